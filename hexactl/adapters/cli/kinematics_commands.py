@@ -1,0 +1,168 @@
+"""``hexactl check``, ``ik`` and ``fk``: the kinematics on the active geometry."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+
+from hexactl.adapters.cli.common import CliError, load_config, parse_numbers, parse_pose_argument
+from hexactl.kinematics.forward import forward_kinematics
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import leg_lengths
+from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative, relative_from_absolute
+from hexactl.kinematics.workspace import PoseAssessment, assess_poses
+
+PAPER_STROKES: tuple[tuple[str, float], ...] = (
+    ("x", 600.0), ("y", 600.0), ("z", 250.0), ("roll", 23.0), ("pitch", 23.0), ("yaw", 60.0)
+)
+"""Single-axis strokes of the paper's platform (mm, deg): ``check``'s default poses are ±each."""
+
+LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
+
+
+def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    check = subparsers.add_parser(
+        "check",
+        parents=[common],
+        help="reachability of poses, with margins to every limit",
+        description="Check poses (relative to the zero posture) against stroke, joint-cone, "
+        "pose-envelope and singularity limits. Default: the paper's single-axis extremes "
+        "(X/Y ±600 mm, Z ±250 mm, roll/pitch ±23°, yaw ±60°). Exit status 1 if any is unreachable.",
+        epilog="POSE is X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs such as x=600 or "
+        "pitch=-20,yaw=5. Put -- before poses that start with a minus sign.",
+    )
+    check.add_argument("poses", nargs="*", metavar="POSE", type=_pose)
+    check.add_argument("--json", action="store_true", help="machine-readable output")
+    check.set_defaults(run=run_check)
+
+    ik = subparsers.add_parser(
+        "ik",
+        parents=[common],
+        help="leg lengths and sensor set-points for a pose",
+        description="Inverse kinematics: leg lengths and actuator sensor set-points (mm) for a pose "
+        "relative to the zero posture. Exit status 1 if the pose violates a limit.",
+    )
+    for axis, unit in zip(POSE_AXES, POSE_UNITS):
+        ik.add_argument(axis.upper(), help=unit)
+    ik.add_argument("--json", action="store_true", help="machine-readable output")
+    ik.set_defaults(run=run_ik)
+
+    fk = subparsers.add_parser(
+        "fk",
+        parents=[common],
+        help="the pose for six sensor readings",
+        description="Forward kinematics: the pose (relative to the zero posture) at which the six "
+        "actuators read L1..L6 mm. Exit status 1 if it does not converge.",
+    )
+    for label in LEG_LABELS:
+        fk.add_argument(label, help="sensor reading, mm")
+    fk.add_argument("--json", action="store_true", help="machine-readable output")
+    fk.set_defaults(run=run_fk)
+
+
+def _pose(text: str) -> list[float]:
+    try:
+        return parse_pose_argument(text)
+    except CliError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def paper_extremes() -> list[list[float]]:
+    poses = []
+    for axis, stroke in PAPER_STROKES:
+        for sign in (1.0, -1.0):
+            pose = [0.0] * 6
+            pose[POSE_AXES.index(axis)] = sign * stroke
+            poses.append(pose)
+    return poses
+
+
+def run_check(arguments: argparse.Namespace) -> int:
+    geometry = load_config(arguments)
+    assessments = assess_poses(geometry, arguments.poses or paper_extremes())
+    if arguments.json:
+        print(json.dumps([_assessment_record(a) for a in assessments], indent=2))
+    else:
+        _print_check(geometry, assessments)
+    return 0 if all(a.ok for a in assessments) else 1
+
+
+def _assessment_record(assessment: PoseAssessment) -> dict[str, object]:
+    return {
+        "pose": list(assessment.pose_relative),
+        "reachable": assessment.ok,
+        "sensor_mm": list(assessment.sensor_mm),
+        "stroke_margin_mm": list(assessment.stroke_margin_mm),
+        "base_cone_deg": list(assessment.base_cone_deg),
+        "platform_cone_deg": list(assessment.platform_cone_deg),
+        "pose_margin": list(assessment.pose_margin),
+        "jacobian_condition": assessment.jacobian_condition,
+        "violations": [{"kind": str(v.kind), "leg": v.leg, "axis": v.axis, "value": v.value,
+                        "limit": v.limit, "message": v.message} for v in assessment.violations],
+    }
+
+
+def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> None:
+    limits = geometry.limits
+    print(f"geometry: {geometry.name or 'unnamed'}  stroke {limits.stroke[0]:g}..{limits.stroke[1]:g} mm, "
+          f"cones base {limits.base_cone_deg:g}° platform {limits.platform_cone_deg:g}°, "
+          f"condition ≤ {limits.max_jacobian_condition:g}")
+    print(f"{'pose (mm, deg)':<36} {'result':<11} {'stroke margin':>15} {'base cone':>10} "
+          f"{'plat. cone':>10} {'cond.':>6} {'envelope':>9}")
+    for a in assessments:
+        stroke_leg = min(range(6), key=lambda leg: a.stroke_margin_mm[leg])
+        pose = ",".join(f"{v:g}" for v in a.pose_relative)
+        envelope = min(a.pose_margin)
+        print(f"{pose:<36} {'reachable' if a.ok else 'UNREACHABLE':<11} "
+              f"{a.stroke_margin_mm[stroke_leg]:>8.1f} mm L{stroke_leg + 1} "
+              f"{max(a.base_cone_deg):>9.1f}° {max(a.platform_cone_deg):>9.1f}° "
+              f"{a.jacobian_condition:>6.1f} {envelope:>9.1f}")
+        for violation in a.violations:
+            print(f"    {violation.message}")
+    unreachable = sum(not a.ok for a in assessments)
+    print(f"{len(assessments) - unreachable} of {len(assessments)} poses reachable"
+          + ("" if not unreachable else f"; {unreachable} unreachable"))
+
+
+def run_ik(arguments: argparse.Namespace) -> int:
+    geometry = load_config(arguments)
+    pose = parse_numbers([getattr(arguments, axis.upper()) for axis in POSE_AXES], POSE_AXES)
+    lengths = leg_lengths(geometry.legs, absolute_from_relative(geometry.home, pose))
+    setpoints = [length - zero for length, zero in zip(lengths, geometry.zero_lengths)]
+    assessment = assess_poses(geometry, [pose])[0]
+    if arguments.json:
+        print(json.dumps({"pose": pose, "leg_lengths_mm": lengths, "setpoints_mm": setpoints,
+                          "reachable": assessment.ok,
+                          "violations": [v.message for v in assessment.violations]}, indent=2))
+    else:
+        print(f"{'leg':<4} {'length mm':>12} {'set-point mm':>13}")
+        for leg, (length, setpoint) in enumerate(zip(lengths, setpoints), start=1):
+            print(f"L{leg:<3} {length:>12.4f} {setpoint:>13.4f}")
+        for violation in assessment.violations:
+            print(f"refused: {violation.message}")
+    return 0 if assessment.ok else 1
+
+
+def run_fk(arguments: argparse.Namespace) -> int:
+    geometry = load_config(arguments)
+    readings = parse_numbers([getattr(arguments, label) for label in LEG_LABELS], LEG_LABELS)
+    lengths = [reading + zero for reading, zero in zip(readings, geometry.zero_lengths)]
+    result = forward_kinematics(geometry.legs, lengths, absolute_from_relative(geometry.home, [0.0] * 6))
+    pose = [float(v) for v in relative_from_absolute(geometry.home, result.pose)]
+    low, high = geometry.limits.stroke
+    outside = [f"{label} {reading:g} mm is outside the stroke [{low:g}, {high:g}] mm"
+               for label, reading in zip(LEG_LABELS, readings) if not low <= reading <= high]
+    if arguments.json:
+        print(json.dumps({"pose": pose if result.ok else None, "status": result.status.name.lower(),
+                          "iterations": result.iterations, "residual_mm": result.residual_mm,
+                          "warnings": outside}, indent=2))
+    elif result.ok:
+        print("  ".join(f"{axis} {value:.4f} {unit}" for axis, value, unit in zip(POSE_AXES, pose, POSE_UNITS)))
+        print(f"converged in {result.iterations} iterations, residual {result.residual_mm:.1e} mm")
+    else:
+        print(f"no pose: forward kinematics {result.status.name.lower().replace('_', ' ')} after "
+              f"{result.iterations} iterations (residual {result.residual_mm:.3g} mm)")
+    for warning in outside if not arguments.json else ():
+        print(f"warning: {warning}")
+    return 0 if result.ok else 1

@@ -1,0 +1,88 @@
+"""Geometry and calibration files (TOML, mm and degrees): reading, writing, finding.
+
+The format is documented in config/platform.toml and README.md. A calibration file is a
+geometry file with identified values and a ``[calibration]`` table.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tomllib
+from pathlib import Path
+
+import tomli_w
+
+from hexactl.adapters.files.atomic import write_atomic
+from hexactl.kinematics.geometry import Geometry, GeometryError, geometry_from_mapping
+
+CONFIG_ENVIRONMENT_VARIABLE = "HEXACTL_CONFIG"
+DEFAULT_CONFIG = Path("config") / "platform.toml"
+_REPOSITORY_CONFIG = Path(__file__).resolve().parents[3] / DEFAULT_CONFIG
+
+
+def default_config_path() -> Path:
+    """The geometry used when none is named: $HEXACTL_CONFIG, else ./config/platform.toml,
+    else the repository's config/platform.toml (for commands run outside the checkout)."""
+    from_environment = os.environ.get(CONFIG_ENVIRONMENT_VARIABLE)
+    if from_environment:
+        return Path(from_environment)
+    return DEFAULT_CONFIG if DEFAULT_CONFIG.exists() else _REPOSITORY_CONFIG
+
+
+def parse_geometry(text: str, source: str) -> Geometry:
+    """Validate TOML text into a :class:`Geometry`; :class:`GeometryError` names every problem."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise GeometryError(f"{source}: not valid TOML: {error}") from None
+    return geometry_from_mapping(data, source)
+
+
+def load_geometry(path: str | os.PathLike[str]) -> Geometry:
+    """Read a geometry or calibration file; :class:`GeometryError` names the file, key and problem."""
+    location = Path(path)
+    try:
+        text = location.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise GeometryError(f"{location}: cannot read: {error}") from None
+    return parse_geometry(text, str(location))
+
+
+def geometry_to_toml(geometry: Geometry) -> str:
+    """The TOML text of ``geometry``, one joint per line; round-trips through :func:`parse_geometry`.
+
+    Written here rather than with a generic TOML writer because those put every number of
+    a nested array on its own line, which makes a geometry file unreadable for a person.
+    """
+    document = geometry.model_dump(mode="json", exclude_none=True)
+    tables = {key: value for key, value in document.items() if isinstance(value, dict)}
+    lines = [_toml_assignment(key, value) for key, value in document.items() if key not in tables]
+    for table, content in tables.items():
+        lines += ["", f"[{table}]"] + [_toml_assignment(key, value) for key, value in content.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_assignment(key: str, value: object) -> str:
+    if isinstance(value, list) and value and isinstance(value[0], list):
+        rows = "".join(f"    {_toml_value(row)},\n" for row in value)
+        return f"{key} = [\n{rows}]"
+    return f"{key} = {_toml_value(value)}"
+
+
+def _toml_value(value: object) -> str:
+    if isinstance(value, (str, bool, int, float)):
+        return tomli_w.dumps({"v": value})[len("v = ") : -1]
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to a geometry file")
+
+
+def save_geometry(geometry: Geometry, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """Write ``geometry`` atomically; refuses to replace an existing file unless ``overwrite``."""
+    return write_atomic(path, geometry_to_toml(geometry).encode("utf-8"), overwrite=overwrite)
+
+
+def geometry_id(geometry: Geometry) -> str:
+    """Content hash identifying a geometry: equal for equal values, whatever the file layout."""
+    return hashlib.sha256(geometry_to_toml(geometry).encode("utf-8")).hexdigest()[:16]

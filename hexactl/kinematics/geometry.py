@@ -1,0 +1,170 @@
+"""The platform geometry: the contract shared by the controller and the calibration tools.
+
+A :class:`Geometry` is what a geometry or calibration TOML file holds (see
+config/platform.toml for the annotated nominal one). It is frozen and fully validated on
+construction: every number finite, shapes right, joints distinct, limits consistent and
+the zero posture inside the actuator stroke. Units: mm and degrees, as in the file.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+from itertools import combinations
+from typing import Annotated
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from hexactl.kinematics.inverse import LegModel, leg_lengths, twist_jacobian
+from hexactl.kinematics.pose import POSE_AXES, absolute_from_relative
+
+MIN_JOINT_SEPARATION_MM = 1.0
+"""Joints closer than this are taken as a typing error (two legs on one joint)."""
+
+Vector3 = Annotated[tuple[float, float, float], Field(description="[x, y, z], mm")]
+Pose6 = Annotated[
+    tuple[float, float, float, float, float, float],
+    Field(description="[x, y, z, roll, pitch, yaw], mm and deg"),
+]
+Six = tuple[float, float, float, float, float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False, strict=False)
+
+
+class Limits(_Strict):
+    """Actuator, joint and pose limits."""
+
+    stroke: tuple[float, float] = Field(description="sensor range [min, max], mm")
+    base_cone_deg: float = Field(gt=0, lt=90, description="base joint cone-angle limit, deg")
+    platform_cone_deg: float = Field(gt=0, lt=90, description="platform joint cone-angle limit, deg")
+    pose_min: Pose6 = Field(description="pose envelope lower bound, relative to the zero posture")
+    pose_max: Pose6 = Field(description="pose envelope upper bound, relative to the zero posture")
+    leg_velocity_mm_s: float = Field(gt=0, description="fastest allowed actuator speed, mm/s")
+    max_jacobian_condition: float = Field(gt=1, description="near-singularity threshold")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Limits:
+        if not self.stroke[0] < self.stroke[1]:
+            raise ValueError(f"stroke: min {self.stroke[0]} must be below max {self.stroke[1]}")
+        for axis, low, high in zip(POSE_AXES, self.pose_min, self.pose_max):
+            if not low <= 0.0 <= high:
+                raise ValueError(
+                    f"pose_min/pose_max: {axis} range [{low}, {high}] must contain the zero posture (0)"
+                )
+        return self
+
+
+class Measurement(_Strict):
+    """The external instrument's targets and noise."""
+
+    feature_points: tuple[Vector3, ...] = Field(
+        min_length=3, description="targets on the platform, moving frame, mm"
+    )
+    point_sigma_mm: float = Field(gt=0, description="instrument noise, 1 sigma per coordinate, mm")
+
+    @model_validator(mode="after")
+    def _not_collinear(self) -> Measurement:
+        points = np.array(self.feature_points)
+        singular = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+        if singular[1] < MIN_JOINT_SEPARATION_MM:
+            raise ValueError("feature_points: the points are collinear; a pose needs three non-collinear points")
+        return self
+
+
+class CalibrationInfo(_Strict):
+    """Metadata of an identified geometry (the ``[calibration]`` table)."""
+
+    method: str = Field(description="identification method, e.g. leglock or full")
+    created: str = Field(description="ISO 8601 time of the identification")
+    input_sha256: str = Field(description="hash of the measurement data file")
+    postures: int = Field(ge=1, description="postures used")
+    residual_rms_mm: float = Field(ge=0, description="fit residual, RMS, mm")
+    nominal: str = Field(default="", description="the nominal geometry it started from")
+    base_joints_std_mm: tuple[Vector3, ...] | None = None
+    platform_joints_std_mm: tuple[Vector3, ...] | None = None
+    zero_lengths_std_mm: Six | None = None
+    notes: str = ""
+
+
+class Geometry(_Strict):
+    """A platform's nominal or calibrated geometry (mm, deg)."""
+
+    name: str = ""
+    base_joints: tuple[Vector3, Vector3, Vector3, Vector3, Vector3, Vector3] = Field(
+        description="base joint centres B_i, fixed frame, mm"
+    )
+    platform_joints: tuple[Vector3, Vector3, Vector3, Vector3, Vector3, Vector3] = Field(
+        description="platform joint centres P_mi, moving frame, mm"
+    )
+    zero_lengths: Six = Field(description="joint-to-joint leg length at sensor reading 0, mm")
+    home: Pose6 = Field(description="zero posture in the fixed frame [x, y, z, roll, pitch, yaw]")
+    limits: Limits
+    measurement: Measurement
+    calibration: CalibrationInfo | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Geometry:
+        for key in ("base_joints", "platform_joints"):
+            joints = getattr(self, key)
+            for i, j in combinations(range(6), 2):
+                if np.linalg.norm(np.subtract(joints[i], joints[j])) < MIN_JOINT_SEPARATION_MM:
+                    raise ValueError(f"{key}: joints {i + 1} and {j + 1} coincide")
+        for i, length in enumerate(self.zero_lengths):
+            if length <= 0:
+                raise ValueError(f"zero_lengths: leg {i + 1} has non-positive zero length {length}")
+        low, high = self.limits.stroke
+        home_lengths = leg_lengths(self.legs, absolute_from_relative(self.home, [0.0] * 6))
+        for i, (length, zero) in enumerate(zip(home_lengths, self.zero_lengths)):
+            reading = length - zero
+            if not low <= reading <= high:
+                raise ValueError(
+                    f"limits.stroke: leg {i + 1} needs sensor reading {reading:.3f} mm in the zero "
+                    f"posture, outside the stroke [{low}, {high}]"
+                )
+        jacobian, _ = twist_jacobian(self.legs, absolute_from_relative(self.home, [0.0] * 6))
+        if np.linalg.matrix_rank(jacobian) < 6:
+            raise ValueError("the zero posture is singular: the joints do not form a working hexapod")
+        return self
+
+    @cached_property
+    def legs(self) -> LegModel:
+        """The structural parameters as the kinematics consumes them."""
+        return LegModel(
+            np.array(self.base_joints), np.array(self.platform_joints), np.array(self.zero_lengths)
+        )
+
+    @cached_property
+    def characteristic_length_mm(self) -> float:
+        """Mean platform-joint radius: scales rotations to lengths in conditioning figures."""
+        return float(np.mean(np.linalg.norm(np.array(self.platform_joints), axis=1)))
+
+
+class GeometryError(ValueError):
+    """A geometry could not be accepted; the message names each key and its problem."""
+
+
+def geometry_from_mapping(data: object, source: str = "geometry") -> Geometry:
+    """Validate parsed file content into a :class:`Geometry`.
+
+    Raises :class:`GeometryError` listing every problem as ``source: key: problem``.
+    """
+    try:
+        return Geometry.model_validate(data)
+    except ValidationError as error:
+        raise GeometryError(describe_validation_error(error, source)) from None
+
+
+def describe_validation_error(error: ValidationError, source: str) -> str:
+    """One line per problem, ``source: key[index]: message``, for people rather than parsers."""
+    lines = []
+    for problem in error.errors():
+        location = ""
+        for part in problem["loc"]:
+            location += f"[{part}]" if isinstance(part, int) else (f".{part}" if location else str(part))
+        message = problem["msg"].removeprefix("Value error, ")
+        if problem["type"] == "finite_number":
+            message = "must be a finite number (NaN and inf are refused)"
+        lines.append(f"{source}: {location}: {message}" if location else f"{source}: {message}")
+    return "\n".join(lines)

@@ -1,0 +1,114 @@
+"""Inverse kinematics: leg lengths l_i = ‖T·P_mi + R − B_i‖ (paper, equation 1).
+
+Two paths that agree to 1e-9 mm:
+
+- :func:`leg_lengths` for one pose, the control loop's path. It is plain-float Python on
+  purpose: at six legs numpy's per-call overhead (array creation, ufunc dispatch) costs
+  more than the arithmetic; BENCHMARKS.md has the measurement that chose it.
+- :func:`leg_lengths_batch` for N poses at once (sequences, planning, calibration).
+
+Poses are absolute: mm and rad, see :mod:`hexactl.kinematics.pose`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from math import cos, sin, sqrt
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexactl.kinematics.rotation import rotation_matrices, rotation_matrix
+
+LEG_COUNT = 6
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LegModel:
+    """A platform's structural parameters in the form the kinematics consumes.
+
+    ``base_joints_mm`` (6, 3): B_i in the fixed frame; ``platform_joints_mm`` (6, 3):
+    P_mi in the moving frame; ``zero_lengths_mm`` (6,): joint-to-joint length at sensor 0.
+    Arrays are copied and made read-only so a model shared with the control loop can never
+    change under it. Equality is identity: compare the :class:`Geometry` it came from.
+    """
+
+    base_joints_mm: NDArray[np.float64]
+    platform_joints_mm: NDArray[np.float64]
+    zero_lengths_mm: NDArray[np.float64]
+    # Per-leg (px, py, pz, bx, by, bz, zero) as plain floats for the scalar path.
+    _rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for name, shape in (
+            ("base_joints_mm", (LEG_COUNT, 3)),
+            ("platform_joints_mm", (LEG_COUNT, 3)),
+            ("zero_lengths_mm", (LEG_COUNT,)),
+        ):
+            array = np.array(getattr(self, name), dtype=float)
+            if array.shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        rows = tuple(
+            tuple(float(v) for v in (*p, *b, z))
+            for p, b, z in zip(self.platform_joints_mm, self.base_joints_mm, self.zero_lengths_mm)
+        )
+        object.__setattr__(self, "_rows", rows)
+
+
+def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
+    """Joint-to-joint length of each leg, mm, for one absolute pose (mm, rad)."""
+    x, y, z, roll, pitch, yaw = pose
+    cr, sr = cos(roll), sin(roll)
+    cp, sp = cos(pitch), sin(pitch)
+    cy, sy = cos(yaw), sin(yaw)
+    r11, r12, r13 = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    r21, r22, r23 = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    r31, r32, r33 = -sp, cp * sr, cp * cr
+    lengths = []
+    for px, py, pz, bx, by, bz, _ in model._rows:
+        dx = r11 * px + r12 * py + r13 * pz + x - bx
+        dy = r21 * px + r22 * py + r23 * pz + y - by
+        dz = r31 * px + r32 * py + r33 * pz + z - bz
+        lengths.append(sqrt(dx * dx + dy * dy + dz * dz))
+    return lengths
+
+
+def sensor_setpoints(model: LegModel, pose: Sequence[float]) -> list[float]:
+    """Actuator sensor readings, mm, that put the platform at ``pose`` (leg length − zero length)."""
+    return [length - row[6] for length, row in zip(leg_lengths(model, pose), model._rows)]
+
+
+def leg_vectors_batch(model: LegModel, poses: NDArray) -> NDArray[np.float64]:
+    """Leg vectors B_iP_i in the fixed frame, mm, for (N, 6) absolute poses → (N, 6, 3)."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 6)
+    rotations = rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5])
+    platform_in_fixed = np.einsum("nij,kj->nki", rotations, model.platform_joints_mm)
+    return platform_in_fixed + poses[:, None, :3] - model.base_joints_mm[None, :, :]
+
+
+def leg_lengths_batch(model: LegModel, poses: NDArray) -> NDArray[np.float64]:
+    """Leg lengths, mm, for (N, 6) absolute poses (mm, rad) → (N, 6)."""
+    vectors = leg_vectors_batch(model, poses)
+    return np.sqrt(np.einsum("nki,nki->nk", vectors, vectors))
+
+
+def sensor_setpoints_batch(model: LegModel, poses: NDArray) -> NDArray[np.float64]:
+    """Sensor readings, mm, for (N, 6) absolute poses → (N, 6)."""
+    return leg_lengths_batch(model, poses) - model.zero_lengths_mm
+
+
+def twist_jacobian(model: LegModel, pose: Sequence[float]) -> tuple[NDArray, NDArray]:
+    """Jacobian of leg lengths w.r.t. a twist (δR in mm, δθ rotation vector in rad).
+
+    Returns (J, lengths): J is (6, 6) with rows [u_i, (T·P_mi) × u_i], u_i the unit leg
+    vector, so that δl = J·[δR; δθ] with δθ a small rotation in the fixed frame.
+    """
+    t = rotation_matrix(pose[3], pose[4], pose[5])
+    platform_in_fixed = model.platform_joints_mm @ t.T
+    vectors = platform_in_fixed + np.asarray(pose[:3], dtype=float) - model.base_joints_mm
+    lengths = np.sqrt(np.einsum("ki,ki->k", vectors, vectors))
+    units = vectors / lengths[:, None]
+    return np.hstack((units, np.cross(platform_in_fixed, units))), lengths

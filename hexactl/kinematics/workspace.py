@@ -1,0 +1,146 @@
+"""Workspace check: every limit a pose violates, with reasons and margins.
+
+A move is accepted or refused whole, so the check reports all violations at once rather
+than the first: leg stroke, joint cone angles, the pose envelope and near-singularity.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import leg_vectors_batch, twist_jacobian
+from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative
+from hexactl.kinematics.rotation import rotation_matrices
+
+
+class ViolationKind(StrEnum):
+    STROKE_LOW = "stroke_low"
+    STROKE_HIGH = "stroke_high"
+    BASE_CONE = "base_cone"
+    PLATFORM_CONE = "platform_cone"
+    POSE_RANGE = "pose_range"
+    SINGULAR = "near_singular"
+
+
+@dataclass(frozen=True, slots=True)
+class Violation:
+    """One violated limit. ``leg`` is 1–6 for leg limits, ``axis`` names a pose axis."""
+
+    kind: ViolationKind
+    value: float
+    limit: float
+    message: str
+    leg: int | None = None
+    axis: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PoseAssessment:
+    """Everything the limits say about one pose (relative pose in mm/deg).
+
+    Margins are distances to the nearest limit in the limit's unit (mm or deg; for the
+    condition number, threshold minus value): negative means violated.
+    """
+
+    pose_relative: tuple[float, ...]
+    sensor_mm: tuple[float, ...]
+    stroke_margin_mm: tuple[float, ...]
+    base_cone_deg: tuple[float, ...]
+    platform_cone_deg: tuple[float, ...]
+    pose_margin: tuple[float, ...]
+    jacobian_condition: float
+    violations: tuple[Violation, ...]
+
+    @property
+    def ok(self) -> bool:
+        return not self.violations
+
+
+def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] | NDArray) -> list[PoseAssessment]:
+    """Check (N, 6) poses relative to the zero posture (mm, deg) against every limit."""
+    relative = np.asarray(poses_relative, dtype=float).reshape(-1, 6)
+    absolute = absolute_from_relative(geometry.home, relative)
+    limits = geometry.limits
+    vectors = leg_vectors_batch(geometry.legs, absolute)
+    lengths = np.linalg.norm(vectors, axis=2)
+    units = vectors / lengths[..., None]
+    sensor = lengths - geometry.legs.zero_lengths_mm
+    stroke_low, stroke_high = limits.stroke
+
+    base_axes, platform_axes = _neutral_axes(geometry)
+    rotations = rotation_matrices(absolute[:, 3], absolute[:, 4], absolute[:, 5])
+    base_cone = np.degrees(np.arccos(np.clip(np.einsum("nki,ki->nk", units, base_axes), -1.0, 1.0)))
+    units_moving = np.einsum("nji,nkj->nki", rotations, units)  # Tᵀ·u: leg seen from the platform
+    platform_cone = np.degrees(np.arccos(np.clip(np.einsum("nki,ki->nk", units_moving, platform_axes), -1.0, 1.0)))
+    pose_margin = np.minimum(relative - np.array(limits.pose_min), np.array(limits.pose_max) - relative)
+
+    assessments = []
+    for n in range(len(relative)):
+        condition = jacobian_condition(geometry, absolute[n])
+        violations: list[Violation] = []
+        for leg in range(6):
+            reading = float(sensor[n, leg])
+            if reading < stroke_low:
+                violations.append(Violation(ViolationKind.STROKE_LOW, reading, stroke_low,
+                    f"leg {leg + 1} below stroke: {reading:.3f} mm < {stroke_low:g} mm", leg=leg + 1))
+            elif reading > stroke_high:
+                violations.append(Violation(ViolationKind.STROKE_HIGH, reading, stroke_high,
+                    f"leg {leg + 1} above stroke: {reading:.3f} mm > {stroke_high:g} mm", leg=leg + 1))
+            for kind, angles, limit, where in (
+                (ViolationKind.BASE_CONE, base_cone, limits.base_cone_deg, "base"),
+                (ViolationKind.PLATFORM_CONE, platform_cone, limits.platform_cone_deg, "platform"),
+            ):
+                angle = float(angles[n, leg])
+                if angle > limit:
+                    violations.append(Violation(kind, angle, limit,
+                        f"leg {leg + 1} {where} joint at {angle:.2f}° exceeds its {limit:g}° cone", leg=leg + 1))
+        for axis, unit, value, low, high in zip(POSE_AXES, POSE_UNITS, relative[n], limits.pose_min, limits.pose_max):
+            if not low <= value <= high:
+                violations.append(Violation(ViolationKind.POSE_RANGE, float(value), high if value > high else low,
+                    f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit}", axis=axis))
+        if not condition <= limits.max_jacobian_condition:
+            violations.append(Violation(ViolationKind.SINGULAR, condition, limits.max_jacobian_condition,
+                f"near-singular pose: Jacobian condition {condition:.1f} > {limits.max_jacobian_condition:g}"))
+        assessments.append(PoseAssessment(
+            pose_relative=tuple(float(v) for v in relative[n]),
+            sensor_mm=tuple(float(v) for v in sensor[n]),
+            stroke_margin_mm=tuple(float(v) for v in np.minimum(sensor[n] - stroke_low, stroke_high - sensor[n])),
+            base_cone_deg=tuple(float(v) for v in base_cone[n]),
+            platform_cone_deg=tuple(float(v) for v in platform_cone[n]),
+            pose_margin=tuple(float(v) for v in pose_margin[n]),
+            jacobian_condition=condition,
+            violations=tuple(violations),
+        ))
+    return assessments
+
+
+def assess_pose(geometry: Geometry, pose_relative: Sequence[float]) -> PoseAssessment:
+    """Check one pose relative to the zero posture (mm, deg) against every limit."""
+    return assess_poses(geometry, [pose_relative])[0]
+
+
+def jacobian_condition(geometry: Geometry, pose_absolute: Sequence[float]) -> float:
+    """Condition number of the twist Jacobian with rotations scaled to lengths.
+
+    The rotation columns (mm/rad) are divided by the mean platform-joint radius so that
+    both halves are dimensionless; ``inf`` for a singular pose.
+    """
+    jacobian, _ = twist_jacobian(geometry.legs, pose_absolute)
+    scaled = jacobian * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
+    singular = np.linalg.svd(scaled, compute_uv=False)
+    return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
+
+
+def _neutral_axes(geometry: Geometry) -> tuple[NDArray, NDArray]:
+    """Each joint's neutral axis: the leg direction in the zero posture (fixed, moving frame)."""
+    home = absolute_from_relative(geometry.home, np.zeros((1, 6)))
+    vectors = leg_vectors_batch(geometry.legs, home)[0]
+    units = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
+    rotation = rotation_matrices(home[:, 3], home[:, 4], home[:, 5])[0]
+    return units, units @ rotation
