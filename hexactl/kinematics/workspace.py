@@ -75,9 +75,9 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
 
     base_axes, platform_axes = _neutral_axes(geometry)
     rotations = rotation_matrices(absolute[:, 3], absolute[:, 4], absolute[:, 5])
-    base_cone = np.degrees(np.arccos(np.clip(np.einsum("nki,ki->nk", units, base_axes), -1.0, 1.0)))
+    base_cone = _angle_deg(units, base_axes[None])
     units_moving = np.einsum("nji,nkj->nki", rotations, units)  # Tᵀ·u: leg seen from the platform
-    platform_cone = np.degrees(np.arccos(np.clip(np.einsum("nki,ki->nk", units_moving, platform_axes), -1.0, 1.0)))
+    platform_cone = _angle_deg(units_moving, platform_axes[None])
     pose_margin = np.minimum(relative - np.array(limits.pose_min), np.array(limits.pose_max) - relative)
 
     assessments = []
@@ -135,6 +135,11 @@ def jacobian_condition(geometry: Geometry, pose_absolute: Sequence[float]) -> fl
     scaled = jacobian * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
     singular = np.linalg.svd(scaled, compute_uv=False)
     return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
+
+
+def _angle_deg(a: NDArray, b: NDArray) -> NDArray:
+    """Angle between unit vectors along the last axis, deg; atan2 keeps it exact near 0°."""
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...i,...i->...", a, b)))
 
 
 def _neutral_axes(geometry: Geometry) -> tuple[NDArray, NDArray]:

@@ -1,0 +1,87 @@
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.files.geometry_file import CONFIG_ENVIRONMENT_VARIABLE
+
+
+def test_check_shows_every_paper_extreme_reachable(capsys) -> None:
+    assert main(["check"]) == 0
+    out = capsys.readouterr().out
+    assert "12 of 12 poses reachable" in out
+    assert out.count("reachable") == 13 and "UNREACHABLE" not in out
+
+
+def test_check_refuses_unreachable_poses_with_reasons(capsys) -> None:
+    assert main(["check", "x=700", "pitch=-30,yaw=5", "--", "-600,0,0,0,0,0"]) == 1
+    out = capsys.readouterr().out
+    assert "x 700 mm outside the pose envelope" in out
+    assert "pitch -30 deg outside the pose envelope" in out
+    assert "1 of 3 poses reachable; 2 unreachable" in out
+
+
+def test_check_json_has_margins(capsys) -> None:
+    assert main(["check", "--json", "z=250"]) == 0
+    (record,) = json.loads(capsys.readouterr().out)
+    assert record["reachable"] and record["pose"] == [0, 0, 250, 0, 0, 0]
+    assert min(record["stroke_margin_mm"]) > 0 and record["violations"] == []
+
+
+def test_ik_then_fk_returns_the_pose(capsys) -> None:
+    pose = [100.0, 100.0, 100.0, 5.0, 5.0, 5.0]
+    assert main(["ik", *map(str, pose), "--json"]) == 0
+    ik = json.loads(capsys.readouterr().out)
+    assert ik["reachable"] and len(ik["setpoints_mm"]) == 6
+    assert main(["fk", *map(repr, ik["setpoints_mm"]), "--json"]) == 0
+    fk = json.loads(capsys.readouterr().out)
+    assert fk["status"] == "ok"
+    np.testing.assert_allclose(fk["pose"], pose, atol=1e-7)
+
+
+def test_fk_reports_non_convergence(capsys) -> None:
+    assert main(["fk", "0", "850", "0", "850", "0", "850", "--json"]) == 1
+    assert json.loads(capsys.readouterr().out)["pose"] is None
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["ik", "1", "2", "3", "nan", "0", "0"], "roll: 'nan' is not a finite number"),
+        (["ik", "1", "2", "three", "0", "0", "0"], "z: 'three' is not a number"),
+        (["fk", "1", "2", "3", "4", "5", "inf"], "L6: 'inf' is not a finite number"),
+        (["check", "--config", "/nonexistent/platform.toml"], "/nonexistent/platform.toml: cannot read"),
+    ],
+)
+def test_bad_arguments_get_a_named_error_and_status_2(argv, message, capsys) -> None:
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_bad_pose_argument_is_a_usage_error(capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["check", "x=1,tilt=3"])
+    assert exit_info.value.code == 2
+    assert "'tilt=3' is not axis=value" in capsys.readouterr().err
+
+
+def test_config_comes_from_the_environment_and_the_console_script_works(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.toml"
+    broken.write_text("name = 1\n")
+    run = subprocess.run(
+        [sys.executable, "-m", "hexactl.adapters.cli.main", "check"],
+        capture_output=True, text=True, cwd=tmp_path,
+        env={"PATH": "/usr/bin:/bin", CONFIG_ENVIRONMENT_VARIABLE: str(broken)},
+    )
+    assert run.returncode == 2
+    assert f"{broken}: base_joints: Field required" in run.stderr
+    default = subprocess.run([sys.executable, "-m", "hexactl.adapters.cli.main", "check"],
+                             capture_output=True, text=True, cwd=tmp_path, env={"PATH": "/usr/bin:/bin"})
+    # Outside the checkout the repository's config/platform.toml is the fallback.
+    assert default.returncode == 0 and "12 of 12 poses reachable" in default.stdout

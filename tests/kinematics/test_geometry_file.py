@@ -1,0 +1,92 @@
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+import tomli_w
+
+from hexactl.adapters.files.geometry_file import (
+    geometry_id,
+    geometry_to_toml,
+    load_geometry,
+    parse_geometry,
+    save_geometry,
+)
+from hexactl.kinematics.geometry import GeometryError
+
+from .conftest import REPOSITORY
+
+NOMINAL_TEXT = (REPOSITORY / "config" / "platform.toml").read_text()
+
+
+def _edited(edit) -> str:
+    data = tomllib.loads(NOMINAL_TEXT)
+    edit(data)
+    return tomli_w.dumps(data)
+
+
+def test_nominal_file_loads_and_round_trips(nominal, tmp_path: Path) -> None:
+    text = geometry_to_toml(nominal)
+    assert parse_geometry(text, "round trip") == nominal
+    saved = save_geometry(nominal, tmp_path / "copy.toml")
+    assert load_geometry(saved) == nominal
+    assert geometry_id(load_geometry(saved)) == geometry_id(nominal)
+
+
+def test_saving_never_overwrites_without_being_told(nominal, tmp_path: Path) -> None:
+    target = tmp_path / "cal.toml"
+    target.write_text("precious")
+    with pytest.raises(FileExistsError, match="--force"):
+        save_geometry(nominal, target)
+    assert target.read_text() == "precious"
+    save_geometry(nominal, target, overwrite=True)
+    assert load_geometry(target) == nominal
+    assert [p.name for p in tmp_path.iterdir()] == ["cal.toml"]  # no temporary left behind
+
+
+def _del(key):
+    return lambda d: d.pop(key)
+
+
+def _set(path, value):
+    def edit(data):
+        node = data
+        for part in path[:-1]:
+            node = node[part]
+        node[path[-1]] = value
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (_del("zero_lengths"), r"zero_lengths: Field required"),
+        (_del("limits"), r"limits: Field required"),
+        (_set(["base_joints"], [[1.0, 2.0, 3.0]] * 5), r"base_joints"),
+        (_set(["platform_joints", 2], [1.0, 2.0]), r"platform_joints\[2\]"),
+        (_set(["zero_lengths", 3], float("nan")), r"zero_lengths\[3\]: must be a finite number"),
+        (_set(["home", 2], float("inf")), r"home\[2\]: must be a finite number"),
+        (_set(["base_joints", 1], [1448.889, -388.229, 0.0]), r"base_joints: joints 1 and 2 coincide"),
+        (_set(["limits", "stroke"], [0.0, 100.0]), r"limits.stroke: leg 1 needs sensor reading .* outside the stroke"),
+        (_set(["limits", "stroke"], [500.0, 100.0]), r"stroke: min 500.0 must be below max 100.0"),
+        (_set(["limits", "pose_min", 0], 10.0), r"x range \[10.0, 610.0\] must contain the zero posture"),
+        (_set(["zero_lengths", 0], -5.0), r"zero_lengths: leg 1 has non-positive zero length"),
+        (_set(["measurement", "feature_points"], [[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]]), r"collinear"),
+        (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: Extra inputs are not permitted"),
+        (_set(["zero_lengths", 0], "long"), r"zero_lengths\[0\]: Input should be a valid number"),
+    ],
+)
+def test_bad_geometry_files_are_refused_naming_the_key(edit, expected) -> None:
+    with pytest.raises(GeometryError, match=expected) as refused:
+        parse_geometry(_edited(edit), "bad.toml")
+    assert str(refused.value).startswith("bad.toml: ")
+
+
+def test_unreadable_and_invalid_toml_files_are_named(tmp_path: Path) -> None:
+    with pytest.raises(GeometryError, match="missing.toml: cannot read"):
+        load_geometry(tmp_path / "missing.toml")
+    broken = tmp_path / "broken.toml"
+    broken.write_text("base_joints = [[1, 2, 3]\n")
+    with pytest.raises(GeometryError, match="broken.toml: not valid TOML"):
+        load_geometry(broken)

@@ -1,0 +1,96 @@
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from hexactl.kinematics.forward import FkStatus, forward_kinematics
+from hexactl.kinematics.inverse import (
+    leg_lengths,
+    leg_lengths_batch,
+    sensor_setpoints,
+    sensor_setpoints_batch,
+    twist_jacobian,
+)
+from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
+
+from .strategies import relative_poses
+
+
+@given(relative_poses())
+def test_scalar_and_batch_ik_agree_and_match_the_definition(nominal, pose_rel: list[float]) -> None:
+    pose = absolute_from_relative(nominal.home, pose_rel)
+    scalar = leg_lengths(nominal.legs, pose)
+    batch = leg_lengths_batch(nominal.legs, pose[None, :])[0]
+    rotation = Rotation.from_euler("ZYX", pose[[5, 4, 3]]).as_matrix()
+    definition = np.linalg.norm(
+        np.array(nominal.platform_joints) @ rotation.T + pose[:3] - np.array(nominal.base_joints), axis=1
+    )
+    np.testing.assert_allclose(scalar, definition, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(batch, definition, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(sensor_setpoints(nominal.legs, pose), definition - nominal.zero_lengths, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(
+        sensor_setpoints_batch(nominal.legs, pose[None, :])[0], definition - nominal.zero_lengths, atol=1e-9, rtol=0
+    )
+
+
+@given(relative_poses(), st.integers(0, 5))
+def test_twist_jacobian_predicts_leg_length_changes(nominal, pose_rel: list[float], column: int) -> None:
+    pose = absolute_from_relative(nominal.home, pose_rel)
+    jacobian, _ = twist_jacobian(nominal.legs, pose)
+    step = 1e-4  # mm or rad; a central difference leaves an O(step³) error
+
+    def lengths_after(twist: np.ndarray) -> np.ndarray:
+        rotation = Rotation.from_rotvec(twist[3:]) * Rotation.from_euler("ZYX", pose[[5, 4, 3]])
+        moved = np.r_[pose[:3] + twist[:3], rotation.as_euler("ZYX")[::-1]]
+        return np.array(leg_lengths(nominal.legs, moved))
+
+    twist = np.zeros(6)
+    twist[column] = step
+    central = (lengths_after(twist) - lengths_after(-twist)) / (2 * step)
+    np.testing.assert_allclose(central, jacobian[:, column], atol=1e-6)
+
+
+@settings(max_examples=300)
+@given(relative_poses(scale=0.5))
+def test_fk_inverts_ik_from_the_zero_posture(nominal, pose_rel: list[float]) -> None:
+    pose = absolute_from_relative(nominal.home, pose_rel)
+    result = forward_kinematics(nominal.legs, leg_lengths(nominal.legs, pose), absolute_from_relative(nominal.home, [0.0] * 6))
+    assert result.status is FkStatus.OK
+    assert result.residual_mm <= 1e-9
+    np.testing.assert_allclose(relative_from_absolute(nominal.home, result.pose), pose_rel, atol=1e-7)
+
+
+@given(relative_poses(), st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6))
+def test_fk_warm_started_near_the_answer_converges_in_few_iterations(nominal, pose_rel, offset) -> None:
+    pose = absolute_from_relative(nominal.home, pose_rel)
+    guess = absolute_from_relative(nominal.home, np.add(pose_rel, np.multiply(offset, [1, 1, 1, 0.1, 0.1, 0.1])))
+    result = forward_kinematics(nominal.legs, leg_lengths(nominal.legs, pose), guess)
+    assert result.ok and result.iterations <= 5
+    np.testing.assert_allclose(result.pose, pose, atol=1e-9)
+
+
+def test_fk_reports_invalid_input_instead_of_raising(nominal) -> None:
+    home = absolute_from_relative(nominal.home, [0.0] * 6)
+    lengths = leg_lengths(nominal.legs, home)
+    for bad_lengths, guess in (([float("nan")] + lengths[1:], home), (lengths[:5], home), (lengths, [np.inf] * 6)):
+        result = forward_kinematics(nominal.legs, bad_lengths, guess)
+        assert result.status is FkStatus.INVALID_INPUT and not result.ok
+
+
+def test_fk_does_not_claim_success_for_unreachable_lengths(nominal) -> None:
+    home = absolute_from_relative(nominal.home, [0.0] * 6)
+    # Legs 1 and 2 share a platform-joint pair; no pose makes one 1 m and the other 4 m long.
+    lengths = leg_lengths(nominal.legs, home)
+    lengths[0], lengths[1] = 1000.0, 4000.0
+    result = forward_kinematics(nominal.legs, lengths, home, max_iterations=30)
+    assert result.status in (FkStatus.MAX_ITERATIONS, FkStatus.DIVERGED, FkStatus.SINGULAR)
+    assert result.residual_mm > 1e-3 or result.status is FkStatus.DIVERGED
+
+
+def test_fk_honours_its_iteration_cap(nominal) -> None:
+    home = absolute_from_relative(nominal.home, [0.0] * 6)
+    target = leg_lengths(nominal.legs, absolute_from_relative(nominal.home, [300.0, -200.0, 100.0, 10.0, -10.0, 30.0]))
+    result = forward_kinematics(nominal.legs, target, home, max_iterations=1)
+    assert result.status is FkStatus.MAX_ITERATIONS and result.iterations == 1

@@ -1,0 +1,51 @@
+from __future__ import annotations
+
+from hexactl.adapters.cli.kinematics_commands import paper_extremes
+from hexactl.kinematics.workspace import ViolationKind, assess_pose, assess_poses
+
+
+def test_every_paper_stroke_extreme_is_reachable_on_the_nominal_geometry(nominal) -> None:
+    assessments = assess_poses(nominal, paper_extremes())
+    assert len(assessments) == 12
+    for assessment in assessments:
+        assert assessment.ok, [v.message for v in assessment.violations]
+        assert min(assessment.stroke_margin_mm) > 0
+        assert max(assessment.base_cone_deg) < nominal.limits.base_cone_deg
+        assert max(assessment.platform_cone_deg) < nominal.limits.platform_cone_deg
+
+
+def test_the_zero_posture_has_full_margins(nominal) -> None:
+    home = assess_pose(nominal, [0.0] * 6)
+    assert home.ok
+    assert max(home.base_cone_deg) < 1e-6 and max(home.platform_cone_deg) < 1e-6
+
+
+def test_all_violations_are_listed_at_once_with_legs_and_axes(nominal) -> None:
+    far = assess_pose(nominal, [0.0, 0.0, 600.0, 0.0, 40.0, 0.0])
+    kinds = {v.kind for v in far.violations}
+    assert {ViolationKind.STROKE_HIGH, ViolationKind.POSE_RANGE} <= kinds
+    assert {v.axis for v in far.violations if v.kind is ViolationKind.POSE_RANGE} == {"z", "pitch"}
+    assert all(1 <= v.leg <= 6 for v in far.violations if v.kind is ViolationKind.STROKE_HIGH)
+    assert any("above stroke" in v.message for v in far.violations)
+
+
+def test_low_stroke_and_cone_limits_are_reported(nominal) -> None:
+    low = assess_pose(nominal, [0.0, 0.0, -600.0, 0.0, 0.0, 0.0])
+    assert all(v.kind in (ViolationKind.STROKE_LOW, ViolationKind.POSE_RANGE) for v in low.violations)
+    assert sum(v.kind is ViolationKind.STROKE_LOW for v in low.violations) == 6
+    tight = nominal.model_copy(
+        update={"limits": nominal.limits.model_copy(update={"base_cone_deg": 20.0, "platform_cone_deg": 35.0})}
+    )
+    twisted = assess_pose(tight, [0.0, 0.0, 0.0, 0.0, 0.0, 60.0])  # cones 23.4° base, 39.8° platform
+    for kind in (ViolationKind.BASE_CONE, ViolationKind.PLATFORM_CONE):
+        cones = [v for v in twisted.violations if v.kind is kind]
+        assert cones and all(v.value > v.limit for v in cones)
+
+
+def test_margins_are_negative_exactly_where_limits_are_violated(nominal) -> None:
+    for pose in ([0.0, 0.0, 300.0, 0.0, 0.0, 0.0], [700.0, 0.0, 0.0, 0.0, 0.0, 0.0]):
+        assessment = assess_pose(nominal, pose)
+        stroke_violated = any(v.kind in (ViolationKind.STROKE_LOW, ViolationKind.STROKE_HIGH) for v in assessment.violations)
+        assert stroke_violated == (min(assessment.stroke_margin_mm) < 0)
+        range_violated = any(v.kind is ViolationKind.POSE_RANGE for v in assessment.violations)
+        assert range_violated == (min(assessment.pose_margin) < 0)
