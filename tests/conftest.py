@@ -1,0 +1,42 @@
+"""vcan test selection (see tools/uml_vcan.py).
+
+* ``vcan``-marked tests need a real SocketCAN ``vcan0``.  Where it exists (inside
+  the user-mode Linux guest, or a developer box with vcan0 up) they run as
+  usual.  Where it does not, they are *deselected* at collection, not skipped:
+  ``tests/test_vcan_in_uml.py`` runs them inside UML instead.
+* Tests marked ``uml_runner`` (that UML launcher test) are deselected where
+  vcan0 exists or inside the guest (``HEXACTL_IN_UML=1``), so nothing recurses
+  and nothing runs twice.
+"""
+
+import os
+
+import pytest
+
+HAS_VCAN0 = os.path.exists("/sys/class/net/vcan0")
+IN_UML = os.environ.get("HEXACTL_IN_UML") == "1"
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "uml_runner: runs the vcan tests inside user-mode Linux (host without vcan0 only)")
+
+
+def pytest_report_header(config):
+    where = "inside UML" if IN_UML else ("host" if HAS_VCAN0 else "host without vcan0")
+    plan = "run here" if HAS_VCAN0 else "run inside UML by tests/test_vcan_in_uml.py"
+    return f"hexactl vcan: {where}; vcan-marked tests {plan}"
+
+
+def pytest_collection_modifyitems(config, items):
+    def unwanted(item):
+        if item.get_closest_marker("vcan") is not None:
+            return not HAS_VCAN0
+        if item.get_closest_marker("uml_runner") is not None:
+            return HAS_VCAN0 or IN_UML
+        return False
+
+    drop = [item for item in items if unwanted(item)]
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = [item for item in items if not unwanted(item)]
