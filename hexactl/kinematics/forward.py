@@ -17,9 +17,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from math import isfinite, pi
 
-import numpy as np
-
-from hexactl.kinematics.inverse import LegModel, twist_jacobian
+from hexactl.kinematics.inverse import LegModel, leg_jacobian_rows
 from hexactl.kinematics.rotation import euler_rates_from_angular_velocity
 
 FK_TOLERANCE_MM = 1e-9
@@ -30,6 +28,7 @@ FK_MAX_ITERATIONS = 20
 
 _MAX_PITCH_RAD = 0.45 * pi  # beyond ±81° the Euler update is ill-defined: call it divergence
 _NO_POSE = (float("nan"),) * 6  # returned where no iterate is meaningful
+_SINGULAR_PIVOT = 1e-12  # pivots below this fraction of the largest entry mean "singular"
 
 
 class FkStatus(IntEnum):
@@ -68,29 +67,32 @@ def forward_kinematics(
     ``guess`` is the starting pose, normally the previous solution. Returns an
     :class:`FkResult`; its status says whether the pose can be trusted.
     """
-    pose = np.array(guess, dtype=float)
-    target = np.array(lengths_mm, dtype=float)
-    if pose.shape != (6,) or target.shape != (6,) or not (np.all(np.isfinite(pose)) and np.all(np.isfinite(target))):
+    try:
+        pose = [float(v) for v in guess]
+        target = [float(v) for v in lengths_mm]
+    except (TypeError, ValueError):
+        return FkResult(FkStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"))
+    if len(pose) != 6 or len(target) != 6 or not all(isfinite(v) for v in (*pose, *target)):
         return FkResult(FkStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"))
 
-    jacobian, lengths = twist_jacobian(model, pose)
-    residual = target - lengths
-    worst = float(np.max(np.abs(residual)))
+    rows, lengths = leg_jacobian_rows(model, pose)
+    residual = [t - length for t, length in zip(target, lengths)]
+    worst = max(abs(r) for r in residual)
     first = worst
     for iteration in range(1, max_iterations + 1):
         if worst <= tolerance_mm:
             return FkResult(FkStatus.OK, _as_tuple(pose), iteration - 1, worst)
-        try:
-            step = np.linalg.solve(jacobian, residual)
-        except np.linalg.LinAlgError:
+        step = solve_6x6(rows, residual)
+        if step is None:
             return FkResult(FkStatus.SINGULAR, _as_tuple(pose), iteration - 1, worst)
-        pose[:3] += step[:3]
-        pose[3:] += euler_rates_from_angular_velocity(step[3:], pose[4], pose[5])
+        roll_step, pitch_step, yaw_step = euler_rates_from_angular_velocity(step[3:], pose[4], pose[5])
+        pose = [pose[0] + step[0], pose[1] + step[1], pose[2] + step[2],
+                pose[3] + roll_step, pose[4] + pitch_step, pose[5] + yaw_step]
         if not (abs(pose[4]) < _MAX_PITCH_RAD and all(isfinite(v) for v in pose)):
             return FkResult(FkStatus.DIVERGED, _NO_POSE, iteration, float("inf"))
-        jacobian, lengths = twist_jacobian(model, pose)
-        residual = target - lengths
-        worst = float(np.max(np.abs(residual)))
+        rows, lengths = leg_jacobian_rows(model, pose)
+        residual = [t - length for t, length in zip(target, lengths)]
+        worst = max(abs(r) for r in residual)
         if worst > 1e3 * max(first, 1.0):
             return FkResult(FkStatus.DIVERGED, _as_tuple(pose), iteration, worst)
     if worst <= tolerance_mm:
@@ -98,6 +100,37 @@ def forward_kinematics(
     return FkResult(FkStatus.MAX_ITERATIONS, _as_tuple(pose), max_iterations, worst)
 
 
-def _as_tuple(pose: np.ndarray) -> tuple[float, float, float, float, float, float]:
-    x, y, z, roll, pitch, yaw = (float(v) for v in pose)
+def solve_6x6(matrix: list[list[float]], rhs: list[float]) -> list[float] | None:
+    """Solve A·x = b by Gaussian elimination with partial pivoting; None if A is singular.
+
+    Hand-written because at 6×6 numpy.linalg.solve spends most of its time on call
+    overhead and array creation (see BENCHMARKS.md). ``matrix`` and ``rhs`` are not modified.
+    """
+    n = len(rhs)
+    a = [row[:] + [value] for row, value in zip(matrix, rhs)]
+    scale = max(abs(v) for row in matrix for v in row)
+    if not scale > 0.0:
+        return None
+    for col in range(n):
+        pivot_row = max(range(col, n), key=lambda r: abs(a[r][col]))
+        pivot = a[pivot_row][col]
+        if abs(pivot) <= _SINGULAR_PIVOT * scale:
+            return None
+        a[col], a[pivot_row] = a[pivot_row], a[col]
+        pivot_values = a[col]
+        for r in range(col + 1, n):
+            factor = a[r][col] / pivot
+            if factor:
+                row = a[r]
+                for c in range(col, n + 1):
+                    row[c] -= factor * pivot_values[c]
+    x = [0.0] * n
+    for r in range(n - 1, -1, -1):
+        row = a[r]
+        x[r] = (row[n] - sum(row[c] * x[c] for c in range(r + 1, n))) / row[r]
+    return x
+
+
+def _as_tuple(pose: Sequence[float]) -> tuple[float, float, float, float, float, float]:
+    x, y, z, roll, pitch, yaw = pose
     return (x, y, z, roll, pitch, yaw)

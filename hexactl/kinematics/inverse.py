@@ -100,15 +100,35 @@ def sensor_setpoints_batch(model: LegModel, poses: NDArray) -> NDArray[np.float6
     return leg_lengths_batch(model, poses) - model.zero_lengths_mm
 
 
-def twist_jacobian(model: LegModel, pose: Sequence[float]) -> tuple[NDArray, NDArray]:
-    """Jacobian of leg lengths w.r.t. a twist (δR in mm, δθ rotation vector in rad).
+def leg_jacobian_rows(model: LegModel, pose: Sequence[float]) -> tuple[list[list[float]], list[float]]:
+    """Twist Jacobian rows and leg lengths for one absolute pose, as plain floats.
 
-    Returns (J, lengths): J is (6, 6) with rows [u_i, (T·P_mi) × u_i], u_i the unit leg
-    vector, so that δl = J·[δR; δθ] with δθ a small rotation in the fixed frame.
+    Row i is [u_i, (T·P_mi) × u_i] with u_i the unit leg vector, so that δl = J·[δR; δθ]
+    for a translation δR (mm) and a small rotation δθ (rad, fixed frame). Plain floats for
+    the same reason as :func:`leg_lengths`: forward kinematics runs this every cycle.
     """
-    t = rotation_matrix(pose[3], pose[4], pose[5])
-    platform_in_fixed = model.platform_joints_mm @ t.T
-    vectors = platform_in_fixed + np.asarray(pose[:3], dtype=float) - model.base_joints_mm
-    lengths = np.sqrt(np.einsum("ki,ki->k", vectors, vectors))
-    units = vectors / lengths[:, None]
-    return np.hstack((units, np.cross(platform_in_fixed, units))), lengths
+    x, y, z, roll, pitch, yaw = pose
+    cr, sr = cos(roll), sin(roll)
+    cp, sp = cos(pitch), sin(pitch)
+    cy, sy = cos(yaw), sin(yaw)
+    r11, r12, r13 = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    r21, r22, r23 = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    r31, r32, r33 = -sp, cp * sr, cp * cr
+    rows = []
+    lengths = []
+    for px, py, pz, bx, by, bz, _ in model._rows:
+        qx = r11 * px + r12 * py + r13 * pz
+        qy = r21 * px + r22 * py + r23 * pz
+        qz = r31 * px + r32 * py + r33 * pz
+        dx, dy, dz = qx + x - bx, qy + y - by, qz + z - bz
+        length = sqrt(dx * dx + dy * dy + dz * dz)
+        ux, uy, uz = dx / length, dy / length, dz / length
+        rows.append([ux, uy, uz, qy * uz - qz * uy, qz * ux - qx * uz, qx * uy - qy * ux])
+        lengths.append(length)
+    return rows, lengths
+
+
+def twist_jacobian(model: LegModel, pose: Sequence[float]) -> tuple[NDArray, NDArray]:
+    """:func:`leg_jacobian_rows` as arrays: J (6, 6) and the leg lengths (6,), mm."""
+    rows, lengths = leg_jacobian_rows(model, pose)
+    return np.array(rows), np.array(lengths)
