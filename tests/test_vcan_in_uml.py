@@ -22,12 +22,15 @@ UML_TIMEOUT = int(os.environ.get("HEXACTL_UML_TIMEOUT", "600"))
 # extra room for a first-run apt-get install of user-mode-linux/kmod/iproute2
 HOST_TIMEOUT = UML_TIMEOUT + 600
 
-SUMMARY = re.compile(r"^=+ (?P<body>.*\bin [\d.]+s\b.*?) =+$")
+# '=== 4 passed, 2 deselected in 3.1s ===', or without the '=' under -q
+SUMMARY = re.compile(r"^(?:=+ )?(?P<body>(?:\d+ \w+|no tests ran)(?:, \d+ \w+)* in [\d.]+s\b.*?)(?: =+)?$")
+ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
 def inner_counts(stdout: str) -> dict[str, int]:
     """Counts from the last pytest summary line, e.g. '=== 4 passed in 1.2s ==='."""
-    lines = [m.group("body") for line in stdout.splitlines() if (m := SUMMARY.match(line.strip()))]
+    lines = [m.group("body") for line in ANSI.sub("", stdout).splitlines()
+             if (m := SUMMARY.match(line.strip()))]
     assert lines, "no pytest summary line in the inner output"
     counts = {}
     for n, word in re.findall(r"(\d+) (\w+)", lines[-1]):

@@ -23,8 +23,9 @@ Usage
 
 Default pytest args: ``tests`` (all vcan-marked tests of the repo).  Options
 that belong to this tool must come before the pytest args; use ``--`` to be
-explicit (``python tools/uml_vcan.py -- -k filter -x``).  The guest's cwd is
-the host's cwd, so relative paths mean the same thing inside.
+explicit (``python tools/uml_vcan.py -- -k filter -x``).  pytest runs from
+the repo root (so pyproject's settings apply); arguments that are existing
+paths relative to your cwd are made absolute first.
 
 Recipe (what happens)
 ---------------------
@@ -44,7 +45,7 @@ Recipe (what happens)
    with stdin=/dev/null and stdout/stderr piped to this process.
 4. The init script mounts /proc, /sys, a tmpfs on /dev/shm and devpts, brings
    ``lo`` up, insmods the modules, ``ip link add dev vcan0 type vcan; ip link
-   set up vcan0``, silences kernel console messages, cds to the host cwd,
+   set up vcan0``, silences kernel console messages, cds to the repo root,
    exports the relevant host environment plus ``HEXACTL_IN_UML=1`` and runs
    ``<sys.executable> -m pytest -m vcan ARGS`` (output through ``tee`` so
    pytest sees a pipe, not a tty, and a log lands in the temp dir).  The exit
@@ -385,9 +386,9 @@ def run_uml(args: argparse.Namespace, pytest_args: list[str]) -> int:
     modules = module_load_order(UML_MODULES_ROOT / ver, WANTED_MODULES)
     mem_bytes = parse_size(args.mem)
     memdir = pick_memdir(mem_bytes)
-    cwd = os.getcwd()
+    cwd = str(REPO)
     if not guest_visible(cwd):
-        raise ToolError(EXIT_PREREQ, f"current directory {cwd} is not visible inside the guest; cd elsewhere")
+        raise ToolError(EXIT_PREREQ, f"repo {cwd} is not visible inside the guest (under /proc, /sys or /dev?)")
     if not guest_visible(sys.executable):
         raise ToolError(EXIT_PREREQ, f"interpreter {sys.executable} is not visible inside the guest")
 
@@ -551,7 +552,22 @@ def run_direct(pytest_args: list[str]) -> int:
                         "sudo ip link add dev vcan0 type vcan && sudo ip link set up vcan0")
     cmd = [sys.executable, "-m", "pytest", "-m", "vcan", *pytest_args]
     log("running on the host: " + " ".join(shlex.quote(c) for c in cmd))
-    return subprocess.run(cmd, stdin=subprocess.DEVNULL).returncode
+    return subprocess.run(cmd, cwd=REPO, stdin=subprocess.DEVNULL).returncode
+
+
+# pytest options whose separate value is never a path (``-k vcan`` stays as is)
+NON_PATH_VALUE_OPTS = {"-k", "-m", "-p", "-o", "-W", "-r", "--tb", "--maxfail", "--durations",
+                       "--color", "--log-level", "--import-mode", "--capture"}
+
+
+def absolutize(arg: str) -> str:
+    """``tests/x.py::t`` relative to the host cwd -> absolute (pytest runs from the repo root)."""
+    if arg.startswith("-"):
+        return arg
+    path, sep, rest = arg.partition("::")
+    if path and not os.path.isabs(path) and os.path.exists(path):
+        return os.path.abspath(path) + sep + rest
+    return arg
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -591,9 +607,8 @@ def main(argv: list[str] | None = None) -> int:
     pytest_args = argv[i:]
     if pytest_args[:1] == ["--"]:
         pytest_args = pytest_args[1:]
-    if not pytest_args:
-        tests = REPO / "tests"
-        pytest_args = ["tests"] if Path.cwd().resolve() == REPO else [str(tests)]
+    pytest_args = [a if prev in NON_PATH_VALUE_OPTS else absolutize(a)
+                   for prev, a in zip([""] + pytest_args, pytest_args)] or ["tests"]
     try:
         if args.direct:
             return run_direct(pytest_args)
