@@ -11,7 +11,6 @@
 
 import os
 
-import pytest
 
 HAS_VCAN0 = os.path.exists("/sys/class/net/vcan0")
 IN_UML = os.environ.get("HEXACTL_IN_UML") == "1"

@@ -64,9 +64,10 @@ Gotchas found while building this
   the host /dev/shm or /tmp mount likely just ran out of space".  We choose a
   writable, non-noexec directory with enough free space and pass it as
   TMPDIR/TMP/TEMP to linux.uml only.
-* Console: ``con0=fd:0,fd:1`` with stdin=/dev/null logs "epollctl add err fd
-  0" (regular files/devnull cannot be epolled); ``con0=null,fd:1`` avoids
-  reading stdin at all, so it works with stdin closed or /dev/null (CI).
+* Console: ``con0=fd:0,fd:1`` logs "epollctl add err fd N, Operation not
+  permitted" when stdin/stdout are /dev/null or regular files (they cannot be
+  epolled); ``con0=null,fd:1`` never reads stdin, so it works with stdin
+  closed or /dev/null (CI), and stdout is always our pipe.
   Output lines arrive with CRLF (tty onlcr); we strip the CR.
 * The guest's /dev is devtmpfs without /dev/shm: Python multiprocessing
   (SemLock) fails with FileNotFoundError until a tmpfs is mounted there.
