@@ -1,0 +1,146 @@
+"""The hardware interface between the control loop and the six actuators.
+
+ros2_control style: the loop (the controller) talks to the actuators only through
+:class:`ActuatorInterface`; the CAN adapter implements it, and so does the in-memory
+simulator (:mod:`hexactl.sim.ideal_actuators`). Nothing here knows a wire format.
+
+Units: positions are actuator *sensor* readings in mm (leg length minus the geometry's
+zero length, the same scale as :func:`hexactl.kinematics.inverse.sensor_setpoints`),
+velocities mm/s, times s. Legs are numbered 1–6 at this interface, as everywhere a
+person or an actuator sees them.
+
+Threading: every method is called from the control loop's thread only, except
+:meth:`ActuatorInterface.send_estop`, which must be safe to call from any thread (the
+controller sends an E-stop at once from the caller's thread as well as from the loop).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum, StrEnum
+from typing import Protocol, runtime_checkable
+
+ACTUATOR_COUNT = 6
+
+
+class ActuatorCommand(StrEnum):
+    """Discrete commands to one actuator or to all. E-stop is not one of them: it has its
+    own method because it must bypass everything else."""
+
+    ENABLE = "enable"  # energise the drive and follow set-points
+    DISABLE = "disable"  # stop following set-points; the drive's own safe state (brake)
+    CLEAR_FAULT = "clear_fault"  # leave FAULT/ESTOP for DISABLED if the cause is gone
+    LOCK = "lock"  # engage the brake and hold the current length (leg-lock mode)
+    UNLOCK = "unlock"  # release the brake and follow set-points again
+
+
+class ActuatorState(IntEnum):
+    """What an actuator reports it is doing."""
+
+    DISABLED = 0
+    ENABLED = 1
+    LOCKED = 2
+    FAULT = 3
+    ESTOP = 4
+
+
+class BusState(StrEnum):
+    """Health of the link to the actuators, in CAN's error-state terms."""
+
+    ACTIVE = "active"  # healthy
+    WARNING = "warning"  # error counters high; still working
+    PASSIVE = "passive"  # error passive; still working, degraded
+    BUS_OFF = "bus_off"  # the controller left the bus: nothing is sent
+    DOWN = "down"  # the interface is closed or missing
+
+
+LINK_FAILED_STATES = frozenset({BusState.BUS_OFF, BusState.DOWN})
+"""Bus states in which the loop treats the link as failed."""
+
+
+@dataclass(frozen=True, slots=True)
+class ActuatorFeedback:
+    """The latest report of one actuator.
+
+    ``heartbeat_age_s``: time since the last frame from this actuator arrived, s
+    (``inf`` if none ever did). ``setpoint_counter``: the ``counter`` of the last
+    :meth:`ActuatorInterface.send_setpoints` call whose value the actuator applied, as
+    passed to that call (an implementation with a narrower wire field unwraps it), or
+    −1 if none yet. ``fault_bits``: the drive's fault word, 0 when healthy.
+    """
+
+    position_mm: float
+    velocity_mm_s: float
+    state: ActuatorState
+    fault_bits: int
+    heartbeat_age_s: float
+    setpoint_counter: int
+
+
+@dataclass(frozen=True, slots=True)
+class FeedbackSnapshot:
+    """All six actuators' reports as of one :meth:`ActuatorInterface.read_feedback` call.
+
+    ``actuators[i]`` is leg i + 1; ``t_ns`` is the ``time.monotonic_ns()`` of the read.
+    """
+
+    actuators: tuple[ActuatorFeedback, ...]
+    t_ns: int
+
+    @property
+    def positions_mm(self) -> tuple[float, ...]:
+        return tuple(a.position_mm for a in self.actuators)
+
+
+@dataclass(frozen=True, slots=True)
+class LinkHealth:
+    """``send_failures``: failed sends (set-points, commands, E-stops) since the link
+    was opened; ``detail``: a human-readable note (driver error text), may be empty."""
+
+    bus_state: BusState
+    send_failures: int
+    detail: str = ""
+
+
+@runtime_checkable
+class ActuatorInterface(Protocol):
+    """The six actuators as the control loop sees them.
+
+    Every method is non-blocking and bounded in time, and none raises: failures are
+    reported through return values and :meth:`link_health`. An implementation that
+    meets an unexpected error inside a method catches it, counts it as a send failure
+    (or marks the bus ``DOWN``) and returns.
+    """
+
+    def send_setpoints(self, counter: int, setpoints_mm: Sequence[float]) -> bool:
+        """Queue six position set-points (sensor mm, legs 1–6 in order) for sending.
+
+        ``counter`` increases by one per call (the loop's cycle count of sends); the
+        actuators report the last one applied. Returns False when the set-points could
+        not be queued (counted in :attr:`LinkHealth.send_failures`).
+        """
+        ...
+
+    def send_command(self, leg: int | None, command: ActuatorCommand) -> bool:
+        """Send ``command`` to leg 1–6, or to all six when ``leg`` is None.
+
+        Returns False when it could not be sent (counted as a send failure).
+        """
+        ...
+
+    def send_estop(self) -> bool:
+        """Send an emergency stop to all actuators. Safe to call from any thread.
+
+        Returns False when it could not be sent (counted as a send failure).
+        """
+        ...
+
+    def read_feedback(self) -> FeedbackSnapshot:
+        """Process what has arrived since the last call and return the latest state of
+        all six actuators (never waits for new frames)."""
+        ...
+
+    def link_health(self) -> LinkHealth:
+        """The link's current state; cheap enough to call every cycle."""
+        ...

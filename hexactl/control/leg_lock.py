@@ -1,0 +1,132 @@
+"""Leg-lock projection: the pose closest to a given one at which one leg has a given length.
+
+In leg-lock mode one actuator is braked and the five others move; every commanded pose
+must keep the locked leg at its length, a 5-dimensional surface l_N(pose) = L.
+:func:`project_to_locked_leg` finds the point of that surface closest to a pose in the
+metric
+
+    d² = |δx|² + |δy|² + |δz|² + c²·(δroll² + δpitch² + δyaw²)   (mm; angles in rad),
+
+c = ``characteristic_length_mm`` (use ``Geometry.characteristic_length_mm``, the mean
+platform-joint radius): a radian costs what the platform joints travel.
+
+Method: the fixed-point iteration of the least-distance problem's optimality
+conditions, x ← x₀ − λ·W⁻¹g, λ = (l_N(x) − L + g·(x₀ − x)) / (g·W⁻¹g), g = ∂l_N/∂pose at
+the current iterate (twist-Jacobian row [u, (T·P_N) × u] mapped to Euler-angle rates),
+W = diag(1, 1, 1, c², c², c²). Its fixed point is the true closest pose. From the loop's
+per-cycle targets, within a millimetre of the surface, two iterations reach 1e-9 mm.
+
+Plain-float Python on purpose, like :func:`hexactl.kinematics.inverse.leg_lengths`: it
+needs one leg's row only and runs every cycle in leg-lock mode, where numpy's call
+overhead on 3-vectors would dominate (5 µs here).
+
+NOTE for the merge: ``hexactl.calibration.projection.project_to_locked_leg`` (in
+progress, numpy) solves the same problem with the same signature, metric, iteration,
+result fields and status codes; keep one of the two.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+from math import cos, isfinite, pi, sin, sqrt
+
+from hexactl.kinematics.inverse import LEG_COUNT, LegModel
+
+PROJECTION_TOLERANCE_MM = 1e-9
+"""Default: the locked leg's length error at which the projection stops, mm."""
+
+PROJECTION_MAX_ITERATIONS = 50
+"""Default iteration cap."""
+
+_MAX_PITCH_RAD = 0.45 * pi  # as in forward kinematics: beyond it the Euler chart is unusable
+_NO_POSE = (float("nan"),) * 6
+
+
+class ProjectionStatus(IntEnum):
+    """Outcome of :func:`project_to_locked_leg`."""
+
+    OK = 0
+    MAX_ITERATIONS = 1  # tolerance not met within the iteration cap
+    DIVERGED = 2  # the iterate left the valid chart (|pitch| ≥ 81°) or stopped being finite
+    SINGULAR = 3  # the leg length does not depend on the pose (zero-length leg)
+    INVALID_INPUT = 4  # leg outside 1–6, a non-finite or non-positive input, not six numbers
+
+
+@dataclass(frozen=True, slots=True)
+class ProjectionResult:
+    """``pose``: absolute (mm, rad), trust it only when ``ok``. ``residual_mm``: the
+    locked leg's length minus the target at ``pose``. ``correction``: the metric
+    distance from the input pose, mm."""
+
+    status: ProjectionStatus
+    pose: tuple[float, float, float, float, float, float]
+    iterations: int
+    residual_mm: float
+    correction: float
+
+    @property
+    def ok(self) -> bool:
+        return self.status is ProjectionStatus.OK
+
+
+def project_to_locked_leg(
+    legs: LegModel,
+    pose: Sequence[float],
+    leg: int,
+    length_mm: float,
+    characteristic_length_mm: float,
+    tolerance_mm: float = PROJECTION_TOLERANCE_MM,
+    max_iterations: int = PROJECTION_MAX_ITERATIONS,
+) -> ProjectionResult:
+    """The pose closest to ``pose`` (absolute, mm and rad) at which leg ``leg`` (1–6) has
+    joint-to-joint length ``length_mm``. Never raises; see :class:`ProjectionStatus`."""
+    try:
+        x0, y0, z0, roll0, pitch0, yaw0 = start = tuple(float(v) for v in pose)
+        valid = (1 <= leg <= LEG_COUNT and isfinite(length_mm) and length_mm > 0
+                 and isfinite(characteristic_length_mm) and characteristic_length_mm > 0
+                 and all(isfinite(v) for v in start))
+    except (TypeError, ValueError):
+        valid = False
+    if not valid:
+        return ProjectionResult(ProjectionStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"), float("inf"))
+    px, py, pz, bx, by, bz, _ = legs._rows[leg - 1]
+    angle_weight = 1.0 / (characteristic_length_mm * characteristic_length_mm)  # W⁻¹ on angles
+    x, y, z, roll, pitch, yaw = start
+    iteration = 0
+    while True:
+        cr, sr, cp, sp, cy, sy = cos(roll), sin(roll), cos(pitch), sin(pitch), cos(yaw), sin(yaw)
+        # T·P_N with T = Rz(yaw)·Ry(pitch)·Rx(roll), written out as in inverse.leg_lengths.
+        tx = cy * cp * px + (cy * sp * sr - sy * cr) * py + (cy * sp * cr + sy * sr) * pz
+        ty = sy * cp * px + (sy * sp * sr + cy * cr) * py + (sy * sp * cr - cy * sr) * pz
+        tz = -sp * px + cp * sr * py + cp * cr * pz
+        vx, vy, vz = tx + x - bx, ty + y - by, tz + z - bz
+        current = sqrt(vx * vx + vy * vy + vz * vz)
+        residual = current - length_mm
+        correction = sqrt((x - x0) ** 2 + (y - y0) ** 2 + (z - z0) ** 2
+                          + ((roll - roll0) ** 2 + (pitch - pitch0) ** 2 + (yaw - yaw0) ** 2)
+                          * characteristic_length_mm * characteristic_length_mm)
+        here = (x, y, z, roll, pitch, yaw)
+        if abs(residual) <= tolerance_mm:
+            return ProjectionResult(ProjectionStatus.OK, here, iteration, residual, correction)
+        if iteration >= max_iterations:
+            return ProjectionResult(ProjectionStatus.MAX_ITERATIONS, here, iteration, residual, correction)
+        if current < 1e-9:
+            return ProjectionResult(ProjectionStatus.SINGULAR, here, iteration, residual, correction)
+        ux, uy, uz = vx / current, vy / current, vz / current
+        mx, my, mz = ty * uz - tz * uy, tz * ux - tx * uz, tx * uy - ty * ux  # (T·P_N) × u
+        # ∂l/∂(roll, pitch, yaw) = m·∂ω/∂angle; ∂ω/∂roll = Rz·Ry·ex, ∂ω/∂pitch = Rz·ey, ∂ω/∂yaw = ez.
+        g_roll = mx * cy * cp + my * sy * cp - mz * sp
+        g_pitch = -mx * sy + my * cy
+        g_yaw = mz
+        denominator = ux * ux + uy * uy + uz * uz + (g_roll * g_roll + g_pitch * g_pitch + g_yaw * g_yaw) * angle_weight
+        multiplier = (residual + ux * (x0 - x) + uy * (y0 - y) + uz * (z0 - z)
+                      + g_roll * (roll0 - roll) + g_pitch * (pitch0 - pitch) + g_yaw * (yaw0 - yaw)) / denominator
+        x, y, z = x0 - multiplier * ux, y0 - multiplier * uy, z0 - multiplier * uz
+        roll = roll0 - multiplier * g_roll * angle_weight
+        pitch = pitch0 - multiplier * g_pitch * angle_weight
+        yaw = yaw0 - multiplier * g_yaw * angle_weight
+        iteration += 1
+        if not (abs(pitch) < _MAX_PITCH_RAD and isfinite(x + y + z + roll + yaw)):
+            return ProjectionResult(ProjectionStatus.DIVERGED, _NO_POSE, iteration, float("inf"), float("inf"))

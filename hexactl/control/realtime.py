@@ -1,0 +1,147 @@
+"""Real-time set-up of the loop's thread: scheduling, CPU affinity, memory locking and
+the garbage collector. Every step is optional, none is required to run: without the
+privilege a step is skipped and :class:`RealtimeReport` says what was obtained.
+
+Garbage collection policy (why: a cyclic collection of the whole heap can stop every
+thread for milliseconds at a moment the collector picks):
+
+- at start: ``gc.collect()`` then ``gc.freeze()`` (everything alive moves to the
+  permanent generation, never scanned again) then ``gc.disable()`` — process-wide, so
+  the caller threads' allocations no longer trigger collections either;
+- while running, the loop itself runs ``gc.collect(1)`` (generations 0 and 1: only
+  objects created since the previous run) every ``gc_interval_s``, in a cycle's slack
+  (after its work, when at least half a period is left); :class:`~hexactl.control.stats.LoopStats`
+  reports how many ran and the longest;
+- generation 2 is not collected while the loop runs: cyclic garbage that lived through
+  two young collections (> ``gc_interval_s``) stays until shutdown
+  (:func:`restore_process`). The loop's own cycle creates no reference cycles.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import os
+import sys
+from dataclasses import dataclass, field
+
+from pydantic import BaseModel, ConfigDict, Field
+
+_MCL_CURRENT = 1
+_MCL_FUTURE = 2
+
+
+class RealtimeConfig(BaseModel):
+    """What to ask the operating system for. The defaults need no privilege."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    fifo_priority: int | None = Field(
+        default=None, ge=1, le=99, description="SCHED_FIFO priority of the loop thread; None: normal scheduling"
+    )
+    cpus: tuple[int, ...] | None = Field(default=None, description="CPUs the loop thread may run on; None: any")
+    lock_memory: bool = Field(default=False, description="mlockall(MCL_CURRENT | MCL_FUTURE): no page faults")
+    switch_interval_s: float | None = Field(
+        default=0.0005,
+        gt=0,
+        description="sys.setswitchinterval while running: the longest another thread can keep the GIL "
+        "from the loop once it wakes (CPython's default 5 ms would be 2.5 periods); None: leave it",
+    )
+    manage_gc: bool = Field(default=True, description="apply the garbage collection policy of this module")
+    gc_interval_s: float = Field(default=1.0, gt=0, description="period of the loop's young-generation collection")
+
+
+@dataclass(frozen=True, slots=True)
+class RealtimeReport:
+    """What the loop thread obtained. ``notes``: one line per step that was skipped or
+    failed, with the reason."""
+
+    fifo_priority: int | None = None
+    cpus: tuple[int, ...] | None = None
+    memory_locked: bool = False
+    switch_interval_s: float | None = None
+    gc_managed: bool = False
+    notes: tuple[str, ...] = field(default=())
+
+
+@dataclass(slots=True)
+class _Previous:
+    """What :func:`apply_realtime` changed process-wide, to put back at shutdown."""
+
+    gc_enabled: bool
+    switch_interval_s: float
+    memory_locked: bool
+
+
+def apply_realtime(config: RealtimeConfig) -> tuple[RealtimeReport, _Previous]:
+    """Apply ``config`` to the calling thread (scheduling, affinity) and the process
+    (memory, GIL switch interval, gc). Never raises for a missing privilege."""
+    notes: list[str] = []
+    previous = _Previous(gc.isenabled(), sys.getswitchinterval(), False)
+
+    priority = None
+    if config.fifo_priority is not None:
+        try:
+            # pid 0 is the calling thread on Linux: only the loop thread becomes real-time.
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(config.fifo_priority))
+            priority = config.fifo_priority
+        except (OSError, AttributeError) as error:
+            notes.append(f"SCHED_FIFO {config.fifo_priority} not set: {error}")
+
+    cpus = None
+    if config.cpus is not None:
+        try:
+            os.sched_setaffinity(0, set(config.cpus))
+            cpus = tuple(sorted(os.sched_getaffinity(0)))
+        except (OSError, ValueError, AttributeError) as error:
+            notes.append(f"CPU affinity {list(config.cpus)} not set: {error}")
+
+    locked = False
+    if config.lock_memory:
+        error_text = _mlockall()
+        if error_text is None:
+            locked = previous.memory_locked = True
+        else:
+            notes.append(f"mlockall failed: {error_text}")
+
+    switch = None
+    if config.switch_interval_s is not None:
+        sys.setswitchinterval(config.switch_interval_s)
+        switch = sys.getswitchinterval()
+
+    if config.manage_gc:
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+
+    report = RealtimeReport(priority, cpus, locked, switch, config.manage_gc, tuple(notes))
+    return report, previous
+
+
+def restore_process(config: RealtimeConfig, previous: _Previous) -> None:
+    """Undo the process-wide parts of :func:`apply_realtime` (thread settings end with
+    the thread)."""
+    if config.manage_gc:
+        gc.unfreeze()
+        if previous.gc_enabled:
+            gc.enable()
+    if config.switch_interval_s is not None:
+        sys.setswitchinterval(previous.switch_interval_s)
+    if previous.memory_locked:
+        _libc().munlockall()
+
+
+def _libc() -> ctypes.CDLL:
+    return ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+
+
+def _mlockall() -> str | None:
+    """None on success, else the reason."""
+    try:
+        libc = _libc()
+    except OSError as error:
+        return f"no libc: {error}"
+    if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE) != 0:
+        return os.strerror(ctypes.get_errno())
+    return None

@@ -1,0 +1,111 @@
+"""Loop timing statistics: fixed-size rings written on the hot path, percentiles
+computed on demand in the reader's thread.
+
+The loop records, per cycle, its wake-up lateness (actual wake − deadline) and its
+compute time (wake → end of the cycle's work), both in ns, into preallocated
+``array('q')`` rings: recording allocates nothing and the memory never grows.
+Percentiles cover the last ``window`` cycles; maxima and counters cover the whole run.
+"""
+
+from __future__ import annotations
+
+from array import array
+from dataclasses import dataclass
+
+import numpy as np
+
+DEFAULT_WINDOW = 16384
+"""Cycles kept for percentiles: about 33 s at 500 Hz, 16 s at 1 kHz."""
+
+
+@dataclass(frozen=True, slots=True)
+class Percentiles:
+    """Distribution summary in µs: p50, p99, p99.9 over the window, max over the run."""
+
+    p50: float
+    p99: float
+    p999: float
+    max: float
+
+
+@dataclass(frozen=True, slots=True)
+class LoopStats:
+    """What the loop's timing looks like.
+
+    ``missed``: cycles that woke more than half a period late. ``skipped``: deadlines
+    dropped by re-anchoring after an overrun (the loop never bursts to catch up).
+    ``gc_runs``/``gc_max_us``: young-generation collections run in the loop's slack.
+    """
+
+    rate_hz: float
+    cycles: int
+    missed: int
+    skipped: int
+    lateness_us: Percentiles
+    compute_us: Percentiles
+    gc_runs: int
+    gc_max_us: float
+
+
+class CycleStats:
+    """The loop's counters and rings. :meth:`record` is the hot-path part; everything
+    else runs in whichever thread asks."""
+
+    def __init__(self, period_ns: int, window: int = DEFAULT_WINDOW) -> None:
+        if window < 1:
+            raise ValueError("window must be at least 1")
+        self.period_ns = period_ns
+        self.window = window
+        self.cycles = 0
+        self.missed = 0
+        self.skipped = 0
+        self.gc_runs = 0
+        self.gc_max_ns = 0
+        self.max_lateness_ns = 0
+        self.max_compute_ns = 0
+        self._late_limit_ns = period_ns // 2
+        self._lateness = array("q", bytes(8 * window))
+        self._compute = array("q", bytes(8 * window))
+        self._next = 0
+
+    def record(self, lateness_ns: int, compute_ns: int) -> None:
+        """Store one cycle's figures (ns). Hot path: no allocation beyond int objects."""
+        i = self._next
+        self._lateness[i] = lateness_ns
+        self._compute[i] = compute_ns
+        self._next = i + 1 if i + 1 < self.window else 0
+        self.cycles += 1
+        if lateness_ns > self._late_limit_ns:
+            self.missed += 1
+        if lateness_ns > self.max_lateness_ns:
+            self.max_lateness_ns = lateness_ns
+        if compute_ns > self.max_compute_ns:
+            self.max_compute_ns = compute_ns
+
+    def record_gc(self, duration_ns: int) -> None:
+        self.gc_runs += 1
+        if duration_ns > self.gc_max_ns:
+            self.gc_max_ns = duration_ns
+
+    def summary(self) -> LoopStats:
+        """Percentiles over the window; call it off the hot path (it sorts)."""
+        count = min(self.cycles, self.window)
+        return LoopStats(
+            rate_hz=1e9 / self.period_ns,
+            cycles=self.cycles,
+            missed=self.missed,
+            skipped=self.skipped,
+            lateness_us=_percentiles(self._lateness, count, self.max_lateness_ns),
+            compute_us=_percentiles(self._compute, count, self.max_compute_ns),
+            gc_runs=self.gc_runs,
+            gc_max_us=self.gc_max_ns / 1e3,
+        )
+
+
+def _percentiles(ring: array, count: int, maximum_ns: int) -> Percentiles:
+    if count == 0:
+        return Percentiles(0.0, 0.0, 0.0, 0.0)
+    # A copy, so the loop can keep writing while this sorts.
+    samples = np.array(np.frombuffer(ring, dtype=np.int64)[:count], dtype=float)
+    p50, p99, p999 = np.percentile(samples, [50.0, 99.0, 99.9]) / 1e3
+    return Percentiles(float(p50), float(p99), float(p999), maximum_ns / 1e3)
