@@ -100,13 +100,17 @@ def frame_time_s(db: Database, message: Message, bit_rate: BitRate) -> float:
     return nominal_bits / bit_rate.nominal_bps + data_bits / (bit_rate.data_bps if switches else bit_rate.nominal_bps)
 
 
-def message_rate_hz(db: Database, message: Message, loop_rate_hz: float) -> float:
-    """Frames per second of a periodic ``message`` when the control loop runs at ``loop_rate_hz``.
+def follows_loop_rate(db: Database, message: Message) -> bool:
+    """Whether ``message`` goes once per loop cycle (DBC ``CycleTimeFollowsLoopRate``).
 
-    Messages marked ``CycleTimeFollowsLoopRate`` go once per loop cycle (their ``GenMsgCycleTime`` is
-    the default loop period); the others keep their ``GenMsgCycleTime``.
+    Such a message's ``GenMsgCycleTime`` is the default loop period.
     """
-    if _enum_attribute(db, message, "CycleTimeFollowsLoopRate") == "Yes":
+    return _enum_attribute(db, message, "CycleTimeFollowsLoopRate") == "Yes"
+
+
+def message_rate_hz(db: Database, message: Message, loop_rate_hz: float) -> float:
+    """Frames per second of a periodic ``message`` when the control loop runs at ``loop_rate_hz``."""
+    if follows_loop_rate(db, message):
         return loop_rate_hz
     return 1000 / message.cycle_time
 

@@ -263,31 +263,24 @@ def _crc8_byte_table() -> bytes:
 
 
 _CRC8_TABLE = _crc8_byte_table()
-# Two bytes per lookup: entry (b1 << 8) | x is the state after feeding x and then b1 to state 0, so a
-# little-endian word w = b0 | b1 << 8 advances state c to _CRC8_WORD_TABLE[w ^ c].
-_CRC8_WORD_TABLE = bytes(_CRC8_TABLE[_CRC8_TABLE[x] ^ b1] for b1 in range(256) for x in range(256))
 
 
-def _crc8_update(crc: int, data: int, length: int) -> int:
-    """Advance CRC state ``crc`` over ``length`` bytes given as a little-endian integer."""
-    word_table = _CRC8_WORD_TABLE
-    for _ in range(length >> 1):
-        crc = word_table[(data & 0xFFFF) ^ crc]
-        data >>= 16
-    if length & 1:
-        crc = _CRC8_TABLE[(data & 0xFF) ^ crc]
+def _crc8_update(crc: int, data: bytes) -> int:
+    table = _CRC8_TABLE
+    for byte in data:
+        crc = table[crc ^ byte]
     return crc
 
 
 def crc8(data: bytes) -> int:
     """CRC-8/SAE-J1850 of ``data`` (``crc8(b"123456789") == 0x4B``)."""
-    return _crc8_update(CRC8_INIT, int.from_bytes(data, "little"), len(data)) ^ CRC8_XOR_OUT
+    return _crc8_update(CRC8_INIT, data) ^ CRC8_XOR_OUT
 
 
 def _frame_crc(can_id: int, body: int, length: int) -> int:
     # The identifier is part of the CRC (as two bytes, low first) so that a payload that is valid
     # for one frame, e.g. CMD_3, is never accepted under another identifier, e.g. CMD_4.
-    return _crc8_update(CRC8_INIT, can_id | body << 16, length + 2) ^ CRC8_XOR_OUT
+    return _crc8_update(CRC8_INIT, (can_id | body << 16).to_bytes(length + 2, "little")) ^ CRC8_XOR_OUT
 
 
 def frame_crc(can_id: int, body: bytes) -> int:
