@@ -1,0 +1,533 @@
+"""The controller's CAN link: :class:`CanActuatorLink` implements the control layer's
+:class:`~hexactl.control.hardware.ActuatorInterface` over python-can with the actuator protocol
+of ``firmware_proto`` (PROTOCOL.md; frames are built and parsed only by its codec).
+
+Units at this interface are those of :mod:`hexactl.control.hardware` (sensor mm, mm/s, s);
+on the wire they are µm and µm/s, rounded to the nearest µm.
+
+Sending never blocks and never queues: every frame goes out with ``timeout=0`` (the E-stop
+with a short bounded timeout) and a frame that cannot be sent is dropped and counted in
+:attr:`LinkHealth.send_failures`. A cycle whose set-point frame fails is abandoned before its
+SYNC, so no actuator applies part of it and nothing stale is ever sent later. Commands are
+the only frames that are repeated: unacknowledged commands are retried with the same
+sequence number (PROTOCOL.md section 7), which the actuator executes at most once.
+
+Receiving happens in :meth:`CanActuatorLink.read_feedback`: it drains at most
+``max_frames_per_read`` frames with ``recv(timeout=0)``, decodes FEEDBACK, HEARTBEAT, EMCY and
+CMD_ACK into per-actuator state (position and velocity are NaN until an actuator's first
+FEEDBACK) and counts every frame the codec rejects (bad DLC, CRC or
+value, unknown id) instead of raising.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from math import inf, nan
+
+import can
+
+from firmware_proto.codec import (
+    NODE_IDS,
+    PROTOCOL_VERSION,
+    WATCHDOG_CYCLES_DEFAULT,
+    WATCHDOG_CYCLES_MAX,
+    WATCHDOG_CYCLES_MIN,
+    CommandAck,
+    CommandCode,
+    CommandResult,
+    Emergency,
+    EStopReason,
+    Feedback,
+    FrameError,
+    Heartbeat,
+    LoopRate,
+    decode,
+    encode_command,
+    encode_estop,
+    encode_setpoints,
+)
+from firmware_proto.codec import ActuatorState as WireState
+from hexactl.adapters.can.transport import (
+    BusSpec,
+    bus_state_after_send_error,
+    bus_state_from_error_frame,
+    open_bus,
+)
+from hexactl.control.hardware import (
+    ActuatorCommand,
+    ActuatorFeedback,
+    ActuatorState,
+    BusState,
+    FeedbackSnapshot,
+    LinkHealth,
+)
+
+_UM_PER_MM = 1000.0
+_MM_PER_UM = 1e-3
+
+STATE_FROM_WIRE: dict[WireState, ActuatorState] = {
+    WireState.INIT: ActuatorState.DISABLED,  # booting: not following, brake on
+    WireState.DISABLED: ActuatorState.DISABLED,
+    WireState.ENABLED: ActuatorState.ENABLED,
+    WireState.LOCKED: ActuatorState.LOCKED,
+    WireState.FAULT: ActuatorState.FAULT,
+    WireState.ESTOP: ActuatorState.ESTOP,
+}
+"""Firmware state → control-layer state."""
+
+COMMAND_TO_WIRE: dict[ActuatorCommand, CommandCode] = {
+    ActuatorCommand.ENABLE: CommandCode.ENABLE,
+    ActuatorCommand.DISABLE: CommandCode.DISABLE,
+    ActuatorCommand.CLEAR_FAULT: CommandCode.CLEAR_FAULT,
+    ActuatorCommand.LOCK: CommandCode.LOCK,
+    ActuatorCommand.UNLOCK: CommandCode.UNLOCK,
+}
+"""Control-layer command → protocol command."""
+
+_ENGAGED = (WireState.ENABLED, WireState.LOCKED)
+_LOOP_RATES = (LoopRate.HZ_250, LoopRate.HZ_500, LoopRate.HZ_1000)
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """How the link drives the actuators.
+
+    :ivar loop_rate: the control loop's rate, sent with every ENABLE
+    :ivar watchdog_cycles: loop cycles without a valid set-point before an actuator stops with
+        COMM_TIMEOUT, sent with every ENABLE (3..100)
+    :ivar heartbeat_timeout_s: an actuator that sent nothing for this long is reported silent
+        in :meth:`CanActuatorLink.link_health` (PROTOCOL.md: lost after 300 ms)
+    :ivar max_frames_per_read: bound on the frames one :meth:`CanActuatorLink.read_feedback` drains
+    :ivar command_retry_s: a command unacknowledged for this long is sent again (same sequence)
+    :ivar command_retries: retries before the command is given up and counted as timed out
+    :ivar estop_send_timeout_s: how long :meth:`CanActuatorLink.send_estop` may wait for room
+        in the transmit queue (the only send that waits at all)
+    """
+
+    loop_rate: LoopRate = LoopRate.HZ_500
+    watchdog_cycles: int = WATCHDOG_CYCLES_DEFAULT
+    heartbeat_timeout_s: float = 0.3
+    max_frames_per_read: int = 256
+    command_retry_s: float = 0.020
+    command_retries: int = 3
+    estop_send_timeout_s: float = 0.005
+
+    def __post_init__(self) -> None:
+        if self.loop_rate not in _LOOP_RATES:
+            raise ValueError(f"loop_rate must be 250, 500 or 1000 Hz, got {self.loop_rate!r}")
+        if not WATCHDOG_CYCLES_MIN <= self.watchdog_cycles <= WATCHDOG_CYCLES_MAX:
+            raise ValueError(
+                f"watchdog_cycles must be {WATCHDOG_CYCLES_MIN}..{WATCHDOG_CYCLES_MAX}, got {self.watchdog_cycles}"
+            )
+        if self.max_frames_per_read < 1:
+            raise ValueError("max_frames_per_read must be at least 1")
+
+
+@dataclass(frozen=True, slots=True)
+class LinkStats:
+    """Counters since the link was opened (diagnostics; the loop needs only :class:`LinkHealth`).
+
+    :ivar frames_received: frames taken from the bus
+    :ivar undecodable_frames: frames the codec rejected (bad DLC, CRC, value or unknown id)
+        and frames that are not classic 11-bit data frames
+    :ivar foreign_frames: valid protocol frames that actuators do not send (another controller's)
+    :ivar refused_setpoints: :meth:`CanActuatorLink.send_setpoints` calls refused before
+        sending (non-finite or unencodable values); also counted as send failures
+    :ivar send_failures: as in :class:`LinkHealth`
+    :ivar command_timeouts: commands given up after their retries
+    :ivar rejected_frames: per leg 1–6, the sum of the heartbeats' RejectedFrames
+    :ivar emergencies: per leg 1–6, EMCY frames received
+    """
+
+    frames_received: int
+    undecodable_frames: int
+    foreign_frames: int
+    refused_setpoints: int
+    send_failures: int
+    command_timeouts: int
+    rejected_frames: tuple[int, ...]
+    emergencies: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class NodeStatus:
+    """Protocol-level view of one actuator (diagnostics).
+
+    :ivar protocol_version: from its last HEARTBEAT, None before the first
+    :ivar heartbeat_age_s: time since its last HEARTBEAT, s (``inf`` if none)
+    :ivar feedback_age_s: time since its last FEEDBACK, s (``inf`` if none)
+    :ivar last_ack: its last CMD_ACK, None before the first
+    :ivar last_emergency: its last EMCY, None before the first
+    :ivar command_pending: a command is waiting for its acknowledgement
+    """
+
+    protocol_version: int | None
+    heartbeat_age_s: float
+    feedback_age_s: float
+    last_ack: CommandAck | None
+    last_emergency: Emergency | None
+    command_pending: bool
+
+
+class _PendingCommand:
+    __slots__ = ("frame", "sequence", "sent_ns", "retries")
+
+    def __init__(self, frame: tuple[int, bytes], sequence: int, sent_ns: int) -> None:
+        self.frame = frame
+        self.sequence = sequence
+        self.sent_ns = sent_ns
+        self.retries = 0
+
+
+class _Node:
+    """What the link knows about one actuator."""
+
+    __slots__ = (
+        "position_mm", "velocity_mm_s", "wire_state", "fault_bits", "wire_counter", "engaged",
+        "heard_ns", "heartbeat_ns", "feedback_ns", "protocol_version", "rejected_frames",
+        "emergencies", "last_emergency", "last_ack", "sequence", "pending",
+    )  # fmt: skip
+
+    def __init__(self) -> None:
+        # NaN until the first FEEDBACK: no reading is better than a plausible-looking 0.0.
+        self.position_mm = nan
+        self.velocity_mm_s = nan
+        self.wire_state = WireState.INIT
+        self.fault_bits = 0
+        self.wire_counter = 0
+        self.engaged = False  # has reported ENABLED or LOCKED: its SetpointCounter means something
+        self.heard_ns: int | None = None
+        self.heartbeat_ns: int | None = None
+        self.feedback_ns: int | None = None
+        self.protocol_version: int | None = None
+        self.rejected_frames = 0
+        self.emergencies = 0
+        self.last_emergency: Emergency | None = None
+        self.last_ack: CommandAck | None = None
+        # A random start, because an actuator that outlives a controller restart would take a
+        # first command whose sequence equals its last executed one for a retry (PROTOCOL.md §5).
+        self.sequence = random.randrange(256)
+        self.pending: _PendingCommand | None = None
+
+
+class CanActuatorLink:
+    """The six actuators over CAN, as an :class:`~hexactl.control.hardware.ActuatorInterface`.
+
+    The link takes ownership of ``bus`` (:meth:`close` shuts it down). ``clock_ns`` is the
+    time source for ages and retries (``time.monotonic_ns`` by default; tests pass their own).
+
+    Threading: as the interface requires, only :meth:`send_estop` may be called from another
+    thread than the loop's. python-can's SocketCAN ``send`` is one ``send(2)`` per frame and the
+    virtual bus's puts into thread-safe queues, so frames need no lock; the shared failure
+    counters take one.
+    """
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        config: LinkConfig = LinkConfig(),
+        *,
+        clock_ns: Callable[[], int] = time.monotonic_ns,
+    ) -> None:
+        self._bus = bus
+        self.config = config
+        self._clock_ns = clock_ns
+        self._nodes = tuple(_Node() for _ in NODE_IDS)
+        self._lock = threading.Lock()
+        self._bus_state = BusState.ACTIVE
+        self._closed = False
+        self._detail = ""
+        self._send_failures = 0
+        self._refused_setpoints = 0
+        self._frames_received = 0
+        self._undecodable = 0
+        self._foreign = 0
+        self._command_timeouts = 0
+        self._first_counter: int | None = None
+        self._last_counter: int | None = None
+        self._estop_frames = {reason: encode_estop(reason) for reason in EStopReason}
+
+    @classmethod
+    def open(cls, spec: str | BusSpec, config: LinkConfig = LinkConfig(), **bus_options: object) -> CanActuatorLink:
+        """Open the bus named by ``spec`` (see :mod:`hexactl.adapters.can.transport`) and a link on it.
+
+        :raises BusSpecError: for a malformed spec
+        :raises can.CanError: if the bus cannot be opened
+        """
+        return cls(open_bus(spec, **bus_options), config)
+
+    def close(self) -> None:
+        """Shut the bus down; afterwards every send fails and the bus state is ``DOWN``."""
+        self._closed = True
+        self._bus_state = BusState.DOWN
+        self._bus.shutdown()
+
+    def __enter__(self) -> CanActuatorLink:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- ActuatorInterface -------------------------------------------------------------
+
+    def send_setpoints(self, counter: int, setpoints_mm: Sequence[float]) -> bool:
+        """Send one cycle: SETPOINT_12, SETPOINT_34, SETPOINT_56 and SYNC with ``counter`` mod 256.
+
+        Set-points are sensor mm, rounded to the nearest µm. Refused without sending anything
+        (False, counted in :attr:`LinkStats.refused_setpoints` and as a send failure): not six
+        values, a NaN or infinite value, one outside the encodable ±8388 mm. Values outside the
+        stroke but encodable are sent: the actuator refuses them (fault SETPOINT_RANGE).
+        If a frame cannot be sent the rest of the cycle, SYNC included, is dropped (False).
+        """
+        try:
+            frames = encode_setpoints(counter & 0xFF, [round(value * _UM_PER_MM) for value in setpoints_mm])
+        except (ValueError, OverflowError, TypeError) as error:
+            # round() raises ValueError for NaN and OverflowError for ±inf; the codec raises
+            # ValueError for a count other than six or a value outside its field.
+            with self._lock:
+                self._refused_setpoints += 1
+                self._send_failures += 1
+                self._detail = f"set-points refused: {error}"
+            return False
+        send = self._send
+        for can_id, payload in frames:
+            if not send(can_id, payload, 0.0):
+                return False
+        if self._first_counter is None:
+            self._first_counter = counter
+        self._last_counter = counter
+        return True
+
+    def send_command(self, leg: int | None, command: ActuatorCommand) -> bool:
+        """Send ``command`` to leg 1–6, or to each of the six when ``leg`` is None.
+
+        ENABLE carries the configured loop rate and watchdog cycles, and is refused (False,
+        counted as a send failure) for a leg that has not yet sent a HEARTBEAT with this
+        protocol version. Unacknowledged commands are retried by :meth:`read_feedback`.
+        Returns False if any of the frames could not be sent.
+        """
+        if leg is not None and leg not in NODE_IDS:
+            return self._refuse(f"no leg {leg!r}: legs are 1-6")
+        code = COMMAND_TO_WIRE.get(command)
+        if code is None:
+            return self._refuse(f"unknown command {command!r}")
+        now = self._clock_ns()
+        sent = True
+        for node in NODE_IDS if leg is None else (leg,):
+            sent = self._send_command(node, code, now) and sent
+        return sent
+
+    def send_estop(self, reason: EStopReason = EStopReason.OPERATOR) -> bool:
+        """Send ESTOP (``reason`` is informative). Safe from any thread; waits at most
+        ``estop_send_timeout_s`` for room in the transmit queue. Call it again while the
+        e-stop condition lasts (PROTOCOL.md: every 100 ms)."""
+        can_id, payload = self._estop_frames[reason]
+        return self._send(can_id, payload, self.config.estop_send_timeout_s)
+
+    def read_feedback(self) -> FeedbackSnapshot:
+        """Drain up to ``max_frames_per_read`` received frames, retry unacknowledged commands
+        and return every actuator's latest report. Never waits and never raises."""
+        now = self._clock_ns()
+        if not self._closed:
+            recv = self._bus.recv
+            handle = self._handle
+            for _ in range(self.config.max_frames_per_read):
+                try:
+                    message = recv(0.0)
+                except Exception as error:  # the interface promises not to raise: report the bus down
+                    self._bus_state = BusState.DOWN
+                    self._detail = f"receive failed: {error}"
+                    break
+                if message is None:
+                    break
+                handle(message, now)
+            self._retry_commands(now)
+        return FeedbackSnapshot(tuple(self._feedback(node, now) for node in self._nodes), now)
+
+    def link_health(self) -> LinkHealth:
+        """Bus state, send failures and a note naming the last error and any silent legs."""
+        silent = self.silent_legs()
+        detail = self._detail
+        if silent:
+            legs = ", ".join(str(leg) for leg in silent)
+            detail = f"silent legs: {legs}" + (f"; {detail}" if detail else "")
+        return LinkHealth(self._bus_state, self._send_failures, detail)
+
+    # -- diagnostics -------------------------------------------------------------------
+
+    def silent_legs(self) -> tuple[int, ...]:
+        """Legs from which nothing arrived for longer than ``heartbeat_timeout_s`` (as of
+        the last :meth:`read_feedback`'s frames and the clock's present)."""
+        now = self._clock_ns()
+        limit = self.config.heartbeat_timeout_s
+        return tuple(
+            leg for leg, node in zip(NODE_IDS, self._nodes) if _age_s(node.heard_ns, now) > limit
+        )
+
+    def node_status(self, leg: int) -> NodeStatus:
+        """Protocol-level state of leg 1–6.
+
+        :raises ValueError: for a leg outside 1–6
+        """
+        if leg not in NODE_IDS:
+            raise ValueError(f"no leg {leg!r}: legs are 1-6")
+        node = self._nodes[leg - 1]
+        now = self._clock_ns()
+        return NodeStatus(
+            node.protocol_version,
+            _age_s(node.heartbeat_ns, now),
+            _age_s(node.feedback_ns, now),
+            node.last_ack,
+            node.last_emergency,
+            node.pending is not None,
+        )
+
+    def stats(self) -> LinkStats:
+        """Counters since the link was opened."""
+        return LinkStats(
+            self._frames_received,
+            self._undecodable,
+            self._foreign,
+            self._refused_setpoints,
+            self._send_failures,
+            self._command_timeouts,
+            tuple(node.rejected_frames for node in self._nodes),
+            tuple(node.emergencies for node in self._nodes),
+        )
+
+    # -- sending -----------------------------------------------------------------------
+
+    def _send(self, can_id: int, payload: bytes, timeout_s: float) -> bool:
+        try:
+            self._bus.send(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False), timeout_s)
+        except Exception as error:  # any failure, expected (CanOperationError) or not, is counted
+            with self._lock:
+                self._send_failures += 1
+                self._bus_state = BusState.DOWN if self._closed else bus_state_after_send_error(error, self._bus_state)
+                self._detail = f"send 0x{can_id:03X} failed: {error}"
+            return False
+        if self._bus_state is BusState.DOWN and not self._closed:
+            self._bus_state = BusState.ACTIVE  # the interface is back
+        return True
+
+    def _refuse(self, reason: str) -> bool:
+        with self._lock:
+            self._send_failures += 1
+            self._detail = reason
+        return False
+
+    def _send_command(self, leg: int, code: CommandCode, now: int) -> bool:
+        node = self._nodes[leg - 1]
+        if code is CommandCode.ENABLE:
+            if node.protocol_version != PROTOCOL_VERSION:
+                heard = "no heartbeat yet" if node.protocol_version is None else f"protocol {node.protocol_version}"
+                return self._refuse(f"ENABLE refused for leg {leg}: {heard}, need protocol {PROTOCOL_VERSION}")
+            frame = encode_command(leg, code, node.sequence, self.config.loop_rate, self.config.watchdog_cycles)
+        else:
+            frame = encode_command(leg, code, node.sequence)
+        sequence = node.sequence
+        node.sequence = (sequence + 1) & 0xFF
+        if not self._send(*frame, 0.0):
+            return False
+        # A newer command supersedes an unacknowledged older one: only the latest is retried.
+        node.pending = _PendingCommand(frame, sequence, now)
+        return True
+
+    def _retry_commands(self, now: int) -> None:
+        retry_ns = int(self.config.command_retry_s * 1e9)
+        for leg, node in zip(NODE_IDS, self._nodes):
+            pending = node.pending
+            if pending is None or now - pending.sent_ns < retry_ns:
+                continue
+            if pending.retries >= self.config.command_retries:
+                node.pending = None
+                self._command_timeouts += 1
+                self._detail = f"leg {leg}: command 0x{pending.frame[1][0]:02X} not acknowledged after {pending.retries} retries"
+                continue
+            pending.retries += 1
+            pending.sent_ns = now
+            self._send(*pending.frame, 0.0)
+
+    # -- receiving ---------------------------------------------------------------------
+
+    def _handle(self, message: can.Message, now: int) -> None:
+        self._frames_received += 1
+        if message.is_error_frame:
+            state = bus_state_from_error_frame(message)
+            if state is not None:
+                self._bus_state = state
+            return
+        if message.is_extended_id or message.is_remote_frame:
+            self._undecodable += 1
+            return
+        try:
+            decoded = decode(message.arbitration_id, message.data)
+        except FrameError:
+            self._undecodable += 1
+            return
+        kind = type(decoded)
+        if kind is Feedback:
+            node = self._nodes[decoded.node - 1]
+            node.position_mm = decoded.position_um * _MM_PER_UM
+            node.velocity_mm_s = decoded.velocity_um_s * _MM_PER_UM
+            node.wire_state = decoded.state
+            node.fault_bits = int(decoded.faults)
+            node.wire_counter = decoded.setpoint_counter
+            node.feedback_ns = now
+        elif kind is Heartbeat:
+            node = self._nodes[decoded.node - 1]
+            node.wire_state = decoded.state
+            node.protocol_version = decoded.protocol_version
+            node.rejected_frames += decoded.rejected_frames
+            node.heartbeat_ns = now
+        elif kind is Emergency:
+            node = self._nodes[decoded.node - 1]
+            node.wire_state = decoded.state
+            node.fault_bits = int(decoded.faults)
+            node.emergencies += 1
+            node.last_emergency = decoded
+        elif kind is CommandAck:
+            node = self._nodes[decoded.node - 1]
+            node.wire_state = decoded.state
+            node.last_ack = decoded
+            pending = node.pending
+            if pending is not None and pending.sequence == decoded.sequence:
+                node.pending = None
+            if decoded.result is not CommandResult.ACCEPTED:
+                self._detail = (
+                    f"leg {decoded.node}: {decoded.command.name} {decoded.result.name} in {decoded.state.name}"
+                )
+        else:
+            self._foreign += 1
+            return
+        node.heard_ns = now
+        if node.wire_state in _ENGAGED:
+            node.engaged = True
+
+    def _feedback(self, node: _Node, now: int) -> ActuatorFeedback:
+        return ActuatorFeedback(
+            position_mm=node.position_mm,
+            velocity_mm_s=node.velocity_mm_s,
+            state=STATE_FROM_WIRE[node.wire_state],
+            fault_bits=node.fault_bits,
+            heartbeat_age_s=_age_s(node.heard_ns, now),
+            setpoint_counter=self._unwrap(node),
+        )
+
+    def _unwrap(self, node: _Node) -> int:
+        """The loop counter whose low byte the actuator echoes: the latest one sent that ends
+        in those 8 bits (acknowledgements lag far less than 256 cycles), or −1 if the
+        actuator has applied nothing this link sent."""
+        last, first = self._last_counter, self._first_counter
+        if last is None or first is None or not node.engaged:
+            return -1
+        counter = last - ((last - node.wire_counter) & 0xFF)
+        return counter if counter >= first else -1
+
+
+def _age_s(then_ns: int | None, now_ns: int) -> float:
+    return inf if then_ns is None else (now_ns - then_ns) * 1e-9

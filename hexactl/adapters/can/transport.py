@@ -1,0 +1,125 @@
+"""Which CAN bus to use: spec strings, opening a python-can bus, and the bus's error state.
+
+A *bus spec* names an interface and a channel, ``INTERFACE:CHANNEL``:
+
+============================  =================================================================
+``socketcan:can0``            a real SocketCAN interface (Linux), e.g. a USB or PCIe adapter
+``socketcan:vcan0``           the kernel's virtual CAN (needs ``vcan``; see tools/uml_vcan.py)
+``virtual:NAME``              python-can's in-process bus: every bus opened on ``NAME`` in the
+                              same process sees the others' frames (the simulator's default)
+============================  =================================================================
+
+Everything below the spec is plain python-can: :func:`open_bus` returns a :class:`can.BusABC`.
+"""
+
+from __future__ import annotations
+
+import errno
+from dataclasses import dataclass
+from typing import Any
+
+import can
+
+from hexactl.control.hardware import BusState
+
+INTERFACES = ("socketcan", "virtual")
+"""The python-can interfaces a spec may name."""
+
+VIRTUAL_RX_QUEUE_SIZE = 10_000
+"""Frames a ``virtual:`` bus keeps unread before senders get errors. Bounded so that a bus
+nobody reads (a spy left open in a test, a stalled loop) cannot grow memory without limit."""
+
+
+class BusSpecError(ValueError):
+    """A bus spec that is not ``INTERFACE:CHANNEL`` with a known interface."""
+
+
+@dataclass(frozen=True, slots=True)
+class BusSpec:
+    """A parsed bus spec: python-can's ``interface`` and ``channel``."""
+
+    interface: str
+    channel: str
+
+    def __str__(self) -> str:
+        return f"{self.interface}:{self.channel}"
+
+
+def parse_bus_spec(spec: str) -> BusSpec:
+    """Parse ``socketcan:CHANNEL`` or ``virtual:NAME``.
+
+    :raises BusSpecError: for anything else (the message says what is accepted)
+    """
+    interface, separator, channel = spec.strip().partition(":")
+    if not separator or not channel or interface not in INTERFACES:
+        raise BusSpecError(
+            f"bus spec {spec!r}: expected socketcan:CHANNEL (e.g. socketcan:can0, socketcan:vcan0) "
+            "or virtual:NAME"
+        )
+    return BusSpec(interface, channel)
+
+
+def open_bus(spec: str | BusSpec, **options: Any) -> can.BusABC:
+    """Open the bus named by ``spec``; ``options`` go to :class:`can.Bus` unchanged.
+
+    Virtual buses get a bounded receive queue (:data:`VIRTUAL_RX_QUEUE_SIZE`) unless
+    ``rx_queue_size`` is given.
+
+    :raises BusSpecError: for a malformed spec
+    :raises can.CanError: if python-can cannot open it (e.g. ``can.CanInitializationError``
+        for a missing SocketCAN interface)
+    :raises OSError: for operating-system errors python-can passes through
+    """
+    parsed = parse_bus_spec(spec) if isinstance(spec, str) else spec
+    if parsed.interface == "virtual":
+        options.setdefault("rx_queue_size", VIRTUAL_RX_QUEUE_SIZE)
+    return can.Bus(interface=parsed.interface, channel=parsed.channel, **options)
+
+
+# SocketCAN error-frame bits (linux/can/error.h): the identifier says the error class,
+# data[1] details controller problems.
+_CAN_ERR_CRTL = 0x004
+_CAN_ERR_BUSOFF = 0x040
+_CAN_ERR_RESTARTED = 0x100
+_CAN_ERR_CRTL_RX_WARNING = 0x04
+_CAN_ERR_CRTL_TX_WARNING = 0x08
+_CAN_ERR_CRTL_RX_PASSIVE = 0x10
+_CAN_ERR_CRTL_TX_PASSIVE = 0x20
+_CAN_ERR_CRTL_ACTIVE = 0x40
+
+
+def bus_state_from_error_frame(message: can.Message) -> BusState | None:
+    """The bus state a SocketCAN error frame announces, or None if it announces none.
+
+    python-can delivers the kernel's error frames as messages with ``is_error_frame``;
+    only bus-off, restart and controller warning/passive/active changes move the state.
+    """
+    error_class = message.arbitration_id
+    if error_class & _CAN_ERR_BUSOFF:
+        return BusState.BUS_OFF
+    if error_class & _CAN_ERR_RESTARTED:
+        return BusState.ACTIVE
+    if error_class & _CAN_ERR_CRTL and len(message.data) > 1:
+        detail = message.data[1]
+        if detail & (_CAN_ERR_CRTL_RX_PASSIVE | _CAN_ERR_CRTL_TX_PASSIVE):
+            return BusState.PASSIVE
+        if detail & (_CAN_ERR_CRTL_RX_WARNING | _CAN_ERR_CRTL_TX_WARNING):
+            return BusState.WARNING
+        if detail & _CAN_ERR_CRTL_ACTIVE:
+            return BusState.ACTIVE
+    return None
+
+
+_DOWN_ERRNOS = frozenset({errno.ENETDOWN, errno.ENODEV, errno.ENXIO, errno.EBADF})
+
+
+def bus_state_after_send_error(error: Exception, current: BusState) -> BusState:
+    """The bus state implied by a failed send.
+
+    ENETDOWN/ENODEV (interface down or removed) and a closed bus mean ``DOWN``; a full
+    transmit queue (ENOBUFS, "Transmit buffer full") says nothing new about the bus.
+    """
+    code = getattr(error, "error_code", None)
+    if code in _DOWN_ERRNOS or (isinstance(error, can.CanOperationError) and "closed bus" in str(error)):
+        return BusState.DOWN
+    return current

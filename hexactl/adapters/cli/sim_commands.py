@@ -1,0 +1,115 @@
+"""``hexactl sim-actuators``: the six simulated actuators on a CAN bus, in their own process."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from types import FrameType
+
+import can
+
+from hexactl.adapters.can.transport import BusSpecError, open_bus, parse_bus_spec
+from hexactl.adapters.cli.common import CliError, load_config, parse_numbers
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.kinematics.geometry import Geometry, GeometryError
+from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
+from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
+from hexactl.sim.true_platform import true_geometry
+
+LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
+
+
+def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    sim = subparsers.add_parser(
+        "sim-actuators",
+        parents=[common],
+        help="run the six simulated actuator firmwares on a CAN bus",
+        description="Run six simulated actuators (firmware, drive, sensor) speaking the hexapod CAN "
+        "protocol on a bus, with the simulated physical platform behind them. Prints one JSON line "
+        "when ready and one with the final state when stopped (SIGINT, SIGTERM or --duration).",
+        epilog="Stroke and speed limit come from the geometry's [limits]. The actuators start at the "
+        "readings that put the true platform in its zero posture unless --positions is given. "
+        "See docs/can.md.",
+    )
+    sim.add_argument("--can", required=True, metavar="SPEC", help="bus: socketcan:CHANNEL (e.g. socketcan:vcan0)")
+    sim.add_argument("--seed", type=int, default=0, help="seed of the true platform's manufacturing errors and "
+                     "of injected frame faults (default 0)")  # fmt: skip
+    sim.add_argument("--true-geometry", metavar="FILE", help="geometry file of the true platform "
+                     "(default: the --config geometry with seeded manufacturing errors)")  # fmt: skip
+    sim.add_argument("--positions", metavar="L1,...,L6", help="start readings, mm")
+    sim.add_argument("--tick-ms", type=float, default=1.0, help="physics tick, ms (default 1)")
+    sim.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    sim.add_argument("--drop-probability", type=float, default=0.0, help="each received frame is lost with this probability")
+    sim.add_argument("--corrupt-probability", type=float, default=0.0,
+                     help="each received frame is corrupted (bad CRC) with this probability")  # fmt: skip
+    sim.set_defaults(run=run_sim_actuators)
+
+
+def _true_geometry(arguments: argparse.Namespace, nominal: Geometry) -> Geometry:
+    try:
+        if arguments.true_geometry:
+            return load_geometry(arguments.true_geometry)
+        return true_geometry(nominal, arguments.seed)
+    except GeometryError as error:
+        raise CliError(str(error)) from None
+
+
+def run_sim_actuators(arguments: argparse.Namespace) -> int:
+    nominal = load_config(arguments)
+    truth = _true_geometry(arguments, nominal)
+    if arguments.positions:
+        positions = parse_numbers(arguments.positions.split(","), LEG_LABELS)
+    else:
+        positions = zero_posture_readings_mm(truth)
+    if not arguments.tick_ms > 0:
+        raise CliError("--tick-ms must be positive")
+    try:
+        spec = parse_bus_spec(arguments.can)
+        firmwares = make_firmwares(positions, actuator_params_for(nominal), seed=arguments.seed)
+    except (BusSpecError, ValueError) as error:
+        raise CliError(str(error)) from None
+    for firmware in firmwares:
+        firmware.inject.drop_probability = arguments.drop_probability
+        firmware.inject.corrupt_probability = arguments.corrupt_probability
+    try:
+        bus = open_bus(spec)
+    except (can.CanError, OSError) as error:
+        raise CliError(f"cannot open {spec}: {error}") from None
+
+    runner = ActuatorBus(bus, firmwares, tick_s=arguments.tick_ms / 1000.0)
+    platform = PhysicalPlatform(truth, runner.actual_positions_mm)
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        runner.stop()
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    _print_json({"ready": True, "can": str(spec), "positions_mm": positions, "true_geometry": truth.name})
+    try:
+        runner.serve(arguments.duration)
+    finally:
+        bus.shutdown()
+    try:
+        pose = list(platform.true_pose().relative)
+    except PoseUnavailable:
+        pose = None
+    _print_json(
+        {
+            "stopped": True,
+            "positions_mm": list(runner.actual_positions_mm()),
+            "states": [firmware.state.name for firmware in firmwares],
+            "faults": [int(firmware.faults) for firmware in firmwares],
+            "rejected_frames": [firmware.rejected_total for firmware in firmwares],
+            "frames_sent": runner.frames_sent,
+            "send_failures": runner.send_failures,
+            "true_pose_relative": pose,
+        }
+    )
+    return 0
+
+
+def _print_json(document: dict[str, object]) -> None:
+    print(json.dumps(document), flush=True)
+    sys.stdout.flush()
