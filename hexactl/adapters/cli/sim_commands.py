@@ -16,7 +16,6 @@ from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
 from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
-from hexactl.sim.true_platform import true_geometry
 
 LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
 
@@ -48,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 
 def _true_geometry(arguments: argparse.Namespace, nominal: Geometry) -> Geometry:
+    # Imported here so that the other commands do not load the simulator's dependencies.
+    from hexactl.sim.true_platform import true_geometry
+
     try:
         if arguments.true_geometry:
             return load_geometry(arguments.true_geometry)
