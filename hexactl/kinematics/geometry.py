@@ -85,6 +85,9 @@ class CalibrationInfo(_Strict):
     base_joints_std_mm: tuple[Vector3, ...] | None = None
     platform_joints_std_mm: tuple[Vector3, ...] | None = None
     zero_lengths_std_mm: Six | None = None
+    sensor_scale_errors: Six | None = Field(
+        default=None, description="identified sensor scale errors (length = zero + (1 + e)·reading); not applied by the kinematics"
+    )
     notes: str = ""
 
 

@@ -1,0 +1,181 @@
+"""Measured postures: the identification's input, and the checks that guard it.
+
+One posture is one row of a measurement file: which leg was locked (1–6, 0 for none), the
+six sensor readings, and the measured posture, either as an absolute pose or as the
+fixed-frame coordinates of the feature points (the raw instrument output). Every posture
+keeps the line it came from so that any problem can be reported where the user can fix it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexactl.kinematics.inverse import LEG_COUNT
+from hexactl.kinematics.points import DegeneratePointsError, pose_from_points
+from hexactl.kinematics.rotation import rotation_matrices
+
+DISTANCE_TOLERANCE_SIGMAS = 5.0
+"""Default inter-point distance tolerance, in standard deviations of a measured distance."""
+
+LOCKED_READING_TOLERANCE_MM = 0.1
+"""Default: a locked leg whose reading moves more than this from its group's median was not locked."""
+
+
+@dataclass(frozen=True, slots=True)
+class RowProblem:
+    """Something wrong with one row: ``line`` is the 1-based line in the source (0: none)."""
+
+    line: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"line {self.line}: {self.message}" if self.line else self.message
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MeasurementData:
+    """N measured postures.
+
+    ``locked_leg`` (N,) int, 1–6 or 0; ``readings_mm`` (N, 6) sensor readings; exactly one of
+    ``poses`` (N, 6) absolute (mm, rad) or ``points_mm`` (N, K, 3) feature points in the
+    fixed frame, point k being the geometry's ``feature_points[k]``; ``lines`` (N,) source
+    lines. Arrays are copied read-only.
+    """
+
+    locked_leg: NDArray[np.int64]
+    readings_mm: NDArray[np.float64]
+    lines: NDArray[np.int64]
+    poses: NDArray[np.float64] | None = None
+    points_mm: NDArray[np.float64] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.poses is None) == (self.points_mm is None):
+            raise ValueError("give either measured poses or measured points")
+        count = len(np.asarray(self.locked_leg))
+        points_shape = None if self.points_mm is None else np.shape(self.points_mm)
+        shapes = {
+            "locked_leg": (np.int64, (count,)),
+            "readings_mm": (float, (count, LEG_COUNT)),
+            "lines": (np.int64, (count,)),
+            "poses": (float, (count, 6)),
+            "points_mm": (float, (count, points_shape[1], 3) if points_shape and len(points_shape) == 3 else None),
+        }
+        for name, (dtype, shape) in shapes.items():
+            value = getattr(self, name)
+            if value is None:
+                continue
+            array = np.array(value, dtype=dtype)
+            if array.shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        if np.any((self.locked_leg < 0) | (self.locked_leg > LEG_COUNT)):
+            raise ValueError("locked_leg must be 0 (none) or a leg number 1-6")
+
+    def __len__(self) -> int:
+        return len(self.locked_leg)
+
+    @property
+    def point_count(self) -> int:
+        """Feature points per posture (0 for pose-form data)."""
+        return 0 if self.points_mm is None else self.points_mm.shape[1]
+
+    def select(self, mask: NDArray[np.bool_]) -> MeasurementData:
+        """The postures where ``mask`` is true."""
+        mask = np.asarray(mask, dtype=bool)
+        return MeasurementData(
+            self.locked_leg[mask],
+            self.readings_mm[mask],
+            self.lines[mask],
+            None if self.poses is None else self.poses[mask],
+            None if self.points_mm is None else self.points_mm[mask],
+        )
+
+    def without_lines(self, lines: Iterable[int]) -> MeasurementData:
+        """The postures not from ``lines`` (to exclude rows that have problems)."""
+        return self.select(~np.isin(self.lines, list(lines)))
+
+    def locked_rows(self, leg: int) -> NDArray[np.intp]:
+        """Indices of the postures with ``leg`` (1–6) locked."""
+        return np.flatnonzero(self.locked_leg == leg)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MeasuredPoses:
+    """Each posture's measured pose: ``poses`` (N, 6) absolute (mm, rad), ``rotations`` (N, 3, 3)."""
+
+    poses: NDArray[np.float64]
+    rotations: NDArray[np.float64]
+
+    @property
+    def translations(self) -> NDArray[np.float64]:
+        return self.poses[:, :3]
+
+
+def measured_poses(data: MeasurementData, feature_points_mm: NDArray) -> MeasuredPoses:
+    """The pose of every posture: as given, or fitted to the measured points (Kabsch).
+
+    Raises :class:`~hexactl.kinematics.points.DegeneratePointsError` for collinear points;
+    :func:`screen_measurements` reports those rows first.
+    """
+    if data.points_mm is None:
+        assert data.poses is not None
+        poses = np.array(data.poses)
+        return MeasuredPoses(poses, rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5]))
+    model = np.asarray(feature_points_mm, dtype=float)[: data.point_count]
+    fits = [pose_from_points(model, points) for points in data.points_mm]
+    return MeasuredPoses(np.array([fit.pose for fit in fits]), np.array([fit.rotation for fit in fits]))
+
+
+def screen_measurements(
+    data: MeasurementData,
+    feature_points_mm: NDArray,
+    point_sigma_mm: float,
+    distance_tolerance_mm: float | None = None,
+    locked_reading_tolerance_mm: float = LOCKED_READING_TOLERANCE_MM,
+) -> tuple[RowProblem, ...]:
+    """Rows that must not be used as they are, one :class:`RowProblem` per finding.
+
+    - measured points collinear (no orientation) or with an inter-point distance off the
+      known one by more than ``distance_tolerance_mm`` (default
+      ``DISTANCE_TOLERANCE_SIGMAS · √2 · point_sigma_mm``): a mis-sighted target or a typo;
+    - a leg marked locked whose reading is more than ``locked_reading_tolerance_mm`` from the
+      median of that leg's locked rows: the leg did not hold, or the row is mislabelled.
+    """
+    problems: list[RowProblem] = []
+    if data.points_mm is not None:
+        tolerance = (
+            DISTANCE_TOLERANCE_SIGMAS * np.sqrt(2.0) * point_sigma_mm
+            if distance_tolerance_mm is None
+            else distance_tolerance_mm
+        )
+        model = np.asarray(feature_points_mm, dtype=float)[: data.point_count]
+        for line, points in zip(data.lines, data.points_mm):
+            try:
+                fit = pose_from_points(model, points)
+            except DegeneratePointsError as error:
+                problems.append(RowProblem(int(line), f"feature points unusable: {error}"))
+                continue
+            for (i, j), error_mm in zip(combinations(range(len(model)), 2), fit.distance_errors_mm):
+                if abs(error_mm) > tolerance:
+                    known = float(np.linalg.norm(model[i] - model[j]))
+                    problems.append(RowProblem(int(line),
+                        f"distance p{i + 1}-p{j + 1} is {known + error_mm:.3f} mm, the feature points are "
+                        f"{known:.3f} mm apart (error {error_mm:+.3f} mm, tolerance {tolerance:.3f} mm)"))
+    for leg in range(1, LEG_COUNT + 1):
+        rows = data.locked_rows(leg)
+        if len(rows) == 0:
+            continue
+        readings = data.readings_mm[rows, leg - 1]
+        median = float(np.median(readings))
+        for row, reading in zip(rows, readings):
+            if abs(reading - median) > locked_reading_tolerance_mm:
+                problems.append(RowProblem(int(data.lines[row]),
+                    f"leg {leg} is marked locked but reads {reading:.4f} mm, {reading - median:+.4f} mm from "
+                    f"its locked rows' median {median:.4f} mm (tolerance {locked_reading_tolerance_mm:g} mm)"))
+    return tuple(sorted(problems, key=lambda problem: problem.line))

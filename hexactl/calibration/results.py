@@ -1,0 +1,217 @@
+"""Identification options and results, shared by every method.
+
+Every method ends in :func:`assemble_result`, so covariance, observability, outlier flags,
+the noise-consistency test and the status follow one rule whatever produced the estimate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum, StrEnum
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from hexactl.calibration.parameters import StructuralParameters
+from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
+from hexactl.calibration.uncertainty import (
+    DEFAULT_READING_SIGMA_MM,
+    Observability,
+    PredictedAccuracy,
+    analyse_information,
+    predict_accuracy,
+)
+
+
+class Method(StrEnum):
+    """Identification methods (see docs/calibration.md for when each applies)."""
+
+    AUTO = "auto"  # full, unless the data show its model does not hold (then leglock)
+    FULL = "full"  # all parameters from every posture and every reading, errors-in-variables ML
+    LEGLOCK = "leglock"  # each leg from its locked postures alone, bounded least squares
+    PAPER = "paper"  # the paper's squared-length objective with Gauss–Newton and reorderings
+
+
+class IdentificationStatus(IntEnum):
+    OK = 0
+    WEAKLY_DETERMINED = 1  # solved, but the data leave commanded poses uncertain: see warnings
+    NOT_CONVERGED = 2  # the iteration cap was reached: do not use the parameters
+    NOT_OBSERVABLE = 3  # the data cannot determine some parameter combination at all
+    INSUFFICIENT_DATA = 4  # too few postures for the method: nothing was identified
+
+
+MIN_LOCKED_POSTURES = 8
+"""Per leg, for leglock and paper: seven unknowns plus at least one redundant equation."""
+
+MIN_POSTURES = 8
+"""For full: each leg has seven unknowns and every posture gives one equation per leg."""
+
+
+@dataclass(frozen=True, slots=True)
+class IdentificationOptions:
+    """Settings of an identification. Lengths in mm.
+
+    ``point_sigma_mm`` None: the geometry's ``[measurement] point_sigma_mm``.
+    ``max_joint_deviation_mm`` / ``max_zero_length_deviation_mm`` bound leglock's and
+    paper's estimates around the nominal (the paper's boundary conditions).
+    ``loss`` is leglock's scipy robust loss ("linear", "soft_l1", "huber", "cauchy",
+    "arctan"), on residuals in noise standard deviations. ``paper_orderings`` random
+    reorderings (seeded by ``seed``) for the paper's method (the paper used 200 000).
+    ``max_predicted_position_mm`` / ``max_predicted_orientation_deg``: when the parameter
+    uncertainty leaves the test motions' poses more uncertain than this (RMS, 1σ), the
+    status is WEAKLY_DETERMINED. ``consistency_limit``: χ²/dof above it means the residuals
+    do not match the noise model. ``outlier_probability``: a posture whose residual is
+    less likely than this under the noise model is flagged.
+    """
+
+    method: Method = Method.AUTO
+    point_sigma_mm: float | None = None
+    reading_sigma_mm: float = DEFAULT_READING_SIGMA_MM
+    estimate_scales: bool = False
+    max_joint_deviation_mm: float = 15.0
+    max_zero_length_deviation_mm: float = 15.0
+    loss: str = "linear"
+    paper_orderings: int = 200
+    seed: int = 0
+    max_iterations: int = 100
+    max_predicted_position_mm: float = 0.1
+    max_predicted_orientation_deg: float = 0.01
+    consistency_limit: float = 2.0
+    outlier_probability: float = 1e-3
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PostureResiduals:
+    """Per posture (N,): ``lines`` source lines; ``fit_rms_mm`` the residual a posture
+    leaves, mm (full: feature points; leglock/paper: the locked leg's length); ``normalised``
+    its χ² over its degrees of freedom (≈ 1 when it fits the noise model); ``outlier``
+    when that is improbably large. Postures a method did not use have NaN and False."""
+
+    lines: NDArray[np.int64]
+    locked_leg: NDArray[np.int64]
+    fit_rms_mm: NDArray[np.float64]
+    normalised: NDArray[np.float64]
+    outlier: NDArray[np.bool_]
+
+    @property
+    def outlier_lines(self) -> tuple[int, ...]:
+        return tuple(int(line) for line in self.lines[self.outlier])
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class IdentificationResult:
+    """What an identification found, and how far to trust it.
+
+    ``covariance`` (p, p) of the parameter vector (mm²; scaled by χ²/dof when the residuals
+    exceed the noise model, so standard deviations stay honest); ``residual_rms_mm`` and
+    ``expected_rms_mm``: the fit residual and what the noise model predicts for it;
+    ``predicted``: the pose error the parameter uncertainty alone leaves on the paper's
+    test motions (the Cramér–Rao prediction when the method is ``full``);
+    ``reason``: why this method (auto's choice explained); ``warnings``: for people.
+    Use the parameters only when ``ok``.
+    """
+
+    status: IdentificationStatus
+    method: Method
+    reason: str
+    parameters: StructuralParameters
+    covariance: NDArray[np.float64]
+    observability: Observability
+    residuals: PostureResiduals
+    residual_rms_mm: float
+    expected_rms_mm: float
+    chi2_per_dof: float
+    predicted: PredictedAccuracy
+    postures_used: int
+    iterations: int
+    warnings: tuple[str, ...]
+
+    @property
+    def ok(self) -> bool:
+        return self.status in (IdentificationStatus.OK, IdentificationStatus.WEAKLY_DETERMINED)
+
+    @property
+    def std(self) -> StructuralParameters:
+        """Standard deviations, shaped like the parameters (mm; scale errors dimensionless)."""
+        return StructuralParameters.from_vector(np.sqrt(np.clip(np.diag(self.covariance), 0, None)), self.parameters.has_scales)
+
+
+def assemble_result(
+    method: Method,
+    reason: str,
+    parameters: StructuralParameters,
+    information: NDArray,
+    residuals: PostureResiduals,
+    chi2_total: float,
+    degrees_of_freedom: int,
+    residual_rms_mm: float,
+    expected_rms_mm: float,
+    iterations: int,
+    converged: bool,
+    options: IdentificationOptions,
+    home_mm_deg: tuple[float, ...],
+    warnings: tuple[str, ...] = (),
+) -> IdentificationResult:
+    """Covariance, observability, χ² test, predicted accuracy and status from a method's
+    raw outcome; ``home_mm_deg`` is the zero posture the test motions are relative to."""
+    covariance, observability = analyse_information(information)
+    chi2_per_dof = chi2_total / max(degrees_of_freedom, 1)
+    notes = list(warnings)
+    if chi2_per_dof > 1.0:
+        covariance = covariance * chi2_per_dof
+    if chi2_per_dof > options.consistency_limit:
+        notes.append(
+            f"residuals are {np.sqrt(chi2_per_dof):.2g}× the noise model (χ²/dof {chi2_per_dof:.3g}): the noise "
+            "figures are optimistic or something is not modelled (outliers, joint play, drift); standard "
+            "deviations are scaled up accordingly")
+    outliers = residuals.outlier_lines
+    if outliers:
+        notes.append(f"{len(outliers)} posture(s) fit worse than the noise model allows (p < "
+                     f"{options.outlier_probability:g}): lines {', '.join(map(str, outliers))}")
+    with_scales = parameters.has_scales
+    status = IdentificationStatus.OK
+    if not converged:
+        status = IdentificationStatus.NOT_CONVERGED
+        notes.append(f"no convergence within {iterations} iterations: do not use these parameters")
+    elif not observability.full_rank:
+        status = IdentificationStatus.NOT_OBSERVABLE
+        notes.append(f"the data cannot determine {len(observability.singular_values) - observability.rank} "
+                     f"parameter combination(s), e.g. {observability.worst_direction_terms(with_scales)}: "
+                     "add postures that move these joints differently")
+    predicted = predict_accuracy(parameters.legs(), covariance, PAPER_TEST_MOTIONS, home_mm_deg)
+    if status is IdentificationStatus.OK and (
+        predicted.rms_position_mm > options.max_predicted_position_mm
+        or predicted.rms_orientation_deg > options.max_predicted_orientation_deg
+    ):
+        status = IdentificationStatus.WEAKLY_DETERMINED
+        notes.append(f"weakly determined: the parameter uncertainty alone leaves the test motions' poses uncertain "
+                     f"by {predicted.rms_position_mm:.3g} mm and {predicted.rms_orientation_deg:.3g}° RMS (limits "
+                     f"{options.max_predicted_position_mm:g} mm, {options.max_predicted_orientation_deg:g}°); the worst "
+                     f"combination {observability.worst_direction_terms(with_scales)} is known to "
+                     f"±{observability.worst_std_mm:.3g} mm: add or spread postures")
+    return IdentificationResult(status, method, reason, parameters, covariance, observability, residuals,
+                                residual_rms_mm, expected_rms_mm, chi2_per_dof, predicted,
+                                int(np.count_nonzero(np.isfinite(residuals.normalised))), iterations, tuple(notes))
+
+
+def flag_outliers(chi2_values: NDArray, dof: NDArray | float, probability: float) -> NDArray[np.bool_]:
+    """True where χ² with ``dof`` degrees of freedom is less likely than ``probability``."""
+    values = np.asarray(chi2_values, dtype=float)
+    flagged = np.zeros(values.shape, dtype=bool)
+    finite = np.isfinite(values)
+    flagged[finite] = chi2.sf(values[finite], np.broadcast_to(dof, values.shape)[finite]) < probability
+    return flagged
+
+
+def failed_result(method: Method, reason: str, status: IdentificationStatus, nominal: StructuralParameters,
+                  lines: NDArray, locked_leg: NDArray, message: str) -> IdentificationResult:
+    """A result that identified nothing (nominal parameters, infinite uncertainty)."""
+    size = nominal.size
+    nan = np.full(len(lines), np.nan)
+    observability = Observability(np.zeros(size), float("inf"), float("inf"), np.zeros(size), 0)
+    residuals = PostureResiduals(np.asarray(lines), np.asarray(locked_leg), nan, nan, np.zeros(len(lines), dtype=bool))
+    unknown = PredictedAccuracy(float("inf"), float("inf"), float("inf"), float("inf"))
+    return IdentificationResult(status, method, reason, nominal, np.full((size, size), np.inf), observability,
+                                residuals, float("nan"), float("nan"), float("nan"), unknown, 0, 0, (message,))
+

@@ -1,0 +1,67 @@
+"""The paper's test motions (section 4): the one definition of their waypoints.
+
+The controller's built-in test sequences, the simulated validation and the calibration
+report all read these; poses are relative to the zero posture, mm and deg.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+Pose = tuple[float, float, float, float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class TestMotion:
+    """A named list of waypoints (relative poses, mm and deg).
+
+    ``axis`` is the pose axis the motion sweeps (index into x, y, z, roll, pitch, yaw), or
+    None for a motion that moves several axes at once.
+    """
+
+    __test__ = False  # not a pytest test class, despite the name
+
+    name: str
+    title: str
+    waypoints: tuple[Pose, ...]
+    axis: int | None
+
+
+def _single_axis(axis: int, values: tuple[float, ...]) -> tuple[Pose, ...]:
+    poses = []
+    for value in values:
+        pose = [0.0] * 6
+        pose[axis] = value
+        poses.append((pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]))
+    return tuple(poses)
+
+
+X_SWEEP = TestMotion(
+    name="x_sweep",
+    title="Translate in X (paper Fig. 3)",
+    waypoints=_single_axis(0, (600.0, 450.0, 300.0, 150.0, 0.0, -150.0, -300.0, -450.0, -600.0)),
+    axis=0,
+)
+
+Y_ROTATION = TestMotion(
+    name="y_rotation",
+    title="Rotate about Y (paper Fig. 4)",
+    waypoints=_single_axis(4, (20.0, 15.0, 10.0, 5.0, 0.0, -5.0, -10.0, -15.0, -20.0)),
+    axis=4,
+)
+
+COMPOUND = TestMotion(
+    name="compound",
+    title="Compound motion (paper Table 1)",
+    waypoints=((0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (100.0, 100.0, 100.0, 5.0, 5.0, 5.0)),
+    axis=None,
+)
+
+PAPER_TEST_MOTIONS: tuple[TestMotion, ...] = (X_SWEEP, Y_ROTATION, COMPOUND)
+
+PAPER_TABLE_1: dict[str, Pose] = {
+    "instruction": (100.0, 100.0, 100.0, 5.0, 5.0, 5.0),
+    "before calibration": (99.95, 99.66, 99.31, 4.94, 5.22, 5.51),
+    "after calibration": (100.29, 99.79, 100.15, 5.02, 5.06, 5.06),
+}
+"""The paper's measured compound-motion result (its platform, not ours), for reference."""

@@ -1,0 +1,194 @@
+"""Fisher information, observability and the Cramér–Rao bound on pose accuracy.
+
+The measurement model behind every figure here: each posture's feature points are
+measured with isotropic noise ``point_sigma_mm`` per coordinate, the six sensor readings
+with ``reading_sigma_mm``. Marginalising the posture's unknown pose out of the
+errors-in-variables model gives the information one posture carries about the 42
+structural parameters θ:
+
+    I_j = C_jᵀ (G_j Σ_j G_jᵀ + σ_r² I)⁻¹ C_j
+
+with C_j = ∂(leg closure)/∂θ, G_j = ∂(leg length)/∂(pose twist) and Σ_j the covariance of
+the pose fitted to the points. Σ_j I_j⁻¹ is the Cramér–Rao bound, which the ``full``
+maximum-likelihood identification reaches (its Schur-complement normal matrix is the same
+matrix). Parameter covariance is then propagated to the error of commanded poses.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexactl.calibration.jacobians import length_pose_jacobian, point_fit_twist_covariance
+from hexactl.calibration.parameters import GEOMETRIC_PARAMETERS, PARAMETERS_PER_LEG, parameter_names
+from hexactl.calibration.test_motions import TestMotion
+from hexactl.kinematics.inverse import LEG_COUNT, LegModel, leg_vectors_batch, twist_jacobian
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.rotation import rotation_matrices
+
+DEFAULT_READING_SIGMA_MM = 0.01
+"""Default sensor-reading noise, 1σ, mm: encoder resolution plus actuator model error."""
+
+RANK_TOLERANCE = 1e-10
+"""Singular values below this fraction of the largest count as zero (rank deficiency)."""
+
+
+def closure_parameter_jacobian(legs: LegModel, poses: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(C, units): C (N, 6, 42) = ∂(‖T·P_i + R − B_i‖ − zero_i)/∂θ; units (N, 6, 3) leg directions.
+
+    Row i of posture n is non-zero only in leg i's seven columns: [−u, Tᵀu, −1].
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 6)
+    vectors = leg_vectors_batch(legs, poses)
+    units = vectors / np.linalg.norm(vectors, axis=2, keepdims=True)
+    rotations = rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5])
+    jacobian = np.zeros((len(poses), LEG_COUNT, GEOMETRIC_PARAMETERS))
+    for leg in range(LEG_COUNT):
+        start = PARAMETERS_PER_LEG * leg
+        jacobian[:, leg, start : start + 3] = -units[:, leg]
+        jacobian[:, leg, start + 3 : start + 6] = np.einsum("nji,nj->ni", rotations, units[:, leg])
+        jacobian[:, leg, start + 6] = -1.0
+    return jacobian, units
+
+
+def posture_information_factors(
+    legs: LegModel, poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float, reading_sigma_mm: float
+) -> NDArray[np.float64]:
+    """Square roots F_j (N, 6, 42) of each posture's information about θ (I_j = F_jᵀF_j).
+
+    ``poses`` (N, 6) absolute (mm, rad), the postures' true (or planned) poses.
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 6)
+    closure, _ = closure_parameter_jacobian(legs, poses)
+    rotations = rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5])
+    pose_covariance = point_fit_twist_covariance(rotations, feature_points_mm, point_sigma_mm)
+    twist = np.array([twist_jacobian(legs, pose)[0] for pose in poses])
+    length_covariance = twist @ pose_covariance @ np.transpose(twist, (0, 2, 1))
+    length_covariance += reading_sigma_mm**2 * np.eye(LEG_COUNT)
+    cholesky = np.linalg.cholesky(length_covariance)
+    return np.linalg.solve(cholesky, closure)
+
+
+def fisher_information(
+    legs: LegModel, poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float, reading_sigma_mm: float
+) -> NDArray[np.float64]:
+    """The 42×42 Fisher information of the postures ``poses`` (absolute, mm and rad)."""
+    factors = posture_information_factors(legs, poses, feature_points_mm, point_sigma_mm, reading_sigma_mm)
+    return np.einsum("nri,nrj->ij", factors, factors)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Observability:
+    """How well the data determine the parameters (all in mm: every parameter is a length).
+
+    ``singular_values`` of the noise-whitened Jacobian (1/mm), largest first;
+    ``worst_std_mm`` = 1/smallest: the standard deviation of the worst-determined parameter
+    combination ``worst_direction`` (unit vector); ``rank`` counts the determined ones.
+    """
+
+    singular_values: NDArray[np.float64]
+    condition_number: float
+    worst_std_mm: float
+    worst_direction: NDArray[np.float64]
+    rank: int
+
+    @property
+    def full_rank(self) -> bool:
+        return self.rank == len(self.singular_values)
+
+    def worst_direction_terms(self, with_scales: bool, count: int = 4) -> str:
+        """The worst direction's largest components, e.g. ``0.71·B3.z − 0.70·zero3``."""
+        names = parameter_names(with_scales)
+        order = np.argsort(-np.abs(self.worst_direction))[:count]
+        return " ".join(f"{'+' if self.worst_direction[k] >= 0 else '−'}{abs(self.worst_direction[k]):.2f}·{names[k]}" for k in order).lstrip("+")
+
+
+def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Observability]:
+    """(covariance, observability) from an information matrix (p, p).
+
+    The covariance is the inverse on the determined subspace (pseudo-inverse), with the
+    undetermined directions left out, so it must be read together with ``rank``.
+    """
+    information = 0.5 * (np.asarray(information, dtype=float) + np.asarray(information, dtype=float).T)
+    eigenvalues, vectors = np.linalg.eigh(information)
+    eigenvalues = np.clip(eigenvalues, 0.0, None)
+    singular = np.sqrt(eigenvalues)[::-1]
+    vectors = vectors[:, ::-1]
+    largest = singular[0] if singular[0] > 0 else 1.0
+    determined = singular > RANK_TOLERANCE * largest
+    inverse = np.where(determined, 1.0 / np.where(determined, singular, 1.0) ** 2, 0.0)
+    covariance = (vectors * inverse) @ vectors.T
+    smallest = singular[-1]
+    observability = Observability(
+        singular_values=singular,
+        condition_number=float(largest / smallest) if smallest > 0 else float("inf"),
+        worst_std_mm=float(1.0 / smallest) if smallest > 0 else float("inf"),
+        worst_direction=vectors[:, -1].copy(),
+        rank=int(np.count_nonzero(determined)),
+    )
+    return covariance, observability
+
+
+def correlation_matrix(covariance: NDArray) -> NDArray[np.float64]:
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    scale = np.where(std > 0, std, 1.0)
+    return covariance / np.outer(scale, scale)
+
+
+def pose_error_sensitivity(legs: LegModel, pose: Sequence[float]) -> NDArray[np.float64]:
+    """S (6, 42): pose error (mm, rad) of a commanded ``pose`` per parameter error (mm).
+
+    A controller that uses parameters θ + δθ computes readings for ``pose``; the platform
+    (true θ) then sits at pose + S·δθ to first order: from h(θ, x) = ‖T·P + R − B‖ − zero,
+    h(θ, x_true) = h(θ + δθ, x_commanded) gives δx = H_x⁻¹·H_θ·δθ.
+    """
+    pose_jacobian, _ = length_pose_jacobian(legs, pose)
+    closure, _ = closure_parameter_jacobian(legs, np.asarray(pose, dtype=float)[None, :])
+    return np.linalg.solve(pose_jacobian, closure[0])
+
+
+@dataclass(frozen=True, slots=True)
+class PredictedAccuracy:
+    """Pose error expected from a parameter covariance over a set of test motions.
+
+    ``rms_*`` over all waypoints and axes; ``expected_max_*`` the mean over parameter draws
+    of the largest |error| of any waypoint and axis (the statistic the validation reports).
+    """
+
+    rms_position_mm: float
+    rms_orientation_deg: float
+    expected_max_position_mm: float
+    expected_max_orientation_deg: float
+
+
+def predict_accuracy(
+    legs: LegModel,
+    covariance: NDArray,
+    motions: Sequence[TestMotion],
+    home_mm_deg: Sequence[float],
+    samples: int = 4000,
+    seed: int = 0,
+) -> PredictedAccuracy:
+    """Propagate a 42×42 parameter covariance to the error of the motions' commanded poses.
+
+    ``legs`` are the parameters to linearise at (true ones in simulation, identified ones
+    otherwise). The expected maxima are Monte-Carlo means over ``samples`` Gaussian
+    parameter-error draws (seeded), since a maximum has no closed form.
+    """
+    relative = np.array([pose for motion in motions for pose in motion.waypoints])
+    absolute = absolute_from_relative(home_mm_deg, relative)
+    sensitivity = np.concatenate([pose_error_sensitivity(legs, pose) for pose in absolute])  # (6W, 42)
+    covariance = np.asarray(covariance, dtype=float)[:GEOMETRIC_PARAMETERS, :GEOMETRIC_PARAMETERS]
+    pose_variance = np.einsum("ij,jk,ik->i", sensitivity, covariance, sensitivity).reshape(-1, 6)
+    to_deg = np.degrees(1.0)
+    draws = np.random.default_rng(seed).multivariate_normal(np.zeros(len(covariance)), covariance, size=samples, method="eigh")
+    errors = np.abs(draws @ sensitivity.T).reshape(samples, -1, 6)
+    return PredictedAccuracy(
+        rms_position_mm=float(np.sqrt(np.mean(pose_variance[:, :3]))),
+        rms_orientation_deg=float(np.sqrt(np.mean(pose_variance[:, 3:])) * to_deg),
+        expected_max_position_mm=float(np.mean(np.max(errors[:, :, :3], axis=(1, 2)))),
+        expected_max_orientation_deg=float(np.mean(np.max(errors[:, :, 3:], axis=(1, 2))) * to_deg),
+    )

@@ -1,0 +1,91 @@
+"""Identification: exact recovery without noise, honest uncertainty with it, clear refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexactl.calibration.identification import identify
+from hexactl.calibration.parameters import StructuralParameters
+from hexactl.calibration.results import IdentificationOptions, IdentificationStatus, Method
+from hexactl.calibration.uncertainty import fisher_information
+from hexactl.sim.offline_campaign import CampaignDesign, execute_plans, plan_campaign
+from hexactl.sim.instrument import SimulatedInstrument
+from hexactl.sim.true_platform import true_geometry
+
+
+@pytest.mark.parametrize("method", [Method.FULL, Method.LEGLOCK, Method.PAPER])
+def test_noise_free_data_give_the_true_parameters(nominal, true_platform, noise_free_campaign, method):
+    result = identify(noise_free_campaign.data, nominal, IdentificationOptions(method=method, paper_orderings=20))
+    truth = StructuralParameters.from_geometry(true_platform).to_vector()
+    assert result.ok, result.warnings
+    # paper's Gauss–Newton stops on its own rules (relative decrease), so allow it more.
+    tolerance = 1e-4 if method is Method.PAPER else 1e-6
+    assert np.max(np.abs(result.parameters.to_vector() - truth)) < tolerance
+
+
+def test_full_recovers_sensor_scale_errors(nominal, noise_free_campaign):
+    result = identify(noise_free_campaign.data, nominal, IdentificationOptions(method=Method.FULL, estimate_scales=True))
+    assert result.ok and result.parameters.has_scales
+    assert np.max(np.abs(result.parameters.scale_errors)) < 1e-9  # the simulated sensors are exact
+
+
+def test_full_with_noise_is_consistent_with_its_standard_deviations(nominal):
+    """Over seeds the normalised errors (estimate − truth)/σ behave like N(0, 1), and σ is the CRB."""
+    plans = plan_campaign(nominal, CampaignDesign(postures_per_leg=10, candidates=300, seed=2))
+    normalised = []
+    for seed in range(4):
+        true = true_geometry(nominal, seed=100 + seed)
+        campaign = execute_plans(nominal, true, plans, SimulatedInstrument.for_geometry(nominal, seed), 0.001, seed)
+        result = identify(campaign.data, nominal, IdentificationOptions(method=Method.FULL))
+        assert result.ok and 0.7 < result.chi2_per_dof < 1.3
+        std = np.sqrt(np.diag(result.covariance))
+        normalised.append((result.parameters.to_vector() - StructuralParameters.from_geometry(true).to_vector()) / std)
+        bound = fisher_information(true.legs, campaign.true_poses, np.array(nominal.measurement.feature_points),
+                                   nominal.measurement.point_sigma_mm, IdentificationOptions().reading_sigma_mm)
+        assert np.allclose(std, np.sqrt(np.diag(np.linalg.inv(bound))), rtol=0.05)
+    normalised = np.concatenate(normalised)
+    assert np.max(np.abs(normalised)) < 4.5
+    assert 0.6 < np.sqrt(np.mean(normalised**2)) < 1.4
+
+
+def test_auto_explains_its_choice_and_full_beats_leglock(nominal, leglock_campaign):
+    auto = identify(leglock_campaign.data, nominal)
+    assert auto.method is Method.FULL and "auto chose full" in auto.reason
+    leglock = identify(leglock_campaign.data, nominal, IdentificationOptions(method=Method.LEGLOCK))
+    assert auto.predicted.rms_position_mm < leglock.predicted.rms_position_mm
+
+
+def test_auto_falls_back_to_leglock_when_free_readings_disagree(nominal, leglock_campaign):
+    data = leglock_campaign.data
+    readings = np.array(data.readings_mm)
+    free = data.locked_leg != 2
+    readings[free, 1] += np.random.default_rng(0).normal(0.0, 2.0, np.count_nonzero(free))  # a sliding sensor
+    corrupted = type(data)(data.locked_leg, readings, data.lines, points_mm=data.points_mm)
+    result = identify(corrupted, nominal)
+    assert result.method is Method.LEGLOCK and "auto chose leglock" in result.reason
+
+
+def test_leglock_names_legs_and_lines_with_too_few_locked_postures(nominal, leglock_campaign):
+    data = leglock_campaign.data
+    keep = (data.locked_leg != 3) | (np.cumsum(data.locked_leg == 3) <= 4)
+    result = identify(data.select(keep), nominal, IdentificationOptions(method=Method.LEGLOCK))
+    assert result.status is IdentificationStatus.INSUFFICIENT_DATA and not result.ok
+    lines = data.lines[data.locked_leg == 3][:4]
+    assert "leg 3 has 4 locked posture(s)" in result.warnings[0]
+    assert all(str(line) in result.warnings[0] for line in lines)
+
+
+def test_too_few_postures_for_full(nominal, leglock_campaign):
+    result = identify(leglock_campaign.data.select(np.arange(len(leglock_campaign.data)) < 5), nominal,
+                      IdentificationOptions(method=Method.FULL))
+    assert result.status is IdentificationStatus.INSUFFICIENT_DATA
+
+
+def test_a_bad_posture_is_flagged_as_outlier(nominal, leglock_campaign):
+    data = leglock_campaign.data
+    points = np.array(data.points_mm)
+    points[7] += np.array([1.5, -1.0, 1.2])  # the whole target set shifted: distances still fine
+    result = identify(type(data)(data.locked_leg, data.readings_mm, data.lines, points_mm=points), nominal,
+                      IdentificationOptions(method=Method.FULL))
+    assert int(data.lines[7]) in result.residuals.outlier_lines
