@@ -165,6 +165,15 @@ def _worst_case_length(message: Message) -> str:
     return f"{classic_frame_bits(message.length)} bit"
 
 
+def _frame_row(same_frame: Iterable[FrameLoad]) -> list[str]:
+    """Table row of one message at each loop rate."""
+    loads = list(same_frame)
+    message = loads[0].message
+    return [message.name, f"0x{message.frame_id:03X}", str(message.length), _worst_case_length(message)] + [
+        f"{frame.rate_hz:g} Hz: {_percent(frame.load, 2)}" for frame in loads
+    ]
+
+
 def _table(header: Iterable[str], rows: Iterable[Iterable[str]]) -> list[str]:
     header = list(header)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -190,13 +199,9 @@ def render_markdown(db: Database) -> str:
     for profile in Profile:
         for bit_rate in profile.bit_rates:
             per_rate = [frame_loads(db, profile, rate, bit_rate) for rate in LOOP_RATES_HZ]
-            rows = [
-                [f"{frames[0].message.name}", f"0x{frames[0].message.frame_id:03X}", str(frames[0].message.length),
-                 _worst_case_length(frames[0].message)]
-                + [f"{frame.rate_hz:g} Hz: {_percent(frame.load, 2)}" for frame in frames]
-                for frames in zip(*per_rate)
-            ]
-            rows.append(["**Total**", "", "", ""] + [f"**{_verdict(sum(f.load for f in loads))}**" for loads in per_rate])
+            rows = [_frame_row(same_frame) for same_frame in zip(*per_rate)]
+            totals = [f"**{_verdict(sum(frame.load for frame in loads))}**" for loads in per_rate]
+            rows.append(["**Total**", "", "", ""] + totals)
             lines += ["", f"**{profile.name} profile, {bit_rate.label}**", ""]
             lines += _table(["Frame", "ID", "Bytes", "Worst case"] + loop_columns, rows)
     return "\n".join(lines) + "\n"

@@ -4,7 +4,7 @@ import pytest
 
 from firmware_proto import busload
 from firmware_proto.busload import CLASSIC_1M, FD_1M_5M, Profile, bus_load
-from firmware_proto.generate import PROTOCOL_MD, render_protocol_md
+from firmware_proto.generate import BUS_LOAD_BEGIN, PROTOCOL_MD, render_protocol_md
 
 from .frames import DB
 
@@ -60,3 +60,13 @@ def test_profiles_carry_their_own_set_point_path():
 def test_an_fd_frame_needs_an_fd_bit_rate():
     with pytest.raises(ValueError):
         busload.frame_time_s(DB, DB.get_message_by_name("SETPOINT_ALL_FD"), CLASSIC_1M)
+
+
+def test_protocol_md_prose_quotes_the_computed_figures():
+    prose = PROTOCOL_MD.read_text(encoding="utf-8").split(BUS_LOAD_BEGIN)[0]
+    for profile, loop_rate_hz, bit_rate in [
+        (Profile.CLASSIC, 500, CLASSIC_1M),
+        (Profile.CLASSIC, 1000, CLASSIC_1M),
+        (Profile.FD, 1000, FD_1M_5M),
+    ]:
+        assert f"{100 * bus_load(DB, profile, loop_rate_hz, bit_rate):.1f} %" in prose
