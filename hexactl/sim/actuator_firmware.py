@@ -11,7 +11,9 @@ Units: µm, µm/s, µm/s² and seconds, as on the wire.
 
 The drive: a first-order lag (time constant ``lag_s``) towards the applied set-point, with its
 speed limited to ``max_velocity_um_s``, to what still stops at the set-point with
-``max_acceleration_um_s2``, and its acceleration limited to the same. Outside ENABLED it makes a
+``max_acceleration_um_s2`` and to what still stops before the soft limits (limit braking), and
+its acceleration limited to the same. A set-point that stops more abruptly than that is
+overshot, as by a real drive. Outside ENABLED it makes a
 controlled stop at that deceleration and then holds on its brake; in LOCKED the brake holds at
 once. The sensor reads the position rounded to 1 µm.
 
@@ -75,8 +77,8 @@ _HEARTBEAT_REJECTED_MAX = 0xFF
 class ActuatorParams:
     """A simulated actuator's configuration (µm, µm/s, µm/s², s).
 
-    :ivar soft_limits_um: set-points outside ``[low, high]`` are refused; the drive's hard end
-        stops are at the same place (touching one latches LIMIT_SWITCH)
+    :ivar soft_limits_um: set-points outside ``[low, high]`` are refused, and the drive brakes
+        so that it never passes them
     :ivar max_velocity_um_s: speed limit of the drive and of the set-point step rule
     :ivar max_acceleration_um_s2: acceleration limit, also the controlled-stop deceleration
     :ivar lag_s: time constant of the drive's first-order lag
@@ -444,16 +446,15 @@ class ActuatorFirmware:
             change = wanted - velocity
             limit = accel * dt
             velocity += max(-limit, min(limit, change))
-        position = self.position_um + velocity * dt
-        if self.state is ActuatorState.ENABLED:
-            # Arrive, do not pass: the last step lands on the target.
-            before = self.target_um - self.position_um
-            if before * (self.target_um - position) < 0:
-                position, velocity = self.target_um, 0.0
         low, high = params.soft_limits_um
-        if not low <= position <= high:
-            position, velocity = min(max(position, low), high), 0.0
-            self._latch_fault(FaultCode.LIMIT_SWITCH, now, out)
+        # Like a drive's limit braking: never faster than what still stops before the end
+        # stop at full deceleration, and never past it within one step.
+        room = high - self.position_um if velocity > 0 else self.position_um - low
+        room = max(room, 0.0)
+        speed = min(abs(velocity), sqrt(2.0 * accel * room), room / dt)
+        velocity = copysign(speed, velocity)
+        # The clamp only absorbs floating-point rounding of room / dt · dt.
+        position = min(max(self.position_um + velocity * dt, low), high)
         self.position_um = position
         self.velocity_um_s = velocity
         if (

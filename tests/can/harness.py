@@ -74,6 +74,10 @@ class Rig:
             self.cycle()
         return self.snapshot
 
+    def flush(self) -> None:
+        """Let the actuators handle what is on the bus now (e.g. the link's bare SYNC)."""
+        self.sim.step(self.clock.t_s)
+
     def hold(self, cycles: int) -> FeedbackSnapshot:
         """Stream the present measured positions (what a loop does before it moves)."""
         for _ in range(cycles):

@@ -12,6 +12,12 @@ SYNC, so no actuator applies part of it and nothing stale is ever sent later. Co
 the only frames that are repeated: unacknowledged commands are retried with the same
 sequence number (PROTOCOL.md section 7), which the actuator executes at most once.
 
+The cycle never stops: SYNC schedules every actuator's FEEDBACK in every state (PROTOCOL.md
+section 4), so when no cycle was sent since the previous :meth:`CanActuatorLink.read_feedback`
+(a loop that does not know the positions yet, or refused set-points) that call sends a bare
+SYNC. It carries no set-point: an enabled actuator counts it a missed cycle and its watchdog
+keeps running. Its counter follows the last one sent, so it never completes a half-sent cycle.
+
 Receiving happens in :meth:`CanActuatorLink.read_feedback`: it drains at most
 ``max_frames_per_read`` frames with ``recv(timeout=0)``, decodes FEEDBACK, HEARTBEAT, EMCY and
 CMD_ACK into per-actuator state (position and velocity are NaN until an actuator's first
@@ -49,6 +55,7 @@ from firmware_proto.codec import (
     encode_command,
     encode_estop,
     encode_setpoints,
+    encode_sync,
 )
 from firmware_proto.codec import ActuatorState as WireState
 from hexactl.adapters.can.transport import (
@@ -249,6 +256,8 @@ class CanActuatorLink:
         self._command_timeouts = 0
         self._first_counter: int | None = None
         self._last_counter: int | None = None
+        self._next_sync_counter = 0  # wire counter of the next bare SYNC
+        self._cycle_sent = False  # a cycle went to the bus since the last read_feedback
         self._estop_frames = {reason: encode_estop(reason) for reason in EStopReason}
 
     @classmethod
@@ -293,6 +302,8 @@ class CanActuatorLink:
                 self._send_failures += 1
                 self._detail = f"set-points refused: {error}"
             return False
+        self._cycle_sent = True
+        self._next_sync_counter = (counter + 1) & 0xFF
         send = self._send
         for can_id, payload in frames:
             if not send(can_id, payload, 0.0):
@@ -329,10 +340,15 @@ class CanActuatorLink:
         return self._send(can_id, payload, self.config.estop_send_timeout_s)
 
     def read_feedback(self) -> FeedbackSnapshot:
-        """Drain up to ``max_frames_per_read`` received frames, retry unacknowledged commands
-        and return every actuator's latest report. Never waits and never raises."""
+        """Drain up to ``max_frames_per_read`` received frames, retry unacknowledged commands,
+        send a bare SYNC if no cycle was sent since the last call, and return every actuator's
+        latest report. Never waits and never raises."""
         now = self._clock_ns()
         if not self._closed:
+            if not self._cycle_sent:
+                self._send(*encode_sync(self._next_sync_counter), 0.0)
+                self._next_sync_counter = (self._next_sync_counter + 1) & 0xFF
+            self._cycle_sent = False
             recv = self._bus.recv
             handle = self._handle
             for _ in range(self.config.max_frames_per_read):

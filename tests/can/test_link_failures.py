@@ -1,0 +1,371 @@
+"""The link against a fake bus: send failures, bad frames, bus states, counters, threads."""
+
+from __future__ import annotations
+
+import errno
+import math
+import threading
+from collections import deque
+
+import can
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from firmware_proto import codec
+from firmware_proto.codec import ActuatorState as WireState
+from firmware_proto.codec import CommandCode, EStopReason, Fault, LoopRate
+from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
+from hexactl.adapters.can.transport import BusSpec, BusSpecError, parse_bus_spec
+from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, BusState
+
+ENOBUFS = can.CanOperationError("Failed to transmit: No buffer space available", errno.ENOBUFS)
+ENETDOWN = can.CanOperationError("Failed to transmit: Network is down", errno.ENETDOWN)
+SIX = [100.0, 200.0, 300.0, 400.0, 500.0, 600.0]
+
+
+class FakeBus:
+    """Records sent frames; ``fail`` (an exception) makes sends raise; ``incoming`` feeds recv."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, bytes]] = []
+        self.timeouts: list[float | None] = []
+        self.fail: Exception | None = None
+        self.fail_after: int | None = None  # succeed this many more sends, then raise ``fail``
+        self.incoming: deque[can.Message] = deque()
+        self.recv_error: Exception | None = None
+
+    def send(self, message: can.Message, timeout: float | None = None) -> None:
+        if self.fail is not None:
+            if self.fail_after is None or self.fail_after == 0:
+                raise self.fail
+            self.fail_after -= 1
+        self.sent.append((message.arbitration_id, bytes(message.data)))
+        self.timeouts.append(timeout)
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        if self.recv_error is not None:
+            raise self.recv_error
+        return self.incoming.popleft() if self.incoming else None
+
+    def shutdown(self) -> None:
+        pass
+
+    def push(self, can_id: int, payload: bytes, **flags: bool) -> None:
+        self.incoming.append(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False, **flags))
+
+
+def without_syncs(frames: list[tuple[int, bytes]]) -> list[tuple[int, bytes]]:
+    """Leave out the bare SYNCs that read_feedback sends when no cycle was sent."""
+    return [frame for frame in frames if frame[0] != codec.FrameId.SYNC]
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t_ns = 0
+
+    def __call__(self) -> int:
+        return self.t_ns
+
+
+@pytest.fixture
+def bus() -> FakeBus:
+    return FakeBus()
+
+
+@pytest.fixture
+def clock() -> Clock:
+    return Clock()
+
+
+@pytest.fixture
+def link(bus: FakeBus, clock: Clock) -> CanActuatorLink:
+    return CanActuatorLink(bus, LinkConfig(), clock_ns=clock)  # type: ignore[arg-type]
+
+
+def greet(bus: FakeBus, link: CanActuatorLink, version: int = codec.PROTOCOL_VERSION) -> None:
+    """Every actuator sends a HEARTBEAT in DISABLED."""
+    for node in codec.NODE_IDS:
+        bus.push(*codec.encode_heartbeat(node, WireState.DISABLED, 0, version))
+    link.read_feedback()
+
+
+def test_implements_the_control_layers_interface(link):
+    assert isinstance(link, ActuatorInterface)
+
+
+# -- spec strings ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("spec", "parsed"),
+    [("socketcan:can0", BusSpec("socketcan", "can0")), ("socketcan:vcan0", BusSpec("socketcan", "vcan0")),
+     ("virtual:bench", BusSpec("virtual", "bench")), (" virtual:a:b ", BusSpec("virtual", "a:b"))],
+)
+def test_bus_specs(spec, parsed):
+    assert parse_bus_spec(spec) == parsed
+    assert str(parsed) == f"{parsed.interface}:{parsed.channel}"
+
+
+@pytest.mark.parametrize("spec", ["can0", "socketcan:", "pcan:PCAN_USBBUS1", ":vcan0", ""])
+def test_bad_bus_specs(spec):
+    with pytest.raises(BusSpecError, match="socketcan:CHANNEL"):
+        parse_bus_spec(spec)
+
+
+# -- set-points -----------------------------------------------------------------------------
+
+
+def test_setpoints_are_one_cycle_of_codec_frames_in_um(link, bus):
+    assert link.send_setpoints(300, [100.0004, 200.0005, 300.0006, -0.0004, 8388.607, 0.0])
+    assert bus.sent == list(codec.encode_setpoints(300 & 0xFF, [100_000, 200_000, 300_001, 0, 8_388_607, 0]))
+    assert bus.timeouts == [0.0] * 4
+
+
+@pytest.mark.parametrize(
+    "values",
+    [[math.nan] + SIX[1:], SIX[:5] + [math.inf], SIX[:5] + [-math.inf], SIX[:5] + [8388.608], SIX[:5], SIX + [1.0]],
+)
+def test_unsendable_setpoints_are_refused_and_counted(link, bus, values):
+    assert link.send_setpoints(1, values) is False
+    assert bus.sent == []
+    assert link.stats().refused_setpoints == 1 and link.link_health().send_failures == 1
+    assert "refused" in link.link_health().detail
+
+
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=6, max_size=6))
+def test_setpoints_are_sent_exactly_when_encodable(values):
+    bus = FakeBus()
+    link = CanActuatorLink(bus, LinkConfig(), clock_ns=Clock())  # type: ignore[arg-type]
+    encodable = all(math.isfinite(v * 1000) and -(2**23) <= round(v * 1000) < 2**23 for v in values)
+    assert link.send_setpoints(5, values) is encodable
+    assert len(bus.sent) == (4 if encodable else 0)
+
+
+def test_send_failure_is_counted_never_raised_and_drops_the_cycle(link, bus):
+    bus.fail = ENOBUFS
+    assert link.send_setpoints(10, SIX) is False
+    health = link.link_health()
+    assert health.send_failures == 1 and health.bus_state is BusState.ACTIVE
+    assert "No buffer space" in health.detail
+
+
+def test_failure_mid_cycle_withholds_the_sync(link, bus):
+    bus.fail, bus.fail_after = ENOBUFS, 2  # SETPOINT_12 and SETPOINT_34 go out, SETPOINT_56 fails
+    assert link.send_setpoints(10, SIX) is False
+    assert [can_id for can_id, _ in bus.sent] == [codec.FrameId.SETPOINT_12, codec.FrameId.SETPOINT_34]
+
+
+def test_nothing_stale_is_sent_after_a_failure(link, bus):
+    bus.fail = ENOBUFS
+    for counter in range(10, 15):
+        assert not link.send_setpoints(counter, [v + counter for v in SIX])
+    bus.fail = None
+    assert link.send_setpoints(15, [v + 15 for v in SIX])
+    link.read_feedback()
+    assert bus.sent == list(codec.encode_setpoints(15, [round((v + 15) * 1000) for v in SIX]))
+    assert link.link_health().send_failures == 5
+
+
+def test_interface_down_and_back(link, bus):
+    bus.fail = ENETDOWN
+    link.send_setpoints(1, SIX)
+    assert link.link_health().bus_state is BusState.DOWN
+    bus.fail = None
+    assert link.send_setpoints(2, SIX)
+    assert link.link_health().bus_state is BusState.ACTIVE
+
+
+def test_unexpected_exception_from_the_driver_is_a_counted_failure(link, bus):
+    bus.fail = RuntimeError("driver bug")
+    assert link.send_estop() is False
+    assert link.send_command(1, ActuatorCommand.DISABLE) is False
+    assert link.link_health().send_failures == 2
+
+
+def test_bare_sync_keeps_the_cycle_when_no_setpoints_were_sent(link, bus):
+    link.read_feedback()  # nothing sent yet: SYNC 0
+    link.send_setpoints(41, [math.nan] * 6)  # refused: nothing on the bus
+    link.read_feedback()
+    link.send_setpoints(42, SIX)
+    link.read_feedback()  # a cycle was sent: no SYNC
+    link.read_feedback()  # SYNC 43: after the last counter sent, never completing an old cycle
+    syncs = [codec.decode(*frame).counter for frame in bus.sent if frame[0] == codec.FrameId.SYNC]
+    assert syncs == [0, 1, 42, 43]
+
+
+def test_closed_link_is_down_and_fails_quietly(bus, clock):
+    link = CanActuatorLink(bus, clock_ns=clock)  # type: ignore[arg-type]
+    link.close()
+    bus.fail = can.CanOperationError("Cannot operate on a closed bus")
+    assert link.send_setpoints(0, SIX) is False
+    assert link.read_feedback().actuators[0].heartbeat_age_s == math.inf
+    assert link.link_health().bus_state is BusState.DOWN
+
+
+def test_estop_waits_briefly_and_carries_its_reason(link, bus):
+    assert link.send_estop(EStopReason.FEEDBACK_LOST)
+    assert bus.sent == [codec.encode_estop(EStopReason.FEEDBACK_LOST)]
+    assert bus.timeouts == [LinkConfig().estop_send_timeout_s]
+
+
+def test_failure_counting_is_thread_safe(link, bus):
+    bus.fail = ENOBUFS
+    calls = 2000
+
+    def estops():
+        for _ in range(calls):
+            link.send_estop()
+
+    thread = threading.Thread(target=estops)
+    thread.start()
+    for counter in range(calls):
+        link.send_setpoints(counter, SIX)
+    thread.join()
+    assert link.link_health().send_failures == 2 * calls
+
+
+# -- commands -------------------------------------------------------------------------------
+
+
+def test_enable_carries_loop_rate_and_watchdog_and_sequences_advance(bus, clock):
+    link = CanActuatorLink(bus, LinkConfig(loop_rate=LoopRate.HZ_250, watchdog_cycles=8), clock_ns=clock)  # type: ignore[arg-type]
+    greet(bus, link)
+    assert link.send_command(3, ActuatorCommand.ENABLE)
+    assert link.send_command(3, ActuatorCommand.LOCK)
+    enable, lock = (codec.decode(*frame) for frame in without_syncs(bus.sent))
+    assert (enable.node, enable.command, enable.loop_rate, enable.watchdog_cycles) == (3, CommandCode.ENABLE, 250, 8)
+    assert (lock.command, lock.loop_rate, lock.watchdog_cycles) == (CommandCode.LOCK, LoopRate.NOT_SET, 0)
+    assert lock.sequence == (enable.sequence + 1) & 0xFF
+
+
+def test_command_to_all_legs(link, bus):
+    assert link.send_command(None, ActuatorCommand.CLEAR_FAULT)
+    assert [codec.decode(*frame).node for frame in bus.sent] == [1, 2, 3, 4, 5, 6]
+
+
+@pytest.mark.parametrize("version", [None, 2])
+def test_enable_needs_a_heartbeat_with_this_protocol_version(link, bus, version):
+    if version is not None:
+        greet(bus, link, version)
+    assert link.send_command(1, ActuatorCommand.ENABLE) is False
+    assert without_syncs(bus.sent) == [] and link.link_health().send_failures == 1
+    assert "ENABLE refused for leg 1" in link.link_health().detail
+
+
+def test_bad_leg_is_refused(link, bus):
+    assert link.send_command(7, ActuatorCommand.DISABLE) is False
+    assert bus.sent == []
+
+
+def test_unacknowledged_command_is_retried_with_its_sequence_then_given_up(link, bus, clock):
+    link.send_command(2, ActuatorCommand.DISABLE)
+    for _ in range(5):
+        clock.t_ns += 20_000_000
+        link.read_feedback()
+    commands = without_syncs(bus.sent)
+    assert len(commands) == 4 and len(set(commands)) == 1  # the command and 3 identical retries
+    assert link.stats().command_timeouts == 1 and not link.node_status(2).command_pending
+
+
+def test_acknowledged_command_is_not_retried(link, bus, clock):
+    link.send_command(2, ActuatorCommand.DISABLE)
+    sequence = codec.decode(*bus.sent[0]).sequence
+    bus.push(*codec.encode_command_ack(2, CommandCode.DISABLE, sequence, codec.CommandResult.ACCEPTED, WireState.DISABLED))
+    clock.t_ns += 100_000_000
+    link.read_feedback()
+    assert len(without_syncs(bus.sent)) == 1 and link.node_status(2).last_ack.sequence == sequence
+
+
+# -- receiving ------------------------------------------------------------------------------
+
+
+def test_feedback_heartbeat_and_emergency_become_actuator_state(link, bus, clock):
+    bus.push(*codec.encode_feedback(1, 123_456, -2_500, WireState.ENABLED, Fault(0), 0))
+    bus.push(*codec.encode_heartbeat(2, WireState.LOCKED, 7))
+    bus.push(*codec.encode_emergency(3, codec.FaultCode.SENSOR, WireState.FAULT, Fault.SENSOR | Fault.ESTOP))
+    clock.t_ns = 5_000_000
+    snapshot = link.read_feedback()
+    one, two, three, four = snapshot.actuators[:4]
+    assert (one.position_mm, one.velocity_mm_s, one.state) == (123.456, -2.5, ActuatorState.ENABLED)
+    assert two.state is ActuatorState.LOCKED and math.isnan(two.position_mm)
+    assert three.state is ActuatorState.FAULT and three.fault_bits == int(Fault.SENSOR | Fault.ESTOP)
+    assert four.heartbeat_age_s == math.inf and four.state is ActuatorState.DISABLED
+    clock.t_ns = 105_000_000
+    assert link.read_feedback().actuators[0].heartbeat_age_s == pytest.approx(0.1)
+    assert link.stats().emergencies == (0, 0, 1, 0, 0, 0)
+
+
+def test_bad_frames_are_counted_not_raised(link, bus):
+    bus.push(0x181, b"\x00\x01")  # FEEDBACK_1 with a bad DLC
+    bus.push(0x187, bytes(8))  # FEEDBACK of node 7
+    bus.push(0x555, b"")  # not in the protocol
+    bus.push(0x701, bytes((9, 0, 1, 0)))  # HEARTBEAT with state 9
+    bus.incoming.append(can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=True))
+    bus.push(*codec.encode_setpoints(0, [0] * 6)[0])  # another controller's frame
+    snapshot = link.read_feedback()
+    assert link.stats().undecodable_frames == 5 and link.stats().foreign_frames == 1
+    assert all(math.isnan(a.position_mm) for a in snapshot.actuators)
+
+
+def test_receive_error_marks_the_bus_down(link, bus):
+    bus.recv_error = can.CanOperationError("Network is down", errno.ENETDOWN)
+    link.read_feedback()
+    assert link.link_health().bus_state is BusState.DOWN
+
+
+@pytest.mark.parametrize(
+    ("can_id", "data", "state"),
+    [(0x040, bytes(8), BusState.BUS_OFF), (0x004, bytes((0, 0x20, 0, 0, 0, 0, 0, 0)), BusState.PASSIVE),
+     (0x004, bytes((0, 0x08, 0, 0, 0, 0, 0, 0)), BusState.WARNING), (0x100, bytes(8), BusState.ACTIVE)],
+)
+def test_socketcan_error_frames_set_the_bus_state(link, bus, can_id, data, state):
+    bus.push(0x040, bytes(8), is_error_frame=True)
+    bus.push(can_id, data, is_error_frame=True)
+    link.read_feedback()
+    assert link.link_health().bus_state is state
+
+
+def test_read_drains_a_bounded_number_of_frames(bus, clock):
+    link = CanActuatorLink(bus, LinkConfig(max_frames_per_read=10), clock_ns=clock)  # type: ignore[arg-type]
+    for _ in range(25):
+        bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, 0))
+    link.read_feedback()
+    assert len(bus.incoming) == 15
+    link.read_feedback()
+    link.read_feedback()
+    assert not bus.incoming and link.stats().frames_received == 25
+
+
+def test_setpoint_counter_is_unwrapped_to_the_loop_counter(link, bus):
+    for counter in range(1000, 1300):
+        link.send_setpoints(counter, SIX)
+    bus.push(*codec.encode_feedback(1, 0, 0, WireState.ENABLED, Fault(0), 1297 & 0xFF))
+    bus.push(*codec.encode_feedback(2, 0, 0, WireState.DISABLED, Fault(0), 1297 & 0xFF))
+    first, second = link.read_feedback().actuators[:2]
+    assert first.setpoint_counter == 1297
+    assert second.setpoint_counter == -1  # never enabled: its counter means nothing yet
+
+
+def test_counter_older_than_the_first_sent_is_none(link, bus):
+    link.send_setpoints(5, SIX)
+    bus.push(*codec.encode_feedback(1, 0, 0, WireState.ENABLED, Fault(0), 200))
+    assert link.read_feedback().actuators[0].setpoint_counter == -1
+
+
+def test_silent_legs_and_health_detail(link, bus, clock):
+    greet(bus, link)
+    clock.t_ns = 250_000_000
+    bus.push(*codec.encode_heartbeat(3, WireState.DISABLED, 1))
+    link.read_feedback()
+    clock.t_ns = 350_000_000
+    assert link.silent_legs() == (1, 2, 4, 5, 6)
+    assert link.link_health().detail.startswith("silent legs: 1, 2, 4, 5, 6")
+    assert link.node_status(3).heartbeat_age_s == pytest.approx(0.1)
+
+
+def test_config_is_validated():
+    with pytest.raises(ValueError, match="loop_rate"):
+        LinkConfig(loop_rate=LoopRate.NOT_SET)
+    with pytest.raises(ValueError, match="watchdog_cycles"):
+        LinkConfig(watchdog_cycles=101)
