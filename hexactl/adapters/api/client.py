@@ -1,0 +1,143 @@
+"""Python clients of a running ``hexactl serve``: commands and telemetry.
+
+    with HexactlClient("tcp://127.0.0.1:5555") as client:
+        client.call("enable")
+        client.call("move", pose=[0, 0, 50, 0, 0, 5], duration=2.0)
+        print(client.call("status")["status"]["pose_measured"])
+
+    with TelemetrySubscriber("tcp://127.0.0.1:5556") as telemetry:
+        record = telemetry.receive(timeout_s=1.0)
+
+Poses are [x, y, z, roll, pitch, yaw] in mm and degrees relative to the zero posture.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import time
+from types import TracebackType
+from typing import Any
+
+import zmq
+
+from hexactl.adapters.api.messages import PROTOCOL_VERSION
+from hexactl.adapters.api.security import CurveClientKeys, secure_client
+from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
+from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, TOPIC
+
+DEFAULT_TIMEOUT_S = 5.0
+
+
+class ServiceUnavailable(Exception):
+    """No reply (or no telemetry) within the timeout: the service is not running there,
+    or is unreachable."""
+
+
+class CommandError(Exception):
+    """The service refused or failed a command: ``code`` (snake_case), ``message``, ``details``."""
+
+    def __init__(self, code: str, message: str, details: Any = None) -> None:
+        super().__init__(f"{code}: {message}")
+        self.code = code
+        self.message = message
+        self.details = details
+
+
+class _Connection:
+    """A socket of its own context, closed with the object."""
+
+    def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int]) -> None:
+        self.endpoint = endpoint
+        self._context = zmq.Context()
+        self.socket = self._context.socket(kind)
+        self.socket.linger = 0
+        for option, value in options.items():
+            self.socket.setsockopt(option, value)
+        if curve is not None:
+            secure_client(self.socket, curve)
+        self.socket.connect(endpoint)
+
+    def close(self) -> None:
+        self.socket.close()
+        self._context.term()
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None, trace: TracebackType | None) -> None:
+        self.close()
+
+
+class HexactlClient(_Connection):
+    """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
+
+    A DEALER socket rather than REQ so that a timed-out request leaves the client
+    usable: a late reply to it is recognised by its ``id`` and dropped. ``IMMEDIATE``
+    so that a request is never queued for a service that is not there yet: a command
+    that timed out must not run when the service starts later.
+    """
+
+    def __init__(
+        self, endpoint: str = DEFAULT_API_ENDPOINT, *, timeout_s: float = DEFAULT_TIMEOUT_S, curve: CurveClientKeys | None = None
+    ) -> None:
+        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1})
+        self.timeout_s = timeout_s
+        self._ids = itertools.count(1)
+
+    def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        """Send a command and return the whole reply, ok or not.
+
+        Raises :class:`ServiceUnavailable` when it cannot be sent or no reply arrives
+        within ``timeout_s``.
+        """
+        request_id = next(self._ids)
+        deadline = time.monotonic() + self.timeout_s
+        unavailable = ServiceUnavailable(
+            f"no answer from {self.endpoint} within {self.timeout_s:g} s: is `hexactl serve` running there?"
+        )
+        self.socket.sndtimeo = max(1, round(self.timeout_s * 1000))
+        try:
+            self.socket.send(json.dumps({"v": PROTOCOL_VERSION, "id": request_id, "cmd": cmd, **fields}).encode())
+        except zmq.Again:
+            raise unavailable from None
+        while True:
+            remaining_s = deadline - time.monotonic()
+            if remaining_s <= 0 or not self.socket.poll(remaining_s * 1000.0):
+                raise unavailable
+            reply = json.loads(self.socket.recv_multipart()[-1])
+            if reply.get("id") == request_id:
+                return reply
+
+    def call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        """Send a command; return its reply when ok, else raise :class:`CommandError`
+        (and :class:`ServiceUnavailable` on no reply)."""
+        reply = self.request(cmd, **fields)
+        if not reply.get("ok"):
+            error = reply.get("error") or {}
+            raise CommandError(error.get("code", "unknown"), error.get("message", ""), error.get("details"))
+        return reply
+
+
+class TelemetrySubscriber(_Connection):
+    """The newest telemetry records of the service at ``endpoint``.
+
+    ``conflate`` (default) keeps only the latest record unread, for displays; without it
+    every record is queued (up to ZeroMQ's high-water mark), for loggers.
+    """
+
+    def __init__(
+        self, endpoint: str = DEFAULT_TELEMETRY_ENDPOINT, *, conflate: bool = True, curve: CurveClientKeys | None = None
+    ) -> None:
+        # CONFLATE must be set before connecting; the subscription may come after.
+        super().__init__(zmq.SUB, endpoint, curve, {zmq.CONFLATE: 1} if conflate else {})
+        self.socket.setsockopt(zmq.SUBSCRIBE, TOPIC)
+
+    def receive(self, timeout_s: float = DEFAULT_TIMEOUT_S) -> dict[str, Any]:
+        """The next record; :class:`ServiceUnavailable` if none arrives within ``timeout_s``."""
+        if not self.socket.poll(timeout_s * 1000.0):
+            raise ServiceUnavailable(
+                f"no telemetry from {self.endpoint} within {timeout_s:g} s: is `hexactl serve` running there?"
+            )
+        return json.loads(self.socket.recv()[len(TOPIC) :])
+

@@ -1,0 +1,138 @@
+"""Who may connect: local endpoints are open, anything else needs CURVE.
+
+The API and telemetry sockets bind to the loopback interface by default, where any
+local user may connect (as to the CLI). Binding anywhere else exposes the actuators
+to the network, so the service refuses to start without CURVE encryption and
+authentication: a server secret key file and a directory of the client public keys
+allowed in (ZeroMQ certificate files, made by :func:`create_keys`).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import zmq
+import zmq.auth
+from zmq.auth.thread import ThreadAuthenticator
+
+_LOCAL_HOSTS = frozenset({"localhost", "lo"})
+
+
+class SecurityError(Exception):
+    """The endpoints and keys given are not a safe configuration; the message says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class CurveServerKeys:
+    """``secret_key_file``: the server's certificate with its secret key;
+    ``clients_dir``: the public certificates of the clients allowed in."""
+
+    secret_key_file: Path
+    clients_dir: Path
+
+
+@dataclass(frozen=True, slots=True)
+class CurveClientKeys:
+    """``server_key_file``: the server's public certificate; ``secret_key_file``: this
+    client's certificate with its secret key."""
+
+    server_key_file: Path
+    secret_key_file: Path
+
+
+def is_local_endpoint(endpoint: str) -> bool:
+    """True for ``inproc://``, ``ipc://`` and TCP on a loopback address or ``localhost``."""
+    scheme, _, address = endpoint.partition("://")
+    if scheme in ("inproc", "ipc"):
+        return True
+    if scheme != "tcp":
+        return False
+    host = address.rsplit(":", 1)[0]
+    if ";" in host:  # tcp://SOURCE;DESTINATION is a connect form: judge where it binds
+        host = host.split(";", 1)[0]
+    host = host.strip("[]")
+    if host in _LOCAL_HOSTS:
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # "*", an interface name or a host name: may be reachable from elsewhere
+        return False
+
+
+def check_endpoints(endpoints: list[str], keys: CurveServerKeys | None) -> None:
+    """Refuse (SecurityError) to bind a non-local endpoint without CURVE keys, or with
+    key files that are missing."""
+    exposed = [endpoint for endpoint in endpoints if not is_local_endpoint(endpoint)]
+    if keys is None:
+        if exposed:
+            raise SecurityError(
+                f"refusing to bind {', '.join(exposed)} without CURVE: a non-loopback endpoint exposes the "
+                "actuators to the network. Give --curve-secret SERVER.key_secret and --curve-clients DIR "
+                "(make them with `hexactl keys --out DIR`), or bind to tcp://127.0.0.1"
+            )
+        return
+    if not keys.secret_key_file.is_file():
+        raise SecurityError(f"CURVE server secret key file {keys.secret_key_file} does not exist")
+    if not keys.clients_dir.is_dir():
+        raise SecurityError(f"CURVE clients directory {keys.clients_dir} does not exist")
+
+
+class CurveServer:
+    """CURVE on the service's sockets, with ZeroMQ's authenticator thread checking
+    every client's public key against :attr:`CurveServerKeys.clients_dir`."""
+
+    def __init__(self, context: zmq.Context, keys: CurveServerKeys) -> None:
+        public, secret = zmq.auth.load_certificate(keys.secret_key_file)
+        if secret is None:
+            raise SecurityError(f"{keys.secret_key_file} holds no secret key (use the .key_secret file)")
+        self._public, self._secret = public, secret
+        self._authenticator = ThreadAuthenticator(context)
+        self._authenticator.start()
+        self._authenticator.configure_curve(domain="*", location=str(keys.clients_dir))
+
+    def secure(self, socket: zmq.Socket) -> None:
+        """Make ``socket`` (before it binds) a CURVE server."""
+        socket.curve_secretkey = self._secret
+        socket.curve_publickey = self._public
+        socket.curve_server = True
+
+    def close(self) -> None:
+        self._authenticator.stop()
+
+
+def secure_client(socket: zmq.Socket, keys: CurveClientKeys) -> None:
+    """Make ``socket`` (before it connects) a CURVE client of the server in ``keys``."""
+    server_public, _ = zmq.auth.load_certificate(keys.server_key_file)
+    public, secret = zmq.auth.load_certificate(keys.secret_key_file)
+    if secret is None:
+        raise SecurityError(f"{keys.secret_key_file} holds no secret key (use the .key_secret file)")
+    socket.curve_serverkey = server_public
+    socket.curve_publickey = public
+    socket.curve_secretkey = secret
+
+
+def create_keys(directory: Path, client_name: str = "client") -> dict[str, Path]:
+    """Make a server and a client certificate pair in ``directory`` and authorise the
+    client (its public certificate copied into ``directory/clients``). Refuses to
+    overwrite existing keys (FileExistsError)."""
+    names = {
+        "server_secret": directory / "server.key_secret",
+        "server_public": directory / "server.key",
+        "client_secret": directory / f"{client_name}.key_secret",
+        "client_public": directory / f"{client_name}.key",
+    }
+    existing = [str(path) for path in names.values() if path.exists()]
+    if existing:
+        raise FileExistsError(f"refusing to overwrite {', '.join(existing)}")
+    clients = directory / "clients"
+    clients.mkdir(parents=True, exist_ok=True)
+    zmq.auth.create_certificates(directory, "server")
+    zmq.auth.create_certificates(directory, client_name)
+    for secret in (names["server_secret"], names["client_secret"]):
+        secret.chmod(0o600)  # pyzmq writes them with the umask's permissions
+    names["clients_dir"] = clients
+    shutil.copy(names["client_public"], clients / names["client_public"].name)
+    return names

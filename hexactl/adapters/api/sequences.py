@@ -1,0 +1,45 @@
+"""What ``play`` plays: a built-in sequence, a sequence file, or inline waypoints, as
+the control layer's :class:`~hexactl.control.sequences.MotionSequence`.
+
+Files are read and validated here, in the API thread, never in the control loop; their
+format is :mod:`hexactl.control.sequences`'s.
+"""
+
+from __future__ import annotations
+
+from hexactl.adapters.api.messages import InlineSequence
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.wire import ApiError, ErrorCode, problems_error
+from hexactl.control.sequences import (
+    BUILTIN_SEQUENCES,
+    MotionSequence,
+    SequenceError,
+    builtin_sequence,
+    sequence_from_mapping,
+    sequence_from_toml,
+)
+
+SEQUENCE_SUFFIX = ".toml"
+
+
+def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> MotionSequence:
+    """The sequence a ``play`` request names. :class:`ApiError` ``unknown_sequence`` for a
+    name that is neither built in nor a ``.toml`` file, the path errors of
+    :meth:`DataDirectories.resolve`, ``invalid_sequence`` for a refused sequence."""
+    try:
+        if isinstance(sequence, InlineSequence):
+            document = sequence.model_dump(exclude={"waypoints"})
+            document["waypoint"] = [waypoint.model_dump() for waypoint in sequence.waypoints]  # the file's key
+            return sequence_from_mapping(document, "sequence")
+        if sequence in BUILTIN_SEQUENCES:
+            return builtin_sequence(sequence)
+        if not sequence.endswith(SEQUENCE_SUFFIX):
+            raise ApiError(
+                ErrorCode.UNKNOWN_SEQUENCE,
+                f"{sequence!r} is neither a built-in sequence nor a {SEQUENCE_SUFFIX} file",
+                {"built_in": list(BUILTIN_SEQUENCES)},
+            )
+        path, text = data.read_text(sequence, ErrorCode.INVALID_SEQUENCE)
+        return sequence_from_toml(text, str(path))
+    except SequenceError as error:
+        raise problems_error(ErrorCode.INVALID_SEQUENCE, str(error)) from None

@@ -1,0 +1,108 @@
+"""The telemetry socket: a PUB sending one record per period from its own thread.
+
+Each message is a single frame ``telemetry <json>`` (the topic, a space, a
+:class:`~hexactl.adapters.api.messages.Telemetry` record), so that a subscriber can
+set ``zmq.CONFLATE`` and always read the newest record: CONFLATE does not work with
+multipart messages.
+
+Cost per message, measured: ~7 µs for the stdlib JSON encoding of a record (orjson
+would take ~2 µs; not worth a dependency at 50 Hz), plus building the record.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zmq
+
+from hexactl.adapters.api.security import CurveServer
+from hexactl.adapters.api.wire import encode
+
+DEFAULT_TELEMETRY_ENDPOINT = "tcp://127.0.0.1:5556"
+DEFAULT_TELEMETRY_RATE_HZ = 50.0
+MAX_TELEMETRY_RATE_HZ = 1000.0
+TOPIC = b"telemetry "
+
+_SEND_HIGH_WATER_MARK = 100  # records queued per slow subscriber before PUB drops them
+
+log = logging.getLogger(__name__)
+
+
+def telemetry_message(record: dict[str, Any]) -> bytes:
+    """The single-frame message carrying ``record``."""
+    return TOPIC + encode(record)
+
+
+class TelemetryPublisher:
+    """Publish ``record()`` at ``rate_hz`` on a PUB bound to ``endpoint``.
+
+    ``record`` runs in the publisher's thread and must be cheap (the GIL is shared with
+    the control loop); an exception from it is logged (first occurrence and then every
+    thousandth) and that period is skipped.
+    """
+
+    def __init__(
+        self,
+        context: zmq.Context,
+        endpoint: str,
+        record: Callable[[], dict[str, Any]],
+        rate_hz: float = DEFAULT_TELEMETRY_RATE_HZ,
+        curve: CurveServer | None = None,
+    ) -> None:
+        if not 0 < rate_hz <= MAX_TELEMETRY_RATE_HZ:
+            raise ValueError(f"telemetry rate {rate_hz} Hz outside (0, {MAX_TELEMETRY_RATE_HZ:g}]")
+        self._record = record
+        self._period_s = 1.0 / rate_hz
+        self._stopping = threading.Event()
+        self._failures = 0
+        self._socket = context.socket(zmq.PUB)
+        self._socket.linger = 0
+        self._socket.sndhwm = _SEND_HIGH_WATER_MARK
+        if curve is not None:
+            curve.secure(self._socket)
+        try:
+            self._socket.bind(endpoint)
+        except zmq.ZMQError:
+            self._socket.close()
+            raise
+        self.endpoint: str = self._socket.getsockopt_string(zmq.LAST_ENDPOINT)
+        self.published = 0
+        self._thread = threading.Thread(target=self._run, name="hexactl-telemetry", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stopping.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        self._socket.close()
+
+    def _run(self) -> None:
+        deadline = time.monotonic()
+        while True:
+            deadline += self._period_s
+            delay = deadline - time.monotonic()
+            if delay < 0:  # fell behind (a long pause): restart the grid instead of bursting
+                deadline, delay = time.monotonic(), 0.0
+            if self._stopping.wait(delay):
+                return
+            self._publish_once()
+
+    def _publish_once(self) -> None:
+        try:
+            message = telemetry_message(self._record())
+        except Exception:
+            self._failures += 1
+            if self._failures % 1000 == 1:
+                log.exception("telemetry record failed (%d times so far)", self._failures)
+            return
+        try:
+            self._socket.send(message, zmq.NOBLOCK)
+            self.published += 1
+        except zmq.ZMQError as error:  # PUB drops rather than blocks; this is a closed context
+            log.warning("telemetry not sent: %s", error)

@@ -1,0 +1,159 @@
+"""Bytes on the wire ↔ messages: request decoding with one error code per way a
+request can be wrong, reply encoding, and the ROUTER envelope.
+
+Nothing here raises for bad input except :class:`ApiError`, which carries the code,
+message and the request's ``id`` when it could be read.
+"""
+
+from __future__ import annotations
+
+import json
+from enum import StrEnum
+from math import isfinite
+from typing import Any
+
+from pydantic import TypeAdapter, ValidationError
+
+from hexactl.adapters.api.messages import COMMANDS, PROTOCOL_VERSION, Request
+
+MAX_REQUEST_BYTES = 64 * 1024
+"""Largest request answered; a larger one gets ``too_large``."""
+
+TRANSPORT_MAX_BYTES = 16 * MAX_REQUEST_BYTES
+"""``zmq.MAXMSGSIZE``: ZeroMQ drops the connection of a peer sending a frame larger than
+this, without a reply (nothing can be answered without reading it all); between
+:data:`MAX_REQUEST_BYTES` and this the request is read, counted and refused."""
+
+
+class ErrorCode(StrEnum):
+    """The API's own error codes. Controller refusals add theirs (``not_enabled``,
+    ``out_of_workspace``, …), passed through unchanged."""
+
+    MALFORMED_JSON = "malformed_json"  # not UTF-8 JSON, or NaN/Infinity/out-of-range numbers
+    INVALID_REQUEST = "invalid_request"  # not an object, missing id/v/cmd, wrong types or values, multipart
+    UNKNOWN_COMMAND = "unknown_command"
+    UNSUPPORTED_VERSION = "unsupported_version"
+    TOO_LARGE = "too_large"
+    FORBIDDEN_PATH = "forbidden_path"  # a file outside the data directories
+    FILE_NOT_FOUND = "file_not_found"
+    INVALID_CALIBRATION = "invalid_calibration"  # the calibration text or file is refused
+    INVALID_SEQUENCE = "invalid_sequence"  # the sequence file is refused
+    UNKNOWN_SEQUENCE = "unknown_sequence"
+    INTERNAL_ERROR = "internal_error"  # a bug: logged with its traceback
+
+
+class ApiError(Exception):
+    """A request that cannot be carried out; becomes an error reply."""
+
+    def __init__(self, code: str, message: str, details: Any = None, request_id: Any = None) -> None:
+        super().__init__(message)
+        self.code = str(code)
+        self.message = message
+        self.details = details
+        self.request_id = request_id
+
+
+def problems_error(code: str, text: str) -> ApiError:
+    """An ApiError for a refusal listing one problem per line (a geometry or sequence
+    error): the first problem (and the count) as the message, every line in details."""
+    lines = text.splitlines() or [text]
+    message = lines[0] if len(lines) == 1 else f"{len(lines)} problems, first: {lines[0]}"
+    return ApiError(code, message, lines)
+
+
+_REQUEST = TypeAdapter(Request)
+
+
+def decode_request(body: bytes) -> Request:
+    """The request in one frame, validated; :class:`ApiError` says what is wrong.
+
+    The checks run in order, so each bad request gets the most specific code: size,
+    JSON, object, ``id``, ``v``, ``cmd``, then the command's own fields.
+    """
+    if len(body) > MAX_REQUEST_BYTES:
+        raise ApiError(ErrorCode.TOO_LARGE, f"request of {len(body)} bytes; the limit is {MAX_REQUEST_BYTES}")
+    try:
+        document = json.loads(body, parse_constant=_refuse_constant, parse_float=_finite_float)
+    except (ValueError, RecursionError) as error:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise ApiError(ErrorCode.MALFORMED_JSON, f"not valid JSON: {_first_line(error)}") from None
+    if not isinstance(document, dict):
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is a JSON object, got {_json_type(document)}")
+    if "id" not in document:
+        raise ApiError(ErrorCode.INVALID_REQUEST, "missing id")
+    request_id = document["id"]
+    version = document.get("v")
+    if "v" not in document:
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"missing v (the protocol version, {PROTOCOL_VERSION})", request_id=request_id)
+    if type(version) is not int or version != PROTOCOL_VERSION:  # type(): true is not 1
+        raise ApiError(
+            ErrorCode.UNSUPPORTED_VERSION,
+            f"protocol version {json.dumps(version)} is not supported",
+            {"supported": [PROTOCOL_VERSION]},
+            request_id,
+        )
+    command = document.get("cmd")
+    if not isinstance(command, str):
+        raise ApiError(ErrorCode.INVALID_REQUEST, "cmd must be a command name (a string)", request_id=request_id)
+    if command not in COMMANDS:
+        raise ApiError(
+            ErrorCode.UNKNOWN_COMMAND, f"unknown command {command[:100]!r}", {"commands": list(COMMANDS)}, request_id
+        )
+    try:
+        return _REQUEST.validate_python(document)
+    except ValidationError as error:
+        problems = [
+            {"field": ".".join(str(part) for part in problem["loc"][1:]), "problem": problem["msg"].removeprefix("Value error, ")}
+            for problem in error.errors(include_url=False, include_input=False, include_context=False)
+        ]
+        message = "; ".join(f"{p['field']}: {p['problem']}" if p["field"] else p["problem"] for p in problems)
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"{command}: {message}", problems, request_id) from None
+
+
+def encode(document: dict[str, Any]) -> bytes:
+    """Compact JSON, ASCII (so an echoed id with a lone surrogate still encodes); raises
+    ValueError for NaN or infinity, which are not JSON."""
+    return json.dumps(document, allow_nan=False, separators=(",", ":")).encode("ascii")
+
+
+def ok_reply(request_id: Any, **fields: Any) -> dict[str, Any]:
+    return {"v": PROTOCOL_VERSION, "id": request_id, "ok": True, **fields}
+
+
+def error_reply(request_id: Any, code: str, message: str, details: Any = None) -> dict[str, Any]:
+    error: dict[str, Any] = {"code": str(code), "message": message}
+    if details is not None:
+        error["details"] = details
+    return {"v": PROTOCOL_VERSION, "id": request_id, "ok": False, "error": error}
+
+
+def split_envelope(frames: list[bytes]) -> tuple[list[bytes], list[bytes]]:
+    """(envelope, body) of a message received on a ROUTER socket.
+
+    The envelope is the routing identity plus, for REQ clients (and DEALERs that mimic
+    them), every frame up to the first empty delimiter; the body is what follows. A
+    plain DEALER's message has no delimiter: its envelope is the identity alone. The
+    reply goes back with the same envelope.
+    """
+    for index in range(1, len(frames)):
+        if not frames[index]:
+            return frames[: index + 1], frames[index + 1 :]
+    return frames[:1], frames[1:]
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not JSON (numbers must be finite)")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not isfinite(value):
+        raise ValueError(f"number {text[:40]} is out of range")
+    return value
+
+
+def _json_type(value: Any) -> str:
+    return {list: "an array", str: "a string", bool: "a boolean", type(None): "null"}.get(type(value), "a number")
+
+
+def _first_line(error: BaseException) -> str:
+    return (str(error).splitlines() or [type(error).__name__])[0][:200]

@@ -1,0 +1,34 @@
+"""Fixtures: a service with a fake controller, per test or shared by a module."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.kinematics.geometry import Geometry
+from tests.api.support import start_service
+
+
+@pytest.fixture(scope="session")
+def nominal() -> Geometry:
+    return load_geometry(default_config_path())
+
+
+@pytest.fixture
+def service(nominal: Geometry, tmp_path: Path) -> Iterator[SimpleNamespace]:
+    (tmp_path / "data").mkdir()
+    running = start_service(nominal, tmp_path / "data")
+    yield running
+    running.close()
+
+
+@pytest.fixture(scope="module")
+def shared_service(nominal: Geometry, tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimpleNamespace]:
+    """One service for a module's many requests (hypothesis examples)."""
+    running = start_service(nominal, tmp_path_factory.mktemp("data"))
+    yield running
+    running.close()

@@ -1,0 +1,147 @@
+"""Whatever arrives gets exactly one reply with the right error code, and the server
+keeps serving: bad JSON, wrong shapes and types, NaN, unknown commands, huge and
+multipart messages, random bytes."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import zmq
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hexactl.adapters.api.messages import ErrorReply
+from hexactl.adapters.api.server import answer
+from hexactl.adapters.api.wire import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES
+from tests.api.support import exchange
+
+STATUS = {"v": 1, "id": "after", "cmd": "status"}
+
+CASES: list[tuple[str, bytes, str, object]] = [
+    ("not JSON", b"hello", "malformed_json", None),
+    ("not UTF-8", b'{"v": 1, "id": 1, "cmd": "status"\xff}', "malformed_json", None),
+    ("truncated", b'{"v": 1, "id": 1, "cmd": "sta', "malformed_json", None),
+    ("NaN literal", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, NaN]}', "malformed_json", None),
+    ("Infinity literal", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, -Infinity]}', "malformed_json", None),
+    ("overflowing number", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, 1e400]}', "malformed_json", None),
+    ("deep nesting", b"[" * 50_000, "malformed_json", None),
+    ("JSON array", b'[{"v": 1, "id": 1, "cmd": "status"}]', "invalid_request", None),
+    ("JSON string", b'"status"', "invalid_request", None),
+    ("missing id", b'{"v": 1, "cmd": "status"}', "invalid_request", None),
+    ("missing v", b'{"id": 3, "cmd": "status"}', "invalid_request", 3),
+    ("missing cmd", b'{"v": 1, "id": 3}', "invalid_request", 3),
+    ("cmd not a string", b'{"v": 1, "id": 3, "cmd": 5}', "invalid_request", 3),
+    ("unknown cmd", b'{"v": 1, "id": 3, "cmd": "launch"}', "unknown_command", 3),
+    ("wrong version", b'{"v": 2, "id": 3, "cmd": "status"}', "unsupported_version", 3),
+    ("version true", b'{"v": true, "id": 3, "cmd": "status"}', "unsupported_version", 3),
+    ("extra field", b'{"v": 1, "id": 3, "cmd": "status", "verbose": true}', "invalid_request", 3),
+    ("pose too short", b'{"v": 1, "id": 3, "cmd": "move", "pose": [1, 2, 3]}', "invalid_request", 3),
+    ("pose of strings", b'{"v": 1, "id": 3, "cmd": "move", "pose": ["1", 0, 0, 0, 0, 0]}', "invalid_request", 3),
+    ("leg as float", b'{"v": 1, "id": 3, "cmd": "leg_lock", "leg": 1.0}', "invalid_request", 3),
+    ("leg as bool", b'{"v": 1, "id": 3, "cmd": "leg_lock", "leg": true}', "invalid_request", 3),
+    ("leg out of range", b'{"v": 1, "id": 3, "cmd": "leg_lock", "leg": 7}', "invalid_request", 3),
+    ("negative duration", b'{"v": 1, "id": 3, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "duration": -1}', "invalid_request", 3),
+    ("too large", json.dumps({"v": 1, "id": 3, "cmd": "status", "pad": "x" * MAX_REQUEST_BYTES}).encode(), "too_large", None),
+]
+
+
+@pytest.mark.parametrize("kind", [zmq.REQ, zmq.DEALER], ids=["REQ", "DEALER"])
+@pytest.mark.parametrize(("body", "code", "request_id"), [case[1:] for case in CASES], ids=[case[0] for case in CASES])
+def test_bad_request_gets_its_error_code(shared_service, kind, body, code, request_id) -> None:
+    frames = exchange(shared_service.api, [body], kind)
+    assert len(frames) == 1
+    reply = ErrorReply.model_validate_json(frames[0])
+    assert (reply.error.code, reply.id) == (code, request_id)
+    assert reply.error.message
+    assert _still_serving(shared_service.api)
+
+
+@pytest.mark.parametrize(
+    ("frames", "code"),
+    [
+        ([b'{"v": 1, "id": 1, "cmd": "status"}', b"extra"], "invalid_request"),
+        ([b"a", b"b", b"c"], "invalid_request"),
+        ([b"x" * (MAX_REQUEST_BYTES // 2 + 1)] * 2, "too_large"),
+    ],
+    ids=["request plus a frame", "three frames", "too large in total"],
+)
+def test_multipart_is_refused(shared_service, frames, code) -> None:
+    reply = json.loads(exchange(shared_service.api, frames)[-1])
+    assert reply["error"]["code"] == code and reply["id"] is None
+    assert _still_serving(shared_service.api)
+
+
+def test_empty_request(shared_service) -> None:
+    assert json.loads(exchange(shared_service.api, [b""], zmq.REQ)[0])["error"]["code"] == "malformed_json"
+    # From a DEALER a lone empty frame is a delimiter with nothing after it.
+    delimiter, reply = exchange(shared_service.api, [b""])
+    assert delimiter == b"" and json.loads(reply)["error"]["code"] == "invalid_request"
+
+
+def test_req_envelope_is_kept_for_dealer_that_mimics_req(shared_service) -> None:
+    frames = exchange(shared_service.api, [b"", json.dumps(STATUS).encode()])
+    assert frames[0] == b"" and json.loads(frames[1])["id"] == "after"
+
+
+def test_handler_bug_becomes_internal_error() -> None:
+    def broken(request):
+        raise KeyError("boom")
+
+    reply = json.loads(answer([json.dumps(STATUS).encode()], broken))
+    assert reply["error"]["code"] == "internal_error" and reply["id"] == "after"
+
+
+def test_non_finite_reply_becomes_internal_error() -> None:
+    reply = json.loads(answer([json.dumps(STATUS).encode()], lambda request: {"value": float("nan")}))
+    assert reply["error"]["code"] == "internal_error"
+
+
+def test_frame_beyond_transport_limit_does_not_stop_the_server(shared_service) -> None:
+    # ZeroMQ drops such a peer without delivering anything (documented); the server carries on.
+    context = zmq.Context.instance()
+    with context.socket(zmq.DEALER) as socket:
+        socket.linger = 0
+        socket.connect(shared_service.api)
+        socket.send(b"x" * (TRANSPORT_MAX_BYTES + 1))
+    assert _still_serving(shared_service.api)
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=20),
+    lambda children: st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=8), children, max_size=4),
+    max_leaves=20,
+)
+requestish = st.fixed_dictionaries(
+    {"v": st.sampled_from([1, 1, 2, "1"]), "id": json_values, "cmd": st.sampled_from(["status", "move", "leg_lock", "play", "x"])},
+    optional={"pose": json_values, "leg": json_values, "sequence": json_values, "duration": json_values},
+)
+bodies = st.one_of(
+    st.binary(max_size=200),
+    json_values.map(lambda value: json.dumps(value).encode()),
+    requestish.map(lambda value: json.dumps(value).encode()),
+)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(frames=st.lists(bodies, min_size=1, max_size=3))
+def test_fuzz_exactly_one_reply(shared_service, frames) -> None:
+    # The fuzz message, then a status: the next two replies must be the fuzz reply and
+    # the status reply, in order. A missing or duplicated reply breaks the pairing.
+    context = zmq.Context.instance()
+    with context.socket(zmq.DEALER) as socket:
+        socket.linger = 0
+        socket.connect(shared_service.api)
+        socket.send_multipart(frames)
+        socket.send(json.dumps(STATUS).encode())
+        replies = []
+        for _ in range(2):
+            assert socket.poll(5000), "a reply is missing"
+            replies.append(json.loads(socket.recv_multipart()[-1]))
+        assert socket.poll(0) == 0, "an extra reply"
+    assert set(replies[0]) >= {"v", "id", "ok"}
+    assert replies[1]["id"] == "after" and replies[1]["ok"]
+
+
+def _still_serving(endpoint: str) -> bool:
+    return json.loads(exchange(endpoint, [json.dumps(STATUS).encode()])[-1])["ok"]

@@ -1,0 +1,87 @@
+"""Remote access: loopback is open, anything else needs CURVE, and CURVE works end to end."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import zmq
+
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
+from hexactl.adapters.api.security import (
+    CurveClientKeys,
+    CurveServer,
+    CurveServerKeys,
+    SecurityError,
+    check_endpoints,
+    create_keys,
+    is_local_endpoint,
+)
+from hexactl.adapters.api.server import ApiServer
+
+
+@pytest.mark.parametrize(
+    ("endpoint", "local"),
+    [
+        ("tcp://127.0.0.1:5555", True),
+        ("tcp://127.3.2.1:5555", True),
+        ("tcp://localhost:5555", True),
+        ("tcp://[::1]:5555", True),
+        ("tcp://lo:5555", True),
+        ("ipc:///tmp/hexactl.sock", True),
+        ("inproc://api", True),
+        ("tcp://*:5555", False),
+        ("tcp://0.0.0.0:5555", False),
+        ("tcp://192.168.1.10:5555", False),
+        ("tcp://eth0:5555", False),
+        ("tcp://[::]:5555", False),
+        ("tcp://controller.example.org:5555", False),
+        ("ws://127.0.0.1:5555", False),
+    ],
+)
+def test_which_endpoints_are_local(endpoint, local) -> None:
+    assert is_local_endpoint(endpoint) is local
+
+
+def test_non_loopback_bind_needs_curve(tmp_path) -> None:
+    with pytest.raises(SecurityError, match="refusing to bind tcp://0.0.0.0:5555 without CURVE"):
+        check_endpoints(["tcp://127.0.0.1:5555", "tcp://0.0.0.0:5555"], None)
+    check_endpoints(["tcp://127.0.0.1:5555", "ipc:///tmp/x"], None)
+    with pytest.raises(SecurityError, match="does not exist"):
+        check_endpoints(["tcp://0.0.0.0:5555"], CurveServerKeys(tmp_path / "missing", tmp_path))
+    keys = create_keys(tmp_path / "keys")
+    check_endpoints(["tcp://0.0.0.0:5555"], CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
+
+
+def test_create_keys_refuses_to_overwrite(tmp_path) -> None:
+    keys = create_keys(tmp_path)
+    assert (keys["server_secret"].stat().st_mode & 0o777) == 0o600
+    assert (keys["clients_dir"] / "client.key").is_file()
+    with pytest.raises(FileExistsError):
+        create_keys(tmp_path)
+
+
+def test_curve_end_to_end(tmp_path) -> None:
+    keys = create_keys(tmp_path / "keys")
+    stranger = create_keys(tmp_path / "stranger")  # a client whose key is not in clients/
+    context = zmq.Context()
+    curve = CurveServer(context, CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
+    server = ApiServer(context, "tcp://127.0.0.1:*", lambda request: {"message": "hello"}, curve)
+    server.start()
+    try:
+        allowed = CurveClientKeys(keys["server_public"], keys["client_secret"])
+        with HexactlClient(server.endpoint, curve=allowed) as client:
+            assert client.call("status")["message"] == "hello"
+        refused = CurveClientKeys(keys["server_public"], stranger["client_secret"])
+        with HexactlClient(server.endpoint, timeout_s=0.5, curve=refused) as client:
+            with pytest.raises(ServiceUnavailable):
+                client.call("status")
+        with context.socket(zmq.DEALER) as plain:  # no CURVE at all: nothing gets through
+            plain.linger = 0
+            plain.connect(server.endpoint)
+            plain.send(json.dumps({"v": 1, "id": 1, "cmd": "status"}).encode())
+            assert plain.poll(500) == 0
+    finally:
+        server.close()
+        curve.close()
+        context.term()
