@@ -139,7 +139,9 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     )
     residual_count = current.point_residuals.size + current.leg_residuals.size
     dof = residual_count - 6 * len(data) - len(theta)
-    point_dof_share = dof / residual_count
+    # The leg closures are near-exact constraints (σ_reading ≪ the pose noise they carry), so
+    # the point residuals hold practically all the degrees of freedom.
+    point_dof_share = min(dof / current.point_residuals.size, 1.0)
     parameters = StructuralParameters.from_vector(theta, options.estimate_scales)
     warnings = ()
     if options.estimate_scales:

@@ -1,0 +1,261 @@
+"""``hexactl calibrate``, ``plan-leglock`` and ``simulate-campaign``: the calibration workflow.
+
+Exit status as everywhere: 0 success, 1 the answer is "no" (identification failed or
+not trustworthy, no feasible plan), 2 bad input (arguments, files, bad rows).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from hexactl.adapters.cli.common import CliError, load_config
+from hexactl.adapters.files.geometry_file import save_geometry
+from hexactl.adapters.files.measurements import (
+    MeasurementFileError,
+    format_plan,
+    read_measurements,
+    write_measurements,
+    write_plan,
+)
+from hexactl.adapters.report.html import REPORT_PAGE, CalibrationReport, ValidationComparison, write_report
+from hexactl.calibration.data import MeasurementData, measured_poses, screen_measurements
+from hexactl.calibration.identification import calibration_info, identify
+from hexactl.calibration.parameters import StructuralParameters, calibrated_geometry
+from hexactl.calibration.planning import DEFAULT_CANDIDATES, PlanRequest, PlanStatus, plan_postures
+from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method
+from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM
+from hexactl.kinematics.geometry import Geometry, GeometryError
+from hexactl.kinematics.inverse import leg_lengths
+from hexactl.kinematics.pose import absolute_from_relative
+
+
+def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    calibrate = subparsers.add_parser(
+        "calibrate",
+        parents=[common],
+        help="identify the structural parameters from measured postures",
+        description="Identify base joints, platform joints and zero lengths from a measurement CSV and write "
+        "a calibration file (the --config geometry with identified values and a [calibration] table). "
+        "Exit status 1 if the identification fails or the data cannot determine the parameters.",
+        epilog="See docs/calibration.md for the CSV format and the methods.",
+    )
+    calibrate.add_argument("data", metavar="DATA.csv", help="measurement file (never modified)")
+    calibrate.add_argument("-o", "--output", required=True, metavar="CAL.toml", help="calibration file to write")
+    calibrate.add_argument("--method", choices=[m.value for m in Method], default=Method.AUTO.value,
+                           help="identification method (default: auto, the best for the data, explained in the output)")
+    calibrate.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
+    calibrate.add_argument("--force", action="store_true", help="overwrite an existing calibration file or report")
+    calibrate.add_argument("--skip-bad-rows", action="store_true",
+                           help="exclude rows with problems (listed) instead of refusing the file")
+    calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
+    calibrate.add_argument("--point-sigma", type=float, metavar="MM",
+                           help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
+    calibrate.add_argument("--reading-sigma", type=float, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
+                           help=f"sensor reading noise, 1σ (default {DEFAULT_READING_SIGMA_MM} mm)")
+    calibrate.add_argument("--max-deviation", type=float, default=15.0, metavar="MM",
+                           help="leglock/paper: bound on each parameter's deviation from nominal (default 15 mm)")
+    calibrate.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy", "arctan"],
+                           help="leglock: robust loss (default linear)")
+    calibrate.add_argument("--true", metavar="TRUE.toml",
+                           help="simulation only: the true geometry, to add before/after validation to the report")
+    calibrate.set_defaults(run=run_calibrate)
+
+    plan = subparsers.add_parser(
+        "plan-leglock",
+        parents=[common],
+        help="plan leg-lock postures that keep every limit and spread for observability",
+        description="Plan COUNT postures with leg N locked (its length kept), inside every limit with margin, "
+        "chosen D-optimally from random feasible candidates. The leg is locked at its length in the zero "
+        "posture unless --length or --reading is given. --leg 0 plans free postures. Output: CSV of relative "
+        "poses (mm, deg) and sensor set-points. Exit status 1 if too few candidates are feasible.",
+    )
+    plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
+    plan.add_argument("--count", type=int, required=True, help="number of postures")
+    lock = plan.add_mutually_exclusive_group()
+    lock.add_argument("--length", type=float, metavar="MM", help="locked joint-to-joint length")
+    lock.add_argument("--reading", type=float, metavar="MM", help="locked sensor reading")
+    plan.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help=f"random candidates (default {DEFAULT_CANDIDATES})")
+    plan.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    plan.add_argument("-o", "--output", metavar="FILE", help="write the plan here (default: standard output)")
+    plan.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    plan.set_defaults(run=run_plan)
+
+    simulate = subparsers.add_parser(
+        "simulate-campaign",
+        parents=[common],
+        help="simulate a calibration campaign on a platform with random manufacturing errors",
+        description="Plan leg-lock (and free) postures on the --config geometry, run them on a simulated platform "
+        "with seeded manufacturing errors, measure the feature points with a simulated instrument and write "
+        "the measurement CSV (and the true geometry, to validate a calibration against).",
+    )
+    simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
+    simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
+    simulate.add_argument("--per-leg", type=int, default=20, help="leg-lock postures per leg (default 20)")
+    simulate.add_argument("--free", type=int, default=0, help="free postures (default 0)")
+    simulate.add_argument("--seed", type=int, default=0, help="seed of errors, plans and noise (default 0)")
+    simulate.add_argument("--point-sigma", type=float, metavar="MM", help="instrument noise (default: the geometry's)")
+    simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
+    simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
+    simulate.set_defaults(run=run_simulate)
+
+
+def run_calibrate(arguments: argparse.Namespace) -> int:
+    nominal = load_config(arguments)
+    output = Path(arguments.output)
+    if output.exists() and not arguments.force:
+        raise CliError(f"{output} exists; refusing to overwrite it (use --force)")
+    if arguments.report and (Path(arguments.report) / REPORT_PAGE).exists() and not arguments.force:
+        raise CliError(f"{arguments.report} already holds a report; refusing to overwrite it (use --force)")
+    true = _load_geometry(arguments.true) if arguments.true else None
+    point_sigma = nominal.measurement.point_sigma_mm if arguments.point_sigma is None else arguments.point_sigma
+    try:
+        measurements = read_measurements(arguments.data, len(nominal.measurement.feature_points))
+    except MeasurementFileError as error:
+        raise CliError(str(error)) from None
+    problems = measurements.problems + screen_measurements(
+        measurements.data, np.array(nominal.measurement.feature_points), point_sigma)
+    for problem in problems:
+        print(f"{arguments.data}: {problem}", file=sys.stderr)
+    if problems and not arguments.skip_bad_rows:
+        raise CliError(f"{len(problems)} row problem(s) in {arguments.data} (listed above): fix them, or pass "
+                       "--skip-bad-rows to exclude those rows")
+    data = measurements.data.without_lines(problem.line for problem in problems)
+    if problems:
+        print(f"excluded {len({problem.line for problem in problems})} row(s) with problems")
+    if measurements.ignored_columns:
+        print(f"ignored columns: {', '.join(measurements.ignored_columns)}")
+    options = IdentificationOptions(
+        method=Method(arguments.method), point_sigma_mm=point_sigma, reading_sigma_mm=arguments.reading_sigma,
+        estimate_scales=arguments.scales, max_joint_deviation_mm=arguments.max_deviation,
+        max_zero_length_deviation_mm=arguments.max_deviation, loss=arguments.loss)
+    result = identify(data, nominal, options)
+    _print_result(result, nominal)
+    if not result.ok:
+        print(f"no calibration written: {result.status.name.lower().replace('_', ' ')}")
+        return 1
+    created = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    info = calibration_info(result, created, measurements.sha256, nominal.name or str(arguments.config or ""))
+    try:
+        calibrated = calibrated_geometry(nominal, result.parameters, info)
+        save_geometry(calibrated, output, overwrite=arguments.force)
+    except (GeometryError, OSError) as error:
+        raise CliError(str(error)) from None
+    print(f"wrote {output}")
+    if arguments.report:
+        validation = None
+        if true is not None:
+            from hexactl.sim.offline_campaign import validate_geometry  # simulation only
+
+            validation = ValidationComparison(validate_geometry(nominal, true), validate_geometry(calibrated, true))
+        report = CalibrationReport(str(arguments.data), created, nominal, result, problems, validation, true)
+        page = write_report(arguments.report, report, overwrite=arguments.force)
+        print(f"wrote {page}")
+    return 0
+
+
+def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
+    print(f"method: {result.reason}")
+    print(f"status: {result.status.name.lower().replace('_', ' ')}")
+    if not np.isfinite(result.residual_rms_mm):
+        for warning in result.warnings:
+            print(f"warning: {warning}")
+        return
+    o, p = result.observability, result.predicted
+    print(f"postures used: {result.postures_used}, iterations: {result.iterations}")
+    print(f"fit residual RMS {result.residual_rms_mm:.4f} mm (noise model expects {result.expected_rms_mm:.4f} mm), "
+          f"χ²/dof {result.chi2_per_dof:.3f}")
+    print(f"observability: condition number {o.condition_number:.3g}, smallest singular value "
+          f"{o.singular_values[-1]:.3g} /mm (worst combination ±{o.worst_std_mm:.3g} mm)")
+    print(f"predicted pose uncertainty on the paper's test motions: {p.rms_position_mm:.4f} mm, "
+          f"{p.rms_orientation_deg:.5f}° RMS (1σ)")
+    deviation = result.parameters.to_vector() - StructuralParameters.from_geometry(nominal, result.parameters.has_scales).to_vector()
+    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
+    print("deviation from nominal ± σ, mm:")
+    print(f"{'leg':<4} {'base joint B x, y, z':<42} {'platform joint P x, y, z':<42} {'zero length':<18}")
+    for leg in range(6):
+        cells = [f"{deviation[k]:+7.3f}±{std[k]:.3f}" for k in range(7 * leg, 7 * leg + 7)]
+        print(f"{leg + 1:<4} {' '.join(cells[0:3]):<42} {' '.join(cells[3:6]):<42} {cells[6]:<18}")
+    if result.parameters.has_scales:
+        scales = ", ".join(f"{deviation[42 + leg]:+.3f}±{std[42 + leg]:.3f}" for leg in range(6))
+        print(f"sensor scale errors, mm per m of reading: {scales}")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+
+
+def run_plan(arguments: argparse.Namespace) -> int:
+    geometry = load_config(arguments)
+    if arguments.output and Path(arguments.output).exists() and not arguments.force:
+        raise CliError(f"{arguments.output} exists; refusing to overwrite it (use --force)")
+    if not 0 <= arguments.leg <= 6:
+        raise CliError(f"--leg {arguments.leg}: a leg is 1-6 (0 for free postures)")
+    length = arguments.length
+    if arguments.reading is not None:
+        if not arguments.leg:
+            raise CliError("--reading needs a locked leg (--leg 1-6)")
+        length = geometry.zero_lengths[arguments.leg - 1] + arguments.reading
+    plan = plan_postures(geometry, PlanRequest(arguments.leg, arguments.count, length, arguments.candidates, arguments.seed))
+    if plan.status is PlanStatus.INVALID_REQUEST:
+        raise CliError(plan.message)
+    if not plan.ok:
+        print(f"hexactl plan-leglock: {plan.message}", file=sys.stderr)
+        return 1
+    home_length = (leg_lengths(geometry.legs, absolute_from_relative(geometry.home, [0.0] * 6))[arguments.leg - 1]
+                   if arguments.leg else float("nan"))
+    comments = [f"hexactl plan-leglock on {geometry.name or 'unnamed geometry'}, seed {arguments.seed}", plan.message,
+                "poses relative to the zero posture (mm, deg); l*_setpoint: sensor set-points on this geometry (mm)"]
+    if arguments.leg:
+        comments.append(f"leg {arguments.leg} is {home_length:.3f} mm long in the zero posture")
+    if arguments.output:
+        try:
+            write_plan(arguments.output, plan, overwrite=arguments.force, comments=comments)
+        except OSError as error:
+            raise CliError(str(error)) from None
+        print(f"{plan.message}\nwrote {arguments.output}")
+    else:
+        sys.stdout.write(format_plan(plan, comments))
+    return 0
+
+
+def run_simulate(arguments: argparse.Namespace) -> int:
+    from hexactl.sim.offline_campaign import CampaignDesign, SimulationError, run_offline_campaign
+    from hexactl.sim.true_platform import true_geometry
+
+    nominal = load_config(arguments)
+    for path in (arguments.output, arguments.true_output):
+        if path and Path(path).exists() and not arguments.force:
+            raise CliError(f"{path} exists; refusing to overwrite it (use --force)")
+    true = true_geometry(nominal, arguments.seed)
+    design = CampaignDesign(postures_per_leg=arguments.per_leg, free_postures=arguments.free,
+                            point_sigma_mm=arguments.point_sigma, seed=arguments.seed)
+    try:
+        campaign = run_offline_campaign(nominal, true, design)
+    except (ValueError, SimulationError) as error:
+        raise CliError(str(error)) from None
+    data = campaign.data
+    if arguments.pose_form:
+        poses = measured_poses(data, np.array(nominal.measurement.feature_points)).poses
+        data = MeasurementData(data.locked_leg, data.readings_mm, data.lines, poses=poses)
+    comments = [f"hexactl simulate-campaign, seed {arguments.seed}: {arguments.per_leg} leg-lock postures per leg, "
+                f"{arguments.free} free", "simulated: not measured on a real platform"]
+    try:
+        write_measurements(arguments.output, data, overwrite=arguments.force, comments=comments)
+        if arguments.true_output:
+            save_geometry(true, arguments.true_output, overwrite=arguments.force)
+    except OSError as error:
+        raise CliError(str(error)) from None
+    print(f"wrote {arguments.output} ({len(data)} postures)" + (f" and {arguments.true_output}" if arguments.true_output else ""))
+    return 0
+
+
+def _load_geometry(path: str) -> Geometry:
+    from hexactl.adapters.files.geometry_file import load_geometry
+
+    try:
+        return load_geometry(path)
+    except GeometryError as error:
+        raise CliError(str(error)) from None

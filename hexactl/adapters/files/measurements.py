@@ -1,0 +1,206 @@
+"""Measurement and posture-plan CSV files (mm and degrees).
+
+Measurement file: one row per measured posture, header first, ``#`` comment lines and
+blank lines allowed anywhere. Columns, in any order:
+
+- ``leg``: the locked leg 1–6, 0 when none is locked;
+- ``l1`` … ``l6``: sensor readings, mm;
+- the measured posture, either ``x, y, z, roll, pitch, yaw`` (absolute: the moving frame in
+  the fixed frame; mm, deg) or feature points ``p1_x, p1_y, p1_z, p2_x, …`` (fixed frame,
+  mm; three or more, point k being the geometry's ``[measurement] feature_points[k]``).
+  When both are present the points are used: they are the instrument's raw output.
+
+Other columns are ignored (and listed). A row with a missing, non-numeric or non-finite
+value or a bad leg number is reported by its line and left out of the data; the caller
+decides whether that refuses the file. Input files are only read.
+
+Plan file (written by ``hexactl plan-leglock``): ``leg``, the relative pose ``x … yaw``
+(mm, deg from the zero posture) and ``l1_setpoint`` … ``l6_setpoint`` (mm). Its set-point
+columns are named so that a plan can never be mistaken for measurement data.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from math import isfinite
+from pathlib import Path
+
+import numpy as np
+
+from hexactl.adapters.files.atomic import write_atomic
+from hexactl.calibration.data import MeasurementData, RowProblem
+from hexactl.calibration.planning import PosturePlan
+from hexactl.kinematics.inverse import LEG_COUNT
+from hexactl.kinematics.pose import POSE_AXES, pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
+
+READING_COLUMNS = tuple(f"l{leg}" for leg in range(1, LEG_COUNT + 1))
+SETPOINT_COLUMNS = tuple(f"l{leg}_setpoint" for leg in range(1, LEG_COUNT + 1))
+
+
+class MeasurementFileError(ValueError):
+    """The file as a whole cannot be used (unreadable, no header, missing columns)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MeasurementFile:
+    """A parsed measurement file: the good rows as ``data``, the bad ones as ``problems``.
+
+    ``form`` is "points" or "pose"; ``sha256`` hashes the file's bytes (it goes into the
+    calibration file); ``ignored_columns`` were present but are not part of the format.
+    """
+
+    source: str
+    data: MeasurementData
+    problems: tuple[RowProblem, ...]
+    form: str
+    sha256: str
+    ignored_columns: tuple[str, ...]
+
+
+def read_measurements(path: str | os.PathLike[str], feature_point_count: int) -> MeasurementFile:
+    """Read and parse a measurement file; ``feature_point_count`` is the geometry's number of
+    feature points. Raises :class:`MeasurementFileError` naming the file and the problem."""
+    location = Path(path)
+    try:
+        raw = location.read_bytes()
+        text = raw.decode("utf-8-sig")
+    except (OSError, UnicodeDecodeError) as error:
+        raise MeasurementFileError(f"{location}: cannot read: {error}") from None
+    return parse_measurements(text, str(location), feature_point_count, hashlib.sha256(raw).hexdigest())
+
+
+def parse_measurements(text: str, source: str, feature_point_count: int, sha256: str = "") -> MeasurementFile:
+    """Parse measurement CSV ``text`` (see the module docstring)."""
+    rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
+            if line.strip() and not line.lstrip().startswith("#")]
+    if not rows:
+        raise MeasurementFileError(f"{source}: no header line and no data")
+    header_line, header_text = rows[0]
+    header = [name.strip().lower() for name in next(csv.reader([header_text]))]
+    duplicates = sorted({name for name in header if header.count(name) > 1})
+    if duplicates:
+        raise MeasurementFileError(f"{source}: line {header_line}: duplicate columns {', '.join(duplicates)}")
+    point_columns = _point_columns(header)
+    form = "points" if point_columns else "pose"
+    pose_columns = [] if point_columns else list(POSE_AXES)
+    required = ["leg", *READING_COLUMNS, *pose_columns, *(name for point in point_columns for name in point)]
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise MeasurementFileError(
+            f"{source}: line {header_line}: missing columns {', '.join(missing)} (a row needs leg, l1 … l6 and either "
+            "x, y, z, roll, pitch, yaw or feature points p1_x, p1_y, p1_z … p3_z)")
+    if 0 < len(point_columns) < 3:
+        raise MeasurementFileError(f"{source}: the file has {len(point_columns)} feature point(s); a posture needs at least 3")
+    if len(point_columns) > feature_point_count:
+        raise MeasurementFileError(
+            f"{source}: the file has {len(point_columns)} feature points but the geometry defines "
+            f"{feature_point_count} ([measurement] feature_points)")
+    position = {name: index for index, name in enumerate(header)}
+    used = set(required) | (set(POSE_AXES) if point_columns else set())
+    ignored = tuple(name for name in header if name not in used)
+
+    problems: list[RowProblem] = []
+    legs, readings, lines, values = [], [], [], []
+    for number, line in rows[1:]:
+        fields = next(csv.reader([line]))
+        if len(fields) != len(header):
+            problems.append(RowProblem(number, f"has {len(fields)} fields, the header has {len(header)}"))
+            continue
+        row_problems = []
+        numbers = {}
+        for name in required:
+            value, problem = _number(fields[position[name]], name)
+            if problem:
+                row_problems.append(problem)
+            numbers[name] = value
+        leg = numbers["leg"]
+        if not row_problems and not (leg == int(leg) and 0 <= leg <= LEG_COUNT):
+            row_problems.append(f"leg {fields[position['leg']].strip()!r} must be 0 (none locked) or a leg 1-{LEG_COUNT}")
+        if row_problems:
+            problems.append(RowProblem(number, "; ".join(row_problems)))
+            continue
+        legs.append(int(leg))
+        readings.append([numbers[name] for name in READING_COLUMNS])
+        lines.append(number)
+        values.append([numbers[name] for name in pose_columns] if pose_columns
+                      else [[numbers[name] for name in point] for point in point_columns])
+    count = len(legs)
+    arrays = dict(locked_leg=np.array(legs, dtype=np.int64), readings_mm=np.array(readings).reshape(count, LEG_COUNT),
+                  lines=np.array(lines, dtype=np.int64))
+    if form == "points":
+        data = MeasurementData(**arrays, points_mm=np.array(values).reshape(count, len(point_columns), 3))
+    else:
+        data = MeasurementData(**arrays, poses=pose_mm_deg_to_mm_rad(np.array(values).reshape(count, 6)))
+    return MeasurementFile(source, data, tuple(problems), form, sha256, ignored)
+
+
+def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:
+    """Column names of p1, p2, … as long as any coordinate of that point is present."""
+    points = []
+    while any(f"p{len(points) + 1}_{axis}" in header for axis in "xyz"):
+        k = len(points) + 1
+        points.append((f"p{k}_x", f"p{k}_y", f"p{k}_z"))
+    return points
+
+
+def _number(text: str, name: str) -> tuple[float, str | None]:
+    text = text.strip()
+    if not text:
+        return float("nan"), f"{name} is missing"
+    try:
+        value = float(text)
+    except ValueError:
+        return float("nan"), f"{name} {text!r} is not a number"
+    if not isfinite(value):
+        return value, f"{name} is {text} (not a finite number)"
+    return value, None
+
+
+def format_measurements(data: MeasurementData, comments: Sequence[str] = ()) -> str:
+    """Measurement CSV text for ``data`` (points form when it has points)."""
+    header = ["leg", *READING_COLUMNS]
+    if data.points_mm is not None:
+        header += [f"p{k}_{axis}" for k in range(1, data.point_count + 1) for axis in "xyz"]
+        posture = data.points_mm.reshape(len(data), -1)
+        digits = 6
+    else:
+        assert data.poses is not None
+        header += list(POSE_AXES)
+        posture = pose_mm_rad_to_mm_deg(data.poses)
+        digits = 9
+    out = io.StringIO()
+    for comment in comments:
+        out.write(f"# {comment}\n")
+    out.write(",".join(header) + "\n")
+    for leg, reading, values in zip(data.locked_leg, data.readings_mm, posture):
+        out.write(",".join([str(int(leg)), *(f"{v:.6f}" for v in reading), *(f"{v:.{digits}f}" for v in values)]) + "\n")
+    return out.getvalue()
+
+
+def write_measurements(path: str | os.PathLike[str], data: MeasurementData, *, overwrite: bool = False,
+                       comments: Sequence[str] = ()) -> Path:
+    """Write ``data`` atomically; refuses to replace a file unless ``overwrite``."""
+    return write_atomic(path, format_measurements(data, comments).encode("utf-8"), overwrite=overwrite)
+
+
+def format_plan(plan: PosturePlan, comments: Sequence[str] = ()) -> str:
+    """Plan CSV text: leg, relative pose (mm, deg) and sensor set-points (mm)."""
+    out = io.StringIO()
+    for comment in comments:
+        out.write(f"# {comment}\n")
+    out.write(",".join(["leg", *POSE_AXES, *SETPOINT_COLUMNS]) + "\n")
+    for pose, setpoints in zip(plan.poses_relative, plan.setpoints_mm):
+        # Nine decimals: 1e-9° at the platform joints is 2e-8 mm, so the lock survives the round trip.
+        out.write(",".join([str(plan.leg), *(f"{v:.9f}" for v in pose), *(f"{v:.6f}" for v in setpoints)]) + "\n")
+    return out.getvalue()
+
+
+def write_plan(path: str | os.PathLike[str], plan: PosturePlan, *, overwrite: bool = False,
+               comments: Sequence[str] = ()) -> Path:
+    """Write a plan atomically; refuses to replace a file unless ``overwrite``."""
+    return write_atomic(path, format_plan(plan, comments).encode("utf-8"), overwrite=overwrite)

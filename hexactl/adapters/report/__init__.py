@@ -1,0 +1,1 @@
+"""Calibration reports: HTML page and PNG figures (matplotlib, Agg)."""

@@ -1,0 +1,117 @@
+"""The calibration commands end to end, through ``hexactl.adapters.cli.main.main``."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.measurements import format_measurements, write_measurements
+from hexactl.kinematics.inverse import leg_lengths_batch
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.workspace import assess_poses
+
+from .conftest import NOMINAL_PATH
+
+
+@pytest.fixture
+def data_file(tmp_path, leglock_campaign):
+    return write_measurements(tmp_path / "data.csv", leglock_campaign.data, comments=["simulated"])
+
+
+def _sha(path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_calibrate_writes_a_reloadable_file_and_refuses_to_overwrite(tmp_path, data_file, nominal, true_platform, capsys):
+    output = tmp_path / "cal.toml"
+    before = _sha(data_file)
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(output)]) == 0
+    out = capsys.readouterr().out
+    assert "auto chose full" in out and f"wrote {output}" in out
+    calibrated = load_geometry(output)
+    assert calibrated.calibration is not None and calibrated.calibration.method == "full"
+    assert calibrated.calibration.input_sha256 == before and calibrated.calibration.postures == 60
+    assert calibrated.limits == nominal.limits and calibrated.home == nominal.home
+    errors = np.subtract(calibrated.platform_joints, true_platform.platform_joints)
+    assert np.max(np.abs(errors)) < 5 * np.max(calibrated.calibration.platform_joints_std_mm)
+    assert _sha(data_file) == before  # input never modified
+
+    written = output.read_bytes()
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(output)]) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err and output.read_bytes() == written
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(output), "--force",
+                 "--method", "leglock"]) == 0
+    assert load_geometry(output).calibration.method == "leglock"
+
+
+def test_report_with_simulated_validation(tmp_path, data_file, true_platform):
+    true_path = tmp_path / "true.toml"
+    from hexactl.adapters.files.geometry_file import save_geometry
+
+    save_geometry(true_platform, true_path)
+    report = tmp_path / "report"
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml"),
+                 "--report", str(report), "--true", str(true_path)]) == 0
+    page = (report / "index.html").read_text(encoding="utf-8")
+    for name in ("residuals.png", "parameters.png", "observability.png", "x_sweep.png", "y_rotation.png"):
+        assert (report / name).read_bytes().startswith(b"\x89PNG")
+    assert "Validation" in page and "paper: after calibration" in page and "data:image/png;base64," in page
+
+
+def test_bad_rows_are_refused_by_line_or_skipped_on_request(tmp_path, leglock_campaign, capsys):
+    lines = format_measurements(leglock_campaign.data).splitlines()
+    fields = lines[5].split(",")
+    fields[2] = "NaN"
+    lines[5] = ",".join(fields)  # file line 6
+    path = tmp_path / "bad.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    output = tmp_path / "cal.toml"
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output)]) == 2
+    err = capsys.readouterr().err
+    assert "line 6: l2 is NaN" in err and "--skip-bad-rows" in err and not output.exists()
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output), "--skip-bad-rows"]) == 0
+    assert "excluded 1 row" in capsys.readouterr().out
+    assert load_geometry(output).calibration.postures == 59
+
+
+def test_too_few_locked_postures_for_leglock_names_the_lines(tmp_path, leglock_campaign, capsys):
+    data = leglock_campaign.data
+    keep = (data.locked_leg != 2) | (np.cumsum(data.locked_leg == 2) <= 3)
+    path = write_measurements(tmp_path / "few.csv", data.select(keep))
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "c.toml"),
+                 "--method", "leglock"]) == 1
+    out = capsys.readouterr().out
+    assert "leg 2 has 3 locked posture(s) (lines 12, 13, 14)" in out and "no calibration written" in out
+
+
+def test_plan_leglock_file_holds_the_lock_and_the_limits(tmp_path, nominal, capsys):
+    plan_path = tmp_path / "plan.csv"
+    assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "5", "--count", "8",
+                 "--candidates", "300", "--reading", "380", "-o", str(plan_path)]) == 0
+    header, *rows = [line for line in plan_path.read_text().splitlines() if not line.startswith("#")]
+    table = np.array([[float(v) for v in row.split(",")] for row in rows])
+    assert header.startswith("leg,x,y,z,roll,pitch,yaw,l1_setpoint")
+    assert np.all(table[:, 0] == 5) and len(table) == 8
+    lengths = leg_lengths_batch(nominal.legs, absolute_from_relative(nominal.home, table[:, 1:7]))
+    assert np.max(np.abs(lengths[:, 4] - (nominal.zero_lengths[4] + 380.0))) < 1e-6
+    assert all(assessment.ok for assessment in assess_poses(nominal, table[:, 1:7]))
+    assert np.allclose(table[:, 7:], lengths - np.array(nominal.zero_lengths), atol=1e-5)
+
+    assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "1", "--count", "3", "--candidates", "100"]) == 0
+    assert capsys.readouterr().out.count("\n1,") == 3
+    assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "8", "--count", "3"]) == 2
+
+
+def test_simulate_campaign_then_calibrate_pose_form(tmp_path, capsys):
+    data, true = tmp_path / "sim.csv", tmp_path / "true.toml"
+    assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(data), "--true-output", str(true),
+                 "--per-leg", "8", "--seed", "4", "--pose-form"]) == 0
+    assert "x,y,z,roll,pitch,yaw" in data.read_text()
+    assert main(["calibrate", str(data), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")]) == 0
+    calibrated, truth = load_geometry(tmp_path / "cal.toml"), load_geometry(true)
+    assert np.max(np.abs(np.subtract(calibrated.zero_lengths, truth.zero_lengths))) < 3.0
+    assert "status: ok" in capsys.readouterr().out

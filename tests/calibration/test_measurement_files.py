@@ -1,0 +1,112 @@
+"""Measurement CSV files: both forms parse, every bad row is named by its line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.files.measurements import (
+    MeasurementFileError,
+    format_measurements,
+    parse_measurements,
+    read_measurements,
+    write_measurements,
+)
+from hexactl.calibration.data import MeasurementData, measured_poses, screen_measurements
+
+HEADER_POINTS = "leg,l1,l2,l3,l4,l5,l6,p1_x,p1_y,p1_z,p2_x,p2_y,p2_z,p3_x,p3_y,p3_z"
+
+
+def _points_text(campaign, rows=slice(0, 6)) -> str:
+    data = campaign.data.select(np.isin(np.arange(len(campaign.data)), np.arange(len(campaign.data))[rows]))
+    return format_measurements(data, comments=["test data"])
+
+
+def test_points_form_round_trips_with_comments_and_line_numbers(leglock_campaign, tmp_path):
+    path = write_measurements(tmp_path / "data.csv", leglock_campaign.data, comments=["first", "second"])
+    parsed = read_measurements(path, feature_point_count=3)
+    assert parsed.form == "points" and not parsed.problems and len(parsed.sha256) == 64
+    assert np.allclose(parsed.data.points_mm, leglock_campaign.data.points_mm, atol=1e-6)
+    assert np.allclose(parsed.data.readings_mm, leglock_campaign.data.readings_mm, atol=1e-6)
+    assert np.array_equal(parsed.data.locked_leg, leglock_campaign.data.locked_leg)
+    assert parsed.data.lines[0] == 4  # two comments and the header come first
+    with pytest.raises(FileExistsError):
+        write_measurements(path, leglock_campaign.data)
+
+
+def test_pose_form_parses_degrees_into_radians(nominal, leglock_campaign):
+    poses = measured_poses(leglock_campaign.data, np.array(nominal.measurement.feature_points)).poses
+    data = MeasurementData(leglock_campaign.data.locked_leg, leglock_campaign.data.readings_mm,
+                           leglock_campaign.data.lines, poses=poses)
+    parsed = parse_measurements("# pose form\n\n" + format_measurements(data), "pose.csv", 3)
+    assert parsed.form == "pose" and parsed.data.points_mm is None and not parsed.problems
+    assert np.allclose(parsed.data.poses, poses, atol=1e-9)
+    assert parsed.data.lines[0] == 4  # comment, blank line, header
+
+
+def test_extra_columns_are_ignored_and_reported(leglock_campaign):
+    text = _points_text(leglock_campaign)
+    lines = text.splitlines()
+    lines = [lines[0], lines[1] + ",operator"] + [line + ",anna" for line in lines[2:]]
+    parsed = parse_measurements("\n".join(lines), "extra.csv", 3)
+    assert parsed.ignored_columns == ("operator",) and len(parsed.data) == 6
+
+
+@pytest.mark.parametrize("drop, missing", [("l4", "l4"), ("p3_z", "p3_z"), ("leg", "leg")])
+def test_missing_columns_are_refused_by_name(leglock_campaign, drop, missing):
+    text = _points_text(leglock_campaign)
+    header_line, *rows = text.splitlines()[1:]
+    columns = header_line.split(",")
+    index = columns.index(drop)
+    cut = [",".join(c for k, c in enumerate(row.split(",")) if k != index) for row in [header_line, *rows]]
+    with pytest.raises(MeasurementFileError, match=f"missing columns {missing}"):
+        parse_measurements("\n".join(cut), "cut.csv", 3)
+
+
+def test_too_few_or_too_many_points(leglock_campaign):
+    with pytest.raises(MeasurementFileError, match="at least 3"):
+        parse_measurements("leg,l1,l2,l3,l4,l5,l6,p1_x,p1_y,p1_z,p2_x,p2_y,p2_z\n", "two.csv", 3)
+    with pytest.raises(MeasurementFileError, match="geometry defines 3"):
+        parse_measurements(HEADER_POINTS + ",p4_x,p4_y,p4_z\n", "four.csv", 3)
+    with pytest.raises(MeasurementFileError, match="no header"):
+        parse_measurements("# only a comment\n\n", "empty.csv", 3)
+
+
+def test_bad_values_are_reported_by_line_and_left_out(leglock_campaign):
+    text = _points_text(leglock_campaign)  # line 1 comment, line 2 header, rows on lines 3-8
+    lines = text.splitlines()
+    fields = lines[3].split(",")
+    fields[3] = "nan"
+    lines[3] = ",".join(fields)  # line 4: NaN reading
+    fields = lines[4].split(",")
+    fields[9] = ""
+    lines[4] = ",".join(fields)  # line 5: missing coordinate
+    lines[5] = "9" + lines[5][1:]  # line 6: no such leg
+    lines[6] = lines[6] + ",1.0"  # line 7: one field too many
+    fields = lines[7].split(",")
+    fields[2] = "abc"
+    lines[7] = ",".join(fields)  # line 8: not a number
+    parsed = parse_measurements("\n".join(lines), "bad.csv", 3)
+    messages = {problem.line: problem.message for problem in parsed.problems}
+    assert set(messages) == {4, 5, 6, 7, 8}
+    assert "l3 is nan" in messages[4] and "p1_z is missing" in messages[5]
+    assert "leg '9'" in messages[6] and "17 fields" in messages[7] and "'abc' is not a number" in messages[8]
+    assert list(parsed.data.lines) == [3]
+
+
+def test_screening_names_inconsistent_collinear_and_unlocked_rows(nominal, leglock_campaign):
+    data = leglock_campaign.data
+    points = np.array(data.points_mm)
+    points[2, 1] += np.array([4.0, 0.0, 0.0])  # a mis-sighted target: distances disagree
+    points[4] = points[4, 0] + np.outer([0.0, 1.0, 2.0], [300.0, 0.0, 0.0])  # collinear
+    readings = np.array(data.readings_mm)
+    leg = data.locked_leg[6]
+    readings[6, leg - 1] += 0.5  # the "locked" leg moved
+    bad = MeasurementData(data.locked_leg, readings, data.lines, points_mm=points)
+    problems = screen_measurements(bad, np.array(nominal.measurement.feature_points), nominal.measurement.point_sigma_mm)
+    by_line = {problem.line: str(problem) for problem in problems}
+    assert set(by_line) == {int(data.lines[2]), int(data.lines[4]), int(data.lines[6])}
+    assert "distance p1-p2" in by_line[int(data.lines[2])] and "tolerance" in by_line[int(data.lines[2])]
+    assert "collinear" in by_line[int(data.lines[4])]
+    assert f"leg {leg} is marked locked" in by_line[int(data.lines[6])]
+    assert not screen_measurements(data, np.array(nominal.measurement.feature_points), nominal.measurement.point_sigma_mm)
