@@ -35,6 +35,9 @@ class LoopStats:
     ``missed``: cycles that woke more than half a period late. ``skipped``: deadlines
     dropped by re-anchoring after an overrun (the loop never bursts to catch up).
     ``gc_runs``/``gc_max_us``: young-generation collections run in the loop's slack.
+    ``guard_clamps``: cycles in which the set-point guard had to change a set-point (a
+    plan was wrong: should stay 0); ``fk_failures``: cycles whose feedback had no
+    forward-kinematics solution. The controller fills these two from the cycle's state.
     """
 
     rate_hz: float
@@ -45,6 +48,8 @@ class LoopStats:
     compute_us: Percentiles
     gc_runs: int
     gc_max_us: float
+    guard_clamps: int = 0
+    fk_failures: int = 0
 
 
 class CycleStats:

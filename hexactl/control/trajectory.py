@@ -29,6 +29,7 @@ from ruckig import (
     OutputParameter,
     Result,
     Ruckig,
+    RuckigError,
     Synchronization,
     Trajectory,
 )
@@ -166,7 +167,10 @@ class PoseTrajectory:
         """Advance one period; the new position is :meth:`state`'s first element."""
         if not self._active:
             return StepResult.IDLE
-        result = self._ruckig.update(self._input, self._output)
+        try:
+            result = self._ruckig.update(self._input, self._output)
+        except RuckigError:  # ruckig raises, rather than returns an error, for some inputs
+            result = Result.Error
         if result != Result.Working and result != Result.Finished:
             self.reset(self._input.current_position)
             return StepResult.ERROR
@@ -196,5 +200,8 @@ def preview(
     )
     configure_input(parameters, limits, goal, time_scale, velocity_scale)
     trajectory = Trajectory(DOFS)
-    result = Ruckig(DOFS, period_s).calculate(parameters, trajectory)
+    try:
+        result = Ruckig(DOFS, period_s).calculate(parameters, trajectory)
+    except RuckigError:
+        return None
     return trajectory if result in (Result.Working, Result.Finished) else None

@@ -74,3 +74,11 @@ def test_preview_refuses_non_finite_input():
 def test_limits_must_be_positive():
     with pytest.raises(ValidationError):
         MotionLimits(max_velocity=(1, 1, 1, 1, 1, 0))
+
+
+def test_ruckig_exceptions_become_an_error_result():
+    trajectory = PoseTrajectory(MotionLimits(), PERIOD)
+    trajectory.move_to([1e300] * 6)
+    assert trajectory.update() is StepResult.ERROR and not trajectory.moving
+    assert trajectory.state()[0] == (0.0,) * 6
+    assert preview(MotionLimits(), PERIOD, ((0.0,) * 6,) * 3, (1e300,) * 6) is None

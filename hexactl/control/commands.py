@@ -1,0 +1,108 @@
+"""Commands from the callers' threads to the loop: immutable objects in a deque.
+
+Producers (the :class:`~hexactl.control.controller.Controller`'s methods, in any
+thread) do all parsing, planning and validation first, then ``append`` one of these;
+the loop ``popleft``s a bounded number per cycle. ``deque.append``/``popleft`` are
+atomic in CPython, so there is no lock the loop could wait on.
+
+``ticket`` numbers a command; the loop publishes its verdict per ticket
+(:class:`Outcome`). ``epoch`` is the loop's plan epoch the command was planned at: the
+loop advances it whenever what a plan starts from changes (a new goal, a halt, leg-lock,
+a calibration swap), and refuses a plan made at another epoch as stale rather than run
+a path nobody validated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hexactl.control.planning import ActiveGeometry, Segment
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    ticket: int
+
+
+@dataclass(frozen=True, slots=True)
+class Enable(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Disable(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Stop(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class EStop(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Reset(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Move(Command):
+    epoch: int
+    segment: Segment
+
+
+@dataclass(frozen=True, slots=True)
+class LockLeg(Command):
+    leg: int
+
+
+@dataclass(frozen=True, slots=True)
+class UnlockLeg(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Play(Command):
+    epoch: int
+    name: str
+    segments: tuple[Segment, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Pause(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Resume(Command):
+    """``remainder``: the rest of the interrupted move, planned from where it stopped
+    (None when the sequence was paused during a dwell)."""
+
+    epoch: int
+    remainder: Segment | None
+
+
+@dataclass(frozen=True, slots=True)
+class Abort(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class SwapGeometry(Command):
+    """Make ``active`` the loop's geometry (a calibration load or a rollback)."""
+
+    epoch: int
+    active: ActiveGeometry
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    """The loop's verdict on command ``ticket``: ``code`` None when carried out."""
+
+    ticket: int
+    code: str | None
+    message: str

@@ -1,0 +1,78 @@
+"""The controller's parameters: one validated, frozen object, read once at start-up."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from hexactl.control.realtime import RealtimeConfig
+from hexactl.control.stats import DEFAULT_WINDOW
+from hexactl.control.trajectory import MotionLimits
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+
+class LoopConfig(_Frozen):
+    """Timing of the loop thread."""
+
+    rate_hz: float = Field(default=500.0, ge=10.0, le=2000.0, description="cycle rate; 500 or 1000 in practice")
+    spin_window_us: float = Field(
+        default=200.0, ge=0.0, description="the last stretch before a deadline is busy-waited instead of slept"
+    )
+    stats_window: int = Field(default=DEFAULT_WINDOW, ge=1, description="cycles kept for lateness percentiles")
+    realtime: RealtimeConfig = RealtimeConfig()
+
+    @property
+    def period_ns(self) -> int:
+        return round(1e9 / self.rate_hz)
+
+    @property
+    def period_s(self) -> float:
+        return self.period_ns / 1e9
+
+
+class SupervisionConfig(_Frozen):
+    """When the loop declares a FAULT (checked every cycle while ENABLED)."""
+
+    heartbeat_timeout_s: float = Field(default=0.05, gt=0, description="an actuator silent this long is lost")
+    state_timeout_s: float = Field(
+        default=0.5, gt=0, description="time an actuator has to reach a commanded state (enabled, locked …)"
+    )
+    setpoint_lag_s: float = Field(
+        default=0.05, gt=0, description="set-points the actuators have not applied for this long mean a broken link"
+    )
+    max_send_failures: int = Field(default=3, ge=1, description="consecutive failed set-point sends before FAULT")
+    estop_repeat_s: float = Field(default=0.1, gt=0, description="while ESTOP is latched, the E-stop is re-sent this often")
+
+
+class ControllerConfig(_Frozen):
+    """Everything the controller needs besides the hardware and the geometry."""
+
+    loop: LoopConfig = LoopConfig()
+    motion: MotionLimits = MotionLimits()
+    supervision: SupervisionConfig = SupervisionConfig()
+    calibration_ramp_fraction: float = Field(
+        default=0.1, gt=0, lt=1,
+        description="share of leg_velocity_mm_s a calibration swap ramps at; moves are planned within the rest",
+    )
+    calibration_max_change_mm: float = Field(
+        default=25.0, gt=0, description="a calibration that moves a set-point more than this at the current pose is refused"
+    )
+    lock_max_correction_mm: float = Field(
+        default=25.0, gt=0, description="leg-lock: a goal farther than this from the locked-leg constraint is refused"
+    )
+    lock_cycle_iterations: int = Field(default=3, ge=1, description="leg-lock: projection iterations per cycle")
+    path_step_mm: float = Field(default=2.0, gt=0, description="move validation: sample spacing in translation")
+    path_step_deg: float = Field(default=0.1, gt=0, description="move validation: sample spacing in rotation")
+    fk_tolerance_mm: float = Field(default=1e-6, gt=0, description="forward kinematics of the feedback: tolerance")
+    fk_max_iterations: int = Field(default=10, ge=1, description="forward kinematics of the feedback: iteration cap")
+    command_timeout_s: float = Field(default=0.5, gt=0, description="how long a caller waits for the loop's verdict")
+
+    @model_validator(mode="after")
+    def _timeouts_span_cycles(self) -> ControllerConfig:
+        period = self.loop.period_s
+        for name in ("heartbeat_timeout_s", "setpoint_lag_s"):
+            if getattr(self.supervision, name) < 3 * period:
+                raise ValueError(f"supervision.{name} must span at least three loop periods ({3 * period:g} s)")
+        return self

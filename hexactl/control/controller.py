@@ -1,0 +1,410 @@
+"""The controller facade: one method per command the API exposes, plus telemetry.
+
+Threading. Methods are called from any thread (the API's, a CLI's, a test's). Each does
+its heavy work there — argument checks, planning, path validation, calibration dry runs
+— against the loop's latest :class:`~hexactl.control.core.CoreSnapshot`, then hands an
+immutable command to the loop through a deque (:mod:`hexactl.control.commands`). With
+the loop thread running, the method then waits (at most ``command_timeout_s``) for the
+loop's verdict, because the state may have changed meanwhile and the loop checks again;
+when the loop is stepped by hand (tests, simulation) it returns at once with
+``details["pending"] = True`` and the verdict is read later with :meth:`Controller.outcome`.
+
+No method raises for bad input: every one returns a
+:class:`~hexactl.control.results.CommandResult`. Poses in and out are relative to the
+zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from hexactl.control import commands as cmd
+from hexactl.control.config import ControllerConfig
+from hexactl.control.core import (
+    ControlCore,
+    ControlState,
+    CoreSnapshot,
+    Event,
+    Fault,
+    SequenceReport,
+    check_abort,
+    check_disable,
+    check_enable,
+    check_lock,
+    check_move,
+    check_pause,
+    check_play,
+    check_reset,
+    check_resume,
+    check_swap,
+    check_unlock,
+)
+from hexactl.control.hardware import ActuatorInterface
+from hexactl.control.loop import ControlLoop
+from hexactl.control.planning import (
+    ActiveGeometry,
+    Plan,
+    PlanningContext,
+    Waypoint,
+    assess_path,
+    piecewise_line,
+    plan_path,
+)
+from hexactl.control.realtime import RealtimeReport
+from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, builtin_sequence
+from hexactl.control.stats import LoopStats
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import sensor_setpoints
+from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+
+
+@dataclass(frozen=True, slots=True)
+class SequenceTelemetry:
+    """The playing sequence: ``index`` 1-based waypoint being approached or dwelt at."""
+
+    name: str
+    index: int
+    total: int
+    phase: str
+
+
+@dataclass(frozen=True, slots=True)
+class Telemetry:
+    """One cycle's picture. ``t``: monotonic time of the cycle, s. Poses relative to the
+    zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
+    solution); legs sensor mm (``leg_feedback`` None before the first read)."""
+
+    t: float
+    state: str
+    motion: str
+    pose_command: tuple[float, ...]
+    pose_measured: tuple[float, ...] | None
+    leg_setpoints: tuple[float, ...]
+    leg_feedback: tuple[float, ...] | None
+    locked_leg: int | None
+    calibration_id: str
+    sequence: SequenceTelemetry | None
+    faults: tuple[Fault, ...]
+    loop: LoopStats
+
+
+class Controller:
+    """The control core of the controller service.
+
+    ``hardware``: the actuators (the CAN adapter, or :class:`~hexactl.sim.ideal_actuators.IdealActuators`).
+    ``geometry``/``calibration_id``/``calibration_source``: the calibrated geometry to
+    start with and its identity (the caller computes the id, e.g. a content hash).
+    ``clock_ns``: monotonic time for cycles stepped by hand and for the first read.
+    Construction reads the actuators once, so status and telemetry work immediately and
+    the commanded pose starts where the platform is.
+    """
+
+    def __init__(
+        self,
+        hardware: ActuatorInterface,
+        geometry: Geometry,
+        calibration_id: str,
+        *,
+        calibration_source: str = "",
+        config: ControllerConfig | None = None,
+        clock_ns: Callable[[], int] = time.monotonic_ns,
+    ) -> None:
+        self.config = config or ControllerConfig()
+        self.hardware = hardware
+        self._clock_ns = clock_ns
+        self._core = ControlCore(hardware, ActiveGeometry.of(geometry, calibration_id, calibration_source), self.config)
+        self._loop = ControlLoop(self._core.step, self.config.loop, on_crash=hardware.send_estop)
+        self._tickets = itertools.count(1)  # next() on a count is atomic in CPython
+        self._core.step(clock_ns())
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    def start(self) -> RealtimeReport:
+        """Start the loop thread; returns what the real-time set-up obtained."""
+        return self._loop.start()
+
+    def shutdown(self) -> None:
+        """Stop the loop thread (the actuators keep their state: disable first)."""
+        self._loop.stop()
+
+    def step(self, now_ns: int | None = None) -> None:
+        """Run one cycle now (tests, simulation); not while the thread runs."""
+        if self._loop.running:
+            raise RuntimeError("the loop thread is running: it steps by itself")
+        self._loop.step(self._clock_ns() if now_ns is None else now_ns)
+
+    @property
+    def snapshot(self) -> CoreSnapshot:
+        snapshot = self._core.snapshot
+        assert snapshot is not None  # the constructor ran one cycle
+        return snapshot
+
+    # -- queries --------------------------------------------------------------------------
+
+    def status(self) -> CommandResult:
+        """State, calibration, sequence, faults, recent events and the loop's health."""
+        s = self.snapshot
+        failure = self._loop.failure
+        return CommandResult.success(
+            s.state.value,
+            state=s.state.value,
+            motion=s.motion.value,
+            locked_leg=s.lock.leg if s.lock else None,
+            calibration_id=s.active.calibration_id,
+            calibration_source=s.active.source,
+            previous_calibration_id=s.previous.calibration_id if s.previous else None,
+            calibration_ramping=s.ramp_active,
+            sequence=asdict(_sequence_telemetry(s)) if s.sequence else None,
+            last_sequence={"name": s.last_sequence.name, "status": s.last_sequence.status,
+                           "records": len(s.last_sequence.records)} if s.last_sequence else None,
+            faults=[asdict(f) for f in s.faults],
+            events=[asdict(e) for e in s.events[-10:]],
+            loop_running=self._loop.running,
+            loop_failure=repr(failure) if failure else None,
+            realtime=asdict(self._loop.realtime) if self._loop.realtime else None,
+        )
+
+    def telemetry(self) -> Telemetry:
+        """The latest cycle; computing the loop's percentiles sorts its window (~1 ms)."""
+        s = self.snapshot
+        stats = replace(self._loop.stats.summary(), guard_clamps=s.clamped_cycles, fk_failures=s.fk_failures)
+        return Telemetry(
+            t=s.t_ns / 1e9,
+            state=s.state.value,
+            motion=s.motion.value,
+            pose_command=_mm_deg(s.pose_command),
+            pose_measured=_mm_deg(s.pose_measured) if s.pose_measured is not None else None,
+            leg_setpoints=s.setpoints,
+            leg_feedback=s.feedback.positions_mm if s.feedback else None,
+            locked_leg=s.lock.leg if s.lock else None,
+            calibration_id=s.active.calibration_id,
+            sequence=_sequence_telemetry(s),
+            faults=s.faults,
+            loop=stats,
+        )
+
+    def events(self) -> tuple[Event, ...]:
+        """The loop's recent events (faults, refusals, sequence and calibration changes)."""
+        return self.snapshot.events
+
+    def sequence_records(self) -> SequenceReport | None:
+        """The playing or last played sequence's dwell records."""
+        return self.snapshot.last_sequence
+
+    def outcome(self, ticket: int) -> CommandResult | None:
+        """The loop's verdict on command ``ticket`` (None if not carried out yet, or
+        too long ago to be remembered)."""
+        for outcome in reversed(self.snapshot.outcomes):
+            if outcome.ticket == ticket:
+                if outcome.code is None:
+                    return CommandResult.success(outcome.message, ticket=ticket)
+                return CommandResult.failure(outcome.code, outcome.message, ticket=ticket)
+        return None
+
+    # -- commands -------------------------------------------------------------------------
+
+    def enable(self) -> CommandResult:
+        """Energise the actuators and hold the pose they are at."""
+        s = self.snapshot
+        if refusal := check_enable(s, self.config.supervision.heartbeat_timeout_s):
+            return CommandResult.failure(*refusal)
+        return self._submit(cmd.Enable, "enabled")
+
+    def disable(self) -> CommandResult:
+        """Disable the actuators (at rest only: stop first)."""
+        return self._checked(check_disable, cmd.Disable, "disabled")
+
+    def stop(self) -> CommandResult:
+        """Brake smoothly to rest where the motion happens to end; aborts a sequence."""
+        return self._submit(cmd.Stop, "stopping")
+
+    def estop(self) -> CommandResult:
+        """Emergency stop, latched until reset. Sent from this thread at once, then
+        latched and repeated by the loop."""
+        sent = self.hardware.send_estop()
+        result = self._submit(cmd.EStop, "E-stop latched")
+        if not sent:
+            return CommandResult.failure(ErrorCode.SEND_FAILED, "the E-stop frame could not be sent; the loop "
+                                         "latched ESTOP and keeps repeating it", **result.details)
+        return result
+
+    def reset(self) -> CommandResult:
+        """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED."""
+        return self._checked(check_reset, cmd.Reset, "reset to disabled")
+
+    def validate_pose(self, pose: Sequence[float], duration: float | None = None,
+                      speed: float | None = None) -> CommandResult:
+        """Would :meth:`move` accept this? Plans and checks the whole path, moves nothing."""
+        s = self.snapshot
+        plan = plan_path(self._context(s), s.trajectory, [Waypoint(pose, duration, speed)])
+        return _plan_result(plan, "valid")
+
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+        """Move to ``pose`` (relative mm/deg), validated whole first; ``duration`` s (at
+        least, to one loop period) or ``speed`` (0, 1] of the velocity limits. In
+        leg-lock mode the goal is projected onto the locked leg's constraint (see
+        ``details.goal``). A move while moving replaces the running one."""
+        s = self.snapshot
+        if refusal := check_move(s):
+            return CommandResult.failure(*refusal)
+        plan = plan_path(self._context(s), s.trajectory, [Waypoint(pose, duration, speed)])
+        if not plan.ok:
+            return _plan_result(plan, "")
+        (segment,) = plan.segments
+        return self._submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", **_plan_result(plan, "").details)
+
+    def leg_lock(self, leg: int) -> CommandResult:
+        """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""
+        if isinstance(leg, bool) or not isinstance(leg, (int, np.integer)) or not 1 <= leg <= 6:
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"leg is a number from 1 to 6, got {leg!r}")
+        return self._checked(check_lock, lambda t: cmd.LockLeg(t, int(leg)), f"leg {leg} locked")
+
+    def leg_unlock(self) -> CommandResult:
+        """Release the locked leg; the pose being held becomes the target (no step)."""
+        return self._checked(check_unlock, cmd.UnlockLeg, "unlocked")
+
+    def play(self, sequence: MotionSequence | str) -> CommandResult:
+        """Play a sequence, or a built-in one by name; every waypoint's path is validated
+        before the first moves."""
+        if isinstance(sequence, str):
+            if sequence not in BUILTIN_SEQUENCES:
+                return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"no built-in sequence {sequence!r}",
+                                             builtin=list(BUILTIN_SEQUENCES))
+            sequence = builtin_sequence(sequence)
+        if not isinstance(sequence, MotionSequence):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "play takes a MotionSequence or a built-in name")
+        s = self.snapshot
+        if refusal := check_play(s):
+            return CommandResult.failure(*refusal)
+        plan = plan_path(self._context(s), s.trajectory, sequence.planning_waypoints())
+        if not plan.ok:
+            return _plan_result(plan, "")
+        name = sequence.name
+        return self._submit(lambda t: cmd.Play(t, s.epoch, name, plan.segments), f"playing {name}",
+                            **_plan_result(plan, "").details)
+
+    def pause(self) -> CommandResult:
+        """Pause the sequence: brake to rest mid-move, or freeze the dwell's clock."""
+        return self._checked(check_pause, cmd.Pause, "pausing")
+
+    def resume(self) -> CommandResult:
+        """Continue a paused sequence; the rest of an interrupted move is planned and
+        validated from where it stopped, at the segment's cruise speed."""
+        s = self.snapshot
+        if refusal := check_resume(s):
+            return CommandResult.failure(*refusal)
+        progress = s.sequence
+        assert progress is not None
+        remainder = None
+        if progress.paused_in_move:
+            segment = progress.segment
+            waypoint = Waypoint(_mm_deg(segment.goal), None, segment.velocity_scale / segment.time_scale)
+            plan = plan_path(self._context(s), s.trajectory, [waypoint])
+            if not plan.ok:
+                return _plan_result(plan, "")
+            (remainder,) = plan.segments
+        return self._submit(lambda t: cmd.Resume(t, s.epoch, remainder), "resumed")
+
+    def abort(self) -> CommandResult:
+        """End the sequence and brake to rest; its records are kept."""
+        return self._checked(check_abort, cmd.Abort, "aborted")
+
+    def load_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
+        """Validate a calibrated geometry and swap it in at a cycle boundary, ramping the
+        set-points to it; refused with the reason otherwise (the active one stays)."""
+        if not isinstance(geometry, Geometry):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "load_calibration takes a validated Geometry")
+        if not isinstance(calibration_id, str) or not calibration_id:
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "the calibration needs a non-empty id")
+        return self._swap(ActiveGeometry.of(geometry, calibration_id, source), "loaded")
+
+    def rollback_calibration(self) -> CommandResult:
+        """Swap back to the previous calibration (validated and ramped like a load); the
+        one rolled back from becomes the previous."""
+        previous = self.snapshot.previous
+        if previous is None:
+            return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no previous calibration")
+        return self._swap(previous, "rolled back")
+
+    # -- helpers ----------------------------------------------------------------------------
+
+    def _context(self, s: CoreSnapshot) -> PlanningContext:
+        config = self.config
+        budget = s.active.geometry.limits.leg_velocity_mm_s * (1.0 - config.calibration_ramp_fraction)
+        return PlanningContext(s.active, config.motion, config.loop.period_s, budget, s.lock,
+                               config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg)
+
+    def _swap(self, new: ActiveGeometry, verb: str) -> CommandResult:
+        """Dry-run ``new`` at the current pose, along the running move and the rest of
+        the playing sequence, and on the size of the set-point change; then hand it over."""
+        s = self.snapshot
+        if refusal := check_swap(s, new):
+            return CommandResult.failure(*refusal)
+        path = [s.pose_command] + ([s.goal] if s.goal is not None else [])
+        if s.sequence is not None:
+            path += [segment.goal for segment in s.sequence.remaining]
+        violations = assess_path(new.geometry, piecewise_line(path, self.config.path_step_mm, self.config.path_step_deg),
+                                 0, self.config.path_step_mm, self.config.path_step_deg)
+        if violations:
+            return CommandResult.failure(ErrorCode.INVALID_GEOMETRY,
+                                         f"calibration {new.calibration_id} refused: {violations[0].message}",
+                                         violations=[asdict(v) for v in violations])
+        change = max(abs(a - b) for a, b in zip(sensor_setpoints(new.geometry.legs, new.absolute(s.pose_command)),
+                                                s.setpoints))
+        if s.state is not ControlState.DISABLED and change > self.config.calibration_max_change_mm:
+            return CommandResult.failure(ErrorCode.CALIBRATION_CHANGE_TOO_LARGE,
+                                         f"calibration {new.calibration_id} would move a leg by {change:.2f} mm "
+                                         f"(limit {self.config.calibration_max_change_mm:g} mm)", change_mm=change)
+        return self._submit(lambda t: cmd.SwapGeometry(t, s.epoch, new), f"calibration {new.calibration_id} {verb}",
+                            calibration_id=new.calibration_id, change_mm=change)
+
+    def _checked(self, check, factory: Callable[[int], cmd.Command], message: str) -> CommandResult:
+        if refusal := check(self.snapshot):
+            return CommandResult.failure(*refusal)
+        return self._submit(factory, message)
+
+    def _submit(self, factory: Callable[[int], cmd.Command], message: str, **details: object) -> CommandResult:
+        """Queue a command; with the thread running, wait for the loop's verdict."""
+        if self._loop.failure is not None:
+            return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {self._loop.failure!r}")
+        ticket = next(self._tickets)
+        self._core.inbox.append(factory(ticket))
+        if not self._loop.running:
+            return CommandResult.success(message, ticket=ticket, pending=True, **details)
+        deadline = time.monotonic() + self.config.command_timeout_s
+        while time.monotonic() < deadline:
+            verdict = self.outcome(ticket)
+            if verdict is not None:
+                return CommandResult(verdict.ok, verdict.error, message if verdict.ok else verdict.message,
+                                     {**verdict.details, **details})
+            time.sleep(self.config.loop.period_s / 2)
+        return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
+                                     "be carried out", ticket=ticket)
+
+
+def _mm_deg(relative_mm_rad: Sequence[float]) -> tuple[float, ...]:
+    return tuple(float(v) for v in pose_mm_rad_to_mm_deg(relative_mm_rad))
+
+
+def _sequence_telemetry(s: CoreSnapshot) -> SequenceTelemetry | None:
+    p = s.sequence
+    return SequenceTelemetry(p.name, p.waypoint, p.total, p.phase.value) if p else None
+
+
+def _plan_result(plan: Plan, message: str) -> CommandResult:
+    if plan.refusal is not None:
+        refusal = plan.refusal
+        return CommandResult.failure(refusal.code, refusal.message, violations=[asdict(v) for v in refusal.violations],
+                                     **refusal.details)
+    return CommandResult.success(
+        message,
+        goal=list(_mm_deg(plan.segments[-1].goal)),
+        duration_s=sum(seg.duration_s + seg.dwell_s for seg in plan.segments),
+        waypoints=len(plan.segments),
+    )

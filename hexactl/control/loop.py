@@ -1,0 +1,117 @@
+"""The loop thread: runs a cycle function on absolute deadlines (the controller manager).
+
+Timing. Deadlines are absolute, ``time.monotonic_ns`` based: deadline k = anchor + k·T,
+so sleep inaccuracy never accumulates into drift. The thread sleeps until
+``spin_window_us`` before the deadline (``time.sleep``: clock_nanosleep on Linux) and
+busy-waits the rest, because a sleep's wake-up is only as precise as the scheduler's
+timer slack. After an overrun that puts the loop a whole period or more behind, it does
+not burst through the missed cycles to catch up: it re-anchors the grid at the present
+and counts the dropped deadlines as ``skipped`` (and as missed).
+
+Each wake-up calls :meth:`ControlLoop.step` with the present time; tests call ``step``
+directly with simulated times and never start the thread. Lateness (wake − deadline) and
+compute time (wake → end of the cycle) go to :class:`~hexactl.control.stats.CycleStats`.
+
+Real-time set-up (:mod:`hexactl.control.realtime`) happens in the thread when it starts;
+the young-generation garbage collection runs in a cycle's slack.
+
+If a cycle raises (a bug: the cycle code never raises by design), the thread sends an
+E-stop through ``on_crash``, records the exception in :attr:`ControlLoop.failure` and
+ends.
+"""
+
+from __future__ import annotations
+
+import gc
+import threading
+import time
+from collections.abc import Callable
+
+from hexactl.control.config import LoopConfig
+from hexactl.control.realtime import RealtimeReport, apply_realtime, restore_process
+from hexactl.control.stats import CycleStats
+
+
+class ControlLoop:
+    """Runs ``cycle(now_ns)`` every period, in its own thread (:meth:`start`) or when
+    told (:meth:`step`). ``on_crash`` is called (from the loop thread) if ``cycle`` raises."""
+
+    def __init__(self, cycle: Callable[[int], None], config: LoopConfig, on_crash: Callable[[], object]) -> None:
+        self._cycle = cycle
+        self._on_crash = on_crash
+        self.config = config
+        self.period_ns = config.period_ns
+        self.stats = CycleStats(self.period_ns, config.stats_window)
+        self.realtime: RealtimeReport | None = None
+        self.failure: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self._running = False
+        self._started = threading.Event()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def step(self, now_ns: int, lateness_ns: int = 0) -> None:
+        """One cycle at ``now_ns`` (simulated or real); records ``lateness_ns`` and the
+        cycle's compute time, measured on the real monotonic clock."""
+        begin = time.monotonic_ns()
+        self._cycle(now_ns)
+        self.stats.record(lateness_ns, time.monotonic_ns() - begin)
+
+    def start(self) -> RealtimeReport:
+        """Start the thread; returns what the real-time set-up obtained."""
+        if self._thread is not None:
+            raise RuntimeError("the loop is already started")
+        self._running = True
+        self._thread = threading.Thread(target=self._run, name="hexactl-control-loop", daemon=True)
+        self._thread.start()
+        self._started.wait()
+        assert self.realtime is not None
+        return self.realtime
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Ask the thread to finish its cycle and end; waits for it."""
+        self._running = False
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+
+    def _run(self) -> None:
+        realtime = self.config.realtime
+        self.realtime, previous = apply_realtime(realtime)
+        self._started.set()
+        period = self.period_ns
+        spin_ns = round(self.config.spin_window_us * 1e3)
+        gc_every_ns = round(realtime.gc_interval_s * 1e9)
+        stats = self.stats
+        clock = time.monotonic_ns
+        deadline = clock() + period
+        next_gc = deadline + gc_every_ns
+        try:
+            while self._running:
+                remaining = deadline - clock()
+                if remaining > spin_ns:
+                    time.sleep((remaining - spin_ns) / 1e9)
+                now = clock()
+                while now < deadline:
+                    now = clock()
+                self.step(now, now - deadline)
+                deadline += period
+                end = clock()
+                behind = end - deadline
+                if behind >= period:
+                    # Re-anchor: serve the next cycle now, drop the deadlines passed meanwhile.
+                    dropped = behind // period
+                    stats.skipped += dropped
+                    stats.missed += dropped
+                    deadline = end
+                elif realtime.manage_gc and end >= next_gc and -behind > period // 2:
+                    gc.collect(1)
+                    stats.record_gc(clock() - end)
+                    next_gc = end + gc_every_ns
+        except BaseException as error:  # noqa: BLE001 - the loop must never die silently
+            self.failure = error
+            self._on_crash()
+        finally:
+            self._running = False
+            restore_process(realtime, previous)

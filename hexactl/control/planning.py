@@ -1,0 +1,325 @@
+"""Move planning and validation, in the caller's thread (never in the loop).
+
+A move, or each waypoint of a sequence, becomes a :class:`Segment` only after the whole
+path has been checked:
+
+1. the goal (relative mm/deg) is converted, and in leg-lock mode projected onto the
+   locked leg's constraint (refused if farther than ``lock_max_correction_mm``);
+2. :func:`~hexactl.control.trajectory.preview` computes the very trajectory the loop's
+   generator will run, from the generator's current state. From rest, ruckig's phase
+   synchronisation makes it the straight line in pose space from the current target
+   to the goal; a move that replaces a running one follows ruckig's blend, and that
+   blend is what gets checked;
+3. it is sampled every loop period; in leg-lock mode each sample is projected, as the
+   loop projects each cycle's target; the legs' set-points follow by batch IK;
+4. if any leg would move faster than ``leg_speed_mm_s`` between two cycles, the move is
+   stretched in time (time scale k: every velocity divided by k, path unchanged) until
+   none does; a requested ``duration`` is a lower bound;
+5. the samples, thinned to one every ``path_step_mm`` / ``path_step_deg``, go through
+   :func:`~hexactl.kinematics.workspace.assess_poses` (stroke, joint cones, envelope,
+   near-singularity). Any violation refuses the whole move or sequence.
+
+Poses inside the control layer are relative to the zero posture in mm and *radians*
+("relative mm/rad"); user-facing ones are relative mm/deg.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from math import isfinite
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexactl.control.leg_lock import project_to_locked_leg
+from hexactl.control.results import ErrorCode
+from hexactl.control.trajectory import MotionLimits, preview
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import sensor_setpoints_batch
+from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg, validate_pose_values
+from hexactl.kinematics.workspace import assess_poses
+
+Pose = tuple[float, float, float, float, float, float]
+
+_MAX_STRETCH_ATTEMPTS = 4  # leg speeds scale exactly as 1/k: one stretch normally suffices
+_STRETCH_MARGIN = 1.001  # covers the rounding of durations to whole periods
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ActiveGeometry:
+    """A geometry as the loop uses it, with its identity. ``home``: the zero posture,
+    absolute mm/rad; ``stroke``: sensor range, mm. Built in the caller's thread and
+    handed to the loop whole: the loop swaps one reference, never edits one."""
+
+    geometry: Geometry
+    calibration_id: str
+    source: str
+    home: Pose
+    stroke: tuple[float, float]
+
+    @classmethod
+    def of(cls, geometry: Geometry, calibration_id: str, source: str = "") -> ActiveGeometry:
+        home = tuple(float(v) for v in pose_mm_deg_to_mm_rad(geometry.home))
+        return cls(geometry, calibration_id, source, home, geometry.limits.stroke)  # type: ignore[arg-type]
+
+    def absolute(self, relative: Sequence[float]) -> Pose:
+        """Absolute mm/rad of a relative mm/rad pose."""
+        return tuple(h + r for h, r in zip(self.home, relative))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True, slots=True)
+class LegLock:
+    """Leg ``leg`` (1–6) is braked at sensor reading ``sensor_mm``."""
+
+    leg: int
+    sensor_mm: float
+
+    def length_mm(self, geometry: Geometry) -> float:
+        """The locked joint-to-joint length in ``geometry``."""
+        return geometry.zero_lengths[self.leg - 1] + self.sensor_mm
+
+
+@dataclass(frozen=True, slots=True)
+class Waypoint:
+    """A requested target: ``pose`` relative mm/deg; ``duration_s`` a lower bound on the
+    move's duration; ``speed`` (0, 1] scales the velocity limits; ``dwell_s`` the time to
+    stay on arrival (sequences)."""
+
+    pose: Sequence[float]
+    duration_s: float | None = None
+    speed: float | None = None
+    dwell_s: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Segment:
+    """One planned move, ready for the loop. ``goal`` relative mm/rad (on the constraint
+    in leg-lock mode); ``time_scale``/``velocity_scale`` as in
+    :func:`~hexactl.control.trajectory.configure_input`; ``duration_s`` as planned."""
+
+    goal: Pose
+    time_scale: float
+    velocity_scale: float
+    dwell_s: float
+    duration_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class PathViolation:
+    """The first sample of waypoint ``waypoint`` (1-based)'s path that violates a limit.
+    ``pose`` relative mm/deg; the rest as in :class:`~hexactl.kinematics.workspace.Violation`."""
+
+    waypoint: int
+    pose: Pose
+    kind: str
+    message: str
+    value: float
+    limit: float
+    leg: int | None = None
+    axis: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """Why a plan was refused: ``message`` for people, ``details`` machine-readable extras."""
+
+    code: ErrorCode
+    message: str
+    violations: tuple[PathViolation, ...] = ()
+    details: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class PlanningContext:
+    """Everything a plan depends on. ``leg_speed_mm_s``: the budget plans keep the legs
+    under (the loop's guard enforces the full ``leg_velocity_mm_s``)."""
+
+    active: ActiveGeometry
+    limits: MotionLimits
+    period_s: float
+    leg_speed_mm_s: float
+    lock: LegLock | None = None
+    lock_max_correction_mm: float = 25.0
+    path_step_mm: float = 2.0
+    path_step_deg: float = 0.1
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """Either ``segments`` (all validated) or a ``refusal``."""
+
+    segments: tuple[Segment, ...] = ()
+    refusal: Refusal | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.refusal is None
+
+
+State = tuple[Sequence[float], Sequence[float], Sequence[float]]
+
+
+def plan_path(context: PlanningContext, start: State, waypoints: Sequence[Waypoint]) -> Plan:
+    """Plan and validate moves through ``waypoints`` from the generator state ``start``
+    (position, velocity, acceleration; relative mm/rad). Each waypoint after the first
+    starts at rest on the previous one. Never raises for bad input: it is refused."""
+    segments = []
+    violations: list[PathViolation] = []
+    for number, waypoint in enumerate(waypoints, start=1):
+        problem = _check_waypoint(waypoint)
+        if problem:
+            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"waypoint {number}: {problem}", details={"waypoint": number}))
+        goal = _goal(context, waypoint.pose)
+        if isinstance(goal, Refusal):
+            return Plan(refusal=Refusal(goal.code, f"waypoint {number}: {goal.message}", details={"waypoint": number, **goal.details}))
+        # The goal alone first: cheap, and no trajectory is previewed towards a goal
+        # that is out of reach anyway (ruckig raises on absurd ones).
+        goal_violations = assess_path(context.active.geometry, np.array([goal]), number, context.path_step_mm,
+                                      context.path_step_deg)
+        if goal_violations:
+            return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
+        planned = _plan_segment(context, start, goal, waypoint)
+        if isinstance(planned, Refusal):
+            return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}", details={"waypoint": number}))
+        segment, samples = planned
+        violations += assess_path(context.active.geometry, samples, number, context.path_step_mm, context.path_step_deg)
+        segments.append(segment)
+        start = (goal, (0.0,) * 6, (0.0,) * 6)
+    if violations:
+        return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(violations), tuple(violations)))
+    return Plan(segments=tuple(segments))
+
+
+def assess_path(
+    geometry: Geometry, samples: NDArray, waypoint: int, step_mm: float, step_deg: float
+) -> list[PathViolation]:
+    """Check (N, 6) relative mm/rad ``samples`` of a path, thinned to one per ``step_mm``
+    of translation or ``step_deg`` of rotation (first and last always kept); the first
+    violation of each kind (per leg or axis) with the pose where it happens."""
+    relative_deg = pose_mm_rad_to_mm_deg(samples)
+    steps = np.abs(np.diff(relative_deg, axis=0))
+    progress = np.concatenate(([0.0], np.cumsum(np.maximum(steps[:, :3].max(axis=1) / step_mm, steps[:, 3:].max(axis=1) / step_deg))))
+    keep = np.flatnonzero(np.diff(np.floor(progress), prepend=-1.0) > 0)
+    keep = np.union1d(keep, [len(samples) - 1])
+    found: dict[tuple, PathViolation] = {}
+    for assessment in assess_poses(geometry, relative_deg[keep]):
+        for violation in assessment.violations:
+            key = (violation.kind, violation.leg, violation.axis)
+            if key not in found:
+                found[key] = PathViolation(
+                    waypoint, assessment.pose_relative, str(violation.kind), violation.message,
+                    violation.value, violation.limit, violation.leg, violation.axis)  # type: ignore[arg-type]
+    return list(found.values())
+
+
+def piecewise_line(poses: Sequence[Sequence[float]], step_mm: float, step_deg: float) -> NDArray:
+    """Samples (relative mm/rad) along the straight lines through ``poses``, at most
+    ``step_mm`` / ``step_deg`` apart."""
+    points = np.asarray(poses, dtype=float).reshape(-1, 6)
+    pieces = [points[:1]]
+    for a, b in zip(points[:-1], points[1:]):
+        span = np.abs(b - a)
+        count = max(1, int(np.ceil(max(span[:3].max() / step_mm, np.degrees(span[3:].max()) / step_deg))))
+        pieces.append(a + np.outer(np.arange(1, count + 1) / count, b - a))
+    return np.concatenate(pieces)
+
+
+def _check_waypoint(waypoint: Waypoint) -> str | None:
+    problem = validate_pose_values(waypoint.pose)
+    if problem:
+        return problem
+    if waypoint.duration_s is not None and not _number_in(waypoint.duration_s, 0.0, float("inf"), low_open=True):
+        return f"duration must be a positive number of seconds, got {waypoint.duration_s!r}"
+    if waypoint.speed is not None and not _number_in(waypoint.speed, 0.0, 1.0, low_open=True):
+        return f"speed is a fraction of the velocity limits in (0, 1], got {waypoint.speed!r}"
+    if waypoint.duration_s is not None and waypoint.speed is not None:
+        return "give a duration or a speed, not both"
+    if not _number_in(waypoint.dwell_s, 0.0, float("inf")):
+        return f"dwell must be zero or more seconds, got {waypoint.dwell_s!r}"
+    return None
+
+
+def _number_in(value: object, low: float, high: float, low_open: bool = False) -> bool:
+    """``value`` is a finite real number (not a bool) in [low, high] ((low, high] if ``low_open``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return False
+    return isfinite(value) and (low < value if low_open else low <= value) and value <= high
+
+
+def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> Pose | Refusal:
+    """The goal in relative mm/rad; in leg-lock mode projected onto the constraint."""
+    goal = tuple(float(v) for v in pose_mm_deg_to_mm_rad([float(v) for v in pose_mm_deg]))
+    if context.lock is None:
+        return goal  # type: ignore[return-value]
+    projected = project_locked(context.active, context.lock, goal)
+    if not projected.ok:
+        return Refusal(ErrorCode.LOCK_UNREACHABLE, f"no pose with leg {context.lock.leg} at its locked length near the goal "
+                       f"({projected.status.name.lower()})")
+    if projected.correction > context.lock_max_correction_mm:
+        return Refusal(ErrorCode.LOCK_UNREACHABLE,
+                       f"the nearest pose with leg {context.lock.leg} at its locked length is {projected.correction:.1f} mm "
+                       f"from the goal (limit {context.lock_max_correction_mm:g} mm)",
+                       details={"correction_mm": projected.correction, "limit_mm": context.lock_max_correction_mm,
+                                "nearest_pose": _to_mm_deg(_relative(context.active, projected.pose))})
+    return _relative(context.active, projected.pose)
+
+
+def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float], max_iterations: int = 50):
+    """:func:`project_to_locked_leg` of a relative mm/rad pose (result pose absolute)."""
+    geometry = active.geometry
+    return project_to_locked_leg(geometry.legs, active.absolute(relative), lock.leg, lock.length_mm(geometry),
+                                 geometry.characteristic_length_mm, max_iterations=max_iterations)
+
+
+def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: Waypoint) -> tuple[Segment, NDArray] | Refusal:
+    velocity_scale = waypoint.speed or 1.0
+    natural = preview(context.limits, context.period_s, start, goal, 1.0, velocity_scale)
+    if natural is None:
+        return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
+    time_scale = max(1.0, waypoint.duration_s / natural.duration) if waypoint.duration_s else 1.0
+    for _ in range(_MAX_STRETCH_ATTEMPTS):
+        trajectory = preview(context.limits, context.period_s, start, goal, time_scale, velocity_scale)
+        if trajectory is None:
+            return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
+        samples = _samples(context, start, trajectory)
+        peak = _peak_leg_speed(context, samples)
+        if peak <= context.leg_speed_mm_s:
+            segment = Segment(goal, time_scale, velocity_scale, waypoint.dwell_s, trajectory.duration)
+            return segment, samples
+        time_scale *= peak / context.leg_speed_mm_s * _STRETCH_MARGIN
+    return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
+
+
+def _samples(context: PlanningContext, start: State, trajectory) -> NDArray:
+    """The start and the position of every cycle of ``trajectory`` (relative mm/rad),
+    projected in leg-lock mode as the loop projects every cycle's target."""
+    count = max(1, int(round(trajectory.duration / context.period_s)))
+    points = [tuple(start[0])] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
+    if context.lock is not None:
+        points = [_relative(context.active, project_locked(context.active, context.lock, p).pose) for p in points]
+    return np.array(points, dtype=float)
+
+
+def _peak_leg_speed(context: PlanningContext, samples: NDArray) -> float:
+    absolute = samples + np.array(context.active.home)
+    setpoints = sensor_setpoints_batch(context.active.geometry.legs, absolute)
+    if context.lock is not None:
+        setpoints[:, context.lock.leg - 1] = context.lock.sensor_mm
+    if len(setpoints) < 2:
+        return 0.0
+    return float(np.max(np.abs(np.diff(setpoints, axis=0)))) / context.period_s
+
+
+def _relative(active: ActiveGeometry, absolute: Sequence[float]) -> Pose:
+    return tuple(a - h for a, h in zip(absolute, active.home))  # type: ignore[return-value]
+
+
+def _to_mm_deg(relative: Sequence[float]) -> list[float]:
+    return [float(v) for v in pose_mm_rad_to_mm_deg(relative)]
+
+
+def _summary(violations: Sequence[PathViolation]) -> str:
+    first = violations[0]
+    more = f" (and {len(violations) - 1} more)" if len(violations) > 1 else ""
+    return f"waypoint {first.waypoint}: {first.message}{more}"

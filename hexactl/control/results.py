@@ -1,0 +1,56 @@
+"""What the controller answers: a result per command, with a snake_case error code."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+
+class ErrorCode(StrEnum):
+    """Why a command was refused. The API sends the value as is."""
+
+    INVALID_ARGUMENT = "invalid_argument"  # the request itself is malformed (NaN, wrong leg, …)
+    NOT_ENABLED = "not_enabled"  # needs ENABLED; the controller is DISABLED
+    LATCHED = "latched"  # FAULT or ESTOP is latched: reset first
+    ALREADY_ENABLED = "already_enabled"
+    NOT_LATCHED = "not_latched"  # reset while ENABLED
+    BUSY = "busy"  # moving, a sequence playing, or a calibration ramping in
+    PATH_VIOLATION = "path_violation"  # the move's path leaves the workspace: see details.violations
+    PLANNING_FAILED = "planning_failed"  # the trajectory generator refused the move
+    LOCK_UNREACHABLE = "lock_unreachable"  # leg-lock: no pose near the goal keeps the locked length
+    LEG_LOCKED = "leg_locked"  # not allowed while a leg is locked (or one is already)
+    NOT_LOCKED = "not_locked"
+    HEARTBEAT_MISSING = "heartbeat_missing"  # enable: an actuator is silent
+    ACTUATOR_FAULT = "actuator_fault"  # enable: an actuator reports a fault
+    OUTSIDE_STROKE = "outside_stroke"  # an actuator (or set-point) is outside the stroke
+    POSE_UNKNOWN = "pose_unknown"  # forward kinematics of the feedback failed
+    NO_SEQUENCE = "no_sequence"
+    ALREADY_PAUSED = "already_paused"
+    NOT_PAUSED = "not_paused"
+    STALE_PLAN = "stale_plan"  # the target changed between planning and execution: try again
+    INVALID_GEOMETRY = "invalid_geometry"  # the calibration fails validation: see details
+    CALIBRATION_CHANGE_TOO_LARGE = "calibration_change_too_large"
+    NO_PREVIOUS_CALIBRATION = "no_previous_calibration"
+    SEND_FAILED = "send_failed"  # the link refused a frame (E-stop)
+    LOOP_FAILED = "loop_failed"  # the loop thread died: see status
+    LOOP_TIMEOUT = "loop_timeout"  # the loop gave no verdict in time (the command may still run)
+
+
+@dataclass(frozen=True, slots=True)
+class CommandResult:
+    """``ok`` True when accepted (``error`` None); otherwise ``error`` says why.
+    ``details``: JSON-friendly extras (violations, the projected goal, a ticket …)."""
+
+    ok: bool
+    error: ErrorCode | None
+    message: str
+    details: Mapping[str, object] = field(default_factory=dict)
+
+    @classmethod
+    def success(cls, message: str, **details: object) -> CommandResult:
+        return cls(True, None, message, details)
+
+    @classmethod
+    def failure(cls, error: ErrorCode | str, message: str, **details: object) -> CommandResult:
+        return cls(False, ErrorCode(error), message, details)
