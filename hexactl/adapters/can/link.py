@@ -73,8 +73,7 @@ from hexactl.control.hardware import (
     LinkHealth,
 )
 
-_UM_PER_MM = 1000.0
-_MM_PER_UM = 1e-3
+_UM_PER_MM = 1000.0  # dividing by it, not multiplying by 1e-3, gives the double nearest the decimal mm
 
 STATE_FROM_WIRE: dict[WireState, ActuatorState] = {
     WireState.INIT: ActuatorState.DISABLED,  # booting: not following, brake on
@@ -488,8 +487,8 @@ class CanActuatorLink:
         kind = type(decoded)
         if kind is Feedback:
             node = self._nodes[decoded.node - 1]
-            node.position_mm = decoded.position_um * _MM_PER_UM
-            node.velocity_mm_s = decoded.velocity_um_s * _MM_PER_UM
+            node.position_mm = decoded.position_um / _UM_PER_MM
+            node.velocity_mm_s = decoded.velocity_um_s / _UM_PER_MM
             node.wire_state = decoded.state
             node.fault_bits = int(decoded.faults)
             node.wire_counter = decoded.setpoint_counter
