@@ -269,23 +269,28 @@ class Controller:
         """Release the locked leg; the pose being held becomes the target (no step)."""
         return self._checked(check_unlock, cmd.UnlockLeg, "unlocked")
 
+    def validate_sequence(self, sequence: MotionSequence | str) -> CommandResult:
+        """Would :meth:`play` accept this sequence (or built-in name) from here? Plans and
+        checks every waypoint's path, moves nothing."""
+        resolved = _resolve_sequence(sequence)
+        if isinstance(resolved, CommandResult):
+            return resolved
+        s = self.snapshot
+        return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints()), "valid")
+
     def play(self, sequence: MotionSequence | str) -> CommandResult:
         """Play a sequence, or a built-in one by name; every waypoint's path is validated
         before the first moves."""
-        if isinstance(sequence, str):
-            if sequence not in BUILTIN_SEQUENCES:
-                return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"no built-in sequence {sequence!r}",
-                                             builtin=list(BUILTIN_SEQUENCES))
-            sequence = builtin_sequence(sequence)
-        if not isinstance(sequence, MotionSequence):
-            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "play takes a MotionSequence or a built-in name")
+        resolved = _resolve_sequence(sequence)
+        if isinstance(resolved, CommandResult):
+            return resolved
         s = self.snapshot
         if refusal := check_play(s):
             return CommandResult.failure(*refusal)
-        plan = plan_path(self._context(s), s.trajectory, sequence.planning_waypoints())
+        plan = plan_path(self._context(s), s.trajectory, resolved.planning_waypoints())
         if not plan.ok:
             return _plan_result(plan, "")
-        name = sequence.name
+        name = resolved.name
         return self._submit(lambda t: cmd.Play(t, s.epoch, name, plan.segments), f"playing {name}",
                             **_plan_result(plan, "").details)
 
@@ -386,6 +391,18 @@ class Controller:
             time.sleep(self.config.loop.period_s / 2)
         return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
                                      "be carried out", ticket=ticket)
+
+
+def _resolve_sequence(sequence: object) -> MotionSequence | CommandResult:
+    """A sequence, a built-in one by name, or the refusal."""
+    if isinstance(sequence, str):
+        if sequence not in BUILTIN_SEQUENCES:
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"no built-in sequence {sequence!r}",
+                                         builtin=list(BUILTIN_SEQUENCES))
+        return builtin_sequence(sequence)
+    if not isinstance(sequence, MotionSequence):
+        return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "a sequence is a MotionSequence or a built-in name")
+    return sequence
 
 
 def _mm_deg(relative_mm_rad: Sequence[float]) -> tuple[float, ...]:

@@ -340,8 +340,10 @@ class ControlCore:
         self._cycle = 0
         self._counter = 0
         self._send_failures = 0
+        # Per leg: the state it should report, and until when it may still be getting there.
         self._expected = [ActuatorState.ENABLED] * ACTUATOR_COUNT
-        self._settle_until_ns = 0  # actuators are changing state until then: skip state checks
+        self._settling_until_ns = [0] * ACTUATOR_COUNT
+        self._estop_grace_until_ns = 0  # after a reset the actuators need time to leave ESTOP
         self._next_estop_ns = 0
         self._ramp_offset: list[float] | None = None
         self._ramp_left = 0.0
@@ -391,7 +393,7 @@ class ControlCore:
                 break
             self._execute(inbox.popleft())
         self._measure(feedback)
-        if self.state is not ControlState.ESTOP and now_ns >= self._settle_until_ns and any(
+        if self.state is not ControlState.ESTOP and now_ns >= self._estop_grace_until_ns and any(
             a.state is ActuatorState.ESTOP for a in feedback.actuators
         ):
             self._enter_estop("an actuator reports E-stop (hardware chain)")
@@ -425,18 +427,20 @@ class ControlCore:
 
     def _supervise(self, feedback: FeedbackSnapshot) -> None:
         faults = []
-        settled = self._now_ns >= self._settle_until_ns
+        now = self._now_ns
         last_sent = self._counter - 1
         for leg, actuator in enumerate(feedback.actuators, start=1):
+            expected = self._expected[leg - 1]
             if not actuator.heartbeat_age_s <= self._heartbeat_timeout_s:
                 faults.append(Fault("heartbeat_lost", f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s", leg))
             elif actuator.state is ActuatorState.FAULT or actuator.fault_bits:
                 faults.append(Fault("actuator_fault", f"leg {leg} reports fault bits 0x{actuator.fault_bits:x}", leg))
-            elif settled and actuator.state is not self._expected[leg - 1]:
-                faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, "
-                                    f"expected {self._expected[leg - 1].name}", leg))
-            elif (settled and self._expected[leg - 1] is ActuatorState.ENABLED
-                  and last_sent - actuator.setpoint_counter > self._lag_limit):
+            elif actuator.state is not expected:
+                if now >= self._settling_until_ns[leg - 1]:
+                    faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected {expected.name}", leg))
+            elif self._settling_until_ns[leg - 1]:
+                self._settling_until_ns[leg - 1] = 0  # got there: from now on any deviation counts
+            elif expected is ActuatorState.ENABLED and last_sent - actuator.setpoint_counter > self._lag_limit:
                 faults.append(Fault("setpoints_not_applied", f"leg {leg} applied set-point {actuator.setpoint_counter}, "
                                     f"last sent {last_sent}", leg))
         link = self.link
@@ -568,6 +572,12 @@ class ControlCore:
             self._event("command_refused", f"{type(command).__name__}: {message}")
         self._outcomes = (self._outcomes + (cmd.Outcome(command.ticket, code, message),))[-KEPT_EVENTS:]
 
+    def _expect(self, leg: int | None, state: ActuatorState) -> None:
+        """Leg 1–6 (or all) must report ``state`` within ``state_timeout_s``."""
+        for i in range(ACTUATOR_COUNT) if leg is None else (leg - 1,):
+            self._expected[i] = state
+            self._settling_until_ns[i] = self._now_ns + self._state_timeout_ns
+
     def _stale(self, epoch: int) -> Refusal:
         if epoch != self._epoch:
             return ErrorCode.STALE_PLAN, "the target changed while the command was being planned: plan again"
@@ -580,8 +590,7 @@ class ControlCore:
         self.setpoints = list(self.feedback.positions_mm)
         self.pose_command = list(self.pose_measured)
         self._trajectory.reset(self.pose_command)
-        self._expected = [ActuatorState.ENABLED] * ACTUATOR_COUNT
-        self._settle_until_ns = self._now_ns + self._state_timeout_ns
+        self._expect(None, ActuatorState.ENABLED)
         self._send_failures = 0
         self._faults = ()
         self.hardware.send_command(None, ActuatorCommand.ENABLE)
@@ -617,7 +626,7 @@ class ControlCore:
         self.state = ControlState.DISABLED
         self.lock = None
         self._faults = ()
-        self._settle_until_ns = self._now_ns + self._state_timeout_ns  # the actuators need time to leave ESTOP
+        self._estop_grace_until_ns = self._now_ns + self._state_timeout_ns
         self._freeze("aborted")
         return None
 
@@ -632,8 +641,7 @@ class ControlCore:
             return refusal
         leg = command.leg
         self.lock = LegLock(leg, self.setpoints[leg - 1])
-        self._expected[leg - 1] = ActuatorState.LOCKED
-        self._settle_until_ns = self._now_ns + self._state_timeout_ns
+        self._expect(leg, ActuatorState.LOCKED)
         self.hardware.send_command(leg, ActuatorCommand.LOCK)
         self._epoch += 1
         return None
@@ -644,8 +652,7 @@ class ControlCore:
         assert self.lock is not None
         leg = self.lock.leg
         self.hardware.send_command(leg, ActuatorCommand.UNLOCK)
-        self._expected[leg - 1] = ActuatorState.ENABLED
-        self._settle_until_ns = self._now_ns + self._state_timeout_ns
+        self._expect(leg, ActuatorState.ENABLED)
         self.lock = None
         # Bumpless: the projected pose being commanded becomes the generator's state.
         self._trajectory.reset(self.pose_command)

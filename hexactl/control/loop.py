@@ -32,6 +32,18 @@ from hexactl.control.realtime import RealtimeReport, apply_realtime, restore_pro
 from hexactl.control.stats import CycleStats
 
 
+def next_deadline(deadline_ns: int, end_ns: int, period_ns: int) -> tuple[int, int]:
+    """The deadline after a cycle due at ``deadline_ns`` that ended at ``end_ns``, and the
+    number of deadlines dropped. Normally one period later; if that too has passed by a
+    whole period or more, the grid is re-anchored at ``end_ns`` (the next cycle runs at
+    once, then one per period) instead of running the missed cycles back to back."""
+    following = deadline_ns + period_ns
+    behind = end_ns - following
+    if behind >= period_ns:
+        return end_ns, behind // period_ns
+    return following, 0
+
+
 class ControlLoop:
     """Runs ``cycle(now_ns)`` every period, in its own thread (:meth:`start`) or when
     told (:meth:`step`). ``on_crash`` is called (from the loop thread) if ``cycle`` raises."""
@@ -96,16 +108,12 @@ class ControlLoop:
                 while now < deadline:
                     now = clock()
                 self.step(now, now - deadline)
-                deadline += period
                 end = clock()
-                behind = end - deadline
-                if behind >= period:
-                    # Re-anchor: serve the next cycle now, drop the deadlines passed meanwhile.
-                    dropped = behind // period
+                deadline, dropped = next_deadline(deadline, end, period)
+                if dropped:
                     stats.skipped += dropped
                     stats.missed += dropped
-                    deadline = end
-                elif realtime.manage_gc and end >= next_gc and -behind > period // 2:
+                elif realtime.manage_gc and end >= next_gc and deadline - end > period // 2:
                     gc.collect(1)
                     stats.record_gc(clock() - end)
                     next_gc = end + gc_every_ns

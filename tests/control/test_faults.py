@@ -1,0 +1,159 @@
+"""Supervision: FAULT and ESTOP are latched, the platform holds, reset returns to DISABLED."""
+
+import numpy as np
+import pytest
+
+from hexactl.control.hardware import ActuatorCommand, BusState
+
+
+def _until_state(rig, state, seconds=1.0):
+    return rig.run_until(lambda: rig.controller.snapshot.state.value == state, limit=int(seconds * 1e9 / rig.period_ns))
+
+
+def test_lost_heartbeat_faults_holds_and_stays_latched_until_reset(rig):
+    rig.enabled()
+    assert rig.controller.move([200, 0, 0, 0, 0, 0]).ok
+    rig.run(300)
+    rig.actuators.silence(3)
+    cycles = _until_state(rig, "fault")
+    timeout = rig.controller.config.supervision.heartbeat_timeout_s
+    assert cycles * rig.period_ns / 1e9 == pytest.approx(timeout, abs=2 * rig.period_ns / 1e9)
+    fault = rig.controller.snapshot.faults[0]
+    assert (fault.code, fault.leg) == ("heartbeat_lost", 3)
+    held = rig.sent[-1].copy()
+    sent = len(rig.sent)
+    rig.run(100)
+    assert len(rig.sent) == sent + 100  # keeps sending …
+    assert np.all(rig.sent[sent:] == held)  # … the held set-points
+    rig.actuators.silence(3, False)
+    rig.run(100)
+    assert rig.controller.snapshot.state.value == "fault"  # latched
+    assert rig.controller.move([0, 0, 0, 0, 0, 0]).error == "latched"
+    assert rig.controller.enable().error == "latched"
+    assert rig.controller.reset().ok
+    rig.run(2)
+    assert rig.controller.snapshot.state.value == "disabled" and rig.controller.snapshot.faults == ()
+    assert rig.actuators.commands[-2:] == [(None, ActuatorCommand.DISABLE), (None, ActuatorCommand.CLEAR_FAULT)]
+    sent = len(rig.sent)
+    rig.run(50)
+    assert len(rig.sent) == sent  # DISABLED sends nothing
+    rig.enabled()  # and starts again from where the platform stands
+    assert rig.sent[-1] == pytest.approx(held, abs=0.5)
+    rig.assert_setpoints_safe()
+
+
+@pytest.mark.parametrize(("inject", "code"), [
+    (lambda a: a.inject_fault(2, 0x10), "actuator_fault"),
+    (lambda a: setattr(a, "bus_state", BusState.BUS_OFF), "link_failed"),
+    (lambda a: setattr(a, "fail_sends", True), "send_failed"),
+])
+def test_actuator_and_link_failures_fault(rig, inject, code):
+    rig.enabled()
+    rig.run(10)
+    inject(rig.actuators)
+    _until_state(rig, "fault", seconds=0.1)
+    assert code in {f.code for f in rig.controller.snapshot.faults}
+
+
+def test_setpoints_that_are_not_applied_fault(rig):
+    rig.enabled()
+    rig.run(10)
+    rig.actuators.applied_counter = _Frozen(rig.actuators.applied_counter)
+    cycles = _until_state(rig, "fault")
+    assert rig.controller.snapshot.faults[0].code == "setpoints_not_applied"
+    assert cycles * rig.period_ns / 1e9 == pytest.approx(rig.controller.config.supervision.setpoint_lag_s,
+                                                         abs=3 * rig.period_ns / 1e9)
+
+
+class _Frozen(list):
+    """A counter list the actuators can no longer update."""
+
+    def __setitem__(self, index, value):
+        pass
+
+
+def test_estop_is_sent_at_once_latched_repeated_and_reset(rig):
+    rig.enabled()
+    assert rig.controller.move([300, 0, 0, 0, 0, 0]).ok
+    rig.run(200)
+    result = rig.controller.estop()
+    assert result.ok and rig.actuators.estops == 1  # sent from the caller's thread already
+    rig.run()
+    assert rig.controller.snapshot.state.value == "estop"
+    sent = len(rig.sent)
+    rig.run(int(0.35e9 / rig.period_ns))
+    assert len(rig.sent) == sent  # no set-points while ESTOP
+    assert rig.actuators.estops == 2 + 3  # the loop's on entry, then every 0.1 s
+    assert rig.controller.move([0] * 6).error == "latched"
+    assert rig.controller.reset().ok
+    rig.run(2)
+    assert rig.controller.snapshot.state.value == "disabled"
+    rig.run(300)
+    assert rig.controller.snapshot.state.value == "disabled"  # the actuators left ESTOP: not re-latched
+    rig.enabled()
+
+
+def test_the_hardware_estop_chain_latches_estop_in_any_state(rig):
+    rig.actuators.press_estop()
+    rig.run()
+    assert rig.controller.snapshot.state.value == "estop"
+    assert rig.controller.snapshot.faults[-1].code == "estop"
+
+
+def test_a_fault_during_a_sequence_ends_it(rig):
+    rig.enabled()
+    assert rig.controller.play("compound").ok
+    rig.run(600)
+    rig.actuators.inject_fault(6)
+    _until_state(rig, "fault", seconds=0.1)
+    assert rig.controller.sequence_records().status == "fault"
+    assert rig.controller.telemetry().sequence is None
+
+
+def test_enable_refusals(make_rig, geometry):
+    rig = make_rig()
+    rig.actuators.silence(1)
+    rig.run(100)
+    assert rig.controller.enable().error == "heartbeat_missing"
+    rig.actuators.silence(1, False)
+    rig.actuators.inject_fault(4)
+    rig.run()
+    assert rig.controller.enable().error == "actuator_fault"
+    rig.actuators.states[3] = rig.actuators.states[0]
+    rig.actuators.fault_bits[3] = 0
+    original = rig.actuators.positions[0]
+    rig.actuators.positions[0] = geometry.limits.stroke[1] + 5.0
+    rig.run()
+    assert rig.controller.enable().error == "outside_stroke"
+    rig.actuators.positions[0] = geometry.limits.stroke[1]  # in the stroke, but no pose has these lengths
+    rig.run()
+    assert rig.controller.enable().error == "pose_unknown"
+    rig.actuators.positions[0] = original
+    rig.run()
+    assert rig.controller.enable().ok
+    rig.run()
+    assert rig.controller.enable().error == "already_enabled"
+    assert rig.controller.reset().error == "not_latched"
+
+
+def test_enable_refused_by_the_loop_when_the_state_changed_meanwhile(rig):
+    assert rig.controller.enable().ok  # checked against the last snapshot …
+    rig.actuators.silence(2)
+    rig.clock.advance(int(0.2e9))  # … but leg 2 falls silent before the loop gets to it
+    rig.run()
+    verdict = rig.controller.outcome(1)
+    assert not verdict.ok and verdict.error == "heartbeat_missing"
+    assert rig.controller.snapshot.state.value == "disabled"
+    assert any(e.code == "command_refused" for e in rig.controller.events())
+
+
+def test_disable_at_rest_only(rig):
+    rig.enabled()
+    assert rig.controller.move([100, 0, 0, 0, 0, 0]).ok
+    rig.run(10)
+    assert rig.controller.disable().error == "busy"
+    rig.settle()
+    assert rig.controller.disable().ok
+    rig.run()
+    assert rig.controller.snapshot.state.value == "disabled"
+    assert rig.actuators.commands[-1] == (None, ActuatorCommand.DISABLE)

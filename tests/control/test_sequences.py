@@ -1,0 +1,163 @@
+"""Sequences: the file format, the built-ins, playback and the dwell records."""
+
+import pytest
+
+from hexactl.control.sequences import (
+    BUILTIN_SEQUENCES,
+    SequenceError,
+    builtin_sequence,
+    dwell_header,
+    dwell_rows,
+    sequence_from_toml,
+)
+
+TEXT = """
+name = "two_steps"
+description = "a test"
+
+[[waypoint]]
+pose = [50.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+duration = 2.0
+dwell = 0.5
+
+[[waypoint]]
+pose = [0.0, 0.0, 20.0, 0.0, 2.0, 0.0]
+speed = 0.5
+"""
+
+
+def test_the_file_format_round_trips_into_waypoints():
+    sequence = sequence_from_toml(TEXT, "two_steps.toml")
+    assert sequence.name == "two_steps" and len(sequence.waypoints) == 2
+    first, second = sequence.planning_waypoints()
+    assert (first.pose, first.duration_s, first.speed, first.dwell_s) == ((50.0, 0, 0, 0, 0, 0), 2.0, None, 0.5)
+    assert (second.speed, second.dwell_s) == (0.5, 0.0)
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    ("name = 'x'", "waypoint"),
+    ("name = 'x'\n[[waypoint]]\npose = [1, 2, 3]", "pose"),
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, nan]", "finite"),
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nduration = 1\nspeed = 0.5", "not both"),
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nspeed = 2", "speed"),
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\ndwell = -1", "dwell"),
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nwait = 1", "wait"),
+    ("name = ", "TOML"),
+])
+def test_bad_files_name_the_problem(text, problem):
+    with pytest.raises(SequenceError, match=problem):
+        sequence_from_toml(text, "bad.toml")
+
+
+def test_builtins_are_the_paper_test_motions():
+    assert set(BUILTIN_SEQUENCES) == {"x_sweep", "y_rotation", "compound"}
+    x_sweep = builtin_sequence("x_sweep")
+    assert [w.pose[0] for w in x_sweep.waypoints] == [600, 450, 300, 150, 0, -150, -300, -450, -600]
+    assert [w.pose[4] for w in builtin_sequence("y_rotation").waypoints] == [20, 15, 10, 5, 0, -5, -10, -15, -20]
+    assert [w.pose for w in builtin_sequence("compound").waypoints] == [(0,) * 6, (100, 100, 100, 5, 5, 5)]
+
+
+@pytest.mark.parametrize("name", BUILTIN_SEQUENCES)
+def test_every_builtin_validates_on_the_nominal_platform(rig, name):
+    result = rig.controller.validate_sequence(name)
+    assert result.ok, result.message
+    assert result.details["waypoints"] == len(builtin_sequence(name).waypoints)
+
+
+def test_play_records_commanded_and_measured_pose_at_each_dwell(rig):
+    rig.enabled()
+    sequence = sequence_from_toml(TEXT)
+    result = rig.controller.play(sequence)
+    assert result.ok and result.details["waypoints"] == 2
+    rig.run(5)
+    assert rig.controller.telemetry().sequence.name == "two_steps"
+    rig.settle()
+    report = rig.controller.sequence_records()
+    assert report.status == "finished" and [r.waypoint for r in report.records] == [1, 2]
+    first, second = report.records
+    assert first.pose_command == pytest.approx((50, 0, 0, 0, 0, 0), abs=1e-9)
+    assert first.pose_measured == pytest.approx((50, 0, 0, 0, 0, 0), abs=1e-3)
+    assert second.pose_command == pytest.approx((0, 0, 20, 0, 2, 0), abs=1e-9)
+    assert second.t_s - first.t_s >= 0.5  # the dwell was kept
+    rows = dwell_rows(report.records)
+    assert len(rows) == 2 and all(len(row) == len(dwell_header()) for row in rows)
+    assert rows[0][:3] == ["two_steps", 1, first.t_s]
+    rig.assert_setpoints_safe()
+
+
+def test_a_sequence_with_one_bad_waypoint_is_refused_before_anything_moves(rig):
+    rig.enabled()
+    text = TEXT + "\n[[waypoint]]\npose = [0.0, 0.0, 0.0, 0.0, 0.0, 70.0]\n"
+    sent = len(rig.sent)
+    result = rig.controller.play(sequence_from_toml(text))
+    assert not result.ok and result.error == "path_violation"
+    assert result.details["violations"][0]["waypoint"] == 3
+    rig.run(100)
+    assert (rig.sent[sent:] == rig.sent[sent - 1]).all()
+    assert rig.controller.telemetry().sequence is None
+
+
+def test_pause_mid_move_resume_and_finish_on_the_path(rig):
+    rig.enabled()
+    assert rig.controller.play("compound").ok
+    rig.run(5)  # waypoint 1 is the zero posture: already there, dwelling
+    rig.run_until(lambda: rig.controller.telemetry().sequence.index == 2)
+    rig.run(300)
+    assert rig.controller.pause().ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "paused")
+    paused = rig.controller.telemetry().pose_command
+    rig.run(200)
+    assert rig.controller.telemetry().pose_command == paused  # stays paused
+    assert 0 < paused[0] < 100
+    # Paused on the straight line towards (100, 100, 100, 5, 5, 5): all axes in proportion.
+    assert paused == pytest.approx([paused[0] * v / 100 for v in (100, 100, 100, 5, 5, 5)], rel=1e-6)
+    assert rig.controller.pause().error == "already_paused"
+    assert rig.controller.resume().ok
+    rig.settle()
+    report = rig.controller.sequence_records()
+    assert report.status == "finished" and len(report.records) == 2
+    assert report.records[1].pose_command == pytest.approx((100, 100, 100, 5, 5, 5), abs=1e-9)
+    rig.assert_setpoints_safe()
+    assert rig.controller.telemetry().loop.guard_clamps == 0
+
+
+def test_pause_during_a_dwell_freezes_its_clock(rig):
+    rig.enabled()
+    sequence = sequence_from_toml(TEXT)
+    assert rig.controller.play(sequence).ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")
+    assert rig.controller.pause().ok
+    rig.run(1000)  # far longer than the 0.5 s dwell
+    assert rig.controller.telemetry().sequence.phase == "paused"
+    assert rig.controller.sequence_records().records == ()
+    assert rig.controller.resume().ok
+    rig.settle()
+    assert len(rig.controller.sequence_records().records) == 2
+
+
+def test_abort_brakes_and_keeps_the_records(rig):
+    rig.enabled()
+    assert rig.controller.play("x_sweep").ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.index == 2)
+    rig.run(200)
+    assert rig.controller.abort().ok
+    rig.settle()
+    report = rig.controller.sequence_records()
+    assert report.status == "aborted" and len(report.records) == 1
+    assert report.records[0].pose_command == pytest.approx((600, 0, 0, 0, 0, 0), abs=1e-9)
+    assert 450 < rig.controller.telemetry().pose_command[0] < 600  # braked on the way
+    assert rig.controller.abort().error == "no_sequence"
+    assert rig.controller.resume().error == "no_sequence"
+    rig.assert_setpoints_safe()
+
+
+def test_sequence_blocks_other_motion_commands(rig):
+    rig.enabled()
+    assert rig.controller.play("compound").ok
+    rig.run(2)
+    assert rig.controller.move([10, 0, 0, 0, 0, 0]).error == "busy"
+    assert rig.controller.play("compound").error == "busy"
+    assert rig.controller.disable().error == "busy"
+    assert rig.controller.resume().error == "not_paused"
+    assert rig.controller.play("nonsense").error == "invalid_argument"
+    assert rig.controller.play(42).error == "invalid_argument"
