@@ -152,7 +152,8 @@ def test_enable_stream_follow_and_the_capture_decodes_with_the_dbc(simulator, li
     feedback = [int(v) for v in re.findall(r"FEEDBACK_3\(Position: (-?\d+) um", decoded)]
     assert setpoints and min(setpoints) == 300_000 and max(setpoints) == 310_000
     assert len(syncs) >= len(setpoints)  # bare SYNCs before the first set-points
-    assert feedback and all(320_000 <= v <= 330_000 for v in feedback) and max(feedback) == 330_000
+    # Leg 3 went from 320 mm to 330 mm (its last reports within 1 µm, as the loop checked above).
+    assert feedback and all(320_000 <= v <= 330_001 for v in feedback) and max(feedback) >= 329_999
     assert "HEARTBEAT_6(State: ENABLED" in decoded and "CMD_ACK_1(Command: ENABLE" in decoded
 
 
