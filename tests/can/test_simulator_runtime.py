@@ -1,0 +1,99 @@
+"""The threaded simulator runner (as the service uses it) and the physical platform behind it."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from hexactl.adapters.can.link import CanActuatorLink
+from hexactl.adapters.can.transport import open_bus
+from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.control.hardware import ActuatorCommand, ActuatorState
+from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
+from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
+from hexactl.sim.true_platform import true_geometry
+
+DEADLINE_S = 10.0  # only a bound on waiting for a condition; nothing asserts a duration
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return load_geometry(default_config_path())
+
+
+@pytest.fixture(scope="module")
+def truth(nominal):
+    return true_geometry(nominal, seed=11)
+
+
+def wait_for(link: CanActuatorLink, condition, what: str):
+    end = time.monotonic() + DEADLINE_S
+    while True:
+        snapshot = link.read_feedback()
+        if condition(snapshot):
+            return snapshot
+        assert time.monotonic() < end, f"timed out waiting for {what}: {snapshot}"
+        time.sleep(0.002)
+
+
+def test_threaded_runner_serves_a_link_in_the_same_process(nominal, truth):
+    spec = "virtual:hexactl-threaded-runner"
+    start = zero_posture_readings_mm(truth)
+    runner = ActuatorBus(open_bus(spec), make_firmwares(start, actuator_params_for(nominal))).start()
+    try:
+        with CanActuatorLink.open(spec) as link:
+            snapshot = wait_for(
+                link,
+                lambda s: all(abs(p - q) <= 0.0005 for p, q in zip(s.positions_mm, start))
+                and all(link.node_status(leg).protocol_version == 1 for leg in range(1, 7)),
+                "feedback and heartbeats",
+            )
+            held = snapshot.positions_mm
+            assert link.send_command(None, ActuatorCommand.ENABLE)
+            counter = 0
+
+            def stream_until(condition, what):
+                nonlocal counter
+                end = time.monotonic() + DEADLINE_S
+                while not condition(link.read_feedback()):
+                    assert time.monotonic() < end, what
+                    link.send_setpoints(counter, held)
+                    counter += 1
+                    time.sleep(0.002)
+
+            stream_until(lambda s: all(a.state is ActuatorState.ENABLED for a in s.actuators), "ENABLED")
+            link.send_estop()
+            stream_until(lambda s: all(a.state is ActuatorState.ESTOP for a in s.actuators), "ESTOP")
+    finally:
+        runner.close()
+    assert runner.send_failures == 0
+    assert [firmware.position_um / 1000 for firmware in runner.firmwares] == pytest.approx(start, abs=0.001)
+
+
+def test_true_pose_at_the_zero_posture_readings_is_the_zero_posture(truth):
+    readings = zero_posture_readings_mm(truth)
+    pose = PhysicalPlatform(truth, lambda: readings).true_pose()
+    assert pose.relative == pytest.approx((0.0,) * 6, abs=1e-9)
+    assert pose.absolute == pytest.approx(tuple(absolute_from_relative(truth.home, [0.0] * 6)), abs=1e-9)
+
+
+def test_true_pose_follows_the_actual_lengths_and_differs_from_nominal(nominal, truth):
+    relative = [40.0, -25.0, 60.0, 2.0, -3.0, 10.0]
+    readings = sensor_setpoints(truth.legs, absolute_from_relative(truth.home, relative))
+    platform = PhysicalPlatform(truth, lambda: readings)
+    pose = platform.true_pose()
+    assert pose.relative == pytest.approx(relative, abs=1e-7)
+    assert leg_lengths(truth.legs, pose.absolute) == pytest.approx(pose.leg_lengths_mm, abs=1e-7)
+    # The same readings on the nominal geometry put the platform elsewhere: what calibration finds.
+    nominal_pose = PhysicalPlatform(nominal, lambda: readings).true_pose()
+    assert max(abs(a - b) for a, b in zip(nominal_pose.relative[:3], pose.relative[:3])) > 0.5
+
+
+def test_impossible_lengths_give_no_pose(truth):
+    platform = PhysicalPlatform(truth, lambda: [math.nan] * 6)
+    with pytest.raises(PoseUnavailable, match="INVALID_INPUT"):
+        platform.true_pose()
