@@ -55,11 +55,14 @@ def closure_parameter_jacobian(legs: LegModel, poses: NDArray) -> tuple[NDArray[
 
 
 def posture_information_factors(
-    legs: LegModel, poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float, reading_sigma_mm: float
+    legs: LegModel, poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float, reading_sigma_mm: float,
+    used_readings: NDArray | None = None,
 ) -> NDArray[np.float64]:
     """Square roots F_j (N, 6, 42) of each posture's information about θ (I_j = F_jᵀF_j).
 
     ``poses`` (N, 6) absolute (mm, rad), the postures' true (or planned) poses.
+    ``used_readings`` (N, 6) bool, default all: the readings an estimator uses (e.g. only
+    the locked leg's, for ``leglock``); the others carry no information.
     """
     poses = np.asarray(poses, dtype=float).reshape(-1, 6)
     closure, _ = closure_parameter_jacobian(legs, poses)
@@ -68,15 +71,21 @@ def posture_information_factors(
     twist = np.array([twist_jacobian(legs, pose)[0] for pose in poses])
     length_covariance = twist @ pose_covariance @ np.transpose(twist, (0, 2, 1))
     length_covariance += reading_sigma_mm**2 * np.eye(LEG_COUNT)
+    if used_readings is not None:
+        # An unused reading is one with unbounded noise: a variance far beyond every other
+        # entry marginalises it out (exactly, to rounding) without changing the shapes.
+        length_covariance += np.einsum("nl,lk->nlk", 1e16 * ~np.asarray(used_readings, dtype=bool), np.eye(LEG_COUNT))
     cholesky = np.linalg.cholesky(length_covariance)
     return np.linalg.solve(cholesky, closure)
 
 
 def fisher_information(
-    legs: LegModel, poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float, reading_sigma_mm: float
+    legs: LegModel, poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float, reading_sigma_mm: float,
+    used_readings: NDArray | None = None,
 ) -> NDArray[np.float64]:
-    """The 42×42 Fisher information of the postures ``poses`` (absolute, mm and rad)."""
-    factors = posture_information_factors(legs, poses, feature_points_mm, point_sigma_mm, reading_sigma_mm)
+    """The 42×42 Fisher information of the postures ``poses`` (absolute, mm and rad);
+    ``used_readings`` as in :func:`posture_information_factors`."""
+    factors = posture_information_factors(legs, poses, feature_points_mm, point_sigma_mm, reading_sigma_mm, used_readings)
     return np.einsum("nri,nrj->ij", factors, factors)
 
 
