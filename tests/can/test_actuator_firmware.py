@@ -18,7 +18,7 @@ from firmware_proto.codec import (
     Heartbeat,
     LoopRate,
 )
-from hexactl.sim.actuator_firmware import ActuatorFirmware, ActuatorParams
+from hexactl.sim.actuator_firmware import ActuatorFirmware, ActuatorParams, FaultInjection
 
 START_UM = 400_000
 PARAMS = ActuatorParams(soft_limits_um=(0, 850_000), max_velocity_um_s=400_000.0)
@@ -152,10 +152,9 @@ def test_stale_and_replayed_counters_are_rejected():
 
 def test_counter_wraps_around():
     fw = enabled()
-    t = stream(fw, range(250, 262), [START_UM + 100 * k for k in range(1, 13)], 0.0)
+    stream(fw, range(250, 262), [START_UM + 100 * k for k in range(1, 13)], 0.0)
     assert fw.setpoint_counter == 261 & 0xFF and fw.rejected_total == 0
     assert fw.target_um == START_UM + 1200
-    del t
 
 
 def test_out_of_stroke_setpoint_is_refused_with_a_fault():
@@ -402,10 +401,7 @@ def test_silent_actuator_sends_nothing_but_keeps_working():
 
 def test_probabilistic_faults_repeat_with_the_seed():
     def rejected(seed):
-        fw = ActuatorFirmware(1, START_UM, PARAMS)
-        fw.inject.seed = seed
-        fw.inject.__post_init__()
-        fw.inject.corrupt_probability = 0.3
+        fw = ActuatorFirmware(1, START_UM, PARAMS, inject=FaultInjection(corrupt_probability=0.3, seed=seed))
         fw.advance(0.0)
         command(fw, CommandCode.ENABLE, 1, 0.0, RATE, 100)
         stream(fw, range(100), [START_UM] * 100, 0.0)
