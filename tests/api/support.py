@@ -17,131 +17,138 @@ from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
+from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.files.geometry_file import geometry_id
-from hexactl.control.sequences import MotionSequence
+from hexactl.control.controller import SequenceTelemetry, Telemetry
+from hexactl.control.core import Fault, SequenceReport
+from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.sequences import DwellRecord, MotionSequence
+from hexactl.control.stats import LoopStats, Percentiles
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.workspace import PoseAssessment, assess_pose
+from hexactl.kinematics.workspace import assess_pose
 
 LOCAL = "tcp://127.0.0.1:*"
 
 
-@dataclass(frozen=True)
-class FakeResult:
-    ok: bool = True
-    code: str | None = None
-    message: str = ""
-    details: Any = None
+RECORDS = (
+    DwellRecord("steps", 1, 10.0, (0.0, 0.0, 10.0, 0.0, 0.0, 0.0), None, (400.0,) * 6, (400.1,) * 6),
+    DwellRecord("steps", 2, 12.5, (0.0,) * 6, (0.01, 0.0, 0.02, 0.0, 0.0, 0.0), (390.0,) * 6, (390.1,) * 6),
+)
 
 
 @dataclass
 class FakeController:
-    """Enough of a controller to exercise every command: a state name, the refusals a
-    real one makes (not_enabled, out_of_workspace, estop_active), calls recorded."""
+    """Enough of a controller to exercise every command: a state name, the refusals the
+    real one makes (not_enabled, latched, path_violation), calls recorded."""
 
     geometry: Geometry
     state: str = "disabled"
     calls: list[tuple[str, tuple]] = field(default_factory=list)
-    previous: list[Geometry] = field(default_factory=list)
+    calibrations: list[str] = field(default_factory=list)
     locked_leg: int | None = None
     sequence: MotionSequence | None = None
 
     def _call(self, name: str, *arguments: Any) -> None:
         self.calls.append((name, arguments))
 
-    def enable(self) -> FakeResult:
+    def enable(self) -> CommandResult:
         self._call("enable")
         if self.state == "estop":
-            return FakeResult(False, "estop_active", "reset first")
+            return CommandResult.failure(ErrorCode.LATCHED, "ESTOP is latched: reset first")
         self.state = "enabled"
-        return FakeResult(message="enabled")
+        return CommandResult.success("enabled", ticket=1)
 
-    def disable(self) -> FakeResult:
+    def disable(self) -> CommandResult:
         self._call("disable")
         self.state = "disabled"
-        return FakeResult()
+        return CommandResult.success("disabled")
 
-    def stop(self) -> FakeResult:
+    def stop(self) -> CommandResult:
         self._call("stop")
-        return FakeResult()
+        return CommandResult.success("stopping")
 
-    def estop(self) -> FakeResult:
+    def estop(self) -> CommandResult:
         self._call("estop")
         self.state = "estop"
-        return FakeResult()
+        return CommandResult.success("E-stop latched")
 
-    def reset(self) -> FakeResult:
+    def reset(self) -> CommandResult:
         self._call("reset")
         self.state = "disabled"
-        return FakeResult()
+        return CommandResult.success("reset to disabled")
 
-    def move(self, pose: Sequence[float], duration_s: float | None, speed: float | None) -> FakeResult:
-        self._call("move", list(pose), duration_s, speed)
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+        self._call("move", list(pose), duration, speed)
         if self.state != "enabled":
-            return FakeResult(False, "not_enabled", "enable first")
-        assessment = self.assess(pose)
-        if not assessment.ok:
-            return FakeResult(False, "out_of_workspace", "refused", list(assessment.violations))
-        return FakeResult(message="moving")
+            return CommandResult.failure(ErrorCode.NOT_ENABLED, "enable first")
+        return self.validate_pose(pose, duration, speed)
 
-    def assess(self, pose: Sequence[float]) -> PoseAssessment:
-        return assess_pose(self.geometry, pose)
+    def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+        violations = assess_pose(self.geometry, pose).violations
+        if violations:
+            items = [{"waypoint": 1, "pose": tuple(pose), **{k: getattr(v, k) for k in ("kind", "message", "value", "limit", "leg", "axis")}}
+                     for v in violations]
+            return CommandResult.failure(ErrorCode.PATH_VIOLATION, f"waypoint 1: {violations[0].message}", violations=items)
+        return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1)
 
-    def leg_lock(self, leg: int) -> FakeResult:
+    def leg_lock(self, leg: int) -> CommandResult:
         self._call("leg_lock", leg)
         self.locked_leg = leg
-        return FakeResult()
+        return CommandResult.success(f"leg {leg} locked")
 
-    def leg_unlock(self) -> FakeResult:
+    def leg_unlock(self) -> CommandResult:
         self._call("leg_unlock")
         self.locked_leg = None
-        return FakeResult()
+        return CommandResult.success("unlocked")
 
-    def play(self, sequence: MotionSequence) -> FakeResult:
+    def play(self, sequence: MotionSequence) -> CommandResult:
         self._call("play", sequence)
         self.sequence = sequence
-        return FakeResult()
+        return CommandResult.success(f"playing {sequence.name}", duration_s=12.5, waypoints=len(sequence.waypoints))
 
-    def pause(self) -> FakeResult:
+    def pause(self) -> CommandResult:
         self._call("pause")
-        return FakeResult()
+        return CommandResult.success("pausing")
 
-    def resume(self) -> FakeResult:
+    def resume(self) -> CommandResult:
         self._call("resume")
-        return FakeResult()
+        return CommandResult.success("resumed")
 
-    def abort(self) -> FakeResult:
+    def abort(self) -> CommandResult:
         self._call("abort")
-        self.sequence = None
-        return FakeResult()
+        return CommandResult.success("aborted")
 
-    def load_calibration(self, geometry: Geometry) -> FakeResult:
-        self._call("load_calibration", geometry)
-        self.previous.append(self.geometry)
-        self.geometry = geometry
-        return FakeResult()
+    def load_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
+        self._call("load_calibration", geometry, calibration_id, source)
+        self.calibrations.append(calibration_id)
+        return CommandResult.success(f"calibration {calibration_id} loaded", calibration_id=calibration_id, change_mm=0.5)
 
-    def rollback_calibration(self) -> FakeResult:
+    def rollback_calibration(self) -> CommandResult:
         self._call("rollback_calibration")
-        if not self.previous:
-            return FakeResult(False, "no_previous_calibration", "nothing to roll back to")
-        self.geometry = self.previous.pop()
-        return FakeResult()
+        if len(self.calibrations) < 1:
+            return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no previous calibration")
+        previous = self.calibrations.pop()
+        return CommandResult.success(f"calibration {previous} rolled back", calibration_id=geometry_id(self.geometry), change_mm=0.5)
 
-    def telemetry(self) -> dict[str, Any]:
-        percentiles = {"p50": 10.0, "p99": 20.0, "p999": 30.0, "max": 40.0}
-        return {
-            "t": time.time(),
-            "state": self.state,
-            "pose_command": [0.0] * 6,
-            "pose_measured": None,
-            "leg_setpoints": [425.0] * 6,
-            "leg_feedback": [425.0] * 6,
-            "locked_leg": self.locked_leg,
-            "calibration_id": geometry_id(self.geometry),
-            "sequence": {"name": self.sequence.name, "index": 0, "total": len(self.sequence.waypoints)} if self.sequence else None,
-            "faults": [{"code": "estop", "message": "emergency stop", "leg": None}] if self.state == "estop" else [],
-            "loop": {"rate_hz": 500.0, "cycles": 1, "missed": 0, "lateness_us": percentiles, "compute_us": percentiles},
-        }
+    def sequence_records(self) -> SequenceReport | None:
+        return SequenceReport(self.sequence.name, "playing", RECORDS) if self.sequence else None
+
+    def telemetry(self) -> Telemetry:
+        percentiles = Percentiles(10.0, 20.0, 30.0, 40.0)
+        return Telemetry(
+            t=time.monotonic(),
+            state=self.state,
+            motion="holding",
+            pose_command=(0.0,) * 6,
+            pose_measured=None,
+            leg_setpoints=(425.0,) * 6,
+            leg_feedback=(425.0,) * 6,
+            locked_leg=self.locked_leg,
+            calibration_id=self.calibrations[-1] if self.calibrations else geometry_id(self.geometry),
+            sequence=SequenceTelemetry(self.sequence.name, 1, len(self.sequence.waypoints), "moving") if self.sequence else None,
+            faults=(Fault("estop", "operator"),) if self.state == "estop" else (),
+            loop=LoopStats(500.0, 1, 0, 0, percentiles, percentiles, 0, 0.0),
+        )
 
 
 def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float = 200.0) -> SimpleNamespace:
@@ -149,7 +156,7 @@ def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float =
     context = zmq.Context()
     controller = FakeController(geometry)
     server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir])))
-    publisher = TelemetryPublisher(context, LOCAL, controller.telemetry, telemetry_rate_hz)
+    publisher = TelemetryPublisher(context, LOCAL, lambda: jsonable(controller.telemetry()), telemetry_rate_hz)
     server.start()
     publisher.start()
 

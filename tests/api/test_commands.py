@@ -7,7 +7,7 @@ import pytest
 import zmq
 from pydantic import TypeAdapter
 
-from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, OkReply
+from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, OkReply, PathViolation
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from tests.api.support import request
 
@@ -18,6 +18,7 @@ ARGUMENTS: dict[str, dict] = {
     "validate_pose": {"pose": [0, 0, 50, 0, 0, 5]},
     "leg_lock": {"leg": 3},
     "play": {"sequence": "x_sweep"},
+    "save_recording": {"path": "recording.csv"},
 }
 
 
@@ -40,13 +41,15 @@ def test_every_command_round_trips(service, kind) -> None:
         assert reply["ok"], reply
         assert reply["id"] == {"n": cmd}
     called = [name for name, _ in service.controller.calls]
-    assert set(called) == set(COMMANDS) - {"status", "validate_pose"}
+    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "save_recording"}  # queries
 
 
-def test_move_passes_pose_duration_and_speed(service) -> None:
+def test_move_passes_pose_and_pace(service) -> None:
     service.controller.state = "enabled"
-    send(service, "move", pose=[1, 2, 3, 4, 5, 6], duration=1.5, speed=0.5)
-    assert service.controller.calls[-1] == ("move", ([1.0, 2.0, 3.0, 4.0, 5.0, 6.0], 1.5, 0.5))
+    send(service, "move", pose=[1, 2, 3, 4, 5, 6], duration=1.5)
+    assert service.controller.calls[-1] == ("move", ([1.0, 2.0, 3.0, 4.0, 5.0, 6.0], 1.5, None))
+    send(service, "move", pose=[1, 2, 3, 4, 5, 6], speed=0.5)
+    assert service.controller.calls[-1] == ("move", ([1.0, 2.0, 3.0, 4.0, 5.0, 6.0], None, 0.5))
 
 
 def test_controller_refusal_keeps_its_code(service) -> None:
@@ -55,22 +58,31 @@ def test_controller_refusal_keeps_its_code(service) -> None:
     assert reply["id"] == 7
 
 
-def test_out_of_workspace_lists_violations(service) -> None:
+def test_path_violation_lists_violations(service) -> None:
     service.controller.state = "enabled"
     reply = send(service, "move", pose=[700, 0, 0, 0, 0, 0])
-    assert reply["error"]["code"] == "out_of_workspace"
-    kinds = {violation["kind"] for violation in reply["error"]["details"]}
-    assert "pose_range" in kinds
-    assert all(isinstance(violation["message"], str) for violation in reply["error"]["details"])
+    assert reply["error"]["code"] == "path_violation"
+    violations = [PathViolation.model_validate(item) for item in reply["error"]["details"]["violations"]]
+    assert "pose_range" in {violation.kind for violation in violations}
 
 
-def test_validate_pose_reports_without_moving(service) -> None:
-    reachable = send(service, "validate_pose", pose=[0, 0, 50, 0, 0, 0])
-    assert reachable["reachable"] and reachable["violations"] == []
-    assert len(reachable["leg_setpoints"]) == 6
-    unreachable = send(service, "validate_pose", pose=[0, 0, 0, 0, 40, 0])
-    assert not unreachable["reachable"]
-    assert {"pitch"} <= {violation.get("axis") for violation in unreachable["violations"]}
+def test_move_reply_has_the_planned_goal_and_duration(service) -> None:
+    service.controller.state = "enabled"
+    reply = send(service, "move", pose=[0, 0, 50, 0, 0, 0], duration=3.0)
+    assert (reply["goal"], reply["duration"]) == ([0, 0, 50, 0, 0, 0], 3.0)
+
+
+def test_duration_and_speed_together_are_refused(service) -> None:
+    reply = send(service, "move", pose=[0] * 6, duration=3.0, speed=0.5)
+    assert reply["error"]["code"] == "invalid_request" and "not both" in reply["error"]["message"]
+
+
+def test_validate_pose_answers_what_move_would(service) -> None:
+    valid = send(service, "validate_pose", pose=[0, 0, 50, 0, 0, 0])
+    assert valid["valid"] and valid["goal"] == [0, 0, 50, 0, 0, 0] and valid["refusal"] is None
+    invalid = send(service, "validate_pose", pose=[0, 0, 0, 0, 40, 0])
+    assert not invalid["valid"] and invalid["refusal"]["code"] == "path_violation"
+    assert {"pitch"} <= {violation.get("axis") for violation in invalid["refusal"]["details"]["violations"]}
     assert service.controller.calls == []
 
 
@@ -83,15 +95,20 @@ def test_status_carries_the_telemetry_record(service) -> None:
 def test_play_inline_waypoints(service) -> None:
     sequence = {"name": "steps", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0], "speed": 0.5}, {"pose": [0] * 6, "dwell": 2.0}]}
     reply = send(service, "play", sequence=sequence)
-    assert reply["sequence"] == {"name": "steps", "index": 0, "total": 2}
+    assert (reply["name"], reply["waypoints"], reply["duration"]) == ("steps", 2, 12.5)
     played = service.controller.calls[-1][1][0]
     assert (played.waypoints[0].speed, played.waypoints[1].dwell) == (0.5, 2.0)
+
+
+def test_play_built_in(service) -> None:
+    reply = send(service, "play", sequence="y_rotation")
+    assert (reply["name"], reply["waypoints"]) == ("y_rotation", 9)
 
 
 def test_play_refuses_a_waypoint_with_duration_and_speed(service) -> None:
     sequence = {"name": "both", "waypoints": [{"pose": [0] * 6, "speed": 0.5, "duration": 2.0}]}
     reply = send(service, "play", sequence=sequence)
-    assert reply["error"]["code"] == "invalid_sequence"
+    assert reply["error"]["code"] == "invalid_request"
     assert "not both" in reply["error"]["message"]
 
 
@@ -105,7 +122,7 @@ def test_load_and_roll_back_calibration(service, nominal) -> None:
     calibrated = nominal.model_copy(update={"name": "calibrated", "zero_lengths": (1751.0,) * 6})
     loaded = send(service, "load_calibration", toml=geometry_to_toml(calibrated))
     assert loaded["calibration_id"] == geometry_id(calibrated) != geometry_id(nominal)
-    assert loaded["name"] == "calibrated"
+    assert service.controller.calls[-1][1][1:] == (geometry_id(calibrated), "request")
     rolled_back = send(service, "rollback_calibration")
     assert rolled_back["calibration_id"] == geometry_id(nominal)
     assert send(service, "rollback_calibration")["error"]["code"] == "no_previous_calibration"
@@ -115,7 +132,7 @@ def test_invalid_calibration_names_each_problem(service) -> None:
     reply = send(service, "load_calibration", toml="zero_lengths = [1, 2]\n")
     assert reply["error"]["code"] == "invalid_calibration"
     assert len(reply["error"]["details"]) > 1
-    assert all(line.startswith("toml: ") for line in reply["error"]["details"])
+    assert all(line.startswith("request: ") for line in reply["error"]["details"])
     assert send(service, "load_calibration", toml="= not toml")["error"]["code"] == "invalid_calibration"
     assert service.controller.calls == []
 
@@ -124,3 +141,15 @@ def test_load_calibration_needs_exactly_one_source(service) -> None:
     reply = send(service, "load_calibration", path="a.toml", toml="")
     assert reply["error"]["code"] == "invalid_request"
     assert send(service, "load_calibration")["error"]["code"] == "invalid_request"
+
+
+def test_save_recording_writes_csv_once(service) -> None:
+    assert send(service, "save_recording", path="run.csv")["error"]["code"] == "no_recording"
+    send(service, "play", sequence="compound")
+    reply = send(service, "save_recording", path="run.csv")
+    assert (reply["records"], reply["status"]) == (2, "playing")
+    lines = (service.data_dir / "run.csv").read_text().splitlines()
+    assert lines[0].startswith("sequence,waypoint,t_s,command_x") and len(lines) == 3
+    assert send(service, "save_recording", path="run.csv")["error"]["code"] == "file_exists"
+    assert send(service, "save_recording", path="../run.csv")["error"]["code"] == "forbidden_path"
+    assert send(service, "save_recording", path="missing/run.csv")["error"]["code"] == "file_not_found"

@@ -1,17 +1,14 @@
 """Carrying out API requests on the controller: request model in, reply fields out.
 
-Files named by requests are read and parsed here (in the API thread), so the control
+Files named by requests are read and parsed here, in the API thread, so the control
 loop only ever receives validated objects.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from enum import Enum
-from math import isfinite
+import csv
+import io
 from typing import Any
-
-import numpy as np
 
 from hexactl.adapters.api.messages import (
     AbortRequest,
@@ -28,21 +25,29 @@ from hexactl.adapters.api.messages import (
     ResetRequest,
     ResumeRequest,
     RollbackCalibrationRequest,
+    SaveRecordingRequest,
     StatusRequest,
     StopRequest,
     ValidatePoseRequest,
 )
 from hexactl.adapters.api.paths import DataDirectories
-from hexactl.adapters.api.port import ControllerPort, Result
+from hexactl.adapters.api.port import ControllerPort
 from hexactl.adapters.api.sequences import resolve_sequence
-from hexactl.adapters.api.wire import ApiError, ErrorCode, problems_error
+from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
+from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
-from hexactl.kinematics.geometry import Geometry, GeometryError
+from hexactl.control.results import CommandResult
+from hexactl.control.sequences import dwell_header, dwell_rows
+from hexactl.kinematics.geometry import GeometryError
+
+TOML_SOURCE = "request"
+"""The calibration source recorded for a calibration sent as text."""
 
 
 class CommandHandler:
-    """The :data:`~hexactl.adapters.api.server.Handler` of the service: one method per
-    command, each returning the reply's fields or raising :class:`ApiError`."""
+    """The :data:`~hexactl.adapters.api.server.Handler` of the service: returns each
+    request's reply fields or raises :class:`ApiError` (with the controller's code for
+    its refusals)."""
 
     def __init__(self, controller: ControllerPort, data: DataDirectories) -> None:
         self.controller = controller
@@ -52,7 +57,7 @@ class CommandHandler:
         controller = self.controller
         match request:
             case StatusRequest():
-                return {"status": controller.telemetry()}
+                return {"status": jsonable(controller.telemetry())}
             case EnableRequest():
                 return _checked(controller.enable())
             case DisableRequest():
@@ -64,7 +69,8 @@ class CommandHandler:
             case ResetRequest():
                 return _checked(controller.reset())
             case MoveRequest():
-                return _checked(controller.move(request.pose, request.duration, request.speed))
+                result = controller.move(request.pose, request.duration, request.speed)
+                return _checked(result, goal=result.details.get("goal"), duration=result.details.get("duration_s"))
             case ValidatePoseRequest():
                 return self._validate_pose(request)
             case LegLockRequest():
@@ -73,8 +79,8 @@ class CommandHandler:
                 return _checked(controller.leg_unlock())
             case PlayRequest():
                 sequence = resolve_sequence(request.sequence, self.data)
-                fields = _checked(controller.play(sequence))
-                return {**fields, "sequence": {"name": sequence.name, "index": 0, "total": len(sequence.waypoints)}}
+                result = controller.play(sequence)
+                return _checked(result, name=sequence.name, waypoints=len(sequence.waypoints), duration=result.details.get("duration_s"))
             case PauseRequest():
                 return _checked(controller.pause())
             case ResumeRequest():
@@ -82,60 +88,60 @@ class CommandHandler:
             case AbortRequest():
                 return _checked(controller.abort())
             case LoadCalibrationRequest():
-                fields = _checked(controller.load_calibration(self._calibration(request)))
-                return {**fields, **_geometry_fields(controller.geometry)}
+                return self._load_calibration(request)
             case RollbackCalibrationRequest():
-                fields = _checked(controller.rollback_calibration())
-                return {**fields, **_geometry_fields(controller.geometry)}
+                return _calibration_fields(controller.rollback_calibration())
+            case SaveRecordingRequest():
+                return self._save_recording(request)
         raise AssertionError(f"no handler for {type(request).__name__}")  # the union and this match disagree
 
     def _validate_pose(self, request: ValidatePoseRequest) -> dict[str, Any]:
-        assessment = self.controller.assess(request.pose)
-        condition = assessment.jacobian_condition
-        return {
-            "reachable": assessment.ok,
-            "violations": jsonable(assessment.violations),
-            "leg_setpoints": list(assessment.sensor_mm),
-            "jacobian_condition": condition if isfinite(condition) else None,
-        }
+        result = self.controller.validate_pose(request.pose, request.duration, request.speed)
+        if result.ok:
+            return {"valid": True, "goal": result.details.get("goal"), "duration": result.details.get("duration_s"), "refusal": None}
+        return {"valid": False, "goal": None, "duration": None, "refusal": error_body(_code(result), result.message, jsonable(result.details))}
 
-    def _calibration(self, request: LoadCalibrationRequest) -> Geometry:
+    def _load_calibration(self, request: LoadCalibrationRequest) -> dict[str, Any]:
         if request.path is not None:
             path, text = self.data.read_text(request.path, ErrorCode.INVALID_CALIBRATION)
             source = str(path)
         else:
-            text, source = request.toml or "", "toml"
+            text, source = request.toml or "", TOML_SOURCE
         try:
-            return parse_geometry(text, source)
+            geometry = parse_geometry(text, source)
         except GeometryError as error:
             raise problems_error(ErrorCode.INVALID_CALIBRATION, str(error)) from None
+        return _calibration_fields(self.controller.load_calibration(geometry, geometry_id(geometry), source))
+
+    def _save_recording(self, request: SaveRecordingRequest) -> dict[str, Any]:
+        report = self.controller.sequence_records()
+        if report is None:
+            raise ApiError(ErrorCode.NO_RECORDING, "no sequence has been played yet")
+        table = io.StringIO()
+        writer = csv.writer(table, lineterminator="\n")
+        writer.writerow(dwell_header())
+        writer.writerows(dwell_rows(report.records))
+        target = self.data.new_file(request.path)
+        try:
+            write_atomic(target, table.getvalue().encode("utf-8"), overwrite=False)
+        except FileExistsError:
+            raise ApiError(ErrorCode.FILE_EXISTS, f"{request.path}: exists; recordings never overwrite") from None
+        except OSError as error:
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{request.path}: cannot write: {error.strerror}") from None
+        return {"path": str(target), "name": report.name, "status": report.status, "records": len(report.records)}
 
 
-def _checked(result: Result) -> dict[str, Any]:
-    """The reply fields of a successful result; :class:`ApiError` with the controller's
-    code for a refusal."""
+def _code(result: CommandResult) -> str:
+    return result.error.value if result.error is not None else ErrorCode.INTERNAL_ERROR.value
+
+
+def _checked(result: CommandResult, **fields: Any) -> dict[str, Any]:
+    """``message`` and ``fields`` for a successful result; :class:`ApiError` with the
+    controller's code and details for a refusal."""
     if not result.ok:
-        raise ApiError(result.code or ErrorCode.INTERNAL_ERROR, result.message, jsonable(result.details))
-    return {"message": result.message} if result.message else {}
+        raise ApiError(_code(result), result.message, jsonable(result.details))
+    return {"message": result.message, **jsonable(fields)}
 
 
-def _geometry_fields(geometry: Geometry) -> dict[str, Any]:
-    return {"calibration_id": geometry_id(geometry), "name": geometry.name}
-
-
-def jsonable(value: Any) -> Any:
-    """``value`` with dataclasses, tuples, enums and numpy scalars turned into JSON types, and
-    non-finite floats into null (JSON has no NaN)."""
-    if isinstance(value, Enum):
-        return value.value
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {field.name: jsonable(getattr(value, field.name)) for field in dataclasses.fields(value)}
-    if isinstance(value, dict):
-        return {str(key): jsonable(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(item) for item in value]
-    if isinstance(value, np.generic):  # numpy scalars from the kinematics
-        value = value.item()
-    if isinstance(value, float) and not isfinite(value):
-        return None
-    return value
+def _calibration_fields(result: CommandResult) -> dict[str, Any]:
+    return _checked(result, calibration_id=result.details.get("calibration_id"), change_mm=result.details.get("change_mm"))

@@ -24,8 +24,11 @@ Pose = Annotated[
 ]
 LegValues = Annotated[list[float], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm")]
 Leg = Annotated[int, Field(ge=1, le=6, description="leg number 1–6")]
+Duration = Annotated[float, Field(gt=0, description="the move takes at least this long, s")]
+Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
 ErrorCodeText = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="snake_case error code")]
 RequestId = Annotated[JsonValue, Field(description="any JSON value; echoed in the reply")]
+FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
 
 
 class _Message(BaseModel):
@@ -40,6 +43,19 @@ class _Request(_Message):
     id: RequestId
 
 
+class _Paced(_Message):
+    """A move's pace: at least ``duration`` s, or ``speed`` of the velocity limits."""
+
+    duration: Duration | None = None
+    speed: Speed | None = None
+
+    @model_validator(mode="after")
+    def _one_pace(self) -> _Paced:
+        if self.duration is not None and self.speed is not None:
+            raise ValueError("give a duration or a speed, not both")
+        return self
+
+
 class StatusRequest(_Request):
     """Reply with the current telemetry record."""
 
@@ -47,53 +63,53 @@ class StatusRequest(_Request):
 
 
 class EnableRequest(_Request):
-    """Energise the actuators; the platform holds its pose."""
+    """Energise the actuators; the platform holds the pose it is at."""
 
     cmd: Literal["enable"]
 
 
 class DisableRequest(_Request):
-    """De-energise the actuators (brakes hold)."""
+    """De-energise the actuators (at rest only: stop first)."""
 
     cmd: Literal["disable"]
 
 
 class StopRequest(_Request):
-    """Halt any motion smoothly (jerk-limited) and stay enabled."""
+    """Brake smoothly to rest and stay enabled; ends a sequence."""
 
     cmd: Literal["stop"]
 
 
 class EstopRequest(_Request):
-    """Emergency stop: every actuator stops and holds at once; needs ``reset``."""
+    """Emergency stop, latched until ``reset``."""
 
     cmd: Literal["estop"]
 
 
 class ResetRequest(_Request):
-    """Clear faults and an emergency stop whose cause is gone; ends disabled."""
+    """Clear a latched fault or emergency stop; ends disabled."""
 
     cmd: Literal["reset"]
 
 
-class MoveRequest(_Request):
-    """Move to ``pose``; refused whole (``out_of_workspace``) if any point of the path violates a limit."""
+class MoveRequest(_Request, _Paced):
+    """Move to ``pose``, the whole path validated first (refused whole otherwise). A move
+    while moving replaces the running one; in leg-lock mode the goal is projected so the
+    locked leg keeps its length (the reply's ``goal``)."""
 
     cmd: Literal["move"]
     pose: Pose
-    duration: Duration | None = Field(default=None, description="minimum duration, s; default: as fast as the limits allow")
-    speed: Speed | None = Field(default=None, description="fraction of the velocity limits; default 1")
 
 
-class ValidatePoseRequest(_Request):
-    """Check ``pose`` against every limit without moving."""
+class ValidatePoseRequest(_Request, _Paced):
+    """Would ``move`` accept this now? Plans and checks the whole path; moves nothing."""
 
     cmd: Literal["validate_pose"]
     pose: Pose
 
 
 class LegLockRequest(_Request):
-    """Lock one leg at its current length (leg-lock calibration mode)."""
+    """Brake one leg at its current length; moves then keep it there (leg-lock mode)."""
 
     cmd: Literal["leg_lock"]
     leg: Leg
@@ -105,16 +121,10 @@ class LegUnlockRequest(_Request):
     cmd: Literal["leg_unlock"]
 
 
-Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
-Duration = Annotated[float, Field(gt=0, description="minimum duration of the move, s")]
-
-
-class Waypoint(_Message):
+class Waypoint(_Paced):
     """One waypoint of an inline sequence: the ``[[waypoint]]`` table of a sequence file."""
 
     pose: Pose
-    duration: Duration | None = Field(default=None, description="minimum duration of the move, s; not with speed")
-    speed: Speed | None = Field(default=None, description="fraction of the velocity limits; not with duration")
     dwell: float = Field(default=0.0, ge=0, description="time to stay on arrival, s")
 
 
@@ -127,35 +137,38 @@ class InlineSequence(_Message):
 
 
 class PlayRequest(_Request):
-    """Play a sequence: a built-in name, a file path under a data directory, or inline waypoints."""
+    """Play a sequence, every waypoint's path validated before the first moves."""
 
     cmd: Literal["play"]
-    sequence: str | InlineSequence = Field(description="built-in name, file path, or inline waypoints")
+    sequence: str | InlineSequence = Field(
+        description="a built-in name (x_sweep, y_rotation, compound), a .toml file in the data directories, "
+        "or the sequence itself"
+    )
 
 
 class PauseRequest(_Request):
-    """Pause the playing sequence (halts smoothly where it is)."""
+    """Pause the sequence: brake to rest mid-move, or freeze the dwell's clock."""
 
     cmd: Literal["pause"]
 
 
 class ResumeRequest(_Request):
-    """Resume the paused sequence."""
+    """Continue the paused sequence."""
 
     cmd: Literal["resume"]
 
 
 class AbortRequest(_Request):
-    """Abandon the sequence (halts smoothly)."""
+    """End the sequence and brake to rest; its dwell records are kept."""
 
     cmd: Literal["abort"]
 
 
 class LoadCalibrationRequest(_Request):
-    """Switch to a calibration: exactly one of ``path`` (under a data directory) or ``toml`` (the file's text)."""
+    """Switch to a calibration, ramped in; exactly one of ``path`` or ``toml`` (the file's text)."""
 
     cmd: Literal["load_calibration"]
-    path: str | None = Field(default=None, max_length=4096)
+    path: FilePath | None = None
     toml: str | None = None
 
     @model_validator(mode="after")
@@ -166,9 +179,16 @@ class LoadCalibrationRequest(_Request):
 
 
 class RollbackCalibrationRequest(_Request):
-    """Return to the calibration active before the last ``load_calibration``."""
+    """Return to the calibration active before the last load (ramped like a load)."""
 
     cmd: Literal["rollback_calibration"]
+
+
+class SaveRecordingRequest(_Request):
+    """Write the playing or last sequence's dwell records as CSV to a new file in a data directory."""
+
+    cmd: Literal["save_recording"]
+    path: FilePath
 
 
 REQUEST_MODELS: tuple[type[_Request], ...] = (
@@ -188,6 +208,7 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     AbortRequest,
     LoadCalibrationRequest,
     RollbackCalibrationRequest,
+    SaveRecordingRequest,
 )
 
 Request = Annotated[Union[REQUEST_MODELS], Field(discriminator="cmd")]  # type: ignore[valid-type]
@@ -209,44 +230,51 @@ class Percentiles(_Message):
 
 
 class LoopTelemetry(_Message):
-    """The control loop's timing."""
+    """The control loop's timing and health counters."""
 
     rate_hz: float = Field(description="loop rate, Hz")
     cycles: int = Field(description="cycles run since start")
     missed: int = Field(description="cycles that woke more than half a period late")
+    skipped: int = Field(description="deadlines dropped after an overrun (the loop never bursts to catch up)")
     lateness_us: Percentiles = Field(description="wake-up lateness, µs")
     compute_us: Percentiles = Field(description="time from wake-up to the end of the cycle's work, µs")
+    gc_runs: int = Field(description="young-generation garbage collections run in the loop's slack")
+    gc_max_us: float = Field(description="the longest of them, µs")
+    guard_clamps: int = Field(description="cycles in which the set-point guard changed a set-point (should stay 0)")
+    fk_failures: int = Field(description="cycles whose feedback had no forward-kinematics solution")
 
 
 class SequenceProgress(_Message):
     """The sequence being played."""
 
     name: str
-    index: int = Field(ge=0, description="waypoint being approached or dwelt at, 0-based")
-    total: int = Field(ge=0, description="number of waypoints")
+    index: int = Field(ge=1, description="waypoint being approached or dwelt at, 1-based")
+    total: int = Field(ge=1, description="number of waypoints")
+    phase: str = Field(description="moving, dwelling, pausing or paused")
 
 
 class Fault(_Message):
-    """An active fault."""
+    """Why the controller latched FAULT or ESTOP."""
 
     code: ErrorCodeText
     message: str
-    leg: Leg | None = None
+    leg: Leg | None = Field(default=None, description="the actuator at fault, if one is")
 
 
 class Telemetry(_Message):
-    """One telemetry record: the platform's state as of ``t``."""
+    """One control cycle's picture."""
 
-    t: float = Field(description="time of the record, s since the Unix epoch")
-    state: str = Field(description="controller state, e.g. disabled, enabled, moving, estop")
-    pose_command: Pose | None = Field(description="commanded pose; null before the first command")
-    pose_measured: Pose | None = Field(description="pose from the actuators' feedback (forward kinematics); null if unknown")
-    leg_setpoints: LegValues | None = Field(description="last set-points sent, sensor mm; null before the first")
+    t: float = Field(description="time of the cycle, s, on the service host's monotonic clock")
+    state: str = Field(description="disabled, enabled, fault or estop")
+    motion: str = Field(description="holding, moving or stopping")
+    pose_command: Pose = Field(description="commanded pose")
+    pose_measured: Pose | None = Field(description="pose from the actuators' feedback by forward kinematics; null if none")
+    leg_setpoints: LegValues = Field(description="set-points sent, sensor mm")
     leg_feedback: LegValues | None = Field(description="actuator positions reported, sensor mm; null before the first report")
     locked_leg: Leg | None = Field(description="the locked leg, or null")
-    calibration_id: str = Field(description="content hash of the active geometry/calibration")
+    calibration_id: str = Field(description="content hash of the active geometry or calibration")
     sequence: SequenceProgress | None = Field(description="the sequence being played, or null")
-    faults: list[Fault]
+    faults: list[Fault] = Field(description="why FAULT or ESTOP is latched; empty otherwise")
     loop: LoopTelemetry
 
 
@@ -256,7 +284,7 @@ class Telemetry(_Message):
 class ErrorBody(_Message):
     code: ErrorCodeText
     message: str = Field(description="for people")
-    details: JsonValue = Field(default=None, description="for programs, e.g. the violations of out_of_workspace")
+    details: JsonValue = Field(default=None, description="for programs, e.g. the violations of a path_violation")
 
 
 class ErrorReply(_Message):
@@ -269,7 +297,7 @@ class ErrorReply(_Message):
 
 
 class OkReply(_Message):
-    """A request that was carried out. ``message`` may say what happened, for people."""
+    """A request carried out. ``message`` says what happened, for people."""
 
     v: Literal[1]
     id: RequestId
@@ -281,43 +309,57 @@ class StatusReply(OkReply):
     status: Telemetry
 
 
-class Violation(_Message):
-    """A limit a pose violates: ``value`` against ``limit`` (mm, deg, or a condition number)."""
+class MoveReply(OkReply):
+    goal: Pose = Field(description="the goal as planned (projected onto the locked leg's constraint in leg-lock mode)")
+    duration: float = Field(description="planned duration, s")
 
+
+class ValidatePoseReply(OkReply):
+    valid: bool = Field(description="whether move would accept the pose now")
+    goal: Pose | None = Field(description="the goal as planned, when valid")
+    duration: float | None = Field(description="planned duration, s, when valid")
+    refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
+
+
+class PlayReply(OkReply):
+    name: str
+    waypoints: int = Field(description="number of waypoints")
+    duration: float = Field(description="planned duration including dwells, s")
+
+
+class CalibrationReply(OkReply):
+    calibration_id: str = Field(description="content hash of the calibration being ramped in")
+    change_mm: float = Field(description="the largest set-point change the swap makes at the current pose, mm")
+
+
+class SaveRecordingReply(OkReply):
+    path: str = Field(description="the file written, on the service's machine")
+    name: str = Field(description="the sequence recorded")
+    status: str = Field(description="playing, finished, aborted or fault")
+    records: int = Field(description="rows written (one per dwell)")
+
+
+class PathViolation(_Message):
+    """An item of ``error.details.violations`` (``path_violation``): the first sample of a
+    waypoint's path that violates a limit."""
+
+    waypoint: int = Field(ge=1, description="1-based waypoint whose path violates")
+    pose: Pose = Field(description="the violating sample")
     kind: str = Field(description="stroke_low, stroke_high, base_cone, platform_cone, pose_range or near_singular")
-    value: float | None = Field(description="null when infinite (an exactly singular pose)")
-    limit: float
     message: str
+    value: float | None = Field(description="the violating value (mm, deg or condition number); null if infinite")
+    limit: float
     leg: Leg | None = None
     axis: str | None = None
 
 
-class ValidatePoseReply(OkReply):
-    reachable: bool
-    violations: list[Violation]
-    leg_setpoints: LegValues = Field(description="sensor readings the pose needs, mm")
-    jacobian_condition: float | None = Field(description="scaled Jacobian condition number; null if singular")
-
-
-class MoveReply(OkReply):
-    duration: float | None = Field(default=None, description="planned duration of the move, s")
-
-
-class PlayReply(OkReply):
-    sequence: SequenceProgress
-
-
-class CalibrationReply(OkReply):
-    calibration_id: str = Field(description="content hash of the geometry now active")
-    name: str = Field(description="its name")
-
-
 REPLY_MODELS: dict[str, type[OkReply]] = {
     "status": StatusReply,
-    "validate_pose": ValidatePoseReply,
     "move": MoveReply,
+    "validate_pose": ValidatePoseReply,
     "play": PlayReply,
     "load_calibration": CalibrationReply,
     "rollback_calibration": CalibrationReply,
+    "save_recording": SaveRecordingReply,
 }
 """The reply model of each command whose reply carries more than :class:`OkReply`."""

@@ -1,4 +1,4 @@
-"""Files a request may name: only regular files inside the configured data directories.
+"""Files a request may name: only files inside the configured data directories.
 
 A request's path is resolved (``..`` and symlinks followed) and refused with
 ``forbidden_path`` unless the real file lies inside one of the directories, so neither
@@ -18,10 +18,11 @@ MAX_FILE_BYTES = 4 * 1024 * 1024
 
 
 class DataDirectories:
-    """The directories requests may read files from. A relative path is looked up in
-    each directory in order, then in the service's working directory (so that
-    ``calibrations/x.toml`` means what it says where the service was started); wherever
-    it is found, the file must lie inside one of the directories."""
+    """The directories requests may read files from and write recordings to. To read, a
+    relative path is looked up in each directory in order, then in the service's
+    working directory (so that ``calibrations/x.toml`` means what it says where the
+    service was started); wherever it is found, the file must lie inside one of the
+    directories."""
 
     def __init__(self, directories: Sequence[str | os.PathLike[str]]) -> None:
         self.directories = tuple(Path(directory).resolve() for directory in directories)
@@ -30,8 +31,7 @@ class DataDirectories:
         """The real path of the file ``text`` names. :class:`ApiError` ``forbidden_path``
         if it is outside every data directory, ``file_not_found`` if it is inside but
         is not a regular file."""
-        if not text or "\0" in text:
-            raise ApiError(ErrorCode.FORBIDDEN_PATH, "a path is a non-empty string without NUL characters")
+        self._check_text(text)
         path = Path(text)
         candidates = [path] if path.is_absolute() else [*(directory / path for directory in self.directories), Path.cwd() / path]
         inside = None
@@ -43,12 +43,23 @@ class DataDirectories:
                 return real
             inside = inside or real
         if inside is None:
-            raise ApiError(
-                ErrorCode.FORBIDDEN_PATH,
-                f"{text}: outside the data directories",
-                {"data_directories": [str(directory) for directory in self.directories]},
-            )
+            raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
         raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories")
+
+    def new_file(self, text: str) -> Path:
+        """Where to create the file ``text`` names: relative to the first data directory,
+        or absolute; :class:`ApiError` ``forbidden_path`` unless its real directory is
+        inside a data directory, ``file_not_found`` if that directory does not exist."""
+        self._check_text(text)
+        path = Path(text) if Path(text).is_absolute() else self.directories[0] / text
+        if path.name in ("", ".", ".."):
+            raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: not a file name")
+        parent = path.parent.resolve()
+        if not any(parent.is_relative_to(directory) for directory in self.directories):
+            raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
+        if not parent.is_dir():
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such directory in the data directories")
+        return parent / path.name
 
     def read_text(self, text: str, invalid: ErrorCode) -> tuple[Path, str]:
         """(real path, UTF-8 content) of the file ``text`` names, after :meth:`resolve`;
@@ -65,3 +76,11 @@ class DataDirectories:
             return path, data.decode("utf-8")
         except UnicodeDecodeError:
             raise ApiError(invalid, f"{text}: not UTF-8 text") from None
+
+    def _listing(self) -> dict[str, list[str]]:
+        return {"data_directories": [str(directory) for directory in self.directories]}
+
+    @staticmethod
+    def _check_text(text: str) -> None:
+        if not text or "\0" in text:
+            raise ApiError(ErrorCode.FORBIDDEN_PATH, "a path is a non-empty string without NUL characters")

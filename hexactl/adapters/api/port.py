@@ -1,79 +1,71 @@
-"""What the API needs of the controller: commands that return a result, and its state.
+"""What the API needs of the controller: the part of
+:class:`hexactl.control.controller.Controller` it drives, as a Protocol (so tests can
+put a fake behind the real server).
 
-Poses are relative to the zero posture, mm and deg; times in s. Every command returns
-at once (motions run in the control loop) with a :class:`Result`; a refusal carries a
-snake_case ``code`` that the API passes through as its error code.
+Poses are relative to the zero posture, mm and deg; times in s. No method raises for
+bad input: each returns a :class:`~hexactl.control.results.CommandResult` whose
+``error`` the API sends as its error code.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Protocol
 
+from hexactl.control.controller import Telemetry
+from hexactl.control.core import SequenceReport
+from hexactl.control.results import CommandResult
 from hexactl.control.sequences import MotionSequence
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.workspace import PoseAssessment
-
-
-class Result(Protocol):
-    """The outcome of a command. ``details``: JSON-able, or dataclasses (e.g. workspace
-    violations) that :func:`hexactl.adapters.api.commands.jsonable` converts."""
-
-    @property
-    def ok(self) -> bool: ...
-
-    @property
-    def code(self) -> str | None: ...
-
-    @property
-    def message(self) -> str: ...
-
-    @property
-    def details(self) -> Any: ...
 
 
 class ControllerPort(Protocol):
-    """The controller as the API drives it. Methods are called from the API thread."""
+    """The controller as the API thread calls it."""
 
-    @property
-    def geometry(self) -> Geometry:
-        """The active geometry or calibration."""
+    def enable(self) -> CommandResult: ...
+
+    def disable(self) -> CommandResult: ...
+
+    def stop(self) -> CommandResult: ...
+
+    def estop(self) -> CommandResult: ...
+
+    def reset(self) -> CommandResult: ...
+
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+        """Success details: ``goal`` (as planned), ``duration_s``."""
         ...
 
-    def enable(self) -> Result: ...
-
-    def disable(self) -> Result: ...
-
-    def stop(self) -> Result: ...
-
-    def estop(self) -> Result: ...
-
-    def reset(self) -> Result: ...
-
-    def move(self, pose: Sequence[float], duration_s: float | None, speed: float | None) -> Result:
-        """Start a move; the result's details on a refusal list the violations."""
+    def validate_pose(
+        self, pose: Sequence[float], duration: float | None = None, speed: float | None = None
+    ) -> CommandResult:
+        """What :meth:`move` would answer, without moving."""
         ...
 
-    def assess(self, pose: Sequence[float]) -> PoseAssessment:
-        """Every limit ``pose`` violates in the current mode, without moving."""
+    def leg_lock(self, leg: int) -> CommandResult: ...
+
+    def leg_unlock(self) -> CommandResult: ...
+
+    def play(self, sequence: MotionSequence) -> CommandResult:
+        """Success details: ``duration_s`` (with dwells), ``waypoints``."""
         ...
 
-    def leg_lock(self, leg: int) -> Result: ...
+    def pause(self) -> CommandResult: ...
 
-    def leg_unlock(self) -> Result: ...
+    def resume(self) -> CommandResult: ...
 
-    def play(self, sequence: MotionSequence) -> Result: ...
+    def abort(self) -> CommandResult: ...
 
-    def pause(self) -> Result: ...
-
-    def resume(self) -> Result: ...
-
-    def abort(self) -> Result: ...
-
-    def load_calibration(self, geometry: Geometry) -> Result: ...
-
-    def rollback_calibration(self) -> Result: ...
-
-    def telemetry(self) -> dict[str, Any]:
-        """The current state as a :class:`~hexactl.adapters.api.messages.Telemetry` record."""
+    def load_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
+        """Success details: ``calibration_id``, ``change_mm``."""
         ...
+
+    def rollback_calibration(self) -> CommandResult:
+        """Success details: ``calibration_id``, ``change_mm``."""
+        ...
+
+    def sequence_records(self) -> SequenceReport | None:
+        """The playing or last played sequence's dwell records."""
+        ...
+
+    def telemetry(self) -> Telemetry: ...

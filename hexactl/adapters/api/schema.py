@@ -21,6 +21,7 @@ from hexactl.adapters.api.messages import (
     REPLY_MODELS,
     ErrorReply,
     OkReply,
+    PathViolation,
     Request,
     Telemetry,
 )
@@ -33,8 +34,9 @@ _REFERENCE = "#/$defs/{model}"
 def api_schema() -> dict[str, Any]:
     """One JSON Schema document: ``request`` (any request), ``reply`` (any reply),
     ``replies`` (the ok reply of each command whose reply has more than ``message``),
-    ``telemetry`` (a record); every model once, in ``$defs``."""
-    models = list(dict.fromkeys([ErrorReply, OkReply, Telemetry, *REPLY_MODELS.values()]))
+    ``telemetry`` (a record), ``path_violation`` (an item of a ``path_violation``
+    error's ``details.violations``); every model once, in ``$defs``."""
+    models = list(dict.fromkeys([ErrorReply, OkReply, *REPLY_MODELS.values(), Telemetry, PathViolation]))
     references, definitions = models_json_schema([(model, "validation") for model in models], ref_template=_REFERENCE)
     request = TypeAdapter(Request).json_schema(ref_template=_REFERENCE)
     shared = {**definitions["$defs"], **request.pop("$defs")}
@@ -46,9 +48,10 @@ def api_schema() -> dict[str, Any]:
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": f"hexactl ZeroMQ API, protocol version {PROTOCOL_VERSION}",
         "request": request,
-        "reply": {"anyOf": [reference(model) for model in models if model is not Telemetry]},
+        "reply": {"anyOf": [reference(model) for model in models if model not in (Telemetry, PathViolation)]},
         "replies": {command: reference(model) for command, model in REPLY_MODELS.items()},
         "telemetry": reference(Telemetry),
+        "path_violation": reference(PathViolation),
         "$defs": dict(sorted(shared.items())),
     }
 

@@ -7,11 +7,14 @@ message and the request's ``id`` when it could be read.
 
 from __future__ import annotations
 
+import dataclasses
 import json
-from enum import StrEnum
+from collections.abc import Mapping
+from enum import Enum, StrEnum
 from math import isfinite
 from typing import Any
 
+import numpy as np
 from pydantic import TypeAdapter, ValidationError
 
 from hexactl.adapters.api.messages import COMMANDS, PROTOCOL_VERSION, Request
@@ -35,10 +38,12 @@ class ErrorCode(StrEnum):
     UNSUPPORTED_VERSION = "unsupported_version"
     TOO_LARGE = "too_large"
     FORBIDDEN_PATH = "forbidden_path"  # a file outside the data directories
-    FILE_NOT_FOUND = "file_not_found"
+    FILE_NOT_FOUND = "file_not_found"  # or a file that cannot be read or written
+    FILE_EXISTS = "file_exists"  # save_recording never overwrites
     INVALID_CALIBRATION = "invalid_calibration"  # the calibration text or file is refused
     INVALID_SEQUENCE = "invalid_sequence"  # the sequence file is refused
     UNKNOWN_SEQUENCE = "unknown_sequence"
+    NO_RECORDING = "no_recording"  # save_recording before any sequence was played
     INTERNAL_ERROR = "internal_error"  # a bug: logged with its traceback
 
 
@@ -115,15 +120,38 @@ def encode(document: dict[str, Any]) -> bytes:
     return json.dumps(document, allow_nan=False, separators=(",", ":")).encode("ascii")
 
 
+def jsonable(value: Any) -> Any:
+    """``value`` with dataclasses, mappings, tuples, enums and numpy scalars turned into
+    JSON types, and non-finite floats into null (JSON has no NaN)."""
+    if isinstance(value, Enum):
+        return value.value
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {field.name: jsonable(getattr(value, field.name)) for field in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(key): jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(item) for item in value]
+    if isinstance(value, np.generic):  # numpy scalars from the kinematics
+        value = value.item()
+    if isinstance(value, float) and not isfinite(value):
+        return None
+    return value
+
+
 def ok_reply(request_id: Any, **fields: Any) -> dict[str, Any]:
     return {"v": PROTOCOL_VERSION, "id": request_id, "ok": True, **fields}
 
 
+def error_body(code: str, message: str, details: Any = None) -> dict[str, Any]:
+    """The ``error`` object of an error reply; ``details`` left out when None or empty."""
+    body: dict[str, Any] = {"code": str(code), "message": message}
+    if details:
+        body["details"] = details
+    return body
+
+
 def error_reply(request_id: Any, code: str, message: str, details: Any = None) -> dict[str, Any]:
-    error: dict[str, Any] = {"code": str(code), "message": message}
-    if details is not None:
-        error["details"] = details
-    return {"v": PROTOCOL_VERSION, "id": request_id, "ok": False, "error": error}
+    return {"v": PROTOCOL_VERSION, "id": request_id, "ok": False, "error": error_body(code, message, details)}
 
 
 def split_envelope(frames: list[bytes]) -> tuple[list[bytes], list[bytes]]:
