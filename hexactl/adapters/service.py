@@ -1,0 +1,252 @@
+"""The composition root of ``hexactl serve`` (ros2_control's "manager"): geometry file →
+CAN link (or the in-process simulator on a ``virtual:`` bus) → controller → API server
+and telemetry publisher.
+
+Threads: the control loop (its own, real-time where allowed), the API server, the
+telemetry publisher and, with the simulator, the six simulated actuators. The caller's
+thread only starts and stops them.
+
+Shutdown (SIGINT/SIGTERM, or :meth:`Service.close`): the API stops taking commands, a
+moving platform brakes to rest, the actuators are disabled (an E-stop if they will not
+be), then the loop, the link, the simulator and the sockets close.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import FrameType
+
+import can
+import zmq
+
+from firmware_proto.codec import LoopRate
+from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.security import CurveServer, CurveServerKeys, check_endpoints, is_local_endpoint
+from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT, ApiServer
+from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, TelemetryPublisher
+from hexactl.adapters.api.wire import jsonable
+from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
+from hexactl.adapters.can.transport import BusSpecError, open_bus
+from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
+from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
+from hexactl.control.controller import Controller
+from hexactl.control.core import ControlState, MotionState
+from hexactl.kinematics.geometry import Geometry, GeometryError
+
+SHUTDOWN_BRAKE_TIMEOUT_S = 10.0
+"""How long shutdown waits for a moving platform to brake to rest before it E-stops."""
+
+SIMULATOR_WATCHDOG_CYCLES = 50
+SIMULATOR_SUPERVISION = SupervisionConfig(heartbeat_timeout_s=0.2, setpoint_lag_s=0.2)
+"""Timeouts for the in-process simulator, relaxed from the protocol's 5-cycle watchdog
+and the 50 ms supervision: the simulated firmwares share the process (and its GIL) with
+the loop, and after a stall of their thread they advance their clocks before reading
+the set-points queued meanwhile, so a stall of a few periods, common on a loaded
+machine, would trip their watchdog although the loop sent every set-point. Real
+actuators keep the defaults."""
+
+log = logging.getLogger("hexactl.service")
+
+
+class ServiceError(Exception):
+    """The service cannot start as configured; the message says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class ServiceConfig:
+    """What ``hexactl serve`` runs.
+
+    ``config_path``: the nominal geometry (None: :func:`default_config_path`);
+    ``calibration_path``: a calibration to start with instead; ``can``: the bus of real
+    actuators, e.g. ``socketcan:can0`` (None: the simulator, whose true platform has the
+    seeded manufacturing errors of :func:`hexactl.sim.true_platform.true_geometry`);
+    ``data_dirs``: where requests may read and write files (None: ./recordings,
+    ./calibrations, ./sequences and the geometry file's directory).
+    """
+
+    config_path: Path | None = None
+    calibration_path: Path | None = None
+    can: str | None = None
+    rate_hz: int = 500
+    api_endpoint: str = DEFAULT_API_ENDPOINT
+    telemetry_endpoint: str = DEFAULT_TELEMETRY_ENDPOINT
+    telemetry_rate_hz: float = DEFAULT_TELEMETRY_RATE_HZ
+    data_dirs: tuple[Path, ...] | None = None
+    curve: CurveServerKeys | None = None
+    simulator_seed: int = 0
+    log_level: str = "INFO"
+
+
+class Simulator:
+    """Six simulated actuator firmwares on an in-process ``virtual:`` bus, driving a
+    simulated physical platform with manufacturing errors."""
+
+    def __init__(self, nominal: Geometry, seed: int) -> None:
+        # Imported here: real hardware never loads the simulator.
+        from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
+        from hexactl.sim.physical_platform import PhysicalPlatform
+        from hexactl.sim.true_platform import true_geometry
+
+        truth = true_geometry(nominal, seed)
+        self.bus_spec = f"virtual:hexactl-sim-{os.getpid()}-{id(self)}"  # private to this service
+        firmwares = make_firmwares(zero_posture_readings_mm(truth), actuator_params_for(nominal), seed=seed)
+        self._runner = ActuatorBus(open_bus(self.bus_spec), firmwares).start()
+        self.platform = PhysicalPlatform(truth, self._runner.actual_positions_mm)
+        """The simulated platform: its true pose, for simulated measurements."""
+
+    def close(self) -> None:
+        self._runner.close()
+
+
+class Service:
+    """The running service; :meth:`start` composes and starts it, :meth:`close` stops it."""
+
+    def __init__(self, controller: Controller, link: CanActuatorLink, simulator: Simulator | None,
+                 context: zmq.Context, curve: CurveServer | None, server: ApiServer, publisher: TelemetryPublisher) -> None:
+        self.controller = controller
+        self.simulator = simulator
+        self.api_endpoint = server.endpoint
+        self.telemetry_endpoint = publisher.endpoint
+        self._link = link
+        self._context = context
+        self._curve = curve
+        self._server = server
+        self._publisher = publisher
+
+    @classmethod
+    def start(cls, config: ServiceConfig) -> Service:
+        """Load the geometry, open the actuators, start the loop and the sockets.
+
+        :raises ServiceError: for a refused geometry, a bus that cannot be opened or an
+            endpoint that cannot be bound
+        :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
+            without CURVE keys
+        """
+        check_endpoints([config.api_endpoint, config.telemetry_endpoint], config.curve)
+        config_path = config.config_path or default_config_path()
+        nominal = _load(config_path)
+        active, source = (_load(config.calibration_path), config.calibration_path) if config.calibration_path else (nominal, config_path)
+        calibration_id = geometry_id(active)
+        log.info("geometry %r (%s) from %s", active.name, calibration_id, source)
+
+        simulator = Simulator(nominal, config.simulator_seed) if config.can is None else None
+        spec = simulator.bus_spec if simulator else config.can
+        watchdog = {"watchdog_cycles": SIMULATOR_WATCHDOG_CYCLES} if simulator else {}
+        try:
+            link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz), **watchdog))
+        except (BusSpecError, can.CanError, OSError, ValueError) as error:
+            if simulator:
+                simulator.close()
+            raise ServiceError(f"cannot open the actuators' bus {spec}: {error}") from None
+        if simulator:
+            log.info("actuators: six simulated on %s, true platform %r; watchdog %d cycles, supervision timeouts "
+                     "%g s (relaxed for an in-process simulation)", spec, simulator.platform.geometry.name,
+                     SIMULATOR_WATCHDOG_CYCLES, SIMULATOR_SUPERVISION.heartbeat_timeout_s)
+        else:
+            log.info("actuators: CAN %s", spec)
+
+        loop = LoopConfig(rate_hz=config.rate_hz)
+        controller_config = ControllerConfig(loop=loop, supervision=SIMULATOR_SUPERVISION) if simulator else ControllerConfig(loop=loop)
+        controller = Controller(link, active, calibration_id, calibration_source=str(source), config=controller_config)
+        realtime = controller.start()
+        log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
+
+        data = DataDirectories(config.data_dirs or _default_data_dirs(config_path))
+        context = zmq.Context()
+        curve = CurveServer(context, config.curve) if config.curve else None
+        try:
+            server = ApiServer(context, config.api_endpoint, CommandHandler(controller, data), curve)
+            publisher = TelemetryPublisher(context, config.telemetry_endpoint, lambda: jsonable(controller.telemetry()),
+                                           config.telemetry_rate_hz, curve)
+        except (zmq.ZMQError, ValueError) as error:
+            cls._close_core(controller, link, simulator)
+            if curve:
+                curve.close()
+            context.destroy(linger=0)
+            raise ServiceError(f"cannot serve: {error}") from None
+        server.start()
+        publisher.start()
+        security = "CURVE" if curve else "no authentication (loopback)"
+        log.info("API on %s, telemetry on %s at %g Hz; %s", server.endpoint, publisher.endpoint, config.telemetry_rate_hz, security)
+        log.info("data directories: %s", ", ".join(str(directory) for directory in data.directories))
+        return cls(controller, link, simulator, context, curve, server, publisher)
+
+    def close(self) -> None:
+        """Stop taking commands, bring the platform to rest disabled, close everything."""
+        self._server.close()
+        _bring_to_rest(self.controller)
+        self._publisher.close()
+        self._close_core(self.controller, self._link, self.simulator)
+        if self._curve:
+            self._curve.close()
+        self._context.term()
+        log.info("stopped")
+
+    @staticmethod
+    def _close_core(controller: Controller, link: CanActuatorLink, simulator: Simulator | None) -> None:
+        controller.shutdown()
+        link.close()
+        if simulator:
+            simulator.close()
+
+
+def run_service(config: ServiceConfig) -> int:
+    """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly."""
+    logging.basicConfig(level=config.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for endpoint in (config.api_endpoint, config.telemetry_endpoint):
+        if not is_local_endpoint(endpoint):
+            log.warning("%s is reachable from the network (CURVE required and configured)", endpoint)
+    stopping = threading.Event()
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        log.info("%s: shutting down", signal.Signals(signum).name)
+        stopping.set()
+
+    previous = {number: signal.signal(number, stop) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        service = Service.start(config)
+        try:
+            stopping.wait()
+        finally:
+            service.close()
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    return 0
+
+
+def _bring_to_rest(controller: Controller) -> None:
+    """Brake to rest and disable; E-stop if that does not happen in time."""
+    telemetry = controller.telemetry()
+    if telemetry.state != ControlState.ENABLED.value:
+        return  # disabled already, or FAULT/ESTOP: the actuators hold by themselves
+    if telemetry.motion != MotionState.HOLDING.value:
+        controller.stop()
+        deadline = time.monotonic() + SHUTDOWN_BRAKE_TIMEOUT_S
+        while controller.telemetry().motion != MotionState.HOLDING.value and time.monotonic() < deadline:
+            time.sleep(0.05)
+    result = controller.disable()
+    if result.ok:
+        log.info("actuators disabled")
+    else:
+        log.warning("disable refused (%s: %s): E-stop", result.error, result.message)
+        controller.estop()
+
+
+def _load(path: Path) -> Geometry:
+    try:
+        return load_geometry(path)
+    except GeometryError as error:
+        raise ServiceError(str(error)) from None
+
+
+def _default_data_dirs(config_path: Path) -> tuple[Path, ...]:
+    working = Path.cwd()
+    return (working / "recordings", working / "calibrations", working / "sequences", config_path.resolve().parent)

@@ -1,0 +1,104 @@
+"""The CLI clients against a service running in-process on a random port: exit status
+0 on ok, 1 on an error reply, 2 when nobody answers; ``monitor --once``; ``keys``."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hexactl.adapters.api.messages import Telemetry
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
+
+
+def run(service, command: str, *arguments: str) -> int:
+    return main([command, "--api", service.api, *arguments])
+
+
+@pytest.mark.parametrize(
+    "arguments",
+    [
+        ["status"], ["enable"], ["disable"], ["stop"], ["estop"], ["reset"], ["pause"], ["resume"], ["abort"],
+        ["leg-lock", "2"], ["unlock"], ["play", "x_sweep"],
+    ],
+)
+def test_commands_exit_zero_when_ok(service, arguments, capsys) -> None:
+    assert run(service, *arguments) == 0
+    assert capsys.readouterr().out.strip()
+
+
+def test_move_sends_the_parsed_pose(service, capsys) -> None:
+    service.controller.state = "enabled"
+    assert run(service, "move", "z=50,yaw=5", "--duration", "2") == 0
+    assert service.controller.calls[-1] == ("move", ([0.0, 0.0, 50.0, 0.0, 0.0, 5.0], 2.0, None))
+    assert run(service, "move", "--", "-10,0,0,0,0,0") == 0
+    assert capsys.readouterr().out.startswith("ok")
+
+
+def test_refusal_exits_one_and_says_why(service, capsys) -> None:
+    service.controller.state = "enabled"
+    assert run(service, "move", "x=700") == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error path_violation: waypoint 1: x 700 mm outside the pose envelope")
+
+
+def test_json_prints_the_raw_reply(service, capsys) -> None:
+    assert run(service, "status", "--json") == 0
+    reply = json.loads(capsys.readouterr().out)
+    Telemetry.model_validate(reply["status"])
+
+
+def test_no_answer_exits_two(tmp_path, capsys) -> None:
+    endpoint = f"ipc://{tmp_path}/nobody"
+    assert main(["status", "--api", endpoint, "--timeout", "0.2"]) == 2
+    assert f"no answer from {endpoint}" in capsys.readouterr().err
+
+
+def test_bad_arguments_exit_two(service) -> None:
+    with pytest.raises(SystemExit) as exited:
+        run(service, "move", "1,2,3")
+    assert exited.value.code == 2
+    with pytest.raises(SystemExit):
+        run(service, "leg-lock", "7")
+
+
+def test_load_calibration_by_path_or_content(service, nominal, tmp_path, capsys) -> None:
+    calibrated = nominal.model_copy(update={"name": "sent"})
+    inside = service.data_dir / "c.toml"
+    inside.write_text(geometry_to_toml(calibrated))
+    assert run(service, "load-calibration", str(inside)) == 0
+    assert capsys.readouterr().out.startswith(f"ok: calibration {geometry_id(calibrated)} loaded")
+    elsewhere = tmp_path / "elsewhere.toml"
+    elsewhere.write_text(geometry_to_toml(calibrated))
+    assert run(service, "load-calibration", str(elsewhere)) == 1  # the service may not read it
+    assert "forbidden_path" in capsys.readouterr().err
+    assert run(service, "load-calibration", "--send", str(elsewhere)) == 0  # but may be sent it
+    assert run(service, "rollback-calibration") == 0
+
+
+def test_save_recording(service, capsys) -> None:
+    assert run(service, "play", "compound") == 0
+    target = service.data_dir / "run.csv"
+    assert run(service, "save-recording", str(target)) == 0
+    assert capsys.readouterr().out.strip().endswith(f"2 records of compound (playing) written to {target}")
+    assert run(service, "save-recording", str(target)) == 1  # never overwrites
+
+
+def test_monitor_once(service, capsys) -> None:
+    assert main(["monitor", "--once", "--telemetry", service.telemetry]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("state          disabled") and "calibration" in out
+    assert main(["monitor", "--once", "--json", "--telemetry", service.telemetry]) == 0
+    Telemetry.model_validate_json(capsys.readouterr().out)
+
+
+def test_monitor_without_service_exits_two(tmp_path, capsys) -> None:
+    assert main(["monitor", "--once", "--telemetry", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
+    assert "no telemetry" in capsys.readouterr().err
+
+
+def test_keys(tmp_path, capsys) -> None:
+    assert main(["keys", "--out", str(tmp_path / "k")]) == 0
+    assert "--curve-secret" in capsys.readouterr().out
+    assert main(["keys", "--out", str(tmp_path / "k")]) == 2  # refuses to overwrite

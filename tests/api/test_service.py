@@ -1,0 +1,161 @@
+"""The whole service: geometry → CAN link → six simulated actuators on a virtual bus →
+controller → API and telemetry, in-process; and ``hexactl serve`` as a process that
+shuts down cleanly on SIGTERM."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
+from hexactl.adapters.api.messages import StatusReply, Telemetry
+from hexactl.adapters.api.security import SecurityError
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.files.geometry_file import geometry_id
+from hexactl.adapters.service import Service, ServiceConfig, ServiceError
+
+WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
+
+
+def wait_for(condition: Callable[[], object], what: str) -> object:
+    """Poll ``condition`` until it returns something true (not a timing assertion: the
+    bound only turns a hang into a failure)."""
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("data")
+
+
+@pytest.fixture(scope="module")
+def running(data_dir) -> Iterator[Service]:
+    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                          data_dirs=(data_dir,)))
+    yield service
+    service.close()
+
+
+@pytest.fixture
+def client(running) -> Iterator[HexactlClient]:
+    with HexactlClient(running.api_endpoint) as client:
+        yield client
+
+
+def status(client: HexactlClient) -> dict:
+    reply = client.call("status")
+    StatusReply.model_validate(reply)  # the real controller's telemetry fits the documented model
+    return reply["status"]
+
+
+def enable(client: HexactlClient) -> None:
+    def attempt() -> bool:
+        try:
+            client.call("enable")
+        except CommandError as error:
+            if error.code == "already_enabled":
+                return True
+            assert error.code == "heartbeat_missing", error  # actuators still booting
+            return False
+        return True
+
+    wait_for(attempt, "the actuators to enable")
+
+
+def at_rest(client: HexactlClient) -> dict | None:
+    record = status(client)
+    return record if record["motion"] == "holding" and record["sequence"] is None else None
+
+
+def test_status_names_the_active_geometry(client, nominal) -> None:
+    record = status(client)
+    assert record["calibration_id"] == geometry_id(nominal)
+    assert record["loop"]["rate_hz"] == 500.0
+    assert record["leg_feedback"] is not None
+
+
+def test_telemetry_records_from_the_real_controller(running) -> None:
+    with TelemetrySubscriber(running.telemetry_endpoint) as telemetry:
+        record = Telemetry.model_validate(telemetry.receive(WAIT_S))
+    assert record.state in ("disabled", "enabled")
+
+
+def test_move_play_record_estop_reset(client, data_dir) -> None:
+    enable(client)
+    moved = client.call("move", pose=[0, 0, 20, 0, 0, 2], duration=0.5)
+    assert moved["goal"] == pytest.approx([0, 0, 20, 0, 0, 2])
+    record = wait_for(lambda: at_rest(client), "the move to end")
+    assert record["pose_command"] == pytest.approx([0, 0, 20, 0, 0, 2], abs=1e-6)
+    assert record["pose_measured"] == pytest.approx([0, 0, 20, 0, 0, 2], abs=0.05)  # 1 µm sensor steps
+
+    sequence = {"name": "hop", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0], "dwell": 0.05}, {"pose": [0] * 6, "dwell": 0.05}]}
+    played = client.call("play", sequence=sequence)
+    assert (played["name"], played["waypoints"]) == ("hop", 2)
+    wait_for(lambda: at_rest(client), "the sequence to end")
+    saved = client.call("save_recording", path="hop.csv")
+    assert (saved["name"], saved["status"], saved["records"]) == ("hop", "finished", 2)
+    assert len((data_dir / "hop.csv").read_text().splitlines()) == 3
+
+    refused = client.request("move", pose=[700, 0, 0, 0, 0, 0])
+    assert refused["error"]["code"] == "path_violation"
+    assert refused["error"]["details"]["violations"][0]["axis"] == "x"
+
+    client.call("estop")
+    assert status(client)["state"] == "estop"
+    assert client.request("enable")["error"]["code"] == "latched"
+    client.call("reset")
+    wait_for(lambda: status(client)["state"] == "disabled", "the reset")
+
+
+def test_non_loopback_bind_without_curve_is_refused_before_anything_starts() -> None:
+    with pytest.raises(SecurityError, match="without CURVE"):
+        Service.start(ServiceConfig(api_endpoint="tcp://0.0.0.0:*", telemetry_endpoint="tcp://127.0.0.1:*"))
+
+
+def test_bad_geometry_is_refused(tmp_path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("zero_lengths = [1]\n")
+    with pytest.raises(ServiceError, match="bad.toml"):
+        Service.start(ServiceConfig(config_path=bad, api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*"))
+
+
+def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) -> None:
+    api, telemetry = f"ipc://{tmp_path}/api", f"ipc://{tmp_path}/telemetry"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry],
+        stderr=subprocess.PIPE, text=True, cwd=tmp_path, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        log = []
+        for line in process.stderr:
+            log.append(line)
+            if "API on" in line:
+                break
+        assert main(["status", "--api", api, "--timeout", str(WAIT_S)]) == 0
+        with HexactlClient(api, timeout_s=WAIT_S) as client:
+            enable(client)
+        assert main(["monitor", "--once", "--telemetry", telemetry, "--timeout", str(WAIT_S)]) == 0
+        assert "state          enabled" in capsys.readouterr().out
+        process.send_signal(signal.SIGTERM)
+        log += process.stderr.readlines()
+        assert process.wait(WAIT_S) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+    text = "".join(log)
+    for expected in ("geometry 'hexactl nominal 1500/900'", "actuators: six simulated", f"API on {api}",
+                     "SIGTERM: shutting down", "actuators disabled", "stopped"):
+        assert expected in text, text
