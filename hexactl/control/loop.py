@@ -3,8 +3,10 @@
 Timing. Deadlines are absolute, ``time.monotonic_ns`` based: deadline k = anchor + k·T,
 so sleep inaccuracy never accumulates into drift. The thread sleeps until
 ``spin_window_us`` before the deadline (``time.sleep``: clock_nanosleep on Linux) and
-busy-waits the rest, because a sleep's wake-up is only as precise as the scheduler's
-timer slack. After an overrun that puts the loop a whole period or more behind, it does
+busy-waits the rest, for two reasons: a sleep's wake-up is only as precise as the
+scheduler's timer slack, and a thread waking from sleep must first win the GIL back,
+which can take up to the GIL switch interval (see :mod:`hexactl.control.realtime`);
+spinning, the loop holds the GIL when the deadline comes. After an overrun that puts the loop a whole period or more behind, it does
 not burst through the missed cycles to catch up: it re-anchors the grid at the present
 and counts the dropped deadlines as ``skipped`` (and as missed).
 

@@ -2,6 +2,16 @@
 the garbage collector. Every step is optional, none is required to run: without the
 privilege a step is skipped and :class:`RealtimeReport` says what was obtained.
 
+The GIL. Every thread of the process that runs Python competes with the loop for the
+GIL, so they are all part of its timing: once the loop asks, the holder gives the GIL up
+after at most ``switch_interval_s`` (plus its longest C call). Two consequences, measured
+by tools/bench_loop.py: the loop's spin window must be longer than the switch interval
+(it then wakes early enough to hold the GIL at its deadline), and a caller thread that
+the kernel preempts *while holding the GIL* stalls the loop for as long as it is
+preempted — a priority inversion SCHED_FIFO on the loop alone cannot prevent. On a
+loaded machine, run the service's other threads at a SCHED_FIFO priority below the
+loop's (or keep other load off its CPUs).
+
 Garbage collection policy (why: a cyclic collection of the whole heap can stop every
 thread for milliseconds at a moment the collector picks):
 
@@ -43,10 +53,10 @@ class RealtimeConfig(BaseModel):
     cpus: tuple[int, ...] | None = Field(default=None, description="CPUs the loop thread may run on; None: any")
     lock_memory: bool = Field(default=False, description="mlockall(MCL_CURRENT | MCL_FUTURE): no page faults")
     switch_interval_s: float | None = Field(
-        default=0.0005,
+        default=0.0001,
         gt=0,
-        description="sys.setswitchinterval while running: the longest another thread can keep the GIL "
-        "from the loop once it wakes (CPython's default 5 ms would be 2.5 periods); None: leave it",
+        description="sys.setswitchinterval while running: how long another thread may keep the GIL once "
+        "the loop asks for it (CPython's default, 5 ms, is 2.5 periods at 500 Hz); None: leave it",
     )
     manage_gc: bool = Field(default=True, description="apply the garbage collection policy of this module")
     gc_interval_s: float = Field(default=1.0, gt=0, description="period of the loop's young-generation collection")
