@@ -117,8 +117,9 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         else:
             damping *= 10.0
         small_step = max(np.max(np.abs(step_theta)), np.max(np.abs(step_poses[:, :3]))) < _STEP_TOLERANCE_MM
-        # Near the minimum the cost changes by rounding noise of either sign: both mean done.
-        if abs(change) <= _COST_TOLERANCE * current.cost or (change >= 0.0 and small_step):
+        # Near the minimum the cost changes by rounding noise of either sign: both mean done,
+        # as does a cost at rounding level (noise-free data, residuals ~1e-10 σ).
+        if abs(change) <= _COST_TOLERANCE * current.cost or (change >= 0.0 and small_step) or current.cost < 1e-20:
             converged = True
             break
         if damping > 1e12:  # no downhill step though the gradient is not negligible

@@ -121,6 +121,9 @@ def leg_by_leg_result(method: Method, reason: str, data: MeasurementData, nomina
     squared_lengths, expected = [], []
     for x, leg_data in zip(estimates, legs):
         residuals, jacobian = locked_leg_residuals(x, leg_data)
+        # Gauss–Newton information of the plain fit. With a robust loss it ignores the
+        # down-weighting, so the standard deviations are slightly optimistic when postures
+        # were down-weighted (the outlier list says which).
         information_blocks.append(jacobian.T @ jacobian)
         count = len(residuals)
         share = (count - PARAMETERS_PER_LEG) / count

@@ -69,10 +69,11 @@ def plan_campaign(controller: Geometry, design: CampaignDesign) -> tuple[Posture
 
     Raises ``ValueError`` if a plan fails (its message says why).
     """
-    requests = [PlanRequest(leg, design.postures_per_leg, candidates=design.candidates, seed=design.seed * 7 + leg)
+    # One candidate stream per plan (leg 0: free), distinct for every seed and leg.
+    requests = [PlanRequest(leg, design.postures_per_leg, candidates=design.candidates, seed=10 * design.seed + leg)
                 for leg in range(1, LEG_COUNT + 1) if design.postures_per_leg]
     if design.free_postures:
-        requests.append(PlanRequest(0, design.free_postures, candidates=design.candidates, seed=design.seed * 7))
+        requests.append(PlanRequest(0, design.free_postures, candidates=design.candidates, seed=10 * design.seed))
     plans = tuple(plan_postures(controller, request) for request in requests)
     for plan in plans:
         if not plan.ok:
@@ -113,7 +114,9 @@ def run_offline_campaign(controller: Geometry, true: Geometry, design: CampaignD
     """Plan on ``controller`` and execute on ``true``: the whole simulated data collection."""
     plans = plan_campaign(controller, design)
     instrument = SimulatedInstrument.for_geometry(controller, seed=design.seed, point_sigma_mm=design.point_sigma_mm)
-    return execute_plans(controller, true, plans, instrument, design.sensor_sigma_mm, seed=design.seed + 1_000_003)
+    # The sensor noise gets its own stream, independent of the instrument's.
+    sensor_seed = int(np.random.SeedSequence(design.seed).spawn(1)[0].generate_state(1)[0])
+    return execute_plans(controller, true, plans, instrument, design.sensor_sigma_mm, seed=sensor_seed)
 
 
 def execute_motion(controller: Geometry, true: Geometry, motion: TestMotion) -> MotionResult:

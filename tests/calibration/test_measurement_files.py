@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hexactl.adapters.files.measurements import (
     MeasurementFileError,
@@ -110,3 +112,27 @@ def test_screening_names_inconsistent_collinear_and_unlocked_rows(nominal, leglo
     assert "collinear" in by_line[int(data.lines[4])]
     assert f"leg {leg} is marked locked" in by_line[int(data.lines[6])]
     assert not screen_measurements(data, np.array(nominal.measurement.feature_points), nominal.measurement.point_sigma_mm)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    legs=st.lists(st.integers(0, 6), min_size=1, max_size=8),
+    scale=st.floats(1e-3, 1e4),
+    points=st.booleans(),
+)
+def test_any_data_round_trips_through_the_file_format(legs, scale, points):
+    rng = np.random.default_rng(len(legs))
+    count = len(legs)
+    readings = rng.uniform(-1, 1, (count, 6)) * scale
+    lines = np.arange(1, count + 1)
+    if points:
+        data = MeasurementData(np.array(legs), readings, lines, points_mm=rng.uniform(-1, 1, (count, 3, 3)) * scale)
+    else:
+        data = MeasurementData(np.array(legs), readings, lines, poses=rng.uniform(-1.5, 1.5, (count, 6)))
+    parsed = parse_measurements(format_measurements(data, comments=["round trip"]), "rt.csv", 3)
+    assert not parsed.problems and np.array_equal(parsed.data.locked_leg, data.locked_leg)
+    assert np.allclose(parsed.data.readings_mm, readings, atol=1e-6)
+    if points:
+        assert np.allclose(parsed.data.points_mm, data.points_mm, atol=1e-6)
+    else:
+        assert np.allclose(parsed.data.poses, data.poses, atol=1e-9)
