@@ -52,7 +52,9 @@ MIN_POSTURES = 8
 class IdentificationOptions:
     """Settings of an identification. Lengths in mm.
 
-    ``point_sigma_mm`` None: the geometry's ``[measurement] point_sigma_mm``.
+    ``point_sigma_mm`` None: the geometry's ``[measurement] point_sigma_mm``;
+    ``reading_sigma_mm`` the sensors' noise. ``estimate_scales``: ``full`` also identifies
+    the six sensor scale errors.
     ``max_joint_deviation_mm`` / ``max_zero_length_deviation_mm`` bound leglock's and
     paper's estimates around the nominal (the paper's boundary conditions).
     ``loss`` is leglock's scipy robust loss ("linear", "soft_l1", "huber", "cauchy",
