@@ -90,3 +90,14 @@ def test_unreadable_and_invalid_toml_files_are_named(tmp_path: Path) -> None:
     broken.write_text("base_joints = [[1, 2, 3]\n")
     with pytest.raises(GeometryError, match="broken.toml: not valid TOML"):
         load_geometry(broken)
+
+
+def test_saved_files_get_ordinary_permissions(nominal, tmp_path: Path) -> None:
+    import os
+
+    previous = os.umask(0o022)
+    try:
+        saved = save_geometry(nominal, tmp_path / "cal.toml")
+    finally:
+        os.umask(previous)
+    assert saved.stat().st_mode & 0o777 == 0o644

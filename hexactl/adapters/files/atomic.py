@@ -19,6 +19,7 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     target.parent.mkdir(parents=True, exist_ok=True)
     descriptor, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
+        os.fchmod(descriptor, 0o666 & ~_current_umask())  # mkstemp makes 0600; a saved file is an ordinary file
         with os.fdopen(descriptor, "wb") as handle:
             handle.write(data)
             handle.flush()
@@ -33,3 +34,9 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     finally:
         os.close(directory)
     return target
+
+
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
