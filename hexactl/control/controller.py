@@ -78,7 +78,9 @@ class SequenceTelemetry:
 class Telemetry:
     """One cycle's picture. ``t``: monotonic time of the cycle, s. Poses relative to the
     zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
-    solution); legs sensor mm (``leg_feedback`` None before the first read)."""
+    solution). Legs in sensor mm; an actuator not heard from yet reads NaN in
+    ``leg_feedback`` (and, while DISABLED, in ``leg_setpoints``, which then mirror the
+    feedback); ``leg_feedback`` is None before the first read."""
 
     t: float
     state: str

@@ -63,8 +63,9 @@ LINK_FAILED_STATES = frozenset({BusState.BUS_OFF, BusState.DOWN})
 class ActuatorFeedback:
     """The latest report of one actuator.
 
-    ``heartbeat_age_s``: time since the last frame from this actuator arrived, s
-    (``inf`` if none ever did). ``setpoint_counter``: the ``counter`` of the last
+    ``position_mm``/``velocity_mm_s``: NaN until the actuator has reported them (the
+    loop then knows no pose and refuses to enable). ``heartbeat_age_s``: time since the
+    last frame from this actuator arrived, s (``inf`` if none ever did). ``setpoint_counter``: the ``counter`` of the last
     :meth:`ActuatorInterface.send_setpoints` call whose value the actuator applied, as
     passed to that call (an implementation with a narrower wire field unwraps it), or
     −1 if none yet. ``fault_bits``: the drive's fault word, 0 when healthy.

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.control.planning import Waypoint
 from hexactl.kinematics.geometry import Pose6, describe_validation_error
 from hexactl.kinematics.pose import POSE_AXES
@@ -88,25 +89,18 @@ def sequence_from_toml(text: str, source: str = "sequence") -> MotionSequence:
 BUILTIN_DWELL_S = 2.0
 """Dwell of the built-in sequences at each waypoint, s."""
 
-# The paper's test motions (section 4), relative mm/deg. hexactl.calibration.test_motions
-# is to hold these as the single definition; build from it once it is in the tree.
-_PAPER_MOTIONS: dict[str, tuple[str, tuple[tuple[float, ...], ...]]] = {
-    "x_sweep": ("Translate in X (paper Fig. 3)",
-                tuple((x, 0.0, 0.0, 0.0, 0.0, 0.0) for x in (600.0, 450.0, 300.0, 150.0, 0.0, -150.0, -300.0, -450.0, -600.0))),
-    "y_rotation": ("Rotate about Y (paper Fig. 4)",
-                   tuple((0.0, 0.0, 0.0, 0.0, p, 0.0) for p in (20.0, 15.0, 10.0, 5.0, 0.0, -5.0, -10.0, -15.0, -20.0))),
-    "compound": ("Compound motion (paper Table 1)",
-                 ((0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (100.0, 100.0, 100.0, 5.0, 5.0, 5.0))),
-}
+_PAPER_MOTIONS = {motion.name: motion for motion in PAPER_TEST_MOTIONS}
 
 BUILTIN_SEQUENCES: tuple[str, ...] = tuple(_PAPER_MOTIONS)
+"""The paper's test motions (:mod:`hexactl.calibration.test_motions` defines them)."""
 
 
 def builtin_sequence(name: str, dwell_s: float = BUILTIN_DWELL_S) -> MotionSequence:
-    """One of :data:`BUILTIN_SEQUENCES`; KeyError for another name."""
-    title, poses = _PAPER_MOTIONS[name]
-    return MotionSequence(name=name, description=title,
-                          waypoints=tuple(SequenceWaypoint(pose=pose, dwell=dwell_s) for pose in poses))
+    """One of :data:`BUILTIN_SEQUENCES`, dwelling ``dwell_s`` at each waypoint; KeyError
+    for another name."""
+    motion = _PAPER_MOTIONS[name]
+    return MotionSequence(name=motion.name, description=motion.title,
+                          waypoints=tuple(SequenceWaypoint(pose=pose, dwell=dwell_s) for pose in motion.waypoints))
 
 
 @dataclass(frozen=True, slots=True)
