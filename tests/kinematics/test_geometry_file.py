@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import os
 import tomllib
 from pathlib import Path
 
@@ -93,11 +94,7 @@ def test_unreadable_and_invalid_toml_files_are_named(tmp_path: Path) -> None:
 
 
 def test_saved_files_get_ordinary_permissions(nominal, tmp_path: Path) -> None:
-    import os
-
-    previous = os.umask(0o022)
-    try:
-        saved = save_geometry(nominal, tmp_path / "cal.toml")
-    finally:
-        os.umask(previous)
-    assert saved.stat().st_mode & 0o777 == 0o644
+    umask = os.umask(0)
+    os.umask(umask)
+    saved = save_geometry(nominal, tmp_path / "cal.toml")
+    assert saved.stat().st_mode & 0o777 == 0o666 & ~umask

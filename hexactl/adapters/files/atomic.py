@@ -7,6 +7,15 @@ import tempfile
 from pathlib import Path
 
 
+def _umask() -> int:
+    mask = os.umask(0)  # the only way to read it; done once, at import, before threads exist
+    os.umask(mask)
+    return mask
+
+
+_FILE_MODE = 0o666 & ~_umask()
+
+
 def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) -> Path:
     """Write ``data`` to ``path`` via a temporary file in the same folder, fsync and rename.
 
@@ -19,7 +28,7 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     target.parent.mkdir(parents=True, exist_ok=True)
     descriptor, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
-        os.fchmod(descriptor, 0o666 & ~_current_umask())  # mkstemp makes 0600; a saved file is an ordinary file
+        os.fchmod(descriptor, _FILE_MODE)  # mkstemp makes 0600; a saved file is an ordinary file
         with os.fdopen(descriptor, "wb") as handle:
             handle.write(data)
             handle.flush()
@@ -34,9 +43,3 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     finally:
         os.close(directory)
     return target
-
-
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
