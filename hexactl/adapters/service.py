@@ -132,9 +132,13 @@ class Service:
         check_endpoints([config.api_endpoint, config.telemetry_endpoint], config.curve)
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
+        log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
         active, source = (_load(config.calibration_path), config.calibration_path) if config.calibration_path else (nominal, config_path)
         calibration_id = geometry_id(active)
-        log.info("geometry %r (%s) from %s", active.name, calibration_id, source)
+        if config.calibration_path:
+            log.info("active calibration %r (%s) from %s", active.name, calibration_id, source)
+        else:
+            log.info("no calibration: the nominal geometry is active")
 
         simulator = Simulator(nominal, config.simulator_seed) if config.can is None else None
         spec = simulator.bus_spec if simulator else config.can

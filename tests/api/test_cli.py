@@ -8,7 +8,9 @@ import json
 import pytest
 
 from hexactl.adapters.api.messages import Telemetry
+from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.cli.main import main
+from hexactl.adapters.cli.service_commands import format_telemetry
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 
 
@@ -88,9 +90,19 @@ def test_save_recording(service, capsys) -> None:
 def test_monitor_once(service, capsys) -> None:
     assert main(["monitor", "--once", "--telemetry", service.telemetry]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("state          disabled") and "calibration" in out
+    assert out.startswith("state          disabled, holding") and "calibration" in out
     assert main(["monitor", "--once", "--json", "--telemetry", service.telemetry]) == 0
     Telemetry.model_validate_json(capsys.readouterr().out)
+
+
+def test_telemetry_text_with_unknown_values(service) -> None:
+    record = jsonable(service.controller.telemetry())
+    record.update(pose_measured=None, leg_feedback=[None, 1.0, 2.0, 3.0, 4.0, 5.0], locked_leg=2,
+                  sequence={"name": "s", "index": 2, "total": 3, "phase": "dwelling"},
+                  faults=[{"code": "heartbeat_lost", "message": "no report", "leg": 4}])
+    text = format_telemetry(record)
+    assert "pose measured  unknown" in text and "L1        ?  L2    1.000" in text
+    assert "sequence       s 2/3 (dwelling)" in text and "leg 4: heartbeat_lost (no report)" in text
 
 
 def test_monitor_without_service_exits_two(tmp_path, capsys) -> None:

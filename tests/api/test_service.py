@@ -18,7 +18,7 @@ from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySu
 from hexactl.adapters.api.messages import StatusReply, Telemetry
 from hexactl.adapters.api.security import SecurityError
 from hexactl.adapters.cli.main import main
-from hexactl.adapters.files.geometry_file import geometry_id
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.adapters.service import Service, ServiceConfig, ServiceError
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
@@ -125,6 +125,24 @@ def test_non_loopback_bind_without_curve_is_refused_before_anything_starts() -> 
         Service.start(ServiceConfig(api_endpoint="tcp://0.0.0.0:*", telemetry_endpoint="tcp://127.0.0.1:*"))
 
 
+def test_serve_command_refuses_a_network_bind_without_keys(capsys) -> None:
+    assert main(["serve", "--api", "tcp://*:5555"]) == 2
+    assert "refusing to bind tcp://*:5555 without CURVE" in capsys.readouterr().err
+
+
+def test_serve_starts_with_a_calibration(nominal, tmp_path) -> None:
+    calibrated = nominal.model_copy(update={"name": "calibrated", "zero_lengths": (1750.5,) * 6})
+    path = tmp_path / "cal.toml"
+    path.write_text(geometry_to_toml(calibrated))
+    service = Service.start(ServiceConfig(calibration_path=path, api_endpoint="tcp://127.0.0.1:*",
+                                          telemetry_endpoint="tcp://127.0.0.1:*"))
+    try:
+        with HexactlClient(service.api_endpoint) as client:
+            assert status(client)["calibration_id"] == geometry_id(calibrated)
+    finally:
+        service.close()
+
+
 def test_bad_geometry_is_refused(tmp_path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text("zero_lengths = [1]\n")
@@ -148,7 +166,7 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
         with HexactlClient(api, timeout_s=WAIT_S) as client:
             enable(client)
         assert main(["monitor", "--once", "--telemetry", telemetry, "--timeout", str(WAIT_S)]) == 0
-        assert "state          enabled" in capsys.readouterr().out
+        assert "state          enabled, holding" in capsys.readouterr().out
         process.send_signal(signal.SIGTERM)
         log += process.stderr.readlines()
         assert process.wait(WAIT_S) == 0
@@ -156,6 +174,6 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
         if process.poll() is None:
             process.kill()
     text = "".join(log)
-    for expected in ("geometry 'hexactl nominal 1500/900'", "actuators: six simulated", f"API on {api}",
+    for expected in ("nominal geometry 'hexactl nominal 1500/900'", "no calibration", "actuators: six simulated", f"API on {api}",
                      "SIGTERM: shutting down", "actuators disabled", "stopped"):
         assert expected in text, text

@@ -23,6 +23,9 @@ Pose = Annotated[
     Field(min_length=6, max_length=6, description="[x, y, z, roll, pitch, yaw], mm and deg, relative to the zero posture"),
 ]
 LegValues = Annotated[list[float], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm")]
+LegReadings = Annotated[
+    list[float | None], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm; null for a leg not heard from yet")
+]
 Leg = Annotated[int, Field(ge=1, le=6, description="leg number 1–6")]
 Duration = Annotated[float, Field(gt=0, description="the move takes at least this long, s")]
 Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
@@ -270,7 +273,7 @@ class Telemetry(_Message):
     pose_command: Pose = Field(description="commanded pose")
     pose_measured: Pose | None = Field(description="pose from the actuators' feedback by forward kinematics; null if none")
     leg_setpoints: LegValues = Field(description="set-points sent, sensor mm")
-    leg_feedback: LegValues | None = Field(description="actuator positions reported, sensor mm; null before the first report")
+    leg_feedback: LegReadings | None = Field(description="actuator positions reported, sensor mm; null before the first read")
     locked_leg: Leg | None = Field(description="the locked leg, or null")
     calibration_id: str = Field(description="content hash of the active geometry or calibration")
     sequence: SequenceProgress | None = Field(description="the sequence being played, or null")

@@ -297,14 +297,14 @@ def format_telemetry(record: dict[str, Any]) -> str:
     sequence = record.get("sequence")
     faults = record.get("faults") or []
     lines = [
-        ("state", record["state"]),
+        ("state", f"{record['state']}, {record['motion']}"),
         ("pose command", _pose_text(record.get("pose_command"))),
         ("pose measured", _pose_text(record.get("pose_measured"))),
         ("leg set-points", _legs_text(record.get("leg_setpoints"))),
         ("leg feedback", _legs_text(record.get("leg_feedback"))),
         ("locked leg", str(record["locked_leg"]) if record.get("locked_leg") else "none"),
         ("calibration", record["calibration_id"]),
-        ("sequence", f"{sequence['name']} {sequence['index'] + 1}/{sequence['total']}" if sequence else "none"),
+        ("sequence", f"{sequence['name']} {sequence['index']}/{sequence['total']} ({sequence['phase']})" if sequence else "none"),
         ("faults", "; ".join(_fault_text(fault) for fault in faults) if faults else "none"),
         ("loop", f"{loop['rate_hz']:g} Hz, {loop['cycles']} cycles, {loop['missed']} missed"),
         ("lateness µs", _percentiles_text(loop["lateness_us"])),
@@ -319,10 +319,10 @@ def _pose_text(pose: list[float] | None) -> str:
     return "  ".join(f"{axis} {value:9.3f}" for axis, value in zip(POSE_AXES, pose))
 
 
-def _legs_text(values: list[float] | None) -> str:
+def _legs_text(values: list[float | None] | None) -> str:
     if values is None:
         return "unknown"
-    return "  ".join(f"L{leg} {value:8.3f}" for leg, value in enumerate(values, start=1))
+    return "  ".join(f"L{leg} {'?' if value is None else format(value, '8.3f'):>8}" for leg, value in enumerate(values, start=1))
 
 
 def _fault_text(fault: dict[str, Any]) -> str:
