@@ -64,6 +64,10 @@ from hexactl.kinematics.inverse import sensor_setpoints
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 
 
+TELEMETRY_PERCENTILES_MAX_AGE_S = 0.25
+"""Telemetry recomputes the loop's percentiles (a sort of its window) at most this often."""
+
+
 @dataclass(frozen=True, slots=True)
 class SequenceTelemetry:
     """The playing sequence: ``index`` 1-based waypoint being approached or dwelt at."""
@@ -173,9 +177,11 @@ class Controller:
         )
 
     def telemetry(self) -> Telemetry:
-        """The latest cycle; computing the loop's percentiles sorts its window (~1 ms)."""
+        """The latest cycle. The loop's lateness and compute percentiles are at most
+        ``TELEMETRY_PERCENTILES_MAX_AGE_S`` old; counters and maxima are current."""
         s = self.snapshot
-        stats = replace(self._loop.stats.summary(), guard_clamps=s.clamped_cycles, fk_failures=s.fk_failures)
+        stats = replace(self._loop.stats.summary(TELEMETRY_PERCENTILES_MAX_AGE_S), guard_clamps=s.clamped_cycles,
+                        fk_failures=s.fk_failures)
         return Telemetry(
             t=s.t_ns / 1e9,
             state=s.state.value,

@@ -4,8 +4,8 @@
 (:mod:`hexactl.control.loop`) or directly by a test with simulated time:
 
 1. read the actuators' feedback and the link's health;
-2. carry out the queued commands (at most :data:`MAX_COMMANDS_PER_CYCLE`);
-3. forward kinematics of the feedback → measured pose (every cycle, warm-started);
+2. forward kinematics of the feedback → measured pose (every cycle, warm-started);
+3. carry out the queued commands (at most :data:`MAX_COMMANDS_PER_CYCLE`);
 4. supervise (ENABLED only): heartbeats, actuator faults and states, set-points
    applied, link → FAULT; an actuator reporting E-stop → ESTOP in any state;
 5. ENABLED: next trajectory point → leg-lock projection → IK on the active geometry →
@@ -387,12 +387,12 @@ class ControlCore:
         hardware = self.hardware
         self.feedback = feedback = hardware.read_feedback()
         self.link = hardware.link_health()
+        self._measure(feedback)
         inbox = self.inbox
         for _ in range(MAX_COMMANDS_PER_CYCLE):
             if not inbox:
                 break
             self._execute(inbox.popleft())
-        self._measure(feedback)
         if self.state is not ControlState.ESTOP and now_ns >= self._estop_grace_until_ns and any(
             a.state is ActuatorState.ESTOP for a in feedback.actuators
         ):
@@ -504,8 +504,8 @@ class ControlCore:
             if run.phase is SequencePhase.MOVING:
                 run.phase = SequencePhase.DWELLING
                 run.dwell_end_ns = now + round(run.segments[run.index].dwell_s * 1e9)
-            elif run.phase is SequencePhase.PAUSING:
-                run.phase = SequencePhase.PAUSED
+        if run.phase is SequencePhase.PAUSING and not self._trajectory.moving:
+            run.phase = SequencePhase.PAUSED
         if run.phase is SequencePhase.DWELLING and now >= run.dwell_end_ns:
             self._record(run)
             run.index += 1
@@ -674,9 +674,9 @@ class ControlCore:
         run = self._run
         assert run is not None
         if run.phase is SequencePhase.MOVING:
-            run.phase = SequencePhase.PAUSING
-            run.paused_in_move = True
             self._trajectory.halt()
+            run.phase = SequencePhase.PAUSING  # PAUSED once at rest (see _sequence_step)
+            run.paused_in_move = True
         else:
             run.phase = SequencePhase.PAUSED
             run.paused_in_move = False
@@ -711,8 +711,10 @@ class ControlCore:
             return refusal
         old = self.active
         if self.state is ControlState.ENABLED:
-            # Ramp from the set-points being sent to the new geometry's, within
-            # calibration_ramp_fraction of the leg velocity limit.
+            # Ramp from the set-points being sent to the new geometry's: the difference
+            # at the present pose fades out linearly, all legs together, at
+            # calibration_ramp_fraction of the leg velocity limit (moves are planned
+            # within the rest of it), while the commanded pose carries on.
             target = sensor_setpoints(new.geometry.legs, new.absolute(self.pose_command))
             offset = [s - t for s, t in zip(self.setpoints, target)]
             largest = max(abs(o) for o in offset)

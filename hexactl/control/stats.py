@@ -9,6 +9,7 @@ Percentiles cover the last ``window`` cycles; maxima and counters cover the whol
 
 from __future__ import annotations
 
+import time
 from array import array
 from dataclasses import dataclass
 
@@ -72,6 +73,7 @@ class CycleStats:
         self._lateness = array("q", bytes(8 * window))
         self._compute = array("q", bytes(8 * window))
         self._next = 0
+        self._sorted: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None  # (time, lateness, compute)
 
     def record(self, lateness_ns: int, compute_ns: int) -> None:
         """Store one cycle's figures (ns). Hot path: no allocation beyond int objects."""
@@ -92,25 +94,33 @@ class CycleStats:
         if duration_ns > self.gc_max_ns:
             self.gc_max_ns = duration_ns
 
-    def summary(self) -> LoopStats:
-        """Percentiles over the window; call it off the hot path (it sorts)."""
-        count = min(self.cycles, self.window)
+    def summary(self, max_age_s: float = 0.0) -> LoopStats:
+        """Counters and maxima as of now; percentiles over the window, recomputed only if
+        the last ones are older than ``max_age_s`` (sorting the window takes about half
+        a millisecond of a thread that shares the GIL with the loop). Off the hot path."""
+        now = time.monotonic()
+        cached = self._sorted
+        if cached is None or now - cached[0] > max_age_s:
+            count = min(self.cycles, self.window)
+            cached = self._sorted = (now, _percentiles(self._lateness, count), _percentiles(self._compute, count))
+        _, lateness, compute = cached
         return LoopStats(
             rate_hz=1e9 / self.period_ns,
             cycles=self.cycles,
             missed=self.missed,
             skipped=self.skipped,
-            lateness_us=_percentiles(self._lateness, count, self.max_lateness_ns),
-            compute_us=_percentiles(self._compute, count, self.max_compute_ns),
+            lateness_us=Percentiles(*lateness, self.max_lateness_ns / 1e3),
+            compute_us=Percentiles(*compute, self.max_compute_ns / 1e3),
             gc_runs=self.gc_runs,
             gc_max_us=self.gc_max_ns / 1e3,
         )
 
 
-def _percentiles(ring: array, count: int, maximum_ns: int) -> Percentiles:
+def _percentiles(ring: array, count: int) -> tuple[float, float, float]:
+    """p50, p99, p99.9 of the first ``count`` samples, µs."""
     if count == 0:
-        return Percentiles(0.0, 0.0, 0.0, 0.0)
+        return 0.0, 0.0, 0.0
     # A copy, so the loop can keep writing while this sorts.
     samples = np.array(np.frombuffer(ring, dtype=np.int64)[:count], dtype=float)
     p50, p99, p999 = np.percentile(samples, [50.0, 99.0, 99.9]) / 1e3
-    return Percentiles(float(p50), float(p99), float(p999), maximum_ns / 1e3)
+    return float(p50), float(p99), float(p999)

@@ -21,3 +21,14 @@ def test_percentiles_over_the_window_maxima_over_the_run():
 def test_empty_summary():
     summary = CycleStats(period_ns=1_000_000).summary()
     assert summary.cycles == 0 and summary.lateness_us.p999 == 0.0
+
+
+def test_percentiles_are_cached_but_counters_are_live():
+    stats = CycleStats(period_ns=1_000_000, window=100)
+    stats.record(100_000, 10_000)
+    first = stats.summary(max_age_s=60.0)
+    stats.record(900_000, 10_000)
+    cached = stats.summary(max_age_s=60.0)
+    assert cached.cycles == 2 and cached.missed == 1 and cached.lateness_us.max == 900.0
+    assert cached.lateness_us.p50 == first.lateness_us.p50  # not recomputed yet
+    assert stats.summary().lateness_us.p50 == 500.0  # max_age_s=0: fresh
