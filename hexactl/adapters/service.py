@@ -18,6 +18,7 @@ import os
 import signal
 import threading
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
@@ -28,7 +29,7 @@ import zmq
 from firmware_proto.codec import LoopRate
 from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.paths import DataDirectories
-from hexactl.adapters.api.security import CurveServer, CurveServerKeys, check_endpoints, is_local_endpoint
+from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError, check_endpoints, is_local_endpoint
 from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT, ApiServer
 from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
@@ -108,24 +109,21 @@ class Simulator:
 class Service:
     """The running service; :meth:`start` composes and starts it, :meth:`close` stops it."""
 
-    def __init__(self, controller: Controller, link: CanActuatorLink, simulator: Simulator | None,
-                 context: zmq.Context, curve: CurveServer | None, server: ApiServer, publisher: TelemetryPublisher) -> None:
+    def __init__(self, controller: Controller, simulator: Simulator | None, api_endpoint: str,
+                 telemetry_endpoint: str, closers: ExitStack) -> None:
         self.controller = controller
         self.simulator = simulator
-        self.api_endpoint = server.endpoint
-        self.telemetry_endpoint = publisher.endpoint
-        self._link = link
-        self._context = context
-        self._curve = curve
-        self._server = server
-        self._publisher = publisher
+        self.api_endpoint = api_endpoint
+        self.telemetry_endpoint = telemetry_endpoint
+        self._closers = closers
 
     @classmethod
     def start(cls, config: ServiceConfig) -> Service:
-        """Load the geometry, open the actuators, start the loop and the sockets.
+        """Load the geometry, open the actuators, start the loop and the sockets; what was
+        started is stopped again if a later step fails.
 
-        :raises ServiceError: for a refused geometry, a bus that cannot be opened or an
-            endpoint that cannot be bound
+        :raises ServiceError: for a refused geometry or key file, a bus that cannot be
+            opened or an endpoint that cannot be bound
         :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
             without CURVE keys
         """
@@ -140,65 +138,65 @@ class Service:
         else:
             log.info("no calibration: the nominal geometry is active")
 
-        simulator = Simulator(nominal, config.simulator_seed) if config.can is None else None
-        spec = simulator.bus_spec if simulator else config.can
-        watchdog = {"watchdog_cycles": SIMULATOR_WATCHDOG_CYCLES} if simulator else {}
-        try:
-            link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz), **watchdog))
-        except (BusSpecError, can.CanError, OSError, ValueError) as error:
+        with ExitStack() as closers:  # unwound in reverse: sockets, bring to rest, loop, link, simulator
+            context = zmq.Context()
+            closers.callback(context.term)
+            curve = None
+            if config.curve:
+                try:
+                    curve = CurveServer(context, config.curve)
+                except (SecurityError, OSError, ValueError) as error:
+                    raise ServiceError(f"CURVE keys: {error}") from None
+                closers.callback(curve.close)
+
+            simulator = None
+            if config.can is None:
+                simulator = Simulator(nominal, config.simulator_seed)
+                closers.callback(simulator.close)
+            spec = simulator.bus_spec if simulator else config.can
+            watchdog = {"watchdog_cycles": SIMULATOR_WATCHDOG_CYCLES} if simulator else {}
+            try:
+                link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz), **watchdog))
+            except (BusSpecError, can.CanError, OSError, ValueError) as error:
+                raise ServiceError(f"cannot open the actuators' bus {spec}: {error}") from None
+            closers.callback(link.close)
             if simulator:
-                simulator.close()
-            raise ServiceError(f"cannot open the actuators' bus {spec}: {error}") from None
-        if simulator:
-            log.info("actuators: six simulated on %s, true platform %r; watchdog %d cycles, supervision timeouts "
-                     "%g s (relaxed for an in-process simulation)", spec, simulator.platform.geometry.name,
-                     SIMULATOR_WATCHDOG_CYCLES, SIMULATOR_SUPERVISION.heartbeat_timeout_s)
-        else:
-            log.info("actuators: CAN %s", spec)
+                log.info("actuators: six simulated on %s, true platform %r; watchdog %d cycles, supervision timeouts "
+                         "%g s (relaxed for an in-process simulation)", spec, simulator.platform.geometry.name,
+                         SIMULATOR_WATCHDOG_CYCLES, SIMULATOR_SUPERVISION.heartbeat_timeout_s)
+            else:
+                log.info("actuators: CAN %s", spec)
 
-        loop = LoopConfig(rate_hz=config.rate_hz)
-        controller_config = ControllerConfig(loop=loop, supervision=SIMULATOR_SUPERVISION) if simulator else ControllerConfig(loop=loop)
-        controller = Controller(link, active, calibration_id, calibration_source=str(source), config=controller_config)
-        realtime = controller.start()
-        log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
+            loop = LoopConfig(rate_hz=config.rate_hz)
+            supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
+            controller = Controller(link, active, calibration_id, calibration_source=str(source),
+                                    config=ControllerConfig(loop=loop, **supervision))
+            realtime = controller.start()
+            closers.callback(controller.shutdown)
+            log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
 
-        data = DataDirectories(config.data_dirs or _default_data_dirs(config_path))
-        context = zmq.Context()
-        curve = CurveServer(context, config.curve) if config.curve else None
-        try:
-            server = ApiServer(context, config.api_endpoint, CommandHandler(controller, data), curve)
-            publisher = TelemetryPublisher(context, config.telemetry_endpoint, lambda: jsonable(controller.telemetry()),
-                                           config.telemetry_rate_hz, curve)
-        except (zmq.ZMQError, ValueError) as error:
-            cls._close_core(controller, link, simulator)
-            if curve:
-                curve.close()
-            context.destroy(linger=0)
-            raise ServiceError(f"cannot serve: {error}") from None
-        server.start()
-        publisher.start()
-        security = "CURVE" if curve else "no authentication (loopback)"
-        log.info("API on %s, telemetry on %s at %g Hz; %s", server.endpoint, publisher.endpoint, config.telemetry_rate_hz, security)
-        log.info("data directories: %s", ", ".join(str(directory) for directory in data.directories))
-        return cls(controller, link, simulator, context, curve, server, publisher)
+            data = DataDirectories(config.data_dirs or _default_data_dirs(config_path))
+            try:
+                publisher = TelemetryPublisher(context, config.telemetry_endpoint, lambda: jsonable(controller.telemetry()),
+                                               config.telemetry_rate_hz, curve)
+                closers.callback(publisher.close)
+                closers.callback(_bring_to_rest, controller)  # after the API stops, while telemetry still flows
+                server = ApiServer(context, config.api_endpoint, CommandHandler(controller, data), curve)
+                closers.callback(server.close)
+            except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
+                raise ServiceError(f"cannot serve: {error}") from None
+            publisher.start()
+            server.start()
+            security = "CURVE" if curve else "no authentication (loopback)"
+            log.info("API on %s, telemetry on %s at %g Hz; %s", server.endpoint, publisher.endpoint,
+                     config.telemetry_rate_hz, security)
+            log.info("data directories: %s", ", ".join(str(directory) for directory in data.directories))
+            return cls(controller, simulator, server.endpoint, publisher.endpoint, closers.pop_all())
 
     def close(self) -> None:
         """Stop taking commands, bring the platform to rest disabled, close everything."""
-        self._server.close()
-        _bring_to_rest(self.controller)
-        self._publisher.close()
-        self._close_core(self.controller, self._link, self.simulator)
-        if self._curve:
-            self._curve.close()
-        self._context.term()
+        self._closers.close()
         log.info("stopped")
-
-    @staticmethod
-    def _close_core(controller: Controller, link: CanActuatorLink, simulator: Simulator | None) -> None:
-        controller.shutdown()
-        link.close()
-        if simulator:
-            simulator.close()
 
 
 def run_service(config: ServiceConfig) -> int:

@@ -110,6 +110,13 @@ def test_monitor_without_service_exits_two(tmp_path, capsys) -> None:
     assert "no telemetry" in capsys.readouterr().err
 
 
+def test_bad_client_keys_exit_two(service, tmp_path, capsys) -> None:
+    (tmp_path / "junk.key").write_text("not a certificate")
+    assert run(service, "status", "--curve-server", str(tmp_path / "missing.key"), "--curve-client", str(tmp_path / "junk.key")) == 2
+    assert "CURVE keys" in capsys.readouterr().err
+    assert run(service, "status", "--curve-server", str(tmp_path / "junk.key")) == 2  # one without the other
+
+
 def test_keys(tmp_path, capsys) -> None:
     assert main(["keys", "--out", str(tmp_path / "k")]) == 0
     assert "--curve-secret" in capsys.readouterr().out

@@ -16,7 +16,7 @@ import pytest
 
 from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
 from hexactl.adapters.api.messages import StatusReply, Telemetry
-from hexactl.adapters.api.security import SecurityError
+from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create_keys
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.adapters.service import Service, ServiceConfig, ServiceError
@@ -141,6 +141,18 @@ def test_serve_starts_with_a_calibration(nominal, tmp_path) -> None:
             assert status(client)["calibration_id"] == geometry_id(calibrated)
     finally:
         service.close()
+
+
+def test_bad_server_key_is_refused_before_the_actuators_open(tmp_path) -> None:
+    keys = create_keys(tmp_path)
+    curve = CurveServerKeys(keys["server_public"], keys["clients_dir"])  # the public half: no secret key
+    with pytest.raises(ServiceError, match="no secret key"):
+        Service.start(ServiceConfig(api_endpoint="tcp://0.0.0.0:*", telemetry_endpoint="tcp://127.0.0.1:*", curve=curve))
+
+
+def test_endpoint_in_use_is_refused_and_everything_closes(running) -> None:
+    with pytest.raises(ServiceError, match="cannot serve"):
+        Service.start(ServiceConfig(api_endpoint=running.api_endpoint, telemetry_endpoint="tcp://127.0.0.1:*"))
 
 
 def test_bad_geometry_is_refused(tmp_path) -> None:

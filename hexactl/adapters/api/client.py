@@ -17,7 +17,7 @@ import itertools
 import json
 import time
 from types import TracebackType
-from typing import Any
+from typing import Any, Self
 
 import zmq
 
@@ -62,7 +62,7 @@ class _Connection:
         self.socket.close()
         self._context.term()
 
-    def __enter__(self) -> Any:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None, trace: TracebackType | None) -> None:

@@ -29,8 +29,9 @@ this, without a reply (nothing can be answered without reading it all); between
 
 
 class ErrorCode(StrEnum):
-    """The API's own error codes. Controller refusals add theirs (``not_enabled``,
-    ``out_of_workspace``, …), passed through unchanged."""
+    """The API's own error codes. The controller's refusals add theirs
+    (:class:`hexactl.control.results.ErrorCode`: ``not_enabled``, ``path_violation``, …),
+    passed through unchanged."""
 
     MALFORMED_JSON = "malformed_json"  # not UTF-8 JSON, or NaN/Infinity/out-of-range numbers
     INVALID_REQUEST = "invalid_request"  # not an object, missing id/v/cmd, wrong types or values, multipart

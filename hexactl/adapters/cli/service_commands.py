@@ -14,7 +14,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from hexactl.adapters.api.client import (
     DEFAULT_TIMEOUT_S,
@@ -32,6 +32,8 @@ from hexactl.kinematics.pose import POSE_AXES
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 MONITOR_INTERVAL_S = 0.1
 _CLEAR_SCREEN = "\x1b[H\x1b[2J"
+
+Connection = TypeVar("Connection", HexactlClient, TelemetrySubscriber)
 
 RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
 """Arguments → (command, request fields)."""
@@ -184,8 +186,9 @@ def _service_path(text: str, *, new: bool = False) -> str:
 
 def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str, Any]) -> int:
     """Send one command, print the reply; the exit status says ok / refused / no answer."""
+    client = _connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     try:
-        with HexactlClient(arguments.api, timeout_s=arguments.timeout, curve=_client_keys(arguments)) as client:
+        with client:
             reply = client.request(cmd, **fields)
     except ServiceUnavailable as error:
         print(f"hexactl {arguments.command}: {error}", file=sys.stderr)
@@ -201,7 +204,7 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
 
 def run_monitor(arguments: argparse.Namespace) -> int:
     try:
-        with TelemetrySubscriber(arguments.telemetry, curve=_client_keys(arguments)) as telemetry:
+        with _connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry:
             while True:
                 record = telemetry.receive(arguments.timeout)
                 text = json.dumps(record) if arguments.json else format_telemetry(record)
@@ -250,10 +253,15 @@ def run_serve(arguments: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
 
 
-def _client_keys(arguments: argparse.Namespace) -> CurveClientKeys | None:
+def _connect(kind: type[Connection], endpoint: str, arguments: argparse.Namespace, **options: Any) -> Connection:
+    """A client of ``kind`` with the CURVE keys the arguments name; CliError for bad keys."""
     if (arguments.curve_server is None) != (arguments.curve_client is None):
         raise CliError("give both --curve-server and --curve-client, or neither")
-    return CurveClientKeys(arguments.curve_server, arguments.curve_client) if arguments.curve_server else None
+    keys = CurveClientKeys(arguments.curve_server, arguments.curve_client) if arguments.curve_server else None
+    try:
+        return kind(endpoint, curve=keys, **options)
+    except (SecurityError, OSError, ValueError) as error:  # missing or malformed key files
+        raise CliError(f"CURVE keys: {error}") from None
 
 
 # -- output --------------------------------------------------------------------------
