@@ -34,7 +34,8 @@ def test_move_sends_the_parsed_pose(service, capsys) -> None:
     service.controller.state = "enabled"
     assert run(service, "move", "z=50,yaw=5", "--duration", "2") == 0
     assert service.controller.calls[-1] == ("move", ([0.0, 0.0, 50.0, 0.0, 0.0, 5.0], 2.0, None))
-    assert run(service, "move", "--", "-10,0,0,0,0,0") == 0
+    assert run(service, "move", "--speed", "0.5", "--", "-10,0,0,0,0,0") == 0
+    assert service.controller.calls[-1] == ("move", ([-10.0, 0.0, 0.0, 0.0, 0.0, 0.0], None, 0.5))
     assert capsys.readouterr().out.startswith("ok")
 
 

@@ -53,12 +53,19 @@ def test_non_loopback_bind_needs_curve(tmp_path) -> None:
     check_endpoints(["tcp://0.0.0.0:5555"], CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
 
 
-def test_create_keys_refuses_to_overwrite(tmp_path) -> None:
+def test_create_keys_adds_clients_and_never_overwrites(tmp_path) -> None:
     keys = create_keys(tmp_path)
     assert (keys["server_secret"].stat().st_mode & 0o777) == 0o600
     assert (keys["clients_dir"] / "client.key").is_file()
+    server_key = keys["server_secret"].read_text()
     with pytest.raises(FileExistsError):
         create_keys(tmp_path)
+    laptop = create_keys(tmp_path, "laptop")
+    assert keys["server_secret"].read_text() == server_key  # kept
+    assert (laptop["clients_dir"] / "laptop.key").is_file() and (laptop["client_secret"].stat().st_mode & 0o777) == 0o600
+    keys["server_public"].unlink()
+    with pytest.raises(FileExistsError, match="half of the server's key pair"):
+        create_keys(tmp_path, "other")
 
 
 def test_curve_end_to_end(tmp_path) -> None:

@@ -115,24 +115,27 @@ def secure_client(socket: zmq.Socket, keys: CurveClientKeys) -> None:
 
 
 def create_keys(directory: Path, client_name: str = "client") -> dict[str, Path]:
-    """Make a server and a client certificate pair in ``directory`` and authorise the
-    client (its public certificate copied into ``directory/clients``). Refuses to
-    overwrite existing keys (FileExistsError)."""
+    """Make a client certificate pair ``client_name`` in ``directory`` and allow it in
+    (its public certificate copied into ``directory/clients``); make the server's pair
+    too unless ``directory`` has it. Refuses to overwrite a client's keys, or to complete
+    a server pair of which one half is missing (FileExistsError)."""
     names = {
         "server_secret": directory / "server.key_secret",
         "server_public": directory / "server.key",
         "client_secret": directory / f"{client_name}.key_secret",
         "client_public": directory / f"{client_name}.key",
+        "clients_dir": directory / "clients",
     }
-    existing = [str(path) for path in names.values() if path.exists()]
+    existing = [str(names[key]) for key in ("client_secret", "client_public") if names[key].exists()]
     if existing:
         raise FileExistsError(f"refusing to overwrite {', '.join(existing)}")
-    clients = directory / "clients"
-    clients.mkdir(parents=True, exist_ok=True)
-    zmq.auth.create_certificates(directory, "server")
-    zmq.auth.create_certificates(directory, client_name)
-    for secret in (names["server_secret"], names["client_secret"]):
-        secret.chmod(0o600)  # pyzmq writes them with the umask's permissions
-    names["clients_dir"] = clients
-    shutil.copy(names["client_public"], clients / names["client_public"].name)
+    server = [names[key].exists() for key in ("server_secret", "server_public")]
+    if any(server) and not all(server):
+        raise FileExistsError(f"{directory} has half of the server's key pair; refusing to replace it")
+    names["clients_dir"].mkdir(parents=True, exist_ok=True)
+    made = ["server", client_name] if not any(server) else [client_name]
+    for name in made:
+        zmq.auth.create_certificates(directory, name)
+        (directory / f"{name}.key_secret").chmod(0o600)  # pyzmq writes it with the umask's permissions
+    shutil.copy(names["client_public"], names["clients_dir"] / names["client_public"].name)
     return names

@@ -54,10 +54,12 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     command("status", "the running service's state (one telemetry record)", "status")
     _register_monitor(subparsers)
     command("enable", "energise the actuators; the platform holds its pose", "enable")
-    command("disable", "de-energise the actuators (brakes hold)", "disable")
+    command("disable", "de-energise the actuators (at rest only: stop first)", "disable")
     move = command("move", "move to a pose relative to the zero posture", _move_request)
     move.add_argument("pose", metavar="POSE", type=_pose, help="X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs, e.g. z=50,yaw=5")
-    move.add_argument("--duration", type=_positive_float, metavar="S", help="minimum duration of the move, s")
+    pace = move.add_mutually_exclusive_group()
+    pace.add_argument("--duration", type=_positive_float, metavar="S", help="minimum duration of the move, s")
+    pace.add_argument("--speed", type=_positive_float, metavar="F", help="fraction (0, 1] of the velocity limits")
     move.epilog = "Put -- before a pose that starts with a minus sign."
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name or a file", _play_request)
@@ -82,12 +84,13 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
     keys = subparsers.add_parser(
         "keys", help="make CURVE keys for a service bound beyond localhost",
-        description="Make a server and a client key pair (ZeroMQ certificates) in DIR and allow the client in DIR/clients. "
+        description="Make a client key pair (ZeroMQ certificates) in DIR, and the server's unless DIR has it, and allow "
+        "the client in DIR/clients. "
         "Serve with --curve-secret DIR/server.key_secret --curve-clients DIR/clients; connect with "
         "--curve-server DIR/server.key --curve-client DIR/NAME.key_secret.",
     )
     keys.add_argument("--out", required=True, type=Path, metavar="DIR")
-    keys.add_argument("--name", default="client", help="the client's name (default client)")
+    keys.add_argument("--name", default="client", help="the client's name (default client); run again with another name to add a client")
     keys.set_defaults(run=run_keys)
 
 
@@ -117,7 +120,8 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
     serve.add_argument("--telemetry-rate", type=_positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
     serve.add_argument(
         "--data-dir", action="append", type=Path, metavar="DIR",
-        help="directory calibration and sequence files may be read from (repeatable; default: the config file's directory, ./calibrations, ./sequences)",
+        help="directory requests may read calibration and sequence files from and write recordings to "
+        "(repeatable; default: ./recordings, ./calibrations, ./sequences and the config file's directory)",
     )
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
@@ -144,10 +148,8 @@ def _client_parser() -> argparse.ArgumentParser:
 
 
 def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
-    fields: dict[str, Any] = {"pose": arguments.pose}
-    if arguments.duration is not None:
-        fields["duration"] = arguments.duration
-    return "move", fields
+    pace = {name: getattr(arguments, name) for name in ("duration", "speed") if getattr(arguments, name) is not None}
+    return "move", {"pose": arguments.pose, **pace}
 
 
 def _leg_lock_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
