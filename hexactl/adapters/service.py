@@ -36,22 +36,13 @@ from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError, open_bus
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
-from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
+from hexactl.control.config import ControllerConfig, LoopConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
 SHUTDOWN_BRAKE_TIMEOUT_S = 10.0
 """How long shutdown waits for a moving platform to brake to rest before it E-stops."""
-
-SIMULATOR_WATCHDOG_CYCLES = 50
-SIMULATOR_SUPERVISION = SupervisionConfig(heartbeat_timeout_s=0.2, setpoint_lag_s=0.2)
-"""Timeouts for the in-process simulator, relaxed from the protocol's 5-cycle watchdog
-and the 50 ms supervision: the simulated firmwares share the process (and its GIL) with
-the loop, and after a stall of their thread they advance their clocks before reading
-the set-points queued meanwhile, so a stall of a few periods, common on a loaded
-machine, would trip their watchdog although the loop sent every set-point. Real
-actuators keep the defaults."""
 
 log = logging.getLogger("hexactl.service")
 
@@ -154,23 +145,19 @@ class Service:
                 simulator = Simulator(nominal, config.simulator_seed)
                 closers.callback(simulator.close)
             spec = simulator.bus_spec if simulator else config.can
-            watchdog = {"watchdog_cycles": SIMULATOR_WATCHDOG_CYCLES} if simulator else {}
             try:
-                link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz), **watchdog))
+                link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz)))
             except (BusSpecError, can.CanError, OSError, ValueError) as error:
                 raise ServiceError(f"cannot open the actuators' bus {spec}: {error}") from None
             closers.callback(link.close)
             if simulator:
-                log.info("actuators: six simulated on %s, true platform %r; watchdog %d cycles, supervision timeouts "
-                         "%g s (relaxed for an in-process simulation)", spec, simulator.platform.geometry.name,
-                         SIMULATOR_WATCHDOG_CYCLES, SIMULATOR_SUPERVISION.heartbeat_timeout_s)
+                log.info("actuators: six simulated on %s, true platform %r", spec, simulator.platform.geometry.name)
             else:
                 log.info("actuators: CAN %s", spec)
 
             loop = LoopConfig(rate_hz=config.rate_hz)
-            supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
             controller = Controller(link, active, calibration_id, calibration_source=str(source),
-                                    config=ControllerConfig(loop=loop, **supervision))
+                                    config=ControllerConfig(loop=loop))
             realtime = controller.start()
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))

@@ -130,24 +130,40 @@ class ActuatorBus:
     # -- live runs -----------------------------------------------------------------------
 
     def serve(self, duration_s: float | None = None) -> None:
-        """Run in the calling thread until :meth:`stop` (or for ``duration_s`` seconds)."""
+        """Run in the calling thread until :meth:`stop` (or for ``duration_s`` seconds).
+
+        Frames are handled at the time they arrived on the bus (their receive timestamp),
+        not the time this thread got round to them: when the thread is held up (the GIL, the
+        scheduler), the frames queued meanwhile are replayed in order at their own times
+        before the firmwares advance to now. Otherwise a stalled *simulator* would look to
+        the firmwares like a controller that stopped sending, and trip their watchdog.
+        """
         clock = self._clock
         origin = clock()
+        # Receive timestamps are wall-clock (python-can's virtual bus and SocketCAN alike).
+        wall_origin = time.time() - (clock() - origin)
         end = None if duration_s is None else origin + duration_s
         next_tick = origin
+        handled_s = 0.0  # simulation time of the latest frame or tick handled; never goes back
         while not self._stop.is_set():
             now = clock()
             if end is not None and now >= end:
                 break
-            if now >= next_tick:
-                with self._lock:
-                    self._advance(now - origin)
-                # Keep to the tick grid; after a stall, resume from now instead of catching up.
-                next_tick = next_tick + self.tick_s if next_tick + self.tick_s > now else now + self.tick_s
-            message = self.bus.recv(max(0.0, next_tick - clock()))
-            if message is not None:
-                with self._lock:
-                    self._deliver(message, clock() - origin)
+            timeout = 0.0 if now >= next_tick else next_tick - now
+            message = self.bus.recv(timeout)
+            now_s = clock() - origin
+            with self._lock:
+                for _ in range(_MAX_FRAMES_PER_STEP):
+                    if message is None:
+                        break
+                    handled_s = min(max(message.timestamp - wall_origin, handled_s), now_s)
+                    self._deliver(message, handled_s)
+                    message = self.bus.recv(0.0)
+                if now_s + origin >= next_tick:
+                    handled_s = now_s
+                    self._advance(now_s)
+                    # Keep to the tick grid; after a stall, resume from now instead of catching up.
+                    next_tick = next_tick + self.tick_s if next_tick + self.tick_s > now_s + origin else now_s + origin + self.tick_s
 
     def start(self) -> ActuatorBus:
         """Run :meth:`serve` in a daemon thread; returns self."""
