@@ -151,8 +151,8 @@ class ActuatorBus:
                 break
             timeout = 0.0 if now >= next_tick else next_tick - now
             message = self.bus.recv(timeout)
-            now_s = clock() - origin
             with self._lock:
+                now_s = clock() - origin  # after the lock: a stall may have been waiting for it
                 for _ in range(_MAX_FRAMES_PER_STEP):
                     if message is None:
                         break

@@ -74,6 +74,42 @@ def test_threaded_runner_serves_a_link_in_the_same_process(nominal, truth):
     assert [firmware.position_um / 1000 for firmware in runner.firmwares] == pytest.approx(start, abs=0.001)
 
 
+def test_a_stalled_runner_replays_queued_set_points_at_their_arrival_times(nominal, truth):
+    """The runner's thread held up for 12 watchdog periods while the controller keeps
+    sending: the firmwares must see the set-points when they arrived, not trip their
+    watchdog as if the controller had stopped."""
+    spec = "virtual:hexactl-stalled-runner"
+    start = zero_posture_readings_mm(truth)
+    runner = ActuatorBus(open_bus(spec), make_firmwares(start, actuator_params_for(nominal))).start()
+    try:
+        with CanActuatorLink.open(spec) as link:
+            wait_for(link, lambda s: all(link.node_status(leg).protocol_version == 1 for leg in range(1, 7)),
+                     "heartbeats")
+            assert link.send_command(None, ActuatorCommand.ENABLE)
+            counter = 0
+
+            def send_cycles(seconds: float) -> None:
+                nonlocal counter
+                end = time.monotonic() + seconds
+                while time.monotonic() < end:
+                    link.send_setpoints(counter, start)
+                    counter += 1
+                    time.sleep(0.002)
+
+            end = time.monotonic() + DEADLINE_S
+            while not all(a.state is ActuatorState.ENABLED for a in link.read_feedback().actuators):
+                assert time.monotonic() < end, "ENABLED"
+                send_cycles(0.01)
+            with runner._lock:  # what a GIL or scheduler stall does to the runner's thread
+                send_cycles(0.12)
+            send_cycles(0.05)
+            states = {a.state for a in link.read_feedback().actuators}
+    finally:
+        runner.close()
+    assert states == {ActuatorState.ENABLED}
+    assert all(firmware.faults == 0 for firmware in runner.firmwares)
+
+
 def test_true_pose_at_the_zero_posture_readings_is_the_zero_posture(truth):
     readings = zero_posture_readings_mm(truth)
     pose = PhysicalPlatform(truth, lambda: readings).true_pose()
