@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from enum import IntEnum
 from math import isfinite, radians
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, field_validator
 from ruckig import (
     ControlInterface,
     DurationDiscretization,
