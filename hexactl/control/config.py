@@ -46,6 +46,11 @@ class SupervisionConfig(_Frozen):
     )
     max_send_failures: int = Field(default=3, ge=1, description="consecutive failed set-point sends before FAULT")
     estop_repeat_s: float = Field(default=0.1, gt=0, description="while ESTOP is latched, the E-stop is re-sent this often")
+    estop_clear_holdoff_s: float = Field(
+        default=0.3, ge=0,
+        description="actuators refuse to clear an E-stop until they have seen none for a while (firmware_proto: "
+        "250 ms); reset sends CLEAR_FAULT this long after the last E-stop the loop sent",
+    )
 
 
 class ControllerConfig(_Frozen):

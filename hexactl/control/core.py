@@ -318,6 +318,7 @@ class ControlCore:
         self._state_timeout_ns = round(supervision.state_timeout_s * 1e9)
         self._lag_limit = ceil(supervision.setpoint_lag_s / self.period_s)
         self._estop_repeat_ns = round(supervision.estop_repeat_s * 1e9)
+        self._estop_clear_holdoff_ns = round(supervision.estop_clear_holdoff_s * 1e9)
         self._trajectory = PoseTrajectory(config.motion, self.period_s)
         self._handlers = {
             cmd.Enable: self._enable, cmd.Disable: self._disable, cmd.Stop: self._stop, cmd.EStop: self._estop,
@@ -345,6 +346,8 @@ class ControlCore:
         self._settling_until_ns = [0] * ACTUATOR_COUNT
         self._estop_grace_until_ns = 0  # after a reset the actuators need time to leave ESTOP
         self._next_estop_ns = 0
+        self._last_estop_ns: int | None = None  # when the loop last sent an E-stop
+        self._clear_fault_due_ns: int | None = None  # a reset's CLEAR_FAULT waits for the E-stop hold-off
         self._ramp_offset: list[float] | None = None
         self._ramp_left = 0.0
         self._ramp_decrement = 0.0
@@ -405,9 +408,12 @@ class ControlCore:
             self._send()
         elif self.state is ControlState.ESTOP:
             if now_ns >= self._next_estop_ns:
-                hardware.send_estop()
-                self._next_estop_ns = now_ns + self._estop_repeat_ns
-        elif self.pose_measured is not None:  # DISABLED: start from where the platform is
+                self._send_estop()
+        if self._clear_fault_due_ns is not None and now_ns >= self._clear_fault_due_ns:
+            self._clear_fault_due_ns = None
+            hardware.send_command(None, ActuatorCommand.CLEAR_FAULT)
+        if self.state is ControlState.DISABLED and self.pose_measured is not None:
+            # Start from where the platform is.
             self.pose_command = list(self.pose_measured)
             self.setpoints = list(feedback.positions_mm)
         self._publish()
@@ -548,9 +554,14 @@ class ControlCore:
         for fault in faults:
             self._event(fault.code, fault.message)
 
-    def _enter_estop(self, reason: str) -> None:
+    def _send_estop(self) -> None:
         self.hardware.send_estop()
+        self._last_estop_ns = self._now_ns
         self._next_estop_ns = self._now_ns + self._estop_repeat_ns
+
+    def _enter_estop(self, reason: str) -> None:
+        self._send_estop()
+        self._clear_fault_due_ns = None
         self.state = ControlState.ESTOP
         self._faults = self._faults + (Fault("estop", reason),)
         self._freeze("fault")
@@ -587,13 +598,18 @@ class ControlCore:
         if refusal := check_enable(self, self._heartbeat_timeout_s):
             return refusal
         assert self.feedback is not None and self.pose_measured is not None
+        if not self.hardware.send_command(None, ActuatorCommand.ENABLE):
+            self.hardware.send_command(None, ActuatorCommand.DISABLE)  # undo the legs that did get it
+            return ErrorCode.SEND_FAILED, (
+                f"the link could not send ENABLE to every actuator ({self.hardware.link_health().detail or 'no detail'}); "
+                "nothing was enabled: try again once all six report"
+            )
         self.setpoints = list(self.feedback.positions_mm)
         self.pose_command = list(self.pose_measured)
         self._trajectory.reset(self.pose_command)
         self._expect(None, ActuatorState.ENABLED)
         self._send_failures = 0
         self._faults = ()
-        self.hardware.send_command(None, ActuatorCommand.ENABLE)
         self.state = ControlState.ENABLED
         self._epoch += 1
         return None
@@ -622,11 +638,16 @@ class ControlCore:
         if refusal := check_reset(self):
             return refusal
         self.hardware.send_command(None, ActuatorCommand.DISABLE)
-        self.hardware.send_command(None, ActuatorCommand.CLEAR_FAULT)
+        # Actuators refuse CLEAR_FAULT while an E-stop is recent: send it once the hold-off
+        # since the loop's last E-stop has passed (at once after a FAULT without E-stops).
+        due = self._now_ns
+        if self._last_estop_ns is not None:
+            due = max(due, self._last_estop_ns + self._estop_clear_holdoff_ns)
+        self._clear_fault_due_ns = due
         self.state = ControlState.DISABLED
         self.lock = None
         self._faults = ()
-        self._estop_grace_until_ns = self._now_ns + self._state_timeout_ns
+        self._estop_grace_until_ns = self._clear_fault_due_ns + self._state_timeout_ns
         self._freeze("aborted")
         return None
 

@@ -37,12 +37,14 @@ class IdealActuators:
         positions_mm: Sequence[float],
         *,
         lag_s: float = 0.005,
+        estop_clear_holdoff_s: float = 0.25,
         clock_ns: Callable[[], int] = time.monotonic_ns,
         record: bool = False,
     ) -> None:
         if len(positions_mm) != ACTUATOR_COUNT:
             raise ValueError(f"need {ACTUATOR_COUNT} positions, got {len(positions_mm)}")
         self.lag_s = lag_s
+        self.estop_clear_holdoff_ns = round(estop_clear_holdoff_s * 1e9)
         self.clock_ns = clock_ns
         self.positions = [float(p) for p in positions_mm]
         self.velocities = [0.0] * ACTUATOR_COUNT
@@ -56,6 +58,7 @@ class IdealActuators:
         self.send_failures = 0
         self.commands: list[tuple[int | None, ActuatorCommand]] = []
         self.estops = 0
+        self._last_estop_ns: int | None = None
         self.sent: list[tuple[int, tuple[float, ...]]] | None = [] if record else None
         now = clock_ns()
         self._last_ns = now
@@ -89,6 +92,7 @@ class IdealActuators:
         if not self._sendable():
             return False
         self.estops += 1
+        self._last_estop_ns = self.clock_ns()
         self.press_estop()
         return True
 
@@ -143,6 +147,8 @@ class IdealActuators:
         elif command is ActuatorCommand.DISABLE and state in (ActuatorState.ENABLED, ActuatorState.LOCKED):
             self.states[i] = ActuatorState.DISABLED
         elif command is ActuatorCommand.CLEAR_FAULT and state in (ActuatorState.FAULT, ActuatorState.ESTOP):
+            if state is ActuatorState.ESTOP and self._estop_recent():
+                return  # as the firmware: an E-stop clears only after none for the hold-off
             self.states[i] = ActuatorState.DISABLED
             self.fault_bits[i] = 0
         elif command is ActuatorCommand.LOCK and state is ActuatorState.ENABLED:
@@ -150,6 +156,10 @@ class IdealActuators:
         elif command is ActuatorCommand.UNLOCK and state is ActuatorState.LOCKED:
             self.targets[i] = self.positions[i]
             self.states[i] = ActuatorState.ENABLED
+
+    def _estop_recent(self) -> bool:
+        last = self._last_estop_ns
+        return last is not None and self.clock_ns() - last < self.estop_clear_holdoff_ns
 
     def _advance(self) -> int:
         """Move every actuator to the clock's present; returns the present, ns."""

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hexactl.control.hardware import ActuatorCommand, BusState
+from hexactl.control.hardware import ActuatorCommand, ActuatorState, BusState
 
 
 def _until_state(rig, state, seconds=1.0):
@@ -91,6 +91,44 @@ def test_estop_is_sent_at_once_latched_repeated_and_reset(rig):
     rig.run(300)
     assert rig.controller.snapshot.state.value == "disabled"  # the actuators left ESTOP: not re-latched
     rig.enabled()
+
+
+def test_reset_waits_for_the_actuators_estop_hold_off_before_clearing(rig):
+    """Actuators refuse CLEAR_FAULT until no E-stop for 250 ms; the loop re-sends E-stops
+    every 0.1 s while latched, so an immediate CLEAR_FAULT would always be refused."""
+    rig.enabled()
+    assert rig.controller.estop().ok
+    rig.run(int(0.35e9 / rig.period_ns))
+    estops = rig.actuators.estops
+    assert rig.controller.reset().ok
+    rig.run(2)
+    assert (None, "clear_fault") not in rig.actuators.commands  # not yet: the hold-off runs
+    hold_off = rig.controller.config.supervision.estop_clear_holdoff_s
+    rig.run(int(hold_off * 1e9 / rig.period_ns) + 2)
+    assert rig.actuators.commands[-1] == (None, "clear_fault")
+    assert rig.actuators.estops == estops  # no E-stop after the reset
+    assert set(rig.actuators.states) == {ActuatorState.DISABLED}
+    rig.run(300)
+    assert rig.controller.snapshot.state.value == "disabled"
+    rig.enabled()
+
+
+def test_enable_that_the_link_cannot_send_is_refused_and_undone(rig):
+    rig.run()
+    real_send = rig.actuators.send_command
+
+    def refuse_enable_to_leg_3(leg, command):
+        if command == "enable":
+            rig.actuators.commands.append((leg, command))
+            return False  # as the CAN link before leg 3's first heartbeat
+        return real_send(leg, command)
+
+    rig.actuators.send_command = refuse_enable_to_leg_3
+    rig.controller.enable()
+    rig.run(2)
+    assert rig.controller.outcome(1).error == "send_failed"
+    assert rig.actuators.commands[-2:] == [(None, "enable"), (None, "disable")]
+    assert rig.controller.snapshot.state.value == "disabled"
 
 
 def test_the_hardware_estop_chain_latches_estop_in_any_state(rig):
