@@ -65,7 +65,8 @@ class ActuatorFeedback:
 
     ``position_mm``/``velocity_mm_s``: NaN until the actuator has reported them (the
     loop then knows no pose and refuses to enable). ``heartbeat_age_s``: time since the
-    last frame from this actuator arrived, s (``inf`` if none ever did). ``setpoint_counter``: the ``counter`` of the last
+    last frame from this actuator arrived, s (``inf`` until the actuator has shown it can
+    be enabled, e.g. announced its protocol version). ``setpoint_counter``: the ``counter`` of the last
     :meth:`ActuatorInterface.send_setpoints` call whose value the actuator applied, as
     passed to that call (an implementation with a narrower wire field unwraps it), or
     −1 if none yet. ``fault_bits``: the drive's fault word, 0 when healthy.

@@ -291,6 +291,10 @@ def test_feedback_heartbeat_and_emergency_become_actuator_state(link, bus, clock
     assert two.state is ActuatorState.LOCKED and math.isnan(two.position_mm)
     assert three.state is ActuatorState.FAULT and three.fault_bits == int(Fault.SENSOR | Fault.ESTOP)
     assert four.heartbeat_age_s == math.inf and four.state is ActuatorState.DISABLED
+    assert one.heartbeat_age_s == math.inf  # FEEDBACK alone: not yet known to speak protocol 1
+    assert two.heartbeat_age_s == 0.0  # heard at this read
+    bus.push(*codec.encode_heartbeat(1, WireState.ENABLED, 0))
+    link.read_feedback()
     clock.t_ns = 105_000_000
     assert link.read_feedback().actuators[0].heartbeat_age_s == pytest.approx(0.1)
     assert link.stats().emergencies == (0, 0, 1, 0, 0, 0)

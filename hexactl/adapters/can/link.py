@@ -529,7 +529,9 @@ class CanActuatorLink:
             velocity_mm_s=node.velocity_mm_s,
             state=STATE_FROM_WIRE[node.wire_state],
             fault_bits=node.fault_bits,
-            heartbeat_age_s=_age_s(node.heard_ns, now),
+            # Not heard (inf) until a HEARTBEAT shows it speaks this protocol: frames before
+            # that do not make an actuator the loop may enable (send_command refuses ENABLE).
+            heartbeat_age_s=_age_s(node.heard_ns if node.protocol_version == PROTOCOL_VERSION else None, now),
             setpoint_counter=self._unwrap(node),
         )
 
