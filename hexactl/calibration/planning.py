@@ -1,7 +1,7 @@
 """Planning calibration postures: feasible, inside every limit with margin, informative.
 
 Candidates are sampled in the pose envelope, projected onto the locked leg's constraint
-surface (:func:`~hexactl.calibration.projection.project_to_locked_leg`), checked with
+surface (:func:`~hexactl.kinematics.leg_lock.project_to_locked_leg`), checked with
 :func:`~hexactl.kinematics.workspace.assess_poses` plus margins (the real platform differs
 from the planning geometry by millimetres), and the requested number is chosen greedily
 for D-optimality: each pick maximises the determinant of the Fisher information of the
@@ -20,7 +20,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.calibration.projection import project_to_locked_leg
+from hexactl.kinematics.leg_lock import project_to_locked_leg
 from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM, posture_information_factors
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import LEG_COUNT, leg_lengths, sensor_setpoints_batch

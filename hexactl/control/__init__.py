@@ -14,7 +14,7 @@ ros2_control's split, in modules:
   a deque (:mod:`~hexactl.control.commands`), results (:mod:`~hexactl.control.results`)
   and telemetry.
 - Pure pieces: :mod:`~hexactl.control.trajectory` (ruckig in pose space),
+  leg-lock projection from :mod:`hexactl.kinematics.leg_lock`,
   :mod:`~hexactl.control.guard` (stroke and velocity limit of every set-point),
-  :mod:`~hexactl.control.leg_lock` (projection onto a locked leg's constraint),
   :mod:`~hexactl.control.sequences` (file format, built-ins, dwell records).
 """

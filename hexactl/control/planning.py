@@ -32,7 +32,7 @@ from math import isfinite
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.control.leg_lock import project_to_locked_leg
+from hexactl.kinematics.leg_lock import project_to_locked_leg
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import MotionLimits, preview
 from hexactl.kinematics.geometry import Geometry

@@ -19,7 +19,7 @@ from math import cos, sin, sqrt
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.kinematics.rotation import rotation_matrices, rotation_matrix
+from hexactl.kinematics.rotation import rotation_matrices
 
 LEG_COUNT = 6
 

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hexactl.calibration.projection import ProjectionStatus, project_to_locked_leg
+from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.inverse import leg_lengths
 from hexactl.kinematics.pose import absolute_from_relative
 

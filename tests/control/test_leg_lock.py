@@ -2,7 +2,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hexactl.control.leg_lock import ProjectionStatus, project_to_locked_leg
+from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.inverse import leg_lengths
 from hexactl.kinematics.pose import absolute_from_relative
 
@@ -62,18 +62,3 @@ def test_invalid_inputs_are_reported_not_raised(geometry):
         assert _project(geometry, *args).status is ProjectionStatus.INVALID_INPUT
     assert project_to_locked_leg(geometry.legs, pose, 1, 2000.0, 0.0).status is ProjectionStatus.INVALID_INPUT
     assert _project(geometry, pose, 1, 1.0, max_iterations=3).status is ProjectionStatus.MAX_ITERATIONS
-
-
-@settings(max_examples=40, deadline=None)
-@given(offsets, st.integers(1, 6), st.floats(-30.0, 30.0))
-def test_agrees_with_the_calibration_package_projection(geometry, offset, leg, change):
-    """Two implementations of one function until they are merged: same answers."""
-    from hexactl.calibration.projection import project_to_locked_leg as calibration_projection
-
-    home = absolute_from_relative(geometry.home, [0.0] * 6)
-    length = leg_lengths(geometry.legs, home)[leg - 1] + change
-    pose = absolute_from_relative(geometry.home, offset)
-    ours = _project(geometry, pose, leg, length)
-    theirs = calibration_projection(geometry.legs, pose, leg, length, geometry.characteristic_length_mm)
-    assert ours.status == theirs.status
-    assert np.allclose(ours.pose, theirs.pose, atol=1e-9) and abs(ours.correction - theirs.correction) < 1e-9

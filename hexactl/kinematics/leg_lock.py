@@ -20,10 +20,8 @@ Plain-float Python on purpose, like :func:`hexactl.kinematics.inverse.leg_length
 needs one leg's row only and runs every cycle in leg-lock mode, where numpy's call
 overhead on 3-vectors would dominate (5 µs here).
 
-NOTE for the merge: ``hexactl.calibration.projection.project_to_locked_leg`` (numpy,
-about ten times slower) solves the same problem with the same signature, metric,
-iteration, result fields and status codes, and agrees with this one to 1e-9
-(tests/control/test_leg_lock.py checks it); keep one of the two.
+Shared by the controller's leg-lock mode (hexactl.control) and leg-lock posture planning
+(hexactl.calibration).
 """
 
 from __future__ import annotations
