@@ -107,6 +107,8 @@ import threading
 import time
 from pathlib import Path
 
+from _debian import SBIN_PATH, PackagesMissing, ensure_executables  # tools/, beside this file
+
 EXIT_PREREQ = 120
 EXIT_BOOT = 121
 EXIT_VCAN = 122
@@ -119,7 +121,6 @@ UML_BIN = "linux.uml"
 UML_MODULES_ROOT = Path("/usr/lib/uml/modules")
 # Modules we want loaded; dependencies come from modules.dep.
 WANTED_MODULES = ["can-raw", "vcan"]
-SBIN_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
 # Paths the guest mounts over (its own proc/sys/devtmpfs), so host files
 # there are invisible inside the guest.
 GUEST_SHADOWED = ("/proc", "/sys", "/dev")
@@ -146,30 +147,11 @@ class ToolError(Exception):
 # host prerequisites
 
 
-def which(name: str) -> str | None:
-    return shutil.which(name, path=os.environ.get("PATH", "") + ":" + SBIN_PATH)
-
-
 def ensure_packages() -> dict[str, str]:
-    need = {"linux.uml": "user-mode-linux", "insmod": "kmod", "ip": "iproute2"}
-    missing = sorted({pkg for exe, pkg in need.items() if not which(exe)})
-    if missing:
-        cmd = "apt-get update && apt-get install -y " + " ".join(missing)
-        if not which("apt-get"):
-            raise ToolError(EXIT_PREREQ, f"missing {missing} and no apt-get here; install them with your package manager")
-        if os.geteuid() != 0:
-            raise ToolError(EXIT_PREREQ, f"missing Debian packages {missing}; run as root: {cmd}")
-        log(f"installing missing Debian packages {' '.join(missing)} (apt-get, output on stderr) ...")
-        env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-        apt = ["apt-get", "-q", "-o", "DPkg::Lock::Timeout=300"]
-        for step in (apt + ["update"], apt + ["install", "-y", "--no-install-recommends", *missing]):
-            r = subprocess.run(step, stdin=subprocess.DEVNULL, stdout=sys.stderr, stderr=sys.stderr, env=env)
-            if r.returncode != 0:
-                raise ToolError(EXIT_PREREQ, f"'{' '.join(step)}' failed with exit code {r.returncode}; cannot install {missing}")
-        still = [exe for exe in need if not which(exe)]
-        if still:
-            raise ToolError(EXIT_PREREQ, f"after apt-get install still missing: {still}")
-    return {exe: which(exe) for exe in need}  # type: ignore[misc]
+    try:
+        return ensure_executables({"linux.uml": "user-mode-linux", "insmod": "kmod", "ip": "iproute2"}, log)
+    except PackagesMissing as e:
+        raise ToolError(EXIT_PREREQ, str(e))
 
 
 def uml_version(uml: str) -> str:

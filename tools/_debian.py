@@ -1,0 +1,57 @@
+"""Make sure the Debian packages a tool needs are installed: apt-get when missing.
+
+Shared by the tools that run host programs (tools/uml_vcan.py: user-mode Linux;
+tools/bench_service.py: cyclictest). Python standard library only.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable, Mapping
+
+SBIN_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
+"""Searched besides $PATH: a non-root $PATH often lacks the sbin directories."""
+
+APT_LOCK_TIMEOUT_S = 300
+"""How long apt-get waits for another apt/dpkg (another engineer's install) to finish."""
+
+
+class PackagesMissing(Exception):
+    """The packages are missing and cannot be installed here; the message says what to run."""
+
+
+def which(name: str) -> str | None:
+    """``name``'s path on $PATH or the sbin directories, or None."""
+    return shutil.which(name, path=os.environ.get("PATH", "") + ":" + SBIN_PATH)
+
+
+def ensure_executables(need: Mapping[str, str], log: Callable[[str], None]) -> dict[str, str]:
+    """Paths of the executables ``need`` maps to their Debian packages, installing the
+    packages of the missing ones first (``apt-get update`` then ``install``, output on
+    stderr; root only).
+
+    :raises PackagesMissing: not root, no apt-get, apt-get failed, or still missing after
+    """
+    missing = sorted({package for executable, package in need.items() if not which(executable)})
+    if missing:
+        command = "apt-get update && apt-get install -y " + " ".join(missing)
+        if not which("apt-get"):
+            raise PackagesMissing(f"missing {missing} and no apt-get here; install them with your package manager")
+        if os.geteuid() != 0:
+            raise PackagesMissing(f"missing Debian packages {missing}; run as root: {command}")
+        log(f"installing missing Debian packages {' '.join(missing)} (apt-get, output on stderr) ...")
+        env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
+        apt = ["apt-get", "-q", "-o", f"DPkg::Lock::Timeout={APT_LOCK_TIMEOUT_S}"]
+        for step in (apt + ["update"], apt + ["install", "-y", "--no-install-recommends", *missing]):
+            completed = subprocess.run(step, stdin=subprocess.DEVNULL, stdout=sys.stderr, stderr=sys.stderr, env=env)
+            if completed.returncode != 0:
+                raise PackagesMissing(f"'{' '.join(step)}' failed with exit code {completed.returncode}; "
+                                      f"cannot install {missing}")
+    found = {executable: which(executable) for executable in need}
+    still = [executable for executable, path in found.items() if path is None]
+    if still:
+        raise PackagesMissing(f"after apt-get install still missing: {still}")
+    return found  # type: ignore[return-value]  # no None left
