@@ -36,13 +36,23 @@ from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError, open_bus
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
-from hexactl.control.config import ControllerConfig, LoopConfig
+from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
 SHUTDOWN_BRAKE_TIMEOUT_S = 10.0
 """How long shutdown waits for a moving platform to brake to rest before it E-stops."""
+
+SIMULATOR_WATCHDOG_CYCLES = 25
+SIMULATOR_SUPERVISION = SupervisionConfig(heartbeat_timeout_s=0.2, setpoint_lag_s=0.2)
+"""Timeouts for the built-in simulator: a 25-cycle actuator watchdog (50 ms at 500 Hz)
+and 0.2 s heartbeat and set-point supervision instead of the protocol's 5 cycles and
+50 ms. A real actuator's firmware runs on its own microcontroller; the simulated ones
+share this host's two cores with the loop, the API and whatever else runs, and a
+scheduler stall of either thread beyond 11 ms (seen under load) would trip a watchdog
+that measures host load, not the controller. Real actuators keep the defaults; missed
+cycles show in the loop statistics either way."""
 
 log = logging.getLogger("hexactl.service")
 
@@ -146,18 +156,22 @@ class Service:
                 closers.callback(simulator.close)
             spec = simulator.bus_spec if simulator else config.can
             try:
-                link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz)))
+                watchdog = {"watchdog_cycles": SIMULATOR_WATCHDOG_CYCLES} if simulator else {}
+                link = CanActuatorLink.open(spec, LinkConfig(loop_rate=LoopRate(config.rate_hz), **watchdog))
             except (BusSpecError, can.CanError, OSError, ValueError) as error:
                 raise ServiceError(f"cannot open the actuators' bus {spec}: {error}") from None
             closers.callback(link.close)
             if simulator:
-                log.info("actuators: six simulated on %s, true platform %r", spec, simulator.platform.geometry.name)
+                log.info("actuators: six simulated on %s, true platform %r; watchdog %d cycles and supervision %g s "
+                         "(simulator timeouts: it shares the host with the loop)", spec, simulator.platform.geometry.name,
+                         SIMULATOR_WATCHDOG_CYCLES, SIMULATOR_SUPERVISION.heartbeat_timeout_s)
             else:
                 log.info("actuators: CAN %s", spec)
 
             loop = LoopConfig(rate_hz=config.rate_hz)
+            supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
             controller = Controller(link, active, calibration_id, calibration_source=str(source),
-                                    config=ControllerConfig(loop=loop))
+                                    config=ControllerConfig(loop=loop, **supervision))
             realtime = controller.start()
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
