@@ -63,7 +63,8 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
 
 from _debian import PackagesMissing, ensure_executables  # noqa: E402  (tools/, beside this file)
 from bench_loop import loop_row  # noqa: E402
@@ -535,10 +536,20 @@ def print_warnings(runs: list[dict]) -> None:
             print(f"note ({name}): {run['cyclictest']['overflows']} cyclictest wake-ups beyond {HISTOGRAM_US} µs")
 
 
+def revision() -> str:
+    """The commit measured, and the measured code's files that differ from it (the tree
+    may be shared with other engineers' uncommitted work)."""
+    def git(*arguments: str) -> str:
+        return subprocess.run(["git", *arguments], cwd=REPO, capture_output=True, text=True).stdout
+
+    changed = git("status", "--porcelain", "--", "hexactl", "firmware_proto").splitlines()  # "XY path"
+    return git("rev-parse", "--short", "HEAD").strip() + (f" + uncommitted {', '.join(line[3:] for line in changed)}" if changed else "")
+
+
 def environment() -> dict[str, Any]:
     return {"host": platform.node(), "kernel": platform.release(), "kernel_version": platform.version(),
             "cpus": os.cpu_count(), "python": platform.python_version(), "realtime_kernel":
-            Path("/sys/kernel/realtime").exists(), "load_average": load_average(),
+            Path("/sys/kernel/realtime").exists(), "load_average": load_average(), "revision": revision(),
             "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]])}
 
 
@@ -562,7 +573,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"bench_service: {error}", file=sys.stderr)
         return 2
     env = environment()
-    print(f"# {env['command']}\n# {env['host']}: Linux {env['kernel']} {env['kernel_version']}, {env['cpus']} CPUs, "
+    print(f"# {env['command']} at {env['revision']}\n# {env['host']}: Linux {env['kernel']} {env['kernel_version']}, {env['cpus']} CPUs, "
           f"Python {env['python']}; load average at start {' '.join(map(str, env['load_average']))}", flush=True)
     runs = []
     with tempfile.TemporaryDirectory(prefix="bench-service-") as workdir:
