@@ -14,12 +14,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from math import cos, sin, sqrt
+from math import sqrt
 
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.kinematics.rotation import rotation_matrices
+from hexactl.kinematics.rotation import rotation_elements, rotation_matrices
 
 LEG_COUNT = 6
 
@@ -61,12 +61,7 @@ class LegModel:
 def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
     """Joint-to-joint length of each leg, mm, for one absolute pose (mm, rad)."""
     x, y, z, roll, pitch, yaw = pose
-    cr, sr = cos(roll), sin(roll)
-    cp, sp = cos(pitch), sin(pitch)
-    cy, sy = cos(yaw), sin(yaw)
-    r11, r12, r13 = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
-    r21, r22, r23 = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
-    r31, r32, r33 = -sp, cp * sr, cp * cr
+    r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
     lengths = []
     for px, py, pz, bx, by, bz, _ in model._rows:
         dx = r11 * px + r12 * py + r13 * pz + x - bx
@@ -108,12 +103,7 @@ def leg_jacobian_rows(model: LegModel, pose: Sequence[float]) -> tuple[list[list
     the same reason as :func:`leg_lengths`: forward kinematics runs this every cycle.
     """
     x, y, z, roll, pitch, yaw = pose
-    cr, sr = cos(roll), sin(roll)
-    cp, sp = cos(pitch), sin(pitch)
-    cy, sy = cos(yaw), sin(yaw)
-    r11, r12, r13 = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
-    r21, r22, r23 = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
-    r31, r32, r33 = -sp, cp * sr, cp * cr
+    r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
     rows = []
     lengths = []
     for px, py, pz, bx, by, bz, _ in model._rows:

@@ -32,6 +32,7 @@ from enum import IntEnum
 from math import cos, isfinite, pi, sin, sqrt
 
 from hexactl.kinematics.inverse import LEG_COUNT, LegModel
+from hexactl.kinematics.rotation import rotation_elements
 
 PROJECTION_TOLERANCE_MM = 1e-9
 """Default: the locked leg's length error at which the projection stops, mm."""
@@ -95,11 +96,10 @@ def project_to_locked_leg(
     x, y, z, roll, pitch, yaw = start
     iteration = 0
     while True:
-        cr, sr, cp, sp, cy, sy = cos(roll), sin(roll), cos(pitch), sin(pitch), cos(yaw), sin(yaw)
-        # T·P_N with T = Rz(yaw)·Ry(pitch)·Rx(roll), written out as in inverse.leg_lengths.
-        tx = cy * cp * px + (cy * sp * sr - sy * cr) * py + (cy * sp * cr + sy * sr) * pz
-        ty = sy * cp * px + (sy * sp * sr + cy * cr) * py + (sy * sp * cr - cy * sr) * pz
-        tz = -sp * px + cp * sr * py + cp * cr * pz
+        r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
+        tx = r11 * px + r12 * py + r13 * pz  # T·P_N
+        ty = r21 * px + r22 * py + r23 * pz
+        tz = r31 * px + r32 * py + r33 * pz
         vx, vy, vz = tx + x - bx, ty + y - by, tz + z - bz
         current = sqrt(vx * vx + vy * vy + vz * vz)
         residual = current - length_mm
@@ -116,7 +116,8 @@ def project_to_locked_leg(
         ux, uy, uz = vx / current, vy / current, vz / current
         mx, my, mz = ty * uz - tz * uy, tz * ux - tx * uz, tx * uy - ty * ux  # (T·P_N) × u
         # ∂l/∂(roll, pitch, yaw) = m·∂ω/∂angle; ∂ω/∂roll = Rz·Ry·ex, ∂ω/∂pitch = Rz·ey, ∂ω/∂yaw = ez.
-        g_roll = mx * cy * cp + my * sy * cp - mz * sp
+        g_roll = mx * r11 + my * r21 + mz * r31  # Rz·Ry·ex is T's first column
+        sy, cy = sin(yaw), cos(yaw)
         g_pitch = -mx * sy + my * cy
         g_yaw = mz
         denominator = ux * ux + uy * uy + uz * uz + (g_roll * g_roll + g_pitch * g_pitch + g_yaw * g_yaw) * angle_weight

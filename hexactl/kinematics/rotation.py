@@ -15,18 +15,25 @@ from numpy.typing import NDArray
 Matrix3 = NDArray[np.float64]
 
 
-def rotation_matrix(roll: float, pitch: float, yaw: float) -> Matrix3:
-    """The 3×3 rotation T = Rz(yaw)·Ry(pitch)·Rx(roll) (angles in rad)."""
+def rotation_elements(roll: float, pitch: float, yaw: float) -> tuple[float, ...]:
+    """T = Rz(yaw)·Ry(pitch)·Rx(roll) row by row as nine plain floats (angles in rad).
+
+    Plain floats because the control loop's IK, FK and leg-lock projection use it every
+    cycle, where numpy's per-call overhead costs more than the arithmetic.
+    """
     cr, sr = cos(roll), sin(roll)
     cp, sp = cos(pitch), sin(pitch)
     cy, sy = cos(yaw), sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
+    return (
+        cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+        sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+        -sp, cp * sr, cp * cr,
+    )  # fmt: skip
+
+
+def rotation_matrix(roll: float, pitch: float, yaw: float) -> Matrix3:
+    """The 3×3 rotation T = Rz(yaw)·Ry(pitch)·Rx(roll) (angles in rad)."""
+    return np.array(rotation_elements(roll, pitch, yaw)).reshape(3, 3)
 
 
 def rotation_matrices(roll: NDArray, pitch: NDArray, yaw: NDArray) -> NDArray[np.float64]:
