@@ -24,10 +24,11 @@ from pathlib import Path
 from types import FrameType
 
 import can
+import numpy as np
 import zmq
 
 from firmware_proto.codec import LoopRate
-from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.commands import CommandHandler, MeasurementError
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError, check_endpoints, is_local_endpoint
 from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT, ApiServer
@@ -71,6 +72,9 @@ class ServiceConfig:
     seeded manufacturing errors of :func:`hexactl.sim.true_platform.true_geometry`);
     ``data_dirs``: where requests may read and write files (None: ./recordings,
     ./calibrations, ./sequences and the geometry file's directory).
+    ``simulator_seed`` seeds the simulator's manufacturing errors and its instrument's
+    noise, ``point_sigma_mm`` that noise (1σ per coordinate, mm; None: the geometry's
+    ``[measurement] point_sigma_mm``).
     """
 
     config_path: Path | None = None
@@ -83,16 +87,20 @@ class ServiceConfig:
     data_dirs: tuple[Path, ...] | None = None
     curve: CurveServerKeys | None = None
     simulator_seed: int = 0
+    point_sigma_mm: float | None = None
     log_level: str = "INFO"
 
 
 class Simulator:
     """Six simulated actuator firmwares on an in-process ``virtual:`` bus, driving a
-    simulated physical platform with manufacturing errors."""
+    simulated physical platform with manufacturing errors, and the instrument that
+    measures it (the paper's theodolites: feature points with noise ``point_sigma_mm``
+    per coordinate, None: the geometry's)."""
 
-    def __init__(self, nominal: Geometry, seed: int) -> None:
+    def __init__(self, nominal: Geometry, seed: int, point_sigma_mm: float | None = None) -> None:
         # Imported here: real hardware never loads the simulator.
         from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
+        from hexactl.sim.instrument import SimulatedInstrument
         from hexactl.sim.physical_platform import PhysicalPlatform
         from hexactl.sim.true_platform import true_geometry
 
@@ -102,6 +110,23 @@ class Simulator:
         self._runner = ActuatorBus(open_bus(self.bus_spec), firmwares).start()
         self.platform = PhysicalPlatform(truth, self._runner.actual_positions_mm)
         """The simulated platform: its true pose, for simulated measurements."""
+        # The noise has its own stream: the manufacturing errors already draw from ``seed``'s.
+        noise_seed = int(np.random.SeedSequence(seed).spawn(1)[0].generate_state(1)[0])
+        self.instrument = SimulatedInstrument.for_geometry(truth, noise_seed, point_sigma_mm)
+
+    def measure(self) -> list[list[float]]:
+        """The feature points of the platform's true pose now, fixed frame, mm, with the
+        instrument's noise (the API's ``measure``; called from the API thread only).
+
+        :raises MeasurementError: if the platform's pose cannot be solved
+        """
+        from hexactl.sim.physical_platform import PoseUnavailable
+
+        try:
+            pose = self.platform.true_pose()
+        except PoseUnavailable as error:
+            raise MeasurementError(f"the simulated platform has no pose: {error}") from None
+        return self.instrument.measure(pose.absolute).tolist()
 
     def close(self) -> None:
         self._runner.close()
@@ -152,7 +177,7 @@ class Service:
 
             simulator = None
             if config.can is None:
-                simulator = Simulator(nominal, config.simulator_seed)
+                simulator = Simulator(nominal, config.simulator_seed, config.point_sigma_mm)
                 closers.callback(simulator.close)
             spec = simulator.bus_spec if simulator else config.can
             try:
@@ -182,7 +207,8 @@ class Service:
                                                config.telemetry_rate_hz, curve)
                 closers.callback(publisher.close)
                 closers.callback(_bring_to_rest, controller)  # after the API stops, while telemetry still flows
-                server = ApiServer(context, config.api_endpoint, CommandHandler(controller, data), curve)
+                handler = CommandHandler(controller, data, simulator.measure if simulator else None)
+                server = ApiServer(context, config.api_endpoint, handler, curve)
                 closers.callback(server.close)
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
                 raise ServiceError(f"cannot serve: {error}") from None

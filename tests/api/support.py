@@ -13,7 +13,7 @@ from typing import Any
 
 import zmq
 
-from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.commands import CommandHandler, Instrument
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
@@ -151,11 +151,16 @@ class FakeController:
         )
 
 
-def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float = 200.0) -> SimpleNamespace:
-    """A fake controller served on random local ports; ``close()`` when done."""
+def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float = 200.0,
+                  instrument: Instrument | None = None) -> SimpleNamespace:
+    """A fake controller served on random local ports; ``close()`` when done. The
+    instrument (``measure``) defaults to one that sees the feature points at the home
+    translation, without noise."""
     context = zmq.Context()
     controller = FakeController(geometry)
-    server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir])))
+    if instrument is None:
+        instrument = lambda: [[p + h for p, h in zip(point, geometry.home[:3])] for point in geometry.measurement.feature_points]  # noqa: E731
+    server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir]), instrument))
     publisher = TelemetryPublisher(context, LOCAL, lambda: jsonable(controller.telemetry()), telemetry_rate_hz)
     server.start()
     publisher.start()

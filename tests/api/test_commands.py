@@ -7,9 +7,12 @@ import pytest
 import zmq
 from pydantic import TypeAdapter
 
-from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, OkReply, PathViolation
+from hexactl.adapters.api.commands import CommandHandler, MeasurementError
+from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, MeasureRequest, OkReply, PathViolation
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
-from tests.api.support import request
+from tests.api.support import FakeController, request
 
 REPLY = TypeAdapter(ErrorReply | OkReply)
 
@@ -41,7 +44,7 @@ def test_every_command_round_trips(service, kind) -> None:
         assert reply["ok"], reply
         assert reply["id"] == {"n": cmd}
     called = [name for name, _ in service.controller.calls]
-    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "save_recording"}  # queries
+    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "save_recording", "measure"}  # queries, instrument
 
 
 def test_move_passes_pose_and_pace(service) -> None:
@@ -153,3 +156,21 @@ def test_save_recording_writes_csv_once(service) -> None:
     assert send(service, "save_recording", path="run.csv")["error"]["code"] == "file_exists"
     assert send(service, "save_recording", path="../run.csv")["error"]["code"] == "forbidden_path"
     assert send(service, "save_recording", path="missing/run.csv")["error"]["code"] == "file_not_found"
+
+
+def test_measure_returns_the_instruments_points(service, nominal) -> None:
+    points = send(service, "measure")["points"]
+    assert len(points) == len(nominal.measurement.feature_points)
+    assert points[0] == pytest.approx([800.0, 0.0, 2000.0])
+
+
+def test_measure_without_an_instrument_or_when_it_fails(nominal, tmp_path) -> None:
+    def broken() -> list[list[float]]:
+        raise MeasurementError("no pose")
+
+    request = MeasureRequest(v=1, id=1, cmd="measure")
+    for instrument, code in ((None, "no_instrument"), (broken, "measurement_failed")):
+        handler = CommandHandler(FakeController(nominal), DataDirectories([tmp_path]), instrument)
+        with pytest.raises(ApiError) as refused:
+            handler(request)
+        assert refused.value.code == code

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from hexactl.adapters.api.messages import (
@@ -18,6 +19,7 @@ from hexactl.adapters.api.messages import (
     LegLockRequest,
     LegUnlockRequest,
     LoadCalibrationRequest,
+    MeasureRequest,
     MoveRequest,
     PauseRequest,
     PlayRequest,
@@ -43,15 +45,25 @@ from hexactl.kinematics.geometry import GeometryError
 TOML_SOURCE = "request"
 """The calibration source recorded for a calibration sent as text."""
 
+Instrument = Callable[[], Sequence[Sequence[float]]]
+"""A measuring instrument: measures the platform's feature points now and returns them
+(K × [x, y, z], fixed frame, mm, in the geometry's order); raises
+:class:`MeasurementError` when it cannot."""
+
+
+class MeasurementError(Exception):
+    """The instrument could not measure; the message says why."""
+
 
 class CommandHandler:
     """The :data:`~hexactl.adapters.api.server.Handler` of the service: returns each
     request's reply fields or raises :class:`ApiError` (with the controller's code for
-    its refusals)."""
+    its refusals). ``instrument`` answers ``measure`` (None: ``no_instrument``)."""
 
-    def __init__(self, controller: ControllerPort, data: DataDirectories) -> None:
+    def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None) -> None:
         self.controller = controller
         self.data = data
+        self.instrument = instrument
 
     def __call__(self, request: Request) -> dict[str, Any]:
         controller = self.controller
@@ -93,6 +105,8 @@ class CommandHandler:
                 return _calibration_fields(controller.rollback_calibration())
             case SaveRecordingRequest():
                 return self._save_recording(request)
+            case MeasureRequest():
+                return self._measure()
         raise AssertionError(f"no handler for {type(request).__name__}")  # the union and this match disagree
 
     def _validate_pose(self, request: ValidatePoseRequest) -> dict[str, Any]:
@@ -129,6 +143,17 @@ class CommandHandler:
         except OSError as error:
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{request.path}: cannot write: {error.strerror}") from None
         return {"path": str(target), "name": report.name, "status": report.status, "records": len(report.records)}
+
+
+    def _measure(self) -> dict[str, Any]:
+        if self.instrument is None:
+            raise ApiError(ErrorCode.NO_INSTRUMENT, "this service has no measuring instrument (only the simulator has one): "
+                           "measure the platform with yours")
+        try:
+            points = self.instrument()
+        except MeasurementError as error:
+            raise ApiError(ErrorCode.MEASUREMENT_FAILED, str(error)) from None
+        return {"points": [[float(value) for value in point] for point in points]}
 
 
 def _code(result: CommandResult) -> str:

@@ -32,6 +32,7 @@ Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity
 ErrorCodeText = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="snake_case error code")]
 RequestId = Annotated[JsonValue, Field(description="any JSON value; echoed in the reply")]
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
+Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
 
 
 class _Message(BaseModel):
@@ -194,6 +195,13 @@ class SaveRecordingRequest(_Request):
     path: FilePath
 
 
+class MeasureRequest(_Request):
+    """Measure the platform's feature points with the measuring instrument: the
+    simulator's (``no_instrument`` when the service drives real actuators)."""
+
+    cmd: Literal["measure"]
+
+
 REQUEST_MODELS: tuple[type[_Request], ...] = (
     StatusRequest,
     EnableRequest,
@@ -212,6 +220,7 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     LoadCalibrationRequest,
     RollbackCalibrationRequest,
     SaveRecordingRequest,
+    MeasureRequest,
 )
 
 Request = Annotated[Union[REQUEST_MODELS], Field(discriminator="cmd")]  # type: ignore[valid-type]
@@ -342,6 +351,13 @@ class SaveRecordingReply(OkReply):
     records: int = Field(description="rows written (one per dwell)")
 
 
+class MeasureReply(OkReply):
+    points: list[Point] = Field(
+        description="the geometry's [measurement] feature points in their order, as measured in the fixed frame, mm "
+        "(noise σ per coordinate: the geometry's point_sigma_mm unless the service sets another)"
+    )
+
+
 class PathViolation(_Message):
     """An item of ``error.details.violations`` (``path_violation``): the first sample of a
     waypoint's path that violates a limit."""
@@ -364,5 +380,6 @@ REPLY_MODELS: dict[str, type[OkReply]] = {
     "load_calibration": CalibrationReply,
     "rollback_calibration": CalibrationReply,
     "save_recording": SaveRecordingReply,
+    "measure": MeasureReply,
 }
 """The reply model of each command whose reply carries more than :class:`OkReply`."""

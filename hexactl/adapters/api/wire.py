@@ -45,6 +45,8 @@ class ErrorCode(StrEnum):
     INVALID_SEQUENCE = "invalid_sequence"  # the sequence file is refused
     UNKNOWN_SEQUENCE = "unknown_sequence"
     NO_RECORDING = "no_recording"  # save_recording before any sequence was played
+    NO_INSTRUMENT = "no_instrument"  # measure on a service without a measuring instrument (real actuators)
+    MEASUREMENT_FAILED = "measurement_failed"  # the instrument could not measure (the simulated platform has no pose)
     INTERNAL_ERROR = "internal_error"  # a bug: logged with its traceback
 
 
