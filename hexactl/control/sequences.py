@@ -81,7 +81,7 @@ def sequence_from_toml(text: str, source: str = "sequence") -> MotionSequence:
     """Parse a sequence file's text; :class:`SequenceError` names the problems."""
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
+    except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise SequenceError(f"{source}: not valid TOML: {error}") from None
     return sequence_from_mapping(data, source)
 

@@ -169,7 +169,7 @@ class PoseTrajectory:
             return StepResult.IDLE
         try:
             result = self._ruckig.update(self._input, self._output)
-        except RuckigError:  # ruckig raises, rather than returns an error, for some inputs
+        except (RuckigError, ValueError):  # raised for some inputs; ValueError: a code the binding lacks (-101)
             result = Result.Error
         if result != Result.Working and result != Result.Finished:
             self.reset(self._input.current_position)
@@ -202,6 +202,6 @@ def preview(
     trajectory = Trajectory(DOFS)
     try:
         result = Ruckig(DOFS, period_s).calculate(parameters, trajectory)
-    except RuckigError:
+    except (RuckigError, ValueError):  # ValueError: a result code the binding lacks (-101)
         return None
     return trajectory if result in (Result.Working, Result.Finished) else None

@@ -39,7 +39,7 @@ class DataDirectories:
             real = candidate.resolve()
             if not any(real.is_relative_to(directory) for directory in self.directories):
                 continue
-            if real.is_file():
+            if os.path.isfile(real):  # False, not OSError, for a name too long
                 return real
             inside = inside or real
         if inside is None:
@@ -57,7 +57,7 @@ class DataDirectories:
         parent = path.parent.resolve()
         if not any(parent.is_relative_to(directory) for directory in self.directories):
             raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
-        if not parent.is_dir():
+        if not os.path.isdir(parent):  # False, not OSError, for a name too long
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such directory in the data directories")
         return parent / path.name
 

@@ -34,7 +34,7 @@ def parse_geometry(text: str, source: str) -> Geometry:
     """Validate TOML text into a :class:`Geometry`; :class:`GeometryError` names every problem."""
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
+    except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise GeometryError(f"{source}: not valid TOML: {error}") from None
     return geometry_from_mapping(data, source)
 
