@@ -17,7 +17,7 @@ from hexactl.control.controller import Controller
 from hexactl.control.hardware import ActuatorState
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import wait_for
-from tests.reliability.support import RATE_HZ, tolerating_loop_stalls, watchdog_tripped
+from tests.reliability.support import RATE_HZ, stall_fault, tolerating_loop_stalls
 
 
 def start_controller(simulator: Simulator, geometry: Geometry) -> Controller:
@@ -62,7 +62,7 @@ def test_killed_mid_motion_then_restarted(nominal: Geometry) -> None:
         assert monitor.counts["cycles"] > RATE_HZ  # it watched both controllers drive
 
     try:
-        tolerating_loop_stalls(scenario, lambda: bool(driving) and watchdog_tripped(driving[-1]), driving.clear)
+        tolerating_loop_stalls(scenario, lambda: bool(driving) and stall_fault(driving[-1]), driving.clear)
     finally:
         assert [violation for monitor in monitors for violation in monitor.violations] == []
 
@@ -71,10 +71,10 @@ def kill_and_restart(simulator: Simulator, nominal: Geometry, driving: list[Cont
     first = start_controller(simulator, nominal)
     driving.append(first)
     enable(first)
-    assert first.move([0, 0, 150, 0, 0, 0], duration=1.0).ok
+    assert first.move([0, 0, 150, 0, 0, 0], duration=1.0).ok, first.telemetry().faults
     wait_for(lambda: first.telemetry().pose_command[2] > 30.0 or first.telemetry().state != "enabled",
              "the platform under way")
-    assert first.telemetry().state == "enabled"
+    assert first.telemetry().state == "enabled", first.telemetry().faults
 
     # The crash: the loop thread ends between two cycles and the process's bus goes with it.
     # No stop, no DISABLE, no E-stop: the stream of set-points just ends.

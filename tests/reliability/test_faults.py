@@ -21,8 +21,8 @@ from tests.reliability.support import (
     clear_injections,
     firmwares,
     recover,
+    stall_fault,
     tolerating_loop_stalls,
-    watchdog_tripped,
 )
 
 MOVE_S = 2.0  # long enough that the fault always strikes mid-motion
@@ -75,7 +75,8 @@ def test_lost_heartbeat(client, actuators, service) -> None:
         actuators[2].inject.silent = False
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: watchdog_tripped(service.controller), lambda: clear_injections(service))
+    tolerating_loop_stalls(scenario, lambda: stall_fault(service.controller, expected_legs=(3,)),
+                           lambda: clear_injections(service))
 
 
 def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service) -> None:
@@ -92,7 +93,8 @@ def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service
         actuators[4].inject.sensor_fault = False
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: watchdog_tripped(service.controller), lambda: clear_injections(service))
+    tolerating_loop_stalls(scenario, lambda: stall_fault(service.controller, expected_legs=(5,)),
+                           lambda: clear_injections(service))
 
 
 def test_a_short_burst_of_lost_or_corrupted_frames_is_ridden_through(client, actuators, service) -> None:
@@ -113,7 +115,7 @@ def test_a_short_burst_of_lost_or_corrupted_frames_is_ridden_through(client, act
         assert (record["state"], record["faults"]) == ("enabled", [])
         assert record["pose_command"] == pytest.approx([0, 0, -40, 0, 0, 0], abs=1e-6)
 
-    tolerating_loop_stalls(scenario, lambda: watchdog_tripped(service.controller), lambda: clear_injections(service))
+    tolerating_loop_stalls(scenario, lambda: stall_fault(service.controller), lambda: clear_injections(service))
 
 
 @pytest.mark.parametrize("loss", ["drop_probability", "corrupt_probability"])
@@ -129,7 +131,7 @@ def test_lasting_frame_loss_trips_the_actuator_watchdog(client, actuators, servi
         setattr(actuators[1].inject, loss, 0.0)
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: watchdog_tripped(service.controller, expected_legs=(2,)),
+    tolerating_loop_stalls(scenario, lambda: stall_fault(service.controller, expected_legs=(2,)),
                            lambda: clear_injections(service))
 
 
@@ -181,7 +183,7 @@ def test_the_bus_going_away(client, service, vanishing_bus) -> None:
                              for actuator in service.controller.snapshot.feedback.actuators), "the actuators' report")
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: watchdog_tripped(service.controller),
+    tolerating_loop_stalls(scenario, lambda: stall_fault(service.controller),
                            lambda: setattr(vanishing_bus, "down", False))
 
 
@@ -196,5 +198,5 @@ def test_reset_cannot_enable_while_the_bus_is_away(client, service, vanishing_bu
         vanishing_bus.down = False
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: watchdog_tripped(service.controller),
+    tolerating_loop_stalls(scenario, lambda: stall_fault(service.controller),
                            lambda: setattr(vanishing_bus, "down", False))

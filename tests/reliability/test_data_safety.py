@@ -1,0 +1,221 @@
+"""Data safety. Files are written atomically: a crash in the middle of writing a
+calibration, a measurement file or a recording leaves the old file whole and nothing at
+the target path half-written. And no request makes the service read or write outside
+its data directories, run a program or evaluate anything: checked through the API of the
+real service with a Python audit hook that records every file the process opens and
+every process it would start while the hostile requests are answered."""
+
+from __future__ import annotations
+
+import errno
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
+from hexactl.adapters.files.measurements import write_measurements
+from hexactl.calibration.data import MeasurementData
+from hexactl.kinematics.geometry import Geometry
+from tests.api.test_service import status, wait_for
+from tests.reliability.support import recover
+
+REPOSITORY = Path(__file__).resolve().parents[2]
+
+
+def measurements(reading_mm: float) -> MeasurementData:
+    return MeasurementData(locked_leg=np.array([0]), readings_mm=np.full((1, 6), reading_mm), lines=np.array([1]),
+                           poses=np.zeros((1, 6)))
+
+
+# Each kind of file: (write the old content, overwrite it with the new).
+WRITERS: dict[str, Callable[[Path, Geometry], tuple[Callable[[], object], Callable[[], object]]]] = {
+    "calibration": lambda path, g: (lambda: save_geometry(g.model_copy(update={"name": "old"}), path),
+                                    lambda: save_geometry(g.model_copy(update={"name": "new"}), path, overwrite=True)),
+    "measurements": lambda path, g: (lambda: write_measurements(path, measurements(400.0)),
+                                     lambda: write_measurements(path, measurements(500.0), overwrite=True)),
+    "recording": lambda path, g: (lambda: write_atomic(path, b"old\n" * 1000, overwrite=False),
+                                  lambda: write_atomic(path, b"new\n" * 100_000, overwrite=True)),
+}
+
+
+def _fail(*args: object) -> None:
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+@pytest.mark.parametrize("failing", ["os.fsync", "os.replace"])
+@pytest.mark.parametrize("kind", sorted(WRITERS))
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, nominal, monkeypatch, kind, failing) -> None:
+    target = tmp_path / f"{kind}.dat"
+    write_old, write_new = WRITERS[kind](target, nominal)
+    write_old()
+    old = target.read_bytes()
+    monkeypatch.setattr(os, failing.removeprefix("os."), _fail)
+    with pytest.raises(OSError, match="No space left"):
+        write_new()
+    monkeypatch.undo()
+    assert target.read_bytes() == old
+    assert [path.name for path in tmp_path.iterdir()] == [target.name]
+
+
+KILLED_WRITER = textwrap.dedent("""
+    import os, sys, time
+    from hexactl.adapters.files.geometry_file import default_config_path, load_geometry, save_geometry
+
+    def stall(descriptor):  # the new content is written, not yet synced nor renamed: die here
+        print("written", flush=True)
+        time.sleep(60)
+
+    os.fsync = stall
+    save_geometry(load_geometry(default_config_path()).model_copy(update={"name": "new"}), sys.argv[1], overwrite=True)
+""")
+
+
+def test_killed_mid_write_leaves_the_old_calibration(tmp_path, nominal) -> None:
+    """SIGKILL between write and rename: the target is the old file, whole. What a hard
+    kill cannot clean up is the hidden temporary (``.NAME.*.tmp``) beside it; it is never
+    at the target path."""
+    target = tmp_path / "cal.toml"
+    save_geometry(nominal.model_copy(update={"name": "old"}), target)
+    old = target.read_bytes()
+    writer = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(target)], cwd=REPOSITORY,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline() == "written\n"
+    finally:
+        writer.send_signal(signal.SIGKILL)
+        writer.wait()
+    assert target.read_bytes() == old and load_geometry(target).name == "old"
+    leftovers = [path.name for path in tmp_path.iterdir() if path != target]
+    assert all(name.startswith(".cal.toml.") and name.endswith(".tmp") for name in leftovers), leftovers
+    save_geometry(nominal.model_copy(update={"name": "next"}), target, overwrite=True)  # the next save is unharmed
+    assert load_geometry(target).name == "next"
+
+
+def test_a_recording_whose_rename_fails_is_not_left_behind(client, data_dir, monkeypatch) -> None:
+    recover(client)
+    client.call("play", sequence={"name": "short", "waypoints": [{"pose": [0, 0, 5, 0, 0, 0], "dwell": 0.02}]})
+    wait_for(lambda: status(client)["sequence"] is None, "the sequence to end")
+    before = sorted(path.name for path in data_dir.iterdir())
+    monkeypatch.setattr(os, "replace", _fail)
+    reply = client.request("save_recording", path="run.csv")
+    monkeypatch.undo()
+    assert reply["error"]["code"] == "file_not_found" and "No space left" in reply["error"]["message"]
+    assert sorted(path.name for path in data_dir.iterdir()) == before
+    assert client.call("save_recording", path="run.csv")["records"] == 1  # and the service writes it once it can
+
+
+# -- nothing outside the data directories, nothing executed ------------------------------
+
+_SPAWN_EVENTS = ("os.system", "os.exec", "os.posix_spawn", "os.spawn", "os.fork", "subprocess.Popen", "pty.spawn",
+                 "ctypes.dlopen", "webbrowser.open")
+_audit: list[tuple[str, tuple]] | None = None  # events recorded while a test listens
+
+
+def _hook(event: str, args: tuple) -> None:
+    if _audit is not None and (event == "open" or event.startswith(_SPAWN_EVENTS)):
+        _audit.append((event, args))
+
+
+_hook_installed = False
+
+
+@pytest.fixture
+def audit() -> Iterator[list[tuple[str, tuple]]]:
+    """The ``open`` and process-starting audit events of the whole process during the test
+    (an audit hook cannot be removed: it is installed once and records only meanwhile)."""
+    global _audit, _hook_installed
+    if not _hook_installed:
+        sys.addaudithook(_hook)
+        _hook_installed = True
+    _audit = events = []
+    try:
+        yield events
+    finally:
+        _audit = None
+
+
+def opened_outside(events: list[tuple[str, tuple]], allowed: Path) -> list[str]:
+    """Files opened outside ``allowed`` (descriptor opens, which carry no path, excluded)."""
+    paths = [args[0] for event, args in events if event == "open" and isinstance(args[0], (str, bytes, os.PathLike))]
+    return [str(path) for path in paths if not Path(os.fsdecode(path)).resolve().is_relative_to(allowed.resolve())]
+
+
+@pytest.fixture
+def outside(data_dir: Path, nominal: Geometry) -> Path:
+    """Beside the data directory: a valid calibration (were it read, it would be accepted)
+    and links to it from inside; inside, a FIFO (reading it would block the API thread)."""
+    directory = data_dir.parent / "outside"
+    directory.mkdir(exist_ok=True)
+    canary = directory / "canary.toml"
+    canary.write_text(geometry_to_toml(nominal.model_copy(update={"name": "canary"})))
+    for link, points_to in (("link_out.toml", canary), ("linkdir", directory)):
+        if not (data_dir / link).is_symlink():
+            (data_dir / link).symlink_to(points_to)
+    if not (data_dir / "fifo.toml").exists():
+        os.mkfifo(data_dir / "fifo.toml")
+    return directory
+
+
+def hostile_reads(outside: Path) -> list[str]:
+    return ["../outside/canary.toml", "link_out.toml", "linkdir/canary.toml", str(outside / "canary.toml"),
+            "/etc/passwd", "/etc/shadow", "/proc/self/environ", "/dev/zero", "fifo.toml", "~/canary.toml",
+            "$HOME/canary.toml", "file:///etc/passwd", "%2e%2e/outside/canary.toml", "sub/../../outside/canary.toml"]
+
+
+def test_no_request_reads_outside_the_data_directory(client, data_dir, outside, audit) -> None:
+    before = status(client)["calibration_id"]
+    for path in hostile_reads(outside):
+        for cmd, fields in (("load_calibration", {"path": path}), ("play", {"sequence": path.removesuffix(".toml") + ".toml"})):
+            reply = client.request(cmd, **fields)
+            assert reply["ok"] is False and reply["error"]["code"] in ("forbidden_path", "file_not_found"), (path, reply)
+    assert status(client)["calibration_id"] == before
+    assert opened_outside(audit, data_dir) == []
+    assert not [event for event, _ in audit if event != "open"]
+    (data_dir / "inside.toml").write_text("not a calibration")  # the hook does see the files read inside
+    assert client.request("load_calibration", path="inside.toml")["error"]["code"] == "invalid_calibration"
+    assert str((data_dir / "inside.toml").resolve()) in [str(args[0]) for event, args in audit if event == "open"]
+
+
+def test_no_request_writes_outside_the_data_directory(client, data_dir, outside, audit) -> None:
+    recover(client)
+    client.call("play", sequence={"name": "short", "waypoints": [{"pose": [0, 0, 3, 0, 0, 0]}]})
+    wait_for(lambda: status(client)["sequence"] is None, "the sequence to end")
+    for path in ("../outside/escaped.csv", "linkdir/escaped.csv", str(outside / "escaped.csv"), "../escaped.csv",
+                 "/tmp/escaped.csv", "link_out.toml", "linkdir", "..", "missing/escaped.csv"):
+        reply = client.request("save_recording", path=path)
+        assert reply["ok"] is False and reply["error"]["code"] in ("forbidden_path", "file_not_found", "file_exists"), (
+            path, reply)
+    assert [path.name for path in outside.iterdir()] == ["canary.toml"]
+    assert not (data_dir.parent / "escaped.csv").exists() and not Path("/tmp/escaped.csv").exists()
+    assert opened_outside(audit, data_dir) == []
+
+
+def test_calibration_text_is_data_never_code(client, data_dir, nominal, audit, tmp_path) -> None:
+    """TOML has no includes, no references and no code; the service treats every string as
+    data: a name asking a shell for something stays a name, and keys the format does not
+    know are refused."""
+    flag = tmp_path / "ran"
+    payload = f"$(touch {flag}) `touch {flag}` __import__('os').system('touch {flag}')"
+    named = nominal.model_copy(update={"name": payload})
+    texts = {
+        "unknown keys": geometry_to_toml(nominal) + f'\ninclude = "/etc/passwd"\n[python]\ncode = "{payload}"\n',
+        "nested": "x = " + "[" * 1000 + "]" * 1000,
+        "not UTF-8 text": "\udcff",
+    }
+    for name, text in texts.items():
+        reply = client.request("load_calibration", toml=text)
+        assert reply["ok"] is False and reply["error"]["code"] in ("invalid_calibration", "invalid_request"), (name, reply)
+    reply = client.call("load_calibration", toml=geometry_to_toml(named))  # at rest: a no-op swap, named oddly
+    assert reply["calibration_id"] == geometry_id(named)
+    client.call("rollback_calibration")
+    assert not flag.exists()
+    assert not [event for event, _ in audit if event != "open"]
+    assert opened_outside(audit, data_dir) == []
