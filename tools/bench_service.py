@@ -195,10 +195,10 @@ class Workload:
 
 def api_client(conn: Connection, rate_hz: float, seconds: float, seed: int) -> None:
     """The client process: says ``"imported"``, receives the endpoints, connects, says
-    ``"ready"``, waits for ``"go"``, runs the workload for ``seconds`` at ``rate_hz`` commands a second on
-    absolute slots (a slot whose command could not start in its own interval counts as
-    late; the next one is sent at once, never in a burst), sends back a
-    :class:`ClientReport` as a dict."""
+    ``"ready"``, waits for ``"go"``, runs the workload for ``seconds`` at ``rate_hz``
+    commands a second on absolute slots (a slot whose command could not start in its own
+    interval counts as late; the next one is sent at once, never in a burst), sends back
+    a :class:`ClientReport` as a dict."""
     conn.send("imported")
     try:
         api, telemetry_endpoint = conn.recv()
@@ -213,9 +213,10 @@ def api_client(conn: Connection, rate_hz: float, seconds: float, seed: int) -> N
         conn.recv()  # go
         start = time.monotonic()
         workload = Workload(random.Random(seed), start)
-        interval = 1.0 / rate_hz
+        interval, end = 1.0 / rate_hz, start + seconds
         slot = 0
-        while (due := start + slot * interval) < start + seconds:
+        # Ends on time even when behind: a slow service gets fewer commands, not a longer run.
+        while (due := start + slot * interval) < end and time.monotonic() < end:
             _drain(telemetry, report, until_s=due)
             now = time.monotonic()
             if now - due > interval:
