@@ -16,6 +16,8 @@ LOCAL = "tcp://127.0.0.1:*"
 RATE_HZ = 500
 RESET_RETRY_S = 0.1  # a reset's CLEAR_FAULT may wait up to the E-stop hold-off (0.3 s)
 ATTEMPTS = 3
+BOOTING = ("heartbeat_missing", "outside_stroke", "pose_unknown")
+"""Refusals of enable while the actuators boot: heard, but no FEEDBACK yet (position NaN)."""
 
 
 def firmwares(service: Service) -> tuple[ActuatorFirmware, ...]:
@@ -35,9 +37,9 @@ def clear_injections(service: Service) -> None:
 
 
 def enable(client: HexactlClient) -> None:
-    """Enable, waiting while the actuators boot; an actuator still in FAULT (its
-    CLEAR_FAULT was refused while the cause lasted) gets another ``reset``, as an operator
-    would give it."""
+    """Enable, waiting while the actuators boot and report their positions; an actuator
+    still in FAULT (its CLEAR_FAULT was refused while the cause lasted) gets another
+    ``reset``, as an operator would give it."""
 
     def attempt() -> bool:
         try:
@@ -49,7 +51,7 @@ def enable(client: HexactlClient) -> None:
                 client.call("reset")
                 time.sleep(RESET_RETRY_S)
                 return False
-            assert error.code == "heartbeat_missing", error
+            assert error.code in BOOTING, error
             return False
         return True
 
@@ -70,25 +72,25 @@ STALL_FAULTS = ("heartbeat_lost", "setpoints_not_applied")
 
 
 def stall_fault(controller: Controller, expected_legs: Collection[int] = ()) -> bool:
-    """Whether the first fault ``controller`` latched is what a held-up loop causes, on a
-    leg outside ``expected_legs``: an actuator stopped by its watchdog (COMM_TIMEOUT), a
-    heartbeat the loop did not read in time, set-points it did not send in time."""
+    """Whether ``controller`` shows what a held-up loop causes, outside ``expected_legs``:
+    an actuator stopped by its watchdog (COMM_TIMEOUT: a stall stops them all), or, as the
+    first latched fault, a heartbeat the loop did not read in time or set-points it did
+    not send in time."""
     snapshot = controller.snapshot
-    if not snapshot.faults or snapshot.feedback is None:
+    if snapshot.feedback is None:
         return False
-    first = snapshot.faults[0]
-    if first.leg is None or first.leg in expected_legs:
-        return False
-    if first.code == "actuator_fault":
-        return bool(snapshot.feedback.actuators[first.leg - 1].fault_bits & Fault.COMM_TIMEOUT)
-    return first.code in STALL_FAULTS
+    if any(actuator.fault_bits & Fault.COMM_TIMEOUT and leg not in expected_legs
+           for leg, actuator in enumerate(snapshot.feedback.actuators, start=1)):
+        return True
+    first = snapshot.faults[0] if snapshot.faults else None
+    return first is not None and first.code in STALL_FAULTS and first.leg not in expected_legs
 
 
-def tolerating_loop_stalls(scenario: Callable[[], None], stalled: Callable[[], bool],
-                           cleanup: Callable[[], None] = lambda: None) -> None:
-    """Run ``scenario``; if it fails and ``stalled()`` says the first fault is one a
-    held-up loop causes, on an actuator the scenario does not target (:func:`stall_fault`),
-    ``cleanup()`` and run it again (:data:`ATTEMPTS` in all).
+def tolerating_loop_stalls(scenario: Callable[[], None], controller: Callable[[], Controller | None],
+                           expected_legs: Collection[int] = (), cleanup: Callable[[], None] = lambda: None) -> None:
+    """Run ``scenario``; if it fails while the controller it drives (``controller()``)
+    shows a stall's faults outside ``expected_legs`` (:func:`stall_fault`), ``cleanup()``
+    and run it again (:data:`ATTEMPTS` in all). Each failed attempt prints the latched faults.
 
     The loop, the simulated actuators and the API share one process and the host's cores:
     on a loaded machine the loop can be held up longer than the actuators' watchdog or
@@ -99,7 +101,9 @@ def tolerating_loop_stalls(scenario: Callable[[], None], stalled: Callable[[], b
         try:
             scenario()
             return
-        except AssertionError:
-            if attempt == ATTEMPTS or not stalled():
+        except (AssertionError, CommandError) as error:  # a refusal of ``client.call`` fails a scenario too
+            driven = controller()
+            print(f"attempt {attempt} failed: {error!r:.300}; latched: {driven.snapshot.faults if driven else None}")
+            if attempt == ATTEMPTS or driven is None or not stall_fault(driven, expected_legs):
                 raise
             cleanup()

@@ -152,8 +152,12 @@ def test_late_and_partial_cycles_are_counted_not_flagged(feed) -> None:
     feed.frame(*codec.encode_setpoint_frame(1, 2, START_UM[:2]))  # the rest of the cycle failed to send
     feed.frame(*codec.encode_sync(2))
     feed.frame(*codec.encode_sync(3))  # a bare SYNC
+    feed.t_s += 10.0  # disabled for 10 s: the controller sends no cycle …
+    feed.feedback(START_UM)
+    feed.enable()
+    feed.cycle(2, START_UM)  # … so the next session's first cycle, though it follows counter 1, is not late
     counts = feed.monitor.counts
-    assert (counts["cycles"], counts["late_cycles"], counts["partial_cycles"], counts["bare_syncs"]) == (2, 1, 1, 1)
+    assert (counts["cycles"], counts["late_cycles"], counts["partial_cycles"], counts["bare_syncs"]) == (3, 1, 1, 1)
     assert feed.monitor.report().max_cycle_gap_s == pytest.approx(3 / RATE_HZ)
     assert feed.kinds() == []
 

@@ -11,20 +11,22 @@ from firmware_proto.codec import Fault, LoopRate
 from hexactl.adapters.can.bus_monitor import BusMonitor
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.files.geometry_file import geometry_id
-from hexactl.adapters.service import Simulator
+from hexactl.adapters.service import SIMULATOR_SUPERVISION, SIMULATOR_WATCHDOG_CYCLES, Simulator
 from hexactl.control.config import ControllerConfig, LoopConfig
 from hexactl.control.controller import Controller
 from hexactl.control.hardware import ActuatorState
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import wait_for
-from tests.reliability.support import RATE_HZ, stall_fault, tolerating_loop_stalls
+from tests.reliability.support import BOOTING, RATE_HZ, tolerating_loop_stalls
 
 
 def start_controller(simulator: Simulator, geometry: Geometry) -> Controller:
-    """A controller on its own link to the simulator's bus, as ``hexactl serve`` composes it."""
-    link = CanActuatorLink.open(simulator.bus_spec, LinkConfig(loop_rate=LoopRate(RATE_HZ)))
+    """A controller on its own link to the simulator's bus, as ``hexactl serve`` composes it
+    with its simulator (the simulator's watchdog and supervision timeouts)."""
+    link = CanActuatorLink.open(simulator.bus_spec, LinkConfig(loop_rate=LoopRate(RATE_HZ),
+                                                               watchdog_cycles=SIMULATOR_WATCHDOG_CYCLES))
     controller = Controller(link, geometry, geometry_id(geometry),
-                            config=ControllerConfig(loop=LoopConfig(rate_hz=RATE_HZ)))
+                            config=ControllerConfig(loop=LoopConfig(rate_hz=RATE_HZ), supervision=SIMULATOR_SUPERVISION))
     controller.start()
     return controller
 
@@ -32,7 +34,7 @@ def start_controller(simulator: Simulator, geometry: Geometry) -> Controller:
 def enable(controller: Controller) -> None:
     def attempt() -> bool:
         result = controller.enable()
-        assert result.ok or result.error in ("heartbeat_missing", "actuator_fault"), result
+        assert result.ok or result.error in (*BOOTING, "actuator_fault"), result
         return result.ok
 
     wait_for(attempt, "the controller to enable")
@@ -62,7 +64,7 @@ def test_killed_mid_motion_then_restarted(nominal: Geometry) -> None:
         assert monitor.counts["cycles"] > RATE_HZ  # it watched both controllers drive
 
     try:
-        tolerating_loop_stalls(scenario, lambda: bool(driving) and stall_fault(driving[-1]), driving.clear)
+        tolerating_loop_stalls(scenario, lambda: driving[-1] if driving else None, cleanup=driving.clear)
     finally:
         assert [violation for monitor in monitors for violation in monitor.violations] == []
 

@@ -19,13 +19,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
 from hexactl.adapters.files.measurements import write_measurements
+from hexactl.adapters.service import Service
 from hexactl.calibration.data import MeasurementData
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import status, wait_for
-from tests.reliability.support import recover
+from tests.reliability.support import recover, tolerating_loop_stalls
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 
@@ -99,10 +101,20 @@ def test_killed_mid_write_leaves_the_old_calibration(tmp_path, nominal) -> None:
     assert load_geometry(target).name == "next"
 
 
-def test_a_recording_whose_rename_fails_is_not_left_behind(client, data_dir, monkeypatch) -> None:
-    recover(client)
-    client.call("play", sequence={"name": "short", "waypoints": [{"pose": [0, 0, 5, 0, 0, 0], "dwell": 0.02}]})
-    wait_for(lambda: status(client)["sequence"] is None, "the sequence to end")
+def play_short(client: HexactlClient, service: Service) -> None:
+    """Play a one-waypoint sequence to its end (something to record)."""
+
+    def scenario() -> None:
+        recover(client)
+        client.call("play", sequence={"name": "short", "waypoints": [{"pose": [0, 0, 5, 0, 0, 0], "dwell": 0.02}]})
+        wait_for(lambda: status(client)["sequence"] is None, "the sequence to end")
+        assert status(client)["state"] == "enabled"
+
+    tolerating_loop_stalls(scenario, lambda: service.controller)
+
+
+def test_a_recording_whose_rename_fails_is_not_left_behind(client, service, data_dir, monkeypatch) -> None:
+    play_short(client, service)
     before = sorted(path.name for path in data_dir.iterdir())
     monkeypatch.setattr(os, "replace", _fail)
     reply = client.request("save_recording", path="run.csv")
@@ -184,10 +196,8 @@ def test_no_request_reads_outside_the_data_directory(client, data_dir, outside, 
     assert str((data_dir / "inside.toml").resolve()) in [str(args[0]) for event, args in audit if event == "open"]
 
 
-def test_no_request_writes_outside_the_data_directory(client, data_dir, outside, audit) -> None:
-    recover(client)
-    client.call("play", sequence={"name": "short", "waypoints": [{"pose": [0, 0, 3, 0, 0, 0]}]})
-    wait_for(lambda: status(client)["sequence"] is None, "the sequence to end")
+def test_no_request_writes_outside_the_data_directory(client, service, data_dir, outside, audit) -> None:
+    play_short(client, service)
     for path in ("../outside/escaped.csv", "linkdir/escaped.csv", str(outside / "escaped.csv"), "../escaped.csv",
                  "/tmp/escaped.csv", "link_out.toml", "linkdir", "..", "missing/escaped.csv"):
         reply = client.request("save_recording", path=path)

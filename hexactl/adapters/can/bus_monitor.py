@@ -24,7 +24,8 @@ never reached the bus (a failed send; the link then drops the rest of the cycle)
 covered. Deadlines the loop *skips* after an overrun do not advance the counter: the next
 set-point moves at most one step in two or more periods of wall time, slower than the
 limit, never faster; the monitor counts such cycles as ``late_cycles`` (a SYNC more than
-1.5 periods after the previous cycle's) and keeps the longest gap. A set-point whose
+1.5 periods after the previous cycle's, in one session: a controller sends no cycles while
+disabled, and ENABLE starts a new stream) and keeps the longest gap. A set-point whose
 counter is not *fresh* for the actuator (``d == 0``, a repeat, or ``d`` above the watchdog
 window ``N`` sent with ENABLE; 100, the protocol's largest, if the monitor missed the
 ENABLE) is one the actuator refuses, and by then its watchdog has stopped it with
@@ -270,7 +271,8 @@ class BusMonitor(can.Listener):
             try:
                 message = recv(_RECV_TIMEOUT_S)
             except Exception as error:  # noqa: BLE001 - a monitor that stops must say so
-                self._violate("monitor_error", f"receive failed, monitor stopped: {error!r}", time.time(), (0, b""))
+                with self._lock:
+                    self._violate("monitor_error", f"receive failed, monitor stopped: {error!r}", time.time(), (0, b""))
                 return
             if message is None:
                 self._idle_s = time.time()
@@ -286,6 +288,7 @@ class BusMonitor(can.Listener):
             return dict(self._counts)
 
     def report(self) -> MonitorReport:
+        """The figures so far (see :class:`MonitorReport`)."""
         with self._lock:
             return MonitorReport(dict(self._counts), len(self.violations), self._max_step_fraction,
                                  self._min_margin_um / 1000.0, self._max_gap_s)
@@ -382,6 +385,7 @@ class BusMonitor(can.Listener):
         leg.last_sequence = sequence
         code = signals["Command"]
         if code in self._starting_codes:
+            self._last_cycle = None  # the stream restarts: the time since its last cycle is no gap in it
             if code == self._enable_code:
                 leg.window = signals["WatchdogCycles"]
             leg.reference_um = leg.measured_um
