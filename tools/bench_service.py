@@ -340,8 +340,11 @@ def set_fifo(loop_priority: int, others: bool) -> None:
 
 
 def enable(client: HexactlClient) -> None:
-    """Enable the platform, waiting for the simulated actuators' first heartbeats."""
+    """Enable the platform, waiting for the simulated actuators' first heartbeats and
+    positions (the controller takes a position not reported yet for one outside the stroke)."""
     deadline = time.monotonic() + CONNECT_TIMEOUT_S
+    while None in (client.call("status")["status"]["leg_feedback"] or [None]) and time.monotonic() < deadline:
+        time.sleep(0.05)
     while True:
         try:
             client.call("enable")
