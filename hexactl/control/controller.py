@@ -59,7 +59,7 @@ from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, builtin_sequence
 from hexactl.control.stats import LoopStats
-from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.geometry import Geometry, Limits, limits_differences
 from hexactl.kinematics.inverse import sensor_setpoints
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 
@@ -119,8 +119,18 @@ class Controller:
         *,
         calibration_source: str = "",
         config: ControllerConfig | None = None,
+        hardware_limits: Limits | None = None,
         clock_ns: Callable[[], int] = time.monotonic_ns,
     ) -> None:
+        """``hardware_limits``: the actuators' and platform's limits, normally the nominal
+        geometry's ``[limits]`` (default: ``geometry``'s). A calibration is refused unless
+        its ``[limits]`` equal them, so no calibration file can widen what is enforced.
+
+        :raises ValueError: if ``geometry``'s limits differ from ``hardware_limits``
+        """
+        self.hardware_limits = hardware_limits or geometry.limits
+        if differences := limits_differences(geometry.limits, self.hardware_limits):
+            raise ValueError(f"the geometry's [limits] differ from the hardware's: {'; '.join(differences)}")
         self.config = config or ControllerConfig()
         self.hardware = hardware
         self._clock_ns = clock_ns
@@ -340,6 +350,13 @@ class Controller:
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "load_calibration takes a validated Geometry")
         if not isinstance(calibration_id, str) or not calibration_id:
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "the calibration needs a non-empty id")
+        if differences := limits_differences(geometry.limits, self.hardware_limits):
+            return CommandResult.failure(
+                ErrorCode.INVALID_GEOMETRY,
+                "the calibration's [limits] differ from the hardware's (" + "; ".join(differences)
+                + "): a calibration may change joints and zero lengths only; limits come from the nominal geometry",
+                differences=differences,
+            )
         return self._swap(ActiveGeometry.of(geometry, calibration_id, source), "loaded")
 
     def rollback_calibration(self) -> CommandResult:

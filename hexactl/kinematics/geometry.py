@@ -144,6 +144,16 @@ class Geometry(_Strict):
         return float(np.mean(np.linalg.norm(np.array(self.platform_joints), axis=1)))
 
 
+def limits_differences(limits: Limits, reference: Limits) -> list[str]:
+    """The ``[limits]`` keys whose values differ from ``reference``'s, as ``key: value (reference)``.
+
+    A calibration identifies joints and zero lengths; the limits are the hardware's and
+    must stay those of the nominal geometry.
+    """
+    ours, theirs = limits.model_dump(), reference.model_dump()
+    return [f"{key}: {ours[key]} (hardware: {theirs[key]})" for key in ours if ours[key] != theirs[key]]
+
+
 class GeometryError(ValueError):
     """A geometry could not be accepted; the message names each key and its problem."""
 

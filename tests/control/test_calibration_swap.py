@@ -86,25 +86,51 @@ def test_rollback_ramps_back_to_the_previous_calibration(rig, calibrated):
     rig.assert_setpoints_safe()
 
 
-def test_a_calibration_that_puts_the_current_pose_out_of_reach_is_refused(rig, geometry):
-    rig.enabled()
+def _with_zero_offset(geometry: Geometry, offset_mm: float) -> Geometry:
+    """Zero lengths ``offset_mm`` longer: every sensor set-point ``offset_mm`` lower."""
+    return _variant(geometry, zero_lengths=[z + offset_mm for z in geometry.zero_lengths])
+
+
+def _accepting_large_changes(make_rig):
+    from hexactl.control.config import ControllerConfig
+
+    return make_rig(config=ControllerConfig(calibration_max_change_mm=400.0))
+
+
+def test_a_calibration_that_puts_the_current_pose_out_of_reach_is_refused(make_rig, geometry):
+    rig = _accepting_large_changes(make_rig).enabled()
     assert rig.controller.move([0, 0, -240, 0, 0, 0]).ok
-    rig.settle()
-    shallow = _variant(geometry, limits={"pose_min": (-610.0, -610.0, -200.0, -24.0, -24.0, -61.0)})
-    result = rig.controller.load_calibration(shallow, "shallow")
+    rig.settle()  # the legs read about 134 mm here
+    result = rig.controller.load_calibration(_with_zero_offset(geometry, 150.0), "long legs")
     assert not result.ok and result.error == "invalid_geometry"
-    assert result.details["violations"][0]["axis"] == "z"
+    assert result.details["violations"][0]["kind"] == "stroke_low"
     rig.run(5)
     assert rig.controller.telemetry().calibration_id == "nominal"
 
 
-def test_a_calibration_whose_stroke_excludes_the_setpoints_is_refused(rig, geometry):
+@pytest.mark.parametrize("limits", [
+    {"stroke": (-100.0, 950.0)},  # wider: would let set-points leave the actuators' real stroke
+    {"stroke": (140.0, 850.0)},  # narrower: limits are the hardware's, not the calibration's
+    {"leg_velocity_mm_s": 800.0},
+    {"pose_max": (700.0, 610.0, 255.0, 24.0, 24.0, 61.0)},
+])
+def test_a_calibration_cannot_change_the_hardware_limits(rig, calibrated, limits):
     rig.enabled()
-    assert rig.controller.move([0, 0, -240, 0, 0, 0]).ok
-    rig.settle()
-    short = _variant(geometry, limits={"stroke": (140.0, 850.0)})  # the legs read 134 mm here
-    result = rig.controller.load_calibration(short, "short")
-    assert not result.ok and result.error == "outside_stroke"
+    changed = _variant(calibrated, limits=limits)
+    result = rig.controller.load_calibration(changed, "changed")
+    assert not result.ok and result.error == "invalid_geometry"
+    assert "[limits] differ from the hardware's" in result.message
+    assert [difference.split(":")[0] for difference in result.details["differences"]] == list(limits)
+    assert rig.controller.load_calibration(calibrated, "calibrated").ok  # same limits: accepted
+
+
+def test_a_controller_refuses_a_start_geometry_with_other_limits(geometry):
+    from hexactl.control.controller import Controller
+    from hexactl.sim.ideal_actuators import IdealActuators
+
+    wide = _variant(geometry, limits={"stroke": (-100.0, 950.0)})
+    with pytest.raises(ValueError, match=r"stroke: \(-100.0, 950.0\) \(hardware: \(0.0, 850.0\)\)"):
+        Controller(IdealActuators([400.0] * 6), wide, "wide", hardware_limits=geometry.limits)
 
 
 def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):
@@ -115,14 +141,14 @@ def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):
     assert result.details["change_mm"] == pytest.approx(30.0)
 
 
-def test_the_remaining_sequence_is_checked_against_the_new_calibration(rig, geometry):
-    rig.enabled()
+def test_the_remaining_sequence_is_checked_against_the_new_calibration(make_rig, geometry):
+    rig = _accepting_large_changes(make_rig).enabled()
     assert rig.controller.play("x_sweep").ok
-    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")
-    narrow = _variant(geometry, limits={"pose_min": (-500.0, -610.0, -255.0, -24.0, -24.0, -61.0)})
-    result = rig.controller.load_calibration(narrow, "narrow")
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")  # at x = 600 mm
+    # 250 mm shorter legs: x = 600 needs readings up to 797 mm (fine), x = -600 up to 870 (beyond 850).
+    result = rig.controller.load_calibration(_with_zero_offset(geometry, -250.0), "short legs")
     assert not result.ok and result.error == "invalid_geometry"
-    assert any(v["axis"] == "x" for v in result.details["violations"])
+    assert {v["kind"] for v in result.details["violations"]} == {"stroke_high"}
 
 
 def test_swap_while_disabled_takes_effect_at_once_and_is_refused_while_locked(rig, calibrated):

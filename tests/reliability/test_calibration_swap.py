@@ -130,8 +130,6 @@ def test_100_swaps_during_playback(client, monitor, service, nominal, data_dir: 
     assert monitor.counts["cycles"] > 0 and monitor.report().max_step_fraction <= 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="bug: a calibration's [limits] replace the nominal (hardware) limits, so a "
-                   "calibration can widen the stroke, the envelope and the velocity limit the controller enforces")
 def test_a_calibration_cannot_widen_the_actuators_limits(client, nominal) -> None:
     recover(client)
     low, high = nominal.limits.stroke
