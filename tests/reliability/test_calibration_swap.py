@@ -10,7 +10,6 @@ import random
 import time
 from pathlib import Path
 
-import pytest
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
