@@ -64,7 +64,10 @@ class PlanRequest:
     ``leg`` 1–6 is locked at ``locked_length_mm`` (joint-to-joint, mm; None: its length in
     the zero posture, where every leg reads mid-stroke-ish and stays far from its limits);
     ``leg`` 0 plans free postures. ``count`` postures are chosen from ``candidates``
-    random ones (seeded). Noise figures weight the information (None: the geometry's).
+    random ones (seeded), drawn in the pose envelope (inside the margins) scaled about the
+    zero posture by ``envelope_fraction`` (0, 1] before the leg-lock projection: less than
+    1 trades information for shorter moves between postures. Noise figures weight the information (None: the
+    geometry's).
     """
 
     leg: int
@@ -75,6 +78,7 @@ class PlanRequest:
     margins: PlanMargins = field(default_factory=PlanMargins)
     point_sigma_mm: float | None = None
     reading_sigma_mm: float = DEFAULT_READING_SIGMA_MM
+    envelope_fraction: float = 1.0
 
 
 class PlanStatus(IntEnum):
@@ -112,10 +116,12 @@ def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
     """
     nan = float("nan")
     empty = np.zeros((0, 6))
-    if not 0 <= request.leg <= LEG_COUNT or request.count < 1 or request.candidates < request.count:
+    if (not 0 <= request.leg <= LEG_COUNT or request.count < 1 or request.candidates < request.count
+            or not 0 < request.envelope_fraction <= 1):
         return PosturePlan(PlanStatus.INVALID_REQUEST, request.leg, empty, empty, nan, nan, 0,
-            f"leg must be 0-{LEG_COUNT}, count ≥ 1 and candidates ≥ count "
-            f"(got leg {request.leg}, count {request.count}, candidates {request.candidates})")
+            f"leg must be 0-{LEG_COUNT}, count ≥ 1, candidates ≥ count and the envelope fraction in (0, 1] "
+            f"(got leg {request.leg}, count {request.count}, candidates {request.candidates}, "
+            f"envelope fraction {request.envelope_fraction})")
     home = absolute_from_relative(geometry.home, np.zeros(6))
     locked_length = nan
     if request.leg:
@@ -148,7 +154,8 @@ def _feasible_candidates(geometry: Geometry, request: PlanRequest, locked_length
     rng = np.random.default_rng(request.seed)
     margins = request.margins
     inset = np.array([margins.envelope_mm] * 3 + [margins.envelope_deg] * 3)
-    low, high = np.array(geometry.limits.pose_min) + inset, np.array(geometry.limits.pose_max) - inset
+    fraction = request.envelope_fraction
+    low, high = fraction * (np.array(geometry.limits.pose_min) + inset), fraction * (np.array(geometry.limits.pose_max) - inset)
     # Uniform in the box puts most samples in its corners, where joint cones and strokes
     # run out; a random radial scale keeps the interior and the single-axis extremes covered.
     samples = rng.uniform(low, high, size=(request.candidates, 6)) * rng.uniform(0.2, 1.0, size=(request.candidates, 1))

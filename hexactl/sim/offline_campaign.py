@@ -43,12 +43,15 @@ class SimulationError(RuntimeError):
 @dataclass(frozen=True, slots=True)
 class CampaignDesign:
     """The campaign's protocol: ``postures_per_leg`` leg-lock postures for each leg (0: none)
-    and ``free_postures`` with no leg locked; noise of the simulated sensors and instrument
-    (None: the geometry's ``point_sigma_mm``); one ``seed`` for planning and noise."""
+    and ``free_postures`` with no leg locked, planned from ``candidates`` random poses in
+    ``envelope_fraction`` of the pose envelope (:class:`~hexactl.calibration.planning.PlanRequest`);
+    noise of the simulated sensors and instrument (None: the geometry's ``point_sigma_mm``);
+    one ``seed`` for planning and noise."""
 
     postures_per_leg: int = 20
     free_postures: int = 0
     candidates: int = DEFAULT_CANDIDATES
+    envelope_fraction: float = 1.0
     sensor_sigma_mm: float = SENSOR_SIGMA_MM
     point_sigma_mm: float | None = None
     seed: int = 0
@@ -70,10 +73,12 @@ def plan_campaign(controller: Geometry, design: CampaignDesign) -> tuple[Posture
     Raises ``ValueError`` if a plan fails (its message says why).
     """
     # One candidate stream per plan (leg 0: free), distinct for every seed and leg.
-    requests = [PlanRequest(leg, design.postures_per_leg, candidates=design.candidates, seed=10 * design.seed + leg)
+    requests = [PlanRequest(leg, design.postures_per_leg, candidates=design.candidates, seed=10 * design.seed + leg,
+                            envelope_fraction=design.envelope_fraction)
                 for leg in range(1, LEG_COUNT + 1) if design.postures_per_leg]
     if design.free_postures:
-        requests.append(PlanRequest(0, design.free_postures, candidates=design.candidates, seed=10 * design.seed))
+        requests.append(PlanRequest(0, design.free_postures, candidates=design.candidates, seed=10 * design.seed,
+                                    envelope_fraction=design.envelope_fraction))
     plans = tuple(plan_postures(controller, request) for request in requests)
     for plan in plans:
         if not plan.ok:

@@ -1,0 +1,136 @@
+"""Carrying out a calibration campaign on a controller: the pure part.
+
+:func:`hexactl.sim.offline_campaign.plan_campaign` plans which postures to measure; this
+module decides in what order and along which path the controller visits them, and
+turns measured feature points into achieved poses:
+
+* :func:`campaign_postures`: each leg's postures in a short travel order
+  (:func:`travel_order`). The D-optimal picks lie all over the pose envelope; visiting
+  them in the planner's order roughly doubles the travel, hence the time.
+* :func:`locked_path`: the waypoints of a leg-lock move. A move is a straight line in
+  pose space, which the controller's loop projects onto the locked leg's constraint
+  every cycle with a few fixed-point iterations (``ControllerConfig.lock_cycle_iterations``).
+  Between two postures far apart that line strays up to ~130 mm from the constraint,
+  where those iterations do not converge and the loop faults (``leg_lock_projection``).
+  So the move is split at points on the constraint until no chord strays more than
+  :data:`LOCKED_CHORD_TOLERANCE_MM`.
+* :func:`achieved_pose`: the pose relative to the zero posture of measured points.
+
+Poses relative to the zero posture are in mm and degrees, as everywhere at the edges.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexactl.calibration.planning import PosturePlan
+from hexactl.calibration.validation import ValidationSummary
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import leg_lengths_batch
+from hexactl.kinematics.leg_lock import project_to_locked_leg
+from hexactl.kinematics.points import pose_from_points
+from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
+
+LOCKED_CHORD_TOLERANCE_MM = 10.0
+"""How far (locked leg's length error, mm) a leg-lock move's straight line may stray from
+the constraint. The loop's three projection iterations reach their 1e-9 mm tolerance from
+up to about 20 mm away (measured over the planned postures of every leg); half of that
+leaves a margin."""
+
+_CHORD_SAMPLES = 17  # points checked along each chord, ends included
+_MAX_SPLIT_DEPTH = 8  # at most 2⁸ pieces per move: far more than any posture pair needs
+
+
+@dataclass(frozen=True, slots=True)
+class CampaignPosture:
+    """One posture to measure: ``leg`` (1–6) locked, at ``pose`` (relative mm/deg)."""
+
+    leg: int
+    pose: tuple[float, float, float, float, float, float]
+
+
+def travel_order(poses: NDArray, characteristic_length_mm: float, start: Sequence[float] = (0.0,) * 6) -> list[int]:
+    """Indices of ``poses`` (N, 6 relative mm/deg) in nearest-neighbour order from ``start``.
+
+    Distance: |δposition|² + c²·|δangles in rad|², c = ``characteristic_length_mm`` (a
+    radian costs what the platform joints travel, the leg-lock projection's metric).
+    Greedy, not an optimal tour: within 25 % of one for points like these, and instant.
+    """
+    weights = np.array([1.0, 1.0, 1.0] + [characteristic_length_mm * np.pi / 180.0] * 3)
+    scaled = np.asarray(poses, dtype=float) * weights
+    here = np.asarray(start, dtype=float) * weights
+    left = list(range(len(scaled)))
+    order = []
+    while left:
+        nearest = left[int(np.argmin(np.linalg.norm(scaled[left] - here, axis=1)))]
+        left.remove(nearest)
+        order.append(nearest)
+        here = scaled[nearest]
+    return order
+
+
+def campaign_postures(plans: Sequence[PosturePlan], characteristic_length_mm: float) -> tuple[CampaignPosture, ...]:
+    """The leg-lock plans' postures in visiting order: plan by plan (each starts and ends
+    at the zero posture, where the leg is locked), each plan's in :func:`travel_order`.
+
+    Raises ``ValueError`` for a free-posture plan (leg 0): a campaign locks a leg.
+    """
+    postures = []
+    for plan in plans:
+        if not 1 <= plan.leg <= 6:
+            raise ValueError(f"a campaign plan locks a leg 1-6, got leg {plan.leg}")
+        for index in travel_order(plan.poses_relative, characteristic_length_mm):
+            x, y, z, roll, pitch, yaw = (float(v) for v in plan.poses_relative[index])
+            postures.append(CampaignPosture(plan.leg, (x, y, z, roll, pitch, yaw)))
+    return tuple(postures)
+
+
+def locked_path(geometry: Geometry, leg: int, length_mm: float, start: Sequence[float], goal: Sequence[float],
+                tolerance_mm: float = LOCKED_CHORD_TOLERANCE_MM) -> list[tuple[float, ...]]:
+    """Waypoints (relative mm/deg) from ``start`` to ``goal`` with leg ``leg`` locked at
+    joint-to-joint ``length_mm`` on ``geometry``; the last one is ``goal``.
+
+    Both ends should lie on the constraint (the controller projects them anyway). A
+    chord whose locked-leg length strays more than ``tolerance_mm`` from ``length_mm`` is
+    split at its midpoint projected onto the constraint, recursively.
+    Raises ``ValueError`` if a midpoint cannot be projected.
+    """
+    start_pose, goal_pose = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    fractions = np.linspace(0.0, 1.0, _CHORD_SAMPLES)[:, None]
+
+    def split(a: NDArray, b: NDArray, depth: int) -> list[NDArray]:
+        chord = absolute_from_relative(geometry.home, a + (b - a) * fractions)
+        stray = np.max(np.abs(leg_lengths_batch(geometry.legs, chord)[:, leg - 1] - length_mm))
+        if stray <= tolerance_mm or depth >= _MAX_SPLIT_DEPTH:
+            return [b]
+        middle = project_to_locked_leg(geometry.legs, absolute_from_relative(geometry.home, (a + b) / 2), leg,
+                                       length_mm, geometry.characteristic_length_mm)
+        if not middle.ok:
+            raise ValueError(f"leg {leg} locked at {length_mm:.3f} mm: no pose on the constraint between "
+                             f"{np.round(a, 3).tolist()} and {np.round(b, 3).tolist()} ({middle.status.name.lower()})")
+        m = relative_from_absolute(geometry.home, middle.pose)
+        return split(a, m, depth + 1) + split(m, b, depth + 1)
+
+    return [tuple(float(v) for v in pose) for pose in split(start_pose, goal_pose, 0)]
+
+
+def achieved_pose(geometry: Geometry, points_mm: NDArray) -> NDArray[np.float64]:
+    """The pose relative to ``geometry``'s zero posture (mm, deg) that measured feature
+    points (K, 3, fixed frame, mm; the first K of ``[measurement] feature_points``) show.
+
+    Raises :class:`~hexactl.kinematics.points.DegeneratePointsError` for collinear points.
+    """
+    points = np.asarray(points_mm, dtype=float)
+    model = np.array(geometry.measurement.feature_points, dtype=float)[: len(points)]
+    return relative_from_absolute(geometry.home, np.array(pose_from_points(model, points).pose))
+
+
+def improved(before: ValidationSummary, after: ValidationSummary) -> bool:
+    """Whether a calibration made the platform more accurate: both the largest position
+    and the largest orientation error over the test motions went down."""
+    return (after.max_position_error_mm < before.max_position_error_mm
+            and after.max_orientation_error_deg < before.max_orientation_error_deg)
