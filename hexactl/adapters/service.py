@@ -18,6 +18,7 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +41,7 @@ from hexactl.adapters.files.geometry_file import default_config_path, geometry_i
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
+from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
 SHUTDOWN_BRAKE_TIMEOUT_S = 10.0
@@ -74,7 +76,8 @@ class ServiceConfig:
     ./calibrations, ./sequences and the geometry file's directory).
     ``simulator_seed`` seeds the simulator's manufacturing errors and its instrument's
     noise, ``point_sigma_mm`` that noise (1σ per coordinate, mm; None: the geometry's
-    ``[measurement] point_sigma_mm``).
+    ``[measurement] point_sigma_mm``). ``motion``: the controller's pose-space velocity,
+    acceleration and jerk limits (the legs' speed limit is the geometry's whatever these are).
     """
 
     config_path: Path | None = None
@@ -88,6 +91,7 @@ class ServiceConfig:
     curve: CurveServerKeys | None = None
     simulator_seed: int = 0
     point_sigma_mm: float | None = None
+    motion: MotionLimits = MotionLimits()
     log_level: str = "INFO"
 
 
@@ -114,16 +118,17 @@ class Simulator:
         noise_seed = int(np.random.SeedSequence(seed).spawn(1)[0].generate_state(1)[0])
         self.instrument = SimulatedInstrument.for_geometry(truth, noise_seed, point_sigma_mm)
 
-    def measure(self) -> list[list[float]]:
+    def measure(self, guess: Sequence[float] | None = None) -> list[list[float]]:
         """The feature points of the platform's true pose now, fixed frame, mm, with the
         instrument's noise (the API's ``measure``; called from the API thread only).
+        ``guess``: roughly where the platform is (absolute mm/rad), to solve its pose from.
 
         :raises MeasurementError: if the platform's pose cannot be solved
         """
         from hexactl.sim.physical_platform import PoseUnavailable
 
         try:
-            pose = self.platform.true_pose()
+            pose = self.platform.true_pose(guess)
         except PoseUnavailable as error:
             raise MeasurementError(f"the simulated platform has no pose: {error}") from None
         return self.instrument.measure(pose.absolute).tolist()
@@ -196,7 +201,7 @@ class Service:
             loop = LoopConfig(rate_hz=config.rate_hz)
             supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
             controller = Controller(link, active, calibration_id, calibration_source=str(source),
-                                    config=ControllerConfig(loop=loop, **supervision))
+                                    config=ControllerConfig(loop=loop, motion=config.motion, **supervision))
             realtime = controller.start()
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
@@ -207,7 +212,8 @@ class Service:
                                                config.telemetry_rate_hz, curve)
                 closers.callback(publisher.close)
                 closers.callback(_bring_to_rest, controller)  # after the API stops, while telemetry still flows
-                handler = CommandHandler(controller, data, simulator.measure if simulator else None)
+                instrument = (lambda: simulator.measure(_measured_pose(controller))) if simulator else None
+                handler = CommandHandler(controller, data, instrument)
                 server = ApiServer(context, config.api_endpoint, handler, curve)
                 closers.callback(server.close)
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
@@ -267,6 +273,15 @@ def _bring_to_rest(controller: Controller) -> None:
     else:
         log.warning("disable refused (%s: %s): E-stop", result.error, result.message)
         controller.estop()
+
+
+def _measured_pose(controller: Controller) -> tuple[float, ...] | None:
+    """The controller's pose from the feedback, absolute mm/rad (None if it has none):
+    within millimetres of the true one, where the simulated instrument solves from."""
+    snapshot = controller.snapshot
+    if snapshot.pose_measured is None:
+        return None
+    return tuple(snapshot.active.absolute(snapshot.pose_measured))
 
 
 def _load(path: Path) -> Geometry:

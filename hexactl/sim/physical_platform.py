@@ -60,13 +60,15 @@ class PhysicalPlatform:
         """True joint-to-joint lengths, mm: the true zero lengths plus the actual positions."""
         return tuple(zero + position for zero, position in zip(self.geometry.zero_lengths, self._actual_positions_mm()))
 
-    def true_pose(self) -> TruePose:
-        """The pose the actuators' present lengths give (forward kinematics, warm-started).
+    def true_pose(self, guess: Sequence[float] | None = None) -> TruePose:
+        """The pose the actuators' present lengths give (forward kinematics, warm-started
+        from ``guess``, absolute mm/rad, or else from the previous answer: a caller asking
+        seldom while the platform travels far should pass where it roughly is).
 
         :raises PoseUnavailable: if forward kinematics does not converge
         """
         lengths = self.leg_lengths_mm()
-        result = forward_kinematics(self.geometry.legs, lengths, self._guess)
+        result = forward_kinematics(self.geometry.legs, lengths, self._guess if guess is None else _as_pose(guess))
         if not result.ok:
             raise PoseUnavailable(result.status, lengths)
         self._guess = result.pose

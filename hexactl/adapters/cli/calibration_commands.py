@@ -1,7 +1,9 @@
-"""``hexactl calibrate``, ``plan-leglock`` and ``simulate-campaign``: the calibration workflow.
+"""``hexactl calibrate``, ``plan-leglock``, ``simulate-campaign`` and ``campaign``: the
+calibration workflow.
 
 Exit status as everywhere: 0 success, 1 the answer is "no" (identification failed or
-not trustworthy, no feasible plan), 2 bad input (arguments, files, bad rows).
+not trustworthy, no feasible plan, a campaign that could not finish or did not improve
+the accuracy), 2 bad input (arguments, files, bad rows) or no answer from the service.
 """
 
 from __future__ import annotations
@@ -13,7 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
+from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
 from hexactl.adapters.cli.common import CliError, load_config
+from hexactl.adapters.cli.service_commands import _connect, _connection_parser  # the client options, shared
 from hexactl.adapters.files.geometry_file import save_geometry
 from hexactl.adapters.files.measurements import (
     MeasurementFileError,
@@ -102,6 +107,38 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
     simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
     simulate.set_defaults(run=run_simulate)
+
+    campaign = subparsers.add_parser(
+        "campaign",
+        parents=[common, _connection_parser()],
+        help="calibrate a running controller: drive, measure, identify, validate (leg-lock campaign)",
+        description="Drive the controller behind --api through leg-lock postures for all six legs (planned on the "
+        "--config geometry, which it must run), record the sensor readings and measure each posture with the "
+        "instrument, saving every measurement into DIR as it goes; identify the parameters, write DIR/calibration.toml, "
+        "measure the paper's test motions before and after loading it, and write the report DIR/report/. An "
+        "interrupted campaign resumes when run again with the same DIR. Exit status 0 if the calibration improved "
+        "the accuracy, 1 if not or if the campaign could not finish, 2 for bad input or no answer, 130 interrupted.",
+        epilog="See docs/calibration.md (the campaign).",
+    )
+    campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
+    campaign.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT",
+                          help=f"the service's command endpoint (default {DEFAULT_API_ENDPOINT})")
+    campaign.add_argument("--instrument", default="sim", metavar="SOURCE",
+                          help="sim: the service's simulated instrument (default); csv:FILE: a real instrument's file of "
+                          "feature points p1_x … (row k = the k-th measurement, waited for); prompt: typed here")
+    campaign.add_argument("--per-leg", type=int, default=20, metavar="N", help="leg-lock postures per leg (default 20)")
+    campaign.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES,
+                          help=f"random candidates per plan (default {DEFAULT_CANDIDATES})")
+    campaign.add_argument("--envelope", type=float, default=1.0, metavar="F",
+                          help="plan within this fraction (0, 1] of the pose envelope: shorter moves, less information "
+                          "(default 1)")
+    campaign.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
+    campaign.add_argument("--apply", action="store_true",
+                          help="keep the calibration active afterwards, if it improved the accuracy (default: roll back)")
+    campaign.add_argument("--reset-faults", type=int, default=0, metavar="N",
+                          help="simulation only: reset a latched fault (not an E-stop) up to N times and go on (default 0: "
+                          "stop, as a real platform needs the operator)")
+    campaign.set_defaults(run=run_campaign_command)
 
 
 def run_calibrate(arguments: argparse.Namespace) -> int:
@@ -250,6 +287,49 @@ def run_simulate(arguments: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     print(f"wrote {arguments.output} ({len(data)} postures)" + (f" and {arguments.true_output}" if arguments.true_output else ""))
     return 0
+
+
+def run_campaign_command(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.campaign.driver import CampaignError
+    from hexactl.adapters.campaign.instruments import InstrumentError, open_instrument
+    from hexactl.adapters.campaign.progress import Progress
+    from hexactl.adapters.campaign.runner import CampaignSettings, run_campaign
+    from hexactl.adapters.campaign.store import DirectoryError
+    from hexactl.sim.offline_campaign import CampaignDesign
+
+    geometry = load_config(arguments)
+    if arguments.per_leg < 1:
+        raise CliError(f"--per-leg {arguments.per_leg}: at least one posture per leg")
+    if not 0 < arguments.envelope <= 1:
+        raise CliError(f"--envelope {arguments.envelope}: a fraction in (0, 1]")
+    progress = Progress()
+    design = CampaignDesign(postures_per_leg=arguments.per_leg, candidates=arguments.candidates,
+                            envelope_fraction=arguments.envelope, seed=arguments.seed)
+    settings = CampaignSettings(arguments.out, design, apply=arguments.apply, reset_faults=arguments.reset_faults)
+    with _connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout) as client:
+        try:
+            instrument = open_instrument(arguments.instrument, client, geometry, progress.say)
+            outcome = run_campaign(client, geometry, instrument, settings, progress)
+        except (ValueError, InstrumentError, DirectoryError) as error:
+            raise CliError(str(error)) from None
+        except ServiceUnavailable as error:
+            progress.finish()
+            print(f"hexactl campaign: {error}", file=sys.stderr)
+            return 2
+        except CampaignError as error:
+            progress.finish()
+            print(f"hexactl campaign: {error}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            progress.finish()
+            try:
+                client.request("stop")  # brake a platform left moving; the lock, if any, holds
+            except ServiceUnavailable:
+                pass
+            print(f"hexactl campaign: interrupted; what was measured is saved in {arguments.out}: run the same command "
+                  "to resume", file=sys.stderr)
+            return 130
+    return 0 if outcome.improved else 1
 
 
 def _load_geometry(path: str) -> Geometry:

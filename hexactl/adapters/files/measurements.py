@@ -14,6 +14,9 @@ Other columns are ignored (and listed). A row with a missing, non-numeric or non
 value or a bad leg number is reported by its line and left out of the data; the caller
 decides whether that refuses the file. Input files are only read.
 
+Instrument file (read by ``hexactl campaign --instrument csv:FILE``): the feature-point
+columns alone, one row per measurement, in the order the campaign takes them.
+
 Plan file (written by ``hexactl plan-leglock``): ``leg``, the relative pose ``x … yaw``
 (mm, deg from the zero posture) and ``l1_setpoint`` … ``l6_setpoint`` (mm). Its set-point
 columns are named so that a plan can never be mistaken for measurement data.
@@ -76,15 +79,7 @@ def read_measurements(path: str | os.PathLike[str], feature_point_count: int) ->
 
 def parse_measurements(text: str, source: str, feature_point_count: int, sha256: str = "") -> MeasurementFile:
     """Parse measurement CSV ``text`` (see the module docstring)."""
-    rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
-            if line.strip() and not line.lstrip().startswith("#")]
-    if not rows:
-        raise MeasurementFileError(f"{source}: no header line and no data")
-    header_line, header_text = rows[0]
-    header = [name.strip().lower() for name in next(csv.reader([header_text]))]
-    duplicates = sorted({name for name in header if header.count(name) > 1})
-    if duplicates:
-        raise MeasurementFileError(f"{source}: line {header_line}: duplicate columns {', '.join(duplicates)}")
+    header_line, header, rows = _table(text, source)
     point_columns = _point_columns(header)
     form = "points" if point_columns else "pose"
     pose_columns = [] if point_columns else list(POSE_AXES)
@@ -94,30 +89,19 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
         raise MeasurementFileError(
             f"{source}: line {header_line}: missing columns {', '.join(missing)} (a row needs leg, l1 … l6 and either "
             "x, y, z, roll, pitch, yaw or feature points p1_x, p1_y, p1_z … p3_z)")
-    if 0 < len(point_columns) < 3:
-        raise MeasurementFileError(f"{source}: the file has {len(point_columns)} feature point(s); a posture needs at least 3")
-    if len(point_columns) > feature_point_count:
-        raise MeasurementFileError(
-            f"{source}: the file has {len(point_columns)} feature points but the geometry defines "
-            f"{feature_point_count} ([measurement] feature_points)")
+    _check_point_count(len(point_columns), source, feature_point_count)
     position = {name: index for index, name in enumerate(header)}
     used = set(required) | (set(POSE_AXES) if point_columns else set())
     ignored = tuple(name for name in header if name not in used)
 
     problems: list[RowProblem] = []
     legs, readings, lines, values = [], [], [], []
-    for number, line in rows[1:]:
+    for number, line in rows:
         fields = next(csv.reader([line]))
         if len(fields) != len(header):
             problems.append(RowProblem(number, f"has {len(fields)} fields, the header has {len(header)}"))
             continue
-        row_problems = []
-        numbers = {}
-        for name in required:
-            value, problem = _number(fields[position[name]], name)
-            if problem:
-                row_problems.append(problem)
-            numbers[name] = value
+        numbers, row_problems = _numbers(fields, position, required)
         leg = numbers["leg"]
         if not row_problems and not (leg == int(leg) and 0 <= leg <= LEG_COUNT):
             row_problems.append(f"leg {fields[position['leg']].strip()!r} must be 0 (none locked) or a leg 1-{LEG_COUNT}")
@@ -137,6 +121,84 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
     else:
         data = MeasurementData(**arrays, poses=pose_mm_deg_to_mm_rad(np.array(values).reshape(count, 6)))
     return MeasurementFile(source, data, tuple(problems), form, sha256, ignored)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PointRows:
+    """An instrument's file of measured feature points, one row per measurement:
+    ``points_mm`` (N, K, 3, fixed frame, mm) of the good rows and their source ``lines``;
+    the bad rows as ``problems``."""
+
+    points_mm: np.ndarray
+    lines: tuple[int, ...]
+    problems: tuple[RowProblem, ...]
+
+
+def parse_point_rows(text: str, source: str, feature_point_count: int) -> PointRows:
+    """Parse CSV ``text`` of measured points: a header naming ``p1_x, p1_y, p1_z, p2_x, …``
+    (three feature points or more, at most ``feature_point_count``; other columns are
+    ignored), ``#`` comments and blank lines anywhere. A row with a missing, non-numeric
+    or non-finite value or the wrong number of fields is a problem of its line. Raises
+    :class:`MeasurementFileError` when the file as a whole cannot be used."""
+    header_line, header, rows = _table(text, source)
+    point_columns = _point_columns(header)
+    names = [name for point in point_columns for name in point]
+    missing = [name for name in names if name not in header]
+    if not point_columns or missing:
+        raise MeasurementFileError(f"{source}: line {header_line}: missing columns "
+                                   f"{', '.join(missing) or 'p1_x, p1_y, p1_z …'} (a row holds feature points "
+                                   "p1_x, p1_y, p1_z, p2_x … in the fixed frame, mm)")
+    _check_point_count(len(point_columns), source, feature_point_count)
+    position = {name: index for index, name in enumerate(header)}
+    points, lines, problems = [], [], []
+    for number, line in rows:
+        fields = next(csv.reader([line]))
+        if len(fields) != len(header):
+            problems.append(RowProblem(number, f"has {len(fields)} fields, the header has {len(header)}"))
+            continue
+        numbers, row_problems = _numbers(fields, position, names)
+        if row_problems:
+            problems.append(RowProblem(number, "; ".join(row_problems)))
+            continue
+        points.append([[numbers[name] for name in point] for point in point_columns])
+        lines.append(number)
+    return PointRows(np.array(points, dtype=float).reshape(len(lines), len(point_columns), 3), tuple(lines),
+                     tuple(problems))
+
+
+def _table(text: str, source: str) -> tuple[int, list[str], list[tuple[int, str]]]:
+    """(header line number, lower-cased column names, the data lines numbered) of CSV
+    ``text`` without its comment and blank lines."""
+    rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
+            if line.strip() and not line.lstrip().startswith("#")]
+    if not rows:
+        raise MeasurementFileError(f"{source}: no header line and no data")
+    header_line, header_text = rows[0]
+    header = [name.strip().lower() for name in next(csv.reader([header_text]))]
+    duplicates = sorted({name for name in header if header.count(name) > 1})
+    if duplicates:
+        raise MeasurementFileError(f"{source}: line {header_line}: duplicate columns {', '.join(duplicates)}")
+    return header_line, header, rows[1:]
+
+
+def _check_point_count(count: int, source: str, feature_point_count: int) -> None:
+    if 0 < count < 3:
+        raise MeasurementFileError(f"{source}: the file has {count} feature point(s); a posture needs at least 3")
+    if count > feature_point_count:
+        raise MeasurementFileError(
+            f"{source}: the file has {count} feature points but the geometry defines "
+            f"{feature_point_count} ([measurement] feature_points)")
+
+
+def _numbers(fields: Sequence[str], position: dict[str, int], names: Sequence[str]) -> tuple[dict[str, float], list[str]]:
+    """The row's values of the columns ``names``, and a problem sentence per bad one."""
+    numbers, problems = {}, []
+    for name in names:
+        value, problem = _number(fields[position[name]], name)
+        if problem:
+            problems.append(problem)
+        numbers[name] = value
+    return numbers, problems
 
 
 def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:

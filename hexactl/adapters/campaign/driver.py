@@ -1,0 +1,193 @@
+"""Driving a running controller through its API for a campaign: enable, move and wait
+until the platform has settled, lock and unlock legs, swap calibrations.
+
+Every method returns or waits on status records (the API's telemetry record: poses
+relative to the zero posture in mm and degrees, legs in sensor mm). A controller in
+FAULT or ESTOP, or a refusal, ends the campaign with :class:`CampaignError`: what was
+measured is saved, and the same command resumes after the operator has dealt with it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from hexactl.adapters.api.client import CommandError, HexactlClient
+
+Record = dict[str, Any]
+"""A status record (``status`` reply's ``status``)."""
+
+ZERO_POSE = (0.0,) * 6
+
+FAULT_CLEAR_S = 2.0
+"""How long enabling waits for actuators that report a fault to clear it (they do after
+a reset's CLEAR_FAULT, once their E-stop hold-off has passed)."""
+
+
+class CampaignError(Exception):
+    """The campaign cannot go on; the message says why and what to do."""
+
+
+class ControllerFault(CampaignError):
+    """The controller latched FAULT or ESTOP, or an actuator is in fault: ``summary``
+    says what; ``resettable``: a fault, not an E-stop (which is someone's decision)."""
+
+    def __init__(self, summary: str, resettable: bool) -> None:
+        self.summary = summary
+        self.resettable = resettable
+        super().__init__(f"{summary}: reset it and enable it, then run the same command again to resume")
+
+
+@dataclass(frozen=True, slots=True)
+class SettleCriteria:
+    """When a platform at rest counts as settled: every leg's feedback stayed within
+    ``tolerance_mm`` for ``window_s`` of controller time (the records' ``t``). A move that
+    has not ended ``timeout_s`` after its planned duration is an error; ``poll_s`` is the
+    status polling interval."""
+
+    window_s: float = 0.05
+    tolerance_mm: float = 0.002
+    timeout_s: float = 15.0
+    poll_s: float = 0.02
+
+
+class PlatformDriver:
+    """The campaign's side of the API: one request at a time on ``client``."""
+
+    def __init__(self, client: HexactlClient, settle: SettleCriteria = SettleCriteria()) -> None:
+        self.client = client
+        self.settle = settle
+
+    def status(self) -> Record:
+        """The current status record; :class:`CampaignError` if FAULT or ESTOP is latched."""
+        record = self.client.call("status")["status"]
+        if record["state"] in ("fault", "estop"):
+            faults = "; ".join(f"{fault['code']}: {fault['message']}" for fault in record["faults"]) or "no reason given"
+            raise ControllerFault(f"the controller is in {record['state']} ({faults})", record["state"] == "fault")
+        return record
+
+    def prepare(self) -> Record:
+        """Bring the controller to an enabled platform at rest, no sequence, no leg
+        locked (what an interrupted campaign may have left); returns the settled record."""
+        record = self.status()
+        if record["state"] == "disabled":
+            self._enable()
+        if record["sequence"] is not None:
+            self._call("abort")
+        elif record["motion"] != "holding":
+            self._call("stop")
+        record = self.wait_settled(0.0)
+        if record["locked_leg"] is not None:
+            self._call("leg_unlock")
+            record = self.status()
+        return record
+
+    def reset(self) -> None:
+        """Clear a latched FAULT (``reset``, which ends disabled); :meth:`prepare` enables again."""
+        self._call("reset")
+        deadline = time.monotonic() + self.settle.timeout_s
+        while self.client.call("status")["status"]["state"] != "disabled":
+            if time.monotonic() > deadline:
+                raise CampaignError("the controller did not reset")
+            time.sleep(self.settle.poll_s)
+
+    def require_calibration(self, calibration_id: str, what: str) -> None:
+        """:class:`CampaignError` unless the controller runs ``calibration_id`` (``what``
+        names it for the message)."""
+        active = self.status()["calibration_id"]
+        if active != calibration_id:
+            raise CampaignError(f"the controller runs calibration {active}, not {what} ({calibration_id}): start it on "
+                                "that geometry or give the geometry it runs (--config)")
+
+    def move(self, pose: Sequence[float], *, settle: bool = True) -> Record:
+        """Move to ``pose`` (relative mm/deg) and wait until the move has ended and, with
+        ``settle``, the legs are steady. Raises :class:`CommandError` if the controller
+        refuses the move (e.g. ``path_violation``) and :class:`CampaignError` on a fault."""
+        try:
+            reply = self.client.call("move", pose=[float(value) for value in pose])
+        except CommandError as error:
+            self._latched(error)
+            raise
+        return self.wait_settled(float(reply["duration"]), settle=settle)
+
+    def lock(self, leg: int) -> Record:
+        """Lock ``leg`` (1–6) where it is; returns the record with the lock in place."""
+        self._call("leg_lock", leg=leg)
+        return self.wait_settled(0.0)
+
+    def unlock(self) -> Record:
+        self._call("leg_unlock")
+        return self.wait_settled(0.0)
+
+    def load_calibration(self, toml: str) -> Record:
+        """Send a calibration's text; returns the settled record once it is ramped in."""
+        self._call("load_calibration", toml=toml)
+        return self.wait_settled(0.0)
+
+    def rollback_calibration(self) -> Record:
+        self._call("rollback_calibration")
+        return self.wait_settled(0.0)
+
+    def wait_settled(self, duration_s: float, *, settle: bool = True) -> Record:
+        """Wait (at most ``duration_s`` + the criteria's timeout) until the platform holds
+        with no sequence playing and, with ``settle``, until every leg's feedback has been
+        steady for the criteria's window. Returns the last record."""
+        criteria = self.settle
+        deadline = time.monotonic() + duration_s + criteria.timeout_s
+        reference: Record | None = None
+        while True:
+            record = self.status()
+            if record["motion"] == "holding" and record["sequence"] is None and _heard(record):
+                if not settle:
+                    return record
+                if reference is None or _moved(reference, record) > criteria.tolerance_mm:
+                    reference = record
+                elif record["t"] - reference["t"] >= criteria.window_s:
+                    return record
+            else:
+                reference = None
+            if time.monotonic() > deadline:
+                raise CampaignError(f"the platform did not settle within {duration_s + criteria.timeout_s:.1f} s "
+                                    f"(motion {record['motion']}, legs {record['leg_feedback']})")
+            time.sleep(criteria.poll_s)
+
+    def _enable(self) -> None:
+        """Enable, waiting for actuators that are still booting (``heartbeat_missing``) or
+        clearing a fault after a reset (``actuator_fault``, for :data:`FAULT_CLEAR_S`)."""
+        start = time.monotonic()
+        while True:
+            try:
+                self.client.call("enable")
+                return
+            except CommandError as error:
+                waited = time.monotonic() - start
+                if error.code == "already_enabled":
+                    return
+                if error.code == "actuator_fault" and waited > FAULT_CLEAR_S:
+                    raise ControllerFault(f"an actuator is in fault ({error.message})", True) from None
+                if error.code not in ("heartbeat_missing", "actuator_fault") or waited > self.settle.timeout_s:
+                    raise CampaignError(f"cannot enable the actuators: {error}") from None
+            time.sleep(0.05)
+
+    def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        try:
+            return self.client.call(cmd, **fields)
+        except CommandError as error:
+            self._latched(error)
+            raise CampaignError(f"the controller refused {cmd}: {error}") from None
+
+    def _latched(self, error: CommandError) -> None:
+        """A refusal because a fault latched meanwhile is that fault (:class:`ControllerFault`)."""
+        if error.code == "latched":
+            self.status()
+
+
+def _heard(record: Record) -> bool:
+    feedback = record["leg_feedback"]
+    return feedback is not None and all(value is not None for value in feedback)
+
+
+def _moved(a: Record, b: Record) -> float:
+    return max(abs(x - y) for x, y in zip(a["leg_feedback"], b["leg_feedback"]))

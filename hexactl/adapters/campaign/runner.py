@@ -1,0 +1,330 @@
+"""The calibration campaign on a running controller (``hexactl campaign``).
+
+The steps of :mod:`hexactl.sim.offline_campaign`, with the controller and an instrument
+doing the driving and measuring:
+
+1. plan leg-lock postures for every leg on the controller's geometry (or resume a saved
+   plan: :mod:`.store`);
+2. measure the paper's test motions before calibration, waypoint by waypoint;
+3. for each leg: move to the zero posture, lock the leg there, visit its postures
+   (:func:`~hexactl.calibration.campaign.locked_path`), and at each one, once the
+   platform has settled, record the six sensor readings and measure the feature points;
+4. identify the parameters from the saved measurement file and write the calibration;
+5. load it into the running controller and measure the test motions again;
+6. keep it (``apply``, and only if the accuracy improved) or roll back; write the report.
+
+Every measurement is saved before the next move, so an interrupted campaign (Ctrl-C, a
+fault, a crash) resumes where it stopped when run again on the same directory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.campaign.driver import (
+    ZERO_POSE,
+    CampaignError,
+    ControllerFault,
+    PlatformDriver,
+    Record,
+)
+from hexactl.adapters.campaign.instruments import Instrument
+from hexactl.adapters.campaign.progress import Progress
+from hexactl.adapters.campaign.store import (
+    CALIBRATION_FILE,
+    MEASUREMENTS_FILE,
+    PLAN_FILE,
+    REPORT_DIRECTORY,
+    VALIDATION_STEPS,
+    CampaignStore,
+)
+from hexactl.adapters.files.geometry_file import (
+    geometry_id,
+    load_geometry,
+    parse_geometry,
+    save_geometry,
+)
+from hexactl.adapters.files.measurements import MeasurementFileError
+from hexactl.adapters.report.html import (
+    CalibrationReport,
+    ValidationComparison,
+    write_report,
+)
+from hexactl.calibration.campaign import improved, locked_path
+from hexactl.calibration.data import screen_measurements
+from hexactl.calibration.identification import calibration_info, identify
+from hexactl.calibration.parameters import calibrated_geometry
+from hexactl.calibration.results import IdentificationOptions, IdentificationResult
+from hexactl.calibration.validation import MotionResult, summarise_validation
+from hexactl.kinematics.geometry import Geometry, GeometryError
+from hexactl.sim.offline_campaign import CampaignDesign
+
+
+@dataclass(frozen=True, slots=True)
+class CampaignSettings:
+    """How to run a campaign: its ``directory``, the plan's ``design`` (postures per leg,
+    candidates, seed), whether to ``apply`` the calibration (kept only if it improved the
+    accuracy), the identification ``options``; in simulation the ``true`` geometry (the
+    report then compares the identified parameters with it) and ``reset_faults``: how
+    many times a latched FAULT (never an E-stop) may be reset and the campaign resumed
+    (a simulator sharing a loaded host trips its actuators' watchdog when the host
+    stalls the process; on a real platform a fault needs the operator: keep 0)."""
+
+    directory: Path
+    design: CampaignDesign = CampaignDesign()
+    apply: bool = False
+    options: IdentificationOptions = IdentificationOptions()
+    true: Geometry | None = None
+    reset_faults: int = 0
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class CampaignOutcome:
+    """A finished campaign: the identification ``result``, the ``calibration`` written,
+    the test motions ``before`` and ``after`` (relative mm/deg), whether the calibration
+    ``improved`` the largest errors and whether it stays ``applied``; the report page."""
+
+    result: IdentificationResult
+    calibration: Geometry
+    before: tuple[MotionResult, ...]
+    after: tuple[MotionResult, ...]
+    improved: bool
+    applied: bool
+    report: Path
+
+
+def run_campaign(client: HexactlClient, geometry: Geometry, instrument: Instrument, settings: CampaignSettings,
+                 progress: Progress) -> CampaignOutcome:
+    """Run (or resume) the campaign in ``settings.directory`` on the controller behind
+    ``client``, whose active geometry must be ``geometry`` (the plan is made on it).
+
+    Raises :class:`CampaignError` when it cannot go on (a fault, a refusal, bad data, a
+    failed identification; the message says what to do), and
+    :class:`~hexactl.adapters.campaign.instruments.InstrumentError`. What was measured
+    stays saved either way.
+    """
+    driver = PlatformDriver(client)
+    if not (settings.directory / PLAN_FILE).exists():  # nothing planned or written for a controller on another geometry
+        driver.require_calibration(geometry_id(geometry), _planned(geometry))
+    store = CampaignStore.open(settings.directory, geometry, settings.design)
+    _announce(store, instrument, progress)
+    step = _Resetting(driver, settings.reset_faults, progress)
+    planned_id = geometry_id(geometry)
+
+    def measure_on_the_planned_geometry() -> None:
+        driver.prepare()
+        if store.validation_steps_left("before") or store.postures_measured < len(store.postures):
+            driver.require_calibration(planned_id, _planned(geometry))
+        _validate(driver, store, instrument, "before", progress)
+        _measure_postures(driver, store, instrument, progress)
+
+    step(measure_on_the_planned_geometry)
+    result, calibrated, text = _identify(store, settings.options, progress)
+    calibrated_id = geometry_id(parse_geometry(text, CALIBRATION_FILE))
+
+    def measure_with_the_calibration() -> None:
+        driver.prepare()
+        if driver.status()["calibration_id"] != calibrated_id:
+            driver.require_calibration(planned_id, _planned(geometry))
+            progress.say("loading the calibration into the controller")
+            driver.load_calibration(text)
+        _validate(driver, store, instrument, "after", progress)
+        driver.move(ZERO_POSE)
+
+    step(measure_with_the_calibration)
+    before, after = store.validation_results("before"), store.validation_results("after")
+    better = improved(summarise_validation(before), summarise_validation(after))
+    _show(before, after, better, progress)
+    step(lambda: _conclude(driver, store, better, settings.apply, progress))
+    created = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    report = write_report(store.path(REPORT_DIRECTORY),
+                          CalibrationReport(str(store.path(MEASUREMENTS_FILE)), created, geometry, result, (),
+                                            ValidationComparison(before, after, result.predicted), settings.true),
+                          overwrite=True)
+    progress.say(f"wrote {report}")
+    return CampaignOutcome(result, calibrated, before, after, better, settings.apply and better, report)
+
+
+class _Resetting:
+    """Runs a step of the campaign; when the controller latches a fault (not an E-stop),
+    resets it and runs the step again, which resumes from what is saved, at most
+    ``allowed`` times over the campaign."""
+
+    def __init__(self, driver: PlatformDriver, allowed: int, progress: Progress) -> None:
+        self.driver, self.allowed, self.progress = driver, allowed, progress
+        self.resets = 0
+
+    def __call__(self, step: Callable[[], None]) -> None:
+        while True:
+            try:
+                return step()
+            except ControllerFault as fault:
+                if not fault.resettable or self.resets >= self.allowed:
+                    raise
+                self.resets += 1
+                self.progress.finish()
+                self.progress.say(f"{fault.summary}; resetting it and resuming ({self.resets} of {self.allowed} "
+                                  "resets allowed)")
+                self.driver.reset()
+
+
+def _planned(geometry: Geometry) -> str:
+    return f"the geometry the campaign is planned on ({geometry.name!r})"
+
+
+def _announce(store: CampaignStore, instrument: Instrument, progress: Progress) -> None:
+    design = store.design
+    what = (f"{len(store.postures)} leg-lock postures ({design.postures_per_leg} per leg, seed {design.seed}) "
+            f"planned on {store.geometry.name!r}")
+    if store.measurements_taken:
+        progress.say(f"resuming the campaign in {store.directory}: {what}; {store.postures_measured} postures and "
+                     f"{store.measurements_taken - store.postures_measured} test-motion waypoints already measured")
+    else:
+        progress.say(f"campaign in {store.directory}: {what}")
+    progress.say(f"measuring with {instrument.description}")
+
+
+def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, phase: str,
+              progress: Progress) -> None:
+    """Measure the rest of ``phase``'s test-motion waypoints."""
+    steps = store.validation_steps_left(phase)
+    if steps:
+        total = len(VALIDATION_STEPS[phase])
+        progress.start(f"test motions {phase} calibration", total, total - len(steps))
+        for step in steps:
+            driver.move(step.pose)
+            label = f"{step.motion.name} {step.waypoint}/{len(step.motion.waypoints)}"
+            store.add_validation(step, instrument.measure(store.measurements_taken, f"{phase} calibration, {label}"))
+            progress.step(total - len(store.validation_steps_left(phase)), label)
+        progress.finish()
+
+
+def _measure_postures(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, progress: Progress) -> None:
+    """Visit every posture not measured yet, leg by leg; the platform ends unlocked."""
+    postures, geometry = store.postures, store.geometry
+    if store.postures_measured == len(postures):
+        return
+    progress.start("postures", len(postures), store.postures_measured)
+    locked, length = None, 0.0
+    for number in range(store.postures_measured, len(postures)):
+        posture = postures[number]
+        leg = posture.leg
+        if locked != leg:
+            if locked is not None:
+                driver.unlock()
+            # The plan locks each leg at its length in the zero posture, on this geometry.
+            driver.move(ZERO_POSE)
+            record = driver.lock(leg)
+            locked, length = leg, geometry.zero_lengths[leg - 1] + record["leg_setpoints"][leg - 1]
+        record = _visit(driver, geometry, leg, length, posture.pose)
+        points = instrument.measure(store.measurements_taken, f"posture {number + 1}, leg {leg} locked")
+        store.add_posture(leg, record["leg_feedback"], points)
+        progress.step(store.postures_measured, f"leg {leg} locked")
+    driver.unlock()
+    progress.finish()
+
+
+def _visit(driver: PlatformDriver, geometry: Geometry, leg: int, length_mm: float, goal: Sequence[float]) -> Record:
+    """Move in leg-lock mode to ``goal``, along :func:`locked_path`; if the controller
+    refuses that path as out of limits, by way of the zero posture instead (it lies on
+    the constraint). Returns the settled record at ``goal``."""
+    start = driver.status()["pose_command"]
+    try:
+        return _follow(driver, locked_path(geometry, leg, length_mm, start, goal))
+    except CommandError as error:
+        if error.code != "path_violation":
+            raise CampaignError(f"the controller refused a leg-lock move: {error}") from None
+    here = driver.status()["pose_command"]
+    detour = locked_path(geometry, leg, length_mm, here, ZERO_POSE) + locked_path(geometry, leg, length_mm, ZERO_POSE, goal)
+    try:
+        return _follow(driver, detour)
+    except CommandError as error:
+        raise CampaignError(f"the controller refused the leg-lock move to {list(goal)}: {error}") from None
+
+
+def _follow(driver: PlatformDriver, waypoints: Sequence[Sequence[float]]) -> Record:
+    """Move through ``waypoints``, stopping at each; settle at the last."""
+    for waypoint in waypoints[:-1]:
+        driver.move(waypoint, settle=False)
+    return driver.move(waypoints[-1])
+
+
+def _identify(store: CampaignStore, options: IdentificationOptions, progress: Progress
+              ) -> tuple[IdentificationResult, Geometry, str]:
+    """Identify from the saved measurement file (what ``hexactl calibrate`` would use) and
+    write the calibration file; returns the result, the calibration and its text."""
+    geometry = store.geometry
+    try:
+        measured = store.measurement_file()
+    except MeasurementFileError as error:
+        raise CampaignError(str(error)) from None
+    sigma = geometry.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
+    problems = measured.problems + screen_measurements(measured.data, np.array(geometry.measurement.feature_points), sigma)
+    if problems:
+        lines = "\n".join(f"{measured.source}: {problem}" for problem in problems)
+        raise CampaignError(f"{lines}\nthe measurements have {len(problems)} problem(s): calibrate with hexactl calibrate "
+                            f"{measured.source} --skip-bad-rows, or measure those postures again")
+    result = identify(measured.data, geometry, options)
+    progress.say(f"identification: {result.reason}")
+    if not result.ok:
+        raise CampaignError(f"identification {result.status.name.lower().replace('_', ' ')}: "
+                            + "; ".join(result.warnings) + f" (the data are in {measured.source})")
+    predicted = result.predicted
+    progress.say(f"fit residual RMS {result.residual_rms_mm:.4f} mm (noise model {result.expected_rms_mm:.4f} mm), "
+                 f"χ²/dof {result.chi2_per_dof:.3f}; predicted pose uncertainty {predicted.rms_position_mm:.4f} mm, "
+                 f"{predicted.rms_orientation_deg:.5f}° RMS")
+    for warning in result.warnings:
+        progress.say(f"warning: {warning}")
+    path = store.path(CALIBRATION_FILE)
+    calibrated = _saved_calibration(path, measured.sha256)
+    if calibrated is None:
+        created = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        info = calibration_info(result, created, measured.sha256, geometry.name or "unnamed geometry")
+        calibrated = calibrated_geometry(geometry, result.parameters, info)
+        save_geometry(calibrated, path, overwrite=True)  # derived from the saved data: a stale one is replaced
+        progress.say(f"wrote {path}")
+    return result, calibrated, path.read_text(encoding="utf-8")
+
+
+def _saved_calibration(path: Path, input_sha256: str) -> Geometry | None:
+    """The calibration file a resumed campaign wrote from these very data (the same
+    parameters: identification is deterministic), so that its id, which the controller
+    may already run, stays the same; None if there is none."""
+    try:
+        saved = load_geometry(path)
+    except GeometryError:  # none, or not readable: written anew
+        return None
+    return saved if saved.calibration is not None and saved.calibration.input_sha256 == input_sha256 else None
+
+
+def _show(before: Sequence[MotionResult], after: Sequence[MotionResult], better: bool, progress: Progress) -> None:
+    """Each test motion's largest errors before and after, and the verdict."""
+    progress.say(f"{'largest error':<14}{'before calibration':>24}{'after calibration':>24}")
+    for b_motion, a_motion in zip(before, after):
+        b, a = summarise_validation([b_motion]), summarise_validation([a_motion])
+        progress.say(f"{b_motion.motion.name:<14}{b.max_position_error_mm:12.3f} mm {b.max_orientation_error_deg:7.4f}°"
+                     f"{a.max_position_error_mm:12.3f} mm {a.max_orientation_error_deg:7.4f}°")
+    b, a = summarise_validation(before), summarise_validation(after)
+    verdict = "improved" if better else "NOT improved"
+    progress.say(f"largest error over the test motions: {b.max_position_error_mm:.3f} mm → {a.max_position_error_mm:.3f} mm, "
+                 f"{b.max_orientation_error_deg:.4f}° → {a.max_orientation_error_deg:.4f}°: {verdict}")
+
+
+def _conclude(driver: PlatformDriver, store: CampaignStore, better: bool, apply: bool, progress: Progress) -> None:
+    """Keep the calibration (``apply`` and ``better``) or roll back to the planned geometry."""
+    if apply and better:
+        progress.say(f"the calibration stays active; to start with it after a restart: hexactl serve --calibration "
+                     f"{store.path(CALIBRATION_FILE)}")
+        return
+    driver.prepare()
+    if driver.status()["calibration_id"] == geometry_id(store.geometry):
+        return  # rolled back already (a fault came after it)
+    driver.rollback_calibration()
+    why = "it did not improve the accuracy" if apply else "--apply keeps it"
+    progress.say(f"rolled back to the geometry the campaign started on ({why})")

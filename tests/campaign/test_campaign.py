@@ -1,0 +1,156 @@
+"""``hexactl campaign`` end to end against an in-process service on the simulator (the
+real API, controller, CAN link, actuator firmwares and simulated instrument), interrupted
+after a few postures and resumed; and its refusals before anything moves."""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.campaign.driver import ControllerFault, PlatformDriver
+from hexactl.adapters.campaign.instruments import ServiceInstrument
+from hexactl.adapters.campaign.progress import Progress
+from hexactl.adapters.campaign.runner import CampaignSettings, run_campaign
+from hexactl.adapters.campaign.store import (
+    CALIBRATION_FILE,
+    MEASUREMENTS_FILE,
+    PLAN_FILE,
+    VALIDATION_FILE,
+)
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.files.geometry_file import (
+    geometry_id,
+    geometry_to_toml,
+    load_geometry,
+)
+from hexactl.adapters.files.measurements import read_measurements
+from hexactl.adapters.service import Service, ServiceConfig
+from hexactl.calibration.test_motions import COMPOUND
+from hexactl.control.trajectory import MotionLimits
+from hexactl.sim.offline_campaign import CampaignDesign
+from tests.api.support import start_service
+
+LOCAL = "tcp://127.0.0.1:*"
+PER_LEG = 2  # 12 postures: enough for `full` to beat the nominal geometry by far, in a minute
+RESETS = 100  # a loaded test host can stall the in-process simulator past its actuators' watchdog, often
+_DEFAULT = MotionLimits()
+FAST = MotionLimits(max_velocity=tuple(4 * v for v in _DEFAULT.max_velocity),
+                    max_acceleration=tuple(4 * v for v in _DEFAULT.max_acceleration),
+                    max_jerk=tuple(8 * v for v in _DEFAULT.max_jerk))
+"""Four times the default motion limits: the legs' own speed limit still holds every move."""
+
+
+class InterruptAfter(Progress):
+    """Ctrl-C right after the ``postures``-th posture has been saved."""
+
+    def __init__(self, postures: int) -> None:
+        super().__init__(io.StringIO(), io.StringIO())
+        self.postures = postures
+
+    def step(self, done: int, label: str) -> None:
+        super().step(done, label)
+        if self.title == "postures" and done == self.postures:
+            raise KeyboardInterrupt
+
+
+@pytest.fixture(scope="module")
+def service() -> Iterator[Service]:
+    running = Service.start(ServiceConfig(api_endpoint=LOCAL, telemetry_endpoint=LOCAL, motion=FAST, log_level="WARNING"))
+    yield running
+    running.close()
+
+
+def test_interrupted_campaign_resumes_and_apply_calibrates_the_controller(service, nominal, tmp_path, capsys) -> None:
+    out = tmp_path / "campaign"
+    with HexactlClient(service.api_endpoint) as client, pytest.raises(KeyboardInterrupt):
+        settings = CampaignSettings(out, CampaignDesign(postures_per_leg=PER_LEG), reset_faults=RESETS)
+        run_campaign(client, nominal, ServiceInstrument(client), settings, InterruptAfter(3))
+    first_rows = data_rows(out / MEASUREMENTS_FILE)
+    assert len(first_rows) == 3
+
+    status = main(["campaign", "--out", str(out), "--api", service.api_endpoint, "--per-leg", str(PER_LEG), "--apply",
+                   "--reset-faults", str(RESETS), "--timeout", "30"])
+    captured = capsys.readouterr()
+    printed = captured.out
+    assert status == 0, printed + captured.err
+    assert "resuming the campaign" in printed and "3 postures and 20 test-motion waypoints already measured" in printed
+
+    # Every planned posture exactly once, in the plan's order; the three from before the interruption kept as saved.
+    saved = read_measurements(out / MEASUREMENTS_FILE, 3)
+    planned = [leg for leg in range(1, 7) for _ in range(PER_LEG)]
+    assert list(saved.data.locked_leg) == planned and not saved.problems
+    assert data_rows(out / MEASUREMENTS_FILE)[:3] == first_rows
+    for leg in range(1, 7):  # the locked leg really held
+        rows = saved.data.locked_rows(leg)
+        assert np.ptp(saved.data.readings_mm[rows, leg - 1]) < 0.01
+    assert len((out / VALIDATION_FILE).read_text().splitlines()) == 2 + 40
+    assert (out / PLAN_FILE).exists() and (out / "report" / "index.html").exists()
+
+    # The test motions: the largest position error is down by far.
+    errors = validation_errors(out / VALIDATION_FILE)
+    assert errors["after"] < errors["before"] / 5, errors
+    assert any(line.endswith(": improved") for line in printed.splitlines())
+
+    # The calibration is the controller's now, and the platform goes where it is told.
+    calibration = load_geometry(out / CALIBRATION_FILE)
+    target = list(COMPOUND.waypoints[-1])
+    with HexactlClient(service.api_endpoint) as client:
+        assert client.call("status")["status"]["calibration_id"] == geometry_id(calibration)
+        driver = PlatformDriver(client)
+        for _ in range(RESETS):
+            try:
+                driver.prepare()
+                driver.move(target)
+                break
+            except ControllerFault:  # the loaded host again
+                driver.reset()
+    true = np.array(service.simulator.platform.true_pose().relative)
+    assert np.max(np.abs(true - target)[:3]) < errors["before"] / 5
+
+
+def data_rows(path) -> list[str]:
+    """A CSV file's lines after its header, comments left out."""
+    return [line for line in path.read_text().splitlines() if not line.startswith("#")][1:]
+
+
+def validation_errors(path) -> dict[str, float]:
+    """The largest |achieved − commanded| position coordinate per phase of a validation.csv, mm."""
+    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
+    errors: dict[str, float] = {}
+    for row in csv.DictReader(lines):
+        error = max(abs(float(row[f"achieved_{axis}"]) - float(row[f"command_{axis}"])) for axis in "xyz")
+        errors[row["phase"]] = max(errors.get(row["phase"], 0.0), error)
+    return errors
+
+
+def test_a_bad_instrument_file_is_refused_before_anything_moves(nominal, tmp_path, capsys) -> None:
+    bad = tmp_path / "tracker.csv"
+    bad.write_text("p1_x,p1_y,p1_z,p2_x,p2_y,p2_z,p3_x,p3_y,p3_z\n1,2,3,4,5,6,7,8,9\n1,2,3,4,5,6,7,8,x\n")
+    (tmp_path / "data").mkdir()
+    fake = start_service(nominal, tmp_path / "data")
+    try:
+        status = main(["campaign", "--out", str(tmp_path / "c"), "--api", fake.api, "--instrument", f"csv:{bad}"])
+    finally:
+        fake.close()
+    assert status == 2
+    assert f"{bad}: line 3: p3_z 'x' is not a number" in capsys.readouterr().err
+    assert fake.controller.calls == [] and not (tmp_path / "c").exists()
+
+
+def test_a_controller_on_another_geometry_is_refused_before_anything_is_planned(nominal, tmp_path, capsys) -> None:
+    other = tmp_path / "other.toml"
+    other.write_text(geometry_to_toml(nominal.model_copy(update={"name": "other", "zero_lengths": (1751.0,) * 6})))
+    (tmp_path / "data").mkdir()
+    fake = start_service(nominal, tmp_path / "data")
+    try:
+        status = main(["campaign", "--config", str(other), "--out", str(tmp_path / "c"), "--api", fake.api])
+    finally:
+        fake.close()
+    assert status == 1
+    assert "not the geometry the campaign is planned on ('other')" in capsys.readouterr().err
+    assert fake.controller.calls == [] and not (tmp_path / "c").exists()
