@@ -33,7 +33,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
-from math import ceil
+from math import ceil, isnan
 
 from hexactl.control import commands as cmd
 from hexactl.control.config import ControllerConfig
@@ -209,6 +209,8 @@ def check_enable(view, heartbeat_timeout_s: float) -> Refusal:
             return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s"
         if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
             return ErrorCode.ACTUATOR_FAULT, f"leg {leg}: {actuator.state.name}, fault bits 0x{actuator.fault_bits:x}"
+        if isnan(actuator.position_mm):
+            return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no position reported yet"
         if not low <= actuator.position_mm <= high:
             return ErrorCode.OUTSIDE_STROKE, f"leg {leg} at {actuator.position_mm:.3f} mm, outside the stroke [{low:g}, {high:g}] mm"
     if view.pose_measured is None:

@@ -166,6 +166,9 @@ def test_enable_refusals(make_rig, geometry):
     rig.actuators.positions[0] = geometry.limits.stroke[1]  # in the stroke, but no pose has these lengths
     rig.run()
     assert rig.controller.enable().error == "pose_unknown"
+    rig.actuators.positions[0] = float("nan")  # heard from, but no position reported yet
+    rig.run()
+    assert rig.controller.enable().error == "heartbeat_missing"
     rig.actuators.positions[0] = original
     rig.run()
     assert rig.controller.enable().ok

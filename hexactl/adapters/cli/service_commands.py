@@ -114,7 +114,8 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
     serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the --config geometry")
-    serve.add_argument("--rate", type=int, choices=(500, 1000), default=500, metavar="HZ", help="control loop rate, 500 (default) or 1000 Hz")
+    serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
+                       help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
     serve.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
     serve.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
     serve.add_argument("--telemetry-rate", type=_positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
