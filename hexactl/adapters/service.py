@@ -39,6 +39,7 @@ from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError, open_bus
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
+from hexactl.control.realtime import RealtimeConfig, set_fifo
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
 from hexactl.control.trajectory import MotionLimits
@@ -56,6 +57,9 @@ share this host's two cores with the loop, the API and whatever else runs, and a
 scheduler stall of either thread beyond 11 ms (seen under load) would trip a watchdog
 that measures host load, not the controller. Real actuators keep the defaults; missed
 cycles show in the loop statistics either way."""
+
+SERVICE_THREAD_NAMES = frozenset({"hexactl-api", "hexactl-telemetry", "actuator-bus"})
+"""The service's threads besides the loop: with ``fifo_priority`` they run just below it."""
 
 log = logging.getLogger("hexactl.service")
 
@@ -78,6 +82,9 @@ class ServiceConfig:
     noise, ``point_sigma_mm`` that noise (1σ per coordinate, mm; None: the geometry's
     ``[measurement] point_sigma_mm``). ``motion``: the controller's pose-space velocity,
     acceleration and jerk limits (the legs' speed limit is the geometry's whatever these are).
+    ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the service's other
+    threads (API, telemetry, simulator), which share the GIL with it (None: normal
+    scheduling); ``lock_memory``: mlockall. Both fall back, logged, without the privilege.
     """
 
     config_path: Path | None = None
@@ -92,6 +99,8 @@ class ServiceConfig:
     simulator_seed: int = 0
     point_sigma_mm: float | None = None
     motion: MotionLimits = MotionLimits()
+    fifo_priority: int | None = None
+    lock_memory: bool = False
     log_level: str = "INFO"
 
 
@@ -198,7 +207,8 @@ class Service:
             else:
                 log.info("actuators: CAN %s", spec)
 
-            loop = LoopConfig(rate_hz=config.rate_hz)
+            realtime_config = RealtimeConfig(fifo_priority=config.fifo_priority, lock_memory=config.lock_memory)
+            loop = LoopConfig(rate_hz=config.rate_hz, realtime=realtime_config)
             supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
             controller = Controller(link, active, calibration_id, calibration_source=str(source),
                                     config=ControllerConfig(loop=loop, motion=config.motion, **supervision))
@@ -220,6 +230,8 @@ class Service:
                 raise ServiceError(f"cannot serve: {error}") from None
             publisher.start()
             server.start()
+            if config.fifo_priority is not None:
+                _fifo_for_service_threads(max(1, config.fifo_priority - 1))
             security = "CURVE" if curve else "no authentication (loopback)"
             log.info("API on %s, telemetry on %s at %g Hz; %s", server.endpoint, publisher.endpoint,
                      config.telemetry_rate_hz, security)
@@ -257,15 +269,28 @@ def run_service(config: ServiceConfig) -> int:
     return 0
 
 
+def _fifo_for_service_threads(priority: int) -> None:
+    """SCHED_FIFO ``priority`` (below the loop's) for the threads that share its GIL."""
+    for thread in threading.enumerate():
+        if thread.name in SERVICE_THREAD_NAMES and thread.native_id is not None:
+            refused = set_fifo(priority, thread.native_id)
+            log.info("%s thread: %s", thread.name, refused or f"SCHED_FIFO {priority}")
+
+
 def _bring_to_rest(controller: Controller) -> None:
     """Brake to rest and disable; E-stop if that does not happen in time."""
     telemetry = controller.telemetry()
     if telemetry.state != ControlState.ENABLED.value:
         return  # disabled already, or FAULT/ESTOP: the actuators hold by themselves
-    if telemetry.motion != MotionState.HOLDING.value:
+
+    def at_rest() -> bool:  # a sequence dwelling is holding, yet disable would be refused as busy
+        now = controller.telemetry()
+        return now.motion == MotionState.HOLDING.value and now.sequence is None
+
+    if not at_rest():
         controller.stop()
         deadline = time.monotonic() + SHUTDOWN_BRAKE_TIMEOUT_S
-        while controller.telemetry().motion != MotionState.HOLDING.value and time.monotonic() < deadline:
+        while not at_rest() and time.monotonic() < deadline:
             time.sleep(0.05)
     result = controller.disable()
     if result.ok:

@@ -84,6 +84,21 @@ class _Previous:
     memory_locked: bool
 
 
+def set_fifo(priority: int, native_id: int = 0) -> str | None:
+    """Put thread ``native_id`` (``threading.Thread.native_id``; 0: the calling thread)
+    under SCHED_FIFO at ``priority``. None when done, else a note saying why not (no
+    privilege, no such thread); never raises.
+
+    Threads that share the GIL with the loop need it too: one preempted by another
+    process while it holds the GIL stalls the loop however high the loop's priority.
+    """
+    try:
+        os.sched_setscheduler(native_id, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as error:
+        return f"SCHED_FIFO {priority} not set: {error}"
+    return None
+
+
 def apply_realtime(config: RealtimeConfig) -> tuple[RealtimeReport, _Previous]:
     """Apply ``config`` to the calling thread (scheduling, affinity) and the process
     (memory, GIL switch interval, gc). Never raises for a missing privilege."""
@@ -92,12 +107,11 @@ def apply_realtime(config: RealtimeConfig) -> tuple[RealtimeReport, _Previous]:
 
     priority = None
     if config.fifo_priority is not None:
-        try:
-            # pid 0 is the calling thread on Linux: only the loop thread becomes real-time.
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(config.fifo_priority))
+        # Thread 0 is the calling thread on Linux: only the loop thread becomes real-time.
+        if (refused := set_fifo(config.fifo_priority)) is None:
             priority = config.fifo_priority
-        except (OSError, AttributeError) as error:
-            notes.append(f"SCHED_FIFO {config.fifo_priority} not set: {error}")
+        else:
+            notes.append(refused)
 
     cpus = None
     if config.cpus is not None:

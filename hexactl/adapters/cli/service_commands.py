@@ -116,6 +116,10 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
     serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the --config geometry")
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
+    serve.add_argument("--fifo", type=int, choices=range(2, 100), metavar="PRIO",
+                       help="SCHED_FIFO priority 2-99 for the loop, PRIO-1 for the API, telemetry and simulator "
+                       "threads (needs root or CAP_SYS_NICE; logged and ignored without)")
+    serve.add_argument("--mlock", action="store_true", help="lock the service's memory (mlockall): no page faults")
     serve.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
     serve.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
     serve.add_argument("--telemetry-rate", type=_positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
@@ -248,6 +252,8 @@ def run_serve(arguments: argparse.Namespace) -> int:
         telemetry_rate_hz=arguments.telemetry_rate,
         data_dirs=tuple(arguments.data_dir) if arguments.data_dir else None,
         curve=curve,
+        fifo_priority=arguments.fifo,
+        lock_memory=arguments.mlock,
         log_level=arguments.log_level,
     )
     try:
