@@ -44,6 +44,11 @@ _MAX_PITCH_RAD = 0.45 * pi  # as in forward kinematics: beyond it the Euler char
 _NO_POSE = (float("nan"),) * 6
 
 
+_MAX_INPUT = 1e6
+"""Pose coordinates (mm or rad) beyond this are refused as invalid: no platform is a
+kilometre away, and squares of such numbers overflow the iteration."""
+
+
 class ProjectionStatus(IntEnum):
     """Outcome of :func:`project_to_locked_leg`."""
 
@@ -51,7 +56,7 @@ class ProjectionStatus(IntEnum):
     MAX_ITERATIONS = 1  # tolerance not met within the iteration cap
     DIVERGED = 2  # the iterate left the valid chart (|pitch| ≥ 81°) or stopped being finite
     SINGULAR = 3  # the leg length does not depend on the pose (zero-length leg)
-    INVALID_INPUT = 4  # leg outside 1–6, a non-finite or non-positive input, not six numbers
+    INVALID_INPUT = 4  # leg outside 1–6, a non-finite, non-positive or absurdly large input, not six numbers
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,7 +91,7 @@ def project_to_locked_leg(
         x0, y0, z0, roll0, pitch0, yaw0 = start = tuple(float(v) for v in pose)
         valid = (1 <= leg <= LEG_COUNT and isfinite(length_mm) and length_mm > 0
                  and isfinite(characteristic_length_mm) and characteristic_length_mm > 0
-                 and all(isfinite(v) for v in start))
+                 and all(abs(v) < _MAX_INPUT for v in start))  # also false for NaN
     except (TypeError, ValueError):
         valid = False
     if not valid:
@@ -121,6 +126,8 @@ def project_to_locked_leg(
         g_pitch = -mx * sy + my * cy
         g_yaw = mz
         denominator = ux * ux + uy * uy + uz * uz + (g_roll * g_roll + g_pitch * g_pitch + g_yaw * g_yaw) * angle_weight
+        if not 0.0 < denominator < float("inf"):  # overflowed: no gradient to follow
+            return ProjectionResult(ProjectionStatus.SINGULAR, here, iteration, residual, correction)
         multiplier = (residual + ux * (x0 - x) + uy * (y0 - y) + uz * (z0 - z)
                       + g_roll * (roll0 - roll) + g_pitch * (pitch0 - pitch) + g_yaw * (yaw0 - yaw)) / denominator
         x, y, z = x0 - multiplier * ux, y0 - multiplier * uy, z0 - multiplier * uz

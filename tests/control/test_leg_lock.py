@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -62,3 +63,12 @@ def test_invalid_inputs_are_reported_not_raised(geometry):
         assert _project(geometry, *args).status is ProjectionStatus.INVALID_INPUT
     assert project_to_locked_leg(geometry.legs, pose, 1, 2000.0, 0.0).status is ProjectionStatus.INVALID_INPUT
     assert _project(geometry, pose, 1, 1.0, max_iterations=3).status is ProjectionStatus.MAX_ITERATIONS
+
+
+@pytest.mark.parametrize("huge", [5e301, -1e200, 1e7])
+def test_absurd_goals_are_invalid_input_not_an_exception(geometry, huge):
+    home = absolute_from_relative(geometry.home, [0.0] * 6)
+    length = leg_lengths(geometry.legs, home)[4]
+    pose = list(home)
+    pose[0] = huge
+    assert _project(geometry, pose, 5, length).status is ProjectionStatus.INVALID_INPUT
