@@ -210,8 +210,12 @@ class Service:
             realtime_config = RealtimeConfig(fifo_priority=config.fifo_priority, lock_memory=config.lock_memory)
             loop = LoopConfig(rate_hz=config.rate_hz, realtime=realtime_config)
             supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
-            controller = Controller(link, active, calibration_id, calibration_source=str(source),
-                                    config=ControllerConfig(loop=loop, motion=config.motion, **supervision))
+            try:
+                controller = Controller(link, active, calibration_id, calibration_source=str(source),
+                                        config=ControllerConfig(loop=loop, motion=config.motion, **supervision),
+                                        hardware_limits=nominal.limits)
+            except ValueError as error:  # a calibration whose [limits] are not the nominal's
+                raise ServiceError(f"{source}: {error}") from None
             realtime = controller.start()
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))

@@ -189,3 +189,16 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
     for expected in ("nominal geometry 'hexactl nominal 1500/900'", "no calibration", "actuators: six simulated", f"API on {api}",
                      "SIGTERM: shutting down", "actuators disabled", "stopped"):
         assert expected in text, text
+
+
+def test_serve_refuses_a_calibration_with_other_limits(tmp_path):
+    from hexactl.adapters.files.geometry_file import default_config_path, load_geometry, save_geometry
+    from hexactl.adapters.service import Service, ServiceConfig, ServiceError
+
+    nominal = load_geometry(default_config_path())
+    data = nominal.model_dump()
+    data["limits"]["leg_velocity_mm_s"] = 2 * nominal.limits.leg_velocity_mm_s
+    fast = save_geometry(type(nominal).model_validate(data), tmp_path / "fast.toml")
+    with pytest.raises(ServiceError, match=r"fast.toml: .*leg_velocity_mm_s: 800.0 \(hardware: 400.0\)"):
+        Service.start(ServiceConfig(calibration_path=fast, api_endpoint="tcp://127.0.0.1:0",
+                                    telemetry_endpoint="tcp://127.0.0.1:0"))
