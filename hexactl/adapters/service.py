@@ -14,6 +14,7 @@ be), then the loop, the link, the simulator and the sockets close.
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
 import signal
 import threading
@@ -21,6 +22,7 @@ import time
 from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
+from multiprocessing.connection import Connection
 from pathlib import Path
 from types import FrameType
 
@@ -246,6 +248,70 @@ class Service:
         """Stop taking commands, bring the platform to rest disabled, close everything."""
         self._closers.close()
         log.info("stopped")
+
+
+class ServiceProcess:
+    """A :class:`Service` of ``config`` in a child process (spawned), with its endpoints;
+    :meth:`close` (or leaving the ``with``) shuts it down cleanly: platform to rest,
+    actuators disabled. For a client in this process whose own work (numpy, matplotlib)
+    must not hold up the control loop through the GIL: ``hexactl demo``, tests.
+
+    The child ignores SIGINT: Ctrl-C at the terminal interrupts the client, which then
+    decides when the service stops.
+
+    :raises ServiceError: if the service does not start (within ``start_timeout_s``)
+    """
+
+    def __init__(self, config: ServiceConfig, start_timeout_s: float = 60.0) -> None:
+        context = multiprocessing.get_context("spawn")  # no fork of a process with threads
+        self._connection, child = context.Pipe()
+        self._process = context.Process(target=_serve, args=(config, child), name="hexactl-service", daemon=True)
+        self._process.start()
+        child.close()
+        message: object = f"the service did not start within {start_timeout_s:g} s"
+        try:
+            if self._connection.poll(start_timeout_s):
+                message = self._connection.recv()
+        except EOFError:
+            message = f"the service process ended (exit status {self._process.exitcode}) before it started"
+        if isinstance(message, str):
+            self.close()
+            raise ServiceError(message)
+        self.api_endpoint, self.telemetry_endpoint = message
+
+    def close(self, timeout_s: float = 30.0) -> None:
+        try:
+            self._connection.send("stop")
+        except OSError:
+            pass  # gone already
+        self._process.join(timeout_s)
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(timeout_s)
+        self._connection.close()
+
+    def __enter__(self) -> ServiceProcess:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def _serve(config: ServiceConfig, connection: Connection) -> None:
+    """The child's life: start, say where, serve until told to stop (or orphaned), close."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        service = Service.start(config)
+    except (ServiceError, SecurityError) as error:
+        connection.send(str(error))
+        return
+    try:
+        connection.send((service.api_endpoint, service.telemetry_endpoint))
+        connection.recv()
+    except EOFError:
+        pass  # the parent is gone: stop too
+    finally:
+        service.close()
 
 
 def run_service(config: ServiceConfig) -> int:

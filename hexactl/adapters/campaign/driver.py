@@ -50,7 +50,7 @@ class SettleCriteria:
     window_s: float = 0.05
     tolerance_mm: float = 0.002
     timeout_s: float = 15.0
-    poll_s: float = 0.02
+    poll_s: float = 0.01
 
 
 class PlatformDriver:
