@@ -53,3 +53,12 @@ def summarise_validation(results: Sequence[MotionResult]) -> ValidationSummary:
         rms_position_error_mm=float(np.sqrt(np.mean(errors[:, :3] ** 2))),
         rms_orientation_error_deg=float(np.sqrt(np.mean(errors[:, 3:] ** 2))),
     )
+
+
+def largest_stroke_error(results: Sequence[MotionResult], strokes: Sequence[float]) -> tuple[float, int]:
+    """The largest |error| over every waypoint of ``results`` as a fraction of its axis'
+    stroke (``strokes``: six, mm and deg, e.g. the paper's ±600 mm … ±60°), and that axis
+    (0–5: x, y, z, roll, pitch, yaw): the paper's "relative error in the range of the stroke"."""
+    relative = np.abs(np.concatenate([result.errors for result in results])) / np.asarray(strokes, dtype=float)
+    largest = int(np.argmax(relative))
+    return float(relative.flat[largest]), largest % 6

@@ -14,7 +14,8 @@ from hexactl.calibration.campaign import (
     travel_order,
 )
 from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
-from hexactl.calibration.validation import ValidationSummary
+from hexactl.calibration.test_motions import X_SWEEP
+from hexactl.calibration.validation import MotionResult, ValidationSummary, largest_stroke_error
 from hexactl.kinematics.inverse import leg_lengths, leg_lengths_batch
 from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.kinematics.rotation import rotation_matrix
@@ -100,3 +101,11 @@ def test_envelope_fraction_keeps_the_candidates_inside_the_scaled_envelope(nomin
     assert np.max(np.abs(locked.poses_relative[:, :3])) < 0.6 * np.max(np.abs(wide.poses_relative[:, :3]))
     refused = plan_postures(nominal, PlanRequest(3, 5, envelope_fraction=0.0))
     assert refused.status is PlanStatus.INVALID_REQUEST and "envelope fraction" in refused.message
+
+
+def test_largest_stroke_error_names_the_axis() -> None:
+    achieved = np.array(X_SWEEP.waypoints, dtype=float)
+    achieved[3, 0] += 6.0  # 1 % of X's 600 mm
+    achieved[5, 3] += 0.46  # 2 % of roll's 23°
+    fraction, axis = largest_stroke_error([MotionResult(X_SWEEP, achieved)], [600, 600, 250, 23, 23, 60])
+    assert (fraction, axis) == (pytest.approx(0.02), 3)

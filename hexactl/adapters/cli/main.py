@@ -12,10 +12,10 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from hexactl.adapters.cli import calibration_commands, kinematics_commands, service_commands, sim_commands
+from hexactl.adapters.cli import calibration_commands, demo_commands, kinematics_commands, service_commands, sim_commands
 from hexactl.adapters.cli.common import CliError, common_parser
 
-COMMAND_MODULES = (kinematics_commands, sim_commands, service_commands, calibration_commands)
+COMMAND_MODULES = (kinematics_commands, sim_commands, service_commands, calibration_commands, demo_commands)
 
 
 def build_parser() -> argparse.ArgumentParser:
