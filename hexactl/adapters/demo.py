@@ -38,6 +38,7 @@ from hexactl.adapters.campaign.progress import Progress
 from hexactl.adapters.campaign.runner import CampaignOutcome, CampaignSettings, run_campaign
 from hexactl.adapters.campaign.store import (
     CALIBRATION_FILE,
+    LOCK_FILE,
     MEASUREMENTS_FILE,
     PLAN_FILE,
     REPORT_DIRECTORY,
@@ -79,7 +80,7 @@ host with everything else, and a host that stalls the service's process beyond t
 simulated actuators' watchdog (50 ms) trips them. Each is reported; none loses a
 measurement."""
 
-RESULT_FILES = (PLAN_FILE, MEASUREMENTS_FILE, VALIDATION_FILE, CALIBRATION_FILE)
+RESULT_FILES = (PLAN_FILE, MEASUREMENTS_FILE, VALIDATION_FILE, CALIBRATION_FILE, LOCK_FILE)
 """What a demo leaves in its directory besides ``report/``; ``--force`` removes them."""
 
 STROKES = np.array([stroke for _, stroke in PAPER_STROKES])

@@ -119,6 +119,9 @@ def test_a_new_campaign_saves_its_plan_and_each_measurement(nominal, tmp_path) -
     store.add_posture(posture.leg, [400.0] * 6, points_at(nominal, posture.pose))
     with pytest.raises(ValueError, match="locks leg"):
         store.add_posture(6, [400.0] * 6, points_at(nominal, posture.pose))
+    with pytest.raises(DirectoryError, match="in use by another campaign"):
+        CampaignStore.open(tmp_path / "c", nominal, DESIGN)
+    store.close()
 
     resumed = CampaignStore.open(tmp_path / "c", nominal, DESIGN)
     assert (resumed.measurements_taken, resumed.postures_measured) == (2, 1)
@@ -130,7 +133,7 @@ def test_a_new_campaign_saves_its_plan_and_each_measurement(nominal, tmp_path) -
 
 
 def test_a_directory_that_cannot_hold_this_campaign_is_refused(nominal, tmp_path) -> None:
-    CampaignStore.open(tmp_path / "c", nominal, DESIGN)
+    CampaignStore.open(tmp_path / "c", nominal, DESIGN).close()
     with pytest.raises(DirectoryError, match="planned with"):
         CampaignStore.open(tmp_path / "c", nominal, CampaignDesign(postures_per_leg=3, candidates=100, seed=1))
     other = nominal.model_copy(update={"name": "other", "zero_lengths": (1751.0,) * 6})
@@ -150,6 +153,7 @@ def test_saved_rows_that_do_not_match_the_plan_are_refused(nominal, tmp_path) ->
     store = CampaignStore.open(tmp_path / "c", nominal, DESIGN)
     posture = store.postures[0]
     store.add_posture(posture.leg, [400.0] * 6, points_at(nominal, posture.pose))
+    store.close()
     path: Path = tmp_path / "c" / MEASUREMENTS_FILE
     path.write_text(path.read_text().replace(f"\n{posture.leg},", "\n6,"))
     with pytest.raises(CampaignError, match="does not match"):

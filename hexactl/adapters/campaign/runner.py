@@ -112,7 +112,14 @@ def run_campaign(client: HexactlClient, geometry: Geometry, instrument: Instrume
     driver = PlatformDriver(client)
     if not (settings.directory / PLAN_FILE).exists():  # nothing planned or written for a controller on another geometry
         driver.require_calibration(geometry_id(geometry), _planned(geometry))
-    store = CampaignStore.open(settings.directory, geometry, settings.design)
+    with CampaignStore.open(settings.directory, geometry, settings.design) as store:
+        return _run(driver, store, instrument, settings, progress)
+
+
+def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, settings: CampaignSettings,
+         progress: Progress) -> CampaignOutcome:
+    """The campaign from wherever ``store`` says it stands."""
+    geometry = store.geometry
     _announce(store, instrument, progress)
     step = _Resetting(driver, settings.reset_faults, progress)
     planned_id = geometry_id(geometry)

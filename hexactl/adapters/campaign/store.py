@@ -12,7 +12,8 @@ Files (all written atomically: a crash leaves the previous version or the new on
   per waypoint (``phase``, ``motion``, ``waypoint`` 1-based, the commanded pose
   ``command_*``, the achieved pose ``achieved_*`` computed from the points, both relative
   mm/deg, and the feature points ``p1_x`` …), rewritten after every waypoint;
-* ``calibration.toml`` and ``report/`` at the end.
+* ``calibration.toml`` and ``report/`` at the end;
+* ``campaign.lock``, locked while a campaign runs there: a second one is refused.
 
 Measurements are taken in one order: the waypoints before calibration, the postures,
 the waypoints after. So the saved rows say exactly where an interrupted campaign
@@ -22,11 +23,13 @@ resumes, and how many measurements an instrument file must already hold.
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,6 +61,7 @@ MEASUREMENTS_FILE = "measurements.csv"
 VALIDATION_FILE = "validation.csv"
 CALIBRATION_FILE = "calibration.toml"
 REPORT_DIRECTORY = "report"
+LOCK_FILE = "campaign.lock"
 PHASES = ("before", "after")
 """Validation phases: on the planning geometry, then with the calibration loaded."""
 
@@ -107,6 +111,7 @@ class CampaignStore:
         self._readings: list[NDArray] = []
         self._points: list[NDArray] = []
         self._validation: list[_ValidationRow] = []
+        self._lock: TextIO | None = None  # held while open: two campaigns must not share a directory
 
     # -- opening -----------------------------------------------------------------------
 
@@ -121,21 +126,40 @@ class CampaignStore:
         """
         directory = Path(directory)
         ensure_unfinished(directory)
-        plan_path = directory / PLAN_FILE
-        if plan_path.exists():
-            store = cls._resumed(directory, geometry, design)
-        else:
-            strays = [name for name in (MEASUREMENTS_FILE, VALIDATION_FILE, CALIBRATION_FILE) if (directory / name).exists()]
-            if strays:
-                raise DirectoryError(f"{directory} holds {', '.join(strays)} but no {PLAN_FILE}: not a campaign's "
-                                    "directory; choose another --out")
-            try:
-                plans = plan_campaign(geometry, design)
-            except ValueError as error:
-                raise CampaignError(f"planning: {error}") from None
-            store = cls(directory, geometry, design, campaign_postures(plans, geometry.characteristic_length_mm))
-            write_atomic(plan_path, store._plan_json().encode("utf-8"), overwrite=False)
+        lock = _lock(directory)
+        try:
+            plan_path = directory / PLAN_FILE
+            if plan_path.exists():
+                store = cls._resumed(directory, geometry, design)
+            else:
+                strays = [name for name in (MEASUREMENTS_FILE, VALIDATION_FILE, CALIBRATION_FILE)
+                          if (directory / name).exists()]
+                if strays:
+                    raise DirectoryError(f"{directory} holds {', '.join(strays)} but no {PLAN_FILE}: not a campaign's "
+                                         "directory; choose another --out")
+                try:
+                    plans = plan_campaign(geometry, design)
+                except ValueError as error:
+                    raise CampaignError(f"planning: {error}") from None
+                store = cls(directory, geometry, design, campaign_postures(plans, geometry.characteristic_length_mm))
+                write_atomic(plan_path, store._plan_json().encode("utf-8"), overwrite=False)
+        except BaseException:
+            lock.close()
+            raise
+        store._lock = lock
         return store
+
+    def close(self) -> None:
+        """Let another campaign open the directory."""
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
+
+    def __enter__(self) -> CampaignStore:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
 
     @classmethod
     def _resumed(cls, directory: Path, geometry: Geometry, design: CampaignDesign) -> CampaignStore:
@@ -284,6 +308,19 @@ class CampaignStore:
                              *(f"{v:.{_DECIMALS}f}" for v in achieved),
                              *(f"{v:.{_DECIMALS}f}" for v in row.points_mm.ravel())])
         return out.getvalue()
+
+
+def _lock(directory: Path) -> TextIO:
+    """The directory's lock file, locked (released when closed or when the process ends);
+    :class:`DirectoryError` if another campaign holds it."""
+    directory.mkdir(parents=True, exist_ok=True)
+    handle = (directory / LOCK_FILE).open("a", encoding="utf-8")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        raise DirectoryError(f"{directory} is in use by another campaign running now") from None
+    return handle
 
 
 def ensure_unfinished(directory: Path) -> None:
