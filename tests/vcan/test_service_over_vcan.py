@@ -105,9 +105,17 @@ class Served:
     api: str = ""
     telemetry: str = ""
     log: list[str] = field(default_factory=list)
+    reader: threading.Thread | None = None
 
     def text(self) -> str:
         return "".join(self.log)
+
+    def final_text(self) -> str:
+        """The whole log once the process has exited: waits for the reader to reach
+        end-of-file (the exit can be seen before the last lines are read)."""
+        if self.reader is not None:
+            self.reader.join(WAIT_S)
+        return self.text()
 
 
 def guest_settings(data_dir: Path) -> dict:
@@ -154,7 +162,8 @@ def service(simulator: subprocess.Popen, data_dir: Path) -> Iterator[Served]:
             served.api, served.telemetry = match.groups()
             break
     assert served.api, served.text()
-    threading.Thread(target=lambda: served.log.extend(process.stderr), daemon=True).start()
+    served.reader = threading.Thread(target=lambda: served.log.extend(process.stderr), daemon=True)
+    served.reader.start()
     yield served
     if process.poll() is None:
         process.kill()
@@ -307,8 +316,8 @@ def test_estop_latches_until_reset(client: HexactlClient) -> None:
 
 def test_sigterm_disables_the_actuators_and_no_frame_was_rejected(service: Served, simulator: subprocess.Popen) -> None:
     service.process.send_signal(signal.SIGTERM)
-    assert service.process.wait(WAIT_S) == 0, service.text()
-    log = service.text()
+    assert service.process.wait(WAIT_S) == 0, service.final_text()
+    log = service.final_text()
     assert "SIGTERM: shutting down" in log and "actuators disabled" in log and "stopped" in log, log
     simulator.send_signal(signal.SIGTERM)
     out, err = simulator.communicate(timeout=WAIT_S)
