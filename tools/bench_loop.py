@@ -66,7 +66,7 @@ def run_once(args: argparse.Namespace, rate_hz: float, geometry: Geometry) -> di
     realtime = RealtimeConfig(fifo_priority=args.fifo, cpus=tuple(args.cpu) if args.cpu else None,
                               lock_memory=args.mlock, switch_interval_s=args.switch_us / 1e6)
     config = ControllerConfig(loop=LoopConfig(rate_hz=rate_hz, spin_window_us=args.spin_us, realtime=realtime))
-    controller = Controller(HARDWARE[args.hardware](geometry), geometry, geometry_id(geometry), config=config)
+    controller = Controller.in_thread(HARDWARE[args.hardware](geometry), geometry, geometry_id(geometry), config=config)
     report = controller.start()
     try:
         _expect(controller.enable())

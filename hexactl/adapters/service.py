@@ -1,25 +1,28 @@
 """The composition root of ``hexactl serve`` (ros2_control's "manager"): geometry file →
-CAN link (or the in-process simulator on a ``virtual:`` bus) → controller → API server
-and telemetry publisher.
+CAN link (or the built-in simulator on a ``virtual:`` bus) → control loop → loop link →
+API process (command server, telemetry, planning).
 
-Threads: the control loop (its own, real-time where allowed), the API server, the
-telemetry publisher and, with the simulator, the six simulated actuators. The caller's
-thread only starts and stops them.
+Two processes. This one holds the real-time part: the control loop's thread (real-time
+where allowed), the CAN link and, with the simulator, the six simulated actuators'
+thread, plus the loop link's report sender. The API process
+(:mod:`hexactl.adapters.api_process`) holds everything that parses, validates, plans or
+serialises, so none of it competes with the loop for the GIL
+(:mod:`hexactl.adapters.loop_link` says why and what crosses). The caller's thread only
+starts and stops them.
 
 Shutdown (SIGINT/SIGTERM, or :meth:`Service.close`): the API stops taking commands, a
 moving platform brakes to rest, the actuators are disabled (an E-stop if they will not
-be), then the loop, the link, the simulator and the sockets close.
+be), then telemetry, the loop, the link and the simulator stop. If the API process dies,
+:func:`run_service` does the same and exits with status 1.
 """
 
 from __future__ import annotations
 
 import logging
 import multiprocessing
-import os
 import signal
 import threading
 import time
-from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -27,23 +30,21 @@ from pathlib import Path
 from types import FrameType
 
 import can
-import numpy as np
-import zmq
 
 from firmware_proto.codec import LoopRate
-from hexactl.adapters.api.commands import CommandHandler, MeasurementError
-from hexactl.adapters.api.paths import DataDirectories
-from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError, check_endpoints, is_local_endpoint
-from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT, ApiServer
-from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, TelemetryPublisher
-from hexactl.adapters.api.wire import jsonable
+from hexactl.adapters.api.security import CurveServerKeys, SecurityError, check_endpoints, is_local_endpoint
+from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
+from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
+from hexactl.adapters.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
-from hexactl.adapters.can.transport import BusSpecError, open_bus
+from hexactl.adapters.can.transport import BusSpecError
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
+from hexactl.adapters.loop_link import LoopExchange
+from hexactl.adapters.simulator import Simulator
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
-from hexactl.control.realtime import RealtimeConfig, set_fifo
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
+from hexactl.control.realtime import RealtimeConfig, set_fifo
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
@@ -60,8 +61,12 @@ scheduler stall of either thread beyond 11 ms (seen under load) would trip a wat
 that measures host load, not the controller. Real actuators keep the defaults; missed
 cycles show in the loop statistics either way."""
 
-SERVICE_THREAD_NAMES = frozenset({"hexactl-api", "hexactl-telemetry", "actuator-bus"})
-"""The service's threads besides the loop: with ``fifo_priority`` they run just below it."""
+SERVICE_THREAD_NAMES = frozenset({"hexactl-loop-reports", "actuator-bus"})
+"""The threads that share the loop's process (and GIL): with ``fifo_priority`` they run
+just below it."""
+
+API_WATCH_INTERVAL_S = 0.5
+"""How often :func:`run_service` checks that the API process lives."""
 
 log = logging.getLogger("hexactl.service")
 
@@ -84,9 +89,10 @@ class ServiceConfig:
     noise, ``point_sigma_mm`` that noise (1σ per coordinate, mm; None: the geometry's
     ``[measurement] point_sigma_mm``). ``motion``: the controller's pose-space velocity,
     acceleration and jerk limits (the legs' speed limit is the geometry's whatever these are).
-    ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the service's other
-    threads (API, telemetry, simulator), which share the GIL with it (None: normal
-    scheduling); ``lock_memory``: mlockall. Both fall back, logged, without the privilege.
+    ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the other threads
+    of its process (simulator, report sender), which share the GIL with it (None: normal
+    scheduling; the API process always runs normally); ``lock_memory``: mlockall of the
+    loop's process. Both fall back, logged, without the privilege.
     """
 
     config_path: Path | None = None
@@ -106,63 +112,34 @@ class ServiceConfig:
     log_level: str = "INFO"
 
 
-class Simulator:
-    """Six simulated actuator firmwares on an in-process ``virtual:`` bus, driving a
-    simulated physical platform with manufacturing errors, and the instrument that
-    measures it (the paper's theodolites: feature points with noise ``point_sigma_mm``
-    per coordinate, None: the geometry's)."""
-
-    def __init__(self, nominal: Geometry, seed: int, point_sigma_mm: float | None = None) -> None:
-        # Imported here: real hardware never loads the simulator.
-        from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
-        from hexactl.sim.instrument import SimulatedInstrument
-        from hexactl.sim.physical_platform import PhysicalPlatform
-        from hexactl.sim.true_platform import true_geometry
-
-        truth = true_geometry(nominal, seed)
-        self.bus_spec = f"virtual:hexactl-sim-{os.getpid()}-{id(self)}"  # private to this service
-        firmwares = make_firmwares(zero_posture_readings_mm(truth), actuator_params_for(nominal), seed=seed)
-        self._runner = ActuatorBus(open_bus(self.bus_spec), firmwares).start()
-        self.platform = PhysicalPlatform(truth, self._runner.actual_positions_mm)
-        """The simulated platform: its true pose, for simulated measurements."""
-        # The noise has its own stream: the manufacturing errors already draw from ``seed``'s.
-        noise_seed = int(np.random.SeedSequence(seed).spawn(1)[0].generate_state(1)[0])
-        self.instrument = SimulatedInstrument.for_geometry(truth, noise_seed, point_sigma_mm)
-
-    def measure(self, guess: Sequence[float] | None = None) -> list[list[float]]:
-        """The feature points of the platform's true pose now, fixed frame, mm, with the
-        instrument's noise (the API's ``measure``; called from the API thread only).
-        ``guess``: roughly where the platform is (absolute mm/rad), to solve its pose from.
-
-        :raises MeasurementError: if the platform's pose cannot be solved
-        """
-        from hexactl.sim.physical_platform import PoseUnavailable
-
-        try:
-            pose = self.platform.true_pose(guess)
-        except PoseUnavailable as error:
-            raise MeasurementError(f"the simulated platform has no pose: {error}") from None
-        return self.instrument.measure(pose.absolute).tolist()
-
-    def close(self) -> None:
-        self._runner.close()
-
-
 class Service:
-    """The running service; :meth:`start` composes and starts it, :meth:`close` stops it."""
+    """The running service; :meth:`start` composes and starts it, :meth:`close` stops it.
+    ``controller``: a facade on the loop of this process (the API process has its own);
+    ``simulator``: the built-in one (None with real actuators)."""
 
-    def __init__(self, controller: Controller, simulator: Simulator | None, api_endpoint: str,
-                 telemetry_endpoint: str, closers: ExitStack) -> None:
+    def __init__(self, controller: Controller, simulator: Simulator | None, api: ApiProcess,
+                 closers: ExitStack) -> None:
         self.controller = controller
         self.simulator = simulator
-        self.api_endpoint = api_endpoint
-        self.telemetry_endpoint = telemetry_endpoint
+        self.api_endpoint = api.api_endpoint
+        self.telemetry_endpoint = api.telemetry_endpoint
+        self._api = api
         self._closers = closers
+
+    @property
+    def api_alive(self) -> bool:
+        """Whether the API process runs (it can only end by a crash or a kill while the
+        service runs)."""
+        return self._api.alive
+
+    @property
+    def api_exitcode(self) -> int | None:
+        return self._api.exitcode
 
     @classmethod
     def start(cls, config: ServiceConfig) -> Service:
-        """Load the geometry, open the actuators, start the loop and the sockets; what was
-        started is stopped again if a later step fails.
+        """Load the geometry, open the actuators, start the loop, then the API process;
+        what was started is stopped again if a later step fails.
 
         :raises ServiceError: for a refused geometry or key file, a bus that cannot be
             opened or an endpoint that cannot be bound
@@ -180,17 +157,7 @@ class Service:
         else:
             log.info("no calibration: the nominal geometry is active")
 
-        with ExitStack() as closers:  # unwound in reverse: sockets, bring to rest, loop, link, simulator
-            context = zmq.Context()
-            closers.callback(context.term)
-            curve = None
-            if config.curve:
-                try:
-                    curve = CurveServer(context, config.curve)
-                except (SecurityError, OSError, ValueError) as error:
-                    raise ServiceError(f"CURVE keys: {error}") from None
-                closers.callback(curve.close)
-
+        with ExitStack() as closers:  # unwound in reverse: API, bring to rest, telemetry, loop, link, simulator
             simulator = None
             if config.can is None:
                 simulator = Simulator(nominal, config.simulator_seed, config.point_sigma_mm)
@@ -204,45 +171,51 @@ class Service:
             closers.callback(link.close)
             if simulator:
                 log.info("actuators: six simulated on %s, true platform %r; watchdog %d cycles and supervision %g s "
-                         "(simulator timeouts: it shares the host with the loop)", spec, simulator.platform.geometry.name,
-                         SIMULATOR_WATCHDOG_CYCLES, SIMULATOR_SUPERVISION.heartbeat_timeout_s)
+                         "(simulator timeouts: it shares the host with the loop)", spec,
+                         simulator.instrument_spec.truth.name, SIMULATOR_WATCHDOG_CYCLES,
+                         SIMULATOR_SUPERVISION.heartbeat_timeout_s)
             else:
                 log.info("actuators: CAN %s", spec)
 
             realtime_config = RealtimeConfig(fifo_priority=config.fifo_priority, lock_memory=config.lock_memory)
             loop = LoopConfig(rate_hz=config.rate_hz, realtime=realtime_config)
             supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
+            controller_config = ControllerConfig(loop=loop, motion=config.motion, **supervision)
             try:
-                controller = Controller(link, active, calibration_id, calibration_source=str(source),
-                                        config=ControllerConfig(loop=loop, motion=config.motion, **supervision),
-                                        hardware_limits=nominal.limits)
+                controller = Controller.in_thread(link, active, calibration_id, calibration_source=str(source),
+                                                  config=controller_config, hardware_limits=nominal.limits)
             except ValueError as error:  # a calibration whose [limits] are not the nominal's
                 raise ServiceError(f"{source}: {error}") from None
+
+            pipes = multiprocessing.get_context("spawn")
+            commands_in, commands_out = pipes.Pipe(duplex=False)
+            reports_in, reports_out = pipes.Pipe(duplex=False)
+            probe = simulator.runner.actual_positions_mm if simulator else None
+            exchange = LoopExchange(controller.thread, commands_in, reports_out, probe).start()
+            closers.callback(exchange.close)
+            controller.thread.loop.exchange = exchange
             realtime = controller.start()
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
-
-            data = DataDirectories(config.data_dirs or _default_data_dirs(config_path))
-            try:
-                publisher = TelemetryPublisher(context, config.telemetry_endpoint, lambda: jsonable(controller.telemetry()),
-                                               config.telemetry_rate_hz, curve)
-                closers.callback(publisher.close)
-                closers.callback(_bring_to_rest, controller)  # after the API stops, while telemetry still flows
-                instrument = (lambda: simulator.measure(_measured_pose(controller))) if simulator else None
-                handler = CommandHandler(controller, data, instrument)
-                server = ApiServer(context, config.api_endpoint, handler, curve)
-                closers.callback(server.close)
-            except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
-                raise ServiceError(f"cannot serve: {error}") from None
-            publisher.start()
-            server.start()
             if config.fifo_priority is not None:
                 _fifo_for_service_threads(max(1, config.fifo_priority - 1))
-            security = "CURVE" if curve else "no authentication (loopback)"
-            log.info("API on %s, telemetry on %s at %g Hz; %s", server.endpoint, publisher.endpoint,
+
+            data_dirs = tuple(config.data_dirs or _default_data_dirs(config_path))
+            settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
+                                   data_dirs, controller_config, nominal.limits,
+                                   simulator.instrument_spec if simulator else None, config.log_level)  # fmt: skip
+            try:
+                api = ApiProcess(settings, commands_out, reports_in)
+            except ApiStartError as error:
+                raise ServiceError(str(error)) from None
+            closers.callback(api.close)  # telemetry flows until the platform is at rest
+            closers.callback(_bring_to_rest, controller)
+            closers.callback(api.close_api)
+            security = "CURVE" if config.curve else "no authentication (loopback)"
+            log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)
-            log.info("data directories: %s", ", ".join(str(directory) for directory in data.directories))
-            return cls(controller, simulator, server.endpoint, publisher.endpoint, closers.pop_all())
+            log.info("data directories: %s", ", ".join(str(directory) for directory in data_dirs))
+            return cls(controller, simulator, api, closers.pop_all())
 
     def close(self) -> None:
         """Stop taking commands, bring the platform to rest disabled, close everything."""
@@ -265,7 +238,9 @@ class ServiceProcess:
     def __init__(self, config: ServiceConfig, start_timeout_s: float = 60.0) -> None:
         context = multiprocessing.get_context("spawn")  # no fork of a process with threads
         self._connection, child = context.Pipe()
-        self._process = context.Process(target=_serve, args=(config, child), name="hexactl-service", daemon=True)
+        # Not a daemon: the service spawns its API process, which a daemon may not. It ends
+        # with this process all the same: it stops when its end of the pipe closes.
+        self._process = context.Process(target=_serve, args=(config, child), name="hexactl-service")
         self._process.start()
         child.close()
         message: object = f"the service did not start within {start_timeout_s:g} s"
@@ -315,8 +290,9 @@ def _serve(config: ServiceConfig, connection: Connection) -> None:
 
 
 def run_service(config: ServiceConfig) -> int:
-    """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly."""
-    logging.basicConfig(level=config.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly;
+    0, or 1 if the API process died (the platform is then brought to rest as at a stop)."""
+    logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     for endpoint in (config.api_endpoint, config.telemetry_endpoint):
         if not is_local_endpoint(endpoint):
             log.warning("%s is reachable from the network (CURVE required and configured)", endpoint)
@@ -327,16 +303,21 @@ def run_service(config: ServiceConfig) -> int:
         stopping.set()
 
     previous = {number: signal.signal(number, stop) for number in (signal.SIGINT, signal.SIGTERM)}
+    status = 0
     try:
         service = Service.start(config)
         try:
-            stopping.wait()
+            while not stopping.wait(API_WATCH_INTERVAL_S):
+                if not service.api_alive:
+                    log.error("the API process died (exit status %s): shutting down", service.api_exitcode)
+                    status = 1
+                    break
         finally:
             service.close()
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
-    return 0
+    return status
 
 
 def _fifo_for_service_threads(priority: int) -> None:
@@ -368,15 +349,6 @@ def _bring_to_rest(controller: Controller) -> None:
     else:
         log.warning("disable refused (%s: %s): E-stop", result.error, result.message)
         controller.estop()
-
-
-def _measured_pose(controller: Controller) -> tuple[float, ...] | None:
-    """The controller's pose from the feedback, absolute mm/rad (None if it has none):
-    within millimetres of the true one, where the simulated instrument solves from."""
-    snapshot = controller.snapshot
-    if snapshot.pose_measured is None:
-        return None
-    return tuple(snapshot.active.absolute(snapshot.pose_measured))
 
 
 def _load(path: Path) -> Geometry:

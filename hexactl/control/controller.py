@@ -3,8 +3,10 @@
 Threading. Methods are called from any thread (the API's, a CLI's, a test's). Each does
 its heavy work there — argument checks, planning, path validation, calibration dry runs
 — against the loop's latest :class:`~hexactl.control.core.CoreSnapshot`, then hands an
-immutable command to the loop through a deque (:mod:`hexactl.control.commands`). With
-the loop thread running, the method then waits (at most ``command_timeout_s``) for the
+immutable command (:mod:`hexactl.control.commands`) to the loop's host
+(:mod:`hexactl.control.host`): a deque in this process, or a pipe to the loop's process
+when the facade serves the API in a process of its own. With the loop running by
+itself, the method then waits (at most ``command_timeout_s``) for the
 loop's verdict, because the state may have changed meanwhile and the loop checks again;
 when the loop is stepped by hand (tests, simulation) it returns at once with
 ``details["pending"] = True`` and the verdict is read later with :meth:`Controller.outcome`.
@@ -26,7 +28,6 @@ import numpy as np
 from hexactl.control import commands as cmd
 from hexactl.control.config import ControllerConfig
 from hexactl.control.core import (
-    ControlCore,
     ControlState,
     CoreSnapshot,
     Event,
@@ -45,7 +46,7 @@ from hexactl.control.core import (
     check_unlock,
 )
 from hexactl.control.hardware import ActuatorInterface
-from hexactl.control.loop import ControlLoop
+from hexactl.control.host import LoopHost, LoopThread
 from hexactl.control.planning import (
     ActiveGeometry,
     Plan,
@@ -101,18 +102,27 @@ class Telemetry:
 
 
 class Controller:
-    """The control core of the controller service.
+    """The facade of the control core: one method per command, over a
+    :class:`~hexactl.control.host.LoopHost` (the loop in a thread of this process,
+    :meth:`in_thread`, or in another process).
 
-    ``hardware``: the actuators (the CAN adapter, or :class:`~hexactl.sim.ideal_actuators.IdealActuators`).
-    ``geometry``/``calibration_id``/``calibration_source``: the calibrated geometry to
-    start with and its identity (the caller computes the id, e.g. a content hash).
-    ``clock_ns``: monotonic time for cycles stepped by hand and for the first read.
-    Construction reads the actuators once, so status and telemetry work immediately and
-    the commanded pose starts where the platform is.
+    ``hardware_limits``: the actuators' and platform's limits, normally the nominal
+    geometry's ``[limits]``. A calibration is refused unless its ``[limits]`` equal them,
+    so no calibration file can widen what is enforced. ``ticket_start``: the first ticket
+    number; facades sharing one loop take disjoint ranges (outcomes are found by ticket).
     """
 
-    def __init__(
-        self,
+    def __init__(self, host: LoopHost, *, config: ControllerConfig, hardware_limits: Limits,
+                 ticket_start: int = 1) -> None:
+        self.config = config
+        self.hardware_limits = hardware_limits
+        self._host = host
+        self._thread = host if isinstance(host, LoopThread) else None
+        self._tickets = itertools.count(ticket_start)  # next() on a count is atomic in CPython
+
+    @classmethod
+    def in_thread(
+        cls,
         hardware: ActuatorInterface,
         geometry: Geometry,
         calibration_id: str,
@@ -121,25 +131,38 @@ class Controller:
         config: ControllerConfig | None = None,
         hardware_limits: Limits | None = None,
         clock_ns: Callable[[], int] = time.monotonic_ns,
-    ) -> None:
-        """``hardware_limits``: the actuators' and platform's limits, normally the nominal
-        geometry's ``[limits]`` (default: ``geometry``'s). A calibration is refused unless
-        its ``[limits]`` equal them, so no calibration file can widen what is enforced.
+    ) -> Controller:
+        """The controller with its loop in this process, driving ``hardware``, on
+        ``geometry`` (with its identity: the caller computes the id, e.g. a content hash).
+        ``hardware_limits`` default to ``geometry``'s. ``clock_ns``: monotonic time for
+        cycles stepped by hand and for the first one, run here, so status and telemetry
+        work at once and the commanded pose starts where the platform is.
 
         :raises ValueError: if ``geometry``'s limits differ from ``hardware_limits``
         """
-        self.hardware_limits = hardware_limits or geometry.limits
-        if differences := limits_differences(geometry.limits, self.hardware_limits):
+        hardware_limits = hardware_limits or geometry.limits
+        if differences := limits_differences(geometry.limits, hardware_limits):
             raise ValueError(f"the geometry's [limits] differ from the hardware's: {'; '.join(differences)}")
-        self.config = config or ControllerConfig()
-        self.hardware = hardware
-        self._clock_ns = clock_ns
-        self._core = ControlCore(hardware, ActiveGeometry.of(geometry, calibration_id, calibration_source), self.config)
-        self._loop = ControlLoop(self._core.step, self.config.loop, on_crash=hardware.send_estop)
-        self._tickets = itertools.count(1)  # next() on a count is atomic in CPython
-        self._core.step(clock_ns())
+        config = config or ControllerConfig()
+        thread = LoopThread(hardware, ActiveGeometry.of(geometry, calibration_id, calibration_source), config, clock_ns)
+        return cls(thread, config=config, hardware_limits=hardware_limits)
 
-    # -- lifecycle ------------------------------------------------------------------------
+    # -- lifecycle (the loop in this process) ---------------------------------------------
+
+    @property
+    def thread(self) -> LoopThread:
+        """The loop of this process.
+
+        :raises RuntimeError: if the loop runs in another process
+        """
+        if self._thread is None:
+            raise RuntimeError("the control loop runs in another process")
+        return self._thread
+
+    @property
+    def hardware(self) -> ActuatorInterface:
+        """The actuators the loop of this process drives (see :attr:`thread`)."""
+        return self.thread.hardware
 
     def start(self) -> RealtimeReport:
         """Start the loop thread; returns what the real-time set-up obtained."""
@@ -148,30 +171,29 @@ class Controller:
         # that would otherwise fill the loop's first young collection (0.5 ms, measured).
         s = self.snapshot
         plan_path(self._context(s), ((0.0,) * 6,) * 3, [Waypoint((1.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
-        return self._loop.start()
+        return self.thread.loop.start()
 
     def shutdown(self) -> None:
         """Stop the loop thread (the actuators keep their state: disable first)."""
-        self._loop.stop()
+        self.thread.loop.stop()
 
-    def step(self, now_ns: int | None = None) -> None:
-        """Run one cycle now (tests, simulation); not while the thread runs."""
-        if self._loop.running:
+    def step(self, now_ns: int) -> None:
+        """Run one cycle at monotonic ``now_ns`` (tests, simulation); not while the thread runs."""
+        loop = self.thread.loop
+        if loop.running:
             raise RuntimeError("the loop thread is running: it steps by itself")
-        self._loop.step(self._clock_ns() if now_ns is None else now_ns)
+        loop.step(now_ns)
 
     @property
     def snapshot(self) -> CoreSnapshot:
-        snapshot = self._core.snapshot
-        assert snapshot is not None  # the constructor ran one cycle
-        return snapshot
+        return self._host.snapshot
 
     # -- queries --------------------------------------------------------------------------
 
     def status(self) -> CommandResult:
         """State, calibration, sequence, faults, recent events and the loop's health."""
-        s = self.snapshot
-        failure = self._loop.failure
+        report = self._host.report(TELEMETRY_PERCENTILES_MAX_AGE_S)
+        s = report.snapshot
         return CommandResult.success(
             s.state.value,
             state=s.state.value,
@@ -186,17 +208,17 @@ class Controller:
                            "records": len(s.last_sequence.records)} if s.last_sequence else None,
             faults=[asdict(f) for f in s.faults],
             events=[asdict(e) for e in s.events[-10:]],
-            loop_running=self._loop.running,
-            loop_failure=repr(failure) if failure else None,
-            realtime=asdict(self._loop.realtime) if self._loop.realtime else None,
+            loop_running=report.running,
+            loop_failure=report.failure,
+            realtime=asdict(report.realtime) if report.realtime else None,
         )
 
     def telemetry(self) -> Telemetry:
         """The latest cycle. The loop's lateness and compute percentiles are at most
         ``TELEMETRY_PERCENTILES_MAX_AGE_S`` old; counters and maxima are current."""
-        s = self.snapshot
-        stats = replace(self._loop.stats.summary(TELEMETRY_PERCENTILES_MAX_AGE_S), guard_clamps=s.clamped_cycles,
-                        fk_failures=s.fk_failures)
+        report = self._host.report(TELEMETRY_PERCENTILES_MAX_AGE_S)
+        s = report.snapshot
+        stats = replace(report.stats, guard_clamps=s.clamped_cycles, fk_failures=s.fk_failures)
         return Telemetry(
             t=s.t_ns / 1e9,
             state=s.state.value,
@@ -248,11 +270,11 @@ class Controller:
         return self._submit(cmd.Stop, "stopping")
 
     def estop(self) -> CommandResult:
-        """Emergency stop, latched until reset. Sent from this thread at once, then
-        latched and repeated by the loop."""
-        sent = self.hardware.send_estop()
+        """Emergency stop, latched until reset. Sent from this thread at once where the
+        actuators are reachable from here, and by the loop, which latches and repeats it."""
+        sent = self._host.estop_now()
         result = self._submit(cmd.EStop, "E-stop latched")
-        if not sent:
+        if sent is False:
             return CommandResult.failure(ErrorCode.SEND_FAILED, "the E-stop frame could not be sent; the loop "
                                          "latched ESTOP and keeps repeating it", **result.details)
         return result
@@ -405,12 +427,13 @@ class Controller:
         return self._submit(factory, message)
 
     def _submit(self, factory: Callable[[int], cmd.Command], message: str, **details: object) -> CommandResult:
-        """Queue a command; with the thread running, wait for the loop's verdict."""
-        if self._loop.failure is not None:
-            return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {self._loop.failure!r}")
+        """Queue a command; with the loop running by itself, wait for its verdict."""
+        report = self._host.report(TELEMETRY_PERCENTILES_MAX_AGE_S)
+        if report.failure is not None:
+            return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {report.failure}")
         ticket = next(self._tickets)
-        self._core.inbox.append(factory(ticket))
-        if not self._loop.running:
+        self._host.submit(factory(ticket))
+        if not report.running:
             return CommandResult.success(message, ticket=ticket, pending=True, **details)
         deadline = time.monotonic() + self.config.command_timeout_s
         while time.monotonic() < deadline:

@@ -15,7 +15,11 @@ directly with simulated times and never start the thread. Lateness (wake − dea
 compute time (wake → end of the cycle) go to :class:`~hexactl.control.stats.CycleStats`.
 
 Real-time set-up (:mod:`hexactl.control.realtime`) happens in the thread when it starts;
-the young-generation garbage collection runs in a cycle's slack.
+the young-generation garbage collection runs in a cycle's slack, and so does ``exchange``
+(the service's command intake from, and snapshot publication to, its API process: see
+:mod:`hexactl.adapters.loop_link`): after every cycle that leaves at least half a period,
+and after the :data:`EXCHANGE_MAX_DEFERRED`-th cycle in a row that does not, so that an
+overloaded loop still takes commands (an E-stop among them) and still reports.
 
 If a cycle raises (a bug: the cycle code never raises by design), the thread sends an
 E-stop through ``on_crash``, records the exception in :attr:`ControlLoop.failure` and
@@ -33,6 +37,9 @@ from hexactl.control.config import LoopConfig
 from hexactl.control.realtime import RealtimeReport, apply_realtime, restore_process
 from hexactl.control.stats import CycleStats
 
+EXCHANGE_MAX_DEFERRED = 8
+"""Cycles in a row without slack after which the exchange runs anyway."""
+
 
 def next_deadline(deadline_ns: int, end_ns: int, period_ns: int) -> tuple[int, int]:
     """The deadline after a cycle due at ``deadline_ns`` that ended at ``end_ns``, and the
@@ -48,11 +55,13 @@ def next_deadline(deadline_ns: int, end_ns: int, period_ns: int) -> tuple[int, i
 
 class ControlLoop:
     """Runs ``cycle(now_ns)`` every period, in its own thread (:meth:`start`) or when
-    told (:meth:`step`). ``on_crash`` is called (from the loop thread) if ``cycle`` raises."""
+    told (:meth:`step`). ``on_crash`` is called (from the loop thread) if ``cycle`` raises.
+    ``exchange``, if set before :meth:`start`, runs in the thread in the cycles' slack."""
 
     def __init__(self, cycle: Callable[[int], None], config: LoopConfig, on_crash: Callable[[], object]) -> None:
         self._cycle = cycle
         self._on_crash = on_crash
+        self.exchange: Callable[[], None] | None = None
         self.config = config
         self.period_ns = config.period_ns
         self.stats = CycleStats(self.period_ns, config.stats_window)
@@ -99,6 +108,8 @@ class ControlLoop:
         gc_every_ns = round(realtime.gc_interval_s * 1e9)
         stats = self.stats
         clock = time.monotonic_ns
+        exchange = self.exchange
+        deferred = 0
         deadline = clock() + period
         next_gc = deadline + gc_every_ns
         try:
@@ -119,6 +130,14 @@ class ControlLoop:
                     gc.collect(1)
                     stats.record_gc(clock() - end)
                     next_gc = end + gc_every_ns
+                if exchange is not None:
+                    begin = clock()
+                    if deadline - begin > period // 2 or deferred >= EXCHANGE_MAX_DEFERRED:
+                        exchange()
+                        stats.record_exchange(clock() - begin)
+                        deferred = 0
+                    else:
+                        deferred += 1
         except BaseException as error:  # noqa: BLE001 - the loop must never die silently
             self.failure = error
             self._on_crash()

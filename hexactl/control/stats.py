@@ -36,6 +36,8 @@ class LoopStats:
     ``missed``: cycles that woke more than half a period late. ``skipped``: deadlines
     dropped by re-anchoring after an overrun (the loop never bursts to catch up).
     ``gc_runs``/``gc_max_us``: young-generation collections run in the loop's slack.
+    ``exchange_max_us``: the longest exchange with the API process in the loop's slack
+    (0 without one).
     ``guard_clamps``: cycles in which the set-point guard had to change a set-point (a
     plan was wrong: should stay 0); ``fk_failures``: cycles whose feedback had no
     forward-kinematics solution. The controller fills these two from the cycle's state.
@@ -49,6 +51,7 @@ class LoopStats:
     compute_us: Percentiles
     gc_runs: int
     gc_max_us: float
+    exchange_max_us: float = 0.0
     guard_clamps: int = 0
     fk_failures: int = 0
 
@@ -67,6 +70,7 @@ class CycleStats:
         self.skipped = 0
         self.gc_runs = 0
         self.gc_max_ns = 0
+        self.exchange_max_ns = 0
         self.max_lateness_ns = 0
         self.max_compute_ns = 0
         self._late_limit_ns = period_ns // 2
@@ -94,6 +98,10 @@ class CycleStats:
         if duration_ns > self.gc_max_ns:
             self.gc_max_ns = duration_ns
 
+    def record_exchange(self, duration_ns: int) -> None:
+        if duration_ns > self.exchange_max_ns:
+            self.exchange_max_ns = duration_ns
+
     def summary(self, max_age_s: float = 0.0) -> LoopStats:
         """Counters and maxima as of now; percentiles over the window, recomputed only if
         the last ones are older than ``max_age_s`` (sorting the window takes about half
@@ -113,6 +121,7 @@ class CycleStats:
             compute_us=Percentiles(*compute, self.max_compute_ns / 1e3),
             gc_runs=self.gc_runs,
             gc_max_us=self.gc_max_ns / 1e3,
+            exchange_max_us=self.exchange_max_ns / 1e3,
         )
 
 

@@ -20,8 +20,8 @@ def first_measurement(seed: int, sigma: float | None) -> tuple[np.ndarray, np.nd
         with HexactlClient(service.api_endpoint) as client:
             reply = client.call("measure")
         MeasureReply.model_validate(reply)
-        simulator = service.simulator
-        assert simulator is not None
+        assert service.simulator is not None
+        simulator = service.simulator.measurement
         pose = simulator.platform.true_pose().absolute  # at rest: the actuators hold still while disabled
         model = np.array(simulator.instrument.feature_points_mm)
         exact = model @ rotation_matrix(*pose[3:]).T + np.array(pose[:3])

@@ -50,7 +50,7 @@ class Rig:
         self.geometry = geometry
         start = sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, start_pose))
         self.actuators = IdealActuators(start, clock_ns=self.clock, record=True)
-        self.controller = Controller(self.actuators, geometry, "nominal", config=config or ControllerConfig(),
+        self.controller = Controller.in_thread(self.actuators, geometry, "nominal", config=config or ControllerConfig(),
                                      clock_ns=self.clock)
         self.period_ns = self.controller.config.loop.period_ns
 

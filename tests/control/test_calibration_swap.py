@@ -130,7 +130,7 @@ def test_a_controller_refuses_a_start_geometry_with_other_limits(geometry):
 
     wide = _variant(geometry, limits={"stroke": (-100.0, 950.0)})
     with pytest.raises(ValueError, match=r"stroke: \(-100.0, 950.0\) \(hardware: \(0.0, 850.0\)\)"):
-        Controller(IdealActuators([400.0] * 6), wide, "wide", hardware_limits=geometry.limits)
+        Controller.in_thread(IdealActuators([400.0] * 6), wide, "wide", hardware_limits=geometry.limits)
 
 
 def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):

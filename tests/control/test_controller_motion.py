@@ -32,7 +32,7 @@ def test_restart_starts_from_where_the_platform_was_left(make_rig, geometry):
     rig.run(100)  # the actuators' lag dies out
     assert rig.controller.disable().ok
     rig.run(2)
-    again = Controller(rig.actuators, geometry, "nominal", clock_ns=rig.clock)
+    again = Controller.in_thread(rig.actuators, geometry, "nominal", clock_ns=rig.clock)
     assert again.telemetry().pose_command == pytest.approx((100, 50, 20, 1, 2, 3), abs=1e-6)
 
 
@@ -156,7 +156,7 @@ def test_a_plan_made_before_the_target_changed_is_refused_as_stale(rig):
     epoch = rig.controller.snapshot.epoch
     assert rig.controller.stop().ok  # advances the epoch
     rig.run()
-    rig.controller._core.inbox.append(cmd.Move(999, epoch, Segment((100.0, 0, 0, 0, 0, 0), 1.0, 1.0, 0.0, 1.0)))
+    rig.controller.thread.submit(cmd.Move(999, epoch, Segment((100.0, 0, 0, 0, 0, 0), 1.0, 1.0, 0.0, 1.0)))
     rig.run()
     outcome = rig.controller.outcome(999)
     assert not outcome.ok and outcome.error == "stale_plan"

@@ -30,7 +30,7 @@ def _wait(condition, timeout_s=10.0):
 def test_the_thread_runs_commands_to_completion(geometry, rate_hz):
     actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0] * 6)))
     config = ControllerConfig(loop=LoopConfig(rate_hz=rate_hz))
-    controller = Controller(actuators, geometry, "nominal", config=config)
+    controller = Controller.in_thread(actuators, geometry, "nominal", config=config)
     gc_was_enabled, switch_before = gc.isenabled(), sys.getswitchinterval()
     report = controller.start()
     try:
@@ -42,7 +42,7 @@ def test_the_thread_runs_commands_to_completion(geometry, rate_hz):
         refused = controller.move([20, 0, 10, 0, 1, 0], speed=3.0)
         assert refused.error == "invalid_argument"
         with pytest.raises(RuntimeError):
-            controller.step()
+            controller.step(time.monotonic_ns())
         telemetry = controller.telemetry()
         assert telemetry.loop.rate_hz == rate_hz and telemetry.loop.cycles > 0
         assert telemetry.loop.missed <= telemetry.loop.cycles
@@ -101,7 +101,7 @@ def test_an_overrun_in_the_thread_is_counted_as_skipped():
 
 def test_a_crashing_cycle_estops_and_commands_report_it(geometry):
     actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0] * 6)))
-    controller = Controller(actuators, geometry, "nominal", config=ControllerConfig(loop=LoopConfig(
+    controller = Controller.in_thread(actuators, geometry, "nominal", config=ControllerConfig(loop=LoopConfig(
         realtime=RealtimeConfig(manage_gc=False))))
     actuators.read_feedback = lambda: 1 / 0  # a bug in a cycle
     controller.start()

@@ -22,9 +22,8 @@ BOOTING = ("heartbeat_missing", "outside_stroke", "pose_unknown")
 
 def firmwares(service: Service) -> tuple[ActuatorFirmware, ...]:
     """The service's six simulated actuator firmwares, for their ``inject``
-    (:class:`~hexactl.sim.actuator_firmware.FaultInjection`). The simulator has no public
-    accessor for them, hence the private attribute."""
-    return service.simulator._runner.firmwares
+    (:class:`~hexactl.sim.actuator_firmware.FaultInjection`)."""
+    return service.simulator.runner.firmwares
 
 
 def clear_injections(service: Service) -> None:

@@ -11,7 +11,8 @@ from firmware_proto.codec import Fault, LoopRate
 from hexactl.adapters.can.bus_monitor import BusMonitor
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.files.geometry_file import geometry_id
-from hexactl.adapters.service import SIMULATOR_SUPERVISION, SIMULATOR_WATCHDOG_CYCLES, Simulator
+from hexactl.adapters.service import SIMULATOR_SUPERVISION, SIMULATOR_WATCHDOG_CYCLES
+from hexactl.adapters.simulator import Simulator
 from hexactl.control.config import ControllerConfig, LoopConfig
 from hexactl.control.controller import Controller
 from hexactl.control.hardware import ActuatorState
@@ -25,7 +26,7 @@ def start_controller(simulator: Simulator, geometry: Geometry) -> Controller:
     with its simulator (the simulator's watchdog and supervision timeouts)."""
     link = CanActuatorLink.open(simulator.bus_spec, LinkConfig(loop_rate=LoopRate(RATE_HZ),
                                                                watchdog_cycles=SIMULATOR_WATCHDOG_CYCLES))
-    controller = Controller(link, geometry, geometry_id(geometry),
+    controller = Controller.in_thread(link, geometry, geometry_id(geometry),
                             config=ControllerConfig(loop=LoopConfig(rate_hz=RATE_HZ), supervision=SIMULATOR_SUPERVISION))
     controller.start()
     return controller

@@ -20,6 +20,10 @@ import numpy as np
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.messages import SaveRecordingRequest
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
 from hexactl.adapters.files.measurements import write_measurements
@@ -115,13 +119,19 @@ def play_short(client: HexactlClient, service: Service) -> None:
 
 def test_a_recording_whose_rename_fails_is_not_left_behind(client, service, data_dir, monkeypatch) -> None:
     play_short(client, service)
+    # The service's API process writes recordings; the same handler runs here on the
+    # service's own facade, so that the rename can be made to fail in this process.
+    handler = CommandHandler(service.controller, DataDirectories([data_dir]))
+    save = SaveRecordingRequest(v=1, id=1, cmd="save_recording", path="run.csv")
     before = sorted(path.name for path in data_dir.iterdir())
     monkeypatch.setattr(os, "replace", _fail)
-    reply = client.request("save_recording", path="run.csv")
+    with pytest.raises(ApiError) as refused:
+        handler(save)
     monkeypatch.undo()
-    assert reply["error"]["code"] == "file_not_found" and "No space left" in reply["error"]["message"]
+    assert refused.value.code == "file_not_found" and "No space left" in refused.value.message
     assert sorted(path.name for path in data_dir.iterdir()) == before
-    assert client.call("save_recording", path="run.csv")["records"] == 1  # and the service writes it once it can
+    assert handler(save)["records"] == 1  # and it is written once it can be
+    assert client.call("save_recording", path="run2.csv")["records"] == 1  # so is the API process's
 
 
 # -- nothing outside the data directories, nothing executed ------------------------------

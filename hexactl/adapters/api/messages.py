@@ -252,6 +252,10 @@ class LoopTelemetry(_Message):
     compute_us: Percentiles = Field(description="time from wake-up to the end of the cycle's work, µs")
     gc_runs: int = Field(description="young-generation garbage collections run in the loop's slack")
     gc_max_us: float = Field(description="the longest of them, µs")
+    exchange_max_us: float = Field(
+        description="the longest exchange with the API process (command intake, snapshot publication) in the "
+        "loop's slack, µs"
+    )
     guard_clamps: int = Field(description="cycles in which the set-point guard changed a set-point (should stay 0)")
     fk_failures: int = Field(description="cycles whose feedback had no forward-kinematics solution")
 

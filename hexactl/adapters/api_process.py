@@ -1,0 +1,186 @@
+"""The service's API process: the ZeroMQ command server, the telemetry publisher, and
+the controller facade that parses, validates and plans every request, away from the
+control loop's GIL (why: :mod:`hexactl.adapters.loop_link`).
+
+The service (:mod:`hexactl.adapters.service`) spawns it with :class:`ApiProcess` once its
+loop runs, handing it the two pipe ends of the loop link. Its life: connect to the loop
+(first report), bind and start the sockets, say where they are bound, then wait. The
+service ends it in two steps, so that telemetry keeps flowing while the platform is
+brought to rest: ``close_api`` (no more commands), then ``stop``.
+
+If the service's process dies, this one sees its control pipe close and ends; if this
+one dies, the service sees its exit (:attr:`ApiProcess.alive`) and shuts down.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import signal
+from contextlib import ExitStack
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+
+import zmq
+
+from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError
+from hexactl.adapters.api.server import ApiServer
+from hexactl.adapters.api.telemetry import TelemetryPublisher
+from hexactl.adapters.api.wire import jsonable
+from hexactl.adapters.loop_link import RemoteLoop
+from hexactl.adapters.simulator import InstrumentSpec, SimulatedMeasurement
+from hexactl.control.config import ControllerConfig
+from hexactl.control.controller import Controller
+from hexactl.kinematics.geometry import Limits
+
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+
+API_TICKET_START = 1 << 40
+"""The API facade's first ticket: the service's own facade (shutdown, tests) counts from 1
+on the same loop, and verdicts are found by ticket."""
+
+_CLOSE_API = "close_api"
+_STOP = "stop"
+
+log = logging.getLogger("hexactl.api")
+
+
+class ApiStartError(RuntimeError):
+    """The API process could not start; the message says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class ApiSettings:
+    """What the API process serves (picklable: it crosses to the child).
+    ``instrument``: the simulator's, for ``measure`` (None: real hardware, no instrument)."""
+
+    api_endpoint: str
+    telemetry_endpoint: str
+    telemetry_rate_hz: float
+    curve: CurveServerKeys | None
+    data_dirs: tuple[Path, ...]
+    controller: ControllerConfig
+    hardware_limits: Limits
+    instrument: InstrumentSpec | None
+    log_level: str
+
+
+class ApiProcess:
+    """The API in a spawned child process, on the loop link's ``commands`` (write end)
+    and ``reports`` (read end); :attr:`api_endpoint`/:attr:`telemetry_endpoint` are
+    where it bound.
+
+    :raises ApiStartError: if it does not start within ``start_timeout_s`` or says it cannot serve
+    """
+
+    def __init__(self, settings: ApiSettings, commands: Connection, reports: Connection,
+                 start_timeout_s: float = 60.0) -> None:
+        context = multiprocessing.get_context("spawn")  # no fork of a process with threads
+        self._control, child = context.Pipe()
+        self._process = context.Process(target=_api_main, args=(settings, commands, reports, child), name="hexactl-api",
+                                        daemon=True)  # fmt: skip
+        self._process.start()
+        for end in (commands, reports, child):  # the child's now
+            end.close()
+        message: object = f"the API process did not start within {start_timeout_s:g} s"
+        try:
+            if self._control.poll(start_timeout_s):
+                message = self._control.recv()
+        except (EOFError, OSError):
+            message = f"the API process ended (exit status {self._process.exitcode}) before it started"
+        if isinstance(message, str):
+            self.close()
+            raise ApiStartError(message)
+        self.api_endpoint, self.telemetry_endpoint = message
+
+    @property
+    def alive(self) -> bool:
+        return self._process.is_alive()
+
+    @property
+    def exitcode(self) -> int | None:
+        return self._process.exitcode
+
+    def close_api(self, timeout_s: float = 5.0) -> None:
+        """Stop taking commands (telemetry goes on); returns when the server is closed."""
+        try:
+            self._control.send(_CLOSE_API)
+            if self._control.poll(timeout_s):
+                self._control.recv()
+        except (EOFError, OSError):
+            pass  # gone already
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """End the process (telemetry too); waits for it, terminates it if it will not."""
+        try:
+            self._control.send(_STOP)
+        except OSError:
+            pass  # gone already
+        self._process.join(timeout_s)
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(timeout_s)
+        self._control.close()
+
+
+def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, control: Connection) -> None:
+    """The child's life (see the module's docstring)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
+    logging.basicConfig(level=settings.log_level, format=LOG_FORMAT)
+    with ExitStack() as closers:
+        try:
+            remote = RemoteLoop(commands, reports)
+            closers.callback(remote.close)
+            controller = Controller(remote, config=settings.controller, hardware_limits=settings.hardware_limits,
+                                    ticket_start=API_TICKET_START)
+            context = zmq.Context()
+            closers.callback(context.term)
+            curve = None
+            if settings.curve:
+                try:
+                    curve = CurveServer(context, settings.curve)
+                except (SecurityError, OSError, ValueError) as error:
+                    raise ApiStartError(f"CURVE keys: {error}") from None
+                closers.callback(curve.close)
+            instrument = None
+            if settings.instrument is not None:
+                measurement = SimulatedMeasurement(settings.instrument, remote.probe)
+                instrument = lambda: measurement.measure(_measured_pose(controller))  # noqa: E731
+            try:
+                publisher = TelemetryPublisher(context, settings.telemetry_endpoint,
+                                               lambda: jsonable(controller.telemetry()), settings.telemetry_rate_hz, curve)
+                closers.callback(publisher.close)
+                server = ApiServer(context, settings.api_endpoint, CommandHandler(controller,
+                                   DataDirectories(settings.data_dirs), instrument), curve)  # fmt: skip
+            except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
+                raise ApiStartError(f"cannot serve: {error}") from None
+        except (ApiStartError, ConnectionError) as error:
+            control.send(str(error))
+            return
+        publisher.start()
+        server.start()
+        server_open = True
+        try:
+            control.send((server.endpoint, publisher.endpoint))
+            while (message := control.recv()) != _STOP:
+                if message == _CLOSE_API and server_open:
+                    server.close()
+                    server_open = False
+                control.send(message)
+        except (EOFError, OSError):
+            log.warning("the service's process is gone: the API stops")
+        finally:
+            if server_open:
+                server.close()
+
+
+def _measured_pose(controller: Controller) -> tuple[float, ...] | None:
+    """The controller's pose from the feedback, absolute mm/rad (None if it has none):
+    within millimetres of the true one, where the simulated instrument solves from."""
+    snapshot = controller.snapshot
+    if snapshot.pose_measured is None:
+        return None
+    return tuple(snapshot.active.absolute(snapshot.pose_measured))
