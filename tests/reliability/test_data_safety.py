@@ -2,8 +2,11 @@
 calibration, a measurement file or a recording leaves the old file whole and nothing at
 the target path half-written. And no request makes the service read or write outside
 its data directories, run a program or evaluate anything: checked through the API of the
-real service with a Python audit hook that records every file the process opens and
-every process it would start while the hostile requests are answered."""
+real service's request handling with a Python audit hook that records every file the
+process opens and every process it would start while the hostile requests are answered.
+The service runs its handlers in its API process, which this process's hook cannot see,
+so these tests serve the same handlers (:class:`ApiServer` and :class:`CommandHandler`,
+on the service's own controller facade and data directory) from this process."""
 
 from __future__ import annotations
 
@@ -18,11 +21,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zmq
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.messages import SaveRecordingRequest
 from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
@@ -30,7 +35,7 @@ from hexactl.adapters.files.measurements import write_measurements
 from hexactl.adapters.service import Service
 from hexactl.calibration.data import MeasurementData
 from hexactl.kinematics.geometry import Geometry
-from tests.api.test_service import status, wait_for
+from tests.api.test_service import WAIT_S, status, wait_for
 from tests.reliability.support import recover, tolerating_loop_stalls
 
 REPOSITORY = Path(__file__).resolve().parents[2]
@@ -192,7 +197,22 @@ def hostile_reads(outside: Path) -> list[str]:
             "$HOME/canary.toml", "file:///etc/passwd", "%2e%2e/outside/canary.toml", "sub/../../outside/canary.toml"]
 
 
-def test_no_request_reads_outside_the_data_directory(client, data_dir, outside, audit) -> None:
+@pytest.fixture
+def client_here(service: Service, data_dir: Path) -> Iterator[HexactlClient]:
+    """A client of the service's request handling served from this process."""
+    context = zmq.Context()
+    server = ApiServer(context, "tcp://127.0.0.1:*", CommandHandler(service.controller, DataDirectories([data_dir])))
+    server.start()
+    try:
+        with HexactlClient(server.endpoint, timeout_s=WAIT_S) as client:
+            yield client
+    finally:
+        server.close()
+        context.term()
+
+
+def test_no_request_reads_outside_the_data_directory(client_here, data_dir, outside, audit) -> None:
+    client = client_here
     before = status(client)["calibration_id"]
     for path in hostile_reads(outside):
         for cmd, fields in (("load_calibration", {"path": path}), ("play", {"sequence": path.removesuffix(".toml") + ".toml"})):
@@ -201,12 +221,14 @@ def test_no_request_reads_outside_the_data_directory(client, data_dir, outside, 
     assert status(client)["calibration_id"] == before
     assert opened_outside(audit, data_dir) == []
     assert not [event for event, _ in audit if event != "open"]
-    (data_dir / "inside.toml").write_text("not a calibration")  # the hook does see the files read inside
+    (data_dir / "inside.toml").write_text("not a calibration")
+    audit.clear()  # the hook does see the files the handlers read inside
     assert client.request("load_calibration", path="inside.toml")["error"]["code"] == "invalid_calibration"
     assert str((data_dir / "inside.toml").resolve()) in [str(args[0]) for event, args in audit if event == "open"]
 
 
-def test_no_request_writes_outside_the_data_directory(client, service, data_dir, outside, audit) -> None:
+def test_no_request_writes_outside_the_data_directory(client_here, service, data_dir, outside, audit) -> None:
+    client = client_here
     play_short(client, service)
     for path in ("../outside/escaped.csv", "linkdir/escaped.csv", str(outside / "escaped.csv"), "../escaped.csv",
                  "/tmp/escaped.csv", "link_out.toml", "linkdir", "..", "missing/escaped.csv"):
@@ -218,10 +240,11 @@ def test_no_request_writes_outside_the_data_directory(client, service, data_dir,
     assert opened_outside(audit, data_dir) == []
 
 
-def test_calibration_text_is_data_never_code(client, data_dir, nominal, audit, tmp_path) -> None:
+def test_calibration_text_is_data_never_code(client_here, data_dir, nominal, audit, tmp_path) -> None:
     """TOML has no includes, no references and no code; the service treats every string as
     data: a name asking a shell for something stays a name, and keys the format does not
     know are refused."""
+    client = client_here
     flag = tmp_path / "ran"
     payload = f"$(touch {flag}) `touch {flag}` __import__('os').system('touch {flag}')"
     named = nominal.model_copy(update={"name": payload})
