@@ -1,0 +1,115 @@
+"""The loop link between the service's loop and its API process (adapters/loop_link.py),
+both ends in this process on real pipes: commands cross and verdicts come back, anything
+that is not a command is dropped without touching the loop, and either end closing is
+seen by the other."""
+
+from __future__ import annotations
+
+import multiprocessing
+import pickle
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pytest
+
+from hexactl.adapters.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop
+from hexactl.control.config import ControllerConfig
+from hexactl.control.controller import Controller
+from hexactl.control.host import LoopThread
+from hexactl.control.planning import ActiveGeometry
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import sensor_setpoints
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.sim.ideal_actuators import IdealActuators
+from tests.api.test_service import wait_for
+from tests.control.conftest import SimClock
+
+
+@dataclass
+class Link:
+    """A loop in this process stepped by hand, its exchange, and a facade on the far end."""
+
+    thread: LoopThread
+    exchange: LoopExchange
+    remote: RemoteLoop
+    controller: Controller
+    clock: SimClock
+
+    def cycle(self) -> None:
+        """One cycle, then the exchange, as the loop thread runs them; spaced so that the
+        exchange publishes every time."""
+        self.thread.loop.step(self.clock.advance(self.thread.loop.period_ns))
+        time.sleep(REPORT_INTERVAL_S)
+        self.exchange()
+
+    def cycle_until_reported(self, condition) -> None:
+        """Cycle until the far end's snapshot satisfies ``condition``."""
+
+        def reported() -> bool:
+            self.cycle()
+            return condition(self.remote.snapshot)
+
+        wait_for(reported, "the far end to see it")
+
+
+@pytest.fixture
+def link(nominal: Geometry) -> Iterator[Link]:
+    start = sensor_setpoints(nominal.legs, absolute_from_relative(nominal.home, (0.0,) * 6))
+    clock = SimClock()
+    actuators = IdealActuators(start, clock_ns=clock)
+    config = ControllerConfig()
+    thread = LoopThread(actuators, ActiveGeometry.of(nominal, "nominal"), config, clock_ns=clock)
+    pipes = multiprocessing.get_context("spawn")
+    commands_in, commands_out = pipes.Pipe(duplex=False)
+    reports_in, reports_out = pipes.Pipe(duplex=False)
+    exchange = LoopExchange(thread, commands_in, reports_out, probe=lambda: (1.0,) * 6).start()
+    remote = RemoteLoop(commands_out, reports_in)
+    controller = Controller(remote, config=config, hardware_limits=nominal.limits)
+    yield Link(thread, exchange, remote, controller, clock)
+    remote.close()
+    exchange.close()
+
+
+def test_commands_cross_and_the_verdicts_come_back(link: Link) -> None:
+    assert link.remote.probe() == (1.0,) * 6
+    queued = link.controller.enable()
+    assert queued.ok and queued.details["pending"]  # the loop is stepped by hand: no waiting
+    ticket = queued.details["ticket"]
+    link.cycle_until_reported(lambda s: any(outcome.ticket == ticket for outcome in s.outcomes))
+    assert link.controller.outcome(ticket).ok and link.remote.snapshot.state.value == "enabled"
+
+    moving = link.controller.move([0, 0, 10, 0, 0, 0], duration=0.1)  # planned on the far end
+    assert moving.ok, moving.message
+    ticket = moving.details["ticket"]
+    link.cycle_until_reported(lambda s: any(outcome.ticket == ticket for outcome in s.outcomes))
+    assert link.controller.outcome(ticket).ok, link.controller.outcome(ticket)
+    link.cycle_until_reported(lambda s: s.motion.value == "holding")
+    assert link.controller.telemetry().pose_command == pytest.approx((0, 0, 10, 0, 0, 0), abs=1e-6)
+    assert link.exchange.rejected == 0
+
+
+def test_anything_but_a_command_is_dropped_and_counted(link: Link) -> None:
+    sender = link.remote._commands  # the API's end, written as a broken API process would
+    for message in (b"not a pickle", pickle.dumps("enable"), pickle.dumps({"cmd": "enable"})):
+        sender.send_bytes(message)
+    cycles = link.thread.snapshot.cycle
+    link.cycle()
+    assert link.exchange.rejected == 3
+    assert link.thread.snapshot.cycle == cycles + 1 and link.thread.snapshot.state.value == "disabled"
+    assert link.thread.core.inbox == type(link.thread.core.inbox)()  # nothing queued for the loop
+
+
+def test_the_api_side_sees_the_loop_end(link: Link) -> None:
+    link.exchange.close()
+    wait_for(lambda: link.controller.status().details["loop_failure"] is not None, "the loop's end seen")
+    assert not link.controller.status().details["loop_running"]
+    refused = link.controller.enable()
+    assert refused.error == "loop_failed", refused
+
+
+def test_the_loop_side_sees_the_api_end(link: Link) -> None:
+    link.remote.close()
+    link.cycle()  # no exception into the loop
+    assert not link.exchange.commands_open
+    link.cycle()
