@@ -10,9 +10,10 @@ ros2_control's split, in modules:
   with :mod:`~hexactl.control.realtime` (scheduling, memory, GIL, gc) and
   :mod:`~hexactl.control.stats` (lateness and compute percentiles).
 - :mod:`~hexactl.control.controller` — the facade the API calls: validation and planning
-  in the caller's thread (:mod:`~hexactl.control.planning`), commands to the loop through
-  a deque (:mod:`~hexactl.control.commands`), results (:mod:`~hexactl.control.results`)
-  and telemetry.
+  in the caller's thread (:mod:`~hexactl.control.planning`), commands to the loop
+  (:mod:`~hexactl.control.commands`) through its host (:mod:`~hexactl.control.host`: the
+  loop's thread in this process, or a loop in another process), results
+  (:mod:`~hexactl.control.results`) and telemetry.
 - Pure pieces: :mod:`~hexactl.control.trajectory` (ruckig in pose space),
   leg-lock projection from :mod:`hexactl.kinematics.leg_lock`,
   :mod:`~hexactl.control.guard` (stroke and velocity limit of every set-point),
