@@ -8,7 +8,8 @@
 3. carry out the queued commands (at most :data:`MAX_COMMANDS_PER_CYCLE`);
 4. supervise (ENABLED only): heartbeats, actuator faults and states, set-points
    applied, link → FAULT; an actuator reporting E-stop → ESTOP in any state;
-5. ENABLED: next trajectory point → leg-lock projection → IK on the active geometry →
+5. ENABLED: next trajectory point → leg-lock projection (warm-started from the previous
+   cycle's, a few iterations at most, as planning checked) → IK on the active geometry →
    calibration ramp → leg-lock hold → guard (stroke, velocity) → send;
    FAULT: send the held set-points; ESTOP: repeat the E-stop; DISABLED: send nothing,
    and follow the measured pose so that enabling starts where the platform is;
@@ -47,7 +48,7 @@ from hexactl.control.hardware import (
     FeedbackSnapshot,
     LinkHealth,
 )
-from hexactl.control.planning import ActiveGeometry, LegLock, Segment, project_locked
+from hexactl.control.planning import ActiveGeometry, LegLock, Segment, track_locked
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.trajectory import PoseTrajectory, StepResult
@@ -459,18 +460,22 @@ class ControlCore:
     def _advance(self) -> None:
         """The ENABLED cycle: next target → set-points (not yet sent)."""
         trajectory = self._trajectory
+        lock = self.lock
+        previous_target = trajectory.position if lock is not None else None
         result = trajectory.update()
         if result is StepResult.ERROR:
             self._enter_fault((Fault("planner_error", "the trajectory generator refused its input"),))
             return
         active = self.active
-        pose = trajectory.state()[0]
-        lock = self.lock
+        pose = trajectory.position
         if lock is not None:
-            projected = project_locked(active, lock, pose, self.config.lock_cycle_iterations)
+            # pose_command: what last cycle's target (the position before this update) was projected to.
+            projected = track_locked(active, lock, pose, previous_target, self.pose_command,
+                                     self.config.lock_cycle_iterations)
             if not projected.ok:
                 self._enter_fault((Fault("leg_lock_projection", f"leg-lock projection failed: "
-                                         f"{projected.status.name.lower()}", lock.leg),))
+                                         f"{projected.status.name.lower()} after {projected.iterations} iterations",
+                                         lock.leg),))
                 return
             pose = tuple(a - h for a, h in zip(projected.pose, active.home))
         desired = sensor_setpoints(active.geometry.legs, active.absolute(pose))

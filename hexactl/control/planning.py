@@ -10,8 +10,11 @@ path has been checked:
    synchronisation makes it the straight line in pose space from the current target
    to the goal; a move that replaces a running one follows ruckig's blend, and that
    blend is what gets checked;
-3. it is sampled every loop period; in leg-lock mode each sample is projected, as the
-   loop projects each cycle's target; the legs' set-points follow by batch IK;
+3. it is sampled every loop period; in leg-lock mode each sample is projected by the
+   loop's own per-cycle procedure (:func:`track_locked`: warm-started from the previous
+   cycle's projection, at most ``lock_cycle_iterations``), so a path the loop could not
+   follow is refused here instead of faulting mid-motion; the legs' set-points follow
+   by batch IK;
 4. if any leg would move faster than ``leg_speed_mm_s`` between two cycles, the move is
    stretched in time (time scale k: every velocity divided by k, path unchanged) until
    none does; a requested ``duration`` is a lower bound;
@@ -32,11 +35,12 @@ from math import isfinite
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.kinematics.leg_lock import project_to_locked_leg
+from hexactl.control.config import ControllerConfig
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import MotionLimits, preview
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import sensor_setpoints_batch
+from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg, validate_pose_values
 from hexactl.kinematics.workspace import assess_poses
 
@@ -133,7 +137,8 @@ class Refusal:
 @dataclass(frozen=True, slots=True)
 class PlanningContext:
     """Everything a plan depends on. ``leg_speed_mm_s``: the budget plans keep the legs
-    under (the loop's guard enforces the full ``leg_velocity_mm_s``)."""
+    under (the loop's guard enforces the full ``leg_velocity_mm_s``);
+    ``lock_cycle_iterations``: the loop's (``ControllerConfig.lock_cycle_iterations``)."""
 
     active: ActiveGeometry
     limits: MotionLimits
@@ -143,6 +148,7 @@ class PlanningContext:
     lock_max_correction_mm: float = 25.0
     path_step_mm: float = 2.0
     path_step_deg: float = 0.1
+    lock_cycle_iterations: int = ControllerConfig.model_fields["lock_cycle_iterations"].default
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,7 +187,8 @@ def plan_path(context: PlanningContext, start: State, waypoints: Sequence[Waypoi
             return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
         planned = _plan_segment(context, start, goal, waypoint)
         if isinstance(planned, Refusal):
-            return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}", details={"waypoint": number}))
+            return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
+                                        details={"waypoint": number, **planned.details}))
         segment, samples = planned
         violations += assess_path(context.active.geometry, samples, number, context.path_step_mm, context.path_step_deg)
         segments.append(segment)
@@ -265,11 +272,30 @@ def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> Pose | Refu
     return _relative(context.active, projected.pose)
 
 
-def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float], max_iterations: int = 50):
-    """:func:`project_to_locked_leg` of a relative mm/rad pose (result pose absolute)."""
+def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float],
+                   max_iterations: int = PROJECTION_MAX_ITERATIONS, start: Sequence[float] | None = None
+                   ) -> ProjectionResult:
+    """:func:`project_to_locked_leg` of a relative mm/rad pose, from ``start`` (relative
+    mm/rad, default the pose); the result's pose is absolute."""
     geometry = active.geometry
     return project_to_locked_leg(geometry.legs, active.absolute(relative), lock.leg, lock.length_mm(geometry),
-                                 geometry.characteristic_length_mm, max_iterations=max_iterations)
+                                 geometry.characteristic_length_mm, max_iterations=max_iterations,
+                                 start=None if start is None else active.absolute(start))
+
+
+def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float], previous_target: Sequence[float],
+                 previous_projected: Sequence[float], max_iterations: int) -> ProjectionResult:
+    """The loop's leg-lock projection of one cycle's ``target``, at most ``max_iterations``;
+    ``previous_target`` and ``previous_projected``: the cycle before's target and the pose
+    it was projected to (all relative mm/rad). The result's pose is absolute.
+
+    Warm-started at ``target`` corrected as the previous one was: the correction changes
+    little from one cycle to the next, so two iterations reach the tolerance (three at the
+    fastest moves), however far the path strays from the constraint; from the target
+    itself, 30 mm away, four are needed. Planning runs exactly this over every cycle of a
+    move, so the loop can follow whatever it accepted."""
+    start = [t + p - q for t, p, q in zip(target, previous_projected, previous_target)]
+    return project_locked(active, lock, target, max_iterations, start=start)
 
 
 def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: Waypoint) -> tuple[Segment, NDArray] | Refusal:
@@ -283,6 +309,8 @@ def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: 
         if trajectory is None:
             return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
         samples = _samples(context, start, trajectory)
+        if isinstance(samples, Refusal):
+            return samples
         peak = _peak_leg_speed(context, samples)
         if peak <= context.leg_speed_mm_s:
             segment = Segment(goal, time_scale, velocity_scale, waypoint.dwell_s, trajectory.duration)
@@ -291,14 +319,29 @@ def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: 
     return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
 
 
-def _samples(context: PlanningContext, start: State, trajectory) -> NDArray:
-    """The start and the position of every cycle of ``trajectory`` (relative mm/rad),
-    projected in leg-lock mode as the loop projects every cycle's target."""
+def _samples(context: PlanningContext, start: State, trajectory) -> NDArray | Refusal:
+    """The start and the position of every cycle of ``trajectory`` (relative mm/rad). In
+    leg-lock mode: projected as the loop will, each cycle's from the one before, starting
+    at the start's full projection (where the loop's commanded pose is); refused if the
+    loop's iterations would not converge at some cycle."""
     count = max(1, int(round(trajectory.duration / context.period_s)))
-    points = [tuple(start[0])] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
-    if context.lock is not None:
-        points = [_relative(context.active, project_locked(context.active, context.lock, p).pose) for p in points]
-    return np.array(points, dtype=float)
+    targets = [tuple(start[0])] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
+    lock = context.lock
+    if lock is None:
+        return np.array(targets, dtype=float)
+    active = context.active
+    projected: list[Pose] = []
+    for cycle, target in enumerate(targets):
+        result = (track_locked(active, lock, target, targets[cycle - 1], projected[-1], context.lock_cycle_iterations)
+                  if cycle else project_locked(active, lock, target))
+        if not result.ok:
+            return Refusal(ErrorCode.LOCK_UNREACHABLE,
+                           f"the loop cannot keep leg {lock.leg} at its locked length {cycle * context.period_s:.3f} s "
+                           f"into the move ({result.status.name.lower()} after {result.iterations} iterations): "
+                           "the path strays too far from the constraint; split the move",
+                           details={"t_s": cycle * context.period_s})
+        projected.append(_relative(active, result.pose))
+    return np.array(projected, dtype=float)
 
 
 def _peak_leg_speed(context: PlanningContext, samples: NDArray) -> float:

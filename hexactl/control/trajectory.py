@@ -131,6 +131,11 @@ class PoseTrajectory:
     def halting(self) -> bool:
         return self._active and self.goal is None
 
+    @property
+    def position(self) -> tuple[float, ...]:
+        """The position the next update starts from (relative mm/rad)."""
+        return tuple(self._input.current_position)
+
     def state(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """(position, velocity, acceleration) the next update starts from."""
         parameters = self._input

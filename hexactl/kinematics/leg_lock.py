@@ -13,8 +13,18 @@ platform-joint radius): a radian costs what the platform joints travel.
 Method: the fixed-point iteration of the least-distance problem's optimality
 conditions, x ← x₀ − λ·W⁻¹g, λ = (l_N(x) − L + g·(x₀ − x)) / (g·W⁻¹g), g = ∂l_N/∂pose at
 the current iterate (twist-Jacobian row [u, (T·P_N) × u] mapped to Euler-angle rates),
-W = diag(1, 1, 1, c², c², c²). Its fixed point is the true closest pose. From the loop's
-per-cycle targets, within a millimetre of the surface, two iterations reach 1e-9 mm.
+W = diag(1, 1, 1, c², c², c²). Its fixed point is the true closest pose. It stops when the
+locked leg's length is within the tolerance at an iterate the iteration produced (or at the
+pose itself, which is then its own projection), or at the iteration cap (LinuxCNC
+genhexkins style: bounded work, a status code instead of an exception).
+
+Each step satisfies the constraint linearised at the iterate it starts from, so the length
+error after it grows with the square of the distance between the two. From the pose itself
+that distance is the whole correction: 30 mm off the surface needs four iterations to
+reach 1e-9 mm. A pose that moves a little per cycle is tracked from a ``start`` next to
+the answer (the pose corrected as the one a cycle ago was): two iterations, three at the
+fastest motions, however far the pose is from the surface. That is how the controller's
+loop uses it.
 
 Plain-float Python on purpose, like :func:`hexactl.kinematics.inverse.leg_lengths`: it
 needs one leg's row only and runs every cycle in leg-lock mode, where numpy's call
@@ -84,22 +94,28 @@ def project_to_locked_leg(
     characteristic_length_mm: float,
     tolerance_mm: float = PROJECTION_TOLERANCE_MM,
     max_iterations: int = PROJECTION_MAX_ITERATIONS,
+    start: Sequence[float] | None = None,
 ) -> ProjectionResult:
     """The pose closest to ``pose`` (absolute, mm and rad) at which leg ``leg`` (1–6) has
-    joint-to-joint length ``length_mm``. Never raises; see :class:`ProjectionStatus`."""
+    joint-to-joint length ``length_mm``. ``start`` (absolute mm/rad): the first iterate,
+    e.g. the projection of the pose a cycle ago; default ``pose``. From a ``start`` other
+    than ``pose`` at least one iteration is made, since a start on the surface is the
+    projection of another pose. Never raises; see :class:`ProjectionStatus`."""
     try:
-        x0, y0, z0, roll0, pitch0, yaw0 = start = tuple(float(v) for v in pose)
+        x0, y0, z0, roll0, pitch0, yaw0 = target = tuple(float(v) for v in pose)
+        first = target if start is None else tuple(float(v) for v in start)
         valid = (1 <= leg <= LEG_COUNT and isfinite(length_mm) and length_mm > 0
                  and isfinite(characteristic_length_mm) and characteristic_length_mm > 0
-                 and all(abs(v) < _MAX_INPUT for v in start))  # also false for NaN
+                 and len(first) == 6 and all(abs(v) < _MAX_INPUT for v in target + first))  # also false for NaN
     except (TypeError, ValueError):
         valid = False
     if not valid:
         return ProjectionResult(ProjectionStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"), float("inf"))
     px, py, pz, bx, by, bz, _ = legs._rows[leg - 1]
     angle_weight = 1.0 / (characteristic_length_mm * characteristic_length_mm)  # W⁻¹ on angles
-    x, y, z, roll, pitch, yaw = start
+    x, y, z, roll, pitch, yaw = first
     iteration = 0
+    min_iterations = 0 if first == target else 1
     while True:
         r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
         tx = r11 * px + r12 * py + r13 * pz  # T·P_N
@@ -112,7 +128,7 @@ def project_to_locked_leg(
                           + ((roll - roll0) ** 2 + (pitch - pitch0) ** 2 + (yaw - yaw0) ** 2)
                           * characteristic_length_mm * characteristic_length_mm)
         here = (x, y, z, roll, pitch, yaw)
-        if abs(residual) <= tolerance_mm:
+        if abs(residual) <= tolerance_mm and iteration >= min_iterations:
             return ProjectionResult(ProjectionStatus.OK, here, iteration, residual, correction)
         if iteration >= max_iterations:
             return ProjectionResult(ProjectionStatus.MAX_ITERATIONS, here, iteration, residual, correction)

@@ -3,9 +3,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
+from hexactl.control.config import ControllerConfig
+from hexactl.control.planning import ActiveGeometry, LegLock, project_locked, track_locked
 from hexactl.kinematics.inverse import leg_lengths
-from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
+from hexactl.kinematics.pose import absolute_from_relative, pose_mm_deg_to_mm_rad
 
 
 def _project(geometry, pose, leg, length, **options):
@@ -17,6 +19,12 @@ def _gradient(geometry, pose, leg, h=1e-6):
     steps = np.eye(6) * h
     return np.array([(leg_lengths(geometry.legs, pose + s)[leg - 1] - leg_lengths(geometry.legs, pose - s)[leg - 1]) / (2 * h)
                      for s in steps])
+
+
+def _distance(geometry, a, b):
+    """The projection's metric between two absolute poses, mm."""
+    c = geometry.characteristic_length_mm
+    return float(np.sqrt(np.sum((np.subtract(a, b)) ** 2 * [1, 1, 1, c * c, c * c, c * c])))
 
 
 offsets = st.tuples(*[st.floats(-40, 40)] * 3, *[st.floats(-3, 3)] * 3)
@@ -72,3 +80,43 @@ def test_absurd_goals_are_invalid_input_not_an_exception(geometry, huge):
     pose = list(home)
     pose[0] = huge
     assert _project(geometry, pose, 5, length).status is ProjectionStatus.INVALID_INPUT
+
+
+def test_a_start_on_the_surface_is_not_taken_for_the_projection(geometry):
+    """A warm start is the projection of another pose: it lies on the surface already, yet
+    the iteration must move on to this pose's projection."""
+    home = absolute_from_relative(geometry.home, [0.0] * 6)
+    length = leg_lengths(geometry.legs, home)[1]
+    start = _project(geometry, absolute_from_relative(geometry.home, [5, 0, 0, 0, 0, 0]), 2, length)
+    pose = absolute_from_relative(geometry.home, [10, 3, -2, 0.2, 0, 0.1])
+    cold = _project(geometry, pose, 2, length)
+    warm = _project(geometry, pose, 2, length, start=start.pose)
+    assert start.ok and cold.ok and warm.ok and warm.iterations >= 1
+    assert _distance(geometry, start.pose, cold.pose) > 5.0
+    assert _distance(geometry, warm.pose, cold.pose) < 1e-5
+    assert abs(warm.residual_mm) <= 1e-9
+    for bad in ([float("nan")] * 6, [1.0] * 5, [5e301] * 6):
+        assert _project(geometry, pose, 2, length, start=bad).status is ProjectionStatus.INVALID_INPUT
+
+
+def test_the_loops_tracking_converges_in_its_few_iterations_where_a_cold_start_does_not(geometry):
+    """Leg 3 locked in the zero posture, a move to roll −15°, pitch −15°, yaw −30°: the goal
+    is 1.5 mm from the constraint, but the straight line to it strays 26 mm away. The
+    projection started at each cycle's target needs four iterations there; tracked from
+    the cycle before (:func:`track_locked`, what the loop and the planner run) it needs at
+    most three, and lands on the closest pose: no farther from the target than the
+    projection from the target itself, which stops at the same tolerance on the length."""
+    iterations = ControllerConfig().lock_cycle_iterations
+    active = ActiveGeometry.of(geometry, "nominal")
+    lock = LegLock(3, leg_lengths(geometry.legs, active.absolute([0.0] * 6))[2] - geometry.zero_lengths[2])
+    goal = np.subtract(project_locked(active, lock, pose_mm_deg_to_mm_rad([0, 0, 0, -15, -15, -30])).pose, active.home)
+    targets = np.linspace(0.0, 1.0, 1001)[:, None] * goal  # 2 s at 500 Hz
+    assert not all(project_locked(active, lock, target, iterations).ok for target in targets)  # what the loop did
+    projected = targets[0]
+    for previous, target in zip(targets[:-1], targets[1:]):
+        result = track_locked(active, lock, target, previous, projected, iterations)
+        assert result.ok, result
+        cold = project_locked(active, lock, target)
+        assert result.correction <= cold.correction + 1e-6
+        assert _distance(geometry, result.pose, cold.pose) < 1e-4
+        projected = np.subtract(result.pose, active.home)

@@ -1,9 +1,16 @@
 """Leg-lock mode: the locked leg's set-point never changes, the others move on the constraint."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from hexactl.kinematics.inverse import leg_lengths
+from hexactl.control.config import ControllerConfig
+from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, Waypoint, plan_path
+from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints
+from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.pose import absolute_from_relative
 
 
@@ -90,3 +97,74 @@ def test_an_actuator_that_does_not_lock_faults(rig):
                   limit=int(0.6e9 / rig.period_ns))
     fault = rig.controller.snapshot.faults[0]
     assert fault.code == "actuator_state" and fault.leg == 5
+
+
+def test_a_move_whose_path_strays_far_from_the_constraint_runs_to_the_end(rig, geometry):
+    """Leg 3 locked in the zero posture, roll −15°, pitch −15°, yaw −30°: the goal is
+    1.5 mm from the constraint, the straight line to it 26 mm at worst. The loop used to
+    project each cycle's target from the target itself with its three iterations, too few
+    that far, and faulted mid-move (leg_lock_projection); it tracks from the cycle before."""
+    rig.enabled()
+    index, locked = _locked(rig, 3)
+    result = rig.controller.move([0, 0, 0, -15, -15, -30])
+    assert result.ok, result.message
+    goal = result.details["goal"]
+    middle = absolute_from_relative(geometry.home, np.array(goal) / 2)
+    cold = project_to_locked_leg(geometry.legs, middle, 3, geometry.zero_lengths[2] + locked,
+                                 geometry.characteristic_length_mm,
+                                 max_iterations=rig.controller.config.lock_cycle_iterations)
+    assert cold.status is ProjectionStatus.MAX_ITERATIONS  # beyond the old per-cycle projection's reach
+    rig.settle()
+    snapshot = rig.controller.snapshot
+    assert snapshot.state.value == "enabled" and snapshot.faults == ()
+    assert rig.controller.telemetry().pose_command == pytest.approx(goal, abs=1e-9)
+    assert np.all(rig.sent[index:, 2] == locked)
+    rig.assert_setpoints_safe()
+    assert rig.controller.telemetry().loop.guard_clamps == 0
+
+
+def test_planning_refuses_a_path_the_loops_iterations_cannot_follow(geometry):
+    """Planning projects every cycle's target with the loop's own procedure and iteration
+    budget: with one iteration per cycle no real move converges, and it says so instead of
+    letting the loop fault."""
+    active = ActiveGeometry.of(geometry, "nominal")
+    lock = LegLock(3, sensor_setpoints(geometry.legs, active.absolute([0.0] * 6))[2])
+    config = ControllerConfig()
+    context = PlanningContext(active, config.motion, config.loop.period_s, geometry.limits.leg_velocity_mm_s, lock,
+                              lock_cycle_iterations=1)
+    plan = plan_path(context, ((0.0,) * 6,) * 3, [Waypoint([0, 0, 0, -15, -15, -30])])
+    assert plan.refusal is not None and plan.refusal.code == "lock_unreachable"
+    assert "the loop cannot keep leg 3 at its locked length" in plan.refusal.message
+    assert plan.refusal.details["t_s"] > 0
+    assert plan_path(replace(context, lock_cycle_iterations=config.lock_cycle_iterations),
+                     ((0.0,) * 6,) * 3, [Waypoint([0, 0, 0, -15, -15, -30])]).ok
+
+
+# Mostly rotation (to 80 % of the envelope's), little translation (a quarter of it): the
+# straight lines that stray farthest from the constraint; one in seven used to fault.
+locked_moves = st.tuples(*[st.floats(-fraction * limit, fraction * limit)
+                           for fraction, limit in zip((0.25, 0.25, 0.25, 0.8, 0.8, 0.8), (600, 600, 250, 23, 23, 60))])
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(leg=st.integers(1, 6), first=locked_moves, second=locked_moves)
+def test_leg_lock_moves_planning_accepts_run_to_the_end(make_rig, leg, first, second):
+    """Two moves in leg-lock mode: each is refused at planning or reaches its goal with no
+    fault. The requests are the goals' nearest poses on the constraint, so that most get
+    past the goal check and it is the paths that are tried."""
+    rig = make_rig().enabled()
+    _locked(rig, leg)
+    for request in (first, second):
+        checked = rig.controller.validate_pose(request)
+        if not checked.ok and "nearest_pose" in checked.details:
+            request = checked.details["nearest_pose"]
+        result = rig.controller.move(request)
+        if not result.ok:
+            assert result.error in ("path_violation", "lock_unreachable"), result.message
+            continue
+        rig.settle()
+        snapshot = rig.controller.snapshot
+        assert snapshot.state.value == "enabled" and snapshot.faults == (), snapshot.faults
+        assert rig.controller.telemetry().pose_command == pytest.approx(result.details["goal"], abs=1e-6)
+    rig.assert_setpoints_safe()
+    assert rig.controller.telemetry().loop.guard_clamps == 0
