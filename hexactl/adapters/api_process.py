@@ -15,7 +15,6 @@ one dies, the service sees its exit (:attr:`ApiProcess.alive`) and shuts down.
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import signal
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.loop_link import RemoteLoop
 from hexactl.adapters.simulator import InstrumentSpec, SimulatedMeasurement
+from hexactl.adapters.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
 from hexactl.kinematics.geometry import Limits
@@ -43,7 +43,6 @@ API_TICKET_START = 1 << 40
 on the same loop, and verdicts are found by ticket."""
 
 _CLOSE_API = "close_api"
-_STOP = "stop"
 
 log = logging.getLogger("hexactl.api")
 
@@ -78,52 +77,28 @@ class ApiProcess:
 
     def __init__(self, settings: ApiSettings, commands: Connection, reports: Connection,
                  start_timeout_s: float = 60.0) -> None:
-        context = multiprocessing.get_context("spawn")  # no fork of a process with threads
-        self._control, child = context.Pipe()
-        self._process = context.Process(target=_api_main, args=(settings, commands, reports, child), name="hexactl-api",
-                                        daemon=True)  # fmt: skip
-        self._process.start()
-        for end in (commands, reports, child):  # the child's now
-            end.close()
-        message: object = f"the API process did not start within {start_timeout_s:g} s"
         try:
-            if self._control.poll(start_timeout_s):
-                message = self._control.recv()
-        except (EOFError, OSError):
-            message = f"the API process ended (exit status {self._process.exitcode}) before it started"
-        if isinstance(message, str):
-            self.close()
-            raise ApiStartError(message)
-        self.api_endpoint, self.telemetry_endpoint = message
+            self._child = Spawned(_api_main, (settings, commands, reports), name="hexactl-api", daemon=True,
+                                  start_timeout_s=start_timeout_s, handed_over=(commands, reports))  # fmt: skip
+        except SpawnError as error:
+            raise ApiStartError(str(error)) from None
+        self.api_endpoint, self.telemetry_endpoint = self._child.served
 
     @property
     def alive(self) -> bool:
-        return self._process.is_alive()
+        return self._child.alive
 
     @property
     def exitcode(self) -> int | None:
-        return self._process.exitcode
+        return self._child.exitcode
 
     def close_api(self, timeout_s: float = 5.0) -> None:
         """Stop taking commands (telemetry goes on); returns when the server is closed."""
-        try:
-            self._control.send(_CLOSE_API)
-            if self._control.poll(timeout_s):
-                self._control.recv()
-        except (EOFError, OSError):
-            pass  # gone already
+        self._child.request(_CLOSE_API, timeout_s)
 
     def close(self, timeout_s: float = 10.0) -> None:
         """End the process (telemetry too); waits for it, terminates it if it will not."""
-        try:
-            self._control.send(_STOP)
-        except OSError:
-            pass  # gone already
-        self._process.join(timeout_s)
-        if self._process.is_alive():
-            self._process.terminate()
-            self._process.join(timeout_s)
-        self._control.close()
+        self._child.close(timeout_s)
 
 
 def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, control: Connection) -> None:
@@ -165,7 +140,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
         server_open = True
         try:
             control.send((server.endpoint, publisher.endpoint))
-            while (message := control.recv()) != _STOP:
+            while (message := control.recv()) != STOP:
                 if message == _CLOSE_API and server_open:
                     server.close()
                     server_open = False

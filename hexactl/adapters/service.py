@@ -32,7 +32,13 @@ from types import FrameType
 import can
 
 from firmware_proto.codec import LoopRate
-from hexactl.adapters.api.security import CurveServerKeys, SecurityError, check_endpoints, is_local_endpoint
+from hexactl.adapters.api.security import (
+    CurveServerKeys,
+    SecurityError,
+    check_endpoints,
+    is_local_endpoint,
+    load_server_keys,
+)
 from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
 from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
 from hexactl.adapters.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
@@ -41,6 +47,7 @@ from hexactl.adapters.can.transport import BusSpecError
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
 from hexactl.adapters.loop_link import LoopExchange
 from hexactl.adapters.simulator import Simulator
+from hexactl.adapters.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
@@ -147,6 +154,11 @@ class Service:
             without CURVE keys
         """
         check_endpoints([config.api_endpoint, config.telemetry_endpoint], config.curve)
+        if config.curve:  # read here, before the actuators open (the API's process uses them)
+            try:
+                load_server_keys(config.curve)
+            except (SecurityError, OSError, ValueError) as error:
+                raise ServiceError(f"CURVE keys: {error}") from None
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
         log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
@@ -236,34 +248,17 @@ class ServiceProcess:
     """
 
     def __init__(self, config: ServiceConfig, start_timeout_s: float = 60.0) -> None:
-        context = multiprocessing.get_context("spawn")  # no fork of a process with threads
-        self._connection, child = context.Pipe()
-        # Not a daemon: the service spawns its API process, which a daemon may not. It ends
-        # with this process all the same: it stops when its end of the pipe closes.
-        self._process = context.Process(target=_serve, args=(config, child), name="hexactl-service")
-        self._process.start()
-        child.close()
-        message: object = f"the service did not start within {start_timeout_s:g} s"
         try:
-            if self._connection.poll(start_timeout_s):
-                message = self._connection.recv()
-        except EOFError:
-            message = f"the service process ended (exit status {self._process.exitcode}) before it started"
-        if isinstance(message, str):
-            self.close()
-            raise ServiceError(message)
-        self.api_endpoint, self.telemetry_endpoint = message
+            # Not a daemon: the service spawns its API process, which a daemon may not. It
+            # ends with this process all the same: it stops when its end of the pipe closes.
+            self._child = Spawned(_serve, (config,), name="hexactl-service", daemon=False,
+                                  start_timeout_s=start_timeout_s)  # fmt: skip
+        except SpawnError as error:
+            raise ServiceError(str(error)) from None
+        self.api_endpoint, self.telemetry_endpoint = self._child.served
 
     def close(self, timeout_s: float = 30.0) -> None:
-        try:
-            self._connection.send("stop")
-        except OSError:
-            pass  # gone already
-        self._process.join(timeout_s)
-        if self._process.is_alive():
-            self._process.terminate()
-            self._process.join(timeout_s)
-        self._connection.close()
+        self._child.close(timeout_s)
 
     def __enter__(self) -> ServiceProcess:
         return self

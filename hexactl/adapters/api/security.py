@@ -80,15 +80,24 @@ def check_endpoints(endpoints: list[str], keys: CurveServerKeys | None) -> None:
         raise SecurityError(f"CURVE clients directory {keys.clients_dir} does not exist")
 
 
+def load_server_keys(keys: CurveServerKeys) -> tuple[bytes, bytes]:
+    """The server's (public, secret) key pair from ``keys.secret_key_file``.
+
+    :raises SecurityError: if the file holds no secret key
+    :raises OSError, ValueError: if it cannot be read or is not a key file
+    """
+    public, secret = zmq.auth.load_certificate(keys.secret_key_file)
+    if secret is None:
+        raise SecurityError(f"{keys.secret_key_file} holds no secret key (use the .key_secret file)")
+    return public, secret
+
+
 class CurveServer:
     """CURVE on the service's sockets, with ZeroMQ's authenticator thread checking
     every client's public key against :attr:`CurveServerKeys.clients_dir`."""
 
     def __init__(self, context: zmq.Context, keys: CurveServerKeys) -> None:
-        public, secret = zmq.auth.load_certificate(keys.secret_key_file)
-        if secret is None:
-            raise SecurityError(f"{keys.secret_key_file} holds no secret key (use the .key_secret file)")
-        self._public, self._secret = public, secret
+        self._public, self._secret = load_server_keys(keys)
         self._authenticator = ThreadAuthenticator(context)
         self._authenticator.start()
         self._authenticator.configure_curve(domain="*", location=str(keys.clients_dir))

@@ -1,0 +1,79 @@
+"""A spawned child process that serves until told to stop, on a control pipe: the
+service in a process of its own (:class:`~hexactl.adapters.service.ServiceProcess`) and
+the service's API process (:class:`~hexactl.adapters.api_process.ApiProcess`).
+
+The protocol on the control pipe: the child's first message is either where it serves
+(any non-string object) or, as a string, why it cannot; then it answers each request
+with the same word once carried out, and ends at :data:`STOP` or when the parent's end
+closes (the parent died).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable, Iterable
+from multiprocessing.connection import Connection
+
+STOP = "stop"
+
+
+class SpawnError(RuntimeError):
+    """The child did not start; the message says why."""
+
+
+class Spawned:
+    """Start ``target(*args, control)`` in a spawned process named ``name`` (spawned, not
+    forked: the parent has threads) and wait at most ``start_timeout_s`` for where it
+    serves (:attr:`served`). ``handed_over``: pipe ends among ``args`` that are the child's
+    now, closed here once it has them.
+
+    :raises SpawnError: if the child says it cannot serve, ends, or is silent too long
+    """
+
+    def __init__(self, target: Callable[..., None], args: tuple, *, name: str, daemon: bool,
+                 start_timeout_s: float, handed_over: Iterable[Connection] = ()) -> None:
+        context = multiprocessing.get_context("spawn")
+        self._control, child = context.Pipe()
+        self._process = context.Process(target=target, args=(*args, child), name=name, daemon=daemon)
+        self._process.start()
+        for end in (*handed_over, child):
+            end.close()
+        message: object = f"{name} did not start within {start_timeout_s:g} s"
+        try:
+            if self._control.poll(start_timeout_s):
+                message = self._control.recv()
+        except (EOFError, OSError):
+            message = f"{name} ended (exit status {self._process.exitcode}) before it started"
+        if isinstance(message, str):
+            self.close(start_timeout_s)
+            raise SpawnError(message)
+        self.served = message
+
+    @property
+    def alive(self) -> bool:
+        return self._process.is_alive()
+
+    @property
+    def exitcode(self) -> int | None:
+        return self._process.exitcode
+
+    def request(self, word: str, timeout_s: float) -> None:
+        """Send ``word``; return once the child has answered (or is gone, or ``timeout_s`` passed)."""
+        try:
+            self._control.send(word)
+            if self._control.poll(timeout_s):
+                self._control.recv()
+        except (EOFError, OSError):
+            pass  # gone already
+
+    def close(self, timeout_s: float) -> None:
+        """Send :data:`STOP` and wait for the child to end; terminate it if it will not."""
+        try:
+            self._control.send(STOP)
+        except OSError:
+            pass  # gone already
+        self._process.join(timeout_s)
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(timeout_s)
+        self._control.close()
