@@ -11,7 +11,7 @@ after) and the largest errors as a percentage of the stroke, beside the paper's
 2.6 % → 0.35 %.
 
 The service runs in a child process (:class:`~hexactl.adapters.service.ServiceProcess`),
-as it would in use: with a GIL of its own. In one process, the campaign's planning,
+as it would in use: with a GIL of its own (and it starts its own API process). In one process, the campaign's planning,
 identification and report (numpy, matplotlib: milliseconds to seconds without letting go
 of the GIL) delay the control loop, and a loop silent for 50 ms trips the simulated
 actuators' watchdog.
