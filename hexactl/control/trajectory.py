@@ -12,12 +12,18 @@ last safety net.
 
 :class:`PoseTrajectory` is the loop's online generator (one ``update`` per cycle);
 :func:`preview` computes the same trajectory offline for the planner, so that what is
-validated is what the loop will run.
+validated is what the loop will run. Two things keep them equal:
+
+- A finished move parks on its goal exactly, not on ruckig's last sample (which misses
+  it by ~1e-13): the planner starts the next segment of a sequence at rest on the goal,
+  and so does the loop, bit for bit.
+- Both go through :func:`_calculate`, which works around ruckig 0.19.4 refusing some
+  moves between valid poses (see :data:`JERK_RETRY_SCALE`), the same way in both.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from enum import IntEnum
 from math import isfinite, radians
 
@@ -38,6 +44,18 @@ from hexactl.kinematics.geometry import Pose6
 
 DOFS = 6
 _ZERO6 = [0.0] * DOFS
+
+JERK_RETRY_SCALE = 1.0 - 1e-9
+"""A move ruckig refuses is calculated once more with every jerk limit scaled by this.
+
+Why: ruckig 0.19.4 fails (an error in its step 1) when one axis travels, rest to rest,
+within a few ulps of 2·a³/j², the distance at which the jerk-limited profile just
+touches the acceleration limit, between two of its profile cases. With the default
+limits (j = 5·a) that distance is a round 40 mm (x, y), 24 mm (z), 2.4° (roll, pitch) or
+3.6° (yaw), so a typed move of exactly that much was refused; and one just beside it,
+previewed from the exact goal before, could fail in the loop from where the previous move
+really ended (``planner_error``). A jerk limit 1e-9 lower moves that distance by 2e-9
+(relative: millions of ulps) and the motion by nothing measurable."""
 
 
 class MotionLimits(BaseModel):
@@ -172,17 +190,17 @@ class PoseTrajectory:
         """Advance one period; the new position is :meth:`state`'s first element."""
         if not self._active:
             return StepResult.IDLE
-        try:
-            result = self._ruckig.update(self._input, self._output)
-        except (RuckigError, ValueError):  # raised for some inputs; ValueError: a code the binding lacks (-101)
-            result = Result.Error
-        if result != Result.Working and result != Result.Finished:
+        # ruckig recalculates only when the input changed since its last calculation: once
+        # per new target (twice when the jerk retry is needed), not every cycle.
+        result = _calculate(self._input, lambda: self._ruckig.update(self._input, self._output))
+        if result is None:
             self.reset(self._input.current_position)
             return StepResult.ERROR
         self._output.pass_to_input(self._input)
         if result == Result.Finished:
-            # Park on the reached position so that later updates are no-ops.
-            self.reset(self._input.current_position)
+            # Park so that later updates are no-ops: on the goal itself, where the planner
+            # starts the next segment (a halt has no goal: where it ended).
+            self.reset(self.goal if self.goal is not None else self._input.current_position)
             return StepResult.FINISHED
         return StepResult.WORKING
 
@@ -205,8 +223,22 @@ def preview(
     )
     configure_input(parameters, limits, goal, time_scale, velocity_scale)
     trajectory = Trajectory(DOFS)
-    try:
-        result = Ruckig(DOFS, period_s).calculate(parameters, trajectory)
-    except (RuckigError, ValueError):  # ValueError: a result code the binding lacks (-101)
-        return None
-    return trajectory if result in (Result.Working, Result.Finished) else None
+    generator = Ruckig(DOFS, period_s)
+    return None if _calculate(parameters, lambda: generator.calculate(parameters, trajectory)) is None else trajectory
+
+
+def _calculate(parameters: InputParameter, calculate: Callable[[], Result]) -> Result | None:
+    """``calculate()`` (ruckig on ``parameters``): its result, or None if ruckig refused
+    the input even after one retry with the jerk limits scaled by
+    :data:`JERK_RETRY_SCALE`. The scaled limits stay in ``parameters``: the online
+    generator would otherwise see a changed input and recalculate every cycle."""
+    for attempt in range(2):
+        if attempt:
+            parameters.max_jerk = [j * JERK_RETRY_SCALE for j in parameters.max_jerk]
+        try:
+            result = calculate()
+        except (RuckigError, ValueError):  # raised for some inputs; ValueError: a code the binding lacks (-101)
+            continue
+        if result == Result.Working or result == Result.Finished:
+            return result
+    return None

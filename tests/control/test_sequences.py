@@ -1,6 +1,9 @@
 """Sequences: the file format, the built-ins, playback and the dwell records."""
 
+import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from hexactl.control.sequences import (
     BUILTIN_SEQUENCES,
@@ -8,6 +11,7 @@ from hexactl.control.sequences import (
     builtin_sequence,
     dwell_header,
     dwell_rows,
+    sequence_from_mapping,
     sequence_from_toml,
 )
 
@@ -161,3 +165,47 @@ def test_sequence_blocks_other_motion_commands(rig):
     assert rig.controller.resume().error == "not_paused"
     assert rig.controller.play("nonsense").error == "invalid_argument"
     assert rig.controller.play(42).error == "invalid_argument"
+
+
+@pytest.mark.parametrize("poses", [
+    # Roll 2.2° → 4.6°: the loop started it from where ruckig ended the first move, 1e-13 off
+    # the goal the planner started from, and ruckig refused it there: planner_error.
+    [(207.3, -94.6, -62.3, 2.2, -1.3, -19.5), (207.3, -94.6, -62.3, 4.6, -1.3, 3.2)],
+    # Steps of 2.4° in pitch: refused as planning_failed (ruckig 0.19.4 fails at that distance).
+    [(0, 0, 0, 0, 1.2, 0), (0, 0, 0, 0, 3.6, 0), (0, 0, 0, 0, 6.0, 0)],
+])
+def test_sequences_ruckig_used_to_refuse_are_accepted_and_played_to_the_end(rig, poses):
+    rig.enabled()
+    result = rig.controller.play(sequence_from_mapping({"name": "steps", "waypoint": [{"pose": p} for p in poses]}))
+    assert result.ok, result.message
+    rig.settle()
+    _assert_finished_on(rig, poses)
+
+
+# Poses as typed (tenths of mm and deg) within 30 % of the envelope, where every pose is valid.
+typed_poses = st.tuples(*[st.integers(-3 * limit, 3 * limit).map(lambda tenths: tenths / 10)
+                          for limit in (600, 600, 250, 23, 23, 60)])
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(first=typed_poses, axis=st.integers(0, 5), sign=st.sampled_from([-1, 1]), last=typed_poses)
+def test_rest_to_rest_sequences_are_accepted_and_played_to_the_end(make_rig, first, axis, sign, last):
+    """Three waypoints, the second one step of 2·a³/j² from the first on one axis (40 mm,
+    24 mm, 2.4°, 3.6°: where ruckig 0.19.4 fails): planned, and played without a fault."""
+    second = list(first)
+    second[axis] = round(second[axis] + sign * (40, 40, 24, 2.4, 2.4, 3.6)[axis], 1)
+    poses = [first, tuple(second), last]
+    rig = make_rig().enabled()
+    result = rig.controller.play(sequence_from_mapping({"name": "typed", "waypoint": [{"pose": p} for p in poses]}))
+    assert result.ok, result.message
+    rig.settle()
+    _assert_finished_on(rig, poses)
+
+
+def _assert_finished_on(rig, poses):
+    snapshot = rig.controller.snapshot
+    assert snapshot.state.value == "enabled" and snapshot.faults == (), snapshot.faults
+    report = rig.controller.sequence_records()
+    assert report.status == "finished"
+    assert np.array([record.pose_command for record in report.records]) == pytest.approx(np.array(poses), abs=1e-9)
+    rig.assert_setpoints_safe()

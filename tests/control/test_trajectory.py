@@ -1,5 +1,7 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from hexactl.control.trajectory import MotionLimits, PoseTrajectory, StepResult, preview
@@ -82,3 +84,39 @@ def test_ruckig_exceptions_become_an_error_result():
     assert trajectory.update() is StepResult.ERROR and not trajectory.moving
     assert trajectory.state()[0] == (0.0,) * 6
     assert preview(MotionLimits(), PERIOD, ((0.0,) * 6,) * 3, (1e300,) * 6) is None
+
+
+def test_a_finished_move_parks_exactly_on_its_goal():
+    """ruckig's last sample misses the goal by ~1e-13; the planner starts a sequence's next
+    segment at rest on the goal, so the loop must too, bit for bit."""
+    trajectory = PoseTrajectory(MotionLimits(), PERIOD)
+    for goal in (GOAL, (123.4, 0.1, -7.7, 0.01, 0.02, -0.03)):
+        trajectory.move_to(goal, 1.3)
+        result, _ = _run(trajectory)
+        assert result is StepResult.FINISHED
+        assert trajectory.state() == (tuple(goal), (0.0,) * 6, (0.0,) * 6)
+
+
+# Per axis, the rest-to-rest distance 2·a³/j² at which ruckig 0.19.4's profile just reaches
+# the acceleration limit: 40 mm, 40 mm, 24 mm, 2.4°, 2.4°, 3.6° with the default limits.
+DEGENERATE = tuple(2 * a**3 / j**2 for a, j in zip(*MotionLimits().in_mm_rad()[1:]))
+typed_poses = st.tuples(*[st.integers(-3000, 3000).map(lambda tenths: tenths / 10)] * 6)  # mm and deg, as typed
+
+
+@settings(max_examples=100, deadline=None)
+@given(start=typed_poses, axis=st.integers(0, 5), sign=st.sampled_from([-1, 1]), others=st.booleans(),
+       time_scale=st.sampled_from([1.0, 2.5]))
+def test_rest_to_rest_moves_by_ruckigs_degenerate_distance_are_planned_and_run(start, axis, sign, others, time_scale):
+    """A move by exactly 2·a³/j² on one axis (e.g. pitch 1.2° → 3.6°) used to be refused
+    (planning_failed), and one just beside it could fail in the loop (planner_error)."""
+    start = np.where(np.arange(6) < 3, start, np.radians(start))
+    goal = start / 2 if others else start.copy()
+    goal[axis] = start[axis] + sign * DEGENERATE[axis]
+    at_rest = (tuple(start), (0.0,) * 6, (0.0,) * 6)
+    planned = preview(MotionLimits(), PERIOD, at_rest, goal, time_scale)
+    assert planned is not None
+    trajectory = PoseTrajectory(MotionLimits(), PERIOD)
+    trajectory.reset(start)
+    trajectory.move_to(goal, time_scale)
+    assert trajectory.update() is StepResult.WORKING  # the loop calculates here, then only samples
+    assert trajectory.state()[0] == pytest.approx(planned.at_time(PERIOD)[0], abs=1e-12)
