@@ -72,6 +72,12 @@ class ControllerConfig(_Frozen):
     lock_cycle_iterations: int = Field(default=3, ge=1, description="leg-lock: projection iterations per cycle")
     path_step_mm: float = Field(default=2.0, gt=0, description="move validation: sample spacing in translation")
     path_step_deg: float = Field(default=0.1, gt=0, description="move validation: sample spacing in rotation")
+    fk_rate_hz: float = Field(
+        default=100.0, gt=0,
+        description="while ENABLED, forward kinematics of the feedback (the measured pose) runs at about this rate "
+        "(every round(loop rate / this) cycles) and at every dwell it records; in the other states, every cycle. "
+        "It is the costliest step of a cycle (≈ 40 µs) and feeds telemetry and records only",
+    )
     fk_tolerance_mm: float = Field(default=1e-6, gt=0, description="forward kinematics of the feedback: tolerance")
     fk_max_iterations: int = Field(default=10, ge=1, description="forward kinematics of the feedback: iteration cap")
     command_timeout_s: float = Field(default=0.5, gt=0, description="how long a caller waits for the loop's verdict")

@@ -4,7 +4,8 @@
 (:mod:`hexactl.control.loop`) or directly by a test with simulated time:
 
 1. read the actuators' feedback and the link's health;
-2. forward kinematics of the feedback → measured pose (every cycle, warm-started);
+2. forward kinematics of the feedback → measured pose (warm-started; while ENABLED at
+   ``fk_rate_hz`` and at each dwell's record, otherwise every cycle);
 3. carry out the queued commands (at most :data:`MAX_COMMANDS_PER_CYCLE`);
 4. supervise (ENABLED only): heartbeats, actuator faults and states, set-points
    applied, link → FAULT; an actuator reporting E-stop → ESTOP in any state;
@@ -336,6 +337,8 @@ class ControlCore:
         self.pose_measured: tuple[float, ...] | None = None
         self.setpoints: list[float] = [0.0] * ACTUATOR_COUNT
         self._measured_absolute: tuple[float, ...] | None = None
+        self._fk_every = max(1, round(config.loop.rate_hz / config.fk_rate_hz))
+        self._measured_cycle = 0  # the cycle FK last ran in
         self._max_step_mm = active.geometry.limits.leg_velocity_mm_s * self.period_s
         self._epoch = 0
         self._cycle = 0
@@ -390,7 +393,8 @@ class ControlCore:
         hardware = self.hardware
         self.feedback = feedback = hardware.read_feedback()
         self.link = hardware.link_health()
-        self._measure(feedback)
+        if self.state is not ControlState.ENABLED or self._cycle - self._measured_cycle >= self._fk_every:
+            self._measure(feedback)
         inbox = self.inbox
         for _ in range(MAX_COMMANDS_PER_CYCLE):
             if not inbox:
@@ -419,6 +423,7 @@ class ControlCore:
         self._publish()
 
     def _measure(self, feedback: FeedbackSnapshot) -> None:
+        self._measured_cycle = self._cycle
         active = self.active
         lengths = [p + z for p, z in zip(feedback.positions_mm, active.geometry.zero_lengths)]
         guess = self._measured_absolute or active.absolute(self.pose_command)
@@ -526,8 +531,10 @@ class ControlCore:
                 run.phase = SequencePhase.MOVING
 
     def _record(self, run: _Run) -> None:
-        measured = self.pose_measured
         feedback = self.feedback
+        if feedback is not None and self._measured_cycle != self._cycle:
+            self._measure(feedback)  # the dwell's record has this cycle's measured pose
+        measured = self.pose_measured
         record = DwellRecord(
             run.name, run.index + 1, self._now_ns / 1e9,
             tuple(float(v) for v in pose_mm_rad_to_mm_deg(self.pose_command)),
@@ -749,6 +756,7 @@ class ControlCore:
         self.previous, self.active = old, new
         self._max_step_mm = new.geometry.limits.leg_velocity_mm_s * self.period_s
         self._measured_absolute = None  # another model: warm-start from the command
+        self._measured_cycle = -self._fk_every  # and measure on it next cycle
         self._epoch += 1
         self._event("calibration_swapped", f"calibration {old.calibration_id} → {new.calibration_id}")
         return None
