@@ -19,8 +19,8 @@ class LoopConfig(_Frozen):
     rate_hz: float = Field(default=500.0, ge=10.0, le=2000.0, description="cycle rate; 500 or 1000 in practice")
     spin_window_us: float = Field(
         default=300.0, ge=0.0,
-        description="the last stretch before a deadline is busy-waited instead of slept; keep it longer than "
-        "realtime.switch_interval_s so the loop holds the GIL when the deadline comes",
+        description="the last stretch before a deadline is busy-waited instead of slept: a sleep wakes only as "
+        "precisely as the timer slack allows, and the loop then holds the GIL when the deadline comes",
     )
     stats_window: int = Field(default=DEFAULT_WINDOW, ge=1, description="cycles kept for lateness percentiles")
     realtime: RealtimeConfig = RealtimeConfig()

@@ -3,14 +3,19 @@ the garbage collector. Every step is optional, none is required to run: without 
 privilege a step is skipped and :class:`RealtimeReport` says what was obtained.
 
 The GIL. Every thread of the process that runs Python competes with the loop for the
-GIL, so they are all part of its timing: once the loop asks, the holder gives the GIL up
-after at most ``switch_interval_s`` (plus its longest C call). Two consequences, measured
-by tools/bench_loop.py: the loop's spin window must be longer than the switch interval
-(it then wakes early enough to hold the GIL at its deadline), and a caller thread that
-the kernel preempts *while holding the GIL* stalls the loop for as long as it is
-preempted — a priority inversion SCHED_FIFO on the loop alone cannot prevent. On a
-loaded machine, run the service's other threads at a SCHED_FIFO priority below the
-loop's (or keep other load off its CPUs).
+GIL; the service keeps the API, its parsing and planning in another process
+(:mod:`hexactl.adapters.loop_link`), so what remains beside the loop are short bursts
+that end by blocking: the loop link's report sender and, with the simulator, the
+simulated firmwares answering each cycle's frames. Once a thread asks for the GIL, the
+holder gives it up after at most ``switch_interval_s`` (plus its longest C call). The
+interval is set longer than a cycle with its spin and exchange (1 ms against about
+0.6 ms): a cycle is then never forced off the GIL halfway for such a burst (at 0.1 ms,
+every frame the simulator answered stole the GIL from the cycle that sent it), while a
+thread that would not let go still delays the loop by at most 1 ms. A thread that the
+kernel preempts *while holding the GIL* stalls the loop for as long as it is preempted —
+a priority inversion SCHED_FIFO on the loop alone cannot prevent: run the process's
+other threads at a SCHED_FIFO priority just below the loop's (``hexactl serve --fifo``
+does).
 
 Garbage collection policy (why: a cyclic collection of the whole heap can stop every
 thread for milliseconds at a moment the collector picks):
@@ -53,10 +58,11 @@ class RealtimeConfig(BaseModel):
     cpus: tuple[int, ...] | None = Field(default=None, description="CPUs the loop thread may run on; None: any")
     lock_memory: bool = Field(default=False, description="mlockall(MCL_CURRENT | MCL_FUTURE): no page faults")
     switch_interval_s: float | None = Field(
-        default=0.0001,
+        default=0.001,
         gt=0,
-        description="sys.setswitchinterval while running: how long another thread may keep the GIL once "
-        "the loop asks for it (CPython's default, 5 ms, is 2.5 periods at 500 Hz); None: leave it",
+        description="sys.setswitchinterval while running: how long another thread may keep the GIL once the "
+        "loop asks for it, and how long the loop may keep it once another asks (longer than a cycle, so no "
+        "cycle is cut in two; CPython's default, 5 ms, is 2.5 periods at 500 Hz); None: leave it",
     )
     manage_gc: bool = Field(default=True, description="apply the garbage collection policy of this module")
     gc_interval_s: float = Field(default=1.0, gt=0, description="period of the loop's young-generation collection")
