@@ -5,7 +5,7 @@ keeps serving, the loop keeps its rate, no set-point beyond the limits reaches t
     python tools/fuzz_api.py --count 10000                 # the figures in BENCHMARKS.md
     python tools/fuzz_api.py --count 500 --json fuzz.json  # the CI-sized run (tests/reliability)
 
-The target: ``Service.start`` in this process on its simulator, enabled, so that the
+The target: ``Service.start`` in a child process on its simulator, enabled, so that the
 requests that happen to be valid really move the platform, with a
 :class:`~hexactl.adapters.can.bus_monitor.BusMonitor` on the simulator's bus
 (:class:`soak.MonitoredService`). Hypothesis generates the requests (generation only: no
@@ -470,7 +470,7 @@ class Fuzzer:
     def _connect(self) -> zmq.Socket:
         socket = self.context.socket(zmq.DEALER)
         socket.linger = 0
-        socket.connect(self.harness.service.api_endpoint)
+        socket.connect(self.harness.api_endpoint)
         return socket
 
     def close(self) -> None:

@@ -5,10 +5,10 @@ for ``--minutes`` at ``--rate`` Hz, every set-point checked by an independent bu
     python tools/soak.py --minutes 10                  # the figures in BENCHMARKS.md
     python tools/soak.py --seconds 20 --json soak.json
 
-What runs, in this process: ``Service.start`` on its simulator (six simulated actuator
+What runs, in a child process: ``Service.start`` on its simulator (six simulated actuator
 firmwares on a private ``virtual:`` bus) and a
 :class:`~hexactl.adapters.can.bus_monitor.BusMonitor` on that bus. The operator (this
-thread) keeps the platform enabled and playing: the built-in sequences and a seeded
+process's main thread) keeps the platform enabled and playing: the built-in sequences and a seeded
 inline one in turn, each saved with ``save_recording`` when it ends; every
 ``--swap-every`` seconds it loads a calibration variant (zero lengths off by up to 1 mm)
 or rolls it back, while the sequence plays. A second client, in its own thread, asks
@@ -34,12 +34,14 @@ import argparse
 import json
 import random
 import re
+import signal
 import sys
 import tempfile
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -49,7 +51,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber  # noqa: E402
 from hexactl.adapters.can.bus_monitor import BusMonitor  # noqa: E402
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_to_toml, load_geometry  # noqa: E402
-from hexactl.adapters.service import Service, ServiceConfig  # noqa: E402
+from hexactl.adapters.service import Service, ServiceConfig, ServiceError  # noqa: E402
+from hexactl.adapters.spawned import STOP, Spawned, SpawnError  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
 
@@ -58,11 +61,15 @@ REQUEST_TIMEOUT_S = 30.0  # generous: a loaded machine; a request unanswered thi
 ENABLE_TIMEOUT_S = 30.0
 RESET_RETRY_S = 0.1  # a reset's CLEAR_FAULT may wait for the actuators' E-stop hold-off (0.3 s)
 ENVELOPE_FRACTION = 0.5  # random poses stay within this share of the pose envelope
+START_TIMEOUT_S = 60.0
+MONITOR = "monitor"  # the request for the monitor's figures
 
 
 class MonitoredService:
-    """An in-process service on its simulator, a bus monitor on its bus from before the
-    first enable, and an operator client; a context manager.
+    """The service on its simulator with a bus monitor on its bus from before the first
+    enable, both in a child process of their own (as ``hexactl serve`` would run, so
+    that this process's work, e.g. hypothesis generating requests, never holds the loop's
+    GIL), and an operator client here; a context manager.
 
     ``data_dir``: the service's only data directory.
     """
@@ -71,14 +78,15 @@ class MonitoredService:
         self.data_dir = data_dir
         self.rate_hz = rate_hz
         self.geometry = load_geometry(config_path or default_config_path())
-        self.service = Service.start(ServiceConfig(config_path=config_path, api_endpoint=LOCAL, telemetry_endpoint=LOCAL,
-                                                   data_dirs=(data_dir,), rate_hz=rate_hz, log_level="WARNING"))
+        config = ServiceConfig(config_path=config_path, api_endpoint=LOCAL, telemetry_endpoint=LOCAL,
+                               data_dirs=(data_dir,), rate_hz=rate_hz, log_level="WARNING")
         try:
-            self.monitor = BusMonitor(self.service.simulator.bus_spec, self.geometry, rate_hz).start()
-            self.operator = HexactlClient(self.service.api_endpoint, timeout_s=REQUEST_TIMEOUT_S)
-        except BaseException:
-            self.service.close()
-            raise
+            self._child = Spawned(_serve_monitored, (config, self.geometry), name="monitored service", daemon=False,
+                                  start_timeout_s=START_TIMEOUT_S)  # fmt: skip
+        except SpawnError as error:
+            raise SystemExit(f"the service did not start: {error}") from None
+        self.api_endpoint, self.telemetry_endpoint = self._child.served
+        self.operator = HexactlClient(self.api_endpoint, timeout_s=REQUEST_TIMEOUT_S)
         self.recoveries: Counter[str] = Counter()
         """Why the platform had to be enabled again: ``estop``, ``disabled`` or the first latched
         fault's code; :attr:`recovery_reasons` has its messages."""
@@ -92,8 +100,7 @@ class MonitoredService:
 
     def close(self) -> None:
         self.operator.close()
-        self.service.close()
-        self.monitor.stop()  # after the service: its shutdown (brake, disable) is checked too
+        self._child.close(START_TIMEOUT_S)
 
     def status(self) -> dict[str, Any]:
         """The current telemetry record."""
@@ -132,17 +139,49 @@ class MonitoredService:
         return {"t": record["t"], **record["loop"]}
 
     def monitor_figures(self) -> dict[str, Any]:
-        """The monitor's report (after catching up with the bus) and its first violations."""
-        self.monitor.catch_up()
-        report = self.monitor.report()
-        return {
-            "counts": report.counts,
-            "violations": report.violations,
-            "first_violations": [f"{v.what}: {v.message}" for v in self.monitor.violations[:5]],
-            "max_step_fraction": round(report.max_step_fraction, 4),
-            "min_stroke_margin_mm": None if report.min_stroke_margin_mm == float("inf") else report.min_stroke_margin_mm,
-            "max_cycle_gap_ms": round(report.max_cycle_gap_s * 1e3, 3),
-        }
+        """The monitor's report (after catching up with the bus) and its first violations.
+
+        :raises SystemExit: if the service's process does not answer
+        """
+        figures = self._child.request(MONITOR, REQUEST_TIMEOUT_S)
+        if not isinstance(figures, dict):
+            raise SystemExit("the monitored service's process did not answer")
+        return figures
+
+
+def _serve_monitored(config: ServiceConfig, geometry: Geometry, control: Connection) -> None:
+    """The monitored service's process (:class:`MonitoredService`): serve, and answer
+    :data:`MONITOR` with the monitor's figures, until told to stop. The monitor stops
+    after the service, so that its shutdown (brake, disable) is watched too."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        service = Service.start(config)
+    except ServiceError as error:
+        control.send(str(error))
+        return
+    monitor = BusMonitor(service.simulator.bus_spec, geometry, config.rate_hz).start()
+    try:
+        control.send((service.api_endpoint, service.telemetry_endpoint))
+        while (word := control.recv()) != STOP:
+            control.send(_monitor_figures(monitor) if word == MONITOR else word)
+    except EOFError:
+        pass  # the parent is gone: stop too
+    finally:
+        service.close()
+        monitor.stop()
+
+
+def _monitor_figures(monitor: BusMonitor) -> dict[str, Any]:
+    monitor.catch_up()
+    report = monitor.report()
+    return {
+        "counts": report.counts,
+        "violations": report.violations,
+        "first_violations": [f"{v.what}: {v.message}" for v in monitor.violations[:5]],
+        "max_step_fraction": round(report.max_step_fraction, 4),
+        "min_stroke_margin_mm": None if report.min_stroke_margin_mm == float("inf") else report.min_stroke_margin_mm,
+        "max_cycle_gap_ms": round(report.max_cycle_gap_s * 1e3, 3),
+    }
 
 
 def loop_difference(before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any]:
@@ -201,9 +240,9 @@ class Traffic(threading.Thread):
         self._stopping = threading.Event()
 
     def run(self) -> None:
-        service = self.harness.service
-        with HexactlClient(service.api_endpoint, timeout_s=REQUEST_TIMEOUT_S) as client, \
-                TelemetrySubscriber(service.telemetry_endpoint, conflate=False) as telemetry:
+        harness = self.harness
+        with HexactlClient(harness.api_endpoint, timeout_s=REQUEST_TIMEOUT_S) as client, \
+                TelemetrySubscriber(harness.telemetry_endpoint, conflate=False) as telemetry:
             while not self._stopping.is_set():
                 record(self.outcomes, client, "status")
                 record(self.outcomes, client, "validate_pose", pose=random_pose(self.harness.geometry, self.rng))
@@ -275,7 +314,7 @@ def soak(duration_s: float, rate_hz: int, swap_every_s: float, traffic_hz: float
                     loop = harness.status()["loop"]
                     progress(f"{(now - start) / 60:.1f} min: {played} sequences, {swaps} swaps, loop missed "
                              f"{loop['missed']}, recoveries {dict(harness.recoveries)}, "
-                             f"monitor violations {len(harness.monitor.violations)}")
+                             f"monitor violations {harness.monitor_figures()['violations']}")
                     next_progress = now + 60.0
                 time.sleep(0.05)
         finally:

@@ -4,7 +4,7 @@ the service's API process (:class:`~hexactl.adapters.api_process.ApiProcess`).
 
 The protocol on the control pipe: the child's first message is either where it serves
 (any non-string object) or, as a string, why it cannot; then it answers each request
-with the same word once carried out, and ends at :data:`STOP` or when the parent's end
+once carried out (with the word itself, or what was asked for), and ends at :data:`STOP` or when the parent's end
 closes (the parent died).
 """
 
@@ -57,14 +57,16 @@ class Spawned:
     def exitcode(self) -> int | None:
         return self._process.exitcode
 
-    def request(self, word: str, timeout_s: float) -> None:
-        """Send ``word``; return once the child has answered (or is gone, or ``timeout_s`` passed)."""
+    def request(self, word: str, timeout_s: float) -> object:
+        """Send ``word``; return the child's answer once it has carried it out (None if
+        it is gone or silent for ``timeout_s``)."""
         try:
             self._control.send(word)
             if self._control.poll(timeout_s):
-                self._control.recv()
+                return self._control.recv()
         except (EOFError, OSError):
             pass  # gone already
+        return None
 
     def close(self, timeout_s: float) -> None:
         """Send :data:`STOP` and wait for the child to end; terminate it if it will not."""
