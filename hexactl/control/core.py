@@ -553,8 +553,10 @@ class ControlCore:
         self._run = None
         self._event(f"sequence_{status}", f"sequence {run.name!r} {status} after {len(records)} of {len(run.segments)} waypoints")
 
-    def _start_segment(self, segment: Segment) -> None:
-        self._trajectory.move_to(segment.goal, segment.time_scale, segment.velocity_scale)
+    def _start_segment(self, segment: Segment) -> bool:
+        """Head for ``segment``'s goal; False if the generator refuses it from the current
+        state, which only a move replacing a running one can meet (see ``move_to``)."""
+        return self._trajectory.move_to(segment.goal, segment.time_scale, segment.velocity_scale)
 
     # -- state changes -----------------------------------------------------------------
 
@@ -665,7 +667,9 @@ class ControlCore:
     def _move(self, command: cmd.Move) -> Refusal:
         if refusal := check_move(self) or self._stale(command.epoch):
             return refusal
-        self._start_segment(command.segment)
+        if not self._start_segment(command.segment):
+            return ErrorCode.STALE_PLAN, ("the motion went on while the move was planned, and from where it is now the "
+                                          "trajectory generator refuses it: plan again")
         return None
 
     def _lock_leg(self, command: cmd.LockLeg) -> Refusal:

@@ -173,12 +173,21 @@ class PoseTrajectory:
         self.goal = tuple(pose)
         self._active = False
 
-    def move_to(self, goal: Sequence[float], time_scale: float = 1.0, velocity_scale: float = 1.0) -> None:
+    def move_to(self, goal: Sequence[float], time_scale: float = 1.0, velocity_scale: float = 1.0) -> bool:
         """Head for ``goal`` (relative mm/rad), arriving at rest; replans from the
-        current state, so it may be called while moving. Scales: :func:`configure_input`."""
+        current state, so it may be called while moving. Scales: :func:`configure_input`.
+
+        While moving, False (and the motion goes on unchanged) if ruckig refuses the move
+        from here: it was planned from the state of a few cycles ago, and, for one, a
+        stretched move's lower acceleration limit may be below the acceleration the
+        platform has reached since. Checking costs one more calculation, in the cycle of
+        the command only. At rest the state is the one the plan started from."""
+        if self._active and preview(self.limits, self.period_s, self.state(), goal, time_scale, velocity_scale) is None:
+            return False
         configure_input(self._input, self.limits, goal, time_scale, velocity_scale)
         self.goal = tuple(goal)
         self._active = True
+        return True
 
     def halt(self) -> None:
         """Brake smoothly to rest (acceleration and jerk limited) wherever that ends."""

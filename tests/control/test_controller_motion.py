@@ -163,6 +163,35 @@ def test_a_plan_made_before_the_target_changed_is_refused_as_stale(rig):
     assert rig.controller.snapshot.motion.value == "holding"
 
 
+def test_a_move_the_motion_has_outrun_since_it_was_planned_is_refused_not_faulted(rig):
+    """With the loop in its own thread, a move replacing a running one is carried out some
+    cycles after the snapshot it was planned from. Here, 0.2 s into a move down by 113 mm,
+    a move stretched 4× is valid from the snapshot but not 10 cycles later, when it
+    arrives (ruckig refuses it from there). The loop used to take it and latch
+    planner_error; it refuses it, and the running move goes on to its goal."""
+    from hexactl.control import commands as cmd
+    from hexactl.control.planning import Segment
+    from hexactl.control.trajectory import preview
+
+    rig.enabled()
+    assert rig.controller.move([0, 0, -113, 0, 0, 0]).ok
+    rig.run(100)
+    planned_from = rig.controller.snapshot
+    goal = (0.0, 180.0, -65.0, 0.0, 0.0, math.radians(16))
+    period_s = rig.controller.config.loop.period_s
+    assert preview(rig.controller.config.motion, period_s, planned_from.trajectory, goal, 4.0) is not None
+    rig.run(10)
+    assert preview(rig.controller.config.motion, period_s, rig.controller.snapshot.trajectory, goal, 4.0) is None
+    rig.controller.thread.submit(cmd.Move(999, planned_from.epoch, Segment(goal, 4.0, 1.0, 0.0, 10.0)))
+    rig.run()
+    outcome = rig.controller.outcome(999)
+    assert not outcome.ok and outcome.error == "stale_plan"
+    rig.settle()
+    assert rig.controller.snapshot.state.value == "enabled" and rig.controller.snapshot.faults == ()
+    assert rig.controller.telemetry().pose_command == pytest.approx((0, 0, -113, 0, 0, 0), abs=1e-9)
+    rig.assert_setpoints_safe()
+
+
 reachable = st.tuples(st.floats(-600, 600), st.floats(-600, 600), st.floats(-250, 250),
                       st.floats(-23, 23), st.floats(-23, 23), st.floats(-60, 60))
 wild = st.one_of(st.floats(-2000, 2000), st.sampled_from([math.nan, math.inf, -math.inf, 1e12, -1e300]))

@@ -69,6 +69,18 @@ def test_halt_brakes_on_the_line_and_the_preview_matches_the_online_run():
     assert _max_distance_from_line(points, GOAL) < 1e-9
 
 
+def test_a_move_refused_from_the_current_state_leaves_the_motion_as_it_was():
+    trajectory, twin = PoseTrajectory(MotionLimits(), PERIOD), PoseTrajectory(MotionLimits(), PERIOD)
+    for generator in (trajectory, twin):
+        generator.move_to((0.0, 0.0, -113.0, 0.0, 0.0, 0.0))
+        for _ in range(110):
+            generator.update()
+    assert not trajectory.move_to((0.0, 180.0, -65.0, 0.0, 0.0, np.radians(16)), 4.0)  # ruckig: -101 from here
+    assert trajectory.goal == twin.goal
+    result, points = _run(trajectory)
+    assert result is StepResult.FINISHED and np.array_equal(points, _run(twin)[1])
+
+
 def test_preview_refuses_non_finite_input():
     assert preview(MotionLimits(), PERIOD, ((0.0,) * 6,) * 3, (float("nan"),) * 6) is None
 
