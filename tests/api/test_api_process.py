@@ -1,0 +1,52 @@
+"""``hexactl serve`` is two processes: if its API process dies, the service brings the
+platform to rest, disables the actuators and exits with status 1."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from hexactl.adapters.api.client import HexactlClient
+from tests.api.test_service import WAIT_S, enable, wait_for
+
+
+def spawned_children(pid: int) -> list[int]:
+    """The process ids of ``pid``'s children started by multiprocessing's spawn (Linux
+    /proc; not its resource tracker)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
+                found.append(int(child))
+    return found
+
+
+def test_the_service_stops_safely_when_its_api_process_dies(tmp_path: Path) -> None:
+    api, telemetry = f"ipc://{tmp_path}/api", f"ipc://{tmp_path}/telemetry"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry],
+        stderr=subprocess.PIPE, text=True, cwd=tmp_path, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        log = []
+        for line in process.stderr:
+            log.append(line)
+            if "API on" in line:
+                break
+        with HexactlClient(api, timeout_s=WAIT_S) as client:
+            enable(client)
+            client.call("move", pose=[0, 0, 30, 0, 0, 0], duration=5.0)  # under way when the API dies
+        (api_pid,) = wait_for(lambda: spawned_children(process.pid), "the API process")
+        os.kill(api_pid, signal.SIGKILL)
+        log += process.stderr.readlines()
+        assert process.wait(WAIT_S) == 1
+    finally:
+        if process.poll() is None:
+            process.kill()
+    text = "".join(log)
+    for expected in ("the API process died (exit status -9): shutting down", "actuators disabled", "stopped"):
+        assert expected in text, text
+    assert "E-stop" not in text, text  # braked and disabled, not E-stopped
