@@ -109,7 +109,10 @@ class ApiProcess:
 
 def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, control: Connection) -> None:
     """The child's life (see the module's docstring)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
+    # Ctrl-C at a terminal and a service manager's SIGTERM reach the whole process group:
+    # the service handles them and stops this process in order (telemetry until at rest).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     logging.basicConfig(level=settings.log_level, format=LOG_FORMAT)
     os.nice(API_NICENESS)
     with ExitStack() as closers:
