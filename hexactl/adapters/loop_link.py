@@ -15,12 +15,11 @@ in a process of their own (:mod:`hexactl.adapters.api_process`); what crosses is
 
 Loop side, :class:`LoopExchange`: the loop thread calls it in its slack (see
 :class:`~hexactl.control.loop.ControlLoop`). It takes at most
-:data:`MAX_COMMANDS_PER_EXCHANGE` waiting commands (a non-blocking poll, then reads that
-never wait: the sender writes each message whole) into the core's inbox and pickles the
-report (about 60 µs for a 5 kB snapshot, measured) into a one-slot outbox. A sender
-thread writes the outbox to the pipe, so a slow reader blocks that thread, never the
-loop; a newer report replaces one not yet sent. Nothing it meets is allowed to raise
-into the loop: a message that does not unpickle to a command is counted and dropped.
+:data:`MAX_COMMANDS_PER_EXCHANGE` complete commands from the pipe into the core's inbox
+and writes the report (pickled: about 60 µs for a 5 kB snapshot, measured), never
+waiting: both pipe ends are non-blocking, and a report the pipe has no room for is
+dropped. Nothing it meets is allowed to raise into the loop: a message that does not
+unpickle to a command is counted and dropped.
 
 API side, :class:`RemoteLoop`: a :class:`~hexactl.control.host.LoopHost` whose snapshot
 is the latest report a receiver thread has read, and whose ``submit`` writes to the
@@ -33,7 +32,9 @@ so pickle is the right encoding: nothing else can write to these pipes.
 from __future__ import annotations
 
 import logging
+import os
 import pickle
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -50,6 +51,10 @@ REPORT_INTERVAL_S = 0.002
 MAX_COMMANDS_PER_EXCHANGE = 8
 """Commands taken per exchange: bounds the loop's slack work when many arrive at once."""
 
+_READ_CHUNK_BYTES = 1 << 16
+_READ_PER_CALL_BYTES = 1 << 20  # bounds one exchange's reading; the rest waits in the pipe
+_HEADER = struct.Struct("!i")  # multiprocessing.Connection's frame header (frames below 2 GiB)
+
 STATS_MAX_AGE_S = 0.25
 """Published percentiles are at most this old (a sort of the statistics window)."""
 
@@ -65,48 +70,119 @@ class PublishedReport:
     probe: tuple[float, ...] | None
 
 
+class _FrameReader:
+    """Non-blocking reads of length-prefixed frames (``multiprocessing.Connection``'s
+    framing: a 4-byte big-endian signed length, then the bytes) from a pipe's read end.
+    A frame whose bytes have not all arrived waits in the buffer for the next call."""
+
+    def __init__(self, fd: int) -> None:
+        os.set_blocking(fd, False)
+        self._fd = fd
+        self._buffer = bytearray()
+        self.closed = False
+        """True once the writer's end is closed and everything it wrote has been taken."""
+
+    def frames(self, limit: int) -> list[bytes]:
+        """At most ``limit`` complete frames; never waits (reads at most
+        :data:`_READ_PER_CALL_BYTES` per call)."""
+        read = 0
+        while not self.closed and read < _READ_PER_CALL_BYTES:
+            try:
+                chunk = os.read(self._fd, _READ_CHUNK_BYTES)
+            except BlockingIOError:
+                break
+            except OSError:
+                chunk = b""
+            if not chunk:
+                self.closed = True
+            read += len(chunk)
+            self._buffer += chunk
+        frames = []
+        buffer = self._buffer
+        while len(frames) < limit and len(buffer) >= _HEADER.size:
+            (size,) = _HEADER.unpack_from(buffer)
+            if size < 0 or len(buffer) < _HEADER.size + size:
+                break
+            frames.append(bytes(buffer[_HEADER.size:_HEADER.size + size]))
+            del buffer[:_HEADER.size + size]
+        return frames
+
+
+class _FrameWriter:
+    """Non-blocking writes of length-prefixed frames to a pipe's write end. A frame the
+    pipe has no room for is finished on later calls; a new one is refused meanwhile."""
+
+    def __init__(self, fd: int) -> None:
+        os.set_blocking(fd, False)
+        self._fd = fd
+        self._pending = memoryview(b"")
+        self.closed = False
+        """True once the reader's end is closed."""
+
+    def offer(self, payload: bytes) -> bool:
+        """Write ``payload`` as one frame, or as much as fits; False (nothing taken) if an
+        earlier frame is still unfinished or the reader is gone."""
+        if not self.flush():
+            return False
+        self._pending = memoryview(_HEADER.pack(len(payload)) + payload)
+        self.flush()
+        return not self.closed
+
+    def flush(self) -> bool:
+        """Write what is pending; True when nothing is."""
+        while self._pending and not self.closed:
+            try:
+                written = os.write(self._fd, self._pending)
+            except BlockingIOError:
+                return False
+            except OSError:  # EPIPE: the reader is gone
+                self.closed = True
+                break
+            self._pending = self._pending[written:]
+        return not self._pending and not self.closed
+
+
 class LoopExchange:
     """The loop side of the link; install as the loop's ``exchange`` and :meth:`start`.
 
+    Nothing in it waits: no lock, no blocking read or write (a lock or a pipe shared with
+    a thread of lower priority, or with the API's process, would make the loop wait for
+    that one's turn on the CPU: priority inversion). Commands are read and reports written
+    as far as the pipes allow without waiting; a report the pipe has no room for is
+    dropped (the next one follows within :data:`REPORT_INTERVAL_S`).
+
     ``probe``: the simulator's true actuator positions, mm (None with real actuators).
-    ``rejected``: messages that were not commands (a bug if ever non-zero).
+    ``rejected``: messages that were not commands (a bug if ever non-zero);
+    ``reports_dropped``: reports the pipe had no room for.
     """
 
     def __init__(self, thread: LoopThread, commands: Connection, reports: Connection,
                  probe: Callable[[], tuple[float, ...]] | None = None) -> None:
         self._thread = thread
-        self._commands = commands
+        self._commands = commands  # kept open: the reader uses its descriptor
         self._reports = reports
+        self._reader = _FrameReader(commands.fileno())
+        self._writer = _FrameWriter(reports.fileno())
         self._probe = probe
         self._interval_ns = round(REPORT_INTERVAL_S * 1e9)
         self._next_report_ns = 0
-        self._outbox: bytes = b""
-        self._ready = threading.Event()
-        self._stopping = False
-        self._sender = threading.Thread(target=self._send, name="hexactl-loop-reports", daemon=True)
-        self.commands_open = True
-        """False once the API process has closed its end (or died)."""
         self.rejected = 0
+        self.reports_dropped = 0
+
+    @property
+    def commands_open(self) -> bool:
+        """False once the API process has closed its end (or died) and every command it
+        sent has been taken."""
+        return not self._reader.closed
 
     def start(self) -> LoopExchange:
-        """Publish the first report and start the sender; returns self."""
+        """Publish the first report; returns self."""
         self._publish()
-        self._sender.start()
         return self
 
     def __call__(self) -> None:
         """The loop's slack work: take waiting commands, publish when due."""
-        commands = self._commands
-        taken = 0
-        while self.commands_open and taken < MAX_COMMANDS_PER_EXCHANGE:
-            try:
-                if not commands.poll():
-                    break
-                data = commands.recv_bytes()
-            except (EOFError, OSError):
-                self.commands_open = False
-                break
-            taken += 1
+        for data in self._reader.frames(MAX_COMMANDS_PER_EXCHANGE):
             try:
                 command = pickle.loads(data)
             except Exception:  # noqa: BLE001 - nothing may raise into the loop
@@ -119,31 +195,18 @@ class LoopExchange:
         if now >= self._next_report_ns:
             self._next_report_ns = now + self._interval_ns
             self._publish()
+        else:
+            self._writer.flush()
 
     def close(self) -> None:
-        """Stop the sender and close both ends (after the loop has stopped)."""
-        self._stopping = True
-        self._ready.set()
-        if self._sender.is_alive():
-            self._sender.join(1.0)
+        """Close both ends (after the loop has stopped)."""
         self._commands.close()
         self._reports.close()
 
     def _publish(self) -> None:
         report = PublishedReport(self._thread.report(STATS_MAX_AGE_S), self._probe() if self._probe else None)
-        self._outbox = pickle.dumps(report, protocol=pickle.HIGHEST_PROTOCOL)
-        self._ready.set()
-
-    def _send(self) -> None:
-        while True:
-            self._ready.wait()
-            self._ready.clear()
-            if self._stopping:
-                return
-            try:
-                self._reports.send_bytes(self._outbox)
-            except (OSError, ValueError):  # the API process is gone
-                return
+        if not self._writer.offer(pickle.dumps(report, protocol=pickle.HIGHEST_PROTOCOL)):
+            self.reports_dropped += 1
 
 
 class RemoteLoop:

@@ -4,7 +4,7 @@ API process (command server, telemetry, planning).
 
 Two processes. This one holds the real-time part: the control loop's thread (real-time
 where allowed), the CAN link and, with the simulator, the six simulated actuators'
-thread, plus the loop link's report sender. The API process
+thread. The API process
 (:mod:`hexactl.adapters.api_process`) holds everything that parses, validates, plans or
 serialises, so none of it competes with the loop for the GIL
 (:mod:`hexactl.adapters.loop_link` says why and what crosses). The caller's thread only
@@ -68,7 +68,7 @@ scheduler stall of either thread beyond 11 ms (seen under load) would trip a wat
 that measures host load, not the controller. Real actuators keep the defaults; missed
 cycles show in the loop statistics either way."""
 
-SERVICE_THREAD_NAMES = frozenset({"hexactl-loop-reports", "actuator-bus"})
+SERVICE_THREAD_NAMES = frozenset({"actuator-bus"})
 """The threads that share the loop's process (and GIL): with ``fifo_priority`` they run
 just below it."""
 
@@ -96,8 +96,8 @@ class ServiceConfig:
     noise, ``point_sigma_mm`` that noise (1σ per coordinate, mm; None: the geometry's
     ``[measurement] point_sigma_mm``). ``motion``: the controller's pose-space velocity,
     acceleration and jerk limits (the legs' speed limit is the geometry's whatever these are).
-    ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the other threads
-    of its process (simulator, report sender), which share the GIL with it (None: normal
+    ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the simulator's
+    thread, which shares the GIL with it (None: normal
     scheduling; the API process always runs normally); ``lock_memory``: mlockall of the
     loop's process. Both fall back, logged, without the privilege.
     """

@@ -4,9 +4,9 @@ privilege a step is skipped and :class:`RealtimeReport` says what was obtained.
 
 The GIL. Every thread of the process that runs Python competes with the loop for the
 GIL; the service keeps the API, its parsing and planning in another process
-(:mod:`hexactl.adapters.loop_link`), so what remains beside the loop are short bursts
-that end by blocking: the loop link's report sender and, with the simulator, the
-simulated firmwares answering each cycle's frames. Once a thread asks for the GIL, the
+(:mod:`hexactl.adapters.loop_link`, whose loop side runs in the loop thread itself), so
+what remains beside the loop are short bursts that end by blocking: with the simulator,
+the simulated firmwares answering each cycle's frames. Once a thread asks for the GIL, the
 holder gives it up after at most ``switch_interval_s`` (plus its longest C call). The
 interval is set longer than a cycle with its spin and exchange (1 ms against about
 0.6 ms): a cycle is then never forced off the GIL halfway for such a burst (at 0.1 ms,

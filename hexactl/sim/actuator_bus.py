@@ -81,6 +81,7 @@ class ActuatorBus:
             raise ValueError("tick_s must be positive")
         self.bus = bus
         self.firmwares = tuple(firmwares)
+        self._positions_mm = self._positions()
         self.tick_s = tick_s
         self._clock = clock
         self._lock = threading.Lock()  # one step at a time; snapshots see whole steps
@@ -103,9 +104,14 @@ class ActuatorBus:
             self._advance(t_s)
 
     def actual_positions_mm(self) -> tuple[float, ...]:
-        """The six drives' true (unquantised) positions, mm, as of the last completed step."""
-        with self._lock:
-            return tuple(firmware.position_um / _UM_PER_MM for firmware in self.firmwares)
+        """The six drives' true (unquantised) positions, mm, as of the last completed step.
+        Lock-free (one reference, replaced at the end of each step): the control loop's
+        process reads it each cycle, and waiting for this thread's lock would make the loop
+        wait for this thread's turn on the CPU."""
+        return self._positions_mm
+
+    def _positions(self) -> tuple[float, ...]:
+        return tuple(firmware.position_um / _UM_PER_MM for firmware in self.firmwares)
 
     def _deliver(self, message: can.Message, t_s: float) -> None:
         if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
@@ -117,6 +123,7 @@ class ActuatorBus:
     def _advance(self, t_s: float) -> None:
         for firmware in self.firmwares:
             self._send_all(firmware.advance(t_s))
+        self._positions_mm = self._positions()
 
     def _send_all(self, frames: list[tuple[int, bytes]]) -> None:
         for can_id, payload in frames:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from hexactl.adapters.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop
+from hexactl.adapters.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop, _FrameReader, _FrameWriter
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
 from hexactl.control.host import LoopThread
@@ -113,3 +113,26 @@ def test_the_loop_side_sees_the_api_end(link: Link) -> None:
     link.cycle()  # no exception into the loop
     assert not link.exchange.commands_open
     link.cycle()
+
+
+def test_frames_arrive_whole_whatever_the_pipe_does() -> None:
+    """The loop's non-blocking pipe ends: a frame cut by the pipe is finished later, never
+    read half; a frame bigger than the pipe goes through in pieces; the reader of a full
+    pipe is refused a new frame instead of waiting; the writer's close is seen."""
+    pipes = multiprocessing.get_context("spawn")
+    reading, writing = pipes.Pipe(duplex=False)
+    reader, writer = _FrameReader(reading.fileno()), _FrameWriter(writing.fileno())
+    big = bytes(range(256)) * 2048  # 512 KiB: larger than a pipe's buffer
+    assert writer.offer(b"first") and writer.offer(big) is True
+    assert writer.offer(b"refused") is False  # the big one is not all written yet
+    received: list[bytes] = []
+    while len(received) < 2:
+        received += reader.frames(8)
+        writer.flush()
+    assert received == [b"first", big]
+    assert writer.offer(b"third") and reader.frames(8) == [b"third"]
+    assert reader.frames(8) == [] and not reader.closed
+    writing.close()
+    assert reader.frames(8) == [] and reader.closed
+    reading.close()
+    assert writer.offer(b"to nobody") is False and writer.closed
