@@ -395,7 +395,8 @@ class Controller:
         config = self.config
         budget = s.active.geometry.limits.leg_velocity_mm_s * (1.0 - config.calibration_ramp_fraction)
         return PlanningContext(s.active, config.motion, config.loop.period_s, budget, s.lock,
-                               config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg)
+                               config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg,
+                               config.lock_cycle_iterations)
 
     def _swap(self, new: ActiveGeometry, verb: str) -> CommandResult:
         """Dry-run ``new`` at the current pose, along the running move and the rest of
