@@ -13,10 +13,17 @@ from hypothesis import strategies as st
 
 from hexactl.adapters.api.messages import ErrorReply
 from hexactl.adapters.api.server import answer
-from hexactl.adapters.api.wire import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES
+from hexactl.adapters.api.wire import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES, ApiError, decode_request
 from tests.api.support import exchange
 
 STATUS = {"v": 1, "id": "after", "cmd": "status"}
+NOT_UTF8: dict[str, bytes] = {  # Python's json.loads(bytes) would accept all of these
+    "UTF-16 with BOM": json.dumps(STATUS).encode("utf-16"),
+    "UTF-16-BE": json.dumps(STATUS).encode("utf-16-be"),
+    "UTF-32 with BOM": json.dumps(STATUS).encode("utf-32"),
+    "UTF-32-LE": json.dumps(STATUS).encode("utf-32-le"),
+    "UTF-8-encoded surrogate": b'{"v": 1, "id": "\xed\xa0\x80", "cmd": "status"}',
+}
 
 CASES: list[tuple[str, bytes, str, object]] = [
     ("not JSON", b"hello", "malformed_json", None),
@@ -43,6 +50,7 @@ CASES: list[tuple[str, bytes, str, object]] = [
     ("leg out of range", b'{"v": 1, "id": 3, "cmd": "leg_lock", "leg": 7}', "invalid_request", 3),
     ("negative duration", b'{"v": 1, "id": 3, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "duration": -1}', "invalid_request", 3),
     ("too large", json.dumps({"v": 1, "id": 3, "cmd": "status", "pad": "x" * MAX_REQUEST_BYTES}).encode(), "too_large", None),
+    *((name, body, "malformed_json", None) for name, body in NOT_UTF8.items()),
 ]
 
 
@@ -55,6 +63,21 @@ def test_bad_request_gets_its_error_code(shared_service, kind, body, code, reque
     assert (reply.error.code, reply.id) == (code, request_id)
     assert reply.error.message
     assert _still_serving(shared_service.api)
+
+
+@pytest.mark.parametrize("body", [*NOT_UTF8.values(), b'{"v": 1, "id": 1, "cmd": "status"\xff}'],
+                         ids=[*NOT_UTF8, "invalid byte"])
+def test_not_utf8_is_refused_as_such(body) -> None:
+    with pytest.raises(ApiError) as refused:
+        decode_request(body)
+    assert refused.value.code == "malformed_json"
+    assert refused.value.message.startswith("not UTF-8: ") and "requests are UTF-8 JSON" in refused.value.message
+
+
+def test_utf8_beyond_ascii_and_a_leading_byte_order_mark_are_accepted() -> None:
+    text = json.dumps({"v": 1, "id": "Zürich ✓ 𝄞", "cmd": "status"}, ensure_ascii=False)
+    assert decode_request(text.encode()).id == "Zürich ✓ 𝄞"
+    assert decode_request(text.encode("utf-8-sig")).id == "Zürich ✓ 𝄞"  # RFC 8259 lets a parser ignore it
 
 
 @pytest.mark.parametrize(

@@ -33,7 +33,7 @@ class ErrorCode(StrEnum):
     (:class:`hexactl.control.results.ErrorCode`: ``not_enabled``, ``path_violation``, …),
     passed through unchanged."""
 
-    MALFORMED_JSON = "malformed_json"  # not UTF-8 JSON, or NaN/Infinity/out-of-range numbers
+    MALFORMED_JSON = "malformed_json"  # not UTF-8 (UTF-16/32 are refused) or not JSON, or NaN/Infinity/out-of-range
     INVALID_REQUEST = "invalid_request"  # not an object, missing id/v/cmd, wrong types or values, multipart
     UNKNOWN_COMMAND = "unknown_command"
     UNSUPPORTED_VERSION = "unsupported_version"
@@ -81,8 +81,8 @@ def decode_request(body: bytes) -> Request:
     if len(body) > MAX_REQUEST_BYTES:
         raise ApiError(ErrorCode.TOO_LARGE, f"request of {len(body)} bytes; the limit is {MAX_REQUEST_BYTES}")
     try:
-        document = json.loads(body, parse_constant=_refuse_constant, parse_float=_finite_float)
-    except (ValueError, RecursionError) as error:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        document = json.loads(_utf8_text(body), parse_constant=_refuse_constant, parse_float=_finite_float)
+    except (ValueError, RecursionError) as error:  # JSONDecodeError is a ValueError
         raise ApiError(ErrorCode.MALFORMED_JSON, f"not valid JSON: {_first_line(error)}") from None
     if not isinstance(document, dict):
         raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is a JSON object, got {_json_type(document)}")
@@ -169,6 +169,22 @@ def split_envelope(frames: list[bytes]) -> tuple[list[bytes], list[bytes]]:
         if not frames[index]:
             return frames[: index + 1], frames[index + 1 :]
     return frames[:1], frames[1:]
+
+
+def _utf8_text(body: bytes) -> str:
+    """``body`` decoded as UTF-8; :class:`ApiError` ``malformed_json`` naming the problem
+    otherwise. ``json.loads`` would guess UTF-16 and UTF-32 from the first bytes and let
+    UTF-8-encoded surrogates through: the API's requests are UTF-8 only. A leading UTF-8
+    byte-order mark is dropped, as RFC 8259 allows a parser to."""
+    nul = body.find(b"\0")
+    if nul >= 0:  # never in UTF-8 JSON (U+0000 must be escaped), always in UTF-16 or UTF-32 JSON
+        raise ApiError(ErrorCode.MALFORMED_JSON,
+                       f"not UTF-8: a NUL byte at offset {nul} (UTF-16 or UTF-32?); requests are UTF-8 JSON")
+    try:
+        return body.decode("utf-8-sig")  # strict: invalid sequences and encoded surrogates raise
+    except UnicodeDecodeError as error:
+        raise ApiError(ErrorCode.MALFORMED_JSON,
+                       f"not UTF-8: {error.reason} at offset {error.start}; requests are UTF-8 JSON") from None
 
 
 def _refuse_constant(name: str) -> float:
