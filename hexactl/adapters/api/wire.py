@@ -7,6 +7,7 @@ message and the request's ``id`` when it could be read.
 
 from __future__ import annotations
 
+import codecs
 import dataclasses
 import json
 from collections.abc import Mapping
@@ -180,11 +181,15 @@ def _utf8_text(body: bytes) -> str:
     if nul >= 0:  # never in UTF-8 JSON (U+0000 must be escaped), always in UTF-16 or UTF-32 JSON
         raise ApiError(ErrorCode.MALFORMED_JSON,
                        f"not UTF-8: a NUL byte at offset {nul} (UTF-16 or UTF-32?); requests are UTF-8 JSON")
+    # Stripped here, not by the utf-8-sig codec: Python loads that from disk at its first use,
+    # and answering a request opens no file outside the data directories.
+    unmarked = body.removeprefix(codecs.BOM_UTF8)
     try:
-        return body.decode("utf-8-sig")  # strict: invalid sequences and encoded surrogates raise
+        return unmarked.decode("utf-8")  # strict: invalid sequences and encoded surrogates raise
     except UnicodeDecodeError as error:
+        offset = error.start + len(body) - len(unmarked)
         raise ApiError(ErrorCode.MALFORMED_JSON,
-                       f"not UTF-8: {error.reason} at offset {error.start}; requests are UTF-8 JSON") from None
+                       f"not UTF-8: {error.reason} at offset {offset}; requests are UTF-8 JSON") from None
 
 
 def _refuse_constant(name: str) -> float:
