@@ -1,6 +1,7 @@
 """Data safety. Files are written atomically: a crash in the middle of writing a
 calibration, a measurement file or a recording leaves the old file whole and nothing at
-the target path half-written. And no request makes the service read or write outside
+the target path half-written, and the temporary a killed writer leaves is removed by a
+later save once stale, never a live writer's. And no request makes the service read or write outside
 its data directories, run a program or evaluate anything: checked through the API of the
 real service's request handling with a Python audit hook that records every file the
 process opens and every process it would start while the hostile requests are answered.
@@ -16,6 +17,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -29,7 +31,7 @@ from hexactl.adapters.api.messages import SaveRecordingRequest
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.wire import ApiError
-from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.atomic import STALE_AFTER_S, remove_stale_temporaries, write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
 from hexactl.adapters.files.measurements import write_measurements
 from hexactl.adapters.service import Service
@@ -89,10 +91,11 @@ KILLED_WRITER = textwrap.dedent("""
 """)
 
 
-def test_killed_mid_write_leaves_the_old_calibration(tmp_path, nominal) -> None:
-    """SIGKILL between write and rename: the target is the old file, whole. What a hard
-    kill cannot clean up is the hidden temporary (``.NAME.*.tmp``) beside it; it is never
-    at the target path."""
+def test_killed_mid_write_leaves_the_old_calibration_and_a_later_save_removes_its_temporary(tmp_path, nominal) -> None:
+    """SIGKILL between write and rename: the target is the old file, whole, and the
+    writer's hidden temporary (``.NAME.PID.RANDOM.tmp``) is left beside it. A save of the
+    same file removes it once it is stale: kept while fresh (a writer on another host or
+    in another PID namespace could still own it), removed once older than STALE_AFTER_S."""
     target = tmp_path / "cal.toml"
     save_geometry(nominal.model_copy(update={"name": "old"}), target)
     old = target.read_bytes()
@@ -104,10 +107,76 @@ def test_killed_mid_write_leaves_the_old_calibration(tmp_path, nominal) -> None:
         writer.send_signal(signal.SIGKILL)
         writer.wait()
     assert target.read_bytes() == old and load_geometry(target).name == "old"
-    leftovers = [path.name for path in tmp_path.iterdir() if path != target]
-    assert all(name.startswith(".cal.toml.") and name.endswith(".tmp") for name in leftovers), leftovers
+    (leftover,) = (path for path in tmp_path.iterdir() if path != target)
+    assert leftover.name.startswith(f".cal.toml.{writer.pid}.") and leftover.name.endswith(".tmp")
     save_geometry(nominal.model_copy(update={"name": "next"}), target, overwrite=True)  # the next save is unharmed
     assert load_geometry(target).name == "next"
+    assert leftover.exists()  # fresh: kept
+    _age(leftover)
+    save_geometry(nominal.model_copy(update={"name": "later"}), target, overwrite=True)
+    assert load_geometry(target).name == "later"
+    assert [path.name for path in tmp_path.iterdir()] == [target.name]
+
+
+def _age(path: Path) -> None:
+    """Make ``path`` look as a file left longer ago than a temporary stays fresh."""
+    then = time.time() - STALE_AFTER_S - 60
+    os.utime(path, (then, then), follow_symlinks=False)
+
+
+def _dead_pid() -> int:
+    """The id of a process that has ended (and been reaped)."""
+    child = subprocess.Popen([sys.executable, "-c", ""])
+    child.wait()
+    return child.pid
+
+
+def test_only_stale_temporaries_of_the_target_are_removed(tmp_path) -> None:
+    target = tmp_path / "cal.toml"
+    dead, alive, me = _dead_pid(), os.getppid(), os.getpid()
+    stale = [f".cal.toml.{dead}.{'0123456789abcdef'}.tmp",
+             f".cal.toml.{me}.{'fedcba9876543210'}.tmp"]  # this process's id, not being written: an earlier process's
+    kept = [f".cal.toml.{alive}.{'0123456789abcdef'}.tmp",  # its writer still runs
+            f".other.toml.{dead}.{'0123456789abcdef'}.tmp",  # another target's
+            f".cal.toml.{dead}.{'0123456789ABCDEF'}.tmp", f".cal.toml.{dead}.notes.tmp", f"cal.toml.{dead}.0123456789abcdef.tmp",
+            ".cal.toml.tmp", ".cal.toml.ab12cd34.tmp", ".cal.toml.0.0123456789abcdef.tmp"]  # not names write_atomic makes
+    for name in stale + kept:
+        (tmp_path / name).write_bytes(b"half")
+        _age(tmp_path / name)
+    fresh = tmp_path / f".cal.toml.{dead}.{'00000000000000ff'}.tmp"  # possibly a writer this host cannot see
+    fresh.write_bytes(b"half")
+    directory = tmp_path / f".cal.toml.{dead}.{'0000000000000001'}.tmp"
+    directory.mkdir()
+    link = tmp_path / f".cal.toml.{dead}.{'0000000000000002'}.tmp"
+    link.symlink_to(tmp_path / stale[0])
+    for path in (directory, link):
+        _age(path)
+    kept += [fresh.name, directory.name, link.name]
+
+    write_atomic(target, b"new", overwrite=False)
+    assert target.read_bytes() == b"new"
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted([target.name, *kept])
+
+
+def test_a_concurrent_writers_temporary_is_never_removed(tmp_path, monkeypatch) -> None:
+    """Another write of the same file runs while this one has its temporary: even aged,
+    this process's own temporary in progress is not stale."""
+    target = tmp_path / "cal.toml"
+    sync = os.fsync
+    aged: list[Path] = []
+    removed: list[Path] = []
+
+    def meanwhile(descriptor: int) -> None:  # the file's fsync, before the rename (then the folder's)
+        for temporary in tmp_path.glob(".cal.toml.*.tmp"):
+            _age(temporary)
+            aged.append(temporary)
+        removed.extend(remove_stale_temporaries(target))
+        sync(descriptor)
+
+    monkeypatch.setattr(os, "fsync", meanwhile)
+    write_atomic(target, b"new", overwrite=False)
+    assert len(aged) == 1 and removed == []
+    assert target.read_bytes() == b"new"
 
 
 def play_short(client: HexactlClient, service: Service) -> None:

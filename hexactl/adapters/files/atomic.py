@@ -1,45 +1,120 @@
-"""Atomic file writes: a reader (or a crash) sees the old file or the new one, never half."""
+"""Atomic file writes: a reader (or a crash) sees the old file or the new one, never half.
+
+The temporary file is ``.NAME.PID.RANDOM.tmp`` beside the target (``PID``: the writer's
+process id, ``RANDOM``: 16 hex digits). A writer killed before its rename cannot remove
+it; a later write to the same target does, once it is stale
+(:func:`remove_stale_temporaries`).
+"""
 
 from __future__ import annotations
 
 import os
-import tempfile
+import re
+import secrets
+import threading
+import time
 from pathlib import Path
 
+STALE_AFTER_S = 600.0
+"""A temporary left this long (by its modification time) by a process that no longer
+runs here is stale. The age protects writers this host cannot see: another machine
+sharing the directory, or another PID namespace (a container), whose process id may
+be free here. A live writer touches its temporary when it writes it; only the final
+fsync and rename follow, well within this."""
 
-def _umask() -> int:
-    mask = os.umask(0)  # the only way to read it; done once, at import, before threads exist
-    os.umask(mask)
-    return mask
-
-
-_FILE_MODE = 0o666 & ~_umask()
+_writing: set[str] = set()
+"""Names of the temporaries this process is writing now: with its own process id in the
+name, the rest are an earlier process's that had the same id (a restarted container's
+service is often PID 1 again)."""
+_writing_lock = threading.Lock()
 
 
 def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) -> Path:
-    """Write ``data`` to ``path`` via a temporary file in the same folder, fsync and rename.
+    """Write ``data`` to ``path`` via a temporary file in the same folder, fsync and rename,
+    after removing stale temporaries of earlier writes to ``path``.
 
     Raises ``FileExistsError`` when ``path`` exists and ``overwrite`` is false, so nothing
-    saved is replaced by accident.
+    saved is replaced by accident; ``OSError`` when the folder cannot be made or the file
+    cannot be written (then the old file is untouched and the temporary removed).
     """
     target = Path(path)
     if target.exists() and not overwrite:
         raise FileExistsError(f"{target} exists; refusing to overwrite it (use --force)")
     target.parent.mkdir(parents=True, exist_ok=True)
-    descriptor, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    remove_stale_temporaries(target)
+    temporary = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(8)}.tmp")
+    with _writing_lock:
+        _writing.add(temporary.name)
     try:
-        os.fchmod(descriptor, _FILE_MODE)  # mkstemp makes 0600; a saved file is an ordinary file
-        with os.fdopen(descriptor, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, target)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+        # O_EXCL: never open an existing file or follow a symbolic link; 0o666 minus the
+        # umask, as for any saved file.
+        descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        try:
+            with os.fdopen(descriptor, "wb") as handle:
+                handle.write(data)
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.replace(temporary, target)
+        except BaseException:
+            temporary.unlink(missing_ok=True)
+            raise
+    finally:
+        with _writing_lock:
+            _writing.discard(temporary.name)
     directory = os.open(target.parent, os.O_RDONLY)
     try:
         os.fsync(directory)  # make the rename itself durable
     finally:
         os.close(directory)
     return target
+
+
+def remove_stale_temporaries(target: str | os.PathLike[str]) -> list[Path]:
+    """Remove the temporaries that writers of ``target`` killed before their rename left
+    beside it; return those removed.
+
+    Only regular files named exactly as :func:`write_atomic` names them for ``target``
+    are considered, and of those only ones older than :data:`STALE_AFTER_S` whose writer
+    is gone: its process no longer runs on this host, or the process id is this
+    process's and this process is not writing it. A concurrent writer's temporary is
+    never touched. A file that cannot be removed (permissions, a race with another cleaner)
+    is left; this never fails the write that triggered it.
+    """
+    target = Path(target)
+    # Linux process ids are below 2**22: at most 7 digits.
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.(?P<pid>[1-9][0-9]{{0,6}})\.[0-9a-f]{{16}}\.tmp")
+    removed: list[Path] = []
+    try:
+        with os.scandir(target.parent) as listing:
+            entries = list(listing)
+    except OSError:
+        return removed  # a folder we cannot list: write_atomic reports what matters about it
+    now, me = time.time(), os.getpid()
+    with _writing_lock:  # after listing: a temporary listed while being written is still in the set
+        writing = set(_writing)
+    for entry in entries:
+        match = pattern.fullmatch(entry.name)
+        if match is None or entry.name in writing:
+            continue
+        pid = int(match["pid"])
+        if pid != me and _running(pid):
+            continue
+        try:
+            if not entry.is_file(follow_symlinks=False) or now - entry.stat(follow_symlinks=False).st_mtime < STALE_AFTER_S:
+                continue
+            os.unlink(entry.path)
+        except OSError:
+            continue
+        removed.append(Path(entry.path))
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists on this host (a zombie counts: it may not be reaped yet)."""
+    try:
+        os.kill(pid, 0)  # signal 0: existence and permission check only
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # someone else's process
+    return True
