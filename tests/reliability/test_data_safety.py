@@ -134,20 +134,20 @@ def _dead_pid() -> int:
 def test_only_stale_temporaries_of_the_target_are_removed(tmp_path) -> None:
     target = tmp_path / "cal.toml"
     dead, alive, me = _dead_pid(), os.getppid(), os.getpid()
-    stale = [f".cal.toml.{dead}.{'0123456789abcdef'}.tmp",
-             f".cal.toml.{me}.{'fedcba9876543210'}.tmp"]  # this process's id, not being written: an earlier process's
-    kept = [f".cal.toml.{alive}.{'0123456789abcdef'}.tmp",  # its writer still runs
-            f".other.toml.{dead}.{'0123456789abcdef'}.tmp",  # another target's
-            f".cal.toml.{dead}.{'0123456789ABCDEF'}.tmp", f".cal.toml.{dead}.notes.tmp", f"cal.toml.{dead}.0123456789abcdef.tmp",
+    stale = [f".cal.toml.{dead}.0123456789abcdef.tmp",
+             f".cal.toml.{me}.fedcba9876543210.tmp"]  # this process's id, not being written: an earlier process's
+    kept = [f".cal.toml.{alive}.0123456789abcdef.tmp",  # its writer still runs
+            f".other.toml.{dead}.0123456789abcdef.tmp",  # another target's
+            f".cal.toml.{dead}.0123456789ABCDEF.tmp", f".cal.toml.{dead}.notes.tmp", f"cal.toml.{dead}.0123456789abcdef.tmp",
             ".cal.toml.tmp", ".cal.toml.ab12cd34.tmp", ".cal.toml.0.0123456789abcdef.tmp"]  # not names write_atomic makes
     for name in stale + kept:
         (tmp_path / name).write_bytes(b"half")
         _age(tmp_path / name)
-    fresh = tmp_path / f".cal.toml.{dead}.{'00000000000000ff'}.tmp"  # possibly a writer this host cannot see
+    fresh = tmp_path / f".cal.toml.{dead}.00000000000000ff.tmp"  # possibly a writer this host cannot see
     fresh.write_bytes(b"half")
-    directory = tmp_path / f".cal.toml.{dead}.{'0000000000000001'}.tmp"
+    directory = tmp_path / f".cal.toml.{dead}.0000000000000001.tmp"
     directory.mkdir()
-    link = tmp_path / f".cal.toml.{dead}.{'0000000000000002'}.tmp"
+    link = tmp_path / f".cal.toml.{dead}.0000000000000002.tmp"
     link.symlink_to(tmp_path / stale[0])
     for path in (directory, link):
         _age(path)
