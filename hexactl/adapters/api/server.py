@@ -5,15 +5,14 @@ REQ and DEALER clients both work: the reply goes back with the request's envelop
 oversized or multipart, gets exactly one reply, and nothing a client sends stops the
 thread: a handler exception becomes an ``internal_error`` reply and is logged.
 
-Threading: the socket belongs to the server thread after :meth:`ApiServer.start`. It
-sleeps in ``zmq.Poller.poll`` and wakes on requests or every :data:`POLL_INTERVAL_MS`
-to see whether it should stop.
+Threading (:class:`~hexactl.adapters.api.socket_thread.SocketThread`): the socket belongs
+to the server thread after :meth:`ApiServer.start`. It sleeps in ``zmq.Poller.poll`` and
+wakes on requests or every :data:`POLL_INTERVAL_MS` to see whether it should stop.
 """
 
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -21,6 +20,7 @@ import zmq
 
 from hexactl.adapters.api.messages import Request
 from hexactl.adapters.api.security import CurveServer
+from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import (
     MAX_REQUEST_BYTES,
     TRANSPORT_MAX_BYTES,
@@ -73,8 +73,12 @@ def answer(body: list[bytes], handle: Handler) -> bytes:
         return encode(error_reply(request_id, ErrorCode.INTERNAL_ERROR, "internal error: the reply held a non-finite number"))
 
 
-class ApiServer:
-    """Serve ``handle`` on a ROUTER bound to ``endpoint`` (``tcp://HOST:*`` picks a free port)."""
+class ApiServer(SocketThread):
+    """Serve ``handle`` on a ROUTER bound to ``endpoint`` (``tcp://HOST:*`` picks a free port);
+    :meth:`close` stops the thread within :data:`POLL_INTERVAL_MS` and closes the socket.
+
+    :raises zmq.ZMQError: the endpoint is malformed or in use
+    """
 
     def __init__(
         self,
@@ -84,32 +88,10 @@ class ApiServer:
         curve: CurveServer | None = None,
     ) -> None:
         self._handle = handle
-        self._stopping = threading.Event()
-        self._socket = context.socket(zmq.ROUTER)
-        self._socket.linger = 0
-        self._socket.setsockopt(zmq.MAXMSGSIZE, TRANSPORT_MAX_BYTES)
-        if curve is not None:
-            curve.secure(self._socket)
-        try:
-            self._socket.bind(endpoint)
-        except zmq.ZMQError:
-            self._socket.close()
-            raise
-        self.endpoint: str = self._socket.getsockopt_string(zmq.LAST_ENDPOINT)
-        """Where it is bound, with the port chosen for ``*``."""
-        self._thread = threading.Thread(target=self._serve, name="hexactl-api", daemon=True)
+        super().__init__(context, zmq.ROUTER, endpoint, name="hexactl-api",
+                         options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES}, curve=curve)
 
-    def start(self) -> None:
-        self._thread.start()
-
-    def close(self) -> None:
-        """Stop the thread (within :data:`POLL_INTERVAL_MS`) and close the socket."""
-        self._stopping.set()
-        if self._thread.is_alive():
-            self._thread.join()
-        self._socket.close()
-
-    def _serve(self) -> None:
+    def _run(self) -> None:
         poller = zmq.Poller()
         poller.register(self._socket, zmq.POLLIN)
         while not self._stopping.is_set():

@@ -12,7 +12,6 @@ would take ~2 µs; not worth a dependency at 50 Hz), plus building the record.
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -20,6 +19,7 @@ from typing import Any
 import zmq
 
 from hexactl.adapters.api.security import CurveServer
+from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import encode
 
 DEFAULT_TELEMETRY_ENDPOINT = "tcp://127.0.0.1:5556"
@@ -37,12 +37,16 @@ def telemetry_message(record: dict[str, Any]) -> bytes:
     return TOPIC + encode(record)
 
 
-class TelemetryPublisher:
-    """Publish ``record()`` at ``rate_hz`` on a PUB bound to ``endpoint``.
+class TelemetryPublisher(SocketThread):
+    """Publish ``record()`` at ``rate_hz`` on a PUB bound to ``endpoint`` (``tcp://HOST:*``
+    picks a free port) from its own thread, between :meth:`start` and :meth:`close`.
 
     ``record`` runs in the publisher's thread and must be cheap (the GIL is shared with
     the control loop); an exception from it is logged (first occurrence and then every
     thousandth) and that period is skipped.
+
+    :raises ValueError: ``rate_hz`` outside (0, :data:`MAX_TELEMETRY_RATE_HZ`]
+    :raises zmq.ZMQError: the endpoint is malformed or in use
     """
 
     def __init__(
@@ -57,30 +61,10 @@ class TelemetryPublisher:
             raise ValueError(f"telemetry rate {rate_hz} Hz outside (0, {MAX_TELEMETRY_RATE_HZ:g}]")
         self._record = record
         self._period_s = 1.0 / rate_hz
-        self._stopping = threading.Event()
         self._failures = 0
-        self._socket = context.socket(zmq.PUB)
-        self._socket.linger = 0
-        self._socket.sndhwm = _SEND_HIGH_WATER_MARK
-        if curve is not None:
-            curve.secure(self._socket)
-        try:
-            self._socket.bind(endpoint)
-        except zmq.ZMQError:
-            self._socket.close()
-            raise
-        self.endpoint: str = self._socket.getsockopt_string(zmq.LAST_ENDPOINT)
         self.published = 0
-        self._thread = threading.Thread(target=self._run, name="hexactl-telemetry", daemon=True)
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def close(self) -> None:
-        self._stopping.set()
-        if self._thread.is_alive():
-            self._thread.join()
-        self._socket.close()
+        super().__init__(context, zmq.PUB, endpoint, name="hexactl-telemetry",
+                         options={zmq.SNDHWM: _SEND_HIGH_WATER_MARK}, curve=curve)
 
     def _run(self) -> None:
         deadline = time.monotonic()

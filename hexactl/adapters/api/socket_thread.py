@@ -1,0 +1,72 @@
+"""A ZeroMQ socket served by a thread of its own: the lifecycle the command server and the
+telemetry publisher share.
+
+The socket is made and bound when the object is made (so a bad or busy endpoint is an
+error there, with nothing left open), served by one daemon thread from :meth:`start`,
+and closed by :meth:`close` once the thread has stopped. Between the two the socket
+belongs to that thread: ZeroMQ sockets are not thread-safe.
+"""
+
+from __future__ import annotations
+
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+
+import zmq
+
+from hexactl.adapters.api.security import CurveServer
+
+
+class SocketThread(ABC):
+    """A socket of ``kind`` bound to ``endpoint`` (``tcp://HOST:*`` picks a free port),
+    with ``options`` (``zmq`` option → value) and CURVE when ``curve`` is given, and a
+    thread named ``name`` running :meth:`_run`.
+
+    Subclasses implement :meth:`_run`: it owns ``self._socket`` and returns soon after
+    ``self._stopping`` is set, which bounds how long :meth:`close` waits.
+
+    :raises zmq.ZMQError: the endpoint is malformed or in use (the socket is closed)
+    """
+
+    def __init__(
+        self,
+        context: zmq.Context,
+        kind: int,
+        endpoint: str,
+        *,
+        name: str,
+        options: Mapping[int, int] | None = None,
+        curve: CurveServer | None = None,
+    ) -> None:
+        self._stopping = threading.Event()
+        self._socket = context.socket(kind)
+        try:
+            self._socket.linger = 0  # closing drops what is unsent: a peer that is gone must not hold up shutdown
+            for option, value in (options or {}).items():
+                self._socket.setsockopt(option, value)
+            if curve is not None:
+                curve.secure(self._socket)
+            self._socket.bind(endpoint)
+        except BaseException:
+            self._socket.close()
+            raise
+        self.endpoint: str = self._socket.getsockopt_string(zmq.LAST_ENDPOINT)
+        """Where it is bound, with the port chosen for ``*``."""
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> None:
+        """Start serving in the thread."""
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop the thread (as soon as :meth:`_run` sees ``_stopping``), then close the
+        socket. Also for an object never started, and more than once."""
+        self._stopping.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        self._socket.close()
+
+    @abstractmethod
+    def _run(self) -> None:
+        """The thread's work, until ``self._stopping`` is set."""

@@ -1,0 +1,56 @@
+"""The lifecycle the command server and the telemetry publisher share
+(:class:`~hexactl.adapters.api.socket_thread.SocketThread`): bound when made, a busy
+endpoint refused with nothing left open, one thread from ``start`` to ``close``, and
+``close`` safe before ``start`` and twice."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+
+import pytest
+import zmq
+
+from hexactl.adapters.api.server import ApiServer
+from hexactl.adapters.api.socket_thread import SocketThread
+from hexactl.adapters.api.telemetry import TelemetryPublisher
+from tests.api.support import LOCAL
+
+WAIT_S = 30.0  # only turns a hang into a failure
+
+MAKERS: dict[str, Callable[[zmq.Context, str], SocketThread]] = {
+    "api": lambda context, endpoint: ApiServer(context, endpoint, lambda request: {"message": "hello"}),
+    "telemetry": lambda context, endpoint: TelemetryPublisher(context, endpoint, lambda: {"t": 0.0}),
+}
+
+
+def terminated(context: zmq.Context) -> bool:
+    """Whether ``context`` terminates, which it does only once all its sockets are closed."""
+    terminating = threading.Thread(target=context.term, daemon=True)
+    terminating.start()
+    terminating.join(WAIT_S)
+    return not terminating.is_alive()
+
+
+@pytest.mark.parametrize("make", MAKERS.values(), ids=MAKERS)
+def test_one_thread_from_start_to_close_then_the_socket_is_closed(make) -> None:
+    context = zmq.Context()
+    served = make(context, LOCAL)
+    assert served.endpoint.startswith("tcp://127.0.0.1:") and not served.endpoint.endswith(":*")
+    before = set(threading.enumerate())
+    served.start()
+    (thread,) = set(threading.enumerate()) - before
+    served.close()
+    assert not thread.is_alive()
+    served.close()  # a second close does nothing
+    assert terminated(context)
+
+
+@pytest.mark.parametrize("make", MAKERS.values(), ids=MAKERS)
+def test_a_busy_endpoint_is_refused_with_nothing_left_open(make) -> None:
+    context = zmq.Context()
+    first = make(context, LOCAL)
+    with pytest.raises(zmq.ZMQError):
+        make(context, first.endpoint)
+    first.close()  # never started
+    assert terminated(context)  # the refused one's socket was closed too
