@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 from hexactl.adapters.api.client import HexactlClient
-from tests.api.test_service import WAIT_S, enable, wait_for
+from tests.api.support import serve_process
+from tests.api.test_service import WAIT_S, wait_for
+from tests.reliability.support import enable
 
 
 def spawned_children(pid: int) -> list[int]:
@@ -25,17 +25,7 @@ def spawned_children(pid: int) -> list[int]:
 
 
 def test_the_service_stops_safely_when_its_api_process_dies(tmp_path: Path) -> None:
-    api, telemetry = f"ipc://{tmp_path}/api", f"ipc://{tmp_path}/telemetry"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry],
-        stderr=subprocess.PIPE, text=True, cwd=tmp_path, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        log = []
-        for line in process.stderr:
-            log.append(line)
-            if "API on" in line:
-                break
+    with serve_process(tmp_path) as (process, api, _, log):
         with HexactlClient(api, timeout_s=WAIT_S) as client:
             enable(client)
             client.call("move", pose=[0, 0, 30, 0, 0, 0], duration=5.0)  # under way when the API dies
@@ -43,9 +33,6 @@ def test_the_service_stops_safely_when_its_api_process_dies(tmp_path: Path) -> N
         os.kill(api_pid, signal.SIGKILL)
         log += process.stderr.readlines()
         assert process.wait(WAIT_S) == 1
-    finally:
-        if process.poll() is None:
-            process.kill()
     text = "".join(log)
     for expected in ("the API process died (exit status -9): shutting down", "actuators disabled", "stopped"):
         assert expected in text, text
