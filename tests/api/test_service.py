@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
+from hexactl.adapters.api.client import HexactlClient, TelemetrySubscriber
 from hexactl.adapters.api.messages import StatusReply, Telemetry
 from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create_keys
 from hexactl.adapters.cli.main import main
@@ -51,7 +51,7 @@ def running(data_dir) -> Iterator[Service]:
 
 @pytest.fixture
 def client(running) -> Iterator[HexactlClient]:
-    with HexactlClient(running.api_endpoint) as client:
+    with HexactlClient(running.api_endpoint, timeout_s=WAIT_S) as client:
         yield client
 
 
@@ -61,22 +61,12 @@ def status(client: HexactlClient) -> dict:
     return reply["status"]
 
 
-def enable(client: HexactlClient) -> None:
-    def attempt() -> bool:
-        try:
-            client.call("enable")
-        except CommandError as error:
-            if error.code == "already_enabled":
-                return True
-            assert error.code == "heartbeat_missing", error  # actuators still booting
-            return False
-        return True
-
-    wait_for(attempt, "the actuators to enable")
-
-
 def at_rest(client: HexactlClient) -> dict | None:
+    """The status record once the platform is at rest with no sequence playing, else None.
+    AssertionError at once if a fault or E-stop latched instead: the platform is at rest
+    then too, but held wherever the fault caught it."""
     record = status(client)
+    assert record["state"] == "enabled", f"{record['state']} latched: {record['faults']}"
     return record if record["motion"] == "holding" and record["sequence"] is None else None
 
 
@@ -93,31 +83,47 @@ def test_telemetry_records_from_the_real_controller(running) -> None:
     assert record.state in ("disabled", "enabled")
 
 
-def test_move_play_record_estop_reset(client, data_dir) -> None:
-    enable(client)
-    moved = client.call("move", pose=[0, 0, 20, 0, 0, 2], duration=0.5)
-    assert moved["goal"] == pytest.approx([0, 0, 20, 0, 0, 2])
-    record = wait_for(lambda: at_rest(client), "the move to end")
-    assert record["pose_command"] == pytest.approx([0, 0, 20, 0, 0, 2], abs=1e-6)
-    assert record["pose_measured"] == pytest.approx([0, 0, 20, 0, 0, 2], abs=0.05)  # 1 µm sensor steps
+def test_move_play_record_estop_reset(running, client, data_dir) -> None:
+    """The motion commands through the whole service. On a loaded host the loop can be
+    held up past the simulated actuators' watchdog, which then stops the platform (all
+    six latch COMM_TIMEOUT): such an attempt is run again, at most three in all; any
+    other failure fails (``tolerating_loop_stalls``, docs/reliability.md)."""
+    # tests.reliability.support builds on this module's helpers: imported once both are loaded.
+    from tests.reliability.support import recover, tolerating_loop_stalls
 
-    sequence = {"name": "hop", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0], "dwell": 0.05}, {"pose": [0] * 6, "dwell": 0.05}]}
-    played = client.call("play", sequence=sequence)
-    assert (played["name"], played["waypoints"]) == ("hop", 2)
-    wait_for(lambda: at_rest(client), "the sequence to end")
-    saved = client.call("save_recording", path="hop.csv")
-    assert (saved["name"], saved["status"], saved["records"]) == ("hop", "finished", 2)
-    assert len((data_dir / "hop.csv").read_text().splitlines()) == 3
+    goal = [0, 0, 20, 0, 0, 2]
+    recording = data_dir / "hop.csv"
 
-    refused = client.request("move", pose=[700, 0, 0, 0, 0, 0])
-    assert refused["error"]["code"] == "path_violation"
-    assert refused["error"]["details"]["violations"][0]["axis"] == "x"
+    def scenario() -> None:
+        recover(client)  # enabled (waiting for the actuators to boot) and at rest, whatever an attempt left
+        moved = client.call("move", pose=goal, duration=0.5)
+        assert moved["goal"] == pytest.approx(goal)
+        record = wait_for(lambda: at_rest(client), "the move to end")
+        assert record["pose_command"] == pytest.approx(goal, abs=1e-6)
+        # The feedback trails the last set-points by a few cycles, more on a loaded host: wait for it.
+        wait_for(lambda: at_rest(client)["pose_measured"] == pytest.approx(goal, abs=0.05),  # 1 µm sensor steps
+                 "the measured pose to reach the goal")
 
-    client.call("estop")
-    assert status(client)["state"] == "estop"
-    assert client.request("enable")["error"]["code"] == "latched"
-    client.call("reset")
-    wait_for(lambda: status(client)["state"] == "disabled", "the reset")
+        sequence = {"name": "hop", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0], "dwell": 0.05}, {"pose": [0] * 6, "dwell": 0.05}]}
+        played = client.call("play", sequence=sequence)
+        assert (played["name"], played["waypoints"]) == ("hop", 2)
+        wait_for(lambda: at_rest(client), "the sequence to end")
+        saved = client.call("save_recording", path=recording.name)
+        assert (saved["name"], saved["status"], saved["records"]) == ("hop", "finished", 2)
+        assert len(recording.read_text().splitlines()) == 3
+
+        refused = client.request("move", pose=[700, 0, 0, 0, 0, 0])
+        assert refused["error"]["code"] == "path_violation"
+        assert refused["error"]["details"]["violations"][0]["axis"] == "x"
+
+        client.call("estop")
+        assert status(client)["state"] == "estop"
+        assert client.request("enable")["error"]["code"] == "latched"
+        client.call("reset")
+        wait_for(lambda: status(client)["state"] == "disabled", "the reset")
+
+    # A failed attempt's recording would make the next one's save_recording file_exists.
+    tolerating_loop_stalls(scenario, lambda: running.controller, cleanup=lambda: recording.unlink(missing_ok=True))
 
 
 def test_non_loopback_bind_without_curve_is_refused_before_anything_starts() -> None:
@@ -163,6 +169,8 @@ def test_bad_geometry_is_refused(tmp_path) -> None:
 
 
 def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) -> None:
+    from tests.reliability.support import recover  # imported here as in test_move_play_record_estop_reset
+
     api, telemetry = f"ipc://{tmp_path}/api", f"ipc://{tmp_path}/telemetry"
     process = subprocess.Popen(
         [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry],
@@ -176,7 +184,7 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
                 break
         assert main(["status", "--api", api, "--timeout", str(WAIT_S)]) == 0
         with HexactlClient(api, timeout_s=WAIT_S) as client:
-            enable(client)
+            recover(client)
         assert main(["monitor", "--once", "--telemetry", telemetry, "--timeout", str(WAIT_S)]) == 0
         assert "state          enabled, holding" in capsys.readouterr().out
         process.send_signal(signal.SIGTERM)
