@@ -4,10 +4,7 @@ shuts down cleanly on SIGTERM."""
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -20,6 +17,7 @@ from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.adapters.service import Service, ServiceConfig, ServiceError
+from tests.api.support import serve_process
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
 
@@ -171,17 +169,7 @@ def test_bad_geometry_is_refused(tmp_path) -> None:
 def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) -> None:
     from tests.reliability.support import recover  # imported here as in test_move_play_record_estop_reset
 
-    api, telemetry = f"ipc://{tmp_path}/api", f"ipc://{tmp_path}/telemetry"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry],
-        stderr=subprocess.PIPE, text=True, cwd=tmp_path, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        log = []
-        for line in process.stderr:
-            log.append(line)
-            if "API on" in line:
-                break
+    with serve_process(tmp_path) as (process, api, telemetry, log):
         assert main(["status", "--api", api, "--timeout", str(WAIT_S)]) == 0
         with HexactlClient(api, timeout_s=WAIT_S) as client:
             recover(client)
@@ -190,9 +178,6 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
         process.send_signal(signal.SIGTERM)
         log += process.stderr.readlines()
         assert process.wait(WAIT_S) == 0
-    finally:
-        if process.poll() is None:
-            process.kill()
     text = "".join(log)
     for expected in ("nominal geometry 'hexactl nominal 1500/900'", "no calibration", "actuators: six simulated", f"API on {api}",
                      "SIGTERM: shutting down", "actuators disabled", "stopped"):

@@ -106,7 +106,7 @@ class LinkConfig:
     :ivar watchdog_cycles: loop cycles without a valid set-point before an actuator stops with
         COMM_TIMEOUT, sent with every ENABLE (3..100)
     :ivar heartbeat_timeout_s: an actuator that sent nothing for this long is reported silent
-        in :meth:`CanActuatorLink.link_health` (PROTOCOL.md: lost after 300 ms)
+        in :meth:`CanActuatorLink.link_health` (the link's diagnostic; the loop's supervision decides, PROTOCOL.md section 7)
     :ivar max_frames_per_read: bound on the frames one :meth:`CanActuatorLink.read_feedback` drains
     :ivar command_retry_s: a command unacknowledged for this long is sent again (same sequence)
     :ivar command_retries: retries before the command is given up and counted as timed out
