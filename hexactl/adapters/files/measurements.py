@@ -97,12 +97,8 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
     problems: list[RowProblem] = []
     legs, readings, lines, values = [], [], [], []
     for number, line in rows:
-        fields = next(csv.reader([line]))
-        if len(fields) != len(header):
-            problems.append(RowProblem(number, f"has {len(fields)} fields, the header has {len(header)}"))
-            continue
-        numbers, row_problems = _numbers(fields, position, required)
-        leg = numbers["leg"]
+        fields, numbers, row_problems = _row(line, position, required)
+        leg = numbers.get("leg", 0.0)
         if not row_problems and not (leg == int(leg) and 0 <= leg <= LEG_COUNT):
             row_problems.append(f"leg {fields[position['leg']].strip()!r} must be 0 (none locked) or a leg 1-{LEG_COUNT}")
         if row_problems:
@@ -152,11 +148,7 @@ def parse_point_rows(text: str, source: str, feature_point_count: int) -> PointR
     position = {name: index for index, name in enumerate(header)}
     points, lines, problems = [], [], []
     for number, line in rows:
-        fields = next(csv.reader([line]))
-        if len(fields) != len(header):
-            problems.append(RowProblem(number, f"has {len(fields)} fields, the header has {len(header)}"))
-            continue
-        numbers, row_problems = _numbers(fields, position, names)
+        _, numbers, row_problems = _row(line, position, names)
         if row_problems:
             problems.append(RowProblem(number, "; ".join(row_problems)))
             continue
@@ -190,15 +182,19 @@ def _check_point_count(count: int, source: str, feature_point_count: int) -> Non
             f"{feature_point_count} ([measurement] feature_points)")
 
 
-def _numbers(fields: Sequence[str], position: dict[str, int], names: Sequence[str]) -> tuple[dict[str, float], list[str]]:
-    """The row's values of the columns ``names``, and a problem sentence per bad one."""
+def _row(line: str, position: dict[str, int], names: Sequence[str]) -> tuple[list[str], dict[str, float], list[str]]:
+    """A data line's fields, the values of the columns ``names`` and a problem sentence per
+    bad one (or the one problem of a line whose field count is not the header's)."""
+    fields = next(csv.reader([line]))
+    if len(fields) != len(position):
+        return fields, {}, [f"has {len(fields)} fields, the header has {len(position)}"]
     numbers, problems = {}, []
     for name in names:
         value, problem = _number(fields[position[name]], name)
         if problem:
             problems.append(problem)
         numbers[name] = value
-    return numbers, problems
+    return fields, numbers, problems
 
 
 def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:
