@@ -23,9 +23,12 @@ the API ROUTER — and, for ``--seconds``:
   the whole machine, so the loop gets the same power-management setting.
 
 Configurations (``--configs``, see :data:`CONFIGURATIONS`): ``normal``; ``fifo``, the
-loop thread alone at SCHED_FIFO ``--fifo-priority`` P; ``fifo-all``, also the service's
-other Python threads at P-1. Priorities are set from outside, by thread id (what
-``chrt -p PRIO TID`` does): the service has no option for the loop's real-time settings.
+loop thread alone at SCHED_FIFO ``--fifo-priority`` P; ``fifo-all``, also the other
+Python threads of the loop's process (the simulated firmwares') at P-1, which is what
+``hexactl serve --fifo P`` does. Priorities are set from outside, by thread id (what
+``chrt -p PRIO TID`` does), so that ``fifo`` can leave the others out. The service's API
+process (command server, planning, telemetry) runs with normal scheduling in every
+configuration.
 
 What is reported, per run: cycles, missed (woke more than half a period late) and
 skipped, counted over the measured interval only; lateness and compute percentiles from
@@ -33,8 +36,8 @@ the service's own loop statistics, which keep the last ``stats_window`` cycles (
 at 500 Hz, 16.4 s at 1 kHz), read in consecutive windows that cover the interval — the
 table shows the worst window's figure; the maxima cover the service's whole life
 (start-up included). Compute is the loop's wall-clock time from wake-up to the end of the
-cycle's work, so it includes waiting for the GIL while the service's other threads (API,
-telemetry, simulator) hold it. cyclictest's percentiles come from its 1 µs histogram over
+cycle's work, so it includes waiting for the GIL while the other threads of the loop's
+process (the simulated firmwares') hold it. cyclictest's percentiles come from its 1 µs histogram over
 the whole interval. The goals of the issue are checked and printed PASS/FAIL (missed
 cycles at 500 Hz only, as the issue states it; compute at its p99).
 
@@ -95,8 +98,8 @@ CONFIGURATIONS = {
     "normal": Scheduling(False, False, "every thread of the service and cyclictest SCHED_OTHER"),
     "fifo": Scheduling(True, False, "the loop thread and cyclictest SCHED_FIFO P, the service's other threads "
                        "SCHED_OTHER"),
-    "fifo-all": Scheduling(True, True, "as fifo, and the service's other Python threads (API, telemetry, simulator) "
-                           "SCHED_FIFO P-1: hexactl/control/realtime.py's advice against GIL priority inversion"),
+    "fifo-all": Scheduling(True, True, "as fifo, and the other Python threads of the loop's process (the simulated "
+                           "firmwares') SCHED_FIFO P-1: hexactl/control/realtime.py's advice against GIL priority inversion"),
 }
 
 MOVE_PHASE_S = 8.0

@@ -9,9 +9,10 @@ what remains beside the loop are short bursts that end by blocking: with the sim
 the simulated firmwares answering each cycle's frames. Once a thread asks for the GIL, the
 holder gives it up after at most ``switch_interval_s`` (plus its longest C call). The
 interval is set longer than a cycle with its spin and exchange (1 ms against about
-0.6 ms): a cycle is then never forced off the GIL halfway for such a burst (at 0.1 ms,
-every frame the simulator answered stole the GIL from the cycle that sent it), while a
-thread that would not let go still delays the loop by at most 1 ms. A thread that the
+0.6 ms): a cycle is then never forced off the GIL halfway for such a burst (at 0.1 ms the
+simulator, woken by the cycle's first frames, could take it before the cycle ends), while
+a thread that would not let go still delays the loop by at most 1 ms. Measured
+(BENCHMARKS.md), 0.1, 1 and 5 ms differ by less than the run-to-run noise. A thread that the
 kernel preempts *while holding the GIL* stalls the loop for as long as it is preempted —
 a priority inversion SCHED_FIFO on the loop alone cannot prevent: run the process's
 other threads at a SCHED_FIFO priority just below the loop's (``hexactl serve --fifo``
