@@ -204,6 +204,9 @@ class LoopExchange:
         self._reports.close()
 
     def _publish(self) -> None:
+        if not self._writer.flush():  # the previous report is still unfinished: do not pickle this one
+            self.reports_dropped += 1
+            return
         report = PublishedReport(self._thread.report(STATS_MAX_AGE_S), self._probe() if self._probe else None)
         if not self._writer.offer(pickle.dumps(report, protocol=pickle.HIGHEST_PROTOCOL)):
             self.reports_dropped += 1
