@@ -70,8 +70,8 @@ class LoopThread:
     """The control core and its loop thread in this process (a :class:`LoopHost`).
 
     Construction runs one cycle at ``clock_ns()``, so the snapshot exists and the
-    commanded pose starts where the actuators are. ``slack_work`` runs in the loop thread
-    after cycles with slack (see :class:`~hexactl.control.loop.ControlLoop`).
+    commanded pose starts where the actuators are. Work for the loop thread's slack goes
+    in ``loop.exchange`` before the thread starts (see :class:`~hexactl.control.loop.ControlLoop`).
     """
 
     def __init__(self, hardware: ActuatorInterface, active: ActiveGeometry, config: ControllerConfig,
