@@ -80,7 +80,11 @@ class _FrameReader:
         self._fd = fd
         self._buffer = bytearray()
         self.closed = False
-        """True once the writer's end is closed and everything it wrote has been taken."""
+        """True once the writer's end is closed and everything it wrote has been taken, or
+        the stream is :attr:`corrupt`."""
+        self.corrupt: str | None = None
+        """Why the stream cannot be read on (a header no writer of ours sends); it is then
+        closed: nothing after a broken frame boundary can be trusted to be a frame."""
 
     def frames(self, limit: int) -> list[bytes]:
         """At most ``limit`` complete frames; never waits (reads at most
@@ -101,7 +105,12 @@ class _FrameReader:
         buffer = self._buffer
         while len(frames) < limit and len(buffer) >= _HEADER.size:
             (size,) = _HEADER.unpack_from(buffer)
-            if size < 0 or len(buffer) < _HEADER.size + size:
+            if size < 0:  # multiprocessing frames ≥ 2 GiB as -1 and a longer header; ours are far smaller
+                self.corrupt = f"a frame header of length {size}"
+                self.closed = True
+                buffer.clear()
+                break
+            if len(buffer) < _HEADER.size + size:
                 break
             frames.append(bytes(buffer[_HEADER.size:_HEADER.size + size]))
             del buffer[:_HEADER.size + size]
@@ -172,8 +181,13 @@ class LoopExchange:
     @property
     def commands_open(self) -> bool:
         """False once the API process has closed its end (or died) and every command it
-        sent has been taken."""
+        sent has been taken, or once its stream is :attr:`corrupt`."""
         return not self._reader.closed
+
+    @property
+    def corrupt(self) -> str | None:
+        """Why the command stream was closed as unreadable (None: it was not)."""
+        return self._reader.corrupt
 
     def start(self) -> LoopExchange:
         """Publish the first report; returns self."""

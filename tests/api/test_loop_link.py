@@ -6,7 +6,9 @@ seen by the other."""
 from __future__ import annotations
 
 import multiprocessing
+import os
 import pickle
+import struct
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -136,3 +138,15 @@ def test_frames_arrive_whole_whatever_the_pipe_does() -> None:
     assert reader.frames(8) == [] and reader.closed
     reading.close()
     assert writer.offer(b"to nobody") is False and writer.closed
+
+
+def test_a_frame_header_no_writer_of_ours_sends_closes_the_stream(link: Link) -> None:
+    """A negative length (how multiprocessing announces a frame of 2 GiB or more, never
+    ours) would otherwise wait forever for its frame: the loop's end says the stream is
+    unreadable and closed, which ``hexactl serve`` treats as the API process gone."""
+    os.write(link.remote._commands.fileno(), struct.pack("!i", -1) + pickle.dumps("enable"))
+    link.cycle()
+    assert not link.exchange.commands_open
+    assert link.exchange.corrupt == "a frame header of length -1"
+    assert link.thread.snapshot.state.value == "disabled"  # the loop cycles on
+    link.cycle()
