@@ -2,7 +2,8 @@
 """Fuzz the command API of a real service: hostile requests, one reply each, the service
 keeps serving, the loop keeps its rate, no set-point beyond the limits reaches the bus.
 
-    python tools/fuzz_api.py --count 10000                 # the figures in BENCHMARKS.md
+    python tools/fuzz_api.py --count 10000 --fifo 80 --mlock  # the figures in BENCHMARKS.md
+    python tools/fuzz_api.py --count 10000                 # normal scheduling
     python tools/fuzz_api.py --count 500 --json fuzz.json  # the CI-sized run (tests/reliability)
 
 The target: ``Service.start`` in a child process on its simulator, enabled, so that the
@@ -70,7 +71,16 @@ from pydantic import TypeAdapter, ValidationError
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from soak import MonitoredService, calibration_variants, loop_difference  # noqa: E402
+from soak import (  # noqa: E402
+    MonitoredService,
+    Scheduling,
+    add_service_arguments,
+    calibration_variants,
+    conclude,
+    loop_difference,
+    realtime_line,
+    scheduling_from,
+)
 
 from hexactl.adapters.api.client import ServiceUnavailable  # noqa: E402
 from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, OkReply, Request  # noqa: E402
@@ -530,12 +540,12 @@ def _reply_id(frames: list[bytes]) -> Any:
         return None
 
 
-def fuzz(count: int, seed_value: int, rate_hz: int = 500) -> dict[str, Any]:
+def fuzz(count: int, seed_value: int, rate_hz: int = 500, scheduling: Scheduling = Scheduling()) -> dict[str, Any]:
     """Run ``count`` cases against a fresh monitored service; the figures."""
     with tempfile.TemporaryDirectory(prefix="hexactl-fuzz-") as directory:
         root = Path(directory)
         files = prepare_files(root, load_geometry(default_config_path()))
-        with MonitoredService(files["data"], rate_hz) as harness:
+        with MonitoredService(files["data"], rate_hz, scheduling=scheduling) as harness:
             strategies = Strategies(harness.geometry, files)
             fuzzer = Fuzzer(harness)
             try:
@@ -575,6 +585,8 @@ def fuzz(count: int, seed_value: int, rate_hz: int = 500) -> dict[str, Any]:
                 "requests": fuzzer.sent,
                 "seconds": round(elapsed, 1),
                 "seed": seed_value,
+                "rate_hz": rate_hz,
+                "realtime": harness.realtime,
                 "by_category": outcomes,
                 "by_outcome": dict(by_outcome.most_common()),
                 "unexpected": len(fuzzer.unexpected),
@@ -601,7 +613,8 @@ def passed(result: dict[str, Any]) -> bool:
 
 def print_report(result: dict[str, Any]) -> None:
     loop, monitor = result["loop"], result["monitor"]
-    print(f"fuzz: {result['requests']} requests in {result['seconds']} s (seed {result['seed']})")
+    print(f"fuzz: {result['requests']} requests in {result['seconds']} s (seed {result['seed']}) at "
+          f"{result['rate_hz']} Hz; {realtime_line(result['realtime'])}")
     print("  outcomes by error code:")
     for outcome, number in result["by_outcome"].items():
         print(f"    {outcome:30s} {number}")
@@ -628,15 +641,10 @@ def print_report(result: dict[str, Any]) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", type=int, default=10_000, help="hostile requests to send")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--rate", type=int, default=500, choices=(500, 1000), help="loop rate, Hz")
-    parser.add_argument("--json", type=Path, help="also write the figures here")
+    add_service_arguments(parser)
     arguments = parser.parse_args(argv)
-    result = fuzz(arguments.count, arguments.seed, arguments.rate)
-    print_report(result)
-    if arguments.json:
-        arguments.json.write_text(json.dumps(result, indent=2) + "\n")
-    return 0 if passed(result) else 1
+    result = fuzz(arguments.count, arguments.seed, arguments.rate, scheduling_from(arguments))
+    return conclude(result, arguments, print_report, passed)
 
 
 if __name__ == "__main__":

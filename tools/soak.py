@@ -2,7 +2,8 @@
 """Soak the whole service: sequences played back to back with API traffic beside them,
 for ``--minutes`` at ``--rate`` Hz, every set-point checked by an independent bus monitor.
 
-    python tools/soak.py --minutes 10                  # the figures in BENCHMARKS.md
+    python tools/soak.py --minutes 10 --fifo 80 --mlock   # the figures in BENCHMARKS.md
+    python tools/soak.py --minutes 10                     # normal scheduling
     python tools/soak.py --seconds 20 --json soak.json
 
 What runs, in a child process: ``Service.start`` on its simulator (six simulated actuator
@@ -10,8 +11,9 @@ firmwares on a private ``virtual:`` bus) and a
 :class:`~hexactl.adapters.can.bus_monitor.BusMonitor` on that bus. The operator (this
 process's main thread) keeps the platform enabled and playing: the built-in sequences and a seeded
 inline one in turn, each saved with ``save_recording`` when it ends; every
-``--swap-every`` seconds it loads a calibration variant (zero lengths off by up to 1 mm)
-or rolls it back, while the sequence plays. A second client, in its own thread, asks
+``--swap-every`` seconds it loads a calibration variant (zero lengths off by up to 1 mm),
+sends a bad one (:func:`bad_calibrations`: it must be refused with its code), rolls the
+variant back, sends another bad one, and so on, while the sequence plays. A second client, in its own thread, asks
 ``status`` and ``validate_pose`` (a random pose in the envelope) at ``--traffic-hz``, and
 a telemetry subscriber reads every record.
 
@@ -20,8 +22,11 @@ and compute percentiles over the loop's recent window and the maxima over the ru
 guard clamps), the requests by command and outcome, the faults the controller latched
 (each recovered with ``reset`` and ``enable``, and counted), and the monitor's counts.
 
-Exit status 0 when the monitor saw no violation, every request was answered and none
-failed with ``internal_error``; 1 otherwise. Missed cycles and faults are reported, not
+``--fifo PRIO`` and ``--mlock`` run the service's process as ``hexactl serve`` runs with
+them (the bus monitor's thread, which shares the loop's GIL, one below the loop).
+
+Exit status 0 when the monitor saw no violation, every request was answered, none
+failed with ``internal_error`` and every bad calibration was refused with its code; 1 otherwise. Missed cycles and faults are reported, not
 judged: they depend on the machine.
 
 :class:`MonitoredService` (service + monitor + operator client) is also what
@@ -41,6 +46,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import asdict, dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
@@ -49,9 +55,9 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber  # noqa: E402
-from hexactl.adapters.can.bus_monitor import BusMonitor  # noqa: E402
+from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME, BusMonitor  # noqa: E402
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_to_toml, load_geometry  # noqa: E402
-from hexactl.adapters.service import Service, ServiceConfig, ServiceError  # noqa: E402
+from hexactl.adapters.service import Service, ServiceConfig, ServiceError, fifo_for_threads  # noqa: E402
 from hexactl.adapters.spawned import STOP, Spawned, SpawnError  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
@@ -65,6 +71,16 @@ START_TIMEOUT_S = 60.0
 MONITOR = "monitor"  # the request for the monitor's figures
 
 
+@dataclass(frozen=True)
+class Scheduling:
+    """How the service's process runs (``hexactl serve --fifo/--mlock``): ``fifo_priority``
+    SCHED_FIFO for the loop thread, one below for the simulator's and the bus monitor's
+    threads (None: normal scheduling); ``lock_memory``: mlockall."""
+
+    fifo_priority: int | None = None
+    lock_memory: bool = False
+
+
 class MonitoredService:
     """The service on its simulator with a bus monitor on its bus from before the first
     enable, both in a child process of their own (as ``hexactl serve`` would run, so
@@ -74,18 +90,21 @@ class MonitoredService:
     ``data_dir``: the service's only data directory.
     """
 
-    def __init__(self, data_dir: Path, rate_hz: int = 500, config_path: Path | None = None) -> None:
+    def __init__(self, data_dir: Path, rate_hz: int = 500, config_path: Path | None = None,
+                 scheduling: Scheduling = Scheduling()) -> None:
         self.data_dir = data_dir
         self.rate_hz = rate_hz
         self.geometry = load_geometry(config_path or default_config_path())
         config = ServiceConfig(config_path=config_path, api_endpoint=LOCAL, telemetry_endpoint=LOCAL,
-                               data_dirs=(data_dir,), rate_hz=rate_hz, log_level="WARNING")
+                               data_dirs=(data_dir,), rate_hz=rate_hz, log_level="WARNING",
+                               fifo_priority=scheduling.fifo_priority, lock_memory=scheduling.lock_memory)
         try:
             self._child = Spawned(_serve_monitored, (config, self.geometry), name="monitored service", daemon=False,
                                   start_timeout_s=START_TIMEOUT_S)  # fmt: skip
         except SpawnError as error:
             raise SystemExit(f"the service did not start: {error}") from None
-        self.api_endpoint, self.telemetry_endpoint = self._child.served
+        self.api_endpoint, self.telemetry_endpoint, self.realtime = self._child.served
+        """``realtime``: what the loop's thread obtained (:class:`~hexactl.control.realtime.RealtimeReport` as a dict)."""
         self.operator = HexactlClient(self.api_endpoint, timeout_s=REQUEST_TIMEOUT_S)
         self.recoveries: Counter[str] = Counter()
         """Why the platform had to be enabled again: ``estop``, ``disabled`` or the first latched
@@ -160,8 +179,11 @@ def _serve_monitored(config: ServiceConfig, geometry: Geometry, control: Connect
         control.send(str(error))
         return
     monitor = BusMonitor(service.simulator.bus_spec, geometry, config.rate_hz).start()
+    if config.fifo_priority is not None:  # the monitor's reader shares the loop's GIL, as the simulator's does
+        fifo_for_threads(max(1, config.fifo_priority - 1), {MONITOR_THREAD_NAME})
     try:
-        control.send((service.api_endpoint, service.telemetry_endpoint))
+        realtime = asdict(service.controller.thread.loop.realtime)
+        control.send((service.api_endpoint, service.telemetry_endpoint, realtime))
         while (word := control.recv()) != STOP:
             control.send(_monitor_figures(monitor) if word == MONITOR else word)
     except EOFError:
@@ -214,6 +236,30 @@ def calibration_variants(geometry: Geometry, seed: int, count: int) -> list[str]
     return variants
 
 
+OUTSIDE_FILE = "outside.toml"
+"""A valid calibration beside (not in) the data directory, for :func:`bad_calibrations`."""
+
+
+def bad_calibrations(geometry: Geometry) -> list[tuple[dict[str, str], str]]:
+    """``load_calibration`` requests the service must refuse: (request fields, the error
+    code it must give). Texts broken in five ways, a change too large to ramp (a zero
+    length 40 mm off), a path out of the data directory (to :data:`OUTSIDE_FILE`, which
+    should exist beside it) and one to no file."""
+    text = geometry_to_toml(geometry)
+    zero = geometry.zero_lengths
+    far = geometry.model_copy(update={"name": "40 mm off", "zero_lengths": (zero[0] + 40.0, *zero[1:])})
+    return [
+        ({"toml": text[: len(text) // 2]}, "invalid_calibration"),  # cut short
+        ({"toml": text.replace(f"zero_lengths = [{zero[0]!r}", "zero_lengths = [nan", 1)}, "invalid_calibration"),
+        ({"toml": "\n".join(line for line in text.splitlines() if not line.startswith("home"))}, "invalid_calibration"),
+        ({"toml": text + "\nsurprise = 1\n"}, "invalid_calibration"),
+        ({"toml": text.replace("stroke = [0.0, 850.0]", "stroke = [0.0, 100.0]")}, "invalid_calibration"),
+        ({"toml": geometry_to_toml(far)}, "calibration_change_too_large"),
+        ({"path": f"../{OUTSIDE_FILE}"}, "forbidden_path"),
+        ({"path": "missing.toml"}, "file_not_found"),
+    ]
+
+
 def random_pose(geometry: Geometry, rng: random.Random, fraction: float = ENVELOPE_FRACTION) -> list[float]:
     """A pose within ``fraction`` of the pose envelope (relative mm and deg)."""
     low, high = geometry.limits.pose_min, geometry.limits.pose_max
@@ -256,6 +302,33 @@ class Traffic(threading.Thread):
         self.join()
 
 
+class CalibrationSwaps:
+    """The soak's calibration changes, one per :meth:`swap`: in turn a good variant loaded,
+    a bad request, a rollback, a bad request, … The good ones count in :attr:`swaps` when
+    applied; a bad one must be refused with its code, else it counts in :attr:`bad_wrong`."""
+
+    def __init__(self, client: HexactlClient, variants: list[str], bad: list[tuple[dict[str, str], str]]) -> None:
+        self.client, self.variants, self.bad = client, variants, bad
+        self.swaps = self.bad_sent = self.bad_wrong = 0
+        self._loaded = self._bad_turn = False
+
+    def swap(self, outcomes: Counter[str]) -> None:
+        if self._bad_turn:
+            fields, code = self.bad[self.bad_sent % len(self.bad)]
+            reply = record(outcomes, self.client, "load_calibration", **fields)
+            self.bad_sent += 1
+            self.bad_wrong += bool(reply and (reply["ok"] or reply["error"]["code"] != code))
+        else:
+            if self._loaded:
+                reply = record(outcomes, self.client, "rollback_calibration")
+            else:
+                reply = record(outcomes, self.client, "load_calibration", toml=self.variants[self.swaps % len(self.variants)])
+            if reply and reply["ok"]:
+                self._loaded = not self._loaded
+                self.swaps += 1
+        self._bad_turn = not self._bad_turn
+
+
 def record(outcomes: Counter[str], client: HexactlClient, cmd: str, **fields: Any) -> dict[str, Any] | None:
     """Send a request, count its outcome as ``cmd:ok``, ``cmd:<code>`` or ``cmd:missing``."""
     try:
@@ -268,79 +341,85 @@ def record(outcomes: Counter[str], client: HexactlClient, cmd: str, **fields: An
 
 
 def soak(duration_s: float, rate_hz: int, swap_every_s: float, traffic_hz: float, seed: int,
-         progress: Callable[[str], None] = lambda line: None) -> dict[str, Any]:
+         progress: Callable[[str], None] = lambda line: None, scheduling: Scheduling = Scheduling()) -> dict[str, Any]:
     """Run the soak; the figures (see the module docstring)."""
     rng = random.Random(seed)
-    with tempfile.TemporaryDirectory(prefix="hexactl-soak-") as directory, \
-            MonitoredService(Path(directory), rate_hz) as harness:
-        operator = harness.operator
-        variants = calibration_variants(harness.geometry, seed, count=16)
-        outcomes: Counter[str] = Counter()
-        harness.ensure_enabled()
-        harness.recoveries.clear()  # the first enable is the start, not a recovery
-        harness.recovery_reasons.clear()
-        before = harness.loop_figures()
-        traffic = Traffic(harness, traffic_hz, seed + 1)
-        traffic.start()
-        start = time.monotonic()
-        next_swap = start + swap_every_s
-        next_progress = start + 60.0
-        names = [*BUILTIN_SEQUENCES, "inline"]
-        played = finished = swaps = saves = 0
-        loaded = False
-        try:
-            while (now := time.monotonic()) < start + duration_s:
-                harness.ensure_enabled()
-                current = harness.status()
-                if current["sequence"] is None and current["motion"] == "holding":
-                    if played > saves:
-                        saves += 1
-                        reply = record(outcomes, operator, "save_recording", path=f"soak-{saves}.csv")
-                        finished += bool(reply and reply["ok"] and reply["status"] == "finished")
-                    name = names[played % len(names)]
-                    sequence = inline_sequence(harness.geometry, rng, f"inline-{played}") if name == "inline" else name
-                    if (reply := record(outcomes, operator, "play", sequence=sequence)) and reply["ok"]:
-                        played += 1
-                if now >= next_swap:
-                    if loaded:
-                        reply = record(outcomes, operator, "rollback_calibration")
-                    else:
-                        reply = record(outcomes, operator, "load_calibration", toml=variants[swaps % len(variants)])
-                    if reply and reply["ok"]:
-                        loaded = not loaded
-                        swaps += 1
-                    next_swap = now + swap_every_s
-                if now >= next_progress:
-                    loop = harness.status()["loop"]
-                    progress(f"{(now - start) / 60:.1f} min: {played} sequences, {swaps} swaps, loop missed "
-                             f"{loop['missed']}, recoveries {dict(harness.recoveries)}, "
-                             f"monitor violations {harness.monitor_figures()['violations']}")
-                    next_progress = now + 60.0
-                time.sleep(0.05)
-        finally:
-            traffic.stop()
-        after = harness.loop_figures()
-        outcomes.update(traffic.outcomes)
-        return {
-            "seconds": round(time.monotonic() - start, 1),
-            "rate_hz": rate_hz,
-            "loop": loop_difference(before, after),
-            "sequences_played": played,
-            "sequences_finished": finished,
-            "calibration_swaps": swaps,
-            "telemetry_records": traffic.telemetry_records,
-            "requests": dict(sorted(outcomes.items())),
-            "requests_missing": sum(n for key, n in outcomes.items() if key.endswith(":missing")),
-            "internal_errors": sum(n for key, n in outcomes.items() if key.endswith(":internal_error")),
-            "recoveries": dict(harness.recoveries),
-            "recovery_reasons": dict(harness.recovery_reasons.most_common()),
-            "monitor": harness.monitor_figures(),
-        }
+    with tempfile.TemporaryDirectory(prefix="hexactl-soak-") as directory:
+        data = Path(directory) / "data"
+        data.mkdir()
+        with MonitoredService(data, rate_hz, scheduling=scheduling) as harness:
+            return _soak(harness, duration_s, swap_every_s, traffic_hz, rng, seed, progress)
+
+
+def _soak(harness: MonitoredService, duration_s: float, swap_every_s: float, traffic_hz: float, rng: random.Random,
+          seed: int, progress: Callable[[str], None]) -> dict[str, Any]:
+    """:func:`soak` on a running ``harness``."""
+    operator = harness.operator
+    (harness.data_dir.parent / OUTSIDE_FILE).write_text(geometry_to_toml(harness.geometry))
+    swapper = CalibrationSwaps(operator, calibration_variants(harness.geometry, seed, count=16),
+                               bad_calibrations(harness.geometry))
+    outcomes: Counter[str] = Counter()
+    harness.ensure_enabled()
+    harness.recoveries.clear()  # the first enable is the start, not a recovery
+    harness.recovery_reasons.clear()
+    before = harness.loop_figures()
+    traffic = Traffic(harness, traffic_hz, seed + 1)
+    traffic.start()
+    start = time.monotonic()
+    next_swap = start + swap_every_s
+    next_progress = start + 60.0
+    names = [*BUILTIN_SEQUENCES, "inline"]
+    played = finished = saves = 0
+    try:
+        while (now := time.monotonic()) < start + duration_s:
+            harness.ensure_enabled()
+            current = harness.status()
+            if current["sequence"] is None and current["motion"] == "holding":
+                if played > saves:
+                    saves += 1
+                    reply = record(outcomes, operator, "save_recording", path=f"soak-{saves}.csv")
+                    finished += bool(reply and reply["ok"] and reply["status"] == "finished")
+                name = names[played % len(names)]
+                sequence = inline_sequence(harness.geometry, rng, f"inline-{played}") if name == "inline" else name
+                if (reply := record(outcomes, operator, "play", sequence=sequence)) and reply["ok"]:
+                    played += 1
+            if now >= next_swap:
+                swapper.swap(outcomes)
+                next_swap = now + swap_every_s
+            if now >= next_progress:
+                loop = harness.status()["loop"]
+                progress(f"{(now - start) / 60:.1f} min: {played} sequences, {swapper.swaps} swaps, loop missed "
+                         f"{loop['missed']}, recoveries {dict(harness.recoveries)}, "
+                         f"monitor violations {harness.monitor_figures()['violations']}")
+                next_progress = now + 60.0
+            time.sleep(0.05)
+    finally:
+        traffic.stop()
+    after = harness.loop_figures()
+    outcomes.update(traffic.outcomes)
+    return {
+        "seconds": round(time.monotonic() - start, 1),
+        "rate_hz": harness.rate_hz,
+        "realtime": harness.realtime,
+        "loop": loop_difference(before, after),
+        "sequences_played": played,
+        "sequences_finished": finished,
+        "calibration_swaps": swapper.swaps,
+        "bad_calibrations_sent": swapper.bad_sent,
+        "bad_calibrations_not_refused_as_expected": swapper.bad_wrong,
+        "telemetry_records": traffic.telemetry_records,
+        "requests": dict(sorted(outcomes.items())),
+        "requests_missing": sum(n for key, n in outcomes.items() if key.endswith(":missing")),
+        "internal_errors": sum(n for key, n in outcomes.items() if key.endswith(":internal_error")),
+        "recoveries": dict(harness.recoveries),
+        "recovery_reasons": dict(harness.recovery_reasons.most_common()),
+        "monitor": harness.monitor_figures(),
+    }
 
 
 def print_report(result: dict[str, Any]) -> None:
     loop, monitor = result["loop"], result["monitor"]
-    print(f"soak: {result['seconds']} s at {result['rate_hz']} Hz")
+    print(f"soak: {result['seconds']} s at {result['rate_hz']} Hz; {realtime_line(result['realtime'])}")
     print(f"  loop: {loop['cycles']} cycles ({loop['achieved_rate_hz']} Hz achieved), missed {loop['missed']}, "
           f"skipped {loop['skipped']}, guard clamps {loop['guard_clamps']}")
     print(f"  lateness us (recent window): p50 {loop['lateness_us']['p50']:.1f} p99 {loop['lateness_us']['p99']:.1f} "
@@ -348,7 +427,9 @@ def print_report(result: dict[str, Any]) -> None:
     print(f"  compute us (recent window): p50 {loop['compute_us']['p50']:.1f} p99 {loop['compute_us']['p99']:.1f}; "
           f"max over the run {loop['compute_us']['max']:.1f}; gc runs {loop['gc_runs']}, longest {loop['gc_max_us']:.1f} us")
     print(f"  sequences played {result['sequences_played']} (finished and saved {result['sequences_finished']}), "
-          f"calibration swaps {result['calibration_swaps']}, telemetry records {result['telemetry_records']}")
+          f"calibration swaps {result['calibration_swaps']}, bad calibrations sent {result['bad_calibrations_sent']} "
+          f"(not refused as expected: {result['bad_calibrations_not_refused_as_expected']}), "
+          f"telemetry records {result['telemetry_records']}")
     print(f"  requests: {sum(result['requests'].values())}, missing {result['requests_missing']}, "
           f"internal errors {result['internal_errors']}")
     for key, count in result["requests"].items():
@@ -365,8 +446,41 @@ def print_report(result: dict[str, Any]) -> None:
 
 
 def passed(result: dict[str, Any]) -> bool:
-    """No limit violation on the bus, no request unanswered, no internal error."""
-    return result["monitor"]["violations"] == 0 and result["requests_missing"] == 0 and result["internal_errors"] == 0
+    """No limit violation on the bus, no request unanswered, no internal error, every bad
+    calibration refused with its code."""
+    return (result["monitor"]["violations"] == 0 and result["requests_missing"] == 0 and result["internal_errors"] == 0
+            and result["bad_calibrations_not_refused_as_expected"] == 0)
+
+
+def add_service_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments every tool running a :class:`MonitoredService` takes: rate, scheduling
+    (:func:`scheduling_from`), where to write the figures (:func:`conclude`), and a seed."""
+    parser.add_argument("--rate", type=int, default=500, choices=(500, 1000), help="loop rate, Hz")
+    parser.add_argument("--fifo", type=int, choices=range(2, 100), metavar="PRIO",
+                        help="run the service as 'hexactl serve --fifo PRIO' does (the bus monitor one below the loop)")
+    parser.add_argument("--mlock", action="store_true", help="lock the service's memory, as 'hexactl serve --mlock'")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, help="also write the figures here")
+
+
+def scheduling_from(arguments: argparse.Namespace) -> Scheduling:
+    return Scheduling(fifo_priority=arguments.fifo, lock_memory=arguments.mlock)
+
+
+def realtime_line(realtime: dict[str, Any]) -> str:
+    """What the loop obtained, in a few words, e.g. 'SCHED_FIFO 80, memory locked'."""
+    fifo = f"SCHED_FIFO {realtime['fifo_priority']}" if realtime["fifo_priority"] else "normal scheduling"
+    return fifo + (", memory locked" if realtime["memory_locked"] else "") + "".join(
+        f"; {note}" for note in realtime["notes"])
+
+
+def conclude(result: dict[str, Any], arguments: argparse.Namespace, report: Callable[[dict[str, Any]], None],
+             judge: Callable[[dict[str, Any]], bool]) -> int:
+    """Print the report, write the figures to ``--json``; the exit status: 0 if ``judge`` passes them."""
+    report(result)
+    if arguments.json:
+        arguments.json.write_text(json.dumps(result, indent=2) + "\n")
+    return 0 if judge(result) else 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -374,19 +488,14 @@ def main(argv: list[str] | None = None) -> int:
     length = parser.add_mutually_exclusive_group()
     length.add_argument("--minutes", type=float, help="how long (default 10)")
     length.add_argument("--seconds", type=float, help="how long, in seconds")
-    parser.add_argument("--rate", type=int, default=500, choices=(500, 1000), help="loop rate, Hz")
     parser.add_argument("--swap-every", type=float, default=5.0, help="seconds between calibration loads/rollbacks")
     parser.add_argument("--traffic-hz", type=float, default=20.0, help="status + validate_pose rate of the second client")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--json", type=Path, help="also write the figures here")
+    add_service_arguments(parser)
     arguments = parser.parse_args(argv)
     duration_s = arguments.seconds if arguments.seconds is not None else 60.0 * (arguments.minutes or 10.0)
     result = soak(duration_s, arguments.rate, arguments.swap_every, arguments.traffic_hz, arguments.seed,
-                  progress=lambda line: print(line, flush=True))
-    print_report(result)
-    if arguments.json:
-        arguments.json.write_text(json.dumps(result, indent=2) + "\n")
-    return 0 if passed(result) else 1
+                  progress=lambda line: print(line, flush=True), scheduling=scheduling_from(arguments))
+    return conclude(result, arguments, print_report, passed)
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ import multiprocessing
 import signal
 import threading
 import time
+from collections.abc import Collection
 from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -124,10 +125,12 @@ class Service:
     ``controller``: a facade on the loop of this process (the API process has its own);
     ``simulator``: the built-in one (None with real actuators)."""
 
-    def __init__(self, controller: Controller, simulator: Simulator | None, api: ApiProcess,
+    def __init__(self, controller: Controller, simulator: Simulator | None, api: ApiProcess, link: LoopExchange,
                  closers: ExitStack) -> None:
         self.controller = controller
         self.simulator = simulator
+        self.link = link
+        """The loop's end of the link to the API process: its counters and state."""
         self.api_endpoint = api.api_endpoint
         self.telemetry_endpoint = api.telemetry_endpoint
         self._api = api
@@ -210,7 +213,7 @@ class Service:
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
             if config.fifo_priority is not None:
-                _fifo_for_service_threads(max(1, config.fifo_priority - 1))
+                fifo_for_threads(max(1, config.fifo_priority - 1))
 
             data_dirs = tuple(config.data_dirs or _default_data_dirs(config_path))
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
@@ -227,7 +230,7 @@ class Service:
             log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)
             log.info("data directories: %s", ", ".join(str(directory) for directory in data_dirs))
-            return cls(controller, simulator, api, closers.pop_all())
+            return cls(controller, simulator, api, exchange, closers.pop_all())
 
     def close(self) -> None:
         """Stop taking commands, bring the platform to rest disabled, close everything."""
@@ -286,7 +289,8 @@ def _serve(config: ServiceConfig, connection: Connection) -> None:
 
 def run_service(config: ServiceConfig) -> int:
     """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly;
-    0, or 1 if the API process died (the platform is then brought to rest as at a stop)."""
+    0, or 1 if the API process died or its command stream ended or broke (the platform is
+    then brought to rest as at a stop); the link's dropped non-commands are logged."""
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     for endpoint in (config.api_endpoint, config.telemetry_endpoint):
         if not is_local_endpoint(endpoint):
@@ -302,9 +306,13 @@ def run_service(config: ServiceConfig) -> int:
     try:
         service = Service.start(config)
         try:
+            rejected = 0
             while not stopping.wait(API_WATCH_INTERVAL_S):
-                if not service.api_alive:
-                    log.error("the API process died (exit status %s): shutting down", service.api_exitcode)
+                if service.link.rejected > rejected:  # a bug of ours if ever: the API process sends only commands
+                    log.warning("the loop link dropped %d messages that were not commands", service.link.rejected - rejected)
+                    rejected = service.link.rejected
+                if problem := _api_problem(service):
+                    log.error("%s: shutting down", problem)
                     status = 1
                     break
         finally:
@@ -315,10 +323,21 @@ def run_service(config: ServiceConfig) -> int:
     return status
 
 
-def _fifo_for_service_threads(priority: int) -> None:
-    """SCHED_FIFO ``priority`` (below the loop's) for the threads that share its GIL."""
+def _api_problem(service: Service) -> str | None:
+    """Why the service cannot go on taking commands (None: it can)."""
+    if not service.api_alive:
+        return f"the API process died (exit status {service.api_exitcode})"
+    link = service.link
+    if not link.commands_open:
+        return f"the API process's command stream {f'is unreadable ({link.corrupt})' if link.corrupt else 'ended'}"
+    return None
+
+
+def fifo_for_threads(priority: int, names: Collection[str] = SERVICE_THREAD_NAMES) -> None:
+    """SCHED_FIFO ``priority`` (below the loop's) for this process's threads called one of
+    ``names``: those that share the loop's GIL (see :func:`~hexactl.control.realtime.set_fifo`)."""
     for thread in threading.enumerate():
-        if thread.name in SERVICE_THREAD_NAMES and thread.native_id is not None:
+        if thread.name in names and thread.native_id is not None:
             refused = set_fifo(priority, thread.native_id)
             log.info("%s thread: %s", thread.name, refused or f"SCHED_FIFO {priority}")
 

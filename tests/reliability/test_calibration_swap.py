@@ -16,6 +16,7 @@ from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import status, wait_for
 from tests.reliability.support import recover, tolerating_loop_stalls
+from tools.soak import OUTSIDE_FILE, bad_calibrations
 
 SWAPS = 100
 SWAP_INTERVAL_S = 0.05  # one swap every 50 ms (an operator swaps far less often): 5 s of swapping
@@ -40,23 +41,6 @@ def good_calibration(nominal: Geometry, rng: random.Random, index: int) -> Geome
     zero = [length + rng.uniform(-2.0, 2.0) for length in nominal.zero_lengths]
     base = [[c + rng.uniform(-1.0, 1.0) for c in joint] for joint in nominal.base_joints]
     return variant(nominal, f"good {index}", zero_lengths=zero, base_joints=base)
-
-
-def bad_calibrations(nominal: Geometry) -> list[tuple[dict[str, str], str]]:
-    """(request fields, the error code it must get)."""
-    text = geometry_to_toml(nominal)
-    zero = list(nominal.zero_lengths)
-    return [
-        ({"toml": text[: len(text) // 2]}, "invalid_calibration"),  # cut short
-        ({"toml": text.replace(f"zero_lengths = [{zero[0]!r}", "zero_lengths = [nan", 1)}, "invalid_calibration"),
-        ({"toml": "\n".join(line for line in text.splitlines() if not line.startswith("home"))}, "invalid_calibration"),
-        ({"toml": text + "\nsurprise = 1\n"}, "invalid_calibration"),
-        ({"toml": text.replace("stroke = [0.0, 850.0]", "stroke = [0.0, 100.0]")}, "invalid_calibration"),
-        ({"toml": geometry_to_toml(variant(nominal, "far", zero_lengths=[zero[0] + 40.0, *zero[1:]]))},
-         "calibration_change_too_large"),
-        ({"path": "../outside.toml"}, "forbidden_path"),
-        ({"path": "missing.toml"}, "file_not_found"),
-    ]
 
 
 def playing(client: HexactlClient) -> None:
@@ -96,7 +80,7 @@ def test_100_swaps_during_playback(client, monitor, service, nominal, data_dir: 
             swaps.append(({"path": f"good-{index}.toml"}, geometry_id(good)))
         else:
             swaps.append(({"toml": geometry_to_toml(good)}, geometry_id(good)))
-    (data_dir.parent / "outside.toml").write_text(geometry_to_toml(nominal))
+    (data_dir.parent / OUTSIDE_FILE).write_text(geometry_to_toml(nominal))
 
     def scenario() -> None:
         recover(client)

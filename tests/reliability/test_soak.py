@@ -1,5 +1,6 @@
-"""tools/soak.py for 20 seconds: sequences, calibration swaps and API traffic on the real
-service, no limit violation on the bus, every request answered (the loop's figures are
+"""tools/soak.py for 20 seconds: sequences, calibration swaps (good and bad) and API traffic
+on the real service, no limit violation on the bus, every request answered, every bad
+calibration refused with its code (the loop's figures are
 reported by the tool, not judged here)."""
 
 from __future__ import annotations
@@ -21,5 +22,6 @@ def test_20_second_soak(tmp_path) -> None:
     assert result["monitor"]["violations"] == 0 and result["monitor"]["counts"]["setpoints"] > 0
     assert (result["requests_missing"], result["internal_errors"]) == (0, 0)
     assert result["sequences_played"] >= 1 and result["calibration_swaps"] >= 2
+    assert result["bad_calibrations_sent"] >= 2 and result["bad_calibrations_not_refused_as_expected"] == 0
     assert result["requests"].get("status:ok", 0) > 0 and result["telemetry_records"] > 0
     assert result["loop"]["cycles"] > 0 and result["loop"]["guard_clamps"] == 0

@@ -79,6 +79,8 @@ protocol's largest WatchdogCycles, so no fresh set-point goes unchecked)."""
 LATE_CYCLE_PERIODS = 1.5
 """A cycle whose SYNC comes this many periods or more after the previous one is late."""
 
+MONITOR_THREAD_NAME = "bus-monitor"
+"""The name of the monitor's reader thread (to find it, e.g. to give it a real-time priority)."""
 _RECV_TIMEOUT_S = 0.05  # how often the idle reader looks at its stop flag
 _SETPOINT_SIGNAL = re.compile(r"Setpoint([1-6])")
 _COMMANDS_THAT_START = ("ENABLE", "UNLOCK")  # the actuator then follows from its measured position
@@ -225,7 +227,7 @@ class BusMonitor(can.Listener):
         if self._thread is not None:
             raise RuntimeError("the monitor is already running")
         self._stop.clear()
-        self._thread = threading.Thread(target=self._read, name="bus-monitor", daemon=True)
+        self._thread = threading.Thread(target=self._read, name=MONITOR_THREAD_NAME, daemon=True)
         self._thread.start()
         return self
 
