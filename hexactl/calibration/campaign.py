@@ -8,12 +8,14 @@ turns measured feature points into achieved poses:
   (:func:`travel_order`). The D-optimal picks lie all over the pose envelope; visiting
   them in the planner's order roughly doubles the travel, hence the time.
 * :func:`locked_path`: the waypoints of a leg-lock move. A move is a straight line in
-  pose space, which the controller's loop projects onto the locked leg's constraint
-  every cycle with a few fixed-point iterations (``ControllerConfig.lock_cycle_iterations``).
-  Between two postures far apart that line strays up to ~130 mm from the constraint,
-  where those iterations do not converge and the loop faults (``leg_lock_projection``).
-  So the move is split at points on the constraint until no chord strays more than
-  :data:`LOCKED_CHORD_TOLERANCE_MM`.
+  pose space; the controller's loop keeps the locked leg's length by projecting each
+  cycle's target onto its constraint, warm-started from the cycle before, with at most
+  ``ControllerConfig.lock_cycle_iterations`` iterations; planning refuses a move
+  (``lock_unreachable``) if that would not converge at one of its cycles. Between
+  postures far apart the line strays up to ~180 mm from the constraint, and at the
+  demo's motion limits planning refuses some of those moves (from ~150 mm on; it
+  depends on the speed too). So the move is split at points on the constraint until no
+  chord strays more than :data:`LOCKED_CHORD_TOLERANCE_MM`.
 * :func:`achieved_pose`: the pose relative to the zero posture of measured points.
 
 Poses relative to the zero posture are in mm and degrees, as everywhere at the edges.
@@ -36,10 +38,13 @@ from hexactl.kinematics.points import pose_from_points
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 
 LOCKED_CHORD_TOLERANCE_MM = 10.0
-"""How far (locked leg's length error, mm) a leg-lock move's straight line may stray from
-the constraint. The loop's three projection iterations reach their 1e-9 mm tolerance from
-up to about 20 mm away (measured over the planned postures of every leg); half of that
-leaves a margin."""
+"""How far (locked leg's length error, mm) a piece of a leg-lock move may stray from the
+constraint. A wide margin rather than the controller's limit: planning refused none of the
+pieces it leaves on the demo's plans (seeds 0–5) and the default plan (seeds 0–2) as
+``lock_unreachable``, whereas it refuses some unsplit moves straying ~150 mm at the demo's
+speeds. It dates from when the loop projected each cycle from the target itself, which
+converged from ~20 mm only; it costs about two extra stops per posture on the demo's plan,
+one on the default plan."""
 
 _CHORD_SAMPLES = 17  # points checked along each chord, ends included
 _MAX_SPLIT_DEPTH = 8  # at most 2⁸ pieces per move: far more than any posture pair needs

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hexactl.adapters.demo import DEMO_ENVELOPE_FRACTION, DEMO_MOTION, DEMO_POSTURES_PER_LEG
 from hexactl.calibration.campaign import (
     LOCKED_CHORD_TOLERANCE_MM,
     achieved_pose,
@@ -16,8 +17,10 @@ from hexactl.calibration.campaign import (
 from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
 from hexactl.calibration.test_motions import X_SWEEP
 from hexactl.calibration.validation import MotionResult, ValidationSummary, largest_stroke_error
+from hexactl.control.config import ControllerConfig
+from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, Waypoint, plan_path
 from hexactl.kinematics.inverse import leg_lengths, leg_lengths_batch
-from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.pose import absolute_from_relative, pose_mm_deg_to_mm_rad
 from hexactl.kinematics.rotation import rotation_matrix
 from hexactl.sim.offline_campaign import CampaignDesign, plan_campaign
 
@@ -76,6 +79,35 @@ def test_locked_path_keeps_every_chord_near_the_constraint(nominal, plans) -> No
             previous = np.array(waypoint)
     assert locked_path(nominal, plan.leg, plan.locked_length_mm, start, start) == [tuple(start)]
     assert len(locked_path(nominal, plan.leg, plan.locked_length_mm, start, goal, tolerance_mm=1e9)) == 1
+
+
+def test_the_controller_refuses_some_unsplit_demo_moves_and_accepts_every_piece_of_locked_path(nominal) -> None:
+    """Why leg-lock moves are split: at the demo's motion limits the controller's planning
+    refuses some moves between consecutive postures of the demo's plan (seed 0), as the
+    loop could not keep the leg locked along their straight line; it accepts every piece
+    of :func:`locked_path` between the same postures."""
+    plans = plan_campaign(nominal, CampaignDesign(postures_per_leg=DEMO_POSTURES_PER_LEG,
+                                                  envelope_fraction=DEMO_ENVELOPE_FRACTION, seed=0))
+    postures = campaign_postures(plans, nominal.characteristic_length_mm)
+    config, active = ControllerConfig(), ActiveGeometry.of(nominal, "nominal")
+    budget = nominal.limits.leg_velocity_mm_s * (1.0 - config.calibration_ramp_fraction)  # as the controller plans
+
+    def refusal(plan, start, goal) -> str | None:
+        context = PlanningContext(active, DEMO_MOTION, config.loop.period_s, budget,
+                                  LegLock(plan.leg, plan.locked_reading_mm), config.lock_max_correction_mm,
+                                  config.path_step_mm, config.path_step_deg, config.lock_cycle_iterations)
+        at_rest = (tuple(pose_mm_deg_to_mm_rad(list(start))), (0.0,) * 6, (0.0,) * 6)
+        planned = plan_path(context, at_rest, [Waypoint(goal)])
+        return None if planned.ok else planned.refusal.code
+
+    unsplit = []
+    for plan in plans:
+        poses = [np.zeros(6)] + [p.pose for p in postures if p.leg == plan.leg]
+        for start, goal in zip(poses[:-1], poses[1:]):
+            unsplit.append(refusal(plan, start, goal))
+            path = locked_path(nominal, plan.leg, plan.locked_length_mm, start, goal)
+            assert [refusal(plan, a, b) for a, b in zip([start] + path[:-1], path)] == [None] * len(path)
+    assert set(unsplit) == {None, "lock_unreachable"}, "every unsplit move accepted: is the split still needed?"
 
 
 def test_achieved_pose_inverts_the_measurement(nominal) -> None:
