@@ -17,7 +17,7 @@ import numpy as np
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
 from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.cli.common import CliError, load_config
+from hexactl.adapters.cli.common import CliError, campaign_stopped, load_config
 from hexactl.adapters.cli.service_commands import _connect, _connection_parser  # the client options, shared
 from hexactl.adapters.files.geometry_file import save_geometry
 from hexactl.adapters.files.measurements import (
@@ -316,20 +316,17 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
             progress.finish()
             print(f"hexactl campaign: {error}", file=sys.stderr)
             return 2
-        except CampaignError as error:
-            progress.finish()
-            print(f"hexactl campaign: {error}", file=sys.stderr)
-            return 1
-        except KeyboardInterrupt:
-            progress.finish()
-            try:
-                client.request("stop")  # brake a platform left moving; the lock, if any, holds
-            except ServiceUnavailable:
-                pass
-            print(f"hexactl campaign: interrupted; what was measured is saved in {arguments.out}: run the same command "
-                  "to resume", file=sys.stderr)
-            return 130
+        except (CampaignError, KeyboardInterrupt) as stopped_by:
+            return campaign_stopped("campaign", stopped_by, arguments.out, progress, on_interrupt=lambda: _stop(client))
     return 0 if outcome.improved else 1
+
+
+def _stop(client: HexactlClient) -> None:
+    """Brake a platform an interrupted campaign left moving; the lock, if any, holds."""
+    try:
+        client.request("stop")
+    except ServiceUnavailable:
+        pass  # the service is gone: nothing to brake through it
 
 
 def _load_geometry(path: str) -> Geometry:

@@ -1,14 +1,23 @@
-"""What every sub-command shares: the --config option, pose arguments, error type."""
+"""What every sub-command shares: the --config option, pose arguments, error type; how a
+campaign-driving command (``demo``, ``campaign``) ends when stopped."""
 
 from __future__ import annotations
 
 import argparse
 import re
+import sys
+from collections.abc import Callable
 from math import isfinite
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hexactl.adapters.files.geometry_file import CONFIG_ENVIRONMENT_VARIABLE, default_config_path, load_geometry
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.kinematics.pose import POSE_AXES, validate_pose_values
+
+if TYPE_CHECKING:  # the campaign's modules load only when a command drives one
+    from hexactl.adapters.campaign.driver import CampaignError
+    from hexactl.adapters.campaign.progress import Progress
 
 
 class CliError(Exception):
@@ -31,6 +40,23 @@ def load_config(arguments: argparse.Namespace) -> Geometry:
         return load_geometry(arguments.config or default_config_path())
     except GeometryError as error:
         raise CliError(str(error)) from None
+
+
+def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt, directory: Path, progress: Progress,
+                     on_interrupt: Callable[[], None] | None = None) -> int:
+    """The exit status of ``hexactl COMMAND`` driving a campaign in ``directory`` when
+    ``stopped_by`` ended it: the progress line finished, then the reason on stderr. A
+    :class:`~hexactl.adapters.campaign.driver.CampaignError` (it cannot go on): 1. Ctrl-C:
+    ``on_interrupt`` runs, then how to resume (everything measured is saved): 130."""
+    progress.finish()
+    if isinstance(stopped_by, KeyboardInterrupt):
+        if on_interrupt is not None:
+            on_interrupt()
+        print(f"hexactl {command}: interrupted; what was measured is saved in {directory}: run the same command to "
+              "resume", file=sys.stderr)
+        return 130
+    print(f"hexactl {command}: {stopped_by}", file=sys.stderr)
+    return 1
 
 
 _KEYED = re.compile(r"^\s*(x|y|z|roll|pitch|yaw)\s*=\s*(\S+)\s*$")

@@ -8,10 +8,9 @@ not finish), 2 bad input (the results directory holds a finished demo: ``--force
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from hexactl.adapters.cli.common import CliError
+from hexactl.adapters.cli.common import CliError, campaign_stopped
 
 DEFAULT_OUT = Path("demo-out")
 
@@ -69,13 +68,6 @@ def run_demo_command(arguments: argparse.Namespace) -> int:
         outcome = run_demo(settings, progress)
     except (DirectoryError, ServiceError) as error:
         raise CliError(f"{error}" + (" (or --force)" if isinstance(error, DirectoryError) else "")) from None
-    except CampaignError as error:
-        progress.finish()
-        print(f"hexactl demo: {error}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        progress.finish()
-        print(f"hexactl demo: interrupted; what was measured is saved in {arguments.out}: run the same command to "
-              "resume", file=sys.stderr)
-        return 130
+    except (CampaignError, KeyboardInterrupt) as stopped_by:
+        return campaign_stopped("demo", stopped_by, arguments.out, progress)
     return 0 if outcome.improved else 1

@@ -1,0 +1,51 @@
+"""How ``hexactl demo`` and ``hexactl campaign`` end when the campaign cannot go on or
+Ctrl-C stops it: the reason on stderr, exit status 1 or 130, and ``campaign`` brakes the
+platform on Ctrl-C. The campaign itself is replaced by one that stops at once."""
+
+from __future__ import annotations
+
+import pytest
+
+import hexactl.adapters.campaign.runner as runner
+import hexactl.adapters.demo as demo
+from hexactl.adapters.campaign.driver import CampaignError
+from hexactl.adapters.cli.main import main
+from tests.api.support import start_service
+
+RESUME = "interrupted; what was measured is saved in {}: run the same command to resume"
+
+
+def stopping(reason: BaseException):
+    def run(*_arguments: object) -> None:
+        raise reason
+
+    return run
+
+
+@pytest.mark.parametrize(("reason", "status", "said"), [
+    (CampaignError("the platform did not settle"), 1, "the platform did not settle"),
+    (KeyboardInterrupt(), 130, None),
+])
+def test_a_stopped_demo_says_why_and_how_to_resume(reason, status, said, monkeypatch, tmp_path, capsys) -> None:
+    monkeypatch.setattr(demo, "run_demo", stopping(reason))
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == status
+    assert capsys.readouterr().err.strip() == f"hexactl demo: {said or RESUME.format(out)}"
+
+
+@pytest.mark.parametrize(("reason", "status", "said", "braked"), [
+    (CampaignError("the controller refused a leg-lock move"), 1, "the controller refused a leg-lock move", False),
+    (KeyboardInterrupt(), 130, None, True),
+])
+def test_a_stopped_campaign_says_why_and_brakes_on_ctrl_c(reason, status, said, braked, nominal, monkeypatch,
+                                                          tmp_path, capsys) -> None:
+    monkeypatch.setattr(runner, "run_campaign", stopping(reason))
+    (tmp_path / "data").mkdir()
+    fake = start_service(nominal, tmp_path / "data")
+    out = tmp_path / "campaign"
+    try:
+        assert main(["campaign", "--out", str(out), "--api", fake.api]) == status
+    finally:
+        fake.close()
+    assert capsys.readouterr().err.strip() == f"hexactl campaign: {said or RESUME.format(out)}"
+    assert (("stop", ()) in fake.controller.calls) is braked
