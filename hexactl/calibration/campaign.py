@@ -14,8 +14,9 @@ turns measured feature points into achieved poses:
   (``lock_unreachable``) if that would not converge at one of its cycles. Between
   postures far apart the line strays up to ~180 mm from the constraint, and at the
   demo's motion limits planning refuses some of those moves (from ~150 mm on; it
-  depends on the speed too). So the move is split at points on the constraint until no
-  chord strays more than :data:`LOCKED_CHORD_TOLERANCE_MM`.
+  depends on the speed too). Such a move is split at points on the constraint until no
+  chord strays more than :data:`LOCKED_CHORD_TOLERANCE_MM` (the campaign runner sends a
+  move straight first and splits only one the controller refuses).
 * :func:`achieved_pose`: the pose relative to the zero posture of measured points.
 
 Poses relative to the zero posture are in mm and degrees, as everywhere at the edges.

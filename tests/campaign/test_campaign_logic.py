@@ -82,7 +82,7 @@ def test_locked_path_keeps_every_chord_near_the_constraint(nominal, plans) -> No
 
 
 def test_the_controller_refuses_some_unsplit_demo_moves_and_accepts_every_piece_of_locked_path(nominal) -> None:
-    """Why leg-lock moves are split: at the demo's motion limits the controller's planning
+    """Why a leg-lock move the controller refuses is split: at the demo's motion limits the controller's planning
     refuses some moves between consecutive postures of the demo's plan (seed 0), as the
     loop could not keep the leg locked along their straight line; it accepts every piece
     of :func:`locked_path` between the same postures."""

@@ -7,7 +7,8 @@ doing the driving and measuring:
    plan: :mod:`.store`);
 2. measure the paper's test motions before calibration, waypoint by waypoint;
 3. for each leg: move to the zero posture, lock the leg there, visit its postures
-   (:func:`~hexactl.calibration.campaign.locked_path`), and at each one, once the
+   (straight, or along :func:`~hexactl.calibration.campaign.locked_path` where the
+   controller refuses the straight move), and at each one, once the
    platform has settled, record the six sensor readings and measure the feature points;
 4. identify the parameters from the saved measurement file and write the calibration;
 5. load it into the running controller and measure the test motions again;
@@ -238,21 +239,27 @@ def _measure_postures(driver: PlatformDriver, store: CampaignStore, instrument: 
 
 
 def _visit(driver: PlatformDriver, geometry: Geometry, leg: int, length_mm: float, goal: Sequence[float]) -> Record:
-    """Move in leg-lock mode to ``goal``, along :func:`locked_path`; if the controller
-    refuses that path as out of limits, by way of the zero posture instead (it lies on
-    the constraint). Returns the settled record at ``goal``."""
-    start = driver.status()["pose_command"]
-    try:
-        return _follow(driver, locked_path(geometry, leg, length_mm, start, goal))
-    except CommandError as error:
-        if error.code != "path_violation":
-            raise CampaignError(f"the controller refused a leg-lock move: {error}") from None
-    here = driver.status()["pose_command"]
-    detour = locked_path(geometry, leg, length_mm, here, ZERO_POSE) + locked_path(geometry, leg, length_mm, ZERO_POSE, goal)
-    try:
-        return _follow(driver, detour)
-    except CommandError as error:
-        raise CampaignError(f"the controller refused the leg-lock move to {list(goal)}: {error}") from None
+    """Move in leg-lock mode to ``goal`` and settle there; returns the settled record.
+
+    Straight, if the controller takes the move; if it refuses it as one it could not keep
+    the locked leg's length along (``lock_unreachable``: far from the constraint, fast) or
+    as out of limits (``path_violation``), along :func:`locked_path`, whose pieces stay near
+    the constraint; if it refuses that as out of limits, by way of the zero posture (it
+    lies on the constraint). A refusal happens at planning, before anything moves; a route
+    refused midway goes on from where the platform stopped."""
+    routes: list[tuple[Callable[[Sequence[float]], list[Sequence[float]]], tuple[str, ...]]] = [
+        (lambda here: [goal], ("lock_unreachable", "path_violation")),
+        (lambda here: locked_path(geometry, leg, length_mm, here, goal), ("path_violation",)),
+        (lambda here: locked_path(geometry, leg, length_mm, here, ZERO_POSE)
+         + locked_path(geometry, leg, length_mm, ZERO_POSE, goal), ()),
+    ]
+    for route, next_route_on in routes:
+        try:
+            return _follow(driver, route(driver.status()["pose_command"]))
+        except CommandError as error:
+            if error.code not in next_route_on:
+                raise CampaignError(f"the controller refused the leg-lock move to {list(goal)}: {error}") from None
+    raise AssertionError("unreachable: the last route raises or returns")
 
 
 def _follow(driver: PlatformDriver, waypoints: Sequence[Sequence[float]]) -> Record:
