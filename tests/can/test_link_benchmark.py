@@ -1,5 +1,6 @@
-"""Per-cycle cost of the link on a ``virtual:`` bus (pytest-benchmark). Run once, untimed, in the
-normal suite; time with ``python -m pytest tests/can/test_link_benchmark.py --benchmark-enable``.
+"""Per-cycle cost of the link on a ``memory:`` and a ``virtual:`` bus (pytest-benchmark). Run
+once, untimed, in the normal suite; time with
+``python -m pytest tests/can/test_link_benchmark.py --benchmark-enable``.
 
 A cycle is what the loop does every period: :meth:`send_setpoints` (four frames) and
 :meth:`read_feedback`. Each round finds on the bus what a 500 Hz cycle brings on average:
@@ -12,6 +13,7 @@ from __future__ import annotations
 import itertools
 
 import can
+import pytest
 
 from firmware_proto import codec
 from firmware_proto.codec import ActuatorState, Fault
@@ -27,8 +29,9 @@ def _feedback(node: int, counter: int) -> codec.CanFrame:
     return codec.encode_feedback(node, 300_000 + node, 0, ActuatorState.ENABLED, Fault(0), counter & 0xFF)
 
 
-def test_send_setpoints_and_read_feedback_cycle(benchmark):
-    channel = f"virtual:hexactl-bench-{next(_channels)}"
+@pytest.mark.parametrize("interface", ["memory", "virtual"])
+def test_send_setpoints_and_read_feedback_cycle(benchmark, interface):
+    channel = f"{interface}:hexactl-bench-{next(_channels)}"
     link = CanActuatorLink.open(channel)
     actuators = open_bus(channel)
     counter = itertools.count()

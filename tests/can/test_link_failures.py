@@ -100,7 +100,8 @@ def test_implements_the_control_layers_interface(link):
 @pytest.mark.parametrize(
     ("spec", "parsed"),
     [("socketcan:can0", BusSpec("socketcan", "can0")), ("socketcan:vcan0", BusSpec("socketcan", "vcan0")),
-     ("virtual:bench", BusSpec("virtual", "bench")), (" virtual:a:b ", BusSpec("virtual", "a:b"))],
+     ("virtual:bench", BusSpec("virtual", "bench")), (" virtual:a:b ", BusSpec("virtual", "a:b")),
+     ("memory:sim", BusSpec("memory", "sim"))],
 )
 def test_bus_specs(spec, parsed):
     assert parse_bus_spec(spec) == parsed

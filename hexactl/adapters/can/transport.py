@@ -5,8 +5,12 @@ A *bus spec* names an interface and a channel, ``INTERFACE:CHANNEL``:
 ============================  =================================================================
 ``socketcan:can0``            a real SocketCAN interface (Linux), e.g. a USB or PCIe adapter
 ``socketcan:vcan0``           the kernel's virtual CAN (needs ``vcan``; see tools/uml_vcan.py)
-``virtual:NAME``              python-can's in-process bus: every bus opened on ``NAME`` in the
-                              same process sees the others' frames (the simulator's default)
+``memory:NAME``               an in-process bus that does not copy frames
+                              (:mod:`hexactl.adapters.can.memory_bus`): every bus opened on
+                              ``NAME`` in the same process hears the others' frames, and no one
+                              may change a frame sent or received (the built-in simulator's)
+``virtual:NAME``              python-can's in-process bus: the same, but every receiver gets
+                              its own copy of each frame
 ============================  =================================================================
 
 Everything below the spec is plain python-can: :func:`open_bus` returns a :class:`can.BusABC`.
@@ -20,14 +24,19 @@ from typing import Any
 
 import can
 
+from hexactl.adapters.can.memory_bus import MemoryBus
 from hexactl.control.hardware import BusState
 
-INTERFACES = ("socketcan", "virtual")
-"""The python-can interfaces a spec may name."""
+IN_PROCESS_INTERFACES = ("memory", "virtual")
+"""The interfaces whose buses live in this process: they take ``rx_queue_size``."""
 
-VIRTUAL_RX_QUEUE_SIZE = 10_000
-"""Frames a ``virtual:`` bus keeps unread before senders get errors. Bounded so that a bus
-nobody reads (a spy left open in a test, a stalled loop) cannot grow memory without limit."""
+INTERFACES = ("socketcan", *IN_PROCESS_INTERFACES)
+"""The interfaces a spec may name: python-can's, and ``memory`` (:class:`MemoryBus`)."""
+
+IN_PROCESS_RX_QUEUE_SIZE = 10_000
+"""Frames a ``memory:`` or ``virtual:`` bus keeps unread before senders get errors. Bounded
+so that a bus nobody reads (a spy left open in a test, a stalled loop) cannot grow memory
+without limit."""
 
 
 class BusSpecError(ValueError):
@@ -46,33 +55,41 @@ class BusSpec:
 
 
 def parse_bus_spec(spec: str) -> BusSpec:
-    """Parse ``socketcan:CHANNEL`` or ``virtual:NAME``.
+    """Parse ``socketcan:CHANNEL``, ``memory:NAME`` or ``virtual:NAME``.
 
     :raises BusSpecError: for anything else (the message says what is accepted)
     """
     interface, separator, channel = spec.strip().partition(":")
     if not separator or not channel or interface not in INTERFACES:
         raise BusSpecError(
-            f"bus spec {spec!r}: expected socketcan:CHANNEL (e.g. socketcan:can0, socketcan:vcan0) "
-            "or virtual:NAME"
+            f"bus spec {spec!r}: expected socketcan:CHANNEL (e.g. socketcan:can0, socketcan:vcan0), "
+            "memory:NAME or virtual:NAME"
         )
     return BusSpec(interface, channel)
 
 
 def open_bus(spec: str | BusSpec, **options: Any) -> can.BusABC:
-    """Open the bus named by ``spec``; ``options`` go to :class:`can.Bus` unchanged.
+    """Open the bus named by ``spec``; ``options`` go unchanged to :class:`can.Bus`, or for
+    ``memory:`` to :class:`MemoryBus`.
 
-    Virtual buses get a bounded receive queue (:data:`VIRTUAL_RX_QUEUE_SIZE`) unless
-    ``rx_queue_size`` is given.
+    In-process buses get a bounded receive queue (:data:`IN_PROCESS_RX_QUEUE_SIZE`) unless
+    ``rx_queue_size`` is given (0: unbounded).
 
     :raises BusSpecError: for a malformed spec
     :raises can.CanError: if python-can cannot open it (e.g. ``can.CanInitializationError``
         for a missing SocketCAN interface)
     :raises OSError: for operating-system errors python-can passes through
+    :raises TypeError: for an option a ``memory:`` bus does not take (``rx_queue_size``,
+        ``can_filters``)
     """
     parsed = parse_bus_spec(spec) if isinstance(spec, str) else spec
-    if parsed.interface == "virtual":
-        options.setdefault("rx_queue_size", VIRTUAL_RX_QUEUE_SIZE)
+    if parsed.interface in IN_PROCESS_INTERFACES:
+        options.setdefault("rx_queue_size", IN_PROCESS_RX_QUEUE_SIZE)
+    if parsed.interface == "memory":
+        # Constructed here, not registered as a python-can "can.interface" entry point: an
+        # entry point works only once the package's metadata is reinstalled, and can.Bus
+        # would also merge in python-can's configuration files and CAN_* environment variables.
+        return MemoryBus(parsed.channel, **options)
     return can.Bus(interface=parsed.interface, channel=parsed.channel, **options)
 
 
