@@ -1,9 +1,9 @@
 """The built-in simulator of ``hexactl serve``: six simulated actuator firmwares on a
-private ``virtual:`` bus, the physical platform they move (with seeded manufacturing
+private ``memory:`` bus, the physical platform they move (with seeded manufacturing
 errors), and the instrument that measures it (the paper's theodolites).
 
 The service's two processes each hold a part. The firmwares run in the loop's process,
-on the bus its CAN link uses (python-can's virtual bus is per process); the API's
+on the bus its CAN link uses (a ``memory:`` bus is per process); the API's
 process answers ``measure`` with a :class:`SimulatedMeasurement` of its own, whose
 platform reads the firmwares' true positions from the loop's reports
 (:meth:`hexactl.adapters.loop_link.RemoteLoop.probe`).
@@ -60,14 +60,18 @@ class SimulatedMeasurement:
 
 
 class Simulator:
-    """Six simulated actuator firmwares on a ``virtual:`` bus of this process
-    (:attr:`bus_spec`), driving a simulated physical platform whose geometry is
-    ``nominal`` with the manufacturing errors of :func:`~hexactl.sim.true_platform.true_geometry`
-    for ``seed``, and its instrument (:attr:`instrument_spec`; noise ``point_sigma_mm``)."""
+    """Six simulated actuator firmwares on a ``memory:`` bus of this process
+    (:attr:`bus_spec`; it does not copy frames, so none of its users may change one),
+    driving a simulated physical platform whose geometry is ``nominal`` with the
+    manufacturing errors of :func:`~hexactl.sim.true_platform.true_geometry` for ``seed``,
+    and its instrument (:attr:`instrument_spec`; noise ``point_sigma_mm``)."""
 
     def __init__(self, nominal: Geometry, seed: int, point_sigma_mm: float | None = None) -> None:
         truth = true_geometry(nominal, seed)
-        self.bus_spec = f"virtual:hexactl-sim-{os.getpid()}-{id(self)}"  # private to this service
+        # Private to this service. memory, not virtual: python-can's virtual bus copies every
+        # frame for every receiver while holding the GIL the loop needs, a large share of the
+        # loop's compute per cycle.
+        self.bus_spec = f"memory:hexactl-sim-{os.getpid()}-{id(self)}"
         firmwares = make_firmwares(zero_posture_readings_mm(truth), actuator_params_for(nominal), seed=seed)
         self.runner = ActuatorBus(open_bus(self.bus_spec), firmwares).start()
         """The firmwares and the thread that runs them (fault injection: ``runner.firmwares``)."""
