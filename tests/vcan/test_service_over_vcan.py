@@ -38,6 +38,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -135,39 +136,79 @@ def data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("data")
 
 
-@pytest.fixture(scope="module")
-def simulator() -> Iterator[subprocess.Popen]:
+@contextmanager
+def simulated_actuators() -> Iterator[subprocess.Popen]:
+    """``hexactl sim-actuators --can SPEC`` in its own process, under SCHED_FIFO
+    :data:`SIMULATOR_FIFO` where permitted, once it says it is ready; killed on leaving
+    unless it has ended (:func:`terminate_simulator` ends it cleanly)."""
     process = subprocess.Popen([*CLI, "sim-actuators", "--can", SPEC, "--seed", "3"], stdin=subprocess.DEVNULL,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
-        os.sched_setscheduler(process.pid, os.SCHED_FIFO, os.sched_param(SIMULATOR_FIFO))  # its one thread
-    except PermissionError:
-        pass
-    ready = json.loads(process.stdout.readline() or "{}")
-    assert ready.get("ready"), process.stderr.read()
-    yield process
-    if process.poll() is None:
-        process.kill()
-        process.wait()
+        try:
+            os.sched_setscheduler(process.pid, os.SCHED_FIFO, os.sched_param(SIMULATOR_FIFO))  # its one thread
+        except PermissionError:
+            pass
+        ready = json.loads(process.stdout.readline() or "{}")
+        assert ready.get("ready"), process.stderr.read()
+        yield process
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+@contextmanager
+def running_service(data_dir: Path) -> Iterator[Served]:
+    """:data:`SERVE` in its own process, once it has said where its API and telemetry are;
+    killed on leaving unless it has ended (:func:`terminate_service` ends it cleanly)."""
+    process = subprocess.Popen([sys.executable, "-c", SERVE, json.dumps(guest_settings(data_dir))],
+                               stdin=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    served = Served(process)
+    try:
+        for line in process.stderr:
+            served.log.append(line)
+            if match := re.search(r"API on (\S+), telemetry on (\S+) at", line):
+                served.api, served.telemetry = match.groups()
+                break
+        assert served.api, served.text()
+        served.reader = threading.Thread(target=lambda: served.log.extend(process.stderr), daemon=True)
+        served.reader.start()
+        yield served
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+def terminate_service(served: Served) -> None:
+    """SIGTERM: the service must disable the actuators and exit with status 0."""
+    served.process.send_signal(signal.SIGTERM)
+    assert served.process.wait(WAIT_S) == 0, served.final_text()
+    log = served.final_text()
+    assert "SIGTERM: shutting down" in log and "actuators disabled" in log and "stopped" in log, log
+
+
+def terminate_simulator(simulator: subprocess.Popen) -> None:
+    """SIGTERM: the simulator must exit with status 0, every actuator disabled without a
+    fault, and no frame rejected in its whole run (its final report)."""
+    simulator.send_signal(signal.SIGTERM)
+    out, err = simulator.communicate(timeout=WAIT_S)
+    assert simulator.returncode == 0, err
+    report = json.loads(out.strip().splitlines()[-1])
+    assert report["states"] == ["DISABLED"] * 6 and report["faults"] == [0] * 6
+    assert report["rejected_frames"] == [0] * 6
+
+
+@pytest.fixture(scope="module")
+def simulator() -> Iterator[subprocess.Popen]:
+    with simulated_actuators() as process:
+        yield process
 
 
 @pytest.fixture(scope="module")
 def service(simulator: subprocess.Popen, data_dir: Path) -> Iterator[Served]:
-    process = subprocess.Popen([sys.executable, "-c", SERVE, json.dumps(guest_settings(data_dir))],
-                               stdin=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
-    served = Served(process)
-    for line in process.stderr:
-        served.log.append(line)
-        if match := re.search(r"API on (\S+), telemetry on (\S+) at", line):
-            served.api, served.telemetry = match.groups()
-            break
-    assert served.api, served.text()
-    served.reader = threading.Thread(target=lambda: served.log.extend(process.stderr), daemon=True)
-    served.reader.start()
-    yield served
-    if process.poll() is None:
-        process.kill()
-        process.wait()
+    with running_service(data_dir) as served:
+        yield served
 
 
 @pytest.fixture(scope="module")
@@ -315,13 +356,5 @@ def test_estop_latches_until_reset(client: HexactlClient) -> None:
 
 
 def test_sigterm_disables_the_actuators_and_no_frame_was_rejected(service: Served, simulator: subprocess.Popen) -> None:
-    service.process.send_signal(signal.SIGTERM)
-    assert service.process.wait(WAIT_S) == 0, service.final_text()
-    log = service.final_text()
-    assert "SIGTERM: shutting down" in log and "actuators disabled" in log and "stopped" in log, log
-    simulator.send_signal(signal.SIGTERM)
-    out, err = simulator.communicate(timeout=WAIT_S)
-    assert simulator.returncode == 0, err
-    report = json.loads(out.strip().splitlines()[-1])
-    assert report["states"] == ["DISABLED"] * 6 and report["faults"] == [0] * 6
-    assert report["rejected_frames"] == [0] * 6
+    terminate_service(service)
+    terminate_simulator(simulator)
