@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from firmware_proto import codec
 from firmware_proto.codec import ActuatorState, CommandCode, Fault, LoopRate
 from hexactl.adapters.can.bus_monitor import BusMonitor, crc8_sae_j1850, frame_crc
-from hexactl.adapters.can.transport import open_bus
+from hexactl.adapters.can.transport import IN_PROCESS_INTERFACES, IN_PROCESS_RX_QUEUE_SIZE, open_bus
 from hexactl.kinematics.geometry import Geometry
 
 RATE_HZ = 500
@@ -162,11 +162,26 @@ def test_late_and_partial_cycles_are_counted_not_flagged(feed) -> None:
     assert feed.kinds() == []
 
 
-def test_the_reader_thread_sees_another_bus_on_the_channel(nominal) -> None:
-    channel = f"virtual:monitor-thread-{next(_channels)}"
+@pytest.mark.parametrize("interface", IN_PROCESS_INTERFACES)
+def test_the_reader_thread_sees_another_bus_on_the_channel(nominal, interface) -> None:
+    channel = f"{interface}:monitor-thread-{next(_channels)}"
     with open_bus(channel) as sender, BusMonitor(channel, nominal, RATE_HZ) as monitor:
         for k in range(50):
             for can_id, payload in codec.encode_setpoints(k, START_UM):
                 sender.send(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False))
         monitor.catch_up()
         assert monitor.counts["cycles"] == 50 and not monitor.violations
+
+
+@pytest.mark.parametrize("interface", IN_PROCESS_INTERFACES)
+def test_a_monitor_that_falls_behind_never_fails_the_senders(nominal, interface) -> None:
+    """Its in-process bus queues without bound: the controller's sends cannot fail because
+    the observer is slow (here: not reading at all)."""
+    channel = f"{interface}:monitor-behind-{next(_channels)}"
+    monitor = BusMonitor(channel, nominal, RATE_HZ)  # not started yet: reads nothing
+    with open_bus(channel) as sender:
+        for _ in range(IN_PROCESS_RX_QUEUE_SIZE + 10):
+            sender.send(can.Message(arbitration_id=0x7FF, data=b"", is_extended_id=False))
+    with monitor:
+        monitor.catch_up()
+    assert monitor.counts["frames"] == IN_PROCESS_RX_QUEUE_SIZE + 10

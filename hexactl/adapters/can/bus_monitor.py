@@ -46,10 +46,11 @@ Usage::
         monitor.catch_up()           # everything sent so far has been checked
     assert not monitor.violations
 
-On a ``virtual:`` channel every bus instance hears every frame, so a monitor opened on
-the same channel as a controller sees its traffic. A monitor opened from a spec owns its
-bus (an unbounded receive queue on ``virtual:``, so that a slow monitor can never make
-the senders' frames fail); a bus passed in stays the caller's.
+On an in-process channel (``memory:``, ``virtual:``) every bus instance hears every frame,
+so a monitor opened on the same channel as a controller sees its traffic. A monitor
+opened from a spec owns its bus (an unbounded receive queue on an in-process channel, so
+that a slow monitor can never make the senders' frames fail); a bus passed in stays the
+caller's.
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ import can
 from cantools.database import DecodeError
 
 from firmware_proto import load_database
-from hexactl.adapters.can.transport import open_bus, parse_bus_spec
+from hexactl.adapters.can.transport import IN_PROCESS_INTERFACES, open_bus, parse_bus_spec
 from hexactl.kinematics.geometry import Geometry
 
 WIRE_ROUNDING_UM = 1.0
@@ -189,7 +190,7 @@ class BusMonitor(can.Listener):
     def __init__(self, bus_or_spec: can.BusABC | str, geometry: Geometry, loop_rate_hz: float) -> None:
         if isinstance(bus_or_spec, str):
             spec = parse_bus_spec(bus_or_spec)
-            options = {"rx_queue_size": 0} if spec.interface == "virtual" else {}
+            options = {"rx_queue_size": 0} if spec.interface in IN_PROCESS_INTERFACES else {}
             self._bus: can.BusABC = open_bus(spec, **options)
             self._owns_bus = True
         else:
