@@ -79,7 +79,7 @@ MOVING_S = 0.5
 HOLD_S = 0.2
 """How long the stopped actuators must report the same position, s."""
 COAST_MM = 5.0
-"""How far an actuator may stop from the killed service's last set-point: it follows its
+"""How far an actuator may stop from where it last reported following: it goes on to its
 last target (drive lag 5 ms) until its watchdog stops it, then brakes."""
 TAKEOVER_ABS = 0.001
 """Commanded against measured pose at the takeover, mm and deg (as the in-process test)."""
@@ -254,7 +254,7 @@ def test_killed_mid_motion_then_a_new_service_takes_over(tmp_path: Path) -> None
         replay(bus, [monitor, watch])
     finally:
         bus.shutdown()
-    judge(watch, takeover)
+    judge(watch, takeover, max(start.when for start in monitor.starts if start.when < takeover.dead_s))
     starts = [start for start in monitor.starts if start.when > takeover.dead_s]
     assert sorted({start.leg for start in starts}) == list(LEGS), starts
     assert all(start.jump_mm is not None and start.jump_mm <= JUMP_MM for start in starts), starts
@@ -319,19 +319,27 @@ def take_over(client: HexactlClient, killed_s: float, dead_s: float) -> Takeover
     return Takeover(killed_s, dead_s, reset_s, before["leg_feedback"])
 
 
-def judge(watch: FrameWatch, takeover: Takeover) -> None:
-    """From the capture: the kill came mid-motion; every actuator stopped on its watchdog
-    (EMCY COMM_TIMEOUT), near its last set-point, and reported FAULT, COMM_TIMEOUT, no
-    velocity and the same position until the reset, over at least :data:`HOLD_S`."""
+def judge(watch: FrameWatch, takeover: Takeover, session_s: float) -> None:
+    """From the capture, ``session_s`` being when the killed service's last session began
+    (its last ENABLE's first set-point, wall clock, s): the kill came mid-motion; every
+    actuator stopped on its watchdog in that session (EMCY COMM_TIMEOUT; a stall of the
+    starved guest just before the kill may have stopped it a moment earlier, the same way),
+    no farther than :data:`COAST_MM` from where it last reported following, and reported
+    FAULT, COMM_TIMEOUT, no velocity and the same position until the reset, over at least
+    :data:`HOLD_S`."""
     last = watch.last_setpoints_mm(takeover.dead_s)
     assert sorted(last) == list(LEGS)
     assert last != watch.last_setpoints_mm(takeover.killed_s - MOVING_S)  # still moving
-    stopped = {heard.message.node for heard in watch.between(codec.Emergency, takeover.killed_s, takeover.reset_s)
-               if heard.message.fault_code is FaultCode.COMM_TIMEOUT}  # fmt: skip
-    assert sorted(stopped) == list(LEGS)
+    emergencies = watch.between(codec.Emergency, session_s, takeover.reset_s)
+    stopped = {heard.message.node for heard in emergencies if heard.message.fault_code is FaultCode.COMM_TIMEOUT}
+    assert sorted(stopped) == list(LEGS), (takeover, emergencies)
 
     held_mm = dict(zip(LEGS, takeover.held_mm))
-    assert all(abs(held_mm[leg] - last[leg]) <= COAST_MM for leg in LEGS), (held_mm, last)
+    following_mm = {heard.message.node: heard.message.position_um / 1000.0
+                    for heard in watch.between(codec.Feedback, session_s, takeover.dead_s)
+                    if heard.message.state is ActuatorState.ENABLED}  # fmt: skip
+    assert sorted(following_mm) == list(LEGS)
+    assert all(abs(held_mm[leg] - following_mm[leg]) <= COAST_MM for leg in LEGS), (held_mm, following_mm)
     reports = watch.between(codec.Feedback, takeover.dead_s, takeover.reset_s)
     for leg in LEGS:
         mine = [heard for heard in reports if heard.message.node == leg]
