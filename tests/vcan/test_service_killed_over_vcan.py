@@ -230,11 +230,12 @@ def move_through_stalls(client: HexactlClient, goal: list[float], reached: Calla
 @dataclass(frozen=True, slots=True)
 class Takeover:
     """What the test saw live, for judging the capture: wall-clock times (s) just before
-    the kill, once the killed service was gone and just before the new one's ``reset``,
-    and the positions the actuators held meanwhile by the new service's status, mm."""
+    the kill, just before the new service was started (the actuators answer the killed
+    one's last SYNCs a moment after it is gone) and just before its ``reset``, and the
+    positions the actuators held meanwhile by its status, mm."""
 
     killed_s: float
-    dead_s: float
+    restarted_s: float
     reset_s: float
     held_mm: list[float]
 
@@ -245,26 +246,26 @@ def test_killed_mid_motion_then_a_new_service_takes_over(tmp_path: Path) -> None
     try:
         with simulated_actuators() as simulator:
             with running_service(tmp_path) as first:
-                killed_s, dead_s = kill_mid_motion(first)
+                killed_s = kill_mid_motion(first)
+            restarted_s = time.time()
             with running_service(tmp_path) as second, HexactlClient(second.api, timeout_s=WAIT_S) as client:
-                takeover = take_over(client, killed_s, dead_s)
+                takeover = take_over(client, killed_s, restarted_s)
                 terminate_service(second)
             terminate_simulator(simulator)
         monitor, watch = BusMonitor(bus, nominal, RATE_HZ), FrameWatch()
         replay(bus, [monitor, watch])
     finally:
         bus.shutdown()
-    judge(watch, takeover, max(start.when for start in monitor.starts if start.when < takeover.dead_s))
-    starts = [start for start in monitor.starts if start.when > takeover.dead_s]
+    judge(watch, takeover, max(start.when for start in monitor.starts if start.when < takeover.restarted_s))
+    starts = [start for start in monitor.starts if start.when > takeover.restarted_s]
     assert sorted({start.leg for start in starts}) == list(LEGS), starts
     assert all(start.jump_mm is not None and start.jump_mm <= JUMP_MM for start in starts), starts
     assert monitor.counts.get("unreferenced_starts", 0) == 0 and monitor.violations == [], monitor.violations
 
 
-def kill_mid_motion(first: Served) -> tuple[float, float]:
+def kill_mid_motion(first: Served) -> float:
     """Enable, start the long move, SIGKILL the service once under way; check that its API
-    process ends too. Returns the wall-clock times just before the kill and once the
-    service was gone, s."""
+    process ends too. Returns the wall-clock time just before the kill, s."""
     with HexactlClient(first.api, timeout_s=WAIT_S) as client:
         record = move_through_stalls(client, UNDER_WAY, lambda r: r["pose_command"][2] > UNDER_WAY_Z_MM,
                                      "the platform under way")  # fmt: skip
@@ -277,15 +278,14 @@ def kill_mid_motion(first: Served) -> tuple[float, float]:
     killed_s = time.time()
     first.process.kill()
     assert first.process.wait(WAIT_S) == -signal.SIGKILL
-    dead_s = time.time()
 
     wait_for(lambda: all(child.ended() for child in spawned),
              f"the killed service's processes to end: {[child.describe() for child in spawned]}")  # fmt: skip
     assert api[0].ended()
-    return killed_s, dead_s
+    return killed_s
 
 
-def take_over(client: HexactlClient, killed_s: float, dead_s: float) -> Takeover:
+def take_over(client: HexactlClient, killed_s: float, restarted_s: float) -> Takeover:
     """The new service (``client``'s) starts disabled, finds the actuators latched and
     holding, resets them and enables from where they stand, then moves home."""
     record = status(client)
@@ -316,7 +316,7 @@ def take_over(client: HexactlClient, killed_s: float, dead_s: float) -> Takeover
     record = move_through_stalls(client, HOME, arrived, "the move home")
     assert record["pose_command"] == pytest.approx(HOME, abs=1e-6)
     assert record["pose_measured"] == pytest.approx(HOME, abs=POSE_ABS)
-    return Takeover(killed_s, dead_s, reset_s, before["leg_feedback"])
+    return Takeover(killed_s, restarted_s, reset_s, before["leg_feedback"])
 
 
 def judge(watch: FrameWatch, takeover: Takeover, session_s: float) -> None:
@@ -327,7 +327,7 @@ def judge(watch: FrameWatch, takeover: Takeover, session_s: float) -> None:
     no farther than :data:`COAST_MM` from where it last reported following, and reported
     FAULT, COMM_TIMEOUT, no velocity and the same position until the reset, over at least
     :data:`HOLD_S`."""
-    last = watch.last_setpoints_mm(takeover.dead_s)
+    last = watch.last_setpoints_mm(takeover.restarted_s)
     assert sorted(last) == list(LEGS)
     assert last != watch.last_setpoints_mm(takeover.killed_s - MOVING_S)  # still moving
     emergencies = watch.between(codec.Emergency, session_s, takeover.reset_s)
@@ -336,11 +336,11 @@ def judge(watch: FrameWatch, takeover: Takeover, session_s: float) -> None:
 
     held_mm = dict(zip(LEGS, takeover.held_mm))
     following_mm = {heard.message.node: heard.message.position_um / 1000.0
-                    for heard in watch.between(codec.Feedback, session_s, takeover.dead_s)
+                    for heard in watch.between(codec.Feedback, session_s, takeover.restarted_s)
                     if heard.message.state is ActuatorState.ENABLED}  # fmt: skip
     assert sorted(following_mm) == list(LEGS)
     assert all(abs(held_mm[leg] - following_mm[leg]) <= COAST_MM for leg in LEGS), (held_mm, following_mm)
-    reports = watch.between(codec.Feedback, takeover.dead_s, takeover.reset_s)
+    reports = watch.between(codec.Feedback, takeover.restarted_s, takeover.reset_s)
     for leg in LEGS:
         mine = [heard for heard in reports if heard.message.node == leg]
         assert mine and mine[-1].when - mine[0].when >= HOLD_S, f"leg {leg}: {mine}"
