@@ -195,8 +195,8 @@ def terminate_simulator(simulator: subprocess.Popen) -> None:
     out, err = simulator.communicate(timeout=WAIT_S)
     assert simulator.returncode == 0, err
     report = json.loads(out.strip().splitlines()[-1])
-    assert report["states"] == ["DISABLED"] * 6 and report["faults"] == [0] * 6
-    assert report["rejected_frames"] == [0] * 6
+    assert report["states"] == ["DISABLED"] * 6 and report["faults"] == [0] * 6, report
+    assert report["rejected_frames"] == [0] * 6, report
 
 
 @pytest.fixture(scope="module")
