@@ -303,7 +303,8 @@ def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: 
     natural = preview(context.limits, context.period_s, start, goal, 1.0, velocity_scale)
     if natural is None:
         return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
-    time_scale = max(1.0, waypoint.duration_s / natural.duration) if waypoint.duration_s else 1.0
+    # a move to where it already is takes no time, however long it was asked to take
+    time_scale = max(1.0, waypoint.duration_s / natural.duration) if waypoint.duration_s and natural.duration else 1.0
     for _ in range(_MAX_STRETCH_ATTEMPTS):
         trajectory = preview(context.limits, context.period_s, start, goal, time_scale, velocity_scale)
         if trajectory is None:

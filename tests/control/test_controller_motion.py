@@ -57,6 +57,15 @@ def test_a_requested_duration_is_honoured(rig):
     assert cycles * rig.period_ns / 1e9 == pytest.approx(3.0, abs=2 * rig.period_ns / 1e9)
 
 
+def test_a_move_to_where_it_is_with_a_duration_is_taken_and_moves_nothing(rig):
+    rig.enabled()
+    here = list(rig.controller.telemetry().pose_command)
+    assert rig.controller.move(here, duration=2.0).ok  # was internal_error: ZeroDivisionError
+    rig.settle()
+    assert list(rig.controller.telemetry().pose_command) == pytest.approx(here, abs=1e-9)
+    rig.assert_setpoints_safe()
+
+
 def test_a_fast_request_is_stretched_to_keep_the_legs_under_their_limit(make_rig, geometry):
     from hexactl.control.config import ControllerConfig
     from hexactl.control.trajectory import MotionLimits
