@@ -44,6 +44,7 @@ from pathlib import Path
 
 import pytest
 
+from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, geometry_to_toml, load_geometry
 from hexactl.kinematics.geometry import Geometry
@@ -188,14 +189,22 @@ def terminate_service(served: Served) -> None:
     assert "SIGTERM: shutting down" in log and "actuators disabled" in log and "stopped" in log, log
 
 
-def terminate_simulator(simulator: subprocess.Popen) -> None:
+def terminate_simulator(simulator: subprocess.Popen, tolerate_watchdog: bool = False) -> None:
     """SIGTERM: the simulator must exit with status 0, every actuator disabled without a
-    fault, and no frame rejected in its whole run (its final report)."""
+    fault, and no frame rejected in its whole run (its final report).
+
+    ``tolerate_watchdog``: an actuator may also have ended stopped by its own watchdog
+    (FAULT with COMM_TIMEOUT alone: the other safe end, which a guest starved past the
+    0.4 s watchdog just before the service's DISABLE produces); never still enabled."""
     simulator.send_signal(signal.SIGTERM)
     out, err = simulator.communicate(timeout=WAIT_S)
     assert simulator.returncode == 0, err
     report = json.loads(out.strip().splitlines()[-1])
-    assert report["states"] == ["DISABLED"] * 6 and report["faults"] == [0] * 6, report
+    ends = list(zip(report["states"], report["faults"]))
+    safe = {("DISABLED", 0), *([("FAULT", int(Fault.COMM_TIMEOUT))] if tolerate_watchdog else [])}
+    assert set(ends) <= safe, report
+    if ("FAULT", int(Fault.COMM_TIMEOUT)) in ends:
+        print(f"actuators stopped by their watchdog before the service's DISABLE (a starved guest): {report}")
     assert report["rejected_frames"] == [0] * 6, report
 
 
