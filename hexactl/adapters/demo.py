@@ -2,7 +2,7 @@
 service path.
 
 A :class:`~hexactl.adapters.service.Service` (what ``hexactl serve`` runs) runs the
-controller loop on a virtual CAN bus with the six simulated actuator firmwares, the
+controller loop on an in-process CAN bus with the six simulated actuator firmwares, the
 simulated platform with seeded manufacturing errors and its simulated theodolites; the
 campaign of :mod:`hexactl.adapters.campaign` drives it through the API on the loopback
 interface, like any client. So the demo is ``hexactl serve`` + ``hexactl campaign
@@ -153,7 +153,7 @@ def _introduce(nominal: Geometry, settings: DemoSettings, progress: Progress) ->
     paper = "the paper: 20" if settings.postures_per_leg != 20 else "as the paper"
     progress.say(f"hexactl demo (seed {settings.seed}): the paper's experiment on the simulated platform\n"
                  f"  service:    its own process: control loop, CAN link to six simulated actuator firmwares "
-                 f"on a virtual bus\n"
+                 f"on an in-process bus\n"
                  f"  platform:   {nominal.name!r} built with seeded errors (joints σ {errors.joint_sigma_mm:g} mm, "
                  f"zero lengths σ {errors.zero_length_sigma_mm:g} mm)\n"
                  f"  instrument: simulated theodolites, σ {sigma_mm:g} mm per coordinate\n"

@@ -44,8 +44,8 @@ constraint. A wide margin rather than the controller's limit: planning refused n
 pieces it leaves on the demo's plans (seeds 0–5) and the default plan (seeds 0–2) as
 ``lock_unreachable``, whereas it refuses some unsplit moves straying ~150 mm at the demo's
 speeds. It dates from when the loop projected each cycle from the target itself, which
-converged from ~20 mm only; it costs about two extra stops per posture on the demo's plan,
-one on the default plan."""
+converged from ~20 mm only; every piece is one more stop, which is why the campaign splits
+only the moves the controller refuses."""
 
 _CHORD_SAMPLES = 17  # points checked along each chord, ends included
 _MAX_SPLIT_DEPTH = 8  # at most 2⁸ pieces per move: far more than any posture pair needs

@@ -1,4 +1,4 @@
-"""The whole service: geometry → CAN link → six simulated actuators on a virtual bus →
+"""The whole service: geometry → CAN link → six simulated actuators on an in-process bus →
 controller → API and telemetry, in-process; and ``hexactl serve`` as a process that
 shuts down cleanly on SIGTERM."""
 

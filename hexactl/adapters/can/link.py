@@ -228,7 +228,7 @@ class CanActuatorLink:
 
     Threading: as the interface requires, only :meth:`send_estop` may be called from another
     thread than the loop's. python-can's SocketCAN ``send`` is one ``send(2)`` per frame and the
-    virtual bus's puts into thread-safe queues, so frames need no lock; the shared failure
+    in-process buses' puts into thread-safe queues, so frames need no lock; the shared failure
     counters take one.
     """
 

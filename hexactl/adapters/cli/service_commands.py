@@ -109,7 +109,7 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
     serve = subparsers.add_parser(
         "serve", parents=[common], help="run the controller service (default: the built-in simulator)",
         description="Run the control loop with the ZeroMQ API and telemetry. Without --can, six simulated "
-        "actuators on an in-process virtual CAN bus drive a simulated platform. SIGINT/SIGTERM disable the "
+        "actuators on an in-process CAN bus drive a simulated platform. SIGINT/SIGTERM disable the "
         "actuators and stop.",
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
