@@ -180,7 +180,7 @@ def _serve_monitored(config: ServiceConfig, geometry: Geometry, control: Connect
         return
     monitor = BusMonitor(service.simulator.bus_spec, geometry, config.rate_hz).start()
     if config.fifo_priority is not None:  # the monitor's reader shares the loop's GIL, as the simulator's does
-        fifo_for_threads(max(1, config.fifo_priority - 1), {MONITOR_THREAD_NAME})
+        fifo_for_threads(config.fifo_priority, {MONITOR_THREAD_NAME})
     try:
         realtime = asdict(service.controller.thread.loop.realtime)
         control.send((service.api_endpoint, service.telemetry_endpoint, realtime))

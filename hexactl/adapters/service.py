@@ -1,5 +1,5 @@
 """The composition root of ``hexactl serve`` (ros2_control's "manager"): geometry file →
-CAN link (or the built-in simulator on a ``virtual:`` bus) → control loop → loop link →
+CAN link (or the built-in simulator on a ``memory:`` bus) → control loop → loop link →
 API process (command server, telemetry, planning).
 
 Two processes. This one holds the real-time part: the control loop's thread (real-time
@@ -213,7 +213,7 @@ class Service:
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
             if config.fifo_priority is not None:
-                fifo_for_threads(max(1, config.fifo_priority - 1))
+                fifo_for_threads(config.fifo_priority)
 
             data_dirs = tuple(config.data_dirs or _default_data_dirs(config_path))
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
@@ -333,9 +333,10 @@ def _api_problem(service: Service) -> str | None:
     return None
 
 
-def fifo_for_threads(priority: int, names: Collection[str] = SERVICE_THREAD_NAMES) -> None:
-    """SCHED_FIFO ``priority`` (below the loop's) for this process's threads called one of
-    ``names``: those that share the loop's GIL (see :func:`~hexactl.control.realtime.set_fifo`)."""
+def fifo_for_threads(loop_priority: int, names: Collection[str] = SERVICE_THREAD_NAMES) -> None:
+    """SCHED_FIFO just below the loop's ``loop_priority`` for this process's threads called
+    one of ``names``: those that share the loop's GIL (see :func:`~hexactl.control.realtime.set_fifo`)."""
+    priority = max(1, loop_priority - 1)
     for thread in threading.enumerate():
         if thread.name in names and thread.native_id is not None:
             refused = set_fifo(priority, thread.native_id)

@@ -23,6 +23,7 @@ validated is what the loop will run. Two things keep them equal:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from enum import IntEnum
 from math import isfinite, radians
@@ -137,6 +138,7 @@ class PoseTrajectory:
         self._ruckig = Ruckig(DOFS, period_s)
         self._input = InputParameter(DOFS)
         self._output = OutputParameter(DOFS)
+        self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
         self._active = False
         self.goal: tuple[float, ...] | None = None
         self.reset(_ZERO6)
@@ -201,7 +203,7 @@ class PoseTrajectory:
             return StepResult.IDLE
         # ruckig recalculates only when the input changed since its last calculation: once
         # per new target (twice when the jerk retry is needed), not every cycle.
-        result = _calculate(self._input, lambda: self._ruckig.update(self._input, self._output))
+        result = _calculate(self._input, self._step)
         if result is None:
             self.reset(self._input.current_position)
             return StepResult.ERROR

@@ -17,7 +17,7 @@ import numpy as np
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
 from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.cli.common import CliError, campaign_stopped, load_config
+from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments, load_config
 from hexactl.adapters.cli.service_commands import _connect, _connection_parser  # the client options, shared
 from hexactl.adapters.files.geometry_file import save_geometry
 from hexactl.adapters.files.measurements import (
@@ -298,10 +298,7 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
     from hexactl.sim.offline_campaign import CampaignDesign
 
     geometry = load_config(arguments)
-    if arguments.per_leg < 1:
-        raise CliError(f"--per-leg {arguments.per_leg}: at least one posture per leg")
-    if not 0 < arguments.envelope <= 1:
-        raise CliError(f"--envelope {arguments.envelope}: a fraction in (0, 1]")
+    check_campaign_arguments(arguments)
     progress = Progress()
     design = CampaignDesign(postures_per_leg=arguments.per_leg, candidates=arguments.candidates,
                             envelope_fraction=arguments.envelope, seed=arguments.seed)

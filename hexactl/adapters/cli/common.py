@@ -42,6 +42,17 @@ def load_config(arguments: argparse.Namespace) -> Geometry:
         raise CliError(str(error)) from None
 
 
+def check_campaign_arguments(arguments: argparse.Namespace) -> None:
+    """``--per-leg`` and ``--envelope`` of a campaign-driving command (``demo``, ``campaign``).
+
+    :raises CliError: naming the option and what it must be
+    """
+    if arguments.per_leg < 1:
+        raise CliError(f"--per-leg {arguments.per_leg}: at least one posture per leg")
+    if not 0 < arguments.envelope <= 1:
+        raise CliError(f"--envelope {arguments.envelope}: a fraction in (0, 1]")
+
+
 def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt, directory: Path, progress: Progress,
                      on_interrupt: Callable[[], None] | None = None) -> int:
     """The exit status of ``hexactl COMMAND`` driving a campaign in ``directory`` when

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hexactl.adapters.cli.common import CliError, campaign_stopped
+from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments
 
 DEFAULT_OUT = Path("demo-out")
 
@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "demo",
         parents=[common],
         help="the paper's experiment end to end on the simulator: measure, calibrate, hot-load, measure again",
-        description="Start the controller service on the simulator (control loop, virtual CAN bus, six simulated "
+        description="Start the controller service on the simulator (control loop, in-process CAN bus, six simulated "
         "actuator firmwares, a platform with seeded manufacturing errors, simulated theodolites), measure the "
         "paper's test motions, run the leg-lock campaign for all six legs through the API, identify the "
         "parameters, hot-load the calibration into the running controller, measure the motions again, and print "
@@ -55,10 +55,7 @@ def run_demo_command(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.demo import DemoSettings, clear_results, run_demo
     from hexactl.adapters.service import ServiceError
 
-    if arguments.per_leg < 1:
-        raise CliError(f"--per-leg {arguments.per_leg}: at least one posture per leg")
-    if not 0 < arguments.envelope <= 1:
-        raise CliError(f"--envelope {arguments.envelope}: a fraction in (0, 1]")
+    check_campaign_arguments(arguments)
     if arguments.force:
         clear_results(arguments.out)
     settings = DemoSettings(arguments.out, arguments.seed, arguments.per_leg, arguments.envelope,
