@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import os
+import socket
+import threading
 
 import pytest
 
+from hexactl.adapters.api import paths
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError, ErrorCode
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
@@ -69,30 +72,147 @@ def test_missing_and_bad_files(service) -> None:
     assert reply["error"]["code"] == "invalid_sequence" and len(reply["error"]["details"]) >= 2
 
 
+def read(directories: DataDirectories, text: str) -> str:
+    return directories.read_text(text, ErrorCode.INVALID_CALIBRATION)[1]
+
+
+def refusal(call, *arguments) -> ApiError:
+    with pytest.raises(ApiError) as refused:
+        call(*arguments)
+    return refused.value
+
+
 def test_relative_paths_try_each_directory_in_order(tmp_path) -> None:
     first, second = tmp_path / "first", tmp_path / "second"
     first.mkdir()
     second.mkdir()
-    (second / "x.toml").write_text("")
+    (second / "x.toml").write_text("second")
     directories = DataDirectories([first, second])
-    assert directories.resolve("x.toml") == (second / "x.toml").resolve()
-    (first / "x.toml").write_text("")
-    assert directories.resolve("x.toml") == (first / "x.toml").resolve()
-    with pytest.raises(ApiError) as refused:
-        directories.resolve(os.path.relpath("/etc/passwd", first))
-    assert refused.value.code == ErrorCode.FORBIDDEN_PATH
+    assert directories.read_text("x.toml", ErrorCode.INVALID_CALIBRATION) == ((second / "x.toml").resolve(), "second")
+    os.mkfifo(first / "x.toml")  # not a file: skipped, as a missing one is
+    assert read(directories, "x.toml") == "second"
+    (first / "x.toml").unlink()
+    (first / "x.toml").write_text("first")
+    assert read(directories, "x.toml") == "first"
+    assert refusal(read, directories, os.path.relpath("/etc/passwd", first)).code == ErrorCode.FORBIDDEN_PATH
 
 
 def test_relative_to_the_working_directory_inside_a_data_directory(tmp_path, monkeypatch) -> None:
     (tmp_path / "calibrations").mkdir()
-    (tmp_path / "calibrations" / "c.toml").write_text("")
+    (tmp_path / "calibrations" / "c.toml").write_text("c")
     (tmp_path / "elsewhere.toml").write_text("")
     monkeypatch.chdir(tmp_path)
     directories = DataDirectories([tmp_path / "calibrations"])
-    assert directories.resolve("calibrations/c.toml") == (tmp_path / "calibrations" / "c.toml").resolve()
-    with pytest.raises(ApiError) as refused:
-        directories.resolve("elsewhere.toml")  # only in the working directory: not found where it may be
-    assert refused.value.code == ErrorCode.FILE_NOT_FOUND
-    with pytest.raises(ApiError) as refused:
-        directories.resolve("./elsewhere.toml/../../x")
-    assert refused.value.code == ErrorCode.FORBIDDEN_PATH
+    assert read(directories, "calibrations/c.toml") == "c"
+    # only in the working directory: not found where it may be
+    assert refusal(read, directories, "elsewhere.toml").code == ErrorCode.FILE_NOT_FOUND
+    assert refusal(read, directories, "./elsewhere.toml/../../x").code == ErrorCode.FORBIDDEN_PATH
+
+
+@pytest.fixture
+def data(tmp_path):
+    """A data directory with ``sub/race.toml`` in it, and ``outside/race.toml`` beside it."""
+    (tmp_path / "data" / "sub").mkdir(parents=True)
+    (tmp_path / "data" / "sub" / "race.toml").write_text("inside")
+    (tmp_path / "outside").mkdir()
+    (tmp_path / "outside" / "race.toml").write_text("outside")
+    return tmp_path
+
+
+def swapped_before(monkeypatch, name: str, swap) -> None:
+    """Make ``swap()`` happen just before ``paths.<name>`` runs: after the path check."""
+    original = getattr(paths, name)
+
+    def late(*arguments, **keywords):
+        swap()
+        return original(*arguments, **keywords)
+
+    monkeypatch.setattr(paths, name, late)
+
+
+def replace_with_symlink(path, target) -> None:
+    os.rename(path, path.with_name(path.name + ".away"))
+    path.symlink_to(target)
+
+
+@pytest.mark.parametrize("swapped", ["sub/race.toml", "sub"])
+def test_a_symlink_swapped_in_after_the_check_is_not_followed(data, monkeypatch, swapped) -> None:
+    swapped_before(monkeypatch, "_open_file_beneath",
+                   lambda: replace_with_symlink(data / "data" / swapped, data / "outside" / swapped.removeprefix("sub/")))
+    refused = refusal(read, DataDirectories([data / "data"]), "sub/race.toml")
+    assert refused.code == ErrorCode.FILE_NOT_FOUND and "symlink swapped in" in refused.message
+
+
+def test_a_fifo_swapped_in_is_refused_without_waiting_for_a_writer(data, monkeypatch) -> None:
+    fifo = data / "data" / "sub" / "race.toml"
+    swapped_before(monkeypatch, "_open_file_beneath", lambda: (fifo.unlink(), os.mkfifo(fifo)))
+    outcome: list[BaseException | str] = []
+
+    def attempt() -> None:
+        try:
+            outcome.append(read(DataDirectories([data / "data"]), "sub/race.toml"))
+        except BaseException as error:  # noqa: BLE001 - handed to the test thread
+            outcome.append(error)
+
+    reader = threading.Thread(target=attempt, daemon=True)
+    reader.start()
+    reader.join(10.0)
+    if reader.is_alive():  # blocked opening the FIFO: release it (a writer), then fail
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        pytest.fail("reading a FIFO blocked the reader")
+    [refused] = outcome
+    assert isinstance(refused, ApiError) and refused.code == ErrorCode.FILE_NOT_FOUND
+    assert "not a regular file (a FIFO)" in refused.message
+
+
+def test_the_open_descriptor_decides_where_the_file_lies(tmp_path, monkeypatch) -> None:
+    """A directory above a data directory swapped for a symlink to elsewhere after the
+    check (by someone who can write there) is followed by the open; the descriptor's real
+    path is what refuses the file."""
+    for place in ("above", "elsewhere"):
+        (tmp_path / place / "data").mkdir(parents=True)
+        (tmp_path / place / "data" / "race.toml").write_text(place)
+    directories = DataDirectories([tmp_path / "above" / "data"])
+    swapped_before(monkeypatch, "_open_file_beneath", lambda: replace_with_symlink(tmp_path / "above", tmp_path / "elsewhere"))
+    assert refusal(read, directories, "race.toml").code == ErrorCode.FORBIDDEN_PATH
+
+
+def test_special_files_large_files_and_bad_paths(data) -> None:
+    directories = DataDirectories([data / "data"])
+    with socket.socket(socket.AF_UNIX) as listener:
+        listener.bind(str(data / "data" / "socket.toml"))
+        refused = refusal(read, directories, "socket.toml")
+    assert refused.code == ErrorCode.FILE_NOT_FOUND and "a socket" in refused.message
+    with open(data / "data" / "big.toml", "wb") as big:
+        big.truncate(paths.MAX_FILE_BYTES + 1)  # sparse
+    assert refusal(read, directories, "big.toml").code == ErrorCode.TOO_LARGE
+    (data / "data" / "loop.toml").symlink_to("loop.toml")
+    refused = refusal(read, directories, "loop.toml")
+    assert refused.code == ErrorCode.FILE_NOT_FOUND and "symlink loop" in refused.message
+    refused = refusal(read, directories, "sub/race.toml/x.toml")
+    assert refused.code == ErrorCode.FILE_NOT_FOUND and "not a directory" in refused.message
+
+
+def test_writes_land_in_the_checked_directory(data) -> None:
+    directories = DataDirectories([data / "data"])
+    written = directories.write_new("sub/run.csv", b"a,b\n")
+    assert written == (data / "data" / "sub" / "run.csv").resolve() and written.read_bytes() == b"a,b\n"
+    assert refusal(directories.write_new, "sub/run.csv", b"").code == ErrorCode.FILE_EXISTS
+    assert refusal(directories.write_new, "../outside/run.csv", b"").code == ErrorCode.FORBIDDEN_PATH
+    assert refusal(directories.write_new, "none/run.csv", b"").code == ErrorCode.FILE_NOT_FOUND
+    assert not (data / "outside" / "run.csv").exists()
+
+
+def test_a_directory_swapped_for_a_symlink_during_a_write_is_not_followed(data, monkeypatch) -> None:
+    directories = DataDirectories([data / "data"])
+    swapped_before(monkeypatch, "_open_directory_beneath", lambda: replace_with_symlink(data / "data" / "sub", data / "outside"))
+    refused = refusal(directories.write_new, "sub/run.csv", b"")
+    assert refused.code == ErrorCode.FILE_NOT_FOUND and "symlink swapped in" in refused.message
+    monkeypatch.undo()
+    (data / "data" / "sub").unlink()
+    (data / "data" / "sub.away").rename(data / "data" / "sub")
+    # Swapped once the directory is open: the file is written where it was checked.
+    swapped_before(monkeypatch, "write_atomic", lambda: replace_with_symlink(data / "data" / "sub", data / "outside"))
+    directories.write_new("sub/run.csv", b"x")
+    assert (data / "data" / "sub.away" / "run.csv").read_bytes() == b"x"
+    assert not (data / "outside" / "run.csv").exists()

@@ -3,79 +3,141 @@
 A request's path is resolved (``..`` and symlinks followed) and refused with
 ``forbidden_path`` unless the real file lies inside one of the directories, so neither
 ``../../etc/passwd`` nor a symlink placed in a data directory reaches anything else.
+
+Anyone who can write into a data directory can change it between that check and the
+open, so the check is not trusted alone: the resolved path is opened one component at a
+time from the data directory without following any symlink (a symlink or a special file
+swapped in fails the open instead of being followed), non-blocking (a FIFO opens without
+waiting for a writer), and the open descriptor decides: a regular file, of bounded size,
+whose real path (``/proc/self/fd``, Linux) lies inside a data directory. Nothing swapped
+into a data directory can block the API thread or make it read or write outside them.
 """
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 from collections.abc import Sequence
-from pathlib import Path
+from pathlib import Path, PurePath
 
 from hexactl.adapters.api.wire import ApiError, ErrorCode
+from hexactl.adapters.files.atomic import write_atomic
 
 MAX_FILE_BYTES = 4 * 1024 * 1024
 """Largest calibration or sequence file read (a 1000-waypoint sequence is ~100 kB)."""
+
+_DIRECTORY_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
+_FILE_FLAGS = os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_NOCTTY | os.O_CLOEXEC
+_READ_CHUNK_BYTES = 64 * 1024
+
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
 
 
 class DataDirectories:
     """The directories requests may read files from and write recordings to. To read, a
     relative path is looked up in each directory in order, then in the service's
     working directory (so that ``calibrations/x.toml`` means what it says where the
-    service was started); wherever it is found, the file must lie inside one of the
-    directories."""
+    service was started); the first place where it opens as a regular file inside one of
+    the directories is read."""
 
     def __init__(self, directories: Sequence[str | os.PathLike[str]]) -> None:
         self.directories = tuple(Path(directory).resolve() for directory in directories)
 
-    def resolve(self, text: str) -> Path:
-        """The real path of the file ``text`` names. :class:`ApiError` ``forbidden_path``
-        if it is outside every data directory, ``file_not_found`` if it is inside but
-        is not a regular file."""
+    def read_text(self, text: str, invalid: ErrorCode) -> tuple[Path, str]:
+        """(real path, UTF-8 content) of the file ``text`` names. :class:`ApiError`
+        ``forbidden_path`` if it is outside every data directory; ``file_not_found`` if it
+        is inside but missing, not a regular file, unreadable, or changed while being
+        opened; ``too_large`` above :data:`MAX_FILE_BYTES`; ``invalid`` if not UTF-8."""
         self._check_text(text)
         path = Path(text)
         candidates = [path] if path.is_absolute() else [*(directory / path for directory in self.directories), Path.cwd() / path]
-        inside = None
+        problem: ApiError | None = None  # the first found inside that is not a readable file
+        missing = False
         for candidate in candidates:
-            real = candidate.resolve()
-            if not any(real.is_relative_to(directory) for directory in self.directories):
+            try:
+                real = candidate.resolve()
+            except (OSError, RuntimeError):  # a loop, or a symlink replaced as it was read (EINVAL)
+                problem = problem or _unresolvable(text)
                 continue
-            if os.path.isfile(real):  # False, not OSError, for a name too long
-                return real
-            inside = inside or real
-        if inside is None:
-            raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
-        raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories")
+            directory = self._containing(real)
+            if directory is None:
+                continue
+            try:
+                descriptor = _open_file_beneath(directory, real.relative_to(directory))
+            except FileNotFoundError:
+                missing = True
+                continue
+            except OSError as error:
+                problem = problem or _open_refusal(text, error)
+                continue
+            try:
+                status = os.fstat(descriptor)
+                if kind := _kind(status.st_mode):
+                    problem = problem or ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: not a regular file ({kind}); name a file")
+                    continue
+                opened = self._place(text, descriptor)
+                data = _read_bounded(text, descriptor, status.st_size)
+            finally:
+                os.close(descriptor)
+            try:
+                return opened, data.decode("utf-8")
+            except UnicodeDecodeError:
+                raise ApiError(invalid, f"{text}: not UTF-8 text") from None
+        if problem is not None:
+            raise problem
+        if missing:
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories")
+        raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
 
-    def new_file(self, text: str) -> Path:
-        """Where to create the file ``text`` names: relative to the first data directory,
-        or absolute; :class:`ApiError` ``forbidden_path`` unless its real directory is
-        inside a data directory, ``file_not_found`` if that directory does not exist."""
+    def write_new(self, text: str, data: bytes) -> Path:
+        """Write ``data`` to a new file ``text`` names (relative to the first data directory,
+        or absolute) atomically; its real path. :class:`ApiError` ``forbidden_path`` unless
+        its directory is inside a data directory, ``file_not_found`` if that directory does
+        not exist or the file cannot be written, ``file_exists`` if the file exists."""
         self._check_text(text)
         path = Path(text) if Path(text).is_absolute() else self.directories[0] / text
         if path.name in ("", ".", ".."):
             raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: not a file name")
-        parent = path.parent.resolve()
-        if not any(parent.is_relative_to(directory) for directory in self.directories):
+        try:
+            parent = path.parent.resolve()
+        except (OSError, RuntimeError):
+            raise _unresolvable(text) from None
+        directory = self._containing(parent)
+        if directory is None:
             raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
-        if not os.path.isdir(parent):  # False, not OSError, for a name too long
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such directory in the data directories")
-        return parent / path.name
-
-    def read_text(self, text: str, invalid: ErrorCode) -> tuple[Path, str]:
-        """(real path, UTF-8 content) of the file ``text`` names, after :meth:`resolve`;
-        ``too_large`` above :data:`MAX_FILE_BYTES`, ``invalid`` if it is not UTF-8."""
-        path = self.resolve(text)
         try:
-            with path.open("rb") as handle:
-                data = handle.read(MAX_FILE_BYTES + 1)
+            descriptor = _open_directory_beneath(directory, parent.relative_to(directory))
         except OSError as error:
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot read: {error.strerror}") from None
-        if len(data) > MAX_FILE_BYTES:
-            raise ApiError(ErrorCode.TOO_LARGE, f"{text}: larger than {MAX_FILE_BYTES} bytes")
+            raise _open_refusal(text, error) from None
         try:
-            return path, data.decode("utf-8")
-        except UnicodeDecodeError:
-            raise ApiError(invalid, f"{text}: not UTF-8 text") from None
+            real_parent = self._place(text, descriptor)
+            # Through the descriptor's own /proc entry, every step of the write happens in
+            # the directory just checked, whatever is renamed onto its path meanwhile.
+            write_atomic(Path(f"/proc/self/fd/{descriptor}") / path.name, data, overwrite=False)
+        except FileExistsError:
+            raise ApiError(ErrorCode.FILE_EXISTS, f"{text}: exists; a saved file is never overwritten: choose another name") from None
+        except OSError as error:
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot write: {error.strerror}") from None
+        finally:
+            os.close(descriptor)
+        return real_parent / path.name
+
+    def _containing(self, real: Path) -> Path | None:
+        return next((directory for directory in self.directories if real.is_relative_to(directory)), None)
+
+    def _place(self, text: str, descriptor: int) -> Path:
+        """The real path of what ``descriptor`` opened: the check no rename can race.
+        :class:`ApiError` ``forbidden_path`` unless it is inside a data directory."""
+        try:
+            real = Path(os.readlink(f"/proc/self/fd/{descriptor}"))
+        except OSError as error:
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot tell where the opened file lies "
+                           f"(/proc/self/fd: {error.strerror}); mount /proc") from None
+        if self._containing(real) is None:
+            raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
+        return real
 
     def _listing(self) -> dict[str, list[str]]:
         return {"data_directories": [str(directory) for directory in self.directories]}
@@ -84,3 +146,75 @@ class DataDirectories:
     def _check_text(text: str) -> None:
         if not text or "\0" in text:
             raise ApiError(ErrorCode.FORBIDDEN_PATH, "a path is a non-empty string without NUL characters")
+
+
+def _open_directory_beneath(directory: Path, relative: PurePath) -> int:
+    """A descriptor of the directory ``directory/relative``, opened from ``directory`` one
+    component at a time without following a symlink: ``relative`` is already resolved, so
+    a symlink met is one swapped in since (``OSError`` ENOTDIR), never a way out."""
+    descriptor = os.open(directory, _DIRECTORY_FLAGS)
+    for part in relative.parts:
+        try:
+            child = os.open(part, _DIRECTORY_FLAGS, dir_fd=descriptor)
+        finally:
+            os.close(descriptor)
+        descriptor = child
+    return descriptor
+
+
+def _open_file_beneath(directory: Path, relative: PurePath) -> int:
+    """A descriptor of the file ``directory/relative`` (resolved), opened as
+    :func:`_open_directory_beneath` opens its directory, without blocking and without
+    following a final symlink (``OSError`` ELOOP)."""
+    parent = _open_directory_beneath(directory, relative.parent)
+    try:
+        return os.open(relative.name, _FILE_FLAGS, dir_fd=parent)
+    finally:
+        os.close(parent)
+
+
+def _read_bounded(text: str, descriptor: int, size_bytes: int) -> bytes:
+    """The content of the regular file of ``size_bytes`` (by fstat); :class:`ApiError`
+    ``too_large`` above :data:`MAX_FILE_BYTES`, also if it grows past it while read."""
+    if size_bytes > MAX_FILE_BYTES:
+        raise _too_large(text)
+    chunks, size = [], 0
+    try:
+        while chunk := os.read(descriptor, _READ_CHUNK_BYTES):
+            chunks.append(chunk)
+            size += len(chunk)
+            if size > MAX_FILE_BYTES:
+                raise _too_large(text)
+    except OSError as error:
+        raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot read: {error.strerror}") from None
+    return b"".join(chunks)
+
+
+def _kind(mode: int) -> str | None:
+    """What a file that is not a regular file is (None for a regular file)."""
+    if stat.S_ISREG(mode):
+        return None
+    return next((name for test, name in _KINDS if test(mode)), "not a file")
+
+
+def _open_refusal(text: str, error: OSError) -> ApiError:
+    if error.errno == errno.ENOENT:
+        return ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such directory in the data directories")
+    if error.errno == errno.ELOOP:  # a symlink where the resolved path has none: swapped in since
+        return ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: changed while being opened (a symlink swapped in); "
+                        "try again")
+    if error.errno == errno.ENOTDIR:  # a file, or a symlink not followed (O_NOFOLLOW), where a directory was
+        return ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: a part of the path is not a directory (a file, or a "
+                        "symlink swapped in while being opened)")
+    if error.errno == errno.ENXIO:  # a socket
+        return ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: not a regular file (a socket); name a file")
+    return ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot open: {error.strerror}")
+
+
+def _unresolvable(text: str) -> ApiError:
+    return ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot be resolved (a symlink loop, or it changed while "
+                    "being resolved); name a file")
+
+
+def _too_large(text: str) -> ApiError:
+    return ApiError(ErrorCode.TOO_LARGE, f"{text}: larger than {MAX_FILE_BYTES} bytes")

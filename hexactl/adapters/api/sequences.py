@@ -25,7 +25,7 @@ SEQUENCE_SUFFIX = ".toml"
 def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> MotionSequence:
     """The sequence a ``play`` request names. :class:`ApiError` ``unknown_sequence`` for a
     name that is neither built in nor a ``.toml`` file, the path errors of
-    :meth:`DataDirectories.resolve`, ``invalid_sequence`` for a refused sequence."""
+    :meth:`DataDirectories.read_text`, ``invalid_sequence`` for a refused sequence."""
     try:
         if isinstance(sequence, InlineSequence):
             document = sequence.model_dump(exclude={"waypoints"})

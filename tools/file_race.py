@@ -1,0 +1,360 @@
+#!/usr/bin/env python3
+"""Race file swaps against ``load_calibration`` on a real ``hexactl serve`` (hexactl issue
+10, findings 1 and 2) and time ``estop`` meanwhile.
+
+    python tools/file_race.py --seconds 30          # the figures in BENCHMARKS.md
+    python tools/file_race.py --seconds 5 --json race.json
+
+What runs: ``hexactl serve`` on its simulator, in a temporary working directory (so its
+data directories are ``./calibrations`` and the others by default), on random loopback
+ports. A separate process (the attacker: anyone who can write into a data directory)
+rename-swaps a valid calibration file, a FIFO and a symlink to a valid calibration
+*outside* the data directories onto ``calibrations/race.toml``, one after the other as
+fast as it can. A client repeats ``load_calibration`` of ``race.toml`` all the while
+(for ``--seconds``, and on until one load succeeded);
+every ``--estop-every`` seconds a new client sends ``estop``, timed from its creation to
+the answer, then reads ``status`` and sends ``reset``. At the end the service gets
+SIGTERM and must exit, leaving both its ports free.
+
+It prints the loads by outcome (``loaded`` or the error code; ``no_answer`` when the
+client timed out), how many loaded the outside file, the E-stop latencies (p50, p99,
+max) and states, and how the service shut down. Exit status 0 when every request was
+answered, none with ``internal_error``, none loaded the outside file, some loaded the
+inside one, every E-stop latched, and the service exited on SIGTERM with its ports free;
+1 otherwise. Latencies are reported, not judged: they depend on the machine.
+
+:func:`race` is what ``tests/reliability/test_file_race.py`` runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from multiprocessing.sharedctypes import Synchronized
+from multiprocessing.synchronize import Event
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # noqa: E402
+from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, geometry_to_toml, load_geometry  # noqa: E402
+
+RACE_NAME = "race.toml"
+ANSWER_TIMEOUT_S = 5.0
+"""How long a client waits for any answer: far above any healthy one, so that only a
+blocked API goes unanswered."""
+SHUTDOWN_TIMEOUT_S = 30.0
+"""How long ``hexactl serve`` may take to exit on SIGTERM before the run counts it hung."""
+START_TIMEOUT_S = 60.0
+LONGEST_RACE_FACTOR = 10.0
+_SERVING = re.compile(r"API on (?P<api>\S+), telemetry on (?P<telemetry>\S+) at")
+
+
+@dataclass(frozen=True)
+class RaceFiles:
+    """The files of a race in ``directory``: ``calibrations/race.toml`` is swapped between
+    a hard link to ``inside`` (a valid calibration), a FIFO and a symlink to ``outside``
+    (another valid calibration, outside every data directory, with another id)."""
+
+    directory: Path
+    inside: Path
+    outside: Path
+    inside_id: str
+    outside_id: str
+
+    @property
+    def race(self) -> Path:
+        return self.directory / "calibrations" / RACE_NAME
+
+    @classmethod
+    def create(cls, directory: Path) -> RaceFiles:
+        nominal = load_geometry(default_config_path())
+        (directory / "calibrations").mkdir(exist_ok=True)
+        # Zero lengths 0.1 and 0.2 mm off: two plausible calibrations with distinct ids.
+        inside, outside = (nominal.model_copy(update={"name": name, "zero_lengths": tuple(z + offset for z in nominal.zero_lengths)})
+                           for name, offset in (("inside", 0.1), ("outside", 0.2)))
+        files = cls(directory, directory / "calibrations" / "inside.toml", directory / "outside.toml",
+                    geometry_id(inside), geometry_id(outside))
+        files.inside.write_text(geometry_to_toml(inside))
+        files.outside.write_text(geometry_to_toml(outside))
+        return files
+
+
+def _swap(files: RaceFiles, started: Event, stop: Event, swaps: Synchronized[int]) -> None:
+    """The attacker: rename-swap a regular file, a FIFO and a symlink to the outside file
+    onto the race name, in turn, from ``started`` until ``stop``; the count in ``swaps``."""
+    staged = files.race.with_name(".race.next")
+    count = 0
+    started.set()
+    while not stop.is_set():
+        for make in (lambda: os.link(files.inside, staged), lambda: os.mkfifo(staged),
+                     lambda: os.symlink(files.outside, staged)):
+            make()
+            os.rename(staged, files.race)
+            count += 1
+    swaps.value = count
+
+
+@contextmanager
+def swapping(files: RaceFiles) -> Iterator[Synchronized[int]]:
+    """The attacker's process, swapping while inside the ``with``; yields its swap count
+    (set when it has stopped)."""
+    context = multiprocessing.get_context("spawn")
+    started, stop, swaps = context.Event(), context.Event(), context.Value("q", 0)
+    attacker = context.Process(target=_swap, args=(files, started, stop, swaps), name="file-race-attacker", daemon=True)
+    attacker.start()
+    try:
+        if not started.wait(START_TIMEOUT_S):
+            raise RuntimeError("the swapping process did not start")
+        yield swaps
+    finally:
+        stop.set()
+        attacker.join(SHUTDOWN_TIMEOUT_S)
+        if attacker.is_alive():
+            attacker.kill()
+            raise RuntimeError("the swapping process did not stop")
+
+
+@dataclass
+class Served:
+    """A running ``hexactl serve``: its process, endpoints and log (read continuously)."""
+
+    process: subprocess.Popen[str]
+    api: str
+    telemetry: str
+    log: list[str] = field(default_factory=list)
+
+    def ports(self) -> list[int]:
+        return [int(endpoint.rsplit(":", 1)[1]) for endpoint in (self.api, self.telemetry)]
+
+
+@contextmanager
+def serving(directory: Path) -> Iterator[Served]:
+    """``hexactl serve`` in ``directory`` on random loopback ports; killed on the way out
+    if still running (:func:`shut_down` is the clean end)."""
+    local = "tcp://127.0.0.1:*"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", local, "--telemetry", local],
+        stderr=subprocess.PIPE, text=True, cwd=directory, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        log: list[str] = []
+        started = time.monotonic()
+        for line in process.stderr:  # type: ignore[union-attr]
+            log.append(line)
+            if match := _SERVING.search(line):
+                break
+            if time.monotonic() - started > START_TIMEOUT_S:
+                raise RuntimeError("hexactl serve did not start:\n" + "".join(log))
+        else:
+            raise RuntimeError("hexactl serve exited at start:\n" + "".join(log))
+        served = Served(process, match["api"], match["telemetry"], log)
+        # Drained all along: a full pipe would block the service's logging.
+        threading.Thread(target=lambda: log.extend(process.stderr), name="serve-log", daemon=True).start()  # type: ignore[arg-type]
+        yield served
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+@dataclass
+class Shutdown:
+    """How ``hexactl serve`` ended on SIGTERM: its exit status (None: still running after
+    :data:`SHUTDOWN_TIMEOUT_S`), how long it took, and the ports still taken."""
+
+    exit_status: int | None
+    seconds: float
+    ports_in_use: list[int]
+
+
+def shut_down(served: Served) -> Shutdown:
+    """SIGTERM, wait for the exit, then check that both ports can be bound again (as a
+    restarted service would: SO_REUSEADDR, so only a listener still there counts)."""
+    started = time.monotonic()
+    served.process.send_signal(signal.SIGTERM)
+    try:
+        status: int | None = served.process.wait(SHUTDOWN_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        status = None
+    seconds = time.monotonic() - started
+    in_use = []
+    for port in served.ports():
+        with socket.socket() as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                in_use.append(port)
+    return Shutdown(status, seconds, in_use)
+
+
+@dataclass
+class RaceResult:
+    """What the clients saw during a race."""
+
+    loads: Counter[str] = field(default_factory=Counter)
+    """By outcome: ``loaded`` (the inside file), ``loaded_outside`` (a leak), an error
+    code, or ``no_answer``."""
+    other_answers: Counter[str] = field(default_factory=Counter)
+    """The E-stop clients' other requests (status, reset) by the same outcomes."""
+    estop_latencies_s: list[float] = field(default_factory=list)
+    """From creating the new client to its ``estop`` answer, for each answered one (the
+    others count in ``estop_unanswered``)."""
+    estop_states: list[str] = field(default_factory=list)
+    """The state ``status`` showed after each answered E-stop."""
+    estop_unanswered: int = 0
+    swaps: int = 0
+
+
+def race(files: RaceFiles, api: str, seconds: float, estop_every_s: float, min_loaded: int = 1) -> RaceResult:
+    """Swap files onto ``race.toml`` while loading it over and over, with a new client's
+    ``estop`` (then ``status`` and ``reset``) every ``estop_every_s``: for ``seconds``, and
+    on until ``min_loaded`` loads of the inside file succeeded (at most
+    :data:`LONGEST_RACE_FACTOR` times as long: on a busy host loads are few)."""
+    result = RaceResult()
+    racing = threading.Event()
+    racing.set()
+    started = time.monotonic()
+
+    def racing_on() -> bool:
+        elapsed = time.monotonic() - started
+        return elapsed < seconds or (result.loads["loaded"] < min_loaded and elapsed < LONGEST_RACE_FACTOR * seconds)
+
+    def load_repeatedly() -> None:
+        with HexactlClient(api, timeout_s=ANSWER_TIMEOUT_S) as client:
+            while racing.is_set():
+                result.loads[_outcome(client, files, "load_calibration", path=RACE_NAME)] += 1
+
+    with swapping(files) as swaps:
+        loader = threading.Thread(target=load_repeatedly, name="file-race-loader")
+        loader.start()
+        try:
+            while racing_on():
+                time.sleep(estop_every_s)
+                _estop_round(api, result)
+        finally:
+            racing.clear()
+            loader.join(ANSWER_TIMEOUT_S * 2)
+    result.swaps = swaps.value
+    if loader.is_alive():
+        result.loads["loader_stuck"] += 1
+    return result
+
+
+def _estop_round(api: str, result: RaceResult) -> None:
+    started = time.perf_counter()
+    with HexactlClient(api, timeout_s=ANSWER_TIMEOUT_S) as client:
+        try:
+            reply = client.request("estop")
+        except ServiceUnavailable:
+            result.estop_unanswered += 1
+            return
+        result.estop_latencies_s.append(time.perf_counter() - started)
+        if not reply.get("ok"):
+            result.other_answers[f"estop_{reply['error']['code']}"] += 1
+        else:
+            result.other_answers["estop_ok"] += 1
+        try:
+            result.estop_states.append(client.call("status")["status"]["state"])
+        except Exception as error:  # noqa: BLE001 - counted: a status must be answered too
+            result.other_answers[f"status_{type(error).__name__}"] += 1
+        result.other_answers[_outcome(client, None, "reset")] += 1  # so the next E-stop latches anew
+
+
+def _outcome(client: HexactlClient, files: RaceFiles | None, cmd: str, **fields: object) -> str:
+    try:
+        reply = client.request(cmd, **fields)
+    except ServiceUnavailable:
+        return "no_answer"
+    if not reply.get("ok"):
+        return reply["error"]["code"]
+    if files is not None and reply.get("calibration_id") == files.outside_id:
+        return "loaded_outside"
+    if files is None:
+        return f"{cmd}_ok"
+    return "loaded" if reply.get("calibration_id") == files.inside_id else "loaded_unknown"
+
+
+def problems(result: RaceResult, shutdown: Shutdown) -> list[str]:
+    """Every way the run failed the promise (empty: it kept it)."""
+    found = []
+    for outcome in ("no_answer", "loader_stuck", "internal_error", "loaded_outside", "loaded_unknown"):
+        if result.loads[outcome] or result.other_answers[outcome]:
+            found.append(f"{result.loads[outcome] + result.other_answers[outcome]} requests: {outcome}")
+    if not result.loads["loaded"]:
+        found.append("no load of the inside file succeeded (a fix that refuses everything?)")
+    if result.estop_unanswered or not result.estop_latencies_s:
+        found.append(f"{result.estop_unanswered} of {result.estop_unanswered + len(result.estop_latencies_s)} E-stops unanswered")
+    if any(state != "estop" for state in result.estop_states) or len(result.estop_states) != len(result.estop_latencies_s):
+        found.append(f"E-stop did not latch every time: states {result.estop_states}")
+    if shutdown.exit_status is None:
+        found.append(f"hexactl serve still running {SHUTDOWN_TIMEOUT_S:g} s after SIGTERM")
+    if shutdown.ports_in_use:
+        found.append(f"ports still in use after the exit: {shutdown.ports_in_use}")
+    return found
+
+
+def percentile(values: list[float], fraction: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, round(fraction * (len(ordered) - 1)))]
+
+
+def report(result: RaceResult, shutdown: Shutdown) -> str:
+    latencies_ms = [1000.0 * s for s in result.estop_latencies_s] or [float("nan")]
+    lines = [
+        f"swaps: {result.swaps} (file, FIFO, symlink to outside, in turn)",
+        "loads: " + ", ".join(f"{outcome} {count}" for outcome, count in result.loads.most_common()),
+        "other answers: " + ", ".join(f"{outcome} {count}" for outcome, count in result.other_answers.most_common()),
+        f"estop latency ms (new client, {len(result.estop_latencies_s)} answered, {result.estop_unanswered} unanswered): "
+        f"p50 {percentile(latencies_ms, 0.5):.1f}, p99 {percentile(latencies_ms, 0.99):.1f}, max {max(latencies_ms):.1f}",
+        f"estop states: {dict(Counter(result.estop_states))}",
+        f"SIGTERM: exit status {shutdown.exit_status} after {shutdown.seconds:.2f} s; ports in use after: {shutdown.ports_in_use or 'none'}",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="how long to race (default 10)")
+    parser.add_argument("--estop-every", type=float, default=0.25, metavar="S", help="seconds between E-stops (default 0.25)")
+    parser.add_argument("--json", type=Path, help="also write the figures here")
+    arguments = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="file_race_") as directory:
+        files = RaceFiles.create(Path(directory))
+        with serving(files.directory) as served:
+            result = race(files, served.api, arguments.seconds, arguments.estop_every)
+            shutdown = shut_down(served)
+    print(report(result, shutdown))
+    found = problems(result, shutdown)
+    for problem in found:
+        print(f"FAILED: {problem}")
+    if arguments.json:
+        latencies_ms = [1000.0 * s for s in result.estop_latencies_s]
+        figures = {
+            "swaps": result.swaps, "loads": dict(result.loads), "other_answers": dict(result.other_answers),
+            "estop_latency_ms": {"answered": len(latencies_ms), "unanswered": result.estop_unanswered,
+                                 **({"p50": percentile(latencies_ms, 0.5), "p99": percentile(latencies_ms, 0.99),
+                                     "max": max(latencies_ms)} if latencies_ms else {})},
+            "estop_states": dict(Counter(result.estop_states)), "shutdown": asdict(shutdown), "problems": found,
+        }
+        arguments.json.write_text(json.dumps(figures, indent=2))
+    return 1 if found else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
