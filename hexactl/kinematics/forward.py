@@ -8,6 +8,12 @@ Each iteration solves J·[δR; δθ] = l_target − l(pose) with the analytic tw
 (rows [u_i, (T·P_mi) × u_i]) and maps the rotation increment δθ to Euler-angle
 increments in closed form. Warm-started from the previous pose (the loop's case) it
 converges in two or three iterations.
+
+Converged means the leg lengths are met, not that the pose is the platform's: near a
+singular configuration other poses (another assembly mode) have almost the same
+lengths, and Newton–Raphson lands on whichever is nearest its start. Callers that report
+a pose to a person check the Jacobian condition there
+(:func:`hexactl.kinematics.workspace.jacobian_condition`; ``hexactl fk`` does).
 """
 
 from __future__ import annotations

@@ -43,6 +43,16 @@ class Limits(_Strict):
     pose_max: Pose6 = Field(description="pose envelope upper bound, relative to the zero posture")
     leg_velocity_mm_s: float = Field(gt=0, description="fastest allowed actuator speed, mm/s")
     max_jacobian_condition: float = Field(gt=1, description="near-singularity threshold")
+    # Plausibility bounds of a calibration around the nominal geometry (see
+    # hexactl.kinematics.plausibility; the defaults' reasons: docs/calibration.md).
+    calibration_joint_tolerance_mm: float = Field(
+        default=60.0, gt=0, description="a calibrated joint centre's largest distance from its nominal position, mm")
+    calibration_zero_length_tolerance_mm: float = Field(
+        default=60.0, gt=0, description="a calibrated zero length's largest difference from the nominal, mm")
+    calibration_home_tolerance_mm: float = Field(
+        default=10.0, gt=0, description="a calibration's zero posture: largest distance from the nominal's, mm")
+    calibration_home_tolerance_deg: float = Field(
+        default=0.5, gt=0, description="a calibration's zero posture: largest roll, pitch or yaw difference, deg")
 
     @model_validator(mode="after")
     def _ordered(self) -> Limits:

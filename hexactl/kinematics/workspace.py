@@ -13,10 +13,18 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import NDArray
 
+from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import leg_vectors_batch, twist_jacobian
-from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative
+from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative, relative_from_absolute
 from hexactl.kinematics.rotation import rotation_matrices
+
+
+ENVELOPE_ROUNDING = 1e-9
+"""mm or deg a pose may pass the envelope's bound by and count as on it: the trajectory
+generator's samples of a move to a goal on the bound overshoot it by an ulp or so
+(610.0000000000001 for x = 610), which is rounding, not motion. The stroke has no such
+allowance: the loop's set-point guard enforces it exactly."""
 
 
 class ViolationKind(StrEnum):
@@ -101,9 +109,11 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
                     violations.append(Violation(kind, angle, limit,
                         f"leg {leg + 1} {where} joint at {angle:.2f}° exceeds its {limit:g}° cone", leg=leg + 1))
         for axis, unit, value, low, high in zip(POSE_AXES, POSE_UNITS, relative[n], limits.pose_min, limits.pose_max):
-            if not low <= value <= high:
-                violations.append(Violation(ViolationKind.POSE_RANGE, float(value), high if value > high else low,
-                    f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit}", axis=axis))
+            if not low - ENVELOPE_ROUNDING <= value <= high + ENVELOPE_ROUNDING:
+                bound = high if value > high else low
+                violations.append(Violation(ViolationKind.POSE_RANGE, float(value), bound,
+                    f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit} "
+                    f"(by {abs(value - bound):.3g} {unit})", axis=axis))
         if not condition <= limits.max_jacobian_condition:
             violations.append(Violation(ViolationKind.SINGULAR, condition, limits.max_jacobian_condition,
                 f"near-singular pose: Jacobian condition {condition:.1f} > {limits.max_jacobian_condition:g}"))
@@ -123,6 +133,23 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
 def assess_pose(geometry: Geometry, pose_relative: Sequence[float]) -> PoseAssessment:
     """Check one pose relative to the zero posture (mm, deg) against every limit."""
     return assess_poses(geometry, [pose_relative])[0]
+
+
+def assess_readings(geometry: Geometry, readings: Sequence[Sequence[float]] | NDArray,
+                    guess_relative: Sequence[float]) -> list[PoseAssessment | None]:
+    """Where the platform is at each row of (N, 6) sensor readings (mm) by ``geometry``,
+    checked against every limit: forward kinematics warm-started row by row from
+    ``guess_relative`` (relative mm/deg), then :func:`assess_poses`. None for a row with
+    no pose (forward kinematics did not converge)."""
+    guess = absolute_from_relative(geometry.home, guess_relative)
+    poses: list[NDArray | None] = []
+    for row in np.asarray(readings, dtype=float).reshape(-1, 6):
+        result = forward_kinematics(geometry.legs, row + geometry.legs.zero_lengths_mm, guess)
+        poses.append(np.array(result.pose) if result.ok else None)
+        guess = result.pose if result.ok else guess
+    found = [pose for pose in poses if pose is not None]
+    assessed = iter(assess_poses(geometry, relative_from_absolute(geometry.home, np.array(found))) if found else ())
+    return [next(assessed) if pose is not None else None for pose in poses]
 
 
 def jacobian_condition(geometry: Geometry, pose_absolute: Sequence[float]) -> float:

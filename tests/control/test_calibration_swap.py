@@ -91,14 +91,18 @@ def _with_zero_offset(geometry: Geometry, offset_mm: float) -> Geometry:
     return _variant(geometry, zero_lengths=[z + offset_mm for z in geometry.zero_lengths])
 
 
-def _accepting_large_changes(make_rig):
+def _accepting_large_changes(make_rig, geometry):
+    """A rig (and its nominal geometry) that accepts zero lengths hundreds of mm from the
+    nominal ones, so that the checks after plausibility can be seen at work."""
     from hexactl.control.config import ControllerConfig
 
-    return make_rig(config=ControllerConfig(calibration_max_change_mm=400.0))
+    tolerant = _variant(geometry, limits={"calibration_zero_length_tolerance_mm": 300.0})
+    return make_rig(config=ControllerConfig(calibration_max_change_mm=400.0), geometry=tolerant), tolerant
 
 
 def test_a_calibration_that_puts_the_current_pose_out_of_reach_is_refused(make_rig, geometry):
-    rig = _accepting_large_changes(make_rig).enabled()
+    rig, geometry = _accepting_large_changes(make_rig, geometry)
+    rig.enabled()
     assert rig.controller.move([0, 0, -240, 0, 0, 0]).ok
     rig.settle()  # the legs read about 134 mm here
     result = rig.controller.load_calibration(_with_zero_offset(geometry, 150.0), "long legs")
@@ -130,7 +134,7 @@ def test_a_controller_refuses_a_start_geometry_with_other_limits(geometry):
 
     wide = _variant(geometry, limits={"stroke": (-100.0, 950.0)})
     with pytest.raises(ValueError, match=r"stroke: \(-100.0, 950.0\) \(hardware: \(0.0, 850.0\)\)"):
-        Controller.in_thread(IdealActuators([400.0] * 6), wide, "wide", hardware_limits=geometry.limits)
+        Controller.in_thread(IdealActuators([400.0] * 6), wide, "wide", nominal=geometry)
 
 
 def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):
@@ -142,13 +146,32 @@ def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):
 
 
 def test_the_remaining_sequence_is_checked_against_the_new_calibration(make_rig, geometry):
-    rig = _accepting_large_changes(make_rig).enabled()
-    assert rig.controller.play("x_sweep").ok
-    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")  # at x = 600 mm
-    # 250 mm shorter legs: x = 600 needs readings up to 797 mm (fine), x = -600 up to 870 (beyond 850).
+    from hexactl.control.sequences import MotionSequence, SequenceWaypoint
+
+    rig, geometry = _accepting_large_changes(make_rig, geometry)
+    rig.enabled()
+    out_and_back = MotionSequence(name="out", waypoint=[SequenceWaypoint(pose=[0, 0, 10, 0, 0, 0], dwell=1.0),
+                                                        SequenceWaypoint(pose=[0, 0, 0, 0, 0, 60])])
+    assert rig.controller.play(out_and_back).ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")  # at z = 10 mm
+    # 100 mm shorter legs: fine here and along the ramp, but yaw = 60° needs readings up to 872 mm (beyond 850).
+    result = rig.controller.load_calibration(_with_zero_offset(geometry, -100.0), "short legs")
+    assert not result.ok and result.error == "invalid_geometry", result.message
+    assert {v["kind"] for v in result.details["violations"]} == {"stroke_high"}
+    assert "ramp_fraction" not in result.details
+
+
+def test_a_change_is_checked_along_its_ramp(make_rig, geometry):
+    rig, geometry = _accepting_large_changes(make_rig, geometry)
+    rig.enabled()
+    assert rig.controller.move([600, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    # 250 mm shorter legs: the platform would pass through poses outside the envelope while ramping.
     result = rig.controller.load_calibration(_with_zero_offset(geometry, -250.0), "short legs")
     assert not result.ok and result.error == "invalid_geometry"
-    assert {v["kind"] for v in result.details["violations"]} == {"stroke_high"}
+    assert "ramp fraction" in result.message and 0 < result.details["ramp_fraction"] <= 1
+    assert {v["kind"] for v in result.details["violations"]} <= {"pose_range", "base_cone", "platform_cone",
+                                                                   "near_singular"}
 
 
 def test_swap_while_disabled_takes_effect_at_once_and_is_refused_while_locked(rig, calibrated):
@@ -161,3 +184,69 @@ def test_swap_while_disabled_takes_effect_at_once_and_is_refused_while_locked(ri
     assert rig.controller.rollback_calibration().error == "leg_locked"
     assert rig.controller.load_calibration("not a geometry", "x").error == "invalid_argument"
     assert rig.controller.load_calibration(calibrated, "").error == "invalid_argument"
+
+
+@pytest.mark.parametrize("case", ["base joints +1 m", "platform joints +300 mm", "home moved"])
+@pytest.mark.parametrize("enabled", [True, False])
+def test_an_implausible_calibration_compensated_at_the_current_pose_is_refused(make_rig, geometry, case, enabled):
+    from tests.kinematics.calibrations import implausible_calibrations
+
+    pose = [100.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    rig = make_rig(start_pose=pose)
+    if enabled:
+        rig.enabled()
+    rig.run(3)
+    calibration, parameter = implausible_calibrations(geometry, pose)[case]
+    result = rig.controller.load_calibration(calibration, "implausible")
+    assert not result.ok and result.error == "invalid_geometry"
+    assert parameter in result.message and "[limits] calibration_" in result.message
+    assert any(problem.startswith(parameter) for problem in result.details["implausible"])
+    rig.run(2)
+    assert rig.controller.telemetry().calibration_id == "nominal"
+
+
+def test_a_start_calibration_must_be_plausible(geometry):
+    from hexactl.control.controller import Controller
+    from hexactl.sim.ideal_actuators import IdealActuators
+    from tests.kinematics.calibrations import implausible_calibrations
+
+    calibration, _ = implausible_calibrations(geometry, [0.0] * 6)["platform joints +300 mm"]
+    with pytest.raises(ValueError, match=r"platform_joints\[0\] \(leg 1\) is 300.0 mm from the nominal"):
+        Controller.in_thread(IdealActuators([400.0] * 6), calibration, "bad", nominal=geometry)
+
+
+def test_a_move_to_the_envelopes_bound_is_accepted(rig):
+    rig.enabled()
+    assert rig.controller.validate_pose([610, 0, 0, 0, 0, 0]).ok
+    assert rig.controller.move([-610, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    assert rig.controller.telemetry().pose_command[0] == -610.0
+
+
+def test_swaps_and_rollbacks_many_times_a_second_during_moves_never_clamp(rig, geometry):
+    """Issue 10: 50 swaps a second with rollbacks clamped the set-points now and then.
+    Here a swap or rollback every 10 cycles (50 a second at 500 Hz) while the platform
+    moves between far poses, on plausible calibrations (true platforms with the
+    simulator's manufacturing errors)."""
+    import random
+
+    from hexactl.sim.true_platform import true_geometry
+
+    calibrations = [true_geometry(geometry, seed) for seed in range(6)]
+    rng = random.Random(3)
+    rig.enabled()
+    accepted = 0
+    for goal in ([300, 300, 150, 10, -10, 30], [-300, -200, -150, -10, 10, -30], [0, 0, 0, 0, 0, 0]):
+        assert rig.controller.move(goal).ok
+        while True:
+            if rig.controller.snapshot.previous is not None and rng.random() < 0.5:
+                result = rig.controller.rollback_calibration()
+            else:
+                result = rig.controller.load_calibration(rng.choice(calibrations), f"cal-{rng.random()}")
+            accepted += result.ok
+            rig.run(10)
+            if rig.controller.snapshot.motion.value == "holding":
+                break
+    assert accepted > 100
+    rig.assert_setpoints_safe()
+    assert rig.controller.telemetry().loop.guard_clamps == 0

@@ -85,3 +85,21 @@ def test_config_comes_from_the_environment_and_the_console_script_works(tmp_path
                              capture_output=True, text=True, cwd=tmp_path, env={"PATH": "/usr/bin:/bin"})
     # Outside the checkout the repository's config/platform.toml is the fallback.
     assert default.returncode == 0 and "12 of 12 poses reachable" in default.stdout
+
+
+def test_fk_warns_near_a_singular_configuration(capsys) -> None:
+    # Yaw 88°: the legs' readings have other poses close by (condition ≈ 230, limit 60).
+    readings = ["754.1", "1019.0"] * 3
+    assert main(["fk", *readings, "--json"]) == 1
+    record = json.loads(capsys.readouterr().out)
+    assert record["status"] == "ok" and record["near_singular"] and record["jacobian_condition"] > 200
+    assert any(w.startswith("near-singular: Jacobian condition") for w in record["warnings"])
+    assert main(["fk", *readings]) == 1
+    out = capsys.readouterr().out
+    assert "Jacobian condition" in out and "warning: near-singular" in out
+
+
+def test_fk_reports_the_condition_of_a_well_conditioned_pose(capsys) -> None:
+    assert main(["fk", "317.6618", "421.2270", "513.9011", "559.2190", "514.5708", "447.7747", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert not record["near_singular"] and 1 < record["jacobian_condition"] < 60

@@ -98,3 +98,22 @@ def test_saved_files_get_ordinary_permissions(nominal, tmp_path: Path) -> None:
     os.umask(umask)
     saved = save_geometry(nominal, tmp_path / "cal.toml")
     assert saved.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_the_id_is_a_hash_of_the_values_not_of_the_text(nominal) -> None:
+    reordered = "\n".join(
+        line for line in NOMINAL_TEXT.splitlines() if not line.startswith("#")  # no comments
+    ).replace("zero_lengths = [1750.0, 1750.0, 1750.0, 1750.0, 1750.0, 1750.0]",
+              "zero_lengths = [1750, 1750, 1.75e3, 1750.000, 1750, 1750]")  # other spellings
+    reordered = reordered.replace("home = [0.0, 0.0, 2000.0, 0.0, 0.0, 0.0]", "")
+    reordered = "home = [-0.0, 0, 2000, 0.0, -0.0, 0]  # a comment\n" + reordered  # moved, -0.0
+    other = parse_geometry(reordered, "other layout")
+    assert other == nominal
+    assert geometry_id(other) == geometry_id(nominal)
+    assert len(geometry_id(nominal)) == 16 and int(geometry_id(nominal), 16) >= 0
+
+
+def test_different_values_get_different_ids(nominal) -> None:
+    moved = nominal.model_copy(update={"zero_lengths": (1750.0,) * 5 + (1750.001,)})
+    renamed = nominal.model_copy(update={"name": "another"})
+    assert len({geometry_id(nominal), geometry_id(moved), geometry_id(renamed)}) == 3

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import numpy as np
+
 from hexactl.adapters.cli.kinematics_commands import paper_extremes
 from hexactl.kinematics.workspace import ViolationKind, assess_pose, assess_poses
 
@@ -49,3 +51,18 @@ def test_margins_are_negative_exactly_where_limits_are_violated(nominal) -> None
         assert stroke_violated == (min(assessment.stroke_margin_mm) < 0)
         range_violated = any(v.kind is ViolationKind.POSE_RANGE for v in assessment.violations)
         assert range_violated == (min(assessment.pose_margin) < 0)
+
+
+def test_the_envelopes_bounds_themselves_are_allowed(nominal) -> None:
+    # A move to x = 610 was refused as "x 610 mm outside [-610, 610]": the trajectory's
+    # samples overshoot the goal by an ulp (610.0000000000001).
+    for axis, bound in ((0, 610.0), (1, -610.0), (5, 61.0)):
+        pose = [0.0] * 6
+        pose[axis] = bound
+        pose[axis] = np.nextafter(bound, 2 * bound)
+        assert not [v for v in assess_pose(nominal, pose).violations if v.kind is ViolationKind.POSE_RANGE]
+
+
+def test_an_envelope_violation_says_by_how_much(nominal) -> None:
+    (violation,) = assess_pose(nominal, [610.001, 0, 0, 0, 0, 0]).violations
+    assert violation.message == "x 610.001 mm outside the pose envelope [-610, 610] mm (by 0.001 mm)"

@@ -11,7 +11,7 @@ from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import leg_lengths
 from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative, relative_from_absolute
-from hexactl.kinematics.workspace import PoseAssessment, assess_poses
+from hexactl.kinematics.workspace import PoseAssessment, assess_poses, jacobian_condition
 
 PAPER_STROKES: tuple[tuple[str, float], ...] = (
     ("x", 600.0), ("y", 600.0), ("z", 250.0), ("roll", 23.0), ("pitch", 23.0), ("yaw", 60.0)
@@ -53,7 +53,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         parents=[common],
         help="the pose for six sensor readings",
         description="Forward kinematics: the pose (relative to the zero posture) at which the six "
-        "actuators read L1..L6 mm. Exit status 1 if it does not converge.",
+        "actuators read L1..L6 mm, and the Jacobian condition there. Exit status 1 if it does not "
+        "converge, or if the pose is near-singular (condition above [limits] max_jacobian_condition): "
+        "there, other poses have almost the same leg lengths and the one found may not be the platform's.",
     )
     for label in LEG_LABELS:
         fk.add_argument(label, help="sensor reading, mm")
@@ -151,18 +153,26 @@ def run_fk(arguments: argparse.Namespace) -> int:
     result = forward_kinematics(geometry.legs, lengths, absolute_from_relative(geometry.home, [0.0] * 6))
     pose = [float(v) for v in relative_from_absolute(geometry.home, result.pose)]
     low, high = geometry.limits.stroke
-    outside = [f"{label} {reading:g} mm is outside the stroke [{low:g}, {high:g}] mm"
-               for label, reading in zip(LEG_LABELS, readings) if not low <= reading <= high]
+    warnings = [f"{label} {reading:g} mm is outside the stroke [{low:g}, {high:g}] mm"
+                for label, reading in zip(LEG_LABELS, readings) if not low <= reading <= high]
+    condition = jacobian_condition(geometry, result.pose) if result.ok else None
+    near_singular = condition is not None and not condition <= geometry.limits.max_jacobian_condition
+    if near_singular:
+        warnings.append(f"near-singular: Jacobian condition {condition:.1f} > {geometry.limits.max_jacobian_condition:g} "
+                        "([limits] max_jacobian_condition); other poses (another assembly mode) have almost these "
+                        "leg lengths, so this one may be tens of mm from the platform's: do not rely on it")
     if arguments.json:
         print(json.dumps({"pose": pose if result.ok else None, "status": result.status.name.lower(),
                           "iterations": result.iterations, "residual_mm": result.residual_mm,
-                          "warnings": outside}, indent=2))
+                          "jacobian_condition": condition, "near_singular": near_singular,
+                          "warnings": warnings}, indent=2))
     elif result.ok:
         print("  ".join(f"{axis} {value:.4f} {unit}" for axis, value, unit in zip(POSE_AXES, pose, POSE_UNITS)))
-        print(f"converged in {result.iterations} iterations, residual {result.residual_mm:.1e} mm")
+        print(f"converged in {result.iterations} iterations, residual {result.residual_mm:.1e} mm, "
+              f"Jacobian condition {condition:.1f} (limit {geometry.limits.max_jacobian_condition:g})")
     else:
         print(f"no pose: forward kinematics {result.status.name.lower().replace('_', ' ')} after "
               f"{result.iterations} iterations (residual {result.residual_mm:.3g} mm)")
-    for warning in outside if not arguments.json else ():
+    for warning in warnings if not arguments.json else ():
         print(f"warning: {warning}")
-    return 0 if result.ok else 1
+    return 0 if result.ok and not near_singular else 1

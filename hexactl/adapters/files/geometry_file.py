@@ -7,6 +7,7 @@ geometry file with identified values and a ``[calibration]`` table.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import tomllib
 from pathlib import Path
@@ -84,5 +85,20 @@ def save_geometry(geometry: Geometry, path: str | os.PathLike[str], *, overwrite
 
 
 def geometry_id(geometry: Geometry) -> str:
-    """Content hash identifying a geometry: equal for equal values, whatever the file layout."""
-    return hashlib.sha256(geometry_to_toml(geometry).encode("utf-8")).hexdigest()[:16]
+    """Content hash identifying a geometry: 16 hex digits of the SHA-256 of its validated
+    values (keys sorted, numbers in their shortest exact form, -0.0 as 0.0), so equal
+    values get equal ids whatever the file's comments, layout, key order or number
+    spelling (``1750`` or ``1750.0``)."""
+    canonical = json.dumps(_canonical(geometry.model_dump(mode="json")), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
+
+
+def _canonical(value: object) -> object:
+    """``value`` with every float zero made +0.0 (equal values, different JSON otherwise)."""
+    if isinstance(value, dict):
+        return {key: _canonical(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_canonical(item) for item in value]
+    if isinstance(value, float) and value == 0.0:
+        return 0.0
+    return value
