@@ -74,11 +74,23 @@ DEMO_MOTION = MotionLimits(
 0.2 g), eight times its jerk: short moves between postures are limited by these, long
 ones by the legs' 400 mm/s, which stays."""
 
-DEMO_RESETS = 5
-"""Latched faults the demo resets and resumes after by default: the simulator shares the
-host with everything else, and a host that stalls the service's process beyond the
-simulated actuators' watchdog (50 ms) trips them. Each is reported; none loses a
-measurement."""
+DEMO_FAULTS_IN_A_ROW = 5
+"""The demo resets every latched fault and resumes, unless it is the sixth in a row with
+no measurement saved between them (then it stops: the host stalls the service faster than
+it can measure). The simulator shares the host with everything else, and a host that
+stalls the service's process beyond the simulated actuators' watchdog (50 ms) trips them;
+the service runs real-time where it may, which makes that rare. A measurement a fault
+interrupted is taken again, never kept; the faults are counted at the end."""
+
+DEMO_START_TIMEOUT_S = 300.0
+"""How long the demo waits for its service (and the service's API process) to start: a few
+seconds on an idle host; beside four CPU-bound processes on two cores their imports alone
+took over a minute."""
+
+DEMO_CLIENT_TIMEOUT_S = 30.0
+"""How long the demo's campaign waits for each answer of its service: milliseconds on an
+idle host, but its planning runs at a lower priority than everything else (nice 5), and
+on a 2-core host loaded by other work an answer took more than 5 s (the clients' default)."""
 
 RESULT_FILES = (PLAN_FILE, MEASUREMENTS_FILE, VALIDATION_FILE, CALIBRATION_FILE, LOCK_FILE)
 """What a demo leaves in its directory besides ``report/``; ``--force`` removes them."""
@@ -91,14 +103,15 @@ STROKES = np.array([stroke for _, stroke in PAPER_STROKES])
 class DemoSettings:
     """``directory`` for the results, the ``seed`` of the manufacturing errors, the
     instrument noise and the plan; the campaign's size; ``config`` the nominal geometry
-    (None: the default); how many latched faults to reset and go on after."""
+    (None: the default); how many latched faults in a row to reset and go on after
+    (:data:`DEMO_FAULTS_IN_A_ROW`)."""
 
     directory: Path
     seed: int = 0
     postures_per_leg: int = DEMO_POSTURES_PER_LEG
     envelope_fraction: float = DEMO_ENVELOPE_FRACTION
     config: Path | None = None
-    reset_faults: int = DEMO_RESETS
+    reset_faults: int = DEMO_FAULTS_IN_A_ROW
 
 
 def clear_results(directory: Path) -> None:
@@ -127,6 +140,7 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     except GeometryError as error:
         raise ServiceError(str(error)) from None
     local = "tcp://127.0.0.1:*"  # the real API path, on ports nobody else has
+    # Real-time where the process may, as hexactl serve (ServiceConfig's default).
     config = ServiceConfig(config_path=settings.config, api_endpoint=local, telemetry_endpoint=local,
                            data_dirs=(settings.directory,), simulator_seed=settings.seed, motion=DEMO_MOTION,
                            log_level="WARNING")
@@ -137,13 +151,16 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     design = CampaignDesign(postures_per_leg=settings.postures_per_leg, envelope_fraction=settings.envelope_fraction,
                             seed=settings.seed)
     campaign = CampaignSettings(settings.directory, design, apply=True, true=truth, reset_faults=settings.reset_faults)
-    with ServiceProcess(config) as service, HexactlClient(service.api_endpoint) as client:
+    with (ServiceProcess(config, DEMO_START_TIMEOUT_S) as service,
+          HexactlClient(service.api_endpoint, timeout_s=DEMO_CLIENT_TIMEOUT_S) as client):
         outcome = run_campaign(client, nominal, ServiceInstrument(client), campaign, progress)
     progress.say("")
     for line in table_1(outcome.before, outcome.after) + stroke_table(outcome.before, outcome.after):
         progress.say(line)
     progress.say(f"\nreport {outcome.report} (and its PNG figures), calibration "
                  f"{settings.directory / CALIBRATION_FILE}, data in {settings.directory}")
+    progress.say(f"recovered from {outcome.faults_recovered} fault(s) of the simulated actuators (a measurement one "
+                 "interrupted was taken again)" if outcome.faults_recovered else "no fault to recover from")
     progress.say(f"finished in {time.monotonic() - started:.0f} s")
     return outcome
 

@@ -13,13 +13,21 @@ starts and stops them.
 Shutdown (SIGINT/SIGTERM, or :meth:`Service.close`): the API stops taking commands, a
 moving platform brakes to rest, the actuators are disabled (an E-stop if they will not
 be), then telemetry, the loop, the link and the simulator stop. If the API process dies,
-:func:`run_service` does the same and exits with status 1.
+:func:`run_service` does the same and exits with status 1. Every step is bounded (an API
+process that does not answer is killed), so the whole takes at most
+:data:`SHUTDOWN_LIMIT_S`; should anything still hang, :func:`run_service` exits anyway.
+
+Real-time by default: the loop thread asks for SCHED_FIFO
+(:data:`~hexactl.control.realtime.DEFAULT_FIFO_PRIORITY`) and the process for mlockall;
+without the privilege it runs normally and says why
+(:func:`~hexactl.control.realtime.allowed`).
 """
 
 from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 import signal
 import threading
 import time
@@ -52,12 +60,31 @@ from hexactl.adapters.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
-from hexactl.control.realtime import RealtimeConfig, set_fifo
+from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, describe, set_fifo
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
-SHUTDOWN_BRAKE_TIMEOUT_S = 10.0
-"""How long shutdown waits for a moving platform to brake to rest before it E-stops."""
+SHUTDOWN_STEPS_S = 5.0
+"""The time :meth:`Service.close`'s waiting steps share: stop taking commands, brake, let
+the API process end. Each waits at most its own bound below and never past this; killing
+an API process that has not ended and the rest of the teardown take about a second more."""
+
+CLOSE_API_TIMEOUT_S = 1.0
+"""How long shutdown waits for the API process to stop taking commands (milliseconds when
+it answers; one that does not is stuck, and is killed when the shutdown's time is up)."""
+
+SHUTDOWN_BRAKE_TIMEOUT_S = 3.0
+"""How long shutdown waits for a moving platform to brake to rest before it E-stops
+(braking from the legs' top speed at the default limits takes about 1 s)."""
+
+MIN_STEP_S = 0.5
+"""The least time a shutdown step gets, even once :data:`SHUTDOWN_STEPS_S` is spent."""
+
+SHUTDOWN_LIMIT_S = 7.0
+"""The most :func:`run_service`'s shutdown may take before it exits regardless (status 1):
+the bounded steps take at most about 6 s; this catches what nothing foresaw. The
+interpreter's own exit takes up to 3 s more on a loaded 2-core host (measured), which
+keeps the whole within the 10 s a service manager is promised."""
 
 SIMULATOR_WATCHDOG_CYCLES = 25
 SIMULATOR_SUPERVISION = SupervisionConfig(heartbeat_timeout_s=0.2, setpoint_lag_s=0.2)
@@ -73,6 +100,10 @@ SERVICE_THREAD_NAMES = frozenset({"actuator-bus"})
 """The threads that share the loop's process (and GIL): with ``fifo_priority`` they run
 just below it."""
 
+API_START_TIMEOUT_S = 240.0
+"""How long the service waits for its API process to start: seconds on an idle host, over
+a minute beside four CPU-bound processes on two cores (measured)."""
+
 API_WATCH_INTERVAL_S = 0.5
 """How often :func:`run_service` checks that the API process lives."""
 
@@ -81,6 +112,21 @@ log = logging.getLogger("hexactl.service")
 
 class ServiceError(Exception):
     """The service cannot start as configured; the message says why."""
+
+
+class _Budget:
+    """The time the shutdown's steps share: none until :meth:`start` (a start that fails
+    unwinds with each step's own bound)."""
+
+    def __init__(self) -> None:
+        self._end = float("inf")
+
+    def start(self, seconds: float) -> None:
+        self._end = time.monotonic() + seconds
+
+    def left(self, most: float) -> float:
+        """Seconds a step may wait: at most ``most``, at least :data:`MIN_STEP_S`."""
+        return max(MIN_STEP_S, min(most, self._end - time.monotonic()))
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,7 +146,8 @@ class ServiceConfig:
     ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the simulator's
     thread, which shares the GIL with it (None: normal
     scheduling; the API process always runs normally); ``lock_memory``: mlockall of the
-    loop's process. Both fall back, logged, without the privilege.
+    loop's process. Both on by default; each falls back, logged and in ``status``,
+    without the privilege.
     """
 
     config_path: Path | None = None
@@ -115,8 +162,8 @@ class ServiceConfig:
     simulator_seed: int = 0
     point_sigma_mm: float | None = None
     motion: MotionLimits = MotionLimits()
-    fifo_priority: int | None = None
-    lock_memory: bool = False
+    fifo_priority: int | None = DEFAULT_FIFO_PRIORITY
+    lock_memory: bool = True
     log_level: str = "INFO"
 
 
@@ -126,7 +173,7 @@ class Service:
     ``simulator``: the built-in one (None with real actuators)."""
 
     def __init__(self, controller: Controller, simulator: Simulator | None, api: ApiProcess, link: LoopExchange,
-                 closers: ExitStack) -> None:
+                 closers: ExitStack, budget: _Budget) -> None:
         self.controller = controller
         self.simulator = simulator
         self.link = link
@@ -135,6 +182,7 @@ class Service:
         self.telemetry_endpoint = api.telemetry_endpoint
         self._api = api
         self._closers = closers
+        self._budget = budget
 
     @property
     def api_alive(self) -> bool:
@@ -198,7 +246,7 @@ class Service:
             controller_config = ControllerConfig(loop=loop, motion=config.motion, **supervision)
             try:
                 controller = Controller.in_thread(link, active, calibration_id, calibration_source=str(source),
-                                                  config=controller_config, hardware_limits=nominal.limits)
+                                                  config=controller_config, nominal=nominal)
             except ValueError as error:  # a calibration whose [limits] are not the nominal's
                 raise ServiceError(f"{source}: {error}") from None
 
@@ -211,29 +259,32 @@ class Service:
             controller.thread.loop.exchange = exchange
             realtime = controller.start()
             closers.callback(controller.shutdown)
-            log.info("control loop at %d Hz%s", config.rate_hz, "".join(f"; {note}" for note in realtime.notes))
-            if config.fifo_priority is not None:
-                fifo_for_threads(config.fifo_priority)
+            log.info("control loop at %d Hz; real-time: %s", config.rate_hz, describe(realtime))
+            if realtime.fifo_priority is not None:
+                fifo_for_threads(realtime.fifo_priority)
 
             data_dirs = tuple(config.data_dirs or _default_data_dirs(config_path))
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
-                                   data_dirs, controller_config, nominal.limits,
+                                   data_dirs, controller_config, nominal,
                                    simulator.instrument_spec if simulator else None, config.log_level)  # fmt: skip
             try:
-                api = ApiProcess(settings, commands_out, reports_in)
+                api = ApiProcess(settings, commands_out, reports_in, API_START_TIMEOUT_S)
             except ApiStartError as error:
                 raise ServiceError(str(error)) from None
-            closers.callback(api.close)  # telemetry flows until the platform is at rest
-            closers.callback(_bring_to_rest, controller)
-            closers.callback(api.close_api)
+            budget = _Budget()
+            closers.callback(lambda: api.close(budget.left(SHUTDOWN_STEPS_S)))  # telemetry flows until at rest
+            closers.callback(lambda: _bring_to_rest(controller, budget.left(SHUTDOWN_BRAKE_TIMEOUT_S)))
+            closers.callback(lambda: api.close_api(budget.left(CLOSE_API_TIMEOUT_S)))
             security = "CURVE" if config.curve else "no authentication (loopback)"
             log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)
             log.info("data directories: %s", ", ".join(str(directory) for directory in data_dirs))
-            return cls(controller, simulator, api, exchange, closers.pop_all())
+            return cls(controller, simulator, api, exchange, closers.pop_all(), budget)
 
     def close(self) -> None:
-        """Stop taking commands, bring the platform to rest disabled, close everything."""
+        """Stop taking commands, bring the platform to rest disabled, close everything,
+        in at most about :data:`SHUTDOWN_STEPS_S` + 1 s."""
+        self._budget.start(SHUTDOWN_STEPS_S)
         self._closers.close()
         log.info("stopped")
 
@@ -316,11 +367,27 @@ def run_service(config: ServiceConfig) -> int:
                     status = 1
                     break
         finally:
+            backstop = threading.Timer(SHUTDOWN_LIMIT_S, _exit_now)
+            backstop.daemon = True
+            backstop.start()
             service.close()
+            backstop.cancel()
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
     return status
+
+
+def _exit_now() -> None:
+    """End the process at once, children first: shutdown took longer than
+    :data:`SHUTDOWN_LIMIT_S`. Actuators the loop no longer heartbeats stop by their own
+    watchdog."""
+    log.error("shutdown did not finish within %g s: killing the child processes and exiting (status 1)",
+              SHUTDOWN_LIMIT_S)
+    for child in multiprocessing.active_children():
+        child.kill()
+    logging.shutdown()  # flush the log: os._exit skips it
+    os._exit(1)
 
 
 def _api_problem(service: Service) -> str | None:
@@ -343,11 +410,12 @@ def fifo_for_threads(loop_priority: int, names: Collection[str] = SERVICE_THREAD
             log.info("%s thread: %s", thread.name, refused or f"SCHED_FIFO {priority}")
 
 
-def _bring_to_rest(controller: Controller) -> None:
-    """Brake to rest and disable; E-stop if that does not happen in time."""
+def _bring_to_rest(controller: Controller, timeout_s: float) -> None:
+    """Brake to rest and disable; E-stop if that does not happen within ``timeout_s``."""
     telemetry = controller.telemetry()
-    if telemetry.state != ControlState.ENABLED.value:
-        return  # disabled already, or FAULT/ESTOP: the actuators hold by themselves
+    if telemetry.state != ControlState.ENABLED.value:  # the actuators hold by themselves
+        log.info("%s at %s (measured): nothing to brake", telemetry.state, _pose_text(telemetry.pose_measured))
+        return
 
     def at_rest() -> bool:  # a sequence dwelling is holding, yet disable would be refused as busy
         now = controller.telemetry()
@@ -355,15 +423,22 @@ def _bring_to_rest(controller: Controller) -> None:
 
     if not at_rest():
         controller.stop()
-        deadline = time.monotonic() + SHUTDOWN_BRAKE_TIMEOUT_S
+        deadline = time.monotonic() + timeout_s
         while not at_rest() and time.monotonic() < deadline:
             time.sleep(0.05)
+    rest = controller.telemetry()
+    log.info("platform %s at %s (commanded, relative to the zero posture, mm and deg; measured %s)",
+             "at rest" if at_rest() else "still moving", _pose_text(rest.pose_command), _pose_text(rest.pose_measured))
     result = controller.disable()
     if result.ok:
         log.info("actuators disabled")
     else:
         log.warning("disable refused (%s: %s): E-stop", result.error, result.message)
         controller.estop()
+
+
+def _pose_text(pose: tuple[float, ...] | None) -> str:
+    return "unknown" if pose is None else "[" + ", ".join(f"{value:.3f}" for value in pose) + "]"
 
 
 def _load(path: Path) -> Geometry:

@@ -6,15 +6,27 @@ The protocol on the control pipe: the child's first message is either where it s
 (any non-string object) or, as a string, why it cannot; then it answers each request
 once carried out (with the word itself, or what was asked for), and ends at :data:`STOP` or when the parent's end
 closes (the parent died).
+
+Every wait is bounded: a child that does not end when told is killed (SIGKILL: it may
+ignore SIGTERM, be stopped, or be stuck in a call that never returns) and reaped, so
+that neither :meth:`Spawned.close` nor multiprocessing's exit handler, which joins every
+child it knows without a timeout, can hang on it.
 """
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 from collections.abc import Callable, Iterable
 from multiprocessing.connection import Connection
 
 STOP = "stop"
+
+KILL_REAP_TIMEOUT_S = 1.0
+"""How long :meth:`Spawned.close` waits for a killed child to be gone (SIGKILL ends even
+a stopped process; one in uninterruptible sleep ends when that call returns)."""
+
+log = logging.getLogger("hexactl.spawned")
 
 
 class SpawnError(RuntimeError):
@@ -69,13 +81,16 @@ class Spawned:
         return None
 
     def close(self, timeout_s: float) -> None:
-        """Send :data:`STOP` and wait for the child to end; terminate it if it will not."""
+        """Send :data:`STOP` and wait at most ``timeout_s`` for the child to end; kill it
+        if it has not (logged). Returns within ``timeout_s`` + :data:`KILL_REAP_TIMEOUT_S`."""
         try:
-            self._control.send(STOP)
+            self._control.send(STOP)  # a few bytes: the pipe takes them even from a stuck child
         except OSError:
             pass  # gone already
         self._process.join(timeout_s)
         if self._process.is_alive():
-            self._process.terminate()
-            self._process.join(timeout_s)
+            log.warning("%s (pid %s) did not end within %g s of being told to: killed", self._process.name,
+                        self._process.pid, timeout_s)
+            self._process.kill()
+            self._process.join(KILL_REAP_TIMEOUT_S)
         self._control.close()

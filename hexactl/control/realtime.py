@@ -39,13 +39,22 @@ import ctypes
 import ctypes.util
 import gc
 import os
+import resource
 import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
 _MCL_CURRENT = 1
 _MCL_FUTURE = 2
+_CAP_IPC_LOCK = 14
+_CAP_SYS_NICE = 23
+
+DEFAULT_FIFO_PRIORITY = 80
+"""The loop's SCHED_FIFO priority when the service runs real-time (its default): above
+the kernel's threaded interrupt handlers (50) and most real-time services, below the
+kernel's own watchdog and migration threads (99)."""
 
 
 class RealtimeConfig(BaseModel):
@@ -82,6 +91,69 @@ class RealtimeReport:
     notes: tuple[str, ...] = field(default=())
 
 
+@dataclass(frozen=True, slots=True)
+class Privileges:
+    """What this process may ask for: ``sys_nice`` (CAP_SYS_NICE: any SCHED_FIFO
+    priority), ``rtprio_limit`` (RLIMIT_RTPRIO: the highest SCHED_FIFO priority without
+    it), ``ipc_lock`` (CAP_IPC_LOCK: lock any amount of memory), ``memlock_limit_bytes``
+    (RLIMIT_MEMLOCK without it; None: unlimited)."""
+
+    sys_nice: bool
+    rtprio_limit: int
+    ipc_lock: bool
+    memlock_limit_bytes: int | None
+
+
+def probe_privileges() -> Privileges:
+    """This process's :class:`Privileges`, from its effective capabilities
+    (``/proc/self/status``; none if unreadable) and resource limits. Root normally has
+    both capabilities; root in a container may have neither."""
+    try:
+        status = Path("/proc/self/status").read_text(encoding="ascii")
+        capabilities = int(next(line.split()[1] for line in status.splitlines() if line.startswith("CapEff:")), 16)
+    except (OSError, StopIteration, ValueError, IndexError):
+        capabilities = 0
+    memlock = resource.getrlimit(resource.RLIMIT_MEMLOCK)[0]
+    return Privileges(sys_nice=bool(capabilities >> _CAP_SYS_NICE & 1),
+                      rtprio_limit=resource.getrlimit(resource.RLIMIT_RTPRIO)[0],
+                      ipc_lock=bool(capabilities >> _CAP_IPC_LOCK & 1),
+                      memlock_limit_bytes=None if memlock == resource.RLIM_INFINITY else memlock)
+
+
+def allowed(config: RealtimeConfig, privileges: Privileges) -> tuple[int | None, bool, tuple[str, ...]]:
+    """What of ``config``'s scheduling and memory locking ``privileges`` allow: (the
+    SCHED_FIFO priority to set, None for normal scheduling; whether to lock memory; a
+    note per request left out or lowered, saying why and how to get it).
+
+    Without CAP_SYS_NICE the priority is capped at RLIMIT_RTPRIO. Without CAP_IPC_LOCK
+    memory is locked only under an unlimited RLIMIT_MEMLOCK: ``MCL_FUTURE`` under a finite
+    one would make every allocation past it fail, which is worse than a page fault."""
+    notes: list[str] = []
+    priority = config.fifo_priority
+    if priority is not None and not privileges.sys_nice and privileges.rtprio_limit < priority:
+        limit = privileges.rtprio_limit
+        if limit <= 0:
+            notes.append(f"SCHED_FIFO {priority} not set: needs root, CAP_SYS_NICE or RLIMIT_RTPRIO > 0 "
+                         "(ulimit -r, limits.conf rtprio); normal scheduling")
+            priority = None
+        else:
+            notes.append(f"SCHED_FIFO {limit}, not {priority}: RLIMIT_RTPRIO is {limit} and there is no CAP_SYS_NICE")
+            priority = limit
+    lock = config.lock_memory
+    if lock and not privileges.ipc_lock and privileges.memlock_limit_bytes is not None:
+        notes.append(f"memory not locked: RLIMIT_MEMLOCK is {privileges.memlock_limit_bytes} bytes and there is no "
+                     "CAP_IPC_LOCK (ulimit -l unlimited, limits.conf memlock)")
+        lock = False
+    return priority, lock, tuple(notes)
+
+
+def describe(report: RealtimeReport) -> str:
+    """``report`` in one line for a log: what was obtained, then the notes."""
+    scheduling = f"SCHED_FIFO {report.fifo_priority}" if report.fifo_priority is not None else "normal scheduling"
+    memory = "memory locked" if report.memory_locked else "memory not locked"
+    return "; ".join((f"{scheduling}, {memory}", *report.notes))
+
+
 @dataclass(slots=True)
 class _Previous:
     """What :func:`apply_realtime` changed process-wide, to put back at shutdown."""
@@ -106,18 +178,20 @@ def set_fifo(priority: int, native_id: int = 0) -> str | None:
     return None
 
 
-def apply_realtime(config: RealtimeConfig) -> tuple[RealtimeReport, _Previous]:
+def apply_realtime(config: RealtimeConfig, privileges: Privileges | None = None) -> tuple[RealtimeReport, _Previous]:
     """Apply ``config`` to the calling thread (scheduling, affinity) and the process
-    (memory, GIL switch interval, gc). Never raises for a missing privilege."""
-    notes: list[str] = []
+    (memory, GIL switch interval, gc), as far as ``privileges`` (None: probed) allow
+    (:func:`allowed`). Never raises for a missing privilege."""
+    wanted_priority, wanted_lock, skipped = allowed(config, privileges or probe_privileges())
+    notes = list(skipped)
     previous = _Previous(gc.isenabled(), sys.getswitchinterval(), False)
 
     priority = None
-    if config.fifo_priority is not None:
+    if wanted_priority is not None:
         # Thread 0 is the calling thread on Linux: only the loop thread becomes real-time.
-        if (refused := set_fifo(config.fifo_priority)) is None:
-            priority = config.fifo_priority
-        else:
+        if (refused := set_fifo(wanted_priority)) is None:
+            priority = wanted_priority
+        else:  # the probe said yes, the kernel no: e.g. a cgroup without real-time runtime
             notes.append(refused)
 
     cpus = None
@@ -129,7 +203,7 @@ def apply_realtime(config: RealtimeConfig) -> tuple[RealtimeReport, _Previous]:
             notes.append(f"CPU affinity {list(config.cpus)} not set: {error}")
 
     locked = False
-    if config.lock_memory:
+    if wanted_lock:
         error_text = _mlockall()
         if error_text is None:
             locked = previous.memory_locked = True

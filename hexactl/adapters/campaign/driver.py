@@ -21,6 +21,12 @@ Record = dict[str, Any]
 
 ZERO_POSE = (0.0,) * 6
 
+MOVE_ATTEMPTS = 3
+"""How many times :meth:`PlatformDriver.move` sends a move that the API answered with
+``loop_timeout`` (the loop's verdict came too late for it, on a loaded host): the move may
+or may not have run, so the driver waits for rest and sends it again (a move to where the
+platform already is ends at once)."""
+
 FAULT_CLEAR_S = 2.0
 """How long enabling waits for actuators that report a fault to clear it (they do after
 a reset's CLEAR_FAULT, once their E-stop hold-off has passed)."""
@@ -45,12 +51,16 @@ class SettleCriteria:
     """When a platform at rest counts as settled: every leg's feedback stayed within
     ``tolerance_mm`` for ``window_s`` of controller time (the records' ``t``). A move that
     has not ended ``timeout_s`` after its planned duration is an error; ``poll_s`` is the
-    status polling interval."""
+    status polling interval. A measurement is kept only if every leg is still within
+    ``still_tolerance_mm`` of the settled record once it has been taken: a fifth of the
+    simulated theodolites' noise, and room for a real leg's sensor noise and drift over
+    the minutes a manual measurement takes."""
 
     window_s: float = 0.05
     tolerance_mm: float = 0.002
     timeout_s: float = 15.0
     poll_s: float = 0.01
+    still_tolerance_mm: float = 0.05
 
 
 class PlatformDriver:
@@ -103,14 +113,36 @@ class PlatformDriver:
 
     def move(self, pose: Sequence[float], *, settle: bool = True) -> Record:
         """Move to ``pose`` (relative mm/deg) and wait until the move has ended and, with
-        ``settle``, the legs are steady. Raises :class:`CommandError` if the controller
-        refuses the move (e.g. ``path_violation``) and :class:`CampaignError` on a fault."""
-        try:
-            reply = self.client.call("move", pose=[float(value) for value in pose])
-        except CommandError as error:
-            self._latched(error)
-            raise
-        return self.wait_settled(float(reply["duration"]), settle=settle)
+        ``settle``, the legs are steady (sent again after a ``loop_timeout``, see
+        :data:`MOVE_ATTEMPTS`). Raises :class:`CommandError` if the controller refuses the
+        move (e.g. ``path_violation``) and :class:`CampaignError` on a fault or when no
+        attempt got a verdict."""
+        for _ in range(MOVE_ATTEMPTS):
+            try:
+                reply = self.client.call("move", pose=[float(value) for value in pose])
+                return self.wait_settled(float(reply["duration"]), settle=settle)
+            except CommandError as error:
+                self._latched(error)
+                if error.code != "loop_timeout":
+                    raise
+            self.wait_settled(0.0, settle=False)
+        raise CampaignError(f"the controller's API gave no verdict on the move to {list(pose)} in time, "
+                            f"{MOVE_ATTEMPTS} times (loop_timeout): the host is too loaded for it; stop other work on "
+                            "it, then run the same command again to resume")
+
+    def confirm_still(self, settled: Record) -> None:
+        """Check, once a measurement of the platform settled at ``settled`` (a
+        :meth:`move`'s record) has been taken, that it still holds there, enabled: the
+        measurement may be kept. Raises :class:`ControllerFault` if a fault or E-stop
+        latched meanwhile (a stall that tripped the actuators' watchdog, say), and
+        :class:`CampaignError` if the platform moved or was disabled without one; either
+        way the measurement is not kept, and a resumed campaign takes it again."""
+        record = self.status()
+        moved = _moved(settled, record) if _heard(record) else float("inf")
+        if record["state"] != "enabled" or record["motion"] != "holding" or moved > self.settle.still_tolerance_mm:
+            raise CampaignError(f"the platform did not hold still while it was measured ({record['state']}, "
+                                f"{record['motion']}, legs moved by up to {moved:.4f} mm): is another client driving "
+                                "it? The measurement was not kept; run the same command again to measure it again")
 
     def lock(self, leg: int) -> Record:
         """Lock ``leg`` (1–6) where it is; returns the record with the lock in place."""
@@ -155,7 +187,9 @@ class PlatformDriver:
 
     def _enable(self) -> None:
         """Enable, waiting for actuators that are still booting (``heartbeat_missing``) or
-        clearing a fault after a reset (``actuator_fault``, for :data:`FAULT_CLEAR_S`)."""
+        clearing a fault after a reset (``actuator_fault``, for :data:`FAULT_CLEAR_S`), and
+        asking again after a verdict that came too late for the API (``loop_timeout``: if
+        the first was carried out, the next answers ``already_enabled``)."""
         start = time.monotonic()
         while True:
             try:
@@ -167,7 +201,7 @@ class PlatformDriver:
                     return
                 if error.code == "actuator_fault" and waited > FAULT_CLEAR_S:
                     raise ControllerFault(f"an actuator is in fault ({error.message})", True) from None
-                if error.code not in ("heartbeat_missing", "actuator_fault") or waited > self.settle.timeout_s:
+                if error.code not in ("heartbeat_missing", "actuator_fault", "loop_timeout") or waited > self.settle.timeout_s:
                     raise CampaignError(f"cannot enable the actuators: {error}") from None
             time.sleep(0.05)
 

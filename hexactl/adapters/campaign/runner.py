@@ -15,7 +15,16 @@ doing the driving and measuring:
 6. keep it (``apply``, and only if the accuracy improved) or roll back; write the report.
 
 Every measurement is saved before the next move, so an interrupted campaign (Ctrl-C, a
-fault, a crash) resumes where it stopped when run again on the same directory.
+fault, a crash) resumes where it stopped when run again on the same directory. Nothing is
+measured across a fault: a measurement is kept only if, once taken, the controller is
+still enabled with no fault latched and the platform still holds where it settled
+(:meth:`~.driver.PlatformDriver.confirm_still`); else the posture or waypoint is measured
+again when the campaign resumes.
+
+With ``reset_faults`` (the simulator: a loaded host can stall its actuators past their
+watchdog) a latched FAULT is reset and the campaign resumes at once, as often as it
+keeps measuring: it stops after ``reset_faults`` faults in a row with no measurement
+saved between them. The run counts and reports the faults it recovered from.
 """
 
 from __future__ import annotations
@@ -73,9 +82,10 @@ class CampaignSettings:
     candidates, seed), whether to ``apply`` the calibration (kept only if it improved the
     accuracy), the identification ``options``; in simulation the ``true`` geometry (the
     report then compares the identified parameters with it) and ``reset_faults``: how
-    many times a latched FAULT (never an E-stop) may be reset and the campaign resumed
-    (a simulator sharing a loaded host trips its actuators' watchdog when the host
-    stalls the process; on a real platform a fault needs the operator: keep 0)."""
+    many latched FAULTs (never an E-stop) in a row, with no measurement saved between
+    them, are reset and the campaign resumed after (a simulator sharing a loaded host
+    trips its actuators' watchdog when the host stalls the process; on a real platform a
+    fault needs the operator: keep 0)."""
 
     directory: Path
     design: CampaignDesign = CampaignDesign()
@@ -89,7 +99,8 @@ class CampaignSettings:
 class CampaignOutcome:
     """A finished campaign: the identification ``result``, the ``calibration`` written,
     the test motions ``before`` and ``after`` (relative mm/deg), whether the calibration
-    ``improved`` the largest errors and whether it stays ``applied``; the report page."""
+    ``improved`` the largest errors and whether it stays ``applied``; the report page;
+    how many latched faults this run reset and resumed after (``faults_recovered``)."""
 
     result: IdentificationResult
     calibration: Geometry
@@ -98,6 +109,7 @@ class CampaignOutcome:
     improved: bool
     applied: bool
     report: Path
+    faults_recovered: int = 0
 
 
 def run_campaign(client: HexactlClient, geometry: Geometry, instrument: Instrument, settings: CampaignSettings,
@@ -122,7 +134,7 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
     """The campaign from wherever ``store`` says it stands."""
     geometry = store.geometry
     _announce(store, instrument, progress)
-    step = _Resetting(driver, settings.reset_faults, progress)
+    step = _Resetting(driver, settings.reset_faults, lambda: store.measurements_taken, progress)
     planned_id = geometry_id(geometry)
 
     def measure_on_the_planned_geometry() -> None:
@@ -156,29 +168,44 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
                                             ValidationComparison(before, after, result.predicted), settings.true),
                           overwrite=True)
     progress.say(f"wrote {report}")
-    return CampaignOutcome(result, calibrated, before, after, better, settings.apply and better, report)
+    if step.resets:
+        progress.say(f"recovered from {step.resets} fault(s): each posture or waypoint one interrupted was measured "
+                     "again")
+    return CampaignOutcome(result, calibrated, before, after, better, settings.apply and better, report, step.resets)
 
 
 class _Resetting:
     """Runs a step of the campaign; when the controller latches a fault (not an E-stop),
-    resets it and runs the step again, which resumes from what is saved, at most
-    ``allowed`` times over the campaign."""
+    resets it and runs the step again, which resumes from what is saved; ``in_a_row``
+    faults with no measurement saved between them (``measured``: how many are) end the
+    campaign. ``resets``: how many it has reset."""
 
-    def __init__(self, driver: PlatformDriver, allowed: int, progress: Progress) -> None:
-        self.driver, self.allowed, self.progress = driver, allowed, progress
+    def __init__(self, driver: PlatformDriver, in_a_row: int, measured: Callable[[], int], progress: Progress) -> None:
+        self.driver, self.in_a_row, self.measured, self.progress = driver, in_a_row, measured, progress
         self.resets = 0
+        self._streak = 0
+        self._measured_at_fault = -1
 
     def __call__(self, step: Callable[[], None]) -> None:
         while True:
             try:
                 return step()
             except ControllerFault as fault:
-                if not fault.resettable or self.resets >= self.allowed:
+                if not fault.resettable or not self.in_a_row:
                     raise
+                measured = self.measured()
+                self._streak = self._streak + 1 if measured == self._measured_at_fault else 1
+                self._measured_at_fault = measured
+                if self._streak > self.in_a_row:
+                    raise CampaignError(
+                        f"{fault.summary}: {self._streak} faults in a row with no measurement saved between them "
+                        f"({self.resets} recovered in all): the host stalls the service faster than the campaign "
+                        "can measure. Stop other work on the host (or run as root, for real-time scheduling), "
+                        "reset the controller, and run the same command again to resume") from None
                 self.resets += 1
                 self.progress.finish()
-                self.progress.say(f"{fault.summary}; resetting it and resuming ({self.resets} of {self.allowed} "
-                                  "resets allowed)")
+                self.progress.say(f"{fault.summary}; resetting it and resuming (fault {self.resets}; {self._streak} "
+                                  f"in a row of at most {self.in_a_row} without a new measurement)")
                 self.driver.reset()
 
 
@@ -206,9 +233,14 @@ def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrume
         total = len(VALIDATION_STEPS[phase])
         progress.start(f"test motions {phase} calibration", total, total - len(steps))
         for step in steps:
-            driver.move(step.pose)
+            try:
+                settled = driver.move(step.pose)
+            except CommandError as error:
+                raise CampaignError(f"the controller refused the test-motion move to {list(step.pose)}: {error}") from None
             label = f"{step.motion.name} {step.waypoint}/{len(step.motion.waypoints)}"
-            store.add_validation(step, instrument.measure(store.measurements_taken, f"{phase} calibration, {label}"))
+            points = instrument.measure(store.measurements_taken, f"{phase} calibration, {label}")
+            driver.confirm_still(settled)
+            store.add_validation(step, points)
             progress.step(total - len(store.validation_steps_left(phase)), label)
         progress.finish()
 
@@ -232,6 +264,7 @@ def _measure_postures(driver: PlatformDriver, store: CampaignStore, instrument: 
             locked, length = leg, geometry.zero_lengths[leg - 1] + record["leg_setpoints"][leg - 1]
         record = _visit(driver, geometry, leg, length, posture.pose)
         points = instrument.measure(store.measurements_taken, f"posture {number + 1}, leg {leg} locked")
+        driver.confirm_still(record)
         store.add_posture(leg, record["leg_feedback"], points)
         progress.step(store.postures_measured, f"leg {leg} locked")
     driver.unlock()

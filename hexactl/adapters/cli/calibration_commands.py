@@ -136,8 +136,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     campaign.add_argument("--apply", action="store_true",
                           help="keep the calibration active afterwards, if it improved the accuracy (default: roll back)")
     campaign.add_argument("--reset-faults", type=int, default=0, metavar="N",
-                          help="simulation only: reset a latched fault (not an E-stop) up to N times and go on (default 0: "
-                          "stop, as a real platform needs the operator)")
+                          help="simulation only: reset a latched fault (not an E-stop) and go on, unless it is the "
+                          "N+1-th in a row with no measurement saved between them (default 0: stop at a fault, as a "
+                          "real platform needs the operator). A measurement a fault interrupted is never kept")
     campaign.set_defaults(run=run_campaign_command)
 
 

@@ -16,7 +16,7 @@ DEFAULT_OUT = Path("demo-out")
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
-    from hexactl.adapters.demo import DEMO_ENVELOPE_FRACTION, DEMO_POSTURES_PER_LEG, DEMO_RESETS
+    from hexactl.adapters.demo import DEMO_ENVELOPE_FRACTION, DEMO_FAULTS_IN_A_ROW, DEMO_POSTURES_PER_LEG
 
     demo = subparsers.add_parser(
         "demo",
@@ -42,13 +42,16 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       help=f"plan within this fraction of the pose envelope (default {DEMO_ENVELOPE_FRACTION:g}: shorter "
                       "moves)")
     demo.add_argument("--force", action="store_true", help="replace the results of a finished demo in DIR")
-    demo.add_argument("--reset-faults", type=int, default=DEMO_RESETS, metavar="N",
-                      help=f"reset a latched fault up to N times and go on (default {DEMO_RESETS}): a loaded host can stall "
-                      "the simulated actuators past their watchdog")
+    demo.add_argument("--reset-faults", type=int, default=DEMO_FAULTS_IN_A_ROW, metavar="N",
+                      help="reset a latched fault and go on, unless it is the N+1-th in a row with no measurement saved "
+                      f"between them (default {DEMO_FAULTS_IN_A_ROW}): a loaded host can stall the simulated actuators "
+                      "past their watchdog. A measurement a fault interrupted is never kept; the faults recovered "
+                      "from are counted at the end")
     demo.set_defaults(run=run_demo_command)
 
 
 def run_demo_command(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.api.client import ServiceUnavailable
     from hexactl.adapters.campaign.driver import CampaignError
     from hexactl.adapters.campaign.progress import Progress
     from hexactl.adapters.campaign.store import DirectoryError
@@ -65,6 +68,10 @@ def run_demo_command(arguments: argparse.Namespace) -> int:
         outcome = run_demo(settings, progress)
     except (DirectoryError, ServiceError) as error:
         raise CliError(f"{error}" + (" (or --force)" if isinstance(error, DirectoryError) else "")) from None
+    except ServiceUnavailable as error:  # its own service: too starved to answer, or dead
+        return campaign_stopped("demo", CampaignError(f"the demo's service stopped answering ({error}); what was "
+                                                      f"measured is saved in {arguments.out}: run the same command "
+                                                      "again to resume"), arguments.out, progress)
     except (CampaignError, KeyboardInterrupt) as stopped_by:
         return campaign_stopped("demo", stopped_by, arguments.out, progress)
     return 0 if outcome.improved else 1

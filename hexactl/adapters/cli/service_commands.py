@@ -27,6 +27,7 @@ from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
 from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
 from hexactl.adapters.cli.common import CliError
 from hexactl.adapters.cli.kinematics_commands import _pose  # the pose argument type, shared
+from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeReport, describe
 from hexactl.kinematics.pose import POSE_AXES
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
@@ -109,17 +110,24 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
     serve = subparsers.add_parser(
         "serve", parents=[common], help="run the controller service (default: the built-in simulator)",
         description="Run the control loop with the ZeroMQ API and telemetry. Without --can, six simulated "
-        "actuators on an in-process CAN bus drive a simulated platform. SIGINT/SIGTERM disable the "
-        "actuators and stop.",
+        "actuators on an in-process CAN bus drive a simulated platform. Real-time by default: the loop under "
+        f"SCHED_FIFO {DEFAULT_FIFO_PRIORITY} and the memory locked, when the process may (root, CAP_SYS_NICE or "
+        "RLIMIT_RTPRIO; CAP_IPC_LOCK or an unlimited RLIMIT_MEMLOCK), else normal scheduling with the reason "
+        "logged; the log and status say what it got. SIGINT/SIGTERM brake the platform to rest, disable the "
+        "actuators and stop, within 10 s.",
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
     serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the --config geometry")
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
-    serve.add_argument("--fifo", type=int, choices=range(2, 100), metavar="PRIO",
-                       help="SCHED_FIFO priority 2-99 for the loop, PRIO-1 for the API, telemetry and simulator "
-                       "threads (needs root or CAP_SYS_NICE; logged and ignored without)")
-    serve.add_argument("--mlock", action="store_true", help="lock the service's memory (mlockall): no page faults")
+    realtime = serve.add_mutually_exclusive_group()
+    realtime.add_argument("--fifo", type=int, choices=range(2, 100), default=DEFAULT_FIFO_PRIORITY, metavar="PRIO",
+                          help=f"SCHED_FIFO priority 2-99 for the loop (default {DEFAULT_FIFO_PRIORITY}), PRIO-1 for the "
+                          "simulator's thread (capped at RLIMIT_RTPRIO without CAP_SYS_NICE)")
+    realtime.add_argument("--no-realtime", action="store_true",
+                          help="normal scheduling and no memory locking, even with the privilege")
+    serve.add_argument("--mlock", action="store_true",
+                       help="accepted for compatibility: the memory is locked by default (--no-realtime: not)")
     serve.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
     serve.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
     serve.add_argument("--telemetry-rate", type=_positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
@@ -252,8 +260,8 @@ def run_serve(arguments: argparse.Namespace) -> int:
         telemetry_rate_hz=arguments.telemetry_rate,
         data_dirs=tuple(arguments.data_dir) if arguments.data_dir else None,
         curve=curve,
-        fifo_priority=arguments.fifo,
-        lock_memory=arguments.mlock,
+        fifo_priority=None if arguments.no_realtime else arguments.fifo,
+        lock_memory=not arguments.no_realtime,
         log_level=arguments.log_level,
     )
     try:
@@ -326,6 +334,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("loop", f"{loop['rate_hz']:g} Hz, {loop['cycles']} cycles, {loop['missed']} missed"),
         ("lateness µs", _percentiles_text(loop["lateness_us"])),
         ("compute µs", _percentiles_text(loop["compute_us"])),
+        ("real-time", describe(RealtimeReport(**record["realtime"])) if record.get("realtime") else "unknown"),
     ]
     return "\n".join(f"{label:<15}{value}" for label, value in lines)
 
