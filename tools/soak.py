@@ -437,6 +437,11 @@ def print_report(result: dict[str, Any]) -> None:
     print(f"  faults recovered: {result['recoveries'] or 'none'}")
     for reason, count in result["recovery_reasons"].items():
         print(f"    {count:5d} x {reason}")
+    print_monitor(monitor)
+
+
+def print_monitor(monitor: dict[str, Any]) -> None:
+    """The bus monitor's figures (:meth:`MonitoredService.monitor_figures`), a line and its first violations."""
     print(f"  monitor: {monitor['violations']} violations; {monitor['counts'].get('cycles', 0)} cycles, "
           f"{monitor['counts'].get('setpoints', 0)} set-points checked, late cycles {monitor['counts'].get('late_cycles', 0)}, "
           f"longest gap {monitor['max_cycle_gap_ms']} ms, largest step {monitor['max_step_fraction']:.3f} of the limit, "

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -27,7 +28,7 @@ import zmq
 from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError
-from hexactl.adapters.api.server import ApiServer
+from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.loop_link import RemoteLoop
@@ -35,14 +36,23 @@ from hexactl.adapters.simulator import InstrumentSpec, SimulatedMeasurement
 from hexactl.adapters.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
-from hexactl.kinematics.geometry import Limits
+from hexactl.kinematics.geometry import Geometry
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 
-API_NICENESS = 5
-"""The API process lowers its own scheduling priority by this much (``nice``; needs no
-privilege): when the CPUs are contended, the loop's process gets about three times its
-share (CFS weights 1024 against 335)."""
+API_WORKER_NICENESS = 5
+"""The API's worker thread, which plans and validates, lowers its scheduling priority by
+this much (``nice``; needs no privilege): when the CPUs are contended, the loop's process
+gets about three times its share (CFS weights 1024 against 335). Only the worker: the
+socket thread that answers ``estop`` and the loop link's receiver keep the normal
+priority, so a busy host does not delay a stop by the niceness."""
+
+API_SWITCH_INTERVAL_S = 0.001
+"""The API process's GIL switch interval (Python's default: 5 ms): the socket thread that
+answers ``estop`` gets the GIL within about this long while the worker plans a move."""
+
+STUCK_EXIT_STATUS = 1
+"""The API process's exit status when its worker is stuck in a request."""
 
 API_TICKET_START = 1 << 40
 """The API facade's first ticket: the service's own facade (shutdown, tests) counts from 1
@@ -60,7 +70,9 @@ class ApiStartError(RuntimeError):
 @dataclass(frozen=True, slots=True)
 class ApiSettings:
     """What the API process serves (picklable: it crosses to the child).
-    ``instrument``: the simulator's, for ``measure`` (None: real hardware, no instrument)."""
+    ``instrument``: the simulator's, for ``measure`` (None: real hardware, no instrument).
+    ``handler_timeout_s``: the watchdog's bound on one request's handling; beyond it the
+    API process ends (exit status 1), which the service treats as a dead API."""
 
     api_endpoint: str
     telemetry_endpoint: str
@@ -68,9 +80,10 @@ class ApiSettings:
     curve: CurveServerKeys | None
     data_dirs: tuple[Path, ...]
     controller: ControllerConfig
-    hardware_limits: Limits
+    nominal: Geometry  # the design geometry: the hardware's limits, the calibrations' plausibility
     instrument: InstrumentSpec | None
     log_level: str
+    handler_timeout_s: float = DEFAULT_HANDLER_TIMEOUT_S
 
 
 class ApiProcess:
@@ -114,12 +127,12 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     logging.basicConfig(level=settings.log_level, format=LOG_FORMAT)
-    os.nice(API_NICENESS)
+    sys.setswitchinterval(API_SWITCH_INTERVAL_S)
     with ExitStack() as closers:
         try:
             remote = RemoteLoop(commands, reports)
             closers.callback(remote.close)
-            controller = Controller(remote, config=settings.controller, hardware_limits=settings.hardware_limits,
+            controller = Controller(remote, config=settings.controller, nominal=settings.nominal,
                                     ticket_start=API_TICKET_START)
             context = zmq.Context()
             closers.callback(context.term)
@@ -139,7 +152,9 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                                                lambda: jsonable(controller.telemetry()), settings.telemetry_rate_hz, curve)
                 closers.callback(publisher.close)
                 server = ApiServer(context, settings.api_endpoint, CommandHandler(controller,
-                                   DataDirectories(settings.data_dirs), instrument), curve)  # fmt: skip
+                                   DataDirectories(settings.data_dirs), instrument), curve,
+                                   handler_timeout_s=settings.handler_timeout_s, on_stuck=_end_stuck,
+                                   worker_niceness=API_WORKER_NICENESS)  # fmt: skip
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
                 raise ApiStartError(f"cannot serve: {error}") from None
         except (ApiStartError, ConnectionError) as error:
@@ -160,6 +175,16 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
         finally:
             if server_open:
                 server.close()
+
+
+def _end_stuck(description: str) -> None:
+    """End this process at once: the worker is stuck in a call that may never return (a
+    blocking open, a hung read), so an orderly exit, which closes the ZeroMQ context and
+    joins threads, could hang with it. The service sees the exit and brings the platform
+    to rest, disables it and exits 1 (:func:`hexactl.adapters.service.run_service`)."""
+    log.error("%s: the API process exits (status %d)", description, STUCK_EXIT_STATUS)
+    logging.shutdown()  # flush the log: os._exit skips it
+    os._exit(STUCK_EXIT_STATUS)
 
 
 def _measured_pose(controller: Controller) -> tuple[float, ...] | None:

@@ -5,6 +5,10 @@ thread) do all parsing, planning and validation first, then ``append`` one of th
 the loop ``popleft``s a bounded number per cycle. ``deque.append``/``popleft`` are
 atomic in CPython, so there is no lock the loop could wait on.
 
+``deadline_ns`` (monotonic, None: none) is when the command's sender stops waiting for
+it: the loop refuses it as ``expired`` from then on rather than carry out what nobody
+waits for any more. The loop and the API's process share the host's monotonic clock.
+
 ``ticket`` numbers a command; the loop publishes its verdict per ticket
 (:class:`Outcome`). ``epoch`` is the loop's plan epoch the command was planned at: the
 loop advances it whenever what a plan starts from changes (a new goal, a halt, leg-lock,
@@ -14,7 +18,7 @@ a path nobody validated.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from hexactl.control.planning import ActiveGeometry, Segment
 
@@ -22,6 +26,7 @@ from hexactl.control.planning import ActiveGeometry, Segment
 @dataclass(frozen=True, slots=True)
 class Command:
     ticket: int
+    deadline_ns: int | None = field(default=None, kw_only=True)
 
 
 @dataclass(frozen=True, slots=True)

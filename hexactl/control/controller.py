@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from math import isfinite
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 
@@ -60,13 +61,18 @@ from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, builtin_sequence
 from hexactl.control.stats import LoopStats
-from hexactl.kinematics.geometry import Geometry, Limits, limits_differences
+from hexactl.kinematics.geometry import Geometry, limits_differences
 from hexactl.kinematics.inverse import sensor_setpoints
+from hexactl.kinematics.plausibility import implausibilities
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+from hexactl.kinematics.workspace import assess_readings
 
 
 TELEMETRY_PERCENTILES_MAX_AGE_S = 0.25
 """Telemetry recomputes the loop's percentiles (a sort of its window) at most this often."""
+
+RAMP_SAMPLES = 11
+"""A calibration change is checked at this many fractions of its set-point ramp (0, 0.1 … 1)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +105,7 @@ class Telemetry:
     sequence: SequenceTelemetry | None
     faults: tuple[Fault, ...]
     loop: LoopStats
+    realtime: RealtimeReport | None = None  # what the loop thread's real-time set-up obtained
 
 
 class Controller:
@@ -106,16 +113,19 @@ class Controller:
     :class:`~hexactl.control.host.LoopHost` (the loop in a thread of this process,
     :meth:`in_thread`, or in another process).
 
-    ``hardware_limits``: the actuators' and platform's limits, normally the nominal
-    geometry's ``[limits]``. A calibration is refused unless its ``[limits]`` equal them,
-    so no calibration file can widen what is enforced. ``ticket_start``: the first ticket
-    number; facades sharing one loop take disjoint ranges (outcomes are found by ticket).
+    ``nominal``: the platform's design geometry. Its ``[limits]`` are the actuators' and
+    platform's (:attr:`hardware_limits`): a calibration is refused unless its own equal
+    them, so no calibration file can widen what is enforced, and unless each of its
+    parameters lies within the plausibility bounds of the nominal one
+    (:mod:`hexactl.kinematics.plausibility`). ``ticket_start``: the first ticket number;
+    facades sharing one loop take disjoint ranges (outcomes are found by ticket).
     """
 
-    def __init__(self, host: LoopHost, *, config: ControllerConfig, hardware_limits: Limits,
+    def __init__(self, host: LoopHost, *, config: ControllerConfig, nominal: Geometry,
                  ticket_start: int = 1) -> None:
         self.config = config
-        self.hardware_limits = hardware_limits
+        self.nominal = nominal
+        self.hardware_limits = nominal.limits
         self._host = host
         self._thread = host if isinstance(host, LoopThread) else None
         self._tickets = itertools.count(ticket_start)  # next() on a count is atomic in CPython
@@ -129,23 +139,26 @@ class Controller:
         *,
         calibration_source: str = "",
         config: ControllerConfig | None = None,
-        hardware_limits: Limits | None = None,
+        nominal: Geometry | None = None,
         clock_ns: Callable[[], int] = time.monotonic_ns,
     ) -> Controller:
         """The controller with its loop in this process, driving ``hardware``, on
         ``geometry`` (with its identity: the caller computes the id, e.g. a content hash).
-        ``hardware_limits`` default to ``geometry``'s. ``clock_ns``: monotonic time for
+        ``nominal`` defaults to ``geometry``. ``clock_ns``: monotonic time for
         cycles stepped by hand and for the first one, run here, so status and telemetry
         work at once and the commanded pose starts where the platform is.
 
-        :raises ValueError: if ``geometry``'s limits differ from ``hardware_limits``
+        :raises ValueError: if ``geometry``'s limits differ from ``nominal``'s, or it is
+            not a plausible calibration of it (the message names each parameter and bound)
         """
-        hardware_limits = hardware_limits or geometry.limits
-        if differences := limits_differences(geometry.limits, hardware_limits):
+        nominal = nominal or geometry
+        if differences := limits_differences(geometry.limits, nominal.limits):
             raise ValueError(f"the geometry's [limits] differ from the hardware's: {'; '.join(differences)}")
+        if problems := implausibilities(geometry, nominal):
+            raise ValueError(_implausible_message("the start calibration", problems))
         config = config or ControllerConfig()
         thread = LoopThread(hardware, ActiveGeometry.of(geometry, calibration_id, calibration_source), config, clock_ns)
-        return cls(thread, config=config, hardware_limits=hardware_limits)
+        return cls(thread, config=config, nominal=nominal)
 
     # -- lifecycle (the loop in this process) ---------------------------------------------
 
@@ -232,6 +245,7 @@ class Controller:
             sequence=_sequence_telemetry(s),
             faults=s.faults,
             loop=stats,
+            realtime=report.realtime,
         )
 
     def events(self) -> tuple[Event, ...]:
@@ -254,12 +268,12 @@ class Controller:
 
     # -- commands -------------------------------------------------------------------------
 
-    def enable(self) -> CommandResult:
+    def enable(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Energise the actuators and hold the pose they are at."""
         s = self.snapshot
         if refusal := check_enable(s, self.config.supervision.heartbeat_timeout_s):
             return CommandResult.failure(*refusal)
-        return self._submit(cmd.Enable, "enabled")
+        return self._submit(cmd.Enable, "enabled", deadline_ns=deadline_ns)
 
     def disable(self) -> CommandResult:
         """Disable the actuators (at rest only: stop first)."""
@@ -290,7 +304,8 @@ class Controller:
         plan = plan_path(self._context(s), s.trajectory, [Waypoint(pose, duration, speed)])
         return _plan_result(plan, "valid")
 
-    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None, *,
+             deadline_ns: int | None = None) -> CommandResult:
         """Move to ``pose`` (relative mm/deg), validated whole first; ``duration`` s (at
         least, to one loop period) or ``speed`` (0, 1] of the velocity limits. In
         leg-lock mode the goal is projected onto the locked leg's constraint (see
@@ -302,17 +317,18 @@ class Controller:
         if not plan.ok:
             return _plan_result(plan, "")
         (segment,) = plan.segments
-        return self._submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", **_plan_result(plan, "").details)
+        return self._submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", deadline_ns=deadline_ns,
+                            **_plan_result(plan, "").details)
 
-    def leg_lock(self, leg: int) -> CommandResult:
+    def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""
         if isinstance(leg, bool) or not isinstance(leg, (int, np.integer)) or not 1 <= leg <= 6:
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"leg is a number from 1 to 6, got {leg!r}")
-        return self._checked(check_lock, lambda t: cmd.LockLeg(t, int(leg)), f"leg {leg} locked")
+        return self._checked(check_lock, lambda t: cmd.LockLeg(t, int(leg)), f"leg {leg} locked", deadline_ns)
 
-    def leg_unlock(self) -> CommandResult:
+    def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Release the locked leg; the pose being held becomes the target (no step)."""
-        return self._checked(check_unlock, cmd.UnlockLeg, "unlocked")
+        return self._checked(check_unlock, cmd.UnlockLeg, "unlocked", deadline_ns)
 
     def validate_sequence(self, sequence: MotionSequence | str) -> CommandResult:
         """Would :meth:`play` accept this sequence (or built-in name) from here? Plans and
@@ -323,7 +339,7 @@ class Controller:
         s = self.snapshot
         return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints()), "valid")
 
-    def play(self, sequence: MotionSequence | str) -> CommandResult:
+    def play(self, sequence: MotionSequence | str, *, deadline_ns: int | None = None) -> CommandResult:
         """Play a sequence, or a built-in one by name; every waypoint's path is validated
         before the first moves."""
         resolved = _resolve_sequence(sequence)
@@ -337,13 +353,13 @@ class Controller:
             return _plan_result(plan, "")
         name = resolved.name
         return self._submit(lambda t: cmd.Play(t, s.epoch, name, plan.segments), f"playing {name}",
-                            **_plan_result(plan, "").details)
+                            deadline_ns=deadline_ns, **_plan_result(plan, "").details)
 
     def pause(self) -> CommandResult:
         """Pause the sequence: brake to rest mid-move, or freeze the dwell's clock."""
         return self._checked(check_pause, cmd.Pause, "pausing")
 
-    def resume(self) -> CommandResult:
+    def resume(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Continue a paused sequence; the rest of an interrupted move is planned and
         validated from where it stopped, at the segment's cruise speed."""
         s = self.snapshot
@@ -359,7 +375,7 @@ class Controller:
             if not plan.ok:
                 return _plan_result(plan, "")
             (remainder,) = plan.segments
-        return self._submit(lambda t: cmd.Resume(t, s.epoch, remainder), "resumed")
+        return self._submit(lambda t: cmd.Resume(t, s.epoch, remainder), "resumed", deadline_ns=deadline_ns)
 
     def abort(self) -> CommandResult:
         """End the sequence and brake to rest; its records are kept."""
@@ -399,11 +415,18 @@ class Controller:
                                config.lock_cycle_iterations)
 
     def _swap(self, new: ActiveGeometry, verb: str) -> CommandResult:
-        """Dry-run ``new`` at the current pose, along the running move and the rest of
-        the playing sequence, and on the size of the set-point change; then hand it over."""
+        """Check ``new``'s plausibility against the nominal geometry; dry-run it at the
+        current pose, along the running move and the rest of the playing sequence, along
+        the set-point ramp to it, and on the size of the set-point change; then hand it over."""
         s = self.snapshot
         if refusal := check_swap(s, new):
             return CommandResult.failure(*refusal)
+        if problems := implausibilities(new.geometry, self.nominal):
+            return CommandResult.failure(ErrorCode.INVALID_GEOMETRY,
+                                         _implausible_message(f"calibration {new.calibration_id}", problems),
+                                         implausible=problems)
+        if refusal := self._ramp_refusal(s, new):
+            return refusal
         path = [s.pose_command] + ([s.goal] if s.goal is not None else [])
         if s.sequence is not None:
             path += [segment.goal for segment in s.sequence.remaining]
@@ -422,18 +445,48 @@ class Controller:
         return self._submit(lambda t: cmd.SwapGeometry(t, s.epoch, new), f"calibration {new.calibration_id} {verb}",
                             calibration_id=new.calibration_id, change_mm=change)
 
-    def _checked(self, check, factory: Callable[[int], cmd.Command], message: str) -> CommandResult:
+    def _ramp_refusal(self, s: CoreSnapshot, new: ActiveGeometry) -> CommandResult | None:
+        """The refusal if a pose the platform passes through while the set-points ramp
+        (linearly, core.ControlCore._swap) from those being sent to ``new``'s at the
+        commanded pose leaves the limits, by the new geometry or by the active one (which
+        of the two describes the machine is what the swap decides, so both must hold).
+        ``RAMP_SAMPLES`` fractions; with set-points not all known (an actuator not heard
+        from while disabled) there is nothing to ramp from, and nothing is checked."""
+        if not all(isfinite(v) for v in s.setpoints):
+            return None
+        fractions = np.linspace(0.0, 1.0, RAMP_SAMPLES)
+        start = np.array(s.setpoints)
+        end = np.array(sensor_setpoints(new.geometry.legs, new.absolute(s.pose_command)))
+        ramp = start + np.outer(fractions, end - start)
+        guess = _mm_deg(s.pose_command)
+        for model, which in ((new, "the new calibration"), (s.active, "the active one")):
+            for fraction, assessment in zip(fractions, assess_readings(model.geometry, ramp, guess)):
+                if assessment is None or assessment.violations:
+                    problem = (assessment.violations[0].message if assessment is not None
+                               else "the set-points have no pose (forward kinematics does not converge)")
+                    return CommandResult.failure(
+                        ErrorCode.INVALID_GEOMETRY,
+                        f"calibration {new.calibration_id} refused: at ramp fraction {fraction:.2f} of the change to it, "
+                        f"by {which}: {problem}; load it nearer the zero posture, or check the file",
+                        ramp_fraction=float(fraction),
+                        violations=[asdict(v) for v in assessment.violations] if assessment is not None else [])
+        return None
+
+    def _checked(self, check, factory: Callable[[int], cmd.Command], message: str,
+                 deadline_ns: int | None = None) -> CommandResult:
         if refusal := check(self.snapshot):
             return CommandResult.failure(*refusal)
-        return self._submit(factory, message)
+        return self._submit(factory, message, deadline_ns=deadline_ns)
 
-    def _submit(self, factory: Callable[[int], cmd.Command], message: str, **details: object) -> CommandResult:
-        """Queue a command; with the loop running by itself, wait for its verdict."""
+    def _submit(self, factory: Callable[[int], cmd.Command], message: str, *, deadline_ns: int | None = None,
+                **details: object) -> CommandResult:
+        """Queue a command; with the loop running by itself, wait for its verdict. With
+        ``deadline_ns`` (monotonic) the loop refuses it as ``expired`` once that has passed."""
         report = self._host.report(TELEMETRY_PERCENTILES_MAX_AGE_S)
         if report.failure is not None:
             return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {report.failure}")
         ticket = next(self._tickets)
-        self._host.submit(factory(ticket))
+        self._host.submit(replace(factory(ticket), deadline_ns=deadline_ns))
         if not report.running:
             return CommandResult.success(message, ticket=ticket, pending=True, **details)
         deadline = time.monotonic() + self.config.command_timeout_s
@@ -445,6 +498,14 @@ class Controller:
             time.sleep(self.config.loop.period_s / 2)
         return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
                                      "be carried out", ticket=ticket)
+
+
+def _implausible_message(what: str, problems: Sequence[str]) -> str:
+    return (f"{what} refused: it cannot be a calibration of this platform: " + "; ".join(problems)
+            + ". A calibration identifies one machine of the nominal design, whose parameters lie within "
+            "millimetres of the nominal ones: check that the file is this platform's calibration, identified "
+            "from the nominal geometry in use; if the machine really differs this much from its design, "
+            "describe it in a nominal geometry of its own")
 
 
 def _resolve_sequence(sequence: object) -> MotionSequence | CommandResult:

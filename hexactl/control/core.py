@@ -590,7 +590,13 @@ class ControlCore:
     # -- commands ------------------------------------------------------------------------
 
     def _execute(self, command: cmd.Command) -> None:
-        refusal = self._handlers[type(command)](command)
+        deadline_ns = command.deadline_ns
+        if deadline_ns is not None and self._now_ns > deadline_ns:
+            refusal: Refusal = ErrorCode.EXPIRED, (
+                f"its deadline passed {(self._now_ns - deadline_ns) / 1e6:.1f} ms before the loop reached it; "
+                "not carried out: send it again with a longer timeout if it is still wanted")
+        else:
+            refusal = self._handlers[type(command)](command)
         code, message = refusal if refusal else (None, "done")
         if refusal:
             self._event("command_refused", f"{type(command).__name__}: {message}")

@@ -46,6 +46,16 @@ from hexactl.kinematics.workspace import assess_poses
 
 Pose = tuple[float, float, float, float, float, float]
 
+MAX_MOTION_S = 600.0
+"""The longest motion one plan may hold, s: a move, or a sequence's moves together (dwells
+not counted). Planning samples every loop period, so its work grows with the motion's
+length (600 s of motion: about 1.3 s of planning, measured on the 2-core test machine);
+no posture of a calibration campaign takes a tenth of it."""
+
+MAX_DWELL_S = 86_400.0
+"""The longest dwell at a waypoint, s (a day): dwells cost no planning, but a sequence's
+duration must stay a number."""
+
 _MAX_STRETCH_ATTEMPTS = 4  # leg speeds scale exactly as 1/k: one stretch normally suffices
 _STRETCH_MARGIN = 1.001  # covers the rounding of durations to whole periods
 
@@ -185,7 +195,7 @@ def plan_path(context: PlanningContext, start: State, waypoints: Sequence[Waypoi
                                       context.path_step_deg)
         if goal_violations:
             return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
-        planned = _plan_segment(context, start, goal, waypoint)
+        planned = _plan_segment(context, start, goal, waypoint, MAX_MOTION_S - sum(done.duration_s for done in segments))
         if isinstance(planned, Refusal):
             return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
                                         details={"waypoint": number, **planned.details}))
@@ -236,14 +246,14 @@ def _check_waypoint(waypoint: Waypoint) -> str | None:
     problem = validate_pose_values(waypoint.pose)
     if problem:
         return problem
-    if waypoint.duration_s is not None and not _number_in(waypoint.duration_s, 0.0, float("inf"), low_open=True):
-        return f"duration must be a positive number of seconds, got {waypoint.duration_s!r}"
+    if waypoint.duration_s is not None and not _number_in(waypoint.duration_s, 0.0, MAX_MOTION_S, low_open=True):
+        return f"duration must be a positive number of seconds up to {MAX_MOTION_S:g}, got {waypoint.duration_s!r}"
     if waypoint.speed is not None and not _number_in(waypoint.speed, 0.0, 1.0, low_open=True):
         return f"speed is a fraction of the velocity limits in (0, 1], got {waypoint.speed!r}"
     if waypoint.duration_s is not None and waypoint.speed is not None:
         return "give a duration or a speed, not both"
-    if not _number_in(waypoint.dwell_s, 0.0, float("inf")):
-        return f"dwell must be zero or more seconds, got {waypoint.dwell_s!r}"
+    if not _number_in(waypoint.dwell_s, 0.0, MAX_DWELL_S):
+        return f"dwell must be 0 to {MAX_DWELL_S:g} s, got {waypoint.dwell_s!r}"
     return None
 
 
@@ -298,7 +308,10 @@ def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float],
     return project_locked(active, lock, target, max_iterations, start=start)
 
 
-def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: Waypoint) -> tuple[Segment, NDArray] | Refusal:
+def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: Waypoint,
+                  motion_left_s: float) -> tuple[Segment, NDArray] | Refusal:
+    """The segment to ``goal`` and its samples; refused before sampling when it would move
+    for longer than ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan)."""
     velocity_scale = waypoint.speed or 1.0
     natural = preview(context.limits, context.period_s, start, goal, 1.0, velocity_scale)
     if natural is None:
@@ -309,6 +322,10 @@ def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: 
         trajectory = preview(context.limits, context.period_s, start, goal, time_scale, velocity_scale)
         if trajectory is None:
             return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
+        if trajectory.duration > motion_left_s:
+            return Refusal(ErrorCode.PLANNING_FAILED,
+                           f"the move would take {trajectory.duration:.6g} s; a move, or a sequence's moves together, "
+                           f"may take at most {MAX_MOTION_S:g} s: raise the speed or shorten the duration")
         samples = _samples(context, start, trajectory)
         if isinstance(samples, Refusal):
             return samples

@@ -35,6 +35,7 @@ class ErrorCode(StrEnum):
     SEND_FAILED = "send_failed"  # the link refused a frame (E-stop, ENABLE)
     LOOP_FAILED = "loop_failed"  # the loop thread died: see status
     LOOP_TIMEOUT = "loop_timeout"  # the loop gave no verdict in time (the command may still run)
+    EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
 
 
 @dataclass(frozen=True, slots=True)

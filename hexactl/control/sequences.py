@@ -7,8 +7,8 @@ File format (TOML; poses relative to the zero posture, mm and deg)::
 
     [[waypoint]]
     pose = [100.0, 0.0, 0.0, 0.0, 0.0, 0.0]   # [x, y, z, roll, pitch, yaw]
-    duration = 4.0    # optional, s: the move takes at least this long (to one loop period)
-    dwell = 2.0       # optional, s: stay this long on arrival (default 0)
+    duration = 4.0    # optional, s: the move takes at least this long (to one loop period); at most 600
+    dwell = 2.0       # optional, s: stay this long on arrival (default 0); at most 86400
 
     [[waypoint]]
     pose = [0.0, 0.0, 0.0, 0.0, 5.0, 0.0]
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
-from hexactl.control.planning import Waypoint
+from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, Waypoint
 from hexactl.kinematics.geometry import Pose6, describe_validation_error
 from hexactl.kinematics.pose import POSE_AXES
 
@@ -45,9 +45,9 @@ class SequenceWaypoint(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     pose: Pose6 = Field(description="relative to the zero posture, mm and deg")
-    duration: float | None = Field(default=None, gt=0, description="minimum move duration, s")
+    duration: float | None = Field(default=None, gt=0, le=MAX_MOTION_S, description="minimum move duration, s")
     speed: float | None = Field(default=None, gt=0, le=1, description="fraction of the velocity limits")
-    dwell: float = Field(default=0.0, ge=0, description="time to stay on arrival, s")
+    dwell: float = Field(default=0.0, ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")
 
     @model_validator(mode="after")
     def _one_pace(self) -> SequenceWaypoint:

@@ -55,7 +55,7 @@ class FakeController:
     def _call(self, name: str, *arguments: Any) -> None:
         self.calls.append((name, arguments))
 
-    def enable(self) -> CommandResult:
+    def enable(self, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("enable")
         if self.state == "estop":
             return CommandResult.failure(ErrorCode.LATCHED, "ESTOP is latched: reset first")
@@ -81,7 +81,8 @@ class FakeController:
         self.state = "disabled"
         return CommandResult.success("reset to disabled")
 
-    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None, *,
+             deadline_ns: int | None = None) -> CommandResult:
         self._call("move", list(pose), duration, speed)
         if self.state != "enabled":
             return CommandResult.failure(ErrorCode.NOT_ENABLED, "enable first")
@@ -95,17 +96,17 @@ class FakeController:
             return CommandResult.failure(ErrorCode.PATH_VIOLATION, f"waypoint 1: {violations[0].message}", violations=items)
         return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1)
 
-    def leg_lock(self, leg: int) -> CommandResult:
+    def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("leg_lock", leg)
         self.locked_leg = leg
         return CommandResult.success(f"leg {leg} locked")
 
-    def leg_unlock(self) -> CommandResult:
+    def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("leg_unlock")
         self.locked_leg = None
         return CommandResult.success("unlocked")
 
-    def play(self, sequence: MotionSequence) -> CommandResult:
+    def play(self, sequence: MotionSequence, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("play", sequence)
         self.sequence = sequence
         return CommandResult.success(f"playing {sequence.name}", duration_s=12.5, waypoints=len(sequence.waypoints))
@@ -114,7 +115,7 @@ class FakeController:
         self._call("pause")
         return CommandResult.success("pausing")
 
-    def resume(self) -> CommandResult:
+    def resume(self, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("resume")
         return CommandResult.success("resumed")
 

@@ -67,7 +67,7 @@ def link(nominal: Geometry) -> Iterator[Link]:
     reports_in, reports_out = pipes.Pipe(duplex=False)
     exchange = LoopExchange(thread, commands_in, reports_out, probe=lambda: (1.0,) * 6).start()
     remote = RemoteLoop(commands_out, reports_in)
-    controller = Controller(remote, config=config, hardware_limits=nominal.limits)
+    controller = Controller(remote, config=config, nominal=nominal)
     yield Link(thread, exchange, remote, controller, clock)
     remote.close()
     exchange.close()

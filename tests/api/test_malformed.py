@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexactl.adapters.api.messages import ErrorReply
-from hexactl.adapters.api.server import answer
+from hexactl.adapters.api.server import carry_out, decode_body
 from hexactl.adapters.api.wire import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES, ApiError, decode_request
 from tests.api.support import exchange
 
@@ -108,15 +108,15 @@ def test_req_envelope_is_kept_for_dealer_that_mimics_req(shared_service) -> None
 
 
 def test_handler_bug_becomes_internal_error() -> None:
-    def broken(request):
+    def broken(request, deadline_ns):
         raise KeyError("boom")
 
-    reply = json.loads(answer([json.dumps(STATUS).encode()], broken))
+    reply = json.loads(carry_out(decode_body([json.dumps(STATUS).encode()]), broken, None))
     assert reply["error"]["code"] == "internal_error" and reply["id"] == "after"
 
 
 def test_non_finite_reply_becomes_internal_error() -> None:
-    reply = json.loads(answer([json.dumps(STATUS).encode()], lambda request: {"value": float("nan")}))
+    reply = json.loads(carry_out(decode_body([json.dumps(STATUS).encode()]), lambda request, deadline_ns: {"value": float("nan")}, None))
     assert reply["error"]["code"] == "internal_error"
 
 

@@ -73,7 +73,7 @@ def test_curve_end_to_end(tmp_path) -> None:
     stranger = create_keys(tmp_path / "stranger")  # a client whose key is not in clients/
     context = zmq.Context()
     curve = CurveServer(context, CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
-    server = ApiServer(context, "tcp://127.0.0.1:*", lambda request: {"message": "hello"}, curve)
+    server = ApiServer(context, "tcp://127.0.0.1:*", lambda request, deadline_ns: {"message": "hello"}, curve)
     server.start()
     try:
         allowed = CurveClientKeys(keys["server_public"], keys["client_secret"])

@@ -21,12 +21,15 @@ from typing import Any, Self
 
 import zmq
 
-from hexactl.adapters.api.messages import PROTOCOL_VERSION
+from hexactl.adapters.api.messages import MAX_DEADLINE_MS, PROTOCOL_VERSION
 from hexactl.adapters.api.security import CurveClientKeys, secure_client
 from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
 from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, TOPIC
 
 DEFAULT_TIMEOUT_S = 5.0
+
+DEADLINE_MARGIN_FRACTION = 0.2
+DEADLINE_MARGIN_MIN_MS = 50.0
 
 
 class ServiceUnavailable(Exception):
@@ -76,6 +79,13 @@ class HexactlClient(_Connection):
     usable: a late reply to it is recognised by its ``id`` and dropped. ``IMMEDIATE``
     so that a request is never queued for a service that is not there yet: a command
     that timed out must not run when the service starts later.
+
+    Every request carries ``deadline_ms`` (unless the caller gives one): ``timeout_s``
+    less a margin of 20 % of it, at least 50 ms and at most half of it
+    (:func:`deadline_ms`). The service carries out nothing after its deadline (it
+    answers ``expired``), and the margin lets the answer to a request carried out just
+    before it reach this client before it gives up: a request this client timed out on
+    never runs later.
     """
 
     def __init__(
@@ -92,6 +102,7 @@ class HexactlClient(_Connection):
         within ``timeout_s``.
         """
         request_id = next(self._ids)
+        fields = {"deadline_ms": deadline_ms(self.timeout_s), **fields}
         deadline = time.monotonic() + self.timeout_s
         unavailable = ServiceUnavailable(
             f"no answer from {self.endpoint} within {self.timeout_s:g} s: is `hexactl serve` running there?"
@@ -117,6 +128,15 @@ class HexactlClient(_Connection):
             error = reply.get("error") or {}
             raise CommandError(error.get("code", "unknown"), error.get("message", ""), error.get("details"))
         return reply
+
+
+def deadline_ms(timeout_s: float) -> float:
+    """The ``deadline_ms`` for a request its sender waits ``timeout_s`` for: the timeout
+    less a margin of 20 % of it, at least 50 ms and at most half of it (so the answer
+    travels back in time), within the service's bound (:data:`MAX_DEADLINE_MS`)."""
+    timeout_ms = timeout_s * 1000.0
+    margin_ms = min(max(DEADLINE_MARGIN_MIN_MS, DEADLINE_MARGIN_FRACTION * timeout_ms), timeout_ms / 2)
+    return min(timeout_ms - margin_ms, MAX_DEADLINE_MS)
 
 
 class TelemetrySubscriber(_Connection):

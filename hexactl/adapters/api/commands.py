@@ -36,7 +36,6 @@ from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.port import ControllerPort
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
-from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
 from hexactl.control.results import CommandResult
 from hexactl.control.sequences import dwell_header, dwell_rows
@@ -58,20 +57,25 @@ class MeasurementError(Exception):
 class CommandHandler:
     """The :data:`~hexactl.adapters.api.server.Handler` of the service: returns each
     request's reply fields or raises :class:`ApiError` (with the controller's code for
-    its refusals). ``instrument`` answers ``measure`` (None: ``no_instrument``)."""
+    its refusals). ``instrument`` answers ``measure`` (None: ``no_instrument``).
+
+    ``deadline_ns`` (monotonic; None: none) goes with every command that sets the platform
+    moving or changes how it moves, so that the loop refuses it (``expired``) once its
+    sender has stopped waiting. ``load_calibration`` and ``rollback_calibration`` are
+    checked against it when taken from the queue only."""
 
     def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None) -> None:
         self.controller = controller
         self.data = data
         self.instrument = instrument
 
-    def __call__(self, request: Request) -> dict[str, Any]:
+    def __call__(self, request: Request, deadline_ns: int | None = None) -> dict[str, Any]:
         controller = self.controller
         match request:
             case StatusRequest():
                 return {"status": jsonable(controller.telemetry())}
             case EnableRequest():
-                return _checked(controller.enable())
+                return _checked(controller.enable(deadline_ns=deadline_ns))
             case DisableRequest():
                 return _checked(controller.disable())
             case StopRequest():
@@ -81,22 +85,22 @@ class CommandHandler:
             case ResetRequest():
                 return _checked(controller.reset())
             case MoveRequest():
-                result = controller.move(request.pose, request.duration, request.speed)
+                result = controller.move(request.pose, request.duration, request.speed, deadline_ns=deadline_ns)
                 return _checked(result, goal=result.details.get("goal"), duration=result.details.get("duration_s"))
             case ValidatePoseRequest():
                 return self._validate_pose(request)
             case LegLockRequest():
-                return _checked(controller.leg_lock(request.leg))
+                return _checked(controller.leg_lock(request.leg, deadline_ns=deadline_ns))
             case LegUnlockRequest():
-                return _checked(controller.leg_unlock())
+                return _checked(controller.leg_unlock(deadline_ns=deadline_ns))
             case PlayRequest():
                 sequence = resolve_sequence(request.sequence, self.data)
-                result = controller.play(sequence)
+                result = controller.play(sequence, deadline_ns=deadline_ns)
                 return _checked(result, name=sequence.name, waypoints=len(sequence.waypoints), duration=result.details.get("duration_s"))
             case PauseRequest():
                 return _checked(controller.pause())
             case ResumeRequest():
-                return _checked(controller.resume())
+                return _checked(controller.resume(deadline_ns=deadline_ns))
             case AbortRequest():
                 return _checked(controller.abort())
             case LoadCalibrationRequest():
@@ -135,13 +139,7 @@ class CommandHandler:
         writer = csv.writer(table, lineterminator="\n")
         writer.writerow(dwell_header())
         writer.writerows(dwell_rows(report.records))
-        target = self.data.new_file(request.path)
-        try:
-            write_atomic(target, table.getvalue().encode("utf-8"), overwrite=False)
-        except FileExistsError:
-            raise ApiError(ErrorCode.FILE_EXISTS, f"{request.path}: exists; recordings never overwrite") from None
-        except OSError as error:
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{request.path}: cannot write: {error.strerror}") from None
+        target = self.data.write_new(request.path, table.getvalue().encode("utf-8"))
         return {"path": str(target), "name": report.name, "status": report.status, "records": len(report.records)}
 
 

@@ -16,6 +16,8 @@ from typing import Annotated, Literal, Union, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
+from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S
+
 PROTOCOL_VERSION = 1
 
 Pose = Annotated[
@@ -27,7 +29,15 @@ LegReadings = Annotated[
     list[float | None], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm; null for a leg not heard from yet")
 ]
 Leg = Annotated[int, Field(ge=1, le=6, description="leg number 1–6")]
-Duration = Annotated[float, Field(gt=0, description="the move takes at least this long, s")]
+Duration = Annotated[float, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
+Dwell = Annotated[float, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
+MAX_DEADLINE_MS = 3_600_000
+"""The largest ``deadline_ms`` (an hour): a bound, so that a deadline is always a time."""
+DeadlineMs = Annotated[
+    float,
+    Field(gt=0, le=MAX_DEADLINE_MS, description="carry it out within this many ms of the service receiving it, or not at all "
+          "(expired); at most an hour"),
+]
 Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
 ErrorCodeText = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="snake_case error code")]
 RequestId = Annotated[JsonValue, Field(description="any JSON value; echoed in the reply")]
@@ -45,6 +55,7 @@ class _Message(BaseModel):
 class _Request(_Message):
     v: Literal[1] = Field(description="protocol version")
     id: RequestId
+    deadline_ms: DeadlineMs | None = None
 
 
 class _Paced(_Message):
@@ -129,7 +140,7 @@ class Waypoint(_Paced):
     """One waypoint of an inline sequence: the ``[[waypoint]]`` table of a sequence file."""
 
     pose: Pose
-    dwell: float = Field(default=0.0, ge=0, description="time to stay on arrival, s")
+    dwell: Dwell = 0.0
 
 
 class InlineSequence(_Message):
@@ -260,6 +271,17 @@ class LoopTelemetry(_Message):
     fk_failures: int = Field(description="cycles whose feedback had no forward-kinematics solution")
 
 
+class RealtimeTelemetry(_Message):
+    """What real-time set-up the loop obtained (``hexactl serve`` asks for SCHED_FIFO and locked memory by default)."""
+
+    fifo_priority: int | None = Field(description="the loop thread's SCHED_FIFO priority; null: normal scheduling")
+    cpus: list[int] | None = Field(description="CPUs the loop thread may run on; null: any")
+    memory_locked: bool = Field(description="the loop's process memory is locked (mlockall)")
+    switch_interval_s: float | None = Field(description="the loop process's GIL switch interval, s")
+    gc_managed: bool = Field(description="the loop runs the garbage collector in its slack")
+    notes: list[str] = Field(description="each real-time step left out or failed, with the reason")
+
+
 class SequenceProgress(_Message):
     """The sequence being played."""
 
@@ -292,6 +314,7 @@ class Telemetry(_Message):
     sequence: SequenceProgress | None = Field(description="the sequence being played, or null")
     faults: list[Fault] = Field(description="why FAULT or ESTOP is latched; empty otherwise")
     loop: LoopTelemetry
+    realtime: RealtimeTelemetry | None = Field(default=None, description="the loop's real-time set-up; null before it starts")
 
 
 # -- replies -------------------------------------------------------------------------

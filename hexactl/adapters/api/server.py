@@ -1,24 +1,52 @@
-"""The command socket: a ROUTER served by its own thread, one reply per request.
+"""The command socket: a ROUTER whose thread admits requests and a worker thread that
+carries them out, one reply per request.
 
 REQ and DEALER clients both work: the reply goes back with the request's envelope
 (:func:`~hexactl.adapters.api.wire.split_envelope`). Whatever arrives, malformed or
 oversized or multipart, gets exactly one reply, and nothing a client sends stops the
-thread: a handler exception becomes an ``internal_error`` reply and is logged.
+threads: a handler exception becomes an ``internal_error`` reply and is logged.
 
-Threading (:class:`~hexactl.adapters.api.socket_thread.SocketThread`): the socket belongs
-to the server thread after :meth:`ApiServer.start`. It sleeps in ``zmq.Poller.poll`` and
-wakes on requests or every :data:`POLL_INTERVAL_MS` to see whether it should stop.
+Threading. The **socket thread** owns the ROUTER (ZeroMQ sockets are not thread-safe)
+and never runs a slow handler. For each request it:
+
+- answers a request that cannot be decoded at once (its error);
+- carries out ``estop``, ``stop`` and ``abort`` at once, ahead of everything queued
+  (they only hand a command to the loop and wait a cycle or two for its verdict), after
+  discarding every queued motion request (:data:`CANCELLED_BY_STOP`) from every client,
+  and then those ZeroMQ had received but this thread not yet read, each answered
+  ``cancelled``: what was asked before a stop must not run after it. A motion request
+  the worker is planning meanwhile is refused by the loop as a stale plan if planned
+  before the stop was carried out; if it got through all the same, the worker stops the
+  platform again after it and answers ``cancelled``;
+- queues anything else for the **worker thread**: one queue per client (the ROUTER's
+  routing identity), served round-robin, bounded per client and in all (``busy`` beyond).
+
+The worker takes requests in turn, answers ``expired`` for one whose ``deadline_ms`` has
+passed, else runs the handler with the absolute deadline (the loop refuses a motion
+command past it). Its replies reach the socket thread through an inproc PUSH→PULL pair
+the socket thread polls with the ROUTER.
+
+A watchdog: when the worker has been inside one handler longer than
+``handler_timeout_s``, the socket thread logs an error naming the request and calls
+``on_stuck`` (the API process ends itself: :mod:`hexactl.adapters.api_process`). Until
+then, and after, the socket thread goes on answering stops and refusals.
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import os
+import threading
+import time
+from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import zmq
 
-from hexactl.adapters.api.messages import Request
+from hexactl.adapters.api.messages import PROTOCOL_VERSION, Request, StopRequest
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import (
@@ -36,36 +64,78 @@ from hexactl.adapters.api.wire import (
 DEFAULT_API_ENDPOINT = "tcp://127.0.0.1:5555"
 
 POLL_INTERVAL_MS = 100
-"""How often the idle server thread wakes to check for shutdown."""
+"""How often the idle threads wake to check for shutdown (and the watchdog its bound)."""
 
-_BATCH = 64  # requests answered per wake before polling again
+URGENT_COMMANDS = frozenset({"estop", "stop", "abort"})
+"""Carried out on the socket thread as they arrive, ahead of every queued request."""
 
-Handler = Callable[[Request], dict[str, Any]]
-"""Carries out a request: returns the reply's fields beyond v/id/ok, or raises
-:class:`~hexactl.adapters.api.wire.ApiError`."""
+CANCELLED_BY_STOP = frozenset({"move", "play", "resume", "leg_lock", "leg_unlock", "load_calibration",
+                               "rollback_calibration"})
+"""Queued requests an urgent command discards: everything that would set the platform
+moving or change its motion or calibration. ``enable`` is not among them (it holds the
+pose the platform is at, and is refused while an E-stop is latched), nor are queries."""
+
+MAX_QUEUED_PER_CLIENT = 32
+"""Requests one client may have waiting. :class:`~hexactl.adapters.api.client.HexactlClient`
+has one in flight; a DEALER pipelining a batch (poses to validate) rarely needs more,
+and one client must not fill the whole queue."""
+
+MAX_QUEUED = 256
+"""Requests waiting from all clients together. Planning a move or validating a pose takes
+about 20 ms (measured), so a full queue is some 5 s of work: what waits longer would
+outlive the client library's default 5 s timeout, so it is refused ``busy`` at once
+instead."""
+
+DEFAULT_HANDLER_TIMEOUT_S = 120.0
+"""The watchdog's default bound on one request's handling, s. The slowest legitimate
+request stays below it: validating a 1000-waypoint sequence took 67 s on the 2-core test
+machine at load 12 (measured; planning is bounded by
+:data:`~hexactl.control.planning.MAX_MOTION_S`, not faster). Stops never wait for the
+worker, so a slow request holds up only other slow requests, never the platform's safety."""
+
+WORKER_JOIN_S = 2.0
+"""How long :meth:`ApiServer.close` waits for the worker to finish the request it is in."""
+
+_BATCH = 64  # messages taken from a socket per wake before polling again
+_TRANSPORT_DRAIN_LIMIT = 4096  # bounds the reading after an urgent command under a flood that never ends
+
+Handler = Callable[[Request, int | None], dict[str, Any]]
+"""Carries out a request by its absolute deadline (monotonic ns, None: none): returns
+the reply's fields beyond v/id/ok, or raises :class:`~hexactl.adapters.api.wire.ApiError`."""
 
 log = logging.getLogger(__name__)
 
 
-def answer(body: list[bytes], handle: Handler) -> bytes:
-    """The encoded reply to the request frames ``body`` (envelope removed). Never raises."""
-    request_id = None
+def decode_body(body: list[bytes]) -> Request:
+    """The request in the frames ``body`` (envelope removed); :class:`ApiError` says what is wrong."""
+    if not body:
+        raise ApiError(ErrorCode.INVALID_REQUEST, "empty request: no frame after the envelope")
+    if len(body) != 1:
+        size = sum(len(frame) for frame in body)
+        if size > MAX_REQUEST_BYTES:
+            raise ApiError(ErrorCode.TOO_LARGE, f"request of {size} bytes; the limit is {MAX_REQUEST_BYTES}")
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is one frame of JSON, got {len(body)} frames")
+    return decode_request(body[0])
+
+
+def carry_out(request: Request, handle: Handler, deadline_ns: int | None) -> bytes:
+    """The encoded reply to ``request``, carried out by ``handle``. Never raises."""
+    return encoded(request.id, reply_to(request, handle, deadline_ns))
+
+
+def reply_to(request: Request, handle: Handler, deadline_ns: int | None) -> dict[str, Any]:
+    """The reply to ``request``, carried out by ``handle``. Never raises."""
     try:
-        if not body:
-            raise ApiError(ErrorCode.INVALID_REQUEST, "empty request: no frame after the envelope")
-        if len(body) != 1:
-            size = sum(len(frame) for frame in body)
-            if size > MAX_REQUEST_BYTES:
-                raise ApiError(ErrorCode.TOO_LARGE, f"request of {size} bytes; the limit is {MAX_REQUEST_BYTES}")
-            raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is one frame of JSON, got {len(body)} frames")
-        request = decode_request(body[0])
-        request_id = request.id
-        reply = ok_reply(request_id, **handle(request))
+        return ok_reply(request.id, **handle(request, deadline_ns))
     except ApiError as error:
-        reply = error_reply(request_id if request_id is not None else error.request_id, error.code, error.message, error.details)
+        return error_reply(request.id, error.code, error.message, error.details)
     except Exception as error:  # a bug in a handler must not end the service: log it, say so
-        log.exception("request %r failed", request_id)
-        reply = error_reply(request_id, ErrorCode.INTERNAL_ERROR, f"internal error: {type(error).__name__}: {error}")
+        log.exception("request %r failed", request.id)
+        return error_reply(request.id, ErrorCode.INTERNAL_ERROR, f"internal error: {type(error).__name__}: {error}")
+
+
+def encoded(request_id: Any, reply: dict[str, Any]) -> bytes:
+    """``reply`` encoded; an ``internal_error`` reply instead if it holds a non-finite number."""
     try:
         return encode(reply)
     except ValueError as error:  # a NaN in a handler's reply
@@ -73,9 +143,33 @@ def answer(body: list[bytes], handle: Handler) -> bytes:
         return encode(error_reply(request_id, ErrorCode.INTERNAL_ERROR, "internal error: the reply held a non-finite number"))
 
 
+def describe(request: Request) -> str:
+    """``cmd (id …)`` for logs and messages."""
+    return f"{request.cmd} (id {json.dumps(request.id)[:100]})"
+
+
+@dataclass(frozen=True, slots=True)
+class _Queued:
+    envelope: list[bytes]
+    request: Request
+    deadline_ns: int | None  # monotonic
+
+
+_STOP_AFTER_RACE = StopRequest(v=PROTOCOL_VERSION, id=None, cmd="stop")
+
+
+def _cancelled(request: Request, cause: str) -> bytes:
+    return encode(error_reply(request.id, ErrorCode.CANCELLED,
+                              f"{request.cmd} cancelled, not carried out: {cause} arrived while it was queued"))
+
+
 class ApiServer(SocketThread):
-    """Serve ``handle`` on a ROUTER bound to ``endpoint`` (``tcp://HOST:*`` picks a free port);
-    :meth:`close` stops the thread within :data:`POLL_INTERVAL_MS` and closes the socket.
+    """Serve ``handle`` on a ROUTER bound to ``endpoint`` (``tcp://HOST:*`` picks a free
+    port), as the module describes. ``on_stuck(description)`` is called once when the
+    worker has spent ``handler_timeout_s`` in one request (None: only logged).
+    :meth:`close` stops both threads (the worker within :data:`WORKER_JOIN_S`, else it is
+    left behind: it is a daemon) and closes the sockets. ``worker_niceness``: the worker
+    thread's ``nice`` (the socket thread keeps the process's).
 
     :raises zmq.ZMQError: the endpoint is malformed or in use
     """
@@ -86,25 +180,218 @@ class ApiServer(SocketThread):
         endpoint: str,
         handle: Handler,
         curve: CurveServer | None = None,
+        *,
+        handler_timeout_s: float = DEFAULT_HANDLER_TIMEOUT_S,
+        on_stuck: Callable[[str], None] | None = None,
+        worker_niceness: int = 0,
     ) -> None:
         self._handle = handle
+        self._worker_niceness = worker_niceness
+        self._handler_timeout_ns = round(handler_timeout_s * 1e9)
+        self._on_stuck = on_stuck
         super().__init__(context, zmq.ROUTER, endpoint, name="hexactl-api",
                          options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES}, curve=curve)
+        replies = f"inproc://hexactl-api-replies-{id(self)}"
+        # Never full while the socket thread drains it: at most MAX_QUEUED replies are owed.
+        self._replies_in = context.socket(zmq.PULL)
+        self._replies_out = context.socket(zmq.PUSH)
+        for socket in (self._replies_in, self._replies_out):
+            socket.linger = 0
+            socket.sndhwm = socket.rcvhwm = 2 * MAX_QUEUED
+        self._replies_in.bind(replies)
+        self._replies_out.connect(replies)
+        # The queues: per client (routing identity) in arrival order, and the clients with
+        # requests waiting in round-robin order. Guarded by _ready's lock, held briefly.
+        self._ready = threading.Condition()
+        self._queues: dict[bytes, deque[_Queued]] = {}
+        self._turns: deque[bytes] = deque()
+        self._queued = 0
+        self._stops = 0  # urgent commands so far: the worker compares it across a motion request
+        self._in_handler: tuple[int, str] | None = None  # (since, monotonic ns; what), set by the worker
+        self._reported: tuple[int, str] | None = None  # the stuck handling already reported
+        self._worker = threading.Thread(target=self._work, name="hexactl-api-worker", daemon=True)
+
+    def start(self) -> None:
+        super().start()
+        self._worker.start()
+
+    def close(self) -> None:
+        super().close()  # the socket thread has stopped and the ROUTER is closed
+        with self._ready:
+            self._ready.notify_all()
+        if self._worker.is_alive():
+            self._worker.join(WORKER_JOIN_S)
+            if self._worker.is_alive():
+                log.warning("the API worker is still in %s: left behind", self._describe_in_handler())
+        # Closed even under a worker left behind: it is in a handler, not in ZeroMQ, and a
+        # send on a closed socket raises there (caught) instead of holding up shutdown.
+        self._replies_out.close()
+        self._replies_in.close()
+
+    # -- the socket thread -------------------------------------------------------------
 
     def _run(self) -> None:
         poller = zmq.Poller()
         poller.register(self._socket, zmq.POLLIN)
+        poller.register(self._replies_in, zmq.POLLIN)
         while not self._stopping.is_set():
-            if not poller.poll(POLL_INTERVAL_MS):
-                continue
-            for _ in range(_BATCH):
-                try:
-                    frames = self._socket.recv_multipart(zmq.NOBLOCK)
-                except zmq.Again:
-                    break
-                envelope, body = split_envelope(frames)
-                try:
-                    # ROUTER never blocks on send: it drops replies to peers that are gone or full.
-                    self._socket.send_multipart([*envelope, answer(body, self._handle)], zmq.NOBLOCK)
-                except zmq.ZMQError as error:
-                    log.warning("reply not sent: %s", error)
+            ready = dict(poller.poll(POLL_INTERVAL_MS))
+            self._watch()
+            if self._replies_in in ready:
+                for _ in range(_BATCH):
+                    try:
+                        self._send(self._replies_in.recv_multipart(zmq.NOBLOCK))
+                    except zmq.Again:
+                        break
+            if self._socket in ready:
+                for _ in range(_BATCH):
+                    try:
+                        frames = self._socket.recv_multipart(zmq.NOBLOCK)
+                    except zmq.Again:
+                        break
+                    self._admit(frames, time.monotonic_ns())
+
+    def _admit(self, frames: list[bytes], received_ns: int, stopped_by: str | None = None) -> None:
+        """Answer, carry out or queue one request. ``stopped_by``: the urgent command just
+        carried out, which cancels a motion request read after it from the transport."""
+        envelope, body = split_envelope(frames)
+        try:
+            request = decode_body(body)
+        except ApiError as error:
+            self._send([*envelope, encode(error_reply(error.request_id, error.code, error.message, error.details))])
+            return
+        if stopped_by is not None and request.cmd in CANCELLED_BY_STOP:
+            self._send([*envelope, _cancelled(request, stopped_by)])
+            return
+        if request.cmd in URGENT_COMMANDS:
+            cause = describe(request)
+            self._cancel_queued(cause)  # first: the worker must not take one of them meanwhile
+            self._send([*envelope, carry_out(request, self._handle, None)])
+            if stopped_by is None:
+                self._cancel_in_transport(cause)
+            return
+        deadline_ns = None if request.deadline_ms is None else received_ns + round(request.deadline_ms * 1e6)
+        client = envelope[0]
+        with self._ready:
+            mine = len(self._queues.get(client, ()))
+            if mine >= MAX_QUEUED_PER_CLIENT:
+                refusal = f"{mine} requests queued from this client; wait for replies before sending more"
+            elif self._queued >= MAX_QUEUED:
+                refusal = f"{self._queued} requests queued from all clients; wait for a reply and send it again"
+            else:
+                refusal = None
+                if not mine:
+                    self._queues[client] = deque()
+                    self._turns.append(client)
+                self._queues[client].append(_Queued(envelope, request, deadline_ns))
+                self._queued += 1
+                self._ready.notify()
+        if refusal is not None:
+            self._send([*envelope, encode(error_reply(request.id, ErrorCode.BUSY, refusal,
+                                                      {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": MAX_QUEUED}))])
+
+    def _cancel_in_transport(self, cause: str) -> None:
+        """Cancel the motion requests ZeroMQ had received but this thread not yet read when
+        ``cause`` was carried out, and admit the others. They were sent before it, perhaps
+        by a client gone since (600 moves, then closed): they must not run after it either."""
+        for _ in range(_TRANSPORT_DRAIN_LIMIT):
+            try:
+                frames = self._socket.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            self._admit(frames, time.monotonic_ns(), stopped_by=cause)
+
+    def _cancel_queued(self, cause: str) -> None:
+        """Discard every queued :data:`CANCELLED_BY_STOP` request, answering each ``cancelled``."""
+        cancelled: list[_Queued] = []
+        with self._ready:
+            for client in list(self._turns):
+                queue = self._queues[client]
+                kept = deque(item for item in queue if item.request.cmd not in CANCELLED_BY_STOP)
+                cancelled += [item for item in queue if item.request.cmd in CANCELLED_BY_STOP]
+                if kept:
+                    self._queues[client] = kept
+                else:
+                    del self._queues[client]
+                    self._turns.remove(client)
+            self._queued -= len(cancelled)
+            self._stops += 1
+        for item in cancelled:
+            self._send([*item.envelope, _cancelled(item.request, cause)])
+
+    def _watch(self) -> None:
+        in_handler = self._in_handler
+        if in_handler is None or in_handler is self._reported:
+            return
+        since_ns, what = in_handler
+        if time.monotonic_ns() - since_ns > self._handler_timeout_ns:
+            self._reported = in_handler
+            description = (f"the API worker has been handling {what} for more than "
+                           f"{self._handler_timeout_ns / 1e9:g} s: the API is stuck")
+            log.error("%s", description)
+            if self._on_stuck is not None:
+                self._on_stuck(description)
+
+    def _send(self, frames: list[bytes]) -> None:
+        try:
+            # ROUTER never blocks on send: it drops replies to peers that are gone or full.
+            self._socket.send_multipart(frames, zmq.NOBLOCK)
+        except zmq.ZMQError as error:
+            log.warning("reply not sent: %s", error)
+
+    def _describe_in_handler(self) -> str:
+        in_handler = self._in_handler
+        return in_handler[1] if in_handler is not None else "no request"
+
+    # -- the worker ----------------------------------------------------------------------
+
+    def _work(self) -> None:
+        if self._worker_niceness:  # Linux: a thread's own niceness (its thread id), not the process's
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), self._worker_niceness)
+        while (taken := self._next()) is not None:
+            item, stops = taken
+            request = item.request
+            if item.deadline_ns is not None and (late_ns := time.monotonic_ns() - item.deadline_ns) >= 0:
+                reply = error_reply(request.id, ErrorCode.EXPIRED,
+                                    f"{request.cmd} expired, not carried out: its deadline_ms "
+                                    f"({request.deadline_ms:g}) passed {late_ns / 1e6:.1f} ms before its "
+                                    "turn came; send it again with a longer deadline if it is still wanted")
+            else:
+                self._in_handler = (time.monotonic_ns(), describe(request))
+                reply = reply_to(request, self._handle, item.deadline_ns)
+                if request.cmd in CANCELLED_BY_STOP and self._stops != stops and reply["ok"]:
+                    reply = self._stop_after_race(request)
+                self._in_handler = None
+            try:
+                self._replies_out.send_multipart([*item.envelope, encoded(request.id, reply)], zmq.NOBLOCK)
+            except zmq.ZMQError as error:  # closed under a worker left behind by close()
+                log.warning("reply to %s not sent: %s", describe(request), error)
+                return
+
+    def _stop_after_race(self, request: Request) -> dict[str, Any]:
+        """An urgent command arrived while ``request`` was being planned, and it was still
+        handed to the loop, perhaps after the urgent one: stop, so that it does not outlive
+        it, and say so."""
+        reply_to(_STOP_AFTER_RACE, self._handle, None)
+        return error_reply(request.id, ErrorCode.CANCELLED, f"{request.cmd} cancelled: a stop, abort or estop arrived "
+                           "while it was being planned, and the platform was stopped again after it")
+
+    def _next(self) -> tuple[_Queued, int] | None:
+        """The next request in round-robin order between clients, and the count of urgent
+        commands so far; None once stopping."""
+        with self._ready:
+            while not self._turns:
+                if self._stopping.is_set():
+                    return None
+                self._ready.wait(POLL_INTERVAL_MS / 1000)
+            if self._stopping.is_set():
+                return None
+            client = self._turns.popleft()
+            queue = self._queues[client]
+            item = queue.popleft()
+            if queue:
+                self._turns.append(client)
+            else:
+                del self._queues[client]
+            self._queued -= 1
+            return item, self._stops

@@ -10,6 +10,7 @@ from __future__ import annotations
 import codecs
 import dataclasses
 import json
+from collections import Counter
 from collections.abc import Mapping
 from enum import Enum, StrEnum
 from math import isfinite
@@ -48,6 +49,9 @@ class ErrorCode(StrEnum):
     NO_RECORDING = "no_recording"  # save_recording before any sequence was played
     NO_INSTRUMENT = "no_instrument"  # measure on a service without a measuring instrument (real actuators)
     MEASUREMENT_FAILED = "measurement_failed"  # the instrument could not measure (the simulated platform has no pose)
+    BUSY = "busy"  # too many requests queued from this client (or from all): wait for replies
+    EXPIRED = "expired"  # its deadline_ms passed before it could be carried out; it never will be
+    CANCELLED = "cancelled"  # a motion request still queued when a stop, abort or estop arrived
     INTERNAL_ERROR = "internal_error"  # a bug: logged with its traceback
 
 
@@ -82,7 +86,11 @@ def decode_request(body: bytes) -> Request:
     if len(body) > MAX_REQUEST_BYTES:
         raise ApiError(ErrorCode.TOO_LARGE, f"request of {len(body)} bytes; the limit is {MAX_REQUEST_BYTES}")
     try:
-        document = json.loads(_utf8_text(body), parse_constant=_refuse_constant, parse_float=_finite_float)
+        document = json.loads(_utf8_text(body), parse_constant=_refuse_constant, parse_float=_finite_float,
+                              object_pairs_hook=_unique_keys)
+    except _DuplicateKey as error:
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"key {error.key[:100]!r} appears twice in one object: "
+                       "give each key once") from None
     except (ValueError, RecursionError) as error:  # JSONDecodeError is a ValueError
         raise ApiError(ErrorCode.MALFORMED_JSON, f"not valid JSON: {_first_line(error)}") from None
     if not isinstance(document, dict):
@@ -190,6 +198,23 @@ def _utf8_text(body: bytes) -> str:
         offset = error.start + len(body) - len(unmarked)
         raise ApiError(ErrorCode.MALFORMED_JSON,
                        f"not UTF-8: {error.reason} at offset {offset}; requests are UTF-8 JSON") from None
+
+
+class _DuplicateKey(Exception):
+    """An object with a key twice (not a ValueError: that would read as malformed JSON)."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    # JSON leaves duplicate keys undefined and Python keeps the last: a request that says
+    # two things must not be read as one of them.
+    document = dict(pairs)
+    if len(document) != len(pairs):
+        raise _DuplicateKey(next(key for key, count in Counter(key for key, _ in pairs).items() if count > 1))
+    return document
 
 
 def _refuse_constant(name: str) -> float:

@@ -1,0 +1,292 @@
+"""The command path of :class:`~hexactl.adapters.api.server.ApiServer`: nothing a
+handler does holds up ``estop``/``stop``/``abort``; those discard queued motion requests
+from every client; clients are queued fairly and bounded (``busy``); a request past its
+``deadline_ms`` is answered ``expired`` and not carried out; a stuck handler is reported
+by the watchdog; and the smaller refusals of the wire format (duplicate keys, unbounded
+durations and dwells)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import zmq
+
+from hexactl.adapters.api.client import DEADLINE_MARGIN_MIN_MS, HexactlClient, deadline_ms
+from hexactl.adapters.api.messages import Request
+from hexactl.adapters.api.server import MAX_QUEUED, MAX_QUEUED_PER_CLIENT, ApiServer
+from hexactl.control.planning import MAX_MOTION_S
+from hexactl.control.sequences import SequenceError, sequence_from_toml
+from tests.api.support import LOCAL, request
+
+WAIT_S = 10.0  # only turns a hang into a failure
+POSE = [0, 0, 10, 0, 0, 0]
+
+
+class BlockingHandler:
+    """Records what it carries out (command, id, deadline); requests whose ``id`` starts
+    with "block" wait until :attr:`release` is set, :attr:`entered` set meanwhile."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.entered = threading.Event()
+        self.done: list[tuple[str, Any, int | None]] = []
+        self.lock = threading.Lock()
+
+    def __call__(self, request: Request, deadline_ns: int | None) -> dict[str, Any]:
+        if isinstance(request.id, str) and request.id.startswith("block"):
+            self.entered.set()
+            assert self.release.wait(WAIT_S * 3), "never released"
+        with self.lock:
+            self.done.append((request.cmd, request.id, deadline_ns))
+        return {"message": f"{request.cmd} done"}
+
+    def ids(self) -> list[Any]:
+        with self.lock:
+            return [request_id for _, request_id, _ in self.done]
+
+
+@pytest.fixture
+def handler() -> BlockingHandler:
+    return BlockingHandler()
+
+
+@pytest.fixture
+def server(handler: BlockingHandler) -> Iterator[ApiServer]:
+    context = zmq.Context()
+    served = ApiServer(context, LOCAL, handler)
+    served.start()
+    yield served
+    handler.release.set()
+    served.close()
+    context.term()
+
+
+class Client:
+    """A DEALER of its own (one ROUTER identity), sending without waiting."""
+
+    def __init__(self, endpoint: str) -> None:
+        self.socket = zmq.Context.instance().socket(zmq.DEALER)
+        self.socket.linger = 0
+        self.socket.connect(endpoint)
+
+    def send(self, request_id: Any, cmd: str, **fields: Any) -> None:
+        self.socket.send(json.dumps({"v": 1, "id": request_id, "cmd": cmd, **fields}).encode())
+
+    def receive(self) -> dict[str, Any]:
+        assert self.socket.poll(WAIT_S * 1000), "no reply"
+        return json.loads(self.socket.recv())
+
+    def replies(self, count: int) -> dict[Any, dict[str, Any]]:
+        return {reply["id"]: reply for reply in (self.receive() for _ in range(count))}
+
+    def close(self) -> None:
+        self.socket.close()
+
+
+def blocked(server: ApiServer, handler: BlockingHandler) -> Client:
+    """A client whose request holds the worker until ``handler.release``."""
+    client = Client(server.endpoint)
+    client.send("block", "status")
+    assert handler.entered.wait(WAIT_S)
+    return client
+
+
+def test_estop_stop_abort_are_answered_while_the_worker_is_stuck(server, handler) -> None:
+    holder = blocked(server, handler)
+    for cmd in ("estop", "stop", "abort"):
+        reply = request(server.endpoint, {"v": 1, "id": cmd, "cmd": cmd})
+        assert reply["ok"] and reply["message"] == f"{cmd} done"
+    assert not handler.release.is_set() and handler.ids() == ["estop", "stop", "abort"]  # the worker is still held
+    handler.release.set()
+    assert holder.receive()["id"] == "block"
+    holder.close()
+
+
+@pytest.mark.parametrize("urgent", ["stop", "abort", "estop"])
+def test_an_urgent_command_cancels_queued_motion_from_every_client(server, handler, urgent) -> None:
+    holder = blocked(server, handler)
+    mover, player = Client(server.endpoint), Client(server.endpoint)
+    for number in range(3):
+        mover.send(f"move{number}", "move", pose=POSE)
+    mover.send("status", "status")
+    player.send("play", "play", sequence="x_sweep")
+    player.send("lock", "leg_lock", leg=2)
+    player.send("validate", "validate_pose", pose=POSE)
+    # Each client's requests arrive in order: once its last is queued, all are.
+    mover.send("marker-m", "pause")
+    player.send("marker-p", "pause")
+    wait_queued(server, 9)
+    reply = request(server.endpoint, {"v": 1, "id": "urgent", "cmd": urgent})
+    assert reply["ok"]
+    cancelled = {**mover.replies(3), **player.replies(2)}
+    assert set(cancelled) == {"move0", "move1", "move2", "play", "lock"}
+    for item in cancelled.values():
+        assert item["error"]["code"] == "cancelled" and urgent in item["error"]["message"], item
+    handler.release.set()
+    kept = {**mover.replies(2), **player.replies(2)}
+    assert all(reply["ok"] for reply in kept.values()) and set(kept) == {"status", "marker-m", "validate", "marker-p"}
+    assert not {"move0", "move1", "move2", "play", "lock"} & set(handler.ids())  # never carried out
+    for client in (holder, mover, player):
+        client.close()
+
+
+def wait_queued(server: ApiServer, count: int) -> None:
+    """Wait until ``count`` requests wait in the server's queues (its own counter)."""
+    deadline = time.monotonic() + WAIT_S
+    while server._queued < count:
+        assert time.monotonic() < deadline, f"{server._queued} queued, expected {count}"
+        time.sleep(0.005)
+
+
+def test_a_flooding_client_gets_busy_and_others_are_served_in_turn(server, handler) -> None:
+    holder = blocked(server, handler)
+    flooder, other = Client(server.endpoint), Client(server.endpoint)
+    extra = 5
+    for number in range(MAX_QUEUED_PER_CLIENT + extra):
+        flooder.send(number, "validate_pose", pose=POSE)
+    busy = [flooder.receive() for _ in range(extra)]
+    assert {reply["id"] for reply in busy} == set(range(MAX_QUEUED_PER_CLIENT, MAX_QUEUED_PER_CLIENT + extra))
+    for reply in busy:
+        assert reply["error"]["code"] == "busy", reply
+        assert f"{MAX_QUEUED_PER_CLIENT} requests queued from this client" in reply["error"]["message"]
+    other.send("other", "status")
+    wait_queued(server, MAX_QUEUED_PER_CLIENT + 1)
+    handler.release.set()
+    assert other.receive()["ok"]
+    assert "other" in handler.ids()[:3]  # its turn came after one of the flooder's, not after 32
+    assert len(flooder.replies(MAX_QUEUED_PER_CLIENT)) == MAX_QUEUED_PER_CLIENT
+    for client in (holder, flooder, other):
+        client.close()
+
+
+def test_the_total_queue_is_bounded(server, handler) -> None:
+    holder = blocked(server, handler)
+    clients = [Client(server.endpoint) for _ in range(MAX_QUEUED // MAX_QUEUED_PER_CLIENT)]
+    for client in clients:
+        for number in range(MAX_QUEUED_PER_CLIENT):
+            client.send(number, "status")
+    wait_queued(server, MAX_QUEUED)
+    late = Client(server.endpoint)
+    late.send("late", "status")
+    reply = late.receive()
+    assert reply["error"]["code"] == "busy" and f"{MAX_QUEUED} requests queued from all clients" in reply["error"]["message"]
+    handler.release.set()
+    for client in clients:
+        assert len(client.replies(MAX_QUEUED_PER_CLIENT)) == MAX_QUEUED_PER_CLIENT
+    for client in (holder, late, *clients):
+        client.close()
+
+
+def test_a_request_past_its_deadline_is_answered_expired_and_not_carried_out(server, handler) -> None:
+    holder = blocked(server, handler)
+    client = Client(server.endpoint)
+    sent_at = time.monotonic_ns()
+    client.send("late", "validate_pose", pose=POSE, deadline_ms=1)
+    client.send("in time", "validate_pose", pose=POSE, deadline_ms=60_000)
+    client.send("marker", "stop")  # answered at once (and cancels no query): both were received before it
+    assert client.receive()["id"] == "marker"
+    received_by = time.monotonic_ns()
+    while time.monotonic_ns() < received_by + 2_000_000:  # the 1 ms deadline is over
+        time.sleep(0.001)
+    handler.release.set()
+    replies = client.replies(2)
+    assert replies["late"]["error"]["code"] == "expired" and "deadline_ms (1)" in replies["late"]["error"]["message"]
+    assert replies["in time"]["ok"]
+    assert "late" not in handler.ids()
+    (deadline,) = [deadline for cmd, request_id, deadline in handler.done if request_id == "in time"]
+    assert sent_at + 60_000_000_000 <= deadline <= received_by + 60_000_000_000  # from when the service received it
+    holder.close()
+    client.close()
+
+
+def test_without_deadline_the_handler_gets_none(server, handler) -> None:
+    assert request(server.endpoint, {"v": 1, "id": 1, "cmd": "status"})["ok"]
+    assert handler.done == [("status", 1, None)]
+
+
+def test_the_client_sets_its_deadline_from_its_timeout(server, handler) -> None:
+    before = time.monotonic_ns()
+    with HexactlClient(server.endpoint, timeout_s=2.0) as client:
+        client.call("status")
+    after = time.monotonic_ns()
+    ((_, _, deadline),) = handler.done
+    assert before + 1_600_000_000 <= deadline <= after + 1_600_000_000  # 2 s less 20 %
+    assert deadline_ms(2.0) == 1600.0
+    assert deadline_ms(0.1) == 100.0 - DEADLINE_MARGIN_MIN_MS  # the margin at least 50 ms
+    assert deadline_ms(0.06) == 30.0  # and at most half the timeout
+
+
+def test_the_watchdog_reports_a_stuck_handler_and_stops_go_on(handler) -> None:
+    context = zmq.Context()
+    stuck = threading.Event()
+    reports: list[str] = []
+
+    def on_stuck(description: str) -> None:
+        reports.append(description)
+        stuck.set()
+
+    served = ApiServer(context, LOCAL, handler, handler_timeout_s=0.2, on_stuck=on_stuck)
+    served.start()
+    try:
+        holder = blocked(served, handler)
+        assert stuck.wait(WAIT_S)
+        assert reports == ['the API worker has been handling status (id "block") for more than 0.2 s: the API is stuck']
+        assert request(served.endpoint, {"v": 1, "id": 2, "cmd": "estop"})["ok"]
+        holder.close()
+    finally:
+        closing = threading.Thread(target=served.close)
+        closing.start()
+        closing.join(WAIT_S)  # bounded although the worker is still held
+        assert not closing.is_alive()
+        handler.release.set()
+        context.term()
+    assert len(reports) == 1  # once per stuck request
+
+
+# -- the smaller findings ------------------------------------------------------------------
+
+
+def test_duplicate_keys_are_refused_naming_the_key(server) -> None:
+    body = b'{"v": 1, "id": 7, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "pose": [80, 0, 0, 0, 0, 0]}'
+    with zmq.Context.instance().socket(zmq.DEALER) as socket:
+        socket.linger = 0
+        socket.connect(server.endpoint)
+        socket.send(body)
+        assert socket.poll(WAIT_S * 1000)
+        reply = json.loads(socket.recv())
+    assert reply["error"]["code"] == "invalid_request" and "'pose' appears twice" in reply["error"]["message"]
+
+
+def test_a_huge_duration_is_an_invalid_request_naming_the_bound(server, handler) -> None:
+    reply = request(server.endpoint, {"v": 1, "id": 1, "cmd": "move", "pose": POSE, "duration": 1e200})
+    assert reply["error"]["code"] == "invalid_request"
+    assert f"less than or equal to {MAX_MOTION_S:g}" in reply["error"]["message"]
+    assert handler.done == []
+
+
+def test_huge_dwells_are_refused(server, handler) -> None:
+    sequence = {"name": "long", "waypoints": [{"pose": POSE, "dwell": 1e308}, {"pose": POSE, "dwell": 1e308}]}
+    reply = request(server.endpoint, {"v": 1, "id": 1, "cmd": "play", "sequence": sequence})
+    assert reply["error"]["code"] == "invalid_request" and "less than or equal to 86400" in reply["error"]["message"]
+    with pytest.raises(SequenceError, match="86400"):
+        sequence_from_toml('name = "long"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\ndwell = 1e308\n')
+    with pytest.raises(SequenceError, match="600"):
+        sequence_from_toml('name = "slow"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nduration = 1e200\n')
+
+
+def test_a_motion_request_being_planned_when_a_stop_arrives_is_stopped_again(server, handler) -> None:
+    mover = Client(server.endpoint)
+    mover.send("block-move", "move", pose=POSE)
+    assert handler.entered.wait(WAIT_S)  # the worker is inside the move's handler
+    assert request(server.endpoint, {"v": 1, "id": "stop", "cmd": "stop"})["ok"]
+    handler.release.set()
+    reply = mover.receive()
+    assert reply["error"]["code"] == "cancelled" and "while it was being planned" in reply["error"]["message"]
+    assert [(cmd, request_id) for cmd, request_id, _ in handler.done] == [("stop", "stop"), ("move", "block-move"),
+                                                                          ("stop", None)]
+    mover.close()
