@@ -26,6 +26,10 @@ from tests.reliability.support import enable
 
 WAIT_S = 60.0  # only turns a hang into a failure (the machine is shared and busy)
 LOCAL = "tcp://127.0.0.1:*"
+FLOODERS = 10
+VALIDATIONS = 2
+"""Each flooding client's validations: 30,000 samples each to check, so the move queued
+behind them waits far beyond its client's 0.1 s on any machine, idle or busy."""
 
 
 @contextmanager
@@ -81,22 +85,27 @@ def test_a_move_whose_client_timed_out_behind_a_flood_never_runs(tmp_path: Path)
         start = status(operator)["pose_command"]
         context = zmq.Context.instance()
         flooders = []
-        for number in range(10):  # 10 clients × 3 validations of a slow move (planning 10 s of motion each)
+        for number in range(FLOODERS):  # each validates a slow move: planning 60 s of motion, every cycle checked
             flooder = context.socket(zmq.DEALER)
             flooder.linger = 0
             flooder.connect(api)
-            for request_id in range(3):
+            for request_id in range(VALIDATIONS):
                 flooder.send(json.dumps({"v": 1, "id": request_id, "cmd": "validate_pose",
-                                         "pose": [0, 0, number, 0, 0, 0], "duration": 10.0}).encode())
+                                         "pose": [0, 0, number + 1, 0, 0, 0], "duration": 60.0}).encode())
             flooders.append(flooder)
         with HexactlClient(api, timeout_s=0.1) as mover:
-            with pytest.raises(ServiceUnavailable):  # its turn comes after one validation of each client's
+            # The mover's own slow validations first: one client's requests are served in
+            # order, so its move waits for them whatever the other clients' turns.
+            for request_id in range(VALIDATIONS):
+                mover.socket.send(json.dumps({"v": 1, "id": f"slow-{request_id}", "cmd": "validate_pose",
+                                              "pose": [0, 0, -1, 0, 0, 0], "duration": 60.0}).encode())
+            with pytest.raises(ServiceUnavailable):
                 mover.call("move", pose=[80, 0, 0, 0, 0, 0])
             mover.timeout_s = 5 * WAIT_S  # behind the whole flood on a loaded host
             status(mover)  # answered after the move: the same client's requests are served in order
         for flooder in flooders:
-            for _ in range(3):
-                assert flooder.poll(WAIT_S * 1000)
+            for _ in range(VALIDATIONS):
+                assert flooder.poll(5 * WAIT_S * 1000)
                 assert json.loads(flooder.recv())["ok"]
             flooder.close()
         record = status(operator)
