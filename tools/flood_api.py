@@ -200,10 +200,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--processes", type=int, default=4, help="processes the clients are spread over")
     parser.add_argument("--operator-every", type=float, default=1.0, help="seconds between the operator's stops")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-realtime", action="store_true", help="normal scheduling, as 'hexactl serve --no-realtime'")
     parser.add_argument("--json", type=Path, help="also write the figures here")
     arguments = parser.parse_args(argv)
     result = flood(arguments.clients, arguments.requests, arguments.processes, arguments.operator_every,
-                   arguments.seed)
+                   arguments.seed, Scheduling() if arguments.no_realtime else SERVE_DEFAULT)
     print_report(result)
     if arguments.json:
         arguments.json.write_text(json.dumps(result, indent=2) + "\n")
