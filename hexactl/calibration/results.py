@@ -11,7 +11,6 @@ from enum import IntEnum, StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from hexactl.calibration.parameters import StructuralParameters
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
@@ -199,6 +198,10 @@ def assemble_result(
 
 def flag_outliers(chi2_values: NDArray, dof: NDArray | float, probability: float) -> NDArray[np.bool_]:
     """True where χ² with ``dof`` degrees of freedom is less likely than ``probability``."""
+    # Imported here: scipy.stats takes most of a second to import, and every hexactl
+    # process (the service's, each CLI command's) imports this module.
+    from scipy.stats import chi2
+
     values = np.asarray(chi2_values, dtype=float)
     flagged = np.zeros(values.shape, dtype=bool)
     finite = np.isfinite(values)

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from hexactl.adapters.files.atomic import write_atomic
-from hexactl.adapters.report import plots
 from hexactl.calibration.data import RowProblem
 from hexactl.calibration.parameters import StructuralParameters, parameter_names
 from hexactl.calibration.results import IdentificationResult
@@ -62,6 +61,10 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
     Refuses (``FileExistsError``) a directory that already holds a report unless
     ``overwrite``. Every file is written atomically.
     """
+    # Imported here: matplotlib takes about half a second to import, and the modules that
+    # only need REPORT_PAGE (the service's, the CLI's) must not pay for it.
+    from hexactl.adapters.report import plots
+
     folder = Path(directory)
     if (folder / REPORT_PAGE).exists() and not overwrite:
         raise FileExistsError(f"{folder} already holds a report; refusing to overwrite it (use --force)")
