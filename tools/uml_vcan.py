@@ -47,7 +47,8 @@ Recipe (what happens)
    ``lo`` up, insmods the modules, ``ip link add dev vcan0 type vcan; ip link
    set up vcan0``, silences kernel console messages, cds to the repo root,
    exports the relevant host environment plus ``HEXACTL_IN_UML=1`` and runs
-   ``<sys.executable> -m pytest -m vcan ARGS`` (output through ``tee`` so
+   ``<sys.executable> -m pytest -m vcan ARGS`` (interrupted with SIGINT a
+   minute before the timeout, so that it still reports its failures; output through ``tee`` so
    pytest sees a pipe, not a tty, and a log lands in the temp dir).  The exit
    code is written to ``<tmp>/exitcode``; finally ``echo o >
    /proc/sysrq-trigger`` powers the guest off and linux.uml exits 0.
@@ -77,9 +78,12 @@ Gotchas found while building this
   containers; the sysrq trigger is kernel-only and makes linux.uml exit 0.
   If init exits instead, the kernel panics and linux.uml aborts (SIGABRT) -
   it does not hang, and the host timeout is the last resort anyway.
-* The UML kernel is single-CPU with HZ=100; boot to the pytest start takes
-  about 2 s, Python/numpy imports over hostfs work (about 1.3 s for
-  numpy+scipy+python-can).
+* The UML kernel is single-CPU with HZ=100 but high-resolution timers
+  (``hres_active``: a 4 ms sleep lasts 5.3 ms median); boot to the pytest start
+  takes about 2 s. Each guest system call costs about 28 us (ptrace), and the
+  guest's CPU is one host process's share: on a loaded host everything inside
+  runs several times slower (``python -c pass`` 0.6 s, importing hexactl's CLI
+  14-25 s). Hence precompile() and no PYTHONDONTWRITEBYTECODE in the guest.
 
 Exit codes: the inner pytest's exit code, or
   120 prerequisites missing / could not be installed / unusable host setup
@@ -297,21 +301,27 @@ echo 1 > /proc/sys/kernel/printk   # keep kernel messages out of pytest output
 cd @CWD@ || fail BOOT "cd @CWD@ failed"
 @ENV@
 say "PYTEST-BEGIN $(up)"
-{ @PYTEST@ </dev/null; echo $? > "$RES/exitcode"; } 2>&1 | tee "$RES/pytest.log"
+# SIGINT before the host's timeout kills the guest: pytest then still reports the failures so far.
+{ timeout -s INT -k 30 @INNER_TIMEOUT@ @PYTEST@ </dev/null; echo $? > "$RES/exitcode"; } 2>&1 | tee "$RES/pytest.log"
 say "PYTEST-END $(cat "$RES/exitcode" 2>/dev/null) $(up)"
 finish
 """
 
 
+INNER_MARGIN_S = 60.0
+"""The inner pytest is interrupted this long before the overall timeout: time for its
+report of the failures so far to reach the host on a starved guest."""
+
+
 def build_init(res: str, modules: list[str], exes: dict[str, str], cwd: str,
-               pytest_cmd: list[str], env: dict[str, str]) -> str:
+               pytest_cmd: list[str], env: dict[str, str], inner_timeout_s: float) -> str:
     q = shlex.quote
     env_lines = "\n".join(f"export {k}={q(v)}" for k, v in sorted(env.items()))
     repl = {
         "@RES@": q(res), "@SBIN@": q(SBIN_PATH), "@MARK@": MARK,
         "@MODULES@": " ".join(q(m) for m in modules), "@INSMOD@": q(exes["insmod"]),
         "@IP@": q(exes["ip"]), "@CWD@": q(cwd), "@ENV@": env_lines,
-        "@PYTEST@": " ".join(q(a) for a in pytest_cmd),
+        "@PYTEST@": " ".join(q(a) for a in pytest_cmd), "@INNER_TIMEOUT@": f"{max(1.0, inner_timeout_s):.0f}",
     }
     text = INIT_TEMPLATE
     for k, v in repl.items():
@@ -322,6 +332,9 @@ def build_init(res: str, modules: list[str], exes: dict[str, str], cwd: str,
 def guest_env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items()
            if k in ENV_EXACT or k.startswith(ENV_PREFIXES)}
+    # The guest reads bytecode that precompile() wrote; without it each of its Python
+    # processes compiles the project's sources again on the guest's slow CPU.
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     env.setdefault("PATH", SBIN_PATH)
     env.setdefault("HOME", os.path.expanduser("~"))
     if "TMPDIR" in env and not guest_visible(env["TMPDIR"]):
@@ -336,6 +349,23 @@ def guest_env() -> dict[str, str]:
 
 # --------------------------------------------------------------------------
 # running
+
+PRECOMPILED = ("hexactl", "firmware_proto", "tests")
+"""The repo's packages compiled to bytecode on the host before the guest boots."""
+
+
+def precompile() -> None:
+    """Write the bytecode of :data:`PRECOMPILED` (``__pycache__``, ignored by git) on the
+    host: the guest's one CPU is tens of times slower, and every process the vcan tests
+    start there would otherwise compile the same sources again (PYTHONDONTWRITEBYTECODE
+    in the environment): importing ``hexactl``'s CLI took 25 s in the guest without
+    bytecode and 14 s with it (busy host), CPU taken from the loop and the simulator the
+    tests judge."""
+    r = subprocess.run([sys.executable, "-m", "compileall", "-q", *PRECOMPILED], cwd=REPO,
+                       stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=300)
+    if r.returncode != 0:
+        raise ToolError(EXIT_PREREQ, f"compiling the repo's sources failed (fix the syntax error):\n{r.stdout}{r.stderr}")
+
 
 
 def _reader(stream, q: queue.Queue) -> None:
@@ -375,12 +405,13 @@ def run_uml(args: argparse.Namespace, pytest_args: list[str]) -> int:
     if not guest_visible(sys.executable):
         raise ToolError(EXIT_PREREQ, f"interpreter {sys.executable} is not visible inside the guest")
 
+    precompile()
     work = make_workdir()
     try:
         init = os.path.join(work, "init.sh")
         pytest_cmd = [sys.executable, "-m", "pytest", "-m", "vcan", *pytest_args]
         with open(init, "w") as f:
-            f.write(build_init(work, modules, exes, cwd, pytest_cmd, guest_env()))
+            f.write(build_init(work, modules, exes, cwd, pytest_cmd, guest_env(), args.timeout - INNER_MARGIN_S))
         os.chmod(init, 0o755)
         cmdline = [exes["linux.uml"], f"mem={mem_bytes >> 20}M", "root=/dev/root",
                    "rootfstype=hostfs", "rootflags=/", "rw", f"init={init}",

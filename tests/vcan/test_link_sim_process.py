@@ -25,6 +25,7 @@ from firmware_proto.codec import Fault, LoopRate
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import open_bus
 from hexactl.control.hardware import ActuatorCommand, ActuatorState, FeedbackSnapshot
+from tests.vcan.test_service_over_vcan import SIMULATOR_TICK_MS
 
 pytestmark = pytest.mark.vcan
 
@@ -43,7 +44,7 @@ class Simulator:
         positions = ",".join(str(p) for p in START_MM)
         self.process = subprocess.Popen(
             [sys.executable, "-m", "hexactl.adapters.cli.main", "sim-actuators", "--can", SPEC,
-             "--positions", positions, "--seed", "3"],
+             "--positions", positions, "--seed", "3", "--tick-ms", str(SIMULATOR_TICK_MS)],
             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         ready = json.loads(self.process.stdout.readline() or "{}")
