@@ -266,9 +266,12 @@ class ApiServer(SocketThread):
         if request.cmd in URGENT_COMMANDS:
             cause = describe(request)
             self._cancel_queued(cause)  # first: the worker must not take one of them meanwhile
-            self._send([*envelope, carry_out(request, self._handle, None)])
+            reply = carry_out(request, self._handle, None)
             if stopped_by is None:
+                # Before the reply: what a client sends once it has seen the reply was
+                # sent after the stop, and must not be cancelled by it.
                 self._cancel_in_transport(cause)
+            self._send([*envelope, reply])
             return
         deadline_ns = None if request.deadline_ms is None else received_ns + round(request.deadline_ms * 1e6)
         client = envelope[0]
