@@ -20,7 +20,8 @@ It prints the loads by outcome (``loaded`` or the error code; ``no_answer`` when
 client timed out), how many loaded the outside file, the E-stop latencies (p50, p99,
 max) and states, and how the service shut down. Exit status 0 when every request was
 answered, none with ``internal_error``, none loaded the outside file, some loaded the
-inside one, every E-stop latched, and the service exited on SIGTERM with its ports free;
+inside one, every E-stop latched, and the service exited on SIGTERM (status 0, within
+10 s) with its ports free;
 1 otherwise. Latencies are reported, not judged: they depend on the machine.
 
 :func:`race` is what ``tests/reliability/test_file_race.py`` runs.
@@ -32,10 +33,6 @@ import argparse
 import json
 import multiprocessing
 import os
-import re
-import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -52,16 +49,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # noqa: E402
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, geometry_to_toml, load_geometry  # noqa: E402
+from tools.serving import Shutdown, serve, terminate  # noqa: E402
 
 RACE_NAME = "race.toml"
 ANSWER_TIMEOUT_S = 5.0
 """How long a client waits for any answer: far above any healthy one, so that only a
 blocked API goes unanswered."""
-SHUTDOWN_TIMEOUT_S = 30.0
-"""How long ``hexactl serve`` may take to exit on SIGTERM before the run counts it hung."""
-START_TIMEOUT_S = 60.0
+ATTACKER_TIMEOUT_S = 60.0
+"""How long the swapping process may take to start or to stop."""
 LONGEST_RACE_FACTOR = 10.0
-_SERVING = re.compile(r"API on (?P<api>\S+), telemetry on (?P<telemetry>\S+) at")
 
 
 @dataclass(frozen=True)
@@ -118,89 +114,15 @@ def swapping(files: RaceFiles) -> Iterator[Synchronized[int]]:
     attacker = context.Process(target=_swap, args=(files, started, stop, swaps), name="file-race-attacker", daemon=True)
     attacker.start()
     try:
-        if not started.wait(START_TIMEOUT_S):
+        if not started.wait(ATTACKER_TIMEOUT_S):
             raise RuntimeError("the swapping process did not start")
         yield swaps
     finally:
         stop.set()
-        attacker.join(SHUTDOWN_TIMEOUT_S)
+        attacker.join(ATTACKER_TIMEOUT_S)
         if attacker.is_alive():
             attacker.kill()
             raise RuntimeError("the swapping process did not stop")
-
-
-@dataclass
-class Served:
-    """A running ``hexactl serve``: its process, endpoints and log (read continuously)."""
-
-    process: subprocess.Popen[str]
-    api: str
-    telemetry: str
-    log: list[str] = field(default_factory=list)
-
-    def ports(self) -> list[int]:
-        return [int(endpoint.rsplit(":", 1)[1]) for endpoint in (self.api, self.telemetry)]
-
-
-@contextmanager
-def serving(directory: Path) -> Iterator[Served]:
-    """``hexactl serve`` in ``directory`` on random loopback ports; killed on the way out
-    if still running (:func:`shut_down` is the clean end)."""
-    local = "tcp://127.0.0.1:*"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", local, "--telemetry", local],
-        stderr=subprocess.PIPE, text=True, cwd=directory, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        log: list[str] = []
-        started = time.monotonic()
-        for line in process.stderr:  # type: ignore[union-attr]
-            log.append(line)
-            if match := _SERVING.search(line):
-                break
-            if time.monotonic() - started > START_TIMEOUT_S:
-                raise RuntimeError("hexactl serve did not start:\n" + "".join(log))
-        else:
-            raise RuntimeError("hexactl serve exited at start:\n" + "".join(log))
-        served = Served(process, match["api"], match["telemetry"], log)
-        # Drained all along: a full pipe would block the service's logging.
-        threading.Thread(target=lambda: log.extend(process.stderr), name="serve-log", daemon=True).start()  # type: ignore[arg-type]
-        yield served
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-
-
-@dataclass
-class Shutdown:
-    """How ``hexactl serve`` ended on SIGTERM: its exit status (None: still running after
-    :data:`SHUTDOWN_TIMEOUT_S`), how long it took, and the ports still taken."""
-
-    exit_status: int | None
-    seconds: float
-    ports_in_use: list[int]
-
-
-def shut_down(served: Served) -> Shutdown:
-    """SIGTERM, wait for the exit, then check that both ports can be bound again (as a
-    restarted service would: SO_REUSEADDR, so only a listener still there counts)."""
-    started = time.monotonic()
-    served.process.send_signal(signal.SIGTERM)
-    try:
-        status: int | None = served.process.wait(SHUTDOWN_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        status = None
-    seconds = time.monotonic() - started
-    in_use = []
-    for port in served.ports():
-        with socket.socket() as probe:
-            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                probe.bind(("127.0.0.1", port))
-            except OSError:
-                in_use.append(port)
-    return Shutdown(status, seconds, in_use)
 
 
 @dataclass
@@ -302,11 +224,7 @@ def problems(result: RaceResult, shutdown: Shutdown) -> list[str]:
         found.append(f"{result.estop_unanswered} of {result.estop_unanswered + len(result.estop_latencies_s)} E-stops unanswered")
     if any(state != "estop" for state in result.estop_states) or len(result.estop_states) != len(result.estop_latencies_s):
         found.append(f"E-stop did not latch every time: states {result.estop_states}")
-    if shutdown.exit_status is None:
-        found.append(f"hexactl serve still running {SHUTDOWN_TIMEOUT_S:g} s after SIGTERM")
-    if shutdown.ports_in_use:
-        found.append(f"ports still in use after the exit: {shutdown.ports_in_use}")
-    return found
+    return found + shutdown.problems()
 
 
 def percentile(values: list[float], fraction: float) -> float:
@@ -323,7 +241,7 @@ def report(result: RaceResult, shutdown: Shutdown) -> str:
         f"estop latency ms (new client, {len(result.estop_latencies_s)} answered, {result.estop_unanswered} unanswered): "
         f"p50 {percentile(latencies_ms, 0.5):.1f}, p99 {percentile(latencies_ms, 0.99):.1f}, max {max(latencies_ms):.1f}",
         f"estop states: {dict(Counter(result.estop_states))}",
-        f"SIGTERM: exit status {shutdown.exit_status} after {shutdown.seconds:.2f} s; ports in use after: {shutdown.ports_in_use or 'none'}",
+        str(shutdown),
     ]
     return "\n".join(lines)
 
@@ -336,9 +254,9 @@ def main(argv: list[str] | None = None) -> int:
     arguments = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="file_race_") as directory:
         files = RaceFiles.create(Path(directory))
-        with serving(files.directory) as served:
+        with serve(files.directory) as served:
             result = race(files, served.api, arguments.seconds, arguments.estop_every)
-            shutdown = shut_down(served)
+            shutdown = terminate(served)
     print(report(result, shutdown))
     found = problems(result, shutdown)
     for problem in found:

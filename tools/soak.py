@@ -57,7 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber  # noqa: E402
 from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME, BusMonitor  # noqa: E402
 from hexactl.adapters.files.geometry_file import default_config_path, geometry_to_toml, load_geometry  # noqa: E402
-from hexactl.adapters.service import Service, ServiceConfig, ServiceError, fifo_for_threads  # noqa: E402
+from hexactl.adapters.service import Service, ServiceConfig, ServiceError, fifo_below_loop  # noqa: E402
 from hexactl.adapters.spawned import STOP, Spawned, SpawnError  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
@@ -180,7 +180,7 @@ def _serve_monitored(config: ServiceConfig, geometry: Geometry, control: Connect
         return
     monitor = BusMonitor(service.simulator.bus_spec, geometry, config.rate_hz).start()
     if config.fifo_priority is not None:  # the monitor's reader shares the loop's GIL, as the simulator's does
-        fifo_for_threads(config.fifo_priority, {MONITOR_THREAD_NAME})
+        fifo_below_loop(config.fifo_priority, {MONITOR_THREAD_NAME})
     try:
         realtime = asdict(service.controller.thread.loop.realtime)
         control.send((service.api_endpoint, service.telemetry_endpoint, realtime))

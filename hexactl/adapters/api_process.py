@@ -36,6 +36,7 @@ from hexactl.adapters.simulator import InstrumentSpec, SimulatedMeasurement
 from hexactl.adapters.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
+from hexactl.control.realtime import fifo_for_threads
 from hexactl.kinematics.geometry import Geometry
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -46,6 +47,13 @@ this much (``nice``; needs no privilege): when the CPUs are contended, the loop'
 gets about three times its share (CFS weights 1024 against 335). Only the worker: the
 socket thread that answers ``estop`` and the loop link's receiver keep the normal
 priority, so a busy host does not delay a stop by the niceness."""
+
+URGENT_THREAD_NAMES = frozenset({"hexactl-api", "hexactl-loop-link"})
+"""The API process's threads on the way of a stop: the socket thread that takes ``estop``
+and the link's receiver that brings the loop's verdict. With
+:attr:`ApiSettings.urgent_fifo_priority` they run under SCHED_FIFO, so that CPU-bound
+work elsewhere on the host does not delay a stop by its time slices; the worker, which
+plans and validates, stays at normal (lowered) priority."""
 
 API_SWITCH_INTERVAL_S = 0.001
 """The API process's GIL switch interval (Python's default: 5 ms): the socket thread that
@@ -84,6 +92,7 @@ class ApiSettings:
     instrument: InstrumentSpec | None
     log_level: str
     handler_timeout_s: float = DEFAULT_HANDLER_TIMEOUT_S
+    urgent_fifo_priority: int | None = None  # for URGENT_THREAD_NAMES; None: normal scheduling
 
 
 class ApiProcess:
@@ -162,6 +171,9 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
             return
         publisher.start()
         server.start()
+        if settings.urgent_fifo_priority is not None:
+            for name, refused in fifo_for_threads(settings.urgent_fifo_priority, URGENT_THREAD_NAMES).items():
+                log.info("%s thread: %s", name, refused or f"SCHED_FIFO {settings.urgent_fifo_priority}")
         server_open = True
         try:
             control.send((server.endpoint, publisher.endpoint))

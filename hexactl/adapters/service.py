@@ -60,7 +60,7 @@ from hexactl.adapters.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
-from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, describe, set_fifo
+from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, describe, fifo_for_threads
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
@@ -103,6 +103,11 @@ just below it."""
 API_START_TIMEOUT_S = 240.0
 """How long the service waits for its API process to start: seconds on an idle host, over
 a minute beside four CPU-bound processes on two cores (measured)."""
+
+API_FIFO_BELOW_LOOP = 10
+"""With a real-time loop, the API process's urgent threads (the way of a stop:
+:data:`~hexactl.adapters.api_process.URGENT_THREAD_NAMES`) run this far below the loop's
+SCHED_FIFO priority, and below the threads that share the loop's GIL."""
 
 API_WATCH_INTERVAL_S = 0.5
 """How often :func:`run_service` checks that the API process lives."""
@@ -261,12 +266,14 @@ class Service:
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz; real-time: %s", config.rate_hz, describe(realtime))
             if realtime.fifo_priority is not None:
-                fifo_for_threads(realtime.fifo_priority)
+                fifo_below_loop(realtime.fifo_priority)
 
             data_dirs = tuple(config.data_dirs or _default_data_dirs(config_path))
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
                                    data_dirs, controller_config, nominal,
-                                   simulator.instrument_spec if simulator else None, config.log_level)  # fmt: skip
+                                   simulator.instrument_spec if simulator else None, config.log_level,
+                                   urgent_fifo_priority=None if realtime.fifo_priority is None
+                                   else max(1, realtime.fifo_priority - API_FIFO_BELOW_LOOP))  # fmt: skip
             try:
                 api = ApiProcess(settings, commands_out, reports_in, API_START_TIMEOUT_S)
             except ApiStartError as error:
@@ -400,14 +407,12 @@ def _api_problem(service: Service) -> str | None:
     return None
 
 
-def fifo_for_threads(loop_priority: int, names: Collection[str] = SERVICE_THREAD_NAMES) -> None:
+def fifo_below_loop(loop_priority: int, names: Collection[str] = SERVICE_THREAD_NAMES) -> None:
     """SCHED_FIFO just below the loop's ``loop_priority`` for this process's threads called
     one of ``names``: those that share the loop's GIL (see :func:`~hexactl.control.realtime.set_fifo`)."""
     priority = max(1, loop_priority - 1)
-    for thread in threading.enumerate():
-        if thread.name in names and thread.native_id is not None:
-            refused = set_fifo(priority, thread.native_id)
-            log.info("%s thread: %s", thread.name, refused or f"SCHED_FIFO {priority}")
+    for name, refused in fifo_for_threads(priority, names).items():
+        log.info("%s thread: %s", name, refused or f"SCHED_FIFO {priority}")
 
 
 def _bring_to_rest(controller: Controller, timeout_s: float) -> None:

@@ -41,6 +41,8 @@ import gc
 import os
 import resource
 import sys
+import threading
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -176,6 +178,13 @@ def set_fifo(priority: int, native_id: int = 0) -> str | None:
     except (OSError, AttributeError) as error:
         return f"SCHED_FIFO {priority} not set: {error}"
     return None
+
+
+def fifo_for_threads(priority: int, names: Collection[str]) -> dict[str, str | None]:
+    """SCHED_FIFO at ``priority`` for each of this process's running threads called one of
+    ``names``: thread name to None when done, else :func:`set_fifo`'s note why not."""
+    return {thread.name: set_fifo(priority, thread.native_id) for thread in threading.enumerate()
+            if thread.name in names and thread.native_id is not None}
 
 
 def apply_realtime(config: RealtimeConfig, privileges: Privileges | None = None) -> tuple[RealtimeReport, _Previous]:

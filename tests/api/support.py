@@ -4,12 +4,8 @@ random local ports, and raw sockets to talk to them."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import time
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -198,25 +194,3 @@ def request(endpoint: str, document: dict[str, Any], kind: int = zmq.DEALER) -> 
     frames = exchange(endpoint, [json.dumps(document).encode()], kind)
     assert len(frames) == 1
     return json.loads(frames[0])
-
-
-@contextmanager
-def serve_process(directory: Path) -> Iterator[tuple[subprocess.Popen, str, str, list[str]]]:
-    """``hexactl serve`` in a process of its own, on ipc endpoints in ``directory`` (also
-    its working directory): (the process, API endpoint, telemetry endpoint, its log so far,
-    up to the line saying where it serves). Killed on the way out if still running."""
-    api, telemetry = f"ipc://{directory}/api", f"ipc://{directory}/telemetry"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry],
-        stderr=subprocess.PIPE, text=True, cwd=directory, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        log = []
-        for line in process.stderr:
-            log.append(line)
-            if "API on" in line:
-                break
-        yield process, api, telemetry, log
-    finally:
-        if process.poll() is None:
-            process.kill()

@@ -8,32 +8,20 @@ import signal
 from pathlib import Path
 
 from hexactl.adapters.api.client import HexactlClient
-from tests.api.support import serve_process
+from tools.serving import serve, spawned_children
 from tests.api.test_service import WAIT_S, wait_for
 from tests.reliability.support import enable
 
 
-def spawned_children(pid: int) -> list[int]:
-    """The process ids of ``pid``'s children started by multiprocessing's spawn (Linux
-    /proc; not its resource tracker)."""
-    found = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
-                found.append(int(child))
-    return found
-
-
 def test_the_service_stops_safely_when_its_api_process_dies(tmp_path: Path) -> None:
-    with serve_process(tmp_path) as (process, api, _, log):
-        with HexactlClient(api, timeout_s=WAIT_S) as client:
+    with serve(tmp_path) as served:
+        with HexactlClient(served.api, timeout_s=WAIT_S) as client:
             enable(client)
             client.call("move", pose=[0, 0, 30, 0, 0, 0], duration=5.0)  # under way when the API dies
-        (api_pid,) = wait_for(lambda: spawned_children(process.pid), "the API process")
+        (api_pid,) = wait_for(lambda: spawned_children(served.process.pid), "the API process")
         os.kill(api_pid, signal.SIGKILL)
-        log += process.stderr.readlines()
-        assert process.wait(WAIT_S) == 1
-    text = "".join(log)
+        assert served.wait(WAIT_S) == 1, served.log
+    text = served.log
     for expected in ("the API process died (exit status -9): shutting down", "actuators disabled", "stopped"):
         assert expected in text, text
     assert "E-stop" not in text, text  # braked and disabled, not E-stopped

@@ -6,12 +6,6 @@ SIGTERM and checks that it exits and frees both ports."""
 from __future__ import annotations
 
 import json
-import os
-import re
-import signal
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -23,6 +17,7 @@ import zmq
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
 from tests.reliability.support import enable
+from tools.serving import serve, terminate
 
 WAIT_S = 60.0  # only turns a hang into a failure (the machine is shared and busy)
 LOCAL = "tcp://127.0.0.1:*"
@@ -35,34 +30,11 @@ behind them waits far beyond its client's 0.1 s on any machine, idle or busy."""
 @contextmanager
 def serving(directory: Path) -> Iterator[tuple[str, str]]:
     """``hexactl serve`` on random local ports: (API endpoint, telemetry endpoint). On the
-    way out: SIGTERM, the process exits, and both ports can be bound again."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", LOCAL, "--telemetry", LOCAL],
-        stderr=subprocess.PIPE, text=True, cwd=directory, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        log = []
-        for line in process.stderr:
-            log.append(line)
-            if match := re.search(r"API on (tcp://\S+), telemetry on (tcp://\S+) ", line):
-                break
-        else:
-            raise AssertionError("the service did not start:\n" + "".join(log))
-        api, telemetry = match.groups()
-        yield api, telemetry
-        process.send_signal(signal.SIGTERM)
-        process.stderr.close()  # its log is not needed here; a full pipe must not hold it up
-        assert process.wait(WAIT_S) == 0
-        for endpoint in (api, telemetry):
-            with socket.socket() as probe:  # raises OSError if something still listens there
-                # as ZeroMQ binds: connections the service closed may linger in TIME_WAIT
-                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                probe.bind(("127.0.0.1", int(endpoint.rsplit(":", 1)[1])))
-                probe.listen()
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
+    way out: SIGTERM, and it must keep the shutdown's promise (:mod:`tools.serving`)."""
+    with serve(directory) as served:
+        yield served.api, served.telemetry
+        shutdown = terminate(served)
+    assert shutdown.problems() == [], f"{shutdown}\n{served.log}"
 
 
 def status(client: HexactlClient) -> dict[str, Any]:

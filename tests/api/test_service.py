@@ -4,7 +4,6 @@ shuts down cleanly on SIGTERM."""
 
 from __future__ import annotations
 
-import signal
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -17,7 +16,7 @@ from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.adapters.service import Service, ServiceConfig, ServiceError
-from tests.api.support import serve_process
+from tools.serving import serve, terminate
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
 
@@ -169,18 +168,17 @@ def test_bad_geometry_is_refused(tmp_path) -> None:
 def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) -> None:
     from tests.reliability.support import recover  # imported here as in test_move_play_record_estop_reset
 
-    with serve_process(tmp_path) as (process, api, telemetry, log):
-        assert main(["status", "--api", api, "--timeout", str(WAIT_S)]) == 0
-        with HexactlClient(api, timeout_s=WAIT_S) as client:
+    with serve(tmp_path) as served:
+        assert main(["status", "--api", served.api, "--timeout", str(WAIT_S)]) == 0
+        with HexactlClient(served.api, timeout_s=WAIT_S) as client:
             recover(client)
-        assert main(["monitor", "--once", "--telemetry", telemetry, "--timeout", str(WAIT_S)]) == 0
+        assert main(["monitor", "--once", "--telemetry", served.telemetry, "--timeout", str(WAIT_S)]) == 0
         assert "state          enabled, holding" in capsys.readouterr().out
-        process.send_signal(signal.SIGTERM)
-        log += process.stderr.readlines()
-        assert process.wait(WAIT_S) == 0
-    text = "".join(log)
-    for expected in ("nominal geometry 'hexactl nominal 1500/900'", "no calibration", "actuators: six simulated", f"API on {api}",
-                     "SIGTERM: shutting down", "actuators disabled", "stopped"):
+        shutdown = terminate(served)
+    text = served.log
+    assert shutdown.problems() == [], f"{shutdown}\n{text}"
+    for expected in ("nominal geometry 'hexactl nominal 1500/900'", "no calibration", "actuators: six simulated",
+                     f"API on {served.api}", "SIGTERM: shutting down", "actuators disabled", "stopped"):
         assert expected in text, text
 
 
