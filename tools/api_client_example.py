@@ -13,8 +13,8 @@ import argparse
 import time
 
 from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
-from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT
+from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
+from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT
 
 
 def wait_until_at_rest(client: HexactlClient, telemetry: TelemetrySubscriber) -> dict:

@@ -76,7 +76,7 @@ from _debian import PackagesMissing, ensure_executables  # noqa: E402  (tools/, 
 from bench_loop import loop_row  # noqa: E402
 
 from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable, TelemetrySubscriber  # noqa: E402
-from hexactl.adapters.service import Service, ServiceConfig  # noqa: E402
+from hexactl.application.service import Service, ServiceConfig  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.control.stats import DEFAULT_WINDOW  # noqa: E402
 

@@ -48,7 +48,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # noqa: E402
-from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, geometry_to_toml, load_geometry  # noqa: E402
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry  # noqa: E402
+from hexactl.adapters.files.config_path import default_config_path  # noqa: E402
 from tools.serving import Shutdown, serve, terminate  # noqa: E402
 
 RACE_NAME = "race.toml"

@@ -42,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from soak import MonitoredService, Scheduling, loop_difference, print_monitor, random_pose, realtime_line  # noqa: E402
 
 from hexactl.adapters.api.client import HexactlClient  # noqa: E402
-from hexactl.adapters.api.messages import PROTOCOL_VERSION  # noqa: E402
+from hexactl.adapters.api.protocol import PROTOCOL_VERSION  # noqa: E402
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY  # noqa: E402
 
 COLLECT_TIMEOUT_S = 60.0

@@ -87,7 +87,8 @@ from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, Ok
 from hexactl.adapters.api.paths import MAX_FILE_BYTES  # noqa: E402
 from hexactl.adapters.api.wire import MAX_REQUEST_BYTES  # noqa: E402
 from hexactl.adapters.api.wire import ErrorCode as ApiCode  # noqa: E402
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry  # noqa: E402
+from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
+from hexactl.adapters.files.config_path import default_config_path  # noqa: E402
 from hexactl.control.results import ErrorCode as ControlCode  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402

@@ -56,9 +56,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber  # noqa: E402
 from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME, BusMonitor  # noqa: E402
-from hexactl.adapters.files.geometry_file import default_config_path, geometry_to_toml, load_geometry  # noqa: E402
-from hexactl.adapters.service import Service, ServiceConfig, ServiceError, fifo_below_loop  # noqa: E402
-from hexactl.adapters.spawned import STOP, Spawned, SpawnError  # noqa: E402
+from hexactl.adapters.files.geometry_file import geometry_to_toml, load_geometry  # noqa: E402
+from hexactl.adapters.files.config_path import default_config_path  # noqa: E402
+from hexactl.application.service import Service, ServiceConfig, ServiceError, fifo_below_loop  # noqa: E402
+from hexactl.application.spawned import STOP, Spawned, SpawnError  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
 

@@ -150,6 +150,26 @@ def leg_by_leg_result(method: Method, reason: str, data: MeasurementData, nomina
     )
 
 
+def leg_problems(data: MeasurementData, nominal: Geometry, options: IdentificationOptions, method: Method,
+                 reason: str) -> list[tuple[LockedLegData, NDArray, NDArray, NDArray]] | IdentificationResult:
+    """What each leg's fit starts from, legs 1–6: its locked-posture data, the lower and
+    upper parameter bounds and the start (the nominal parameters), in the layout (B, P,
+    zero); or, when a leg has fewer than :data:`MIN_LOCKED_POSTURES` locked postures, the
+    INSUFFICIENT_DATA result of ``method`` naming legs and lines."""
+    start = StructuralParameters.from_geometry(nominal)
+    if shortage := too_few_locked(data):
+        return failed_result(method, reason, IdentificationStatus.INSUFFICIENT_DATA, start,
+                             data.lines, data.locked_leg, shortage)
+    sigma = nominal.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
+    poses = measured_poses(data, np.array(nominal.measurement.feature_points))
+    problems = []
+    for leg in range(1, LEG_COUNT + 1):
+        low, high = parameter_bounds(start, options, leg)
+        problems.append((locked_leg_data(data, poses, nominal, leg, sigma, options.reading_sigma_mm), low, high,
+                         start.to_vector()[leg_columns(leg - 1)]))
+    return problems
+
+
 def identify_leglock(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
     """Each leg's B_i, P_mi and zero length from its locked postures (module docstring).
 
@@ -157,22 +177,15 @@ def identify_leglock(data: MeasurementData, nominal: Geometry, options: Identifi
     :data:`MIN_LOCKED_POSTURES` locked postures. Scale errors are not identifiable from a
     constant reading and are never estimated here.
     """
-    start = StructuralParameters.from_geometry(nominal)
     reason = ("leglock: each leg's joints and zero length from the postures with that leg locked "
               "(bounded trust-region least squares, residuals whitened by the pose uncertainty)")
-    shortage = too_few_locked(data)
-    if shortage:
-        return failed_result(Method.LEGLOCK, reason, IdentificationStatus.INSUFFICIENT_DATA, start,
-                             data.lines, data.locked_leg, shortage)
-    sigma = nominal.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
-    poses = measured_poses(data, np.array(nominal.measurement.feature_points))
+    problems = leg_problems(data, nominal, options, Method.LEGLOCK, reason)
+    if isinstance(problems, IdentificationResult):
+        return problems
     names = parameter_names(with_scales=False)
     estimates, legs, warnings = [], [], []
     iterations, converged = 0, True
-    for leg in range(1, LEG_COUNT + 1):
-        leg_data = locked_leg_data(data, poses, nominal, leg, sigma, options.reading_sigma_mm)
-        low, high = parameter_bounds(start, options, leg)
-        x0 = start.to_vector()[leg_columns(leg - 1)]
+    for leg, (leg_data, low, high, x0) in enumerate(problems, start=1):
         solution = least_squares(
             lambda x, d=leg_data: locked_leg_residuals(x, d)[0], x0,
             jac=lambda x, d=leg_data: locked_leg_residuals(x, d)[1],

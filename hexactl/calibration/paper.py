@@ -19,24 +19,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.calibration.data import MeasurementData, measured_poses
-from hexactl.calibration.leglock import (
-    LockedLegData,
-    leg_by_leg_result,
-    locked_leg_data,
-    parameter_bounds,
-    too_few_locked,
-)
-from hexactl.calibration.parameters import StructuralParameters, leg_columns
-from hexactl.calibration.results import (
-    IdentificationOptions,
-    IdentificationResult,
-    IdentificationStatus,
-    Method,
-    failed_result,
-)
+from hexactl.calibration.data import MeasurementData
+from hexactl.calibration.leglock import LockedLegData, leg_by_leg_result, leg_problems
+from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import LEG_COUNT
 
 _DESCENT_HALVINGS = 12  # descending factor down to 2⁻¹² before an ordering's iteration ends
 _RELATIVE_TOLERANCE = 1e-12  # e2 of the paper, relative to J
@@ -44,21 +30,14 @@ _RELATIVE_TOLERANCE = 1e-12  # e2 of the paper, relative to J
 
 def identify_paper(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
     """The paper's method on the locked postures (module docstring); INSUFFICIENT_DATA as leglock."""
-    start = StructuralParameters.from_geometry(nominal)
     reason = (f"paper: the paper's squared-length objective, Gauss–Newton with descending factor and "
               f"{options.paper_orderings} random reorderings per leg (for comparison)")
-    shortage = too_few_locked(data)
-    if shortage:
-        return failed_result(Method.PAPER, reason, IdentificationStatus.INSUFFICIENT_DATA, start,
-                             data.lines, data.locked_leg, shortage)
-    sigma = nominal.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
-    poses = measured_poses(data, np.array(nominal.measurement.feature_points))
+    problems = leg_problems(data, nominal, options, Method.PAPER, reason)
+    if isinstance(problems, IdentificationResult):
+        return problems
     rng = np.random.default_rng(options.seed)
     estimates, legs, iterations = [], [], 0
-    for leg in range(1, LEG_COUNT + 1):
-        leg_data = locked_leg_data(data, poses, nominal, leg, sigma, options.reading_sigma_mm)
-        low, high = parameter_bounds(start, options, leg)
-        x0 = start.to_vector()[leg_columns(leg - 1)]
+    for leg_data, low, high, x0 in problems:
         # Paper order (P, B); the shared layout is (B, P, zero).
         paper_low, paper_high = np.concatenate((low[3:6], low[0:3])), np.concatenate((high[3:6], high[0:3]))
         count = len(leg_data.rows)

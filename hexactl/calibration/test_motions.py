@@ -70,3 +70,9 @@ PAPER_MAX_STROKE_ERROR: tuple[float, float] = (0.026, 0.0035)
 """The paper's largest pose error over its X sweep and Y rotation as a fraction of the
 single-axis stroke (section 4): 2.6 % before calibration (on roll, rotating about Y),
 0.35 % after (on X, moving along X)."""
+
+PAPER_STROKES: tuple[tuple[str, float], ...] = (
+    ("x", 600.0), ("y", 600.0), ("z", 250.0), ("roll", 23.0), ("pitch", 23.0), ("yaw", 60.0)
+)
+"""Single-axis strokes of the paper's platform (mm, deg): ``hexactl check``'s default poses
+are ± each, and ``hexactl demo`` reports its errors as a share of them."""

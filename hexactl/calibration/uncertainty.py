@@ -141,12 +141,6 @@ def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Obse
     return covariance, observability
 
 
-def correlation_matrix(covariance: NDArray) -> NDArray[np.float64]:
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    scale = np.where(std > 0, std, 1.0)
-    return covariance / np.outer(scale, scale)
-
-
 def pose_error_sensitivity(legs: LegModel, pose: Sequence[float]) -> NDArray[np.float64]:
     """S (6, 42): pose error (mm, rad) of a commanded ``pose`` per parameter error (mm).
 

@@ -7,7 +7,7 @@ command, and the loop's health. Two hosts:
 
 - :class:`LoopThread` — the core and its real-time thread in this process (the service's
   own, and every test that steps the loop by hand in simulated time);
-- :class:`hexactl.adapters.loop_link.RemoteLoop` — a loop in another process, seen
+- :class:`hexactl.application.loop_link.RemoteLoop` — a loop in another process, seen
   through its published :class:`LoopReport`\\ s: the service's API process plans there, so
   its work never holds the loop's GIL.
 """
@@ -70,8 +70,8 @@ class LoopThread:
     """The control core and its loop thread in this process (a :class:`LoopHost`).
 
     Construction runs one cycle at ``clock_ns()``, so the snapshot exists and the
-    commanded pose starts where the actuators are. Work for the loop thread's slack goes
-    in ``loop.exchange`` before the thread starts (see :class:`~hexactl.control.loop.ControlLoop`).
+    commanded pose starts where the actuators are. Work for the loop thread's slack is
+    given when it starts (:meth:`~hexactl.control.loop.ControlLoop.start`).
     """
 
     def __init__(self, hardware: ActuatorInterface, active: ActiveGeometry, config: ControllerConfig,

@@ -17,7 +17,7 @@ compute time (wake → end of the cycle) go to :class:`~hexactl.control.stats.Cy
 Real-time set-up (:mod:`hexactl.control.realtime`) happens in the thread when it starts;
 the young-generation garbage collection runs in a cycle's slack, and so does ``exchange``
 (the service's command intake from, and snapshot publication to, its API process: see
-:mod:`hexactl.adapters.loop_link`): after every cycle that leaves at least half a period,
+:mod:`hexactl.application.loop_link`): after every cycle that leaves at least half a period,
 and after the :data:`EXCHANGE_MAX_DEFERRED`-th cycle in a row that does not, so that an
 overloaded loop still takes commands (an E-stop among them) and still reports.
 
@@ -56,12 +56,12 @@ def next_deadline(deadline_ns: int, end_ns: int, period_ns: int) -> tuple[int, i
 class ControlLoop:
     """Runs ``cycle(now_ns)`` every period, in its own thread (:meth:`start`) or when
     told (:meth:`step`). ``on_crash`` is called (from the loop thread) if ``cycle`` raises.
-    ``exchange``, if set before :meth:`start`, runs in the thread in the cycles' slack."""
+    :meth:`start`'s ``exchange`` runs in the thread in the cycles' slack."""
 
     def __init__(self, cycle: Callable[[int], None], config: LoopConfig, on_crash: Callable[[], object]) -> None:
         self._cycle = cycle
         self._on_crash = on_crash
-        self.exchange: Callable[[], None] | None = None
+        self._exchange: Callable[[], None] | None = None
         self.config = config
         self.period_ns = config.period_ns
         self.stats = CycleStats(self.period_ns, config.stats_window)
@@ -82,10 +82,12 @@ class ControlLoop:
         self._cycle(now_ns)
         self.stats.record(lateness_ns, time.monotonic_ns() - begin)
 
-    def start(self) -> RealtimeReport:
-        """Start the thread; returns what the real-time set-up obtained."""
+    def start(self, exchange: Callable[[], None] | None = None) -> RealtimeReport:
+        """Start the thread; returns what the real-time set-up obtained. ``exchange``:
+        work for the thread's slack (the link to another process), never raising."""
         if self._thread is not None:
             raise RuntimeError("the loop is already started")
+        self._exchange = exchange
         self._running = True
         self._thread = threading.Thread(target=self._run, name="hexactl-control-loop", daemon=True)
         self._thread.start()
@@ -108,7 +110,7 @@ class ControlLoop:
         gc_every_ns = round(realtime.gc_interval_s * 1e9)
         stats = self.stats
         clock = time.monotonic_ns
-        exchange = self.exchange
+        exchange = self._exchange
         deferred = 0
         deadline = clock() + period
         next_gc = deadline + gc_every_ns

@@ -41,8 +41,9 @@ from hexactl.control.trajectory import MotionLimits, preview
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import sensor_setpoints_batch
 from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
-from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg, validate_pose_values
-from hexactl.kinematics.workspace import assess_poses
+from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
+from hexactl.kinematics.axes import validate_pose_values
+from hexactl.kinematics.workspace import Violation, assess_poses
 
 Pose = tuple[float, float, float, float, float, float]
 
@@ -119,19 +120,13 @@ class Segment:
     duration_s: float
 
 
-@dataclass(frozen=True, slots=True)
-class PathViolation:
-    """The first sample of waypoint ``waypoint`` (1-based)'s path that violates a limit.
-    ``pose`` relative mm/deg; the rest as in :class:`~hexactl.kinematics.workspace.Violation`."""
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PathViolation(Violation):
+    """A :class:`~hexactl.kinematics.workspace.Violation` at the first sample of waypoint
+    ``waypoint`` (1-based)'s path that violates it; ``pose`` relative mm/deg."""
 
     waypoint: int
     pose: Pose
-    kind: str
-    message: str
-    value: float
-    limit: float
-    leg: int | None = None
-    axis: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -224,9 +219,9 @@ def assess_path(
         for violation in assessment.violations:
             key = (violation.kind, violation.leg, violation.axis)
             if key not in found:
-                found[key] = PathViolation(
-                    waypoint, assessment.pose_relative, str(violation.kind), violation.message,
-                    violation.value, violation.limit, violation.leg, violation.axis)  # type: ignore[arg-type]
+                found[key] = PathViolation(violation.kind, violation.value, violation.limit, violation.message,
+                                           violation.leg, violation.axis, waypoint=waypoint,
+                                           pose=assessment.pose_relative)
     return list(found.values())
 
 
@@ -242,6 +237,11 @@ def piecewise_line(poses: Sequence[Sequence[float]], step_mm: float, step_deg: f
     return np.concatenate(pieces)
 
 
+def pace_problem(duration_s: object, speed: object) -> str | None:
+    """A move's pace is a duration or a speed, not both: what is wrong, or None."""
+    return "give a duration or a speed, not both" if duration_s is not None and speed is not None else None
+
+
 def _check_waypoint(waypoint: Waypoint) -> str | None:
     problem = validate_pose_values(waypoint.pose)
     if problem:
@@ -250,8 +250,8 @@ def _check_waypoint(waypoint: Waypoint) -> str | None:
         return f"duration must be a positive number of seconds up to {MAX_MOTION_S:g}, got {waypoint.duration_s!r}"
     if waypoint.speed is not None and not _number_in(waypoint.speed, 0.0, 1.0, low_open=True):
         return f"speed is a fraction of the velocity limits in (0, 1], got {waypoint.speed!r}"
-    if waypoint.duration_s is not None and waypoint.speed is not None:
-        return "give a duration or a speed, not both"
+    if problem := pace_problem(waypoint.duration_s, waypoint.speed):
+        return problem
     if not _number_in(waypoint.dwell_s, 0.0, MAX_DWELL_S):
         return f"dwell must be 0 to {MAX_DWELL_S:g} s, got {waypoint.dwell_s!r}"
     return None

@@ -4,19 +4,18 @@ privilege a step is skipped and :class:`RealtimeReport` says what was obtained.
 
 The GIL. Every thread of the process that runs Python competes with the loop for the
 GIL; the service keeps the API, its parsing and planning in another process
-(:mod:`hexactl.adapters.loop_link`, whose loop side runs in the loop thread itself), so
+(:mod:`hexactl.application.loop_link`, whose loop side runs in the loop thread itself), so
 what remains beside the loop are short bursts that end by blocking: with the simulator,
 the simulated firmwares answering each cycle's frames. Once a thread asks for the GIL, the
 holder gives it up after at most ``switch_interval_s`` (plus its longest C call). The
-interval is set longer than a cycle with its spin and exchange (1 ms against about
-0.6 ms): a cycle is then never forced off the GIL halfway for such a burst (at 0.1 ms the
-simulator, woken by the cycle's first frames, could take it before the cycle ends), while
-a thread that would not let go still delays the loop by at most 1 ms. Measured
-(BENCHMARKS.md), 0.1, 1 and 5 ms differ by less than the run-to-run noise. A thread that the
-kernel preempts *while holding the GIL* stalls the loop for as long as it is preempted —
-a priority inversion SCHED_FIFO on the loop alone cannot prevent: run the process's
-other threads at a SCHED_FIFO priority just below the loop's (``hexactl serve --fifo``
-does).
+interval is set longer than a cycle with its spin and exchange (1 ms): a cycle is then
+never forced off the GIL halfway for such a burst (at 0.1 ms the simulator, woken by the
+cycle's first frames, could take it before the cycle ends), while a thread that would not
+let go still delays the loop by at most 1 ms (BENCHMARKS.md compares 0.1, 1 and 5 ms).
+A thread that the kernel preempts *while holding the GIL* stalls the loop for as long as
+it is preempted — a priority inversion SCHED_FIFO on the loop alone cannot prevent: run
+the process's other threads at a SCHED_FIFO priority just below the loop's
+(``hexactl serve`` does, unless ``--no-realtime``).
 
 Garbage collection policy (why: a cyclic collection of the whole heap can stop every
 thread for milliseconds at a moment the collector picks):

@@ -26,6 +26,7 @@ class ErrorCode(StrEnum):
     OUTSIDE_STROKE = "outside_stroke"  # an actuator (or set-point) is outside the stroke
     POSE_UNKNOWN = "pose_unknown"  # forward kinematics of the feedback failed
     NO_SEQUENCE = "no_sequence"
+    UNKNOWN_SEQUENCE = "unknown_sequence"  # play: not a built-in sequence (details.built_in lists them)
     ALREADY_PAUSED = "already_paused"
     NOT_PAUSED = "not_paused"
     STALE_PLAN = "stale_plan"  # the target changed between planning and execution: try again

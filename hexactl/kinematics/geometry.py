@@ -16,7 +16,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hexactl.kinematics.inverse import LegModel, leg_lengths, twist_jacobian
-from hexactl.kinematics.pose import POSE_AXES, absolute_from_relative
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.axes import POSE_AXES
 
 MIN_JOINT_SEPARATION_MM = 1.0
 """Joints closer than this are taken as a typing error (two legs on one joint)."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.pose import POSE_AXES
+from hexactl.kinematics.axes import POSE_AXES
 
 
 def implausibilities(geometry: Geometry, nominal: Geometry) -> list[str]:

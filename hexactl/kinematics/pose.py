@@ -12,15 +12,10 @@ its orientation T = Rz(yaw)·Ry(pitch)·Rx(roll).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from math import isfinite
 
 import numpy as np
 from numpy.typing import NDArray
 
-POSE_AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
-"""Axis names in pose order; the first three in mm, the last three in degrees at the edges."""
-
-POSE_UNITS: tuple[str, ...] = ("mm", "mm", "mm", "deg", "deg", "deg")
 
 _DEG_TO_RAD = np.array([1.0, 1.0, 1.0, np.pi / 180.0, np.pi / 180.0, np.pi / 180.0])
 
@@ -47,17 +42,3 @@ def relative_from_absolute(
 ) -> NDArray[np.float64]:
     """Pose relative to the zero posture (mm, deg) of an absolute pose (mm, rad); (…, 6)."""
     return pose_mm_rad_to_mm_deg(absolute_mm_rad) - np.asarray(home_mm_deg, dtype=float)
-
-
-def validate_pose_values(pose: Sequence[float]) -> str | None:
-    """None when ``pose`` is six finite numbers, else a sentence naming the problem."""
-    try:
-        values = [float(v) for v in pose]
-    except (TypeError, ValueError):
-        return "a pose is six numbers [x, y, z, roll, pitch, yaw]"
-    if len(values) != 6:
-        return f"a pose is six numbers [x, y, z, roll, pitch, yaw], got {len(values)}"
-    bad = [POSE_AXES[i] for i, v in enumerate(values) if not isfinite(v)]
-    if bad:
-        return f"pose {', '.join(bad)} is not a finite number"
-    return None

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import leg_vectors_batch, twist_jacobian
-from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative, relative_from_absolute
+from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.rotation import rotation_matrices
 
 

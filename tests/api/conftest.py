@@ -8,7 +8,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.geometry import Geometry
 from tests.api.support import start_service
 

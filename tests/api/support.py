@@ -19,8 +19,9 @@ from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.files.geometry_file import geometry_id
-from hexactl.control.controller import SequenceTelemetry, Telemetry
-from hexactl.control.core import Fault, SequenceReport
+from hexactl.control.telemetry import SequenceTelemetry, Telemetry
+from hexactl.control.sequence_player import SequenceReport
+from hexactl.control.supervisor import Fault
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import DwellRecord, MotionSequence
 from hexactl.control.stats import LoopStats, Percentiles

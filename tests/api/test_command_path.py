@@ -20,7 +20,8 @@ from hexactl.adapters.api.client import DEADLINE_MARGIN_MIN_MS, HexactlClient, d
 from hexactl.adapters.api.messages import Request
 from hexactl.adapters.api.server import MAX_QUEUED, MAX_QUEUED_PER_CLIENT, ApiServer
 from hexactl.control.planning import MAX_MOTION_S
-from hexactl.control.sequences import SequenceError, sequence_from_toml
+from hexactl.adapters.files.sequence_file import sequence_from_toml
+from hexactl.control.sequences import SequenceError
 from tests.api.support import LOCAL, request
 
 WAIT_S = 10.0  # only turns a hang into a failure

@@ -1,4 +1,4 @@
-"""The loop link between the service's loop and its API process (adapters/loop_link.py),
+"""The loop link between the service's loop and its API process (application/loop_link.py),
 both ends in this process on real pipes: commands cross and verdicts come back, anything
 that is not a command is dropped without touching the loop, and either end closing is
 seen by the other."""
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from hexactl.adapters.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop, _FrameReader, _FrameWriter
+from hexactl.application.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop, _FrameReader, _FrameWriter
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
 from hexactl.control.host import LoopThread

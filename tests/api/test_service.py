@@ -15,7 +15,7 @@ from hexactl.adapters.api.messages import StatusReply, Telemetry
 from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create_keys
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
-from hexactl.adapters.service import Service, ServiceConfig, ServiceError
+from hexactl.application.service import Service, ServiceConfig, ServiceError
 from tools.serving import serve, terminate
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
@@ -183,8 +183,9 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
 
 
 def test_serve_refuses_a_calibration_with_other_limits(tmp_path):
-    from hexactl.adapters.files.geometry_file import default_config_path, load_geometry, save_geometry
-    from hexactl.adapters.service import Service, ServiceConfig, ServiceError
+    from hexactl.adapters.files.geometry_file import load_geometry, save_geometry
+    from hexactl.adapters.files.config_path import default_config_path
+    from hexactl.application.service import Service, ServiceConfig, ServiceError
 
     nominal = load_geometry(default_config_path())
     data = nominal.model_dump()

@@ -56,8 +56,12 @@ def test_sigterm_ends_the_service_and_its_stuck_api_process(tmp_path: Path) -> N
         assert gone(api_process), f"the API process {api_process} is left:\n{served.log}"
     log = served.log
     assert "did not end within" in log and "killed" in log
-    assert re.search(r"platform (at rest|still moving) at \[[-0-9., ]+\]", log), log  # braked, then where
-    assert "actuators disabled" in log and log.rstrip().endswith("stopped")
+    # Unless a loaded host stalled the simulator meanwhile (a fault latched: the actuators
+    # hold), the platform was braked, its place logged, and the actuators disabled.
+    if not re.search(r"fault at \[[-0-9., ]+\] \(measured\): nothing to brake", log):
+        assert re.search(r"platform (at rest|still moving) at \[[-0-9., ]+\]", log), log
+        assert "actuators disabled" in log, log
+    assert log.rstrip().endswith("stopped"), log
 
 
 def test_the_service_says_what_real_time_set_up_it_got_and_no_realtime_opts_out(tmp_path: Path) -> None:

@@ -9,7 +9,8 @@ import zmq
 
 from hexactl.adapters.api.client import TelemetrySubscriber
 from hexactl.adapters.api.messages import Telemetry
-from hexactl.adapters.api.telemetry import TOPIC, telemetry_message
+from hexactl.adapters.api.telemetry import telemetry_message
+from hexactl.adapters.api.protocol import TOPIC
 
 
 def test_records_are_single_frames_that_parse_into_the_model(service) -> None:

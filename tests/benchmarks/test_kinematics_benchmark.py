@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints, sensor_setpoints_batch
 from hexactl.kinematics.pose import absolute_from_relative

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.geometry import Geometry
 
 

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
-from hexactl.adapters.campaign.driver import ControllerFault, PlatformDriver
-from hexactl.adapters.campaign.instruments import ServiceInstrument
-from hexactl.adapters.campaign.progress import Progress
-from hexactl.adapters.campaign.runner import CampaignSettings, run_campaign
-from hexactl.adapters.campaign.store import (
+from hexactl.application.campaign.driver import ControllerFault, PlatformDriver
+from hexactl.application.campaign.instruments import ServiceInstrument
+from hexactl.application.campaign.progress import Progress
+from hexactl.application.campaign.runner import CampaignSettings, run_campaign
+from hexactl.application.campaign.store import (
     CALIBRATION_FILE,
     MEASUREMENTS_FILE,
     PLAN_FILE,
@@ -30,7 +30,7 @@ from hexactl.adapters.files.geometry_file import (
     load_geometry,
 )
 from hexactl.adapters.files.measurements import read_measurements
-from hexactl.adapters.service import ServiceConfig, ServiceProcess
+from hexactl.application.service import ServiceConfig, ServiceProcess
 from hexactl.calibration.campaign import achieved_pose
 from hexactl.calibration.test_motions import COMPOUND
 from hexactl.control.trajectory import MotionLimits

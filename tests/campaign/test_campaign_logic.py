@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexactl.adapters.demo import DEMO_ENVELOPE_FRACTION, DEMO_MOTION, DEMO_POSTURES_PER_LEG
+from hexactl.application.demo import DEMO_ENVELOPE_FRACTION, DEMO_MOTION, DEMO_POSTURES_PER_LEG
 from hexactl.calibration.campaign import (
     LOCKED_CHORD_TOLERANCE_MM,
     achieved_pose,

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-import hexactl.adapters.campaign.runner as runner
-import hexactl.adapters.demo as demo
-from hexactl.adapters.campaign.driver import CampaignError
+import hexactl.application.campaign.runner as runner
+import hexactl.application.demo as demo
+from hexactl.application.campaign.driver import CampaignError
 from hexactl.adapters.cli.main import main
 from tests.api.support import start_service
 

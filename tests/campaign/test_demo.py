@@ -12,14 +12,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hexactl.adapters.campaign.store import (
+from hexactl.application.campaign.store import (
     CALIBRATION_FILE,
     MEASUREMENTS_FILE,
     REPORT_DIRECTORY,
     VALIDATION_FILE,
 )
 from hexactl.adapters.cli.main import main
-from hexactl.adapters.demo import clear_results
+from hexactl.application.demo import clear_results
 from hexactl.adapters.files.measurements import read_measurements, write_measurements
 from hexactl.calibration.data import MeasurementData
 from hexactl.kinematics.rotation import rotation_matrix

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
-from hexactl.adapters.campaign.driver import MOVE_ATTEMPTS, CampaignError, ControllerFault, PlatformDriver
-from hexactl.adapters.campaign.instruments import ServiceInstrument
-from hexactl.adapters.campaign.progress import Progress
-from hexactl.adapters.campaign.runner import CampaignSettings, _Resetting, run_campaign
-from hexactl.adapters.campaign.store import VALIDATION_FILE
-from hexactl.adapters.service import ServiceConfig, ServiceProcess
+from hexactl.application.campaign.driver import MOVE_ATTEMPTS, CampaignError, ControllerFault, PlatformDriver
+from hexactl.application.campaign.instruments import ServiceInstrument
+from hexactl.application.campaign.progress import Progress
+from hexactl.application.campaign.runner import CampaignSettings, _Resetting, run_campaign
+from hexactl.application.campaign.store import VALIDATION_FILE
+from hexactl.application.service import ServiceConfig, ServiceProcess
 from hexactl.sim.offline_campaign import CampaignDesign
 from tests.campaign.test_campaign import ENVELOPE, FAST, LOCAL, PER_LEG
 

@@ -8,15 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexactl.adapters.campaign import instruments
-from hexactl.adapters.campaign.driver import CampaignError
-from hexactl.adapters.campaign.instruments import (
+from hexactl.application.campaign import instruments
+from hexactl.application.campaign.driver import CampaignError
+from hexactl.application.campaign.instruments import (
     CsvInstrument,
     InstrumentError,
     PromptInstrument,
     open_instrument,
 )
-from hexactl.adapters.campaign.store import (
+from hexactl.application.campaign.store import (
     MEASUREMENTS_FILE,
     PLAN_FILE,
     VALIDATION_FILE,

@@ -6,7 +6,7 @@ import numpy as np
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.api.messages import MeasureReply
-from hexactl.adapters.service import Service, ServiceConfig
+from hexactl.application.service import Service, ServiceConfig
 from hexactl.kinematics.rotation import rotation_matrix
 
 LOCAL = "tcp://127.0.0.1:*"

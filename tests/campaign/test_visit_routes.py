@@ -10,8 +10,8 @@ from collections.abc import Callable, Sequence
 import pytest
 
 from hexactl.adapters.api.client import CommandError
-from hexactl.adapters.campaign.driver import CampaignError
-from hexactl.adapters.campaign.runner import ZERO_POSE, _visit
+from hexactl.application.campaign.driver import CampaignError
+from hexactl.application.campaign.runner import ZERO_POSE, _visit
 from hexactl.calibration.campaign import locked_path
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import leg_lengths

@@ -9,7 +9,8 @@ import pytest
 
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import open_bus
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from hexactl.control.hardware import ActuatorCommand, ActuatorState
 from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints
 from hexactl.kinematics.pose import absolute_from_relative

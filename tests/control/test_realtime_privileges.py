@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import pytest
 
-import hexactl.adapters.service as service_module
+import hexactl.application.service as service_module
 from hexactl.adapters.cli.main import main
 from hexactl.control import realtime
 from hexactl.control.realtime import (

@@ -5,15 +5,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hexactl.control.sequences import (
-    BUILTIN_SEQUENCES,
-    SequenceError,
-    builtin_sequence,
-    dwell_header,
-    dwell_rows,
-    sequence_from_mapping,
-    sequence_from_toml,
-)
+from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows, sequence_from_toml
+from hexactl.control.sequences import BUILTIN_SEQUENCES, SequenceError, builtin_sequence, sequence_from_mapping
 
 TEXT = """
 name = "two_steps"
@@ -163,7 +156,8 @@ def test_sequence_blocks_other_motion_commands(rig):
     assert rig.controller.play("compound").error == "busy"
     assert rig.controller.disable().error == "busy"
     assert rig.controller.resume().error == "not_paused"
-    assert rig.controller.play("nonsense").error == "invalid_argument"
+    unknown = rig.controller.play("nonsense")
+    assert unknown.error == "unknown_sequence" and unknown.details["built_in"] == list(BUILTIN_SEQUENCES), unknown
     assert rig.controller.play(42).error == "invalid_argument"
 
 

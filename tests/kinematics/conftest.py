@@ -4,7 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from hexactl.adapters.files.geometry_file import DEFAULT_CONFIG, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import DEFAULT_CONFIG
 from hexactl.kinematics.geometry import Geometry
 
 REPOSITORY = Path(__file__).resolve().parents[2]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hexactl.adapters.cli.main import main
-from hexactl.adapters.files.geometry_file import CONFIG_ENVIRONMENT_VARIABLE
+from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 
 
 def test_check_shows_every_paper_extreme_reachable(capsys) -> None:

@@ -10,7 +10,7 @@ import pytest
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.can.bus_monitor import BusMonitor
-from hexactl.adapters.service import Service, ServiceConfig
+from hexactl.application.service import Service, ServiceConfig
 from hexactl.kinematics.geometry import Geometry
 from tests.api.conftest import nominal  # noqa: F401 - the session's nominal geometry, shared
 from tests.api.test_service import WAIT_S

@@ -7,7 +7,7 @@ from collections.abc import Callable, Collection
 
 from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import CommandError, HexactlClient
-from hexactl.adapters.service import Service
+from hexactl.application.service import Service
 from hexactl.control.controller import Controller
 from hexactl.sim.actuator_firmware import ActuatorFirmware
 from tests.api.test_service import status, wait_for

@@ -19,7 +19,7 @@ import hexactl.adapters.api.server as server_module
 import hexactl.control.controller as controller_module
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.files.geometry_file import geometry_to_toml
-from hexactl.adapters.service import Service
+from hexactl.application.service import Service
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import WAIT_S, status
 from tests.reliability.support import enable
@@ -104,8 +104,7 @@ def test_bad_input_is_refused_while_the_loop_runs_on(service: Service, client: H
     assert handled_here == Counter()  # not one request was parsed, handled or planned in the loop's process
     assert after["state"] == "enabled" and after["faults"] == [] and after["calibration_id"] == before["calibration_id"]
     assert after["loop"]["cycles"] > before["loop"]["cycles"]
-    exchange = service.controller.thread.loop.exchange
-    assert exchange is not None and exchange.rejected == 0 and exchange.commands_open
+    assert service.link.rejected == 0 and service.link.commands_open
     print(f"loop during the bad input: {after['loop']['cycles'] - before['loop']['cycles']} cycles, "
           f"{after['loop']['missed'] - before['loop']['missed']} missed, "
           f"lateness max {after['loop']['lateness_us']['max']:.0f} µs over the run")

@@ -11,8 +11,8 @@ from firmware_proto.codec import Fault, LoopRate
 from hexactl.adapters.can.bus_monitor import BusMonitor
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.files.geometry_file import geometry_id
-from hexactl.adapters.service import SIMULATOR_SUPERVISION, SIMULATOR_WATCHDOG_CYCLES
-from hexactl.adapters.simulator import Simulator
+from hexactl.application.service import SIMULATOR_SUPERVISION, SIMULATOR_WATCHDOG_CYCLES
+from hexactl.application.simulator import Simulator
 from hexactl.control.config import ControllerConfig, LoopConfig
 from hexactl.control.controller import Controller
 from hexactl.control.hardware import ActuatorState

@@ -34,7 +34,7 @@ from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files.atomic import STALE_AFTER_S, remove_stale_temporaries, write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
 from hexactl.adapters.files.measurements import write_measurements
-from hexactl.adapters.service import Service
+from hexactl.application.service import Service
 from hexactl.calibration.data import MeasurementData
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import WAIT_S, status, wait_for
@@ -80,7 +80,8 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, nominal, 
 
 KILLED_WRITER = textwrap.dedent("""
     import os, sys, time
-    from hexactl.adapters.files.geometry_file import default_config_path, load_geometry, save_geometry
+    from hexactl.adapters.files.geometry_file import load_geometry, save_geometry
+    from hexactl.adapters.files.config_path import default_config_path
 
     def stall(descriptor):  # the new content is written, not yet synced nor renamed: die here
         print("written", flush=True)

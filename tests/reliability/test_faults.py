@@ -14,7 +14,7 @@ import pytest
 from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.adapters.can.link import CanActuatorLink
-from hexactl.adapters.service import Service
+from hexactl.application.service import Service
 from hexactl.control.hardware import ActuatorState
 from tests.api.test_service import status, wait_for
 from tests.reliability.support import (

@@ -44,7 +44,8 @@ from firmware_proto.codec import ActuatorState, Fault, FaultCode
 from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.adapters.can.bus_monitor import BusMonitor
 from hexactl.adapters.can.transport import open_bus
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from tests.reliability.support import ATTEMPTS, STALL_FAULTS
 from tests.vcan.test_service_over_vcan import (
     POSE_ABS,

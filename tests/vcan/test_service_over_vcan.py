@@ -50,7 +50,8 @@ import pytest
 
 from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
-from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, geometry_to_toml, load_geometry
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.geometry import Geometry
 
 pytestmark = pytest.mark.vcan

@@ -17,16 +17,21 @@ import itertools
 import json
 import time
 from types import TracebackType
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import zmq
 
-from hexactl.adapters.api.messages import MAX_DEADLINE_MS, PROTOCOL_VERSION
-from hexactl.adapters.api.security import CurveClientKeys, secure_client
-from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, TOPIC
+from hexactl.adapters.api.protocol import (
+    DEFAULT_API_ENDPOINT,
+    DEFAULT_TELEMETRY_ENDPOINT,
+    DEFAULT_TIMEOUT_S,
+    MAX_DEADLINE_MS,
+    PROTOCOL_VERSION,
+    TOPIC,
+)
 
-DEFAULT_TIMEOUT_S = 5.0
+if TYPE_CHECKING:  # CURVE's modules load only for a client that uses it (see _Connection)
+    from hexactl.adapters.api.security import CurveClientKeys
 
 DEADLINE_MARGIN_FRACTION = 0.2
 DEADLINE_MARGIN_MIN_MS = 50.0
@@ -58,6 +63,8 @@ class _Connection:
         for option, value in options.items():
             self.socket.setsockopt(option, value)
         if curve is not None:
+            from hexactl.adapters.api.security import secure_client  # zmq.auth: not for a local client
+
             secure_client(self.socket, curve)
         self.socket.connect(endpoint)
 

@@ -37,8 +37,8 @@ from hexactl.adapters.api.port import ControllerPort
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
+from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.results import CommandResult
-from hexactl.control.sequences import dwell_header, dwell_rows
 from hexactl.kinematics.geometry import GeometryError
 
 TOML_SOURCE = "request"

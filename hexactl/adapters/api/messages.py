@@ -16,9 +16,8 @@ from typing import Annotated, Literal, Union, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
-from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S
-
-PROTOCOL_VERSION = 1
+from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
+from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, pace_problem
 
 Pose = Annotated[
     list[float],
@@ -31,8 +30,6 @@ LegReadings = Annotated[
 Leg = Annotated[int, Field(ge=1, le=6, description="leg number 1–6")]
 Duration = Annotated[float, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
 Dwell = Annotated[float, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
-MAX_DEADLINE_MS = 3_600_000
-"""The largest ``deadline_ms`` (an hour): a bound, so that a deadline is always a time."""
 DeadlineMs = Annotated[
     float,
     Field(gt=0, le=MAX_DEADLINE_MS, description="carry it out within this many ms of the service receiving it, or not at all "
@@ -66,8 +63,8 @@ class _Paced(_Message):
 
     @model_validator(mode="after")
     def _one_pace(self) -> _Paced:
-        if self.duration is not None and self.speed is not None:
-            raise ValueError("give a duration or a speed, not both")
+        if problem := pace_problem(self.duration, self.speed):
+            raise ValueError(problem)
         return self
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
-from hexactl.control.controller import Telemetry
-from hexactl.control.core import SequenceReport
+from hexactl.control.telemetry import Telemetry
+from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
 from hexactl.control.sequences import MotionSequence
 from hexactl.kinematics.geometry import Geometry

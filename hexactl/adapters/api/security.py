@@ -16,7 +16,6 @@ from pathlib import Path
 
 import zmq
 import zmq.auth
-from zmq.auth.thread import ThreadAuthenticator
 
 _LOCAL_HOSTS = frozenset({"localhost", "lo"})
 
@@ -97,6 +96,8 @@ class CurveServer:
     every client's public key against :attr:`CurveServerKeys.clients_dir`."""
 
     def __init__(self, context: zmq.Context, keys: CurveServerKeys) -> None:
+        from zmq.auth.thread import ThreadAuthenticator  # loads asyncio: only a server needs it, not every client
+
         self._public, self._secret = load_server_keys(keys)
         self._authenticator = ThreadAuthenticator(context)
         self._authenticator.start()

@@ -2,7 +2,7 @@
 the control layer's :class:`~hexactl.control.sequences.MotionSequence`.
 
 Files are read and validated here, in the API thread, never in the control loop; their
-format is :mod:`hexactl.control.sequences`'s.
+format is :mod:`hexactl.adapters.files.sequence_file`'s.
 """
 
 from __future__ import annotations
@@ -10,13 +10,14 @@ from __future__ import annotations
 from hexactl.adapters.api.messages import InlineSequence
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError, ErrorCode, problems_error
+from hexactl.adapters.files.sequence_file import sequence_from_toml
 from hexactl.control.sequences import (
     BUILTIN_SEQUENCES,
     MotionSequence,
     SequenceError,
+    UnknownSequence,
     builtin_sequence,
     sequence_from_mapping,
-    sequence_from_toml,
 )
 
 SEQUENCE_SUFFIX = ".toml"
@@ -31,15 +32,12 @@ def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> M
             document = sequence.model_dump(exclude={"waypoints"})
             document["waypoint"] = [waypoint.model_dump() for waypoint in sequence.waypoints]  # the file's key
             return sequence_from_mapping(document, "sequence")
-        if sequence in BUILTIN_SEQUENCES:
-            return builtin_sequence(sequence)
         if not sequence.endswith(SEQUENCE_SUFFIX):
-            raise ApiError(
-                ErrorCode.UNKNOWN_SEQUENCE,
-                f"{sequence!r} is neither a built-in sequence nor a {SEQUENCE_SUFFIX} file",
-                {"built_in": list(BUILTIN_SEQUENCES)},
-            )
+            return builtin_sequence(sequence)
         path, text = data.read_text(sequence, ErrorCode.INVALID_SEQUENCE)
         return sequence_from_toml(text, str(path))
+    except UnknownSequence as error:
+        raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{error}; or name a {SEQUENCE_SUFFIX} file",
+                       {"built_in": list(BUILTIN_SEQUENCES)}) from None
     except SequenceError as error:
         raise problems_error(ErrorCode.INVALID_SEQUENCE, str(error)) from None

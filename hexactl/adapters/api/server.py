@@ -28,7 +28,7 @@ the socket thread polls with the ROUTER.
 
 A watchdog: when the worker has been inside one handler longer than
 ``handler_timeout_s``, the socket thread logs an error naming the request and calls
-``on_stuck`` (the API process ends itself: :mod:`hexactl.adapters.api_process`). Until
+``on_stuck`` (the API process ends itself: :mod:`hexactl.application.api_process`). Until
 then, and after, the socket thread goes on answering stops and refusals.
 """
 
@@ -46,7 +46,8 @@ from typing import Any
 
 import zmq
 
-from hexactl.adapters.api.messages import PROTOCOL_VERSION, Request, StopRequest
+from hexactl.adapters.api.messages import Request, StopRequest
+from hexactl.adapters.api.protocol import PROTOCOL_VERSION
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import (
@@ -60,8 +61,6 @@ from hexactl.adapters.api.wire import (
     ok_reply,
     split_envelope,
 )
-
-DEFAULT_API_ENDPOINT = "tcp://127.0.0.1:5555"
 
 POLL_INTERVAL_MS = 100
 """How often the idle threads wake to check for shutdown (and the watchdog its bound)."""

@@ -18,14 +18,12 @@ from typing import Any
 
 import zmq
 
+from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_RATE_HZ, TOPIC
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import encode
 
-DEFAULT_TELEMETRY_ENDPOINT = "tcp://127.0.0.1:5556"
-DEFAULT_TELEMETRY_RATE_HZ = 50.0
 MAX_TELEMETRY_RATE_HZ = 1000.0
-TOPIC = b"telemetry "
 
 _SEND_HIGH_WATER_MARK = 100  # records queued per slow subscriber before PUB drops them
 

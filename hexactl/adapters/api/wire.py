@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 from pydantic import TypeAdapter, ValidationError
 
-from hexactl.adapters.api.messages import COMMANDS, PROTOCOL_VERSION, Request
+from hexactl.adapters.api.messages import COMMANDS, Request
+from hexactl.adapters.api.protocol import PROTOCOL_VERSION
 
 MAX_REQUEST_BYTES = 64 * 1024
 """Largest request answered; a larger one gets ``too_large``."""

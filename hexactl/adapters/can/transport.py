@@ -135,6 +135,8 @@ def bus_state_after_send_error(error: Exception, current: BusState) -> BusState:
 
     ENETDOWN/ENODEV (interface down or removed) and a closed bus mean ``DOWN``; a full
     transmit queue (ENOBUFS, "Transmit buffer full") says nothing new about the bus.
+    python-can has no error type for a closed bus: its buses raise ``CanOperationError``
+    saying "closed bus" (``can/interfaces/virtual.py``), and so does :class:`MemoryBus`.
     """
     code = getattr(error, "error_code", None)
     if code in _DOWN_ERRNOS or (isinstance(error, can.CanOperationError) and "closed bus" in str(error)):

@@ -4,6 +4,11 @@ calibration workflow.
 Exit status as everywhere: 0 success, 1 the answer is "no" (identification failed or
 not trustworthy, no feasible plan, a campaign that could not finish or did not improve
 the accuracy), 2 bad input (arguments, files, bad rows) or no answer from the service.
+
+The calibration (numpy, scipy), the files and the report load in the functions that run
+the commands, and the options whose defaults come from them are declared only for the
+command that is run (:class:`~hexactl.adapters.cli.common.DeferredParser`): they must not
+slow every other command's start.
 """
 
 from __future__ import annotations
@@ -12,31 +17,22 @@ import argparse
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
-from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments, load_config
-from hexactl.adapters.cli.service_commands import _connect, _connection_parser  # the client options, shared
-from hexactl.adapters.files.geometry_file import save_geometry
-from hexactl.adapters.files.measurements import (
-    MeasurementFileError,
-    format_plan,
-    read_measurements,
-    write_measurements,
-    write_plan,
+from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
+from hexactl.adapters.cli.common import (
+    CliError,
+    campaign_stopped,
+    check_campaign_arguments,
+    connect,
+    connection_parser,
+    load_config,
 )
-from hexactl.adapters.report.html import REPORT_PAGE, CalibrationReport, ValidationComparison, write_report
-from hexactl.calibration.data import MeasurementData, measured_poses, screen_measurements
-from hexactl.calibration.identification import calibration_info, identify
-from hexactl.calibration.parameters import StructuralParameters, calibrated_geometry
-from hexactl.calibration.planning import DEFAULT_CANDIDATES, PlanRequest, PlanStatus, plan_postures
-from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method
-from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM
-from hexactl.kinematics.geometry import Geometry, GeometryError
-from hexactl.kinematics.inverse import leg_lengths
-from hexactl.kinematics.pose import absolute_from_relative
+
+if TYPE_CHECKING:
+    from hexactl.adapters.api.client import HexactlClient
+    from hexactl.calibration.results import IdentificationResult
+    from hexactl.kinematics.geometry import Geometry
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -48,26 +44,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "a calibration file (the --config geometry with identified values and a [calibration] table). "
         "Exit status 1 if the identification fails or the data cannot determine the parameters.",
         epilog="See docs/calibration.md for the CSV format and the methods.",
+        declare=_declare_calibrate,
     )
-    calibrate.add_argument("data", metavar="DATA.csv", help="measurement file (never modified)")
-    calibrate.add_argument("-o", "--output", required=True, metavar="CAL.toml", help="calibration file to write")
-    calibrate.add_argument("--method", choices=[m.value for m in Method], default=Method.AUTO.value,
-                           help="identification method (default: auto, the best for the data, explained in the output)")
-    calibrate.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
-    calibrate.add_argument("--force", action="store_true", help="overwrite an existing calibration file or report")
-    calibrate.add_argument("--skip-bad-rows", action="store_true",
-                           help="exclude rows with problems (listed) instead of refusing the file")
-    calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
-    calibrate.add_argument("--point-sigma", type=float, metavar="MM",
-                           help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
-    calibrate.add_argument("--reading-sigma", type=float, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
-                           help=f"sensor reading noise, 1σ (default {DEFAULT_READING_SIGMA_MM} mm)")
-    calibrate.add_argument("--max-deviation", type=float, default=15.0, metavar="MM",
-                           help="leglock/paper: bound on each parameter's deviation from nominal (default 15 mm)")
-    calibrate.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy", "arctan"],
-                           help="leglock: robust loss (default linear)")
-    calibrate.add_argument("--true", metavar="TRUE.toml",
-                           help="simulation only: the true geometry, to add before/after validation to the report")
     calibrate.set_defaults(run=run_calibrate)
 
     plan = subparsers.add_parser(
@@ -78,16 +56,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "chosen D-optimally from random feasible candidates. The leg is locked at its length in the zero "
         "posture unless --length or --reading is given. --leg 0 plans free postures. Output: CSV of relative "
         "poses (mm, deg) and sensor set-points. Exit status 1 if too few candidates are feasible.",
+        declare=_declare_plan,
     )
-    plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
-    plan.add_argument("--count", type=int, required=True, help="number of postures")
-    lock = plan.add_mutually_exclusive_group()
-    lock.add_argument("--length", type=float, metavar="MM", help="locked joint-to-joint length")
-    lock.add_argument("--reading", type=float, metavar="MM", help="locked sensor reading")
-    plan.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help=f"random candidates (default {DEFAULT_CANDIDATES})")
-    plan.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    plan.add_argument("-o", "--output", metavar="FILE", help="write the plan here (default: standard output)")
-    plan.add_argument("--force", action="store_true", help="overwrite an existing output file")
     plan.set_defaults(run=run_plan)
 
     simulate = subparsers.add_parser(
@@ -110,7 +80,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
     campaign = subparsers.add_parser(
         "campaign",
-        parents=[common, _connection_parser()],
+        parents=[common, connection_parser()],
         help="calibrate a running controller: drive, measure, identify, validate (leg-lock campaign)",
         description="Drive the controller behind --api through leg-lock postures for all six legs (planned on the "
         "--config geometry, which it must run), record the sensor readings and measure each posture with the "
@@ -119,7 +89,53 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "interrupted campaign resumes when run again with the same DIR. Exit status 0 if the calibration improved "
         "the accuracy, 1 if not or if the campaign could not finish, 2 for bad input or no answer, 130 interrupted.",
         epilog="See docs/calibration.md (the campaign).",
+        declare=_declare_campaign,
     )
+    campaign.set_defaults(run=run_campaign_command)
+
+
+def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
+    from hexactl.calibration.results import Method
+    from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM
+
+    calibrate.add_argument("data", metavar="DATA.csv", help="measurement file (never modified)")
+    calibrate.add_argument("-o", "--output", required=True, metavar="CAL.toml", help="calibration file to write")
+    calibrate.add_argument("--method", choices=[m.value for m in Method], default=Method.AUTO.value,
+                           help="identification method (default: auto, the best for the data, explained in the output)")
+    calibrate.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
+    calibrate.add_argument("--force", action="store_true", help="overwrite an existing calibration file or report")
+    calibrate.add_argument("--skip-bad-rows", action="store_true",
+                           help="exclude rows with problems (listed) instead of refusing the file")
+    calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
+    calibrate.add_argument("--point-sigma", type=float, metavar="MM",
+                           help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
+    calibrate.add_argument("--reading-sigma", type=float, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
+                           help=f"sensor reading noise, 1σ (default {DEFAULT_READING_SIGMA_MM} mm)")
+    calibrate.add_argument("--max-deviation", type=float, default=15.0, metavar="MM",
+                           help="leglock/paper: bound on each parameter's deviation from nominal (default 15 mm)")
+    calibrate.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy", "arctan"],
+                           help="leglock: robust loss (default linear)")
+    calibrate.add_argument("--true", metavar="TRUE.toml",
+                           help="simulation only: the true geometry, to add before/after validation to the report")
+
+
+def _declare_plan(plan: argparse.ArgumentParser) -> None:
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES
+
+    plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
+    plan.add_argument("--count", type=int, required=True, help="number of postures")
+    lock = plan.add_mutually_exclusive_group()
+    lock.add_argument("--length", type=float, metavar="MM", help="locked joint-to-joint length")
+    lock.add_argument("--reading", type=float, metavar="MM", help="locked sensor reading")
+    plan.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help=f"random candidates (default {DEFAULT_CANDIDATES})")
+    plan.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    plan.add_argument("-o", "--output", metavar="FILE", help="write the plan here (default: standard output)")
+    plan.add_argument("--force", action="store_true", help="overwrite an existing output file")
+
+
+def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES
+
     campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
     campaign.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT",
                           help=f"the service's command endpoint (default {DEFAULT_API_ENDPOINT})")
@@ -139,10 +155,20 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                           help="simulation only: reset a latched fault (not an E-stop) and go on, unless it is the "
                           "N+1-th in a row with no measurement saved between them (default 0: stop at a fault, as a "
                           "real platform needs the operator). A measurement a fault interrupted is never kept")
-    campaign.set_defaults(run=run_campaign_command)
 
 
 def run_calibrate(arguments: argparse.Namespace) -> int:
+    import numpy as np
+
+    from hexactl.adapters.files.geometry_file import save_geometry
+    from hexactl.adapters.files.measurements import MeasurementFileError, read_measurements
+    from hexactl.adapters.report.html import REPORT_PAGE, CalibrationReport, ValidationComparison, write_report
+    from hexactl.calibration.data import screen_measurements
+    from hexactl.calibration.identification import calibration_info, identify
+    from hexactl.calibration.parameters import calibrated_geometry
+    from hexactl.calibration.results import IdentificationOptions, Method
+    from hexactl.kinematics.geometry import GeometryError
+
     nominal = load_config(arguments)
     output = Path(arguments.output)
     if output.exists() and not arguments.force:
@@ -197,6 +223,10 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
 
 
 def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
+    import numpy as np
+
+    from hexactl.calibration.parameters import StructuralParameters
+
     print(f"method: {result.reason}")
     print(f"status: {result.status.name.lower().replace('_', ' ')}")
     if not np.isfinite(result.residual_rms_mm):
@@ -226,6 +256,11 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
 
 
 def run_plan(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.files.measurements import format_plan, write_plan
+    from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
+    from hexactl.kinematics.inverse import leg_lengths
+    from hexactl.kinematics.pose import absolute_from_relative
+
     geometry = load_config(arguments)
     if arguments.output and Path(arguments.output).exists() and not arguments.force:
         raise CliError(f"{arguments.output} exists; refusing to overwrite it (use --force)")
@@ -260,6 +295,11 @@ def run_plan(arguments: argparse.Namespace) -> int:
 
 
 def run_simulate(arguments: argparse.Namespace) -> int:
+    import numpy as np
+
+    from hexactl.adapters.files.geometry_file import save_geometry
+    from hexactl.adapters.files.measurements import write_measurements
+    from hexactl.calibration.data import MeasurementData, measured_poses
     from hexactl.sim.offline_campaign import CampaignDesign, SimulationError, run_offline_campaign
     from hexactl.sim.true_platform import true_geometry
 
@@ -291,11 +331,12 @@ def run_simulate(arguments: argparse.Namespace) -> int:
 
 
 def run_campaign_command(arguments: argparse.Namespace) -> int:
-    from hexactl.adapters.campaign.driver import CampaignError
-    from hexactl.adapters.campaign.instruments import InstrumentError, open_instrument
-    from hexactl.adapters.campaign.progress import Progress
-    from hexactl.adapters.campaign.runner import CampaignSettings, run_campaign
-    from hexactl.adapters.campaign.store import DirectoryError
+    from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
+    from hexactl.application.campaign.driver import CampaignError
+    from hexactl.application.campaign.instruments import InstrumentError, open_instrument
+    from hexactl.application.campaign.progress import Progress
+    from hexactl.application.campaign.runner import CampaignSettings, run_campaign
+    from hexactl.application.campaign.store import DirectoryError
     from hexactl.sim.offline_campaign import CampaignDesign
 
     geometry = load_config(arguments)
@@ -304,7 +345,7 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
     design = CampaignDesign(postures_per_leg=arguments.per_leg, candidates=arguments.candidates,
                             envelope_fraction=arguments.envelope, seed=arguments.seed)
     settings = CampaignSettings(arguments.out, design, apply=arguments.apply, reset_faults=arguments.reset_faults)
-    with _connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout) as client:
+    with connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout) as client:
         try:
             instrument = open_instrument(arguments.instrument, client, geometry, progress.say)
             outcome = run_campaign(client, geometry, instrument, settings, progress)
@@ -321,6 +362,8 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
 
 def _stop(client: HexactlClient) -> None:
     """Brake a platform an interrupted campaign left moving; the lock, if any, holds."""
+    from hexactl.adapters.api.client import ServiceUnavailable
+
     try:
         client.request("stop")
     except ServiceUnavailable:
@@ -329,6 +372,7 @@ def _stop(client: HexactlClient) -> None:
 
 def _load_geometry(path: str) -> Geometry:
     from hexactl.adapters.files.geometry_file import load_geometry
+    from hexactl.kinematics.geometry import GeometryError
 
     try:
         return load_geometry(path)

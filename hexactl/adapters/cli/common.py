@@ -1,27 +1,71 @@
-"""What every sub-command shares: the --config option, pose arguments, error type; how a
-campaign-driving command (``demo``, ``campaign``) ends when stopped."""
+"""What every sub-command shares: the --config option, the options of a client of the
+service, pose arguments, error type, deferred declaration; how a campaign-driving command
+(``demo``, ``campaign``) ends when stopped.
+
+Start-up: ``hexactl`` builds the parser of every command before it runs one, so this
+module and each ``*_commands`` module import only the standard library and light modules
+(:mod:`~hexactl.adapters.api.protocol`, :mod:`~hexactl.kinematics.axes`) at the top; what a command needs to run (numpy, the calibration, the service) is imported
+in the function that runs it, and a command whose options show defaults from such modules
+declares them in a :class:`DeferredParser`. ``tests/cli/test_startup.py`` checks it.
+"""
 
 from __future__ import annotations
 
 import argparse
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from math import isfinite
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from hexactl.adapters.files.geometry_file import CONFIG_ENVIRONMENT_VARIABLE, default_config_path, load_geometry
-from hexactl.kinematics.geometry import Geometry, GeometryError
-from hexactl.kinematics.pose import POSE_AXES, validate_pose_values
+from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S
+from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
+from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
 
-if TYPE_CHECKING:  # the campaign's modules load only when a command drives one
-    from hexactl.adapters.campaign.driver import CampaignError
-    from hexactl.adapters.campaign.progress import Progress
+if TYPE_CHECKING:  # loaded only by the commands that use them
+    from hexactl.adapters.api.client import HexactlClient, TelemetrySubscriber
+    from hexactl.application.campaign.driver import CampaignError
+    from hexactl.application.campaign.progress import Progress
+    from hexactl.kinematics.geometry import Geometry
+
+Connection = TypeVar("Connection", "HexactlClient", "TelemetrySubscriber")
 
 
 class CliError(Exception):
     """Bad input to a command: printed as ``hexactl CMD: error: …``, exit status 2."""
+
+
+class DeferredParser(argparse.ArgumentParser):
+    """The parser of every sub-command (``hexactl``'s ``parser_class``). Given
+    ``subparsers.add_parser(name, …, declare=function)``, ``function(parser)`` adds the
+    command's options when the parser is first used (to parse, or to format its usage or
+    help): only for the command the command line names. For a command whose options show
+    defaults from modules too heavy to load for every other command (the service's, the
+    calibration's)."""
+
+    def __init__(self, *args: Any, declare: Callable[[argparse.ArgumentParser], None] | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._declare: Callable[[argparse.ArgumentParser], None] | None = declare
+
+    def _declared(self) -> None:
+        if self._declare is not None:
+            declare, self._declare = self._declare, None
+            declare(self)
+
+    def parse_known_args(self, args: Sequence[str] | None = None,
+                         namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
+        self._declared()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self) -> str:
+        self._declared()
+        return super().format_usage()
+
+    def format_help(self) -> str:
+        self._declared()
+        return super().format_help()
 
 
 def common_parser() -> argparse.ArgumentParser:
@@ -34,8 +78,36 @@ def common_parser() -> argparse.ArgumentParser:
     return common
 
 
+def connection_parser() -> argparse.ArgumentParser:
+    """The options of every client of the service: timeout and CURVE keys (see :func:`connect`)."""
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--timeout", type=positive_float, default=DEFAULT_TIMEOUT_S, metavar="S", help=f"seconds to wait for the service (default {DEFAULT_TIMEOUT_S:g})")
+    parser.add_argument("--curve-server", type=Path, metavar="FILE", help="the service's CURVE public key (a service beyond localhost)")
+    parser.add_argument("--curve-client", type=Path, metavar="FILE", help="this client's CURVE secret key")
+    return parser
+
+
+def connect(kind: type[Connection], endpoint: str, arguments: argparse.Namespace, **options: Any) -> Connection:
+    """A client of ``kind`` with the CURVE keys the arguments (:func:`connection_parser`)
+    name; CliError for bad keys."""
+    if (arguments.curve_server is None) != (arguments.curve_client is None):
+        raise CliError("give both --curve-server and --curve-client, or neither")
+    if arguments.curve_server is None:
+        return kind(endpoint, **options)
+    from hexactl.adapters.api.security import CurveClientKeys, SecurityError  # zmq.auth: only with keys
+
+    try:
+        return kind(endpoint, curve=CurveClientKeys(arguments.curve_server, arguments.curve_client), **options)
+    except (SecurityError, OSError, ValueError) as error:  # missing or malformed key files
+        raise CliError(f"CURVE keys: {error}") from None
+
+
 def load_config(arguments: argparse.Namespace) -> Geometry:
     """The geometry named by --config, or the default one; CliError if it is refused."""
+    from hexactl.adapters.files.geometry_file import load_geometry
+    from hexactl.adapters.files.config_path import default_config_path
+    from hexactl.kinematics.geometry import GeometryError
+
     try:
         return load_geometry(arguments.config or default_config_path())
     except GeometryError as error:
@@ -57,7 +129,7 @@ def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt
                      on_interrupt: Callable[[], None] | None = None) -> int:
     """The exit status of ``hexactl COMMAND`` driving a campaign in ``directory`` when
     ``stopped_by`` ended it: the progress line finished, then the reason on stderr. A
-    :class:`~hexactl.adapters.campaign.driver.CampaignError` (it cannot go on): 1. Ctrl-C:
+    :class:`~hexactl.application.campaign.driver.CampaignError` (it cannot go on): 1. Ctrl-C:
     ``on_interrupt`` runs, then how to resume (everything measured is saved): 130."""
     progress.finish()
     if isinstance(stopped_by, KeyboardInterrupt):
@@ -93,6 +165,25 @@ def parse_pose_argument(text: str) -> list[float]:
     if problem:
         raise CliError(f"pose {text!r}: {problem}")
     return pose
+
+
+def pose_argument(text: str) -> list[float]:
+    """:func:`parse_pose_argument` as an argparse ``type``: its error becomes argparse's."""
+    try:
+        return parse_pose_argument(text)
+    except CliError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def positive_float(text: str) -> float:
+    """An argparse ``type``: a positive finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
+    return value
 
 
 def parse_numbers(values: list[str], labels: tuple[str, ...]) -> list[float]:

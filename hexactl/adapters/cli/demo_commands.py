@@ -1,4 +1,4 @@
-"""``hexactl demo``: the paper's experiment end to end on the simulator (:mod:`hexactl.adapters.demo`).
+"""``hexactl demo``: the paper's experiment end to end on the simulator (:mod:`hexactl.application.demo`).
 
 Exit status: 0 the calibration improved the accuracy, 1 it did not (or the campaign could
 not finish), 2 bad input (the results directory holds a finished demo: ``--force``),
@@ -16,12 +16,11 @@ DEFAULT_OUT = Path("demo-out")
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
-    from hexactl.adapters.demo import DEMO_ENVELOPE_FRACTION, DEMO_FAULTS_IN_A_ROW, DEMO_POSTURES_PER_LEG
-
     demo = subparsers.add_parser(
         "demo",
         parents=[common],
         help="the paper's experiment end to end on the simulator: measure, calibrate, hot-load, measure again",
+        declare=_declare_demo,
         description="Start the controller service on the simulator (control loop, in-process CAN bus, six simulated "
         "actuator firmwares, a platform with seeded manufacturing errors, simulated theodolites), measure the "
         "paper's test motions, run the leg-lock campaign for all six legs through the API, identify the "
@@ -31,6 +30,12 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "accuracy.",
         epilog="An interrupted demo resumes when run again with the same DIR and options. See docs/calibration.md.",
     )
+    demo.set_defaults(run=run_demo_command)
+
+
+def _declare_demo(demo: argparse.ArgumentParser) -> None:
+    from hexactl.application.demo import DEMO_ENVELOPE_FRACTION, DEMO_FAULTS_IN_A_ROW, DEMO_POSTURES_PER_LEG
+
     demo.add_argument("--out", type=Path, default=DEFAULT_OUT, metavar="DIR",
                       help=f"results directory (default ./{DEFAULT_OUT})")
     demo.add_argument("--seed", type=int, default=0,
@@ -47,16 +52,15 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       f"between them (default {DEMO_FAULTS_IN_A_ROW}): a loaded host can stall the simulated actuators "
                       "past their watchdog. A measurement a fault interrupted is never kept; the faults recovered "
                       "from are counted at the end")
-    demo.set_defaults(run=run_demo_command)
 
 
 def run_demo_command(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.api.client import ServiceUnavailable
-    from hexactl.adapters.campaign.driver import CampaignError
-    from hexactl.adapters.campaign.progress import Progress
-    from hexactl.adapters.campaign.store import DirectoryError
-    from hexactl.adapters.demo import DemoSettings, clear_results, run_demo
-    from hexactl.adapters.service import ServiceError
+    from hexactl.application.campaign.driver import CampaignError
+    from hexactl.application.campaign.progress import Progress
+    from hexactl.application.campaign.store import DirectoryError
+    from hexactl.application.demo import DemoSettings, clear_results, run_demo
+    from hexactl.application.service import ServiceError
 
     check_campaign_arguments(arguments)
     if arguments.force:

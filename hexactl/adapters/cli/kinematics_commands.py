@@ -1,22 +1,22 @@
-"""``hexactl check``, ``ik`` and ``fk``: the kinematics on the active geometry."""
+"""``hexactl check``, ``ik`` and ``fk``: the kinematics on the active geometry.
+
+The kinematics (numpy) load in the functions that run the commands: declaring them must
+not slow every other command's start (see :mod:`hexactl.adapters.cli.common`).
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-from hexactl.adapters.cli.common import CliError, load_config, parse_numbers, parse_pose_argument
-from hexactl.kinematics.forward import forward_kinematics
-from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import leg_lengths
-from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS, absolute_from_relative, relative_from_absolute
-from hexactl.kinematics.workspace import PoseAssessment, assess_poses, jacobian_condition
+from hexactl.adapters.cli.common import load_config, parse_numbers, pose_argument
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
-PAPER_STROKES: tuple[tuple[str, float], ...] = (
-    ("x", 600.0), ("y", 600.0), ("z", 250.0), ("roll", 23.0), ("pitch", 23.0), ("yaw", 60.0)
-)
-"""Single-axis strokes of the paper's platform (mm, deg): ``check``'s default poses are ±each."""
+if TYPE_CHECKING:  # the kinematics (numpy) load in the functions that run the commands
+    from hexactl.kinematics.geometry import Geometry
+    from hexactl.kinematics.workspace import PoseAssessment
 
 LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
 
@@ -32,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         epilog="POSE is X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs such as x=600 or "
         "pitch=-20,yaw=5. Put -- before poses that start with a minus sign.",
     )
-    check.add_argument("poses", nargs="*", metavar="POSE", type=_pose)
+    check.add_argument("poses", nargs="*", metavar="POSE", type=pose_argument)
     check.add_argument("--json", action="store_true", help="machine-readable output")
     check.set_defaults(run=run_check)
 
@@ -63,14 +63,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     fk.set_defaults(run=run_fk)
 
 
-def _pose(text: str) -> list[float]:
-    try:
-        return parse_pose_argument(text)
-    except CliError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
-
-
 def paper_extremes() -> list[list[float]]:
+    from hexactl.calibration.test_motions import PAPER_STROKES
+
     poses = []
     for axis, stroke in PAPER_STROKES:
         for sign in (1.0, -1.0):
@@ -81,6 +76,8 @@ def paper_extremes() -> list[list[float]]:
 
 
 def run_check(arguments: argparse.Namespace) -> int:
+    from hexactl.kinematics.workspace import assess_poses
+
     geometry = load_config(arguments)
     assessments = assess_poses(geometry, arguments.poses or paper_extremes())
     if arguments.json:
@@ -128,6 +125,10 @@ def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> N
 
 
 def run_ik(arguments: argparse.Namespace) -> int:
+    from hexactl.kinematics.inverse import leg_lengths
+    from hexactl.kinematics.pose import absolute_from_relative
+    from hexactl.kinematics.workspace import assess_poses
+
     geometry = load_config(arguments)
     pose = parse_numbers([getattr(arguments, axis.upper()) for axis in POSE_AXES], POSE_AXES)
     lengths = leg_lengths(geometry.legs, absolute_from_relative(geometry.home, pose))
@@ -147,6 +148,10 @@ def run_ik(arguments: argparse.Namespace) -> int:
 
 
 def run_fk(arguments: argparse.Namespace) -> int:
+    from hexactl.kinematics.forward import forward_kinematics
+    from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
+    from hexactl.kinematics.workspace import jacobian_condition
+
     geometry = load_config(arguments)
     readings = parse_numbers([getattr(arguments, label) for label in LEG_LABELS], LEG_LABELS)
     lengths = [reading + zero for reading, zero in zip(readings, geometry.zero_lengths)]

@@ -4,6 +4,10 @@ Each command module exposes ``register(subparsers, common)`` that adds its sub-c
 ``common`` is the parent parser with the options every sub-command takes (``--config``).
 A command returns its exit status: 0 success, 1 the answer is "no" (unreachable pose,
 non-converged solution), 2 bad input (arguments, files).
+
+Every command's parser is built before one runs, so the command modules import only
+light modules at the top and defer the rest (:mod:`hexactl.adapters.cli.common`): ``--help``
+and the client commands (``status``, ``move``, …) start without numpy, scipy or pydantic.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ import sys
 from collections.abc import Sequence
 
 from hexactl.adapters.cli import calibration_commands, demo_commands, kinematics_commands, service_commands, sim_commands
-from hexactl.adapters.cli.common import CliError, common_parser
+from hexactl.adapters.cli.common import CliError, DeferredParser, common_parser
 
 COMMAND_MODULES = (kinematics_commands, sim_commands, service_commands, calibration_commands, demo_commands)
 
@@ -23,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="hexactl",
         description="Controller and calibration toolkit for six-actuator parallel platforms.",
     )
-    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=DeferredParser)
     common = common_parser()
     for module in COMMAND_MODULES:
         module.register(subparsers, common)

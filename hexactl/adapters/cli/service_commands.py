@@ -14,27 +14,15 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-from hexactl.adapters.api.client import (
-    DEFAULT_TIMEOUT_S,
-    HexactlClient,
-    ServiceUnavailable,
-    TelemetrySubscriber,
-)
-from hexactl.adapters.api.security import CurveClientKeys, CurveServerKeys, SecurityError, create_keys
-from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
-from hexactl.adapters.cli.common import CliError
-from hexactl.adapters.cli.kinematics_commands import _pose  # the pose argument type, shared
-from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeReport, describe
-from hexactl.kinematics.pose import POSE_AXES
+from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
+from hexactl.adapters.cli.common import CliError, connect, connection_parser, pose_argument, positive_float
+from hexactl.kinematics.axes import POSE_AXES
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 MONITOR_INTERVAL_S = 0.1
 _CLEAR_SCREEN = "\x1b[H\x1b[2J"
-
-Connection = TypeVar("Connection", HexactlClient, TelemetrySubscriber)
 
 RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
 """Arguments → (command, request fields)."""
@@ -57,10 +45,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     command("enable", "energise the actuators; the platform holds its pose", "enable")
     command("disable", "de-energise the actuators (at rest only: stop first)", "disable")
     move = command("move", "move to a pose relative to the zero posture", _move_request)
-    move.add_argument("pose", metavar="POSE", type=_pose, help="X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs, e.g. z=50,yaw=5")
+    move.add_argument("pose", metavar="POSE", type=pose_argument, help="X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs, e.g. z=50,yaw=5")
     pace = move.add_mutually_exclusive_group()
-    pace.add_argument("--duration", type=_positive_float, metavar="S", help="minimum duration of the move, s")
-    pace.add_argument("--speed", type=_positive_float, metavar="F", help="fraction (0, 1] of the velocity limits")
+    pace.add_argument("--duration", type=positive_float, metavar="S", help="minimum duration of the move, s")
+    pace.add_argument("--speed", type=positive_float, metavar="F", help="fraction (0, 1] of the velocity limits")
     move.epilog = "Put -- before a pose that starts with a minus sign."
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name or a file", _play_request)
@@ -97,7 +85,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 def _register_monitor(subparsers: argparse._SubParsersAction) -> None:
     monitor = subparsers.add_parser(
-        "monitor", parents=[_connection_parser()], help="live view of the service's telemetry",
+        "monitor", parents=[connection_parser()], help="live view of the service's telemetry",
         description="Show the running service's telemetry, refreshed in place about 10 times a second (Ctrl-C ends).",
     )
     monitor.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
@@ -109,12 +97,23 @@ def _register_monitor(subparsers: argparse._SubParsersAction) -> None:
 def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     serve = subparsers.add_parser(
         "serve", parents=[common], help="run the controller service (default: the built-in simulator)",
-        description="Run the control loop with the ZeroMQ API and telemetry. Without --can, six simulated "
+        declare=_declare_serve,
+    )
+    serve.set_defaults(run=run_serve)
+
+
+def _declare_serve(serve: argparse.ArgumentParser) -> None:
+    # The service's modules: serve loads them to run anyway; no other command does.
+    from hexactl.application.service import API_URGENT_NICENESS
+    from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY
+
+    serve.description = (
+        "Run the control loop with the ZeroMQ API and telemetry. Without --can, six simulated "
         "actuators on an in-process CAN bus drive a simulated platform. Real-time by default: the loop under "
         f"SCHED_FIFO {DEFAULT_FIFO_PRIORITY} and the memory locked, when the process may (root, CAP_SYS_NICE or "
         "RLIMIT_RTPRIO; CAP_IPC_LOCK or an unlimited RLIMIT_MEMLOCK), else normal scheduling with the reason "
         "logged; the log and status say what it got. SIGINT/SIGTERM brake the platform to rest, disable the "
-        "actuators and stop, within 10 s.",
+        "actuators and stop, within 10 s."
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
     serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the --config geometry")
@@ -122,15 +121,17 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
     realtime = serve.add_mutually_exclusive_group()
     realtime.add_argument("--fifo", type=int, choices=range(2, 100), default=DEFAULT_FIFO_PRIORITY, metavar="PRIO",
-                          help=f"SCHED_FIFO priority 2-99 for the loop (default {DEFAULT_FIFO_PRIORITY}), PRIO-1 for the "
-                          "simulator's thread (capped at RLIMIT_RTPRIO without CAP_SYS_NICE)")
+                          help=f"SCHED_FIFO priority 2-99 of the loop (default {DEFAULT_FIFO_PRIORITY}: real-time is the "
+                          "default, --no-realtime turns it off); PRIO-1 for the simulator's thread, which shares the "
+                          f"loop's GIL; the API process's threads on the way of a stop get nice {API_URGENT_NICENESS}; "
+                          "capped at RLIMIT_RTPRIO without CAP_SYS_NICE")
     realtime.add_argument("--no-realtime", action="store_true",
                           help="normal scheduling and no memory locking, even with the privilege")
     serve.add_argument("--mlock", action="store_true",
                        help="accepted for compatibility: the memory is locked by default (--no-realtime: not)")
     serve.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
     serve.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
-    serve.add_argument("--telemetry-rate", type=_positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
+    serve.add_argument("--telemetry-rate", type=positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
     serve.add_argument(
         "--data-dir", action="append", type=Path, metavar="DIR",
         help="directory requests may read calibration and sequence files from and write recordings to "
@@ -139,19 +140,10 @@ def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.Arg
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
     serve.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
-    serve.set_defaults(run=run_serve)
-
-
-def _connection_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(add_help=False)
-    parser.add_argument("--timeout", type=_positive_float, default=DEFAULT_TIMEOUT_S, metavar="S", help=f"seconds to wait for the service (default {DEFAULT_TIMEOUT_S:g})")
-    parser.add_argument("--curve-server", type=Path, metavar="FILE", help="the service's CURVE public key (a service beyond localhost)")
-    parser.add_argument("--curve-client", type=Path, metavar="FILE", help="this client's CURVE secret key")
-    return parser
 
 
 def _client_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(add_help=False, parents=[_connection_parser()])
+    parser = argparse.ArgumentParser(add_help=False, parents=[connection_parser()])
     parser.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"the service's command endpoint (default {DEFAULT_API_ENDPOINT})")
     parser.add_argument("--json", action="store_true", help="print the raw JSON reply")
     return parser
@@ -201,7 +193,9 @@ def _service_path(text: str, *, new: bool = False) -> str:
 
 def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str, Any]) -> int:
     """Send one command, print the reply; the exit status says ok / refused / no answer."""
-    client = _connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
+    from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
+
+    client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     try:
         with client:
             reply = client.request(cmd, **fields)
@@ -218,8 +212,10 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
 
 
 def run_monitor(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
+
     try:
-        with _connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry:
+        with connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry:
             while True:
                 record = telemetry.receive(arguments.timeout)
                 text = json.dumps(record) if arguments.json else format_telemetry(record)
@@ -234,6 +230,8 @@ def run_monitor(arguments: argparse.Namespace) -> int:
 
 
 def run_keys(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.api.security import create_keys
+
     try:
         made = create_keys(arguments.out, arguments.name)
     except (FileExistsError, OSError) as error:
@@ -245,7 +243,8 @@ def run_keys(arguments: argparse.Namespace) -> int:
 
 
 def run_serve(arguments: argparse.Namespace) -> int:
-    from hexactl.adapters.service import ServiceConfig, ServiceError, run_service  # heavy: only for serve
+    from hexactl.adapters.api.security import CurveServerKeys, SecurityError
+    from hexactl.application.service import ServiceConfig, ServiceError, run_service  # heavy: only for serve
 
     if (arguments.curve_secret is None) != (arguments.curve_clients is None):
         raise CliError("give both --curve-secret and --curve-clients, or neither")
@@ -268,17 +267,6 @@ def run_serve(arguments: argparse.Namespace) -> int:
         return run_service(config)
     except (ServiceError, SecurityError) as error:
         raise CliError(str(error)) from None
-
-
-def _connect(kind: type[Connection], endpoint: str, arguments: argparse.Namespace, **options: Any) -> Connection:
-    """A client of ``kind`` with the CURVE keys the arguments name; CliError for bad keys."""
-    if (arguments.curve_server is None) != (arguments.curve_client is None):
-        raise CliError("give both --curve-server and --curve-client, or neither")
-    keys = CurveClientKeys(arguments.curve_server, arguments.curve_client) if arguments.curve_server else None
-    try:
-        return kind(endpoint, curve=keys, **options)
-    except (SecurityError, OSError, ValueError) as error:  # missing or malformed key files
-        raise CliError(f"CURVE keys: {error}") from None
 
 
 # -- output --------------------------------------------------------------------------
@@ -334,7 +322,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("loop", f"{loop['rate_hz']:g} Hz, {loop['cycles']} cycles, {loop['missed']} missed"),
         ("lateness µs", _percentiles_text(loop["lateness_us"])),
         ("compute µs", _percentiles_text(loop["compute_us"])),
-        ("real-time", describe(RealtimeReport(**record["realtime"])) if record.get("realtime") else "unknown"),
+        ("real-time", _realtime_text(record.get("realtime"))),
     ]
     return "\n".join(f"{label:<15}{value}" for label, value in lines)
 
@@ -351,6 +339,15 @@ def _legs_text(values: list[float | None] | None) -> str:
     return "  ".join(f"L{leg} {'?' if value is None else format(value, '8.3f'):>8}" for leg, value in enumerate(values, start=1))
 
 
+def _realtime_text(realtime: dict[str, Any] | None) -> str:
+    if not realtime:
+        return "unknown"
+    # Here, not at the top: the module loads pydantic, which the other commands do not need.
+    from hexactl.control.realtime import RealtimeReport, describe
+
+    return describe(RealtimeReport(**realtime))
+
+
 def _fault_text(fault: dict[str, Any]) -> str:
     where = f"leg {fault['leg']}: " if fault.get("leg") else ""
     return f"{where}{fault['code']} ({fault['message']})"
@@ -358,13 +355,3 @@ def _fault_text(fault: dict[str, Any]) -> str:
 
 def _percentiles_text(values: dict[str, float]) -> str:
     return f"p50 {values['p50']:.0f}  p99 {values['p99']:.0f}  p99.9 {values['p999']:.0f}  max {values['max']:.0f}"
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
-    return value

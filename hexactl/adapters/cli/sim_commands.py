@@ -7,15 +7,12 @@ import json
 import signal
 import sys
 from types import FrameType
+from typing import TYPE_CHECKING
 
-import can
-
-from hexactl.adapters.can.transport import BusSpecError, open_bus, parse_bus_spec
 from hexactl.adapters.cli.common import CliError, load_config, parse_numbers
-from hexactl.adapters.files.geometry_file import load_geometry
-from hexactl.kinematics.geometry import Geometry, GeometryError
-from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
-from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
+
+if TYPE_CHECKING:  # the simulator and python-can load when the command runs, not for every command
+    from hexactl.kinematics.geometry import Geometry
 
 LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
 
@@ -47,7 +44,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 
 def _true_geometry(arguments: argparse.Namespace, nominal: Geometry) -> Geometry:
-    # Imported here so that the other commands do not load the simulator's dependencies.
+    from hexactl.adapters.files.geometry_file import load_geometry
+    from hexactl.kinematics.geometry import GeometryError
     from hexactl.sim.true_platform import true_geometry
 
     try:
@@ -59,6 +57,12 @@ def _true_geometry(arguments: argparse.Namespace, nominal: Geometry) -> Geometry
 
 
 def run_sim_actuators(arguments: argparse.Namespace) -> int:
+    import can
+
+    from hexactl.adapters.can.transport import BusSpecError, open_bus, parse_bus_spec
+    from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
+    from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
+
     nominal = load_config(arguments)
     truth = _true_geometry(arguments, nominal)
     if arguments.positions:

@@ -17,19 +17,6 @@ import tomli_w
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.kinematics.geometry import Geometry, GeometryError, geometry_from_mapping
 
-CONFIG_ENVIRONMENT_VARIABLE = "HEXACTL_CONFIG"
-DEFAULT_CONFIG = Path("config") / "platform.toml"
-_REPOSITORY_CONFIG = Path(__file__).resolve().parents[3] / DEFAULT_CONFIG
-
-
-def default_config_path() -> Path:
-    """The geometry used when none is named: $HEXACTL_CONFIG, else ./config/platform.toml,
-    else the repository's config/platform.toml (for commands run outside the checkout)."""
-    from_environment = os.environ.get(CONFIG_ENVIRONMENT_VARIABLE)
-    if from_environment:
-        return Path(from_environment)
-    return DEFAULT_CONFIG if DEFAULT_CONFIG.exists() else _REPOSITORY_CONFIG
-
 
 def parse_geometry(text: str, source: str) -> Geometry:
     """Validate TOML text into a :class:`Geometry`; :class:`GeometryError` names every problem."""

@@ -39,7 +39,8 @@ from hexactl.adapters.files.atomic import write_atomic
 from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.planning import PosturePlan
 from hexactl.kinematics.inverse import LEG_COUNT
-from hexactl.kinematics.pose import POSE_AXES, pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
+from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
+from hexactl.kinematics.axes import POSE_AXES
 
 READING_COLUMNS = tuple(f"l{leg}" for leg in range(1, LEG_COUNT + 1))
 SETPOINT_COLUMNS = tuple(f"l{leg}_setpoint" for leg in range(1, LEG_COUNT + 1))

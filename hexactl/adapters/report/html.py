@@ -27,7 +27,7 @@ from hexactl.calibration.test_motions import PAPER_TABLE_1
 from hexactl.calibration.uncertainty import PredictedAccuracy
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 REPORT_PAGE = "index.html"
 

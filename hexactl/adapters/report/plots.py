@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from hexactl.calibration.parameters import PARAMETERS_PER_LEG
 from hexactl.calibration.results import IdentificationResult
 from hexactl.calibration.validation import MotionResult
-from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 _LEG_COLOURS = ("#7f7f7f", "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")  # index = locked leg
 

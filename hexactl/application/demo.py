@@ -1,16 +1,16 @@
 """``hexactl demo``: the paper's experiment end to end, on the simulator, through the real
 service path.
 
-A :class:`~hexactl.adapters.service.Service` (what ``hexactl serve`` runs) runs the
+A :class:`~hexactl.application.service.Service` (what ``hexactl serve`` runs) runs the
 controller loop on an in-process CAN bus with the six simulated actuator firmwares, the
 simulated platform with seeded manufacturing errors and its simulated theodolites; the
-campaign of :mod:`hexactl.adapters.campaign` drives it through the API on the loopback
+campaign of :mod:`hexactl.application.campaign` drives it through the API on the loopback
 interface, like any client. So the demo is ``hexactl serve`` + ``hexactl campaign
 --apply``, plus the paper's tables: Table 1 (the compound motion: command, before,
 after) and the largest errors as a percentage of the stroke, beside the paper's
 2.6 % → 0.35 %.
 
-The service runs in a child process (:class:`~hexactl.adapters.service.ServiceProcess`),
+The service runs in a child process (:class:`~hexactl.application.service.ServiceProcess`),
 as it would in use: with a GIL of its own (and it starts its own API process). In one process, the campaign's planning,
 identification and report (numpy, matplotlib: milliseconds to seconds without letting go
 of the GIL) delay the control loop, and a loop silent for 50 ms trips the simulated
@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 
 from hexactl.adapters.api.client import HexactlClient
-from hexactl.adapters.campaign.instruments import ServiceInstrument
-from hexactl.adapters.campaign.progress import Progress
-from hexactl.adapters.campaign.runner import CampaignOutcome, CampaignSettings, run_campaign
-from hexactl.adapters.campaign.store import (
+from hexactl.application.campaign.instruments import ServiceInstrument
+from hexactl.application.campaign.progress import Progress
+from hexactl.application.campaign.runner import CampaignOutcome, CampaignSettings, run_campaign
+from hexactl.application.campaign.store import (
     CALIBRATION_FILE,
     LOCK_FILE,
     MEASUREMENTS_FILE,
@@ -45,15 +45,15 @@ from hexactl.adapters.campaign.store import (
     VALIDATION_FILE,
     ensure_unfinished,
 )
-from hexactl.adapters.cli.kinematics_commands import PAPER_STROKES
-from hexactl.adapters.files.geometry_file import default_config_path, load_geometry
+from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.report.html import REPORT_PAGE
-from hexactl.adapters.service import ServiceConfig, ServiceError, ServiceProcess
-from hexactl.calibration.test_motions import PAPER_MAX_STROKE_ERROR, PAPER_TABLE_1
+from hexactl.application.service import ServiceConfig, ServiceError, ServiceProcess
+from hexactl.calibration.test_motions import PAPER_MAX_STROKE_ERROR, PAPER_STROKES, PAPER_TABLE_1
 from hexactl.calibration.validation import MotionResult, largest_stroke_error
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
-from hexactl.kinematics.pose import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.sim.offline_campaign import CampaignDesign
 from hexactl.sim.true_platform import ManufacturingErrors, true_geometry
 
@@ -128,10 +128,10 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     """Start the service on the simulator, run the campaign with ``apply`` and print the
     paper's tables. An unfinished demo in the directory is resumed.
 
-    Raises what :func:`~hexactl.adapters.campaign.runner.run_campaign` raises (a
-    :class:`~hexactl.adapters.campaign.store.DirectoryError` for a directory holding a
+    Raises what :func:`~hexactl.application.campaign.runner.run_campaign` raises (a
+    :class:`~hexactl.application.campaign.store.DirectoryError` for a directory holding a
     finished demo, before anything starts), and
-    :class:`~hexactl.adapters.service.ServiceError` if the service cannot start.
+    :class:`~hexactl.application.service.ServiceError` if the service cannot start.
     """
     started = time.monotonic()
     ensure_unfinished(settings.directory)  # before anything starts

@@ -34,7 +34,7 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.adapters.campaign.driver import CampaignError
+from hexactl.application.campaign.driver import CampaignError
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id
 from hexactl.adapters.files.measurements import (
@@ -53,7 +53,7 @@ from hexactl.calibration.data import MeasurementData
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS, TestMotion
 from hexactl.calibration.validation import MotionResult
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.pose import POSE_AXES
+from hexactl.kinematics.axes import POSE_AXES
 from hexactl.sim.offline_campaign import CampaignDesign, plan_campaign
 
 PLAN_FILE = "campaign.json"

@@ -6,7 +6,7 @@ The service's two processes each hold a part. The firmwares run in the loop's pr
 on the bus its CAN link uses (a ``memory:`` bus is per process); the API's
 process answers ``measure`` with a :class:`SimulatedMeasurement` of its own, whose
 platform reads the firmwares' true positions from the loop's reports
-(:meth:`hexactl.adapters.loop_link.RemoteLoop.probe`).
+(:meth:`hexactl.application.loop_link.RemoteLoop.probe`).
 """
 
 from __future__ import annotations

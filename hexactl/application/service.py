@@ -5,9 +5,9 @@ API process (command server, telemetry, planning).
 Two processes. This one holds the real-time part: the control loop's thread (real-time
 where allowed), the CAN link and, with the simulator, the six simulated actuators'
 thread. The API process
-(:mod:`hexactl.adapters.api_process`) holds everything that parses, validates, plans or
+(:mod:`hexactl.application.api_process`) holds everything that parses, validates, plans or
 serialises, so none of it competes with the loop for the GIL
-(:mod:`hexactl.adapters.loop_link` says why and what crosses). The caller's thread only
+(:mod:`hexactl.application.loop_link` says why and what crosses). The caller's thread only
 starts and stops them.
 
 Shutdown (SIGINT/SIGTERM, or :meth:`Service.close`): the API stops taking commands, a
@@ -48,15 +48,16 @@ from hexactl.adapters.api.security import (
     is_local_endpoint,
     load_server_keys,
 )
-from hexactl.adapters.api.server import DEFAULT_API_ENDPOINT
-from hexactl.adapters.api.telemetry import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
-from hexactl.adapters.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
+from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
+from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
+from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError
-from hexactl.adapters.files.geometry_file import default_config_path, geometry_id, load_geometry
-from hexactl.adapters.loop_link import LoopExchange
-from hexactl.adapters.simulator import Simulator
-from hexactl.adapters.spawned import Spawned, SpawnError
+from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
+from hexactl.adapters.files.config_path import default_config_path
+from hexactl.application.loop_link import LoopExchange
+from hexactl.application.simulator import Simulator
+from hexactl.application.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
 from hexactl.control.core import ControlState, MotionState
@@ -104,10 +105,11 @@ API_START_TIMEOUT_S = 240.0
 """How long the service waits for its API process to start: seconds on an idle host, over
 a minute beside four CPU-bound processes on two cores (measured)."""
 
-API_FIFO_BELOW_LOOP = 10
-"""With a real-time loop, the API process's urgent threads (the way of a stop:
-:data:`~hexactl.adapters.api_process.URGENT_THREAD_NAMES`) run this far below the loop's
-SCHED_FIFO priority, and below the threads that share the loop's GIL."""
+API_URGENT_NICENESS = -10
+"""With a real-time loop (the privilege to raise priorities), the API process's threads
+on the way of a stop (:data:`~hexactl.application.api_process.URGENT_THREAD_NAMES`) run at
+this ``nice``: about nine times a normal thread's share of a contended CPU (CFS weights
+9548 against 1024), without starving anything."""
 
 API_WATCH_INTERVAL_S = 0.5
 """How often :func:`run_service` checks that the API process lives."""
@@ -149,8 +151,9 @@ class ServiceConfig:
     ``[measurement] point_sigma_mm``). ``motion``: the controller's pose-space velocity,
     acceleration and jerk limits (the legs' speed limit is the geometry's whatever these are).
     ``fifo_priority``: SCHED_FIFO for the loop thread, and one below for the simulator's
-    thread, which shares the GIL with it (None: normal
-    scheduling; the API process always runs normally); ``lock_memory``: mlockall of the
+    thread, which shares the GIL with it (None: normal scheduling; the API process's
+    threads on the way of a stop then keep the normal priority too, else they get
+    :data:`API_URGENT_NICENESS`); ``lock_memory``: mlockall of the
     loop's process. Both on by default; each falls back, logged and in ``status``,
     without the privilege.
     """
@@ -261,8 +264,7 @@ class Service:
             probe = simulator.runner.actual_positions_mm if simulator else None
             exchange = LoopExchange(controller.thread, commands_in, reports_out, probe).start()
             closers.callback(exchange.close)
-            controller.thread.loop.exchange = exchange
-            realtime = controller.start()
+            realtime = controller.start(exchange)
             closers.callback(controller.shutdown)
             log.info("control loop at %d Hz; real-time: %s", config.rate_hz, describe(realtime))
             if realtime.fifo_priority is not None:
@@ -272,8 +274,8 @@ class Service:
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
                                    data_dirs, controller_config, nominal,
                                    simulator.instrument_spec if simulator else None, config.log_level,
-                                   urgent_fifo_priority=None if realtime.fifo_priority is None
-                                   else max(1, realtime.fifo_priority - API_FIFO_BELOW_LOOP))  # fmt: skip
+                                   urgent_niceness=0 if realtime.fifo_priority is None
+                                   else API_URGENT_NICENESS)  # fmt: skip
             try:
                 api = ApiProcess(settings, commands_out, reports_in, API_START_TIMEOUT_S)
             except ApiStartError as error:

@@ -37,16 +37,16 @@ from pathlib import Path
 import numpy as np
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
-from hexactl.adapters.campaign.driver import (
+from hexactl.application.campaign.driver import (
     ZERO_POSE,
     CampaignError,
     ControllerFault,
     PlatformDriver,
     Record,
 )
-from hexactl.adapters.campaign.instruments import Instrument
-from hexactl.adapters.campaign.progress import Progress
-from hexactl.adapters.campaign.store import (
+from hexactl.application.campaign.instruments import Instrument
+from hexactl.application.campaign.progress import Progress
+from hexactl.application.campaign.store import (
     CALIBRATION_FILE,
     MEASUREMENTS_FILE,
     PLAN_FILE,
@@ -119,7 +119,7 @@ def run_campaign(client: HexactlClient, geometry: Geometry, instrument: Instrume
 
     Raises :class:`CampaignError` when it cannot go on (a fault, a refusal, bad data, a
     failed identification; the message says what to do), and
-    :class:`~hexactl.adapters.campaign.instruments.InstrumentError`. What was measured
+    :class:`~hexactl.application.campaign.instruments.InstrumentError`. What was measured
     stays saved either way.
     """
     driver = PlatformDriver(client)

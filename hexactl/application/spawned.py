@@ -1,6 +1,6 @@
 """A spawned child process that serves until told to stop, on a control pipe: the
-service in a process of its own (:class:`~hexactl.adapters.service.ServiceProcess`) and
-the service's API process (:class:`~hexactl.adapters.api_process.ApiProcess`).
+service in a process of its own (:class:`~hexactl.application.service.ServiceProcess`) and
+the service's API process (:class:`~hexactl.application.api_process.ApiProcess`).
 
 The protocol on the control pipe: the child's first message is either where it serves
 (any non-string object) or, as a string, why it cannot; then it answers each request

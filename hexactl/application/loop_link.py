@@ -3,9 +3,9 @@
 Why a second process: in CPython every thread of a process shares one GIL, so the API's
 work (JSON, pydantic validation, planning a move along hundreds of IK samples, a
 calibration dry run, the telemetry's JSON) delays the loop's wake-up and stretches its
-cycles whenever it holds the lock (BENCHMARKS.md: p99 lateness 205 µs with the API
-busy in the same process against 12 µs with it idle). The API and everything it does run
-in a process of their own (:mod:`hexactl.adapters.api_process`); what crosses is small:
+cycles whenever it holds the lock (BENCHMARKS.md has the loop's lateness with the API
+busy in the same process and in its own). The API and everything it does run
+in a process of their own (:mod:`hexactl.application.api_process`); what crosses is small:
 
 - **commands** (API → loop): the immutable :mod:`hexactl.control.commands` objects the
   facade builds after planning and validating, pickled, one message each, on a pipe;
@@ -16,7 +16,7 @@ in a process of their own (:mod:`hexactl.adapters.api_process`); what crosses is
 Loop side, :class:`LoopExchange`: the loop thread calls it in its slack (see
 :class:`~hexactl.control.loop.ControlLoop`). It takes at most
 :data:`MAX_COMMANDS_PER_EXCHANGE` complete commands from the pipe into the core's inbox
-and writes the report (pickled: about 60 µs for a 5 kB snapshot, measured), never
+and writes the report (pickled), never
 waiting: both pipe ends are non-blocking, and a report the pipe has no room for is
 dropped. Nothing it meets is allowed to raise into the loop: a message that does not
 unpickle to a command is counted and dropped.

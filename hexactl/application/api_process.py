@@ -1,8 +1,8 @@
 """The service's API process: the ZeroMQ command server, the telemetry publisher, and
 the controller facade that parses, validates and plans every request, away from the
-control loop's GIL (why: :mod:`hexactl.adapters.loop_link`).
+control loop's GIL (why: :mod:`hexactl.application.loop_link`).
 
-The service (:mod:`hexactl.adapters.service`) spawns it with :class:`ApiProcess` once its
+The service (:mod:`hexactl.application.service`) spawns it with :class:`ApiProcess` once its
 loop runs, handing it the two pipe ends of the loop link. Its life: connect to the loop
 (first report), bind and start the sockets, say where they are bound, then wait. The
 service ends it in two steps, so that telemetry keeps flowing while the platform is
@@ -18,6 +18,7 @@ import logging
 import os
 import signal
 import sys
+import threading
 from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -31,12 +32,11 @@ from hexactl.adapters.api.security import CurveServer, CurveServerKeys, Security
 from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
-from hexactl.adapters.loop_link import RemoteLoop
-from hexactl.adapters.simulator import InstrumentSpec, SimulatedMeasurement
-from hexactl.adapters.spawned import STOP, Spawned, SpawnError
+from hexactl.application.loop_link import RemoteLoop
+from hexactl.application.simulator import InstrumentSpec, SimulatedMeasurement
+from hexactl.application.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
-from hexactl.control.realtime import fifo_for_threads
 from hexactl.kinematics.geometry import Geometry
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -45,15 +45,17 @@ API_WORKER_NICENESS = 5
 """The API's worker thread, which plans and validates, lowers its scheduling priority by
 this much (``nice``; needs no privilege): when the CPUs are contended, the loop's process
 gets about three times its share (CFS weights 1024 against 335). Only the worker: the
-socket thread that answers ``estop`` and the loop link's receiver keep the normal
-priority, so a busy host does not delay a stop by the niceness."""
+threads on the way of a stop are raised instead (:data:`URGENT_THREAD_NAMES`)."""
 
 URGENT_THREAD_NAMES = frozenset({"hexactl-api", "hexactl-loop-link"})
 """The API process's threads on the way of a stop: the socket thread that takes ``estop``
 and the link's receiver that brings the loop's verdict. With
-:attr:`ApiSettings.urgent_fifo_priority` they run under SCHED_FIFO, so that CPU-bound
-work elsewhere on the host does not delay a stop by its time slices; the worker, which
-plans and validates, stays at normal (lowered) priority."""
+:attr:`ApiSettings.urgent_niceness` (negative: needs CAP_SYS_NICE) they get a larger
+share of a contended CPU, so that CPU-bound work elsewhere delays a stop less. Not
+SCHED_FIFO: these threads run Python under a flood (every request is decoded here), and
+a real-time thread that does would starve every normal thread of its CPU, among them
+the threads holding a loop's GIL in other processes (measured: actuator watchdogs
+tripped across the test suite under load)."""
 
 API_SWITCH_INTERVAL_S = 0.001
 """The API process's GIL switch interval (Python's default: 5 ms): the socket thread that
@@ -92,7 +94,7 @@ class ApiSettings:
     instrument: InstrumentSpec | None
     log_level: str
     handler_timeout_s: float = DEFAULT_HANDLER_TIMEOUT_S
-    urgent_fifo_priority: int | None = None  # for URGENT_THREAD_NAMES; None: normal scheduling
+    urgent_niceness: int = 0  # for URGENT_THREAD_NAMES; 0: the process's
 
 
 class ApiProcess:
@@ -171,9 +173,8 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
             return
         publisher.start()
         server.start()
-        if settings.urgent_fifo_priority is not None:
-            for name, refused in fifo_for_threads(settings.urgent_fifo_priority, URGENT_THREAD_NAMES).items():
-                log.info("%s thread: %s", name, refused or f"SCHED_FIFO {settings.urgent_fifo_priority}")
+        if settings.urgent_niceness:
+            _raise_urgent_threads(settings.urgent_niceness)
         server_open = True
         try:
             control.send((server.endpoint, publisher.endpoint))
@@ -189,11 +190,22 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                 server.close()
 
 
+def _raise_urgent_threads(niceness: int) -> None:
+    """``nice`` ``niceness`` for each of :data:`URGENT_THREAD_NAMES` (Linux: per thread id)."""
+    for thread in threading.enumerate():
+        if thread.name in URGENT_THREAD_NAMES and thread.native_id is not None:
+            try:
+                os.setpriority(os.PRIO_PROCESS, thread.native_id, niceness)
+                log.info("%s thread: nice %d", thread.name, niceness)
+            except OSError as error:  # no CAP_SYS_NICE: the normal priority stays
+                log.info("%s thread: nice %d not set (%s)", thread.name, niceness, error)
+
+
 def _end_stuck(description: str) -> None:
     """End this process at once: the worker is stuck in a call that may never return (a
     blocking open, a hung read), so an orderly exit, which closes the ZeroMQ context and
     joins threads, could hang with it. The service sees the exit and brings the platform
-    to rest, disables it and exits 1 (:func:`hexactl.adapters.service.run_service`)."""
+    to rest, disables it and exits 1 (:func:`hexactl.application.service.run_service`)."""
     log.error("%s: the API process exits (status %d)", description, STUCK_EXIT_STATUS)
     logging.shutdown()  # flush the log: os._exit skips it
     os._exit(STUCK_EXIT_STATUS)

@@ -1,0 +1,55 @@
+"""Motion sequence files and the dwell records' table.
+
+File format (TOML; poses relative to the zero posture, mm and deg)::
+
+    name = "my_sweep"                 # required
+    description = "optional text"
+
+    [[waypoint]]
+    pose = [100.0, 0.0, 0.0, 0.0, 0.0, 0.0]   # [x, y, z, roll, pitch, yaw]
+    duration = 4.0    # optional, s: the move takes at least this long (to one loop period); at most 600
+    dwell = 2.0       # optional, s: stay this long on arrival (default 0); at most 86400
+
+    [[waypoint]]
+    pose = [0.0, 0.0, 0.0, 0.0, 5.0, 0.0]
+    speed = 0.5       # optional, (0, 1]: fraction of the velocity limits; not with duration
+
+The model it validates into is :class:`~hexactl.control.sequences.MotionSequence`.
+:func:`dwell_header` and :func:`dwell_rows` lay out
+:class:`~hexactl.control.sequences.DwellRecord` as the rows of a CSV file.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Sequence
+
+from hexactl.control.sequences import DwellRecord, MotionSequence, SequenceError, sequence_from_mapping
+from hexactl.kinematics.axes import POSE_AXES
+
+
+def sequence_from_toml(text: str, source: str = "sequence") -> MotionSequence:
+    """Parse a sequence file's text; :class:`SequenceError` names the problems."""
+    try:
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
+        raise SequenceError(f"{source}: not valid TOML: {error}") from None
+    return sequence_from_mapping(data, source)
+
+
+def dwell_header() -> list[str]:
+    """Column names of :func:`dwell_rows`."""
+    return (["sequence", "waypoint", "t_s"]
+            + [f"command_{a}" for a in POSE_AXES] + [f"measured_{a}" for a in POSE_AXES]
+            + [f"setpoint_{i}" for i in range(1, 7)] + [f"feedback_{i}" for i in range(1, 7)])
+
+
+def dwell_rows(records: Sequence[DwellRecord]) -> list[list[object]]:
+    """One row per record in :func:`dwell_header`'s order; a missing measurement is
+    six empty cells."""
+    return [
+        [r.sequence, r.waypoint, r.t_s, *r.pose_command,
+         *(r.pose_measured if r.pose_measured is not None else [""] * 6),
+         *r.leg_setpoints, *r.leg_feedback]
+        for r in records
+    ]

@@ -1,0 +1,132 @@
+"""What the platform is told to do: the trajectory, the leg lock, the sequence, the plan epoch.
+
+:class:`Motion` owns the loop's online trajectory generator
+(:class:`~hexactl.control.trajectory.PoseTrajectory`), the set-point path it feeds
+(:class:`~hexactl.control.setpoint_path.SetpointPath`), the sequence player
+(:class:`~hexactl.control.sequence_player.SequencePlayer`) and the locked leg. Its
+:meth:`Motion.update` is the ENABLED cycle's update: the trajectory's next target →
+the set-points → playback.
+
+The plan epoch (:mod:`hexactl.control.commands`) advances whenever what a plan starts
+from changes: a new goal, a halt, a pause or resume, leg-lock, a calibration swap, a
+freeze. The core checks each command's preconditions
+(:mod:`~hexactl.control.preconditions`) before calling the method that carries it out.
+
+Poses relative mm/rad; set-points sensor mm; times monotonic ns. Owned by the loop
+thread: not thread-safe.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from hexactl.control.config import ControllerConfig
+from hexactl.control.planning import ActiveGeometry, LegLock, Segment
+from hexactl.control.preconditions import Refusal
+from hexactl.control.results import ErrorCode
+from hexactl.control.sequence_player import SequencePlayer, start_segment
+from hexactl.control.sequences import DwellRecord
+from hexactl.control.setpoint_path import SetpointPath
+from hexactl.control.snapshot import MotionState
+from hexactl.control.supervisor import Fault
+from hexactl.control.trajectory import PoseTrajectory, StepResult
+
+
+class Motion:
+    """The motion of a loop running every ``period_s`` on ``active``. ``record`` and
+    ``log`` as :class:`~hexactl.control.sequence_player.SequencePlayer`'s."""
+
+    def __init__(self, config: ControllerConfig, active: ActiveGeometry, period_s: float,
+                 record: Callable[[str, int], DwellRecord], log: Callable[[str, str], None]) -> None:
+        self.trajectory = PoseTrajectory(config.motion, period_s)
+        self.path = SetpointPath(config, active, period_s, log)
+        self.player = SequencePlayer(self.trajectory, record, log)
+        self.lock: LegLock | None = None
+        self.epoch = 0
+
+    def state(self, enabled: bool) -> MotionState:
+        trajectory = self.trajectory
+        if not enabled or not trajectory.moving:
+            return MotionState.HOLDING
+        return MotionState.STOPPING if trajectory.halting else MotionState.MOVING
+
+    def stale(self, epoch: int) -> Refusal:
+        """The refusal of a command planned at ``epoch`` if that is not the current one."""
+        if epoch != self.epoch:
+            return ErrorCode.STALE_PLAN, "the target changed while the command was being planned: plan again"
+        return None
+
+    # -- the cycle ---------------------------------------------------------------------
+
+    def update(self, active: ActiveGeometry, now_ns: int) -> Fault | None:
+        """The ENABLED cycle: the next target → set-points (not yet sent) → playback; the
+        fault if the generator or the leg-lock projection fails (nothing then changed)."""
+        trajectory = self.trajectory
+        lock = self.lock
+        previous_target = trajectory.position if lock is not None else None
+        result = trajectory.update()
+        if result is StepResult.ERROR:
+            return Fault("planner_error", "the trajectory generator refused its input")
+        if fault := self.path.follow(active, lock, trajectory.position, previous_target):
+            return fault
+        if self.player.playing:
+            self.player.update(result, now_ns)
+        return None
+
+    def start(self, pose: Sequence[float], setpoints: Sequence[float]) -> None:
+        """Enabled at rest at ``pose`` with ``setpoints``: where the platform is."""
+        self.path.hold(pose, setpoints)
+        self.trajectory.reset(pose)
+        self.epoch += 1
+
+    def follow(self, pose: Sequence[float], setpoints: Sequence[float]) -> None:
+        """While disabled: command where the platform is, so that enabling starts there."""
+        self.path.hold(pose, setpoints)
+
+    def freeze(self, sequence_status: str) -> None:
+        """Forget any motion (the sequence ends as ``sequence_status``): the commanded
+        pose and set-points stay as they are."""
+        self.trajectory.reset(self.path.pose_command)
+        self.path.ramp.cancel()
+        self.player.end(sequence_status)
+        self.epoch += 1
+
+    # -- commands, once their preconditions hold -----------------------------------------
+
+    def move(self, segment: Segment) -> Refusal:
+        if not start_segment(self.trajectory, segment):
+            return ErrorCode.STALE_PLAN, ("the motion went on while the move was planned, and from where it is now the "
+                                          "trajectory generator refuses it: plan again")
+        return None
+
+    def stop(self) -> None:
+        """Abort any sequence and brake to rest."""
+        self.player.end("aborted")
+        self.trajectory.halt()
+        self.epoch += 1
+
+    def lock_leg(self, leg: int) -> None:
+        """Hold leg 1–6 at the set-point being sent."""
+        self.lock = LegLock(leg, self.path.setpoints[leg - 1])
+        self.epoch += 1
+
+    def unlock_leg(self) -> None:
+        self.lock = None
+        # Bumpless: the projected pose being commanded becomes the generator's state.
+        self.trajectory.reset(self.path.pose_command)
+        self.epoch += 1
+
+    def pause(self, now_ns: int) -> None:
+        self.player.pause(now_ns)
+        self.epoch += 1
+
+    def resume(self, remainder: Segment | None, now_ns: int) -> Refusal:
+        if refusal := self.player.resume(remainder, now_ns):
+            return refusal
+        self.epoch += 1
+        return None
+
+    def swap(self, new: ActiveGeometry, enabled: bool) -> None:
+        """``new`` is the geometry from now on (ramped in when ``enabled``)."""
+        self.path.swap(new, enabled)
+        self.epoch += 1

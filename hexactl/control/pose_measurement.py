@@ -1,0 +1,55 @@
+"""The platform's measured pose: forward kinematics of the actuators' feedback.
+
+:class:`PoseMeasurement` solves FK warm-started from its last solution (from the
+commanded pose when it has none), so that one or two iterations usually do. The core
+measures every cycle while not ENABLED and every ``every_cycles`` cycles while ENABLED
+(``fk_rate_hz``), plus at each dwell's record.
+
+Poses: ``pose`` relative to the active geometry's zero posture, mm and rad (None when
+FK failed or never ran). Owned by the loop thread: not thread-safe.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from hexactl.control.hardware import FeedbackSnapshot
+from hexactl.control.planning import ActiveGeometry
+from hexactl.kinematics.forward import forward_kinematics
+
+
+class PoseMeasurement:
+    """FK of the feedback at most every ``every_cycles`` cycles (when asked with :meth:`due`),
+    to ``tolerance_mm`` within ``max_iterations``."""
+
+    def __init__(self, every_cycles: int, tolerance_mm: float, max_iterations: int) -> None:
+        self.every_cycles = every_cycles
+        self._tolerance_mm = tolerance_mm
+        self._max_iterations = max_iterations
+        self.pose: tuple[float, ...] | None = None
+        self.failures = 0  # FK runs that did not converge
+        self.cycle = 0  # the cycle it last ran in
+        self._absolute: tuple[float, ...] | None = None  # the last solution, absolute mm/rad: the warm start
+
+    def due(self, cycle: int) -> bool:
+        return cycle - self.cycle >= self.every_cycles
+
+    def measure(self, cycle: int, feedback: FeedbackSnapshot, active: ActiveGeometry,
+                commanded: Sequence[float]) -> None:
+        """Solve FK of ``feedback`` on ``active`` in cycle ``cycle``; ``commanded`` (relative
+        mm/rad) is the start when there is no previous solution."""
+        self.cycle = cycle
+        lengths = [p + z for p, z in zip(feedback.positions_mm, active.geometry.zero_lengths)]
+        guess = self._absolute or active.absolute(commanded)
+        result = forward_kinematics(active.geometry.legs, lengths, guess, self._tolerance_mm, self._max_iterations)
+        if result.ok:
+            self._absolute = result.pose
+            self.pose = tuple(a - h for a, h in zip(result.pose, active.home))
+        else:
+            self._absolute = self.pose = None
+            self.failures += 1
+
+    def geometry_changed(self) -> None:
+        """Another model: start from the commanded pose and measure at the next :meth:`due`."""
+        self._absolute = None
+        self.cycle = -self.every_cycles

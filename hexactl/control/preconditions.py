@@ -1,0 +1,148 @@
+"""When the loop carries a command out: pure functions of a :class:`CoreView`.
+
+A view is the live :class:`~hexactl.control.core.ControlCore` or a
+:class:`~hexactl.control.snapshot.CoreSnapshot`: both have these attributes. The
+controller checks a command in the caller's thread against the latest snapshot for an
+immediate answer; the loop checks it again against itself when it carries the command
+out (the state may have moved). Each check returns a :data:`Refusal`.
+"""
+
+from __future__ import annotations
+
+from math import isnan
+from typing import Protocol
+
+from hexactl.control.hardware import ActuatorState, FeedbackSnapshot
+from hexactl.control.planning import ActiveGeometry, LegLock
+from hexactl.control.results import ErrorCode
+from hexactl.control.sequence_player import SequencePhase, SequenceProgress
+from hexactl.control.snapshot import ControlState, MotionState
+
+Refusal = tuple[ErrorCode, str] | None  # (code, message) or None when allowed
+
+
+class CoreView(Protocol):
+    """What the checks read (read-only); poses relative mm/rad, legs sensor mm."""
+
+    @property
+    def state(self) -> ControlState: ...
+    @property
+    def motion(self) -> MotionState: ...
+    @property
+    def sequence(self) -> SequenceProgress | None: ...
+    @property
+    def feedback(self) -> FeedbackSnapshot | None: ...
+    @property
+    def pose_measured(self) -> tuple[float, ...] | None: ...
+    @property
+    def active(self) -> ActiveGeometry: ...
+    @property
+    def lock(self) -> LegLock | None: ...
+    @property
+    def ramp_active(self) -> bool: ...
+
+
+def _enabled(view: CoreView) -> Refusal:
+    if view.state is ControlState.ENABLED:
+        return None
+    if view.state in (ControlState.FAULT, ControlState.ESTOP):
+        return ErrorCode.LATCHED, f"{view.state.value} is latched: reset first"
+    return ErrorCode.NOT_ENABLED, "the controller is disabled: enable first"
+
+
+def _at_rest(view: CoreView) -> Refusal:
+    if view.sequence is not None:
+        return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
+    if view.motion is not MotionState.HOLDING:
+        return ErrorCode.BUSY, "the platform is moving: stop first"
+    return None
+
+
+def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
+    if view.state is ControlState.ENABLED:
+        return ErrorCode.ALREADY_ENABLED, "already enabled"
+    if view.state is not ControlState.DISABLED:
+        return ErrorCode.LATCHED, f"{view.state.value} is latched: reset first"
+    if view.feedback is None:
+        return ErrorCode.HEARTBEAT_MISSING, "no feedback from the actuators yet"
+    low, high = view.active.stroke
+    for leg, actuator in enumerate(view.feedback.actuators, start=1):
+        if not actuator.heartbeat_age_s <= heartbeat_timeout_s:
+            return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s"
+        if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
+            return ErrorCode.ACTUATOR_FAULT, f"leg {leg}: {actuator.state.name}, fault bits 0x{actuator.fault_bits:x}"
+        if isnan(actuator.position_mm):
+            return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no position reported yet"
+        if not low <= actuator.position_mm <= high:
+            return ErrorCode.OUTSIDE_STROKE, f"leg {leg} at {actuator.position_mm:.3f} mm, outside the stroke [{low:g}, {high:g}] mm"
+    if view.pose_measured is None:
+        return ErrorCode.POSE_UNKNOWN, "forward kinematics of the feedback failed: the platform's pose is unknown"
+    return None
+
+
+def check_disable(view: CoreView) -> Refusal:
+    return _enabled(view) or _at_rest(view)
+
+
+def check_move(view: CoreView) -> Refusal:
+    if refusal := _enabled(view):
+        return refusal
+    if view.sequence is not None:
+        return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
+    return None
+
+
+def check_lock(view: CoreView) -> Refusal:
+    if refusal := _enabled(view) or _at_rest(view):
+        return refusal
+    if view.lock is not None:
+        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is already locked"
+    if view.ramp_active:
+        return ErrorCode.BUSY, "a calibration change is still ramping in"
+    return None
+
+
+def check_unlock(view: CoreView) -> Refusal:
+    if refusal := _enabled(view):
+        return refusal
+    if view.lock is None:
+        return ErrorCode.NOT_LOCKED, "no leg is locked"
+    return _at_rest(view)
+
+
+def check_play(view: CoreView) -> Refusal:
+    return _enabled(view) or _at_rest(view)
+
+
+def check_pause(view: CoreView) -> Refusal:
+    if view.sequence is None:
+        return ErrorCode.NO_SEQUENCE, "no sequence is playing"
+    if view.sequence.phase in (SequencePhase.PAUSING, SequencePhase.PAUSED):
+        return ErrorCode.ALREADY_PAUSED, "the sequence is already paused"
+    return None
+
+
+def check_resume(view: CoreView) -> Refusal:
+    if view.sequence is None:
+        return ErrorCode.NO_SEQUENCE, "no sequence is playing"
+    if view.sequence.phase is not SequencePhase.PAUSED:
+        return ErrorCode.NOT_PAUSED, f"the sequence is {view.sequence.phase.value}, not paused"
+    return None
+
+
+def check_abort(view: CoreView) -> Refusal:
+    return None if view.sequence is not None else (ErrorCode.NO_SEQUENCE, "no sequence is playing")
+
+
+def check_reset(view: CoreView) -> Refusal:
+    if view.state is ControlState.ENABLED:
+        return ErrorCode.NOT_LATCHED, "nothing to reset: the controller is enabled (disable or estop)"
+    return None
+
+
+def check_swap(view: CoreView, new: ActiveGeometry) -> Refusal:
+    # The new geometry's limits equal the hardware's (Controller.load_calibration), so
+    # the set-points already respect its stroke.
+    if view.lock is not None:
+        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: unlock before changing the calibration"
+    return None

@@ -1,0 +1,76 @@
+"""What the loop publishes each cycle: its states and an immutable :class:`CoreSnapshot`.
+
+Other threads read the latest snapshot (one reference, swapped once a cycle); the
+controller checks its preconditions (:mod:`~hexactl.control.preconditions`) against it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+from hexactl.control import commands as cmd
+from hexactl.control.hardware import FeedbackSnapshot, LinkHealth
+from hexactl.control.planning import ActiveGeometry, LegLock
+from hexactl.control.sequence_player import SequenceProgress, SequenceReport
+from hexactl.control.supervisor import Fault
+
+
+class ControlState(StrEnum):
+    DISABLED = "disabled"
+    ENABLED = "enabled"
+    FAULT = "fault"
+    ESTOP = "estop"
+
+
+class MotionState(StrEnum):
+    HOLDING = "holding"  # at rest on the target (also whenever not ENABLED)
+    MOVING = "moving"
+    STOPPING = "stopping"  # braking to rest after stop, pause or abort
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """Something the loop did or refused, for the log; ``t_ns`` monotonic."""
+
+    t_ns: int
+    code: str
+    message: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CoreSnapshot:
+    """What the loop looked like at the end of cycle ``cycle`` (``t_ns`` monotonic).
+
+    Poses relative to the zero posture in mm and rad; ``trajectory`` the generator's
+    (position, velocity, acceleration), which a new plan starts from, and ``goal`` its
+    target (None while braking); set-points and
+    feedback sensor mm. ``clamped_cycles``: cycles in which the guard changed a
+    set-point (each one means a plan was wrong); ``clamped_legs``: bit mask of the
+    legs it ever changed.
+    """
+
+    t_ns: int
+    cycle: int
+    state: ControlState
+    motion: MotionState
+    epoch: int
+    pose_command: tuple[float, ...]
+    trajectory: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
+    goal: tuple[float, ...] | None
+    pose_measured: tuple[float, ...] | None
+    setpoints: tuple[float, ...]
+    feedback: FeedbackSnapshot | None
+    link: LinkHealth | None
+    lock: LegLock | None
+    active: ActiveGeometry
+    previous: ActiveGeometry | None
+    ramp_active: bool
+    sequence: SequenceProgress | None
+    last_sequence: SequenceReport | None
+    faults: tuple[Fault, ...]
+    events: tuple[Event, ...]
+    outcomes: tuple[cmd.Outcome, ...]
+    clamped_cycles: int
+    clamped_legs: int
+    fk_failures: int

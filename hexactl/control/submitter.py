@@ -1,0 +1,57 @@
+"""Handing commands to the loop and reading its verdicts, by ticket."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import replace
+
+from hexactl.control import commands as cmd
+from hexactl.control.config import ControllerConfig
+from hexactl.control.host import LoopHost
+from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S
+
+class CommandSubmitter:
+    """Queues commands on ``host`` with tickets from ``ticket_start`` on (facades sharing
+    one loop take disjoint ranges: outcomes are found by ticket) and, with the loop running
+    by itself, waits at most ``config.command_timeout_s`` for each verdict."""
+
+    def __init__(self, host: LoopHost, config: ControllerConfig, ticket_start: int = 1) -> None:
+        self._host = host
+        self._config = config
+        self._tickets = itertools.count(ticket_start)  # next() on a count is atomic in CPython
+
+    def outcome(self, ticket: int) -> CommandResult | None:
+        """The loop's verdict on command ``ticket`` (None if not carried out yet, or too
+        long ago to be remembered)."""
+        for outcome in reversed(self._host.snapshot.outcomes):
+            if outcome.ticket == ticket:
+                if outcome.code is None:
+                    return CommandResult.success(outcome.message, ticket=ticket)
+                return CommandResult.failure(outcome.code, outcome.message, ticket=ticket)
+        return None
+
+    def submit(self, factory: Callable[[int], cmd.Command], message: str, *, deadline_ns: int | None = None,
+               **details: object) -> CommandResult:
+        """Queue the command ``factory`` builds for its ticket; with the loop running by
+        itself, wait for its verdict (``message`` and ``details`` join an accepted one).
+        With ``deadline_ns`` (monotonic) the loop refuses it as ``expired`` once that has
+        passed. ``loop_failed`` if the loop died; ``loop_timeout`` if no verdict came in time."""
+        report = self._host.report(PERCENTILES_MAX_AGE_S)  # only its liveness is read
+        if report.failure is not None:
+            return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {report.failure}")
+        ticket = next(self._tickets)
+        self._host.submit(replace(factory(ticket), deadline_ns=deadline_ns))
+        if not report.running:
+            return CommandResult.success(message, ticket=ticket, pending=True, **details)
+        deadline = time.monotonic() + self._config.command_timeout_s
+        while time.monotonic() < deadline:
+            verdict = self.outcome(ticket)
+            if verdict is not None:
+                return CommandResult(verdict.ok, verdict.error, message if verdict.ok else verdict.message,
+                                     {**verdict.details, **details})
+            time.sleep(self._config.loop.period_s / 2)
+        return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
+                                     "be carried out", ticket=ticket)

@@ -1,0 +1,133 @@
+"""Supervision of the actuators and the link, and the E-stop's timing.
+
+:class:`Supervisor` decides; the core acts (latches FAULT or ESTOP, sends). While
+ENABLED, :meth:`Supervisor.faults` lists what is wrong this cycle: an actuator silent
+longer than ``heartbeat_timeout_s``, reporting a fault, in another state than the one
+it was told to reach (after ``state_timeout_s`` to get there), or not applying the
+set-points (more than ``setpoint_lag_s`` behind); the link failed; too many set-point
+sends failed in a row. In any state, an actuator reporting E-stop is the hardware
+chain's E-stop (:meth:`Supervisor.estop_reported`), except in the grace time a reset
+gives the actuators to leave it.
+
+E-stop timing: while ESTOP is latched the E-stop is re-sent every ``estop_repeat_s``;
+a reset's CLEAR_FAULT waits until ``estop_clear_holdoff_s`` after the loop's last
+E-stop, because the actuators refuse it while an E-stop is recent.
+
+Times are monotonic ns; legs 1–6. Owned by the loop thread: not thread-safe.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import ceil
+
+from hexactl.control.config import SupervisionConfig
+from hexactl.control.hardware import ACTUATOR_COUNT, LINK_FAILED_STATES, ActuatorState, FeedbackSnapshot, LinkHealth
+
+
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """Why the loop latched FAULT or ESTOP; ``leg`` 1–6 when one actuator is the cause."""
+
+    code: str
+    message: str
+    leg: int | None = None
+
+
+class Supervisor:
+    """The supervision rules and timers of one loop running every ``period_s``."""
+
+    def __init__(self, supervision: SupervisionConfig, period_s: float) -> None:
+        self.heartbeat_timeout_s = supervision.heartbeat_timeout_s
+        self._state_timeout_ns = round(supervision.state_timeout_s * 1e9)
+        self._lag_limit = ceil(supervision.setpoint_lag_s / period_s)  # cycles
+        self._max_send_failures = supervision.max_send_failures
+        self._estop_repeat_ns = round(supervision.estop_repeat_s * 1e9)
+        self._estop_clear_holdoff_ns = round(supervision.estop_clear_holdoff_s * 1e9)
+        # Per leg: the state it should report, and until when it may still be getting there.
+        self._expected = [ActuatorState.ENABLED] * ACTUATOR_COUNT
+        self._settling_until_ns = [0] * ACTUATOR_COUNT
+        self._send_failures = 0  # in a row
+        self._estop_grace_until_ns = 0  # after a reset the actuators need time to leave ESTOP
+        self._next_estop_ns = 0
+        self._last_estop_ns: int | None = None  # when the loop last sent an E-stop
+        self._clear_fault_due_ns: int | None = None  # a reset's CLEAR_FAULT waits for the E-stop hold-off
+
+    def expect(self, leg: int | None, state: ActuatorState, now_ns: int) -> None:
+        """Leg 1–6 (or all) must report ``state`` within ``state_timeout_s`` of ``now_ns``."""
+        for i in range(ACTUATOR_COUNT) if leg is None else (leg - 1,):
+            self._expected[i] = state
+            self._settling_until_ns[i] = now_ns + self._state_timeout_ns
+
+    def faults(self, feedback: FeedbackSnapshot, link: LinkHealth | None, last_sent: int, now_ns: int) -> list[Fault]:
+        """What is wrong while ENABLED (empty: nothing); ``last_sent`` the counter of the
+        last set-points sent."""
+        faults = []
+        for leg, actuator in enumerate(feedback.actuators, start=1):
+            expected = self._expected[leg - 1]
+            if not actuator.heartbeat_age_s <= self.heartbeat_timeout_s:
+                faults.append(Fault("heartbeat_lost", f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s", leg))
+            elif actuator.state is ActuatorState.FAULT or actuator.fault_bits:
+                faults.append(Fault("actuator_fault", f"leg {leg} reports fault bits 0x{actuator.fault_bits:x}", leg))
+            elif actuator.state is not expected:
+                if now_ns >= self._settling_until_ns[leg - 1]:
+                    faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected {expected.name}", leg))
+            elif self._settling_until_ns[leg - 1]:
+                self._settling_until_ns[leg - 1] = 0  # got there: from now on any deviation counts
+            elif expected is ActuatorState.ENABLED and last_sent - actuator.setpoint_counter > self._lag_limit:
+                faults.append(Fault("setpoints_not_applied", f"leg {leg} applied set-point {actuator.setpoint_counter}, "
+                                    f"last sent {last_sent}", leg))
+        if link is not None and link.bus_state in LINK_FAILED_STATES:
+            faults.append(Fault("link_failed", f"bus {link.bus_state.value}" + (f": {link.detail}" if link.detail else "")))
+        if self._send_failures >= self._max_send_failures:
+            faults.append(Fault("send_failed", f"{self._send_failures} set-point sends failed in a row"))
+        return faults
+
+    def sent(self, ok: bool) -> None:
+        """Count a set-point send that failed (``ok`` False) or end the run of failures."""
+        self._send_failures = 0 if ok else self._send_failures + 1
+
+    def enabled(self, now_ns: int) -> None:
+        """The actuators were told to enable at ``now_ns``: expect ENABLED, forget old send failures."""
+        self.expect(None, ActuatorState.ENABLED, now_ns)
+        self._send_failures = 0
+
+    def estop_reported(self, feedback: FeedbackSnapshot, now_ns: int) -> bool:
+        """An actuator reports E-stop, outside a reset's grace time."""
+        if now_ns < self._estop_grace_until_ns:
+            return False
+        for actuator in feedback.actuators:  # every cycle, in any state: a loop, not any() of a generator
+            if actuator.state is ActuatorState.ESTOP:
+                return True
+        return False
+
+    def estop_sent(self, now_ns: int) -> None:
+        """The loop sent an E-stop at ``now_ns`` (latching ESTOP or repeating it)."""
+        self._last_estop_ns = now_ns
+        self._next_estop_ns = now_ns + self._estop_repeat_ns
+
+    def estop_due(self, now_ns: int) -> bool:
+        """While ESTOP is latched: time to repeat the E-stop."""
+        return now_ns >= self._next_estop_ns
+
+    def latched_estop(self) -> None:
+        """ESTOP latched again: a reset's CLEAR_FAULT still waiting is not sent."""
+        self._clear_fault_due_ns = None
+
+    def reset(self, now_ns: int) -> None:
+        """A reset at ``now_ns``: schedule CLEAR_FAULT once the hold-off since the loop's
+        last E-stop has passed (at once after a FAULT without E-stops), and ignore the
+        actuators' E-stop for the state timeout after it, while they leave ESTOP."""
+        due = now_ns
+        if self._last_estop_ns is not None:
+            due = max(due, self._last_estop_ns + self._estop_clear_holdoff_ns)
+        self._clear_fault_due_ns = due
+        self._estop_grace_until_ns = due + self._state_timeout_ns
+
+    def clear_fault_due(self, now_ns: int) -> bool:
+        """True once, when a reset's CLEAR_FAULT is to be sent."""
+        due = self._clear_fault_due_ns
+        if due is None or now_ns < due:
+            return False
+        self._clear_fault_due_ns = None
+        return True

@@ -1,0 +1,106 @@
+"""What the controller reports: ``status`` and each cycle's telemetry, built from the
+loop's latest report (:class:`~hexactl.control.host.LoopReport`). Poses relative to the
+zero posture, mm and degrees; legs in actuator sensor mm."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
+
+from hexactl.control.core import CoreSnapshot, Fault
+from hexactl.control.host import LoopReport
+from hexactl.control.realtime import RealtimeReport
+from hexactl.control.results import CommandResult
+from hexactl.control.stats import LoopStats
+from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+
+PERCENTILES_MAX_AGE_S = 0.25
+"""Status and telemetry recompute the loop's percentiles (a sort of its window) at most this often."""
+
+
+@dataclass(frozen=True, slots=True)
+class SequenceTelemetry:
+    """The playing sequence: ``index`` 1-based waypoint being approached or dwelt at."""
+
+    name: str
+    index: int
+    total: int
+    phase: str
+
+
+@dataclass(frozen=True, slots=True)
+class Telemetry:
+    """One cycle's picture. ``t``: monotonic time of the cycle, s. Poses relative to the
+    zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
+    solution). Legs in sensor mm; an actuator not heard from yet reads NaN in
+    ``leg_feedback`` (and, while DISABLED, in ``leg_setpoints``, which then mirror the
+    feedback); ``leg_feedback`` is None before the first read."""
+
+    t: float
+    state: str
+    motion: str
+    pose_command: tuple[float, ...]
+    pose_measured: tuple[float, ...] | None
+    leg_setpoints: tuple[float, ...]
+    leg_feedback: tuple[float, ...] | None
+    locked_leg: int | None
+    calibration_id: str
+    sequence: SequenceTelemetry | None
+    faults: tuple[Fault, ...]
+    loop: LoopStats
+    realtime: RealtimeReport | None = None  # what the loop thread's real-time set-up obtained
+
+
+def status_result(report: LoopReport) -> CommandResult:
+    """``status``: state, calibration, sequence, faults, the last ten events and the loop's health."""
+    s = report.snapshot
+    return CommandResult.success(
+        s.state.value,
+        state=s.state.value,
+        motion=s.motion.value,
+        locked_leg=s.lock.leg if s.lock else None,
+        calibration_id=s.active.calibration_id,
+        calibration_source=s.active.source,
+        previous_calibration_id=s.previous.calibration_id if s.previous else None,
+        calibration_ramping=s.ramp_active,
+        sequence=asdict(sequence_telemetry(s)) if s.sequence else None,
+        last_sequence={"name": s.last_sequence.name, "status": s.last_sequence.status,
+                       "records": len(s.last_sequence.records)} if s.last_sequence else None,
+        faults=[asdict(f) for f in s.faults],
+        events=[asdict(e) for e in s.events[-10:]],
+        loop_running=report.running,
+        loop_failure=report.failure,
+        realtime=asdict(report.realtime) if report.realtime else None,
+    )
+
+
+def telemetry_of(report: LoopReport) -> Telemetry:
+    """The report's cycle as telemetry; the core's guard clamps and FK failures join the loop's statistics."""
+    s = report.snapshot
+    stats = replace(report.stats, guard_clamps=s.clamped_cycles, fk_failures=s.fk_failures)
+    return Telemetry(
+        t=s.t_ns / 1e9,
+        state=s.state.value,
+        motion=s.motion.value,
+        pose_command=mm_deg(s.pose_command),
+        pose_measured=mm_deg(s.pose_measured) if s.pose_measured is not None else None,
+        leg_setpoints=s.setpoints,
+        leg_feedback=s.feedback.positions_mm if s.feedback else None,
+        locked_leg=s.lock.leg if s.lock else None,
+        calibration_id=s.active.calibration_id,
+        sequence=sequence_telemetry(s),
+        faults=s.faults,
+        loop=stats,
+        realtime=report.realtime,
+    )
+
+
+def sequence_telemetry(s: CoreSnapshot) -> SequenceTelemetry | None:
+    """The playing sequence's progress (None: none playing)."""
+    p = s.sequence
+    return SequenceTelemetry(p.name, p.waypoint, p.total, p.phase.value) if p else None
+
+
+def mm_deg(relative_mm_rad: Sequence[float]) -> tuple[float, ...]:
+    """A relative pose in mm and radians as reported: mm and degrees, plain floats."""
+    return tuple(float(v) for v in pose_mm_rad_to_mm_deg(relative_mm_rad))

@@ -1,0 +1,48 @@
+"""The measured pose alone: forward kinematics of the feedback, warm-started, at its rate."""
+
+from __future__ import annotations
+
+import pytest
+
+from hexactl.control.hardware import ActuatorFeedback, ActuatorState, FeedbackSnapshot
+from hexactl.control.planning import ActiveGeometry
+from hexactl.control.pose_measurement import PoseMeasurement
+from hexactl.kinematics.inverse import sensor_setpoints
+
+POSE = (12.0, -8.0, 5.0, 0.02, -0.01, 0.03)  # relative mm/rad
+
+
+def feedback_at(active: ActiveGeometry, positions) -> FeedbackSnapshot:
+    return FeedbackSnapshot(tuple(ActuatorFeedback(p, 0.0, ActuatorState.ENABLED, 0, 0.0, 0) for p in positions), 0)
+
+
+@pytest.fixture
+def active(geometry) -> ActiveGeometry:
+    return ActiveGeometry.of(geometry, "nominal")
+
+
+def test_it_finds_the_pose_the_legs_are_at(active):
+    measurement = PoseMeasurement(5, 1e-6, 10)
+    legs = sensor_setpoints(active.geometry.legs, active.absolute(POSE))
+    measurement.measure(1, feedback_at(active, legs), active, (0.0,) * 6)
+    assert measurement.pose == pytest.approx(POSE, abs=1e-6)
+    assert measurement.failures == 0 and measurement.cycle == 1
+
+
+def test_it_runs_every_n_cycles_and_at_once_after_a_geometry_change(active):
+    measurement = PoseMeasurement(5, 1e-6, 10)
+    measurement.measure(10, feedback_at(active, sensor_setpoints(active.geometry.legs, active.absolute(POSE))), active, POSE)
+    assert [c for c in range(10, 21) if measurement.due(c)] == list(range(15, 21))
+    measurement.geometry_changed()
+    assert measurement.due(11)
+
+
+def test_a_failure_is_counted_and_forgets_the_pose(active):
+    measurement = PoseMeasurement(1, 1e-6, 10)
+    legs = sensor_setpoints(active.geometry.legs, active.absolute(POSE))
+    measurement.measure(1, feedback_at(active, legs), active, POSE)
+    measurement.measure(2, feedback_at(active, [float("nan")] * 6), active, POSE)
+    assert measurement.pose is None and measurement.failures == 1
+    # and it starts again from the commanded pose, not from the lost solution
+    measurement.measure(3, feedback_at(active, legs), active, POSE)
+    assert measurement.pose == pytest.approx(POSE, abs=1e-6)

@@ -1,0 +1,134 @@
+"""The supervisor alone: what it declares a fault while ENABLED, the actuators' E-stop
+and its grace after a reset, and the E-stop's timing (repeat, CLEAR_FAULT hold-off)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from hexactl.control.config import SupervisionConfig
+from hexactl.control.hardware import ActuatorFeedback, ActuatorState, BusState, FeedbackSnapshot, LinkHealth
+from hexactl.control.supervisor import Supervisor
+
+PERIOD_S = 0.002
+CONFIG = SupervisionConfig(heartbeat_timeout_s=0.05, state_timeout_s=0.5, setpoint_lag_s=0.01, max_send_failures=3,
+                           estop_repeat_s=0.1, estop_clear_holdoff_s=0.3)
+MS = 1_000_000
+HEALTHY = LinkHealth(BusState.ACTIVE, 0)
+
+
+def feedback(state=ActuatorState.ENABLED, counter=100, **leg) -> FeedbackSnapshot:
+    """Six actuators in ``state`` that applied set-point ``counter``; ``leg`` ({leg_n: changes}) alters some."""
+    healthy = ActuatorFeedback(100.0, 0.0, state, 0, 0.001, counter)
+    return FeedbackSnapshot(tuple(replace(healthy, **leg.get(f"leg{n}", {})) for n in range(1, 7)), 0)
+
+
+@pytest.fixture
+def supervisor() -> Supervisor:
+    supervisor = Supervisor(CONFIG, PERIOD_S)
+    supervisor.enabled(0)
+    return supervisor
+
+
+def codes(faults) -> list[tuple[str, int | None]]:
+    return [(f.code, f.leg) for f in faults]
+
+
+def test_healthy_actuators_that_reached_their_state_give_no_fault(supervisor):
+    assert supervisor.faults(feedback(), HEALTHY, 100, 1 * MS) == []
+
+
+def test_each_fault_is_named_with_its_leg(supervisor):
+    bad = feedback(leg2={"heartbeat_age_s": 0.06}, leg4={"fault_bits": 0x8}, leg5={"state": ActuatorState.FAULT})
+    assert codes(supervisor.faults(bad, HEALTHY, 100, 1 * MS)) == [
+        ("heartbeat_lost", 2), ("actuator_fault", 4), ("actuator_fault", 5)]
+    never_heard = feedback(leg1={"heartbeat_age_s": float("inf")})
+    assert codes(supervisor.faults(never_heard, HEALTHY, 100, 1 * MS)) == [("heartbeat_lost", 1)]
+
+
+def test_a_leg_has_the_state_timeout_to_reach_its_state_then_none(supervisor):
+    late = feedback(leg3={"state": ActuatorState.DISABLED})
+    assert supervisor.faults(late, HEALTHY, 100, 499 * MS) == []
+    assert codes(supervisor.faults(late, HEALTHY, 100, 500 * MS)) == [("actuator_state", 3)]
+    # Once there, leaving the state is a fault at once, however early.
+    supervisor.enabled(1000 * MS)
+    assert supervisor.faults(feedback(), HEALTHY, 100, 1001 * MS) == []
+    assert codes(supervisor.faults(late, HEALTHY, 100, 1002 * MS)) == [("actuator_state", 3)]
+
+
+def test_a_locked_leg_is_expected_locked_and_not_to_follow_setpoints(supervisor):
+    supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)  # all arrived in ENABLED
+    supervisor.expect(2, ActuatorState.LOCKED, 10 * MS)
+    locked = feedback(counter=100, leg2={"state": ActuatorState.LOCKED, "setpoint_counter": 3})
+    assert supervisor.faults(locked, HEALTHY, 100, 11 * MS) == []  # arrives
+    assert supervisor.faults(locked, HEALTHY, 100, 12 * MS) == []  # its stale counter does not count
+    assert codes(supervisor.faults(feedback(), HEALTHY, 100, 13 * MS)) == [("actuator_state", 2)]
+
+
+def test_setpoints_not_applied_for_longer_than_the_lag_is_a_fault(supervisor):
+    supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)  # arrived: from now on the counters count
+    lag = 5  # setpoint_lag_s / period, cycles
+    assert supervisor.faults(feedback(counter=100), HEALTHY, 100 + lag, 2 * MS) == []
+    assert codes(supervisor.faults(feedback(counter=100), HEALTHY, 101 + lag, 3 * MS)) == [
+        ("setpoints_not_applied", leg) for leg in range(1, 7)]
+
+
+@pytest.mark.parametrize("state,failed", [(BusState.ACTIVE, False), (BusState.WARNING, False),
+                                          (BusState.PASSIVE, False), (BusState.BUS_OFF, True), (BusState.DOWN, True)])
+def test_only_a_bus_that_sends_nothing_fails_the_link(supervisor, state, failed):
+    faults = supervisor.faults(feedback(), LinkHealth(state, 0, "driver says so"), 100, 1 * MS)
+    assert codes(faults) == ([("link_failed", None)] if failed else [])
+    if failed:
+        assert faults[0].message == f"bus {state.value}: driver says so"
+
+
+def test_send_failures_in_a_row_fault_and_a_success_ends_the_run(supervisor):
+    for _ in range(2):
+        supervisor.sent(False)
+    assert supervisor.faults(feedback(), HEALTHY, 100, 1 * MS) == []
+    supervisor.sent(True)
+    for _ in range(2):
+        supervisor.sent(False)
+    assert supervisor.faults(feedback(), HEALTHY, 100, 1 * MS) == []
+    supervisor.sent(False)
+    assert codes(supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)) == [("send_failed", None)]
+    supervisor.enabled(2 * MS)  # enabling starts afresh
+    assert supervisor.faults(feedback(), HEALTHY, 100, 3 * MS) == []
+
+
+def test_an_actuator_estop_is_reported_except_in_a_resets_grace(supervisor):
+    estop = feedback(leg6={"state": ActuatorState.ESTOP})
+    assert not supervisor.estop_reported(feedback(), 0)
+    assert supervisor.estop_reported(estop, 0)
+    supervisor.reset(1000 * MS)  # no E-stop sent by the loop: CLEAR_FAULT at once, grace the state timeout
+    assert not supervisor.estop_reported(estop, 1499 * MS)
+    assert supervisor.estop_reported(estop, 1500 * MS)
+
+
+def test_the_estop_repeats_while_latched(supervisor):
+    supervisor.estop_sent(10 * MS)
+    assert not supervisor.estop_due(109 * MS)
+    assert supervisor.estop_due(110 * MS)
+    supervisor.estop_sent(110 * MS)
+    assert not supervisor.estop_due(209 * MS)
+
+
+def test_clear_fault_waits_for_the_holdoff_after_the_last_estop_and_is_sent_once(supervisor):
+    supervisor.estop_sent(100 * MS)
+    supervisor.reset(200 * MS)
+    assert not supervisor.clear_fault_due(399 * MS)
+    assert supervisor.clear_fault_due(400 * MS)
+    assert not supervisor.clear_fault_due(401 * MS)
+    # the grace runs from the CLEAR_FAULT, not from the reset
+    estop = feedback(leg1={"state": ActuatorState.ESTOP})
+    assert not supervisor.estop_reported(estop, 899 * MS)
+    assert supervisor.estop_reported(estop, 900 * MS)
+
+
+def test_a_reset_without_estops_clears_at_once_and_a_new_estop_cancels_it(supervisor):
+    supervisor.reset(50 * MS)
+    assert supervisor.clear_fault_due(50 * MS)
+    supervisor.reset(60 * MS)
+    supervisor.latched_estop()
+    assert not supervisor.clear_fault_due(10_000 * MS)
