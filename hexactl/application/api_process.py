@@ -217,4 +217,4 @@ def _measured_pose(controller: Controller) -> tuple[float, ...] | None:
     snapshot = controller.snapshot
     if snapshot.pose_measured is None:
         return None
-    return tuple(snapshot.active.absolute(snapshot.pose_measured))
+    return tuple(snapshot.active.absolute_from_relative_mm_rad(snapshot.pose_measured))

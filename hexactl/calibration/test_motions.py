@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-Pose = tuple[float, float, float, float, float, float]
+from hexactl.kinematics.axes import RelativeMmDeg
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,11 +23,11 @@ class TestMotion:
 
     name: str
     title: str
-    waypoints: tuple[Pose, ...]
+    waypoints: tuple[RelativeMmDeg, ...]
     axis: int | None
 
 
-def _single_axis(axis: int, values: tuple[float, ...]) -> tuple[Pose, ...]:
+def _single_axis(axis: int, values: tuple[float, ...]) -> tuple[RelativeMmDeg, ...]:
     poses = []
     for value in values:
         pose = [0.0] * 6
@@ -59,7 +59,7 @@ COMPOUND = TestMotion(
 
 PAPER_TEST_MOTIONS: tuple[TestMotion, ...] = (X_SWEEP, Y_ROTATION, COMPOUND)
 
-PAPER_TABLE_1: dict[str, Pose] = {
+PAPER_TABLE_1: dict[str, RelativeMmDeg] = {
     "instruction": (100.0, 100.0, 100.0, 5.0, 5.0, 5.0),
     "before calibration": (99.95, 99.66, 99.31, 4.94, 5.22, 5.51),
     "after calibration": (100.29, 99.79, 100.15, 5.02, 5.06, 5.06),

@@ -58,8 +58,8 @@ def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig)
         return CommandResult.failure(ErrorCode.INVALID_GEOMETRY,
                                      f"calibration {new.calibration_id} refused: {violations[0].message}",
                                      violations=[asdict(v) for v in violations])
-    change = max(abs(a - b) for a, b in zip(sensor_setpoints(new.geometry.legs, new.absolute(s.pose_command)),
-                                            s.setpoints))
+    at_command = sensor_setpoints(new.geometry.legs, new.absolute_from_relative_mm_rad(s.pose_command))
+    change = max(abs(a - b) for a, b in zip(at_command, s.setpoints))
     if s.state is not ControlState.DISABLED and change > config.calibration_max_change_mm:
         return CommandResult.failure(ErrorCode.CALIBRATION_CHANGE_TOO_LARGE,
                                      f"calibration {new.calibration_id} would move a leg by {change:.2f} mm "
@@ -78,7 +78,7 @@ def _ramp_refusal(s: CoreSnapshot, new: ActiveGeometry) -> CommandResult | None:
         return None
     fractions = np.linspace(0.0, 1.0, RAMP_SAMPLES)
     start = np.array(s.setpoints)
-    end = np.array(sensor_setpoints(new.geometry.legs, new.absolute(s.pose_command)))
+    end = np.array(sensor_setpoints(new.geometry.legs, new.absolute_from_relative_mm_rad(s.pose_command)))
     ramp = start + np.outer(fractions, end - start)
     guess = mm_deg(s.pose_command)
     for model, which in ((new, "the new calibration"), (s.active, "the active one")):

@@ -37,7 +37,7 @@ class CalibrationRamp:
         """Ramp from ``sent`` (the set-points being sent) to ``new``'s set-points at
         ``pose`` (relative mm/rad); replaces a ramp under way (``sent`` includes it).
         Nothing to ramp when they are equal."""
-        target = sensor_setpoints(new.geometry.legs, new.absolute(pose))
+        target = sensor_setpoints(new.geometry.legs, new.absolute_from_relative_mm_rad(pose))
         offset = [s - t for s, t in zip(sent, target)]
         largest = max(abs(o) for o in offset)
         if largest > 0.0:

@@ -41,11 +41,10 @@ from hexactl.control.trajectory import MotionLimits, preview
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import sensor_setpoints_batch
 from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
+from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmDeg, RelativeMmRad, validate_pose_values
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
-from hexactl.kinematics.axes import validate_pose_values
 from hexactl.kinematics.workspace import Violation, assess_poses
 
-Pose = tuple[float, float, float, float, float, float]
 
 MAX_MOTION_S = 600.0
 """The longest motion one plan may hold, s: a move, or a sequence's moves together (dwells
@@ -70,7 +69,7 @@ class ActiveGeometry:
     geometry: Geometry
     calibration_id: str
     source: str
-    home: Pose
+    home: AbsoluteMmRad
     stroke: tuple[float, float]
 
     @classmethod
@@ -78,8 +77,9 @@ class ActiveGeometry:
         home = tuple(float(v) for v in pose_mm_deg_to_mm_rad(geometry.home))
         return cls(geometry, calibration_id, source, home, geometry.limits.stroke)  # type: ignore[arg-type]
 
-    def absolute(self, relative: Sequence[float]) -> Pose:
-        """Absolute mm/rad of a relative mm/rad pose."""
+    def absolute_from_relative_mm_rad(self, relative: Sequence[float]) -> AbsoluteMmRad:
+        """Absolute mm/rad of a pose relative to this zero posture in mm/rad (the users' relative
+        poses are mm/deg: :func:`~hexactl.kinematics.pose.absolute_from_relative`)."""
         return tuple(h + r for h, r in zip(self.home, relative))  # type: ignore[return-value]
 
 
@@ -113,7 +113,7 @@ class Segment:
     in leg-lock mode); ``time_scale``/``velocity_scale`` as in
     :func:`~hexactl.control.trajectory.configure_input`; ``duration_s`` as planned."""
 
-    goal: Pose
+    goal: RelativeMmRad
     time_scale: float
     velocity_scale: float
     dwell_s: float
@@ -126,7 +126,7 @@ class PathViolation(Violation):
     ``waypoint`` (1-based)'s path that violates it; ``pose`` relative mm/deg."""
 
     waypoint: int
-    pose: Pose
+    pose: RelativeMmDeg
 
 
 @dataclass(frozen=True, slots=True)
@@ -264,7 +264,7 @@ def _number_in(value: object, low: float, high: float, low_open: bool = False) -
     return isfinite(value) and (low < value if low_open else low <= value) and value <= high
 
 
-def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> Pose | Refusal:
+def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> RelativeMmRad | Refusal:
     """The goal in relative mm/rad; in leg-lock mode projected onto the constraint."""
     goal = tuple(float(v) for v in pose_mm_deg_to_mm_rad([float(v) for v in pose_mm_deg]))
     if context.lock is None:
@@ -288,9 +288,10 @@ def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[flo
     """:func:`project_to_locked_leg` of a relative mm/rad pose, from ``start`` (relative
     mm/rad, default the pose); the result's pose is absolute."""
     geometry = active.geometry
-    return project_to_locked_leg(geometry.legs, active.absolute(relative), lock.leg, lock.length_mm(geometry),
+    return project_to_locked_leg(geometry.legs, active.absolute_from_relative_mm_rad(relative), lock.leg,
+                                 lock.length_mm(geometry),
                                  geometry.characteristic_length_mm, max_iterations=max_iterations,
-                                 start=None if start is None else active.absolute(start))
+                                 start=None if start is None else active.absolute_from_relative_mm_rad(start))
 
 
 def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float], previous_target: Sequence[float],
@@ -308,7 +309,7 @@ def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float],
     return project_locked(active, lock, target, max_iterations, start=start)
 
 
-def _plan_segment(context: PlanningContext, start: State, goal: Pose, waypoint: Waypoint,
+def _plan_segment(context: PlanningContext, start: State, goal: RelativeMmRad, waypoint: Waypoint,
                   motion_left_s: float) -> tuple[Segment, NDArray] | Refusal:
     """The segment to ``goal`` and its samples; refused before sampling when it would move
     for longer than ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan)."""
@@ -348,7 +349,7 @@ def _samples(context: PlanningContext, start: State, trajectory) -> NDArray | Re
     if lock is None:
         return np.array(targets, dtype=float)
     active = context.active
-    projected: list[Pose] = []
+    projected: list[RelativeMmRad] = []
     for cycle, target in enumerate(targets):
         result = (track_locked(active, lock, target, targets[cycle - 1], projected[-1], context.lock_cycle_iterations)
                   if cycle else project_locked(active, lock, target))
@@ -372,7 +373,7 @@ def _peak_leg_speed(context: PlanningContext, samples: NDArray) -> float:
     return float(np.max(np.abs(np.diff(setpoints, axis=0)))) / context.period_s
 
 
-def _relative(active: ActiveGeometry, absolute: Sequence[float]) -> Pose:
+def _relative(active: ActiveGeometry, absolute: Sequence[float]) -> RelativeMmRad:
     return tuple(a - h for a, h in zip(absolute, active.home))  # type: ignore[return-value]
 
 

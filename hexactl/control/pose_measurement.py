@@ -40,7 +40,7 @@ class PoseMeasurement:
         mm/rad) is the start when there is no previous solution."""
         self.cycle = cycle
         lengths = [p + z for p, z in zip(feedback.positions_mm, active.geometry.zero_lengths)]
-        guess = self._absolute or active.absolute(commanded)
+        guess = self._absolute or active.absolute_from_relative_mm_rad(commanded)
         result = forward_kinematics(active.geometry.legs, lengths, guess, self._tolerance_mm, self._max_iterations)
         if result.ok:
             self._absolute = result.pose

@@ -67,7 +67,7 @@ class SetpointPath:
                 return Fault("leg_lock_projection", f"leg-lock projection failed: {projected.status.name.lower()} "
                              f"after {projected.iterations} iterations", lock.leg)
             pose = tuple(a - h for a, h in zip(projected.pose, active.home))
-        desired = self.ramp.apply(sensor_setpoints(active.geometry.legs, active.absolute(pose)))
+        desired = self.ramp.apply(sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad(pose)))
         if lock is not None:
             desired[lock.leg - 1] = lock.sensor_mm  # exactly the locked value, not IK's rounding of it
         setpoints, clamped = guard_setpoints(desired, self.setpoints, active.stroke, self._max_step_mm)

@@ -7,6 +7,11 @@ its orientation T = Rz(yaw)·Ry(pitch)·Rx(roll).
   sequences): offsets from the zero posture ``home``, component by component.
 - *Absolute* poses, in mm and radians, are what the kinematics works with. Measurement
   files carry absolute poses (in mm and degrees).
+
+One name per convention, for every pose held as six floats (arrays of poses keep numpy's
+types; the functions below convert between the conventions):
+:data:`~hexactl.kinematics.axes.RelativeMmDeg`, :data:`~hexactl.kinematics.axes.RelativeMmRad`,
+:data:`~hexactl.kinematics.axes.AbsoluteMmRad`.
 """
 
 from __future__ import annotations

@@ -13,11 +13,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmDeg
 from hexactl.kinematics.forward import FkStatus, forward_kinematics
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 
-Pose = tuple[float, float, float, float, float, float]
 
 
 class PoseUnavailable(RuntimeError):
@@ -41,8 +41,8 @@ class TruePose:
     :ivar leg_lengths_mm: the true joint-to-joint lengths it was solved from
     """
 
-    absolute: Pose
-    relative: Pose
+    absolute: AbsoluteMmRad
+    relative: RelativeMmDeg
     leg_lengths_mm: tuple[float, ...]
 
 
@@ -54,7 +54,7 @@ class PhysicalPlatform:
     def __init__(self, true_geometry: Geometry, actual_positions_mm: Callable[[], Sequence[float]]) -> None:
         self.geometry = true_geometry
         self._actual_positions_mm = actual_positions_mm
-        self._guess: Pose = _as_pose(absolute_from_relative(true_geometry.home, [0.0] * 6))
+        self._guess: AbsoluteMmRad = _as_pose(absolute_from_relative(true_geometry.home, [0.0] * 6))
 
     def leg_lengths_mm(self) -> tuple[float, ...]:
         """True joint-to-joint lengths, mm: the true zero lengths plus the actual positions."""
@@ -76,6 +76,6 @@ class PhysicalPlatform:
         return TruePose(result.pose, relative, lengths)
 
 
-def _as_pose(values: Sequence[float]) -> Pose:
+def _as_pose(values: Sequence[float]) -> tuple[float, float, float, float, float, float]:
     x, y, z, roll, pitch, yaw = (float(v) for v in values)
     return (x, y, z, roll, pitch, yaw)

@@ -24,7 +24,7 @@ def active(geometry) -> ActiveGeometry:
 
 
 def ramp_from_offset(active: ActiveGeometry) -> tuple[CalibrationRamp, list[float]]:
-    target = sensor_setpoints(active.geometry.legs, active.absolute(POSE))
+    target = sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad(POSE))
     ramp = CalibrationRamp(FRACTION, PERIOD_S)
     ramp.begin([t + o for t, o in zip(target, OFFSET)], active, POSE)
     return ramp, target

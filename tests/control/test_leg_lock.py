@@ -108,7 +108,7 @@ def test_the_loops_tracking_converges_in_its_few_iterations_where_a_cold_start_d
     projection from the target itself, which stops at the same tolerance on the length."""
     iterations = ControllerConfig().lock_cycle_iterations
     active = ActiveGeometry.of(geometry, "nominal")
-    lock = LegLock(3, leg_lengths(geometry.legs, active.absolute([0.0] * 6))[2] - geometry.zero_lengths[2])
+    lock = LegLock(3, leg_lengths(geometry.legs, active.absolute_from_relative_mm_rad([0.0] * 6))[2] - geometry.zero_lengths[2])
     goal = np.subtract(project_locked(active, lock, pose_mm_deg_to_mm_rad([0, 0, 0, -15, -15, -30])).pose, active.home)
     targets = np.linspace(0.0, 1.0, 1001)[:, None] * goal  # 2 s at 500 Hz
     assert not all(project_locked(active, lock, target, iterations).ok for target in targets)  # what the loop did

@@ -128,7 +128,7 @@ def test_planning_refuses_a_path_the_loops_iterations_cannot_follow(geometry):
     budget: with one iteration per cycle no real move converges, and it says so instead of
     letting the loop fault."""
     active = ActiveGeometry.of(geometry, "nominal")
-    lock = LegLock(3, sensor_setpoints(geometry.legs, active.absolute([0.0] * 6))[2])
+    lock = LegLock(3, sensor_setpoints(geometry.legs, active.absolute_from_relative_mm_rad([0.0] * 6))[2])
     config = ControllerConfig()
     context = PlanningContext(active, config.motion, config.loop.period_s, geometry.limits.leg_velocity_mm_s, lock,
                               lock_cycle_iterations=1)

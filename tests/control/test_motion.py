@@ -28,7 +28,7 @@ class Rig:
         self.motion.start(ZERO, self.ik(ZERO))
 
     def ik(self, pose) -> list[float]:
-        return sensor_setpoints(self.active.geometry.legs, self.active.absolute(pose))
+        return sensor_setpoints(self.active.geometry.legs, self.active.absolute_from_relative_mm_rad(pose))
 
     def run(self, cycles: int) -> None:
         for _ in range(cycles):

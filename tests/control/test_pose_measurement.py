@@ -23,7 +23,7 @@ def active(geometry) -> ActiveGeometry:
 
 def test_it_finds_the_pose_the_legs_are_at(active):
     measurement = PoseMeasurement(5, 1e-6, 10)
-    legs = sensor_setpoints(active.geometry.legs, active.absolute(POSE))
+    legs = sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad(POSE))
     measurement.measure(1, feedback_at(active, legs), active, (0.0,) * 6)
     assert measurement.pose == pytest.approx(POSE, abs=1e-6)
     assert measurement.failures == 0 and measurement.cycle == 1
@@ -31,7 +31,8 @@ def test_it_finds_the_pose_the_legs_are_at(active):
 
 def test_it_runs_every_n_cycles_and_at_once_after_a_geometry_change(active):
     measurement = PoseMeasurement(5, 1e-6, 10)
-    measurement.measure(10, feedback_at(active, sensor_setpoints(active.geometry.legs, active.absolute(POSE))), active, POSE)
+    legs = sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad(POSE))
+    measurement.measure(10, feedback_at(active, legs), active, POSE)
     assert [c for c in range(10, 21) if measurement.due(c)] == list(range(15, 21))
     measurement.geometry_changed()
     assert measurement.due(11)
@@ -39,7 +40,7 @@ def test_it_runs_every_n_cycles_and_at_once_after_a_geometry_change(active):
 
 def test_a_failure_is_counted_and_forgets_the_pose(active):
     measurement = PoseMeasurement(1, 1e-6, 10)
-    legs = sensor_setpoints(active.geometry.legs, active.absolute(POSE))
+    legs = sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad(POSE))
     measurement.measure(1, feedback_at(active, legs), active, POSE)
     measurement.measure(2, feedback_at(active, [float("nan")] * 6), active, POSE)
     assert measurement.pose is None and measurement.failures == 1

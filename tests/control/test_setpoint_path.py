@@ -22,7 +22,7 @@ class Rig:
         self.path.hold(ZERO, self.ik(ZERO))
 
     def ik(self, pose) -> list[float]:
-        return sensor_setpoints(self.active.geometry.legs, self.active.absolute(pose))
+        return sensor_setpoints(self.active.geometry.legs, self.active.absolute_from_relative_mm_rad(pose))
 
 
 @pytest.fixture
@@ -57,7 +57,7 @@ def test_a_locked_leg_stays_at_its_reading_and_the_pose_moves_on_the_constraint(
         previous = target
         assert rig.path.setpoints[1] == lock.sensor_mm  # exactly, not IK's rounding
         pose = rig.path.pose_command
-        length = leg_lengths(rig.active.geometry.legs, rig.active.absolute(pose))[1]
+        length = leg_lengths(rig.active.geometry.legs, rig.active.absolute_from_relative_mm_rad(pose))[1]
         assert length == pytest.approx(lock.length_mm(rig.active.geometry), abs=1e-6)
         assert pose != list(target)  # projected
 
