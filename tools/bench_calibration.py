@@ -38,7 +38,8 @@ from hexactl.calibration.results import IdentificationOptions, Method
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.calibration.uncertainty import analyse_information, fisher_information, predict_accuracy
 from hexactl.calibration.validation import ValidationSummary, summarise_validation
-from hexactl.sim.offline_campaign import CampaignDesign, run_offline_campaign, validate_geometry
+from hexactl.calibration.campaign import CampaignDesign
+from hexactl.sim.offline_campaign import run_offline_campaign, validate_geometry
 from hexactl.sim.true_platform import true_geometry
 
 REPOSITORY = Path(__file__).resolve().parents[1]

@@ -54,7 +54,7 @@ from hexactl.calibration.validation import MotionResult, largest_stroke_error
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
-from hexactl.sim.offline_campaign import CampaignDesign
+from hexactl.calibration.campaign import CampaignDesign
 from hexactl.sim.true_platform import ManufacturingErrors, true_geometry
 
 DEMO_POSTURES_PER_LEG = 3

@@ -30,10 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.calibration.planning import PosturePlan
+from hexactl.calibration.planning import DEFAULT_CANDIDATES, PlanRequest, PosturePlan, plan_postures
 from hexactl.calibration.validation import ValidationSummary
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import leg_lengths_batch
+from hexactl.kinematics.inverse import LEG_COUNT, leg_lengths_batch
 from hexactl.kinematics.leg_lock import project_to_locked_leg
 from hexactl.kinematics.points import pose_from_points
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
@@ -49,6 +49,45 @@ only the moves the controller refuses."""
 
 _CHORD_SAMPLES = 17  # points checked along each chord, ends included
 _MAX_SPLIT_DEPTH = 8  # at most 2⁸ pieces per move: far more than any posture pair needs
+
+SENSOR_SIGMA_MM = 0.001
+"""Default noise of the simulated length sensors, 1σ, mm (a µm-resolution sensor)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CampaignDesign:
+    """The campaign's protocol: ``postures_per_leg`` leg-lock postures for each leg (0: none)
+    and ``free_postures`` with no leg locked, planned from ``candidates`` random poses in
+    ``envelope_fraction`` of the pose envelope (:class:`~hexactl.calibration.planning.PlanRequest`);
+    noise of the simulated sensors and instrument (None: the geometry's ``point_sigma_mm``);
+    one ``seed`` for planning and noise."""
+
+    postures_per_leg: int = 20
+    free_postures: int = 0
+    candidates: int = DEFAULT_CANDIDATES
+    envelope_fraction: float = 1.0
+    sensor_sigma_mm: float = SENSOR_SIGMA_MM
+    point_sigma_mm: float | None = None
+    seed: int = 0
+
+
+def plan_campaign(controller: Geometry, design: CampaignDesign) -> tuple[PosturePlan, ...]:
+    """Leg-lock plans for legs 1–6 then the free plan, on the controller's geometry.
+
+    Raises ``ValueError`` if a plan fails (its message says why).
+    """
+    # One candidate stream per plan (leg 0: free), distinct for every seed and leg.
+    requests = [PlanRequest(leg, design.postures_per_leg, candidates=design.candidates, seed=10 * design.seed + leg,
+                            envelope_fraction=design.envelope_fraction)
+                for leg in range(1, LEG_COUNT + 1) if design.postures_per_leg]
+    if design.free_postures:
+        requests.append(PlanRequest(0, design.free_postures, candidates=design.candidates, seed=10 * design.seed,
+                                    envelope_fraction=design.envelope_fraction))
+    plans = tuple(plan_postures(controller, request) for request in requests)
+    for plan in plans:
+        if not plan.ok:
+            raise ValueError(f"planning leg {plan.leg}: {plan.message}")
+    return plans
 
 
 @dataclass(frozen=True, slots=True)

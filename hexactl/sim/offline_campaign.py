@@ -22,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from hexactl.calibration.campaign import CampaignDesign, plan_campaign
 from hexactl.calibration.data import MeasurementData
-from hexactl.calibration.planning import DEFAULT_CANDIDATES, PlanRequest, PosturePlan, plan_postures
+from hexactl.calibration.planning import PosturePlan
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS, TestMotion
 from hexactl.calibration.validation import MotionResult
 from hexactl.kinematics.forward import forward_kinematics
@@ -32,29 +33,8 @@ from hexactl.kinematics.inverse import LEG_COUNT, sensor_setpoints_batch
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 from hexactl.sim.instrument import SimulatedInstrument
 
-SENSOR_SIGMA_MM = 0.001
-"""Default simulated sensor noise, 1σ, mm (a µm-resolution length sensor)."""
-
-
 class SimulationError(RuntimeError):
     """The simulated platform could not reach a commanded posture (forward kinematics failed)."""
-
-
-@dataclass(frozen=True, slots=True)
-class CampaignDesign:
-    """The campaign's protocol: ``postures_per_leg`` leg-lock postures for each leg (0: none)
-    and ``free_postures`` with no leg locked, planned from ``candidates`` random poses in
-    ``envelope_fraction`` of the pose envelope (:class:`~hexactl.calibration.planning.PlanRequest`);
-    noise of the simulated sensors and instrument (None: the geometry's ``point_sigma_mm``);
-    one ``seed`` for planning and noise."""
-
-    postures_per_leg: int = 20
-    free_postures: int = 0
-    candidates: int = DEFAULT_CANDIDATES
-    envelope_fraction: float = 1.0
-    sensor_sigma_mm: float = SENSOR_SIGMA_MM
-    point_sigma_mm: float | None = None
-    seed: int = 0
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -65,25 +45,6 @@ class OfflineCampaign:
     data: MeasurementData
     true_poses: NDArray[np.float64]
     plans: tuple[PosturePlan, ...]
-
-
-def plan_campaign(controller: Geometry, design: CampaignDesign) -> tuple[PosturePlan, ...]:
-    """Leg-lock plans for legs 1–6 then the free plan, on the controller's geometry.
-
-    Raises ``ValueError`` if a plan fails (its message says why).
-    """
-    # One candidate stream per plan (leg 0: free), distinct for every seed and leg.
-    requests = [PlanRequest(leg, design.postures_per_leg, candidates=design.candidates, seed=10 * design.seed + leg,
-                            envelope_fraction=design.envelope_fraction)
-                for leg in range(1, LEG_COUNT + 1) if design.postures_per_leg]
-    if design.free_postures:
-        requests.append(PlanRequest(0, design.free_postures, candidates=design.candidates, seed=10 * design.seed,
-                                    envelope_fraction=design.envelope_fraction))
-    plans = tuple(plan_postures(controller, request) for request in requests)
-    for plan in plans:
-        if not plan.ok:
-            raise ValueError(f"planning leg {plan.leg}: {plan.message}")
-    return plans
 
 
 def execute_plans(controller: Geometry, true: Geometry, plans: Sequence[PosturePlan],

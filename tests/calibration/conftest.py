@@ -12,7 +12,8 @@ import pytest
 
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.kinematics.geometry import Geometry
-from hexactl.sim.offline_campaign import CampaignDesign, OfflineCampaign, run_offline_campaign
+from hexactl.calibration.campaign import CampaignDesign
+from hexactl.sim.offline_campaign import OfflineCampaign, run_offline_campaign
 from hexactl.sim.true_platform import true_geometry
 
 NOMINAL_PATH = Path(__file__).resolve().parents[2] / "config" / "platform.toml"

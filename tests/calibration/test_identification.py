@@ -9,7 +9,8 @@ from hexactl.calibration.identification import identify
 from hexactl.calibration.parameters import StructuralParameters
 from hexactl.calibration.results import IdentificationOptions, IdentificationStatus, Method
 from hexactl.calibration.uncertainty import fisher_information
-from hexactl.sim.offline_campaign import CampaignDesign, execute_plans, plan_campaign
+from hexactl.calibration.campaign import CampaignDesign, plan_campaign
+from hexactl.sim.offline_campaign import execute_plans
 from hexactl.sim.instrument import SimulatedInstrument
 from hexactl.sim.true_platform import true_geometry
 

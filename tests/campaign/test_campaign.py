@@ -31,10 +31,9 @@ from hexactl.adapters.files.geometry_file import (
 )
 from hexactl.adapters.files.measurements import read_measurements
 from hexactl.application.service import ServiceConfig, ServiceProcess
-from hexactl.calibration.campaign import achieved_pose
+from hexactl.calibration.campaign import CampaignDesign, achieved_pose
 from hexactl.calibration.test_motions import COMPOUND
 from hexactl.control.trajectory import MotionLimits
-from hexactl.sim.offline_campaign import CampaignDesign
 from tests.api.support import start_service
 
 LOCAL = "tcp://127.0.0.1:*"

@@ -7,11 +7,13 @@ import pytest
 
 from hexactl.application.demo import DEMO_ENVELOPE_FRACTION, DEMO_MOTION, DEMO_POSTURES_PER_LEG
 from hexactl.calibration.campaign import (
+    CampaignDesign,
     LOCKED_CHORD_TOLERANCE_MM,
     achieved_pose,
     campaign_postures,
     improved,
     locked_path,
+    plan_campaign,
     travel_order,
 )
 from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
@@ -22,7 +24,6 @@ from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, W
 from hexactl.kinematics.inverse import leg_lengths, leg_lengths_batch
 from hexactl.kinematics.pose import absolute_from_relative, pose_mm_deg_to_mm_rad
 from hexactl.kinematics.rotation import rotation_matrix
-from hexactl.sim.offline_campaign import CampaignDesign, plan_campaign
 
 
 @pytest.fixture(scope="module")

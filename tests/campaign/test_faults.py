@@ -21,7 +21,7 @@ from hexactl.application.campaign.progress import Progress
 from hexactl.application.campaign.runner import CampaignSettings, _Resetting, run_campaign
 from hexactl.application.campaign.store import VALIDATION_FILE
 from hexactl.application.service import ServiceConfig, ServiceProcess
-from hexactl.sim.offline_campaign import CampaignDesign
+from hexactl.calibration.campaign import CampaignDesign
 from tests.campaign.test_campaign import ENVELOPE, FAST, LOCAL, PER_LEG
 
 START_TIMEOUT_S = 300.0  # seconds on an idle host, minutes on one loaded by other work

@@ -27,7 +27,7 @@ from hexactl.application.campaign.store import (
 from hexactl.adapters.files.measurements import read_measurements
 from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.kinematics.rotation import rotation_matrix
-from hexactl.sim.offline_campaign import CampaignDesign
+from hexactl.calibration.campaign import CampaignDesign
 
 DESIGN = CampaignDesign(postures_per_leg=2, candidates=100, seed=1)
 

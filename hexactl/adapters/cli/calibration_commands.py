@@ -300,7 +300,8 @@ def run_simulate(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.files.geometry_file import save_geometry
     from hexactl.adapters.files.measurements import write_measurements
     from hexactl.calibration.data import MeasurementData, measured_poses
-    from hexactl.sim.offline_campaign import CampaignDesign, SimulationError, run_offline_campaign
+    from hexactl.calibration.campaign import CampaignDesign
+    from hexactl.sim.offline_campaign import SimulationError, run_offline_campaign
     from hexactl.sim.true_platform import true_geometry
 
     nominal = load_config(arguments)
@@ -337,7 +338,7 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
     from hexactl.application.campaign.progress import Progress
     from hexactl.application.campaign.runner import CampaignSettings, run_campaign
     from hexactl.application.campaign.store import DirectoryError
-    from hexactl.sim.offline_campaign import CampaignDesign
+    from hexactl.calibration.campaign import CampaignDesign
 
     geometry = load_config(arguments)
     check_campaign_arguments(arguments)

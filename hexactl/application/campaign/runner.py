@@ -66,14 +66,13 @@ from hexactl.adapters.report.html import (
     ValidationComparison,
     write_report,
 )
-from hexactl.calibration.campaign import improved, locked_path
+from hexactl.calibration.campaign import CampaignDesign, improved, locked_path
 from hexactl.calibration.data import screen_measurements
 from hexactl.calibration.identification import calibration_info, identify
 from hexactl.calibration.parameters import calibrated_geometry
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry, GeometryError
-from hexactl.sim.offline_campaign import CampaignDesign
 
 
 @dataclass(frozen=True, slots=True)

@@ -45,16 +45,17 @@ from hexactl.adapters.files.measurements import (
 )
 from hexactl.adapters.report.html import REPORT_PAGE
 from hexactl.calibration.campaign import (
+    CampaignDesign,
     CampaignPosture,
     achieved_pose,
     campaign_postures,
+    plan_campaign,
 )
 from hexactl.calibration.data import MeasurementData
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS, TestMotion
 from hexactl.calibration.validation import MotionResult
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.axes import POSE_AXES
-from hexactl.sim.offline_campaign import CampaignDesign, plan_campaign
 
 PLAN_FILE = "campaign.json"
 MEASUREMENTS_FILE = "measurements.csv"
