@@ -83,7 +83,7 @@ CLI = [sys.executable, "-m", "hexactl.adapters.cli.main"]
 SERVE = """
 import functools, json, os, sys
 from pathlib import Path
-from hexactl.adapters import service
+from hexactl.application import service
 from hexactl.control.config import SupervisionConfig
 guest = json.loads(sys.argv[1])
 service.LinkConfig = functools.partial(service.LinkConfig, watchdog_cycles=guest["watchdog_cycles"])
