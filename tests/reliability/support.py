@@ -70,25 +70,26 @@ STALL_FAULTS = ("heartbeat_lost", "setpoints_not_applied")
 """Faults the loop latches when it was held up itself (besides the actuators' watchdog)."""
 
 
-def stall_fault(controller: Controller, expected_legs: Collection[int] = ()) -> bool:
-    """Whether ``controller`` shows what a held-up loop causes, outside ``expected_legs``:
-    an actuator stopped by its watchdog (COMM_TIMEOUT: a stall stops them all), or, as the
-    first latched fault, a heartbeat the loop did not read in time or set-points it did
-    not send in time."""
+def stall_fault(controller: Controller, expected: Collection[tuple[str, int]] = ()) -> bool:
+    """Whether ``controller`` shows what a held-up loop causes, other than the faults
+    ``expected`` by the scenario ((code, leg) pairs; an actuator's COMM_TIMEOUT counts as
+    ``actuator_fault``): an actuator stopped by its watchdog (COMM_TIMEOUT: a stall stops
+    them all), or, as the first latched fault, a heartbeat the loop did not read in time
+    or set-points it did not send in time."""
     snapshot = controller.snapshot
     if snapshot.feedback is None:
         return False
-    if any(actuator.fault_bits & Fault.COMM_TIMEOUT and leg not in expected_legs
+    if any(actuator.fault_bits & Fault.COMM_TIMEOUT and ("actuator_fault", leg) not in expected
            for leg, actuator in enumerate(snapshot.feedback.actuators, start=1)):
         return True
     first = snapshot.faults[0] if snapshot.faults else None
-    return first is not None and first.code in STALL_FAULTS and first.leg not in expected_legs
+    return first is not None and first.code in STALL_FAULTS and (first.code, first.leg) not in expected
 
 
 def tolerating_loop_stalls(scenario: Callable[[], None], controller: Callable[[], Controller | None],
-                           expected_legs: Collection[int] = (), cleanup: Callable[[], None] = lambda: None) -> None:
+                           expected: Collection[tuple[str, int]] = (), cleanup: Callable[[], None] = lambda: None) -> None:
     """Run ``scenario``; if it fails while the controller it drives (``controller()``)
-    shows a stall's faults outside ``expected_legs`` (:func:`stall_fault`), ``cleanup()``
+    shows a stall's faults other than those ``expected`` (:func:`stall_fault`), ``cleanup()``
     and run it again (:data:`ATTEMPTS` in all). Each failed attempt prints the latched faults.
 
     The loop, the simulated actuators and the API share one process and the host's cores:
@@ -103,6 +104,6 @@ def tolerating_loop_stalls(scenario: Callable[[], None], controller: Callable[[]
         except (AssertionError, CommandError) as error:  # a refusal of ``client.call`` fails a scenario too
             driven = controller()
             print(f"attempt {attempt} failed: {error!r:.300}; latched: {driven.snapshot.faults if driven else None}")
-            if attempt == ATTEMPTS or driven is None or not stall_fault(driven, expected_legs):
+            if attempt == ATTEMPTS or driven is None or not stall_fault(driven, expected):
                 raise
             cleanup()

@@ -75,7 +75,8 @@ def test_lost_heartbeat(client, actuators, service) -> None:
         actuators[2].inject.silent = False
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: service.controller, (3,), lambda: clear_injections(service))
+    tolerating_loop_stalls(scenario, lambda: service.controller, {("heartbeat_lost", 3), ("setpoints_not_applied", 3)},
+                           lambda: clear_injections(service))
 
 
 def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service) -> None:
@@ -92,7 +93,7 @@ def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service
         actuators[4].inject.sensor_fault = False
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: service.controller, (5,), lambda: clear_injections(service))
+    tolerating_loop_stalls(scenario, lambda: service.controller, {("actuator_fault", 5)}, lambda: clear_injections(service))
 
 
 def test_a_short_burst_of_lost_or_corrupted_frames_is_ridden_through(client, actuators, service) -> None:
@@ -129,7 +130,7 @@ def test_lasting_frame_loss_trips_the_actuator_watchdog(client, actuators, servi
         setattr(actuators[1].inject, loss, 0.0)
         back_in_service(client)
 
-    tolerating_loop_stalls(scenario, lambda: service.controller, (2,), lambda: clear_injections(service))
+    tolerating_loop_stalls(scenario, lambda: service.controller, {("actuator_fault", 2)}, lambda: clear_injections(service))
 
 
 class VanishingBus:
