@@ -85,6 +85,7 @@ from soak import (  # noqa: E402
 from hexactl.adapters.api.client import ServiceUnavailable  # noqa: E402
 from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, OkReply, Request  # noqa: E402
 from hexactl.adapters.api.paths import MAX_FILE_BYTES  # noqa: E402
+from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S  # noqa: E402
 from hexactl.adapters.api.wire import MAX_REQUEST_BYTES  # noqa: E402
 from hexactl.adapters.api.wire import ErrorCode as ApiCode  # noqa: E402
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
@@ -94,7 +95,11 @@ from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
 
 PWNED = "/tmp/hexactl-fuzz-pwned"  # what a calibration text asks a shell to create; it must never appear
-REPLY_TIMEOUT_S = 30.0  # generous for a loaded machine; no reply by then counts as missing
+REPLY_TIMEOUT_S = DEFAULT_HANDLER_TIMEOUT_S + 30.0
+"""The API answers every request or, once its worker has spent DEFAULT_HANDLER_TIMEOUT_S in
+one, ends itself: a reply missing after that bound (plus a margin) is a broken promise,
+while a shorter wait would measure the machine (a 1000-waypoint ``play`` took over 30 s
+beside two CPU-bound processes)."""
 
 SYNTAX = frozenset({ApiCode.MALFORMED_JSON, ApiCode.INVALID_REQUEST, ApiCode.UNKNOWN_COMMAND,
                     ApiCode.UNSUPPORTED_VERSION, ApiCode.TOO_LARGE})
