@@ -13,6 +13,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -117,6 +118,23 @@ class Loop:
         return positions
 
 
+class FeedbackWatch(can.Listener):
+    """Sets ``reached`` once one actuator's feedback, as received on this listener's socket,
+    reports at least ``at_least_um``."""
+
+    def __init__(self, node: int, at_least_um: int) -> None:
+        self.can_id = codec.NodeFrameBase.FEEDBACK + node
+        self.target_um = at_least_um
+        self.position_um: int | None = None
+        self.reached = threading.Event()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if msg.arbitration_id == self.can_id:
+            self.position_um = codec.decode_feedback(msg.arbitration_id, bytes(msg.data)).position_um
+            if self.position_um >= self.target_um:
+                self.reached.set()
+
+
 def all_in(state: ActuatorState) -> Callable[[FeedbackSnapshot], bool]:
     return lambda s: all(a.state is state for a in s.actuators)
 
@@ -125,7 +143,8 @@ def test_enable_stream_follow_and_the_capture_decodes_with_the_dbc(simulator, li
     capture = tmp_path / "capture.log"  # python-can's .log is candump -L format
     analyser = open_bus(SPEC)
     logger = can.Logger(str(capture))
-    notifier = can.Notifier(analyser, [logger])
+    leg_3 = FeedbackWatch(node=3, at_least_um=329_999)
+    notifier = can.Notifier(analyser, [logger, leg_3])
     try:
         loop = Loop(link)
         start = loop.enable()
@@ -137,6 +156,10 @@ def test_enable_stream_follow_and_the_capture_decodes_with_the_dbc(simulator, li
         assert all(a.setpoint_counter >= 100 for a in loop.snapshot.actuators)
         health = link.link_health()
         assert health.send_failures == 0 and link.stats().undecodable_frames == 0
+        # The analyser reads its own socket on its own thread and may lag behind the loop: stopping
+        # it now would drop the frames still queued in that socket, so wait until it has the last
+        # feedback the loop saw.
+        assert leg_3.reached.wait(DEADLINE_S), f"the capture's last leg-3 feedback: {leg_3.position_um} µm"
     finally:
         notifier.stop()
         logger.stop()
