@@ -188,6 +188,12 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
         finally:
             if server_open:
                 server.close()
+    # Everything is closed. End now rather than through the interpreter's finalisation,
+    # which tears numpy, scipy, pydantic and ZeroMQ down module by module while the
+    # service waits for this process: about 0.1 s on the host, seconds in a slow guest
+    # (BENCHMARKS.md), enough to use up the shutdown's time.
+    logging.shutdown()  # flush the log: os._exit skips it
+    os._exit(0)
 
 
 def _raise_urgent_threads(niceness: int) -> None:

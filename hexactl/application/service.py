@@ -29,6 +29,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Collection
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import FrameType
+from typing import NoReturn
 
 import can
 
@@ -293,9 +295,10 @@ class Service:
     def close(self) -> None:
         """Stop taking commands, bring the platform to rest disabled, close everything,
         in at most about :data:`SHUTDOWN_STEPS_S` + 1 s."""
+        started = time.monotonic()
         self._budget.start(SHUTDOWN_STEPS_S)
         self._closers.close()
-        log.info("stopped")
+        log.info("stopped (shutdown took %.2f s)", time.monotonic() - started)
 
 
 class ServiceProcess:
@@ -347,10 +350,14 @@ def _serve(config: ServiceConfig, connection: Connection) -> None:
         service.close()
 
 
-def run_service(config: ServiceConfig) -> int:
-    """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly;
-    0, or 1 if the API process died or its command stream ended or broke (the platform is
-    then brought to rest as at a stop); the link's dropped non-commands are logged."""
+def run_service(config: ServiceConfig) -> NoReturn:
+    """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly and
+    end the process: status 0, or 1 if the API process died or its command stream ended or
+    broke (the platform is then brought to rest as at a stop); the link's dropped
+    non-commands are logged.
+
+    :raises ServiceError: if the service does not start (see :meth:`Service.start`)
+    """
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     for endpoint in (config.api_endpoint, config.telemetry_endpoint):
         if not is_local_endpoint(endpoint):
@@ -384,7 +391,12 @@ def run_service(config: ServiceConfig) -> int:
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
-    return status
+    # Everything is closed. End now rather than through the interpreter's finalisation,
+    # which tears numpy, scipy and pydantic down module by module after "stopped" (0.2 s on
+    # the host, seconds in a slow guest: BENCHMARKS.md) while a service manager waits.
+    logging.shutdown()  # flush the log: os._exit skips it
+    sys.stdout.flush()
+    os._exit(status)
 
 
 def _exit_now() -> None:

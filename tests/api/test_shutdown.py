@@ -61,7 +61,7 @@ def test_sigterm_ends_the_service_and_its_stuck_api_process(tmp_path: Path) -> N
     if not re.search(r"fault at \[[-0-9., ]+\] \(measured\): nothing to brake", log):
         assert re.search(r"platform (at rest|still moving) at \[[-0-9., ]+\]", log), log
         assert "actuators disabled" in log, log
-    assert log.rstrip().endswith("stopped"), log
+    assert re.search(r"stopped \(shutdown took \d+\.\d\d s\)$", log.rstrip()), log
 
 
 def test_the_service_says_what_real_time_set_up_it_got_and_no_realtime_opts_out(tmp_path: Path) -> None:

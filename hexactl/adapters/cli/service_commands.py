@@ -264,7 +264,7 @@ def run_serve(arguments: argparse.Namespace) -> int:
         log_level=arguments.log_level,
     )
     try:
-        return run_service(config)
+        return run_service(config)  # it ends the process, with the service's exit status
     except (ServiceError, SecurityError) as error:
         raise CliError(str(error)) from None
 
