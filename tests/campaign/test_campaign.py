@@ -47,15 +47,16 @@ FAST = MotionLimits(max_velocity=tuple(4 * v for v in _DEFAULT.max_velocity),
 
 
 class InterruptAfter(Progress):
-    """Ctrl-C right after the ``postures``-th posture has been saved."""
+    """Ctrl-C right after the ``count``-th step of the phase whose title starts with
+    ``phase`` (``postures``, ``test motions``) has been saved."""
 
-    def __init__(self, postures: int) -> None:
+    def __init__(self, phase: str, count: int) -> None:
         super().__init__(io.StringIO(), io.StringIO())
-        self.postures = postures
+        self.phase, self.count = phase, count
 
     def step(self, done: int, label: str) -> None:
         super().step(done, label)
-        if self.title == "postures" and done == self.postures:
+        if self.title.startswith(self.phase) and done == self.count:
             raise KeyboardInterrupt
 
 
@@ -72,7 +73,7 @@ def test_interrupted_campaign_resumes_and_apply_calibrates_the_controller(servic
     with HexactlClient(service.api_endpoint) as client, pytest.raises(KeyboardInterrupt):
         design = CampaignDesign(postures_per_leg=PER_LEG, envelope_fraction=ENVELOPE)
         settings = CampaignSettings(out, design, reset_faults=RESETS)
-        run_campaign(client, nominal, ServiceInstrument(client), settings, InterruptAfter(3))
+        run_campaign(client, nominal, ServiceInstrument(client), settings, InterruptAfter("postures", 3))
     first_rows = data_rows(out / MEASUREMENTS_FILE)
     assert len(first_rows) == 3
 

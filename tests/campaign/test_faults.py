@@ -22,7 +22,7 @@ from hexactl.application.campaign.runner import CampaignSettings, _Resetting, ru
 from hexactl.application.campaign.store import VALIDATION_FILE
 from hexactl.application.service import ServiceConfig, ServiceProcess
 from hexactl.calibration.campaign import CampaignDesign
-from tests.campaign.test_campaign import ENVELOPE, FAST, LOCAL, PER_LEG
+from tests.campaign.test_campaign import ENVELOPE, FAST, LOCAL, PER_LEG, InterruptAfter
 
 START_TIMEOUT_S = 300.0  # seconds on an idle host, minutes on one loaded by other work
 
@@ -57,22 +57,9 @@ class StallDuring:
         return points
 
 
-class StopAfterWaypoints(Progress):
-    """Ctrl-C once ``count`` test-motion waypoints have been saved."""
-
-    def __init__(self, count: int) -> None:
-        super().__init__(io.StringIO(), io.StringIO())
-        self.count = count
-
-    def step(self, done: int, label: str) -> None:
-        super().step(done, label)
-        if self.title.startswith("test motions") and done == self.count:
-            raise KeyboardInterrupt
-
-
 def test_a_measurement_taken_across_a_fault_is_measured_again(nominal, tmp_path) -> None:
     out = tmp_path / "campaign"
-    progress = StopAfterWaypoints(3)
+    progress = InterruptAfter("test motions", 3)
     config = ServiceConfig(api_endpoint=LOCAL, telemetry_endpoint=LOCAL, motion=FAST, log_level="WARNING")
     with (ServiceProcess(config, START_TIMEOUT_S) as service,
           HexactlClient(service.api_endpoint, timeout_s=30) as client):

@@ -1,7 +1,8 @@
 """Test oracle for the protocol: per DBC message, a strategy of valid codec messages and their DBC signal values.
 
-Everything here is written against the DBC and a bitwise CRC, independently of the codec's
-bit operations and table-driven CRC.
+Everything here is written against the DBC and a bitwise CRC (the bus monitor's, which
+shares nothing with the codec: :mod:`hexactl.adapters.can.bus_monitor`), independently of
+the codec's bit operations and table-driven CRC.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from cantools.database.can import Message as DbcMessage
 from hypothesis import strategies as st
 
 from firmware_proto import codec, load_database
+from hexactl.adapters.can.bus_monitor import frame_crc as bitwise_frame_crc
 
 DB = load_database()
 MESSAGES = DB.messages
@@ -23,20 +25,9 @@ commands = st.sampled_from(codec.CommandCode)
 fault_words = st.integers(0, 0xFFF).map(codec.Fault)
 
 
-def reference_crc8(data: bytes) -> int:
-    """CRC-8/SAE-J1850 computed bit by bit."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
-
-
 def with_reference_crc(can_id: int, payload: bytes) -> bytes:
     """``payload`` with its last byte replaced by the CRC over the id and the other bytes."""
-    body = payload[:-1]
-    return body + bytes((reference_crc8(can_id.to_bytes(2, "little") + body),))
+    return payload[:-1] + bytes((bitwise_frame_crc(can_id, payload),))
 
 
 def node_of(message: DbcMessage) -> int:

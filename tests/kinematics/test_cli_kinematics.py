@@ -56,6 +56,7 @@ def test_fk_reports_non_convergence(capsys) -> None:
         (["ik", "1", "2", "3", "nan", "0", "0"], "roll: 'nan' is not a finite number"),
         (["ik", "1", "2", "three", "0", "0", "0"], "z: 'three' is not a number"),
         (["fk", "1", "2", "3", "4", "5", "inf"], "L6: 'inf' is not a finite number"),
+        (["sim-actuators", "--can", "socketcan:vcan0", "--positions", "1,2"], "give 6 numbers (L1,L2,L3,L4,L5,L6), not 2"),
         (["check", "--config", "/nonexistent/platform.toml"], "/nonexistent/platform.toml: cannot read"),
     ],
 )

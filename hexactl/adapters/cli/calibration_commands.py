@@ -259,7 +259,6 @@ def run_plan(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.files.measurements import format_plan, write_plan
     from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
     from hexactl.kinematics.inverse import leg_lengths
-    from hexactl.kinematics.pose import absolute_from_relative
 
     geometry = load_config(arguments)
     if arguments.output and Path(arguments.output).exists() and not arguments.force:
@@ -277,7 +276,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
     if not plan.ok:
         print(f"hexactl plan-leglock: {plan.message}", file=sys.stderr)
         return 1
-    home_length = (leg_lengths(geometry.legs, absolute_from_relative(geometry.home, [0.0] * 6))[arguments.leg - 1]
+    home_length = (leg_lengths(geometry.legs, geometry.home.in_radians())[arguments.leg - 1]
                    if arguments.leg else float("nan"))
     comments = [f"hexactl plan-leglock on {geometry.name or 'unnamed geometry'}, seed {arguments.seed}", plan.message,
                 "poses relative to the zero posture (mm, deg); l*_setpoint: sensor set-points on this geometry (mm)"]

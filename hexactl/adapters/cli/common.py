@@ -31,6 +31,9 @@ if TYPE_CHECKING:  # loaded only by the commands that use them
 
 Connection = TypeVar("Connection", "HexactlClient", "TelemetrySubscriber")
 
+LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
+"""The legs' names in arguments and messages: L1 … L6."""
+
 
 class CliError(Exception):
     """Bad input to a command: printed as ``hexactl CMD: error: …``, exit status 2."""
@@ -187,7 +190,12 @@ def positive_float(text: str) -> float:
 
 
 def parse_numbers(values: list[str], labels: tuple[str, ...]) -> list[float]:
-    """Finite numbers given as separate arguments, one per label (e.g. ``ik X Y Z ROLL PITCH YAW``)."""
+    """Finite numbers given as separate arguments, one per label (e.g. ``ik X Y Z ROLL PITCH YAW``).
+
+    :raises CliError: a value is not a finite number, or there is not one per label
+    """
+    if len(values) != len(labels):
+        raise CliError(f"give {len(labels)} numbers ({','.join(labels)}), not {len(values)}")
     numbers = []
     for label, value in zip(labels, values, strict=True):
         number = _number(value, label)

@@ -11,20 +11,25 @@ import json
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from hexactl.adapters.cli.common import load_config, parse_numbers, pose_argument
+from hexactl.adapters.cli.common import (
+    LEG_LABELS,
+    load_config,
+    parse_numbers,
+    pose_argument,
+)
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 if TYPE_CHECKING:  # the kinematics (numpy) load in the functions that run the commands
     from hexactl.kinematics.geometry import Geometry
     from hexactl.kinematics.workspace import PoseAssessment
 
-LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
-
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    output = argparse.ArgumentParser(add_help=False)
+    output.add_argument("--json", action="store_true", help="machine-readable output")
     check = subparsers.add_parser(
         "check",
-        parents=[common],
+        parents=[common, output],
         help="reachability of poses, with margins to every limit",
         description="Check poses (relative to the zero posture) against stroke, joint-cone, "
         "pose-envelope and singularity limits. Default: the paper's single-axis extremes "
@@ -33,24 +38,22 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "pitch=-20,yaw=5. Put -- before poses that start with a minus sign.",
     )
     check.add_argument("poses", nargs="*", metavar="POSE", type=pose_argument)
-    check.add_argument("--json", action="store_true", help="machine-readable output")
     check.set_defaults(run=run_check)
 
     ik = subparsers.add_parser(
         "ik",
-        parents=[common],
+        parents=[common, output],
         help="leg lengths and sensor set-points for a pose",
         description="Inverse kinematics: leg lengths and actuator sensor set-points (mm) for a pose "
         "relative to the zero posture. Exit status 1 if the pose violates a limit.",
     )
     for axis, unit in zip(POSE_AXES, POSE_UNITS):
         ik.add_argument(axis.upper(), help=unit)
-    ik.add_argument("--json", action="store_true", help="machine-readable output")
     ik.set_defaults(run=run_ik)
 
     fk = subparsers.add_parser(
         "fk",
-        parents=[common],
+        parents=[common, output],
         help="the pose for six sensor readings",
         description="Forward kinematics: the pose (relative to the zero posture) at which the six "
         "actuators read L1..L6 mm, and the Jacobian condition there. Exit status 1 if it does not "
@@ -59,7 +62,6 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     )
     for label in LEG_LABELS:
         fk.add_argument(label, help="sensor reading, mm")
-    fk.add_argument("--json", action="store_true", help="machine-readable output")
     fk.set_defaults(run=run_fk)
 
 
@@ -149,13 +151,13 @@ def run_ik(arguments: argparse.Namespace) -> int:
 
 def run_fk(arguments: argparse.Namespace) -> int:
     from hexactl.kinematics.forward import forward_kinematics
-    from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
+    from hexactl.kinematics.pose import relative_from_absolute
     from hexactl.kinematics.workspace import jacobian_condition
 
     geometry = load_config(arguments)
     readings = parse_numbers([getattr(arguments, label) for label in LEG_LABELS], LEG_LABELS)
     lengths = [reading + zero for reading, zero in zip(readings, geometry.zero_lengths)]
-    result = forward_kinematics(geometry.legs, lengths, absolute_from_relative(geometry.home, [0.0] * 6))
+    result = forward_kinematics(geometry.legs, lengths, geometry.home.in_radians())
     pose = [float(v) for v in relative_from_absolute(geometry.home, result.pose)]
     low, high = geometry.limits.stroke
     warnings = [f"{label} {reading:g} mm is outside the stroke [{low:g}, {high:g}] mm"

@@ -9,12 +9,10 @@ import sys
 from types import FrameType
 from typing import TYPE_CHECKING
 
-from hexactl.adapters.cli.common import CliError, load_config, parse_numbers
+from hexactl.adapters.cli.common import LEG_LABELS, CliError, load_config, parse_numbers
 
 if TYPE_CHECKING:  # the simulator and python-can load when the command runs, not for every command
     from hexactl.kinematics.geometry import Geometry
-
-LEG_LABELS = tuple(f"L{leg}" for leg in range(1, 7))
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:

@@ -146,21 +146,17 @@ class PlatformDriver:
 
     def lock(self, leg: int) -> Record:
         """Lock ``leg`` (1–6) where it is; returns the record with the lock in place."""
-        self._call("leg_lock", leg=leg)
-        return self.wait_settled(0.0)
+        return self._settled_after("leg_lock", leg=leg)
 
     def unlock(self) -> Record:
-        self._call("leg_unlock")
-        return self.wait_settled(0.0)
+        return self._settled_after("leg_unlock")
 
     def load_calibration(self, toml: str) -> Record:
         """Send a calibration's text; returns the settled record once it is ramped in."""
-        self._call("load_calibration", toml=toml)
-        return self.wait_settled(0.0)
+        return self._settled_after("load_calibration", toml=toml)
 
     def rollback_calibration(self) -> Record:
-        self._call("rollback_calibration")
-        return self.wait_settled(0.0)
+        return self._settled_after("rollback_calibration")
 
     def wait_settled(self, duration_s: float, *, settle: bool = True) -> Record:
         """Wait (at most ``duration_s`` + the criteria's timeout) until the platform holds
@@ -204,6 +200,11 @@ class PlatformDriver:
                 if error.code not in ("heartbeat_missing", "actuator_fault", "loop_timeout") or waited > self.settle.timeout_s:
                     raise CampaignError(f"cannot enable the actuators: {error}") from None
             time.sleep(0.05)
+
+    def _settled_after(self, cmd: str, **fields: Any) -> Record:
+        """Carry out ``cmd`` (:meth:`_call`), then wait until the platform settles (:meth:`wait_settled`)."""
+        self._call(cmd, **fields)
+        return self.wait_settled(0.0)
 
     def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
         try:
