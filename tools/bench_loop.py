@@ -39,13 +39,12 @@ from hexactl.control.realtime import RealtimeConfig  # noqa: E402
 from hexactl.control.sequences import MotionSequence  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
 from hexactl.kinematics.inverse import sensor_setpoints  # noqa: E402
-from hexactl.kinematics.pose import absolute_from_relative  # noqa: E402
 from hexactl.sim.ideal_actuators import IdealActuators  # noqa: E402
 
 
 def ideal_actuators(geometry: Geometry) -> ActuatorInterface:
     """Six in-memory actuators at the zero posture."""
-    return IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0.0] * 6)))
+    return IdealActuators(sensor_setpoints(geometry.legs, geometry.home.in_radians()))
 
 
 HARDWARE: dict[str, Callable[[Geometry], ActuatorInterface]] = {"ideal": ideal_actuators}

@@ -122,7 +122,7 @@ def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
             f"leg must be 0-{LEG_COUNT}, count ≥ 1, candidates ≥ count and the envelope fraction in (0, 1] "
             f"(got leg {request.leg}, count {request.count}, candidates {request.candidates}, "
             f"envelope fraction {request.envelope_fraction})")
-    home = absolute_from_relative(geometry.home, np.zeros(6))
+    home = np.array(geometry.home.in_radians())
     locked_length = nan
     if request.leg:
         locked_length = (

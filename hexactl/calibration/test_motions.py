@@ -28,12 +28,7 @@ class TestMotion:
 
 
 def _single_axis(axis: int, values: tuple[float, ...]) -> tuple[RelativeMmDeg, ...]:
-    poses = []
-    for value in values:
-        pose = [0.0] * 6
-        pose[axis] = value
-        poses.append((pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]))
-    return tuple(poses)
+    return tuple(RelativeMmDeg._make(value if i == axis else 0.0 for i in range(6)) for value in values)
 
 
 X_SWEEP = TestMotion(
@@ -53,16 +48,16 @@ Y_ROTATION = TestMotion(
 COMPOUND = TestMotion(
     name="compound",
     title="Compound motion (paper Table 1)",
-    waypoints=((0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (100.0, 100.0, 100.0, 5.0, 5.0, 5.0)),
+    waypoints=(RelativeMmDeg(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), RelativeMmDeg(100.0, 100.0, 100.0, 5.0, 5.0, 5.0)),
     axis=None,
 )
 
 PAPER_TEST_MOTIONS: tuple[TestMotion, ...] = (X_SWEEP, Y_ROTATION, COMPOUND)
 
 PAPER_TABLE_1: dict[str, RelativeMmDeg] = {
-    "instruction": (100.0, 100.0, 100.0, 5.0, 5.0, 5.0),
-    "before calibration": (99.95, 99.66, 99.31, 4.94, 5.22, 5.51),
-    "after calibration": (100.29, 99.79, 100.15, 5.02, 5.06, 5.06),
+    "instruction": RelativeMmDeg(100.0, 100.0, 100.0, 5.0, 5.0, 5.0),
+    "before calibration": RelativeMmDeg(99.95, 99.66, 99.31, 4.94, 5.22, 5.51),
+    "after calibration": RelativeMmDeg(100.29, 99.79, 100.15, 5.02, 5.06, 5.06),
 }
 """The paper's measured compound-motion result (its platform, not ours), for reference."""
 

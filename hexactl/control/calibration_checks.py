@@ -14,9 +14,7 @@ from hexactl.control.config import ControllerConfig
 from hexactl.control.core import ControlState, CoreSnapshot
 from hexactl.control.planning import ActiveGeometry, assess_path, piecewise_line
 from hexactl.control.results import CommandResult, ErrorCode
-from hexactl.control.telemetry import mm_deg
 from hexactl.kinematics.geometry import Geometry, limits_differences
-from hexactl.kinematics.inverse import sensor_setpoints
 from hexactl.kinematics.plausibility import implausibilities
 from hexactl.kinematics.workspace import assess_readings
 
@@ -58,8 +56,7 @@ def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig)
         return CommandResult.failure(ErrorCode.INVALID_GEOMETRY,
                                      f"calibration {new.calibration_id} refused: {violations[0].message}",
                                      violations=[asdict(v) for v in violations])
-    at_command = sensor_setpoints(new.geometry.legs, new.absolute_from_relative_mm_rad(s.pose_command))
-    change = max(abs(a - b) for a, b in zip(at_command, s.setpoints))
+    change = max(abs(a - b) for a, b in zip(new.setpoints_at(s.pose_command), s.setpoints))
     if s.state is not ControlState.DISABLED and change > config.calibration_max_change_mm:
         return CommandResult.failure(ErrorCode.CALIBRATION_CHANGE_TOO_LARGE,
                                      f"calibration {new.calibration_id} would move a leg by {change:.2f} mm "
@@ -78,9 +75,9 @@ def _ramp_refusal(s: CoreSnapshot, new: ActiveGeometry) -> CommandResult | None:
         return None
     fractions = np.linspace(0.0, 1.0, RAMP_SAMPLES)
     start = np.array(s.setpoints)
-    end = np.array(sensor_setpoints(new.geometry.legs, new.absolute_from_relative_mm_rad(s.pose_command)))
+    end = np.array(new.setpoints_at(s.pose_command))
     ramp = start + np.outer(fractions, end - start)
-    guess = mm_deg(s.pose_command)
+    guess = s.pose_command.in_degrees()
     for model, which in ((new, "the new calibration"), (s.active, "the active one")):
         for fraction, assessment in zip(fractions, assess_readings(model.geometry, ramp, guess)):
             if assessment is None or assessment.violations:

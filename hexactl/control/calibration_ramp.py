@@ -6,7 +6,7 @@ difference (the set-points being sent minus the new geometry's at the pose) and 
 it out linearly, all legs together, at ``fraction`` of the new geometry's leg velocity
 limit (moves are planned within the rest of it), while the commanded pose carries on.
 The controller checks beforehand that every pose the ramp passes through is within the
-limits (``Controller._ramp_refusal``).
+limits (:func:`~hexactl.control.calibration_checks.swap_refusal`).
 
 Set-points: sensor mm. Owned by the loop thread: not thread-safe.
 """
@@ -16,7 +16,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from hexactl.control.planning import ActiveGeometry
-from hexactl.kinematics.inverse import sensor_setpoints
 
 
 class CalibrationRamp:
@@ -37,8 +36,7 @@ class CalibrationRamp:
         """Ramp from ``sent`` (the set-points being sent) to ``new``'s set-points at
         ``pose`` (relative mm/rad); replaces a ramp under way (``sent`` includes it).
         Nothing to ramp when they are equal."""
-        target = sensor_setpoints(new.geometry.legs, new.absolute_from_relative_mm_rad(pose))
-        offset = [s - t for s, t in zip(sent, target)]
+        offset = [s - t for s, t in zip(sent, new.setpoints_at(pose))]
         largest = max(abs(o) for o in offset)
         if largest > 0.0:
             step_mm = self._fraction * new.geometry.limits.leg_velocity_mm_s * self._period_s

@@ -43,7 +43,9 @@ from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
-from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, mm_deg, status_result, telemetry_of
+from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
+from hexactl.control.trajectory import KinematicState
+from hexactl.kinematics.axes import RelativeMmDeg, RelativeMmRad
 from hexactl.kinematics.geometry import Geometry
 
 
@@ -121,7 +123,8 @@ class Controller:
         # first plan creates lazily initialised module state (numpy, ruckig, pydantic)
         # that would otherwise fill the loop's first young collection (0.5 ms, measured).
         s = self.snapshot
-        plan_path(self._context(s), ((0.0,) * 6,) * 3, [Waypoint((1.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
+        plan_path(self._context(s), KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
+                  [Waypoint(RelativeMmDeg(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
         return self.thread.loop.start(exchange)
 
     def shutdown(self) -> None:
@@ -267,7 +270,7 @@ class Controller:
         remainder = None
         if progress.paused_in_move:
             segment = progress.segment
-            waypoint = Waypoint(mm_deg(segment.goal), None, segment.velocity_scale / segment.time_scale)
+            waypoint = Waypoint(segment.goal.in_degrees(), None, segment.velocity_scale / segment.time_scale)
             plan = plan_path(self._context(s), s.trajectory, [waypoint])
             if not plan.ok:
                 return _plan_result(plan, "")
@@ -344,7 +347,7 @@ def _plan_result(plan: Plan, message: str) -> CommandResult:
                                      **refusal.details)
     return CommandResult.success(
         message,
-        goal=list(mm_deg(plan.segments[-1].goal)),
+        goal=list(plan.segments[-1].goal.in_degrees()),
         duration_s=sum(seg.duration_s + seg.dwell_s for seg in plan.segments),
         waypoints=len(plan.segments),
     )

@@ -31,18 +31,19 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from math import isfinite
+from operator import add, sub
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.results import ErrorCode
-from hexactl.control.trajectory import MotionLimits, preview
+from hexactl.control.trajectory import KinematicState, MotionLimits, preview
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import sensor_setpoints_batch
+from hexactl.kinematics.inverse import sensor_setpoints, sensor_setpoints_batch
 from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
 from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmDeg, RelativeMmRad, validate_pose_values
-from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
+from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.workspace import Violation, assess_poses
 
 
@@ -74,13 +75,23 @@ class ActiveGeometry:
 
     @classmethod
     def of(cls, geometry: Geometry, calibration_id: str, source: str = "") -> ActiveGeometry:
-        home = tuple(float(v) for v in pose_mm_deg_to_mm_rad(geometry.home))
-        return cls(geometry, calibration_id, source, home, geometry.limits.stroke)  # type: ignore[arg-type]
+        return cls(geometry, calibration_id, source, geometry.home.in_radians(), geometry.limits.stroke)
 
     def absolute_from_relative_mm_rad(self, relative: Sequence[float]) -> AbsoluteMmRad:
-        """Absolute mm/rad of a pose relative to this zero posture in mm/rad (the users' relative
-        poses are mm/deg: :func:`~hexactl.kinematics.pose.absolute_from_relative`)."""
-        return tuple(h + r for h, r in zip(self.home, relative))  # type: ignore[return-value]
+        """The absolute pose of ``relative`` (relative mm/rad; a sequence where the loop or
+        numpy hands one over)."""
+        # The loop calls this several times a cycle: tuple.__new__ over a C-level map, not
+        # _make (a Python call and a count check) over a generator.
+        return tuple.__new__(AbsoluteMmRad, map(add, self.home, relative))
+
+    def setpoints_at(self, relative: Sequence[float]) -> list[float]:
+        """The legs' sensor set-points (mm) that put the platform at ``relative`` (relative
+        mm/rad) by this geometry."""
+        return sensor_setpoints(self.geometry.legs, self.absolute_from_relative_mm_rad(relative))
+
+    def relative_from_absolute_mm_rad(self, absolute: Sequence[float]) -> RelativeMmRad:
+        """The pose relative to this zero posture of ``absolute`` (absolute mm/rad)."""
+        return tuple.__new__(RelativeMmRad, map(sub, absolute, self.home))  # as above
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +112,7 @@ class Waypoint:
     move's duration; ``speed`` (0, 1] scales the velocity limits; ``dwell_s`` the time to
     stay on arrival (sequences)."""
 
-    pose: Sequence[float]
+    pose: RelativeMmDeg
     duration_s: float | None = None
     speed: float | None = None
     dwell_s: float = 0.0
@@ -168,12 +179,9 @@ class Plan:
         return self.refusal is None
 
 
-State = tuple[Sequence[float], Sequence[float], Sequence[float]]
-
-
-def plan_path(context: PlanningContext, start: State, waypoints: Sequence[Waypoint]) -> Plan:
-    """Plan and validate moves through ``waypoints`` from the generator state ``start``
-    (position, velocity, acceleration; relative mm/rad). Each waypoint after the first
+def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequence[Waypoint]) -> Plan:
+    """Plan and validate moves through ``waypoints`` from the generator state ``start``.
+    Each waypoint after the first
     starts at rest on the previous one. Never raises for bad input: it is refused."""
     segments = []
     violations: list[PathViolation] = []
@@ -197,7 +205,7 @@ def plan_path(context: PlanningContext, start: State, waypoints: Sequence[Waypoi
         segment, samples = planned
         violations += assess_path(context.active.geometry, samples, number, context.path_step_mm, context.path_step_deg)
         segments.append(segment)
-        start = (goal, (0.0,) * 6, (0.0,) * 6)
+        start = KinematicState.at_rest(goal)
     if violations:
         return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(violations), tuple(violations)))
     return Plan(segments=tuple(segments))
@@ -266,9 +274,9 @@ def _number_in(value: object, low: float, high: float, low_open: bool = False) -
 
 def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> RelativeMmRad | Refusal:
     """The goal in relative mm/rad; in leg-lock mode projected onto the constraint."""
-    goal = tuple(float(v) for v in pose_mm_deg_to_mm_rad([float(v) for v in pose_mm_deg]))
+    goal = RelativeMmDeg._make(float(v) for v in pose_mm_deg).in_radians()
     if context.lock is None:
-        return goal  # type: ignore[return-value]
+        return goal
     projected = project_locked(context.active, context.lock, goal)
     if not projected.ok:
         return Refusal(ErrorCode.LOCK_UNREACHABLE, f"no pose with leg {context.lock.leg} at its locked length near the goal "
@@ -278,8 +286,8 @@ def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> RelativeMmR
                        f"the nearest pose with leg {context.lock.leg} at its locked length is {projected.correction:.1f} mm "
                        f"from the goal (limit {context.lock_max_correction_mm:g} mm)",
                        details={"correction_mm": projected.correction, "limit_mm": context.lock_max_correction_mm,
-                                "nearest_pose": _to_mm_deg(_relative(context.active, projected.pose))})
-    return _relative(context.active, projected.pose)
+                                "nearest_pose": list(context.active.relative_from_absolute_mm_rad(projected.pose).in_degrees())})
+    return context.active.relative_from_absolute_mm_rad(projected.pose)
 
 
 def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float],
@@ -309,7 +317,7 @@ def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float],
     return project_locked(active, lock, target, max_iterations, start=start)
 
 
-def _plan_segment(context: PlanningContext, start: State, goal: RelativeMmRad, waypoint: Waypoint,
+def _plan_segment(context: PlanningContext, start: KinematicState, goal: RelativeMmRad, waypoint: Waypoint,
                   motion_left_s: float) -> tuple[Segment, NDArray] | Refusal:
     """The segment to ``goal`` and its samples; refused before sampling when it would move
     for longer than ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan)."""
@@ -338,13 +346,13 @@ def _plan_segment(context: PlanningContext, start: State, goal: RelativeMmRad, w
     return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
 
 
-def _samples(context: PlanningContext, start: State, trajectory) -> NDArray | Refusal:
+def _samples(context: PlanningContext, start: KinematicState, trajectory) -> NDArray | Refusal:
     """The start and the position of every cycle of ``trajectory`` (relative mm/rad). In
     leg-lock mode: projected as the loop will, each cycle's from the one before, starting
     at the start's full projection (where the loop's commanded pose is); refused if the
     loop's iterations would not converge at some cycle."""
     count = max(1, int(round(trajectory.duration / context.period_s)))
-    targets = [tuple(start[0])] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
+    targets = [start.position] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
     lock = context.lock
     if lock is None:
         return np.array(targets, dtype=float)
@@ -359,7 +367,7 @@ def _samples(context: PlanningContext, start: State, trajectory) -> NDArray | Re
                            f"into the move ({result.status.name.lower()} after {result.iterations} iterations): "
                            "the path strays too far from the constraint; split the move",
                            details={"t_s": cycle * context.period_s})
-        projected.append(_relative(active, result.pose))
+        projected.append(active.relative_from_absolute_mm_rad(result.pose))
     return np.array(projected, dtype=float)
 
 
@@ -371,14 +379,6 @@ def _peak_leg_speed(context: PlanningContext, samples: NDArray) -> float:
     if len(setpoints) < 2:
         return 0.0
     return float(np.max(np.abs(np.diff(setpoints, axis=0)))) / context.period_s
-
-
-def _relative(active: ActiveGeometry, absolute: Sequence[float]) -> RelativeMmRad:
-    return tuple(a - h for a, h in zip(absolute, active.home))  # type: ignore[return-value]
-
-
-def _to_mm_deg(relative: Sequence[float]) -> list[float]:
-    return [float(v) for v in pose_mm_rad_to_mm_deg(relative)]
 
 
 def _summary(violations: Sequence[PathViolation]) -> str:

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 from hexactl.control.hardware import FeedbackSnapshot
 from hexactl.control.planning import ActiveGeometry
+from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmRad
 from hexactl.kinematics.forward import forward_kinematics
 
 
@@ -26,10 +27,10 @@ class PoseMeasurement:
         self.every_cycles = every_cycles
         self._tolerance_mm = tolerance_mm
         self._max_iterations = max_iterations
-        self.pose: tuple[float, ...] | None = None
+        self.pose: RelativeMmRad | None = None
         self.failures = 0  # FK runs that did not converge
         self.cycle = 0  # the cycle it last ran in
-        self._absolute: tuple[float, ...] | None = None  # the last solution, absolute mm/rad: the warm start
+        self._absolute: AbsoluteMmRad | None = None  # the last solution, absolute mm/rad: the warm start
 
     def due(self, cycle: int) -> bool:
         return cycle - self.cycle >= self.every_cycles
@@ -44,7 +45,7 @@ class PoseMeasurement:
         result = forward_kinematics(active.geometry.legs, lengths, guess, self._tolerance_mm, self._max_iterations)
         if result.ok:
             self._absolute = result.pose
-            self.pose = tuple(a - h for a, h in zip(result.pose, active.home))
+            self.pose = active.relative_from_absolute_mm_rad(result.pose)
         else:
             self._absolute = self.pose = None
             self.failures += 1

@@ -24,7 +24,7 @@ from hexactl.control.planning import Segment
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.trajectory import PoseTrajectory, StepResult
-from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+from hexactl.kinematics.axes import RelativeMmRad
 
 
 class SequencePhase(StrEnum):
@@ -68,15 +68,14 @@ class SequenceReport:
     records: tuple[DwellRecord, ...]
 
 
-def dwell_record(sequence: str, waypoint: int, t_ns: int, pose_command: Sequence[float],
-                 pose_measured: Sequence[float] | None, setpoints: Sequence[float],
+def dwell_record(sequence: str, waypoint: int, t_ns: int, pose_command: RelativeMmRad,
+                 pose_measured: RelativeMmRad | None, setpoints: Sequence[float],
                  feedback: FeedbackSnapshot | None) -> DwellRecord:
     """The record at the end of ``waypoint``'s dwell at monotonic ``t_ns``: poses given
     relative mm/rad (recorded in mm/deg), set-points sensor mm, the legs NaN without feedback."""
     return DwellRecord(
         sequence, waypoint, t_ns / 1e9,
-        tuple(float(v) for v in pose_mm_rad_to_mm_deg(pose_command)),
-        None if pose_measured is None else tuple(float(v) for v in pose_mm_rad_to_mm_deg(pose_measured)),
+        pose_command.in_degrees(), None if pose_measured is None else pose_measured.in_degrees(),
         tuple(setpoints), feedback.positions_mm if feedback else (float("nan"),) * ACTUATOR_COUNT)
 
 

@@ -16,7 +16,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, Waypoint, pace_problem
-from hexactl.kinematics.geometry import Pose6, describe_validation_error
+from hexactl.kinematics.axes import RelativeMmDeg
+from hexactl.kinematics.geometry import describe_validation_error
 
 
 class SequenceError(ValueError):
@@ -35,7 +36,7 @@ class SequenceWaypoint(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
-    pose: Pose6 = Field(description="relative to the zero posture, mm and deg")
+    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
     duration: float | None = Field(default=None, gt=0, le=MAX_MOTION_S, description="minimum move duration, s")
     speed: float | None = Field(default=None, gt=0, le=1, description="fraction of the velocity limits")
     dwell: float = Field(default=0.0, ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")

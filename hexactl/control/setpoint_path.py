@@ -21,6 +21,7 @@ from hexactl.control.guard import guard_setpoints
 from hexactl.control.hardware import ACTUATOR_COUNT
 from hexactl.control.planning import ActiveGeometry, LegLock, track_locked
 from hexactl.control.supervisor import Fault
+from hexactl.kinematics.axes import RelativeMmRad
 from hexactl.kinematics.inverse import sensor_setpoints
 
 
@@ -36,14 +37,14 @@ class SetpointPath:
         self._log = log
         self._max_step_mm = active.geometry.limits.leg_velocity_mm_s * period_s
         # Tuples: published as they are, never changed in place.
-        self.pose_command: tuple[float, ...] = (0.0,) * 6
+        self.pose_command = RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self.setpoints: tuple[float, ...] = (0.0,) * ACTUATOR_COUNT
         self.clamped_cycles = 0  # cycles in which the guard changed a set-point
         self.clamped_legs = 0  # bit mask of the legs it ever changed
 
     def hold(self, pose: Sequence[float], setpoints: Sequence[float]) -> None:
         """Command ``pose`` (relative mm/rad) with ``setpoints`` (sensor mm): where the platform is."""
-        self.pose_command = tuple(pose)
+        self.pose_command = RelativeMmRad._make(pose)
         self.setpoints = tuple(setpoints)
 
     def swap(self, new: ActiveGeometry, enabled: bool) -> None:
@@ -53,21 +54,22 @@ class SetpointPath:
             self.ramp.begin(self.setpoints, new, self.pose_command)
         self._max_step_mm = new.geometry.limits.leg_velocity_mm_s * self._period_s
 
-    def follow(self, active: ActiveGeometry, lock: LegLock | None, target: tuple[float, ...],
-               previous_target: tuple[float, ...] | None) -> Fault | None:
+    def follow(self, active: ActiveGeometry, lock: LegLock | None, target: RelativeMmRad,
+               previous_target: RelativeMmRad | None) -> Fault | None:
         """This cycle's set-points for the trajectory's ``target`` (relative mm/rad);
         ``previous_target`` last cycle's (leg-lock mode only). The fault, with nothing
         changed, if the leg-lock projection fails."""
-        pose = target
-        if lock is not None:
+        if lock is None:
+            pose, absolute = target, active.absolute_from_relative_mm_rad(target)
+        else:
             assert previous_target is not None, "leg-lock tracking needs the previous target"
             # pose_command: what last cycle's target was projected to.
             projected = track_locked(active, lock, target, previous_target, self.pose_command, self._lock_iterations)
             if not projected.ok:
                 return Fault("leg_lock_projection", f"leg-lock projection failed: {projected.status.name.lower()} "
                              f"after {projected.iterations} iterations", lock.leg)
-            pose = tuple(a - h for a, h in zip(projected.pose, active.home))
-        desired = self.ramp.apply(sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad(pose)))
+            pose, absolute = active.relative_from_absolute_mm_rad(projected.pose), projected.pose
+        desired = self.ramp.apply(sensor_setpoints(active.geometry.legs, absolute))
         if lock is not None:
             desired[lock.leg - 1] = lock.sensor_mm  # exactly the locked value, not IK's rounding of it
         setpoints, clamped = guard_setpoints(desired, self.setpoints, active.stroke, self._max_step_mm)

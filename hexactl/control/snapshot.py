@@ -14,6 +14,8 @@ from hexactl.control.hardware import FeedbackSnapshot, LinkHealth
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.sequence_player import SequenceProgress, SequenceReport
 from hexactl.control.supervisor import Fault
+from hexactl.control.trajectory import KinematicState
+from hexactl.kinematics.axes import RelativeMmRad
 
 
 class ControlState(StrEnum):
@@ -55,10 +57,10 @@ class CoreSnapshot:
     state: ControlState
     motion: MotionState
     epoch: int
-    pose_command: tuple[float, ...]
-    trajectory: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
-    goal: tuple[float, ...] | None
-    pose_measured: tuple[float, ...] | None
+    pose_command: RelativeMmRad
+    trajectory: KinematicState
+    goal: RelativeMmRad | None
+    pose_measured: RelativeMmRad | None
     setpoints: tuple[float, ...]
     feedback: FeedbackSnapshot | None
     link: LinkHealth | None

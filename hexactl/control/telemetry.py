@@ -4,7 +4,6 @@ zero posture, mm and degrees; legs in actuator sensor mm."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 
 from hexactl.control.core import CoreSnapshot, Fault
@@ -12,7 +11,7 @@ from hexactl.control.host import LoopReport
 from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
 from hexactl.control.stats import LoopStats
-from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+from hexactl.kinematics.axes import RelativeMmDeg
 
 PERCENTILES_MAX_AGE_S = 0.25
 """Status and telemetry recompute the loop's percentiles (a sort of its window) at most this often."""
@@ -39,8 +38,8 @@ class Telemetry:
     t: float
     state: str
     motion: str
-    pose_command: tuple[float, ...]
-    pose_measured: tuple[float, ...] | None
+    pose_command: RelativeMmDeg
+    pose_measured: RelativeMmDeg | None
     leg_setpoints: tuple[float, ...]
     leg_feedback: tuple[float, ...] | None
     locked_leg: int | None
@@ -82,8 +81,8 @@ def telemetry_of(report: LoopReport) -> Telemetry:
         t=s.t_ns / 1e9,
         state=s.state.value,
         motion=s.motion.value,
-        pose_command=mm_deg(s.pose_command),
-        pose_measured=mm_deg(s.pose_measured) if s.pose_measured is not None else None,
+        pose_command=s.pose_command.in_degrees(),
+        pose_measured=s.pose_measured.in_degrees() if s.pose_measured is not None else None,
         leg_setpoints=s.setpoints,
         leg_feedback=s.feedback.positions_mm if s.feedback else None,
         locked_leg=s.lock.leg if s.lock else None,
@@ -101,6 +100,4 @@ def sequence_telemetry(s: CoreSnapshot) -> SequenceTelemetry | None:
     return SequenceTelemetry(p.name, p.waypoint, p.total, p.phase.value) if p else None
 
 
-def mm_deg(relative_mm_rad: Sequence[float]) -> tuple[float, ...]:
-    """A relative pose in mm and radians as reported: mm and degrees, plain floats."""
-    return tuple(float(v) for v in pose_mm_rad_to_mm_deg(relative_mm_rad))
+

@@ -24,9 +24,10 @@ validated is what the loop will run. Two things keep them equal:
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from enum import IntEnum
 from math import isfinite, radians
+from typing import NamedTuple
 
 from pydantic import BaseModel, ConfigDict, field_validator
 from ruckig import (
@@ -41,10 +42,11 @@ from ruckig import (
     Trajectory,
 )
 
-from hexactl.kinematics.geometry import Pose6
+from hexactl.kinematics.axes import PerAxis, RelativeMmRad
 
 DOFS = 6
 _ZERO6 = [0.0] * DOFS
+_ZERO_AXES: PerAxis = (0.0,) * DOFS  # type: ignore[assignment]
 
 JERK_RETRY_SCALE = 1.0 - 1e-9
 """A move ruckig refuses is calculated once more with every jerk limit scaled by this.
@@ -65,9 +67,9 @@ class MotionLimits(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
-    max_velocity: Pose6 = (200.0, 200.0, 100.0, 10.0, 10.0, 15.0)
-    max_acceleration: Pose6 = (500.0, 500.0, 300.0, 30.0, 30.0, 45.0)
-    max_jerk: Pose6 = (2500.0, 2500.0, 1500.0, 150.0, 150.0, 225.0)
+    max_velocity: PerAxis = (200.0, 200.0, 100.0, 10.0, 10.0, 15.0)
+    max_acceleration: PerAxis = (500.0, 500.0, 300.0, 30.0, 30.0, 45.0)
+    max_jerk: PerAxis = (2500.0, 2500.0, 1500.0, 150.0, 150.0, 225.0)
 
     @field_validator("max_velocity", "max_acceleration", "max_jerk")
     @classmethod
@@ -84,6 +86,19 @@ class MotionLimits(BaseModel):
         )
 
 
+class KinematicState(NamedTuple):
+    """Where a trajectory is (ruckig's current or target state): ``position`` relative
+    mm/rad, ``velocity`` mm/s and rad/s, ``acceleration`` mm/s² and rad/s², per axis."""
+
+    position: RelativeMmRad
+    velocity: PerAxis
+    acceleration: PerAxis
+
+    @classmethod
+    def at_rest(cls, position: RelativeMmRad) -> KinematicState:
+        return cls(position, _ZERO_AXES, _ZERO_AXES)
+
+
 class StepResult(IntEnum):
     """Outcome of :meth:`PoseTrajectory.update`."""
 
@@ -96,7 +111,7 @@ class StepResult(IntEnum):
 def configure_input(
     parameters: InputParameter,
     limits: MotionLimits,
-    goal: Sequence[float] | None,
+    goal: RelativeMmRad | None,
     time_scale: float = 1.0,
     velocity_scale: float = 1.0,
 ) -> None:
@@ -140,8 +155,8 @@ class PoseTrajectory:
         self._output = OutputParameter(DOFS)
         self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
         self._active = False
-        self.goal: tuple[float, ...] | None = None
-        self.reset(_ZERO6)
+        self.goal: RelativeMmRad | None = None
+        self.reset(RelativeMmRad(*_ZERO6))
 
     @property
     def moving(self) -> bool:
@@ -152,30 +167,32 @@ class PoseTrajectory:
         return self._active and self.goal is None
 
     @property
-    def position(self) -> tuple[float, ...]:
-        """The position the next update starts from (relative mm/rad)."""
-        return tuple(self._input.current_position)
+    def position(self) -> RelativeMmRad:
+        """The position the next update starts from."""
+        return tuple.__new__(RelativeMmRad, self._input.current_position)  # every cycle: no _make call
 
-    def state(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-        """(position, velocity, acceleration) the next update starts from."""
+    def state(self) -> KinematicState:
+        """The state the next update starts from."""
         parameters = self._input
-        return (
-            tuple(parameters.current_position),
+        # tuple.__new__ for both: built every cycle for the loop's snapshot, and a NamedTuple's
+        # __new__ and _make are Python calls.
+        return tuple.__new__(KinematicState, (
+            tuple.__new__(RelativeMmRad, parameters.current_position),
             tuple(parameters.current_velocity),
             tuple(parameters.current_acceleration),
-        )
+        ))
 
-    def reset(self, pose: Sequence[float]) -> None:
+    def reset(self, pose: RelativeMmRad) -> None:
         """At rest at ``pose``, nothing to do."""
         parameters = self._input
         parameters.current_position = list(pose)
         parameters.current_velocity = _ZERO6
         parameters.current_acceleration = _ZERO6
         configure_input(parameters, self.limits, pose)
-        self.goal = tuple(pose)
+        self.goal = RelativeMmRad._make(pose)
         self._active = False
 
-    def move_to(self, goal: Sequence[float], time_scale: float = 1.0, velocity_scale: float = 1.0) -> bool:
+    def move_to(self, goal: RelativeMmRad, time_scale: float = 1.0, velocity_scale: float = 1.0) -> bool:
         """Head for ``goal`` (relative mm/rad), arriving at rest; replans from the
         current state, so it may be called while moving. Scales: :func:`configure_input`.
 
@@ -187,7 +204,7 @@ class PoseTrajectory:
         if self._active and preview(self.limits, self.period_s, self.state(), goal, time_scale, velocity_scale) is None:
             return False
         configure_input(self._input, self.limits, goal, time_scale, velocity_scale)
-        self.goal = tuple(goal)
+        self.goal = RelativeMmRad._make(goal)
         self._active = True
         return True
 
@@ -205,13 +222,13 @@ class PoseTrajectory:
         # per new target (twice when the jerk retry is needed), not every cycle.
         result = _calculate(self._input, self._step)
         if result is None:
-            self.reset(self._input.current_position)
+            self.reset(self.position)
             return StepResult.ERROR
         self._output.pass_to_input(self._input)
         if result == Result.Finished:
             # Park so that later updates are no-ops: on the goal itself, where the planner
             # starts the next segment (a halt has no goal: where it ended).
-            self.reset(self.goal if self.goal is not None else self._input.current_position)
+            self.reset(self.goal if self.goal is not None else self.position)
             return StepResult.FINISHED
         return StepResult.WORKING
 
@@ -219,13 +236,13 @@ class PoseTrajectory:
 def preview(
     limits: MotionLimits,
     period_s: float,
-    start: tuple[Sequence[float], Sequence[float], Sequence[float]],
-    goal: Sequence[float],
+    start: KinematicState,
+    goal: RelativeMmRad,
     time_scale: float = 1.0,
     velocity_scale: float = 1.0,
 ) -> Trajectory | None:
-    """The trajectory :class:`PoseTrajectory` would run from ``start`` (position,
-    velocity, acceleration; relative mm/rad) to ``goal``; None if ruckig refuses it."""
+    """The trajectory :class:`PoseTrajectory` would run from ``start`` to ``goal``; None if
+    ruckig refuses it."""
     if not all(isfinite(v) for part in (*start, goal) for v in part):
         return None
     parameters = InputParameter(DOFS)

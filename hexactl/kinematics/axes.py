@@ -1,4 +1,4 @@
-"""The pose's axes, their units at the edges, the name of each pose convention, and what
+"""The pose's axes, their units at the edges, a type for each pose convention, and what
 makes six values a pose.
 
 Standard library only, so that the command line parses a pose without loading numpy;
@@ -7,23 +7,77 @@ the conversions are in :mod:`hexactl.kinematics.pose`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from math import isfinite
-from typing import TypeAlias
+from collections.abc import Callable, Sequence
+from math import degrees, isfinite, radians
+from typing import Any, NamedTuple, TypeAlias
 
 POSE_AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
 """Axis names in pose order; the first three in mm, the last three in degrees at the edges."""
 
 POSE_UNITS: tuple[str, ...] = ("mm", "mm", "mm", "deg", "deg", "deg")
 
-RelativeMmDeg: TypeAlias = tuple[float, float, float, float, float, float]
-"""Relative to the zero posture, mm and degrees: what the API, the CLI and files carry."""
+PerAxis: TypeAlias = tuple[float, float, float, float, float, float]
+"""One value per pose axis, in that axis's units (a limit, a velocity): not a pose."""
 
-RelativeMmRad: TypeAlias = tuple[float, float, float, float, float, float]
-"""Relative to the zero posture, mm and radians: what planning and the loop work in."""
 
-AbsoluteMmRad: TypeAlias = tuple[float, float, float, float, float, float]
-"""In the fixed frame, mm and radians: what the kinematics works in."""
+class _SixAxes(NamedTuple):
+    """The six values of a pose. Each convention below is its own subclass, so that a pose's
+    frame and units are in its type; they are tuples, so numpy and the hot loop take them
+    as they are."""
+
+    x: float
+    y: float
+    z: float
+    roll: float
+    pitch: float
+    yaw: float
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: type, handler: Callable[[type], Any]) -> Any:
+        """Validated by pydantic as six finite numbers (a model's ``allow_inf_nan=False``),
+        with :func:`validate_pose_values`'s sentence for a wrong count."""
+        from pydantic_core import core_schema  # only where pydantic builds a model: the CLI parses poses without it
+
+        def six(value: object) -> object:  # a list or tuple (not a mapping, which a NamedTuple takes) of six
+            if not isinstance(value, (list, tuple)) or len(value) != 6:
+                raise ValueError(validate_pose_values(value) or "a pose is six numbers [x, y, z, roll, pitch, yaw]")
+            return value
+
+        return core_schema.no_info_before_validator_function(six, handler(source))
+
+
+class RelativeMmDeg(_SixAxes):
+    """Relative to the zero posture, mm and degrees: what the API, the CLI and files carry."""
+
+    __slots__ = ()
+
+    def in_radians(self) -> RelativeMmRad:
+        return RelativeMmRad(self.x, self.y, self.z, radians(self.roll), radians(self.pitch), radians(self.yaw))
+
+
+class RelativeMmRad(_SixAxes):
+    """Relative to the zero posture, mm and radians: what planning and the loop work in."""
+
+    __slots__ = ()
+
+    def in_degrees(self) -> RelativeMmDeg:
+        return RelativeMmDeg(self.x, self.y, self.z, degrees(self.roll), degrees(self.pitch), degrees(self.yaw))
+
+
+class AbsoluteMmDeg(_SixAxes):
+    """In the fixed frame, mm and degrees: the zero posture in geometry files, and measured
+    poses in measurement files."""
+
+    __slots__ = ()
+
+    def in_radians(self) -> AbsoluteMmRad:
+        return AbsoluteMmRad(self.x, self.y, self.z, radians(self.roll), radians(self.pitch), radians(self.yaw))
+
+
+class AbsoluteMmRad(_SixAxes):
+    """In the fixed frame, mm and radians: what the kinematics works in."""
+
+    __slots__ = ()
 
 
 def validate_pose_values(pose: Sequence[float]) -> str | None:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from math import isfinite, pi
 
+from hexactl.kinematics.axes import AbsoluteMmRad
 from hexactl.kinematics.inverse import LegModel, leg_jacobian_rows
 from hexactl.kinematics.rotation import euler_rates_from_angular_velocity
 
@@ -52,7 +53,7 @@ class FkResult:
     """``pose`` is absolute (mm, rad) and is the last iterate; trust it only when ``ok``."""
 
     status: FkStatus
-    pose: tuple[float, float, float, float, float, float]
+    pose: AbsoluteMmRad
     iterations: int
     residual_mm: float  # largest |l_target − l(pose)| at ``pose``
 
@@ -87,10 +88,10 @@ def forward_kinematics(
     first = worst
     for iteration in range(1, max_iterations + 1):
         if worst <= tolerance_mm:
-            return FkResult(FkStatus.OK, _as_tuple(pose), iteration - 1, worst)
+            return FkResult(FkStatus.OK, _absolute(pose), iteration - 1, worst)
         step = solve_6x6(rows, residual)
         if step is None:
-            return FkResult(FkStatus.SINGULAR, _as_tuple(pose), iteration - 1, worst)
+            return FkResult(FkStatus.SINGULAR, _absolute(pose), iteration - 1, worst)
         roll_step, pitch_step, yaw_step = euler_rates_from_angular_velocity(step[3:], pose[4], pose[5])
         pose = [pose[0] + step[0], pose[1] + step[1], pose[2] + step[2],
                 pose[3] + roll_step, pose[4] + pitch_step, pose[5] + yaw_step]
@@ -100,10 +101,10 @@ def forward_kinematics(
         residual = [t - length for t, length in zip(target, lengths)]
         worst = max(abs(r) for r in residual)
         if worst > 1e3 * max(first, 1.0):
-            return FkResult(FkStatus.DIVERGED, _as_tuple(pose), iteration, worst)
+            return FkResult(FkStatus.DIVERGED, _absolute(pose), iteration, worst)
     if worst <= tolerance_mm:
-        return FkResult(FkStatus.OK, _as_tuple(pose), max_iterations, worst)
-    return FkResult(FkStatus.MAX_ITERATIONS, _as_tuple(pose), max_iterations, worst)
+        return FkResult(FkStatus.OK, _absolute(pose), max_iterations, worst)
+    return FkResult(FkStatus.MAX_ITERATIONS, _absolute(pose), max_iterations, worst)
 
 
 def solve_6x6(matrix: list[list[float]], rhs: list[float]) -> list[float] | None:
@@ -137,6 +138,5 @@ def solve_6x6(matrix: list[list[float]], rhs: list[float]) -> list[float] | None
     return x
 
 
-def _as_tuple(pose: Sequence[float]) -> tuple[float, float, float, float, float, float]:
-    x, y, z, roll, pitch, yaw = pose
-    return (x, y, z, roll, pitch, yaw)
+def _absolute(pose: Sequence[float]) -> AbsoluteMmRad:
+    return tuple.__new__(AbsoluteMmRad, pose)  # the loop solves FK often: no _make call

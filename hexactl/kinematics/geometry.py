@@ -16,17 +16,12 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hexactl.kinematics.inverse import LegModel, leg_lengths, twist_jacobian
-from hexactl.kinematics.pose import absolute_from_relative
-from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.axes import POSE_AXES, AbsoluteMmDeg, RelativeMmDeg
 
 MIN_JOINT_SEPARATION_MM = 1.0
 """Joints closer than this are taken as a typing error (two legs on one joint)."""
 
 Vector3 = Annotated[tuple[float, float, float], Field(description="[x, y, z], mm")]
-Pose6 = Annotated[
-    tuple[float, float, float, float, float, float],
-    Field(description="[x, y, z, roll, pitch, yaw], mm and deg"),
-]
 Six = tuple[float, float, float, float, float, float]
 
 
@@ -40,8 +35,8 @@ class Limits(_Strict):
     stroke: tuple[float, float] = Field(description="sensor range [min, max], mm")
     base_cone_deg: float = Field(gt=0, lt=90, description="base joint cone-angle limit, deg")
     platform_cone_deg: float = Field(gt=0, lt=90, description="platform joint cone-angle limit, deg")
-    pose_min: Pose6 = Field(description="pose envelope lower bound, relative to the zero posture")
-    pose_max: Pose6 = Field(description="pose envelope upper bound, relative to the zero posture")
+    pose_min: RelativeMmDeg = Field(description="pose envelope lower bound, relative to the zero posture, mm and deg")
+    pose_max: RelativeMmDeg = Field(description="pose envelope upper bound, relative to the zero posture, mm and deg")
     leg_velocity_mm_s: float = Field(gt=0, description="fastest allowed actuator speed, mm/s")
     max_jacobian_condition: float = Field(gt=1, description="near-singularity threshold")
     # Plausibility bounds of a calibration around the nominal geometry (see
@@ -113,7 +108,7 @@ class Geometry(_Strict):
         description="platform joint centres P_mi, moving frame, mm"
     )
     zero_lengths: Six = Field(description="joint-to-joint leg length at sensor reading 0, mm")
-    home: Pose6 = Field(description="zero posture in the fixed frame [x, y, z, roll, pitch, yaw]")
+    home: AbsoluteMmDeg = Field(description="zero posture in the fixed frame [x, y, z, roll, pitch, yaw], mm and deg")
     limits: Limits
     measurement: Measurement
     calibration: CalibrationInfo | None = None
@@ -129,7 +124,7 @@ class Geometry(_Strict):
             if length <= 0:
                 raise ValueError(f"zero_lengths: leg {i + 1} has non-positive zero length {length}")
         low, high = self.limits.stroke
-        home_lengths = leg_lengths(self.legs, absolute_from_relative(self.home, [0.0] * 6))
+        home_lengths = leg_lengths(self.legs, self.home.in_radians())
         for i, (length, zero) in enumerate(zip(home_lengths, self.zero_lengths)):
             reading = length - zero
             if not low <= reading <= high:
@@ -137,7 +132,7 @@ class Geometry(_Strict):
                     f"limits.stroke: leg {i + 1} needs sensor reading {reading:.3f} mm in the zero "
                     f"posture, outside the stroke [{low}, {high}]"
                 )
-        jacobian, _ = twist_jacobian(self.legs, absolute_from_relative(self.home, [0.0] * 6))
+        jacobian, _ = twist_jacobian(self.legs, self.home.in_radians())
         if np.linalg.matrix_rank(jacobian) < 6:
             raise ValueError("the zero posture is singular: the joints do not form a working hexapod")
         return self

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from math import cos, isfinite, pi, sin, sqrt
 
+from hexactl.kinematics.axes import AbsoluteMmRad
 from hexactl.kinematics.inverse import LEG_COUNT, LegModel
 from hexactl.kinematics.rotation import rotation_elements
 
@@ -51,7 +52,7 @@ PROJECTION_MAX_ITERATIONS = 50
 """Default iteration cap."""
 
 _MAX_PITCH_RAD = 0.45 * pi  # as in forward kinematics: beyond it the Euler chart is unusable
-_NO_POSE = (float("nan"),) * 6
+_NO_POSE = AbsoluteMmRad._make((float("nan"),) * 6)
 
 
 _MAX_INPUT = 1e6
@@ -76,7 +77,7 @@ class ProjectionResult:
     distance from the input pose, mm."""
 
     status: ProjectionStatus
-    pose: tuple[float, float, float, float, float, float]
+    pose: AbsoluteMmRad
     iterations: int
     residual_mm: float
     correction: float
@@ -127,7 +128,7 @@ def project_to_locked_leg(
         correction = sqrt((x - x0) ** 2 + (y - y0) ** 2 + (z - z0) ** 2
                           + ((roll - roll0) ** 2 + (pitch - pitch0) ** 2 + (yaw - yaw0) ** 2)
                           * characteristic_length_mm * characteristic_length_mm)
-        here = (x, y, z, roll, pitch, yaw)
+        here = tuple.__new__(AbsoluteMmRad, (x, y, z, roll, pitch, yaw))  # each iteration: no Python-level __new__
         if abs(residual) <= tolerance_mm and iteration >= min_iterations:
             return ProjectionResult(ProjectionStatus.OK, here, iteration, residual, correction)
         if iteration >= max_iterations:

@@ -24,7 +24,6 @@ import can
 
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import sensor_setpoints
-from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.sim.actuator_firmware import ActuatorFirmware, ActuatorParams, FaultInjection
 
 DEFAULT_TICK_S = 0.001
@@ -44,7 +43,7 @@ def actuator_params_for(geometry: Geometry) -> ActuatorParams:
 
 def zero_posture_readings_mm(geometry: Geometry) -> list[float]:
     """The sensor readings (mm) at which ``geometry`` is in its zero posture."""
-    return sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0.0] * 6))
+    return sensor_setpoints(geometry.legs, geometry.home.in_radians())
 
 
 def make_firmwares(

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmDeg
 from hexactl.kinematics.forward import FkStatus, forward_kinematics
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
+from hexactl.kinematics.pose import relative_from_absolute
 
 
 
@@ -54,7 +54,7 @@ class PhysicalPlatform:
     def __init__(self, true_geometry: Geometry, actual_positions_mm: Callable[[], Sequence[float]]) -> None:
         self.geometry = true_geometry
         self._actual_positions_mm = actual_positions_mm
-        self._guess: AbsoluteMmRad = _as_pose(absolute_from_relative(true_geometry.home, [0.0] * 6))
+        self._guess = true_geometry.home.in_radians()
 
     def leg_lengths_mm(self) -> tuple[float, ...]:
         """True joint-to-joint lengths, mm: the true zero lengths plus the actual positions."""
@@ -68,14 +68,9 @@ class PhysicalPlatform:
         :raises PoseUnavailable: if forward kinematics does not converge
         """
         lengths = self.leg_lengths_mm()
-        result = forward_kinematics(self.geometry.legs, lengths, self._guess if guess is None else _as_pose(guess))
+        result = forward_kinematics(self.geometry.legs, lengths, self._guess if guess is None else guess)
         if not result.ok:
             raise PoseUnavailable(result.status, lengths)
-        self._guess = result.pose
-        relative = _as_pose(relative_from_absolute(self.geometry.home, result.pose))
-        return TruePose(result.pose, relative, lengths)
-
-
-def _as_pose(values: Sequence[float]) -> tuple[float, float, float, float, float, float]:
-    x, y, z, roll, pitch, yaw = (float(v) for v in values)
-    return (x, y, z, roll, pitch, yaw)
+        self._guess = AbsoluteMmRad._make(float(v) for v in result.pose)
+        relative = RelativeMmDeg._make(float(v) for v in relative_from_absolute(self.geometry.home, result.pose))
+        return TruePose(self._guess, relative, lengths)

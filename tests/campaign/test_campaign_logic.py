@@ -21,8 +21,10 @@ from hexactl.calibration.test_motions import X_SWEEP
 from hexactl.calibration.validation import MotionResult, ValidationSummary, largest_stroke_error
 from hexactl.control.config import ControllerConfig
 from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, Waypoint, plan_path
+from hexactl.control.trajectory import KinematicState
+from hexactl.kinematics.axes import RelativeMmDeg
 from hexactl.kinematics.inverse import leg_lengths, leg_lengths_batch
-from hexactl.kinematics.pose import absolute_from_relative, pose_mm_deg_to_mm_rad
+from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.kinematics.rotation import rotation_matrix
 
 
@@ -97,7 +99,7 @@ def test_the_controller_refuses_some_unsplit_demo_moves_and_accepts_every_piece_
         context = PlanningContext(active, DEMO_MOTION, config.loop.period_s, budget,
                                   LegLock(plan.leg, plan.locked_reading_mm), config.lock_max_correction_mm,
                                   config.path_step_mm, config.path_step_deg, config.lock_cycle_iterations)
-        at_rest = (tuple(pose_mm_deg_to_mm_rad(list(start))), (0.0,) * 6, (0.0,) * 6)
+        at_rest = KinematicState.at_rest(RelativeMmDeg._make(start).in_radians())
         planned = plan_path(context, at_rest, [Waypoint(goal)])
         return None if planned.ok else planned.refusal.code
 

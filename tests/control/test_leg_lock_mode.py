@@ -9,6 +9,8 @@ from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, Waypoint, plan_path
+from hexactl.control.trajectory import KinematicState
+from hexactl.kinematics.axes import RelativeMmRad
 from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints
 from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.pose import absolute_from_relative
@@ -132,12 +134,12 @@ def test_planning_refuses_a_path_the_loops_iterations_cannot_follow(geometry):
     config = ControllerConfig()
     context = PlanningContext(active, config.motion, config.loop.period_s, geometry.limits.leg_velocity_mm_s, lock,
                               lock_cycle_iterations=1)
-    plan = plan_path(context, ((0.0,) * 6,) * 3, [Waypoint([0, 0, 0, -15, -15, -30])])
+    plan = plan_path(context, KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)), [Waypoint([0, 0, 0, -15, -15, -30])])
     assert plan.refusal is not None and plan.refusal.code == "lock_unreachable"
     assert "the loop cannot keep leg 3 at its locked length" in plan.refusal.message
     assert plan.refusal.details["t_s"] > 0
     assert plan_path(replace(context, lock_cycle_iterations=config.lock_cycle_iterations),
-                     ((0.0,) * 6,) * 3, [Waypoint([0, 0, 0, -15, -15, -30])]).ok
+                     KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)), [Waypoint([0, 0, 0, -15, -15, -30])]).ok
 
 
 # Mostly rotation (to 80 % of the envelope's), little translation (a quarter of it): the

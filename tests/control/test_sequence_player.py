@@ -12,6 +12,7 @@ from hexactl.control.planning import Segment
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequencePlayer, dwell_record
 from hexactl.control.trajectory import StepResult
+from hexactl.kinematics.axes import RelativeMmRad
 
 S = 1_000_000_000
 
@@ -147,7 +148,7 @@ def test_a_new_sequence_starts_with_no_records(rig):
 
 
 def test_a_dwell_record_is_in_mm_and_degrees_and_nan_without_feedback():
-    pose = (1.0, 2.0, 3.0, radians(10), radians(-20), radians(30))
+    pose = RelativeMmRad(1.0, 2.0, 3.0, radians(10), radians(-20), radians(30))
     legs = FeedbackSnapshot(tuple(ActuatorFeedback(float(i), 0.0, ActuatorState.ENABLED, 0, 0.0, 0) for i in range(6)), 0)
     record = dwell_record("tour", 2, 3 * S, pose, None, [5.0] * 6, legs)
     assert (record.sequence, record.waypoint, record.t_s) == ("tour", 2, 3.0)

@@ -4,10 +4,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from hexactl.control.trajectory import MotionLimits, PoseTrajectory, StepResult, preview
+from hexactl.control.trajectory import KinematicState, MotionLimits, PoseTrajectory, StepResult, preview
+from hexactl.kinematics.axes import RelativeMmRad
 
 PERIOD = 0.002
-GOAL = (600.0, -100.0, 50.0, 0.1, -0.05, 0.2)
+GOAL = RelativeMmRad(600.0, -100.0, 50.0, 0.1, -0.05, 0.2)
+REST = KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 
 def _run(trajectory, limit=100_000):
@@ -28,7 +30,7 @@ def _max_distance_from_line(points, goal):
 
 @pytest.mark.parametrize(("time_scale", "velocity_scale"), [(1.0, 1.0), (3.0, 1.0), (1.0, 0.3)])
 def test_a_move_from_rest_is_a_straight_line_ending_on_the_grid(time_scale, velocity_scale):
-    natural = preview(MotionLimits(), PERIOD, ((0.0,) * 6,) * 3, GOAL).duration
+    natural = preview(MotionLimits(), PERIOD, REST, GOAL).duration
     trajectory = PoseTrajectory(MotionLimits(), PERIOD)
     trajectory.move_to(GOAL, time_scale, velocity_scale)
     result, points = _run(trajectory)
@@ -52,7 +54,7 @@ def test_limits_are_respected_per_axis():
 
 def test_halt_brakes_on_the_line_and_the_preview_matches_the_online_run():
     limits = MotionLimits()
-    planned = preview(limits, PERIOD, ((0.0,) * 6, (0.0,) * 6, (0.0,) * 6), GOAL)
+    planned = preview(limits, PERIOD, REST, GOAL)
     trajectory = PoseTrajectory(limits, PERIOD)
     trajectory.move_to(GOAL)
     online = []
@@ -82,7 +84,7 @@ def test_a_move_refused_from_the_current_state_leaves_the_motion_as_it_was():
 
 
 def test_preview_refuses_non_finite_input():
-    assert preview(MotionLimits(), PERIOD, ((0.0,) * 6,) * 3, (float("nan"),) * 6) is None
+    assert preview(MotionLimits(), PERIOD, REST, (float("nan"),) * 6) is None
 
 
 def test_limits_must_be_positive():
@@ -95,7 +97,7 @@ def test_ruckig_exceptions_become_an_error_result():
     trajectory.move_to([1e300] * 6)
     assert trajectory.update() is StepResult.ERROR and not trajectory.moving
     assert trajectory.state()[0] == (0.0,) * 6
-    assert preview(MotionLimits(), PERIOD, ((0.0,) * 6,) * 3, (1e300,) * 6) is None
+    assert preview(MotionLimits(), PERIOD, REST, (1e300,) * 6) is None
 
 
 def test_a_finished_move_parks_exactly_on_its_goal():
@@ -124,7 +126,7 @@ def test_rest_to_rest_moves_by_ruckigs_degenerate_distance_are_planned_and_run(s
     start = np.where(np.arange(6) < 3, start, np.radians(start))
     goal = start / 2 if others else start.copy()
     goal[axis] = start[axis] + sign * DEGENERATE[axis]
-    at_rest = (tuple(start), (0.0,) * 6, (0.0,) * 6)
+    at_rest = KinematicState.at_rest(RelativeMmRad._make(start))
     planned = preview(MotionLimits(), PERIOD, at_rest, goal, time_scale)
     assert planned is not None
     trajectory = PoseTrajectory(MotionLimits(), PERIOD)

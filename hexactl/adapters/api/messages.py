@@ -18,11 +18,8 @@ from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, pace_problem
+from hexactl.kinematics.axes import RelativeMmDeg
 
-PoseMmDeg = Annotated[
-    list[float],
-    Field(min_length=6, max_length=6, description="[x, y, z, roll, pitch, yaw], mm and deg, relative to the zero posture"),
-]
 LegValues = Annotated[list[float], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm")]
 LegReadings = Annotated[
     list[float | None], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm; null for a leg not heard from yet")
@@ -110,14 +107,14 @@ class MoveRequest(_Request, _Paced):
     locked leg keeps its length (the reply's ``goal``)."""
 
     cmd: Literal["move"]
-    pose: PoseMmDeg
+    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
 
 
 class ValidatePoseRequest(_Request, _Paced):
     """Would ``move`` accept this now? Plans and checks the whole path; moves nothing."""
 
     cmd: Literal["validate_pose"]
-    pose: PoseMmDeg
+    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
 
 
 class LegLockRequest(_Request):
@@ -136,7 +133,7 @@ class LegUnlockRequest(_Request):
 class Waypoint(_Paced):
     """One waypoint of an inline sequence: the ``[[waypoint]]`` table of a sequence file."""
 
-    pose: PoseMmDeg
+    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
     dwell: Dwell = 0.0
 
 
@@ -302,8 +299,8 @@ class Telemetry(_Message):
     t: float = Field(description="time of the cycle, s, on the service host's monotonic clock")
     state: str = Field(description="disabled, enabled, fault or estop")
     motion: str = Field(description="holding, moving or stopping")
-    pose_command: PoseMmDeg = Field(description="commanded pose")
-    pose_measured: PoseMmDeg | None = Field(description="pose from the actuators' feedback by forward kinematics; null if none")
+    pose_command: RelativeMmDeg = Field(description="commanded pose")
+    pose_measured: RelativeMmDeg | None = Field(description="pose from the actuators' feedback by forward kinematics; null if none")
     leg_setpoints: LegValues = Field(description="set-points sent, sensor mm")
     leg_feedback: LegReadings | None = Field(description="actuator positions reported, sensor mm; null before the first read")
     locked_leg: Leg | None = Field(description="the locked leg, or null")
@@ -346,13 +343,13 @@ class StatusReply(OkReply):
 
 
 class MoveReply(OkReply):
-    goal: PoseMmDeg = Field(description="the goal as planned (projected onto the locked leg's constraint in leg-lock mode)")
+    goal: RelativeMmDeg = Field(description="the goal as planned (projected onto the locked leg's constraint in leg-lock mode)")
     duration: float = Field(description="planned duration, s")
 
 
 class ValidatePoseReply(OkReply):
     valid: bool = Field(description="whether move would accept the pose now")
-    goal: PoseMmDeg | None = Field(description="the goal as planned, when valid")
+    goal: RelativeMmDeg | None = Field(description="the goal as planned, when valid")
     duration: float | None = Field(description="planned duration, s, when valid")
     refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
 
@@ -387,7 +384,7 @@ class PathViolation(_Message):
     waypoint's path that violates a limit."""
 
     waypoint: int = Field(ge=1, description="1-based waypoint whose path violates")
-    pose: PoseMmDeg = Field(description="the violating sample")
+    pose: RelativeMmDeg = Field(description="the violating sample")
     kind: str = Field(description="stroke_low, stroke_high, base_cone, platform_cone, pose_range or near_singular")
     message: str
     value: float | None = Field(description="the violating value (mm, deg or condition number); null if infinite")
