@@ -1,0 +1,35 @@
+"""tools/bench_cycle_cpu.py runs each scenario and reports a figure per cycle."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+TOOL = Path(__file__).resolve().parents[2] / "tools" / "bench_cycle_cpu.py"
+
+
+def run(*arguments: str) -> str:
+    result = subprocess.run([sys.executable, str(TOOL), *arguments], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_cpu_time_per_cycle_for_each_scenario():
+    out = run("--rounds", "2", "--cycles", "200")
+    for scenario in ("lock", "move"):
+        match = re.search(rf"^{scenario}: CPU per cycle min ([0-9.]+) µs, median ([0-9.]+) µs", out, re.M)
+        assert match and 0 < float(match[1]) <= float(match[2]), out
+
+
+def test_calls_per_cycle_are_counted_and_the_same_every_time():
+    first, second = run("--calls", "--cycles", "300"), run("--calls", "--cycles", "300")
+    assert first == second, (first, second)  # deterministic: what makes it a load-independent figure
+    counts = dict(re.findall(r"^(\w+): ([0-9.]+) Python calls per cycle", first, re.M))
+    assert set(counts) == {"lock", "move"} and float(counts["lock"]) > float(counts["move"]) > 50, first
+
+
+def test_bad_arguments_are_refused():
+    result = subprocess.run([sys.executable, str(TOOL), "--rounds", "0"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "--rounds and --cycles must be at least 1" in result.stderr

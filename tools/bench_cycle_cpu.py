@@ -1,0 +1,113 @@
+"""CPU time of one control-loop cycle, stepped by hand: a measure the host's load does not
+change (``tools/bench_loop.py`` measures the running thread's wall-clock compute, which a
+busy host or the planning thread's share of the GIL inflates).
+
+The controller runs on ideal in-memory actuators in simulated time, as the control
+tests' rig does; each scenario plays a tour of moves (``lock``: with leg 1 locked) and
+``time.thread_time_ns`` is summed around each ``step`` only, so planning, which runs in the
+caller's thread, is not counted. Each round steps ``--cycles`` cycles; the minimum over
+the rounds is the figure (the least disturbed one), the median beside it. On a shared
+virtual machine even CPU time varies by tens of per cent from run to run; ``--calls``
+counts the Python function calls per cycle instead (cProfile around each step), which
+does not vary at all.
+
+    python3 tools/bench_cycle_cpu.py --rounds 8 --cycles 5000
+    python3 tools/bench_cycle_cpu.py --calls --cycles 2000
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
+from hexactl.control.config import ControllerConfig  # noqa: E402
+from hexactl.control.controller import Controller  # noqa: E402
+from hexactl.control.sequences import MotionSequence  # noqa: E402
+from hexactl.kinematics.inverse import sensor_setpoints  # noqa: E402
+from hexactl.sim.ideal_actuators import IdealActuators  # noqa: E402
+
+TOURS = {
+    "move": [(300, 0, 0, 0, 0, 0), (-300, 200, 100, 0, 5, 10), (0, -300, -150, 5, -5, -20), (0, 0, 0, 0, 0, 0)],
+    "lock": [(30, 0, 0, 0, 0, 0), (0, 30, 0, 0, 0, 2), (-30, 0, 0, 0, 0, -2), (0, 0, 0, 0, 0, 0)],
+}
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.now_ns = 1_000_000_000
+
+    def __call__(self) -> int:
+        return self.now_ns
+
+
+def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.Profile | None = None) -> float:
+    """Mean CPU time of ``cycles`` steps of ``scenario``, µs (the tour replayed as needed);
+    with ``profile``, the steps also run under it (and the time is the profiler's too)."""
+    geometry = load_geometry(config_path)
+    clock = _Clock()
+    actuators = IdealActuators(sensor_setpoints(geometry.legs, geometry.home.in_radians()), clock_ns=clock)
+    controller = Controller.in_thread(actuators, geometry, "nominal", config=ControllerConfig(), clock_ns=clock)
+    period_ns = controller.config.loop.period_ns
+    tour = MotionSequence(name=f"bench_{scenario}", waypoints=[{"pose": pose} for pose in TOURS[scenario]])
+
+    def step() -> int:
+        clock.now_ns += period_ns
+        start = time.thread_time_ns()
+        if profile is None:
+            controller.step(clock.now_ns)
+        else:
+            profile.runcall(controller.step, clock.now_ns)
+        return time.thread_time_ns() - start
+
+    _expect(controller.enable())
+    for _ in range(2):
+        step()
+    if scenario == "lock":
+        _expect(controller.leg_lock(1))
+        step()
+    spent_ns = 0
+    for _ in range(cycles):
+        if controller.snapshot.sequence is None:
+            _expect(controller.play(tour))
+        spent_ns += step()
+    return spent_ns / cycles / 1e3
+
+
+def _expect(result) -> None:
+    if not result.ok:
+        raise SystemExit(f"benchmark set-up failed: {result.error}: {result.message}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenario", choices=sorted(TOURS), nargs="+", default=sorted(TOURS))
+    parser.add_argument("--rounds", type=int, default=8)
+    parser.add_argument("--cycles", type=int, default=5000, help="cycles per round")
+    parser.add_argument("--calls", action="store_true", help="count Python calls per cycle instead (one round)")
+    parser.add_argument("--geometry", type=Path, default=Path(__file__).resolve().parents[1] / "config" / "platform.toml")
+    args = parser.parse_args(argv)
+    if args.rounds < 1 or args.cycles < 1:
+        parser.error("--rounds and --cycles must be at least 1")
+    for scenario in args.scenario:
+        if args.calls:
+            profile = cProfile.Profile()
+            per_cycle(scenario, args.cycles, args.geometry, profile)
+            calls = pstats.Stats(profile).total_calls  # type: ignore[attr-defined]
+            print(f"{scenario}: {calls / args.cycles:.1f} Python calls per cycle ({args.cycles} cycles)")
+            continue
+        figures = [per_cycle(scenario, args.cycles, args.geometry) for _ in range(args.rounds)]
+        print(f"{scenario}: CPU per cycle min {min(figures):.1f} µs, median {statistics.median(figures):.1f} µs "
+              f"({args.rounds} rounds of {args.cycles} cycles)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
