@@ -33,7 +33,7 @@ from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.application.loop_link import RemoteLoop
-from hexactl.application.simulator import InstrumentSpec, SimulatedMeasurement
+from hexactl.application.simulator import InstrumentLine, InstrumentSpec, SimulatedMeasurement
 from hexactl.application.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
@@ -99,17 +99,19 @@ class ApiSettings:
 
 class ApiProcess:
     """The API in a spawned child process, on the loop link's ``commands`` (write end)
-    and ``reports`` (read end); :attr:`api_endpoint`/:attr:`telemetry_endpoint` are
-    where it bound.
+    and ``reports`` (read end), with the simulated instrument's ``instrument_line`` (its
+    :class:`~hexactl.application.simulator.InstrumentPort`'s other end; None with real
+    hardware); :attr:`api_endpoint`/:attr:`telemetry_endpoint` are where it bound.
 
     :raises ApiStartError: if it does not start within ``start_timeout_s`` or says it cannot serve
     """
 
     def __init__(self, settings: ApiSettings, commands: Connection, reports: Connection,
-                 start_timeout_s: float = 60.0) -> None:
+                 start_timeout_s: float = 60.0, instrument_line: Connection | None = None) -> None:
+        handed_over = (commands, reports) + ((instrument_line,) if instrument_line is not None else ())
         try:
-            self._child = Spawned(_api_main, (settings, commands, reports), name="hexactl-api", daemon=True,
-                                  start_timeout_s=start_timeout_s, handed_over=(commands, reports))  # fmt: skip
+            self._child = Spawned(_api_main, (settings, commands, reports, instrument_line), name="hexactl-api",
+                                  daemon=True, start_timeout_s=start_timeout_s, handed_over=handed_over)
         except SpawnError as error:
             raise ApiStartError(str(error)) from None
         self.api_endpoint, self.telemetry_endpoint = self._child.served
@@ -131,7 +133,8 @@ class ApiProcess:
         self._child.close(timeout_s)
 
 
-def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, control: Connection) -> None:
+def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, instrument_line: Connection | None,
+              control: Connection) -> None:
     """The child's life (see the module's docstring)."""
     # Ctrl-C at a terminal and a service manager's SIGTERM reach the whole process group:
     # the service handles them and stops this process in order (telemetry until at rest).
@@ -155,8 +158,10 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                     raise ApiStartError(f"CURVE keys: {error}") from None
                 closers.callback(curve.close)
             instrument = None
-            if settings.instrument is not None:
-                measurement = SimulatedMeasurement(settings.instrument, remote.probe)
+            if settings.instrument is not None and instrument_line is not None:
+                line = InstrumentLine(instrument_line)
+                closers.callback(line.close)
+                measurement = SimulatedMeasurement(settings.instrument, line)
                 instrument = lambda: measurement.measure(_measured_pose(controller))  # noqa: E731
             try:
                 publisher = TelemetryPublisher(context, settings.telemetry_endpoint,

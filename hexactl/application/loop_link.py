@@ -9,9 +9,10 @@ in a process of their own (:mod:`hexactl.application.api_process`); what crosses
 
 - **commands** (API → loop): the immutable :mod:`hexactl.control.commands` objects the
   facade builds after planning and validating, pickled, one message each, on a pipe;
-- **reports** (loop → API): :class:`PublishedReport`, the loop's
-  :class:`~hexactl.control.host.LoopReport` (snapshot, statistics, health) and the
-  simulator's probe, at most every :data:`REPORT_INTERVAL_S`, on another pipe.
+- **reports** (loop → API): the loop's :class:`~hexactl.control.host.LoopReport`
+  (snapshot, statistics, health), at most every :data:`REPORT_INTERVAL_S`, on another pipe.
+  (The built-in simulator's instrument has a port of its own:
+  :mod:`hexactl.application.simulator`.)
 
 Loop side, :class:`LoopExchange`: the loop thread calls it in its slack (see
 :class:`~hexactl.control.loop.ControlLoop`). It takes at most
@@ -37,8 +38,7 @@ import pickle
 import struct
 import threading
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from multiprocessing.connection import Connection
 
 from hexactl.control import commands as cmd
@@ -59,15 +59,6 @@ STATS_MAX_AGE_S = 0.25
 """Published percentiles are at most this old (a sort of the statistics window)."""
 
 log = logging.getLogger("hexactl.loop_link")
-
-
-@dataclass(frozen=True, slots=True)
-class PublishedReport:
-    """One report on the pipe: the loop's, and the simulator's true actuator positions
-    (sensor mm) at that moment (None with real actuators)."""
-
-    report: LoopReport
-    probe: tuple[float, ...] | None
 
 
 class _FrameReader:
@@ -160,19 +151,16 @@ class LoopExchange:
     as far as the pipes allow without waiting; a report the pipe has no room for is
     dropped (the next one follows within :data:`REPORT_INTERVAL_S`).
 
-    ``probe``: the simulator's true actuator positions, mm (None with real actuators).
     ``rejected``: messages that were not commands (a bug if ever non-zero);
     ``reports_dropped``: reports the pipe had no room for.
     """
 
-    def __init__(self, thread: LoopThread, commands: Connection, reports: Connection,
-                 probe: Callable[[], tuple[float, ...]] | None = None) -> None:
+    def __init__(self, thread: LoopThread, commands: Connection, reports: Connection) -> None:
         self._thread = thread
         self._commands = commands  # kept open: the reader uses its descriptor
         self._reports = reports
         self._reader = _FrameReader(commands.fileno())
         self._writer = _FrameWriter(reports.fileno())
-        self._probe = probe
         self._interval_ns = round(REPORT_INTERVAL_S * 1e9)
         self._next_report_ns = 0
         self.rejected = 0
@@ -221,7 +209,7 @@ class LoopExchange:
         if not self._writer.flush():  # the previous report is still unfinished: do not pickle this one
             self.reports_dropped += 1
             return
-        report = PublishedReport(self._thread.report(STATS_MAX_AGE_S), self._probe() if self._probe else None)
+        report = self._thread.report(STATS_MAX_AGE_S)
         if not self._writer.offer(pickle.dumps(report, protocol=pickle.HIGHEST_PROTOCOL)):
             self.reports_dropped += 1
 
@@ -242,7 +230,7 @@ class RemoteLoop:
         try:
             if not reports.poll(first_report_timeout_s):
                 raise ConnectionError(f"no report from the control loop within {first_report_timeout_s:g} s")
-            self._latest: PublishedReport = pickle.loads(reports.recv_bytes())
+            self._latest: LoopReport = pickle.loads(reports.recv_bytes())
         except (EOFError, OSError) as error:
             raise ConnectionError(f"the control loop's link is closed: {error!r}") from None
         self._receiver = threading.Thread(target=self._receive, name="hexactl-loop-link", daemon=True)
@@ -250,23 +238,13 @@ class RemoteLoop:
 
     @property
     def snapshot(self) -> CoreSnapshot:
-        return self._latest.report.snapshot
-
-    def probe(self) -> tuple[float, ...]:
-        """The simulator's true actuator positions, sensor mm, as last reported.
-
-        :raises LookupError: with real actuators (nothing to probe)
-        """
-        probe = self._latest.probe
-        if probe is None:
-            raise LookupError("the loop reports no simulator")
-        return probe
+        return self._latest.snapshot
 
     def report(self, stats_max_age_s: float) -> LoopReport:
         """The latest report (its percentiles are at most :data:`STATS_MAX_AGE_S` old
         whatever ``stats_max_age_s`` asks); once the link is gone, the loop is reported
         not running and failed."""
-        report = self._latest.report
+        report = self._latest
         if self._gone is not None:
             return replace(report, running=False, failure=report.failure or self._gone)
         return report

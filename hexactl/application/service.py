@@ -58,7 +58,7 @@ from hexactl.adapters.can.transport import BusSpecError
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.loop_link import LoopExchange
-from hexactl.application.simulator import Simulator
+from hexactl.application.simulator import InstrumentPort, Simulator
 from hexactl.application.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.controller import Controller
@@ -263,8 +263,7 @@ class Service:
             pipes = multiprocessing.get_context("spawn")
             commands_in, commands_out = pipes.Pipe(duplex=False)
             reports_in, reports_out = pipes.Pipe(duplex=False)
-            probe = simulator.runner.actual_positions_mm if simulator else None
-            exchange = LoopExchange(controller.thread, commands_in, reports_out, probe).start()
+            exchange = LoopExchange(controller.thread, commands_in, reports_out).start()
             closers.callback(exchange.close)
             realtime = controller.start(exchange)
             closers.callback(controller.shutdown)
@@ -278,8 +277,13 @@ class Service:
                                    simulator.instrument_spec if simulator else None, config.log_level,
                                    urgent_niceness=0 if realtime.fifo_priority is None
                                    else API_URGENT_NICENESS)  # fmt: skip
+            port = None
+            if simulator:
+                port = InstrumentPort(simulator.runner.actual_positions_mm).start()
+                closers.callback(port.close)  # after the API's process: unwound in reverse
             try:
-                api = ApiProcess(settings, commands_out, reports_in, API_START_TIMEOUT_S)
+                api = ApiProcess(settings, commands_out, reports_in, API_START_TIMEOUT_S,
+                                 port.line_end if port else None)
             except ApiStartError as error:
                 raise ServiceError(str(error)) from None
             budget = _Budget()
