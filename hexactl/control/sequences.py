@@ -11,6 +11,7 @@ settled, the instrument done), the commanded and the measured pose: :class:`Dwel
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -31,21 +32,32 @@ class UnknownSequence(SequenceError, KeyError):
         return str(self.args[0])
 
 
-class SequenceWaypoint(BaseModel):
-    """One ``[[waypoint]]`` table."""
+Duration = Annotated[float, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
+Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
+Dwell = Annotated[float, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
+
+
+class Paced(BaseModel):
+    """A move's pace: at least ``duration`` s, or ``speed`` of the velocity limits (sequence
+    files, and the API's moves and inline sequences)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
-    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
-    duration: float | None = Field(default=None, gt=0, le=MAX_MOTION_S, description="minimum move duration, s")
-    speed: float | None = Field(default=None, gt=0, le=1, description="fraction of the velocity limits")
-    dwell: float = Field(default=0.0, ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")
+    duration: Duration | None = None
+    speed: Speed | None = None
 
     @model_validator(mode="after")
-    def _one_pace(self) -> SequenceWaypoint:
+    def _one_pace(self) -> Paced:
         if problem := pace_problem(self.duration, self.speed):
             raise ValueError(problem)
         return self
+
+
+class SequenceWaypoint(Paced):
+    """One ``[[waypoint]]`` table."""
+
+    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
+    dwell: Dwell = 0.0
 
 
 class MotionSequence(BaseModel):

@@ -17,7 +17,7 @@ from typing import Annotated, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
-from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, pace_problem
+from hexactl.control.sequences import Paced, SequenceWaypoint
 from hexactl.kinematics.axes import RelativeMmDeg
 
 LegValues = Annotated[list[float], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm")]
@@ -25,14 +25,11 @@ LegReadings = Annotated[
     list[float | None], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm; null for a leg not heard from yet")
 ]
 Leg = Annotated[int, Field(ge=1, le=6, description="leg number 1–6")]
-Duration = Annotated[float, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
-Dwell = Annotated[float, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
 DeadlineMs = Annotated[
     float,
     Field(gt=0, le=MAX_DEADLINE_MS, description="carry it out within this many ms of the service receiving it, or not at all "
           "(expired); at most an hour"),
 ]
-Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
 ErrorCodeText = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="snake_case error code")]
 RequestId = Annotated[JsonValue, Field(description="any JSON value; echoed in the reply")]
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
@@ -50,19 +47,6 @@ class _Request(_Message):
     v: Literal[1] = Field(description="protocol version")
     id: RequestId
     deadline_ms: DeadlineMs | None = None
-
-
-class _Paced(_Message):
-    """A move's pace: at least ``duration`` s, or ``speed`` of the velocity limits."""
-
-    duration: Duration | None = None
-    speed: Speed | None = None
-
-    @model_validator(mode="after")
-    def _one_pace(self) -> _Paced:
-        if problem := pace_problem(self.duration, self.speed):
-            raise ValueError(problem)
-        return self
 
 
 class StatusRequest(_Request):
@@ -101,7 +85,7 @@ class ResetRequest(_Request):
     cmd: Literal["reset"]
 
 
-class MoveRequest(_Request, _Paced):
+class MoveRequest(_Request, Paced):
     """Move to ``pose``, the whole path validated first (refused whole otherwise). A move
     while moving replaces the running one; in leg-lock mode the goal is projected so the
     locked leg keeps its length (the reply's ``goal``)."""
@@ -110,7 +94,7 @@ class MoveRequest(_Request, _Paced):
     pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
 
 
-class ValidatePoseRequest(_Request, _Paced):
+class ValidatePoseRequest(_Request, Paced):
     """Would ``move`` accept this now? Plans and checks the whole path; moves nothing."""
 
     cmd: Literal["validate_pose"]
@@ -130,11 +114,9 @@ class LegUnlockRequest(_Request):
     cmd: Literal["leg_unlock"]
 
 
-class Waypoint(_Paced):
-    """One waypoint of an inline sequence: the ``[[waypoint]]`` table of a sequence file."""
-
-    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
-    dwell: Dwell = 0.0
+class Waypoint(_Message, SequenceWaypoint):
+    """One waypoint of an inline sequence: the ``[[waypoint]]`` table of a sequence file
+    (strict, as every message)."""
 
 
 class InlineSequence(_Message):
