@@ -50,6 +50,7 @@ from hexactl.control.sequence_player import SequenceProgress, dwell_record
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.supervisor import Fault, Supervisor
+from hexactl.kinematics.axes import RelativeMmRad
 
 KEPT_EVENTS = 64
 """Recent events kept in the snapshot."""
@@ -98,7 +99,7 @@ class ControlCore:
         return self._motion.player.progress
 
     @property
-    def pose_measured(self) -> tuple[float, ...] | None:
+    def pose_measured(self) -> RelativeMmRad | None:
         return self._measurement.pose
 
     @property

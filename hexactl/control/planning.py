@@ -181,8 +181,8 @@ class Plan:
 
 def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequence[Waypoint]) -> Plan:
     """Plan and validate moves through ``waypoints`` from the generator state ``start``.
-    Each waypoint after the first
-    starts at rest on the previous one. Never raises for bad input: it is refused."""
+    Each waypoint after the first starts at rest on the previous one. Never raises for bad
+    input: it is refused."""
     segments = []
     violations: list[PathViolation] = []
     for number, waypoint in enumerate(waypoints, start=1):

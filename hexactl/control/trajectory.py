@@ -215,7 +215,7 @@ class PoseTrajectory:
             self.goal = None
 
     def update(self) -> StepResult:
-        """Advance one period; the new position is :meth:`state`'s first element."""
+        """Advance one period; the new position is :attr:`position`."""
         if not self._active:
             return StepResult.IDLE
         # ruckig recalculates only when the input changed since its last calculation: once
