@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
 from hexactl.control.config import ControllerConfig  # noqa: E402
-from hexactl.control.controller import Controller  # noqa: E402
+from hexactl.control.local_controller import LocalController  # noqa: E402
 from hexactl.control.sequences import MotionSequence  # noqa: E402
 from hexactl.kinematics.inverse import sensor_setpoints  # noqa: E402
 from hexactl.sim.ideal_actuators import IdealActuators  # noqa: E402
@@ -54,7 +54,7 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
     geometry = load_geometry(config_path)
     clock = _Clock()
     actuators = IdealActuators(sensor_setpoints(geometry.legs, geometry.home.in_radians()), clock_ns=clock)
-    controller = Controller.in_thread(actuators, geometry, "nominal", config=ControllerConfig(), clock_ns=clock)
+    controller = LocalController.in_thread(actuators, geometry, "nominal", config=ControllerConfig(), clock_ns=clock)
     period_ns = controller.config.loop.period_ns
     tour = MotionSequence(name=f"bench_{scenario}", waypoints=[{"pose": pose} for pose in TOURS[scenario]])
 

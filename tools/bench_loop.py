@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark the control loop thread: wake-up lateness, missed cycles, compute per cycle.
 
-Runs the real :class:`hexactl.control.controller.Controller` thread for ``--seconds`` at
+Runs the real :class:`hexactl.control.local_controller.LocalController` thread for ``--seconds`` at
 each ``--rate`` against a hardware back-end (``--hardware``; today the in-memory ideal
 actuators) while a scenario keeps it busy, then prints the loop statistics.
 
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry  # noqa: E402
 from hexactl.control.config import ControllerConfig, LoopConfig  # noqa: E402
-from hexactl.control.controller import Controller  # noqa: E402
+from hexactl.control.local_controller import LocalController  # noqa: E402
 from hexactl.control.hardware import ActuatorInterface  # noqa: E402
 from hexactl.control.realtime import RealtimeConfig  # noqa: E402
 from hexactl.control.sequences import MotionSequence  # noqa: E402
@@ -65,7 +65,7 @@ def run_once(args: argparse.Namespace, rate_hz: float, geometry: Geometry) -> di
     realtime = RealtimeConfig(fifo_priority=args.fifo, cpus=tuple(args.cpu) if args.cpu else None,
                               lock_memory=args.mlock, switch_interval_s=args.switch_us / 1e6)
     config = ControllerConfig(loop=LoopConfig(rate_hz=rate_hz, spin_window_us=args.spin_us, realtime=realtime))
-    controller = Controller.in_thread(HARDWARE[args.hardware](geometry), geometry, geometry_id(geometry), config=config)
+    controller = LocalController.in_thread(HARDWARE[args.hardware](geometry), geometry, geometry_id(geometry), config=config)
     report = controller.start()
     try:
         _expect(controller.enable())

@@ -61,7 +61,7 @@ from hexactl.application.loop_link import LoopExchange
 from hexactl.application.simulator import InstrumentPort, Simulator
 from hexactl.application.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
-from hexactl.control.controller import Controller
+from hexactl.control.local_controller import LocalController
 from hexactl.control.core import ControlState, MotionState
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, describe, fifo_for_threads
 from hexactl.control.trajectory import MotionLimits
@@ -182,7 +182,7 @@ class Service:
     ``controller``: a facade on the loop of this process (the API process has its own);
     ``simulator``: the built-in one (None with real actuators)."""
 
-    def __init__(self, controller: Controller, simulator: Simulator | None, api: ApiProcess, link: LoopExchange,
+    def __init__(self, controller: LocalController, simulator: Simulator | None, api: ApiProcess, link: LoopExchange,
                  closers: ExitStack, budget: _Budget) -> None:
         self.controller = controller
         self.simulator = simulator
@@ -255,8 +255,8 @@ class Service:
             supervision = {"supervision": SIMULATOR_SUPERVISION} if simulator else {}
             controller_config = ControllerConfig(loop=loop, motion=config.motion, **supervision)
             try:
-                controller = Controller.in_thread(link, active, calibration_id, calibration_source=str(source),
-                                                  config=controller_config, nominal=nominal)
+                controller = LocalController.in_thread(link, active, calibration_id, calibration_source=str(source),
+                                                       config=controller_config, nominal=nominal)
             except ValueError as error:  # a calibration whose [limits] are not the nominal's
                 raise ServiceError(f"{source}: {error}") from None
 
@@ -433,7 +433,7 @@ def fifo_below_loop(loop_priority: int, names: Collection[str] = SERVICE_THREAD_
         log.info("%s thread: %s", name, refused or f"SCHED_FIFO {priority}")
 
 
-def _bring_to_rest(controller: Controller, timeout_s: float) -> None:
+def _bring_to_rest(controller: LocalController, timeout_s: float) -> None:
     """Brake to rest and disable; E-stop if that does not happen within ``timeout_s``."""
     telemetry = controller.telemetry()
     if telemetry.state != ControlState.ENABLED.value:  # the actuators hold by themselves

@@ -18,7 +18,6 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict
 
@@ -30,8 +29,7 @@ from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.snapshot import CoreSnapshot, Event
-from hexactl.control.hardware import ActuatorInterface
-from hexactl.control.host import LoopHost, LoopThread
+from hexactl.control.host import LoopHost
 from hexactl.control.planning import (
     ActiveGeometry,
     Plan,
@@ -39,20 +37,18 @@ from hexactl.control.planning import (
     Waypoint,
     plan_path,
 )
-from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
-from hexactl.control.trajectory import KinematicState
-from hexactl.kinematics.axes import RelativeMmDeg, RelativeMmRad
 from hexactl.kinematics.geometry import Geometry
 
 
 class Controller:
     """The facade of the control core: one method per command, over a
-    :class:`~hexactl.control.host.LoopHost` (the loop in a thread of this process,
-    :meth:`in_thread`, or in another process).
+    :class:`~hexactl.control.host.LoopHost` (a loop in another process; for the loop in a
+    thread of this process, which it also starts, steps and stops:
+    :class:`~hexactl.control.local_controller.LocalController`).
 
     ``nominal``: the platform's design geometry. Its ``[limits]`` are the actuators' and
     platform's (:attr:`hardware_limits`): a calibration is refused unless its own equal
@@ -68,75 +64,7 @@ class Controller:
         self.nominal = nominal
         self.hardware_limits = nominal.limits
         self._host = host
-        self._thread = host if isinstance(host, LoopThread) else None
         self._commands = CommandSubmitter(host, config, ticket_start)
-
-    @classmethod
-    def in_thread(
-        cls,
-        hardware: ActuatorInterface,
-        geometry: Geometry,
-        calibration_id: str,
-        *,
-        calibration_source: str = "",
-        config: ControllerConfig | None = None,
-        nominal: Geometry | None = None,
-        clock_ns: Callable[[], int] = time.monotonic_ns,
-    ) -> Controller:
-        """The controller with its loop in this process, driving ``hardware``, on
-        ``geometry`` (with its identity: the caller computes the id, e.g. a content hash).
-        ``nominal`` defaults to ``geometry``. ``clock_ns``: monotonic time for
-        cycles stepped by hand and for the first one, run here, so status and telemetry
-        work at once and the commanded pose starts where the platform is.
-
-        :raises ValueError: if ``geometry``'s limits differ from ``nominal``'s, or it is
-            not a plausible calibration of it (the message names each parameter and bound)
-        """
-        nominal = nominal or geometry
-        if refusal := acceptance_refusal(geometry, "the start calibration", nominal):
-            raise ValueError(refusal.message)
-        config = config or ControllerConfig()
-        thread = LoopThread(hardware, ActiveGeometry.of(geometry, calibration_id, calibration_source), config, clock_ns)
-        return cls(thread, config=config, nominal=nominal)
-
-    # -- lifecycle (the loop in this process) ---------------------------------------------
-
-    @property
-    def thread(self) -> LoopThread:
-        """The loop of this process.
-
-        :raises RuntimeError: if the loop runs in another process
-        """
-        if self._thread is None:
-            raise RuntimeError("the control loop runs in another process")
-        return self._thread
-
-    @property
-    def hardware(self) -> ActuatorInterface:
-        """The actuators the loop of this process drives (see :attr:`thread`)."""
-        return self.thread.hardware
-
-    def start(self, exchange: Callable[[], None] | None = None) -> RealtimeReport:
-        """Start the loop thread, with ``exchange`` for its slack (see
-        :meth:`~hexactl.control.loop.ControlLoop.start`); returns what the real-time set-up obtained."""
-        # Plan one small move, and discard it, before the thread freezes the heap: the
-        # first plan creates lazily initialised module state (numpy, ruckig, pydantic)
-        # that would otherwise fill the loop's first young collection (0.5 ms, measured).
-        s = self.snapshot
-        plan_path(self._context(s), KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
-                  [Waypoint(RelativeMmDeg(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
-        return self.thread.loop.start(exchange)
-
-    def shutdown(self) -> None:
-        """Stop the loop thread (the actuators keep their state: disable first)."""
-        self.thread.loop.stop()
-
-    def step(self, now_ns: int) -> None:
-        """Run one cycle at monotonic ``now_ns`` (tests, simulation); not while the thread runs."""
-        loop = self.thread.loop
-        if loop.running:
-            raise RuntimeError("the loop thread is running: it steps by itself")
-        loop.step(now_ns)
 
     @property
     def snapshot(self) -> CoreSnapshot:

@@ -41,7 +41,7 @@ class Rig:
 
     def __init__(self, geometry: Geometry, start_pose=(0.0,) * 6, config=None) -> None:
         from hexactl.control.config import ControllerConfig
-        from hexactl.control.controller import Controller
+        from hexactl.control.local_controller import LocalController
         from hexactl.kinematics.inverse import sensor_setpoints
         from hexactl.kinematics.pose import absolute_from_relative
         from hexactl.sim.ideal_actuators import IdealActuators
@@ -50,7 +50,7 @@ class Rig:
         self.geometry = geometry
         start = sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, start_pose))
         self.actuators = IdealActuators(start, clock_ns=self.clock, record=True)
-        self.controller = Controller.in_thread(self.actuators, geometry, "nominal", config=config or ControllerConfig(),
+        self.controller = LocalController.in_thread(self.actuators, geometry, "nominal", config=config or ControllerConfig(),
                                      clock_ns=self.clock)
         self.period_ns = self.controller.config.loop.period_ns
 

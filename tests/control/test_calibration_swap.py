@@ -129,12 +129,12 @@ def test_a_calibration_cannot_change_the_hardware_limits(rig, calibrated, limits
 
 
 def test_a_controller_refuses_a_start_geometry_with_other_limits(geometry):
-    from hexactl.control.controller import Controller
+    from hexactl.control.local_controller import LocalController
     from hexactl.sim.ideal_actuators import IdealActuators
 
     wide = _variant(geometry, limits={"stroke": (-100.0, 950.0)})
     with pytest.raises(ValueError, match=r"stroke: \(-100.0, 950.0\) \(hardware: \(0.0, 850.0\)\)"):
-        Controller.in_thread(IdealActuators([400.0] * 6), wide, "wide", nominal=geometry)
+        LocalController.in_thread(IdealActuators([400.0] * 6), wide, "wide", nominal=geometry)
 
 
 def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):
@@ -206,13 +206,13 @@ def test_an_implausible_calibration_compensated_at_the_current_pose_is_refused(m
 
 
 def test_a_start_calibration_must_be_plausible(geometry):
-    from hexactl.control.controller import Controller
+    from hexactl.control.local_controller import LocalController
     from hexactl.sim.ideal_actuators import IdealActuators
     from tests.kinematics.calibrations import implausible_calibrations
 
     calibration, _ = implausible_calibrations(geometry, [0.0] * 6)["platform joints +300 mm"]
     with pytest.raises(ValueError, match=r"platform_joints\[0\] \(leg 1\) is 300.0 mm from the nominal"):
-        Controller.in_thread(IdealActuators([400.0] * 6), calibration, "bad", nominal=geometry)
+        LocalController.in_thread(IdealActuators([400.0] * 6), calibration, "bad", nominal=geometry)
 
 
 def test_a_move_to_the_envelopes_bound_is_accepted(rig):

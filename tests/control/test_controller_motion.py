@@ -24,7 +24,7 @@ def test_starts_from_the_pose_the_actuators_are_at_without_a_jump(make_rig):
 
 
 def test_restart_starts_from_where_the_platform_was_left(make_rig, geometry):
-    from hexactl.control.controller import Controller
+    from hexactl.control.local_controller import LocalController
 
     rig = make_rig().enabled()
     assert rig.controller.move([100, 50, 20, 1, 2, 3]).ok
@@ -32,7 +32,7 @@ def test_restart_starts_from_where_the_platform_was_left(make_rig, geometry):
     rig.run(100)  # the actuators' lag dies out
     assert rig.controller.disable().ok
     rig.run(2)
-    again = Controller.in_thread(rig.actuators, geometry, "nominal", clock_ns=rig.clock)
+    again = LocalController.in_thread(rig.actuators, geometry, "nominal", clock_ns=rig.clock)
     assert again.telemetry().pose_command == pytest.approx((100, 50, 20, 1, 2, 3), abs=1e-6)
 
 

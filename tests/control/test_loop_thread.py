@@ -11,7 +11,7 @@ import pytest
 
 from hexactl.control import realtime
 from hexactl.control.config import ControllerConfig, LoopConfig
-from hexactl.control.controller import Controller
+from hexactl.control.local_controller import LocalController
 from hexactl.control.loop import ControlLoop, next_deadline
 from hexactl.control.realtime import RealtimeConfig
 from hexactl.kinematics.inverse import sensor_setpoints
@@ -30,7 +30,7 @@ def _wait(condition, timeout_s=10.0):
 def test_the_thread_runs_commands_to_completion(geometry, rate_hz):
     actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0] * 6)))
     config = ControllerConfig(loop=LoopConfig(rate_hz=rate_hz))
-    controller = Controller.in_thread(actuators, geometry, "nominal", config=config)
+    controller = LocalController.in_thread(actuators, geometry, "nominal", config=config)
     gc_was_enabled, switch_before = gc.isenabled(), sys.getswitchinterval()
     report = controller.start()
     try:
@@ -101,7 +101,7 @@ def test_an_overrun_in_the_thread_is_counted_as_skipped():
 
 def test_a_crashing_cycle_estops_and_commands_report_it(geometry):
     actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0] * 6)))
-    controller = Controller.in_thread(actuators, geometry, "nominal", config=ControllerConfig(loop=LoopConfig(
+    controller = LocalController.in_thread(actuators, geometry, "nominal", config=ControllerConfig(loop=LoopConfig(
         realtime=RealtimeConfig(manage_gc=False))))
     actuators.read_feedback = lambda: 1 / 0  # a bug in a cycle
     controller.start()

@@ -8,7 +8,7 @@ from collections.abc import Callable, Collection
 from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.application.service import Service
-from hexactl.control.controller import Controller
+from hexactl.control.local_controller import LocalController
 from hexactl.sim.actuator_firmware import ActuatorFirmware
 from tests.api.test_service import status, wait_for
 
@@ -70,7 +70,7 @@ STALL_FAULTS = ("heartbeat_lost", "setpoints_not_applied")
 """Faults the loop latches when it was held up itself (besides the actuators' watchdog)."""
 
 
-def stall_fault(controller: Controller, expected: Collection[tuple[str, int]] = ()) -> bool:
+def stall_fault(controller: LocalController, expected: Collection[tuple[str, int]] = ()) -> bool:
     """Whether ``controller`` shows what a held-up loop causes, other than the faults
     ``expected`` by the scenario ((code, leg) pairs; an actuator's COMM_TIMEOUT counts as
     ``actuator_fault``): an actuator stopped by its watchdog (COMM_TIMEOUT: a stall stops
@@ -86,7 +86,7 @@ def stall_fault(controller: Controller, expected: Collection[tuple[str, int]] = 
     return first is not None and first.code in STALL_FAULTS and (first.code, first.leg) not in expected
 
 
-def tolerating_loop_stalls(scenario: Callable[[], None], controller: Callable[[], Controller | None],
+def tolerating_loop_stalls(scenario: Callable[[], None], controller: Callable[[], LocalController | None],
                            expected: Collection[tuple[str, int]] = (), cleanup: Callable[[], None] = lambda: None) -> None:
     """Run ``scenario``; if it fails while the controller it drives (``controller()``)
     shows a stall's faults other than those ``expected`` (:func:`stall_fault`), ``cleanup()``

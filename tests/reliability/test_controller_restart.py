@@ -14,25 +14,25 @@ from hexactl.adapters.files.geometry_file import geometry_id
 from hexactl.application.service import SIMULATOR_SUPERVISION, SIMULATOR_WATCHDOG_CYCLES
 from hexactl.application.simulator import Simulator
 from hexactl.control.config import ControllerConfig, LoopConfig
-from hexactl.control.controller import Controller
+from hexactl.control.local_controller import LocalController
 from hexactl.control.hardware import ActuatorState
 from hexactl.kinematics.geometry import Geometry
 from tests.api.test_service import wait_for
 from tests.reliability.support import BOOTING, RATE_HZ, tolerating_loop_stalls
 
 
-def start_controller(simulator: Simulator, geometry: Geometry) -> Controller:
+def start_controller(simulator: Simulator, geometry: Geometry) -> LocalController:
     """A controller on its own link to the simulator's bus, as ``hexactl serve`` composes it
     with its simulator (the simulator's watchdog and supervision timeouts)."""
     link = CanActuatorLink.open(simulator.bus_spec, LinkConfig(loop_rate=LoopRate(RATE_HZ),
                                                                watchdog_cycles=SIMULATOR_WATCHDOG_CYCLES))
-    controller = Controller.in_thread(link, geometry, geometry_id(geometry),
+    controller = LocalController.in_thread(link, geometry, geometry_id(geometry),
                             config=ControllerConfig(loop=LoopConfig(rate_hz=RATE_HZ), supervision=SIMULATOR_SUPERVISION))
     controller.start()
     return controller
 
 
-def enable(controller: Controller) -> None:
+def enable(controller: LocalController) -> None:
     def attempt() -> bool:
         result = controller.enable()
         assert result.ok or result.error in (*BOOTING, "actuator_fault"), result
@@ -41,13 +41,13 @@ def enable(controller: Controller) -> None:
     wait_for(attempt, "the controller to enable")
 
 
-def at_rest(controller: Controller) -> bool:
+def at_rest(controller: LocalController) -> bool:
     telemetry = controller.telemetry()
     return telemetry.motion == "holding" and telemetry.sequence is None
 
 
 def test_killed_mid_motion_then_restarted(nominal: Geometry) -> None:
-    driving: list[Controller] = []  # the controller expected to be in control, for the stall check
+    driving: list[LocalController] = []  # the controller expected to be in control, for the stall check
     monitors: list[BusMonitor] = []  # every attempt's: a repeated attempt never hides a violation
 
     def scenario() -> None:
@@ -70,7 +70,7 @@ def test_killed_mid_motion_then_restarted(nominal: Geometry) -> None:
         assert [violation for monitor in monitors for violation in monitor.violations] == []
 
 
-def kill_and_restart(simulator: Simulator, nominal: Geometry, driving: list[Controller]) -> None:
+def kill_and_restart(simulator: Simulator, nominal: Geometry, driving: list[LocalController]) -> None:
     first = start_controller(simulator, nominal)
     driving.append(first)
     enable(first)
