@@ -1,0 +1,93 @@
+"""Rigid transforms between the fixed, work, platform and tool frames.
+
+An operator's pose names where the *tool* frame (fixed to the platform: the object's
+point and axes, its origin the pivot point) is in the *work* frame (fixed to the base:
+the table, the beam, the part). With ``W`` the work frame in the fixed frame, ``T`` the
+tool frame in the platform frame and ``X`` the tool in the work frame, the platform's
+absolute pose is ``P = W·X·T⁻¹``, and ``X = W⁻¹·P·T``.
+
+Poses are (x, y, z, roll, pitch, yaw) in mm and radians, orientation Rz·Ry·Rx
+(:mod:`hexactl.kinematics.rotation`). A rotation of ``X`` about its own origin turns the
+platform about the tool point, which stays where it is in the fixed frame: the pivot.
+
+Plain floats, not numpy: the loop maps its commanded pose through the frames every
+cycle, where numpy's per-call overhead costs more than the arithmetic (as in
+:func:`~hexactl.kinematics.rotation.rotation_elements`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from math import asin, atan2
+from typing import NamedTuple
+
+from hexactl.kinematics.axes import AbsoluteMmRad
+from hexactl.kinematics.rotation import rotation_elements
+
+
+class Transform(NamedTuple):
+    """A rigid transform: ``rotation`` row by row (nine floats) and ``translation`` (mm).
+    It maps a point p of the inner frame to ``rotation·p + translation`` in the outer."""
+
+    rotation: tuple[float, ...]
+    translation: tuple[float, float, float]
+
+
+IDENTITY = Transform((1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+
+
+def transform_of(pose_mm_rad: Sequence[float]) -> Transform:
+    """The transform of a pose (x, y, z mm; roll, pitch, yaw rad)."""
+    x, y, z, roll, pitch, yaw = pose_mm_rad
+    return Transform(rotation_elements(roll, pitch, yaw), (float(x), float(y), float(z)))
+
+
+def pose_of(transform: Transform) -> tuple[float, float, float, float, float, float]:
+    """The pose (mm, rad; pitch in [-π/2, π/2]) of a transform: :func:`transform_of`'s inverse
+    away from pitch ±90°, where roll and yaw are not separable."""
+    r = transform.rotation
+    pitch = asin(max(-1.0, min(1.0, -r[6])))
+    return (*transform.translation, atan2(r[7], r[8]), pitch, atan2(r[3], r[0]))
+
+
+def compose(outer: Transform, inner: Transform) -> Transform:
+    """``outer·inner``: the inner transform's frame seen through the outer one."""
+    a, b = outer.rotation, inner.rotation
+    rotation = tuple(
+        a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j] for i in range(3) for j in range(3)
+    )
+    return Transform(rotation, apply(outer, inner.translation))
+
+
+def inverse(transform: Transform) -> Transform:
+    """The transform back: its rotation transposed, its translation undone."""
+    r = transform.rotation
+    rt = (r[0], r[3], r[6], r[1], r[4], r[7], r[2], r[5], r[8])
+    tx, ty, tz = transform.translation
+    return Transform(rt, (-(rt[0] * tx + rt[1] * ty + rt[2] * tz), -(rt[3] * tx + rt[4] * ty + rt[5] * tz),
+                          -(rt[6] * tx + rt[7] * ty + rt[8] * tz)))
+
+
+def apply(transform: Transform, point: Sequence[float]) -> tuple[float, float, float]:
+    """The point (mm) of the inner frame in the outer frame."""
+    r, (tx, ty, tz) = transform.rotation, transform.translation
+    px, py, pz = point
+    return (r[0] * px + r[1] * py + r[2] * pz + tx, r[3] * px + r[4] * py + r[5] * pz + ty,
+            r[6] * px + r[7] * py + r[8] * pz + tz)
+
+
+class Frames(NamedTuple):
+    """The work frame in the fixed frame and the tool frame in the platform frame."""
+
+    work: Transform = IDENTITY
+    tool: Transform = IDENTITY
+
+    def platform_pose(self, tool_in_work_mm_rad: Sequence[float]) -> AbsoluteMmRad:
+        """The platform's absolute pose that puts the tool at ``tool_in_work_mm_rad``
+        (the tool frame's pose in the work frame, mm and rad): ``W·X·T⁻¹``."""
+        return AbsoluteMmRad._make(pose_of(compose(compose(self.work, transform_of(tool_in_work_mm_rad)), inverse(self.tool))))
+
+    def tool_in_work(self, platform_mm_rad: Sequence[float]) -> tuple[float, ...]:
+        """The tool frame's pose in the work frame (mm, rad) with the platform at
+        ``platform_mm_rad`` (absolute, mm and rad): ``W⁻¹·P·T``."""
+        return pose_of(compose(compose(inverse(self.work), transform_of(platform_mm_rad)), self.tool))
