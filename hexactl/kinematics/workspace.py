@@ -35,6 +35,8 @@ class ViolationKind(StrEnum):
     PLATFORM_CONE = "platform_cone"
     POSE_RANGE = "pose_range"
     SINGULAR = "near_singular"
+    SOFT_LIMIT = "soft_limit"  # an operator's bound on an axis of the tool pose in the work frame
+    SOFT_TILT = "soft_tilt"  # an operator's bound on the tool's tilt in the work frame
 
 
 @dataclass(frozen=True, slots=True)

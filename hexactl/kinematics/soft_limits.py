@@ -1,0 +1,88 @@
+"""An operator's workspace inside the hardware's: soft limits.
+
+A box per axis of the tool's pose in the work frame (mm, deg; see
+:mod:`hexactl.kinematics.frames`) and a bound on its tilt: the angle between the tool
+frame's z axis and the work frame's. They are checked *with* the hardware's limits
+(:func:`~hexactl.kinematics.workspace.assess_poses`), never instead of them, so they can
+narrow what is allowed and never widen it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.workspace import Violation, ViolationKind
+
+MAX_TILT_DEG = 90.0
+"""The largest tilt bound: beyond it the tool's z axis points down."""
+
+Bound = float | None
+"""One axis's soft bound in its unit (mm or deg); None: none on that side."""
+
+Bounds = tuple[Bound, Bound, Bound, Bound, Bound, Bound]
+NO_BOUNDS: Bounds = (None,) * 6
+
+
+class SoftLimits(BaseModel):
+    """``lower``/``upper``: per axis of the tool's pose in the work frame, mm and deg
+    (None, for an axis or all: no soft limit on that side); ``max_tilt_deg``: bound on
+    the tilt (None: none).
+
+    :raises pydantic.ValidationError: a bound not finite, ``lower`` not below ``upper``
+        on every axis, or a tilt bound outside (0, 90] degrees
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    lower: Bounds = Field(default=NO_BOUNDS, description="lower bound per axis (x, y, z mm; roll, pitch, yaw deg) or null")
+    upper: Bounds = Field(default=NO_BOUNDS, description="upper bound per axis (x, y, z mm; roll, pitch, yaw deg) or null")
+    max_tilt_deg: float | None = Field(default=None, gt=0.0, le=MAX_TILT_DEG,
+                                       description="largest angle between the tool's z axis and the work frame's, deg")
+
+    @field_validator("lower", "upper", mode="before")
+    @classmethod
+    def _six(cls, value: object) -> object:
+        if not isinstance(value, (list, tuple)) or len(value) != 6:
+            count = f", got {len(value)}" if isinstance(value, (list, tuple)) else ""
+            raise ValueError(f"six bounds, one per axis x, y, z, roll, pitch, yaw (null: none){count}")
+        return value
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SoftLimits:
+        crossed = [f"{axis} [{low:g}, {high:g}]" for axis, low, high in zip(POSE_AXES, self.lower, self.upper)
+                   if low is not None and high is not None and not low < high]
+        if crossed:
+            raise ValueError(f"each lower bound must be below its upper bound: {', '.join(crossed)}")
+        return self
+
+    def violations(self, tool_in_work_mm_deg: Sequence[Sequence[float]] | NDArray) -> list[list[Violation]]:
+        """For each of the (N, 6) poses of the tool in the work frame (mm, deg), the soft
+        limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``)."""
+        poses = np.asarray(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
+        found: list[list[Violation]] = [[] for _ in range(len(poses))]
+        for bounds, side, broken, open_end in ((self.lower, "below", np.less, -np.inf),
+                                               (self.upper, "above", np.greater, np.inf)):
+            limits = np.array([open_end if bound is None else bound for bound in bounds])
+            for n, axis in zip(*np.nonzero(broken(poses, limits))):
+                value, limit, unit = float(poses[n, axis]), bounds[axis], POSE_UNITS[axis]
+                found[n].append(Violation(
+                    ViolationKind.SOFT_LIMIT, value, limit,
+                    f"{POSE_AXES[axis]} {value:.3f} {unit} {side} the soft limit {limit:g} {unit}", axis=POSE_AXES[axis]))
+        if self.max_tilt_deg is not None:
+            for n, tilt in enumerate(tilt_deg(poses)):
+                if tilt > self.max_tilt_deg:
+                    found[n].append(Violation(ViolationKind.SOFT_TILT, float(tilt), self.max_tilt_deg,
+                                              f"tilt {tilt:.3f} deg beyond the soft limit {self.max_tilt_deg:g} deg"))
+        return found
+
+
+def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:
+    """The angle (deg) between the moving z axis and the frame's z axis of (N, 6) poses
+    (mm, deg; orientation Rz·Ry·Rx): element (3, 3) of the rotation is cos(roll)·cos(pitch)."""
+    roll, pitch = np.radians(poses_mm_deg[:, 3]), np.radians(poses_mm_deg[:, 4])
+    return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))

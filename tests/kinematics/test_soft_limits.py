@@ -1,0 +1,55 @@
+"""Soft limits: a box per axis and a tilt bound on the tool pose in the work frame."""
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from pydantic import ValidationError
+
+from hexactl.kinematics.soft_limits import SoftLimits, tilt_deg
+from hexactl.kinematics.workspace import ViolationKind
+
+poses = st.tuples(*[st.floats(-500.0, 500.0)] * 3, *[st.floats(-40.0, 40.0)] * 3)
+
+
+def test_each_broken_bound_is_named_with_its_axis_and_units():
+    limits = SoftLimits(lower=(-10, None, None, None, -2, None), upper=(10, None, 50, None, None, None))
+    (inside, low_x_and_pitch, high_z) = limits.violations([[0, 0, 0, 0, 0, 0], [-11, 0, 0, 0, -3, 0], [0, 0, 60, 0, 0, 0]])
+    assert inside == []
+    assert [(v.kind, v.axis, v.value, v.limit) for v in low_x_and_pitch] == [
+        (ViolationKind.SOFT_LIMIT, "x", -11.0, -10), (ViolationKind.SOFT_LIMIT, "pitch", -3.0, -2)]
+    assert low_x_and_pitch[0].message == "x -11.000 mm below the soft limit -10 mm"
+    assert low_x_and_pitch[1].message == "pitch -3.000 deg below the soft limit -2 deg"
+    assert high_z[0].message == "z 60.000 mm above the soft limit 50 mm"
+
+
+def test_the_tilt_is_the_angle_of_the_tool_z_axis_whatever_the_yaw():
+    assert tilt_deg(np.array([[0, 0, 0, 3, 4, 0], [0, 0, 0, 0, 5, 77]])) == pytest.approx(
+        [np.degrees(np.arccos(np.cos(np.radians(3)) * np.cos(np.radians(4)))), 5.0])
+    (tilted,) = SoftLimits(max_tilt_deg=4.0).violations([[0, 0, 0, 0, 5, 77]])
+    assert [(v.kind, v.value) for v in tilted] == [(ViolationKind.SOFT_TILT, pytest.approx(5.0))]
+    assert tilted[0].message == "tilt 5.000 deg beyond the soft limit 4 deg"
+
+
+@pytest.mark.parametrize("bad, fragment", [
+    ({"lower": (5, None, None, None, None, None), "upper": (5, None, None, None, None, None)}, r"x \[5, 5\]"),
+    ({"lower": (float("nan"),) + (None,) * 5}, "finite"),
+    ({"max_tilt_deg": 0}, "greater than 0"),
+    ({"max_tilt_deg": 91}, "less than or equal to 90"),
+    ({"lower": (1, 2, 3)}, "one per axis x, y, z, roll, pitch, yaw \\(null: none\\), got 3"),
+    ({"lowr": (None,) * 6}, "Extra inputs"),
+])
+def test_malformed_soft_limits_are_refused_naming_the_problem(bad, fragment):
+    with pytest.raises(ValidationError, match=fragment):
+        SoftLimits(**bad)
+
+
+@given(st.lists(poses, min_size=1, max_size=20), poses, poses)
+def test_a_pose_passes_exactly_when_every_axis_is_within_its_bounds(samples, a, b):
+    lower = tuple(min(x, y) - 1e-3 for x, y in zip(a, b))
+    upper = tuple(max(x, y) + 1e-3 for x, y in zip(a, b))
+    limits = SoftLimits(lower=lower, upper=upper)
+    for pose, found in zip(samples, limits.violations(samples)):
+        outside = {axis for axis, value, low, high in zip(("x", "y", "z", "roll", "pitch", "yaw"), pose, lower, upper)
+                   if not low <= value <= high}
+        assert {v.axis for v in found} == outside
