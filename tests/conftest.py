@@ -1,4 +1,5 @@
-"""vcan test selection (see tools/uml_vcan.py).
+"""Test-wide set-up: each test in a working directory of its own, and vcan test selection
+(see tools/uml_vcan.py).
 
 * ``vcan``-marked tests need a real SocketCAN ``vcan0``.  Where it exists (inside
   the user-mode Linux guest, or a developer box with vcan0 up) they run as
@@ -11,9 +12,19 @@
 
 import os
 
+import pytest
+
 
 HAS_VCAN0 = os.path.exists("/sys/class/net/vcan0")
 IN_UML = os.environ.get("HEXACTL_IN_UML") == "1"
+
+
+@pytest.fixture(autouse=True)
+def _working_directory(tmp_path_factory, monkeypatch):
+    """Each test runs in an empty working directory of its own: a service started with its
+    default data directories creates ./recordings, ./calibrations and ./sequences there,
+    not in the checkout, and no test sees another's files."""
+    monkeypatch.chdir(tmp_path_factory.mktemp("cwd"))
 
 
 def pytest_configure(config):

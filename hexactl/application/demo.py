@@ -135,6 +135,7 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     """
     started = time.monotonic()
     ensure_unfinished(settings.directory)  # before anything starts
+    settings.directory.mkdir(parents=True, exist_ok=True)  # the service's data directory: it must exist
     try:
         nominal = load_geometry(settings.config or default_config_path())
     except GeometryError as error:

@@ -33,6 +33,7 @@ import sys
 import threading
 import time
 from collections.abc import Collection
+from importlib import resources
 from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -55,6 +56,7 @@ from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TE
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError
+from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.loop_link import LoopExchange
@@ -65,6 +67,7 @@ from hexactl.control.local_controller import LocalController
 from hexactl.control.core import ControlState, MotionState
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, describe, fifo_for_threads
 from hexactl.control.trajectory import MotionLimits
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.geometry import Geometry, GeometryError
 
 SHUTDOWN_STEPS_S = 5.0
@@ -146,8 +149,9 @@ class ServiceConfig:
     ``calibration_path``: a calibration to start with instead; ``can``: the bus of real
     actuators, e.g. ``socketcan:can0`` (None: the simulator, whose true platform has the
     seeded manufacturing errors of :func:`hexactl.sim.true_platform.true_geometry`);
-    ``data_dirs``: where requests may read and write files (None: ./recordings,
-    ./calibrations, ./sequences and the geometry file's directory).
+    ``data_dirs``: where requests may read and write files, each of which must exist
+    (None: ./recordings, ./calibrations, ./sequences, created if missing, and the
+    geometry file's directory; see :func:`data_directories`).
     ``simulator_seed`` seeds the simulator's manufacturing errors and its instrument's
     noise, ``point_sigma_mm`` that noise (1σ per coordinate, mm; None: the geometry's
     ``[measurement] point_sigma_mm``). ``motion``: the controller's pose-space velocity,
@@ -214,7 +218,10 @@ class Service:
         :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
             without CURVE keys
         """
-        check_endpoints([config.api_endpoint, config.telemetry_endpoint], config.curve)
+        check_endpoints([config.api_endpoint, config.telemetry_endpoint], config.curve)  # refused before any word of CURVE
+        for endpoint in (config.api_endpoint, config.telemetry_endpoint):
+            if not is_local_endpoint(endpoint):
+                log.warning("%s is reachable from the network: CURVE keys given, only their clients get in", endpoint)
         if config.curve:  # read here, before the actuators open (the API's process uses them)
             try:
                 load_server_keys(config.curve)
@@ -222,6 +229,7 @@ class Service:
                 raise ServiceError(f"CURVE keys: {error}") from None
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
+        data_dirs = data_directories(config.data_dirs, config_path)
         log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
         active, source = (_load(config.calibration_path), config.calibration_path) if config.calibration_path else (nominal, config_path)
         calibration_id = geometry_id(active)
@@ -271,7 +279,6 @@ class Service:
             if realtime.fifo_priority is not None:
                 fifo_below_loop(realtime.fifo_priority)
 
-            data_dirs = tuple(config.data_dirs or _default_data_dirs(config_path))
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
                                    data_dirs, controller_config, nominal,
                                    simulator.instrument_spec if simulator else None, config.log_level,
@@ -363,9 +370,6 @@ def run_service(config: ServiceConfig) -> NoReturn:
     :raises ServiceError: if the service does not start (see :meth:`Service.start`)
     """
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
-    for endpoint in (config.api_endpoint, config.telemetry_endpoint):
-        if not is_local_endpoint(endpoint):
-            log.warning("%s is reachable from the network (CURVE required and configured)", endpoint)
     stopping = threading.Event()
 
     def stop(signum: int, frame: FrameType | None) -> None:
@@ -450,7 +454,7 @@ def _bring_to_rest(controller: LocalController, timeout_s: float) -> None:
         while not at_rest() and time.monotonic() < deadline:
             time.sleep(0.05)
     rest = controller.telemetry()
-    log.info("platform %s at %s (commanded, relative to the zero posture, mm and deg; measured %s)",
+    log.info("platform %s at %s (commanded, relative to the zero posture; measured %s)",
              "at rest" if at_rest() else "still moving", _pose_text(rest.pose_command), _pose_text(rest.pose_measured))
     result = controller.disable()
     if result.ok:
@@ -461,7 +465,10 @@ def _bring_to_rest(controller: LocalController, timeout_s: float) -> None:
 
 
 def _pose_text(pose: tuple[float, ...] | None) -> str:
-    return "unknown" if pose is None else "[" + ", ".join(f"{value:.3f}" for value in pose) + "]"
+    """``x 1.000 mm, …, yaw 5.000 deg`` (relative to the zero posture), or ``unknown``."""
+    if pose is None:
+        return "unknown"
+    return ", ".join(f"{axis} {value:.3f} {unit}" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, pose))
 
 
 def _load(path: Path) -> Geometry:
@@ -471,6 +478,56 @@ def _load(path: Path) -> Geometry:
         raise ServiceError(str(error)) from None
 
 
-def _default_data_dirs(config_path: Path) -> tuple[Path, ...]:
+EXAMPLE_SEQUENCES = resources.files("hexactl.application") / "example_sequences"
+"""The example sequence files (``*.toml``) that :func:`data_directories` puts into the
+``./sequences`` it creates."""
+
+
+def data_directories(configured: tuple[Path, ...] | None, config_path: Path) -> tuple[Path, ...]:
+    """The service's data directories: ``configured``, each of which must exist (one
+    created for a mistyped ``--data-dir`` would take recordings where nobody looks for
+    them), else ./recordings, ./calibrations and ./sequences, each created (and logged)
+    if missing, ./sequences with the example sequences, and the directory of
+    ``config_path``.
+
+    :raises ServiceError: naming a configured directory that does not exist, or a
+        default one that cannot be created
+    """
+    if configured:
+        missing = [str(directory) for directory in configured if not directory.is_dir()]
+        if missing:
+            raise ServiceError(f"data directory {', '.join(missing)}: no such directory; create it, or correct "
+                               "--data-dir")
+        return configured
     working = Path.cwd()
-    return (working / "recordings", working / "calibrations", working / "sequences", config_path.resolve().parent)
+    recordings, calibrations, sequences = (working / name for name in ("recordings", "calibrations", "sequences"))
+    for directory in (recordings, calibrations):
+        _create_data_directory(directory)
+    if _create_data_directory(sequences):
+        examples = sorted((entry for entry in EXAMPLE_SEQUENCES.iterdir() if entry.name.endswith(".toml")),
+                          key=lambda entry: entry.name)
+        try:
+            for example in examples:
+                write_atomic(sequences / example.name, example.read_bytes(), overwrite=False)  # never over a file
+        except OSError as error:  # a convenience: the service runs without them
+            log.warning("example sequences not written into %s: %s", sequences, error)
+        else:
+            log.info("example sequences in %s: %s", sequences, ", ".join(example.name for example in examples))
+    return recordings, calibrations, sequences, config_path.resolve().parent
+
+
+def _create_data_directory(directory: Path) -> bool:
+    """Create ``directory`` unless it exists; whether it did. :class:`ServiceError` if it
+    cannot, or something else has its name."""
+    try:
+        directory.mkdir()
+    except FileExistsError:
+        if not directory.is_dir():
+            raise ServiceError(f"data directory {directory}: exists but is not a directory; move it away, or give "
+                               "--data-dir") from None
+        return False
+    except OSError as error:
+        raise ServiceError(f"data directory {directory}: cannot create it: {error.strerror}; run serve where it "
+                           "may, or give --data-dir") from None
+    log.info("created data directory %s", directory)
+    return True

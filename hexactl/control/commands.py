@@ -98,10 +98,12 @@ class Abort(Command):
 
 @dataclass(frozen=True, slots=True)
 class SwapGeometry(Command):
-    """Make ``active`` the loop's geometry (a calibration load or a rollback)."""
+    """Make ``active`` the loop's geometry: a calibration load, or with ``rollback`` a
+    return to the last one in the history (which it must be)."""
 
     epoch: int
     active: ActiveGeometry
+    rollback: bool = False
 
 
 @dataclass(frozen=True, slots=True)

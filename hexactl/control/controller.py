@@ -19,7 +19,7 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -27,13 +27,16 @@ from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
+from hexactl.control.frame_commands import FrameCommands
+from hexactl.control.frames import Frame, OperatorFrames, requested_goal
 from hexactl.control.sequence_player import SequenceReport
-from hexactl.control.snapshot import CoreSnapshot, Event
+from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.host import LoopHost
 from hexactl.control.planning import (
     ActiveGeometry,
     Plan,
     PlanningContext,
+    Refusal,
     Waypoint,
     plan_path,
 )
@@ -41,7 +44,9 @@ from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
+from hexactl.kinematics.axes import validate_pose_values
 from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.soft_limits import SoftLimits
 
 
 class Controller:
@@ -59,8 +64,9 @@ class Controller:
     """
 
     def __init__(self, host: LoopHost, *, config: ControllerConfig, nominal: Geometry,
-                 ticket_start: int = 1) -> None:
+                 ticket_start: int = 1, frames: OperatorFrames | None = None) -> None:
         self.config = config
+        self.frames = FrameCommands(frames or OperatorFrames(), lambda: self.snapshot)
         self.nominal = nominal
         self.hardware_limits = nominal.limits
         self._host = host
@@ -108,8 +114,16 @@ class Controller:
         return self._checked(preconditions.check_disable, cmd.Disable, "disabled")
 
     def stop(self) -> CommandResult:
-        """Brake smoothly to rest where the motion happens to end; aborts a sequence."""
-        return self._commands.submit(cmd.Stop, "stopping")
+        """Brake smoothly to rest where the motion happens to end; aborts a sequence.
+        Never refused: at rest, or disabled, it says there was nothing to stop."""
+        s = self.snapshot
+        if s.state is not ControlState.ENABLED:
+            message = f"nothing to stop: the controller is {s.state.value}"
+        elif s.motion is MotionState.HOLDING and s.sequence is None:
+            message = "nothing to stop: the platform is at rest"
+        else:
+            message = "stopping"
+        return self._commands.submit(cmd.Stop, message)
 
     def estop(self) -> CommandResult:
         """Emergency stop, latched until reset. Sent from this thread at once where the
@@ -125,23 +139,24 @@ class Controller:
         """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED."""
         return self._checked(preconditions.check_reset, cmd.Reset, "reset to disabled")
 
-    def validate_pose(self, pose: Sequence[float], duration: float | None = None,
-                      speed: float | None = None) -> CommandResult:
+    def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
+                      frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
         """Would :meth:`move` accept this? Plans and checks the whole path, moves nothing."""
         s = self.snapshot
-        plan = plan_path(self._context(s), s.trajectory, [Waypoint(pose, duration, speed)])
-        return _plan_result(plan, "valid")
+        return _plan_result(self._plan_move(s, pose, duration, speed, frame, relative), "valid")
 
-    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None, *,
-             deadline_ns: int | None = None) -> CommandResult:
-        """Move to ``pose`` (relative mm/deg), validated whole first; ``duration`` s (at
-        least, to one loop period) or ``speed`` (0, 1] of the velocity limits. In
-        leg-lock mode the goal is projected onto the locked leg's constraint (see
-        ``details.goal``). A move while moving replaces the running one."""
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
+             frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
+        """Move to ``pose`` (mm/deg) in ``frame`` (:class:`~hexactl.control.frames.Frame`),
+        or by it from where the motion is headed with ``relative``; validated whole first,
+        soft limits too; ``duration`` s (at least, to one loop period) or ``speed`` (0, 1]
+        of the velocity limits. In leg-lock mode the goal is projected onto the locked
+        leg's constraint (see ``details.goal``). A move while moving replaces the running
+        one (in the same frame: another frame needs rest)."""
         s = self.snapshot
         if refusal := preconditions.check_move(s):
             return CommandResult.failure(*refusal)
-        plan = plan_path(self._context(s), s.trajectory, [Waypoint(pose, duration, speed)])
+        plan = self._plan_move(s, pose, duration, speed, frame, relative)
         if not plan.ok:
             return _plan_result(plan, "")
         (segment,) = plan.segments
@@ -165,7 +180,7 @@ class Controller:
         if isinstance(resolved, CommandResult):
             return resolved
         s = self.snapshot
-        return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints()), "valid")
+        return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames), "valid")
 
     def play(self, sequence: MotionSequence | str, *, deadline_ns: int | None = None) -> CommandResult:
         """Play a sequence, or a built-in one by name; every waypoint's path is validated
@@ -176,7 +191,7 @@ class Controller:
         s = self.snapshot
         if refusal := preconditions.check_play(s):
             return CommandResult.failure(*refusal)
-        plan = plan_path(self._context(s), s.trajectory, resolved.planning_waypoints())
+        plan = plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames)
         if not plan.ok:
             return _plan_result(plan, "")
         name = resolved.name
@@ -199,7 +214,8 @@ class Controller:
         if progress.paused_in_move:
             segment = progress.segment
             waypoint = Waypoint(segment.goal.in_degrees(), None, segment.velocity_scale / segment.time_scale)
-            plan = plan_path(self._context(s), s.trajectory, [waypoint])
+            context = self._context(s)  # the remainder runs in the frames the segment was planned in
+            plan = plan_path(replace(context, frames=segment.frames or context.frames), s.trajectory, [waypoint], s.frames)
             if not plan.ok:
                 return _plan_result(plan, "")
             (remainder,) = plan.segments
@@ -219,35 +235,52 @@ class Controller:
         new = ActiveGeometry.of(geometry, calibration_id, source)
         if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self.nominal):
             return refusal
-        return self._swap(new, "loaded")
+        return self._swap(new, f"calibration {calibration_id} loaded")
 
     def rollback_calibration(self) -> CommandResult:
-        """Swap back to the previous calibration (validated and ramped like a load); the
-        one rolled back from becomes the previous."""
-        previous = self.snapshot.previous
-        if previous is None:
-            return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no previous calibration")
-        return self._swap(previous, "rolled back")
+        """Swap back to the calibration active before the last load (validated and ramped
+        like a load); again, to the one before that, and so on (the last
+        :data:`~hexactl.control.core.KEPT_CALIBRATIONS`)."""
+        s = self.snapshot
+        if s.previous is None:
+            return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no earlier calibration to roll "
+                                         f"back to ({s.active.calibration_id} is the first since start-up)")
+        return self._swap(s.previous, f"rolled back from calibration {s.active.calibration_id} to "
+                          f"{s.previous.calibration_id}", rollback=True)
 
     # -- helpers ----------------------------------------------------------------------------
 
     def _context(self, s: CoreSnapshot) -> PlanningContext:
-        config = self.config
+        config, frames = self.config, self.frames.current
         budget = s.active.geometry.limits.leg_velocity_mm_s * (1.0 - config.calibration_ramp_fraction)
         return PlanningContext(s.active, config.motion, config.loop.period_s, budget, s.lock,
                                config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg,
-                               config.lock_cycle_iterations)
+                               config.lock_cycle_iterations, frames.frames(s.active.home),
+                               frames.soft_limits if frames.soft_limits != SoftLimits() else None)
 
-    def _swap(self, new: ActiveGeometry, verb: str) -> CommandResult:
-        """Check ``new`` (:func:`~hexactl.control.calibration_checks.swap_refusal`), then hand it over."""
+    def _plan_move(self, s: CoreSnapshot, pose: Sequence[float], duration: float | None, speed: float | None,
+                   frame: Frame, relative: bool) -> Plan:
+        context = self._context(s)
+        if problem := validate_pose_values(pose) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
+            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, problem))
+        target = s.goal if s.goal is not None else s.trajectory.position
+        goal = requested_goal(pose, Frame(frame), bool(relative), target, s.frames, context.frames, s.active.home)
+        if isinstance(goal, str):
+            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, goal))
+        return plan_path(context, s.trajectory, [Waypoint(goal, duration, speed)], s.frames)
+
+    def _swap(self, new: ActiveGeometry, message: str, *, rollback: bool = False) -> CommandResult:
+        """Check ``new`` (:func:`~hexactl.control.calibration_checks.swap_refusal`), then
+        hand it over (with ``rollback``: the last of the history, which the loop drops)."""
         s = self.snapshot
         if refusal := preconditions.check_swap(s, new):
             return CommandResult.failure(*refusal)
         checked = swap_refusal(s, new, self.config)
         if isinstance(checked, CommandResult):
             return checked
-        return self._commands.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new), f"calibration {new.calibration_id} {verb}",
-                            calibration_id=new.calibration_id, change_mm=checked)
+        replaced = {"rolled_back_from": s.active.calibration_id} if rollback else {}
+        return self._commands.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback), message,
+                                     calibration_id=new.calibration_id, change_mm=checked, **replaced)
 
     def _checked(self, check, factory: Callable[[int], cmd.Command], message: str,
                  deadline_ns: int | None = None) -> CommandResult:

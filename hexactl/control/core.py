@@ -54,6 +54,8 @@ from hexactl.kinematics.axes import RelativeMmRad
 
 KEPT_EVENTS = 64
 """Recent events kept in the snapshot."""
+KEPT_CALIBRATIONS = 16
+"""Calibrations a rollback can return to, the most recent first."""
 
 
 class ControlCore:
@@ -78,7 +80,7 @@ class ControlCore:
         self.inbox = self._commands.queue
         self.state = ControlState.DISABLED
         self.active = active
-        self.previous: ActiveGeometry | None = None
+        self.history: tuple[ActiveGeometry, ...] = ()  # the calibrations active before, oldest first
         self.feedback: FeedbackSnapshot | None = None
         self.link: LinkHealth | None = None
         self._cycle = 0
@@ -247,12 +249,12 @@ class ControlCore:
         return None
 
     def _swap(self, command: cmd.SwapGeometry) -> Refusal:
-        new = command.active
-        if refusal := preconditions.check_swap(self, new) or self._motion.stale(command.epoch):
+        new, stale = command.active, self._motion.stale(command.epoch)
+        if refusal := preconditions.check_swap(self, new) or stale or preconditions.check_rollback(self.history, command):
             return refusal
-        old = self.active
+        old, self.active = self.active, new
         self._motion.swap(new, self.state is ControlState.ENABLED)
-        self.previous, self.active = old, new
+        self.history = self.history[:-1] if command.rollback else (self.history + (old,))[-KEPT_CALIBRATIONS:]
         self._measurement.geometry_changed()
         self._event("calibration_swapped", f"calibration {old.calibration_id} → {new.calibration_id}")
         return None
@@ -299,9 +301,10 @@ class ControlCore:
         self.snapshot = CoreSnapshot(
             t_ns=self._now_ns, cycle=self._cycle, state=self.state, motion=self.motion, epoch=motion.epoch,
             pose_command=path.pose_command, trajectory=trajectory.state(), goal=trajectory.goal,
-            pose_measured=self._measurement.pose, setpoints=path.setpoints, feedback=self.feedback,
-            link=self.link, lock=motion.lock, active=self.active, previous=self.previous, ramp_active=path.ramp.active,
+            frames=trajectory.frames, pose_measured=self._measurement.pose, setpoints=path.setpoints,
+            feedback=self.feedback, link=self.link, lock=motion.lock, active=self.active,
+            previous=self.history[-1] if self.history else None, ramp_active=path.ramp.active,
             sequence=motion.player.progress, last_sequence=motion.player.report, faults=self._faults,
             events=self._events, outcomes=self._commands.outcomes, clamped_cycles=path.clamped_cycles,
-            clamped_legs=path.clamped_legs, fk_failures=self._measurement.failures,
+            clamped_legs=path.clamped_legs, fk_failures=self._measurement.failures, motion_end_ns=motion.end_ns,
         )

@@ -43,6 +43,8 @@ class Motion:
         self.player = SequencePlayer(self.trajectory, record, log)
         self.lock: LegLock | None = None
         self.epoch = 0
+        self.end_ns: int | None = None
+        """When the trajectory's move or halt is planned to end (monotonic ns); stale once it is at rest."""
 
     def state(self, enabled: bool) -> MotionState:
         trajectory = self.trajectory
@@ -67,7 +69,9 @@ class Motion:
         result = trajectory.update()
         if result is StepResult.ERROR:
             return Fault("planner_error", "the trajectory generator refused its input")
-        if fault := self.path.follow(active, lock, trajectory.position, previous_target):
+        if result is StepResult.WORKING and trajectory.replanned:
+            self.end_ns = now_ns + round(trajectory.remaining_s * 1e9)
+        if fault := self.path.follow(active, lock, trajectory.position, previous_target, trajectory.frames):
             return fault
         if self.player.playing:
             self.player.update(result, now_ns)
@@ -76,7 +80,7 @@ class Motion:
     def start(self, pose: Sequence[float], setpoints: Sequence[float]) -> None:
         """Enabled at rest at ``pose`` with ``setpoints``: where the platform is."""
         self.path.hold(pose, setpoints)
-        self.trajectory.reset(pose)
+        self.trajectory.rebase(pose, None)
         self.epoch += 1
 
     def follow(self, pose: Sequence[float], setpoints: Sequence[float]) -> None:
@@ -86,7 +90,7 @@ class Motion:
     def freeze(self, sequence_status: str) -> None:
         """Forget any motion (the sequence ends as ``sequence_status``): the commanded
         pose and set-points stay as they are."""
-        self.trajectory.reset(self.path.pose_command)
+        self.trajectory.rebase(self.path.pose_command, None)
         self.path.ramp.cancel()
         self.player.end(sequence_status)
         self.epoch += 1
@@ -106,14 +110,16 @@ class Motion:
         self.epoch += 1
 
     def lock_leg(self, leg: int) -> None:
-        """Hold leg 1–6 at the set-point being sent."""
+        """Hold leg 1–6 at the set-point being sent; the motion (at rest) continues in
+        relative coordinates, which leg-lock tracking works in."""
         self.lock = LegLock(leg, self.path.setpoints[leg - 1])
+        self.trajectory.rebase(self.path.pose_command, None)
         self.epoch += 1
 
     def unlock_leg(self) -> None:
         self.lock = None
         # Bumpless: the projected pose being commanded becomes the generator's state.
-        self.trajectory.reset(self.path.pose_command)
+        self.trajectory.rebase(self.path.pose_command, None)
         self.epoch += 1
 
     def pause(self, now_ns: int) -> None:

@@ -29,7 +29,7 @@ Poses inside the control layer are relative to the zero posture in mm and *radia
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from math import isfinite
 from operator import add, sub
 
@@ -37,13 +37,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.control.config import ControllerConfig
+from hexactl.control.frames import Coordinates, convert, relative_poses
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState, MotionLimits, preview
+from hexactl.kinematics.frames import Frames, tools_in_work
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import sensor_setpoints, sensor_setpoints_batch
 from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
-from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmDeg, RelativeMmRad, validate_pose_values
+from hexactl.kinematics.axes import (
+    AbsoluteMmRad,
+    RelativeMmDeg,
+    RelativeMmRad,
+    ToolInWorkMmDeg,
+    validate_pose_values,
+)
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import Violation, assess_poses
 
 
@@ -108,11 +117,12 @@ class LegLock:
 
 @dataclass(frozen=True, slots=True)
 class Waypoint:
-    """A requested target: ``pose`` relative mm/deg; ``duration_s`` a lower bound on the
-    move's duration; ``speed`` (0, 1] scales the velocity limits; ``dwell_s`` the time to
-    stay on arrival (sequences)."""
+    """A requested target: ``pose`` relative mm/deg, or the tool's pose in the work frame
+    (its type says which; any other sequence of six numbers is relative); ``duration_s`` a
+    lower bound on the move's duration; ``speed`` (0, 1] scales the velocity limits;
+    ``dwell_s`` the time to stay on arrival (sequences)."""
 
-    pose: RelativeMmDeg
+    pose: RelativeMmDeg | ToolInWorkMmDeg
     duration_s: float | None = None
     speed: float | None = None
     dwell_s: float = 0.0
@@ -120,15 +130,20 @@ class Waypoint:
 
 @dataclass(frozen=True, slots=True)
 class Segment:
-    """One planned move, ready for the loop. ``goal`` relative mm/rad (on the constraint
-    in leg-lock mode); ``time_scale``/``velocity_scale`` as in
-    :func:`~hexactl.control.trajectory.configure_input`; ``duration_s`` as planned."""
+    """One planned move, ready for the loop. ``goal`` in the coordinates of ``frames``
+    (None: relative mm/rad, on the constraint in leg-lock mode; else the tool's pose in
+    the work frame, mm/rad); ``time_scale``/``velocity_scale`` as in
+    :func:`~hexactl.control.trajectory.configure_input`; ``duration_s`` as planned;
+    ``start``: where it starts at rest, in its coordinates, when the motion before it ran
+    in others (None: it continues from the generator's state)."""
 
-    goal: RelativeMmRad
+    goal: Coordinates
     time_scale: float
     velocity_scale: float
     dwell_s: float
     duration_s: float
+    frames: Frames | None = None
+    start: Coordinates | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -154,7 +169,9 @@ class Refusal:
 class PlanningContext:
     """Everything a plan depends on. ``leg_speed_mm_s``: the budget plans keep the legs
     under (the loop's guard enforces the full ``leg_velocity_mm_s``);
-    ``lock_cycle_iterations``: the loop's (``ControllerConfig.lock_cycle_iterations``)."""
+    ``lock_cycle_iterations``: the loop's (``ControllerConfig.lock_cycle_iterations``);
+    ``frames``: the operator's (:meth:`~hexactl.control.frames.OperatorFrames.frames`), for
+    waypoints in the work frame and the ``soft_limits``."""
 
     active: ActiveGeometry
     limits: MotionLimits
@@ -165,6 +182,8 @@ class PlanningContext:
     path_step_mm: float = 2.0
     path_step_deg: float = 0.1
     lock_cycle_iterations: int = ControllerConfig.model_fields["lock_cycle_iterations"].default
+    frames: Frames | None = None
+    soft_limits: SoftLimits | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,12 +198,16 @@ class Plan:
         return self.refusal is None
 
 
-def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequence[Waypoint]) -> Plan:
-    """Plan and validate moves through ``waypoints`` from the generator state ``start``.
-    Each waypoint after the first starts at rest on the previous one. Never raises for bad
-    input: it is refused."""
+def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequence[Waypoint],
+              start_frames: Frames | None = None) -> Plan:
+    """Plan and validate moves through ``waypoints`` from the generator state ``start``,
+    in the coordinates of ``start_frames`` (None: relative mm/rad). Each waypoint after the
+    first starts at rest on the previous one; one in other coordinates than the motion
+    before it starts from rest (refused while moving). Never raises for bad input: it is
+    refused."""
     segments = []
     violations: list[PathViolation] = []
+    home = context.active.home
     for number, waypoint in enumerate(waypoints, start=1):
         problem = _check_waypoint(waypoint)
         if problem:
@@ -192,23 +215,48 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
         goal = _goal(context, waypoint.pose)
         if isinstance(goal, Refusal):
             return Plan(refusal=Refusal(goal.code, f"waypoint {number}: {goal.message}", details={"waypoint": number, **goal.details}))
+        goal, frames = goal
+        rebased = None
+        if frames != start_frames:
+            if not start.resting:
+                return Plan(refusal=Refusal(ErrorCode.BUSY, f"waypoint {number}: the motion under way runs in another "
+                                            "frame: stop first, or move in its frame", details={"waypoint": number}))
+            rebased = convert(start.position, start_frames, frames, home)
+            start, start_frames = KinematicState.at_rest(rebased), frames
         # The goal alone first: cheap, and no trajectory is previewed towards a goal
         # that is out of reach anyway (ruckig raises on absurd ones).
-        goal_violations = assess_path(context.active.geometry, np.array([goal]), number, context.path_step_mm,
-                                      context.path_step_deg)
+        goal_violations = _violations(context, relative_poses(frames, np.array([goal]), home), number)
         if goal_violations:
             return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
-        planned = _plan_segment(context, start, goal, waypoint, MAX_MOTION_S - sum(done.duration_s for done in segments))
+        planned = _plan_segment(context, start, goal, frames, waypoint,
+                                MAX_MOTION_S - sum(done.duration_s for done in segments))
         if isinstance(planned, Refusal):
             return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
                                         details={"waypoint": number, **planned.details}))
         segment, samples = planned
-        violations += assess_path(context.active.geometry, samples, number, context.path_step_mm, context.path_step_deg)
-        segments.append(segment)
+        violations += _violations(context, samples, number)
+        segments.append(replace(segment, start=rebased))
         start = KinematicState.at_rest(goal)
     if violations:
         return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(violations), tuple(violations)))
     return Plan(segments=tuple(segments))
+
+
+def _violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
+    """The hardware's limits (:func:`assess_path`) and the soft limits broken by (N, 6)
+    relative mm/rad samples of waypoint ``waypoint``'s path."""
+    found = assess_path(context.active.geometry, relative, waypoint, context.path_step_mm, context.path_step_deg)
+    limits, frames = context.soft_limits, context.frames
+    if limits is None or frames is None:
+        return found
+    tool = pose_mm_rad_to_mm_deg(tools_in_work(frames, relative + np.asarray(context.active.home)))
+    first: dict[tuple, PathViolation] = {}
+    for n, broken in enumerate(limits.violations(tool)):
+        for violation in broken:
+            first.setdefault((violation.kind, violation.axis), PathViolation(
+                violation.kind, violation.value, violation.limit, violation.message, axis=violation.axis,
+                waypoint=waypoint, pose=RelativeMmDeg._make(pose_mm_rad_to_mm_deg(relative[n]))))
+    return found + list(first.values())
 
 
 def assess_path(
@@ -272,11 +320,21 @@ def _number_in(value: object, low: float, high: float, low_open: bool = False) -
     return isfinite(value) and (low < value if low_open else low <= value) and value <= high
 
 
-def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> RelativeMmRad | Refusal:
-    """The goal in relative mm/rad; in leg-lock mode projected onto the constraint."""
-    goal = RelativeMmDeg._make(float(v) for v in pose_mm_deg).in_radians()
-    if context.lock is None:
-        return goal
+def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> tuple[Coordinates, Frames | None] | Refusal:
+    """The goal and the frames of its coordinates: a pose in the work frame in the
+    operator's frames, any other relative mm/rad; in leg-lock mode projected onto the
+    constraint (relative mm/rad: a projected path keeps no pivot)."""
+    if isinstance(pose_mm_deg, ToolInWorkMmDeg):
+        if context.frames is None:
+            return Refusal(ErrorCode.INVALID_ARGUMENT, "a pose in the work frame needs the operator's frames")
+        goal, frames = pose_mm_deg.in_radians(), context.frames
+        if context.lock is None:
+            return goal, frames
+        goal = convert(goal, frames, None, context.active.home)
+    else:
+        goal = RelativeMmDeg._make(float(v) for v in pose_mm_deg).in_radians()
+        if context.lock is None:
+            return goal, None
     projected = project_locked(context.active, context.lock, goal)
     if not projected.ok:
         return Refusal(ErrorCode.LOCK_UNREACHABLE, f"no pose with leg {context.lock.leg} at its locked length near the goal "
@@ -287,7 +345,7 @@ def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> RelativeMmR
                        f"from the goal (limit {context.lock_max_correction_mm:g} mm)",
                        details={"correction_mm": projected.correction, "limit_mm": context.lock_max_correction_mm,
                                 "nearest_pose": list(context.active.relative_from_absolute_mm_rad(projected.pose).in_degrees())})
-    return context.active.relative_from_absolute_mm_rad(projected.pose)
+    return context.active.relative_from_absolute_mm_rad(projected.pose), None
 
 
 def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float],
@@ -317,10 +375,11 @@ def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float],
     return project_locked(active, lock, target, max_iterations, start=start)
 
 
-def _plan_segment(context: PlanningContext, start: KinematicState, goal: RelativeMmRad, waypoint: Waypoint,
-                  motion_left_s: float) -> tuple[Segment, NDArray] | Refusal:
-    """The segment to ``goal`` and its samples; refused before sampling when it would move
-    for longer than ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan)."""
+def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordinates, frames: Frames | None,
+                  waypoint: Waypoint, motion_left_s: float) -> tuple[Segment, NDArray] | Refusal:
+    """The segment to ``goal`` (in the coordinates of ``frames``, as ``start``) and its
+    samples (relative mm/rad); refused before sampling when it would move for longer than
+    ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan)."""
     velocity_scale = waypoint.speed or 1.0
     natural = preview(context.limits, context.period_s, start, goal, 1.0, velocity_scale)
     if natural is None:
@@ -335,27 +394,28 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Relativ
             return Refusal(ErrorCode.PLANNING_FAILED,
                            f"the move would take {trajectory.duration:.6g} s; a move, or a sequence's moves together, "
                            f"may take at most {MAX_MOTION_S:g} s: raise the speed or shorten the duration")
-        samples = _samples(context, start, trajectory)
+        samples = _samples(context, start, trajectory, frames)
         if isinstance(samples, Refusal):
             return samples
         peak = _peak_leg_speed(context, samples)
         if peak <= context.leg_speed_mm_s:
-            segment = Segment(goal, time_scale, velocity_scale, waypoint.dwell_s, trajectory.duration)
+            segment = Segment(goal, time_scale, velocity_scale, waypoint.dwell_s, trajectory.duration, frames)
             return segment, samples
         time_scale *= peak / context.leg_speed_mm_s * _STRETCH_MARGIN
     return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
 
 
-def _samples(context: PlanningContext, start: KinematicState, trajectory) -> NDArray | Refusal:
-    """The start and the position of every cycle of ``trajectory`` (relative mm/rad). In
-    leg-lock mode: projected as the loop will, each cycle's from the one before, starting
-    at the start's full projection (where the loop's commanded pose is); refused if the
-    loop's iterations would not converge at some cycle."""
+def _samples(context: PlanningContext, start: KinematicState, trajectory, frames: Frames | None) -> NDArray | Refusal:
+    """The start and the position of every cycle of ``trajectory`` (in the coordinates of
+    ``frames``) as poses relative mm/rad. In leg-lock mode (relative coordinates):
+    projected as the loop will, each cycle's from the one before, starting at the start's
+    full projection (where the loop's commanded pose is); refused if the loop's
+    iterations would not converge at some cycle."""
     count = max(1, int(round(trajectory.duration / context.period_s)))
     targets = [start.position] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
     lock = context.lock
     if lock is None:
-        return np.array(targets, dtype=float)
+        return relative_poses(frames, np.array(targets, dtype=float), context.active.home)
     active = context.active
     projected: list[RelativeMmRad] = []
     for cycle, target in enumerate(targets):

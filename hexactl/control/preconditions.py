@@ -9,9 +9,11 @@ out (the state may have moved). Each check returns a :data:`Refusal`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from math import isnan
 from typing import Protocol
 
+from hexactl.control.commands import SwapGeometry
 from hexactl.control.hardware import ActuatorState, FeedbackSnapshot
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.results import ErrorCode
@@ -145,4 +147,12 @@ def check_swap(view: CoreView, new: ActiveGeometry) -> Refusal:
     # the set-points already respect its stroke.
     if view.lock is not None:
         return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: unlock before changing the calibration"
+    return None
+
+
+def check_rollback(history: Sequence[ActiveGeometry], swap: SwapGeometry) -> Refusal:
+    """A rollback's calibration must still be the last of the ``history`` (another client
+    may have loaded or rolled back since it was checked). By id: it crossed a process."""
+    if swap.rollback and (not history or history[-1].calibration_id != swap.active.calibration_id):
+        return ErrorCode.STALE_PLAN, "the calibration history changed meanwhile: roll back again"
     return None

@@ -33,6 +33,7 @@ class ErrorCode(StrEnum):
     INVALID_GEOMETRY = "invalid_geometry"  # the calibration fails validation: see details
     CALIBRATION_CHANGE_TOO_LARGE = "calibration_change_too_large"
     NO_PREVIOUS_CALIBRATION = "no_previous_calibration"
+    OUTSIDE_SOFT_LIMITS = "outside_soft_limits"  # set_frames: the platform would be outside the new soft limits
     SEND_FAILED = "send_failed"  # the link refused a frame (E-stop, ENABLE)
     LOOP_FAILED = "loop_failed"  # the loop thread died: see status
     LOOP_TIMEOUT = "loop_timeout"  # the loop gave no verdict in time (the command may still run)

@@ -81,7 +81,13 @@ def dwell_record(sequence: str, waypoint: int, t_ns: int, pose_command: Relative
 
 def start_segment(trajectory: PoseTrajectory, segment: Segment) -> bool:
     """Head for ``segment``'s goal; False if the generator refuses it from the current
-    state, which only a move replacing a running one can meet (see ``move_to``)."""
+    state, which only a move replacing a running one can meet (see ``move_to``). A
+    segment in other coordinates than the generator's starts at rest where its plan put
+    it (False while moving: the plan assumed rest)."""
+    if segment.frames != trajectory.frames:
+        if trajectory.moving or segment.start is None:
+            return False
+        trajectory.rebase(segment.start, segment.frames)
     return trajectory.move_to(segment.goal, segment.time_scale, segment.velocity_scale)
 
 

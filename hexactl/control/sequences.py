@@ -10,6 +10,7 @@ settled, the instrument done), the commanded and the measured pose: :class:`Dwel
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -26,7 +27,8 @@ class SequenceError(ValueError):
 
 
 class UnknownSequence(SequenceError, KeyError):
-    """A name that is not one of :data:`BUILTIN_SEQUENCES`; the message lists them."""
+    """A name that is not one of :data:`BUILTIN_SEQUENCES`; the message lists them and
+    names the closest, if one is close."""
 
     def __str__(self) -> str:  # KeyError's would quote the message
         return str(self.args[0])
@@ -97,7 +99,9 @@ def builtin_sequence(name: str, dwell_s: float = BUILTIN_DWELL_S) -> MotionSeque
     """
     motion = _PAPER_MOTIONS.get(name)
     if motion is None:
-        raise UnknownSequence(f"{name!r} is not a built-in sequence (built in: {', '.join(BUILTIN_SEQUENCES)})")
+        near = difflib.get_close_matches(name, BUILTIN_SEQUENCES, n=1)
+        guess = f"did you mean {near[0]!r}? " if near else ""
+        raise UnknownSequence(f"{name!r} is not a built-in sequence ({guess}built in: {', '.join(BUILTIN_SEQUENCES)})")
     return MotionSequence(name=motion.name, description=motion.title,
                           waypoints=tuple(SequenceWaypoint(pose=pose, dwell=dwell_s) for pose in motion.waypoints))
 

@@ -21,7 +21,8 @@ from hexactl.control.guard import guard_setpoints
 from hexactl.control.hardware import ACTUATOR_COUNT
 from hexactl.control.planning import ActiveGeometry, LegLock, track_locked
 from hexactl.control.supervisor import Fault
-from hexactl.kinematics.axes import RelativeMmRad
+from hexactl.kinematics.axes import RelativeMmRad, ToolInWorkMmRad
+from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import sensor_setpoints
 
 
@@ -54,13 +55,18 @@ class SetpointPath:
             self.ramp.begin(self.setpoints, new, self.pose_command)
         self._max_step_mm = new.geometry.limits.leg_velocity_mm_s * self._period_s
 
-    def follow(self, active: ActiveGeometry, lock: LegLock | None, target: RelativeMmRad,
-               previous_target: RelativeMmRad | None) -> Fault | None:
-        """This cycle's set-points for the trajectory's ``target`` (relative mm/rad);
-        ``previous_target`` last cycle's (leg-lock mode only). The fault, with nothing
-        changed, if the leg-lock projection fails."""
+    def follow(self, active: ActiveGeometry, lock: LegLock | None, target: RelativeMmRad | ToolInWorkMmRad,
+               previous_target: RelativeMmRad | None, frames: Frames | None = None) -> Fault | None:
+        """This cycle's set-points for the trajectory's ``target``: relative mm/rad, or the
+        tool's pose in the work frame of ``frames``; ``previous_target`` last cycle's
+        (leg-lock mode only, relative). The fault, with nothing changed, if the leg-lock
+        projection fails."""
         if lock is None:
-            pose, absolute = target, active.absolute_from_relative_mm_rad(target)
+            if frames is None:
+                pose, absolute = target, active.absolute_from_relative_mm_rad(target)
+            else:
+                absolute = frames.platform_pose(target)
+                pose = active.relative_from_absolute_mm_rad(absolute)
         else:
             assert previous_target is not None, "leg-lock tracking needs the previous target"
             # pose_command: what last cycle's target was projected to.

@@ -15,7 +15,8 @@ from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.sequence_player import SequenceProgress, SequenceReport
 from hexactl.control.supervisor import Fault
 from hexactl.control.trajectory import KinematicState
-from hexactl.kinematics.axes import RelativeMmRad
+from hexactl.kinematics.axes import RelativeMmRad, ToolInWorkMmRad
+from hexactl.kinematics.frames import Frames
 
 
 class ControlState(StrEnum):
@@ -46,7 +47,8 @@ class CoreSnapshot:
 
     Poses relative to the zero posture in mm and rad; ``trajectory`` the generator's
     (position, velocity, acceleration), which a new plan starts from, and ``goal`` its
-    target (None while braking); set-points and
+    target (None while braking), both in the coordinates of ``frames`` (None: relative
+    mm/rad; else the tool's pose in the work frame, mm/rad); set-points and
     feedback sensor mm. ``clamped_cycles``: cycles in which the guard changed a
     set-point (each one means a plan was wrong); ``clamped_legs``: bit mask of the
     legs it ever changed.
@@ -59,7 +61,8 @@ class CoreSnapshot:
     epoch: int
     pose_command: RelativeMmRad
     trajectory: KinematicState
-    goal: RelativeMmRad | None
+    goal: RelativeMmRad | ToolInWorkMmRad | None
+    frames: Frames | None
     pose_measured: RelativeMmRad | None
     setpoints: tuple[float, ...]
     feedback: FeedbackSnapshot | None
@@ -76,3 +79,4 @@ class CoreSnapshot:
     clamped_cycles: int
     clamped_legs: int
     fk_failures: int
+    motion_end_ns: int | None = None  # when the move or braking under way ends as planned; stale while HOLDING

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
-from hexactl.control.core import CoreSnapshot, Fault
+from hexactl.control.core import CoreSnapshot, Fault, MotionState
 from hexactl.control.host import LoopReport
 from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
@@ -33,7 +33,9 @@ class Telemetry:
     zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
     solution). Legs in sensor mm; an actuator not heard from yet reads NaN in
     ``leg_feedback`` (and, while DISABLED, in ``leg_setpoints``, which then mirror the
-    feedback); ``leg_feedback`` is None before the first read."""
+    feedback); ``leg_feedback`` is None before the first read. ``goal``: where the move
+    under way ends, relative mm and deg (None at rest and while braking); ``remaining_s``:
+    time until the move or the braking under way ends as planned, s (None at rest)."""
 
     t: float
     state: str
@@ -48,6 +50,8 @@ class Telemetry:
     faults: tuple[Fault, ...]
     loop: LoopStats
     realtime: RealtimeReport | None = None  # what the loop thread's real-time set-up obtained
+    goal: RelativeMmDeg | None = None
+    remaining_s: float | None = None
 
 
 def status_result(report: LoopReport) -> CommandResult:
@@ -91,7 +95,16 @@ def telemetry_of(report: LoopReport) -> Telemetry:
         faults=s.faults,
         loop=stats,
         realtime=report.realtime,
+        goal=s.goal.in_degrees() if s.motion is MotionState.MOVING and s.goal is not None else None,
+        remaining_s=_remaining_s(s),
     )
+
+
+def _remaining_s(s: CoreSnapshot) -> float | None:
+    """Time until the motion under way ends as planned, s; None at rest."""
+    if s.motion is MotionState.HOLDING or s.motion_end_ns is None:
+        return None
+    return max(0.0, (s.motion_end_ns - s.t_ns) / 1e9)
 
 
 def sequence_telemetry(s: CoreSnapshot) -> SequenceTelemetry | None:

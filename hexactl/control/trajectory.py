@@ -1,8 +1,9 @@
 """Jerk-limited trajectories in pose space, by ruckig.
 
 Planning happens in *pose space*: the six coordinates of the pose relative to the zero
-posture, x, y, z in mm and roll, pitch, yaw in rad, each with its own velocity,
-acceleration and jerk limit. Why pose space rather than leg space: ruckig's phase
+posture (or, for a motion in the work frame, of the tool's pose in it:
+:mod:`hexactl.control.frames`), x, y, z in mm and roll, pitch, yaw in rad, each with its
+own velocity, acceleration and jerk limit. Why pose space rather than leg space: ruckig's phase
 synchronisation then makes every move from rest a straight line in pose space (all
 axes share one time profile), which is the path the move validation samples, and the
 platform moves the way the user thinks of it. Leg speeds are a consequence of the path:
@@ -42,7 +43,8 @@ from ruckig import (
     Trajectory,
 )
 
-from hexactl.kinematics.axes import PerAxis, RelativeMmRad
+from hexactl.kinematics.axes import PerAxis, RelativeMmRad, ToolInWorkMmRad
+from hexactl.kinematics.frames import Frames
 
 DOFS = 6
 _ZERO6 = [0.0] * DOFS
@@ -88,15 +90,21 @@ class MotionLimits(BaseModel):
 
 class KinematicState(NamedTuple):
     """Where a trajectory is (ruckig's current or target state): ``position`` relative
-    mm/rad, ``velocity`` mm/s and rad/s, ``acceleration`` mm/s² and rad/s², per axis."""
+    mm/rad or, for a motion in the work frame, the tool's pose in it (mm/rad);
+    ``velocity`` mm/s and rad/s, ``acceleration`` mm/s² and rad/s², per axis."""
 
-    position: RelativeMmRad
+    position: RelativeMmRad | ToolInWorkMmRad
     velocity: PerAxis
     acceleration: PerAxis
 
     @classmethod
-    def at_rest(cls, position: RelativeMmRad) -> KinematicState:
+    def at_rest(cls, position: RelativeMmRad | ToolInWorkMmRad) -> KinematicState:
         return cls(position, _ZERO_AXES, _ZERO_AXES)
+
+    @property
+    def resting(self) -> bool:
+        """No velocity and no acceleration (a finished move parks at exactly zero)."""
+        return self.velocity == _ZERO_AXES and self.acceleration == _ZERO_AXES
 
 
 class StepResult(IntEnum):
@@ -141,7 +149,8 @@ def configure_input(
 
 
 class PoseTrajectory:
-    """The loop's online trajectory generator in pose space (relative, mm and rad).
+    """The loop's online trajectory generator in pose space: relative mm/rad, or the
+    tool's pose in the work frame of :attr:`frames` (:meth:`rebase`).
 
     Not thread-safe: owned by the loop. ``update`` costs about a microsecond while
     following a plan and a few tens when a new target forces a recalculation.
@@ -155,7 +164,9 @@ class PoseTrajectory:
         self._output = OutputParameter(DOFS)
         self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
         self._active = False
-        self.goal: RelativeMmRad | None = None
+        self.frames: Frames | None = None
+        self._coordinates: type[RelativeMmRad | ToolInWorkMmRad] = RelativeMmRad
+        self.goal: RelativeMmRad | ToolInWorkMmRad | None = None
         self.reset(RelativeMmRad(*_ZERO6))
 
     @property
@@ -167,9 +178,21 @@ class PoseTrajectory:
         return self._active and self.goal is None
 
     @property
-    def position(self) -> RelativeMmRad:
+    def position(self) -> RelativeMmRad | ToolInWorkMmRad:
         """The position the next update starts from."""
-        return tuple.__new__(RelativeMmRad, self._input.current_position)  # every cycle: no _make call
+        return tuple.__new__(self._coordinates, self._input.current_position)  # every cycle: no _make call
+
+    @property
+    def replanned(self) -> bool:
+        """The last update calculated a new plan (a new goal or a halt)."""
+        return self._output.new_calculation
+
+    @property
+    def remaining_s(self) -> float:
+        """Time left on the plan the last update followed, s. About 0.4 µs: read it when
+        :attr:`replanned`, not every cycle."""
+        output = self._output
+        return output.trajectory.duration - output.time
 
     def state(self) -> KinematicState:
         """The state the next update starts from."""
@@ -177,23 +200,31 @@ class PoseTrajectory:
         # tuple.__new__ for both: built every cycle for the loop's snapshot, and a NamedTuple's
         # __new__ and _make are Python calls.
         return tuple.__new__(KinematicState, (
-            tuple.__new__(RelativeMmRad, parameters.current_position),
+            tuple.__new__(self._coordinates, parameters.current_position),
             tuple(parameters.current_velocity),
             tuple(parameters.current_acceleration),
         ))
 
-    def reset(self, pose: RelativeMmRad) -> None:
-        """At rest at ``pose``, nothing to do."""
+    def reset(self, pose: RelativeMmRad | ToolInWorkMmRad) -> None:
+        """At rest at ``pose`` (in the current coordinates), nothing to do."""
         parameters = self._input
         parameters.current_position = list(pose)
         parameters.current_velocity = _ZERO6
         parameters.current_acceleration = _ZERO6
         configure_input(parameters, self.limits, pose)
-        self.goal = RelativeMmRad._make(pose)
+        self.goal = self._coordinates._make(pose)
         self._active = False
 
-    def move_to(self, goal: RelativeMmRad, time_scale: float = 1.0, velocity_scale: float = 1.0) -> bool:
-        """Head for ``goal`` (relative mm/rad), arriving at rest; replans from the
+    def rebase(self, pose: RelativeMmRad | ToolInWorkMmRad, frames: Frames | None) -> None:
+        """At rest at ``pose`` in new coordinates: relative mm/rad (``frames`` None) or the
+        tool's pose in the work frame of ``frames``."""
+        self.frames = frames
+        self._coordinates = RelativeMmRad if frames is None else ToolInWorkMmRad
+        self.reset(pose)
+
+    def move_to(self, goal: RelativeMmRad | ToolInWorkMmRad, time_scale: float = 1.0,
+                velocity_scale: float = 1.0) -> bool:
+        """Head for ``goal`` (in the current coordinates), arriving at rest; replans from the
         current state, so it may be called while moving. Scales: :func:`configure_input`.
 
         While moving, False (and the motion goes on unchanged) if ruckig refuses the move
@@ -204,7 +235,7 @@ class PoseTrajectory:
         if self._active and preview(self.limits, self.period_s, self.state(), goal, time_scale, velocity_scale) is None:
             return False
         configure_input(self._input, self.limits, goal, time_scale, velocity_scale)
-        self.goal = RelativeMmRad._make(goal)
+        self.goal = self._coordinates._make(goal)
         self._active = True
         return True
 

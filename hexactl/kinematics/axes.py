@@ -80,6 +80,38 @@ class AbsoluteMmRad(_SixAxes):
     __slots__ = ()
 
 
+class ToolInWorkMmDeg(_SixAxes):
+    """The tool frame's pose in the work frame, mm and degrees (see
+    :mod:`hexactl.kinematics.frames`): what the API, the CLI and files carry for a pose in
+    the work frame."""
+
+    __slots__ = ()
+
+    def in_radians(self) -> ToolInWorkMmRad:
+        return ToolInWorkMmRad(self.x, self.y, self.z, radians(self.roll), radians(self.pitch), radians(self.yaw))
+
+
+class ToolInWorkMmRad(_SixAxes):
+    """The tool frame's pose in the work frame, mm and radians: what a motion in the work
+    frame is planned and run in."""
+
+    __slots__ = ()
+
+    def in_degrees(self) -> ToolInWorkMmDeg:
+        return ToolInWorkMmDeg(self.x, self.y, self.z, degrees(self.roll), degrees(self.pitch), degrees(self.yaw))
+
+
+class FramePoseMmDeg(_SixAxes):
+    """Where a frame an operator defines is in its parent, mm and degrees: the work frame
+    in the zero frame (the platform's frame at the zero posture), the tool frame in the
+    platform's frame."""
+
+    __slots__ = ()
+
+    def in_radians(self) -> tuple[float, float, float, float, float, float]:
+        return (self.x, self.y, self.z, radians(self.roll), radians(self.pitch), radians(self.yaw))
+
+
 def validate_pose_values(pose: Sequence[float]) -> str | None:
     """None when ``pose`` is six finite numbers, else a sentence naming the problem."""
     try:

@@ -10,9 +10,10 @@ Poses are (x, y, z, roll, pitch, yaw) in mm and radians, orientation Rz·Ry·Rx
 (:mod:`hexactl.kinematics.rotation`). A rotation of ``X`` about its own origin turns the
 platform about the tool point, which stays where it is in the fixed frame: the pivot.
 
-Plain floats, not numpy: the loop maps its commanded pose through the frames every
-cycle, where numpy's per-call overhead costs more than the arithmetic (as in
-:func:`~hexactl.kinematics.rotation.rotation_elements`).
+Plain floats for one pose, not numpy: the loop maps its commanded pose through the
+frames every cycle, where numpy's per-call overhead costs more than the arithmetic (as
+in :func:`~hexactl.kinematics.rotation.rotation_elements`); numpy for planning's
+batches (:func:`platform_poses`, :func:`tools_in_work`).
 """
 
 from __future__ import annotations
@@ -21,8 +22,11 @@ from collections.abc import Sequence
 from math import asin, atan2
 from typing import NamedTuple
 
+import numpy as np
+from numpy.typing import NDArray
+
 from hexactl.kinematics.axes import AbsoluteMmRad
-from hexactl.kinematics.rotation import rotation_elements
+from hexactl.kinematics.rotation import rotation_elements, rotation_matrices
 
 
 class Transform(NamedTuple):
@@ -91,3 +95,34 @@ class Frames(NamedTuple):
         """The tool frame's pose in the work frame (mm, rad) with the platform at
         ``platform_mm_rad`` (absolute, mm and rad): ``W⁻¹·P·T``."""
         return pose_of(compose(compose(inverse(self.work), transform_of(platform_mm_rad)), self.tool))
+
+
+def platform_poses(frames: Frames, tool_in_work_mm_rad: NDArray) -> NDArray[np.float64]:
+    """:meth:`Frames.platform_pose` of (N, 6) poses at once (planning's samples)."""
+    return _poses_batch(_matrix(frames.work) @ _matrices(tool_in_work_mm_rad) @ _matrix(inverse(frames.tool)))
+
+
+def tools_in_work(frames: Frames, platform_mm_rad: NDArray) -> NDArray[np.float64]:
+    """:meth:`Frames.tool_in_work` of (N, 6) poses at once."""
+    return _poses_batch(_matrix(inverse(frames.work)) @ _matrices(platform_mm_rad) @ _matrix(frames.tool))
+
+
+def _matrix(transform: Transform) -> NDArray[np.float64]:
+    m = np.eye(4)
+    m[:3, :3] = np.reshape(transform.rotation, (3, 3))
+    m[:3, 3] = transform.translation
+    return m
+
+
+def _matrices(poses_mm_rad: NDArray) -> NDArray[np.float64]:
+    poses = np.asarray(poses_mm_rad, dtype=float).reshape(-1, 6)
+    m = np.zeros((len(poses), 4, 4))
+    m[:, :3, :3] = rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5])
+    m[:, :3, 3] = poses[:, :3]
+    m[:, 3, 3] = 1.0
+    return m
+
+
+def _poses_batch(m: NDArray) -> NDArray[np.float64]:
+    pitch = np.arcsin(np.clip(-m[:, 2, 0], -1.0, 1.0))
+    return np.column_stack((m[:, :3, 3], np.arctan2(m[:, 2, 1], m[:, 2, 2]), pitch, np.arctan2(m[:, 1, 0], m[:, 0, 0])))

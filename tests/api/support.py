@@ -129,8 +129,10 @@ class FakeController:
         self._call("rollback_calibration")
         if len(self.calibrations) < 1:
             return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no previous calibration")
-        previous = self.calibrations.pop()
-        return CommandResult.success(f"calibration {previous} rolled back", calibration_id=geometry_id(self.geometry), change_mm=0.5)
+        rolled_back_from = self.calibrations.pop()
+        now = self.calibrations[-1] if self.calibrations else geometry_id(self.geometry)
+        return CommandResult.success(f"rolled back from calibration {rolled_back_from} to {now}", calibration_id=now,
+                                     rolled_back_from=rolled_back_from, change_mm=0.5)
 
     def sequence_records(self) -> SequenceReport | None:
         return SequenceReport(self.sequence.name, "playing", RECORDS) if self.sequence else None

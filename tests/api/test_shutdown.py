@@ -58,8 +58,8 @@ def test_sigterm_ends_the_service_and_its_stuck_api_process(tmp_path: Path) -> N
     assert "did not end within" in log and "killed" in log
     # Unless a loaded host stalled the simulator meanwhile (a fault latched: the actuators
     # hold), the platform was braked, its place logged, and the actuators disabled.
-    if not re.search(r"fault at \[[-0-9., ]+\] \(measured\): nothing to brake", log):
-        assert re.search(r"platform (at rest|still moving) at \[[-0-9., ]+\]", log), log
+    if not re.search(r"fault at x [-0-9.]+ mm, .* deg \(measured\): nothing to brake", log):
+        assert re.search(r"platform (at rest|still moving) at x [-0-9.]+ mm, .* yaw [-0-9.]+ deg", log), log
         assert "actuators disabled" in log, log
     assert re.search(r"stopped \(shutdown took \d+\.\d\d s\)$", log.rstrip()), log
 

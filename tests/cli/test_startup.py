@@ -25,7 +25,7 @@ NO_SERVICE = ["--api", "tcp://127.0.0.1:1", "--timeout", "0.05"]  # nothing list
 HEAVY = (
     "numpy", "scipy", "matplotlib", "pydantic", "pydantic_core", "can", "asyncio", "zmq",
     "hexactl.adapters.api.messages", "hexactl.adapters.api.security", "hexactl.adapters.report",
-    "hexactl.application", "hexactl.calibration", "hexactl.control", "hexactl.sim",
+    "hexactl.application", "hexactl.calibration", "hexactl.control", "hexactl.sim", "rich",
 )
 """Modules (and their submodules) none of the light commands may load: ``zmq`` only the
 commands that talk to the service, ``zmq.auth`` (in ``security``) only with CURVE keys."""
@@ -60,7 +60,8 @@ print(json.dumps({{"status": status,
     (["status", *NO_SERVICE], 2, ["zmq"]),
     (["move", "x=50,yaw=5", *NO_SERVICE], 2, ["zmq"]),
     (["enable", *NO_SERVICE], 2, ["zmq"]),
-], ids=["parser", "help", "move-help", "status", "move", "enable"])
+    (["monitor", "--once", "--telemetry", "tcp://127.0.0.1:1", "--timeout", "0.05"], 2, ["zmq"]),
+], ids=["parser", "help", "move-help", "status", "move", "enable", "monitor-once"])
 def test_light_commands_load_no_heavy_module(argv: list[str] | None, status: int, allowed: list[str]) -> None:
     run = loaded_after(argv)
     assert run["status"] == status

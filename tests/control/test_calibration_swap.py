@@ -72,18 +72,51 @@ def test_rollback_ramps_back_to_the_previous_calibration(rig, calibrated):
     rig.enabled()
     rig.run(3)
     original = rig.sent[-1].copy()
-    assert rig.controller.rollback_calibration().error == "no_previous_calibration"
+    refused = rig.controller.rollback_calibration()
+    assert refused.error == "no_previous_calibration" and "nominal is the first since start-up" in refused.message
     assert rig.controller.load_calibration(calibrated, "cal-1").ok
     rig.run(2)
     rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
-    assert rig.controller.rollback_calibration().ok
+    rolled = rig.controller.rollback_calibration()
+    assert rolled.ok and rolled.message == "rolled back from calibration cal-1 to nominal"
+    assert rolled.details["calibration_id"] == "nominal" and rolled.details["rolled_back_from"] == "cal-1"
     rig.run(2)
     rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
     rig.run(2)
     assert rig.controller.telemetry().calibration_id == "nominal"
-    assert rig.controller.status().details["previous_calibration_id"] == "cal-1"
+    assert rig.controller.status().details["previous_calibration_id"] is None  # an undo, not a toggle
+    assert rig.controller.rollback_calibration().error == "no_previous_calibration"
     assert rig.sent[-1] == pytest.approx(original, abs=1e-9)
     rig.assert_setpoints_safe()
+
+
+def test_rollbacks_walk_back_through_every_load_in_order(rig, geometry):
+    from hexactl.control.core import KEPT_CALIBRATIONS
+
+    loads = KEPT_CALIBRATIONS + 2
+    for n in range(1, loads + 1):
+        assert rig.controller.load_calibration(_with_zero_offset(geometry, 0.1 * n), f"cal-{n}").ok
+        rig.run(2)
+    assert rig.controller.telemetry().calibration_id == f"cal-{loads}"
+    walked = []
+    while (result := rig.controller.rollback_calibration()).ok:
+        rig.run(2)
+        walked.append(rig.controller.telemetry().calibration_id)
+    # The most recent KEPT_CALIBRATIONS, newest first; the oldest ones (nominal, cal-1) forgotten.
+    assert walked == [f"cal-{n}" for n in range(loads - 1, loads - 1 - KEPT_CALIBRATIONS, -1)]
+    assert result.error == "no_previous_calibration"
+
+
+def test_a_rollback_overtaken_by_a_load_is_refused_as_stale(rig, calibrated, geometry):
+    """Two clients: one rolls back while another's load is still queued before it."""
+    assert rig.controller.load_calibration(calibrated, "cal-1").ok
+    rig.run(2)
+    loaded = rig.controller.load_calibration(_with_zero_offset(geometry, 0.5), "cal-2")
+    rolled = rig.controller.rollback_calibration()  # checked against cal-1's history
+    rig.run(2)
+    assert rig.controller.outcome(loaded.details["ticket"]).ok
+    assert rig.controller.outcome(rolled.details["ticket"]).error == "stale_plan"
+    assert rig.controller.telemetry().calibration_id == "cal-2"
 
 
 def _with_zero_offset(geometry: Geometry, offset_mm: float) -> Geometry:

@@ -150,11 +150,21 @@ def test_stop_brakes_smoothly_short_of_the_goal(rig):
     rig.enabled()
     assert rig.controller.move([500, 0, 0, 0, 0, 0]).ok
     rig.run(400)
-    assert rig.controller.stop().ok
+    stopping = rig.controller.stop()
+    assert stopping.ok and stopping.message == "stopping"
     rig.settle()
     x = rig.controller.telemetry().pose_command[0]
     assert 0 < x < 500
     rig.assert_setpoints_safe()
+
+
+def test_stop_with_nothing_to_stop_says_so_and_is_not_refused(rig):
+    """Issue 16: ``stop`` while disabled answered "stopping"."""
+    disabled = rig.controller.stop()
+    assert disabled.ok and disabled.message == "nothing to stop: the controller is disabled"
+    rig.enabled()
+    at_rest = rig.controller.stop()
+    assert at_rest.ok and at_rest.message == "nothing to stop: the platform is at rest"
 
 
 def test_a_plan_made_before_the_target_changed_is_refused_as_stale(rig):

@@ -24,6 +24,7 @@ class Trajectory:
         self.goals: list[tuple] = []
         self.halts = 0
         self.moving = False
+        self.frames = None  # relative coordinates, as every segment here
 
     def move_to(self, goal, time_scale=1.0, velocity_scale=1.0) -> bool:
         self.goals.append((tuple(goal), time_scale, velocity_scale))

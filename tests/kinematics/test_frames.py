@@ -7,7 +7,17 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hexactl.kinematics.frames import IDENTITY, Frames, apply, compose, inverse, pose_of, transform_of
+from hexactl.kinematics.frames import (
+    IDENTITY,
+    Frames,
+    apply,
+    compose,
+    inverse,
+    platform_poses,
+    pose_of,
+    tools_in_work,
+    transform_of,
+)
 from hexactl.kinematics.rotation import rotation_matrix
 
 mm = st.floats(-1000.0, 1000.0)
@@ -67,3 +77,11 @@ def test_rotations_of_the_tool_pose_turn_the_platform_about_the_tool_point(work,
 def test_identity_frames_leave_the_pose_as_it_is(pose):
     assert Frames().platform_pose(pose) == pytest.approx(pose, abs=1e-9)
     assert Frames(IDENTITY, IDENTITY).tool_in_work(pose) == pytest.approx(pose, abs=1e-9)
+
+
+@given(poses, poses, st.lists(poses, min_size=1, max_size=10))
+def test_the_batch_maps_equal_the_single_pose_ones(work, tool, samples):
+    frames = Frames(transform_of(work), transform_of(tool))
+    platform = platform_poses(frames, np.array(samples))
+    assert platform == pytest.approx(np.array([frames.platform_pose(x) for x in samples]), abs=1e-6)
+    assert tools_in_work(frames, platform) == pytest.approx(np.array([frames.tool_in_work(p) for p in platform]), abs=1e-6)

@@ -124,7 +124,8 @@ class CommandHandler:
             path, text = self.data.read_text(request.path, ErrorCode.INVALID_CALIBRATION)
             source = str(path)
         else:
-            text, source = request.toml or "", TOML_SOURCE
+            text = request.toml or ""
+            source = f"{TOML_SOURCE} ({request.source})" if request.source else TOML_SOURCE
         try:
             geometry = parse_geometry(text, source)
         except GeometryError as error:

@@ -132,8 +132,8 @@ class PlayRequest(_Request):
 
     cmd: Literal["play"]
     sequence: str | InlineSequence = Field(
-        description="a built-in name (x_sweep, y_rotation, compound), a .toml file in the data directories, "
-        "or the sequence itself"
+        description="a built-in name (x_sweep, y_rotation, compound), a .toml sequence file or a .csv plan "
+        "(from hexactl plan-leglock) in the data directories, or the sequence itself"
     )
 
 
@@ -156,16 +156,22 @@ class AbortRequest(_Request):
 
 
 class LoadCalibrationRequest(_Request):
-    """Switch to a calibration, ramped in; exactly one of ``path`` or ``toml`` (the file's text)."""
+    """Switch to a calibration, ramped in; exactly one of ``path`` or ``toml`` (the file's
+    text), and with ``toml`` optionally ``source``: where the text came from, recorded as
+    the calibration's source (``request (SOURCE)``, telemetry's ``calibration_source``)."""
 
     cmd: Literal["load_calibration"]
     path: FilePath | None = None
     toml: str | None = None
+    source: str | None = Field(None, min_length=1, max_length=4096, description="with toml: the sender's name for "
+                               "the text, e.g. the file it read (default: request)")
 
     @model_validator(mode="after")
     def _exactly_one_source(self) -> LoadCalibrationRequest:
         if (self.path is None) == (self.toml is None):
             raise ValueError("give exactly one of path or toml")
+        if self.source is not None and self.toml is None:
+            raise ValueError("source names a toml text: give it with toml only")
         return self
 
 
@@ -291,6 +297,11 @@ class Telemetry(_Message):
     faults: list[Fault] = Field(description="why FAULT or ESTOP is latched; empty otherwise")
     loop: LoopTelemetry
     realtime: RealtimeTelemetry | None = Field(default=None, description="the loop's real-time set-up; null before it starts")
+    goal: RelativeMmDeg | None = Field(
+        default=None, description="where the move under way ends (projected onto the locked leg's constraint in leg-lock "
+        "mode); null at rest and while braking")
+    remaining_s: float | None = Field(
+        default=None, ge=0, description="time until the move or the braking under way ends as planned, s; null at rest")
 
 
 # -- replies -------------------------------------------------------------------------

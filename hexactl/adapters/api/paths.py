@@ -88,7 +88,7 @@ class DataDirectories:
         if problem is not None:
             raise problem
         if missing:
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories")
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories", self._listing())
         raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
 
     def write_new(self, text: str, data: bytes) -> Path:

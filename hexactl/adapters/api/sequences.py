@@ -1,16 +1,20 @@
-"""What ``play`` plays: a built-in sequence, a sequence file, or inline waypoints, as
-the control layer's :class:`~hexactl.control.sequences.MotionSequence`.
+"""What ``play`` plays: a built-in sequence, a sequence file, a posture plan, or inline
+waypoints, as the control layer's :class:`~hexactl.control.sequences.MotionSequence`.
 
 Files are read and validated here, in the API thread, never in the control loop; their
-format is :mod:`hexactl.adapters.files.sequence_file`'s.
+formats are :mod:`hexactl.adapters.files.sequence_file`'s: a ``.toml`` sequence file, or
+a ``.csv`` plan as ``hexactl plan-leglock`` writes it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import PurePath
+
 from hexactl.adapters.api.messages import InlineSequence
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError, ErrorCode, problems_error
-from hexactl.adapters.files.sequence_file import sequence_from_toml
+from hexactl.adapters.files.sequence_file import sequence_from_plan, sequence_from_toml
 from hexactl.control.sequences import (
     BUILTIN_SEQUENCES,
     MotionSequence,
@@ -20,24 +24,28 @@ from hexactl.control.sequences import (
     sequence_from_mapping,
 )
 
-SEQUENCE_SUFFIX = ".toml"
+SEQUENCE_READERS: dict[str, Callable[[str, str], MotionSequence]] = {
+    ".toml": sequence_from_toml, ".csv": sequence_from_plan,
+}
+"""A file's reader by its suffix (lower case); any other name is a built-in's."""
 
 
 def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> MotionSequence:
     """The sequence a ``play`` request names. :class:`ApiError` ``unknown_sequence`` for a
-    name that is neither built in nor a ``.toml`` file, the path errors of
+    name that is neither built in nor a ``.toml`` or ``.csv`` file, the path errors of
     :meth:`DataDirectories.read_text`, ``invalid_sequence`` for a refused sequence."""
     try:
         if isinstance(sequence, InlineSequence):
             document = sequence.model_dump(exclude={"waypoints"})
             document["waypoint"] = [waypoint.model_dump() for waypoint in sequence.waypoints]  # the file's key
             return sequence_from_mapping(document, "sequence")
-        if not sequence.endswith(SEQUENCE_SUFFIX):
+        reader = SEQUENCE_READERS.get(PurePath(sequence).suffix.lower())
+        if reader is None:
             return builtin_sequence(sequence)
         path, text = data.read_text(sequence, ErrorCode.INVALID_SEQUENCE)
-        return sequence_from_toml(text, str(path))
+        return reader(text, str(path))
     except UnknownSequence as error:
-        raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{error}; or name a {SEQUENCE_SUFFIX} file",
-                       {"built_in": list(BUILTIN_SEQUENCES)}) from None
+        raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{error}; or name a .toml sequence file or a .csv plan "
+                       "(from hexactl plan-leglock) in a data directory", {"built_in": list(BUILTIN_SEQUENCES)}) from None
     except SequenceError as error:
         raise problems_error(ErrorCode.INVALID_SEQUENCE, str(error)) from None

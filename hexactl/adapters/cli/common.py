@@ -12,12 +12,13 @@ declares them in a :class:`DeferredParser`. ``tests/cli/test_startup.py`` checks
 from __future__ import annotations
 
 import argparse
+import difflib
 import re
 import sys
 from collections.abc import Callable, Sequence
 from math import isfinite
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
@@ -39,9 +40,22 @@ class CliError(Exception):
     """Bad input to a command: printed as ``hexactl CMD: error: …``, exit status 2."""
 
 
+NEGATIVE_NUMBERS = re.compile(r"^-(\d|\.\d|inf|nan)[\d.,eE+-]*$|^-(inf|nan)$", re.IGNORECASE)
+"""What the parsers read as a value, not an option, though it starts with ``-``: a negative
+number or a comma list starting with one (``-10``, ``-1.5e3``, ``-10,0,0,0,0,0``), so that
+``hexactl move -10,0,0,0,0,0`` needs no ``--``. No option of hexactl looks like one."""
+
+DASH_HINT = "a value starting with '-' is read as an option: put it after `--`, e.g. hexactl move -- -10,0,0,0,0,0"
+_MISREAD = ("unrecognized arguments", "the following arguments are required", "expected one argument",
+            "expected at least one argument")
+
+
 class DeferredParser(argparse.ArgumentParser):
-    """The parser of every sub-command (``hexactl``'s ``parser_class``). Given
-    ``subparsers.add_parser(name, …, declare=function)``, ``function(parser)`` adds the
+    """The parser of ``hexactl`` and of every sub-command (its ``parser_class``): reads
+    :data:`NEGATIVE_NUMBERS` as values, and adds to argparse's errors what to do: "did you
+    mean" for a mistyped choice, where ``--`` goes.
+
+    Given ``subparsers.add_parser(name, …, declare=function)``, ``function(parser)`` adds the
     command's options when the parser is first used (to parse, or to format its usage or
     help): only for the command the command line names. For a command whose options show
     defaults from modules too heavy to load for every other command (the service's, the
@@ -51,6 +65,8 @@ class DeferredParser(argparse.ArgumentParser):
                  **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._declare: Callable[[argparse.ArgumentParser], None] | None = declare
+        self._negative_number_matcher = NEGATIVE_NUMBERS  # argparse's own matcher knows single numbers only
+        self._arguments: list[str] = []
 
     def _declared(self) -> None:
         if self._declare is not None:
@@ -60,7 +76,24 @@ class DeferredParser(argparse.ArgumentParser):
     def parse_known_args(self, args: Sequence[str] | None = None,
                          namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
         self._declared()
+        self._arguments = list(sys.argv[1:] if args is None else args)
         return super().parse_known_args(args, namespace)
+
+    def error(self, message: str) -> NoReturn:
+        """argparse's error (usage, message, exit status 2) with what to do about it."""
+        super().error(message + "".join(f"\n  {hint}" for hint in self._hints(message)))
+
+    def _hints(self, message: str) -> list[str]:
+        hints = []
+        if choice := re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)$", message):
+            offered = re.findall(r"'([^']*)'", choice.group(2))
+            hints += [f"did you mean {close!r}?" for close in difflib.get_close_matches(choice.group(1), offered, n=1)]
+        if message.startswith(_MISREAD):
+            if "--" in self._arguments and message.startswith("unrecognized arguments"):
+                hints.append("options go before `--`: everything after it is read as values")
+            elif any(re.match(r"-\.?\d", text) for text in self._arguments):
+                hints.append(DASH_HINT)
+        return hints
 
     def format_usage(self) -> str:
         self._declared()
@@ -85,8 +118,8 @@ def connection_parser() -> argparse.ArgumentParser:
     """The options of every client of the service: timeout and CURVE keys (see :func:`connect`)."""
     parser = argparse.ArgumentParser(add_help=False)
     parser.add_argument("--timeout", type=positive_float, default=DEFAULT_TIMEOUT_S, metavar="S", help=f"seconds to wait for the service (default {DEFAULT_TIMEOUT_S:g})")
-    parser.add_argument("--curve-server", type=Path, metavar="FILE", help="the service's CURVE public key (a service beyond localhost)")
-    parser.add_argument("--curve-client", type=Path, metavar="FILE", help="this client's CURVE secret key")
+    parser.add_argument("--curve-server", type=Path, metavar="FILE", help="the service's CURVE public key (a service beyond localhost; default $HEXACTL_CURVE_SERVER, else the client file)")
+    parser.add_argument("--curve-client", type=Path, metavar="FILE", help="this client's CURVE secret key (default $HEXACTL_CURVE_CLIENT, else the client file)")
     return parser
 
 
@@ -186,6 +219,17 @@ def positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not 0 < value < float("inf"):
         raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
+    return value
+
+
+def fraction(text: str) -> float:
+    """An argparse ``type``: a number in (0, 1] (``move --speed``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a fraction in (0, 1] of the velocity limits, e.g. 0.5")
     return value
 
 

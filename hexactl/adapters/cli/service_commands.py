@@ -1,5 +1,5 @@
-"""``hexactl serve``, the clients of a running service (``status``, ``enable``, ``move``, …),
-``hexactl monitor`` and ``hexactl keys``.
+"""``hexactl serve``, the clients of a running service (``status``, ``enable``, ``move``, …)
+and ``hexactl keys``; ``hexactl monitor`` is :mod:`hexactl.adapters.cli.monitor`.
 
 Client commands print the reply (human-readable, or the raw JSON with ``--json``) and
 exit 0 when the service carried the command out, 1 when it refused it (an error
@@ -11,18 +11,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
-from hexactl.adapters.cli.common import CliError, connect, connection_parser, pose_argument, positive_float
-from hexactl.kinematics.axes import POSE_AXES
+from hexactl.adapters.cli.common import CliError, connect, connection_parser, fraction, pose_argument, positive_float
+from hexactl.adapters.cli.telemetry_text import format_telemetry, pose_text
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
-MONITOR_INTERVAL_S = 0.1
-_CLEAR_SCREEN = "\x1b[H\x1b[2J"
 
 RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
 """Arguments → (command, request fields)."""
@@ -41,15 +38,15 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         return parser
 
     command("status", "the running service's state (one telemetry record)", "status")
-    _register_monitor(subparsers)
     command("enable", "energise the actuators; the platform holds its pose", "enable")
     command("disable", "de-energise the actuators (at rest only: stop first)", "disable")
     move = command("move", "move to a pose relative to the zero posture", _move_request)
     move.add_argument("pose", metavar="POSE", type=pose_argument, help="X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs, e.g. z=50,yaw=5")
     pace = move.add_mutually_exclusive_group()
     pace.add_argument("--duration", type=positive_float, metavar="S", help="minimum duration of the move, s")
-    pace.add_argument("--speed", type=positive_float, metavar="F", help="fraction (0, 1] of the velocity limits")
-    move.epilog = "Put -- before a pose that starts with a minus sign."
+    pace.add_argument("--speed", type=fraction, metavar="F", help="fraction (0, 1] of the velocity limits")
+    move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). In leg-lock mode the goal is projected "
+                   "onto the locked leg's constraint: the reply prints the goal run to when it differs.")
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name or a file", _play_request)
     play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound) or a sequence file in a data directory of the service")
@@ -60,14 +57,16 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     leg_lock.add_argument("leg", type=int, choices=range(1, 7), metavar="N", help="leg 1–6")
     command("unlock", "release the locked leg", "leg_unlock")
     load = command("load-calibration", "switch the running service to a calibration file", _load_calibration_request)
-    load.add_argument("file", metavar="FILE", help="calibration TOML")
-    load.add_argument(
-        "--send", action="store_true",
-        help="read FILE here and send its content (for a service on another machine); default: the service reads it from its data directories",
-    )
+    load.add_argument("file", metavar="FILE", help="calibration TOML: a file here is read here and its content sent (so "
+                      "any file works, for a local or a remote service); a name that is no file here is read by the "
+                      "service from its data directories")
+    load.add_argument("--send", action="store_true", help="insist that FILE is read here (the default when it exists here)")
     command("rollback-calibration", "return to the calibration active before the last load", "rollback_calibration")
     save = command("save-recording", "write the last sequence's dwell records as CSV on the service's machine", _save_recording_request)
-    save.add_argument("file", metavar="FILE", help="new CSV file in a data directory of the service (never overwritten)")
+    save.add_argument("file", metavar="FILE", help="new CSV file (never overwritten): a bare name (run1.csv) goes into the "
+                      "service's first data directory; a path with a directory (recordings/run1.csv) names that directory, "
+                      "sent absolute when it exists here (a service in the same working directory), else as typed; it "
+                      "must be a data directory of the service")
     command("estop", "emergency stop: every actuator stops and holds at once", "estop")
     command("reset", "clear faults and an emergency stop whose cause is gone", "reset")
 
@@ -81,17 +80,6 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     keys.add_argument("--out", required=True, type=Path, metavar="DIR")
     keys.add_argument("--name", default="client", help="the client's name (default client); run again with another name to add a client")
     keys.set_defaults(run=run_keys)
-
-
-def _register_monitor(subparsers: argparse._SubParsersAction) -> None:
-    monitor = subparsers.add_parser(
-        "monitor", parents=[connection_parser()], help="live view of the service's telemetry",
-        description="Show the running service's telemetry, refreshed in place about 10 times a second (Ctrl-C ends).",
-    )
-    monitor.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
-    monitor.add_argument("--once", action="store_true", help="print one record and exit")
-    monitor.add_argument("--json", action="store_true", help="print records as JSON, one per line")
-    monitor.set_defaults(run=run_monitor)
 
 
 def _register_serve(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -144,7 +132,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
 
 def _client_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(add_help=False, parents=[connection_parser()])
-    parser.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"the service's command endpoint (default {DEFAULT_API_ENDPOINT})")
+    parser.add_argument("--api", metavar="ENDPOINT", help=f"the service's command endpoint (default $HEXACTL_API, else the "
+                        f"client file's api, else {DEFAULT_API_ENDPOINT})")
     parser.add_argument("--json", action="store_true", help="print the raw JSON reply")
     return parser
 
@@ -162,30 +151,36 @@ def _leg_lock_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any
 
 
 def _play_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
-    return "play", {"sequence": _service_path(arguments.sequence)}
+    path = Path(arguments.sequence)  # a file here is sent absolute: the service's working directory may differ
+    return "play", {"sequence": str(path.resolve()) if path.is_file() else arguments.sequence}
 
 
 def _save_recording_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
-    return "save_recording", {"path": _service_path(arguments.file, new=True)}
+    """The rule of ``save-recording FILE``'s help: only a path with a directory part that
+    exists here is made absolute; a bare name stays one, for the service to put in its
+    first data directory (docs/api.md)."""
+    path = Path(arguments.file)
+    here = path.parent != Path() and path.parent.is_dir()
+    return "save_recording", {"path": str(path.resolve()) if here else arguments.file}
 
 
 def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
-    if arguments.send:
-        try:
-            return "load_calibration", {"toml": Path(arguments.file).read_text(encoding="utf-8")}
-        except (OSError, UnicodeDecodeError) as error:
-            raise CliError(f"{arguments.file}: cannot read: {error}") from None
-    return "load_calibration", {"path": _service_path(arguments.file)}
+    """A file here is read and checked to be TOML here, and sent as content with its
+    name; any other name goes to the service, which looks it up in its data directories."""
+    path = Path(arguments.file)
+    if not (arguments.send or path.is_file()):
+        return "load_calibration", {"path": arguments.file}
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise CliError(f"{arguments.file}: cannot read: {error}") from None
+    import tomllib  # light; only for this command
 
-
-def _service_path(text: str, *, new: bool = False) -> str:
-    """A path to a file here (an existing one; with ``new``, one to create in an existing
-    directory) is sent absolute, since the service's working directory may differ from
-    ours; anything else (a built-in name, a path in the service's data directories) as
-    typed."""
-    path = Path(text)
-    here = path.parent.is_dir() if new else path.is_file()
-    return str(path.resolve()) if here else text
+    try:
+        tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise CliError(f"{arguments.file}: not valid TOML: {error}") from None
+    return "load_calibration", {"toml": text, "source": str(path.resolve())}
 
 
 # -- running -------------------------------------------------------------------------
@@ -205,28 +200,12 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
     if arguments.json:
         print(json.dumps(reply))
     elif reply.get("ok"):
-        print(format_ok_reply(cmd, reply))
+        if cmd == "status":
+            print(f"{'service':<15}{arguments.api} (from {arguments.origins['api']})")
+        print(format_ok_reply(cmd, reply, fields))
     else:
         print(format_error_reply(reply), file=sys.stderr)
     return EXIT_OK if reply.get("ok") else EXIT_REFUSED
-
-
-def run_monitor(arguments: argparse.Namespace) -> int:
-    from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
-
-    try:
-        with connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry:
-            while True:
-                record = telemetry.receive(arguments.timeout)
-                text = json.dumps(record) if arguments.json else format_telemetry(record)
-                if arguments.once:
-                    print(text)
-                    return EXIT_OK
-                print(text if arguments.json else _CLEAR_SCREEN + text, flush=True)
-                time.sleep(MONITOR_INTERVAL_S)  # CONFLATE keeps the newest record meanwhile
-    except ServiceUnavailable as error:
-        print(f"hexactl monitor: {error}", file=sys.stderr)
-        return EXIT_NO_ANSWER
 
 
 def run_keys(arguments: argparse.Namespace) -> int:
@@ -272,12 +251,23 @@ def run_serve(arguments: argparse.Namespace) -> int:
 # -- output --------------------------------------------------------------------------
 
 
-def format_ok_reply(cmd: str, reply: dict[str, Any]) -> str:
+GOAL_TOLERANCE = 5e-4
+"""mm or deg: a goal farther than this from the requested pose on some axis (what shows in
+3 decimals) is printed: the service projected it (leg-lock)."""
+
+
+def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | None = None) -> str:
     """A successful reply for people: the telemetry for ``status``, else ``ok``, what the
-    service said, and the reply's figures."""
+    service said, and the reply's figures; for a move, the goal run to when it differs
+    from the requested pose (``fields``, the request's)."""
     if cmd == "status":
         return format_telemetry(reply["status"])
     said = [reply["message"]] if reply.get("message") else []
+    requested, goal = (fields or {}).get("pose"), reply.get("goal")
+    if requested is not None and goal is not None and any(abs(a - b) > GOAL_TOLERANCE for a, b in zip(goal, requested)):
+        said.append(f"goal {pose_text(goal)} (projected onto the locked leg's constraint)")
+    if source := (fields or {}).get("source"):
+        said.append(f"read from {source} here and sent")
     if "waypoints" in reply:
         said.append(f"{reply['waypoints']} waypoints")
     if reply.get("duration") is not None:
@@ -301,57 +291,18 @@ def format_error_reply(reply: dict[str, Any]) -> str:
         text = item.get("message") if isinstance(item, dict) else item
         if isinstance(text, str) and text not in message:
             lines.append(f"  {text}")
+    if error.get("code") in _FILE_ERRORS:
+        directories = details.get("data_directories") if isinstance(details, dict) else None
+        if directories:
+            lines.append(f"  the service's data directories: {', '.join(directories)}")
+        lines.append(f"  {_FILE_ERRORS[error['code']]}")
     return "\n".join(lines)
 
 
-def format_telemetry(record: dict[str, Any]) -> str:
-    """A telemetry record as an aligned block of text (poses in mm and deg)."""
-    loop = record["loop"]
-    sequence = record.get("sequence")
-    faults = record.get("faults") or []
-    lines = [
-        ("state", f"{record['state']}, {record['motion']}"),
-        ("pose command", _pose_text(record.get("pose_command"))),
-        ("pose measured", _pose_text(record.get("pose_measured"))),
-        ("leg set-points", _legs_text(record.get("leg_setpoints"))),
-        ("leg feedback", _legs_text(record.get("leg_feedback"))),
-        ("locked leg", str(record["locked_leg"]) if record.get("locked_leg") else "none"),
-        ("calibration", record["calibration_id"]),
-        ("sequence", f"{sequence['name']} {sequence['index']}/{sequence['total']} ({sequence['phase']})" if sequence else "none"),
-        ("faults", "; ".join(_fault_text(fault) for fault in faults) if faults else "none"),
-        ("loop", f"{loop['rate_hz']:g} Hz, {loop['cycles']} cycles, {loop['missed']} missed"),
-        ("lateness µs", _percentiles_text(loop["lateness_us"])),
-        ("compute µs", _percentiles_text(loop["compute_us"])),
-        ("real-time", _realtime_text(record.get("realtime"))),
-    ]
-    return "\n".join(f"{label:<15}{value}" for label, value in lines)
-
-
-def _pose_text(pose: list[float] | None) -> str:
-    if pose is None:
-        return "unknown"
-    return "  ".join(f"{axis} {value:9.3f}" for axis, value in zip(POSE_AXES, pose))
-
-
-def _legs_text(values: list[float | None] | None) -> str:
-    if values is None:
-        return "unknown"
-    return "  ".join(f"L{leg} {'?' if value is None else format(value, '8.3f'):>8}" for leg, value in enumerate(values, start=1))
-
-
-def _realtime_text(realtime: dict[str, Any] | None) -> str:
-    if not realtime:
-        return "unknown"
-    # Here, not at the top: the module loads pydantic, which the other commands do not need.
-    from hexactl.control.realtime import RealtimeReport, describe
-
-    return describe(RealtimeReport(**realtime))
-
-
-def _fault_text(fault: dict[str, Any]) -> str:
-    where = f"leg {fault['leg']}: " if fault.get("leg") else ""
-    return f"{where}{fault['code']} ({fault['message']})"
-
-
-def _percentiles_text(values: dict[str, float]) -> str:
-    return f"p50 {values['p50']:.0f}  p99 {values['p99']:.0f}  p99.9 {values['p999']:.0f}  max {values['max']:.0f}"
+_FILE_ERRORS = {
+    "forbidden_path": "the service reads and writes files only in its data directories (hexactl serve --data-dir DIR); "
+                      "name a file there, or give a file on this machine to load-calibration (it is sent)",
+    "file_not_found": "check the name: a relative name is looked up in each data directory, then in the service's "
+                      "working directory; a recording's directory must exist",
+}
+"""What to do about a file refused: the API's codes for paths."""

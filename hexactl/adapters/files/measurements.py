@@ -19,7 +19,8 @@ columns alone, one row per measurement, in the order the campaign takes them.
 
 Plan file (written by ``hexactl plan-leglock``): ``leg``, the relative pose ``x … yaw``
 (mm, deg from the zero posture) and ``l1_setpoint`` … ``l6_setpoint`` (mm). Its set-point
-columns are named so that a plan can never be mistaken for measurement data.
+columns are named so that a plan can never be mistaken for measurement data, nor a
+measurement file's absolute poses for a plan's relative ones (:func:`parse_plan`).
 """
 
 from __future__ import annotations
@@ -100,8 +101,8 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
     for number, line in rows:
         fields, numbers, row_problems = _row(line, position, required)
         leg = numbers.get("leg", 0.0)
-        if not row_problems and not (leg == int(leg) and 0 <= leg <= LEG_COUNT):
-            row_problems.append(f"leg {fields[position['leg']].strip()!r} must be 0 (none locked) or a leg 1-{LEG_COUNT}")
+        if not row_problems and (problem := _leg_problem(leg, fields[position["leg"]])):
+            row_problems.append(problem)
         if row_problems:
             problems.append(RowProblem(number, "; ".join(row_problems)))
             continue
@@ -198,6 +199,13 @@ def _row(line: str, position: dict[str, int], names: Sequence[str]) -> tuple[lis
     return fields, numbers, problems
 
 
+def _leg_problem(leg: float, field: str) -> str | None:
+    """Why the ``leg`` column's value ``leg`` (read from ``field``) is not a leg number."""
+    if leg == int(leg) and 0 <= leg <= LEG_COUNT:
+        return None
+    return f"leg {field.strip()!r} must be 0 (none locked) or a leg 1-{LEG_COUNT}"
+
+
 def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:
     """Column names of p1, p2, … as long as any coordinate of that point is present."""
     points = []
@@ -263,3 +271,42 @@ def write_plan(path: str | os.PathLike[str], plan: PosturePlan, *, overwrite: bo
                comments: Sequence[str] = ()) -> Path:
     """Write a plan atomically; refuses to replace a file unless ``overwrite``."""
     return write_atomic(path, format_plan(plan, comments).encode("utf-8"), overwrite=overwrite)
+
+
+@dataclass(frozen=True, slots=True)
+class PlanRows:
+    """A parsed plan file: per good row its locked ``leg`` (0: none), relative pose (mm,
+    deg) and source ``line``; the bad rows as ``problems``."""
+
+    legs: tuple[int, ...]
+    poses: tuple[tuple[float, ...], ...]
+    lines: tuple[int, ...]
+    problems: tuple[RowProblem, ...]
+
+
+def parse_plan(text: str, source: str) -> PlanRows:
+    """Parse plan CSV ``text`` (:func:`format_plan`'s layout; ``#`` comments and blank
+    lines anywhere, columns in any order, others ignored). A row with a missing,
+    non-numeric or non-finite value or a bad leg is a problem of its line. Raises
+    :class:`MeasurementFileError` when the file is not a plan at all."""
+    header_line, header, rows = _table(text, source)
+    required = ["leg", *POSE_AXES, *SETPOINT_COLUMNS]
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise MeasurementFileError(
+            f"{source}: line {header_line}: not a posture plan: missing columns {', '.join(missing)} (a plan, as "
+            "`hexactl plan-leglock` writes it, has leg, x, y, z, roll, pitch, yaw and l1_setpoint … l6_setpoint)")
+    position = {name: index for index, name in enumerate(header)}
+    legs, poses, lines, problems = [], [], [], []
+    for number, line in rows:
+        fields, numbers, row_problems = _row(line, position, required)
+        leg = numbers.get("leg", 0.0)
+        if not row_problems and (problem := _leg_problem(leg, fields[position["leg"]])):
+            row_problems.append(problem)
+        if row_problems:
+            problems.append(RowProblem(number, "; ".join(row_problems)))
+            continue
+        legs.append(int(leg))
+        poses.append(tuple(numbers[name] for name in POSE_AXES))
+        lines.append(number)
+    return PlanRows(tuple(legs), tuple(poses), tuple(lines), tuple(problems))

@@ -15,6 +15,15 @@ File format (TOML; poses relative to the zero posture, mm and deg)::
     speed = 0.5       # optional, (0, 1]: fraction of the velocity limits; not with duration
 
 The model it validates into is :class:`~hexactl.control.sequences.MotionSequence`.
+
+A posture plan (the CSV ``hexactl plan-leglock`` writes, read by
+:func:`~hexactl.adapters.files.measurements.parse_plan`) is a sequence too
+(:func:`sequence_from_plan`): its rows' poses in order, each a waypoint at the default
+pace (the velocity limits) dwelling :data:`~hexactl.control.sequences.BUILTIN_DWELL_S`;
+the plan's ``leg`` and set-point columns are not acted on (playing locks nothing; with
+the plan's leg locked at its planned length, each posture lies on the lock). Measuring
+the postures is ``hexactl campaign``'s work.
+
 :func:`dwell_header` and :func:`dwell_rows` lay out
 :class:`~hexactl.control.sequences.DwellRecord` as the rows of a CSV file.
 """
@@ -23,8 +32,17 @@ from __future__ import annotations
 
 import tomllib
 from collections.abc import Sequence
+from pathlib import PurePath
 
-from hexactl.control.sequences import DwellRecord, MotionSequence, SequenceError, sequence_from_mapping
+from hexactl.adapters.files.measurements import MeasurementFileError, parse_plan
+from hexactl.control.sequences import (
+    BUILTIN_DWELL_S,
+    DwellRecord,
+    MotionSequence,
+    SequenceError,
+    SequenceWaypoint,
+    sequence_from_mapping,
+)
 from hexactl.kinematics.axes import POSE_AXES
 
 
@@ -35,6 +53,25 @@ def sequence_from_toml(text: str, source: str = "sequence") -> MotionSequence:
     except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise SequenceError(f"{source}: not valid TOML: {error}") from None
     return sequence_from_mapping(data, source)
+
+
+def sequence_from_plan(text: str, source: str) -> MotionSequence:
+    """A posture plan's text as a sequence named after the file ``source`` (see the
+    module's docstring). :class:`SequenceError` if it is not a plan, has no postures, or
+    has bad rows (each named by its line): a plan plays whole or not at all."""
+    try:
+        plan = parse_plan(text, source)
+    except MeasurementFileError as error:
+        raise SequenceError(str(error)) from None
+    if plan.problems:
+        raise SequenceError("\n".join(f"{source}: {problem}" for problem in plan.problems))
+    if not plan.poses:
+        raise SequenceError(f"{source}: a header but no postures: a plan to play needs at least one row")
+    legs = sorted(set(plan.legs) - {0})
+    locked = f", planned with leg {', '.join(map(str, legs))} locked" if legs else ""
+    return MotionSequence(name=PurePath(source).stem or source,
+                          description=f"{len(plan.poses)} postures of the plan {source}{locked}",
+                          waypoints=tuple(SequenceWaypoint(pose=pose, dwell=BUILTIN_DWELL_S) for pose in plan.poses))
 
 
 def dwell_header() -> list[str]:

@@ -1,0 +1,81 @@
+"""A telemetry record (docs/api.md, "Telemetry") as text, with units: ``status``, ``monitor
+--once`` and ``monitor`` when its output is not a terminal print it, and the full-screen
+``monitor`` (:mod:`hexactl.adapters.cli.monitor`) shows the same values.
+
+Standard library only at the top (start-up: :mod:`hexactl.adapters.cli.common`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+
+
+def format_telemetry(record: dict[str, Any]) -> str:
+    """A telemetry record as an aligned block of text (poses in mm and deg, legs in mm)."""
+    loop = record["loop"]
+    lines = [
+        ("state", f"{record['state']}, {record['motion']}"),
+        ("pose command", pose_text(record.get("pose_command"))),
+        ("pose measured", pose_text(record.get("pose_measured"))),
+        ("goal", pose_text(record["goal"]) if record.get("goal") else "none"),
+        ("remaining", remaining_text(record.get("remaining_s"))),
+        ("leg set-points", legs_text(record.get("leg_setpoints"))),
+        ("leg feedback", legs_text(record.get("leg_feedback"))),
+        ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
+        ("calibration", record["calibration_id"]),
+        ("sequence", sequence_text(record.get("sequence"))),
+        ("faults", "; ".join(fault_text(fault) for fault in record.get("faults") or []) or "none"),
+        ("loop", loop_text(loop)),
+        ("lateness µs", percentiles_text(loop["lateness_us"])),
+        ("compute µs", percentiles_text(loop["compute_us"])),
+        ("real-time", realtime_text(record.get("realtime"))),
+    ]
+    return "\n".join(f"{label:<15}{value}" for label, value in lines)
+
+
+def pose_text(pose: list[float] | None) -> str:
+    """``x 1.000 mm  …  yaw 5.000 deg``; ``unknown`` for None."""
+    if pose is None:
+        return "unknown"
+    return "  ".join(f"{axis} {value:8.3f} {unit}" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, pose))
+
+
+def legs_text(values: list[float | None] | None) -> str:
+    """``L1 425.000  …  L6 425.000 mm`` (``?`` for a leg not heard from); ``unknown`` for None."""
+    if values is None:
+        return "unknown"
+    return "  ".join(f"L{leg} {'?' if value is None else format(value, '8.3f'):>8}"
+                     for leg, value in enumerate(values, start=1)) + " mm"
+
+
+def remaining_text(remaining_s: float | None) -> str:
+    return "at rest" if remaining_s is None else f"{remaining_s:.2f} s"
+
+
+def sequence_text(sequence: dict[str, Any] | None) -> str:
+    """``NAME i/n (phase)``, or ``none``."""
+    return f"{sequence['name']} {sequence['index']}/{sequence['total']} ({sequence['phase']})" if sequence else "none"
+
+
+def fault_text(fault: dict[str, Any]) -> str:
+    where = f"leg {fault['leg']}: " if fault.get("leg") else ""
+    return f"{where}{fault['code']} ({fault['message']})"
+
+
+def loop_text(loop: dict[str, Any]) -> str:
+    return f"{loop['rate_hz']:g} Hz, {loop['cycles']} cycles, {loop['missed']} missed"
+
+
+def percentiles_text(values: dict[str, float]) -> str:
+    return f"p50 {values['p50']:.0f}  p99 {values['p99']:.0f}  p99.9 {values['p999']:.0f}  max {values['max']:.0f}"
+
+
+def realtime_text(realtime: dict[str, Any] | None) -> str:
+    if not realtime:
+        return "unknown"
+    # Here, not at the top: the module loads pydantic, which the light commands do not need.
+    from hexactl.control.realtime import RealtimeReport, describe
+
+    return describe(RealtimeReport(**realtime))

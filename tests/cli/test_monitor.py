@@ -1,0 +1,181 @@
+"""``hexactl monitor`` without a terminal emulator: the view's text and units, what each key
+sends, single keys from a pseudo-terminal (a bare Escape told from an arrow key's
+sequence), and the plain outputs (``--once``, ``--json`` into a pipe that closes early).
+Through a real terminal: tests/cli/test_monitor_tmux.py."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import sys
+import termios
+from pathlib import Path
+from typing import Any
+
+import pytest
+from rich.console import Console
+
+from hexactl.adapters.api.client import ServiceUnavailable
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.cli.monitor import ESCAPE, KEY_COMMANDS, LEGEND, KeyReader, key_result, say_if_moving, view
+from tests.api.support import start_service
+
+ROOT = Path(__file__).resolve().parents[2]
+TIMEOUT_S = 60.0  # only turns a hang into a failure
+
+RECORD: dict[str, Any] = {
+    "t": 12.5, "state": "enabled", "motion": "moving",
+    "pose_command": [1.0, 2.0, 3.0, 0.5, -0.25, 5.0], "pose_measured": [1.001, 2.0, 3.0, 0.5, -0.25, 5.0],
+    "goal": [0.0, 0.0, 50.0, 0.0, 0.0, 5.0], "remaining_s": 1.234,
+    "leg_setpoints": [425.0, 426.0, 427.0, 428.0, 429.0, 430.0], "leg_feedback": [425.1, None, 427.1, 428.1, 429.1, 430.1],
+    "locked_leg": 3, "calibration_id": "0fd49f5a13b75edc",
+    "sequence": {"name": "x_sweep", "index": 2, "total": 5, "phase": "dwelling"},
+    "faults": [{"code": "actuator_fault", "message": "overcurrent", "leg": 4}],
+    "loop": {"rate_hz": 500.0, "cycles": 1000, "missed": 3, "skipped": 0,
+             "lateness_us": {"p50": 41, "p99": 120, "p999": 300, "max": 900},
+             "compute_us": {"p50": 80, "p99": 150, "p999": 200, "max": 400}},
+    "realtime": None,
+}
+
+
+def rendered(record: dict[str, Any] | None, status: str = "", waiting: str | None = None) -> str:
+    console = Console(file=io.StringIO(), width=120, record=True)
+    console.print(view(record, status, waiting))
+    return console.export_text()
+
+
+def test_the_view_shows_every_value_with_its_unit() -> None:
+    text = rendered(RECORD, "stop: ok: stopping")
+    for expected in ("ENABLED", "moving", "remaining 1.23 s",
+                     "x mm", "y mm", "z mm", "roll deg", "pitch deg", "yaw deg", "50.000", "-0.250",
+                     "L1 mm", "L3 mm locked", "426.000", "430.100",
+                     "0fd49f5a13b75edc", "x_sweep 2/5 (dwelling)", "leg 4: actuator_fault (overcurrent)",
+                     "500 Hz, 1000 cycles, 3 missed", "lateness µs", "p99 120", "compute µs",
+                     LEGEND, "stop: ok: stopping"):
+        assert expected in text, expected
+    rows = {line.split()[0]: line.split()[1:] for line in text.splitlines() if line.split()}
+    assert rows["goal"] == ["0.000", "0.000", "50.000", "0.000", "0.000", "5.000"]
+    assert rows["feedback"][1] == "—"  # leg 2 not heard from
+
+
+def test_the_view_at_rest_and_before_any_telemetry() -> None:
+    text = rendered({**RECORD, "motion": "holding", "goal": None, "remaining_s": None, "sequence": None, "faults": []})
+    assert "remaining at rest" in text
+    assert [line.split()[1:] for line in text.splitlines() if line.startswith("goal")] == [["—"] * 6]
+    waiting = rendered(None, "", "no telemetry from tcp://127.0.0.1:1 for 6 s: is `hexactl serve` running there?")
+    assert "waiting for telemetry" in waiting and "no telemetry from tcp://127.0.0.1:1" in waiting
+
+
+class RecordingClient:
+    def __init__(self, reply: dict[str, Any] | Exception) -> None:
+        self.reply = reply
+        self.sent: list[str] = []
+
+    def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        self.sent.append(cmd)
+        if isinstance(self.reply, Exception):
+            raise self.reply
+        return self.reply
+
+
+@pytest.mark.parametrize(("key", "command"), [
+    (" ", "stop"), (ESCAPE, "estop"), ("e", "estop"), ("p", "pause"), ("r", "resume"), ("x", "reset"),
+])
+def test_each_key_sends_its_command_and_says_the_reply(key: str, command: str) -> None:
+    assert KEY_COMMANDS[key] == command
+    client = RecordingClient({"ok": True, "message": "done"})
+    assert key_result(key, client, ServiceUnavailable) == f"{command}: ok: done"
+    assert client.sent == [command]
+
+
+def test_a_refusal_an_unknown_key_and_no_answer_are_said() -> None:
+    refused = RecordingClient({"ok": False, "error": {"code": "latched", "message": "estop is latched: reset first"}})
+    assert key_result("p", refused, ServiceUnavailable) == "pause: error latched: estop is latched: reset first"
+    unknown = RecordingClient({"ok": True})
+    assert key_result("\x1b[A", unknown, ServiceUnavailable).startswith("'\\x1b[A': not a key of the monitor")
+    assert unknown.sent == []
+    silent = RecordingClient(ServiceUnavailable("no answer from tcp://x within 5 s"))
+    assert key_result(" ", silent, ServiceUnavailable) == "stop: no answer from tcp://x within 5 s"
+
+
+def test_keys_from_a_terminal_escape_alone_or_in_a_sequence_and_the_mode_restored() -> None:
+    controller, terminal = os.openpty()
+    try:
+        before = termios.tcgetattr(terminal)
+        with KeyReader(terminal) as reader:
+            assert not termios.tcgetattr(terminal)[3] & (termios.ICANON | termios.ECHO)  # cbreak, no echo
+            assert reader.read(0.01) is None
+            os.write(controller, b" ")
+            assert reader.read(5.0) == " "
+            os.write(controller, b"\x1b")
+            assert reader.read(5.0) == ESCAPE
+            os.write(controller, b"\x1b[A")  # an arrow key: one sequence, not an Escape
+            assert reader.read(5.0) == "\x1b[A"
+            os.write(controller, b"e")
+            assert reader.read(5.0) == "e"
+        assert termios.tcgetattr(terminal) == before
+    finally:
+        os.close(controller)
+        os.close(terminal)
+
+
+@pytest.fixture
+def service(geometry, tmp_path):
+    running = start_service(geometry, tmp_path, telemetry_rate_hz=100.0)
+    yield running
+    running.close()
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    from hexactl.adapters.files.geometry_file import load_geometry
+
+    return load_geometry(ROOT / "config" / "platform.toml")
+
+
+def test_once_prints_one_record_with_units(service, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["monitor", "--once", "--telemetry", service.telemetry]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("state          disabled, holding")
+    assert "x    0.000 mm" in out and "yaw    0.000 deg" in out and "425.000 mm" in out
+    assert "remaining      at rest" in out
+
+
+def test_json_into_a_pipe_closed_early_ends_quietly(service) -> None:
+    """``hexactl monitor --json | head -n 2``: a real pipe, closed after two lines."""
+    monitor = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "monitor", "--json",
+                                "--telemetry", service.telemetry], cwd=ROOT, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        lines = [json.loads(monitor.stdout.readline()) for _ in range(2)]
+        monitor.stdout.close()  # what `head` does once it has its lines
+        _, stderr = monitor.communicate(timeout=TIMEOUT_S)
+    finally:
+        monitor.kill()
+    assert [line["state"] for line in lines] == ["disabled", "disabled"]
+    assert stderr.decode() == ""
+    assert monitor.returncode == 0
+
+
+def test_no_telemetry_is_said_with_exit_status_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["monitor", "--once", "--telemetry", "tcp://127.0.0.1:1", "--timeout", "0.1"]) == 2
+    assert "no telemetry from tcp://127.0.0.1:1 within 0.1 s" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("change", "said"), [
+    ({}, "(a sequence plays (x_sweep 2/5 (dwelling)))"),
+    ({"sequence": None}, "(it is moving)"),
+    ({"sequence": None, "motion": "stopping"}, "(it is stopping)"),
+    ({"sequence": None, "motion": "holding"}, None),
+    ({"sequence": {**RECORD["sequence"], "phase": "paused"}, "motion": "holding"}, None),
+])
+def test_leaving_says_so_only_while_the_platform_moves(change: dict[str, Any], said: str | None,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    say_if_moving({**RECORD, **change})
+    err = capsys.readouterr().err
+    if said is None:
+        assert err == ""
+    else:
+        assert err == f"hexactl monitor: left while the platform moves {said}; it goes on: `hexactl stop` stops it\n"

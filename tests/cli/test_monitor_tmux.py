@@ -1,0 +1,162 @@
+"""``hexactl monitor`` in a real terminal (issue 16's "Done when"): a detached tmux session
+runs it against a service on the simulator; keys are typed with ``send-keys``, the screen
+read with ``capture-pane``, and what the keys did is checked through the API.
+
+tmux is installed if missing (apt-get, as root: see tools/_debian.py). Each test uses a
+tmux server of its own (``-L hexactl-test-<pid>-<n>``), killed at the end."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shlex
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from hexactl.adapters.api.client import HexactlClient
+from hexactl.application.service import Service, ServiceConfig
+from tests.reliability.support import recover
+from tools._debian import ensure_executables
+
+ROOT = Path(__file__).resolve().parents[2]
+WAIT_S = 60.0  # generous: only turns a hang into a failure on a busy machine
+LONG_MOVE = {"pose": [0, 0, 80, 0, 0, 5], "duration": 60.0}  # still moving whenever a key is sent
+
+_servers = itertools.count()
+
+
+def wait_for(condition: Callable[[], object], what: str) -> object:
+    """Poll ``condition`` until it returns something true (the bound turns a hang into a failure)."""
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+class Terminal:
+    """A detached 120×40 tmux session running one command, on a tmux server of its own."""
+
+    def __init__(self, tmux: str, command: str) -> None:
+        self._tmux = [tmux, "-L", f"hexactl-test-{os.getpid()}-{next(_servers)}", "-f", "/dev/null"]
+        # The pane outlives the command, so that what it printed on leaving can be read; the
+        # shell survives the Ctrl-C sent to the monitor (its handler is not inherited).
+        self.run("new-session", "-d", "-x", "120", "-y", "40", "-s", "monitor",
+                 f"trap : INT; {command}; echo monitor exited $?; sleep 600")
+
+    def run(self, *arguments: str) -> str:
+        return subprocess.run([*self._tmux, *arguments], check=True, capture_output=True, text=True,
+                              timeout=WAIT_S).stdout
+
+    def screen(self) -> str:
+        return self.run("capture-pane", "-p", "-t", "monitor")
+
+    def keys(self, *keys: str) -> None:
+        self.run("send-keys", "-t", "monitor", *keys)
+
+    def wait_for_screen(self, *texts: str) -> str:
+        def showing() -> str | None:
+            screen = self.screen()
+            return screen if all(text in screen for text in texts) else None
+
+        return wait_for(showing, f"{texts} on the screen")
+
+    def kill(self) -> None:
+        subprocess.run([*self._tmux, "kill-server"], capture_output=True, timeout=WAIT_S)
+
+
+@pytest.fixture(scope="module")
+def tmux() -> str:
+    return ensure_executables({"tmux": "tmux"}, lambda line: print(line, file=sys.stderr))["tmux"]
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory) -> Iterator[Service]:
+    running = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                          data_dirs=(tmp_path_factory.mktemp("data"),)))
+    yield running
+    running.close()
+
+
+@pytest.fixture
+def client(service) -> Iterator[HexactlClient]:
+    with HexactlClient(service.api_endpoint, timeout_s=WAIT_S) as client:
+        yield client
+
+
+@pytest.fixture
+def terminal(tmux, service) -> Iterator[Terminal]:
+    command = shlex.join(["env", f"PYTHONPATH={ROOT}", sys.executable, "-m", "hexactl.adapters.cli.main", "monitor",
+                          "--api", service.api_endpoint, "--telemetry", service.telemetry_endpoint])
+    opened = Terminal(tmux, f"cd {shlex.quote(str(ROOT))} && {command}")
+    yield opened
+    opened.kill()
+
+
+def status(client: HexactlClient) -> dict:
+    return client.call("status")["status"]
+
+
+def moving(client: HexactlClient) -> None:
+    """Enabled (after a reset if need be) and on a long move."""
+    recover(client)
+    client.call("move", **LONG_MOVE)
+    wait_for(lambda: status(client)["motion"] == "moving", "the move to start")
+
+
+def test_the_monitor_shows_the_values_with_units_in_place_and_its_keys_stop_the_platform(terminal, client) -> None:
+    moving(client)
+    screen = terminal.wait_for_screen("ENABLED", "moving", "remaining", "x mm", "yaw deg", "L1 mm", "goal", "µs")
+    goal_row = next(line.split() for line in screen.splitlines() if line.startswith("goal"))
+    assert goal_row[1:] == ["0.000", "0.000", "80.000", "0.000", "0.000", "5.000"]
+    assert "space stop" in screen and "Esc or e E-STOP" in screen and "q quit" in screen
+
+    terminal.keys("Space")
+    wait_for(lambda: status(client)["motion"] == "holding", "the platform at rest after space")
+    assert status(client)["state"] == "enabled"
+    terminal.wait_for_screen("stop: ok")
+
+    moving(client)
+    terminal.keys("e")
+    wait_for(lambda: status(client)["state"] == "estop", "E-stop latched after e")
+    terminal.wait_for_screen("ESTOP", "estop: ok")
+
+    terminal.keys("x")
+    wait_for(lambda: status(client)["state"] == "disabled", "reset after x")
+    moving(client)
+    terminal.keys("Escape")
+    wait_for(lambda: status(client)["state"] == "estop", "E-stop latched after Escape")
+
+    # Redrawn in place on the alternate screen: nothing went into the scrollback.
+    assert terminal.run("display-message", "-p", "-t", "monitor", "#{history_size}").strip() == "0"
+
+
+def test_leaving_while_the_platform_moves_says_how_to_stop_it(terminal, client) -> None:
+    terminal.wait_for_screen("hexactl monitor", "x mm")
+    moving(client)
+    terminal.wait_for_screen("moving")
+    terminal.keys("q")
+    screen = terminal.wait_for_screen("monitor exited 0")
+    assert "left while the platform moves (it is moving); it goes on: `hexactl stop` stops it" in screen
+    assert status(client)["motion"] == "moving"  # leaving stopped nothing
+    client.call("stop")
+
+
+def test_ctrl_c_leaves_with_the_terminal_restored(terminal, client) -> None:
+    terminal.wait_for_screen("hexactl monitor", "x mm")
+    moving(client)
+    terminal.wait_for_screen("moving")
+    terminal.keys("C-c")
+    screen = terminal.wait_for_screen("monitor exited 130")
+    assert "`hexactl stop` stops it" in screen
+    client.call("stop")
+    # The shell's terminal is back in canonical mode with echo: a typed line shows and runs.
+    terminal.keys("echo typed-after", "Enter")
+    terminal.wait_for_screen("typed-after")
