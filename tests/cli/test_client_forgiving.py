@@ -219,6 +219,12 @@ def test_the_telemetry_endpoint_from_the_environment(service, monkeypatch, capsy
     assert "disabled" in capsys.readouterr().out
 
 
+def test_the_campaign_takes_its_endpoint_from_the_environment_too(monkeypatch, tmp_path, capsys) -> None:
+    monkeypatch.setenv("HEXACTL_API", "tcp://127.0.0.1:1")  # nobody there: the error names where it asked
+    assert main(["campaign", "--out", str(tmp_path / "campaign"), "--timeout", "0.2"]) != 0
+    assert "tcp://127.0.0.1:1" in capsys.readouterr().err
+
+
 def test_a_bad_client_file_is_named(service, tmp_path, monkeypatch, capsys) -> None:
     client_file = tmp_path / "client.toml"
     client_file.write_text('apy = "tcp://127.0.0.1:5555"\n')

@@ -137,8 +137,8 @@ def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
     from hexactl.calibration.planning import DEFAULT_CANDIDATES
 
     campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
-    campaign.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT",
-                          help=f"the service's command endpoint (default {DEFAULT_API_ENDPOINT})")
+    campaign.add_argument("--api", metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, "
+                          f"else the client file's api, else {DEFAULT_API_ENDPOINT})")
     campaign.add_argument("--instrument", default="sim", metavar="SOURCE",
                           help="sim: the service's simulated instrument (default); csv:FILE: a real instrument's file of "
                           "feature points p1_x … (row k = the k-th measurement, waited for); prompt: typed here")

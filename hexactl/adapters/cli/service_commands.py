@@ -48,8 +48,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). In leg-lock mode the goal is projected "
                    "onto the locked leg's constraint: the reply prints the goal run to when it differs.")
     command("stop", "halt any motion smoothly and stay enabled", "stop")
-    play = command("play", "play a sequence: a built-in name or a file", _play_request)
-    play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound) or a sequence file in a data directory of the service")
+    play = command("play", "play a sequence: a built-in name, a sequence file or a plan", _play_request)
+    play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound), a .toml "
+                      "sequence file or a .csv plan from plan-leglock: a file here is sent by its absolute path, any "
+                      "other name is looked up in the service's data directories (serve puts examples in ./sequences)")
     command("pause", "pause the playing sequence", "pause")
     command("resume", "resume the paused sequence", "resume")
     command("abort", "abandon the playing sequence (halts smoothly)", "abort")
