@@ -3,7 +3,8 @@ change (``tools/bench_loop.py`` measures the running thread's wall-clock compute
 busy host or the planning thread's share of the GIL inflates).
 
 The controller runs on ideal in-memory actuators in simulated time, as the control
-tests' rig does; each scenario plays a tour of moves (``lock``: with leg 1 locked) and
+tests' rig does; each scenario plays a tour of moves (``lock``: with leg 1 locked; ``frames``:
+in the work frame, turning about a pivot point 300 mm above the platform) and
 ``time.thread_time_ns`` is summed around each ``step`` only, so planning, which runs in the
 caller's thread, is not counted. Each round steps ``--cycles`` cycles; the minimum over
 the rounds is the figure (the least disturbed one), the median beside it. On a shared
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import itertools
 import pstats
 import statistics
 import sys
@@ -29,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
 from hexactl.control.config import ControllerConfig  # noqa: E402
+from hexactl.control.frames import Frame, OperatorFrames  # noqa: E402
 from hexactl.control.local_controller import LocalController  # noqa: E402
 from hexactl.control.sequences import MotionSequence  # noqa: E402
 from hexactl.kinematics.inverse import sensor_setpoints  # noqa: E402
@@ -37,7 +40,13 @@ from hexactl.sim.ideal_actuators import IdealActuators  # noqa: E402
 TOURS = {
     "move": [(300, 0, 0, 0, 0, 0), (-300, 200, 100, 0, 5, 10), (0, -300, -150, 5, -5, -20), (0, 0, 0, 0, 0, 0)],
     "lock": [(30, 0, 0, 0, 0, 0), (0, 30, 0, 0, 0, 2), (-30, 0, 0, 0, 0, -2), (0, 0, 0, 0, 0, 0)],
+    "frames": [(0, 0, 0, 10, 0, 0), (50, 0, 0, 0, -10, 5), (0, 50, -20, 5, 5, -10), (0, 0, 0, 0, 0, 0)],
+    "turns": [(0, 0, 0, 10, 0, 0), (50, 0, 0, 0, -10, 5), (0, 50, -20, 5, 5, -10), (0, 0, 0, 0, 0, 0)],
 }
+"""``frames`` and ``turns``: the same poses one move after another, in the work frame about
+a pivot and in the zero frame: the difference is what the frames cost."""
+PIVOT = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0))
+"""The ``frames`` scenario's: a tool point 300 mm above the platform, the work frame on it."""
 
 
 class _Clock:
@@ -73,9 +82,16 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
     if scenario == "lock":
         _expect(controller.leg_lock(1))
         step()
+    frame = Frame.WORK if scenario == "frames" else Frame.ZERO
+    if frame is Frame.WORK:
+        _expect(controller.set_frames(PIVOT))
+    goals = itertools.cycle(TOURS[scenario])
     spent_ns = 0
     for _ in range(cycles):
-        if controller.snapshot.sequence is None:
+        if scenario in ("frames", "turns"):  # moves one after the other: a sequence's waypoints are in the zero frame
+            if controller.snapshot.motion.value == "holding":
+                _expect(controller.move(next(goals), frame=frame))
+        elif controller.snapshot.sequence is None:
             _expect(controller.play(tour))
         spent_ns += step()
     return spent_ns / cycles / 1e3

@@ -37,6 +37,7 @@ from hexactl.application.simulator import InstrumentLine, InstrumentSpec, Simula
 from hexactl.application.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
+from hexactl.control.frames import OperatorFrames
 from hexactl.kinematics.geometry import Geometry
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -95,6 +96,8 @@ class ApiSettings:
     log_level: str
     handler_timeout_s: float = DEFAULT_HANDLER_TIMEOUT_S
     urgent_niceness: int = 0  # for URGENT_THREAD_NAMES; 0: the process's
+    frames: OperatorFrames = OperatorFrames()  # the operator's, as restored from frames_file
+    frames_file: Path | None = None  # where a change of the frames is saved (None: not saved)
 
 
 class ApiProcess:
@@ -147,7 +150,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
             remote = RemoteLoop(commands, reports)
             closers.callback(remote.close)
             controller = Controller(remote, config=settings.controller, nominal=settings.nominal,
-                                    ticket_start=API_TICKET_START)
+                                    ticket_start=API_TICKET_START, frames=settings.frames)
             context = zmq.Context()
             closers.callback(context.term)
             curve = None
@@ -168,7 +171,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                                                lambda: jsonable(controller.telemetry()), settings.telemetry_rate_hz, curve)
                 closers.callback(publisher.close)
                 server = ApiServer(context, settings.api_endpoint, CommandHandler(controller,
-                                   DataDirectories(settings.data_dirs), instrument), curve,
+                                   DataDirectories(settings.data_dirs), instrument, settings.frames_file), curve,
                                    handler_timeout_s=settings.handler_timeout_s, on_stuck=_end_stuck,
                                    worker_niceness=API_WORKER_NICENESS)  # fmt: skip
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate

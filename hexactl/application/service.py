@@ -57,6 +57,7 @@ from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings,
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError
 from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.loop_link import LoopExchange
@@ -65,10 +66,14 @@ from hexactl.application.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
 from hexactl.control.local_controller import LocalController
 from hexactl.control.core import ControlState, MotionState
+from hexactl.control.frames import OperatorFrames
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, describe, fifo_for_threads
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.geometry import Geometry, GeometryError
+
+DEFAULT_FRAMES_FILE = "frames.toml"
+"""Where the operator's frames are kept, in the service's working directory, unless set."""
 
 SHUTDOWN_STEPS_S = 5.0
 """The time :meth:`Service.close`'s waiting steps share: stop taking commands, brake, let
@@ -161,7 +166,9 @@ class ServiceConfig:
     threads on the way of a stop then keep the normal priority too, else they get
     :data:`API_URGENT_NICENESS`); ``lock_memory``: mlockall of the
     loop's process. Both on by default; each falls back, logged and in ``status``,
-    without the privilege.
+    without the privilege. ``frames_path``: where the operator's frames and soft limits
+    are kept across restarts (None: ./frames.toml); read at start (a file that is not
+    valid refuses the start), written whenever they change.
     """
 
     config_path: Path | None = None
@@ -179,6 +186,7 @@ class ServiceConfig:
     fifo_priority: int | None = DEFAULT_FIFO_PRIORITY
     lock_memory: bool = True
     log_level: str = "INFO"
+    frames_path: Path | None = None
 
 
 class Service:
@@ -230,6 +238,8 @@ class Service:
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
         data_dirs = data_directories(config.data_dirs, config_path)
+        frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
+        frames = _restored_frames(frames_path)
         log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
         active, source = (_load(config.calibration_path), config.calibration_path) if config.calibration_path else (nominal, config_path)
         calibration_id = geometry_id(active)
@@ -283,7 +293,7 @@ class Service:
                                    data_dirs, controller_config, nominal,
                                    simulator.instrument_spec if simulator else None, config.log_level,
                                    urgent_niceness=0 if realtime.fifo_priority is None
-                                   else API_URGENT_NICENESS)  # fmt: skip
+                                   else API_URGENT_NICENESS, frames=frames, frames_file=frames_path)  # fmt: skip
             port = None
             if simulator:
                 port = InstrumentPort(simulator.runner.actual_positions_mm).start()
@@ -469,6 +479,23 @@ def _pose_text(pose: tuple[float, ...] | None) -> str:
     if pose is None:
         return "unknown"
     return ", ".join(f"{axis} {value:.3f} {unit}" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, pose))
+
+
+def _restored_frames(path: Path) -> OperatorFrames:
+    """The operator's frames kept in ``path`` (none set: the defaults).
+
+    :raises ServiceError: naming the file and what is wrong with it: a service must not
+        start without the soft limits its operator set
+    """
+    if not path.exists():
+        log.info("no operator frames saved in %s: none set", path)
+        return OperatorFrames()
+    try:
+        frames = load_frames(path)
+    except FramesFileError as error:
+        raise ServiceError(f"{error}\nfix the file, or remove it to start with no frames and no soft limits") from None
+    log.info("operator frames restored from %s", path)
+    return frames
 
 
 def _load(path: Path) -> Geometry:

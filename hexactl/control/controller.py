@@ -28,7 +28,7 @@ from hexactl.control import preconditions
 from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frame_commands import FrameCommands
-from hexactl.control.frames import Frame, OperatorFrames, requested_goal
+from hexactl.control.frames import Frame, OperatorFrames, convert, requested_goal
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.host import LoopHost
@@ -80,12 +80,12 @@ class Controller:
 
     def status(self) -> CommandResult:
         """State, calibration, sequence, faults, recent events and the loop's health."""
-        return status_result(self._host.report(PERCENTILES_MAX_AGE_S))
+        return status_result(self._host.report(PERCENTILES_MAX_AGE_S), self.frames.current)
 
     def telemetry(self) -> Telemetry:
         """The latest cycle. The loop's lateness and compute percentiles are at most
         ``PERCENTILES_MAX_AGE_S`` old; counters and maxima are current."""
-        return telemetry_of(self._host.report(PERCENTILES_MAX_AGE_S))
+        return telemetry_of(self._host.report(PERCENTILES_MAX_AGE_S), self.frames.current)
 
     def events(self) -> tuple[Event, ...]:
         """The loop's recent events (faults, refusals, sequence and calibration changes)."""
@@ -143,7 +143,7 @@ class Controller:
                       frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
         """Would :meth:`move` accept this? Plans and checks the whole path, moves nothing."""
         s = self.snapshot
-        return _plan_result(self._plan_move(s, pose, duration, speed, frame, relative), "valid")
+        return _plan_result(self._plan_move(s, pose, duration, speed, frame, relative), "valid", s.active.home)
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
              frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
@@ -158,10 +158,10 @@ class Controller:
             return CommandResult.failure(*refusal)
         plan = self._plan_move(s, pose, duration, speed, frame, relative)
         if not plan.ok:
-            return _plan_result(plan, "")
+            return _plan_result(plan, "", s.active.home)
         (segment,) = plan.segments
         return self._commands.submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", deadline_ns=deadline_ns,
-                            **_plan_result(plan, "").details)
+                            **_plan_result(plan, "", s.active.home).details)
 
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""
@@ -180,7 +180,8 @@ class Controller:
         if isinstance(resolved, CommandResult):
             return resolved
         s = self.snapshot
-        return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames), "valid")
+        return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames), "valid",
+                            s.active.home)
 
     def play(self, sequence: MotionSequence | str, *, deadline_ns: int | None = None) -> CommandResult:
         """Play a sequence, or a built-in one by name; every waypoint's path is validated
@@ -193,10 +194,10 @@ class Controller:
             return CommandResult.failure(*refusal)
         plan = plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames)
         if not plan.ok:
-            return _plan_result(plan, "")
+            return _plan_result(plan, "", s.active.home)
         name = resolved.name
         return self._commands.submit(lambda t: cmd.Play(t, s.epoch, name, plan.segments), f"playing {name}",
-                            deadline_ns=deadline_ns, **_plan_result(plan, "").details)
+                            deadline_ns=deadline_ns, **_plan_result(plan, "", s.active.home).details)
 
     def pause(self) -> CommandResult:
         """Pause the sequence: brake to rest mid-move, or freeze the dwell's clock."""
@@ -217,7 +218,7 @@ class Controller:
             context = self._context(s)  # the remainder runs in the frames the segment was planned in
             plan = plan_path(replace(context, frames=segment.frames or context.frames), s.trajectory, [waypoint], s.frames)
             if not plan.ok:
-                return _plan_result(plan, "")
+                return _plan_result(plan, "", s.active.home)
             (remainder,) = plan.segments
         return self._commands.submit(lambda t: cmd.Resume(t, s.epoch, remainder), "resumed", deadline_ns=deadline_ns)
 
@@ -247,6 +248,14 @@ class Controller:
                                          f"back to ({s.active.calibration_id} is the first since start-up)")
         return self._swap(s.previous, f"rolled back from calibration {s.active.calibration_id} to "
                           f"{s.previous.calibration_id}", rollback=True)
+
+    def set_frames(self, frames: OperatorFrames) -> CommandResult:
+        """Make ``frames`` the operator's work and tool frames and soft limits (see
+        :meth:`~hexactl.control.frame_commands.FrameCommands.set`)."""
+        return self.frames.set(frames)
+
+    def operator_frames(self) -> OperatorFrames:
+        return self.frames.current
 
     # -- helpers ----------------------------------------------------------------------------
 
@@ -301,14 +310,20 @@ def _resolve_sequence(sequence: object) -> MotionSequence | CommandResult:
     return sequence
 
 
-def _plan_result(plan: Plan, message: str) -> CommandResult:
+def _plan_result(plan: Plan, message: str, home_mm_rad: Sequence[float]) -> CommandResult:
+    """The result of ``plan``: its refusal, or ``goal`` relative to the zero posture
+    ``home_mm_rad`` (and ``tool_goal``, the tool's pose in the work frame, for a motion in
+    it; mm and deg), ``duration_s`` and ``waypoints``."""
     if plan.refusal is not None:
         refusal = plan.refusal
         return CommandResult.failure(refusal.code, refusal.message, violations=[asdict(v) for v in refusal.violations],
                                      **refusal.details)
+    last = plan.segments[-1]
+    in_work = {"tool_goal": list(last.goal.in_degrees())} if last.frames is not None else {}
     return CommandResult.success(
         message,
-        goal=list(plan.segments[-1].goal.in_degrees()),
+        goal=list(convert(last.goal, last.frames, None, home_mm_rad).in_degrees()),
         duration_s=sum(seg.duration_s + seg.dwell_s for seg in plan.segments),
         waypoints=len(plan.segments),
+        **in_work,
     )

@@ -110,8 +110,10 @@ def requested_goal(pose_mm_deg: Sequence[float], frame: Frame, relative: bool, t
             return RelativeMmDeg._make(pose)
         base = convert(target, target_frames, None, home_mm_rad).in_degrees()
         return RelativeMmDeg._make(map(add, base, pose))
-    if frame is Frame.TOOL and not relative:
-        return "a pose in the tool frame is a relative move (relative: true): the tool is always at its own origin"
+    if not relative:
+        if frame is Frame.TOOL:
+            return "a pose in the tool frame is a relative move (relative: true): the tool is always at its own origin"
+        return ToolInWorkMmDeg._make(pose)
     base = convert(target, target_frames, operator, home_mm_rad)
     if frame is Frame.WORK:
         return ToolInWorkMmDeg._make(map(add, base.in_degrees(), pose))

@@ -11,7 +11,8 @@ from hexactl.control.host import LoopReport
 from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
 from hexactl.control.stats import LoopStats
-from hexactl.kinematics.axes import RelativeMmDeg
+from hexactl.control.frames import OperatorFrames, convert
+from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 
 PERCENTILES_MAX_AGE_S = 0.25
 """Status and telemetry recompute the loop's percentiles (a sort of its window) at most this often."""
@@ -35,7 +36,9 @@ class Telemetry:
     ``leg_feedback`` (and, while DISABLED, in ``leg_setpoints``, which then mirror the
     feedback); ``leg_feedback`` is None before the first read. ``goal``: where the move
     under way ends, relative mm and deg (None at rest and while braking); ``remaining_s``:
-    time until the move or the braking under way ends as planned, s (None at rest)."""
+    time until the move or the braking under way ends as planned, s (None at rest);
+    ``tool_pose_command``, ``tool_pose_measured``: the poses as the tool's in the work
+    frame of ``frames`` (the operator's), mm and deg."""
 
     t: float
     state: str
@@ -52,10 +55,14 @@ class Telemetry:
     realtime: RealtimeReport | None = None  # what the loop thread's real-time set-up obtained
     goal: RelativeMmDeg | None = None
     remaining_s: float | None = None
+    tool_pose_command: ToolInWorkMmDeg | None = None
+    tool_pose_measured: ToolInWorkMmDeg | None = None
+    frames: OperatorFrames | None = None
 
 
-def status_result(report: LoopReport) -> CommandResult:
-    """``status``: state, calibration, sequence, faults, the last ten events and the loop's health."""
+def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
+    """``status``: state, calibration, sequence, faults, the last ten events, the loop's
+    health and the operator's ``frames``."""
     s = report.snapshot
     return CommandResult.success(
         s.state.value,
@@ -74,12 +81,17 @@ def status_result(report: LoopReport) -> CommandResult:
         loop_running=report.running,
         loop_failure=report.failure,
         realtime=asdict(report.realtime) if report.realtime else None,
+        frames=frames.model_dump(mode="json"),
     )
 
 
-def telemetry_of(report: LoopReport) -> Telemetry:
-    """The report's cycle as telemetry; the core's guard clamps and FK failures join the loop's statistics."""
+def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
+    """The report's cycle as telemetry, its poses also as the tool's in the work frame of
+    the operator's ``frames``; the core's guard clamps and FK failures join the loop's
+    statistics."""
     s = report.snapshot
+    home = s.active.home
+    in_work = frames.frames(home)
     stats = replace(report.stats, guard_clamps=s.clamped_cycles, fk_failures=s.fk_failures)
     return Telemetry(
         t=s.t_ns / 1e9,
@@ -95,8 +107,13 @@ def telemetry_of(report: LoopReport) -> Telemetry:
         faults=s.faults,
         loop=stats,
         realtime=report.realtime,
-        goal=s.goal.in_degrees() if s.motion is MotionState.MOVING and s.goal is not None else None,
+        goal=convert(s.goal, s.frames, None, home).in_degrees()
+        if s.motion is MotionState.MOVING and s.goal is not None else None,
         remaining_s=_remaining_s(s),
+        tool_pose_command=convert(s.pose_command, None, in_work, home).in_degrees(),
+        tool_pose_measured=convert(s.pose_measured, None, in_work, home).in_degrees()
+        if s.pose_measured is not None else None,
+        frames=frames,
     )
 
 

@@ -7,7 +7,7 @@ the conversions are in :mod:`hexactl.kinematics.pose`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from math import degrees, isfinite, radians
 from typing import Any, NamedTuple, TypeAlias
 
@@ -33,17 +33,24 @@ class _SixAxes(NamedTuple):
     yaw: float
 
     @classmethod
-    def __get_pydantic_core_schema__(cls, source: type, handler: Callable[[type], Any]) -> Any:
+    def __get_pydantic_core_schema__(cls, source: type, handler: Any) -> Any:
         """Validated by pydantic as six finite numbers (a model's ``allow_inf_nan=False``),
-        with :func:`validate_pose_values`'s sentence for a wrong count."""
+        with :func:`validate_pose_values`'s sentence for a wrong count, into this type.
+
+        Built on a list of floats, not on the NamedTuple pydantic would make of the class:
+        that one is a shared definition, and a second field of the same type in a model got
+        it without the count check. A list, so that strict models take JSON arrays and
+        tuples alike."""
         from pydantic_core import core_schema  # only where pydantic builds a model: the CLI parses poses without it
 
-        def six(value: object) -> object:  # a list or tuple (not a mapping, which a NamedTuple takes) of six
+        def six(value: object) -> object:  # a list or tuple (not a mapping) of six
             if not isinstance(value, (list, tuple)) or len(value) != 6:
                 raise ValueError(validate_pose_values(value) or "a pose is six numbers [x, y, z, roll, pitch, yaw]")
-            return value
+            return list(value)
 
-        return core_schema.no_info_before_validator_function(six, handler(source))
+        values = core_schema.list_schema(core_schema.float_schema(), min_length=6, max_length=6)
+        return core_schema.no_info_before_validator_function(six, core_schema.no_info_after_validator_function(
+            cls._make, values, serialization=core_schema.plain_serializer_function_ser_schema(list)))
 
 
 class RelativeMmDeg(_SixAxes):

@@ -19,6 +19,7 @@ from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.files.geometry_file import geometry_id
+from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.telemetry import SequenceTelemetry, Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.supervisor import Fault
@@ -48,6 +49,8 @@ class FakeController:
     calibrations: list[str] = field(default_factory=list)
     locked_leg: int | None = None
     sequence: MotionSequence | None = None
+    frames: OperatorFrames = field(default_factory=OperatorFrames)
+    frames_of_moves: list[tuple[Frame, bool]] = field(default_factory=list)
 
     def _call(self, name: str, *arguments: Any) -> None:
         self.calls.append((name, arguments))
@@ -78,14 +81,24 @@ class FakeController:
         self.state = "disabled"
         return CommandResult.success("reset to disabled")
 
-    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None, *,
-             deadline_ns: int | None = None) -> CommandResult:
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
+             frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("move", list(pose), duration, speed)
+        self.frames_of_moves.append((frame, relative))
         if self.state != "enabled":
             return CommandResult.failure(ErrorCode.NOT_ENABLED, "enable first")
         return self.validate_pose(pose, duration, speed)
 
-    def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None) -> CommandResult:
+    def set_frames(self, frames: OperatorFrames) -> CommandResult:
+        self._call("set_frames", frames)
+        self.frames = frames
+        return CommandResult.success("frames set")
+
+    def operator_frames(self) -> OperatorFrames:
+        return self.frames
+
+    def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
+                      frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
         violations = assess_pose(self.geometry, pose).violations
         if violations:
             items = [{"waypoint": 1, "pose": tuple(pose), **{k: getattr(v, k) for k in ("kind", "message", "value", "limit", "leg", "axis")}}
@@ -156,15 +169,15 @@ class FakeController:
 
 
 def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float = 200.0,
-                  instrument: Instrument | None = None) -> SimpleNamespace:
+                  instrument: Instrument | None = None, frames_file: Path | None = None) -> SimpleNamespace:
     """A fake controller served on random local ports; ``close()`` when done. The
     instrument (``measure``) defaults to one that sees the feature points at the home
-    translation, without noise."""
+    translation, without noise; ``frames_file``: where the frames are saved (None: not)."""
     context = zmq.Context()
     controller = FakeController(geometry)
     if instrument is None:
         instrument = lambda: [[p + h for p, h in zip(point, geometry.home[:3])] for point in geometry.measurement.feature_points]  # noqa: E731
-    server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir]), instrument))
+    server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir]), instrument, frames_file))
     publisher = TelemetryPublisher(context, LOCAL, lambda: jsonable(controller.telemetry()), telemetry_rate_hz)
     server.start()
     publisher.start()

@@ -44,7 +44,8 @@ def test_every_command_round_trips(service, kind) -> None:
         assert reply["ok"], reply
         assert reply["id"] == {"n": cmd}
     called = [name for name, _ in service.controller.calls]
-    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "save_recording", "measure"}  # queries, instrument
+    # queries and the instrument call nothing; clear_frames is a set_frames of no frames
+    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "save_recording", "measure", "frames", "clear_frames"}
 
 
 def test_move_passes_pose_and_pace(service) -> None:

@@ -60,6 +60,18 @@ def test_the_view_shows_every_value_with_its_unit() -> None:
     assert rows["feedback"][1] == "—"  # leg 2 not heard from
 
 
+def test_the_view_shows_the_frames_the_tool_pose_and_the_soft_limits() -> None:
+    assert "frames" in rendered(RECORD) and "none (poses relative to the zero posture)" in rendered(RECORD)
+    framed = {**RECORD, "tool_pose_command": [0.0, 0.0, 0.0, 5.0, 0.0, 0.0],
+              "frames": {"work": [0.0, 0.0, 300.0, 0.0, 0.0, 0.0], "tool": [0.0, 0.0, 300.0, 0.0, 0.0, 0.0],
+                         "soft_limits": {"lower": [-50.0, None, None, None, None, None],
+                                         "upper": [50.0, None, None, None, None, None], "max_tilt_deg": 12.0}}}
+    text = rendered(framed)
+    assert "tool frame   x    0.000 mm  y    0.000 mm  z  300.000 mm" in text
+    assert "soft limits  x -50..50 mm, tilt ≤ 12 deg" in text
+    assert "tool in work  0.000" in text and "5.000" in text
+
+
 def test_the_view_at_rest_and_before_any_telemetry() -> None:
     text = rendered({**RECORD, "motion": "holding", "goal": None, "remaining_s": None, "sequence": None, "faults": []})
     assert "remaining at rest" in text

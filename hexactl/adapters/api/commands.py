@@ -9,13 +9,18 @@ from __future__ import annotations
 import csv
 import io
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
+
+from pydantic import ValidationError
 
 from hexactl.adapters.api.messages import (
     AbortRequest,
+    ClearFramesRequest,
     DisableRequest,
     EnableRequest,
     EstopRequest,
+    FramesRequest,
     LegLockRequest,
     LegUnlockRequest,
     LoadCalibrationRequest,
@@ -28,6 +33,7 @@ from hexactl.adapters.api.messages import (
     ResumeRequest,
     RollbackCalibrationRequest,
     SaveRecordingRequest,
+    SetFramesRequest,
     StatusRequest,
     StopRequest,
     ValidatePoseRequest,
@@ -36,10 +42,12 @@ from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.port import ControllerPort
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
+from hexactl.adapters.files.frames_file import save_frames
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
+from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
-from hexactl.kinematics.geometry import GeometryError
+from hexactl.kinematics.geometry import GeometryError, describe_validation_error
 
 TOML_SOURCE = "request"
 """The calibration source recorded for a calibration sent as text."""
@@ -62,12 +70,15 @@ class CommandHandler:
     ``deadline_ns`` (monotonic; None: none) goes with every command that sets the platform
     moving or changes how it moves, so that the loop refuses it (``expired``) once its
     sender has stopped waiting. ``load_calibration`` and ``rollback_calibration`` are
-    checked against it when taken from the queue only."""
+    checked against it when taken from the queue only. ``frames_file``: where the
+    operator's frames are saved whenever they change (None: not saved)."""
 
-    def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None) -> None:
+    def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None,
+                 frames_file: Path | None = None) -> None:
         self.controller = controller
         self.data = data
         self.instrument = instrument
+        self.frames_file = frames_file
 
     def __call__(self, request: Request, deadline_ns: int | None = None) -> dict[str, Any]:
         controller = self.controller
@@ -85,8 +96,10 @@ class CommandHandler:
             case ResetRequest():
                 return _checked(controller.reset())
             case MoveRequest():
-                result = controller.move(request.pose, request.duration, request.speed, deadline_ns=deadline_ns)
-                return _checked(result, goal=result.details.get("goal"), duration=result.details.get("duration_s"))
+                result = controller.move(request.pose, request.duration, request.speed, Frame(request.frame),
+                                         request.relative, deadline_ns=deadline_ns)
+                return _checked(result, goal=result.details.get("goal"), tool_goal=result.details.get("tool_goal"),
+                                duration=result.details.get("duration_s"))
             case ValidatePoseRequest():
                 return self._validate_pose(request)
             case LegLockRequest():
@@ -111,13 +124,47 @@ class CommandHandler:
                 return self._save_recording(request)
             case MeasureRequest():
                 return self._measure()
+            case SetFramesRequest():
+                return self._set_frames(request)
+            case ClearFramesRequest():
+                return self._replace_frames(OperatorFrames())
+            case FramesRequest():
+                return {"frames": jsonable(controller.operator_frames())}
         raise AssertionError(f"no handler for {type(request).__name__}")  # the union and this match disagree
 
     def _validate_pose(self, request: ValidatePoseRequest) -> dict[str, Any]:
-        result = self.controller.validate_pose(request.pose, request.duration, request.speed)
+        result = self.controller.validate_pose(request.pose, request.duration, request.speed, Frame(request.frame),
+                                               request.relative)
         if result.ok:
-            return {"valid": True, "goal": result.details.get("goal"), "duration": result.details.get("duration_s"), "refusal": None}
-        return {"valid": False, "goal": None, "duration": None, "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+            return {"valid": True, "goal": result.details.get("goal"), "tool_goal": result.details.get("tool_goal"),
+                    "duration": result.details.get("duration_s"), "refusal": None}
+        return {"valid": False, "goal": None, "tool_goal": None, "duration": None,
+                "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+
+    def _set_frames(self, request: SetFramesRequest) -> dict[str, Any]:
+        current = self.controller.operator_frames()
+        given = {name: getattr(request, name) for name in ("work", "tool", "soft_limits") if getattr(request, name) is not None}
+        try:
+            frames = OperatorFrames.model_validate({**dict(current), **given})
+        except ValidationError as error:
+            raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames")) from None
+        return self._replace_frames(frames)
+
+    def _replace_frames(self, frames: OperatorFrames) -> dict[str, Any]:
+        """Make ``frames`` the controller's, then save them; if saving fails, the old ones
+        are put back (what is in force is what a restart restores)."""
+        before = self.controller.operator_frames()
+        result = self.controller.set_frames(frames)
+        if not result.ok:
+            raise ApiError(_code(result), result.message, jsonable(result.details))
+        if self.frames_file is not None:
+            try:
+                save_frames(frames, self.frames_file)
+            except OSError as error:
+                self.controller.set_frames(before)
+                raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{self.frames_file}: the frames could not be saved ({error}); "
+                               "the ones before stay in force: free the disk or fix the permissions, then again") from None
+        return {"message": result.message, "frames": jsonable(frames)}
 
     def _load_calibration(self, request: LoadCalibrationRequest) -> dict[str, Any]:
         if request.path is not None:

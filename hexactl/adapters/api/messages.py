@@ -1,7 +1,7 @@
 """The API's messages as pydantic models: the user-facing contract (docs/api.md).
 
-Every pose is ``[x, y, z, roll, pitch, yaw]`` in mm and degrees relative to the zero
-posture; leg values are actuator sensor readings in mm; times in s unless the name
+Every pose is ``[x, y, z, roll, pitch, yaw]`` in mm and degrees, relative to the zero
+posture unless its frame says otherwise (``frame``, ``tool_pose_*``); leg values are actuator sensor readings in mm; times in s unless the name
 says otherwise (``_us``: microseconds).
 
 Requests are validated strictly (no coercion: ``"1"`` is not a number, ``true`` is not
@@ -17,8 +17,10 @@ from typing import Annotated, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
+from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.sequences import Paced, SequenceWaypoint
-from hexactl.kinematics.axes import RelativeMmDeg
+from hexactl.kinematics.axes import FramePoseMmDeg, RelativeMmDeg, ToolInWorkMmDeg
+from hexactl.kinematics.soft_limits import SoftLimits
 
 LegValues = Annotated[list[float], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm")]
 LegReadings = Annotated[
@@ -85,20 +87,59 @@ class ResetRequest(_Request):
     cmd: Literal["reset"]
 
 
-class MoveRequest(_Request, Paced):
-    """Move to ``pose``, the whole path validated first (refused whole otherwise). A move
-    while moving replaces the running one; in leg-lock mode the goal is projected so the
-    locked leg keeps its length (the reply's ``goal``)."""
+FrameName = Annotated[Literal["zero", "work", "tool"], Field(
+    description="zero: the platform relative to the zero posture (the default); work: the tool's pose in the work "
+    "frame, rotations about the pivot point; tool: relative moves along and about the tool's own axes")]
+
+_POSE_IN_FRAME = ("mm and deg: with frame zero relative to the zero posture, with work the tool's pose in the work "
+                  "frame; with relative: true the displacement from where the motion is headed, in that frame")
+
+
+class _PoseInFrame(_Request, Paced):
+    pose: RelativeMmDeg = Field(description=_POSE_IN_FRAME)
+    frame: FrameName = Frame.ZERO.value
+    relative: bool = Field(default=False, description="pose is a displacement from the goal of the motion under way "
+                           "(or the pose at rest): component by component in zero and work, composed in tool")
+
+
+class MoveRequest(_PoseInFrame):
+    """Move to ``pose`` in ``frame``, the whole path validated first (refused whole
+    otherwise; soft limits too). A move while moving replaces the running one (in another
+    frame: refused ``busy`` until at rest); in leg-lock mode the goal is projected so the
+    locked leg keeps its length (the reply's ``goal``, relative to the zero posture)."""
 
     cmd: Literal["move"]
-    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
 
 
-class ValidatePoseRequest(_Request, Paced):
+class ValidatePoseRequest(_PoseInFrame):
     """Would ``move`` accept this now? Plans and checks the whole path; moves nothing."""
 
     cmd: Literal["validate_pose"]
-    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
+
+
+class SetFramesRequest(_Request):
+    """Set the operator's work frame, tool frame (its origin is the pivot point) and soft
+    limits; what is not given stays as it is. Saved, and restored when the service
+    restarts. Refused (``outside_soft_limits``) when the pose being commanded breaks the
+    new soft limits. A motion under way keeps the frames it was planned in."""
+
+    cmd: Literal["set_frames"]
+    work: FramePoseMmDeg | None = Field(default=None, description="the work frame in the zero frame, mm and deg")
+    tool: FramePoseMmDeg | None = Field(default=None, description="the tool frame in the platform's frame, mm and deg")
+    soft_limits: SoftLimits | None = Field(default=None, description="bounds on the tool's pose in the work frame "
+                                           "(replaces all of them)")
+
+
+class ClearFramesRequest(_Request):
+    """Back to no work frame, no tool frame and no soft limits (saved)."""
+
+    cmd: Literal["clear_frames"]
+
+
+class FramesRequest(_Request):
+    """Reply with the operator's frames and soft limits (``frames``)."""
+
+    cmd: Literal["frames"]
 
 
 class LegLockRequest(_Request):
@@ -214,6 +255,9 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     RollbackCalibrationRequest,
     SaveRecordingRequest,
     MeasureRequest,
+    SetFramesRequest,
+    ClearFramesRequest,
+    FramesRequest,
 )
 
 Request = Annotated[Union[REQUEST_MODELS], Field(discriminator="cmd")]  # type: ignore[valid-type]
@@ -302,6 +346,11 @@ class Telemetry(_Message):
         "mode); null at rest and while braking")
     remaining_s: float | None = Field(
         default=None, ge=0, description="time until the move or the braking under way ends as planned, s; null at rest")
+    tool_pose_command: ToolInWorkMmDeg | None = Field(default=None, description="pose_command as the tool's pose in "
+                                                      "the work frame, mm and deg")
+    tool_pose_measured: ToolInWorkMmDeg | None = Field(default=None, description="pose_measured as the tool's pose in "
+                                                       "the work frame, mm and deg; null if none")
+    frames: OperatorFrames | None = Field(default=None, description="the operator's frames and soft limits")
 
 
 # -- replies -------------------------------------------------------------------------
@@ -336,13 +385,18 @@ class StatusReply(OkReply):
 
 
 class MoveReply(OkReply):
-    goal: RelativeMmDeg = Field(description="the goal as planned (projected onto the locked leg's constraint in leg-lock mode)")
+    goal: RelativeMmDeg = Field(description="the goal as planned, relative to the zero posture (projected onto the "
+                                "locked leg's constraint in leg-lock mode)")
+    tool_goal: ToolInWorkMmDeg | None = Field(default=None, description="for a move in the work or tool frame: the "
+                                              "goal as the tool's pose in the work frame")
     duration: float = Field(description="planned duration, s")
 
 
 class ValidatePoseReply(OkReply):
     valid: bool = Field(description="whether move would accept the pose now")
-    goal: RelativeMmDeg | None = Field(description="the goal as planned, when valid")
+    goal: RelativeMmDeg | None = Field(description="the goal as planned, relative to the zero posture, when valid")
+    tool_goal: ToolInWorkMmDeg | None = Field(default=None, description="for a move in the work or tool frame, when "
+                                              "valid: the goal as the tool's pose in the work frame")
     duration: float | None = Field(description="planned duration, s, when valid")
     refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
 
@@ -372,13 +426,18 @@ class MeasureReply(OkReply):
     )
 
 
+class FramesReply(OkReply):
+    frames: OperatorFrames = Field(description="the operator's frames and soft limits now in force")
+
+
 class PathViolation(_Message):
     """An item of ``error.details.violations`` (``path_violation``): the first sample of a
     waypoint's path that violates a limit."""
 
     waypoint: int = Field(ge=1, description="1-based waypoint whose path violates")
     pose: RelativeMmDeg = Field(description="the violating sample")
-    kind: str = Field(description="stroke_low, stroke_high, base_cone, platform_cone, pose_range or near_singular")
+    kind: str = Field(description="stroke_low, stroke_high, base_cone, platform_cone, pose_range, near_singular, "
+                      "soft_limit (an axis of the tool's pose in the work frame) or soft_tilt")
     message: str
     value: float | None = Field(description="the violating value (mm, deg or condition number); null if infinite")
     limit: float
@@ -395,5 +454,8 @@ REPLY_MODELS: dict[str, type[OkReply]] = {
     "rollback_calibration": CalibrationReply,
     "save_recording": SaveRecordingReply,
     "measure": MeasureReply,
+    "set_frames": FramesReply,
+    "clear_frames": FramesReply,
+    "frames": FramesReply,
 }
 """The reply model of each command whose reply carries more than :class:`OkReply`."""

@@ -2,7 +2,8 @@
 :class:`hexactl.control.controller.Controller` it drives, as a Protocol (so tests can
 put a fake behind the real server).
 
-Poses are relative to the zero posture, mm and deg; times in s. No method raises for
+Poses are relative to the zero posture, mm and deg, unless a ``frame`` says otherwise;
+times in s. No method raises for
 bad input: each returns a :class:`~hexactl.control.results.CommandResult` whose
 ``error`` the API sends as its error code.
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
+from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.telemetry import Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
@@ -32,17 +34,23 @@ class ControllerPort(Protocol):
 
     def reset(self) -> CommandResult: ...
 
-    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None, *,
-             deadline_ns: int | None = None) -> CommandResult:
-        """Success details: ``goal`` (as planned), ``duration_s``. ``deadline_ns``, here and
-        below: monotonic time after which the loop refuses the command as ``expired``."""
+    def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
+             frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
+        """Success details: ``goal`` (as planned, relative to the zero posture),
+        ``duration_s``. ``deadline_ns``, here and below: monotonic time after which the
+        loop refuses the command as ``expired``."""
         ...
 
-    def validate_pose(
-        self, pose: Sequence[float], duration: float | None = None, speed: float | None = None
-    ) -> CommandResult:
+    def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
+                      frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
         """What :meth:`move` would answer, without moving."""
         ...
+
+    def set_frames(self, frames: OperatorFrames) -> CommandResult:
+        """Success details: ``frames``."""
+        ...
+
+    def operator_frames(self) -> OperatorFrames: ...
 
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult: ...
 

@@ -17,7 +17,7 @@ from math import isfinite
 from typing import Any
 
 import numpy as np
-from pydantic import TypeAdapter, ValidationError
+from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from hexactl.adapters.api.messages import COMMANDS, Request
 from hexactl.adapters.api.protocol import PROTOCOL_VERSION
@@ -134,10 +134,12 @@ def encode(document: dict[str, Any]) -> bytes:
 
 
 def jsonable(value: Any) -> Any:
-    """``value`` with dataclasses, mappings, tuples, enums and numpy scalars turned into
+    """``value`` with dataclasses, pydantic models, mappings, tuples, enums and numpy scalars turned into
     JSON types, and non-finite floats into null (JSON has no NaN)."""
     if isinstance(value, Enum):
         return value.value
+    if isinstance(value, BaseModel):
+        return value.model_dump(mode="json")
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {field.name: jsonable(getattr(value, field.name)) for field in dataclasses.fields(value)}
     if isinstance(value, Mapping):

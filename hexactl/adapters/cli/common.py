@@ -189,12 +189,7 @@ def parse_pose_argument(text: str) -> list[float]:
     """
     parts = [part for part in text.split(",") if part.strip()]
     if parts and all("=" in part for part in parts):
-        pose = [0.0] * 6
-        for part in parts:
-            match = _KEYED.match(part)
-            if not match:
-                raise CliError(f"pose {text!r}: {part.strip()!r} is not axis=value with axis one of {', '.join(POSE_AXES)}")
-            pose[POSE_AXES.index(match.group(1))] = _number(match.group(2), text)
+        pose = _keyed_values("pose", text, parts, 0.0)
     else:
         pose = [_number(part, text) for part in parts]
     problem = validate_pose_values(pose)
@@ -203,10 +198,38 @@ def parse_pose_argument(text: str) -> list[float]:
     return pose
 
 
+def parse_bounds_argument(text: str) -> list[float | None]:
+    """Soft bounds typed on the command line: ``axis=value`` pairs (mm, deg), the axes not
+    named unbounded: ``x=-50,z=-10``."""
+    bounds = _keyed_values("bounds", text, [part for part in text.split(",") if part.strip()], None)
+    if any(bound is not None and not isfinite(bound) for bound in bounds):
+        raise CliError(f"bounds {text!r}: every value must be a finite number")
+    return bounds
+
+
+def _keyed_values(what: str, text: str, parts: list[str], missing: float | None) -> list[float | None]:
+    values: list[float | None] = [missing] * 6
+    for part in parts:
+        match = _KEYED.match(part)
+        if not match:
+            raise CliError(f"{what} {text!r}: {part.strip()!r} is not axis=value with axis one of {', '.join(POSE_AXES)}")
+        values[POSE_AXES.index(match.group(1))] = _number(match.group(2), text)
+    return values
+
+
 def pose_argument(text: str) -> list[float]:
     """:func:`parse_pose_argument` as an argparse ``type``: its error becomes argparse's."""
+    return _argparse_type(parse_pose_argument, text)
+
+
+def bounds_argument(text: str) -> list[float | None]:
+    """:func:`parse_bounds_argument` as an argparse ``type``."""
+    return _argparse_type(parse_bounds_argument, text)
+
+
+def _argparse_type(parse: Callable[[str], Any], text: str) -> Any:
     try:
-        return parse_pose_argument(text)
+        return parse(text)
     except CliError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 

@@ -29,8 +29,10 @@ from typing import TYPE_CHECKING, Any
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT
 from hexactl.adapters.cli.common import connect, connection_parser
 from hexactl.adapters.cli.telemetry_text import (
+    NO_FRAMES,
     fault_text,
     format_telemetry,
+    frames_lines,
     loop_text,
     percentiles_text,
     realtime_text,
@@ -294,8 +296,10 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
     poses.add_column("pose")
     for axis, unit in zip(POSE_AXES, POSE_UNITS):
         poses.add_column(f"{axis} {unit}", justify="right")
+    framed = record.get("frames") not in (None, NO_FRAMES)
     for label, pose in (("command", record.get("pose_command")), ("measured", record.get("pose_measured")),
-                        ("goal", record.get("goal"))):
+                        ("goal", record.get("goal")),
+                        *((("tool in work", record.get("tool_pose_command")),) if framed else ())):
         poses.add_row(label, *([f"{value:.3f}" for value in pose] if pose else ["—"] * 6))
     legs = Table(box=None, pad_edge=False, header_style="bold")
     legs.add_column("legs")
@@ -310,6 +314,7 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
     facts.add_column(style="bold")
     facts.add_column()
     for label, value in (
+        *frames_lines({"frames": record.get("frames")}),
         ("locked leg", f"L{locked}" if locked else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),

@@ -16,10 +16,20 @@ from pathlib import Path
 from typing import Any
 
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
-from hexactl.adapters.cli.common import CliError, connect, connection_parser, fraction, pose_argument, positive_float
-from hexactl.adapters.cli.telemetry_text import format_telemetry, pose_text
+from hexactl.adapters.cli.common import (
+    CliError,
+    bounds_argument,
+    connect,
+    connection_parser,
+    fraction,
+    pose_argument,
+    positive_float,
+)
+from hexactl.adapters.cli.telemetry_text import format_telemetry, frames_lines, pose_text
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
+FRAMES = ("zero", "work", "tool")
+"""``move --frame``'s choices: the API's frames (docs/api.md)."""
 
 RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
 """Arguments → (command, request fields)."""
@@ -40,13 +50,31 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     command("status", "the running service's state (one telemetry record)", "status")
     command("enable", "energise the actuators; the platform holds its pose", "enable")
     command("disable", "de-energise the actuators (at rest only: stop first)", "disable")
-    move = command("move", "move to a pose relative to the zero posture", _move_request)
+    move = command("move", "move to a pose (relative to the zero posture, or in the work frame), or by one",
+                   _move_request)
     move.add_argument("pose", metavar="POSE", type=pose_argument, help="X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs, e.g. z=50,yaw=5")
     pace = move.add_mutually_exclusive_group()
     pace.add_argument("--duration", type=positive_float, metavar="S", help="minimum duration of the move, s")
     pace.add_argument("--speed", type=fraction, metavar="F", help="fraction (0, 1] of the velocity limits")
+    move.add_argument("--frame", choices=FRAMES, default="zero",
+                      help="zero: the platform relative to the zero posture (default); work: the tool's pose in the "
+                      "work frame, turning about the pivot point; tool: with --relative, along and about the tool's axes")
+    move.add_argument("--relative", action="store_true", help="POSE is a displacement from where the motion is headed")
     move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). In leg-lock mode the goal is projected "
-                   "onto the locked leg's constraint: the reply prints the goal run to when it differs.")
+                   "onto the locked leg's constraint: the reply prints the goal run to when it differs. "
+                   "Frames: hexactl frames.")
+    frames = command("frames", "show or set the work and tool frames (the pivot point) and the soft limits",
+                     _frames_request)
+    frames.add_argument("--work", type=pose_argument, metavar="POSE", help="the work frame in the zero frame (mm, deg)")
+    frames.add_argument("--tool", type=pose_argument, metavar="POSE",
+                        help="the tool frame in the platform's frame (mm, deg): its origin is the pivot point")
+    frames.add_argument("--soft-lower", type=bounds_argument, metavar="BOUNDS",
+                        help="lower soft bounds on the tool's pose in the work frame, axis=value pairs, e.g. x=-50,z=-10")
+    frames.add_argument("--soft-upper", type=bounds_argument, metavar="BOUNDS", help="upper soft bounds, likewise")
+    frames.add_argument("--max-tilt", type=positive_float, metavar="DEG", help="soft bound on the tool's tilt, deg")
+    frames.add_argument("--clear", action="store_true", help="no frames and no soft limits")
+    frames.epilog = ("Without options: show them. The soft limits are set as a whole: --soft-lower, --soft-upper and "
+                     "--max-tilt replace all three (one not given: none). Saved by the service, restored on restart.")
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name, a sequence file or a plan", _play_request)
     play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound), a .toml "
@@ -127,6 +155,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
         help="directory requests may read calibration and sequence files from and write recordings to "
         "(repeatable; default: ./recordings, ./calibrations, ./sequences and the config file's directory)",
     )
+    serve.add_argument("--frames", type=Path, metavar="FILE", help="where the operator's frames and soft limits are "
+                       "kept across restarts (default ./frames.toml; read at start, written when they change)")
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
     serve.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
@@ -145,7 +175,20 @@ def _client_parser() -> argparse.ArgumentParser:
 
 def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     pace = {name: getattr(arguments, name) for name in ("duration", "speed") if getattr(arguments, name) is not None}
-    return "move", {"pose": arguments.pose, **pace}
+    frame = {"frame": arguments.frame} if arguments.frame != "zero" else {}
+    return "move", {"pose": arguments.pose, **pace, **frame, **({"relative": True} if arguments.relative else {})}
+
+
+def _frames_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    soft = {"lower": arguments.soft_lower, "upper": arguments.soft_upper, "max_tilt_deg": arguments.max_tilt}
+    fields = {name: value for name, value in (("work", arguments.work), ("tool", arguments.tool)) if value is not None}
+    if any(value is not None for value in soft.values()):
+        fields["soft_limits"] = {name: value for name, value in soft.items() if value is not None}
+    if arguments.clear:
+        if fields:
+            raise CliError("--clear takes no other frame option: clear, then set")
+        return "clear_frames", {}
+    return ("set_frames", fields) if fields else ("frames", {})
 
 
 def _leg_lock_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -243,6 +286,7 @@ def run_serve(arguments: argparse.Namespace) -> int:
         fifo_priority=None if arguments.no_realtime else arguments.fifo,
         lock_memory=not arguments.no_realtime,
         log_level=arguments.log_level,
+        frames_path=arguments.frames,
     )
     try:
         return run_service(config)  # it ends the process, with the service's exit status
@@ -264,9 +308,17 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     from the requested pose (``fields``, the request's)."""
     if cmd == "status":
         return format_telemetry(reply["status"])
+    if "frames" in reply:
+        return "\n".join([f"ok: {reply.get('message') or 'frames'}"] + [f"{label:<15}{text}" for label, text in
+                                                                       frames_lines({"frames": reply["frames"]})])
     said = [reply["message"]] if reply.get("message") else []
-    requested, goal = (fields or {}).get("pose"), reply.get("goal")
-    if requested is not None and goal is not None and any(abs(a - b) > GOAL_TOLERANCE for a, b in zip(goal, requested)):
+    fields = fields or {}
+    requested, goal = fields.get("pose"), reply.get("goal")
+    if fields.get("relative") or fields.get("frame"):
+        said.append(f"goal {pose_text(goal)} (relative to the zero posture)")
+        if reply.get("tool_goal") is not None:
+            said.append(f"tool {pose_text(reply['tool_goal'])} (in the work frame)")
+    elif requested is not None and goal is not None and any(abs(a - b) > GOAL_TOLERANCE for a, b in zip(goal, requested)):
         said.append(f"goal {pose_text(goal)} (projected onto the locked leg's constraint)")
     if source := (fields or {}).get("source"):
         said.append(f"read from {source} here and sent")

@@ -23,6 +23,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("remaining", remaining_text(record.get("remaining_s"))),
         ("leg set-points", legs_text(record.get("leg_setpoints"))),
         ("leg feedback", legs_text(record.get("leg_feedback"))),
+        *frames_lines(record),
         ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),
@@ -40,6 +41,35 @@ def pose_text(pose: list[float] | None) -> str:
     if pose is None:
         return "unknown"
     return "  ".join(f"{axis} {value:8.3f} {unit}" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, pose))
+
+
+NO_FRAMES = {"work": [0.0] * 6, "tool": [0.0] * 6, "soft_limits": {"lower": [None] * 6, "upper": [None] * 6,
+                                                                   "max_tilt_deg": None}}
+"""A record's ``frames`` when the operator has set none."""
+
+
+def frames_lines(record: dict[str, Any]) -> list[tuple[str, str]]:
+    """The operator's frames, soft limits and the tool's pose in the work frame, as
+    (label, text) rows; one row when none are set."""
+    frames = record.get("frames")
+    if not frames or frames == NO_FRAMES:
+        return [("frames", "none (poses relative to the zero posture)")]
+    in_work = [("tool in work", pose_text(record["tool_pose_command"]))] if "tool_pose_command" in record else []
+    return [("work frame", pose_text(frames["work"])), ("tool frame", pose_text(frames["tool"])), *in_work,
+            ("soft limits", soft_limits_text(frames["soft_limits"]))]
+
+
+def soft_limits_text(limits: dict[str, Any]) -> str:
+    """``x -50..50 mm, z ≥ -10 mm, tilt ≤ 5 deg``, or ``none``."""
+    parts = []
+    for axis, unit, low, high in zip(POSE_AXES, POSE_UNITS, limits["lower"], limits["upper"]):
+        if low is not None and high is not None:
+            parts.append(f"{axis} {low:g}..{high:g} {unit}")
+        elif low is not None or high is not None:
+            parts.append(f"{axis} {'≥' if low is not None else '≤'} {low if low is not None else high:g} {unit}")
+    if limits.get("max_tilt_deg") is not None:
+        parts.append(f"tilt ≤ {limits['max_tilt_deg']:g} deg")
+    return ", ".join(parts) or "none"
 
 
 def legs_text(values: list[float | None] | None) -> str:

@@ -53,16 +53,17 @@ def geometry_to_toml(geometry: Geometry) -> str:
 
 def _toml_assignment(key: str, value: object) -> str:
     if isinstance(value, list) and value and isinstance(value[0], list):
-        rows = "".join(f"    {_toml_value(row)},\n" for row in value)
+        rows = "".join(f"    {toml_value(row)},\n" for row in value)
         return f"{key} = [\n{rows}]"
-    return f"{key} = {_toml_value(value)}"
+    return f"{key} = {toml_value(value)}"
 
 
-def _toml_value(value: object) -> str:
+def toml_value(value: object) -> str:
+    """``value`` (a string, bool, number or list of them) as TOML, a list on one line."""
     if isinstance(value, (str, bool, int, float)):
         return tomli_w.dumps({"v": value})[len("v = ") : -1]
     if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+        return "[" + ", ".join(toml_value(item) for item in value) + "]"
     raise TypeError(f"cannot write {type(value).__name__} to a geometry file")
 
 

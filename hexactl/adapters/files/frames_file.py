@@ -1,0 +1,87 @@
+"""The operator's frames file (TOML, mm and degrees): where the service keeps the work and
+tool frames and the soft limits across restarts.
+
+```toml
+work = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]     # the work frame in the zero frame
+tool = [0.0, 0.0, 300.0, 0.0, 0.0, 0.0]   # the tool frame (origin: the pivot point) in the platform's frame
+
+[soft_limits]
+max_tilt_deg = 5.0
+
+[soft_limits.lower]                        # per axis; an axis not named has no bound
+x = -50.0
+
+[soft_limits.upper]
+x = 50.0
+```
+
+TOML has no null, so a bound that is not set is a key left out. Written atomically (the
+file is whole, old or new, whatever happens during the write).
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+
+import tomli_w
+from pydantic import ValidationError
+
+from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.geometry_file import toml_value
+from hexactl.control.frames import OperatorFrames
+from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.geometry import describe_validation_error
+
+
+class FramesFileError(ValueError):
+    """A frames file that cannot be used; the message names the file, key and problem."""
+
+
+def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
+    """The frames in ``path``.
+
+    :raises FramesFileError: unreadable, not TOML, or a value refused (each named)
+    """
+    location = Path(path)
+    try:
+        data = tomllib.loads(location.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as error:
+        raise FramesFileError(f"{location}: cannot read: {error}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as error:
+        raise FramesFileError(f"{location}: not valid TOML: {error}") from None
+    limits = data.get("soft_limits")
+    if isinstance(limits, dict):
+        for side in ("lower", "upper"):
+            if isinstance(bounds := limits.get(side), dict):
+                unknown = sorted(set(bounds) - set(POSE_AXES))
+                if unknown:
+                    raise FramesFileError(f"{location}: soft_limits.{side}: unknown axis {', '.join(unknown)}; the "
+                                          f"axes are {', '.join(POSE_AXES)}")
+                limits[side] = [bounds.get(axis) for axis in POSE_AXES]
+    try:
+        return OperatorFrames.model_validate(data)
+    except ValidationError as error:
+        raise FramesFileError(describe_validation_error(error, str(location))) from None
+
+
+def frames_to_toml(frames: OperatorFrames) -> str:
+    """The TOML text of ``frames``; round-trips through :func:`load_frames`."""
+    limits = frames.soft_limits
+    lines = ["# hexactl operator frames: mm and degrees (docs/api.md, Frames)",
+             f"work = {toml_value(list(frames.work))}", f"tool = {toml_value(list(frames.tool))}"]
+    soft: dict[str, object] = {}
+    if limits.max_tilt_deg is not None:
+        soft["max_tilt_deg"] = limits.max_tilt_deg
+    for side, bounds in (("lower", limits.lower), ("upper", limits.upper)):
+        named = {axis: bound for axis, bound in zip(POSE_AXES, bounds) if bound is not None}
+        if named:
+            soft[side] = named
+    text = "\n".join(lines) + "\n"
+    return text + "\n" + tomli_w.dumps({"soft_limits": soft}) if soft else text
+
+
+def save_frames(frames: OperatorFrames, path: str | os.PathLike[str]) -> Path:
+    """Write ``frames`` to ``path`` atomically, replacing what was there."""
+    return write_atomic(path, frames_to_toml(frames).encode("utf-8"), overwrite=True)

@@ -1,0 +1,117 @@
+"""The frames commands through the real API server (a fake controller behind it) and the
+command line: fields validated, partial updates, saved to the frames file, a failed save
+leaves the frames in force unchanged (issue 12)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.cli.service_commands import FRAMES
+from hexactl.adapters.files.frames_file import load_frames
+from hexactl.control.frames import Frame
+from hexactl.kinematics.geometry import Geometry
+from tests.api.support import start_service
+from tests.api.test_commands import send
+
+
+@pytest.fixture
+def framed(nominal: Geometry, tmp_path: Path) -> Iterator[SimpleNamespace]:
+    running = start_service(nominal, tmp_path, frames_file=tmp_path / "frames.toml")
+    yield running
+    running.close()
+
+
+def test_move_carries_its_frame_and_relative_to_the_controller(framed) -> None:
+    send(framed, "enable")
+    send(framed, "move", pose=[0, 0, 0, 5, 0, 0], frame="work")
+    send(framed, "validate_pose", pose=[1, 0, 0, 0, 0, 0], frame="tool", relative=True)
+    send(framed, "move", pose=[0, 0, 10, 0, 0, 0])
+    assert framed.controller.frames_of_moves == [(Frame.WORK, False), (Frame.ZERO, False)]
+
+
+@pytest.mark.parametrize("fields, fragment", [
+    ({"frame": "platform"}, "frame"),
+    ({"frame": "work", "relative": 1}, "relative"),
+    ({"relative": "yes"}, "relative"),
+])
+def test_a_bad_frame_or_relative_is_an_invalid_request(framed, fields, fragment) -> None:
+    reply = send(framed, "move", pose=[0, 0, 0, 0, 0, 0], **fields)
+    assert reply["error"]["code"] == "invalid_request" and fragment in reply["error"]["message"]
+
+
+def test_set_frames_merges_saves_and_clears(framed, tmp_path: Path) -> None:
+    tool = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    assert tool["frames"]["tool"] == [0, 0, 300, 0, 0, 0] and tool["frames"]["work"] == [0] * 6
+    soft = {"lower": [-50, None, None, None, None, None], "upper": [50, None, None, None, None, None],
+            "max_tilt_deg": 10}
+    both = send(framed, "set_frames", work=[0, 0, 300, 0, 0, 0], soft_limits=soft)
+    assert both["frames"]["tool"] == [0, 0, 300, 0, 0, 0] and both["frames"]["soft_limits"] == soft
+    assert send(framed, "frames")["frames"] == both["frames"]
+    saved = load_frames(tmp_path / "frames.toml")
+    assert saved == framed.controller.frames and saved.soft_limits.max_tilt_deg == 10
+    cleared = send(framed, "clear_frames")
+    assert cleared["frames"]["tool"] == [0] * 6 and load_frames(tmp_path / "frames.toml").tool == (0,) * 6
+
+
+@pytest.mark.parametrize("fields, fragment", [
+    ({"tool": [0, 0, 300]}, "six numbers"),
+    ({"work": [0, 0, 0, 0, 0, 200]}, "yaw 200 deg is outside [-180, 180] deg"),
+    ({"soft_limits": {"max_tilt_deg": 95}}, "max_tilt_deg"),
+    ({"soft_limits": {"lower": [1, 2, 3, 4, 5, 6], "upper": [0, 2, 3, 4, 5, 6]}}, "below its upper bound"),
+    ({"pivot": [0, 0, 300]}, "pivot"),
+])
+def test_bad_frames_are_refused_naming_the_problem_and_change_nothing(framed, fields, fragment) -> None:
+    reply = send(framed, "set_frames", **fields)
+    assert reply["error"]["code"] == "invalid_request" and fragment in reply["error"]["message"]
+    assert framed.controller.calls == []
+
+
+def test_a_failed_save_keeps_the_frames_in_force(nominal: Geometry, tmp_path: Path) -> None:
+    (tmp_path / "a file").write_text("")
+    unwritable = start_service(nominal, tmp_path, frames_file=tmp_path / "a file" / "frames.toml")
+    try:
+        reply = send(unwritable, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+        assert reply["error"]["code"] == "file_not_found" and "the ones before stay in force" in reply["error"]["message"]
+        assert unwritable.controller.frames.tool == (0,) * 6
+    finally:
+        unwritable.close()
+
+
+def test_the_command_line_sets_shows_and_moves_in_frames(framed, capsys) -> None:
+    api = ["--api", framed.api]
+    assert main(["frames", "--tool", "z=300", "--soft-lower", "x=-50", "--soft-upper", "x=50", *api]) == 0
+    out = capsys.readouterr().out
+    assert "tool frame     x    0.000 mm  y    0.000 mm  z  300.000 mm" in out
+    assert "soft limits    x -50..50 mm" in out
+    assert framed.controller.frames.soft_limits.lower[0] == -50
+    assert main(["frames", *api]) == 0 and "soft limits    x -50..50 mm" in capsys.readouterr().out
+    assert main(["enable", *api]) == 0
+    assert main(["move", "--frame", "tool", "--relative", "pitch=5", *api]) == 0
+    assert framed.controller.frames_of_moves[-1] == (Frame.TOOL, True)
+    assert main(["frames", "--clear", "--tool", "z=1", *api]) == 2
+    assert "--clear takes no other frame option" in capsys.readouterr().err
+    assert main(["frames", "--clear", *api]) == 0 and "frames         none" in capsys.readouterr().out
+
+
+def test_the_command_line_knows_every_frame_the_controller_does() -> None:
+    assert FRAMES == tuple(frame.value for frame in Frame)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("tool = [0, 0, 300", "not valid TOML"),
+    ("[soft_limits.lower]\ntilt = 3\n", "soft_limits.lower: unknown axis tilt; the axes are x, y, z, roll, pitch, yaw"),
+    ("tool = [0, 0, 300, 0, 0, 0]\npivot = 1\n", "pivot"),
+])
+def test_a_frames_file_that_cannot_be_used_is_named_with_the_problem(tmp_path: Path, text, fragment) -> None:
+    from hexactl.adapters.files.frames_file import FramesFileError
+
+    path = tmp_path / "frames.toml"
+    path.write_text(text)
+    with pytest.raises(FramesFileError, match=str(path)) as refused:
+        load_frames(path)
+    assert fragment in str(refused.value)
