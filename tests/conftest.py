@@ -19,6 +19,16 @@ HAS_VCAN0 = os.path.exists("/sys/class/net/vcan0")
 IN_UML = os.environ.get("HEXACTL_IN_UML") == "1"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _session_working_directory(tmp_path_factory):
+    """Fixtures wider than a test (a module's service) start in a working directory of the
+    session's, not in the checkout: a service writes ./frames.toml, ./recordings, … there."""
+    before = os.getcwd()
+    os.chdir(tmp_path_factory.mktemp("session-cwd"))
+    yield
+    os.chdir(before)
+
+
 @pytest.fixture(autouse=True)
 def _working_directory(tmp_path_factory, monkeypatch):
     """Each test runs in an empty working directory of its own: a service started with its
