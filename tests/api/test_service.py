@@ -21,10 +21,10 @@ from tools.serving import serve, terminate
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
 
 
-def wait_for(condition: Callable[[], object], what: str) -> object:
+def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT_S) -> object:
     """Poll ``condition`` until it returns something true (not a timing assertion: the
     bound only turns a hang into a failure)."""
-    deadline = time.monotonic() + WAIT_S
+    deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         value = condition()
         if value:

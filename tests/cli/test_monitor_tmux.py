@@ -7,19 +7,19 @@ tmux server of its own (``-L hexactl-test-<pid>-<n>``), killed at the end."""
 
 from __future__ import annotations
 
+import functools
 import itertools
 import os
 import shlex
 import subprocess
 import sys
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
-from hexactl.application.service import Service, ServiceConfig
+from tests.api.test_service import wait_for as service_wait_for
 from tests.reliability.support import recover
 from tools._debian import ensure_executables
 
@@ -30,15 +30,7 @@ LONG_MOVE = {"pose": [0, 0, 80, 0, 0, 5], "duration": 60.0}  # still moving when
 _servers = itertools.count()
 
 
-def wait_for(condition: Callable[[], object], what: str) -> object:
-    """Poll ``condition`` until it returns something true (the bound turns a hang into a failure)."""
-    deadline = time.monotonic() + WAIT_S
-    while time.monotonic() < deadline:
-        value = condition()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
+wait_for = functools.partial(service_wait_for, timeout_s=WAIT_S)
 
 
 class Terminal:
@@ -77,24 +69,10 @@ def tmux() -> str:
     return ensure_executables({"tmux": "tmux"}, lambda line: print(line, file=sys.stderr))["tmux"]
 
 
-@pytest.fixture(scope="module")
-def service(tmp_path_factory) -> Iterator[Service]:
-    running = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(tmp_path_factory.mktemp("data"),)))
-    yield running
-    running.close()
-
-
 @pytest.fixture
-def client(service) -> Iterator[HexactlClient]:
-    with HexactlClient(service.api_endpoint, timeout_s=WAIT_S) as client:
-        yield client
-
-
-@pytest.fixture
-def terminal(tmux, service) -> Iterator[Terminal]:
+def terminal(tmux, running) -> Iterator[Terminal]:
     command = shlex.join(["env", f"PYTHONPATH={ROOT}", sys.executable, "-m", "hexactl.adapters.cli.main", "monitor",
-                          "--api", service.api_endpoint, "--telemetry", service.telemetry_endpoint])
+                          "--api", running.api_endpoint, "--telemetry", running.telemetry_endpoint])
     opened = Terminal(tmux, f"cd {shlex.quote(str(ROOT))} && {command}")
     yield opened
     opened.kill()
@@ -138,23 +116,24 @@ def test_the_monitor_shows_the_values_with_units_in_place_and_its_keys_stop_the_
     assert terminal.run("display-message", "-p", "-t", "monitor", "#{history_size}").strip() == "0"
 
 
-def test_leaving_while_the_platform_moves_says_how_to_stop_it(terminal, client) -> None:
+def _leave_while_moving(terminal: Terminal, client: HexactlClient, key: str, exit_status: int) -> str:
+    """Set the platform moving under the monitor and leave it with ``key``: the screen after."""
     terminal.wait_for_screen("hexactl monitor", "x mm")
     moving(client)
     terminal.wait_for_screen("moving")
-    terminal.keys("q")
-    screen = terminal.wait_for_screen("monitor exited 0")
+    terminal.keys(key)
+    return terminal.wait_for_screen(f"monitor exited {exit_status}")
+
+
+def test_leaving_while_the_platform_moves_says_how_to_stop_it(terminal, client) -> None:
+    screen = _leave_while_moving(terminal, client, "q", 0)
     assert "left while the platform moves (it is moving); it goes on: `hexactl stop` stops it" in screen
     assert status(client)["motion"] == "moving"  # leaving stopped nothing
     client.call("stop")
 
 
 def test_ctrl_c_leaves_with_the_terminal_restored(terminal, client) -> None:
-    terminal.wait_for_screen("hexactl monitor", "x mm")
-    moving(client)
-    terminal.wait_for_screen("moving")
-    terminal.keys("C-c")
-    screen = terminal.wait_for_screen("monitor exited 130")
+    screen = _leave_while_moving(terminal, client, "C-c", 130)
     assert "`hexactl stop` stops it" in screen
     client.call("stop")
     # The shell's terminal is back in canonical mode with echo: a typed line shows and runs.

@@ -29,7 +29,7 @@ import csv
 import hashlib
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from math import isfinite
 from pathlib import Path
@@ -98,15 +98,8 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
 
     problems: list[RowProblem] = []
     legs, readings, lines, values = [], [], [], []
-    for number, line in rows:
-        fields, numbers, row_problems = _row(line, position, required)
-        leg = numbers.get("leg", 0.0)
-        if not row_problems and (problem := _leg_problem(leg, fields[position["leg"]])):
-            row_problems.append(problem)
-        if row_problems:
-            problems.append(RowProblem(number, "; ".join(row_problems)))
-            continue
-        legs.append(int(leg))
+    for number, leg, numbers in _valid_rows(rows, position, required, problems):
+        legs.append(leg)
         readings.append([numbers[name] for name in READING_COLUMNS])
         lines.append(number)
         values.append([numbers[name] for name in pose_columns] if pose_columns
@@ -284,6 +277,21 @@ class PlanRows:
     problems: tuple[RowProblem, ...]
 
 
+def _valid_rows(rows: Iterable[tuple[int, str]], position: dict[str, int], required: Sequence[str],
+                problems: list[RowProblem]) -> Iterator[tuple[int, int, dict[str, float]]]:
+    """(line, leg, values) of each row whose ``required`` values are finite numbers and
+    whose leg is 1–6; each other row goes into ``problems`` with what is wrong with it."""
+    for number, line in rows:
+        fields, numbers, row_problems = _row(line, position, required)
+        leg = numbers.get("leg", 0.0)
+        if not row_problems and (problem := _leg_problem(leg, fields[position["leg"]])):
+            row_problems.append(problem)
+        if row_problems:
+            problems.append(RowProblem(number, "; ".join(row_problems)))
+            continue
+        yield number, int(leg), numbers
+
+
 def parse_plan(text: str, source: str) -> PlanRows:
     """Parse plan CSV ``text`` (:func:`format_plan`'s layout; ``#`` comments and blank
     lines anywhere, columns in any order, others ignored). A row with a missing,
@@ -298,15 +306,8 @@ def parse_plan(text: str, source: str) -> PlanRows:
             "`hexactl plan-leglock` writes it, has leg, x, y, z, roll, pitch, yaw and l1_setpoint … l6_setpoint)")
     position = {name: index for index, name in enumerate(header)}
     legs, poses, lines, problems = [], [], [], []
-    for number, line in rows:
-        fields, numbers, row_problems = _row(line, position, required)
-        leg = numbers.get("leg", 0.0)
-        if not row_problems and (problem := _leg_problem(leg, fields[position["leg"]])):
-            row_problems.append(problem)
-        if row_problems:
-            problems.append(RowProblem(number, "; ".join(row_problems)))
-            continue
-        legs.append(int(leg))
+    for number, leg, numbers in _valid_rows(rows, position, required, problems):
+        legs.append(leg)
         poses.append(tuple(numbers[name] for name in POSE_AXES))
         lines.append(number)
     return PlanRows(tuple(legs), tuple(poses), tuple(lines), tuple(problems))
