@@ -1,7 +1,8 @@
 """Motion sequences: the validated model, the built-in test motions and the dwell records.
 
-A sequence is a name and waypoints (poses relative to the zero posture, mm and deg; each
-with an optional duration or speed, and a dwell). Its file format (TOML) and the dwell
+A sequence is a name and waypoints (poses relative to the zero posture, mm and deg, or
+with ``frame = "work"`` the tool's poses in the operator's work frame; each with an
+optional duration or speed, and a dwell). Its file format (TOML) and the dwell
 records' table are :mod:`hexactl.adapters.files.sequence_file`'s. A sequence is validated
 whole before anything moves (every move path, see :mod:`hexactl.control.planning`).
 During playback the controller records, at the end of each waypoint's dwell (the platform
@@ -12,13 +13,13 @@ from __future__ import annotations
 
 import difflib
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, Waypoint, pace_problem
-from hexactl.kinematics.axes import RelativeMmDeg
+from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.geometry import describe_validation_error
 
 
@@ -58,7 +59,8 @@ class Paced(BaseModel):
 class SequenceWaypoint(Paced):
     """One ``[[waypoint]]`` table."""
 
-    pose: RelativeMmDeg = Field(description="relative to the zero posture, mm and deg")
+    pose: RelativeMmDeg = Field(description="mm and deg: relative to the zero posture, or the tool's pose in the work "
+                                "frame when the sequence's frame is work")
     dwell: Dwell = 0.0
 
 
@@ -69,10 +71,14 @@ class MotionSequence(BaseModel):
 
     name: str = Field(min_length=1)
     description: str = ""
+    frame: Literal["zero", "work"] = Field(default="zero", description="what the poses are: relative to the zero "
+                                           "posture (zero), or the tool's poses in the work frame (work)")
     waypoints: tuple[SequenceWaypoint, ...] = Field(alias="waypoint", min_length=1)
 
     def planning_waypoints(self) -> list[Waypoint]:
-        return [Waypoint(w.pose, w.duration, w.speed, w.dwell) for w in self.waypoints]
+        in_work = self.frame == "work"
+        return [Waypoint(ToolInWorkMmDeg._make(w.pose) if in_work else w.pose, w.duration, w.speed, w.dwell)
+                for w in self.waypoints]
 
 
 def sequence_from_mapping(data: object, source: str = "sequence") -> MotionSequence:

@@ -115,3 +115,17 @@ def test_a_frames_file_that_cannot_be_used_is_named_with_the_problem(tmp_path: P
     with pytest.raises(FramesFileError, match=str(path)) as refused:
         load_frames(path)
     assert fragment in str(refused.value)
+
+
+def test_a_sequence_says_its_frame_inline_and_in_a_file(framed, tmp_path: Path) -> None:
+    send(framed, "enable")
+    inline = {"name": "tilts", "frame": "work", "waypoints": [{"pose": [0, 0, 0, 5, 0, 0]}]}
+    send(framed, "play", sequence=inline)
+    assert framed.controller.sequence.frame == "work"
+    assert type(framed.controller.sequence.planning_waypoints()[0].pose).__name__ == "ToolInWorkMmDeg"
+    (tmp_path / "tilts.toml").write_text('name = "tilts"\nframe = "work"\n[[waypoint]]\npose = [0, 0, 0, 0, 5, 0]\n')
+    send(framed, "play", sequence="tilts.toml")
+    assert framed.controller.sequence.frame == "work"
+    (tmp_path / "bad.toml").write_text('name = "bad"\nframe = "tool"\n[[waypoint]]\npose = [0, 0, 0, 0, 5, 0]\n')
+    refused = send(framed, "play", sequence="bad.toml")
+    assert refused["error"]["code"] == "invalid_sequence" and "frame" in refused["error"]["message"]

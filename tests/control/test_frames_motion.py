@@ -173,3 +173,26 @@ def test_soft_limits_never_allow_what_the_hardware_refuses(rig, goal, low, high,
         assert not soft.ok
     elif hardware.ok:
         assert soft.ok
+
+
+def test_a_sequence_in_the_work_frame_turns_about_the_pivot_at_every_waypoint(rig):
+    from hexactl.control.sequences import MotionSequence
+
+    assert rig.controller.set_frames(TOOL_ABOVE).ok
+    rig.enabled()
+    assert rig.controller.move([0, 0, 0, 0, 0, 1]).ok  # the sequence starts from rest in other coordinates
+    rig.settle()
+    tilts = MotionSequence(name="tilts", frame="work", waypoints=[
+        {"pose": [0, 0, 0, 6, 0, 0], "dwell": 0.01}, {"pose": [0, 0, 0, 0, -6, 0], "dwell": 0.01},
+        {"pose": [0, 0, 0, 0, 0, 0]}])
+    assert rig.controller.validate_sequence(tilts).ok
+    pivot = _tool_point(rig, TOOL_ABOVE)  # yawed about the platform's axis, which runs through it
+    assert rig.controller.play(tilts).ok
+    deviations = []
+    while not deviations or rig.controller.snapshot.sequence is not None:
+        rig.run()
+        deviations.append(np.linalg.norm(np.subtract(_tool_point(rig, TOOL_ABOVE), pivot)))
+    assert len(deviations) > 100 and max(deviations) < MICROMETRE
+    records = rig.controller.sequence_records().records
+    assert len(records) == 3 and records[0].pose_command[3] == pytest.approx(6.0, abs=1e-9)  # dwell records: zero frame
+    rig.assert_setpoints_safe()

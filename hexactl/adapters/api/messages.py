@@ -165,6 +165,8 @@ class InlineSequence(_Message):
 
     name: str = Field(min_length=1, max_length=200)
     description: str = ""
+    frame: Literal["zero", "work"] = Field(default="zero", description="the waypoints' poses: relative to the zero "
+                                           "posture (zero), or the tool's poses in the work frame (work)")
     waypoints: list[Waypoint] = Field(min_length=1, max_length=1000)
 
 

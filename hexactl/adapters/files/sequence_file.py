@@ -4,6 +4,7 @@ File format (TOML; poses relative to the zero posture, mm and deg)::
 
     name = "my_sweep"                 # required
     description = "optional text"
+    frame = "zero"                    # optional: "work" makes the poses the tool's in the work frame
 
     [[waypoint]]
     pose = [100.0, 0.0, 0.0, 0.0, 0.0, 0.0]   # [x, y, z, roll, pitch, yaw]
