@@ -182,7 +182,8 @@ _KEYED = re.compile(r"^\s*(x|y|z|roll|pitch|yaw)\s*=\s*(\S+)\s*$")
 
 
 def parse_pose_argument(text: str) -> list[float]:
-    """A pose typed on the command line, relative to the zero posture (mm, deg).
+    """A pose typed on the command line, mm and deg (relative to the zero posture, or in the
+    frame the command names).
 
     Either six comma-separated numbers ``X,Y,Z,ROLL,PITCH,YAW`` or ``axis=value`` pairs
     separated by commas, missing axes 0: ``x=600``, ``pitch=-20,yaw=5``.
