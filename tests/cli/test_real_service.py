@@ -5,8 +5,11 @@ and where Ctrl-C left the platform (hexactl issue 16)."""
 
 from __future__ import annotations
 
+import os
 import re
 import signal
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -101,6 +104,53 @@ def test_the_readme_session_runs_as_written(served, directory, client, monkeypat
     tolerating_stalls(client, scenario, cleanup=lambda: recording.unlink(missing_ok=True))
 
 
+README = Path(__file__).resolve().parents[2] / "README.md"
+INTERACTIVE = ("hexactl monitor",)
+"""README lines a script cannot run (the monitor's screen: tests/cli/test_monitor_tmux.py)."""
+
+
+def readme_session() -> list[str]:
+    """The command lines of README.md's "Running the controller" session, comments cut."""
+    text = README.read_text(encoding="utf-8")
+    block = text[text.index("From another terminal in the same directory"):]
+    block = block[block.index("```sh\n") + len("```sh\n"):block.index("\n```", block.index("```sh\n"))]
+    lines = [re.sub(r"\s+#.*$", "", line).strip() for line in block.splitlines()]
+    return [line for line in lines if line and line not in INTERACTIVE]
+
+
+def test_the_readme_session_runs_line_by_line_as_written(served, directory, client, tmp_path) -> None:
+    """Every line of the README's session, through a shell, in the service's working
+    directory, with ``hexactl`` on the PATH and the endpoint from ``HEXACTL_API``: each
+    exits 0. ``demo-out/calibration.toml`` stands for ``hexactl demo``'s result."""
+    (directory / "demo-out").mkdir(exist_ok=True)
+    demo = load_geometry(default_config_path()).model_copy(update={"name": "demo", "zero_lengths": (1751.0,) * 6})
+    (directory / "demo-out" / "calibration.toml").write_text(geometry_to_toml(demo))
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "hexactl").write_text(f"#!/bin/sh\nexec {sys.executable} -m hexactl.adapters.cli.main \"$@\"\n")
+    (bin_dir / "hexactl").chmod(0o755)
+    environment = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "HEXACTL_API": served.api,
+                   "PYTHONPATH": str(README.parent)}
+    session = readme_session()
+    assert len(session) > 12 and "hexactl load-calibration demo-out/calibration.toml" in session
+
+    def scenario() -> None:
+        client.request("disable")  # as a service just started: the session enables it
+        for line in session:
+            ran = subprocess.run(["bash", "-c", line], cwd=directory, env=environment, capture_output=True, text=True,
+                                 timeout=300)
+            assert ran.returncode == 0, f"{line!r} exited {ran.returncode}:\n{ran.stdout}{ran.stderr}"
+
+    def cleanup() -> None:
+        (directory / "recordings" / "run1.csv").unlink(missing_ok=True)
+        client.request("reset")
+
+    try:
+        tolerating_stalls(client, scenario, cleanup)
+    finally:
+        client.request("clear_frames")
+
+
 def test_a_leg_locked_move_prints_the_goal_it_runs_to(served, client, capsys) -> None:
     def scenario() -> None:
         assert hexactl(served, "leg-lock", "3") == 0
@@ -140,3 +190,26 @@ def test_ctrl_c_mid_move_logs_where_the_platform_came_to_rest(tmp_path) -> None:
     braked = re.search(rf"platform (at rest|still moving) at {pose} \(commanded, relative to the zero posture; "
                        rf"measured {pose}\)", running.log)
     assert braked or re.search(rf"fault at {pose} \(measured\): nothing to brake", running.log), running.log
+
+
+def test_wait_returns_at_rest_and_says_when_a_pause_or_an_estop_holds_the_motion(served, client, capsys) -> None:
+    def scenario() -> None:
+        assert hexactl(served, "move", "z=30", "--duration", "1", "--wait") == 0
+        assert at_rest(client) and status(client)["pose_command"][2] == pytest.approx(30.0, abs=1e-6)
+        playing = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "play", "x_sweep", "--wait",
+                                    "--api", served.api], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for(lambda: (status(client).get("sequence") or {}).get("phase") == "moving", "the sequence to play")
+        client.request("pause")
+        _, err = playing.communicate(timeout=WAIT_S)
+        assert playing.returncode == 1 and "sequence x_sweep is paused: `hexactl resume` or `hexactl abort`" in err
+        resuming = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "resume", "--wait",
+                                     "--api", served.api], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for(lambda: status(client)["motion"] == "moving", "the sequence to resume")
+        client.request("estop")
+        _, err = resuming.communicate(timeout=WAIT_S)
+        assert resuming.returncode == 1 and "the motion ended: the controller is estop" in err
+
+    try:
+        tolerating_stalls(client, scenario)
+    finally:
+        client.request("reset")

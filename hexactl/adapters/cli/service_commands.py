@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       help="zero: the platform relative to the zero posture (default); work: the tool's pose in the "
                       "work frame, turning about the pivot point; tool: with --relative, along and about the tool's axes")
     move.add_argument("--relative", action="store_true", help="POSE is a displacement from where the motion is headed")
+    _waiting(move)
     move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). In leg-lock mode the goal is projected "
                    "onto the locked leg's constraint: the reply prints the goal run to when it differs. "
                    "Frames: hexactl frames.")
@@ -80,8 +82,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound), a .toml "
                       "sequence file or a .csv plan from plan-leglock: a file here is sent by its absolute path, any "
                       "other name is looked up in the service's data directories (serve puts examples in ./sequences)")
+    _waiting(play)
     command("pause", "pause the playing sequence", "pause")
-    command("resume", "resume the paused sequence", "resume")
+    _waiting(command("resume", "resume the paused sequence", "resume"))
     command("abort", "abandon the playing sequence (halts smoothly)", "abort")
     leg_lock = command("leg-lock", "lock one leg at its current length (leg-lock calibration mode)", _leg_lock_request)
     leg_lock.add_argument("leg", type=int, choices=range(1, 7), metavar="N", help="leg 1–6")
@@ -162,6 +165,11 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
+def _waiting(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--wait", action="store_true", help="then wait until the platform is at rest and the sequence "
+                        "over (exit 1, saying why, if a fault, an E-stop or a pause ends or holds it)")
+
+
 def _client_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(add_help=False, parents=[connection_parser()])
     parser.add_argument("--api", metavar="ENDPOINT", help=f"the service's command endpoint (default $HEXACTL_API, else the "
@@ -232,25 +240,62 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
 
 
 def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str, Any]) -> int:
-    """Send one command, print the reply; the exit status says ok / refused / no answer."""
+    """Send one command, print the reply; the exit status says ok / refused / no answer.
+    With ``--wait``, then wait for the motion to end (:func:`wait_until_at_rest`)."""
     from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
 
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     try:
         with client:
             reply = client.request(cmd, **fields)
+            if arguments.json:
+                print(json.dumps(reply))
+            elif reply.get("ok"):
+                if cmd == "status":
+                    print(f"{'service':<15}{arguments.api} (from {arguments.origins['api']})")
+                print(format_ok_reply(cmd, reply, fields), flush=True)
+            else:
+                print(format_error_reply(reply), file=sys.stderr)
+            if not reply.get("ok"):
+                return EXIT_REFUSED
+            return wait_until_at_rest(client, arguments.command, reply) if getattr(arguments, "wait", False) else EXIT_OK
     except ServiceUnavailable as error:
         print(f"hexactl {arguments.command}: {error}", file=sys.stderr)
         return EXIT_NO_ANSWER
-    if arguments.json:
-        print(json.dumps(reply))
-    elif reply.get("ok"):
-        if cmd == "status":
-            print(f"{'service':<15}{arguments.api} (from {arguments.origins['api']})")
-        print(format_ok_reply(cmd, reply, fields))
-    else:
-        print(format_error_reply(reply), file=sys.stderr)
-    return EXIT_OK if reply.get("ok") else EXIT_REFUSED
+
+
+WAIT_POLL_S = 0.1
+WAIT_SLACK_S = 30.0
+"""``--wait`` gives up when a motion has gone on WAIT_SLACK_S longer than its plan said
+(the reply's ``duration``, telemetry's ``remaining_s``), a stuck platform: it waits, it
+does not judge time. A sequence that goes on from waypoint to waypoint is progress."""
+
+
+def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
+    """``--wait``: poll the service until the platform is at rest and no sequence plays.
+    0 then; 1 (saying why) when a fault, an E-stop or a disable ended the motion, the
+    sequence is paused, or the motion goes on well past its plan."""
+    deadline = time.monotonic() + float(reply.get("duration") or 0.0) + WAIT_SLACK_S
+    while True:
+        status = client.request("status")["status"]
+        sequence = status.get("sequence")
+        remaining_s = status.get("remaining_s") or 0.0
+        if remaining_s > 0 or (sequence and sequence["phase"] == "dwelling"):  # a plan still running: progress
+            deadline = max(deadline, time.monotonic() + remaining_s + WAIT_SLACK_S)
+        problem = None
+        if status["state"] != "enabled":
+            faults = "; ".join(fault["message"] for fault in status.get("faults") or [])
+            problem = f"the motion ended: the controller is {status['state']}" + (f" ({faults})" if faults else "")
+        elif sequence and sequence["phase"] == "paused":
+            problem = f"sequence {sequence['name']} is paused: `hexactl resume` or `hexactl abort`"
+        elif status["motion"] == "holding" and sequence is None:
+            return EXIT_OK
+        elif time.monotonic() > deadline:
+            problem = f"still moving {WAIT_SLACK_S:g} s after its plan said it would be at rest"
+        if problem:
+            print(f"hexactl {command}: {problem}", file=sys.stderr)
+            return EXIT_REFUSED
+        time.sleep(WAIT_POLL_S)
 
 
 def run_keys(arguments: argparse.Namespace) -> int:
