@@ -11,6 +11,8 @@ import os
 import subprocess
 import sys
 import termios
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +21,16 @@ from rich.console import Console
 
 from hexactl.adapters.api.client import ServiceUnavailable
 from hexactl.adapters.cli.main import main
-from hexactl.adapters.cli.monitor import ESCAPE, KEY_COMMANDS, LEGEND, KeyReader, key_result, say_if_moving, view
+from hexactl.adapters.cli.monitor import (
+    ESCAPE,
+    KEY_COMMANDS,
+    LEGEND,
+    KeyReader,
+    KeyThread,
+    key_result,
+    say_if_moving,
+    view,
+)
 from tests.api.support import start_service
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -110,6 +121,51 @@ def test_a_refusal_an_unknown_key_and_no_answer_are_said() -> None:
     assert unknown.sent == []
     silent = RecordingClient(ServiceUnavailable("no answer from tcp://x within 5 s"))
     assert key_result(" ", silent, ServiceUnavailable) == "stop: no answer from tcp://x within 5 s"
+
+
+def test_an_estop_key_does_not_wait_behind_a_command_the_service_is_slow_to_answer() -> None:
+    """Space, then ``e``, while the service does not answer the stop: the E-stop goes out
+    on a connection of its own and is answered; the stop's answer comes later."""
+    release = threading.Event()
+
+    class Client(RecordingClient):
+        def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+            if cmd == "stop":
+                release.wait(10)
+            return super().request(cmd, **fields)
+
+        def __enter__(self) -> "Client":
+            return self
+
+        def __exit__(self, *exception: object) -> None:
+            pass
+
+    class Keys:
+        def __init__(self) -> None:
+            self.keys = [" ", "e"]
+
+        def read(self, timeout_s: float) -> str | None:
+            if self.keys:
+                return self.keys.pop(0)
+            time.sleep(timeout_s)
+            return None
+
+    said: list[str] = []
+    thread = KeyThread(Keys(), lambda: Client({"ok": True, "message": "done"}), said.append)  # type: ignore[arg-type]
+    thread.start()
+    try:
+        deadline = time.monotonic() + 10
+        while "estop: ok: done" not in said:
+            assert time.monotonic() < deadline, said
+            time.sleep(0.01)
+        assert "stop: ok: done" not in said  # still waiting for its answer
+        release.set()
+        while "stop: ok: done" not in said:
+            assert time.monotonic() < deadline, said
+            time.sleep(0.01)
+    finally:
+        release.set()
+        thread.stop()
 
 
 def test_keys_from_a_terminal_escape_alone_or_in_a_sequence_and_the_mode_restored() -> None:

@@ -139,10 +139,10 @@ def _run_screen(arguments: argparse.Namespace) -> int:
     received_at = time.monotonic()
     status = StatusLine(f"keys send commands to {arguments.api}")
     exit_status = EXIT_OK
-    with (connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout) as client,
-          connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry,
+    with (connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry,
           KeyReader(sys.stdin.fileno()) as reader):
-        keys = KeyThread(reader, client, status.set)
+        keys = KeyThread(reader, lambda: connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout),
+                         status.set)
         keys.start()
         try:
             with Live(console=Console(), screen=True, auto_refresh=False, redirect_stdout=False, redirect_stderr=False) as live:
@@ -212,14 +212,16 @@ def _readable(fd: int, timeout_s: float) -> bool:
 
 
 class KeyThread(threading.Thread):
-    """Reads keys from ``reader`` and sends each one's command with ``client`` (its own
-    until :meth:`stop` returns) as soon as it is read; says what happened through ``say``. ``quit`` is set
-    when the quit key is read (or the thread fails)."""
+    """Reads keys from ``reader`` and sends each one's command as soon as it is read, on a
+    connection of its own (``connect()``) from a thread of its own, so that no key waits
+    behind another's command (an E-stop behind a ``stop`` the service is slow to answer);
+    says what came of each through ``say``. ``quit`` is set when the quit key is read (or
+    the thread fails)."""
 
-    def __init__(self, reader: KeyReader, client: HexactlClient, say: Callable[[str], None]) -> None:
+    def __init__(self, reader: KeyReader, connect: Callable[[], HexactlClient], say: Callable[[str], None]) -> None:
         super().__init__(name="hexactl-monitor-keys", daemon=True)
         self._reader = reader
-        self._client = client
+        self._connect = connect
         self._say = say
         self._stopping = threading.Event()
         self.quit = threading.Event()
@@ -237,11 +239,20 @@ class KeyThread(threading.Thread):
                 if key == QUIT_KEY:
                     return
                 if key is not None:
-                    self._say(key_result(key, self._client, ServiceUnavailable))
+                    threading.Thread(target=self._send, args=(key, ServiceUnavailable), name="hexactl-monitor-key",
+                                     daemon=True).start()
         except Exception as error:  # shown rather than lost with the thread: the keys no longer work
             self._say(f"the keys stopped working ({type(error).__name__}: {error}): use `hexactl stop` / `hexactl estop`")
         finally:
             self.quit.set()
+
+
+    def _send(self, key: str, unavailable: type[Exception]) -> None:
+        try:
+            with self._connect() as client:
+                self._say(key_result(key, client, unavailable))
+        except Exception as error:  # shown rather than lost with the thread (bad keys, a closed context)
+            self._say(f"{key_name(key)}: not sent ({type(error).__name__}: {error}): use `hexactl estop`")
 
 
 def key_result(key: str, client: HexactlClient, unavailable: type[Exception]) -> str:
