@@ -46,7 +46,7 @@ from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, Unknown
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
 from hexactl.kinematics.axes import validate_pose_values
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.soft_limits import SoftLimits
+from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS
 
 
 class Controller:
@@ -265,7 +265,7 @@ class Controller:
         return PlanningContext(s.active, config.motion, config.loop.period_s, budget, s.lock,
                                config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg,
                                config.lock_cycle_iterations, frames.frames(s.active.home),
-                               frames.soft_limits if frames.soft_limits != SoftLimits() else None)
+                               None if frames.soft_limits == NO_SOFT_LIMITS else frames.soft_limits)
 
     def _plan_move(self, s: CoreSnapshot, pose: Sequence[float], duration: float | None, speed: float | None,
                    frame: Frame, relative: bool) -> Plan:

@@ -26,7 +26,7 @@ from hexactl.kinematics.axes import (
     ToolInWorkMmRad,
 )
 from hexactl.kinematics.frames import Frames, compose, platform_poses, pose_of, transform_of
-from hexactl.kinematics.soft_limits import SoftLimits
+from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS, SoftLimits
 
 MAX_FRAME_OFFSET_MM = 10_000.0
 """How far a frame's origin may be from its parent's along each axis: beyond, a typo."""
@@ -47,7 +47,7 @@ class OperatorFrames(BaseModel):
     work: FramePoseMmDeg = Field(default=ZERO_FRAME, description="the work frame in the zero frame, mm and deg")
     tool: FramePoseMmDeg = Field(default=ZERO_FRAME, description="the tool frame (origin: the pivot point) in the "
                                  "platform's frame, mm and deg")
-    soft_limits: SoftLimits = Field(default=SoftLimits(), description="bounds on the tool's pose in the work frame")
+    soft_limits: SoftLimits = Field(default=NO_SOFT_LIMITS, description="bounds on the tool's pose in the work frame")
 
     @field_validator("work", "tool")
     @classmethod

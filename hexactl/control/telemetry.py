@@ -92,6 +92,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
     s = report.snapshot
     home = s.active.home
     in_work = frames.frames(home)
+    moving_to = s.goal if s.motion is MotionState.MOVING else None
     stats = replace(report.stats, guard_clamps=s.clamped_cycles, fk_failures=s.fk_failures)
     return Telemetry(
         t=s.t_ns / 1e9,
@@ -107,12 +108,11 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         faults=s.faults,
         loop=stats,
         realtime=report.realtime,
-        goal=convert(s.goal, s.frames, None, home).in_degrees()
-        if s.motion is MotionState.MOVING and s.goal is not None else None,
+        goal=None if moving_to is None else convert(moving_to, s.frames, None, home).in_degrees(),
         remaining_s=_remaining_s(s),
         tool_pose_command=convert(s.pose_command, None, in_work, home).in_degrees(),
-        tool_pose_measured=convert(s.pose_measured, None, in_work, home).in_degrees()
-        if s.pose_measured is not None else None,
+        tool_pose_measured=None if s.pose_measured is None
+        else convert(s.pose_measured, None, in_work, home).in_degrees(),
         frames=frames,
     )
 

@@ -86,3 +86,7 @@ def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:
     (mm, deg; orientation Rz·Ry·Rx): element (3, 3) of the rotation is cos(roll)·cos(pitch)."""
     roll, pitch = np.radians(poses_mm_deg[:, 3]), np.radians(poses_mm_deg[:, 4])
     return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
+
+
+NO_SOFT_LIMITS = SoftLimits()
+"""No bound at all: what an operator who set none has."""

@@ -55,6 +55,7 @@ def test_set_frames_merges_saves_and_clears(framed, tmp_path: Path) -> None:
     saved = load_frames(tmp_path / "frames.toml")
     assert saved == framed.controller.frames and saved.soft_limits.max_tilt_deg == 10
     cleared = send(framed, "clear_frames")
+    assert cleared["message"] == "frames cleared: poses relative to the zero posture"
     assert cleared["frames"]["tool"] == [0] * 6 and load_frames(tmp_path / "frames.toml").tool == (0,) * 6
 
 

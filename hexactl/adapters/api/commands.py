@@ -127,7 +127,7 @@ class CommandHandler:
             case SetFramesRequest():
                 return self._set_frames(request)
             case ClearFramesRequest():
-                return self._replace_frames(OperatorFrames())
+                return self._replace_frames(OperatorFrames(), "frames cleared: poses relative to the zero posture")
             case FramesRequest():
                 return {"frames": jsonable(controller.operator_frames())}
         raise AssertionError(f"no handler for {type(request).__name__}")  # the union and this match disagree
@@ -150,7 +150,7 @@ class CommandHandler:
             raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames")) from None
         return self._replace_frames(frames)
 
-    def _replace_frames(self, frames: OperatorFrames) -> dict[str, Any]:
+    def _replace_frames(self, frames: OperatorFrames, message: str | None = None) -> dict[str, Any]:
         """Make ``frames`` the controller's, then save them; if saving fails, the old ones
         are put back (what is in force is what a restart restores)."""
         before = self.controller.operator_frames()
@@ -164,7 +164,7 @@ class CommandHandler:
                 self.controller.set_frames(before)
                 raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{self.frames_file}: the frames could not be saved ({error}); "
                                "the ones before stay in force: free the disk or fix the permissions, then again") from None
-        return {"message": result.message, "frames": jsonable(frames)}
+        return {"message": message or result.message, "frames": jsonable(frames)}
 
     def _load_calibration(self, request: LoadCalibrationRequest) -> dict[str, Any]:
         if request.path is not None:
