@@ -10,17 +10,16 @@ import re
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
-from tests.reliability.support import ATTEMPTS, STALL_FAULTS, recover, status, wait_for
+from tests.reliability.support import recover, status, tolerating_stalls, wait_for
 from tools.serving import HANG_S, Served, serve
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
@@ -46,32 +45,6 @@ def client(served: Served) -> Iterator[HexactlClient]:
 
 def hexactl(served: Served, *arguments: str) -> int:
     return main([*arguments, "--api", served.api, "--timeout", str(WAIT_S)])
-
-
-def stalled(client: HexactlClient) -> bool:
-    """Whether every fault latched is one a held-up loop causes on a loaded host (the
-    actuators' watchdog, COMM_TIMEOUT; the loop's heartbeat or set-point supervision):
-    the service did its job, but not what these tests are about."""
-    faults = status(client)["faults"]
-    watchdog = f"fault bits {Fault.COMM_TIMEOUT:#x}"
-    return bool(faults) and all(fault["code"] in STALL_FAULTS
-                                or (fault["code"] == "actuator_fault" and fault["message"].endswith(watchdog))
-                                for fault in faults)
-
-
-def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], cleanup: Callable[[], None] = lambda: None) -> None:
-    """Run ``scenario``; again from enabled and at rest (``cleanup()`` first) if it failed
-    with only a stall's faults latched, :data:`ATTEMPTS` in all."""
-    for attempt in range(1, ATTEMPTS + 1):
-        try:
-            scenario()
-            return
-        except AssertionError as error:
-            print(f"attempt {attempt} failed: {error!r:.300}; latched: {status(client)['faults']}")
-            if attempt == ATTEMPTS or not stalled(client):
-                raise
-            cleanup()
-            recover(client)
 
 
 def at_rest(client: HexactlClient) -> bool:
