@@ -143,3 +143,10 @@ def test_the_cli_sends_a_plan_in_the_working_directory(service, plan_text, tmp_p
     assert service.controller.calls[-1][1][0].name == "leg3"
     assert main(["play", "x_swep", "--api", service.api]) != 0
     assert "did you mean 'x_sweep'?" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["/.toml", ".toml", "PLAN.CSV", "sub/.csv"])
+def test_a_name_ending_in_a_file_ending_is_looked_up_as_a_file(service, name) -> None:
+    """Found by the fuzz: ``/.toml`` has no suffix to PurePath (a dot file), and was taken
+    for a built-in's name."""
+    assert send(service, "play", sequence=name)["error"]["code"] in ("file_not_found", "forbidden_path")

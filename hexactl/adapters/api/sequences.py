@@ -9,7 +9,6 @@ a ``.csv`` plan as ``hexactl plan-leglock`` writes it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import PurePath
 
 from hexactl.adapters.api.messages import InlineSequence
 from hexactl.adapters.api.paths import DataDirectories
@@ -27,7 +26,7 @@ from hexactl.control.sequences import (
 SEQUENCE_READERS: dict[str, Callable[[str, str], MotionSequence]] = {
     ".toml": sequence_from_toml, ".csv": sequence_from_plan,
 }
-"""A file's reader by its suffix (lower case); any other name is a built-in's."""
+"""A file's reader by how its name ends (in any case); any other name is a built-in's."""
 
 
 def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> MotionSequence:
@@ -39,7 +38,8 @@ def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> M
             document = sequence.model_dump(exclude={"waypoints"})
             document["waypoint"] = [waypoint.model_dump() for waypoint in sequence.waypoints]  # the file's key
             return sequence_from_mapping(document, "sequence")
-        reader = SEQUENCE_READERS.get(PurePath(sequence).suffix.lower())
+        # by how the name ends, not by PurePath's suffix: ".toml" alone is a name without one
+        reader = next((read for ending, read in SEQUENCE_READERS.items() if sequence.lower().endswith(ending)), None)
         if reader is None:
             return builtin_sequence(sequence)
         path, text = data.read_text(sequence, ErrorCode.INVALID_SEQUENCE)
