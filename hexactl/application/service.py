@@ -451,7 +451,9 @@ def _bring_to_rest(controller: LocalController, timeout_s: float) -> None:
     """Brake to rest and disable; E-stop if that does not happen within ``timeout_s``."""
     telemetry = controller.telemetry()
     if telemetry.state != ControlState.ENABLED.value:  # the actuators hold by themselves
-        log.info("%s at %s (measured): nothing to brake", telemetry.state, _pose_text(telemetry.pose_measured))
+        faults = "; ".join(f"{fault.code}: {fault.message}" for fault in telemetry.faults)
+        log.info("%s%s at %s (measured): nothing to brake", telemetry.state, f" ({faults})" if faults else "",
+                 _pose_text(telemetry.pose_measured))
         return
 
     def at_rest() -> bool:  # a sequence dwelling is holding, yet disable would be refused as busy
