@@ -34,6 +34,7 @@ from hexactl.control.config import ControllerConfig  # noqa: E402
 from hexactl.control.frames import Frame, OperatorFrames  # noqa: E402
 from hexactl.control.local_controller import LocalController  # noqa: E402
 from hexactl.control.sequences import MotionSequence  # noqa: E402
+from hexactl.control.waves import WaveSpec  # noqa: E402
 from hexactl.kinematics.inverse import sensor_setpoints  # noqa: E402
 from hexactl.sim.ideal_actuators import IdealActuators  # noqa: E402
 
@@ -42,9 +43,18 @@ TOURS = {
     "lock": [(30, 0, 0, 0, 0, 0), (0, 30, 0, 0, 0, 2), (-30, 0, 0, 0, 0, -2), (0, 0, 0, 0, 0, 0)],
     "frames": [(0, 0, 0, 10, 0, 0), (50, 0, 0, 0, -10, 5), (0, 50, -20, 5, 5, -10), (0, 0, 0, 0, 0, 0)],
     "turns": [(0, 0, 0, 10, 0, 0), (50, 0, 0, 0, -10, 5), (0, 50, -20, 5, 5, -10), (0, 0, 0, 0, 0, 0)],
+    "recording": [(0, 0, 0, 10, 0, 0), (50, 0, 0, 0, -10, 5), (0, 50, -20, 5, 5, -10), (0, 0, 0, 0, 0, 0)],
 }
 """``frames`` and ``turns``: the same poses one move after another, in the work frame about
-a pivot and in the zero frame: the difference is what the frames cost."""
+a pivot and in the zero frame: the difference is what the frames cost. ``recording``: the
+``turns`` moves with the data recorder capturing every cycle (its rows taken between the
+steps, as the loop's exchange does in its slack): the difference is what recording costs."""
+WAVES = {
+    "wave": WaveSpec(frequency_hz=1.0, cycles=4, axes={"z": {"amplitude": 3.0}, "roll": {"amplitude": 0.3, "phase_deg": 45}}),
+    "wave_tool": WaveSpec(frame=Frame.TOOL, frequency_hz=0.8, cycles=4, axes={"roll": {"amplitude": 0.5}}),
+}
+"""Waves played one after the other (issue 12): ``wave`` on z and roll in the zero frame,
+beside ``turns``' moves; ``wave_tool`` a roll about the pivot of :data:`PIVOT`, beside ``frames``."""
 PIVOT = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0))
 """The ``frames`` scenario's: a tool point 300 mm above the platform, the work frame on it."""
 
@@ -65,7 +75,7 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
     actuators = IdealActuators(sensor_setpoints(geometry.legs, geometry.home.in_radians()), clock_ns=clock)
     controller = LocalController.in_thread(actuators, geometry, "nominal", config=ControllerConfig(), clock_ns=clock)
     period_ns = controller.config.loop.period_ns
-    tour = MotionSequence(name=f"bench_{scenario}", waypoints=[{"pose": pose} for pose in TOURS[scenario]])
+    tour = MotionSequence(name=f"bench_{scenario}", waypoints=[{"pose": pose} for pose in TOURS.get(scenario, TOURS["move"])])
 
     def step() -> int:
         clock.now_ns += period_ns
@@ -82,18 +92,24 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
     if scenario == "lock":
         _expect(controller.leg_lock(1))
         step()
-    frame = Frame.WORK if scenario == "frames" else Frame.ZERO
+    frame = Frame.WORK if scenario in ("frames", "wave_tool") else Frame.ZERO
     if frame is Frame.WORK:
         _expect(controller.set_frames(PIVOT))
-    goals = itertools.cycle(TOURS[scenario])
+    if scenario == "recording":
+        _expect(controller.record(1, "bench", 1, 1 << 40))
+    goals = itertools.cycle(TOURS.get(scenario, ()))
     spent_ns = 0
     for _ in range(cycles):
-        if scenario in ("frames", "turns"):  # moves one after the other: a sequence's waypoints are in the zero frame
+        if scenario in WAVES:
+            if controller.snapshot.motion.value == "holding":
+                _expect(controller.wave(WAVES[scenario]))
+        elif scenario in ("frames", "turns", "recording"):  # moves one after the other: a sequence's waypoints are in the zero frame
             if controller.snapshot.motion.value == "holding":
                 _expect(controller.move(next(goals), frame=frame))
         elif controller.snapshot.sequence is None:
             _expect(controller.play(tour))
         spent_ns += step()
+        controller.take_recorded()  # outside the step: the exchange's work, in the loop's slack
     return spent_ns / cycles / 1e3
 
 
@@ -104,7 +120,7 @@ def _expect(result) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenario", choices=sorted(TOURS), nargs="+", default=sorted(TOURS))
+    parser.add_argument("--scenario", choices=sorted(TOURS | WAVES), nargs="+", default=sorted(TOURS | WAVES))
     parser.add_argument("--rounds", type=int, default=8)
     parser.add_argument("--cycles", type=int, default=5000, help="cycles per round")
     parser.add_argument("--calls", action="store_true", help="count Python calls per cycle instead (one round)")

@@ -395,6 +395,8 @@ def run_once(args: argparse.Namespace, configuration: str, rate_hz: int, cyclict
                 set_fifo(fifo, scheduling.others_fifo)
             with HexactlClient(service.api_endpoint, timeout_s=CONNECT_TIMEOUT_S) as client:
                 enable(client)
+                if args.record:  # every cycle, every signal, for the whole interval and beyond
+                    client.call("record", name=f"bench-{configuration}-{rate_hz}", duration_s=args.seconds + 10)
             client_conn.send((service.api_endpoint, service.telemetry_endpoint))
             _expect(client_conn, "ready")
             load_start = load_average()
@@ -404,6 +406,10 @@ def run_once(args: argparse.Namespace, configuration: str, rate_hz: int, cyclict
             windows = sample_windows(service, rate_hz, args.seconds)
             final = service.controller.telemetry()
             load_end = load_average()
+            recording = None
+            if args.record:
+                with HexactlClient(service.api_endpoint, timeout_s=CONNECT_TIMEOUT_S) as client:
+                    recording = client.call("record_stop")
             client = client_conn.recv() if client_conn.poll(CONNECT_TIMEOUT_S) else None
             reference = cyclictest.result(CONNECT_TIMEOUT_S)
         finally:
@@ -415,7 +421,9 @@ def run_once(args: argparse.Namespace, configuration: str, rate_hz: int, cyclict
             "load_end": load_end,
             "loop": interval_figures(at_go, final.loop, windows),
             "state_end": final.state, "faults_end": [asdict(f) for f in final.faults],
-            "client": summarise_client(client), "cyclictest": reference}
+            "client": summarise_client(client), "cyclictest": reference,
+            "recording": None if recording is None else {key: recording[key] for key in (
+                "rows_written", "cycles_missing", "rows_lost", "ended")}}
 
 
 def _expect(conn: Connection, word: str) -> None:
@@ -514,6 +522,8 @@ def table_rows(run: dict) -> dict[str, str]:
         "API round trip p50 / p99 ms": f"{client['rtt_p50_ms']:.2f} / {client['rtt_p99_ms']:.2f}",
         "telemetry records (moving %)": f"{client['telemetry_records']} ({moving_pct:.0f} %)",
         "faults latched (reset by the client)": str(client["latched"]),
+        **({"recording at the loop rate: rows / cycles missing / lost": "{rows_written} / {cycles_missing} / "
+            "{rows_lost}".format(**run["recording"])} if run.get("recording") else {}),
         **{goal: f"**{'PASS' if met else 'FAIL'}** {figures}" for goal, met, figures in goals(run)},
     }
 
@@ -579,6 +589,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--telemetry-rate", type=float, default=50.0, help="telemetry records per second")
     parser.add_argument("--seed", type=int, default=1, help="seed of the client's random poses")
     parser.add_argument("--json", type=Path, default=None, help="write the raw figures here")
+    parser.add_argument("--record", action="store_true", help="the data recorder records every cycle, every signal, "
+                        "throughout each run")
     args = parser.parse_args(argv)
     if args.seconds < 1 or not 2 <= args.fifo_priority <= 99:
         parser.error("--seconds must be ≥ 1 and --fifo-priority 2–99 (fifo-all uses P-1)")

@@ -33,6 +33,7 @@ from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.application.loop_link import RemoteLoop
+from hexactl.application.recording import Recordings
 from hexactl.application.simulator import InstrumentLine, InstrumentSpec, SimulatedMeasurement
 from hexactl.application.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
@@ -151,6 +152,10 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
             closers.callback(remote.close)
             controller = Controller(remote, config=settings.controller, nominal=settings.nominal,
                                     ticket_start=API_TICKET_START, frames=settings.frames)
+            data = DataDirectories(settings.data_dirs)
+            recordings = Recordings(controller, data)
+            recordings.start_thread()
+            closers.callback(recordings.close)  # also when the service's process is gone: finish what was recorded
             context = zmq.Context()
             closers.callback(context.term)
             curve = None
@@ -171,7 +176,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                                                lambda: jsonable(controller.telemetry()), settings.telemetry_rate_hz, curve)
                 closers.callback(publisher.close)
                 server = ApiServer(context, settings.api_endpoint, CommandHandler(controller,
-                                   DataDirectories(settings.data_dirs), instrument, settings.frames_file), curve,
+                                   data, instrument, settings.frames_file, recordings), curve,
                                    handler_timeout_s=settings.handler_timeout_s, on_stuck=_end_stuck,
                                    worker_niceness=API_WORKER_NICENESS)  # fmt: skip
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
@@ -190,6 +195,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                 if message == _CLOSE_API and server_open:
                     server.close()
                     server_open = False
+                    recordings.close()  # the service is stopping: finish a recording now, while there is time
                 control.send(message)
         except (EOFError, OSError):
             log.warning("the service's process is gone: the API stops")

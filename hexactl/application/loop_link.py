@@ -10,7 +10,9 @@ in a process of their own (:mod:`hexactl.application.api_process`); what crosses
 - **commands** (API → loop): the immutable :mod:`hexactl.control.commands` objects the
   facade builds after planning and validating, pickled, one message each, on a pipe;
 - **reports** (loop → API): the loop's :class:`~hexactl.control.host.LoopReport`
-  (snapshot, statistics, health), at most every :data:`REPORT_INTERVAL_S`, on another pipe.
+  (snapshot, statistics, health, the data recorder's rows), at most every
+  :data:`REPORT_INTERVAL_S`, on another pipe. A report may be dropped, the recorder's rows
+  may not: they are taken from the recorder only for a report the pipe takes whole.
   (The built-in simulator's instrument has a port of its own:
   :mod:`hexactl.application.simulator`.)
 
@@ -38,15 +40,21 @@ import pickle
 import struct
 import threading
 import time
+from collections import deque
 from dataclasses import replace
 from multiprocessing.connection import Connection
 
 from hexactl.control import commands as cmd
 from hexactl.control.core import CoreSnapshot
 from hexactl.control.host import LoopReport, LoopThread
+from hexactl.control.recorder import Row
 
 REPORT_INTERVAL_S = 0.002
 """The loop publishes a report at most this often (every cycle at 500 Hz)."""
+
+MAX_ROWS_PER_REPORT = 64
+"""Recorder rows per report at most: bounds the loop's pickling; a backlog (after reports
+that did not fit) drains at this many per report."""
 
 MAX_COMMANDS_PER_EXCHANGE = 8
 """Commands taken per exchange: bounds the loop's slack work when many arrive at once."""
@@ -209,7 +217,9 @@ class LoopExchange:
         if not self._writer.flush():  # the previous report is still unfinished: do not pickle this one
             self.reports_dropped += 1
             return
-        report = self._thread.report(STATS_MAX_AGE_S)
+        # The writer is free: offer() takes the whole frame now, so the rows taken are sent.
+        report = replace(self._thread.report(STATS_MAX_AGE_S),
+                         recorded=tuple(self._thread.take_recorded(MAX_ROWS_PER_REPORT)))
         if not self._writer.offer(pickle.dumps(report, protocol=pickle.HIGHEST_PROTOCOL)):
             self.reports_dropped += 1
 
@@ -227,10 +237,11 @@ class RemoteLoop:
         self._reports = reports
         self._send_lock = threading.Lock()
         self._gone: str | None = None
+        self._recorded: deque[Row] = deque()
         try:
             if not reports.poll(first_report_timeout_s):
                 raise ConnectionError(f"no report from the control loop within {first_report_timeout_s:g} s")
-            self._latest: LoopReport = pickle.loads(reports.recv_bytes())
+            self._latest: LoopReport = self._received(reports.recv_bytes())
         except (EOFError, OSError) as error:
             raise ConnectionError(f"the control loop's link is closed: {error!r}") from None
         self._receiver = threading.Thread(target=self._receive, name="hexactl-loop-link", daemon=True)
@@ -257,6 +268,11 @@ class RemoteLoop:
         except (OSError, ValueError) as error:
             self._gone = self._gone or f"the control loop's link is closed: {error!r}"
 
+    def take_recorded(self) -> list[Row]:
+        """The recorder's rows received and not taken yet, oldest first (one taker)."""
+        recorded = self._recorded
+        return [recorded.popleft() for _ in range(len(recorded))]
+
     def estop_now(self) -> None:
         """Nothing: the actuators are reachable from the loop's process only; the queued
         E-stop command is carried out within a cycle."""
@@ -275,4 +291,12 @@ class RemoteLoop:
             except (EOFError, OSError):
                 self._gone = "the control loop's process closed the link"
                 return
-            self._latest = pickle.loads(data)
+            self._latest = self._received(data)
+
+    def _received(self, data: bytes) -> LoopReport:
+        """The report in ``data``, its recorder rows moved to :meth:`take_recorded`'s queue."""
+        report: LoopReport = pickle.loads(data)
+        if report.recorded:
+            self._recorded.extend(report.recorded)
+            report = replace(report, recorded=())
+        return report

@@ -20,7 +20,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from hexactl.control.jog import JogPlan
 from hexactl.control.planning import ActiveGeometry, Segment
+from hexactl.control.wave_planning import WavePlan
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,6 +106,49 @@ class SwapGeometry(Command):
     epoch: int
     active: ActiveGeometry
     rollback: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Jog(Command):
+    """Start a jog, or re-plan the one under way (its number: this command's ticket)."""
+
+    epoch: int
+    plan: JogPlan
+
+
+@dataclass(frozen=True, slots=True)
+class RenewJog(Command):
+    """The jog under way at ``velocity`` in ``frame`` (as :class:`~hexactl.control.jog.JogPlan`)
+    goes on for another deadman interval."""
+
+    frame: str
+    velocity: tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class StartRecording(Command):
+    """Record every ``divisor``-th cycle, ``rows`` rows, as recording ``recording`` (an
+    id the reader matches rows by) named ``name``; from the next cycle, or with
+    ``on_motion`` from the first cycle of the next motion (:mod:`~hexactl.control.recorder`)."""
+
+    recording: int
+    name: str
+    divisor: int
+    rows: int
+    on_motion: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class StopRecording(Command):
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class PlayWave(Command):
+    """Play the validated wave ``plan`` (:mod:`~hexactl.control.wave_planning`)."""
+
+    epoch: int
+    plan: WavePlan
 
 
 @dataclass(frozen=True, slots=True)

@@ -81,6 +81,11 @@ class ControllerConfig(_Frozen):
     fk_tolerance_mm: float = Field(default=1e-6, gt=0, description="forward kinematics of the feedback: tolerance")
     fk_max_iterations: int = Field(default=10, ge=1, description="forward kinematics of the feedback: iteration cap")
     command_timeout_s: float = Field(default=0.5, gt=0, description="how long a caller waits for the loop's verdict")
+    jog_deadman_s: float = Field(
+        default=0.2, ge=0.02, le=5.0,
+        description="a jog goes on for this long after each renewal (its client sends jog again at least this "
+        "often), then brakes to rest",
+    )
 
     @model_validator(mode="after")
     def _timeouts_span_cycles(self) -> ControllerConfig:
@@ -88,4 +93,6 @@ class ControllerConfig(_Frozen):
         for name in ("heartbeat_timeout_s", "setpoint_lag_s"):
             if getattr(self.supervision, name) < 3 * period:
                 raise ValueError(f"supervision.{name} must span at least three loop periods ({3 * period:g} s)")
+        if self.jog_deadman_s < 3 * period:
+            raise ValueError(f"jog_deadman_s must span at least three loop periods ({3 * period:g} s)")
         return self

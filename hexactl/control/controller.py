@@ -29,6 +29,9 @@ from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frame_commands import FrameCommands
 from hexactl.control.frames import Frame, OperatorFrames, convert, requested_goal
+from hexactl.control.jog_commands import JogCommands
+from hexactl.control.recording_commands import RecordingCommands
+from hexactl.control.recorder import Row
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.host import LoopHost
@@ -44,6 +47,8 @@ from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
+from hexactl.control.wave_commands import WaveCommands
+from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import validate_pose_values
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS
@@ -71,6 +76,9 @@ class Controller:
         self.hardware_limits = nominal.limits
         self._host = host
         self._commands = CommandSubmitter(host, config, ticket_start)
+        self._jogs = JogCommands(lambda: self.snapshot, self._context, self._commands, config.jog_deadman_s)
+        self.recordings = RecordingCommands(self._commands, lambda: self.snapshot)
+        self._waves = WaveCommands(lambda: self.snapshot, self._context, self._commands)
 
     @property
     def snapshot(self) -> CoreSnapshot:
@@ -163,6 +171,15 @@ class Controller:
         return self._commands.submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", deadline_ns=deadline_ns,
                             **_plan_result(plan, "", s.active.home).details)
 
+    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
+            deadline_ns: int | None = None) -> CommandResult:
+        """Jog at ``velocity`` (mm/s for x, y, z; deg/s for roll, pitch, yaw) in ``frame``
+        while renewed: send it again at least every ``jog_deadman_s`` or the platform brakes
+        to rest. The same velocity and frame renew the jog under way, another re-plans it,
+        all zeros release it (brake to rest). It heads for the first limit ahead, soft or
+        hard, and comes to rest on it (``details.end``; :mod:`~hexactl.control.jog_planning`)."""
+        return self._jogs.jog(velocity, frame, deadline_ns)
+
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""
         if isinstance(leg, bool) or not isinstance(leg, (int, np.integer)) or not 1 <= leg <= 6:
@@ -222,8 +239,19 @@ class Controller:
             (remainder,) = plan.segments
         return self._commands.submit(lambda t: cmd.Resume(t, s.epoch, remainder), "resumed", deadline_ns=deadline_ns)
 
+    def validate_wave(self, spec: WaveSpec) -> CommandResult:
+        """Would :meth:`wave` accept this? Plans and checks the whole path, moves nothing."""
+        return self._waves.validate(spec)
+
+    def wave(self, spec: WaveSpec, *, deadline_ns: int | None = None) -> CommandResult:
+        """Play the wave ``spec`` from rest, its whole path validated first
+        (:mod:`~hexactl.control.wave_planning`); refused, never slowed down, if too fast.
+        Success details: ``duration_s``, the peak leg speed and acceleration, the peak pose
+        velocity. ``stop`` or ``abort`` brake it to rest; it cannot be paused."""
+        return self._waves.play(spec, deadline_ns)
+
     def abort(self) -> CommandResult:
-        """End the sequence and brake to rest; its records are kept."""
+        """End the sequence or the wave and brake to rest; a sequence's records are kept."""
         return self._checked(preconditions.check_abort, cmd.Abort, "aborted")
 
     def load_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
@@ -256,6 +284,18 @@ class Controller:
 
     def operator_frames(self) -> OperatorFrames:
         return self.frames.current
+
+    def record(self, recording: int, name: str, divisor: int, rows: int, on_motion: bool = False) -> CommandResult:
+        """Start the loop's data recorder (see :meth:`~hexactl.control.recording_commands.RecordingCommands.start`)."""
+        return self.recordings.start(recording, name, divisor, rows, on_motion)
+
+    def record_stop(self) -> CommandResult:
+        """End the recording under way early."""
+        return self.recordings.stop()
+
+    def take_recorded(self) -> list[Row]:
+        """The recorder's rows not taken yet, oldest first (one taker: the recording's writer)."""
+        return self._host.take_recorded()
 
     # -- helpers ----------------------------------------------------------------------------
 

@@ -18,7 +18,9 @@ ros2_control's read → update → write:
    the measured pose so that enabling starts where the platform is;
 3. write: ENABLED or FAULT: send the set-points (FAULT: the held ones); ESTOP: repeat
    the E-stop; a reset's CLEAR_FAULT once due; DISABLED: nothing else;
-4. publish an immutable :class:`~hexactl.control.snapshot.CoreSnapshot` (one reference swap).
+4. publish an immutable :class:`~hexactl.control.snapshot.CoreSnapshot` (one reference swap);
+5. after the cycle, the loop's :meth:`ControlCore.after_cycle`: the data recorder
+   (:class:`~hexactl.control.recorder.CycleRecorder`) keeps a reference to a due cycle.
 
 States. DISABLED → ``enable`` → ENABLED (holding or moving). FAULT is latched until
 ``reset``; ESTOP likewise. ``reset`` sends DISABLE and CLEAR_FAULT to all actuators and
@@ -45,11 +47,13 @@ from hexactl.control.motion import Motion
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.pose_measurement import PoseMeasurement
 from hexactl.control.preconditions import Refusal
+from hexactl.control.recorder import CycleRecorder
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequenceProgress, dwell_record
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.supervisor import Fault, Supervisor
+from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
 
 KEPT_EVENTS = 64
@@ -71,11 +75,14 @@ class ControlCore:
         self._measurement = PoseMeasurement(max(1, round(config.loop.rate_hz / config.fk_rate_hz)),
                                             config.fk_tolerance_mm, config.fk_max_iterations)
         self._motion = Motion(config, active, period_s, self._dwell_record, self._event)
+        self.recorder = CycleRecorder()
         self._commands = CommandInbox({
             cmd.Enable: self._enable, cmd.Disable: self._disable, cmd.Stop: self._stop, cmd.EStop: self._estop,
             cmd.Reset: self._reset, cmd.Move: self._move, cmd.LockLeg: self._lock_leg, cmd.UnlockLeg: self._unlock_leg,
+            cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog,
+            cmd.PlayWave: self._play_wave,
             cmd.Play: self._play, cmd.Pause: self._pause, cmd.Resume: self._resume, cmd.Abort: self._abort,
-            cmd.SwapGeometry: self._swap,
+            cmd.SwapGeometry: self._swap, cmd.StartRecording: self.recorder.start, cmd.StopRecording: self.recorder.stop,
         }, self._event)
         self.inbox = self._commands.queue
         self.state = ControlState.DISABLED
@@ -112,6 +119,10 @@ class ControlCore:
     def ramp_active(self) -> bool:
         return self._motion.path.ramp.active
 
+    @property
+    def wave(self) -> WaveProgress | None:
+        return self._motion.wave.progress
+
     # -- the cycle ---------------------------------------------------------------------
 
     def step(self, now_ns: int) -> None:
@@ -121,6 +132,11 @@ class ControlCore:
         self._update(self._read())
         self._write()
         self._publish()
+
+    def after_cycle(self, lateness_ns: int, compute_ns: int) -> None:
+        """The loop's report on the cycle just run (its lateness and compute time, ns):
+        for the data recorder (:mod:`~hexactl.control.recorder`)."""
+        self.recorder.capture(self.snapshot, lateness_ns, compute_ns)
 
     def _read(self) -> FeedbackSnapshot:
         hardware = self.hardware
@@ -264,6 +280,13 @@ class ControlCore:
     def _move(self, command: cmd.Move) -> Refusal:
         return preconditions.check_move(self) or self._motion.stale(command.epoch) or self._motion.move(command.segment)
 
+    def _jog(self, command: cmd.Jog) -> Refusal:
+        return (preconditions.check_jog(self) or self._motion.stale(command.epoch)
+                or self._motion.jog(command.ticket, command.plan, self._now_ns))
+
+    def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
+        return self._motion.jogger.renew(command.frame, command.velocity, self._now_ns)
+
     def _stop(self, command: cmd.Stop) -> Refusal:
         self._motion.stop()
         return None
@@ -271,7 +294,13 @@ class ControlCore:
     def _play(self, command: cmd.Play) -> Refusal:
         if refusal := preconditions.check_play(self) or self._motion.stale(command.epoch):
             return refusal
-        self._motion.player.play(command.name, command.segments)
+        self._motion.play(command.name, command.segments)
+        return None
+
+    def _play_wave(self, command: cmd.PlayWave) -> Refusal:
+        if refusal := preconditions.check_wave(self) or self._motion.stale(command.epoch):
+            return refusal
+        self._motion.play_wave(command.plan, self._now_ns)
         return None
 
     def _pause(self, command: cmd.Pause) -> Refusal:
@@ -307,4 +336,6 @@ class ControlCore:
             sequence=motion.player.progress, last_sequence=motion.player.report, faults=self._faults,
             events=self._events, outcomes=self._commands.outcomes, clamped_cycles=path.clamped_cycles,
             clamped_legs=path.clamped_legs, fk_failures=self._measurement.failures, motion_end_ns=motion.end_ns,
+            recorder=self.recorder.state, jog=motion.jogger.progress, last_jog=motion.jogger.report,
+            wave=motion.wave.progress,
         )

@@ -26,6 +26,7 @@ from hexactl.control.hardware import ActuatorInterface
 from hexactl.control.loop import ControlLoop
 from hexactl.control.planning import ActiveGeometry
 from hexactl.control.realtime import RealtimeReport
+from hexactl.control.recorder import Row
 from hexactl.control.stats import LoopStats
 
 
@@ -33,13 +34,15 @@ from hexactl.control.stats import LoopStats
 class LoopReport:
     """What a loop looks like from outside: its latest snapshot, timing statistics
     (percentiles at most a quarter of a second old), what its real-time set-up obtained
-    (None before the thread starts), and why it died (None while healthy)."""
+    (None before the thread starts), why it died (None while healthy), and the data
+    recorder's rows taken since the report before (:mod:`~hexactl.control.recorder`)."""
 
     snapshot: CoreSnapshot
     stats: LoopStats
     realtime: RealtimeReport | None
     running: bool
     failure: str | None
+    recorded: tuple[Row, ...] = ()
 
 
 class LoopHost(Protocol):
@@ -65,6 +68,10 @@ class LoopHost(Protocol):
         the queued command does it within a cycle)."""
         ...
 
+    def take_recorded(self) -> list[Row]:
+        """The data recorder's rows not taken yet, oldest first (one taker per host)."""
+        ...
+
 
 class LoopThread:
     """The control core and its loop thread in this process (a :class:`LoopHost`).
@@ -78,7 +85,8 @@ class LoopThread:
                  clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
         self.hardware = hardware
         self.core = ControlCore(hardware, active, config)
-        self.loop = ControlLoop(self.core.step, config.loop, on_crash=hardware.send_estop)
+        self.loop = ControlLoop(self.core.step, config.loop, on_crash=hardware.send_estop,
+                                after_cycle=self.core.after_cycle)
         self.core.step(clock_ns())
 
     @property
@@ -98,3 +106,7 @@ class LoopThread:
 
     def estop_now(self) -> bool:
         return self.hardware.send_estop()
+
+    def take_recorded(self, limit: int = 1 << 20) -> list[Row]:
+        """At most ``limit`` of the recorder's rows waiting, oldest first."""
+        return self.core.recorder.take(limit)

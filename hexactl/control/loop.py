@@ -12,7 +12,8 @@ and counts the dropped deadlines as ``skipped`` (and as missed).
 
 Each wake-up calls :meth:`ControlLoop.step` with the present time; tests call ``step``
 directly with simulated times and never start the thread. Lateness (wake − deadline) and
-compute time (wake → end of the cycle) go to :class:`~hexactl.control.stats.CycleStats`.
+compute time (wake → end of the cycle) go to :class:`~hexactl.control.stats.CycleStats`,
+then to ``after_cycle`` if given (the data recorder's hook; not counted in compute).
 
 Real-time set-up (:mod:`hexactl.control.realtime`) happens in the thread when it starts;
 the young-generation garbage collection runs in a cycle's slack, and so does ``exchange``
@@ -56,10 +57,13 @@ def next_deadline(deadline_ns: int, end_ns: int, period_ns: int) -> tuple[int, i
 class ControlLoop:
     """Runs ``cycle(now_ns)`` every period, in its own thread (:meth:`start`) or when
     told (:meth:`step`). ``on_crash`` is called (from the loop thread) if ``cycle`` raises.
-    :meth:`start`'s ``exchange`` runs in the thread in the cycles' slack."""
+    :meth:`start`'s ``exchange`` runs in the thread in the cycles' slack. ``after_cycle(lateness_ns,
+    compute_ns)`` follows every cycle (never raising)."""
 
-    def __init__(self, cycle: Callable[[int], None], config: LoopConfig, on_crash: Callable[[], object]) -> None:
+    def __init__(self, cycle: Callable[[int], None], config: LoopConfig, on_crash: Callable[[], object],
+                 after_cycle: Callable[[int, int], None] | None = None) -> None:
         self._cycle = cycle
+        self._after_cycle = after_cycle
         self._on_crash = on_crash
         self._exchange: Callable[[], None] | None = None
         self.config = config
@@ -80,7 +84,10 @@ class ControlLoop:
         cycle's compute time, measured on the real monotonic clock."""
         begin = time.monotonic_ns()
         self._cycle(now_ns)
-        self.stats.record(lateness_ns, time.monotonic_ns() - begin)
+        compute_ns = time.monotonic_ns() - begin
+        self.stats.record(lateness_ns, compute_ns)
+        if self._after_cycle is not None:
+            self._after_cycle(lateness_ns, compute_ns)
 
     def start(self, exchange: Callable[[], None] | None = None) -> RealtimeReport:
         """Start the thread; returns what the real-time set-up obtained. ``exchange``:

@@ -3,7 +3,9 @@
 :class:`Motion` owns the loop's online trajectory generator
 (:class:`~hexactl.control.trajectory.PoseTrajectory`), the set-point path it feeds
 (:class:`~hexactl.control.setpoint_path.SetpointPath`), the sequence player
-(:class:`~hexactl.control.sequence_player.SequencePlayer`) and the locked leg. Its
+(:class:`~hexactl.control.sequence_player.SequencePlayer`), the wave player
+(:class:`~hexactl.control.wave_player.WavePlayer`: while a wave plays it, not the
+generator's update, gives each cycle's position) and the locked leg. Its
 :meth:`Motion.update` is the ENABLED cycle's update: the trajectory's next target →
 the set-points → playback.
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from hexactl.control.config import ControllerConfig
+from hexactl.control.jog import Jogger, JogPlan
 from hexactl.control.planning import ActiveGeometry, LegLock, Segment
 from hexactl.control.preconditions import Refusal
 from hexactl.control.results import ErrorCode
@@ -30,6 +33,8 @@ from hexactl.control.setpoint_path import SetpointPath
 from hexactl.control.snapshot import MotionState
 from hexactl.control.supervisor import Fault
 from hexactl.control.trajectory import PoseTrajectory, StepResult
+from hexactl.control.wave_planning import WavePlan
+from hexactl.control.wave_player import WavePhase, WavePlayer
 
 
 class Motion:
@@ -41,6 +46,8 @@ class Motion:
         self.trajectory = PoseTrajectory(config.motion, period_s)
         self.path = SetpointPath(config, active, period_s, log)
         self.player = SequencePlayer(self.trajectory, record, log)
+        self.jogger = Jogger(self.trajectory, log)
+        self.wave = WavePlayer(self.trajectory)
         self.lock: LegLock | None = None
         self.epoch = 0
         self.end_ns: int | None = None
@@ -66,10 +73,16 @@ class Motion:
         trajectory = self.trajectory
         lock = self.lock
         previous_target = trajectory.position if lock is not None else None
-        result = trajectory.update()
+        jogger = self.jogger
+        if jogger.progress is not None:
+            jogger.before_step(now_ns)
+        wave = self.wave
+        result = wave.update() if wave.playing else trajectory.update()  # a wave drives the generator's state
+        if jogger.progress is not None:
+            jogger.after_step()
         if result is StepResult.ERROR:
             return Fault("planner_error", "the trajectory generator refused its input")
-        if result is StepResult.WORKING and trajectory.replanned:
+        if result is StepResult.WORKING and trajectory.replanned and not wave.playing:
             self.end_ns = now_ns + round(trajectory.remaining_s * 1e9)
         if fault := self.path.follow(active, lock, trajectory.position, previous_target, trajectory.frames):
             return fault
@@ -93,6 +106,8 @@ class Motion:
         self.trajectory.rebase(self.path.pose_command, None)
         self.path.ramp.cancel()
         self.player.end(sequence_status)
+        self.jogger.end(sequence_status)
+        self.wave.end(WavePhase.FAULT if sequence_status == "fault" else WavePhase.ABORTED)
         self.epoch += 1
 
     # -- commands, once their preconditions hold -----------------------------------------
@@ -101,17 +116,40 @@ class Motion:
         if not start_segment(self.trajectory, segment):
             return ErrorCode.STALE_PLAN, ("the motion went on while the move was planned, and from where it is now the "
                                           "trajectory generator refuses it: plan again")
+        self.jogger.end("replaced by a move")
         return None
 
+    def jog(self, jog: int, plan: JogPlan, now_ns: int) -> Refusal:
+        """Start jog ``jog`` (or re-plan the one under way) with ``plan``."""
+        if not start_segment(self.trajectory, plan.segment):
+            return ErrorCode.STALE_PLAN, ("the motion went on while the jog was planned, and from where it is now the "
+                                          "trajectory generator refuses it: send jog again")
+        self.jogger.start(jog, plan, now_ns)
+        return None
+
+    def play(self, name: str, segments: tuple[Segment, ...]) -> None:
+        self.jogger.end("replaced by a sequence")
+        self.player.play(name, segments)
+
+    def play_wave(self, plan: WavePlan, now_ns: int) -> None:
+        """Play the wave of ``plan`` (from rest, where it was planned)."""
+        self.jogger.end("replaced by a wave")
+        self.wave.play(plan)
+        self.end_ns = now_ns + round(plan.path.duration_s * 1e9)
+        self.epoch += 1
+
     def stop(self) -> None:
-        """Abort any sequence and brake to rest."""
+        """Abort any sequence or wave and brake to rest."""
         self.player.end("aborted")
+        self.wave.end(WavePhase.ABORTED)  # the generator has the wave's state: it brakes from there
         self.trajectory.halt()
+        self.jogger.brake("stopped")
         self.epoch += 1
 
     def lock_leg(self, leg: int) -> None:
         """Hold leg 1–6 at the set-point being sent; the motion (at rest) continues in
         relative coordinates, which leg-lock tracking works in."""
+        self.jogger.end("a leg was locked")
         self.lock = LegLock(leg, self.path.setpoints[leg - 1])
         self.trajectory.rebase(self.path.pose_command, None)
         self.epoch += 1
@@ -135,4 +173,7 @@ class Motion:
     def swap(self, new: ActiveGeometry, enabled: bool) -> None:
         """``new`` is the geometry from now on (ramped in when ``enabled``)."""
         self.path.swap(new, enabled)
+        if self.jogger.progress is not None:  # its limits were found on the old geometry
+            self.trajectory.halt()
+            self.jogger.brake("the calibration changed")
         self.epoch += 1

@@ -225,7 +225,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
             start, start_frames = KinematicState.at_rest(rebased), frames
         # The goal alone first: cheap, and no trajectory is previewed towards a goal
         # that is out of reach anyway (ruckig raises on absurd ones).
-        goal_violations = _violations(context, relative_poses(frames, np.array([goal]), home), number)
+        goal_violations = path_violations(context, relative_poses(frames, np.array([goal]), home), number)
         if goal_violations:
             return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
         planned = _plan_segment(context, start, goal, frames, waypoint,
@@ -234,7 +234,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
             return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
                                         details={"waypoint": number, **planned.details}))
         segment, samples = planned
-        violations += _violations(context, samples, number)
+        violations += path_violations(context, samples, number)
         segments.append(replace(segment, start=rebased))
         start = KinematicState.at_rest(goal)
     if violations:
@@ -242,9 +242,10 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
     return Plan(segments=tuple(segments))
 
 
-def _violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
-    """The hardware's limits (:func:`assess_path`) and the soft limits broken by (N, 6)
-    relative mm/rad samples of waypoint ``waypoint``'s path."""
+def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
+    """The hardware's limits (:func:`assess_path`: stroke, joint cones, envelope,
+    near-singularity) and the soft limits broken by (N, 6) relative mm/rad samples of
+    waypoint ``waypoint``'s path: what every commanded path is checked against."""
     found = assess_path(context.active.geometry, relative, waypoint, context.path_step_mm, context.path_step_deg)
     limits, frames = context.soft_limits, context.frames
     if limits is None or frames is None:

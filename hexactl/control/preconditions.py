@@ -19,6 +19,7 @@ from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequenceProgress
 from hexactl.control.snapshot import ControlState, MotionState
+from hexactl.control.wave_player import WaveProgress
 
 Refusal = tuple[ErrorCode, str] | None  # (code, message) or None when allowed
 
@@ -42,6 +43,8 @@ class CoreView(Protocol):
     def lock(self) -> LegLock | None: ...
     @property
     def ramp_active(self) -> bool: ...
+    @property
+    def wave(self) -> WaveProgress | None: ...
 
 
 def _enabled(view: CoreView) -> Refusal:
@@ -52,7 +55,17 @@ def _enabled(view: CoreView) -> Refusal:
     return ErrorCode.NOT_ENABLED, "the controller is disabled: enable first"
 
 
+def _wave_playing(view: CoreView) -> bool:
+    return view.wave is not None and view.wave.playing
+
+
+def _no_wave(view: CoreView) -> Refusal:
+    return (ErrorCode.BUSY, "a wave is playing: abort it (or stop) first") if _wave_playing(view) else None
+
+
 def _at_rest(view: CoreView) -> Refusal:
+    if refusal := _no_wave(view):
+        return refusal
     if view.sequence is not None:
         return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
     if view.motion is not MotionState.HOLDING:
@@ -87,10 +100,18 @@ def check_disable(view: CoreView) -> Refusal:
 
 
 def check_move(view: CoreView) -> Refusal:
-    if refusal := _enabled(view):
+    if refusal := _enabled(view) or _no_wave(view):
         return refusal
     if view.sequence is not None:
         return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
+    return None
+
+
+def check_jog(view: CoreView) -> Refusal:
+    if refusal := check_move(view):
+        return refusal
+    if view.lock is not None:
+        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: a jog needs all six legs (unlock first)"
     return None
 
 
@@ -117,6 +138,8 @@ def check_play(view: CoreView) -> Refusal:
 
 
 def check_pause(view: CoreView) -> Refusal:
+    if _wave_playing(view):
+        return ErrorCode.BUSY, "a wave cannot be paused: abort it (or stop), and it brakes to rest"
     if view.sequence is None:
         return ErrorCode.NO_SEQUENCE, "no sequence is playing"
     if view.sequence.phase in (SequencePhase.PAUSING, SequencePhase.PAUSED):
@@ -133,7 +156,19 @@ def check_resume(view: CoreView) -> Refusal:
 
 
 def check_abort(view: CoreView) -> Refusal:
-    return None if view.sequence is not None else (ErrorCode.NO_SEQUENCE, "no sequence is playing")
+    if view.sequence is not None or _wave_playing(view):
+        return None
+    return ErrorCode.NO_SEQUENCE, "no sequence or wave is playing"
+
+
+def check_wave(view: CoreView) -> Refusal:
+    if refusal := _enabled(view) or _at_rest(view):
+        return refusal
+    if view.lock is not None:
+        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: a wave needs all six legs (unlock first)"
+    if view.ramp_active:
+        return ErrorCode.BUSY, "a calibration change is still ramping in"
+    return None
 
 
 def check_reset(view: CoreView) -> Refusal:
@@ -145,6 +180,8 @@ def check_reset(view: CoreView) -> Refusal:
 def check_swap(view: CoreView, new: ActiveGeometry) -> Refusal:
     # The new geometry's limits equal the hardware's (Controller.load_calibration), so
     # the set-points already respect its stroke.
+    if refusal := _no_wave(view):
+        return refusal
     if view.lock is not None:
         return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: unlock before changing the calibration"
     return None

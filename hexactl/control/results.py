@@ -37,6 +37,8 @@ class ErrorCode(StrEnum):
     SEND_FAILED = "send_failed"  # the link refused a frame (E-stop, ENABLE)
     LOOP_FAILED = "loop_failed"  # the loop thread died: see status
     LOOP_TIMEOUT = "loop_timeout"  # the loop gave no verdict in time (the command may still run)
+    NOT_RECORDING = "not_recording"  # record_stop with no recording under way
+    JOG_ENDED = "jog_ended"  # a jog renewal for a jog that is no longer under way: send jog again
     EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
 
 

@@ -11,10 +11,13 @@ from enum import StrEnum
 
 from hexactl.control import commands as cmd
 from hexactl.control.hardware import FeedbackSnapshot, LinkHealth
+from hexactl.control.jog import JogProgress, JogReport
 from hexactl.control.planning import ActiveGeometry, LegLock
+from hexactl.control.recorder import IDLE, RecorderState
 from hexactl.control.sequence_player import SequenceProgress, SequenceReport
 from hexactl.control.supervisor import Fault
 from hexactl.control.trajectory import KinematicState
+from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad, ToolInWorkMmRad
 from hexactl.kinematics.frames import Frames
 
@@ -80,3 +83,7 @@ class CoreSnapshot:
     clamped_legs: int
     fk_failures: int
     motion_end_ns: int | None = None  # when the move or braking under way ends as planned; stale while HOLDING
+    recorder: RecorderState = IDLE  # the data recorder, as of the end of the cycle before
+    jog: JogProgress | None = None  # the jog under way
+    last_jog: JogReport | None = None  # how the last jog ended
+    wave: WaveProgress | None = None  # the wave playing, or how the last one ended

@@ -12,6 +12,7 @@ from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
 from hexactl.control.stats import LoopStats
 from hexactl.control.frames import OperatorFrames, convert
+from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 
 PERCENTILES_MAX_AGE_S = 0.25
@@ -26,6 +27,36 @@ class SequenceTelemetry:
     index: int
     total: int
     phase: str
+
+
+@dataclass(frozen=True, slots=True)
+class RecordingTelemetry:
+    """The data recorder: ``state`` idle, armed, recording or done (``ended``: duration
+    or stopped); ``rows`` recorded of ``rows_requested``; ``lost`` for want of room."""
+
+    state: str
+    name: str
+    rows: int
+    rows_requested: int
+    lost: int
+    ended: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class JogTelemetry:
+    """The jog under way: ``jog`` its number; ``velocity`` (mm/s, deg/s) in ``frame`` as
+    requested, run at ``speed`` of it; ``phase`` jogging, at_end or braking; ``end`` where
+    its plan ends (``to_limit``: on a limit, else at the horizon a renewal extends);
+    ``renew_within_s``: time left before the deadman lapses, s."""
+
+    jog: int
+    frame: str
+    velocity: tuple[float, ...]
+    speed: float
+    phase: str
+    end: str
+    to_limit: bool
+    renew_within_s: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +89,9 @@ class Telemetry:
     tool_pose_command: ToolInWorkMmDeg | None = None
     tool_pose_measured: ToolInWorkMmDeg | None = None
     frames: OperatorFrames | None = None
+    recording: RecordingTelemetry | None = None  # None: no recording since the start
+    jog: JogTelemetry | None = None  # None: no jog under way
+    wave: WaveProgress | None = None  # the wave playing, or how the last one ended; None: no wave since the start
 
 
 def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
@@ -82,6 +116,10 @@ def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
         loop_failure=report.failure,
         realtime=asdict(report.realtime) if report.realtime else None,
         frames=frames.model_dump(mode="json"),
+        recording=asdict(recording) if (recording := recording_telemetry(s)) else None,
+        jog=asdict(jog) if (jog := jog_telemetry(s)) else None,
+        last_jog=asdict(s.last_jog) if s.last_jog else None,
+        wave=asdict(s.wave) if s.wave else None,
     )
 
 
@@ -109,15 +147,27 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         loop=stats,
         realtime=report.realtime,
         goal=None if moving_to is None else convert(moving_to, s.frames, None, home).in_degrees(),
-        remaining_s=_remaining_s(s),
+        remaining_s=motion_remaining_s(s),
         tool_pose_command=convert(s.pose_command, None, in_work, home).in_degrees(),
         tool_pose_measured=None if s.pose_measured is None
         else convert(s.pose_measured, None, in_work, home).in_degrees(),
         frames=frames,
+        recording=recording_telemetry(s),
+        jog=jog_telemetry(s),
+        wave=s.wave,
     )
 
 
-def _remaining_s(s: CoreSnapshot) -> float | None:
+def recording_telemetry(s: CoreSnapshot) -> RecordingTelemetry | None:
+    """The data recorder's state (None: no recording since the start)."""
+    r = s.recorder
+    if r.recording == 0:
+        return None
+    return RecordingTelemetry(r.phase.value, r.name, r.rows, r.rows_requested, r.lost,
+                              r.ended.value if r.ended else None)
+
+
+def motion_remaining_s(s: CoreSnapshot) -> float | None:
     """Time until the motion under way ends as planned, s; None at rest."""
     if s.motion is MotionState.HOLDING or s.motion_end_ns is None:
         return None
@@ -130,4 +180,9 @@ def sequence_telemetry(s: CoreSnapshot) -> SequenceTelemetry | None:
     return SequenceTelemetry(p.name, p.waypoint, p.total, p.phase.value) if p else None
 
 
-
+def jog_telemetry(s: CoreSnapshot) -> JogTelemetry | None:
+    jog = s.jog
+    if jog is None:
+        return None
+    return JogTelemetry(jog.jog, jog.frame, jog.velocity, jog.speed, jog.phase.value, jog.end, jog.to_limit,
+                        max(0.0, (jog.deadline_ns - s.t_ns) / 1e9))

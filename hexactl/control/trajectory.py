@@ -222,6 +222,17 @@ class PoseTrajectory:
         self._coordinates = RelativeMmRad if frames is None else ToolInWorkMmRad
         self.reset(pose)
 
+    def track(self, state: KinematicState, goal: RelativeMmRad | ToolInWorkMmRad) -> None:
+        """Be at ``state`` (in the current coordinates), moving towards ``goal``: a path
+        the generator does not compute (a wave) drives it, without calling :meth:`update`,
+        so that :meth:`halt` brakes from where that path is and how it moves."""
+        parameters = self._input
+        parameters.current_position = list(state.position)
+        parameters.current_velocity = list(state.velocity)
+        parameters.current_acceleration = list(state.acceleration)
+        self.goal = goal
+        self._active = True
+
     def move_to(self, goal: RelativeMmRad | ToolInWorkMmRad, time_scale: float = 1.0,
                 velocity_scale: float = 1.0) -> bool:
         """Head for ``goal`` (in the current coordinates), arriving at rest; replans from the

@@ -26,6 +26,7 @@ from hexactl.control.supervisor import Fault
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import DwellRecord, MotionSequence
 from hexactl.control.stats import LoopStats, Percentiles
+from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.workspace import assess_pose
 
@@ -36,6 +37,13 @@ RECORDS = (
     DwellRecord("steps", 1, 10.0, (0.0, 0.0, 10.0, 0.0, 0.0, 0.0), None, (400.0,) * 6, (400.1,) * 6),
     DwellRecord("steps", 2, 12.5, (0.0,) * 6, (0.01, 0.0, 0.02, 0.0, 0.0, 0.0), (390.0,) * 6, (390.1,) * 6),
 )
+
+
+def wave_figures(spec: WaveSpec) -> dict[str, Any]:
+    """Made-up figures of a wave, in the controller's details."""
+    return {"duration_s": spec.duration_s, "cycles": spec.cycles, "samples": 500 * spec.cycles,
+            "peak_leg_speed_mm_s": 12.5, "peak_leg_speed_leg": 2, "peak_leg_acceleration_mm_s2": 80.0,
+            "peak_leg_acceleration_leg": 2, "peak_pose_velocity": [0.0, 0.0, 12.5, 0.0, 0.0, 0.0]}
 
 
 @dataclass
@@ -106,6 +114,12 @@ class FakeController:
             return CommandResult.failure(ErrorCode.PATH_VIOLATION, f"waypoint 1: {violations[0].message}", violations=items)
         return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1)
 
+    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
+            deadline_ns: int | None = None) -> CommandResult:
+        self._call("jog", list(velocity), frame)
+        return CommandResult.success("jogging", jog=1, goal=[5.0, 0, 0, 0, 0, 0], speed=1.0,
+                                     end="the soft limit on x at 5", to_limit=True, deadman_s=0.2)
+
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("leg_lock", leg)
         self.locked_leg = leg
@@ -115,6 +129,18 @@ class FakeController:
         self._call("leg_unlock")
         self.locked_leg = None
         return CommandResult.success("unlocked")
+
+    def wave(self, spec: WaveSpec, *, deadline_ns: int | None = None) -> CommandResult:
+        self._call("wave", spec)
+        if self.state != "enabled":
+            return CommandResult.failure(ErrorCode.NOT_ENABLED, "the controller is disabled: enable first")
+        return CommandResult.success("waving", **wave_figures(spec))
+
+    def validate_wave(self, spec: WaveSpec) -> CommandResult:
+        if spec.axes.get("z") and spec.axes["z"].amplitude > 100:
+            return CommandResult.failure(ErrorCode.PLANNING_FAILED, "leg 2 would move at 999.0 mm/s, beyond the legs' "
+                                         "speed limit 360 mm/s", kind="leg_speed", leg=2)
+        return CommandResult.success("valid", **wave_figures(spec))
 
     def play(self, sequence: MotionSequence, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("play", sequence)
@@ -168,6 +194,30 @@ class FakeController:
         )
 
 
+@dataclass
+class FakeRecorder:
+    """The data recorder's writer as the API calls it: each call noted on ``controller``."""
+
+    controller: FakeController
+
+    def start(self, name, signals, frame, divisor, duration_s, start) -> dict:
+        self.controller._call("record", name, tuple(signals), frame, divisor, duration_s, start)
+        return {"message": "recording", "path": f"{name}.csv.partial", "side_file": f"{name}.json",
+                "rows": round(duration_s * 500 / divisor), "rate_hz": 500.0 / divisor, "duration": duration_s}
+
+    def stop(self) -> dict:
+        self.controller._call("record_stop")
+        return {"message": "stopped", "name": "r", "csv": "r.csv", "signals": ["lateness"], "frame": "zero",
+                "frames": None, "divisor": 1, "loop_rate_hz": 500.0, "rate_hz": 500.0, "duration_s": 1.0,
+                "start": "now", "calibration_id": "c", "started_utc": None, "started_monotonic_s": None,
+                "first_cycle": 1, "rows_requested": 500, "rows_written": 10, "cycles_missing": 0, "rows_lost": 0,
+                "faults_during": False, "ended": "stopped", "columns": [{"name": "t_s", "unit": "s"}]}
+
+    def state(self) -> dict:
+        self.controller._call("record_status")
+        return {"state": "idle"}
+
+
 def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float = 200.0,
                   instrument: Instrument | None = None, frames_file: Path | None = None) -> SimpleNamespace:
     """A fake controller served on random local ports; ``close()`` when done. The
@@ -177,7 +227,8 @@ def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float =
     controller = FakeController(geometry)
     if instrument is None:
         instrument = lambda: [[p + h for p, h in zip(point, geometry.home[:3])] for point in geometry.measurement.feature_points]  # noqa: E731
-    server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir]), instrument, frames_file))
+    server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir]), instrument, frames_file,
+                                                      FakeRecorder(controller)))
     publisher = TelemetryPublisher(context, LOCAL, lambda: jsonable(controller.telemetry()), telemetry_rate_hz)
     server.start()
     publisher.start()

@@ -20,8 +20,12 @@ ARGUMENTS: dict[str, dict] = {
     "move": {"pose": [0, 0, 50, 0, 0, 5], "duration": 2.0},
     "validate_pose": {"pose": [0, 0, 50, 0, 0, 5]},
     "leg_lock": {"leg": 3},
+    "jog": {"velocity": [10, 0, 0, 0, 0, 0]},
     "play": {"sequence": "x_sweep"},
     "save_recording": {"path": "recording.csv"},
+    "record": {"name": "run1", "duration_s": 1.0},
+    "wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
+    "validate_wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
 }
 
 
@@ -45,7 +49,8 @@ def test_every_command_round_trips(service, kind) -> None:
         assert reply["id"] == {"n": cmd}
     called = [name for name, _ in service.controller.calls]
     # queries and the instrument call nothing; clear_frames is a set_frames of no frames
-    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "save_recording", "measure", "frames", "clear_frames"}
+    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "validate_wave", "save_recording", "measure",
+                                           "frames", "clear_frames"}
 
 
 def test_move_passes_pose_and_pace(service) -> None:

@@ -83,6 +83,20 @@ def test_the_view_shows_the_frames_the_tool_pose_and_the_soft_limits() -> None:
     assert "tool in work  0.000" in text and "5.000" in text
 
 
+def test_the_view_and_status_show_the_jog_and_the_recording() -> None:
+    from hexactl.adapters.cli.telemetry_text import format_telemetry
+
+    assert "jog          none" in rendered(RECORD) and "recording    none" in rendered(RECORD)
+    busy = {**RECORD, "jog": {"jog": 17, "frame": "tool", "velocity": [0.0, 0.0, 0.0, 2.0, 0.0, 0.0], "speed": 1.0,
+                              "phase": "jogging", "end": "the soft tilt limit at 12", "to_limit": True,
+                              "renew_within_s": 0.15},
+            "recording": {"state": "recording", "name": "run2", "rows": 1200, "rows_requested": 2500, "lost": 0,
+                          "ended": None}}
+    jog = "jog 17 jogging roll 2 deg/s in tool, to the soft tilt limit at 12 (renew within 0.15 s)"
+    for text in (rendered(busy), format_telemetry(busy)):
+        assert jog in text and "run2 recording 1200/2500 rows" in text
+
+
 def test_the_view_at_rest_and_before_any_telemetry() -> None:
     text = rendered({**RECORD, "motion": "holding", "goal": None, "remaining_s": None, "sequence": None, "faults": []})
     assert "remaining at rest" in text

@@ -110,6 +110,8 @@ def test_the_readme_session_runs_line_by_line_as_written(served, directory, clie
     def scenario() -> None:
         client.request("disable")  # as a service just started: the session enables it
         (directory / "recordings" / "run1.csv").unlink(missing_ok=True)  # the module's other tests save one too
+        for made in ("run2.csv", "run2.json"):  # a retry's recording: a recording never overwrites
+            (directory / "recordings" / made).unlink(missing_ok=True)
         for line in session:
             ran = subprocess.run(["bash", "-c", line], cwd=directory, env=environment, capture_output=True, text=True,
                                  timeout=300)

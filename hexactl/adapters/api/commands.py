@@ -21,6 +21,7 @@ from hexactl.adapters.api.messages import (
     EnableRequest,
     EstopRequest,
     FramesRequest,
+    JogRequest,
     LegLockRequest,
     LegUnlockRequest,
     LoadCalibrationRequest,
@@ -28,6 +29,9 @@ from hexactl.adapters.api.messages import (
     MoveRequest,
     PauseRequest,
     PlayRequest,
+    RecordRequest,
+    RecordStatusRequest,
+    RecordStopRequest,
     Request,
     ResetRequest,
     ResumeRequest,
@@ -37,9 +41,12 @@ from hexactl.adapters.api.messages import (
     StatusRequest,
     StopRequest,
     ValidatePoseRequest,
+    ValidateWaveRequest,
+    WaveFigures,
+    WaveRequest,
 )
 from hexactl.adapters.api.paths import DataDirectories
-from hexactl.adapters.api.port import ControllerPort
+from hexactl.adapters.api.port import ControllerPort, RecorderPort
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
 from hexactl.adapters.files.frames_file import save_frames
@@ -47,7 +54,11 @@ from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
+from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import GeometryError, describe_validation_error
+
+JOG_REPLY = ("jog", "goal", "speed", "end", "to_limit", "deadman_s")
+"""The fields of a ``jog`` reply besides ``message``."""
 
 TOML_SOURCE = "request"
 """The calibration source recorded for a calibration sent as text."""
@@ -71,14 +82,16 @@ class CommandHandler:
     moving or changes how it moves, so that the loop refuses it (``expired``) once its
     sender has stopped waiting. ``load_calibration`` and ``rollback_calibration`` are
     checked against it when taken from the queue only. ``frames_file``: where the
-    operator's frames are saved whenever they change (None: not saved)."""
+    operator's frames are saved whenever they change (None: not saved). ``recorder``:
+    the data recorder's writer (None: ``record`` is refused ``no_recorder``)."""
 
     def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None,
-                 frames_file: Path | None = None) -> None:
+                 frames_file: Path | None = None, recorder: RecorderPort | None = None) -> None:
         self.controller = controller
         self.data = data
         self.instrument = instrument
         self.frames_file = frames_file
+        self.recorder = recorder
 
     def __call__(self, request: Request, deadline_ns: int | None = None) -> dict[str, Any]:
         controller = self.controller
@@ -102,6 +115,14 @@ class CommandHandler:
                                 duration=result.details.get("duration_s"))
             case ValidatePoseRequest():
                 return self._validate_pose(request)
+            case JogRequest():
+                result = self.controller.jog(request.velocity, Frame(request.frame), deadline_ns=deadline_ns)
+                return _checked(result, **{key: result.details.get(key) for key in JOG_REPLY})
+            case WaveRequest():
+                result = controller.wave(_wave_spec(request), deadline_ns=deadline_ns)
+                return _checked(result, **_wave_figures(result))
+            case ValidateWaveRequest():
+                return self._validate_wave(request)
             case LegLockRequest():
                 return _checked(controller.leg_lock(request.leg, deadline_ns=deadline_ns))
             case LegUnlockRequest():
@@ -130,7 +151,20 @@ class CommandHandler:
                 return self._replace_frames(OperatorFrames(), "frames cleared: poses relative to the zero posture")
             case FramesRequest():
                 return {"frames": jsonable(controller.operator_frames())}
+            case RecordRequest():
+                return self._recorder().start(request.name, request.signals, request.frame, request.divisor,
+                                              request.duration_s, request.start)
+            case RecordStopRequest():
+                return self._recorder().stop()
+            case RecordStatusRequest():
+                return self._recorder().state()
         raise AssertionError(f"no handler for {type(request).__name__}")  # the union and this match disagree
+
+    def _recorder(self) -> RecorderPort:
+        if self.recorder is None:
+            raise ApiError(ErrorCode.NO_RECORDER, "this service has no data recorder (a test's handler): record with "
+                           "hexactl serve")
+        return self.recorder
 
     def _validate_pose(self, request: ValidatePoseRequest) -> dict[str, Any]:
         result = self.controller.validate_pose(request.pose, request.duration, request.speed, Frame(request.frame),
@@ -140,6 +174,13 @@ class CommandHandler:
                     "duration": result.details.get("duration_s"), "refusal": None}
         return {"valid": False, "goal": None, "tool_goal": None, "duration": None,
                 "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+
+    def _validate_wave(self, request: ValidateWaveRequest) -> dict[str, Any]:
+        result = self.controller.validate_wave(_wave_spec(request))
+        if result.ok:
+            return {"valid": True, "refusal": None,
+                    "wave": jsonable(_wave_figures(result))}
+        return {"valid": False, "wave": None, "refusal": error_body(_code(result), result.message, jsonable(result.details))}
 
     def _set_frames(self, request: SetFramesRequest) -> dict[str, Any]:
         current = self.controller.operator_frames()
@@ -204,6 +245,17 @@ class CommandHandler:
 
 def _code(result: CommandResult) -> str:
     return result.error.value if result.error is not None else ErrorCode.INTERNAL_ERROR.value
+
+
+def _wave_spec(request: WaveRequest | ValidateWaveRequest) -> WaveSpec:
+    """The wave a request asks for (validated with it: the request is one)."""
+    return WaveSpec.model_validate({name: getattr(request, name) for name in WaveSpec.model_fields})
+
+
+def _wave_figures(result: CommandResult) -> dict[str, Any]:
+    """A wave's :class:`WaveFigures` from its result's details (``duration_s``: ``duration``, as moves')."""
+    details = {**result.details, "duration": result.details.get("duration_s")}
+    return {key: details.get(key) for key in WaveFigures.model_fields}
 
 
 def _checked(result: CommandResult, **fields: Any) -> dict[str, Any]:

@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.sequences import Paced, SequenceWaypoint
+from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import FramePoseMmDeg, RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.soft_limits import SoftLimits
 
@@ -142,6 +143,44 @@ class FramesRequest(_Request):
     cmd: Literal["frames"]
 
 
+JogVelocity = Annotated[list[float], Field(
+    min_length=6, max_length=6,
+    description="x, y, z in mm/s and roll, pitch, yaw in deg/s, in the frame; all zeros release the jog")]
+
+
+class JogRequest(_Request):
+    """Jog at ``velocity`` in ``frame`` while this request is repeated: send it again at
+    least every ``jog_deadman_s`` (0.2 s by default; ``status`` says) or the platform
+    brakes to rest along its path. The same velocity and frame renew the jog under way,
+    another velocity re-plans it, all zeros release it. The jog heads for the first limit
+    ahead (hardware or soft) and comes to rest on it: it is not refused there."""
+
+    cmd: Literal["jog"]
+    velocity: JogVelocity
+    frame: FrameName = Frame.ZERO.value
+
+
+class _WaveBody(_Request, WaveSpec):
+    pass
+
+
+class WaveRequest(_WaveBody):
+    """Play a wave from rest: each axis in ``axes`` oscillates as ``amplitude·sin(2π·
+    frequency_hz·t + phase_deg)`` about the start pose in ``frame`` for ``cycles``
+    periods, ramped in and out over ``ramp_cycles``. The whole path is validated first
+    (stroke, cones, envelope, soft limits, the legs' speed, the motion limits): a wave too
+    fast is refused, never slowed down. ``stop`` or ``abort`` brake it to rest; it cannot
+    be paused."""
+
+    cmd: Literal["wave"]
+
+
+class ValidateWaveRequest(_WaveBody):
+    """Would ``wave`` accept this now? Plans and checks the whole path; moves nothing."""
+
+    cmd: Literal["validate_wave"]
+
+
 class LegLockRequest(_Request):
     """Brake one leg at its current length; moves then keep it there (leg-lock mode)."""
 
@@ -231,6 +270,42 @@ class SaveRecordingRequest(_Request):
     path: FilePath
 
 
+RecordSignal = Literal["pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute"]
+
+
+class RecordRequest(_Request):
+    """Record signals of the control loop to ``NAME.csv`` (and its side file ``NAME.json``)
+    in the first data directory: every ``divisor``-th cycle for ``duration_s``, from now
+    or from the next motion's start. One recording at a time (not ``save_recording``,
+    which saves a sequence's dwell records)."""
+
+    cmd: Literal["record"]
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$", description="the files' name without "
+                      "extension: a bare file name, no directory")
+    signals: list[RecordSignal] = Field(
+        default=["pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute"], min_length=1,
+        description="what to record (default: all): pose_command and pose_measured (mm, deg, in frame), setpoints "
+        "and feedback (legs, sensor mm), lateness and compute (the loop's, µs)")
+    frame: Literal["zero", "work"] = Field(default="zero", description="the poses' frame: zero (relative to the zero "
+                                           "posture) or work (the tool's pose in the work frame at the start)")
+    divisor: int = Field(default=1, ge=1, le=10_000, description="record every divisor-th cycle (1: every cycle)")
+    duration_s: float = Field(gt=0, le=3600, description="how long to record, s (at most an hour)")
+    start: Literal["now", "next_motion"] = Field(default="now", description="now, or armed until the next move, "
+                                                 "sequence or other motion starts")
+
+
+class RecordStopRequest(_Request):
+    """End the recording under way early; the reply comes once its files are written."""
+
+    cmd: Literal["record_stop"]
+
+
+class RecordStatusRequest(_Request):
+    """The data recorder's writer: the recording being written, or the last one written."""
+
+    cmd: Literal["record_status"]
+
+
 class MeasureRequest(_Request):
     """Measure the platform's feature points with the measuring instrument: the
     simulator's (``no_instrument`` when the service drives real actuators)."""
@@ -247,6 +322,9 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     ResetRequest,
     MoveRequest,
     ValidatePoseRequest,
+    JogRequest,
+    WaveRequest,
+    ValidateWaveRequest,
     LegLockRequest,
     LegUnlockRequest,
     PlayRequest,
@@ -257,6 +335,9 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     RollbackCalibrationRequest,
     SaveRecordingRequest,
     MeasureRequest,
+    RecordRequest,
+    RecordStopRequest,
+    RecordStatusRequest,
     SetFramesRequest,
     ClearFramesRequest,
     FramesRequest,
@@ -327,6 +408,42 @@ class Fault(_Message):
     leg: Leg | None = Field(default=None, description="the actuator at fault, if one is")
 
 
+class RecorderTelemetry(_Message):
+    """The data recorder as the loop sees it (the file: ``record_status``)."""
+
+    state: Literal["idle", "armed", "recording", "done"]
+    name: str = Field(description="the recording's name")
+    rows: int = Field(ge=0, description="rows recorded so far")
+    rows_requested: int = Field(ge=0, description="rows the recording asked for")
+    lost: int = Field(ge=0, description="rows lost for want of room (the writer fell behind); 0 normally")
+    ended: Literal["duration", "stopped"] | None = Field(description="how it ended, once done")
+
+
+class WaveTelemetry(_Message):
+    """The wave playing, or the last one."""
+
+    cycle: int = Field(ge=1, description="the wave's period under way (or the last reached), 1-based")
+    cycles: int = Field(ge=1, description="the wave's periods")
+    phase: Literal["ramp_in", "steady", "ramp_out", "finished", "aborted", "fault"] = Field(
+        description="ramp_in, steady or ramp_out while it plays; how it ended: finished (at rest on the start pose), "
+        "aborted (by stop or abort: braked to rest) or fault (a fault, an E-stop or a disable froze it)")
+
+
+class JogTelemetry(_Message):
+    """The jog under way."""
+
+    jog: int = Field(description="its number (the reply to the jog that started it says it)")
+    frame: FrameName
+    velocity: JogVelocity
+    speed: float = Field(gt=0, le=1, description="the fraction of the velocity the motion limits allow it")
+    phase: Literal["jogging", "at_end", "braking"] = Field(
+        description="jogging; at_end: at rest where its plan ends (on a limit, or at the horizon a renewal extends); "
+        "braking: released, replaced or lapsed, braking to rest")
+    end: str = Field(description="where its plan ends: the limit ahead, by name, or the horizon")
+    to_limit: bool = Field(description="its plan ends on a limit (false: at the horizon)")
+    renew_within_s: float = Field(ge=0, description="time left before the deadman lapses unless the jog is renewed, s")
+
+
 class Telemetry(_Message):
     """One control cycle's picture."""
 
@@ -353,6 +470,11 @@ class Telemetry(_Message):
     tool_pose_measured: ToolInWorkMmDeg | None = Field(default=None, description="pose_measured as the tool's pose in "
                                                        "the work frame, mm and deg; null if none")
     frames: OperatorFrames | None = Field(default=None, description="the operator's frames and soft limits")
+    recording: RecorderTelemetry | None = Field(default=None, description="the data recorder in the loop; null before "
+                                                "the first recording")
+    wave: WaveTelemetry | None = Field(default=None, description="the wave playing, or how the last one ended; null "
+                                       "before the first wave")
+    jog: JogTelemetry | None = Field(default=None, description="the jog under way; null when none is")
 
 
 # -- replies -------------------------------------------------------------------------
@@ -403,6 +525,16 @@ class ValidatePoseReply(OkReply):
     refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
 
 
+class JogReply(OkReply):
+    jog: int | None = Field(description="the jog's number (null when the reply releases one)")
+    goal: RelativeMmDeg | None = Field(description="where its plan ends, relative to the zero posture; null on a "
+                                       "renewal or a release")
+    speed: float | None = Field(description="the fraction of the velocity its plan runs at")
+    end: str | None = Field(description="where its plan ends: the limit ahead by name, or the horizon")
+    to_limit: bool | None = Field(description="its plan ends on a limit (false: at the horizon a renewal extends)")
+    deadman_s: float | None = Field(description="renew the jog at least this often, s")
+
+
 class PlayReply(OkReply):
     name: str
     waypoints: int = Field(description="number of waypoints")
@@ -419,6 +551,54 @@ class SaveRecordingReply(OkReply):
     name: str = Field(description="the sequence recorded")
     status: str = Field(description="playing, finished, aborted or fault")
     records: int = Field(description="rows written (one per dwell)")
+
+
+class RecordReply(OkReply):
+    path: str = Field(description="the CSV file, on the service's machine (written as NAME.csv.partial until the "
+                      "recording ends)")
+    side_file: str = Field(description="the JSON side file written at the end")
+    rows: int = Field(description="rows the recording will have")
+    rate_hz: float = Field(description="rows per second: the loop's rate over the divisor")
+    duration: float = Field(description="the duration recorded, s (rows over rate)")
+
+
+class RecordingSideFile(_Message):
+    """The JSON side file of a recording (``NAME.json``), also the reply of ``record_stop``
+    and, once written, of ``record_status``."""
+
+    name: str
+    csv: str = Field(description="the CSV file written")
+    signals: list[str]
+    frame: Literal["zero", "work"]
+    frames: OperatorFrames | None = Field(description="with frame work: the operator's frames at the start")
+    divisor: int
+    loop_rate_hz: float
+    rate_hz: float
+    duration_s: float = Field(description="the duration asked for, s")
+    start: Literal["now", "next_motion"]
+    calibration_id: str | None = Field(description="the calibration active in the first row")
+    started_utc: str | None = Field(description="the first row's time, ISO 8601 UTC")
+    started_monotonic_s: float | None = Field(description="the first row's time on the service host's monotonic clock, s")
+    first_cycle: int | None
+    rows_requested: int
+    rows_written: int
+    cycles_missing: int = Field(description="gaps in the cycle column (0 normally)")
+    rows_lost: int = Field(description="rows the loop could not keep for want of room (0 normally)")
+    faults_during: bool = Field(description="the controller was in FAULT or ESTOP during the recording")
+    ended: Literal["duration", "stopped", "shutdown", "fault"] = Field(
+        description="duration reached, stopped (record_stop), shutdown of the service, or fault (the loop died)")
+    columns: list[dict[str, str]] = Field(description="each CSV column's name and unit")
+    side_file_error: str | None = Field(default=None, description="why the side file could not be written")
+
+
+class RecordStopReply(OkReply, RecordingSideFile):
+    pass
+
+
+class RecordStatusReply(OkReply):
+    state: Literal["idle", "writing", "done"] = Field(description="idle: no recording yet; writing: under way (rows "
+                                                      "so far in rows_written); done: the last one's side file follows")
+    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False, frozen=True)
 
 
 class MeasureReply(OkReply):
@@ -447,15 +627,48 @@ class PathViolation(_Message):
     axis: str | None = None
 
 
+class WaveFigures(_Message):
+    """A validated wave's figures, peaks over every loop cycle of its path."""
+
+    duration: float = Field(description="the wave's duration, s: cycles over frequency_hz")
+    cycles: int = Field(description="the wave's periods")
+    samples: int = Field(description="loop cycles it runs")
+    peak_leg_speed_mm_s: float = Field(description="the legs' peak speed, sensor mm/s (at most the legs' budget)")
+    peak_leg_speed_leg: Leg = Field(description="the leg it is on")
+    peak_leg_acceleration_mm_s2: float = Field(description="the legs' peak acceleration, mm/s² (reported: the "
+                                               "geometry sets no limit on it)")
+    peak_leg_acceleration_leg: Leg = Field(description="the leg it is on")
+    peak_pose_velocity: Annotated[list[float], Field(min_length=6, max_length=6)] = Field(
+        description="peak velocity per axis in the coordinates the wave runs in (frame zero: the pose relative to "
+        "the zero posture; work and tool: the tool's pose in the work frame): mm/s for x, y, z; deg/s for roll, pitch, "
+        "yaw")
+
+
+class WaveReply(OkReply, WaveFigures):
+    pass
+
+
+class ValidateWaveReply(OkReply):
+    valid: bool = Field(description="whether wave would accept it now")
+    wave: WaveFigures | None = Field(description="the wave's figures, when valid")
+    refusal: ErrorBody | None = Field(description="what wave would answer, when not valid")
+
+
 REPLY_MODELS: dict[str, type[OkReply]] = {
     "status": StatusReply,
     "move": MoveReply,
     "validate_pose": ValidatePoseReply,
+    "jog": JogReply,
+    "wave": WaveReply,
+    "validate_wave": ValidateWaveReply,
     "play": PlayReply,
     "load_calibration": CalibrationReply,
     "rollback_calibration": CalibrationReply,
     "save_recording": SaveRecordingReply,
     "measure": MeasureReply,
+    "record": RecordReply,
+    "record_stop": RecordStopReply,
+    "record_status": RecordStatusReply,
     "set_frames": FramesReply,
     "clear_frames": FramesReply,
     "frames": FramesReply,

@@ -11,13 +11,14 @@ bad input: each returns a :class:`~hexactl.control.results.CommandResult` whose
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.telemetry import Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
 from hexactl.control.sequences import MotionSequence
+from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry
 
 
@@ -52,6 +53,21 @@ class ControllerPort(Protocol):
 
     def operator_frames(self) -> OperatorFrames: ...
 
+    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
+            deadline_ns: int | None = None) -> CommandResult:
+        """Success details: ``jog`` (its number), ``goal`` (where its plan ends, relative to the
+        zero posture; absent on a renewal), ``speed``, ``end``, ``to_limit``, ``deadman_s``."""
+        ...
+
+    def wave(self, spec: WaveSpec, *, deadline_ns: int | None = None) -> CommandResult:
+        """Success details: :meth:`~hexactl.control.wave_planning.WavePlan.summary`'s
+        (``duration_s``, the peak leg speed and acceleration, the peak pose velocity)."""
+        ...
+
+    def validate_wave(self, spec: WaveSpec) -> CommandResult:
+        """What :meth:`wave` would answer, without moving."""
+        ...
+
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult: ...
 
     def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult: ...
@@ -79,3 +95,16 @@ class ControllerPort(Protocol):
         ...
 
     def telemetry(self) -> Telemetry: ...
+
+
+class RecorderPort(Protocol):
+    """The data recorder's writer (:class:`hexactl.application.recording.Recordings`):
+    each method answers a reply's fields or raises
+    :class:`~hexactl.adapters.api.wire.ApiError`."""
+
+    def start(self, name: str, signals: Sequence[str], frame: str, divisor: int, duration_s: float,
+              start: str) -> dict[str, Any]: ...
+
+    def stop(self) -> dict[str, Any]: ...
+
+    def state(self) -> dict[str, Any]: ...

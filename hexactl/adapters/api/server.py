@@ -68,7 +68,7 @@ POLL_INTERVAL_MS = 100
 URGENT_COMMANDS = frozenset({"estop", "stop", "abort"})
 """Carried out on the socket thread as they arrive, ahead of every queued request."""
 
-CANCELLED_BY_STOP = frozenset({"move", "play", "resume", "leg_lock", "leg_unlock", "load_calibration",
+CANCELLED_BY_STOP = frozenset({"move", "jog", "play", "resume", "leg_lock", "leg_unlock", "load_calibration",
                                "rollback_calibration"})
 """Queued requests an urgent command discards: everything that would set the platform
 moving or change its motion or calibration. ``enable`` is not among them (it holds the

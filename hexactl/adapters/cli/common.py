@@ -181,21 +181,21 @@ def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt
 _KEYED = re.compile(r"^\s*(x|y|z|roll|pitch|yaw)\s*=\s*(\S+)\s*$")
 
 
-def parse_pose_argument(text: str) -> list[float]:
+def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
     """A pose typed on the command line, mm and deg (relative to the zero posture, or in the
-    frame the command names).
+    frame the command names), or six values of another ``what`` per axis (a velocity).
 
     Either six comma-separated numbers ``X,Y,Z,ROLL,PITCH,YAW`` or ``axis=value`` pairs
     separated by commas, missing axes 0: ``x=600``, ``pitch=-20,yaw=5``.
     """
     parts = [part for part in text.split(",") if part.strip()]
     if parts and all("=" in part for part in parts):
-        pose = _keyed_values("pose", text, parts, 0.0)
+        pose = _keyed_values(what, text, parts, 0.0)
     else:
         pose = [_number(part, text) for part in parts]
     problem = validate_pose_values(pose)
     if problem:
-        raise CliError(f"pose {text!r}: {problem}")
+        raise CliError(f"{what} {text!r}: {problem.replace('pose', what)}")
     return pose
 
 
@@ -221,6 +221,11 @@ def _keyed_values(what: str, text: str, parts: list[str], missing: float | None)
 def pose_argument(text: str) -> list[float]:
     """:func:`parse_pose_argument` as an argparse ``type``: its error becomes argparse's."""
     return _argparse_type(parse_pose_argument, text)
+
+
+def velocity_argument(text: str) -> list[float]:
+    """Six velocities typed as a pose is (:func:`parse_pose_argument`), mm/s and deg/s."""
+    return _argparse_type(lambda typed: parse_pose_argument(typed, "velocity"), text)
 
 
 def bounds_argument(text: str) -> list[float | None]:

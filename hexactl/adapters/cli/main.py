@@ -18,11 +18,22 @@ import os
 import sys
 from collections.abc import Sequence
 
-from hexactl.adapters.cli import calibration_commands, demo_commands, kinematics_commands, monitor, service_commands, sim_commands
+from hexactl.adapters.cli import (
+    calibration_commands,
+    demo_commands,
+    jog_commands,
+    kinematics_commands,
+    monitor,
+    recording_commands,
+    service_commands,
+    sim_commands,
+    wave_commands,
+)
 from hexactl.adapters.cli.common import CliError, DeferredParser, common_parser
 from hexactl.adapters.cli.endpoints import fill_endpoints
 
-COMMAND_MODULES = (kinematics_commands, sim_commands, service_commands, monitor, calibration_commands, demo_commands)
+COMMAND_MODULES = (kinematics_commands, sim_commands, service_commands, jog_commands, recording_commands, wave_commands,
+                   monitor, calibration_commands, demo_commands)
 
 EXIT_BROKEN_PIPE = 141
 """The shell's status for a command killed by SIGPIPE (128 + 13), e.g. ``hexactl … | head``."""

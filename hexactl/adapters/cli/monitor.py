@@ -33,11 +33,14 @@ from hexactl.adapters.cli.telemetry_text import (
     fault_text,
     format_telemetry,
     frames_lines,
+    jog_text,
     loop_text,
     percentiles_text,
     realtime_text,
+    recording_text,
     remaining_text,
     sequence_text,
+    wave_text,
 )
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
@@ -329,6 +332,9 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         ("locked leg", f"L{locked}" if locked else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),
+        ("jog", jog_text(record.get("jog"))),
+        ("wave", wave_text(record.get("wave"))),
+        ("recording", recording_text(record.get("recording"))),
         ("faults", Text("\n".join(fault_text(fault) for fault in faults), style="bold red") if faults else "none"),
         ("loop", loop_text(loop)),
         ("lateness µs", percentiles_text(loop["lateness_us"])),

@@ -38,7 +38,7 @@ RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     _register_serve(subparsers, common)
-    client = _client_parser()
+    client = client_parser()
 
     def command(name: str, help_text: str, build: RequestBuilder | str) -> argparse.ArgumentParser:
         """A client sub-command sending what ``build`` makes of the arguments (a bare
@@ -170,7 +170,7 @@ def _waiting(parser: argparse.ArgumentParser) -> None:
                         "over (exit 1, saying why, if a fault, an E-stop or a pause ends or holds it)")
 
 
-def _client_parser() -> argparse.ArgumentParser:
+def client_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(add_help=False, parents=[connection_parser()])
     parser.add_argument("--api", metavar="ENDPOINT", help=f"the service's command endpoint (default $HEXACTL_API, else the "
                         f"client file's api, else {DEFAULT_API_ENDPOINT})")

@@ -27,6 +27,9 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),
+        ("jog", jog_text(record.get("jog"))),
+        ("wave", wave_text(record.get("wave"))),
+        ("recording", recording_text(record.get("recording"))),
         ("faults", "; ".join(fault_text(fault) for fault in record.get("faults") or []) or "none"),
         ("loop", loop_text(loop)),
         ("lateness µs", percentiles_text(loop["lateness_us"])),
@@ -87,6 +90,34 @@ def remaining_text(remaining_s: float | None) -> str:
 def sequence_text(sequence: dict[str, Any] | None) -> str:
     """``NAME i/n (phase)``, or ``none``."""
     return f"{sequence['name']} {sequence['index']}/{sequence['total']} ({sequence['phase']})" if sequence else "none"
+
+
+def jog_text(jog: dict[str, Any] | None) -> str:
+    """``jog 12 jogging x 10 mm/s in zero, to the soft limit on x at 5 (renew within 0.15 s)``, or ``none``."""
+    if not jog:
+        return "none"
+    velocity = ", ".join(f"{axis} {value:g} {unit}/s" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, jog["velocity"])
+                         if value)
+    return (f"jog {jog['jog']} {jog['phase']} {velocity} in {jog['frame']}, to {jog['end']} "
+            f"(renew within {jog['renew_within_s']:.2f} s)")
+
+
+def wave_text(wave: dict[str, Any] | None) -> str:
+    """``cycle 2 of 5 (steady)`` while a wave plays, ``finished in cycle 5 of 5`` once over; or ``none``."""
+    if not wave:
+        return "none"
+    if wave["phase"] in ("ramp_in", "steady", "ramp_out"):
+        return f"cycle {wave['cycle']} of {wave['cycles']} ({wave['phase']})"
+    return f"{wave['phase']} in cycle {wave['cycle']} of {wave['cycles']}"
+
+
+def recording_text(recording: dict[str, Any] | None) -> str:
+    """``run2 recording 1200/2500 rows``, ``run2 done 2500/2500 rows (duration)``, with rows lost if any; or ``none``."""
+    if not recording:
+        return "none"
+    lost = f", {recording['lost']} lost" if recording.get("lost") else ""
+    ended = f" ({recording['ended']})" if recording.get("ended") else ""
+    return f"{recording['name']} {recording['state']} {recording['rows']}/{recording['rows_requested']} rows{lost}{ended}"
 
 
 def fault_text(fault: dict[str, Any]) -> str:

@@ -1,0 +1,102 @@
+"""``hexactl jog``: jog a running service for a while, renewing the deadman, then release.
+
+The service jogs only while its client renews the jog (``jog_deadman_s``, 0.2 s by
+default): this command renews it four times per interval for ``--for`` seconds, then
+releases it and waits until the platform is at rest. Ctrl-C releases it at once; if this
+command dies, the service brakes by itself when the deadman lapses.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+from hexactl.adapters.cli.common import connect, positive_float, velocity_argument
+from hexactl.adapters.cli.service_commands import (
+    EXIT_NO_ANSWER,
+    EXIT_REFUSED,
+    FRAMES,
+    client_parser,
+    format_error_reply,
+    wait_until_at_rest,
+)
+from hexactl.adapters.cli.telemetry_text import pose_text
+
+RENEWALS_PER_DEADMAN = 4
+"""Renewals per deadman interval: three may be late before the platform brakes."""
+
+MAX_JOG_FOR_S = 600.0
+
+
+def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    description = ("jog the platform at a velocity for a while: it heads for the first limit ahead (hardware or "
+                   "soft) and comes to rest on it; then it is released and brakes to rest")
+    jog = subparsers.add_parser("jog", parents=[client_parser()], help=description, description=description)
+    jog.add_argument("velocity", metavar="VELOCITY", type=velocity_argument,
+                     help="X,Y,Z,ROLL,PITCH,YAW in mm/s and deg/s, or axis=value pairs, e.g. z=5 or yaw=-1")
+    jog.add_argument("--for", dest="for_s", type=positive_float, required=True, metavar="S",
+                     help=f"how long to jog, s (at most {MAX_JOG_FOR_S:g}); Ctrl-C releases it sooner")
+    jog.add_argument("--frame", choices=FRAMES, default="zero",
+                     help="zero: the platform's axes at the zero posture (default); work: the work frame's axes; "
+                     "tool: the tool's own axes, turning about the pivot point")
+    jog.epilog = ("Exit 0 at rest after the release; 1 if the service refused the jog or a fault ended it. With --json: "
+                  "the first reply, then the status at rest, one JSON object per line.")
+    jog.set_defaults(run=run_jog)
+
+
+def run_jog(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
+
+    if arguments.for_s > MAX_JOG_FOR_S:
+        print(f"hexactl jog: --for {arguments.for_s:g} is beyond {MAX_JOG_FOR_S:g} s: jog in shorter runs",
+              file=sys.stderr)
+        return EXIT_NO_ANSWER
+    fields = {"velocity": arguments.velocity, "frame": arguments.frame}
+    client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
+    try:
+        with client:
+            reply = client.request("jog", **fields)
+            if not reply.get("ok"):
+                print(format_error_reply(reply), file=sys.stderr)
+                return EXIT_REFUSED
+            if arguments.json:
+                print(json.dumps(reply), flush=True)
+            else:
+                print(f"jogging (jog {reply['jog']}): heading for {reply['end']}, at {reply['speed']:.0%} of the "
+                      f"velocity asked", flush=True)
+            try:
+                refused = _renew(client, fields, arguments.for_s, reply["deadman_s"] / RENEWALS_PER_DEADMAN)
+            finally:
+                client.request("jog", velocity=[0.0] * 6, frame=arguments.frame)
+            if refused is not None:
+                print(format_error_reply(refused), file=sys.stderr)
+                return EXIT_REFUSED
+            waited = wait_until_at_rest(client, "jog", {})
+            status = client.request("status")["status"]
+            if arguments.json:
+                print(json.dumps(status))
+                return waited
+            print(f"released; at rest at {pose_text(status['pose_command'])}"
+                  + (f" (tool {pose_text(status['tool_pose_command'])} in the work frame)"
+                     if arguments.frame != "zero" else ""))
+            return waited
+    except ServiceUnavailable as error:
+        print(f"hexactl jog: {error}", file=sys.stderr)
+        return EXIT_NO_ANSWER
+
+
+def _renew(client: Any, fields: dict[str, Any], for_s: float, every_s: float) -> dict[str, Any] | None:
+    """Send the jog every ``every_s`` for ``for_s``; the reply that refused it (None: none
+    did). ``jog_ended`` (a renewal that found the jog braking, after a stall of this
+    machine) is no refusal: the next renewal starts it again, as the API says."""
+    end = time.monotonic() + for_s
+    while (left := end - time.monotonic()) > 0:
+        time.sleep(min(every_s, left))
+        reply = client.request("jog", **fields)
+        if not reply.get("ok") and (reply.get("error") or {}).get("code") != "jog_ended":
+            return reply
+    return None
+

@@ -1,0 +1,242 @@
+"""``hexactl record`` (the service's data recorder) and ``hexactl plot`` (a recording to a PNG).
+
+``record NAME --duration S`` asks the running service to record (docs/api.md, "Data
+recorder"); with ``--wait`` it returns once the file is written, printing its path, and
+exits 1 saying why if the recording ended badly. ``record --stop`` ends one early.
+``plot RECORDING.csv`` draws one panel per signal group, with the units of the header
+and the title from the side file (``RECORDING.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from hexactl.adapters.cli.common import CliError, connect, positive_float
+
+EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
+SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
+"""The API's signals (docs/api.md); the service checks them again."""
+
+WAIT_POLL_S = 0.2
+WAIT_SLACK_S = 30.0
+"""``--wait`` gives up this long after the recording should have ended (its duration, plus
+the wait for the next motion with ``--on-motion``: there, it waits as long as it takes)."""
+
+GOOD_ENDINGS = ("duration", "stopped")
+
+_GROUPS = (  # (column prefix, panel title): one panel each, in this order
+    ("pose_command_", "commanded pose"), ("pose_measured_", "measured pose"), ("setpoint_", "set-points"),
+    ("feedback_", "feedback"), ("lateness_", "loop lateness"), ("compute_", "loop compute"),
+)
+
+
+def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    from hexactl.adapters.cli.service_commands import client_parser  # the client options, shared
+
+    record = subparsers.add_parser(
+        "record", parents=[client_parser()], help="record the control loop's signals to CSV on the service's machine",
+        description="Record the control loop's signals, cycle by cycle, to NAME.csv (and NAME.json, the "
+        "configuration) in the service's first data directory.")
+    record.add_argument("name", metavar="NAME", nargs="?", help="the files' name, without extension or directory")
+    record.add_argument("--duration", type=positive_float, metavar="S", help="how long to record, s (at most 3600)")
+    record.add_argument("--signals", type=_signals, metavar="A,B", help=f"what to record (default all): {','.join(SIGNALS)}")
+    record.add_argument("--frame", choices=("zero", "work"), default="zero",
+                        help="the poses: relative to the zero posture (default), or the tool's pose in the work frame")
+    record.add_argument("--divisor", type=int, default=1, metavar="N", help="every N-th cycle (default 1: every cycle)")
+    record.add_argument("--on-motion", action="store_true", help="start with the next motion instead of now")
+    record.add_argument("--wait", action="store_true", help="return when the file is written, printing its path "
+                        "(exit 1, saying why, if the recording ended badly)")
+    record.add_argument("--stop", action="store_true", help="end the recording under way early (no NAME)")
+    record.set_defaults(run=run_record)
+    plot = subparsers.add_parser("plot", parents=[common], help="plot a recording (CSV) to a PNG",
+                                 description="Plot a recording made by `hexactl record`: one panel per signal group.")
+    plot.add_argument("recording", metavar="RECORDING", type=Path, help="the recording's CSV file")
+    plot.add_argument("-o", "--out", type=Path, metavar="PNG", help="the image (default: RECORDING with .png)")
+    plot.set_defaults(run=run_plot)
+
+
+def _signals(text: str) -> list[str]:
+    signals = [part.strip() for part in text.split(",") if part.strip()]
+    if unknown := [s for s in signals if s not in SIGNALS]:
+        raise argparse.ArgumentTypeError(f"unknown {', '.join(unknown)}: choose among {','.join(SIGNALS)}")
+    return signals
+
+
+def record_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    """The command and fields ``hexactl record`` sends; CliError for a contradiction."""
+    if arguments.stop:
+        if arguments.name or arguments.duration:
+            raise CliError("--stop takes no NAME and no --duration")
+        return "record_stop", {}
+    if not arguments.name or arguments.duration is None:
+        raise CliError("give NAME and --duration S (or --stop)")
+    if arguments.divisor < 1:
+        raise CliError(f"--divisor {arguments.divisor}: a whole number ≥ 1")
+    name = arguments.name[:-4] if arguments.name.endswith(".csv") else arguments.name
+    fields: dict[str, Any] = {"name": name, "duration_s": arguments.duration, "frame": arguments.frame,
+                              "divisor": arguments.divisor, "start": "next_motion" if arguments.on_motion else "now"}
+    if arguments.signals:
+        fields["signals"] = arguments.signals
+    return "record", fields
+
+
+def run_record(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
+    from hexactl.adapters.cli.service_commands import format_error_reply
+
+    cmd, fields = record_request(arguments)
+    client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
+    try:
+        with client:
+            reply = client.request(cmd, **fields)
+            if arguments.json and not arguments.wait:
+                print(json.dumps(reply))
+                return EXIT_OK if reply.get("ok") else EXIT_REFUSED
+            if not reply.get("ok"):
+                print(format_error_reply(reply), file=sys.stderr)
+                return EXIT_REFUSED
+            if cmd == "record_stop":
+                return _report_written(reply, arguments.json)
+            print(f"ok: {reply['message']}: {reply['rows']} rows at {reply['rate_hz']:g} Hz to {reply['path']}",
+                  flush=True)
+            if not arguments.wait:
+                return EXIT_OK
+            return _report_written(_wait_written(client, fields["name"], reply, arguments.on_motion), arguments.json)
+    except ServiceUnavailable as error:
+        print(f"hexactl record: {error}", file=sys.stderr)
+        return EXIT_NO_ANSWER
+
+
+def _wait_written(client: Any, name: str, reply: dict[str, Any], on_motion: bool) -> dict[str, Any]:
+    """Poll ``record_status`` until recording ``name``'s file is written; its side file."""
+    deadline = time.monotonic() + float(reply["duration"]) + WAIT_SLACK_S
+    while True:
+        state = client.request("record_status")
+        if state.get("state") == "done" and state.get("name") == name:  # one at a time: the last one done is ours
+            return state
+        recorder = (client.request("status")["status"].get("recording") or {}) if on_motion else {}
+        if recorder.get("state") == "armed":
+            deadline = time.monotonic() + float(reply["duration"]) + WAIT_SLACK_S  # no motion yet: keep waiting
+        if time.monotonic() > deadline:
+            return {"ended": "lost", "csv": reply["path"],
+                    "problem": f"not written {WAIT_SLACK_S:g} s after it should have ended"}
+        time.sleep(WAIT_POLL_S)
+
+
+def _report_written(side: dict[str, Any], as_json: bool) -> int:
+    """Print where the recording was written; 1 (saying why) if it ended badly."""
+    if as_json:
+        print(json.dumps(side))
+    problems = []
+    if problem := side.get("problem"):
+        problems.append(problem)
+    elif side.get("ended") not in GOOD_ENDINGS:
+        problems.append(f"it ended early: {side.get('ended')} (the service stopped, or its loop failed)")
+    if side.get("cycles_missing"):
+        problems.append(f"{side['cycles_missing']} cycles are missing ({side.get('rows_lost', 0)} rows lost)")
+    if side.get("side_file_error"):
+        problems.append(f"its side file was not written: {side['side_file_error']}")
+    if not as_json:
+        print(f"{side.get('csv')}: {side.get('rows_written', 0)} rows, ended: {side.get('ended')}")
+    if problems:
+        print(f"hexactl record: {'; '.join(problems)}", file=sys.stderr)
+        return EXIT_REFUSED
+    return EXIT_OK
+
+
+# -- plot ----------------------------------------------------------------------------
+
+
+def run_plot(arguments: argparse.Namespace) -> int:
+    path: Path = arguments.recording
+    header, columns = _read_recording(path)
+    side = _side_file(path)
+    out = arguments.out or path.with_suffix(".png")
+    import matplotlib  # heavy: only for plot
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    time_s = columns[header.index("t_s")]
+    panels = [(title, [name for name in header if name.startswith(prefix)]) for prefix, title in _GROUPS]
+    panels = [(title, names) for title, names in panels if names]
+    if not panels:
+        raise CliError(f"{path}: no signal columns to plot (only {', '.join(header)})")
+    figure, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(10, 2.6 * len(panels)), squeeze=False)
+    for axis, (title, names) in zip(axes[:, 0], panels):
+        # a pose's mm on the left axis, its degrees on a right one; each legend on its side
+        for side, unit in enumerate(dict.fromkeys(name.rsplit("_", 1)[1] for name in names)):
+            target = axis.twinx() if side else axis
+            colours = iter(plt.rcParams["axes.prop_cycle"].by_key()["color"][3 * side:])
+            for name in (n for n in names if n.endswith(f"_{unit}")):
+                target.plot(time_s, columns[header.index(name)], linewidth=0.8, color=next(colours),
+                            label=name.rsplit("_", 1)[0].split("_")[-1])
+            target.set_ylabel(f"{title} ({_UNITS.get(unit, unit)})")
+            target.legend(loc="upper right" if side else "upper left", fontsize="x-small", ncol=3)
+        axis.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (s)")
+    figure.suptitle(_title(path, side))
+    figure.tight_layout()
+    try:
+        figure.savefig(out, dpi=100)
+    except OSError as error:
+        raise CliError(f"{out}: cannot write the image: {error.strerror}") from None
+    finally:
+        plt.close(figure)
+    print(out)
+    return EXIT_OK
+
+
+_UNITS = {"us": "µs", "deg": "°"}
+
+
+def _read_recording(path: Path) -> tuple[list[str], list[list[float]]]:
+    """The header and the columns (NaN for an empty cell); CliError for a missing or garbled file."""
+    import csv
+
+    try:
+        with open(path, encoding="utf-8", newline="") as handle:
+            rows = list(csv.reader(handle))
+    except FileNotFoundError:
+        raise CliError(f"{path}: no such file (a recording is NAME.csv in the service's data directory)") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise CliError(f"{path}: cannot read it: {error}") from None
+    if not rows or "t_s" not in rows[0] or "cycle" not in rows[0]:
+        raise CliError(f"{path}: not a recording (its header has no t_s and cycle columns): plot a file made by "
+                       "hexactl record")
+    header, body = rows[0], rows[1:]
+    if not body:
+        raise CliError(f"{path}: the recording has no rows")
+    columns: list[list[float]] = [[] for _ in header]
+    for number, row in enumerate(body, start=2):
+        if len(row) != len(header):
+            raise CliError(f"{path}: line {number} has {len(row)} values for {len(header)} columns: the file is garbled")
+        try:
+            for column, cell in zip(columns, row):
+                column.append(float(cell) if cell else float("nan"))
+        except ValueError:
+            raise CliError(f"{path}: line {number} has a value that is not a number: the file is garbled") from None
+    return header, columns
+
+
+def _side_file(path: Path) -> dict[str, Any] | None:
+    """The recording's side file, None when absent; CliError when garbled."""
+    side = path.with_suffix(".json")
+    try:
+        return json.loads(side.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise CliError(f"{side}: the side file cannot be read ({error}): move it away to plot without it") from None
+
+
+def _title(path: Path, side: dict[str, Any] | None) -> str:
+    if not isinstance(side, dict):
+        return path.stem
+    return (f"{side.get('name', path.stem)}: {side.get('rate_hz', '?')} Hz, frame {side.get('frame', '?')}, "
+            f"from {side.get('started_utc') or '?'}, {side.get('rows_written', '?')} rows, ended {side.get('ended', '?')}")

@@ -1,0 +1,87 @@
+"""The facade's jog command: start, renew, re-plan or release a jog (:mod:`hexactl.control.jog`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, replace
+from math import isfinite
+
+from hexactl.control import commands as cmd
+from hexactl.control import preconditions
+from hexactl.control.frames import Frame, convert
+from hexactl.control.jog import JogPhase
+from hexactl.control.jog_planning import JOG_EXTEND_S, plan_jog
+from hexactl.control.planning import PlanningContext, Refusal
+from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.snapshot import ControlState, CoreSnapshot, MotionState
+from hexactl.control.submitter import CommandSubmitter
+from hexactl.control.telemetry import motion_remaining_s
+
+MAX_JOG_VELOCITY = 1e4
+"""Bigger components (mm/s, deg/s) are typing errors; the motion limits cap the rest."""
+
+
+class JogCommands:
+    """Jogs of one facade: ``snapshot()`` the loop's latest, ``context(snapshot)`` what a plan
+    depends on, commands queued by ``submitter``; each renewal lasts ``deadman_s``."""
+
+    def __init__(self, snapshot: Callable[[], CoreSnapshot], context: Callable[[CoreSnapshot], PlanningContext],
+                 submitter: CommandSubmitter, deadman_s: float) -> None:
+        self._snapshot = snapshot
+        self._context = context
+        self._submitter = submitter
+        self.deadman_s = deadman_s
+
+    def jog(self, velocity: Sequence[float], frame: Frame, deadline_ns: int | None) -> CommandResult:
+        """See :meth:`hexactl.control.controller.Controller.jog`."""
+        if problem := _velocity_problem(velocity) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, problem)
+        velocity, frame = tuple(float(v) for v in velocity), Frame(frame)
+        s = self._snapshot()
+        if not any(velocity):
+            return self._release(s)
+        if refusal := preconditions.check_jog(s):
+            return CommandResult.failure(*refusal)
+        current = s.jog
+        if (current is not None and current.phase is not JogPhase.BRAKING and current.frame == frame.value
+                and current.velocity == velocity and (current.to_limit or (motion_remaining_s(s) or 0.0) > JOG_EXTEND_S)):
+            return self._submitter.submit(lambda t: cmd.RenewJog(t, frame.value, velocity), "jog renewed",
+                                          deadline_ns=deadline_ns, **_details(current.jog, current.speed, current.end,
+                                                                              current.to_limit, self.deadman_s))
+        context = self._context(s)
+        plan = plan_jog(context, s.trajectory, s.frames, velocity, frame, round(self.deadman_s * 1e9))
+        if isinstance(plan, Refusal):
+            return CommandResult.failure(plan.code, plan.message, violations=[asdict(v) for v in plan.violations],
+                                         **plan.details)
+        goal = convert(plan.segment.goal, plan.segment.frames, None, s.active.home).in_degrees()
+        result = self._submitter.submit(lambda t: cmd.Jog(t, s.epoch, plan), "jogging", deadline_ns=deadline_ns,
+                                        goal=list(goal), **_details(None, plan.speed, plan.end, plan.to_limit,
+                                                                    self.deadman_s))
+        # a jog's number is the ticket of the command that started it
+        return replace(result, details={"jog": result.details.get("ticket"), **result.details})
+
+    def _release(self, s: CoreSnapshot) -> CommandResult:
+        if s.jog is None or s.jog.phase is JogPhase.BRAKING:
+            return CommandResult.success("nothing to release: no jog is under way")
+        if s.state is not ControlState.ENABLED or s.motion is MotionState.HOLDING:
+            message = "jog released (at rest)"
+        else:
+            message = "jog released: braking to rest"
+        return self._submitter.submit(cmd.Stop, message)
+
+
+def _velocity_problem(velocity: object) -> str | None:
+    values = list(velocity) if isinstance(velocity, (list, tuple)) else None
+    if values is None or len(values) != 6:
+        return "a jog velocity is six numbers: x, y, z in mm/s and roll, pitch, yaw in deg/s"
+    for value in values:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not isfinite(value):
+            return f"a jog velocity's components are finite numbers, got {value!r}"
+        if abs(value) > MAX_JOG_VELOCITY:
+            return f"a jog velocity component of {value:g} is beyond {MAX_JOG_VELOCITY:g} (mm/s or deg/s): a typing error?"
+    return None
+
+
+def _details(jog: int | None, speed: float, end: str, to_limit: bool, deadman_s: float) -> dict[str, object]:
+    return {"speed": speed, "end": end, "to_limit": to_limit, "deadman_s": deadman_s,
+            **({"jog": jog} if jog is not None else {})}

@@ -1,0 +1,154 @@
+"""The wave generator's waves: a periodic motion on one or more axes of a frame.
+
+A :class:`WaveSpec` is what the operator asks for; a :class:`WavePath` is the position it
+commands at each loop cycle, oscillating about the start pose (at rest) and multiplied by
+an envelope that ramps in and out with a quintic smoothstep, so that position, velocity
+and acceleration are continuous from rest and back to it. The planner
+(:mod:`~hexactl.control.wave_planning`) validates :meth:`WavePath.at` of every cycle, and
+the loop's :class:`~hexactl.control.wave_player.WavePlayer` commands :meth:`WavePath.at`
+of the same cycles: one function, the same times, so what was validated is what runs
+(the reason :mod:`hexactl.control.trajectory` previews the generator it runs).
+
+Coordinates: relative mm/rad for frame zero; the tool's pose in the work frame
+(:class:`~hexactl.kinematics.axes.ToolInWorkMmRad`) for the work and the tool frame. In the
+tool frame the displacement is composed on the tool's own axes at the start pose, so a
+rotation turns about the pivot point. Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+from math import ceil, radians, sin, tau
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from hexactl.control.frames import Coordinates, Frame
+from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.frames import compose, pose_of, transform_of
+
+MAX_FREQUENCY_HZ = 50.0
+"""The fastest wave: ten loop cycles a period at the default 500 Hz."""
+MAX_CYCLES = 1_000_000
+"""A bound that keeps the count a number; the duration is capped by planning (MAX_MOTION_S)."""
+MAX_AMPLITUDE_MM = 1000.0
+MAX_AMPLITUDE_DEG = 90.0
+
+AxisName = Literal["x", "y", "z", "roll", "pitch", "yaw"]
+
+
+class WaveAxis(BaseModel):
+    """One axis's oscillation: ``amplitude`` mm (x, y, z) or deg (roll, pitch, yaw),
+    ``phase_deg`` its phase at the start."""
+
+    # strict: the API refuses "2" for a number, and an API request holds these
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False, strict=True)
+
+    amplitude: float = Field(description="peak displacement from the start pose: mm for x, y, z; deg for roll, "
+                             "pitch, yaw")
+    phase_deg: float = Field(default=0.0, ge=-360.0, le=360.0, description="phase at the start, deg")
+
+
+class WaveSpec(BaseModel):
+    """A wave: ``axes`` oscillate as ``amplitude·sin(2π·frequency_hz·t + phase)`` about the
+    start pose in ``frame`` for ``cycles`` periods, the amplitude ramped in over the first
+    ``ramp_cycles`` periods and out over the last as many.
+
+    :raises pydantic.ValidationError: naming the field and the bound
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    # not strict: the API's strict requests give the frame as its name
+    frame: Frame = Field(default=Frame.ZERO, strict=False, description="zero: the axes of the pose relative to the "
+                         "zero posture; work: of the tool's pose in the work frame; tool: the tool's own axes at the "
+                         "start pose "
+                         "(rotations about the pivot point)")
+    frequency_hz: float = Field(gt=0.0, le=MAX_FREQUENCY_HZ, description="periods per second")
+    cycles: int = Field(ge=1, le=MAX_CYCLES, description="periods, the ramps included")
+    ramp_cycles: float = Field(default=1.0, gt=0.0, description="periods the amplitude takes to ramp in, and again "
+                               "to ramp out (a quintic smoothstep: from and to rest without a jump in acceleration); "
+                               "at most half of cycles")
+    axes: dict[AxisName, WaveAxis] = Field(min_length=1, description="the oscillating axes, by name")
+    shape: Literal["sine"] = Field(default="sine", description="the waveform")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> WaveSpec:
+        if 2 * self.ramp_cycles > self.cycles:
+            raise ValueError(f"ramp_cycles {self.ramp_cycles:g} ramps in and again out: at most half of cycles "
+                             f"({self.cycles}); lower it or add cycles")
+        for name, axis in self.axes.items():
+            bound, unit = (MAX_AMPLITUDE_MM, "mm") if name in ("x", "y", "z") else (MAX_AMPLITUDE_DEG, "deg")
+            if not abs(axis.amplitude) <= bound:
+                raise ValueError(f"{name} amplitude {axis.amplitude:g} {unit} is beyond ±{bound:g} {unit}")
+        return self
+
+    @property
+    def duration_s(self) -> float:
+        return self.cycles / self.frequency_hz
+
+
+def envelope(u: float) -> float:
+    """The quintic smoothstep at ``u`` in [0, 1]: 0 → 1 with zero first and second
+    derivative at both ends."""
+    return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
+
+
+class WavePath:
+    """The positions of ``spec`` from ``start`` (at rest, in the wave's coordinates: see
+    the module docstring) for a loop running every ``period_s``. Immutable."""
+
+    def __init__(self, spec: WaveSpec, start: Coordinates, period_s: float) -> None:
+        self.spec = spec
+        self.start = start
+        self.period_s = period_s
+        self.duration_s = spec.duration_s
+        self.ramp_s = spec.ramp_cycles / spec.frequency_hz
+        self.samples = ceil(self.duration_s / period_s - 1e-9)
+        """Cycles the wave runs; :meth:`at` is ``start`` from this one on."""
+        omega = tau * spec.frequency_hz
+        self._terms = tuple(
+            (POSE_AXES.index(name), axis.amplitude if name in ("x", "y", "z") else radians(axis.amplitude), omega,
+             radians(axis.phase_deg))
+            for name, axis in spec.axes.items())
+        self._coordinates = type(start)
+        self._on_tool = spec.frame is Frame.TOOL
+        self._start_transform = transform_of(start)
+
+    def envelope_at(self, t: float) -> float:
+        """The amplitude's factor at ``t`` s from the start: 0 at both ends, 1 between the ramps."""
+        if t <= 0.0 or t >= self.duration_s:
+            return 0.0
+        ramp = self.ramp_s
+        if t < ramp:
+            return envelope(t / ramp)
+        if t > self.duration_s - ramp:
+            return envelope((self.duration_s - t) / ramp)
+        return 1.0
+
+    def displacement(self, k: int) -> list[float]:
+        """The displacement from the start at cycle ``k`` (mm, rad), per axis."""
+        t = k * self.period_s
+        scale = self.envelope_at(t)
+        offset = [0.0] * 6
+        for index, amplitude, omega, phase in self._terms:
+            offset[index] = scale * amplitude * sin(omega * t + phase)
+        return offset
+
+    def at(self, k: int) -> Coordinates:
+        """The position commanded ``k`` cycles after the start (the start itself for
+        k ≤ 0 and from :attr:`samples` on)."""
+        start = self.start
+        if k <= 0 or k >= self.samples:
+            return start
+        offset = self.displacement(k)
+        if not self._on_tool:
+            return tuple.__new__(self._coordinates, [s + d for s, d in zip(start, offset)])
+        moved = pose_of(compose(self._start_transform, transform_of(offset)))
+        # pose_of gives angles in (-π, π]: keep them continuous with the start's
+        angles = [a + tau * round((s - a) / tau) for a, s in zip(moved[3:], start[3:])]
+        return tuple.__new__(self._coordinates, (*moved[:3], *angles))
+
+    def cycle_at(self, k: int) -> int:
+        """The wave's period (1-based, at most ``cycles``) that cycle ``k`` is in."""
+        return min(self.spec.cycles, 1 + int(k * self.period_s * self.spec.frequency_hz))
+

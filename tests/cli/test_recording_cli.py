@@ -1,0 +1,72 @@
+"""``hexactl record`` against a running service and ``hexactl plot`` of what it wrote."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from hexactl.adapters.cli.main import main
+from hexactl.application.service import Service, ServiceConfig
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("data")
+
+
+@pytest.fixture(scope="module")
+def api(data_dir) -> Iterator[str]:
+    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                          data_dirs=(data_dir,)))
+    yield service.api_endpoint
+    service.close()
+
+
+def test_record_wait_writes_the_file_and_plot_draws_it(api, data_dir, tmp_path, capsys) -> None:
+    assert main(["record", "cli1", "--duration", "0.3", "--wait", "--api", api]) == 0
+    out = capsys.readouterr().out
+    csv_path = data_dir / "cli1.csv"
+    assert f"{csv_path}: 150 rows, ended: duration" in out
+    side = json.loads((data_dir / "cli1.json").read_text())
+    assert side["rows_written"] == 150 and side["cycles_missing"] == 0
+
+    image = tmp_path / "cli1.png"
+    assert main(["plot", str(csv_path), "-o", str(image)]) == 0
+    assert image.stat().st_size > 20_000  # six panels of lines, not an empty canvas
+    import matplotlib.image
+
+    pixels = matplotlib.image.imread(image)
+    assert pixels.shape[0] > 1000 and pixels.shape[1] == 1000  # six panels, 10 in at 100 dpi
+
+
+def test_record_refusals_exit_1_and_say_why(api, data_dir, capsys) -> None:
+    (data_dir / "taken.csv").write_text("x")
+    assert main(["record", "taken", "--duration", "1", "--api", api]) == 1
+    assert "taken.csv exists" in capsys.readouterr().err
+    assert main(["record", "--stop", "--api", api]) == 1
+    assert "nothing to stop" in capsys.readouterr().err
+    assert main(["record", "--api", api]) == 2
+    assert "give NAME and --duration" in capsys.readouterr().err
+
+
+def test_record_stop_ends_a_recording_early(api, data_dir, capsys) -> None:
+    assert main(["record", "early", "--duration", "600", "--signals", "lateness,compute", "--api", api]) == 0
+    assert main(["record", "--stop", "--api", api]) == 0
+    assert "early.csv" in capsys.readouterr().out and (data_dir / "early.json").exists()
+    assert json.loads((data_dir / "early.json").read_text())["ended"] == "stopped"
+
+
+def test_plot_refuses_missing_and_garbled_files(tmp_path, capsys) -> None:
+    assert main(["plot", str(tmp_path / "none.csv")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    garbled = tmp_path / "bad.csv"
+    garbled.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2\n")
+    assert main(["plot", str(garbled)]) == 2
+    assert "line 3 has 2 values for 3 columns" in capsys.readouterr().err
+    other = tmp_path / "other.csv"
+    other.write_text("a,b\n1,2\n")
+    assert main(["plot", str(other)]) == 2
+    assert "not a recording" in capsys.readouterr().err

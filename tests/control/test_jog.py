@@ -1,0 +1,184 @@
+"""Jog with a deadman, in simulated time: it runs only while renewed, brakes to rest
+jerk-limited when the renewals stop, and comes to rest on a soft or hard limit with no
+refusal and no guard clamp (issue 12)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hexactl.control.config import ControllerConfig
+from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.jog import DEADMAN_LAPSED
+from hexactl.kinematics.frames import apply, transform_of
+from hexactl.kinematics.soft_limits import SoftLimits
+from hexactl.kinematics.workspace import assess_poses
+
+RENEW_CYCLES = 25  # 50 ms at 500 Hz: well inside the 0.2 s deadman
+X_AT_MOST_5 = OperatorFrames(soft_limits=SoftLimits(upper=(5, None, None, None, None, None)))
+
+
+def _hold(rig, velocity, cycles: int, frame: Frame = Frame.ZERO) -> list:
+    """Renew the jog every RENEW_CYCLES for ``cycles``; every reply."""
+    replies = []
+    for _ in range(0, cycles, RENEW_CYCLES):
+        replies.append(rig.controller.jog(velocity, frame))
+        rig.run(RENEW_CYCLES)
+    return replies
+
+
+def _commanded(rig, cycles: int) -> np.ndarray:
+    """(cycles, 6) commanded poses (mm, rad) of the next ``cycles`` cycles."""
+    poses = []
+    for _ in range(cycles):
+        rig.run()
+        poses.append(rig.controller.snapshot.pose_command)
+    return np.array(poses)
+
+
+def test_a_jog_into_a_soft_limit_comes_to_rest_on_it_with_no_refusal_and_no_clamp(rig) -> None:
+    assert rig.controller.set_frames(X_AT_MOST_5).ok
+    rig.enabled()
+    replies = _hold(rig, [10, 0, 0, 0, 0, 0], 1500)
+    assert all(reply.ok for reply in replies), [r.message for r in replies if not r.ok]
+    assert replies[0].details["to_limit"] and replies[0].details["end"] == "the soft limit on x at 5"
+    s = rig.controller.snapshot
+    assert s.jog is not None and s.jog.phase.value == "at_end" and s.motion.value == "holding"
+    assert s.pose_command[0] == pytest.approx(5.0, abs=1e-5) and s.pose_command[0] <= 5.0  # on it, to 10 nm
+    assert s.clamped_cycles == 0
+    rig.assert_setpoints_safe()
+
+
+def test_a_jog_into_the_hardware_limit_comes_to_rest_on_it(rig, geometry) -> None:
+    rig.enabled()
+    replies = _hold(rig, [0, 0, 40, 0, 0, 0], 5000)
+    assert all(reply.ok for reply in replies)
+    s = rig.controller.snapshot
+    assert s.jog is not None and s.jog.phase.value == "at_end" and s.jog.to_limit
+    z = s.pose_command[2]
+    (here,) = assess_poses(geometry, [[*s.pose_command[:3], *np.degrees(s.pose_command[3:])]])
+    (beyond,) = assess_poses(geometry, [[0, 0, z + 1e-3, 0, 0, 0]])
+    assert not here.violations and beyond.violations  # on the boundary: a micrometre on is outside
+    assert s.clamped_cycles == 0
+    rig.assert_setpoints_safe()
+
+
+def test_a_jog_whose_deadman_lapses_brakes_to_rest_jerk_limited(rig) -> None:
+    rig.enabled()
+    _hold(rig, [20, 0, 0, 0, 0, 0], 500)  # 1 s: at its cruise speed
+    assert rig.controller.snapshot.jog.phase.value == "jogging"
+    poses = _commanded(rig, 400)  # no renewal: it lapses within 0.2 s and brakes
+    s = rig.controller.snapshot
+    assert s.jog is None and s.last_jog.reason == DEADMAN_LAPSED and s.motion.value == "holding"
+    period = rig.period_ns / 1e9
+    velocity = np.diff(poses[:, 0]) / period
+    acceleration = np.diff(velocity) / period
+    limits = rig.controller.config.motion
+    assert velocity[0] == pytest.approx(20.0, rel=1e-6)  # was cruising when the deadman lapsed
+    assert np.all(velocity >= -1e-9)  # braked along its path: never backwards
+    assert np.max(np.abs(acceleration)) <= limits.max_acceleration[0] * (1 + 1e-6)
+    assert np.max(np.abs(np.diff(acceleration) / period)) <= limits.max_jerk[0] * (1 + 1e-6)
+    assert s.pose_command[0] < 100  # short of where the plan was heading
+    assert np.all(poses[-50:, 0] == poses[-1, 0])
+
+
+def test_the_deadman_interval_is_configurable(make_rig) -> None:
+    rig = make_rig(config=ControllerConfig(jog_deadman_s=0.5)).enabled()
+    assert rig.controller.jog([5, 0, 0, 0, 0, 0]).details["deadman_s"] == 0.5
+    rig.run(200)  # 0.4 s: still jogging
+    assert rig.controller.snapshot.jog.phase.value == "jogging"
+    rig.run(60)
+    assert rig.controller.snapshot.jog.phase.value == "braking"
+
+
+def test_a_release_brakes_and_ends_the_jog(rig) -> None:
+    rig.enabled()
+    _hold(rig, [10, 0, 0, 0, 0, 0], 250)
+    released = rig.controller.jog([0, 0, 0, 0, 0, 0])
+    assert released.ok and released.message == "jog released: braking to rest"
+    rig.settle()
+    assert rig.controller.snapshot.last_jog.reason == "stopped"
+    assert rig.controller.jog([0] * 6).message == "nothing to release: no jog is under way"
+
+
+def test_a_new_velocity_replans_the_jog_under_way(rig) -> None:
+    rig.enabled()
+    first = _hold(rig, [10, 0, 0, 0, 0, 0], 250)[0]
+    turned = rig.controller.jog([0, 10, 0, 0, 0, 0])
+    assert turned.ok and turned.details["jog"] != first.details["jog"]
+    _hold(rig, [0, 10, 0, 0, 0, 0], 500)
+    s = rig.controller.snapshot
+    assert s.jog.velocity == (0.0, 10.0, 0.0, 0.0, 0.0, 0.0) and s.pose_command[1] > 4.0
+    assert s.clamped_cycles == 0
+
+
+def test_a_jog_about_the_tool_point_keeps_it_put(rig) -> None:
+    frames = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0))
+    assert rig.controller.set_frames(frames).ok
+    rig.enabled()
+
+    def tool_point():
+        s = rig.controller.snapshot
+        absolute = np.asarray(s.active.home) + np.asarray(s.pose_command)
+        return np.array(apply(transform_of(absolute), frames.frames(s.active.home).tool.translation))
+
+    before, drift = tool_point(), []
+    for _ in range(20):
+        assert rig.controller.jog([0, 0, 0, 2, 0, 0], Frame.TOOL).ok
+        for _ in range(RENEW_CYCLES):
+            rig.run()
+            drift.append(np.linalg.norm(tool_point() - before))
+    assert np.degrees(rig.controller.snapshot.pose_command[3]) > 0.5  # it turned
+    assert max(drift) < 1e-3
+
+
+def test_a_jog_is_refused_when_it_cannot_run(rig) -> None:
+    bad = rig.controller.jog([1, 0, 0, 0, 0, float("nan")])
+    assert bad.error.value == "invalid_argument" and "finite" in bad.message
+    assert rig.controller.jog([1, 0, 0]).error.value == "invalid_argument"
+    assert rig.controller.jog([1, 0, 0, 0, 0, 0]).error.value == "not_enabled"
+    rig.enabled()
+    assert rig.controller.leg_lock(2).ok
+    rig.run(2)
+    locked = rig.controller.jog([1, 0, 0, 0, 0, 0])
+    assert locked.error.value == "leg_locked" and "unlock first" in locked.message
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(direction=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda d: np.linalg.norm(d) > 0.2),
+       bound=st.floats(2.0, 20.0))
+def test_a_jog_in_any_direction_ends_inside_every_limit_and_on_one(make_rig, direction, bound) -> None:
+    """Property: a soft-limit box around the start; wherever the jog heads, it ends inside
+    the box and on its surface."""
+    rig = make_rig()
+    box = OperatorFrames(soft_limits=SoftLimits(lower=(-bound,) * 3 + (None,) * 3, upper=(bound,) * 3 + (None,) * 3))
+    assert rig.controller.set_frames(box).ok
+    rig.enabled()
+    velocity = [30 * d for d in direction] + [0, 0, 0]
+    replies = _hold(rig, velocity, 2500)
+    assert all(reply.ok for reply in replies)
+    position = np.array(rig.controller.snapshot.pose_command[:3])
+    assert np.all(np.abs(position) <= bound + 1e-9)
+    assert np.max(np.abs(position)) == pytest.approx(bound, abs=1e-5)
+    assert rig.controller.snapshot.clamped_cycles == 0
+
+
+def test_a_jog_renewed_past_its_horizon_goes_on_without_slowing(rig) -> None:
+    """No limit within the horizon: renewals re-plan it before it is reached, and the
+    platform cruises on at the jog's speed."""
+    from hexactl.control.jog_planning import JOG_HORIZON_S
+
+    rig.enabled()
+    first = rig.controller.jog([5, 0, 0, 0, 0, 0])
+    assert first.ok and not first.details["to_limit"]
+    positions = []
+    for _ in range(round(2.5 * JOG_HORIZON_S * 500 / RENEW_CYCLES)):
+        assert rig.controller.jog([5, 0, 0, 0, 0, 0]).ok
+        for _ in range(RENEW_CYCLES):
+            rig.run()
+            positions.append(rig.controller.snapshot.pose_command[0])
+    velocity = np.diff(positions) * 500
+    assert np.all(velocity[500:] == pytest.approx(5.0, rel=1e-6))  # past the ramp-up: never slower
+    assert positions[-1] > 2.0 * JOG_HORIZON_S * 5.0

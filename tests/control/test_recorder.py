@@ -1,0 +1,178 @@
+"""The data recorder in simulated time: the loop's part (divisor, trigger, duration, stop,
+lost rows, state) and the writer's file (columns, units, side file, measured pose)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.wire import ApiError
+from hexactl.application.recording import Recordings, columns
+from hexactl.control import recorder as recorder_module
+from hexactl.control.frames import OperatorFrames
+from hexactl.control.recorder import RecorderPhase, RecordingEnd
+from hexactl.kinematics.axes import FramePoseMmDeg
+
+
+def _rows(rig):
+    return rig.controller.take_recorded()
+
+
+def test_records_every_cycle_for_the_rows_asked_then_ends(rig):
+    assert rig.controller.record(7, "r", 1, 10).ok
+    rig.run(30)
+    rows = _rows(rig)
+    assert [row[0] for row in rows] == [7] * 10
+    cycles = [row[1] for row in rows]
+    assert cycles == list(range(cycles[0], cycles[0] + 10))
+    state = rig.controller.snapshot.recorder
+    assert (state.phase, state.ended, state.rows, state.lost) == (RecorderPhase.DONE, RecordingEnd.DURATION, 10, 0)
+
+
+def test_divisor_records_every_nth_cycle(rig):
+    assert rig.controller.record(1, "r", 4, 5).ok
+    rig.run(40)
+    cycles = [row[1] for row in _rows(rig)]
+    assert len(cycles) == 5 and all(b - a == 4 for a, b in zip(cycles, cycles[1:]))
+
+
+def test_armed_recording_starts_with_the_next_motion(rig):
+    rig.enabled()
+    assert rig.controller.record(2, "r", 1, 5, on_motion=True).ok
+    rig.run(20)
+    assert rig.controller.snapshot.recorder.phase is RecorderPhase.ARMED
+    assert _rows(rig) == []
+    assert rig.controller.move([1.0, 0, 0, 0, 0, 0], duration=0.5).ok
+    rig.run(10)
+    rows = _rows(rig)
+    assert len(rows) == 5
+    # the first recorded cycle is the first one moving: its commanded pose has left zero
+    assert rows[0][5][0] > 0.0
+    assert rig.controller.snapshot.recorder.phase is RecorderPhase.DONE
+
+
+def test_stop_ends_early_and_a_second_start_is_refused_while_active(rig):
+    assert rig.controller.record(3, "first", 1, 1000).ok
+    rig.run(5)
+    refused = rig.controller.record(4, "second", 1, 10)
+    assert not refused.ok and refused.error.value == "busy" and "first" in refused.message
+    assert rig.controller.record_stop().ok
+    rig.run(3)
+    state = rig.controller.snapshot.recorder
+    assert (state.phase, state.ended) == (RecorderPhase.DONE, RecordingEnd.STOPPED)
+    count = len(_rows(rig))
+    rig.run(5)
+    assert _rows(rig) == [] and 4 <= count <= 7
+    nothing = rig.controller.record_stop()
+    assert not nothing.ok and nothing.error.value == "not_recording"
+
+
+def test_rows_beyond_the_cap_are_counted_lost_not_kept(rig, monkeypatch):
+    monkeypatch.setattr(recorder_module, "MAX_PENDING_ROWS", 8)
+    assert rig.controller.record(5, "r", 1, 20).ok
+    rig.run(30)
+    state = rig.controller.snapshot.recorder
+    assert (state.rows, state.lost, state.phase) == (8, 12, RecorderPhase.DONE)
+    assert len(_rows(rig)) == 8
+
+
+def test_idle_recorder_keeps_nothing(rig):
+    rig.run(20)
+    assert _rows(rig) == [] and rig.controller.snapshot.recorder.phase is RecorderPhase.IDLE
+    assert rig.controller.telemetry().recording is None
+
+
+# -- the writer ----------------------------------------------------------------------
+
+
+@pytest.fixture
+def recordings(rig, tmp_path) -> Recordings:
+    return Recordings(rig.controller, DataDirectories([tmp_path]))
+
+
+def _finish(rig, recordings, cycles=2000):
+    for _ in range(cycles):
+        rig.run()
+        recordings.poll()
+        if recordings.state()["state"] == "done":
+            return recordings.last
+    raise AssertionError("the recording did not finish")
+
+
+def test_writer_writes_every_cycle_with_units_and_a_side_file(rig, recordings, tmp_path):
+    rig.enabled()
+    reply = recordings.start("run1", duration_s=0.5)
+    assert reply["rows"] == 250 and reply["rate_hz"] == 500.0
+    assert (tmp_path / "run1.csv.partial").exists()
+    assert rig.controller.move([2.0, 0, 1.0, 0, 0, 0.5], duration=0.1).ok
+    side = _finish(rig, recordings)
+    assert not (tmp_path / "run1.csv.partial").exists()
+    with open(tmp_path / "run1.csv") as handle:
+        table = list(csv.DictReader(handle))
+    assert list(table[0]) == [name for name, _ in columns(recordings.last["signals"])]
+    assert "pose_command_x_mm" in table[0] and "pose_measured_yaw_deg" in table[0] and "lateness_us" in table[0]
+    cycles = [int(row["cycle"]) for row in table]
+    assert len(cycles) == 250 and cycles == list(range(cycles[0], cycles[0] + 250))
+    # at rest after the move, the measured pose (FK of the feedback) is the commanded one
+    last = table[-1]
+    for axis, tolerance in (("x_mm", 1e-3), ("z_mm", 1e-3), ("yaw_deg", 1e-4)):
+        assert float(last[f"pose_measured_{axis}"]) == pytest.approx(float(last[f"pose_command_{axis}"]), abs=tolerance)
+    moving = [float(row["pose_measured_x_mm"]) for row in table]
+    assert moving[0] == pytest.approx(0.0, abs=1e-3) and moving == sorted(moving)
+    assert float(table[-1]["pose_command_yaw_deg"]) == pytest.approx(0.5, abs=1e-6)
+    written = json.loads((tmp_path / "run1.json").read_text())
+    assert written == side
+    assert (side["rows_written"], side["cycles_missing"], side["rows_lost"], side["ended"]) == (250, 0, 0, "duration")
+    assert side["calibration_id"] == "nominal" and side["started_utc"].endswith("+00:00")
+    assert {"name": "t_s", "unit": "s"} in side["columns"]
+
+
+def test_writer_in_the_work_frame_writes_the_tools_pose(rig, recordings, tmp_path):
+    rig.controller.set_frames(OperatorFrames(work=FramePoseMmDeg(10.0, 0, 0, 0, 0, 0),
+                                             tool=FramePoseMmDeg(0, 0, 300.0, 0, 0, 0)))
+    recordings.start("w", signals=("pose_command",), frame="work", duration_s=0.01)
+    side = _finish(rig, recordings)
+    with open(tmp_path / "w.csv") as handle:
+        row = next(csv.DictReader(handle))
+    assert list(row) == ["t_s", "cycle"] + [name for name, _ in columns(("pose_command",))][2:]
+    assert float(row["pose_command_x_mm"]) == pytest.approx(-10.0, abs=1e-6)
+    assert float(row["pose_command_z_mm"]) == pytest.approx(300.0, abs=1e-6)
+    assert side["frame"] == "work" and side["frames"]["work"][0] == 10.0
+
+
+def test_writer_stop_finishes_with_stopped(rig, recordings, tmp_path):
+    recordings.start("s", duration_s=10.0, start="now")
+    rig.run(10)
+    recordings.poll()
+    assert recordings.stop()["state"] == "writing"
+    side = _finish(rig, recordings)
+    assert side["ended"] == "stopped" and side["cycles_missing"] == 0 and (tmp_path / "s.csv").exists()
+
+
+def test_writer_refusals_name_the_problem(rig, recordings, tmp_path):
+    (tmp_path / "taken.csv").write_text("x")
+    with pytest.raises(ApiError, match="taken.csv exists.*choose another name") as exists:
+        recordings.start("taken")
+    assert exists.value.code == "file_exists"
+    with pytest.raises(ApiError, match="bare file name"):
+        recordings.start("../up")
+    with pytest.raises(ApiError, match="unknown signals"):
+        recordings.start("x", signals=("torque",))
+    recordings.start("one", duration_s=5.0)
+    with pytest.raises(ApiError, match="'one' is under way.*record_stop") as busy:
+        recordings.start("two")
+    assert busy.value.code == "busy" and not (tmp_path / "two.csv.partial").exists()
+    with pytest.raises(ApiError, match="nothing to stop"):
+        Recordings(rig.controller, DataDirectories([tmp_path])).stop()
+
+
+def test_close_finishes_a_recording_under_way_as_shutdown(rig, recordings, tmp_path):
+    recordings.start("c", duration_s=10.0)
+    rig.run(25)
+    recordings.close()
+    side = json.loads(Path(tmp_path / "c.json").read_text())
+    assert side["ended"] == "shutdown" and side["rows_written"] == 25 and side["cycles_missing"] == 0

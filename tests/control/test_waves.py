@@ -1,0 +1,293 @@
+"""The wave generator (issue 12): the path's envelope and peaks, the pivot in the tool
+frame, validation at the legs' speed limit, and the loop playing exactly what was
+validated, ending at rest, braking jerk-limited when aborted."""
+
+from math import radians
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pydantic import ValidationError
+
+from hexactl.control.config import ControllerConfig
+from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.trajectory import MotionLimits
+from hexactl.control.wave_player import WavePhase
+from hexactl.control.waves import WavePath, WaveSpec, envelope
+from hexactl.kinematics.axes import POSE_AXES, RelativeMmRad, ToolInWorkMmRad
+from hexactl.kinematics.frames import apply, transform_of
+from hexactl.kinematics.inverse import sensor_setpoints
+
+PERIOD_S = 0.002  # the default loop's
+MICROMETRE = 1e-3
+TOOL_ABOVE = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0))
+"""A pivot 300 mm above the platform's origin, the work frame on it at the zero posture."""
+
+FAST_LIMITS = MotionLimits(max_velocity=(2000.0,) * 3 + (100.0,) * 3, max_acceleration=(1e5,) * 3 + (1e4,) * 3,
+                           max_jerk=(1e7,) * 3 + (1e6,) * 3)
+"""Pose limits the legs' speed limit binds before: with the defaults (100 mm/s in z) no
+wave reaches the legs' 360 mm/s."""
+
+axis_waves = st.fixed_dictionaries({"amplitude": st.floats(-20.0, 20.0), "phase_deg": st.floats(-360.0, 360.0)})
+specs = st.builds(
+    lambda axes, frequency, cycles, ramp: WaveSpec(frequency_hz=frequency, cycles=cycles,
+                                                   ramp_cycles=min(ramp, cycles / 2), axes=axes),
+    st.dictionaries(st.sampled_from(POSE_AXES), axis_waves, min_size=1, max_size=6),
+    st.floats(0.1, 10.0), st.integers(2, 8), st.floats(0.25, 3.0))
+starts = st.tuples(*[st.floats(-50.0, 50.0)] * 3, *[st.floats(-0.2, 0.2)] * 3).map(RelativeMmRad._make)
+
+
+def test_the_envelope_rises_from_rest_to_one_with_zero_slope_and_curvature_at_both_ends():
+    h = 1e-4
+    assert envelope(0.0) == 0.0 and envelope(1.0) == 1.0
+    for end, inside in ((0.0, h), (1.0, 1.0 - h)):
+        slope = (envelope(inside) - envelope(end)) / (inside - end)
+        assert abs(slope) < 1e-6  # first derivative ~ 30 u², second ~ 60 u at the ends: both → 0
+    u = np.linspace(0.0, 1.0, 1001)
+    assert np.all(np.diff([envelope(v) for v in u]) >= 0.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(specs, starts)
+def test_a_wave_starts_and_ends_at_rest_on_the_start_pose(spec, start):
+    path = WavePath(spec, start, PERIOD_S)
+    assert path.at(0) == start and path.at(path.samples) == start and path.at(path.samples + 7) == start
+    # At rest at both ends: the first and the last cycle's displacement is of order (h/ramp)³.
+    bound = 10.0 * (PERIOD_S / path.ramp_s) ** 3 * max(abs(a.amplitude) for a in spec.axes.values())
+    for k in (1, path.samples - 1):
+        offset = np.subtract(path.at(k), start)
+        offset[3:] = np.degrees(offset[3:])
+        assert np.max(np.abs(offset)) <= bound * (1 + 1e-9) + 1e-12
+    assert type(path.at(path.samples // 2)) is RelativeMmRad
+
+
+@settings(max_examples=60, deadline=None)
+@given(specs, starts)
+def test_the_path_is_continuous_its_steps_bounded_by_the_peak_velocity(spec, start):
+    path = WavePath(spec, start, PERIOD_S)
+    positions = np.array([path.at(k) for k in range(path.samples + 1)])
+    omega = 2 * np.pi * spec.frequency_hz
+    for name, axis in spec.axes.items():
+        index = POSE_AXES.index(name)
+        amplitude = abs(axis.amplitude) if index < 3 else radians(abs(axis.amplitude))
+        # |d/dt (e·A·sin)| ≤ A·(ω + max e') with max e' = 15/8 per ramp time
+        bound = amplitude * (omega + 1.875 / path.ramp_s) * PERIOD_S
+        assert np.max(np.abs(np.diff(positions[:, index]))) <= bound * (1 + 1e-9) + 1e-12
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(POSE_AXES), st.floats(0.1, 20.0), st.sampled_from([0.5, 1.0, 1.25, 5.0]),
+       st.sampled_from([0.0, 90.0, 180.0, 270.0]), starts)
+def test_at_its_peaks_the_path_is_the_spec_amplitude(axis, amplitude, frequency, phase, start):
+    spec = WaveSpec(frequency_hz=frequency, cycles=4, ramp_cycles=1, axes={axis: {"amplitude": amplitude,
+                                                                                  "phase_deg": phase}})
+    path = WavePath(spec, start, PERIOD_S)
+    per_cycle = round(1 / (frequency * PERIOD_S))  # a multiple of 4 at these frequencies
+    index = POSE_AXES.index(axis)
+    expected = amplitude if index < 3 else radians(amplitude)
+    for quarter in range(4, 12):  # the two steady cycles, a sample every quarter period
+        k = quarter * per_cycle // 4
+        value = np.sin(np.radians(90.0 * quarter + phase)) * expected
+        assert path.at(k)[index] - start[index] == pytest.approx(value, abs=1e-9 * max(1.0, expected))
+        others = [i for i in range(6) if i != index]
+        assert np.array(path.at(k))[others] == pytest.approx(np.array(start)[others], abs=0.0)
+
+
+@pytest.mark.parametrize("bad, field", [
+    ({"frequency_hz": 0.0}, "frequency_hz"), ({"frequency_hz": 51.0}, "frequency_hz"),
+    ({"cycles": 0}, "cycles"), ({"ramp_cycles": 3.0}, "at most half of cycles"),
+    ({"axes": {}}, "axes"), ({"axes": {"w": {"amplitude": 1}}}, "axes"),
+    ({"axes": {"roll": {"amplitude": 91}}}, "roll amplitude 91 deg"), ({"shape": "square"}, "shape"),
+    ({"frequency_hz": float("nan")}, "frequency_hz"), ({"speed": 1}, "speed"),
+])
+def test_a_malformed_wave_is_refused_naming_the_field(bad, field):
+    with pytest.raises(ValidationError, match=field):
+        WaveSpec(**{"frequency_hz": 1.0, "cycles": 5, "axes": {"z": {"amplitude": 1.0}}, **bad})
+
+
+def test_a_rotation_in_the_tool_frame_turns_about_the_pivot_point(geometry):
+    frames = TOOL_ABOVE.frames(geometry.home.in_radians())
+    start = ToolInWorkMmRad(5.0, -3.0, 2.0, 0.02, -0.01, 0.1)
+    spec = WaveSpec(frame=Frame.TOOL, frequency_hz=1.0, cycles=3,
+                    axes={"roll": {"amplitude": 2.0}, "pitch": {"amplitude": 1.0, "phase_deg": 90}})
+    path = WavePath(spec, start, PERIOD_S)
+    pivot = apply(transform_of(frames.platform_pose(start)), frames.tool.translation)
+    deviations = [np.linalg.norm(np.subtract(apply(transform_of(frames.platform_pose(path.at(k))),
+                                                   frames.tool.translation), pivot))
+                  for k in range(path.samples + 1)]
+    assert max(deviations) < MICROMETRE
+    assert max(abs(path.at(k)[3] - start[3]) for k in range(path.samples)) > radians(1.9)  # it did turn
+
+
+# -- validation ------------------------------------------------------------------------
+
+
+def _z_wave(amplitude: float, frequency: float = 2.0) -> WaveSpec:
+    return WaveSpec(frequency_hz=frequency, cycles=4, axes={"z": {"amplitude": amplitude}})
+
+
+def test_a_wave_at_the_legs_speed_limit_is_accepted_and_one_just_beyond_is_refused(make_rig, geometry):
+    """Done-when: the limit amplitude by bisection on validate_wave; the accepted wave's
+    peak leg speed checked independently from its samples, scalar IK per sample."""
+    rig = make_rig(config=ControllerConfig(motion=FAST_LIMITS)).enabled()
+    controller = rig.controller
+    budget = geometry.limits.leg_velocity_mm_s * (1 - controller.config.calibration_ramp_fraction)
+    low, high = 1.0, 200.0
+    assert controller.validate_wave(_z_wave(low)).ok
+    assert controller.validate_wave(_z_wave(high)).details["kind"] == "leg_speed"
+    for _ in range(40):
+        middle = (low + high) / 2
+        low, high = (middle, high) if controller.validate_wave(_z_wave(middle)).ok else (low, middle)
+    accepted = controller.validate_wave(_z_wave(low))
+    assert accepted.ok
+    path = WavePath(_z_wave(low), RelativeMmRad(*(0.0,) * 6), PERIOD_S)
+    home = np.asarray(geometry.home.in_radians())
+    legs = np.array([sensor_setpoints(geometry.legs, home + np.asarray(path.at(k))) for k in range(path.samples + 1)])
+    peak = np.max(np.abs(np.diff(legs, axis=0))) / PERIOD_S
+    assert peak <= budget * (1 + 1e-9)
+    assert peak == pytest.approx(budget, rel=1e-6)  # at the limit, not merely under it
+    assert accepted.details["peak_leg_speed_mm_s"] == pytest.approx(peak, rel=1e-9)
+    refused = controller.validate_wave(_z_wave(low * 1.01))
+    assert refused.error == "planning_failed" and refused.details["kind"] == "leg_speed"
+    assert refused.details["limit_mm_s"] == budget
+    assert f"leg {refused.details['leg']} would move at" in refused.message and f"{budget:g} mm/s" in refused.message
+    assert refused.details["leg_speed_mm_s"] == pytest.approx(budget * 1.01, rel=2e-3)
+
+
+def test_pose_space_limits_and_the_workspace_refuse_naming_the_axis(rig):
+    rig.enabled()
+    fast = rig.controller.validate_wave(WaveSpec(frequency_hz=2.0, cycles=4, axes={"x": {"amplitude": 30.0}}))
+    assert fast.error == "planning_failed" and fast.details["kind"] == "pose_velocity" and fast.details["axis"] == "x"
+    assert "x velocity" in fast.message and "200 mm/s" in fast.message
+    far = rig.controller.validate_wave(WaveSpec(frequency_hz=0.01, cycles=2, axes={"x": {"amplitude": 900.0}}))
+    assert far.error == "path_violation" and far.details["violations"]
+    long = rig.controller.validate_wave(WaveSpec(frequency_hz=0.1, cycles=100, axes={"z": {"amplitude": 1.0}}))
+    assert long.error == "planning_failed" and "at most 600 s" in long.message
+
+
+def test_a_wave_is_refused_while_moving_in_leg_lock_and_unless_enabled(rig):
+    spec = _z_wave(1.0, 1.0)
+    assert rig.controller.wave(spec).error == "not_enabled"
+    rig.enabled()
+    assert rig.controller.move([0, 0, 20, 0, 0, 0]).ok
+    rig.run(20)
+    assert rig.controller.wave(spec).error == "busy"
+    rig.settle()
+    assert rig.controller.leg_lock(2).ok
+    rig.run(2)
+    refused = rig.controller.wave(spec)
+    assert refused.error == "leg_locked" and "unlock first" in refused.message
+
+
+# -- the loop --------------------------------------------------------------------------
+
+
+def _play(rig, spec: WaveSpec):
+    """Start ``spec`` (from rest in the zero frame's coordinates) and return its path as the
+    loop will run it, and how many set-point vectors had been sent before its first cycle."""
+    s = rig.controller.snapshot
+    assert s.frames is None
+    sent_before = len(rig.sent)
+    result = rig.controller.wave(spec)
+    assert result.ok, result.message
+    start = s.trajectory.position
+    if spec.frame is not Frame.ZERO:
+        frames = rig.controller.operator_frames().frames(s.active.home)
+        start = ToolInWorkMmRad._make(frames.tool_in_work(np.asarray(s.active.home) + np.asarray(start)))
+    return WavePath(spec, start, PERIOD_S), sent_before
+
+
+def test_the_loop_plays_the_validated_samples_and_ends_at_rest_on_the_start(make_rig, geometry):
+    rig = make_rig(start_pose=(10, -5, 20, 0, 0, 0)).enabled()
+    spec = WaveSpec(frequency_hz=1.0, cycles=3,
+                    axes={"z": {"amplitude": 3.0}, "roll": {"amplitude": 0.3, "phase_deg": 45}})
+    path, before = _play(rig, spec)
+    phases, cycles = [], []
+    while True:
+        rig.run()
+        s = rig.controller.snapshot
+        if not phases or phases[-1] != s.wave.phase:
+            phases.append(s.wave.phase)
+        cycles.append(s.wave.cycle)
+        if s.motion.value == "holding":
+            break
+        assert s.motion.value == "moving" and s.goal == path.start
+    assert phases == [WavePhase.RAMP_IN, WavePhase.STEADY, WavePhase.RAMP_OUT, WavePhase.FINISHED]
+    assert sorted(set(cycles)) == [1, 2, 3] and cycles == sorted(cycles)
+    sent = rig.sent[before:]
+    assert len(sent) >= path.samples
+    home = np.asarray(geometry.home.in_radians())
+    expected = [sensor_setpoints(geometry.legs, home + np.asarray(path.at(k))) for k in range(1, path.samples + 1)]
+    assert np.max(np.abs(sent[:path.samples] - expected)) < 1e-9
+    s = rig.controller.snapshot
+    assert s.pose_command == path.start and s.trajectory.resting and s.trajectory.position == path.start
+    assert rig.controller.telemetry().loop.guard_clamps == 0
+    rig.assert_setpoints_safe()
+
+
+def test_a_tool_frame_wave_in_the_loop_keeps_the_pivot_put(rig):
+    assert rig.controller.set_frames(TOOL_ABOVE).ok
+    rig.enabled()
+    s = rig.controller.snapshot
+    pivot_in_platform = TOOL_ABOVE.frames(s.active.home).tool.translation
+
+    def pivot():
+        s = rig.controller.snapshot
+        return apply(transform_of(np.asarray(s.active.home) + np.asarray(s.pose_command)), pivot_in_platform)
+
+    before = pivot()
+    path, _ = _play(rig, WaveSpec(frame=Frame.TOOL, frequency_hz=0.8, cycles=3, axes={"roll": {"amplitude": 0.5}}))
+    deviations, rolls = [], []
+    while True:
+        rig.run()
+        deviations.append(np.linalg.norm(np.subtract(pivot(), before)))
+        rolls.append(rig.controller.snapshot.pose_command[3])
+        if rig.controller.snapshot.motion.value == "holding":
+            break
+    assert len(deviations) >= path.samples and max(deviations) < MICROMETRE
+    assert max(rolls) > radians(0.49)
+    rig.assert_setpoints_safe()
+
+
+def test_abort_mid_wave_brakes_to_rest_jerk_limited_without_a_guard_clamp(rig):
+    rig.enabled()
+    limits = rig.controller.config.motion
+    path, _ = _play(rig, WaveSpec(frequency_hz=1.0, cycles=4, axes={"z": {"amplitude": 3.0}}))
+    rig.run(round(1.6 / PERIOD_S))  # steady, going fast
+    assert rig.controller.snapshot.wave.phase is WavePhase.STEADY
+    assert rig.controller.pause().message == "a wave cannot be paused: abort it (or stop), and it brakes to rest"
+    assert rig.controller.move([0, 0, 0, 0, 0, 0]).error == "busy"
+    assert rig.controller.abort().ok
+    poses = [rig.controller.snapshot.pose_command]
+    rig.run()
+    assert rig.controller.snapshot.motion.value == "stopping"
+    assert rig.controller.snapshot.wave.phase is WavePhase.ABORTED
+    while rig.controller.snapshot.motion.value != "holding":
+        poses.append(rig.controller.snapshot.pose_command)
+        rig.run()
+    z = np.array(poses)[:, 2]
+    assert len(z) < path.samples  # it did not play on
+    acceleration = np.abs(np.diff(z, 2)) / PERIOD_S**2
+    jerk = np.abs(np.diff(z, 3)) / PERIOD_S**3
+    assert acceleration.max() <= limits.max_acceleration[2] * 1.01
+    assert jerk.max() <= limits.max_jerk[2] * 1.05
+    assert rig.controller.snapshot.trajectory.resting
+    assert rig.controller.telemetry().loop.guard_clamps == 0
+    assert rig.controller.abort().error == "no_sequence"
+    rig.assert_setpoints_safe()
+
+
+def test_stop_also_ends_a_wave_and_an_estop_freezes_it_as_a_fault(rig):
+    rig.enabled()
+    _play(rig, _z_wave(1.0, 1.0))
+    rig.run(300)
+    assert rig.controller.stop().ok
+    rig.settle()
+    assert rig.controller.snapshot.wave.phase is WavePhase.ABORTED
+    _play(rig, _z_wave(1.0, 1.0))
+    rig.run(300)
+    rig.controller.estop()
+    rig.run(2)
+    assert rig.controller.snapshot.wave.phase is WavePhase.FAULT
+    assert rig.controller.snapshot.state.value == "estop"

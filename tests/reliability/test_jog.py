@@ -1,0 +1,90 @@
+"""Jog on the whole service, watched by the independent bus monitor: into a soft limit it
+comes to rest on it with no refusal and no guard clamp; when its client stops renewing
+(or goes away) it brakes to rest by itself (issue 12)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.cli.main import main
+from tests.api.test_service import status, wait_for
+from tests.reliability.support import recover, tolerating_loop_stalls
+
+RENEW_S = 0.05
+SOFT_X_MM = 8.0
+
+
+def _hold(client: HexactlClient, velocity: list[float], seconds: float) -> list[str]:
+    """Renew the jog every RENEW_S for ``seconds``; the codes of the refusals met. A
+    ``jog_ended`` (this process stalled past the deadman, so the jog was braking) is
+    answered as a client should: the next renewal starts it again."""
+    refusals = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            client.call("jog", velocity=velocity)
+        except CommandError as error:
+            refusals.append(error.code)
+        time.sleep(RENEW_S)
+    return refusals
+
+
+def test_a_jog_into_a_soft_limit_rests_on_it_and_a_lapsed_one_brakes(client: HexactlClient, service, capsys) -> None:
+    def scenario() -> None:
+        recover(client)
+        client.call("move", pose=[0, 0, 0, 0, 0, 0], duration=1.0)
+        wait_for(lambda: status(client)["motion"] == "holding", "the zero posture")
+        client.call("set_frames", soft_limits={"upper": [SOFT_X_MM, None, None, None, None, None]})
+        clamps = status(client)["loop"]["guard_clamps"]
+        refusals = _hold(client, [20, 0, 0, 0, 0, 0], 2.0)  # 8 mm at 20 mm/s: there within a second
+        assert set(refusals) <= {"jog_ended"}, refusals
+        at_limit = status(client)
+        assert at_limit["jog"]["phase"] == "at_end" and at_limit["jog"]["end"] == f"the soft limit on x at {SOFT_X_MM:g}"
+        assert at_limit["pose_command"][0] == pytest.approx(SOFT_X_MM, abs=1e-5)
+        assert at_limit["loop"]["guard_clamps"] == clamps
+        assert main(["status", "--api", service.api_endpoint]) == 0
+        shown = capsys.readouterr().out
+        assert "jog " in shown and f"x 20 mm/s in zero, to the soft limit on x at {SOFT_X_MM:g}" in shown
+        # No more renewals: the deadman lapses and the jog ends by itself.
+        wait_for(lambda: status(client)["jog"] is None, "the jog to end")
+        # Back the other way, then the client goes away mid-motion: it brakes to rest.
+        with HexactlClient(service.api_endpoint, timeout_s=5.0) as leaving:
+            leaving.call("jog", velocity=[-20, 0, 0, 0, 0, 0])
+            wait_for(lambda: status(client)["motion"] == "moving", "the jog to start")
+        ended = wait_for(lambda: (s := status(client))["jog"] is None and s["motion"] == "holding" and s,
+                         "the lapsed jog to brake to rest")
+        assert -20 < ended["pose_command"][0] < SOFT_X_MM  # it did not run on to a limit
+        assert ended["loop"]["guard_clamps"] == clamps
+        assert client.call("status")["status"]["state"] == "enabled"
+
+    try:
+        tolerating_loop_stalls(scenario, lambda: service.controller, cleanup=lambda: recover(client))
+    finally:
+        client.call("clear_frames")
+
+
+def test_the_jog_command_line_jogs_for_a_while_and_releases(client: HexactlClient, service, capsys) -> None:
+    def scenario() -> None:
+        recover(client)
+        client.call("move", pose=[0, 0, 0, 0, 0, 0], duration=1.0)
+        wait_for(lambda: status(client)["motion"] == "holding", "the zero posture")
+        exit_code = main(["jog", "z=10", "--for", "1", "--api", service.api_endpoint])
+        out = capsys.readouterr().out
+        assert exit_code == 0, out
+        assert "jogging (jog " in out and "released; at rest at" in out
+        final = status(client)
+        assert final["jog"] is None and final["motion"] == "holding" and 1.0 < final["pose_command"][2] < 20.0  # 10 mm/s for 1 s, and the release's latency
+
+    tolerating_loop_stalls(scenario, lambda: service.controller, cleanup=lambda: recover(client))
+
+
+def test_a_bad_jog_is_refused_with_what_to_do(client: HexactlClient, service, capsys) -> None:
+    with pytest.raises(CommandError) as short:
+        client.call("jog", velocity=[1, 2, 3])
+    assert short.value.code == "invalid_request" and "velocity" in str(short.value)
+    with pytest.raises(SystemExit) as typed:
+        main(["jog", "x=nan", "--for", "1", "--api", service.api_endpoint])
+    assert typed.value.code == 2 and "velocity 'x=nan': velocity x is not a finite number" in capsys.readouterr().err
