@@ -107,12 +107,18 @@ def check_move(view: CoreView) -> Refusal:
     return None
 
 
-def check_jog(view: CoreView) -> Refusal:
-    if refusal := check_move(view):
-        return refusal
+def _all_six_legs(view: CoreView, what: str) -> Refusal:
     if view.lock is not None:
-        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: a jog needs all six legs (unlock first)"
+        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: {what} needs all six legs (unlock first)"
     return None
+
+
+def _not_ramping(view: CoreView) -> Refusal:
+    return (ErrorCode.BUSY, "a calibration change is still ramping in") if view.ramp_active else None
+
+
+def check_jog(view: CoreView) -> Refusal:
+    return check_move(view) or _all_six_legs(view, "a jog")
 
 
 def check_lock(view: CoreView) -> Refusal:
@@ -120,9 +126,7 @@ def check_lock(view: CoreView) -> Refusal:
         return refusal
     if view.lock is not None:
         return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is already locked"
-    if view.ramp_active:
-        return ErrorCode.BUSY, "a calibration change is still ramping in"
-    return None
+    return _not_ramping(view)
 
 
 def check_unlock(view: CoreView) -> Refusal:
@@ -162,13 +166,7 @@ def check_abort(view: CoreView) -> Refusal:
 
 
 def check_wave(view: CoreView) -> Refusal:
-    if refusal := _enabled(view) or _at_rest(view):
-        return refusal
-    if view.lock is not None:
-        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: a wave needs all six legs (unlock first)"
-    if view.ramp_active:
-        return ErrorCode.BUSY, "a calibration change is still ramping in"
-    return None
+    return _enabled(view) or _at_rest(view) or _all_six_legs(view, "a wave") or _not_ramping(view)
 
 
 def check_reset(view: CoreView) -> Refusal:

@@ -1,4 +1,4 @@
-"""Fixtures: a service with a fake controller, per test or shared by a module."""
+"""Fixtures: a service with a fake controller, per test or shared by a module; the real service, per module."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import pytest
 
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.adapters.files.config_path import default_config_path
+from hexactl.application.service import Service, ServiceConfig
 from hexactl.kinematics.geometry import Geometry
 from tests.api.support import start_service
 
@@ -25,6 +26,21 @@ def service(nominal: Geometry, tmp_path: Path) -> Iterator[SimpleNamespace]:
     running = start_service(nominal, tmp_path / "data")
     yield running
     running.close()
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A data directory for a module's real service (:func:`running`)."""
+    return tmp_path_factory.mktemp("data")
+
+
+@pytest.fixture(scope="module")
+def running(data_dir: Path) -> Iterator[Service]:
+    """The whole service on its simulator (loop and API processes), one per module."""
+    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                          data_dirs=(data_dir,)))
+    yield service
+    service.close()
 
 
 @pytest.fixture(scope="module")

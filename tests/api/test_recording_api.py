@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -26,19 +25,6 @@ def at_rest(client: HexactlClient) -> bool:
     record = status(client)
     assert record["state"] == "enabled", f"{record['state']} latched: {record['faults']}"
     return record["motion"] == "holding"
-
-
-@pytest.fixture(scope="module")
-def data_dir(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("data")
-
-
-@pytest.fixture(scope="module")
-def running(data_dir) -> Iterator[Service]:
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(data_dir,)))
-    yield service
-    service.close()
 
 
 @pytest.fixture

@@ -34,19 +34,6 @@ def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT
     raise AssertionError(f"timed out waiting for {what}")
 
 
-@pytest.fixture(scope="module")
-def data_dir(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("data")
-
-
-@pytest.fixture(scope="module")
-def running(data_dir) -> Iterator[Service]:
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(data_dir,)))
-    yield service
-    service.close()
-
-
 @pytest.fixture
 def client(running) -> Iterator[HexactlClient]:
     with HexactlClient(running.api_endpoint, timeout_s=WAIT_S) as client:

@@ -3,26 +3,16 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
 from hexactl.adapters.cli.main import main
-from hexactl.application.service import Service, ServiceConfig
+from hexactl.application.service import Service
 
 
 @pytest.fixture(scope="module")
-def data_dir(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("data")
-
-
-@pytest.fixture(scope="module")
-def api(data_dir) -> Iterator[str]:
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(data_dir,)))
-    yield service.api_endpoint
-    service.close()
+def api(running: Service) -> str:
+    return running.api_endpoint
 
 
 def test_record_wait_writes_the_file_and_plot_draws_it(api, data_dir, tmp_path, capsys) -> None:
