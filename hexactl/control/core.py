@@ -7,7 +7,8 @@ ros2_control's read → update → write:
 1. read: the actuators' feedback and the link's health; forward kinematics of the
    feedback → measured pose (:class:`~hexactl.control.pose_measurement.PoseMeasurement`;
    while ENABLED at ``fk_rate_hz`` and at each dwell's record, otherwise every cycle);
-2. update: carry out the queued commands (at most :data:`MAX_COMMANDS_PER_CYCLE`);
+2. update: carry out the queued commands (at most :data:`MAX_COMMANDS_PER_CYCLE`; the
+   motion's through :class:`~hexactl.control.motion_commands.MotionCommands`);
    supervise (:class:`~hexactl.control.supervisor.Supervisor`): an actuator reporting
    E-stop → ESTOP in any state; while ENABLED heartbeats, actuator faults and states,
    set-points applied, link → FAULT. ENABLED: the motion's update
@@ -44,6 +45,7 @@ from hexactl.control.command_inbox import CommandInbox
 from hexactl.control.config import ControllerConfig
 from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, FeedbackSnapshot, LinkHealth
 from hexactl.control.motion import Motion
+from hexactl.control.motion_commands import MotionCommands
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.pose_measurement import PoseMeasurement
 from hexactl.control.preconditions import Refusal
@@ -77,12 +79,10 @@ class ControlCore:
         self._motion = Motion(config, active, period_s, self._dwell_record, self._event)
         self.recorder = CycleRecorder()
         self._commands = CommandInbox({
-            cmd.Enable: self._enable, cmd.Disable: self._disable, cmd.Stop: self._stop, cmd.EStop: self._estop,
-            cmd.Reset: self._reset, cmd.Move: self._move, cmd.LockLeg: self._lock_leg, cmd.UnlockLeg: self._unlock_leg,
-            cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog,
-            cmd.PlayWave: self._play_wave,
-            cmd.Play: self._play, cmd.Pause: self._pause, cmd.Resume: self._resume, cmd.Abort: self._abort,
-            cmd.SwapGeometry: self._swap, cmd.StartRecording: self.recorder.start, cmd.StopRecording: self.recorder.stop,
+            cmd.Enable: self._enable, cmd.Disable: self._disable, cmd.EStop: self._estop, cmd.Reset: self._reset,
+            cmd.LockLeg: self._lock_leg, cmd.UnlockLeg: self._unlock_leg, cmd.SwapGeometry: self._swap,
+            cmd.StartRecording: self.recorder.start, cmd.StopRecording: self.recorder.stop,
+            **MotionCommands(self, self._motion, lambda: self._now_ns).handlers(),
         }, self._event)
         self.inbox = self._commands.queue
         self.state = ControlState.DISABLED
@@ -273,50 +273,6 @@ class ControlCore:
         self.history = self.history[:-1] if command.rollback else (self.history + (old,))[-KEPT_CALIBRATIONS:]
         self._measurement.geometry_changed()
         self._event("calibration_swapped", f"calibration {old.calibration_id} → {new.calibration_id}")
-        return None
-
-    # The motion's commands: preconditions, then the motion carries them out.
-
-    def _move(self, command: cmd.Move) -> Refusal:
-        return preconditions.check_move(self) or self._motion.stale(command.epoch) or self._motion.move(command.segment)
-
-    def _jog(self, command: cmd.Jog) -> Refusal:
-        return (preconditions.check_jog(self) or self._motion.stale(command.epoch)
-                or self._motion.jog(command.ticket, command.plan, self._now_ns))
-
-    def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
-        return self._motion.jogger.renew(command.frame, command.velocity, self._now_ns)
-
-    def _stop(self, command: cmd.Stop) -> Refusal:
-        self._motion.stop()
-        return None
-
-    def _play(self, command: cmd.Play) -> Refusal:
-        if refusal := preconditions.check_play(self) or self._motion.stale(command.epoch):
-            return refusal
-        self._motion.play(command.name, command.segments)
-        return None
-
-    def _play_wave(self, command: cmd.PlayWave) -> Refusal:
-        if refusal := preconditions.check_wave(self) or self._motion.stale(command.epoch):
-            return refusal
-        self._motion.play_wave(command.plan, self._now_ns)
-        return None
-
-    def _pause(self, command: cmd.Pause) -> Refusal:
-        if refusal := preconditions.check_pause(self):
-            return refusal
-        self._motion.pause(self._now_ns)
-        return None
-
-    def _resume(self, command: cmd.Resume) -> Refusal:
-        return (preconditions.check_resume(self) or self._motion.stale(command.epoch)
-                or self._motion.resume(command.remainder, self._now_ns))
-
-    def _abort(self, command: cmd.Abort) -> Refusal:
-        if refusal := preconditions.check_abort(self):
-            return refusal
-        self._motion.stop()
         return None
 
     # -- publishing ----------------------------------------------------------------------

@@ -1,0 +1,75 @@
+"""The motion's commands in the loop: each one's preconditions, then the motion carries it out.
+
+A part of :class:`~hexactl.control.core.ControlCore`: the loop's inbox hands these
+handlers the commands that start, change or end a motion (moves, jogs, sequences, waves).
+Each checks its preconditions (:mod:`~hexactl.control.preconditions`) on the core's view
+and that it was planned at the current plan epoch, then calls
+:class:`~hexactl.control.motion.Motion`. Owned by the loop thread: not thread-safe.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from hexactl.control import commands as cmd
+from hexactl.control import preconditions
+from hexactl.control.command_inbox import Handler
+from hexactl.control.motion import Motion
+from hexactl.control.preconditions import CoreView, Refusal
+
+
+class MotionCommands:
+    """The handlers of the motion's commands for ``motion``, checked on ``view`` (the core);
+    ``now_ns()`` is the cycle's monotonic time."""
+
+    def __init__(self, view: CoreView, motion: Motion, now_ns: Callable[[], int]) -> None:
+        self._view = view
+        self._motion = motion
+        self._now_ns = now_ns
+
+    def handlers(self) -> dict[type[cmd.Command], Handler]:
+        return {cmd.Move: self._move, cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog, cmd.Stop: self._stop,
+                cmd.Play: self._play, cmd.PlayWave: self._play_wave, cmd.Pause: self._pause, cmd.Resume: self._resume,
+                cmd.Abort: self._abort}
+
+    def _move(self, command: cmd.Move) -> Refusal:
+        return preconditions.check_move(self._view) or self._motion.stale(command.epoch) or self._motion.move(command.segment)
+
+    def _jog(self, command: cmd.Jog) -> Refusal:
+        return (preconditions.check_jog(self._view) or self._motion.stale(command.epoch)
+                or self._motion.jog(command.ticket, command.plan, self._now_ns()))
+
+    def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
+        return self._motion.jogger.renew(command.frame, command.velocity, self._now_ns())
+
+    def _stop(self, command: cmd.Stop) -> Refusal:
+        self._motion.stop()
+        return None
+
+    def _play(self, command: cmd.Play) -> Refusal:
+        if refusal := preconditions.check_play(self._view) or self._motion.stale(command.epoch):
+            return refusal
+        self._motion.play(command.name, command.segments)
+        return None
+
+    def _play_wave(self, command: cmd.PlayWave) -> Refusal:
+        if refusal := preconditions.check_wave(self._view) or self._motion.stale(command.epoch):
+            return refusal
+        self._motion.play_wave(command.plan, self._now_ns())
+        return None
+
+    def _pause(self, command: cmd.Pause) -> Refusal:
+        if refusal := preconditions.check_pause(self._view):
+            return refusal
+        self._motion.pause(self._now_ns())
+        return None
+
+    def _resume(self, command: cmd.Resume) -> Refusal:
+        return (preconditions.check_resume(self._view) or self._motion.stale(command.epoch)
+                or self._motion.resume(command.remainder, self._now_ns()))
+
+    def _abort(self, command: cmd.Abort) -> Refusal:
+        if refusal := preconditions.check_abort(self._view):
+            return refusal
+        self._motion.stop()
+        return None
