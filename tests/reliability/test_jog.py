@@ -4,7 +4,9 @@ comes to rest on it with no refusal and no guard clamp; when its client stops re
 
 from __future__ import annotations
 
-import time
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
@@ -17,19 +19,31 @@ RENEW_S = 0.05
 SOFT_X_MM = 8.0
 
 
-def _hold(client: HexactlClient, velocity: list[float], seconds: float) -> list[str]:
-    """Renew the jog every RENEW_S for ``seconds``; the codes of the refusals met. A
-    ``jog_ended`` (this process stalled past the deadman, so the jog was braking) is
-    answered as a client should: the next renewal starts it again."""
-    refusals = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        try:
-            client.call("jog", velocity=velocity)
-        except CommandError as error:
-            refusals.append(error.code)
-        time.sleep(RENEW_S)
-    return refusals
+@contextmanager
+def _renewing(endpoint: str, velocity: list[float]) -> Iterator[list[str]]:
+    """Renew the jog every RENEW_S from a client and a thread of its own while the block
+    runs (what a held button does); yields the codes of the refusals met. A ``jog_ended``
+    (this process stalled past the deadman, so the jog was braking) is answered as a client
+    should: the next renewal starts it again."""
+    refusals: list[str] = []
+    done = threading.Event()
+
+    def renew() -> None:
+        with HexactlClient(endpoint, timeout_s=5.0) as own:
+            while not done.is_set():
+                try:
+                    own.call("jog", velocity=velocity)
+                except CommandError as error:
+                    refusals.append(error.code)
+                done.wait(RENEW_S)
+
+    thread = threading.Thread(target=renew, name="renewing")
+    thread.start()
+    try:
+        yield refusals
+    finally:
+        done.set()
+        thread.join()
 
 
 def test_a_jog_into_a_soft_limit_rests_on_it_and_a_lapsed_one_brakes(client: HexactlClient, service, capsys) -> None:
@@ -39,15 +53,16 @@ def test_a_jog_into_a_soft_limit_rests_on_it_and_a_lapsed_one_brakes(client: Hex
         wait_for(lambda: status(client)["motion"] == "holding", "the zero posture")
         client.call("set_frames", soft_limits={"upper": [SOFT_X_MM, None, None, None, None, None]})
         clamps = status(client)["loop"]["guard_clamps"]
-        refusals = _hold(client, [20, 0, 0, 0, 0, 0], 2.0)  # 8 mm at 20 mm/s: there within a second
+        with _renewing(service.api_endpoint, [20, 0, 0, 0, 0, 0]) as refusals:  # 8 mm at 20 mm/s
+            at_limit = wait_for(lambda: (s := status(client))["jog"] and s["jog"]["phase"] == "at_end" and s,
+                                "the jog at rest on the soft limit")
+            assert at_limit["jog"]["end"] == f"the soft limit on x at {SOFT_X_MM:g}"
+            assert at_limit["pose_command"][0] == pytest.approx(SOFT_X_MM, abs=1e-5)
+            assert at_limit["loop"]["guard_clamps"] == clamps
+            assert main(["status", "--api", service.api_endpoint]) == 0
+            shown = capsys.readouterr().out
+            assert "jog " in shown and f"x 20 mm/s in zero, to the soft limit on x at {SOFT_X_MM:g}" in shown
         assert set(refusals) <= {"jog_ended"}, refusals
-        at_limit = status(client)
-        assert at_limit["jog"]["phase"] == "at_end" and at_limit["jog"]["end"] == f"the soft limit on x at {SOFT_X_MM:g}"
-        assert at_limit["pose_command"][0] == pytest.approx(SOFT_X_MM, abs=1e-5)
-        assert at_limit["loop"]["guard_clamps"] == clamps
-        assert main(["status", "--api", service.api_endpoint]) == 0
-        shown = capsys.readouterr().out
-        assert "jog " in shown and f"x 20 mm/s in zero, to the soft limit on x at {SOFT_X_MM:g}" in shown
         # No more renewals: the deadman lapses and the jog ends by itself.
         wait_for(lambda: status(client)["jog"] is None, "the jog to end")
         # Back the other way, then the client goes away mid-motion: it brakes to rest.
