@@ -25,6 +25,9 @@ DISTANCE_TOLERANCE_SIGMAS = 5.0
 LOCKED_READING_TOLERANCE_MM = 0.1
 """Default: a locked leg whose reading moves more than this from its group's median was not locked."""
 
+SCALE_TOLERANCE = 2.0
+"""Measured points spread more than this factor above or below the feature points are in another unit."""
+
 
 @dataclass(frozen=True, slots=True)
 class RowProblem:
@@ -146,8 +149,15 @@ def screen_measurements(
       ``DISTANCE_TOLERANCE_SIGMAS · √2 · point_sigma_mm``): a mis-sighted target or a typo;
     - a leg marked locked whose reading is more than ``locked_reading_tolerance_mm`` from the
       median of that leg's locked rows: the leg did not hold, or the row is mislabelled.
+
+    Measured points whose typical spread differs from the feature points' by more than
+    :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
+    (line 0), instead of one per row.
     """
     problems: list[RowProblem] = []
+    unit_problem = _unit_problem(data, feature_points_mm)
+    if unit_problem is not None:
+        return (unit_problem,)
     if data.points_mm is not None:
         tolerance = (
             DISTANCE_TOLERANCE_SIGMAS * np.sqrt(2.0) * point_sigma_mm
@@ -179,3 +189,21 @@ def screen_measurements(
                     f"leg {leg} is marked locked but reads {reading:.4f} mm, {reading - median:+.4f} mm from "
                     f"its locked rows' median {median:.4f} mm (tolerance {locked_reading_tolerance_mm:g} mm)"))
     return tuple(sorted(problems, key=lambda problem: problem.line))
+
+
+def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProblem | None:
+    """A file-level problem if the measured points are not in mm (their median distance from
+    their own centroid against the feature points')."""
+    if data.points_mm is None or len(data) == 0:
+        return None
+    model = np.asarray(feature_points_mm, dtype=float)[: data.point_count]
+    known = float(np.median(np.linalg.norm(model - model.mean(axis=0), axis=1)))
+    measured = data.points_mm - data.points_mm.mean(axis=1, keepdims=True)
+    span = float(np.median(np.linalg.norm(measured, axis=2)))
+    if known <= 0.0 or 1.0 / SCALE_TOLERANCE <= span / known <= SCALE_TOLERANCE:
+        return None
+    guess = {1e-3: "metres", 1e-1: "cm", 1.0 / 25.4: "inches", 1e3: "µm"}
+    unit = next((name for factor, name in guess.items() if abs(np.log(span / known / factor)) < np.log(1.5)), None)
+    question = f"are they in {unit}? " if unit else ""
+    return RowProblem(0, f"the measured feature points lie {span:.3g} from their centre (median), the geometry's "
+                         f"{known:.1f} mm: {question}hexactl reads mm; convert the file to mm")

@@ -16,6 +16,18 @@ varied postures (the singular values in the result check it on the actual data).
 Pose-form data (no points) are handled by the same model: the measured pose is turned into
 the feature points it implies, which weights it exactly as a point fit would.
 
+Gross mis-sightings: after the fit, each observation's standardised residual is tested, a
+feature point's 3-D residual (χ², 3 dof) or, in pose form, a row's whole pose (χ², 6 dof),
+with the leverage of the pose it belongs to taken out so a point the fit pulls toward
+itself is not hidden. Those beyond the cut that a campaign without mis-sightings passes
+with probability 1 − ``exclusion_false_alarm`` (Bonferroni over all observations) are
+excluded, at most the worst one per posture per round (a bad point drags its posture's
+good ones along), and the fit repeated; an excluded observation the new fit predicts
+within the cut comes back; until nothing changes. It stops and says so
+where exclusion would stop being about isolated mis-sightings: more than
+:data:`MAX_EXCLUDED_FRACTION` of the postures touched (the misfit is a model error), or
+parameters left undetermined.
+
 Solver: Levenberg–Marquardt on the sparse problem by the Schur complement, as in bundle
 adjustment. Each posture's 6×6 pose block is eliminated, leaving a p×p system; the reduced
 normal matrix at the solution is the parameters' Fisher information, whose inverse is
@@ -25,7 +37,7 @@ chart's singularities never enter the iteration. Cost: O(N·p²) per iteration.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +48,7 @@ from hexactl.calibration.jacobians import point_twist_jacobians
 from hexactl.calibration.parameters import PARAMETERS_PER_LEG, SCALE_UNIT, StructuralParameters
 from hexactl.calibration.results import (
     MIN_POSTURES,
+    ExcludedObservation,
     IdentificationOptions,
     IdentificationResult,
     IdentificationStatus,
@@ -45,11 +58,15 @@ from hexactl.calibration.results import (
     failed_result,
     flag_outliers,
 )
+from hexactl.calibration.uncertainty import analyse_information
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import LEG_COUNT
 
 _STEP_TOLERANCE_MM = 1e-9  # parameter and pose steps below this end the iteration
 _COST_TOLERANCE = 1e-10  # relative cost decrease below this ends the iteration
+_MAX_EXCLUSION_ROUNDS = 10
+MAX_EXCLUDED_FRACTION = 0.1
+"""Exclusion stops before it touches more than this share of the postures."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -62,11 +79,14 @@ class _Problem:
     point_sigma: float
     reading_sigma: float
     with_scales: bool
+    point_weights: NDArray[np.float64]  # (N, K): 1 used, 0 excluded
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _Linearisation:
-    point_residuals: NDArray[np.float64]  # (N, K, 3), whitened
+    point_misfits: NDArray[np.float64]  # (N, K, 3), whitened, excluded points included
+    point_jacobian: NDArray[np.float64]  # (N, K, 3, 6), whitened, excluded points included
+    point_residuals: NDArray[np.float64]  # (N, K, 3), whitened, excluded points zero
     leg_residuals: NDArray[np.float64]  # (N, 6), whitened
     pose_normal: NDArray[np.float64]  # U (N, 6, 6)
     coupling: NDArray[np.float64]  # W (N, 6, p)
@@ -77,6 +97,16 @@ class _Linearisation:
     @property
     def cost(self) -> float:
         return float(np.sum(self.point_residuals**2) + np.sum(self.leg_residuals**2))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Fit:
+    theta: NDArray[np.float64]
+    rotations: NDArray[np.float64]
+    translations: NDArray[np.float64]
+    linear: _Linearisation
+    iterations: int
+    converged: bool
 
 
 def identify_full(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
@@ -99,13 +129,55 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         model = feature_points[: data.point_count]
         observed = np.array(data.points_mm)
     sigma = nominal.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
-    problem = _Problem(observed, model, np.array(data.readings_mm), sigma, options.reading_sigma_mm, options.estimate_scales)
+    problem = _Problem(observed, model, np.array(data.readings_mm), sigma, options.reading_sigma_mm,
+                       options.estimate_scales, np.ones(observed.shape[:2]))
+    fit = _fit(problem, start.to_vector(), np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
+    pose_form = data.points_mm is None
+    fit, problem, exclusion_notes = _exclude_mis_sightings(problem, fit, pose_form, options)
+    current, theta = fit.linear, fit.theta
 
-    theta = start.to_vector()
-    rotations, translations = np.array(poses.rotations), np.array(poses.translations)
+    information = _reduced_normal(current, 0.0)[0]
+    used_points = problem.point_weights.sum(axis=1)
+    posture_chi2 = np.sum(current.point_residuals**2, axis=(1, 2)) + np.sum(current.leg_residuals**2, axis=1)
+    # Per posture: 3K point + 6 leg residuals against 6 pose unknowns (the parameters' share
+    # of the degrees of freedom is spread thin over the postures and neglected here). A
+    # posture whose points are all excluded is pinned by its readings alone: no test.
+    posture_dof = 3 * used_points
+    posture_chi2 = np.where(posture_dof > 0, posture_chi2, np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normalised = posture_chi2 / posture_dof
+        fit_rms = np.sqrt(np.sum(current.point_residuals**2, axis=(1, 2)) / (3 * used_points)) * sigma
+    residuals = PostureResiduals(
+        lines=np.array(data.lines),
+        locked_leg=np.array(data.locked_leg),
+        fit_rms_mm=fit_rms,
+        normalised=normalised,
+        outlier=flag_outliers(posture_chi2, np.maximum(posture_dof, 1), options.outlier_probability),
+    )
+    point_residual_count = 3 * int(used_points.sum())
+    dof = point_residual_count + current.leg_residuals.size - 6 * len(data) - len(theta)
+    # The leg closures are near-exact constraints (σ_reading ≪ the pose noise they carry), so
+    # the point residuals hold practically all the degrees of freedom.
+    point_dof_share = min(dof / point_residual_count, 1.0)
+    parameters = StructuralParameters.from_vector(theta, options.estimate_scales)
+    warnings = exclusion_notes
+    if options.estimate_scales:
+        warnings += ("sensor scale errors are identified but the kinematics does not apply them: "
+                     "correct the sensors' scaling in the drives if they are significant",)
+    return assemble_result(
+        Method.FULL, reason, parameters, information, residuals, current.cost, dof,
+        residual_rms_mm=float(np.sqrt(np.sum(current.point_residuals**2) / point_residual_count)) * sigma,
+        expected_rms_mm=sigma * float(np.sqrt(point_dof_share)),
+        iterations=fit.iterations, converged=fit.converged, options=options, home_mm_deg=nominal.home,
+        warnings=warnings, excluded=_excluded_observations(problem, fit.linear, pose_form, data),
+    )
+
+
+def _fit(problem: _Problem, theta: NDArray, rotations: NDArray, translations: NDArray, max_iterations: int) -> _Fit:
+    """Levenberg–Marquardt from (θ, poses) to the weighted least-squares minimum."""
     current = _linearise(problem, theta, rotations, translations)
     damping, converged, iteration = 1e-6, False, 0
-    for iteration in range(1, options.max_iterations + 1):
+    for iteration in range(1, max_iterations + 1):
         step_theta, step_poses = _solve(current, damping)
         trial_rotations = Rotation.from_rotvec(step_poses[:, 3:]).as_matrix() @ rotations
         trial = _linearise(problem, theta + step_theta, trial_rotations, translations + step_poses[:, :3])
@@ -124,36 +196,107 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
             break
         if damping > 1e12:  # no downhill step though the gradient is not negligible
             break
+    return _Fit(theta, rotations, translations, current, iteration, converged)
 
-    information = _reduced_normal(current, 0.0)[0]
-    point_count = observed.shape[1]
-    posture_chi2 = np.sum(current.point_residuals**2, axis=(1, 2)) + np.sum(current.leg_residuals**2, axis=1)
-    # Per posture: 3K point + 6 leg residuals against 6 pose unknowns (the parameters' share
-    # of the degrees of freedom is spread thin over the postures and neglected here).
-    posture_dof = 3 * point_count
-    residuals = PostureResiduals(
-        lines=np.array(data.lines),
-        locked_leg=np.array(data.locked_leg),
-        fit_rms_mm=np.sqrt(np.mean(current.point_residuals**2, axis=(1, 2))) * sigma,
-        normalised=posture_chi2 / posture_dof,
-        outlier=flag_outliers(posture_chi2, posture_dof, options.outlier_probability),
-    )
-    residual_count = current.point_residuals.size + current.leg_residuals.size
-    dof = residual_count - 6 * len(data) - len(theta)
-    # The leg closures are near-exact constraints (σ_reading ≪ the pose noise they carry), so
-    # the point residuals hold practically all the degrees of freedom.
-    point_dof_share = min(dof / current.point_residuals.size, 1.0)
-    parameters = StructuralParameters.from_vector(theta, options.estimate_scales)
-    warnings = ()
-    if options.estimate_scales:
-        warnings = ("sensor scale errors are identified but the kinematics does not apply them: "
-                    "correct the sensors' scaling in the drives if they are significant",)
-    return assemble_result(
-        Method.FULL, reason, parameters, information, residuals, current.cost, dof,
-        residual_rms_mm=float(np.sqrt(np.mean(current.point_residuals**2))) * sigma,
-        expected_rms_mm=sigma * float(np.sqrt(point_dof_share)),
-        iterations=iteration, converged=converged, options=options, home_mm_deg=nominal.home, warnings=warnings,
-    )
+
+def _exclude_mis_sightings(problem: _Problem, fit: _Fit, pose_form: bool,
+                           options: IdentificationOptions) -> tuple[_Fit, _Problem, tuple[str, ...]]:
+    """Exclude gross mis-sightings and refit, round by round (see the module docstring).
+
+    Returns the final fit, the problem with its point weights, and notes for people.
+    """
+    from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
+
+    if options.exclusion_false_alarm <= 0.0 or not fit.converged or not _determined(fit.linear):
+        return fit, problem, ()
+    units = len(problem.observed) if pose_form else problem.point_weights.size
+    cut = float(chi2.isf(options.exclusion_false_alarm / units, 6 if pose_form else 3))
+    fit, problem, notes = _exclusion_rounds(problem, fit, pose_form, cut, options.max_iterations)
+    excluded = int(np.count_nonzero(problem.point_weights[:, :1] == 0.0 if pose_form else problem.point_weights == 0.0))
+    if excluded:
+        what = "row(s)' measured pose" if pose_form else "feature point(s)"
+        notes = (f"{excluded} {what} excluded as gross mis-sightings: standardised residual beyond {np.sqrt(cut):.1f} σ, "
+                 f"a cut that all {units} observations of a campaign without mis-sightings pass with probability "
+                 f"{1.0 - options.exclusion_false_alarm:g} (each is listed; measure those postures again if in doubt)",
+                 *notes)
+    return fit, problem, notes
+
+
+def _exclusion_rounds(problem: _Problem, fit: _Fit, pose_form: bool, cut: float,
+                      max_iterations: int) -> tuple[_Fit, _Problem, tuple[str, ...]]:
+    count = len(problem.observed)
+    for _ in range(_MAX_EXCLUSION_ROUNDS):
+        statistics = _standardised_residuals(problem, fit.linear, pose_form)
+        used = problem.point_weights > 0.0
+        candidates = np.where(used, statistics, 0.0)
+        worst = np.argmax(candidates, axis=1)
+        rows = np.flatnonzero(candidates[np.arange(count), worst] > cut)
+        # Bad observations bias the first fits and can push good ones beyond the cut: an
+        # excluded observation that the current fit predicts within the cut comes back.
+        readmitted = ~used & (statistics <= cut)
+        if len(rows) == 0 and not np.any(readmitted):
+            return fit, problem, ()
+        weights = np.where(readmitted, 1.0, problem.point_weights)
+        if pose_form:
+            weights[rows] = 0.0
+        else:
+            weights[rows, worst[rows]] = 0.0
+        touched = int(np.count_nonzero(np.any(weights == 0.0, axis=1)))
+        if touched > MAX_EXCLUDED_FRACTION * count:
+            return fit, problem, (
+                f"{touched} of {count} postures have observations beyond the mis-sighting cut ({np.sqrt(cut):.1f} σ): "
+                "too many for isolated mis-sightings, so no more are excluded; the model does not fit these data "
+                "(drifting sensor offsets, joint play, wrong feature-point coordinates or units?)",)
+        trial_problem = replace(problem, point_weights=weights)
+        trial = _fit(trial_problem, fit.theta, fit.rotations, fit.translations, max_iterations)
+        if not trial.converged or not _determined(trial.linear):
+            return fit, problem, (
+                f"{len(rows)} more observation(s) lie beyond the mis-sighting cut ({np.sqrt(cut):.1f} σ), but without "
+                "them some parameter combination would be undetermined: they are kept; measure those postures again",)
+        fit, problem = trial, trial_problem
+    return fit, problem, (f"mis-sightings still found after {_MAX_EXCLUSION_ROUNDS} rounds of exclusion: "
+                          "the data may hold more bad observations than listed; measure the listed postures again",)
+
+
+def _determined(linear: _Linearisation) -> bool:
+    return analyse_information(_reduced_normal(linear, 0.0)[0])[1].full_rank
+
+
+def _standardised_residuals(problem: _Problem, linear: _Linearisation, pose_form: bool) -> NDArray[np.float64]:
+    """χ² of each observation's standardised residual: (N, K) per feature point, or, in
+    pose form, (N, 1) per row's pose. A used observation's residual has covariance
+    I − H (H its leverage: its own pull on the fit); an excluded one's, as a prediction,
+    I + H."""
+    reduced = _reduced_normal(linear, 0.0)[0]
+    pose_inverse = np.linalg.inv(linear.pose_normal)
+    spread = pose_inverse @ linear.coupling  # U⁻¹W: how the parameters move each pose
+    # The pose block of the inverse normal matrix: each pose's covariance, parameters' included.
+    pose_covariance = pose_inverse + spread @ np.linalg.pinv(reduced) @ np.transpose(spread, (0, 2, 1))
+    sign = np.where(problem.point_weights > 0.0, -1.0, 1.0)
+    a, r = linear.point_jacobian, linear.point_misfits
+    if pose_form:
+        # The synthetic points of a row move together: its pose (6 dof) is the observation.
+        point_information = np.einsum("nkri,nkrj->nij", a, a)
+        pose_misfit = np.linalg.solve(point_information, np.einsum("nkri,nkr->ni", a, r)[..., None])[..., 0]
+        covariance = np.linalg.inv(point_information) + sign[:, :1, None] * pose_covariance
+        return np.einsum("ni,ni->n", pose_misfit, np.linalg.solve(covariance, pose_misfit[..., None])[..., 0])[:, None]
+    leverage = np.einsum("nkri,nij,nksj->nkrs", a, pose_covariance, a)
+    covariance = np.eye(3) + sign[..., None, None] * leverage
+    return np.einsum("nkr,nkr->nk", r, np.linalg.solve(covariance, r[..., None])[..., 0])
+
+
+def _excluded_observations(problem: _Problem, linear: _Linearisation, pose_form: bool,
+                           data: MeasurementData) -> tuple[ExcludedObservation, ...]:
+    excluded = problem.point_weights == 0.0
+    if not np.any(excluded):
+        return ()
+    sigmas = np.sqrt(_standardised_residuals(problem, linear, pose_form))
+    distances = np.linalg.norm(linear.point_misfits, axis=2) * problem.point_sigma
+    if pose_form:
+        return tuple(ExcludedObservation(int(data.lines[row]), int(row), 0, float(np.max(distances[row])),
+                                         float(sigmas[row, 0])) for row in np.flatnonzero(excluded[:, 0]))
+    return tuple(ExcludedObservation(int(data.lines[row]), int(row), int(point) + 1, float(distances[row, point]),
+                                     float(sigmas[row, point])) for row, point in zip(*np.nonzero(excluded)))
 
 
 def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translations: NDArray) -> _Linearisation:
@@ -162,8 +305,10 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
     count = len(rotations)
 
     rotated_points = np.einsum("nij,kj->nki", rotations, problem.model_points)
-    point_residuals = (rotated_points + translations[:, None, :] - problem.observed) / problem.point_sigma
-    point_jacobian = point_twist_jacobians(rotated_points) / problem.point_sigma  # (N, K, 3, 6)
+    point_misfits = (rotated_points + translations[:, None, :] - problem.observed) / problem.point_sigma
+    all_point_jacobian = point_twist_jacobians(rotated_points) / problem.point_sigma  # (N, K, 3, 6)
+    point_residuals = point_misfits * problem.point_weights[:, :, None]
+    point_jacobian = all_point_jacobian * problem.point_weights[:, :, None, None]
 
     rotated_joints = np.einsum("nij,kj->nki", rotations, parameters.platform_joints_mm)
     vectors = rotated_joints + translations[:, None, :] - parameters.base_joints_mm[None, :, :]
@@ -187,6 +332,8 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
     pose_normal = np.einsum("nkri,nkrj->nij", point_jacobian, point_jacobian) + np.einsum(
         "nli,nlj->nij", leg_pose_jacobian, leg_pose_jacobian)
     return _Linearisation(
+        point_misfits=point_misfits,
+        point_jacobian=all_point_jacobian,
         point_residuals=point_residuals,
         leg_residuals=leg_residuals,
         pose_normal=pose_normal,

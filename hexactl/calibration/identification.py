@@ -1,11 +1,14 @@
 """Identification entry point: pick the method, run it, describe the result for the file.
 
-``auto`` runs ``full`` (maximum likelihood from everything measured). Its residuals are
-then tested against the noise model: if they are too large (χ²/dof above
-``consistency_limit``) while every leg has enough locked postures and ``leglock``'s fit is
-consistent, the free legs' readings are what disagrees with the measured poses (a
-drifting sensor offset, joint play), and ``leglock``, which trusts only each locked leg's
-constant reading, is chosen. The explanation is in the result's ``reason``.
+``auto`` runs ``full`` (maximum likelihood from everything measured, gross mis-sightings
+excluded). Its residuals are then tested against the noise model: if they are too large
+(χ²/dof above ``consistency_limit``) while every leg has enough locked postures and
+``leglock``'s fit is consistent, the free legs' readings are what disagrees with the
+measured poses (a drifting sensor offset, joint play). ``leglock``, which trusts only each
+locked leg's constant reading, is chosen then only if its own predicted accuracy is no worse
+than ``full``'s (whose uncertainty is already scaled up by its excess χ²): ``auto`` never
+takes a method its own diagnostics say is worse. The explanation is in the result's
+``reason``.
 """
 
 from __future__ import annotations
@@ -34,20 +37,39 @@ def identify(data: MeasurementData, nominal: Geometry, options: IdentificationOp
     if options.method is not Method.AUTO:
         return _METHODS[options.method](data, nominal, options)
     full = identify_full(data, nominal, options)
+    excluded = f"; {len(full.excluded)} mis-sighted observation(s) excluded" if full.excluded else ""
     consistent = full.ok and full.chi2_per_dof <= options.consistency_limit
     if consistent:
         return replace(full, reason=f"auto chose full: every posture's pose and all six readings are used at once "
-                       f"(maximum likelihood, {len(data)} postures); the residuals agree with the noise model "
+                       f"(maximum likelihood, {len(data)} postures{excluded}); the residuals agree with the noise model "
                        f"(χ²/dof {full.chi2_per_dof:.3g} ≤ {options.consistency_limit:g})")
     if too_few_locked(data) is None:
         leglock = identify_leglock(data, nominal, options)
         if leglock.ok and leglock.chi2_per_dof <= options.consistency_limit:
-            return replace(leglock, reason=f"auto chose leglock: the full fit's residuals do not match the noise "
-                           f"model (χ²/dof {full.chi2_per_dof:.3g}) while each locked leg alone does "
-                           f"(χ²/dof {leglock.chi2_per_dof:.3g}): the free legs' readings disagree with the measured "
-                           f"poses (sensor offset drift, joint play?), so only the locked legs are trusted")
+            if not full.ok or _no_worse(leglock, full):
+                return replace(leglock, reason=f"auto chose leglock: the full fit's residuals do not match the noise "
+                               f"model (χ²/dof {full.chi2_per_dof:.3g}{excluded}) while each locked leg alone does "
+                               f"(χ²/dof {leglock.chi2_per_dof:.3g}) and predicts no worse an accuracy "
+                               f"({_accuracy(leglock)} against full's {_accuracy(full)}): the free legs' readings "
+                               f"disagree with the measured poses (sensor offset drift, joint play?), so only the "
+                               f"locked legs are trusted")
+            return replace(full, reason=f"auto chose full, although its residuals do not match the noise model "
+                           f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}): leglock fits its locked legs consistently but "
+                           f"predicts a worse accuracy ({_accuracy(leglock)} against full's {_accuracy(full)}, full's "
+                           f"uncertainty scaled up by its excess χ²)")
     return replace(full, reason=f"auto chose full, although its residuals do not match the noise model "
-                   f"(χ²/dof {full.chi2_per_dof:.3g}) and leglock offers nothing better for these data")
+                   f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}) and leglock offers nothing better for these data")
+
+
+def _no_worse(candidate: IdentificationResult, reference: IdentificationResult) -> bool:
+    """Whether ``candidate`` predicts test-motion errors no larger than ``reference``, in
+    position and in orientation."""
+    return (candidate.predicted.rms_position_mm <= reference.predicted.rms_position_mm
+            and candidate.predicted.rms_orientation_deg <= reference.predicted.rms_orientation_deg)
+
+
+def _accuracy(result: IdentificationResult) -> str:
+    return f"{result.predicted.rms_position_mm:.3g} mm, {result.predicted.rms_orientation_deg:.3g}° RMS"
 
 
 def calibration_info(result: IdentificationResult, created: str, input_sha256: str, nominal_name: str) -> CalibrationInfo:
@@ -65,7 +87,7 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         platform_joints_std_mm=_rows(std.platform_joints_mm),
         zero_lengths_std_mm=_six(std.zero_lengths_mm),
         sensor_scale_errors=None if scales is None else _six(scales),
-        notes=result.reason,
+        notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded),
     )
 
 

@@ -63,7 +63,9 @@ class IdentificationOptions:
     uncertainty leaves the test motions' poses more uncertain than this (RMS, 1σ), the
     status is WEAKLY_DETERMINED. ``consistency_limit``: χ²/dof above it means the residuals
     do not match the noise model. ``outlier_probability``: a posture whose residual is
-    less likely than this under the noise model is flagged.
+    less likely than this under the noise model is flagged. ``exclusion_false_alarm``: the
+    probability that ``full`` excludes any observation of a campaign that has no
+    mis-sighting (0 disables the exclusion).
     """
 
     method: Method = Method.AUTO
@@ -80,6 +82,7 @@ class IdentificationOptions:
     max_predicted_orientation_deg: float = 0.01
     consistency_limit: float = 2.0
     outlier_probability: float = 1e-3
+    exclusion_false_alarm: float = 0.01
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -100,6 +103,27 @@ class PostureResiduals:
         return tuple(int(line) for line in self.lines[self.outlier])
 
 
+@dataclass(frozen=True, slots=True)
+class ExcludedObservation:
+    """An observation ``full`` left out as a gross mis-sighting.
+
+    ``line`` its source line, ``row`` its index in the data; ``point`` the feature point
+    (1-based), or 0 for a pose-form row's whole pose; ``residual_mm`` how far the final fit
+    puts it from its measured value (pose form: the farthest implied feature point);
+    ``sigmas`` its standardised residual (the Mahalanobis length, leverage included).
+    """
+
+    line: int
+    row: int
+    point: int
+    residual_mm: float
+    sigmas: float
+
+    def __str__(self) -> str:
+        what = f"feature point p{self.point}" if self.point else "measured pose"
+        return f"line {self.line}: {what} off by {self.residual_mm:.3f} mm ({self.sigmas:.1f} σ)"
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class IdentificationResult:
     """What an identification found, and how far to trust it.
@@ -109,7 +133,8 @@ class IdentificationResult:
     ``expected_rms_mm``: the fit residual and what the noise model predicts for it;
     ``predicted``: the pose error the parameter uncertainty alone leaves on the paper's
     test motions (the Cramér–Rao prediction when the method is ``full``);
-    ``reason``: why this method (auto's choice explained); ``warnings``: for people.
+    ``reason``: why this method (auto's choice explained); ``warnings``: for people;
+    ``excluded``: the observations ``full`` left out as mis-sightings (empty for the others).
     Use the parameters only when ``ok``.
     """
 
@@ -127,10 +152,18 @@ class IdentificationResult:
     postures_used: int
     iterations: int
     warnings: tuple[str, ...]
+    excluded: tuple[ExcludedObservation, ...] = ()
 
     @property
     def ok(self) -> bool:
         return self.status in (IdentificationStatus.OK, IdentificationStatus.WEAKLY_DETERMINED)
+
+    @property
+    def consistency(self) -> str:
+        """χ²/dof for people; NaN (nothing identified, or no redundant observation) says so."""
+        if np.isfinite(self.chi2_per_dof):
+            return f"χ²/dof {self.chi2_per_dof:.3f}"
+        return "χ²/dof not available (no redundant observation to test the fit against the noise model)"
 
     @property
     def std(self) -> StructuralParameters:
@@ -153,11 +186,13 @@ def assemble_result(
     options: IdentificationOptions,
     home_mm_deg: tuple[float, ...],
     warnings: tuple[str, ...] = (),
+    excluded: tuple[ExcludedObservation, ...] = (),
 ) -> IdentificationResult:
     """Covariance, observability, χ² test, predicted accuracy and status from a method's
     raw outcome; ``home_mm_deg`` is the zero posture the test motions are relative to."""
     covariance, observability = analyse_information(information)
-    chi2_per_dof = chi2_total / max(degrees_of_freedom, 1)
+    # Without redundant observations the residuals are zero by construction: no test.
+    chi2_per_dof = chi2_total / degrees_of_freedom if degrees_of_freedom > 0 else float("nan")
     notes = list(warnings)
     if chi2_per_dof > 1.0:
         covariance = covariance * chi2_per_dof
@@ -193,7 +228,8 @@ def assemble_result(
                      f"±{observability.worst_std_mm:.3g} mm: add or spread postures")
     return IdentificationResult(status, method, reason, parameters, covariance, observability, residuals,
                                 residual_rms_mm, expected_rms_mm, chi2_per_dof, predicted,
-                                int(np.count_nonzero(np.isfinite(residuals.normalised))), iterations, tuple(notes))
+                                int(np.count_nonzero(np.isfinite(residuals.normalised))), iterations, tuple(notes),
+                                excluded)
 
 
 def flag_outliers(chi2_values: NDArray, dof: NDArray | float, probability: float) -> NDArray[np.bool_]:

@@ -187,7 +187,12 @@ def predict_accuracy(
     covariance = np.asarray(covariance, dtype=float)[:GEOMETRIC_PARAMETERS, :GEOMETRIC_PARAMETERS]
     pose_variance = np.einsum("ij,jk,ik->i", sensitivity, covariance, sensitivity).reshape(-1, 6)
     to_deg = np.degrees(1.0)
-    draws = np.random.default_rng(seed).multivariate_normal(np.zeros(len(covariance)), covariance, size=samples, method="eigh")
+    # The covariance is PSD by construction (analyse_information), but when some combination
+    # is barely determined (variances up to ~1e11 mm²) rounding leaves eigenvalues of about
+    # -1e-16 of the largest, which numpy's absolute check (1e-8) reports as "not
+    # positive-semidefinite"; its eigh factor uses |eigenvalue|, so they draw ~0 either way.
+    draws = np.random.default_rng(seed).multivariate_normal(np.zeros(len(covariance)), covariance, size=samples,
+                                                            method="eigh", check_valid="ignore")
     errors = np.abs(draws @ sensitivity.T).reshape(samples, -1, 6)
     return PredictedAccuracy(
         rms_position_mm=float(np.sqrt(np.mean(pose_variance[:, :3]))),

@@ -115,3 +115,30 @@ def test_simulate_campaign_then_calibrate_pose_form(tmp_path, capsys):
     calibrated, truth = load_geometry(tmp_path / "cal.toml"), load_geometry(true)
     assert np.max(np.abs(np.subtract(calibrated.zero_lengths, truth.zero_lengths))) < 3.0
     assert "status: ok" in capsys.readouterr().out
+
+
+def test_points_in_metres_are_named_once_and_refused(tmp_path, leglock_campaign, capsys):
+    data = leglock_campaign.data
+    metres = type(data)(data.locked_leg, data.readings_mm, data.lines, points_mm=np.array(data.points_mm) / 1000.0)
+    path = write_measurements(tmp_path / "metres.csv", metres)
+    output = tmp_path / "cal.toml"
+    for extra in ([], ["--skip-bad-rows"]):  # no row to skip: the whole file is in the wrong unit
+        assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output), *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("are they in metres? hexactl reads mm") == 1 and "collinear" not in err
+        assert not output.exists()
+
+
+@pytest.mark.filterwarnings("error")  # a library warning fails the test
+def test_undetermined_data_give_no_library_warning_and_say_why(tmp_path, leglock_campaign, capsys):
+    """One posture measured 60 times: most combinations undetermined. Nothing but hexactl's
+    own messages reaches stderr (numpy's "covariance is not symmetric positive-semidefinite"
+    came from rounding in a barely determined covariance)."""
+    data = leglock_campaign.data
+    first = np.zeros(len(data), dtype=int)
+    same = type(data)(data.locked_leg[first], data.readings_mm[first], data.lines, points_mm=data.points_mm[first])
+    path = write_measurements(tmp_path / "same.csv", same)
+    code = main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")])
+    captured = capsys.readouterr()
+    assert code == 1 and "cannot determine" in captured.out and "no calibration written" in captured.out
+    assert "Warning" not in captured.err

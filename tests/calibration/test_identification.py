@@ -57,14 +57,34 @@ def test_auto_explains_its_choice_and_full_beats_leglock(nominal, leglock_campai
     assert auto.predicted.rms_position_mm < leglock.predicted.rms_position_mm
 
 
-def test_auto_falls_back_to_leglock_when_free_readings_disagree(nominal, leglock_campaign):
-    data = leglock_campaign.data
+def _free_readings_disturbed(data, legs, sigma_mm):
+    """``data`` with the readings of ``legs`` (0-based) disturbed wherever that leg is free."""
     readings = np.array(data.readings_mm)
-    free = data.locked_leg != 2
-    readings[free, 1] += np.random.default_rng(0).normal(0.0, 2.0, np.count_nonzero(free))  # a sliding sensor
-    corrupted = type(data)(data.locked_leg, readings, data.lines, points_mm=data.points_mm)
+    rng = np.random.default_rng(0)
+    for leg in legs:
+        free = data.locked_leg != leg + 1
+        readings[free, leg] += rng.normal(0.0, sigma_mm, np.count_nonzero(free))  # sliding sensors
+    return type(data)(data.locked_leg, readings, data.lines, points_mm=data.points_mm)
+
+
+def test_auto_falls_back_to_leglock_when_free_readings_disagree_and_leglock_predicts_better(nominal, leglock_campaign):
+    corrupted = _free_readings_disturbed(leglock_campaign.data, range(6), 3.0)
     result = identify(corrupted, nominal)
+    full = identify(corrupted, nominal, IdentificationOptions(method=Method.FULL))
     assert result.method is Method.LEGLOCK and "auto chose leglock" in result.reason
+    assert result.predicted.rms_position_mm < full.predicted.rms_position_mm
+    assert "too many for isolated mis-sightings" in " ".join(full.warnings) and not full.excluded
+
+
+def test_auto_keeps_full_when_leglock_predicts_worse(nominal, leglock_campaign):
+    """One sliding sensor: full's fit is inconsistent, but leglock, though consistent, predicts
+    a worse accuracy than full's (χ²-inflated) prediction, so auto keeps full and says why."""
+    corrupted = _free_readings_disturbed(leglock_campaign.data, [1], 2.0)
+    result = identify(corrupted, nominal)
+    leglock = identify(corrupted, nominal, IdentificationOptions(method=Method.LEGLOCK))
+    assert leglock.chi2_per_dof < 2.0 < result.chi2_per_dof
+    assert result.method is Method.FULL and "leglock fits its locked legs consistently but predicts a worse" in result.reason
+    assert result.predicted.rms_position_mm < leglock.predicted.rms_position_mm
 
 
 def test_leglock_names_legs_and_lines_with_too_few_locked_postures(nominal, leglock_campaign):
@@ -83,10 +103,14 @@ def test_too_few_postures_for_full(nominal, leglock_campaign):
     assert result.status is IdentificationStatus.INSUFFICIENT_DATA
 
 
-def test_a_bad_posture_is_flagged_as_outlier(nominal, leglock_campaign):
+def test_a_bad_posture_is_excluded_or_with_exclusion_off_flagged(nominal, leglock_campaign):
     data = leglock_campaign.data
     points = np.array(data.points_mm)
     points[7] += np.array([1.5, -1.0, 1.2])  # the whole target set shifted: distances still fine
-    result = identify(type(data)(data.locked_leg, data.readings_mm, data.lines, points_mm=points), nominal,
-                      IdentificationOptions(method=Method.FULL))
-    assert int(data.lines[7]) in result.residuals.outlier_lines
+    shifted = type(data)(data.locked_leg, data.readings_mm, data.lines, points_mm=points)
+    result = identify(shifted, nominal, IdentificationOptions(method=Method.FULL))
+    line = int(data.lines[7])
+    assert sorted((observation.line, observation.point) for observation in result.excluded) == [(line, 1), (line, 2), (line, 3)]
+    assert line not in result.residuals.outlier_lines and result.postures_used == len(data) - 1
+    plain = identify(shifted, nominal, IdentificationOptions(method=Method.FULL, exclusion_false_alarm=0.0))
+    assert plain.excluded == () and line in plain.residuals.outlier_lines

@@ -185,6 +185,8 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
         measurements.data, np.array(nominal.measurement.feature_points), point_sigma)
     for problem in problems:
         print(f"{arguments.data}: {problem}", file=sys.stderr)
+    if any(problem.line == 0 for problem in problems):  # the whole file: no row to skip
+        raise CliError(f"{arguments.data} cannot be used as it is (see above): fix the file and run again")
     if problems and not arguments.skip_bad_rows:
         raise CliError(f"{len(problems)} row problem(s) in {arguments.data} (listed above): fix them, or pass "
                        "--skip-bad-rows to exclude those rows")
@@ -236,7 +238,7 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     o, p = result.observability, result.predicted
     print(f"postures used: {result.postures_used}, iterations: {result.iterations}")
     print(f"fit residual RMS {result.residual_rms_mm:.4f} mm (noise model expects {result.expected_rms_mm:.4f} mm), "
-          f"χ²/dof {result.chi2_per_dof:.3f}")
+          f"{result.consistency}")
     print(f"observability: condition number {o.condition_number:.3g}, smallest singular value "
           f"{o.singular_values[-1]:.3g} /mm (worst combination ±{o.worst_std_mm:.3g} mm)")
     print(f"predicted pose uncertainty on the paper's test motions: {p.rms_position_mm:.4f} mm, "
@@ -253,6 +255,8 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
         print(f"sensor scale errors, mm per m of reading: {scales}")
     for warning in result.warnings:
         print(f"warning: {warning}")
+    for observation in result.excluded:
+        print(f"excluded as a mis-sighting: {observation}")
 
 
 def run_plan(arguments: argparse.Namespace) -> int:

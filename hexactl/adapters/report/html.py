@@ -115,7 +115,7 @@ def _summary(result: IdentificationResult) -> str:
         ("method", f"{result.method} — {result.reason}"),
         ("postures used", str(result.postures_used)),
         ("fit residual RMS", f"{result.residual_rms_mm:.4f} mm (noise model expects {result.expected_rms_mm:.4f} mm)"),
-        ("χ² / degrees of freedom", f"{result.chi2_per_dof:.3f} (≈ 1 when the residuals match the noise model)"),
+        ("χ² / degrees of freedom", f"{result.consistency} (≈ 1 when the residuals match the noise model)"),
         ("iterations", str(result.iterations)),
         ("predicted pose uncertainty on the test motions",
          f"{predicted.rms_position_mm:.4f} mm, {predicted.rms_orientation_deg:.5f}° RMS (1σ); expected largest "
@@ -127,6 +127,7 @@ def _summary(result: IdentificationResult) -> str:
 def _warnings(result: IdentificationResult, excluded: Sequence[RowProblem]) -> str:
     items = [f"<li>{_e(w)}</li>" for w in result.warnings]
     items += [f"<li>excluded: {_e(str(problem))}</li>" for problem in excluded]
+    items += [f"<li>excluded as a mis-sighting: {_e(str(observation))}</li>" for observation in result.excluded]
     return f"<div class='warn'><h3>Warnings</h3><ul>{''.join(items)}</ul></div>" if items else ""
 
 
