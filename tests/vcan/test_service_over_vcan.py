@@ -194,7 +194,13 @@ def running_service(data_dir: Path) -> Iterator[Served]:
 def terminate_service(served: Served) -> None:
     """SIGTERM: the service must disable the actuators and exit with status 0."""
     served.process.send_signal(signal.SIGTERM)
-    assert served.process.wait(WAIT_S) == 0, served.final_text()
+    try:
+        code = served.process.wait(WAIT_S)
+    except subprocess.TimeoutExpired:  # what it logged is what says where it hung
+        served.process.kill()
+        served.process.wait()
+        pytest.fail(f"the service did not exit within {WAIT_S:g} s of SIGTERM; its log:\n{served.final_text()}")
+    assert code == 0, served.final_text()
     log = served.final_text()
     assert "SIGTERM: shutting down" in log and "actuators disabled" in log and "stopped" in log, log
 
