@@ -191,6 +191,10 @@ def running_service(data_dir: Path) -> Iterator[Served]:
             process.wait()
 
 
+ACTUATOR_ESTOP = "an actuator reports E-stop (hardware chain)"
+RESET_RETRY_S = 0.5  # beyond the actuators' E-stop hold-off (firmware_proto: 250 ms)
+
+
 def terminate_service(served: Served) -> None:
     """SIGTERM: the service must disable the actuators and exit with status 0."""
     served.process.send_signal(signal.SIGTERM)
@@ -382,7 +386,18 @@ def test_estop_latches_until_reset(client: HexactlClient) -> None:
     with pytest.raises(CommandError, match="latched"):
         client.call("enable")
     client.call("reset")
-    wait_status(client, lambda r: r["state"] == "disabled", "the reset")
+
+    def reset_done(record: dict) -> bool:
+        # An actuator refuses CLEAR_FAULT while it saw an E-stop within its hold-off; in a
+        # starved guest the loop's last E-stop repeats reach it late, the refusal leaves it in
+        # E-stop and the loop latches that again. The operator resets once more (as
+        # tests/reliability/support.py's enable does for a refused CLEAR_FAULT).
+        if record["state"] == "estop" and [fault["message"] for fault in record["faults"]] == [ACTUATOR_ESTOP]:
+            client.request("reset")
+            time.sleep(RESET_RETRY_S)
+        return record["state"] == "disabled"
+
+    wait_status(client, reset_done, "the reset")
     record = enabled_at_rest(client)  # the actuators come back after the E-stop
     assert record["faults"] == []
 
