@@ -43,6 +43,7 @@ from hexactl.control.snapshot import ControlState
 from hexactl.kinematics.axes import POSE_AXES
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.frames import Frames
+from hexactl.kinematics.inverse import lengths_from_readings
 
 SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
 """What a recording may hold, in the order of the CSV's columns (after ``t_s`` and ``cycle``)."""
@@ -306,7 +307,7 @@ class Recordings:
         """The pose from ``feedback`` by FK on ``active`` (relative mm/rad), None without."""
         if active is None or feedback is None:
             return None
-        lengths = [p + z for p, z in zip(feedback.positions_mm, active.geometry.zero_lengths)]
+        lengths = lengths_from_readings(active.geometry.legs, feedback.positions_mm).tolist()
         guess = current.warm.get(active.calibration_id) or active.absolute_from_relative_mm_rad(pose_command)
         config = self._controller.config
         result = forward_kinematics(active.geometry.legs, lengths, guess, config.fk_tolerance_mm, config.fk_max_iterations)

@@ -161,9 +161,6 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     point_dof_share = min(dof / point_residual_count, 1.0)
     parameters = StructuralParameters.from_vector(theta, options.estimate_scales)
     warnings = exclusion_notes
-    if options.estimate_scales:
-        warnings += ("sensor scale errors are identified but the kinematics does not apply them: "
-                     "correct the sensors' scaling in the drives if they are significant",)
     return assemble_result(
         Method.FULL, reason, parameters, information, residuals, current.cost, dof,
         residual_rms_mm=float(np.sqrt(np.sum(current.point_residuals**2) / point_residual_count)) * sigma,

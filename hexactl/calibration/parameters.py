@@ -3,7 +3,8 @@
 The parameter vector is laid out leg by leg, ``[B_i (x, y, z), P_mi (x, y, z), zero_i]``
 for legs 1–6 (42 values, all mm), followed, when gains are identified, by six scale errors
 in mm per metre of sensor reading (so every entry is a length and one condition number
-compares them all). A leg's length is ``zero_i + (1 + scale_i/1000) · reading``.
+compares them all). A leg's length is ``zero_i + (1 + scale_i/1000) · reading``, and the
+controller's kinematics applies the scale errors a calibration file carries.
 """
 
 from __future__ import annotations
@@ -83,8 +84,9 @@ class StructuralParameters:
         return cls(per_leg[:, 0:3], per_leg[:, 3:6], per_leg[:, 6], scales)
 
     def legs(self) -> LegModel:
-        """The kinematics' view (scale errors are not part of it: see the module docstring)."""
-        return LegModel(self.base_joints_mm, self.platform_joints_mm, self.zero_lengths_mm)
+        """The kinematics' view (scale errors 0 when not identified)."""
+        scales = np.zeros(LEG_COUNT) if self.scale_errors is None else self.scale_errors
+        return LegModel(self.base_joints_mm, self.platform_joints_mm, self.zero_lengths_mm, scales)
 
 
 def parameter_names(with_scales: bool) -> tuple[str, ...]:
@@ -103,9 +105,12 @@ def leg_columns(leg_index: int) -> slice:
 
 
 def calibrated_geometry(nominal: Geometry, parameters: StructuralParameters, info: CalibrationInfo) -> Geometry:
-    """``nominal`` with identified joints and zero lengths and the ``[calibration]`` table.
+    """``nominal`` with identified joints, zero lengths and (when identified) sensor scale
+    errors, and the ``[calibration]`` table.
 
-    Limits, home and measurement are copied from ``nominal``. Raises
+    Limits, home, measurement and, when ``parameters`` has none, the sensor scale errors are
+    copied from ``nominal`` (the identification used them: see
+    :func:`hexactl.calibration.identification.identify`). Raises
     :class:`~hexactl.kinematics.geometry.GeometryError` if the result is not a valid
     geometry (for example the zero posture left the sensor stroke).
     """
@@ -115,6 +120,8 @@ def calibrated_geometry(nominal: Geometry, parameters: StructuralParameters, inf
         base_joints=parameters.base_joints_mm.tolist(),
         platform_joints=parameters.platform_joints_mm.tolist(),
         zero_lengths=parameters.zero_lengths_mm.tolist(),
+        sensor_scale_errors=(nominal.sensor_scale_errors if parameters.scale_errors is None
+                             else parameters.scale_errors.tolist()),
         calibration=info.model_dump(),
     )
     return geometry_from_mapping(document, "calibrated geometry")

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from hexactl.kinematics.leg_lock import project_to_locked_leg
 from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM, posture_information_factors
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import LEG_COUNT, leg_lengths, sensor_setpoints_batch
+from hexactl.kinematics.inverse import LEG_COUNT, leg_lengths, readings_from_lengths, sensor_setpoints_batch
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 from hexactl.kinematics.workspace import PoseAssessment, assess_poses
 
@@ -132,7 +132,7 @@ def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
             return PosturePlan(PlanStatus.INVALID_REQUEST, request.leg, empty, empty, nan, nan, 0,
                 f"locked length must be positive, got {locked_length}")
     candidates = _feasible_candidates(geometry, request, locked_length)
-    locked_reading = locked_length - geometry.zero_lengths[request.leg - 1] if request.leg else nan
+    locked_reading = float(readings_from_lengths(geometry.legs, locked_length, request.leg - 1)) if request.leg else nan
     if len(candidates) < request.count:
         return PosturePlan(PlanStatus.TOO_FEW_FEASIBLE, request.leg, empty, empty, locked_length, locked_reading,
             len(candidates), f"only {len(candidates)} of {request.candidates} candidates are feasible with the "

@@ -153,6 +153,12 @@ class IdentificationResult:
     iterations: int
     warnings: tuple[str, ...]
     excluded: tuple[ExcludedObservation, ...] = ()
+    degrees_of_freedom: int = 0  # of the χ² test (redundant observations)
+
+    @property
+    def chi2(self) -> float:
+        """The fit's total χ² (NaN where there is no redundancy)."""
+        return self.chi2_per_dof * self.degrees_of_freedom
 
     @property
     def ok(self) -> bool:
@@ -229,7 +235,7 @@ def assemble_result(
     return IdentificationResult(status, method, reason, parameters, covariance, observability, residuals,
                                 residual_rms_mm, expected_rms_mm, chi2_per_dof, predicted,
                                 int(np.count_nonzero(np.isfinite(residuals.normalised))), iterations, tuple(notes),
-                                excluded)
+                                excluded, degrees_of_freedom)
 
 
 def flag_outliers(chi2_values: NDArray, dof: NDArray | float, probability: float) -> NDArray[np.bool_]:

@@ -23,9 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.calibration.jacobians import length_pose_jacobian, point_fit_twist_covariance
-from hexactl.calibration.parameters import GEOMETRIC_PARAMETERS, PARAMETERS_PER_LEG, parameter_names
+from hexactl.calibration.parameters import GEOMETRIC_PARAMETERS, PARAMETERS_PER_LEG, SCALE_UNIT, parameter_names
 from hexactl.calibration.test_motions import TestMotion
-from hexactl.kinematics.inverse import LEG_COUNT, LegModel, leg_vectors_batch, twist_jacobian
+from hexactl.kinematics.inverse import LEG_COUNT, LegModel, leg_vectors_batch, sensor_setpoints_batch, twist_jacobian
 from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.kinematics.rotation import rotation_matrices
 
@@ -141,16 +141,22 @@ def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Obse
     return covariance, observability
 
 
-def pose_error_sensitivity(legs: LegModel, pose: Sequence[float]) -> NDArray[np.float64]:
-    """S (6, 42): pose error (mm, rad) of a commanded ``pose`` per parameter error (mm).
+def pose_error_sensitivity(legs: LegModel, pose: Sequence[float], with_scales: bool = False) -> NDArray[np.float64]:
+    """S (6, 42), or (6, 48) ``with_scales``: pose error (mm, rad) of a commanded ``pose`` per
+    parameter error (mm; scale errors in mm per metre of reading, the parameter vector's unit).
 
-    A controller that uses parameters θ + δθ computes readings for ``pose``; the platform
-    (true θ) then sits at pose + S·δθ to first order: from h(θ, x) = ‖T·P + R − B‖ − zero,
-    h(θ, x_true) = h(θ + δθ, x_commanded) gives δx = H_x⁻¹·H_θ·δθ.
+    A controller that uses parameters θ + δθ computes readings r for ``pose``; the platform
+    (true θ) then sits at pose + S·δθ to first order: from h(θ, x) = ‖T·P + R − B‖ − zero −
+    (1 + s)·r, h(θ, x_true) = h(θ + δθ, x_commanded) gives δx = H_x⁻¹·H_θ·δθ.
     """
+    pose = np.asarray(pose, dtype=float)
     pose_jacobian, _ = length_pose_jacobian(legs, pose)
-    closure, _ = closure_parameter_jacobian(legs, np.asarray(pose, dtype=float)[None, :])
-    return np.linalg.solve(pose_jacobian, closure[0])
+    closure, _ = closure_parameter_jacobian(legs, pose[None, :])
+    jacobian = closure[0]
+    if with_scales:
+        readings = sensor_setpoints_batch(legs, pose[None, :])[0]
+        jacobian = np.hstack((jacobian, np.diag(-readings / SCALE_UNIT)))
+    return np.linalg.solve(pose_jacobian, jacobian)
 
 
 @dataclass(frozen=True, slots=True)
@@ -175,7 +181,8 @@ def predict_accuracy(
     samples: int = 4000,
     seed: int = 0,
 ) -> PredictedAccuracy:
-    """Propagate a 42×42 parameter covariance to the error of the motions' commanded poses.
+    """Propagate a parameter covariance (42×42, or 48×48 with scale errors) to the error of
+    the motions' commanded poses.
 
     ``legs`` are the parameters to linearise at (true ones in simulation, identified ones
     otherwise). The expected maxima are Monte-Carlo means over ``samples`` Gaussian
@@ -183,8 +190,9 @@ def predict_accuracy(
     """
     relative = np.array([pose for motion in motions for pose in motion.waypoints])
     absolute = absolute_from_relative(home_mm_deg, relative)
-    sensitivity = np.concatenate([pose_error_sensitivity(legs, pose) for pose in absolute])  # (6W, 42)
-    covariance = np.asarray(covariance, dtype=float)[:GEOMETRIC_PARAMETERS, :GEOMETRIC_PARAMETERS]
+    covariance = np.asarray(covariance, dtype=float)
+    with_scales = len(covariance) > GEOMETRIC_PARAMETERS
+    sensitivity = np.concatenate([pose_error_sensitivity(legs, pose, with_scales) for pose in absolute])  # (6W, p)
     pose_variance = np.einsum("ij,jk,ik->i", sensitivity, covariance, sensitivity).reshape(-1, 6)
     to_deg = np.degrees(1.0)
     # The covariance is PSD by construction (analyse_information), but when some combination

@@ -17,6 +17,7 @@ from hexactl.control.hardware import FeedbackSnapshot
 from hexactl.control.planning import ActiveGeometry
 from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmRad
 from hexactl.kinematics.forward import forward_kinematics
+from hexactl.kinematics.inverse import lengths_from_readings
 
 
 class PoseMeasurement:
@@ -40,7 +41,7 @@ class PoseMeasurement:
         """Solve FK of ``feedback`` on ``active`` in cycle ``cycle``; ``commanded`` (relative
         mm/rad) is the start when there is no previous solution."""
         self.cycle = cycle
-        lengths = [p + z for p, z in zip(feedback.positions_mm, active.geometry.zero_lengths)]
+        lengths = lengths_from_readings(active.geometry.legs, feedback.positions_mm).tolist()
         guess = self._absolute or active.absolute_from_relative_mm_rad(commanded)
         result = forward_kinematics(active.geometry.legs, lengths, guess, self._tolerance_mm, self._max_iterations)
         if result.ok:

@@ -15,11 +15,14 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from hexactl.kinematics.inverse import LegModel, leg_lengths, twist_jacobian
+from hexactl.kinematics.inverse import LegModel, sensor_setpoints, twist_jacobian
 from hexactl.kinematics.axes import POSE_AXES, AbsoluteMmDeg, RelativeMmDeg
 
 MIN_JOINT_SEPARATION_MM = 1.0
 """Joints closer than this are taken as a typing error (two legs on one joint)."""
+
+MAX_SENSOR_SCALE_ERROR = 0.01
+"""A sensor gain error beyond 1 % is a unit or lead mistake, not a calibration (lead errors are ~1e-4)."""
 
 Vector3 = Annotated[tuple[float, float, float], Field(description="[x, y, z], mm")]
 Six = tuple[float, float, float, float, float, float]
@@ -91,8 +94,8 @@ class CalibrationInfo(_Strict):
     base_joints_std_mm: tuple[Vector3, ...] | None = None
     platform_joints_std_mm: tuple[Vector3, ...] | None = None
     zero_lengths_std_mm: Six | None = None
-    sensor_scale_errors: Six | None = Field(
-        default=None, description="identified sensor scale errors (length = zero + (1 + e)·reading); not applied by the kinematics"
+    sensor_scale_errors_std: Six | None = Field(
+        default=None, description="standard deviations of the identified sensor_scale_errors (dimensionless)"
     )
     notes: str = ""
 
@@ -108,10 +111,32 @@ class Geometry(_Strict):
         description="platform joint centres P_mi, moving frame, mm"
     )
     zero_lengths: Six = Field(description="joint-to-joint leg length at sensor reading 0, mm")
+    sensor_scale_errors: Six = Field(
+        default=(0.0,) * 6,
+        description="per-leg sensor gain error e_i, dimensionless: leg length = zero_length + (1 + e_i)·reading "
+                    "(a ball screw's lead error; identified by `hexactl calibrate --scales`)",
+    )
     home: AbsoluteMmDeg = Field(description="zero posture in the fixed frame [x, y, z, roll, pitch, yaw], mm and deg")
     limits: Limits
     measurement: Measurement
     calibration: CalibrationInfo | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _scale_errors_from_older_files(cls, data: object) -> object:
+        """Calibration files written before the kinematics applied sensor gains kept them under
+        ``[calibration]``; their joints and zero lengths were identified with those gains, so
+        the gains belong in the model: moved to the top level (where a file gives both, the
+        top level's are kept and the old key must agree, or validation names the conflict)."""
+        if isinstance(data, dict) and isinstance(data.get("calibration"), dict) and "sensor_scale_errors" in data["calibration"]:
+            calibration = dict(data["calibration"])
+            older = calibration.pop("sensor_scale_errors")
+            data = {**data, "calibration": calibration}
+            if older is not None:
+                if "sensor_scale_errors" in data and list(data["sensor_scale_errors"]) != list(older):
+                    raise ValueError("sensor_scale_errors and calibration.sensor_scale_errors differ: keep the top-level one")
+                data["sensor_scale_errors"] = older
+        return data
 
     @model_validator(mode="after")
     def _consistent(self) -> Geometry:
@@ -123,10 +148,15 @@ class Geometry(_Strict):
         for i, length in enumerate(self.zero_lengths):
             if length <= 0:
                 raise ValueError(f"zero_lengths: leg {i + 1} has non-positive zero length {length}")
+        for i, error in enumerate(self.sensor_scale_errors):
+            if abs(error) > MAX_SENSOR_SCALE_ERROR:
+                raise ValueError(
+                    f"sensor_scale_errors: leg {i + 1} has {error:g}, beyond ±{MAX_SENSOR_SCALE_ERROR:g}: a sensor "
+                    f"this far off is in another unit or has the wrong lead; fix the sensor's configuration"
+                )
         low, high = self.limits.stroke
-        home_lengths = leg_lengths(self.legs, self.home.in_radians())
-        for i, (length, zero) in enumerate(zip(home_lengths, self.zero_lengths)):
-            reading = length - zero
+        home_readings = sensor_setpoints(self.legs, self.home.in_radians())
+        for i, reading in enumerate(home_readings):
             if not low <= reading <= high:
                 raise ValueError(
                     f"limits.stroke: leg {i + 1} needs sensor reading {reading:.3f} mm in the zero "
@@ -141,7 +171,8 @@ class Geometry(_Strict):
     def legs(self) -> LegModel:
         """The structural parameters as the kinematics consumes them."""
         return LegModel(
-            np.array(self.base_joints), np.array(self.platform_joints), np.array(self.zero_lengths)
+            np.array(self.base_joints), np.array(self.platform_joints), np.array(self.zero_lengths),
+            np.array(self.sensor_scale_errors),
         )
 
     @cached_property

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from math import sqrt
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from hexactl.kinematics.rotation import rotation_elements, rotation_matrices
 
@@ -29,7 +29,9 @@ class LegModel:
     """A platform's structural parameters in the form the kinematics consumes.
 
     ``base_joints_mm`` (6, 3): B_i in the fixed frame; ``platform_joints_mm`` (6, 3):
-    P_mi in the moving frame; ``zero_lengths_mm`` (6,): joint-to-joint length at sensor 0.
+    P_mi in the moving frame; ``zero_lengths_mm`` (6,): joint-to-joint length at sensor 0;
+    ``sensor_scale_errors`` (6,), dimensionless, default 0: each sensor's gain error, so that
+    leg i's length at reading r is ``zero_i + (1 + e_i)·r`` (a ball screw's lead error).
     Arrays are copied and made read-only so a model shared with the control loop can never
     change under it. Equality is identity: compare the :class:`Geometry` it came from.
     """
@@ -37,7 +39,9 @@ class LegModel:
     base_joints_mm: NDArray[np.float64]
     platform_joints_mm: NDArray[np.float64]
     zero_lengths_mm: NDArray[np.float64]
-    # Per-leg (px, py, pz, bx, by, bz, zero) as plain floats for the scalar path.
+    sensor_scale_errors: NDArray[np.float64] = field(default_factory=lambda: np.zeros(LEG_COUNT))
+    sensor_gains: NDArray[np.float64] = field(init=False, repr=False)  # 1 + e
+    # Per-leg (px, py, pz, bx, by, bz, zero, gain) as plain floats for the scalar path.
     _rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -45,15 +49,19 @@ class LegModel:
             ("base_joints_mm", (LEG_COUNT, 3)),
             ("platform_joints_mm", (LEG_COUNT, 3)),
             ("zero_lengths_mm", (LEG_COUNT,)),
+            ("sensor_scale_errors", (LEG_COUNT,)),
         ):
             array = np.array(getattr(self, name), dtype=float)
             if array.shape != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
             array.flags.writeable = False
             object.__setattr__(self, name, array)
+        gains = 1.0 + self.sensor_scale_errors
+        gains.flags.writeable = False
+        object.__setattr__(self, "sensor_gains", gains)
         rows = tuple(
-            tuple(float(v) for v in (*p, *b, z))
-            for p, b, z in zip(self.platform_joints_mm, self.base_joints_mm, self.zero_lengths_mm)
+            tuple(float(v) for v in (*p, *b, z, g))
+            for p, b, z, g in zip(self.platform_joints_mm, self.base_joints_mm, self.zero_lengths_mm, gains)
         )
         object.__setattr__(self, "_rows", rows)
 
@@ -63,7 +71,7 @@ def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
     x, y, z, roll, pitch, yaw = pose
     r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
     lengths = []
-    for px, py, pz, bx, by, bz, _ in model._rows:
+    for px, py, pz, bx, by, bz, _, _ in model._rows:
         dx = r11 * px + r12 * py + r13 * pz + x - bx
         dy = r21 * px + r22 * py + r23 * pz + y - by
         dz = r31 * px + r32 * py + r33 * pz + z - bz
@@ -72,8 +80,21 @@ def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
 
 
 def sensor_setpoints(model: LegModel, pose: Sequence[float]) -> list[float]:
-    """Actuator sensor readings, mm, that put the platform at ``pose`` (leg length − zero length)."""
-    return [length - row[6] for length, row in zip(leg_lengths(model, pose), model._rows)]
+    """Actuator sensor readings, mm, that put the platform at ``pose``: (length − zero) / gain."""
+    return [(length - row[6]) / row[7] for length, row in zip(leg_lengths(model, pose), model._rows)]
+
+
+# The sensor model, length = zero + gain·reading, lives in these two functions (and in
+# sensor_setpoints' scalar copy above, kept in plain floats for the loop).
+def lengths_from_readings(model: LegModel, readings: ArrayLike, legs: int | slice = slice(None)) -> NDArray[np.float64]:
+    """Joint-to-joint lengths, mm, of sensor readings, mm, shaped (..., 6), or of leg index
+    ``legs`` (0-based) alone: ``zero + (1 + e)·reading``."""
+    return model.zero_lengths_mm[legs] + model.sensor_gains[legs] * np.asarray(readings, dtype=float)
+
+
+def readings_from_lengths(model: LegModel, lengths: ArrayLike, legs: int | slice = slice(None)) -> NDArray[np.float64]:
+    """Sensor readings, mm, of joint-to-joint lengths, mm (the inverse of :func:`lengths_from_readings`)."""
+    return (np.asarray(lengths, dtype=float) - model.zero_lengths_mm[legs]) / model.sensor_gains[legs]
 
 
 def leg_vectors_batch(model: LegModel, poses: NDArray) -> NDArray[np.float64]:
@@ -92,7 +113,7 @@ def leg_lengths_batch(model: LegModel, poses: NDArray) -> NDArray[np.float64]:
 
 def sensor_setpoints_batch(model: LegModel, poses: NDArray) -> NDArray[np.float64]:
     """Sensor readings, mm, for (N, 6) absolute poses → (N, 6)."""
-    return leg_lengths_batch(model, poses) - model.zero_lengths_mm
+    return readings_from_lengths(model, leg_lengths_batch(model, poses))
 
 
 def leg_jacobian_rows(model: LegModel, pose: Sequence[float]) -> tuple[list[list[float]], list[float]]:
@@ -106,7 +127,7 @@ def leg_jacobian_rows(model: LegModel, pose: Sequence[float]) -> tuple[list[list
     r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
     rows = []
     lengths = []
-    for px, py, pz, bx, by, bz, _ in model._rows:
+    for px, py, pz, bx, by, bz, _, _ in model._rows:
         qx = r11 * px + r12 * py + r13 * pz
         qy = r21 * px + r22 * py + r23 * pz
         qz = r31 * px + r32 * py + r33 * pz

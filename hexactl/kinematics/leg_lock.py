@@ -112,7 +112,7 @@ def project_to_locked_leg(
         valid = False
     if not valid:
         return ProjectionResult(ProjectionStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"), float("inf"))
-    px, py, pz, bx, by, bz, _ = legs._rows[leg - 1]
+    px, py, pz, bx, by, bz, _, _ = legs._rows[leg - 1]
     angle_weight = 1.0 / (characteristic_length_mm * characteristic_length_mm)  # W⁻¹ on angles
     x, y, z, roll, pitch, yaw = first
     iteration = 0

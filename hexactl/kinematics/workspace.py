@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import leg_vectors_batch, twist_jacobian
+from hexactl.kinematics.inverse import leg_vectors_batch, lengths_from_readings, readings_from_lengths, twist_jacobian
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.rotation import rotation_matrices
@@ -81,7 +81,7 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
     vectors = leg_vectors_batch(geometry.legs, absolute)
     lengths = np.linalg.norm(vectors, axis=2)
     units = vectors / lengths[..., None]
-    sensor = lengths - geometry.legs.zero_lengths_mm
+    sensor = readings_from_lengths(geometry.legs, lengths)
     stroke_low, stroke_high = limits.stroke
 
     base_axes, platform_axes = _neutral_axes(geometry)
@@ -147,7 +147,7 @@ def assess_readings(geometry: Geometry, readings: Sequence[Sequence[float]] | ND
     guess = absolute_from_relative(geometry.home, guess_relative)
     poses: list[NDArray | None] = []
     for row in np.asarray(readings, dtype=float).reshape(-1, 6):
-        result = forward_kinematics(geometry.legs, row + geometry.legs.zero_lengths_mm, guess)
+        result = forward_kinematics(geometry.legs, lengths_from_readings(geometry.legs, row).tolist(), guess)
         poses.append(np.array(result.pose) if result.ok else None)
         guess = result.pose if result.ok else guess
     found = [pose for pose in poses if pose is not None]

@@ -29,7 +29,7 @@ from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS, TestMotion
 from hexactl.calibration.validation import MotionResult
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import LEG_COUNT, sensor_setpoints_batch
+from hexactl.kinematics.inverse import LEG_COUNT, lengths_from_readings, sensor_setpoints_batch
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 from hexactl.sim.instrument import SimulatedInstrument
 
@@ -62,7 +62,7 @@ def execute_plans(controller: Geometry, true: Geometry, plans: Sequence[PostureP
         if plan.leg:
             setpoints[:, plan.leg - 1] = plan.locked_reading_mm  # the locked leg holds its reading
         for command, reading in zip(commanded, setpoints):
-            actual = np.array(true.zero_lengths) + reading + rng.normal(0.0, sensor_sigma_mm, LEG_COUNT)
+            actual = lengths_from_readings(true.legs, reading + rng.normal(0.0, sensor_sigma_mm, LEG_COUNT))
             result = forward_kinematics(true.legs, actual, command)
             if not result.ok:
                 raise SimulationError(f"forward kinematics on the true geometry: {result.status.name}")
@@ -96,7 +96,7 @@ def execute_motion(controller: Geometry, true: Geometry, motion: TestMotion) -> 
     readings = sensor_setpoints_batch(controller.legs, commanded)
     achieved = []
     for command, reading in zip(commanded, readings):
-        result = forward_kinematics(true.legs, np.array(true.zero_lengths) + reading, command)
+        result = forward_kinematics(true.legs, lengths_from_readings(true.legs, reading), command)
         if not result.ok:
             raise SimulationError(f"{motion.name}: forward kinematics on the true geometry: {result.status.name}")
         achieved.append(relative_from_absolute(controller.home, result.pose))

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from hexactl.kinematics.axes import AbsoluteMmRad, RelativeMmDeg
 from hexactl.kinematics.forward import FkStatus, forward_kinematics
 from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.inverse import lengths_from_readings
 from hexactl.kinematics.pose import relative_from_absolute
 
 
@@ -57,8 +58,9 @@ class PhysicalPlatform:
         self._guess = true_geometry.home.in_radians()
 
     def leg_lengths_mm(self) -> tuple[float, ...]:
-        """True joint-to-joint lengths, mm: the true zero lengths plus the actual positions."""
-        return tuple(zero + position for zero, position in zip(self.geometry.zero_lengths, self._actual_positions_mm()))
+        """True joint-to-joint lengths, mm, of the actuators' actual positions (the sensors'
+        readings) by the true geometry's sensor model."""
+        return tuple(lengths_from_readings(self.geometry.legs, self._actual_positions_mm()).tolist())
 
     def true_pose(self, guess: Sequence[float] | None = None) -> TruePose:
         """The pose the actuators' present lengths give (forward kinematics, warm-started

@@ -17,15 +17,18 @@ from hexactl.kinematics.inverse import LEG_COUNT
 
 @dataclass(frozen=True, slots=True)
 class ManufacturingErrors:
-    """Standard deviations of the manufacturing and assembly errors, mm.
+    """Standard deviations of the manufacturing and assembly errors.
 
     Each joint centre moves by an isotropic Gaussian error of ``joint_sigma_mm`` per axis,
     each zero length by ``zero_length_sigma_mm`` (the paper's situation: machining and
-    assembly tolerances of a few millimetres).
+    assembly tolerances of a few millimetres), each sensor's gain by
+    ``sensor_scale_sigma`` (dimensionless; a ball screw's lead error is ~1e-4, default 0:
+    the paper's sensors are exact).
     """
 
     joint_sigma_mm: float = 2.0
     zero_length_sigma_mm: float = 3.0
+    sensor_scale_sigma: float = 0.0
 
 
 def true_geometry(nominal: Geometry, seed: int, errors: ManufacturingErrors = ManufacturingErrors()) -> Geometry:
@@ -42,6 +45,9 @@ def true_geometry(nominal: Geometry, seed: int, errors: ManufacturingErrors = Ma
         base_joints=(np.array(nominal.base_joints) + rng.normal(0.0, errors.joint_sigma_mm, (LEG_COUNT, 3))).tolist(),
         platform_joints=(np.array(nominal.platform_joints) + rng.normal(0.0, errors.joint_sigma_mm, (LEG_COUNT, 3))).tolist(),
         zero_lengths=(np.array(nominal.zero_lengths) + rng.normal(0.0, errors.zero_length_sigma_mm, LEG_COUNT)).tolist(),
+        # Drawn last, so a platform of a given seed has the same joints with or without them.
+        sensor_scale_errors=(np.array(nominal.sensor_scale_errors)
+                             + rng.normal(0.0, errors.sensor_scale_sigma, LEG_COUNT)).tolist(),
         calibration=None,
     )
     return geometry_from_mapping(document, f"true platform (seed {seed})")

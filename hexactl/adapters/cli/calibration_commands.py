@@ -262,7 +262,7 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
 def run_plan(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.files.measurements import format_plan, write_plan
     from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
-    from hexactl.kinematics.inverse import leg_lengths
+    from hexactl.kinematics.inverse import leg_lengths, lengths_from_readings
 
     geometry = load_config(arguments)
     if arguments.output and Path(arguments.output).exists() and not arguments.force:
@@ -273,7 +273,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
     if arguments.reading is not None:
         if not arguments.leg:
             raise CliError("--reading needs a locked leg (--leg 1-6)")
-        length = geometry.zero_lengths[arguments.leg - 1] + arguments.reading
+        length = float(lengths_from_readings(geometry.legs, arguments.reading, arguments.leg - 1))
     plan = plan_postures(geometry, PlanRequest(arguments.leg, arguments.count, length, arguments.candidates, arguments.seed))
     if plan.status is PlanStatus.INVALID_REQUEST:
         raise CliError(plan.message)

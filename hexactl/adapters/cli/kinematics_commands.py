@@ -127,14 +127,14 @@ def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> N
 
 
 def run_ik(arguments: argparse.Namespace) -> int:
-    from hexactl.kinematics.inverse import leg_lengths
+    from hexactl.kinematics.inverse import leg_lengths, readings_from_lengths
     from hexactl.kinematics.pose import absolute_from_relative
     from hexactl.kinematics.workspace import assess_poses
 
     geometry = load_config(arguments)
     pose = parse_numbers([getattr(arguments, axis.upper()) for axis in POSE_AXES], POSE_AXES)
     lengths = leg_lengths(geometry.legs, absolute_from_relative(geometry.home, pose))
-    setpoints = [length - zero for length, zero in zip(lengths, geometry.zero_lengths)]
+    setpoints = readings_from_lengths(geometry.legs, lengths).tolist()
     assessment = assess_poses(geometry, [pose])[0]
     if arguments.json:
         print(json.dumps({"pose": pose, "leg_lengths_mm": lengths, "setpoints_mm": setpoints,
@@ -151,12 +151,13 @@ def run_ik(arguments: argparse.Namespace) -> int:
 
 def run_fk(arguments: argparse.Namespace) -> int:
     from hexactl.kinematics.forward import forward_kinematics
+    from hexactl.kinematics.inverse import lengths_from_readings
     from hexactl.kinematics.pose import relative_from_absolute
     from hexactl.kinematics.workspace import jacobian_condition
 
     geometry = load_config(arguments)
     readings = parse_numbers([getattr(arguments, label) for label in LEG_LABELS], LEG_LABELS)
-    lengths = [reading + zero for reading, zero in zip(readings, geometry.zero_lengths)]
+    lengths = lengths_from_readings(geometry.legs, readings).tolist()
     result = forward_kinematics(geometry.legs, lengths, geometry.home.in_radians())
     pose = [float(v) for v in relative_from_absolute(geometry.home, result.pose)]
     low, high = geometry.limits.stroke

@@ -43,7 +43,7 @@ def geometry_to_toml(geometry: Geometry) -> str:
     Written here rather than with a generic TOML writer because those put every number of
     a nested array on its own line, which makes a geometry file unreadable for a person.
     """
-    document = geometry.model_dump(mode="json", exclude_none=True)
+    document = _document(geometry, exclude_none=True)
     tables = {key: value for key, value in document.items() if isinstance(value, dict)}
     lines = [_toml_assignment(key, value) for key, value in document.items() if key not in tables]
     for table, content in tables.items():
@@ -77,8 +77,18 @@ def geometry_id(geometry: Geometry) -> str:
     values (keys sorted, numbers in their shortest exact form, -0.0 as 0.0), so equal
     values get equal ids whatever the file's comments, layout, key order or number
     spelling (``1750`` or ``1750.0``)."""
-    canonical = json.dumps(_canonical(geometry.model_dump(mode="json")), sort_keys=True, separators=(",", ":"))
+    canonical = json.dumps(_canonical(_document(geometry)), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
+
+
+def _document(geometry: Geometry, exclude_none: bool = False) -> dict:
+    """``geometry``'s values for a file or a hash. Exact sensors (every scale error 0, the
+    default) are left out: files and ids stay what they were before gains were modelled,
+    so campaigns and files that name a geometry by its id keep finding it."""
+    document = geometry.model_dump(mode="json", exclude_none=exclude_none)
+    if not any(geometry.sensor_scale_errors):
+        del document["sensor_scale_errors"]
+    return document
 
 
 def _canonical(value: object) -> object:

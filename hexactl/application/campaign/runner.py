@@ -73,6 +73,7 @@ from hexactl.calibration.parameters import calibrated_geometry
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry, GeometryError
+from hexactl.kinematics.inverse import lengths_from_readings
 
 
 @dataclass(frozen=True, slots=True)
@@ -260,7 +261,7 @@ def _measure_postures(driver: PlatformDriver, store: CampaignStore, instrument: 
             # The plan locks each leg at its length in the zero posture, on this geometry.
             driver.move(ZERO_POSE)
             record = driver.lock(leg)
-            locked, length = leg, geometry.zero_lengths[leg - 1] + record["leg_setpoints"][leg - 1]
+            locked, length = leg, float(lengths_from_readings(geometry.legs, record["leg_setpoints"][leg - 1], leg - 1))
         record = _visit(driver, geometry, leg, length, posture.pose)
         points = instrument.measure(store.measurements_taken, f"posture {number + 1}, leg {leg} locked")
         driver.confirm_still(record)
