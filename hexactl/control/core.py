@@ -169,7 +169,7 @@ class ControlCore:
             self._counter += 1
         elif self.state is ControlState.ESTOP and supervisor.estop_due(now_ns):
             self._send_estop()
-        if supervisor.clear_fault_due(now_ns):
+        if supervisor.clear_fault_due(self.feedback, now_ns):
             hardware.send_command(None, ActuatorCommand.CLEAR_FAULT)
 
     def _dwell_record(self, sequence: str, waypoint: int) -> DwellRecord:

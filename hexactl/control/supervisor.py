@@ -52,6 +52,7 @@ class Supervisor:
         self._next_estop_ns = 0
         self._last_estop_ns: int | None = None  # when the loop last sent an E-stop
         self._clear_fault_due_ns: int | None = None  # a reset's CLEAR_FAULT waits for the E-stop hold-off
+        self._clear_fault_repeat = False  # the next CLEAR_FAULT due is a repeat (sent only to an actuator in E-stop)
 
     def expect(self, leg: int | None, state: ActuatorState, now_ns: int) -> None:
         """Leg 1–6 (or all) must report ``state`` within ``state_timeout_s`` of ``now_ns``."""
@@ -122,12 +123,27 @@ class Supervisor:
         if self._last_estop_ns is not None:
             due = max(due, self._last_estop_ns + self._estop_clear_holdoff_ns)
         self._clear_fault_due_ns = due
+        self._clear_fault_repeat = False
         self._estop_grace_until_ns = due + self._state_timeout_ns
 
-    def clear_fault_due(self, now_ns: int) -> bool:
-        """True once, when a reset's CLEAR_FAULT is to be sent."""
+    def clear_fault_due(self, feedback: FeedbackSnapshot | None, now_ns: int) -> bool:
+        """True when a reset's CLEAR_FAULT is to be sent: once its hold-off has passed, then
+        every ``estop_repeat_s`` of the grace time while an actuator still reports E-stop.
+        An actuator that received the loop's last E-stops late (a starved bus or host)
+        refuses the first within its own hold-off; the operator's reset should not fail for
+        that. Harmless otherwise: an actuator leaves E-stop only if its cause is gone."""
         due = self._clear_fault_due_ns
         if due is None or now_ns < due:
             return False
-        self._clear_fault_due_ns = None
-        return True
+        repeat_at = now_ns + self._estop_repeat_ns
+        # The last repeat leaves the actuators a repeat interval to report leaving E-stop.
+        self._clear_fault_due_ns = repeat_at if repeat_at + self._estop_repeat_ns <= self._estop_grace_until_ns else None
+        if not self._clear_fault_repeat:
+            self._clear_fault_repeat = True
+            return True
+        if feedback is not None:
+            for actuator in feedback.actuators:
+                if actuator.state is ActuatorState.ESTOP:
+                    return True
+        self._clear_fault_due_ns = None  # every actuator left E-stop: done
+        return False

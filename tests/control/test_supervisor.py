@@ -117,9 +117,10 @@ def test_the_estop_repeats_while_latched(supervisor):
 def test_clear_fault_waits_for_the_holdoff_after_the_last_estop_and_is_sent_once(supervisor):
     supervisor.estop_sent(100 * MS)
     supervisor.reset(200 * MS)
-    assert not supervisor.clear_fault_due(399 * MS)
-    assert supervisor.clear_fault_due(400 * MS)
-    assert not supervisor.clear_fault_due(401 * MS)
+    assert not supervisor.clear_fault_due(None, 399 * MS)
+    assert supervisor.clear_fault_due(None, 400 * MS)
+    assert not supervisor.clear_fault_due(None, 401 * MS)
+    assert not supervisor.clear_fault_due(feedback(state=ActuatorState.DISABLED), 500 * MS)  # all left E-stop
     # the grace runs from the CLEAR_FAULT, not from the reset
     estop = feedback(leg1={"state": ActuatorState.ESTOP})
     assert not supervisor.estop_reported(estop, 899 * MS)
@@ -128,7 +129,29 @@ def test_clear_fault_waits_for_the_holdoff_after_the_last_estop_and_is_sent_once
 
 def test_a_reset_without_estops_clears_at_once_and_a_new_estop_cancels_it(supervisor):
     supervisor.reset(50 * MS)
-    assert supervisor.clear_fault_due(50 * MS)
+    assert supervisor.clear_fault_due(None, 50 * MS)
     supervisor.reset(60 * MS)
     supervisor.latched_estop()
-    assert not supervisor.clear_fault_due(10_000 * MS)
+    assert not supervisor.clear_fault_due(None, 10_000 * MS)
+
+
+def test_clear_fault_is_repeated_in_the_grace_while_an_actuator_still_reports_estop(supervisor):
+    """One actuator got the loop's last E-stops late and refused the first CLEAR_FAULT
+    within its own hold-off: the reset repeats it, then stops once none reports E-stop."""
+    supervisor.estop_sent(100 * MS)
+    supervisor.reset(200 * MS)
+    late = feedback(state=ActuatorState.DISABLED, leg4={"state": ActuatorState.ESTOP})
+    assert supervisor.clear_fault_due(late, 400 * MS)
+    assert not supervisor.clear_fault_due(late, 499 * MS)
+    assert supervisor.clear_fault_due(late, 500 * MS)  # every estop_repeat_s
+    assert supervisor.clear_fault_due(late, 600 * MS)
+    assert not supervisor.clear_fault_due(feedback(state=ActuatorState.DISABLED), 700 * MS)
+    assert not supervisor.clear_fault_due(late, 800 * MS)  # it stopped repeating once all had left
+
+
+def test_clear_fault_repeats_end_a_repeat_before_the_grace_does(supervisor):
+    supervisor.reset(0)  # no E-stop sent: due at once, grace 500 ms
+    stuck = feedback(state=ActuatorState.ESTOP)
+    sent = [t for t in range(0, 1000, 10) if supervisor.clear_fault_due(stuck, t * MS)]
+    assert sent == [0, 100, 200, 300, 400]
+    assert supervisor.estop_reported(stuck, 500 * MS)  # still in E-stop after the grace: the loop latches it
