@@ -10,7 +10,8 @@ previous solution, else from the commanded pose), converts the poses to the chos
 the operator's frames at the start) and appends them to ``NAME.csv.partial`` in the first
 data directory. When the loop has ended the recording (its duration reached, or stopped)
 and every row has arrived, the file is renamed to ``NAME.csv`` (never over an existing
-file) and ``NAME.json`` says what was recorded and how it ended.
+file) and ``NAME.json`` says what was recorded and how it ended. The files' format is
+:mod:`hexactl.adapters.files.recording_file`'s.
 
 One recording at a time. :meth:`Recordings.poll` does the work: a thread calls it
 (:meth:`Recordings.start_thread`), or a test in simulated time. On shutdown
@@ -20,9 +21,7 @@ One recording at a time. :meth:`Recordings.poll` does the work: a thread calls i
 from __future__ import annotations
 
 import itertools
-import json
 import math
-import os
 import re
 import threading
 import time
@@ -30,23 +29,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from enum import StrEnum
-from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError, ErrorCode
+from hexactl.adapters.files.recording_file import SIGNALS, RecordedCycle, RecordingFile, RecordingFileError
 from hexactl.control.controller import Controller
 from hexactl.control.frames import OperatorFrames, convert
 from hexactl.control.planning import ActiveGeometry
 from hexactl.control.recorder import RecorderPhase, Row
 from hexactl.control.snapshot import ControlState
-from hexactl.kinematics.axes import POSE_AXES
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import lengths_from_readings
-
-SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
-"""What a recording may hold, in the order of the CSV's columns (after ``t_s`` and ``cycle``)."""
 
 MAX_DURATION_S = 3600.0
 """The longest recording: an hour is 1.8 million rows (about 0.5 GB) at 500 Hz."""
@@ -88,24 +83,6 @@ class RecordingRequest:
     start: RecordingStart = RecordingStart.NOW
 
 
-def columns(signals: Sequence[str]) -> list[tuple[str, str]]:
-    """The CSV's (column, unit) for ``signals``, in file order."""
-    pose_units = ["mm"] * 3 + ["deg"] * 3
-    out = [("t_s", "s"), ("cycle", "")]
-    for signal in SIGNALS:
-        if signal not in signals:
-            continue
-        if signal in ("pose_command", "pose_measured"):
-            out += [(f"{signal}_{axis}_{unit}", unit) for axis, unit in zip(POSE_AXES, pose_units)]
-        elif signal == "setpoints":
-            out += [(f"setpoint_{leg}_mm", "mm") for leg in range(1, 7)]
-        elif signal == "feedback":
-            out += [(f"feedback_{leg}_mm", "mm") for leg in range(1, 7)]
-        else:
-            out.append((f"{signal}_us", "us"))
-    return out
-
-
 @dataclass
 class _Open:
     """The recording being written."""
@@ -114,10 +91,7 @@ class _Open:
     request: RecordingRequest
     rows_requested: int
     loop_rate_hz: float
-    directory: int  # descriptor of the data directory the files go to
-    path: Path  # the CSV's final path
-    partial: str  # the partial file's name in it
-    handle: TextIO
+    file: RecordingFile
     frames: OperatorFrames
     started_wall_s: float
     started_monotonic_ns: int
@@ -141,7 +115,6 @@ class Recordings:
     def __init__(self, controller: Controller, data: DataDirectories) -> None:
         self._controller = controller
         self._directory = data.directories[0]
-        self._data = data
         self._lock = threading.Lock()
         self._open: _Open | None = None
         self._geometries: dict[str, ActiveGeometry] = {}
@@ -182,11 +155,11 @@ class Recordings:
             result = self._controller.record(opened.recording, request.name, request.divisor, rows,
                                              request.start is RecordingStart.NEXT_MOTION)
             if not result.ok:
-                self._discard(opened)
+                opened.file.discard()
                 raise ApiError(result.error.value if result.error else ErrorCode.INTERNAL_ERROR, result.message)
             self._open = opened
-            opened.handle.write(",".join(name for name, _ in columns(request.signals)) + "\n")
-        return {"message": result.message, "path": str(opened.path), "side_file": str(opened.path.with_suffix(".json")),
+        path = opened.file.path
+        return {"message": result.message, "path": str(path), "side_file": str(path.with_suffix(".json")),
                 "rows": rows, "rate_hz": rate / request.divisor, "duration": rows * request.divisor / rate}
 
     def stop(self, timeout_s: float = 10.0) -> dict[str, Any]:
@@ -217,7 +190,7 @@ class Recordings:
         side file (``state``: ``done``), or ``idle``."""
         with self._lock:
             if (current := self._open) is not None:
-                return {"state": "writing", "name": current.request.name, "path": str(current.path),
+                return {"state": "writing", "name": current.request.name, "path": str(current.file.path),
                         "rows_written": current.received, "rows": current.rows_requested}
             if self.last is not None:
                 return {"state": "done", **self.last}
@@ -268,9 +241,9 @@ class Recordings:
             self._finish(current, RecordingEnded.FAULT)
 
     def _write(self, current: _Open, rows: list[Row]) -> None:
-        signals = current.request.signals
         pose_frames = current.request.frame is RecordingFrame.WORK
-        lines = []
+        measure = "pose_measured" in current.request.signals
+        cycles = []
         for _, cycle, t_ns, lateness_ns, compute_ns, pose_command, setpoints, feedback, calibration_id in rows:
             if current.first_t_ns is None:
                 current.first_t_ns, current.first_cycle, current.calibration_id = t_ns, cycle, calibration_id
@@ -282,25 +255,13 @@ class Recordings:
             if pose_frames and active is not None:
                 frames = current.work.get(calibration_id) or current.work.setdefault(
                     calibration_id, current.frames.frames(active.home))
-            cells = [f"{(t_ns - current.first_t_ns) / 1e9:.6f}", str(cycle)]
-            if "pose_command" in signals:
-                cells += _pose_cells(pose_command, frames, active, pose_frames)
-            if "pose_measured" in signals:
-                measured = self._measured(current, active, pose_command, feedback)
-                cells += _pose_cells(measured, frames, active, pose_frames)
-            if "setpoints" in signals:
-                cells += [f"{value:.6f}" for value in setpoints]
-            if "feedback" in signals:
-                cells += [f"{value:.6f}" for value in feedback.positions_mm] if feedback is not None else [""] * 6
-            if "lateness" in signals:
-                cells.append(f"{lateness_ns / 1e3:.1f}")
-            if "compute" in signals:
-                cells.append(f"{compute_ns / 1e3:.1f}")
-            lines.append(",".join(cells))
+            measured = self._measured(current, active, pose_command, feedback) if measure else None
+            cycles.append(RecordedCycle(
+                (t_ns - current.first_t_ns) / 1e9, cycle, _shown(pose_command, frames, active, pose_frames),
+                _shown(measured, frames, active, pose_frames), setpoints,
+                feedback.positions_mm if feedback is not None else None, lateness_ns, compute_ns))
         current.received += len(rows)
-        if lines:
-            current.handle.write("\n".join(lines) + "\n")
-            current.handle.flush()
+        current.file.append(cycles)
 
     def _measured(self, current: _Open, active: ActiveGeometry | None, pose_command: Sequence[float],
                   feedback: Any) -> tuple[float, ...] | None:
@@ -320,63 +281,24 @@ class Recordings:
     # -- files ---------------------------------------------------------------------------
 
     def _create(self, request: RecordingRequest, rows: int, rate: float) -> _Open:
-        """Open ``NAME.csv.partial`` new in the first data directory (descriptor-relative,
-        no symlink followed); :class:`ApiError` ``file_exists`` naming the file in the way."""
-        name = request.name
+        """The recording's file, new in the first data directory; :class:`ApiError`
+        ``file_exists`` naming the file in the way, ``file_not_found`` for the directory."""
         try:
-            directory = os.open(self._directory, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-        except OSError as error:
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{self._directory}: cannot open the recordings directory "
-                           f"({error.strerror}): create it or start the service with another --data-dir") from None
-        try:
-            for existing in (f"{name}.csv", f"{name}.json", f"{name}.csv.partial"):
-                if _exists(existing, directory):
-                    raise ApiError(ErrorCode.FILE_EXISTS, f"{self._directory / existing} exists; a recording never "
-                                   "overwrites a file: choose another name or remove that file")
-            descriptor = os.open(f"{name}.csv.partial", os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
-                                 | os.O_CLOEXEC, 0o666, dir_fd=directory)
-        except ApiError:
-            os.close(directory)
-            raise
-        except OSError as error:
-            os.close(directory)
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{self._directory / name}.csv.partial: cannot create it "
-                           f"({error.strerror})") from None
-        return _Open(next(self._ids), request, rows, rate, directory, self._directory / f"{name}.csv",
-                     f"{name}.csv.partial", os.fdopen(descriptor, "w", encoding="utf-8", newline=""),
-                     self._controller.operator_frames(), time.time(), time.monotonic_ns())
-
-    def _discard(self, current: _Open) -> None:
-        current.handle.close()
-        try:
-            os.unlink(current.partial, dir_fd=current.directory)
-        except OSError:
-            pass
-        os.close(current.directory)
+            file = RecordingFile.create(self._directory, request.name, request.signals)
+        except RecordingFileError as error:
+            raise ApiError(error.code, error.message) from None
+        return _Open(next(self._ids), request, rows, rate, file, self._controller.operator_frames(), time.time(),
+                     time.monotonic_ns())
 
     def _finish(self, current: _Open, ended: RecordingEnded) -> None:
-        """Close the CSV, move it to its final name (never over a file), write the side file."""
+        """Finish the files: the CSV under its final name and the side file."""
         self._open = None
-        handle, directory = current.handle, current.directory
-        handle.flush()
-        os.fsync(handle.fileno())
-        handle.close()
-        final = current.path.name
-        path = current.path
-        try:
-            # A hard link fails if the target exists: no recording overwrites a file made meanwhile.
-            os.link(current.partial, final, src_dir_fd=directory, dst_dir_fd=directory, follow_symlinks=False)
-            os.unlink(current.partial, dir_fd=directory)
-        except FileExistsError:
-            path = self._directory / current.partial  # kept under its partial name, said in the side file
-        finally:
-            os.close(directory)
         request, recorder = current.request, self._controller.snapshot.recorder
         first_t_ns = current.first_t_ns
         started_wall = current.started_wall_s + ((first_t_ns - current.started_monotonic_ns) / 1e9
                                                  if first_t_ns is not None else 0.0)
-        side = {
-            "name": request.name, "csv": str(path), "signals": list(request.signals), "frame": request.frame.value,
+        self.last = current.file.finish({
+            "name": request.name, "signals": list(request.signals), "frame": request.frame.value,
             "frames": current.frames.model_dump(mode="json") if request.frame is RecordingFrame.WORK else None,
             "divisor": request.divisor, "loop_rate_hz": current.loop_rate_hz,
             "rate_hz": current.loop_rate_hz / request.divisor, "duration_s": request.duration_s,
@@ -386,25 +308,20 @@ class Recordings:
             "first_cycle": current.first_cycle, "rows_requested": current.rows_requested,
             "rows_written": current.received, "cycles_missing": current.cycles_missing,
             "rows_lost": recorder.lost if recorder.recording == current.recording else 0, "faults_during": current.faults_seen,
-            "ended": ended.value, "columns": [{"name": name, "unit": unit} for name, unit in columns(request.signals)],
-        }
-        try:
-            self._data.write_new(str(path.with_suffix(".json")), (json.dumps(side, indent=2) + "\n").encode("utf-8"))
-        except ApiError as error:  # the CSV stands; say why its side file does not
-            side["side_file_error"] = error.message
-        self.last = side
+            "ended": ended.value,
+        })
         self._finished.notify_all()
 
 
-def _pose_cells(pose: Sequence[float] | None, frames: Frames | None, active: ActiveGeometry | None,
-                in_work: bool) -> list[str]:
-    """A pose (relative mm/rad) as six cells, mm and deg, in the work frame with ``in_work``."""
-    if pose is None or (in_work and (frames is None or active is None)):
-        return [""] * 6
-    shown = convert(pose, None, frames, active.home) if in_work and active is not None else pose
-    x, y, z, roll, pitch, yaw = shown
-    return [f"{x:.6f}", f"{y:.6f}", f"{z:.6f}", f"{math.degrees(roll):.7f}", f"{math.degrees(pitch):.7f}",
-            f"{math.degrees(yaw):.7f}"]
+def _shown(pose: Sequence[float] | None, frames: Frames | None, active: ActiveGeometry | None,
+           in_work: bool) -> Sequence[float] | None:
+    """A pose (relative mm/rad) as recorded: in the work frame with ``in_work`` (None where
+    that frame is not known)."""
+    if pose is None or not in_work:
+        return pose
+    if frames is None or active is None:
+        return None
+    return convert(pose, None, frames, active.home)
 
 
 def _request_problem(request: RecordingRequest) -> str | None:
@@ -420,11 +337,3 @@ def _request_problem(request: RecordingRequest) -> str | None:
     if not (0 < request.duration_s <= MAX_DURATION_S):
         return f"duration_s {request.duration_s!r}: more than 0 and at most {MAX_DURATION_S:g} s"
     return None
-
-
-def _exists(name: str, directory: int) -> bool:
-    try:
-        os.stat(name, dir_fd=directory, follow_symlinks=False)
-    except FileNotFoundError:
-        return False
-    return True

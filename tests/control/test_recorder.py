@@ -11,7 +11,8 @@ import pytest
 
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError
-from hexactl.application.recording import Recordings, columns
+from hexactl.adapters.files.recording_file import columns
+from hexactl.application.recording import Recordings
 from hexactl.control import recorder as recorder_module
 from hexactl.control.frames import OperatorFrames
 from hexactl.control.recorder import RecorderPhase, RecordingEnd

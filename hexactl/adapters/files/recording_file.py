@@ -1,0 +1,190 @@
+"""The data recorder's files: ``NAME.csv``, one row per recorded cycle, and ``NAME.json``.
+
+The CSV's columns are ``t_s`` and ``cycle``, then per signal (in :data:`SIGNALS` order)
+its values with the unit in the name: poses ``pose_command_x_mm`` … ``_yaw_deg``, leg
+values ``setpoint_1_mm`` … and ``feedback_1_mm`` …, ``lateness_us`` and ``compute_us``.
+An empty cell is a value the recorder did not have (no feedback yet, forward kinematics
+did not converge). The side file ``NAME.json`` says what was recorded, how it ended and
+lists the columns with their units.
+
+A recording is written to ``NAME.csv.partial``, created new (never over a file, no
+symbolic link followed) in a directory held open by descriptor, so a directory renamed
+meanwhile does not redirect it; :meth:`RecordingFile.finish` moves it to ``NAME.csv``
+with a hard link, which fails rather than replace a file made meanwhile.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hexactl.adapters.files.atomic import write_atomic
+from hexactl.kinematics.axes import POSE_AXES
+
+SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
+"""What a recording may hold, in the order of the CSV's columns (after ``t_s`` and ``cycle``)."""
+
+
+def columns(signals: Sequence[str]) -> list[tuple[str, str]]:
+    """The CSV's (column, unit) for ``signals``, in file order."""
+    pose_units = ["mm"] * 3 + ["deg"] * 3
+    out = [("t_s", "s"), ("cycle", "")]
+    for signal in SIGNALS:
+        if signal not in signals:
+            continue
+        if signal in ("pose_command", "pose_measured"):
+            out += [(f"{signal}_{axis}_{unit}", unit) for axis, unit in zip(POSE_AXES, pose_units)]
+        elif signal == "setpoints":
+            out += [(f"setpoint_{leg}_mm", "mm") for leg in range(1, 7)]
+        elif signal == "feedback":
+            out += [(f"feedback_{leg}_mm", "mm") for leg in range(1, 7)]
+        else:
+            out.append((f"{signal}_us", "us"))
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class RecordedCycle:
+    """One row's values: ``t_s`` since the first row; poses in mm and rad (None: not
+    available); set-points and feedback positions in mm (feedback None: none yet);
+    lateness and compute in ns."""
+
+    t_s: float
+    cycle: int
+    pose_command: Sequence[float] | None
+    pose_measured: Sequence[float] | None
+    setpoints: Sequence[float]
+    feedback: Sequence[float] | None
+    lateness_ns: int
+    compute_ns: int
+
+
+class RecordingFileError(Exception):
+    """A recording's file cannot be made: ``code`` is ``file_exists`` (a file of that name
+    is in the way) or ``file_not_found`` (the directory cannot be opened or written)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+class RecordingFile:
+    """``NAME.csv.partial`` being written in ``directory``; create with :meth:`create`."""
+
+    def __init__(self, directory: Path, descriptor: int, name: str, signals: Sequence[str], handle: Any) -> None:
+        self.directory = directory
+        self.path = directory / f"{name}.csv"
+        """The CSV's final path."""
+        self._descriptor = descriptor
+        self._partial = f"{name}.csv.partial"
+        self._signals = tuple(signals)
+        self._handle = handle
+
+    @classmethod
+    def create(cls, directory: Path, name: str, signals: Sequence[str]) -> RecordingFile:
+        """Create ``NAME.csv.partial`` new in ``directory`` (a bare, checked ``name``) and
+        write the header. :class:`RecordingFileError` naming the file in the way or the
+        directory's problem."""
+        try:
+            descriptor = os.open(directory, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+        except OSError as error:
+            raise RecordingFileError("file_not_found", f"{directory}: cannot open the recordings directory "
+                                     f"({error.strerror}): create it or start the service with another --data-dir") from None
+        try:
+            for existing in (f"{name}.csv", f"{name}.json", f"{name}.csv.partial"):
+                if _exists(existing, descriptor):
+                    raise RecordingFileError("file_exists", f"{directory / existing} exists; a recording never "
+                                             "overwrites a file: choose another name or remove that file")
+            handle = os.fdopen(os.open(f"{name}.csv.partial", os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+                                       | os.O_CLOEXEC, 0o666, dir_fd=descriptor), "w", encoding="utf-8", newline="")
+        except RecordingFileError:
+            os.close(descriptor)
+            raise
+        except OSError as error:
+            os.close(descriptor)
+            raise RecordingFileError("file_not_found", f"{directory / name}.csv.partial: cannot create it "
+                                     f"({error.strerror})") from None
+        handle.write(",".join(column for column, _ in columns(signals)) + "\n")
+        return cls(directory, descriptor, name, signals, handle)
+
+    def append(self, rows: Sequence[RecordedCycle]) -> None:
+        """Write ``rows`` and flush them."""
+        signals = self._signals
+        lines = []
+        for row in rows:
+            cells = [f"{row.t_s:.6f}", str(row.cycle)]
+            if "pose_command" in signals:
+                cells += _pose_cells(row.pose_command)
+            if "pose_measured" in signals:
+                cells += _pose_cells(row.pose_measured)
+            if "setpoints" in signals:
+                cells += [f"{value:.6f}" for value in row.setpoints]
+            if "feedback" in signals:
+                cells += [f"{value:.6f}" for value in row.feedback] if row.feedback is not None else [""] * 6
+            if "lateness" in signals:
+                cells.append(f"{row.lateness_ns / 1e3:.1f}")
+            if "compute" in signals:
+                cells.append(f"{row.compute_ns / 1e3:.1f}")
+            lines.append(",".join(cells))
+        if lines:
+            self._handle.write("\n".join(lines) + "\n")
+            self._handle.flush()
+
+    def discard(self) -> None:
+        """Close and remove the partial file (a recording the loop refused)."""
+        self._handle.close()
+        try:
+            os.unlink(self._partial, dir_fd=self._descriptor)
+        except OSError:
+            pass
+        os.close(self._descriptor)
+
+    def finish(self, description: Mapping[str, Any]) -> dict[str, Any]:
+        """Close the CSV, move it to ``NAME.csv`` (kept under its partial name if a file of
+        that name appeared meanwhile) and write ``NAME.json``: ``description`` with the
+        CSV's path (``csv``) and ``columns``. Returns the side file's content, with
+        ``side_file_error`` if it could not be written (the CSV stands)."""
+        handle, descriptor = self._handle, self._descriptor
+        handle.flush()
+        os.fsync(handle.fileno())
+        handle.close()
+        path = self.path
+        try:
+            os.link(self._partial, path.name, src_dir_fd=descriptor, dst_dir_fd=descriptor, follow_symlinks=False)
+            os.unlink(self._partial, dir_fd=descriptor)
+        except FileExistsError:
+            path = self.directory / self._partial
+        side = {**description, "csv": str(path),
+                "columns": [{"name": name, "unit": unit} for name, unit in columns(self._signals)]}
+        try:
+            # Through the descriptor, like the CSV: into the directory the recording started in.
+            write_atomic(Path(f"/proc/self/fd/{descriptor}") / self.path.with_suffix(".json").name,
+                         (json.dumps(side, indent=2) + "\n").encode("utf-8"), overwrite=False)
+        except OSError as error:
+            side["side_file_error"] = f"{self.path.with_suffix('.json')}: not written ({error})"
+        finally:
+            os.close(descriptor)
+        return side
+
+
+def _pose_cells(pose: Sequence[float] | None) -> list[str]:
+    """A pose (mm, rad) as six cells, mm and deg; empty cells without one."""
+    if pose is None:
+        return [""] * 6
+    x, y, z, roll, pitch, yaw = pose
+    return [f"{x:.6f}", f"{y:.6f}", f"{z:.6f}", f"{math.degrees(roll):.7f}", f"{math.degrees(pitch):.7f}",
+            f"{math.degrees(yaw):.7f}"]
+
+
+def _exists(name: str, directory: int) -> bool:
+    try:
+        os.stat(name, dir_fd=directory, follow_symlinks=False)
+    except FileNotFoundError:
+        return False
+    return True
