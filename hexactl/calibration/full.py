@@ -45,9 +45,10 @@ from scipy.spatial.transform import Rotation
 
 from hexactl.calibration.data import MeasurementData, measured_poses
 from hexactl.calibration.jacobians import point_twist_jacobians
-from hexactl.calibration.parameters import PARAMETERS_PER_LEG, SCALE_UNIT, StructuralParameters
+from hexactl.calibration.parameters import GEOMETRIC_PARAMETERS, PARAMETERS_PER_LEG, SCALE_UNIT, StructuralParameters
 from hexactl.calibration.results import (
     MIN_POSTURES,
+    Estimate,
     ExcludedObservation,
     IdentificationOptions,
     IdentificationResult,
@@ -71,7 +72,13 @@ MAX_EXCLUDED_FRACTION = 0.1
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _Problem:
-    """The fixed inputs: observed points (N, K, 3), their model (K, 3), readings (N, 6)."""
+    """The fixed inputs: observed points (N, K, 3), their model (K, 3), readings (N, 6).
+
+    ``times`` (N,) in [0, 1], the campaign's time of each posture, when the sensor offsets'
+    drift is estimated (None: not); ``target_sigma`` > 0: the feature points are parameters
+    too, with ``model_points`` as their prior mean and this standard deviation per
+    coordinate (0: exactly known).
+    """
 
     observed: NDArray[np.float64]
     model_points: NDArray[np.float64]
@@ -80,6 +87,22 @@ class _Problem:
     reading_sigma: float
     with_scales: bool
     point_weights: NDArray[np.float64]  # (N, K): 1 used, 0 excluded
+    times: NDArray[np.float64] | None = None
+    target_sigma: float = 0.0
+
+    @property
+    def structural_size(self) -> int:
+        return GEOMETRIC_PARAMETERS + (LEG_COUNT if self.with_scales else 0)
+
+    def split(self, theta: NDArray) -> tuple[NDArray, NDArray | None, NDArray | None]:
+        """θ as (structural, drift (6,) or None, feature points (K, 3) or None): the layout
+        ``[structural | drift | feature points]``, each part present only when estimated."""
+        start = self.structural_size
+        drift = None
+        if self.times is not None:
+            drift, start = theta[start : start + LEG_COUNT], start + LEG_COUNT
+        targets = theta[start:].reshape(-1, 3) if self.target_sigma > 0.0 else None
+        return theta[: self.structural_size], drift, targets
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -93,10 +116,11 @@ class _Linearisation:
     parameter_normal: NDArray[np.float64]  # V (p, p)
     pose_gradient: NDArray[np.float64]  # (N, 6)
     parameter_gradient: NDArray[np.float64]  # (p,)
+    prior_residuals: NDArray[np.float64]  # (3K,) whitened feature-point priors, or (0,)
 
     @property
     def cost(self) -> float:
-        return float(np.sum(self.point_residuals**2) + np.sum(self.leg_residuals**2))
+        return float(np.sum(self.point_residuals**2) + np.sum(self.leg_residuals**2) + np.sum(self.prior_residuals**2))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -129,14 +153,22 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         model = feature_points[: data.point_count]
         observed = np.array(data.points_mm)
     sigma = nominal.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
-    problem = _Problem(observed, model, np.array(data.readings_mm), sigma, options.reading_sigma_mm,
-                       options.estimate_scales, np.ones(observed.shape[:2]))
-    fit = _fit(problem, start.to_vector(), np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
     pose_form = data.points_mm is None
+    # The campaign's time: the rows' order (a file lists its postures as they were measured).
+    times = np.linspace(0.0, 1.0, len(data)) if options.estimate_drift else None
+    # Feature points are parameters only where they were observed: a pose-form row's points
+    # are implied by its pose through the nominal ones.
+    target_sigma = 0.0 if pose_form else nominal.measurement.feature_point_sigma_mm
+    problem = _Problem(observed, model, np.array(data.readings_mm), sigma, options.reading_sigma_mm,
+                       options.estimate_scales, np.ones(observed.shape[:2]), times, target_sigma)
+    theta = np.concatenate((start.to_vector(), np.zeros(LEG_COUNT if times is not None else 0),
+                            model.ravel() if target_sigma > 0.0 else np.zeros(0)))
+    fit = _fit(problem, theta, np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
     fit, problem, exclusion_notes = _exclude_mis_sightings(problem, fit, pose_form, options)
     current, theta = fit.linear, fit.theta
 
-    information = _reduced_normal(current, 0.0)[0]
+    full_information = _reduced_normal(current, 0.0)[0]
+    information = _marginal(full_information, problem.structural_size)
     used_points = problem.point_weights.sum(axis=1)
     posture_chi2 = np.sum(current.point_residuals**2, axis=(1, 2)) + np.sum(current.leg_residuals**2, axis=1)
     # Per posture: 3K point + 6 leg residuals against 6 pose unknowns (the parameters' share
@@ -155,19 +187,42 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         outlier=flag_outliers(posture_chi2, np.maximum(posture_dof, 1), options.outlier_probability),
     )
     point_residual_count = 3 * int(used_points.sum())
-    dof = point_residual_count + current.leg_residuals.size - 6 * len(data) - len(theta)
+    dof = point_residual_count + current.leg_residuals.size + current.prior_residuals.size - 6 * len(data) - len(theta)
     # The leg closures are near-exact constraints (σ_reading ≪ the pose noise they carry), so
     # the point residuals hold practically all the degrees of freedom.
     point_dof_share = min(dof / point_residual_count, 1.0)
-    parameters = StructuralParameters.from_vector(theta, options.estimate_scales)
+    structural, drift, targets = problem.split(theta)
+    parameters = StructuralParameters.from_vector(structural, options.estimate_scales)
     warnings = exclusion_notes
-    return assemble_result(
+    result = assemble_result(
         Method.FULL, reason, parameters, information, residuals, current.cost, dof,
         residual_rms_mm=float(np.sqrt(np.sum(current.point_residuals**2) / point_residual_count)) * sigma,
         expected_rms_mm=sigma * float(np.sqrt(point_dof_share)),
         iterations=fit.iterations, converged=fit.converged, options=options, home_mm_deg=nominal.home,
         warnings=warnings, excluded=_excluded_observations(problem, fit.linear, pose_form, data),
     )
+    extras_std = _extras_std(full_information, problem.structural_size)
+    return replace(
+        result,
+        offset_drift_mm=None if drift is None else Estimate(drift, extras_std[:LEG_COUNT]),
+        feature_points_mm=None if targets is None else Estimate(targets, extras_std[-targets.size:].reshape(-1, 3)),
+    )
+
+
+def _marginal(information: NDArray, size: int) -> NDArray[np.float64]:
+    """The information on the first ``size`` parameters with the rest (drift, feature
+    points) unknown: the Schur complement of their block."""
+    if len(information) == size:
+        return information
+    kept, other = information[:size, :size], information[:size, size:]
+    return kept - other @ np.linalg.pinv(information[size:, size:]) @ other.T
+
+
+def _extras_std(information: NDArray, size: int) -> NDArray[np.float64]:
+    """Standard deviations of the parameters after the first ``size`` (drift, feature points)."""
+    if len(information) == size:
+        return np.zeros(0)
+    return np.sqrt(np.clip(np.diag(np.linalg.pinv(information))[size:], 0.0, None))
 
 
 def _fit(problem: _Problem, theta: NDArray, rotations: NDArray, translations: NDArray, max_iterations: int) -> _Fit:
@@ -298,10 +353,11 @@ def _excluded_observations(problem: _Problem, linear: _Linearisation, pose_form:
 
 def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translations: NDArray) -> _Linearisation:
     """Whitened residuals and the blocks of the normal equations at (θ, poses)."""
-    parameters = StructuralParameters.from_vector(theta, problem.with_scales)
+    structural, drift, targets = problem.split(theta)
+    parameters = StructuralParameters.from_vector(structural, problem.with_scales)
     count = len(rotations)
 
-    rotated_points = np.einsum("nij,kj->nki", rotations, problem.model_points)
+    rotated_points = np.einsum("nij,kj->nki", rotations, problem.model_points if targets is None else targets)
     point_misfits = (rotated_points + translations[:, None, :] - problem.observed) / problem.point_sigma
     all_point_jacobian = point_twist_jacobians(rotated_points) / problem.point_sigma  # (N, K, 3, 6)
     point_residuals = point_misfits * problem.point_weights[:, :, None]
@@ -312,7 +368,8 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
     lengths = np.linalg.norm(vectors, axis=2)
     units = vectors / lengths[:, :, None]
     gains = 1.0 + (parameters.scale_errors if parameters.scale_errors is not None else np.zeros(LEG_COUNT))
-    leg_residuals = (lengths - parameters.zero_lengths_mm - gains * problem.readings) / problem.reading_sigma
+    offsets = parameters.zero_lengths_mm + (0.0 if drift is None else np.outer(problem.times - 1.0, drift))
+    leg_residuals = (lengths - offsets - gains * problem.readings) / problem.reading_sigma
     leg_pose_jacobian = np.concatenate((units, np.cross(rotated_joints, units)), axis=2) / problem.reading_sigma
 
     size = len(theta)
@@ -324,21 +381,41 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
         leg_parameter_jacobian[:, leg, columns + 6] = -1.0
         if problem.with_scales:
             leg_parameter_jacobian[:, leg, 6 * PARAMETERS_PER_LEG + leg] = -problem.readings[:, leg] / SCALE_UNIT
+        if drift is not None:
+            leg_parameter_jacobian[:, leg, problem.structural_size + leg] = 1.0 - problem.times
     leg_parameter_jacobian /= problem.reading_sigma
 
     pose_normal = np.einsum("nkri,nkrj->nij", point_jacobian, point_jacobian) + np.einsum(
         "nli,nlj->nij", leg_pose_jacobian, leg_pose_jacobian)
+    coupling = np.einsum("nli,nlp->nip", leg_pose_jacobian, leg_parameter_jacobian)
+    parameter_normal = np.einsum("nlp,nlq->pq", leg_parameter_jacobian, leg_parameter_jacobian)
+    parameter_gradient = np.einsum("nlp,nl->p", leg_parameter_jacobian, leg_residuals)
+    prior_residuals = np.zeros(0)
+    if targets is not None:
+        # ∂(T·q_k + R)/∂q_k = T: each feature point's columns, and its prior (q_k − q_k⁰)/σ_t.
+        first = len(theta) - targets.size
+        for k in range(len(targets)):
+            columns = slice(first + 3 * k, first + 3 * k + 3)
+            target_jacobian = rotations * (problem.point_weights[:, k, None, None] / problem.point_sigma)  # (N, 3, 3)
+            coupling[:, :, columns] += np.einsum("nri,nrj->nij", point_jacobian[:, k], target_jacobian)
+            parameter_normal[columns, columns] += np.einsum("nri,nrj->ij", target_jacobian, target_jacobian)
+            parameter_gradient[columns] += np.einsum("nri,nr->i", target_jacobian, point_residuals[:, k])
+        prior_residuals = (targets - problem.model_points).ravel() / problem.target_sigma
+        block = slice(first, len(theta))
+        parameter_normal[block, block] += np.eye(targets.size) / problem.target_sigma**2
+        parameter_gradient[block] += prior_residuals / problem.target_sigma
     return _Linearisation(
         point_misfits=point_misfits,
         point_jacobian=all_point_jacobian,
         point_residuals=point_residuals,
         leg_residuals=leg_residuals,
         pose_normal=pose_normal,
-        coupling=np.einsum("nli,nlp->nip", leg_pose_jacobian, leg_parameter_jacobian),
-        parameter_normal=np.einsum("nlp,nlq->pq", leg_parameter_jacobian, leg_parameter_jacobian),
+        coupling=coupling,
+        parameter_normal=parameter_normal,
         pose_gradient=np.einsum("nkri,nkr->ni", point_jacobian, point_residuals)
         + np.einsum("nli,nl->ni", leg_pose_jacobian, leg_residuals),
-        parameter_gradient=np.einsum("nlp,nl->p", leg_parameter_jacobian, leg_residuals),
+        parameter_gradient=parameter_gradient,
+        prior_residuals=prior_residuals,
     )
 
 

@@ -1,8 +1,8 @@
 """Identification entry point: pick the method, run it, describe the result for the file.
 
 ``auto`` runs ``full`` (maximum likelihood from everything measured, gross mis-sightings
-excluded), with the six sensor scale errors when the data show them (a likelihood-ratio
-test against exact sensors). Its residuals are then tested against the noise model: if they are too large
+excluded), with the six sensor scale errors and each sensor offset's drift over the
+campaign when the data show them (likelihood-ratio tests). Its residuals are then tested against the noise model: if they are too large
 (χ²/dof above ``consistency_limit``) while every leg has enough locked postures and
 ``leglock``'s fit is consistent, the free legs' readings are what disagrees with the
 measured poses (a drifting sensor offset, joint play). ``leglock``, which trusts only each
@@ -23,15 +23,16 @@ from hexactl.calibration.data import MeasurementData
 from hexactl.calibration.full import identify_full
 from hexactl.calibration.leglock import identify_leglock, too_few_locked
 from hexactl.calibration.paper import identify_paper
+from hexactl.calibration.parameters import calibrated_geometry
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method
 from hexactl.kinematics.geometry import CalibrationInfo, Geometry, geometry_from_mapping
 from hexactl.kinematics.inverse import LEG_COUNT
 
 _METHODS = {Method.FULL: identify_full, Method.LEGLOCK: identify_leglock, Method.PAPER: identify_paper}
 
-SCALE_TEST_FALSE_ALARM = 0.01
-"""``auto`` identifies sensor scale errors when they improve the fit more than exact sensors
-would by chance with this probability."""
+EXTRA_TEST_FALSE_ALARM = 0.01
+"""``auto`` identifies sensor scale errors, and offset drift, when they improve the fit more
+than their absence would by chance with this probability."""
 
 
 def identify(data: MeasurementData, nominal: Geometry, options: IdentificationOptions = IdentificationOptions()) -> IdentificationResult:
@@ -60,13 +61,13 @@ def identify(data: MeasurementData, nominal: Geometry, options: IdentificationOp
 def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
     if options.method is not Method.AUTO:
         return _METHODS[options.method](data, nominal, options)
-    full, scales_note = _full_with_scales_if_significant(data, nominal, options)
+    full, extras_note = _full_with_significant_extras(data, nominal, options)
     excluded = f"; {len(full.excluded)} mis-sighted observation(s) excluded" if full.excluded else ""
     consistent = full.ok and full.chi2_per_dof <= options.consistency_limit
     if consistent:
         return replace(full, reason=f"auto chose full: every posture's pose and all six readings are used at once "
                        f"(maximum likelihood, {len(data)} postures{excluded}); the residuals agree with the noise model "
-                       f"(χ²/dof {full.chi2_per_dof:.3g} ≤ {options.consistency_limit:g}){scales_note}")
+                       f"(χ²/dof {full.chi2_per_dof:.3g} ≤ {options.consistency_limit:g}){extras_note}")
     if too_few_locked(data) is None:
         leglock = identify_leglock(data, nominal, options)
         if leglock.ok and leglock.chi2_per_dof <= options.consistency_limit:
@@ -80,28 +81,33 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
             return replace(full, reason=f"auto chose full, although its residuals do not match the noise model "
                            f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}): leglock fits its locked legs consistently but "
                            f"predicts a worse accuracy ({_accuracy(leglock)} against full's {_accuracy(full)}, full's "
-                           f"uncertainty scaled up by its excess χ²){scales_note}")
+                           f"uncertainty scaled up by its excess χ²){extras_note}")
     return replace(full, reason=f"auto chose full, although its residuals do not match the noise model "
-                   f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}) and leglock offers nothing better for these data{scales_note}")
+                   f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}) and leglock offers nothing better for these data{extras_note}")
 
 
-def _full_with_scales_if_significant(data: MeasurementData, nominal: Geometry,
-                                     options: IdentificationOptions) -> tuple[IdentificationResult, str]:
-    """``full``, with sensor scale errors when asked or when the data show them, and why (for
-    the reason). The test is the likelihood ratio (χ², 6 dof) at :data:`SCALE_TEST_FALSE_ALARM`,
-    with the χ² drop divided by the scaled fit's χ²/dof where that exceeds 1: a misfit of
-    another kind (a sliding sensor) lowers χ² with any added freedom, and must not pass for
-    a gain (as the covariance is scaled up by the same factor)."""
+def _full_with_significant_extras(data: MeasurementData, nominal: Geometry,
+                                  options: IdentificationOptions) -> tuple[IdentificationResult, str]:
+    """``full``, with sensor scale errors and then offset drift when asked or when the data
+    show them, and why (for the reason). Each is a likelihood-ratio test (χ², 6 dof) at
+    :data:`EXTRA_TEST_FALSE_ALARM`, with the χ² drop divided by the richer fit's χ²/dof
+    where that exceeds 1: a misfit of another kind (a sliding sensor) lowers χ² with any
+    added freedom, and must not pass for a gain or a drift (as the covariance is scaled up
+    by the same factor)."""
     full = identify_full(data, nominal, options)
-    if options.estimate_scales or not full.ok:
-        return full, ""
-    scaled = identify_full(data, nominal, replace(options, estimate_scales=True))
-    threshold = float(chi2.isf(SCALE_TEST_FALSE_ALARM, LEG_COUNT))
-    drop = (full.chi2 - scaled.chi2) / max(1.0, scaled.chi2_per_dof)
-    if not (scaled.ok and drop > threshold):  # also false for NaN (no redundancy)
-        return full, ""
-    return scaled, (f"; sensor scale errors identified: they lower χ² by {drop:.1f}, more than exact sensors would "
-                    f"by chance ({threshold:.1f} at probability {SCALE_TEST_FALSE_ALARM:g})")
+    threshold = float(chi2.isf(EXTRA_TEST_FALSE_ALARM, LEG_COUNT))
+    notes = ""
+    for option, what in (("estimate_scales", "sensor scale errors"), ("estimate_drift", "sensor offset drift")):
+        if getattr(options, option) or not full.ok:
+            continue
+        richer_options = replace(options, **{option: True})
+        richer = identify_full(data, nominal, richer_options)
+        drop = (full.chi2 - richer.chi2) / max(1.0, richer.chi2_per_dof)
+        if richer.ok and drop > threshold:  # also false for NaN (no redundancy)
+            full, options = richer, richer_options
+            notes += (f"; {what} identified: they lower χ² by {drop:.1f}, more than their absence would by chance "
+                      f"({threshold:.1f} at probability {EXTRA_TEST_FALSE_ALARM:g})")
+    return full, notes
 
 
 def _no_worse(candidate: IdentificationResult, reference: IdentificationResult) -> bool:
@@ -129,8 +135,31 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         platform_joints_std_mm=_rows(std.platform_joints_mm),
         zero_lengths_std_mm=_six(std.zero_lengths_mm),
         sensor_scale_errors_std=None if std.scale_errors is None else _six(std.scale_errors),
-        notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded),
+        notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded)
+        + _extras_notes(result),
     )
+
+
+def calibration_geometry(nominal: Geometry, result: IdentificationResult, info: CalibrationInfo) -> Geometry:
+    """The calibration file's geometry: ``nominal`` with ``result``'s parameters and, when
+    identified, feature points, and ``info`` (:func:`calibration_info`). Raises
+    :class:`~hexactl.kinematics.geometry.GeometryError` if it is not a valid geometry."""
+    points = result.feature_points_mm
+    return calibrated_geometry(nominal, result.parameters, info, None if points is None else points.value)
+
+
+def _extras_notes(result: IdentificationResult) -> str:
+    """The drift and feature points ``full`` estimated besides the parameters, for people."""
+    notes = ""
+    if (drift := result.offset_drift_mm) is not None:
+        legs = ", ".join(f"{value:+.3f}±{std:.3f}" for value, std in zip(drift.value, drift.std))
+        notes += (f"; zero lengths drifted over the campaign by (legs 1-6, mm, end minus start) {legs}: the file's "
+                  "zero lengths are the campaign's end")
+    if (points := result.feature_points_mm) is not None:
+        notes += "; feature points identified (moving frame, mm): " + ", ".join(
+            f"p{k} ({x:.3f}, {y:.3f}, {z:.3f})±{np.max(std):.3f}"
+            for k, ((x, y, z), std) in enumerate(zip(points.value, points.std), start=1))
+    return notes
 
 
 def _rows(values: np.ndarray) -> tuple[tuple[float, float, float], ...]:

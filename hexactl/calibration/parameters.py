@@ -104,13 +104,15 @@ def leg_columns(leg_index: int) -> slice:
     return slice(PARAMETERS_PER_LEG * leg_index, PARAMETERS_PER_LEG * (leg_index + 1))
 
 
-def calibrated_geometry(nominal: Geometry, parameters: StructuralParameters, info: CalibrationInfo) -> Geometry:
+def calibrated_geometry(nominal: Geometry, parameters: StructuralParameters, info: CalibrationInfo,
+                        feature_points_mm: NDArray | None = None) -> Geometry:
     """``nominal`` with identified joints, zero lengths and (when identified) sensor scale
     errors, and the ``[calibration]`` table.
 
     Limits, home, measurement and, when ``parameters`` has none, the sensor scale errors are
     copied from ``nominal`` (the identification used them: see
-    :func:`hexactl.calibration.identification.identify`). Raises
+    :func:`hexactl.calibration.identification.identify`). Identified ``feature_points_mm``
+    (K, 3) replace the measurement's: they define the moving frame the joints are in. Raises
     :class:`~hexactl.kinematics.geometry.GeometryError` if the result is not a valid
     geometry (for example the zero posture left the sensor stroke).
     """
@@ -124,4 +126,6 @@ def calibrated_geometry(nominal: Geometry, parameters: StructuralParameters, inf
                              else parameters.scale_errors.tolist()),
         calibration=info.model_dump(),
     )
+    if feature_points_mm is not None:
+        document["measurement"] = {**document["measurement"], "feature_points": np.asarray(feature_points_mm).tolist()}
     return geometry_from_mapping(document, "calibrated geometry")

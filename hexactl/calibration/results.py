@@ -53,7 +53,8 @@ class IdentificationOptions:
 
     ``point_sigma_mm`` None: the geometry's ``[measurement] point_sigma_mm``;
     ``reading_sigma_mm`` the sensors' noise. ``estimate_scales``: ``full`` also identifies
-    the six sensor scale errors.
+    the six sensor scale errors; ``estimate_drift``: and each leg's offset drift over the
+    campaign (linear in the rows' order).
     ``max_joint_deviation_mm`` / ``max_zero_length_deviation_mm`` bound leglock's and
     paper's estimates around the nominal (the paper's boundary conditions).
     ``loss`` is leglock's scipy robust loss ("linear", "soft_l1", "huber", "cauchy",
@@ -72,6 +73,7 @@ class IdentificationOptions:
     point_sigma_mm: float | None = None
     reading_sigma_mm: float = DEFAULT_READING_SIGMA_MM
     estimate_scales: bool = False
+    estimate_drift: bool = False
     max_joint_deviation_mm: float = 15.0
     max_zero_length_deviation_mm: float = 15.0
     loss: str = "linear"
@@ -125,6 +127,14 @@ class ExcludedObservation:
 
 
 @dataclass(frozen=True, slots=True, eq=False)
+class Estimate:
+    """Estimated values and their standard deviations, of one shape and unit."""
+
+    value: NDArray[np.float64]
+    std: NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
 class IdentificationResult:
     """What an identification found, and how far to trust it.
 
@@ -134,7 +144,10 @@ class IdentificationResult:
     ``predicted``: the pose error the parameter uncertainty alone leaves on the paper's
     test motions (the Cramér–Rao prediction when the method is ``full``);
     ``reason``: why this method (auto's choice explained); ``warnings``: for people;
-    ``excluded``: the observations ``full`` left out as mis-sightings (empty for the others).
+    ``excluded``: the observations ``full`` left out as mis-sightings (empty for the others);
+    ``offset_drift_mm`` and ``feature_points_mm``: what ``full`` estimated besides the
+    structural parameters, when it did (``covariance`` is the structural parameters'
+    marginal: their uncertainty is in it).
     Use the parameters only when ``ok``.
     """
 
@@ -154,6 +167,8 @@ class IdentificationResult:
     warnings: tuple[str, ...]
     excluded: tuple[ExcludedObservation, ...] = ()
     degrees_of_freedom: int = 0  # of the χ² test (redundant observations)
+    offset_drift_mm: Estimate | None = None  # (6,) zero length at the campaign's end minus at its start
+    feature_points_mm: Estimate | None = None  # (K, 3) identified feature points, moving frame
 
     @property
     def chi2(self) -> float:

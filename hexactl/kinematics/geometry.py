@@ -72,6 +72,11 @@ class Measurement(_Strict):
         min_length=3, description="targets on the platform, moving frame, mm"
     )
     point_sigma_mm: float = Field(gt=0, description="instrument noise, 1 sigma per coordinate, mm")
+    feature_point_sigma_mm: float = Field(
+        default=0.0, ge=0,
+        description="how well feature_points are known, 1 sigma per coordinate, mm (0: exactly); above 0 the "
+                    "calibration identifies them too, with this prior",
+    )
 
     @model_validator(mode="after")
     def _not_collinear(self) -> Measurement:

@@ -4,12 +4,14 @@ exact sensors."""
 
 from __future__ import annotations
 
+import hashlib
+import json
+
 import numpy as np
 import pytest
 
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, parse_geometry
-from hexactl.calibration.identification import calibration_info, identify
-from hexactl.calibration.parameters import calibrated_geometry
+from hexactl.calibration.identification import calibration_geometry, calibration_info, identify
 from hexactl.calibration.results import IdentificationOptions, Method
 from hexactl.sim.offline_campaign import run_offline_campaign, validate_geometry
 from hexactl.sim.true_platform import ManufacturingErrors, true_geometry
@@ -19,7 +21,7 @@ LEAD_ERRORS = ManufacturingErrors(sensor_scale_sigma=5e-4)  # a ball screw's lea
 
 
 def _calibrated(controller, result):
-    return calibrated_geometry(controller, result.parameters, calibration_info(result, "2026-11-23T00:00:00Z", "0" * 64, "test"))
+    return calibration_geometry(controller, result, calibration_info(result, "2026-11-23T00:00:00Z", "0" * 64, "test"))
 
 
 def _worst_position_error_mm(controller, true) -> float:
@@ -61,8 +63,14 @@ def test_the_calibration_file_carries_the_gains_and_loads_them_into_the_kinemati
     assert geometry_id(loaded) == geometry_id(calibrated)
 
 
-def test_exact_sensors_leave_files_and_ids_as_they_were(nominal):
-    assert "sensor_scale_errors" not in geometry_to_toml(nominal)
+def test_keys_added_to_the_format_are_left_out_at_their_defaults(nominal):
+    """Exact sensors and exactly known feature points: files and ids stay as they were."""
+    text = geometry_to_toml(nominal)
+    assert "sensor_scale_errors" not in text and "feature_point_sigma_mm" not in text
+    older = nominal.model_dump(mode="json")  # as a geometry was before those keys existed
+    del older["sensor_scale_errors"], older["measurement"]["feature_point_sigma_mm"]
+    canonical = json.dumps(older, sort_keys=True, separators=(",", ":"))
+    assert geometry_id(nominal) == hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
 
 
 def test_a_recalibration_starts_from_the_gains_it_is_given(nominal, gained):

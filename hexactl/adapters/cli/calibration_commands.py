@@ -164,8 +164,7 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.files.measurements import MeasurementFileError, read_measurements
     from hexactl.adapters.report.html import REPORT_PAGE, CalibrationReport, ValidationComparison, write_report
     from hexactl.calibration.data import screen_measurements
-    from hexactl.calibration.identification import calibration_info, identify
-    from hexactl.calibration.parameters import calibrated_geometry
+    from hexactl.calibration.identification import calibration_geometry, calibration_info, identify
     from hexactl.calibration.results import IdentificationOptions, Method
     from hexactl.kinematics.geometry import GeometryError
 
@@ -207,7 +206,7 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
     info = calibration_info(result, created, measurements.sha256, nominal.name or str(arguments.config or ""))
     try:
-        calibrated = calibrated_geometry(nominal, result.parameters, info)
+        calibrated = calibration_geometry(nominal, result, info)
         save_geometry(calibrated, output, overwrite=arguments.force)
     except (GeometryError, OSError) as error:
         raise CliError(str(error)) from None

@@ -81,13 +81,22 @@ def geometry_id(geometry: Geometry) -> str:
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
 
 
+_ADDED_LATER = (("sensor_scale_errors",), ("measurement", "feature_point_sigma_mm"))
+"""Keys added to the format after files were written: left out at their default."""
+
+
 def _document(geometry: Geometry, exclude_none: bool = False) -> dict:
-    """``geometry``'s values for a file or a hash. Exact sensors (every scale error 0, the
-    default) are left out: files and ids stay what they were before gains were modelled,
-    so campaigns and files that name a geometry by its id keep finding it."""
+    """``geometry``'s values for a file or a hash. Keys added to the format later are left
+    out at their defaults (exact sensors, exactly known feature points), so such files and
+    ids stay what they were, and campaigns that name a geometry by its id keep finding it."""
     document = geometry.model_dump(mode="json", exclude_none=exclude_none)
-    if not any(geometry.sensor_scale_errors):
-        del document["sensor_scale_errors"]
+    for path in _ADDED_LATER:
+        table, model = document, geometry
+        for key in path[:-1]:
+            table, model = table[key], getattr(model, key)
+        field = type(model).model_fields[path[-1]]
+        if getattr(model, path[-1]) == field.get_default(call_default_factory=True):
+            del table[path[-1]]
     return document
 
 

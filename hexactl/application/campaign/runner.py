@@ -68,8 +68,7 @@ from hexactl.adapters.report.html import (
 )
 from hexactl.calibration.campaign import CampaignDesign, improved, locked_path
 from hexactl.calibration.data import screen_measurements
-from hexactl.calibration.identification import calibration_info, identify
-from hexactl.calibration.parameters import calibrated_geometry
+from hexactl.calibration.identification import calibration_geometry, calibration_info, identify
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry, GeometryError
@@ -333,7 +332,7 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
     if calibrated is None:
         created = datetime.now(timezone.utc).isoformat(timespec="seconds")
         info = calibration_info(result, created, measured.sha256, geometry.name or "unnamed geometry")
-        calibrated = calibrated_geometry(geometry, result.parameters, info)
+        calibrated = calibration_geometry(geometry, result, info)
         save_geometry(calibrated, path, overwrite=True)  # derived from the saved data: a stale one is replaced
         progress.say(f"wrote {path}")
     return result, calibrated, path.read_text(encoding="utf-8")

@@ -1,0 +1,101 @@
+"""What ``full`` estimates besides the structural parameters: the sensor offsets' drift over
+the campaign, and feature-point coordinates known only to a tolerance."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.files.geometry_file import geometry_to_toml, parse_geometry
+from hexactl.calibration.campaign import plan_campaign
+from hexactl.calibration.identification import identify
+from hexactl.calibration.results import IdentificationOptions, Method
+from hexactl.kinematics.geometry import geometry_from_mapping
+from hexactl.sim.instrument import SimulatedInstrument
+from hexactl.sim.offline_campaign import execute_plans, run_offline_campaign
+from hexactl.sim.true_platform import true_geometry
+from tests.calibration.conftest import SMALL
+from tests.calibration.test_sensor_gains import _calibrated, _worst_position_error_mm
+
+SEEDS = (5, 6, 7)
+
+
+def _drifting(nominal, seed):
+    """A campaign whose sensor offsets drift linearly by σ 0.5 mm from its first row to its
+    last, and the platform as it is at the end (zero lengths moved by the drift)."""
+    true = true_geometry(nominal, seed)
+    campaign = run_offline_campaign(nominal, true, SMALL)
+    drift = np.random.default_rng(seed).normal(0.0, 0.5, 6)  # reading change over the campaign, mm
+    readings = campaign.data.readings_mm + np.outer(np.linspace(0.0, 1.0, len(campaign.data)), drift)
+    at_end = geometry_from_mapping({**true.model_dump(), "zero_lengths": (np.array(true.zero_lengths) - drift).tolist()},
+                                   "the platform at the campaign's end")
+    return replace(campaign.data, readings_mm=readings), -drift, at_end
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_auto_identifies_drift_and_the_file_is_right_for_the_campaigns_end(nominal, seed):
+    data, zero_change, at_end = _drifting(nominal, seed)
+    result = identify(data, nominal)
+    assert result.ok and "sensor offset drift identified" in result.reason
+    drift = result.offset_drift_mm
+    assert np.all(np.abs(drift.value - zero_change) < 4 * drift.std)
+    ignored = identify(data, nominal, IdentificationOptions(method=Method.FULL))
+    baseline = _worst_position_error_mm(_calibrated(nominal, identify(run_offline_campaign(
+        nominal, true_geometry(nominal, seed), SMALL).data, nominal)), true_geometry(nominal, seed))
+    assert _worst_position_error_mm(_calibrated(nominal, result), at_end) < 1.5 * baseline
+    assert _worst_position_error_mm(_calibrated(nominal, ignored), at_end) > 2 * baseline
+    assert "zero lengths drifted over the campaign" in _calibrated(nominal, result).calibration.notes
+
+
+def test_auto_adds_no_drift_to_a_steady_campaign(nominal, leglock_campaign):
+    result = identify(leglock_campaign.data, nominal)
+    assert result.offset_drift_mm is None and "drift" not in result.reason
+
+
+def _uncertain_targets(nominal, sigma_mm):
+    measurement = {**nominal.measurement.model_dump(), "feature_point_sigma_mm": sigma_mm}
+    return geometry_from_mapping({**nominal.model_dump(), "measurement": measurement}, "nominal")
+
+
+def test_feature_points_known_to_a_tolerance_give_an_honest_prediction(nominal):
+    """Targets off by σ 0.5 mm: the frame they define is off, which no data can see. With
+    the tolerance in [measurement] the prediction says so; without it, it is far too small."""
+    honest, blind = [], []
+    for seed in SEEDS:
+        true = true_geometry(nominal, seed)
+        targets = np.array(nominal.measurement.feature_points) + np.random.default_rng(100 + seed).normal(0.0, 0.5, (3, 3))
+        campaign = execute_plans(nominal, true, plan_campaign(nominal, SMALL), SimulatedInstrument(targets, 0.25, seed),
+                                 0.001, seed)
+        for sigma, ratios in ((0.5, honest), (0.0, blind)):
+            controller = _uncertain_targets(nominal, sigma)
+            result = identify(campaign.data, controller, IdentificationOptions(method=Method.FULL))
+            assert result.ok
+            ratios.append(_worst_position_error_mm(_calibrated(controller, result), true)
+                          / result.predicted.expected_max_position_mm)
+            if sigma:
+                assert result.chi2_per_dof < 1.3
+                assert result.feature_points_mm.value.shape == (3, 3)
+    assert 0.5 < np.mean(honest) < 2.0
+    assert np.mean(blind) > 3.0
+
+
+def test_identified_feature_points_go_into_the_calibration_file(nominal, leglock_campaign):
+    controller = _uncertain_targets(nominal, 0.5)
+    result = identify(leglock_campaign.data, controller, IdentificationOptions(method=Method.FULL))
+    calibrated = parse_geometry(geometry_to_toml(_calibrated(controller, result)), "calibration.toml")
+    assert np.allclose(calibrated.measurement.feature_points, result.feature_points_mm.value, atol=1e-9)
+    assert calibrated.measurement.feature_point_sigma_mm == 0.5
+    assert "feature points identified" in calibrated.calibration.notes
+
+
+def test_pose_form_rows_leave_the_feature_points_alone(nominal, leglock_campaign):
+    from hexactl.calibration.data import measured_poses
+
+    data = leglock_campaign.data
+    poses = measured_poses(data, np.array(nominal.measurement.feature_points)).poses
+    pose_rows = type(data)(data.locked_leg, data.readings_mm, data.lines, poses=poses)
+    result = identify(pose_rows, _uncertain_targets(nominal, 0.5), IdentificationOptions(method=Method.FULL))
+    assert result.ok and result.feature_points_mm is None
+
