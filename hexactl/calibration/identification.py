@@ -136,7 +136,7 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         zero_lengths_std_mm=_six(std.zero_lengths_mm),
         sensor_scale_errors_std=None if std.scale_errors is None else _six(std.scale_errors),
         notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded)
-        + _extras_notes(result),
+        + "".join(f"; {sentence}" for sentence in extra_estimates(result)),
     )
 
 
@@ -148,18 +148,19 @@ def calibration_geometry(nominal: Geometry, result: IdentificationResult, info: 
     return calibrated_geometry(nominal, result.parameters, info, None if points is None else points.value)
 
 
-def _extras_notes(result: IdentificationResult) -> str:
-    """The drift and feature points ``full`` estimated besides the parameters, for people."""
-    notes = ""
+def extra_estimates(result: IdentificationResult) -> tuple[str, ...]:
+    """The drift and feature points ``full`` estimated besides the parameters, a sentence
+    each, for people (the calibration file's notes, ``hexactl calibrate``)."""
+    sentences = []
     if (drift := result.offset_drift_mm) is not None:
         legs = ", ".join(f"{value:+.3f}±{std:.3f}" for value, std in zip(drift.value, drift.std))
-        notes += (f"; zero lengths drifted over the campaign by (legs 1-6, mm, end minus start) {legs}: the file's "
-                  "zero lengths are the campaign's end")
+        sentences.append(f"zero lengths drifted over the campaign by (legs 1-6, mm, end minus start) {legs}: the "
+                         "file's zero lengths are the campaign's end")
     if (points := result.feature_points_mm) is not None:
-        notes += "; feature points identified (moving frame, mm): " + ", ".join(
+        sentences.append("feature points identified (moving frame, mm): " + ", ".join(
             f"p{k} ({x:.3f}, {y:.3f}, {z:.3f})±{np.max(std):.3f}"
-            for k, ((x, y, z), std) in enumerate(zip(points.value, points.std), start=1))
-    return notes
+            for k, ((x, y, z), std) in enumerate(zip(points.value, points.std), start=1)))
+    return tuple(sentences)
 
 
 def _rows(values: np.ndarray) -> tuple[tuple[float, float, float], ...]:

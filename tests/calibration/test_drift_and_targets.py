@@ -99,3 +99,19 @@ def test_pose_form_rows_leave_the_feature_points_alone(nominal, leglock_campaign
     result = identify(pose_rows, _uncertain_targets(nominal, 0.5), IdentificationOptions(method=Method.FULL))
     assert result.ok and result.feature_points_mm is None
 
+
+
+def test_calibrate_prints_the_drift_and_writes_the_end_of_campaign_file(tmp_path, nominal, capsys):
+    from hexactl.adapters.cli.main import main
+    from hexactl.adapters.files.geometry_file import load_geometry
+    from hexactl.adapters.files.measurements import write_measurements
+    from tests.calibration.conftest import NOMINAL_PATH
+
+    data, zero_change, at_end = _drifting(nominal, 6)
+    path = write_measurements(tmp_path / "drifting.csv", data)
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "sensor offset drift identified" in out and "also estimated: zero lengths drifted over the campaign" in out
+    calibrated = load_geometry(tmp_path / "cal.toml")
+    std = np.array(calibrated.calibration.zero_lengths_std_mm)
+    assert np.all(np.abs(np.subtract(calibrated.zero_lengths, at_end.zero_lengths)) < 5 * std + 0.05)

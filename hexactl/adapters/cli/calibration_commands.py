@@ -252,6 +252,10 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     if result.parameters.has_scales:
         scales = ", ".join(f"{deviation[42 + leg]:+.3f}±{std[42 + leg]:.3f}" for leg in range(6))
         print(f"sensor scale errors, mm per m of reading: {scales}")
+    from hexactl.calibration.identification import extra_estimates
+
+    for sentence in extra_estimates(result):
+        print(f"also estimated: {sentence}")
     for warning in result.warnings:
         print(f"warning: {warning}")
     for observation in result.excluded:
