@@ -135,6 +135,7 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         platform_joints_std_mm=_rows(std.platform_joints_mm),
         zero_lengths_std_mm=_six(std.zero_lengths_mm),
         sensor_scale_errors_std=None if std.scale_errors is None else _six(std.scale_errors),
+        parameter_covariance=tuple(tuple(float(v) for v in row) for row in result.covariance),
         notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded)
         + "".join(f"; {sentence}" for sentence in extra_estimates(result)),
     )

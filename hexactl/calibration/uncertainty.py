@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.calibration.jacobians import length_pose_jacobian, point_fit_twist_covariance
+from hexactl.calibration.jacobians import angular_velocity_matrix, length_pose_jacobian, point_fit_twist_covariance
 from hexactl.calibration.parameters import GEOMETRIC_PARAMETERS, PARAMETERS_PER_LEG, SCALE_UNIT, parameter_names
 from hexactl.calibration.test_motions import TestMotion
 from hexactl.kinematics.inverse import LEG_COUNT, LegModel, leg_vectors_batch, sensor_setpoints_batch, twist_jacobian
@@ -207,4 +207,46 @@ def predict_accuracy(
         rms_orientation_deg=float(np.sqrt(np.mean(pose_variance[:, 3:])) * to_deg),
         expected_max_position_mm=float(np.mean(np.max(errors[:, :, :3], axis=(1, 2)))),
         expected_max_orientation_deg=float(np.mean(np.max(errors[:, :, 3:], axis=(1, 2))) * to_deg),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class PointAccuracy:
+    """The predicted 1σ error of a point on the platform (the tool point, say), commanded
+    to a pose by a controller with uncertain parameters: ``position_mm`` the RMS radius
+    √trace Σ, ``position_axes_mm`` σ along the fixed frame's x, y, z, and ``orientation_deg``
+    the platform's RMS rotation error √trace Σ_ω."""
+
+    position_mm: float
+    position_axes_mm: tuple[float, float, float]
+    orientation_deg: float
+
+
+def point_accuracy(legs: LegModel, covariance: NDArray, pose: Sequence[float],
+                   point_mm: Sequence[float] = (0.0, 0.0, 0.0)) -> PointAccuracy:
+    """Propagate a parameter covariance (42×42, or 48×48 with scale errors; mm², the
+    parameter vector's units) to the error of ``point_mm`` (platform frame, mm) with the
+    platform commanded to ``pose`` (absolute, mm and rad), to first order: one 6×6 solve.
+
+    With ω = E·δ(roll, pitch, yaw) the small rotation error (fixed frame) and q = T·point,
+    the point moves by δR + ω × q.
+    """
+    pose = np.asarray(pose, dtype=float)
+    covariance = np.asarray(covariance, dtype=float)
+    sensitivity = pose_error_sensitivity(legs, pose, len(covariance) > GEOMETRIC_PARAMETERS)
+    rates = angular_velocity_matrix(pose[4], pose[5])
+    rotation = rotation_matrices(pose[3:4], pose[4:5], pose[5:6])[0]
+    qx, qy, qz = rotation @ np.asarray(point_mm, dtype=float)
+    skew = np.array([[0.0, -qz, qy], [qz, 0.0, -qx], [-qy, qx, 0.0]])
+    to_point = np.zeros((6, 6))
+    to_point[:3, :3] = np.eye(3)
+    to_point[:3, 3:] = -skew @ rates  # ω × q = −[q]×·ω
+    to_point[3:, 3:] = rates
+    mapped = to_point @ sensitivity
+    error = mapped @ covariance @ mapped.T
+    variances = np.clip(np.diag(error), 0.0, None)
+    return PointAccuracy(
+        position_mm=float(np.sqrt(variances[:3].sum())),
+        position_axes_mm=(float(np.sqrt(variances[0])), float(np.sqrt(variances[1])), float(np.sqrt(variances[2]))),
+        orientation_deg=float(np.degrees(np.sqrt(variances[3:].sum()))),
     )

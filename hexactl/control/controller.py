@@ -19,12 +19,14 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 from dataclasses import asdict, replace
 
 import numpy as np
 
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
+from hexactl.control.accuracy import predicted_accuracy, tolerance_refusal
 from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frame_commands import FrameCommands
@@ -148,28 +150,53 @@ class Controller:
         return self._checked(preconditions.check_reset, cmd.Reset, "reset to disabled")
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-                      frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
-        """Would :meth:`move` accept this? Plans and checks the whole path, moves nothing."""
+                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
+        """Would :meth:`move` accept this? Plans and checks the whole path, moves nothing;
+        with the predicted accuracy at the tool point on arrival (``details.predicted_accuracy``,
+        None without a calibration covariance)."""
         s = self.snapshot
-        return _plan_result(self._plan_move(s, pose, duration, speed, frame, relative), "valid", s.active.home)
+        plan = self._plan_move(s, pose, duration, speed, frame, relative)
+        if not plan.ok:
+            return _plan_result(plan, "valid", s.active.home)
+        accuracy = self._accuracy_at_goal(s, plan)
+        if refusal := tolerance_refusal(tolerance_mm, accuracy):
+            return refusal
+        result = _plan_result(plan, "valid", s.active.home)
+        return CommandResult.success(result.message, **result.details, predicted_accuracy=accuracy)
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-             frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
+             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None, *,
+             deadline_ns: int | None = None) -> CommandResult:
         """Move to ``pose`` (mm/deg) in ``frame`` (:class:`~hexactl.control.frames.Frame`),
         or by it from where the motion is headed with ``relative``; validated whole first,
         soft limits too; ``duration`` s (at least, to one loop period) or ``speed`` (0, 1]
         of the velocity limits. In leg-lock mode the goal is projected onto the locked
         leg's constraint (see ``details.goal``). A move while moving replaces the running
-        one (in the same frame: another frame needs rest)."""
+        one (in the same frame: another frame needs rest). With ``tolerance_mm`` it is
+        refused (``accuracy_insufficient``) if the predicted error at the tool point on
+        arrival exceeds it (:mod:`~hexactl.control.accuracy`)."""
         s = self.snapshot
         if refusal := preconditions.check_move(s):
             return CommandResult.failure(*refusal)
         plan = self._plan_move(s, pose, duration, speed, frame, relative)
         if not plan.ok:
             return _plan_result(plan, "", s.active.home)
+        accuracy = self._accuracy_at_goal(s, plan) if tolerance_mm is not None else None
+        if refusal := tolerance_refusal(tolerance_mm, accuracy):
+            return refusal
         (segment,) = plan.segments
         return self._commands.submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", deadline_ns=deadline_ns,
                             **_plan_result(plan, "", s.active.home).details)
+
+    def predicted_accuracy(self) -> dict[str, Any] | None:
+        """The predicted 1σ error at the tool point for the commanded pose now
+        (:mod:`~hexactl.control.accuracy`); None without a calibration covariance."""
+        s = self.snapshot
+        return predicted_accuracy(s.active, self.frames.current.tool[:3], s.pose_command)
+
+    def _accuracy_at_goal(self, s: CoreSnapshot, plan: Plan) -> dict[str, Any] | None:
+        last = plan.segments[-1]
+        return predicted_accuracy(s.active, self.frames.current.tool[:3], convert(last.goal, last.frames, None, s.active.home))
 
     def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
             deadline_ns: int | None = None) -> CommandResult:

@@ -40,6 +40,7 @@ class ErrorCode(StrEnum):
     NOT_RECORDING = "not_recording"  # record_stop with no recording under way
     JOG_ENDED = "jog_ended"  # a jog renewal for a jog that is no longer under way: send jog again
     EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
+    ACCURACY_INSUFFICIENT = "accuracy_insufficient"  # the predicted error at the tool point exceeds the move's tolerance
 
 
 @dataclass(frozen=True, slots=True)

@@ -13,13 +13,16 @@ from itertools import combinations
 from typing import Annotated
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from hexactl.kinematics.inverse import LegModel, sensor_setpoints, twist_jacobian
 from hexactl.kinematics.axes import POSE_AXES, AbsoluteMmDeg, RelativeMmDeg
 
 MIN_JOINT_SEPARATION_MM = 1.0
 """Joints closer than this are taken as a typing error (two legs on one joint)."""
+
+COVARIANCE_SIZES = (42, 48)
+"""A parameter covariance covers the 42 structural parameters, and the six sensor scale errors when identified."""
 
 MAX_SENSOR_SCALE_ERROR = 0.01
 """A sensor gain error beyond 1 % is a unit or lead mistake, not a calibration (lead errors are ~1e-4)."""
@@ -102,7 +105,29 @@ class CalibrationInfo(_Strict):
     sensor_scale_errors_std: Six | None = Field(
         default=None, description="standard deviations of the identified sensor_scale_errors (dimensionless)"
     )
+    parameter_covariance: tuple[tuple[float, ...], ...] | None = Field(
+        default=None,
+        description="covariance of the identified parameters, 42×42 (per leg B x y z, P x y z, zero; mm²) or 48×48 "
+                    "with the six sensor scale errors after them (in mm per metre of reading): what the controller's "
+                    "predicted accuracy is computed from",
+    )
     notes: str = ""
+
+    @field_validator("parameter_covariance")
+    @classmethod
+    def _covariance(cls, rows: tuple[tuple[float, ...], ...] | None) -> tuple[tuple[float, ...], ...] | None:
+        if rows is None:
+            return rows
+        size = len(rows)
+        if size not in COVARIANCE_SIZES or any(len(row) != size for row in rows):
+            raise ValueError(f"must be a square matrix of size {' or '.join(map(str, COVARIANCE_SIZES))}, got "
+                             f"{size} rows of {sorted({len(row) for row in rows})} values")
+        matrix = np.array(rows)
+        if not np.allclose(matrix, matrix.T, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(np.diag(matrix))))):
+            raise ValueError("must be symmetric (a covariance): the file was edited or damaged; calibrate again")
+        if np.min(np.diag(matrix)) < 0.0:
+            raise ValueError("has a negative variance on its diagonal: the file was edited or damaged; calibrate again")
+        return rows
 
 
 class Geometry(_Strict):

@@ -90,7 +90,8 @@ class FakeController:
         return CommandResult.success("reset to disabled")
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-             frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
+             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None, *,
+             deadline_ns: int | None = None) -> CommandResult:
         self._call("move", list(pose), duration, speed)
         self.frames_of_moves.append((frame, relative))
         if self.state != "enabled":
@@ -105,8 +106,11 @@ class FakeController:
     def operator_frames(self) -> OperatorFrames:
         return self.frames
 
+    def predicted_accuracy(self) -> dict | None:
+        return None  # the fake's geometry is the nominal: no covariance
+
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-                      frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
+                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
         violations = assess_pose(self.geometry, pose).violations
         if violations:
             items = [{"waypoint": 1, "pose": tuple(pose), **{k: getattr(v, k) for k in ("kind", "message", "value", "limit", "leg", "axis")}}

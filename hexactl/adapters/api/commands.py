@@ -97,7 +97,7 @@ class CommandHandler:
         controller = self.controller
         match request:
             case StatusRequest():
-                return {"status": jsonable(controller.telemetry())}
+                return {"status": jsonable(controller.telemetry()), "predicted_accuracy": controller.predicted_accuracy()}
             case EnableRequest():
                 return _checked(controller.enable(deadline_ns=deadline_ns))
             case DisableRequest():
@@ -110,7 +110,7 @@ class CommandHandler:
                 return _checked(controller.reset())
             case MoveRequest():
                 result = controller.move(request.pose, request.duration, request.speed, Frame(request.frame),
-                                         request.relative, deadline_ns=deadline_ns)
+                                         request.relative, request.tolerance_mm, deadline_ns=deadline_ns)
                 return _checked(result, goal=result.details.get("goal"), tool_goal=result.details.get("tool_goal"),
                                 duration=result.details.get("duration_s"))
             case ValidatePoseRequest():
@@ -168,11 +168,12 @@ class CommandHandler:
 
     def _validate_pose(self, request: ValidatePoseRequest) -> dict[str, Any]:
         result = self.controller.validate_pose(request.pose, request.duration, request.speed, Frame(request.frame),
-                                               request.relative)
+                                               request.relative, request.tolerance_mm)
         if result.ok:
             return {"valid": True, "goal": result.details.get("goal"), "tool_goal": result.details.get("tool_goal"),
-                    "duration": result.details.get("duration_s"), "refusal": None}
-        return {"valid": False, "goal": None, "tool_goal": None, "duration": None,
+                    "duration": result.details.get("duration_s"),
+                    "predicted_accuracy": result.details.get("predicted_accuracy"), "refusal": None}
+        return {"valid": False, "goal": None, "tool_goal": None, "duration": None, "predicted_accuracy": None,
                 "refusal": error_body(_code(result), result.message, jsonable(result.details))}
 
     def _validate_wave(self, request: ValidateWaveRequest) -> dict[str, Any]:

@@ -101,6 +101,19 @@ class _PoseInFrame(_Request, Paced):
     frame: FrameName = Frame.ZERO.value
     relative: bool = Field(default=False, description="pose is a displacement from the goal of the motion under way "
                            "(or the pose at rest): component by component in zero and work, composed in tool")
+    tolerance_mm: float | None = Field(default=None, gt=0, description="refuse (accuracy_insufficient) if the "
+                                       "predicted 1σ position error at the tool point on arrival exceeds this, mm")
+
+
+class PredictedAccuracy(BaseModel):
+    """The predicted 1σ error at the tool point (the tool frame's origin, the pivot; the
+    platform's origin without a tool frame), from the active calibration's parameter
+    covariance."""
+
+    position_mm: float = Field(description="RMS position error, √(σx² + σy² + σz²), mm")
+    position_axes_mm: tuple[float, float, float] = Field(description="σ along the zero frame's x, y, z, mm")
+    orientation_deg: float = Field(description="RMS orientation error, deg")
+    tool_point_mm: tuple[float, float, float] = Field(description="the point, in the platform's frame, mm")
 
 
 class MoveRequest(_PoseInFrame):
@@ -506,6 +519,8 @@ class OkReply(_Message):
 
 class StatusReply(OkReply):
     status: Telemetry
+    predicted_accuracy: PredictedAccuracy | None = Field(
+        default=None, description="at the commanded pose now; null without a calibration covariance")
 
 
 class MoveReply(OkReply):
@@ -522,6 +537,8 @@ class ValidatePoseReply(OkReply):
     tool_goal: ToolInWorkMmDeg | None = Field(default=None, description="for a move in the work or tool frame, when "
                                               "valid: the goal as the tool's pose in the work frame")
     duration: float | None = Field(description="planned duration, s, when valid")
+    predicted_accuracy: PredictedAccuracy | None = Field(
+        default=None, description="at the goal, when valid; null without a calibration covariance")
     refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
 
 

@@ -36,15 +36,21 @@ class ControllerPort(Protocol):
     def reset(self) -> CommandResult: ...
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-             frame: Frame = Frame.ZERO, relative: bool = False, *, deadline_ns: int | None = None) -> CommandResult:
+             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None, *,
+             deadline_ns: int | None = None) -> CommandResult:
         """Success details: ``goal`` (as planned, relative to the zero posture),
         ``duration_s``. ``deadline_ns``, here and below: monotonic time after which the
         loop refuses the command as ``expired``."""
         ...
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-                      frame: Frame = Frame.ZERO, relative: bool = False) -> CommandResult:
-        """What :meth:`move` would answer, without moving."""
+                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
+        """What :meth:`move` would answer, without moving; success details also
+        ``predicted_accuracy``."""
+        ...
+
+    def predicted_accuracy(self) -> dict[str, Any] | None:
+        """The predicted 1σ error at the tool point for the commanded pose now."""
         ...
 
     def set_frames(self, frames: OperatorFrames) -> CommandResult:

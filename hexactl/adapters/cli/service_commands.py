@@ -61,6 +61,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       help="zero: the platform relative to the zero posture (default); work: the tool's pose in the "
                       "work frame, turning about the pivot point; tool: with --relative, along and about the tool's axes")
     move.add_argument("--relative", action="store_true", help="POSE is a displacement from where the motion is headed")
+    move.add_argument("--tolerance", type=positive_float, metavar="MM",
+                      help="refuse the move if the calibration's predicted 1σ error at the tool point on arrival "
+                      "exceeds this, mm")
     _waiting(move)
     move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). In leg-lock mode the goal is projected "
                    "onto the locked leg's constraint: the reply prints the goal run to when it differs. "
@@ -184,7 +187,9 @@ def client_parser() -> argparse.ArgumentParser:
 def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     pace = {name: getattr(arguments, name) for name in ("duration", "speed") if getattr(arguments, name) is not None}
     frame = {"frame": arguments.frame} if arguments.frame != "zero" else {}
-    return "move", {"pose": arguments.pose, **pace, **frame, **({"relative": True} if arguments.relative else {})}
+    tolerance = {"tolerance_mm": arguments.tolerance} if arguments.tolerance is not None else {}
+    return "move", {"pose": arguments.pose, **pace, **frame, **({"relative": True} if arguments.relative else {}),
+                    **tolerance}
 
 
 def _frames_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -352,7 +357,7 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     service said, and the reply's figures; for a move, the goal run to when it differs
     from the requested pose (``fields``, the request's)."""
     if cmd == "status":
-        return format_telemetry(reply["status"])
+        return format_telemetry(reply["status"]) + "\n" + accuracy_line(reply.get("predicted_accuracy"))
     if "frames" in reply:
         return "\n".join([f"ok: {reply.get('message') or 'frames'}"] + [f"{label:<15}{text}" for label, text in
                                                                        frames_lines({"frames": reply["frames"]})])
@@ -376,6 +381,15 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     if "records" in reply:
         said.append(f"{reply['records']} records of {reply['name']} ({reply['status']}) written to {reply['path']}")
     return "ok" + (": " + "; ".join(said) if said else "")
+
+
+def accuracy_line(accuracy: dict[str, Any] | None) -> str:
+    """The predicted accuracy at the tool point, for people."""
+    if accuracy is None:
+        return f"{'accuracy':<15}not predicted (no calibration covariance: calibrate)"
+    x, y, z = accuracy["position_axes_mm"]
+    return (f"{'accuracy':<15}{accuracy['position_mm']:.3f} mm (x {x:.3f}, y {y:.3f}, z {z:.3f}), "
+            f"{accuracy['orientation_deg']:.4f}° predicted 1σ at the tool point")
 
 
 def format_error_reply(reply: dict[str, Any]) -> str:
