@@ -50,10 +50,12 @@ from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.report.html import REPORT_PAGE
 from hexactl.application.service import ServiceConfig, ServiceError, ServiceProcess
 from hexactl.calibration.test_motions import PAPER_MAX_STROKE_ERROR, PAPER_STROKES, PAPER_TABLE_1
-from hexactl.calibration.validation import MotionResult, largest_stroke_error
+from hexactl.calibration.uncertainty import pose_fit_noise_rms
+from hexactl.calibration.validation import MotionResult, largest_stroke_error, summarise_validation
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.calibration.campaign import CampaignDesign
 from hexactl.sim.true_platform import ManufacturingErrors, true_geometry
 
@@ -156,7 +158,8 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
           HexactlClient(service.api_endpoint, timeout_s=DEMO_CLIENT_TIMEOUT_S) as client):
         outcome = run_campaign(client, nominal, ServiceInstrument(client), campaign, progress)
     progress.say("")
-    for line in table_1(outcome.before, outcome.after) + stroke_table(outcome.before, outcome.after):
+    for line in (table_1(outcome.before, outcome.after) + stroke_table(outcome.before, outcome.after)
+                 + accuracy_lines(outcome, nominal)):
         progress.say(line)
     progress.say(f"\nreport {outcome.report} (and its PNG figures), calibration "
                  f"{settings.directory / CALIBRATION_FILE}, data in {settings.directory}")
@@ -177,6 +180,24 @@ def _introduce(nominal: Geometry, settings: DemoSettings, progress: Progress) ->
                  f"  instrument: simulated theodolites, σ {sigma_mm:g} mm per coordinate\n"
                  f"  campaign:   {settings.postures_per_leg} leg-lock postures per leg ({paper}) within "
                  f"{100 * settings.envelope_fraction:g} % of the pose envelope")
+
+
+def accuracy_lines(outcome: CampaignOutcome, nominal: Geometry) -> list[str]:
+    """The test motions' error after calibration as measured, beside what the calibration's
+    covariance predicts for it: RMS over every waypoint and axis. The measurement goes
+    through the instrument, whose own noise is added to the prediction it is compared with."""
+    measured = summarise_validation(outcome.after)
+    predicted = outcome.result.predicted
+    poses = absolute_from_relative(nominal.home, np.concatenate([result.commanded_relative for result in outcome.after]))
+    noise_mm, noise_deg = pose_fit_noise_rms(poses, np.array(nominal.measurement.feature_points),
+                                             nominal.measurement.point_sigma_mm)
+    return ["",
+            "Accuracy after calibration on the test motions, RMS per axis over every waypoint",
+            f"  measured through the instrument        {measured.rms_position_error_mm:8.3f} mm {measured.rms_orientation_error_deg:9.4f}°",
+            f"  predicted, calibration and instrument  {np.hypot(predicted.rms_position_mm, noise_mm):8.3f} mm "
+            f"{np.hypot(predicted.rms_orientation_deg, noise_deg):9.4f}°",
+            f"  predicted, calibration alone           {predicted.rms_position_mm:8.3f} mm "
+            f"{predicted.rms_orientation_deg:9.4f}°  (the platform's own error, which the instrument's noise hides)"]
 
 
 def table_1(before: Sequence[MotionResult], after: Sequence[MotionResult]) -> list[str]:

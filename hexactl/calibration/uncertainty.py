@@ -250,3 +250,14 @@ def point_accuracy(legs: LegModel, covariance: NDArray, pose: Sequence[float],
         position_axes_mm=(float(np.sqrt(variances[0])), float(np.sqrt(variances[1])), float(np.sqrt(variances[2]))),
         orientation_deg=float(np.degrees(np.sqrt(variances[3:].sum()))),
     )
+
+
+def pose_fit_noise_rms(poses: NDArray, feature_points_mm: NDArray, point_sigma_mm: float) -> tuple[float, float]:
+    """RMS per axis of the error of a pose fitted to ``feature_points_mm`` (K, 3) measured
+    with noise ``point_sigma_mm`` per coordinate, over (N, 6) absolute poses (mm, rad):
+    (position mm, orientation deg). What an instrument adds to a measured pose error."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 6)
+    covariance = point_fit_twist_covariance(rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5]),
+                                            feature_points_mm, point_sigma_mm)
+    variances = np.einsum("nii->ni", covariance)
+    return float(np.sqrt(np.mean(variances[:, :3]))), float(np.degrees(np.sqrt(np.mean(variances[:, 3:]))))

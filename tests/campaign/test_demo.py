@@ -59,6 +59,12 @@ def test_the_demo_calibrates_and_prints_the_papers_tables(finished) -> None:
     assert float(swept[8]) < float(swept[5]) / 5  # before % → after %, in the paper's terms
     assert next(line for line in lines if line.startswith("the paper")).split()[4:] == ["2.600", "%", "roll", "0.350", "%", "x"]
     assert "finished in" in lines[-1]
+    # predicted accuracy beside the measured one, the instrument's noise in both
+    measured = next(line for line in lines if line.strip().startswith("measured through the instrument")).split()
+    predicted = next(line for line in lines if line.strip().startswith("predicted, calibration and instrument")).split()
+    alone = next(line for line in lines if line.strip().startswith("predicted, calibration alone")).split()
+    assert 0.5 < float(measured[4]) / float(predicted[4]) < 2.0  # position, mm
+    assert float(alone[3]) < float(predicted[4])
     for name in (CALIBRATION_FILE, MEASUREMENTS_FILE, VALIDATION_FILE, f"{REPORT_DIRECTORY}/index.html",
                  f"{REPORT_DIRECTORY}/x_sweep.png", f"{REPORT_DIRECTORY}/y_rotation.png"):
         assert (finished.directory / name).exists(), name
