@@ -15,7 +15,7 @@ from itertools import combinations
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.kinematics.inverse import LEG_COUNT
+from hexactl.kinematics.inverse import LEG_COUNT, LegModel, sensor_setpoints_batch
 from hexactl.kinematics.points import DegeneratePointsError, pose_from_points
 from hexactl.kinematics.rotation import rotation_matrices
 
@@ -141,6 +141,7 @@ def screen_measurements(
     point_sigma_mm: float,
     distance_tolerance_mm: float | None = None,
     locked_reading_tolerance_mm: float = LOCKED_READING_TOLERANCE_MM,
+    legs: LegModel | None = None,
 ) -> tuple[RowProblem, ...]:
     """Rows that must not be used as they are, one :class:`RowProblem` per finding.
 
@@ -152,10 +153,12 @@ def screen_measurements(
 
     Measured points whose typical spread differs from the feature points' by more than
     :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
-    (line 0), instead of one per row.
+    (line 0), instead of one per row. So are measured poses whose readings ``legs`` (the
+    nominal geometry, when given) explain far better with the angles read as radians or
+    the positions as metres.
     """
     problems: list[RowProblem] = []
-    unit_problem = _unit_problem(data, feature_points_mm)
+    unit_problem = _unit_problem(data, feature_points_mm) or (None if legs is None else _pose_unit_problem(data, legs))
     if unit_problem is not None:
         return (unit_problem,)
     if data.points_mm is not None:
@@ -189,6 +192,37 @@ def screen_measurements(
                     f"leg {leg} is marked locked but reads {reading:.4f} mm, {reading - median:+.4f} mm from "
                     f"its locked rows' median {median:.4f} mm (tolerance {locked_reading_tolerance_mm:g} mm)"))
     return tuple(sorted(problems, key=lambda problem: problem.line))
+
+
+POSE_UNIT_MISFIT_MM = 20.0
+"""Readings this far (median) from what the nominal geometry gives for the measured poses
+are not a calibration's few millimetres: worth asking whether the poses' units are wrong."""
+
+
+def _pose_unit_problem(data: MeasurementData, legs: LegModel) -> RowProblem | None:
+    """A file-level problem if the measured poses' readings fit far better with the angles
+    taken as radians or the positions as metres (the file's units are degrees and mm)."""
+    if data.poses is None or len(data) == 0:
+        return None
+    readings = np.asarray(data.readings_mm)
+
+    def misfit(poses: NDArray) -> float:
+        return float(np.median(np.abs(sensor_setpoints_batch(legs, poses) - readings)))
+
+    as_read = misfit(data.poses)
+    if as_read <= POSE_UNIT_MISFIT_MM:
+        return None
+    radians, metres = np.array(data.poses), np.array(data.poses)
+    radians[:, 3:] = np.degrees(radians[:, 3:])  # the file's numbers were radians, read as degrees
+    metres[:, :3] *= 1000.0
+    both = np.hstack((metres[:, :3], radians[:, 3:]))
+    found = {name: misfit(poses) for name, poses in (("angles are radians", radians), ("positions are metres", metres),
+                                                      ("angles are radians and positions metres", both))}
+    name, best = min(found.items(), key=lambda item: item[1])
+    if best > as_read / 5.0:
+        return None
+    return RowProblem(0, f"the readings are {as_read:.3g} mm (median) from what the nominal geometry gives for the "
+                         f"measured poses, {best:.3g} mm if the {name}: hexactl reads degrees and mm; convert the file")
 
 
 def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProblem | None:

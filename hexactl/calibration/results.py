@@ -228,14 +228,15 @@ def assemble_result(
                      f"{options.outlier_probability:g}): lines {', '.join(map(str, outliers))}")
     with_scales = parameters.has_scales
     status = IdentificationStatus.OK
-    if not converged:
-        status = IdentificationStatus.NOT_CONVERGED
-        notes.append(f"no convergence within {iterations} iterations: do not use these parameters")
-    elif not observability.full_rank:
+    # Undetermined parameters are the cause when both happen: say that first.
+    if not observability.full_rank:
         status = IdentificationStatus.NOT_OBSERVABLE
         notes.append(f"the data cannot determine {len(observability.singular_values) - observability.rank} "
                      f"parameter combination(s), e.g. {observability.worst_direction_terms(with_scales)}: "
                      "add postures that move these joints differently")
+    elif not converged:
+        status = IdentificationStatus.NOT_CONVERGED
+        notes.append(f"no convergence within {iterations} iterations: do not use these parameters")
     predicted = predict_accuracy(parameters.legs(), covariance, PAPER_TEST_MOTIONS, home_mm_deg)
     if status is IdentificationStatus.OK and (
         predicted.rms_position_mm > options.max_predicted_position_mm

@@ -35,6 +35,12 @@ DEFAULT_READING_SIGMA_MM = 0.01
 RANK_TOLERANCE = 1e-10
 """Singular values below this fraction of the largest count as zero (rank deficiency)."""
 
+UNDETERMINED_STD_MM = 100.0
+"""A parameter combination the data know no better than this (1σ) is not determined by
+them. Noise alone separates postures that are really one (a posture measured again and
+again) by information that pins such combinations to metres; counting them as determined
+would hide that the data hold one posture. The plausibility bounds are 60 mm."""
+
 
 def closure_parameter_jacobian(legs: LegModel, poses: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(C, units): C (N, 6, 42) = ∂(‖T·P_i + R − B_i‖ − zero_i)/∂θ; units (N, 6, 3) leg directions.
@@ -119,7 +125,8 @@ def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Obse
     """(covariance, observability) from an information matrix (p, p).
 
     The covariance is the inverse on the determined subspace (pseudo-inverse), with the
-    undetermined directions left out, so it must be read together with ``rank``.
+    undetermined directions (rank deficiency, or 1σ beyond :data:`UNDETERMINED_STD_MM`)
+    left out, so it must be read together with ``rank``.
     """
     information = 0.5 * (np.asarray(information, dtype=float) + np.asarray(information, dtype=float).T)
     eigenvalues, vectors = np.linalg.eigh(information)
@@ -127,7 +134,7 @@ def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Obse
     singular = np.sqrt(eigenvalues)[::-1]
     vectors = vectors[:, ::-1]
     largest = singular[0] if singular[0] > 0 else 1.0
-    determined = singular > RANK_TOLERANCE * largest
+    determined = singular > max(RANK_TOLERANCE * largest, 1.0 / UNDETERMINED_STD_MM)
     inverse = np.where(determined, 1.0 / np.where(determined, singular, 1.0) ** 2, 0.0)
     covariance = (vectors * inverse) @ vectors.T
     smallest = singular[-1]

@@ -181,7 +181,7 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     except MeasurementFileError as error:
         raise CliError(str(error)) from None
     problems = measurements.problems + screen_measurements(
-        measurements.data, np.array(nominal.measurement.feature_points), point_sigma)
+        measurements.data, np.array(nominal.measurement.feature_points), point_sigma, legs=nominal.legs)
     for problem in problems:
         print(f"{arguments.data}: {problem}", file=sys.stderr)
     if any(problem.line == 0 for problem in problems):  # the whole file: no row to skip
