@@ -173,8 +173,10 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     posture_chi2 = np.sum(current.point_residuals**2, axis=(1, 2)) + np.sum(current.leg_residuals**2, axis=1)
     # Per posture: 3K point + 6 leg residuals against 6 pose unknowns (the parameters' share
     # of the degrees of freedom is spread thin over the postures and neglected here). A
-    # posture whose points are all excluded is pinned by its readings alone: no test.
-    posture_dof = 3 * used_points
+    # pose-form row's points are those of a rigid pose: only 6 of its 3K residuals are free
+    # (the others are zero whatever the noise). A posture whose points are all excluded is
+    # pinned by its readings alone: no test.
+    posture_dof = np.where(used_points > 0, 6.0, 0.0) if pose_form else 3 * used_points
     posture_chi2 = np.where(posture_dof > 0, posture_chi2, np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         normalised = posture_chi2 / posture_dof
@@ -187,7 +189,8 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         outlier=flag_outliers(posture_chi2, np.maximum(posture_dof, 1), options.outlier_probability),
     )
     point_residual_count = 3 * int(used_points.sum())
-    dof = point_residual_count + current.leg_residuals.size + current.prior_residuals.size - 6 * len(data) - len(theta)
+    dof = (int(posture_dof.sum()) + current.leg_residuals.size + current.prior_residuals.size - 6 * len(data)
+           - len(theta))
     # The leg closures are near-exact constraints (σ_reading ≪ the pose noise they carry), so
     # the point residuals hold practically all the degrees of freedom.
     point_dof_share = min(dof / point_residual_count, 1.0)

@@ -1,0 +1,33 @@
+"""The noise model holds in both file forms: on correct data χ²/dof is about 1, so the
+consistency warning fires on a misfit, not on the form of the file."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hexactl.calibration.data import MeasurementData, measured_poses
+from hexactl.calibration.identification import identify
+from hexactl.calibration.results import IdentificationOptions, Method
+from hexactl.sim.offline_campaign import run_offline_campaign
+from hexactl.sim.true_platform import true_geometry
+from tests.calibration.conftest import SMALL
+
+SEEDS = range(4)
+
+
+def test_chi2_per_dof_is_about_one_in_points_and_pose_form(nominal):
+    """60 postures: 318 degrees of freedom in pose form (6 per row's pose, 6 readings, less
+    the pose and 42 parameters), so one campaign's χ²/dof has σ √(2/318) ≈ 0.08 and a mean of
+    four 0.04; the band is four of those."""
+    points_form, pose_form = [], []
+    for seed in SEEDS:
+        data = run_offline_campaign(nominal, true_geometry(nominal, seed), SMALL).data
+        poses = measured_poses(data, np.array(nominal.measurement.feature_points)).poses
+        rows = MeasurementData(data.locked_leg, data.readings_mm, data.lines, poses=poses)
+        full = IdentificationOptions(method=Method.FULL)
+        points_form.append(identify(data, nominal, full).chi2_per_dof)
+        result = identify(rows, nominal, full)
+        assert result.degrees_of_freedom == 6 * len(rows) - 42
+        pose_form.append(result.chi2_per_dof)
+    assert abs(np.mean(pose_form) - np.mean(points_form)) < 0.16, (pose_form, points_form)
+    assert 0.84 < np.mean(pose_form) < 1.16, pose_form
