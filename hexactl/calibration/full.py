@@ -197,6 +197,8 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     structural, drift, targets = problem.split(theta)
     parameters = StructuralParameters.from_vector(structural, options.estimate_scales)
     warnings = exclusion_notes
+    if not pose_form and targets is None and (misplaced := _misplaced_targets(problem, fit)):
+        warnings += (misplaced,)
     result = assemble_result(
         Method.FULL, reason, parameters, information, residuals, current.cost, dof,
         residual_rms_mm=float(np.sqrt(np.sum(current.point_residuals**2) / point_residual_count)) * sigma,
@@ -210,6 +212,36 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         offset_drift_mm=None if drift is None else Estimate(drift, extras_std[:LEG_COUNT]),
         feature_points_mm=None if targets is None else Estimate(targets, extras_std[-targets.size:].reshape(-1, 3)),
     )
+
+
+TARGET_TEST_FALSE_ALARM = 1e-3
+"""The feature-point test's probability of firing on correct data."""
+
+
+def _misplaced_targets(problem: _Problem, fit: _Fit) -> str | None:
+    """A warning when the feature points' residuals, seen from the platform, are the same
+    posture after posture: the targets are not where ``[measurement]`` says. Each
+    posture's pose absorbs a rigid motion of them, so of the 3K mean residuals 3K − 6 are
+    free; their χ² (residuals σ-whitened) is tested at :data:`TARGET_TEST_FALSE_ALARM`."""
+    from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
+
+    count = len(problem.model_points)
+    dof = 3 * count - 6
+    used = problem.point_weights > 0.0
+    if dof <= 0 or np.any(used.sum(axis=0) < 2):
+        return None
+    in_platform = np.einsum("nji,nkj->nki", fit.rotations, fit.linear.point_residuals)  # Tᵀ·r, whitened
+    sums = in_platform.sum(axis=0)  # excluded points' residuals are zero
+    statistic = float(np.sum(sums**2 / used.sum(axis=0)[:, None]))
+    threshold = float(chi2.isf(TARGET_TEST_FALSE_ALARM, dof))
+    if statistic <= threshold:
+        return None
+    offsets = np.linalg.norm(sums / used.sum(axis=0)[:, None], axis=1) * problem.point_sigma
+    return (f"the feature points' residuals are the same in every posture (χ² {statistic:.0f} with {dof} dof, beyond "
+            f"{threshold:.0f}): the targets are not where [measurement] feature_points says, by about "
+            f"{', '.join(f'p{k} {offset:.2f} mm' for k, offset in enumerate(offsets, start=1))} (the part a frame "
+            "shift cannot hide); measure their coordinates on the platform, or give their tolerance as "
+            "feature_point_sigma_mm so the calibration identifies them and predicts honestly")
 
 
 def _marginal(information: NDArray, size: int) -> NDArray[np.float64]:

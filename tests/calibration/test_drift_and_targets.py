@@ -115,3 +115,18 @@ def test_calibrate_prints_the_drift_and_writes_the_end_of_campaign_file(tmp_path
     calibrated = load_geometry(tmp_path / "cal.toml")
     std = np.array(calibrated.calibration.zero_lengths_std_mm)
     assert np.all(np.abs(np.subtract(calibrated.zero_lengths, at_end.zero_lengths)) < 5 * std + 0.05)
+
+
+def test_misplaced_feature_points_are_named_when_their_tolerance_is_not_given(nominal):
+    """The misspecification test: silent on correct targets, firing on targets off by σ 0.5 mm."""
+    plans = plan_campaign(nominal, SMALL)
+    for seed in SEEDS:
+        true = true_geometry(nominal, seed)
+        correct = execute_plans(nominal, true, plans, SimulatedInstrument.for_geometry(nominal, seed), 0.001, seed)
+        result = identify(correct.data, nominal, IdentificationOptions(method=Method.FULL))
+        assert not any("feature points' residuals" in warning for warning in result.warnings)
+        targets = np.array(nominal.measurement.feature_points) + np.random.default_rng(100 + seed).normal(0.0, 0.5, (3, 3))
+        moved = execute_plans(nominal, true, plans, SimulatedInstrument(targets, 0.25, seed), 0.001, seed)
+        result = identify(moved.data, nominal, IdentificationOptions(method=Method.FULL))
+        warning = next(w for w in result.warnings if "feature points' residuals are the same in every posture" in w)
+        assert "feature_point_sigma_mm" in warning
