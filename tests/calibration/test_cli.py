@@ -57,9 +57,11 @@ def test_report_with_simulated_validation(tmp_path, data_file, true_platform):
     assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml"),
                  "--report", str(report), "--true", str(true_path)]) == 0
     page = (report / "index.html").read_text(encoding="utf-8")
-    for name in ("residuals.png", "parameters.png", "observability.png", "x_sweep.png", "y_rotation.png"):
+    for name in ("residuals.png", "parameters.png", "observability.png", "x_sweep.png", "y_rotation.png",
+                 "accuracy_map.png"):
         assert (report / name).read_bytes().startswith(b"\x89PNG")
     assert "Validation" in page and "paper: after calibration" in page and "data:image/png;base64," in page
+    assert "Predicted accuracy over the workspace" in page
 
 
 def test_bad_rows_are_refused_by_line_or_skipped_on_request(tmp_path, leglock_campaign, capsys):

@@ -75,6 +75,8 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
         "parameters.png": plots.parameters_figure(report.result, nominal_vector, true_vector),
         "observability.png": plots.observability_figure(report.result),
     }
+    if report.result.ok:
+        figures["accuracy_map.png"] = plots.accuracy_map_figure(report.result, report.nominal)
     if report.validation is not None:
         for before, after in zip(report.validation.before, report.validation.after):
             if before.motion.axis is not None:
@@ -100,6 +102,11 @@ def _page(report: CalibrationReport, figures: dict[str, bytes], nominal_vector: 
         "<h2>Residuals per posture</h2>", _img(figures["residuals.png"]),
         "<h2>Observability</h2>", _observability(result), _img(figures["observability.png"]),
     ]
+    if "accuracy_map.png" in figures:
+        sections += ["<h2>Predicted accuracy over the workspace</h2>",
+                     "<p>The 1σ position error of the platform's origin that the parameters' covariance predicts, "
+                     "pose by pose (the controller reports it at the tool point for every move: "
+                     "<code>validate_pose</code>, <code>status</code>).</p>", _img(figures["accuracy_map.png"])]
     style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
              "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
              "th{background:#f2f2f2}td.l,th.l{text-align:left}.warn{background:#fff4e5;padding:.5em 1em}"

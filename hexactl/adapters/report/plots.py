@@ -13,8 +13,12 @@ from matplotlib.figure import Figure
 
 from hexactl.calibration.parameters import PARAMETERS_PER_LEG
 from hexactl.calibration.results import IdentificationResult
+from hexactl.calibration.uncertainty import point_accuracy
 from hexactl.calibration.validation import MotionResult
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.workspace import assess_poses
 
 _LEG_COLOURS = ("#7f7f7f", "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")  # index = locked leg
 
@@ -121,4 +125,34 @@ def motion_figure(before: MotionResult, after: MotionResult) -> bytes:
         grid[row][0].set_ylabel(label, fontsize=9, color=colour)
     figure.suptitle(f"{motion.title}: achieved − commanded")
     figure.tight_layout()
+    return _png(figure)
+
+
+ACCURACY_MAP_STEPS = 41
+"""Grid points per axis of the accuracy maps."""
+
+
+def accuracy_map_figure(result: IdentificationResult, nominal: Geometry) -> bytes:
+    """The predicted 1σ position error of the platform's origin over the workspace: an
+    x–y map at the zero posture's height and orientation, and a roll–pitch map at the zero
+    posture's position; poses outside the limits left blank."""
+    legs = result.parameters.legs()
+    low, high = np.array(nominal.limits.pose_min), np.array(nominal.limits.pose_max)
+    figure = Figure(figsize=(12, 4.8), layout="constrained")
+    panels = figure.subplots(1, 2)
+    for panel, (first, second) in zip(panels, ((0, 1), (3, 4))):
+        a = np.linspace(low[first], high[first], ACCURACY_MAP_STEPS)
+        b = np.linspace(low[second], high[second], ACCURACY_MAP_STEPS)
+        grid = np.zeros((ACCURACY_MAP_STEPS * ACCURACY_MAP_STEPS, 6))
+        grid[:, first], grid[:, second] = np.repeat(a, len(b)), np.tile(b, len(a))
+        reachable = np.array([assessment.ok for assessment in assess_poses(nominal, grid)])
+        sigma = np.full(len(grid), np.nan)
+        for n in np.flatnonzero(reachable):
+            sigma[n] = point_accuracy(legs, result.covariance, absolute_from_relative(nominal.home, grid[n])).position_mm
+        image = panel.pcolormesh(a, b, sigma.reshape(len(a), len(b)).T, shading="nearest", cmap="viridis")
+        figure.colorbar(image, ax=panel, label="predicted position error, mm (1σ)")
+        panel.set_xlabel(f"{POSE_AXES[first]} ({POSE_UNITS[first]})")
+        panel.set_ylabel(f"{POSE_AXES[second]} ({POSE_UNITS[second]})")
+        panel.set_title(f"{POSE_AXES[first]}–{POSE_AXES[second]}, other axes at the zero posture")
+    figure.suptitle("Predicted accuracy over the workspace, from the calibration's covariance")
     return _png(figure)
