@@ -31,10 +31,13 @@ SCALE_TOLERANCE = 2.0
 
 @dataclass(frozen=True, slots=True)
 class RowProblem:
-    """Something wrong with one row: ``line`` is the 1-based line in the source (0: none)."""
+    """Something wrong with one row: ``line`` is the 1-based line in the source (0: none).
+    ``mis_sighting``: a feature point that disagrees with the others, which an estimator
+    that tests each observation (``full``) can exclude itself."""
 
     line: int
     message: str
+    mis_sighting: bool = False
 
     def __str__(self) -> str:
         return f"line {self.line}: {self.message}" if self.line else self.message
@@ -179,7 +182,8 @@ def screen_measurements(
                     known = float(np.linalg.norm(model[i] - model[j]))
                     problems.append(RowProblem(int(line),
                         f"distance p{i + 1}-p{j + 1} is {known + error_mm:.3f} mm, the feature points are "
-                        f"{known:.3f} mm apart (error {error_mm:+.3f} mm, tolerance {tolerance:.3f} mm)"))
+                        f"{known:.3f} mm apart (error {error_mm:+.3f} mm, tolerance {tolerance:.3f} mm)",
+                        mis_sighting=True))
     for leg in range(1, LEG_COUNT + 1):
         rows = data.locked_rows(leg)
         if len(rows) == 0:

@@ -14,12 +14,13 @@ takes a method its own diagnostics say is worse. The explanation is in the resul
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 from scipy.stats import chi2
 
-from hexactl.calibration.data import MeasurementData
+from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.full import identify_full
 from hexactl.calibration.leglock import identify_leglock, too_few_locked
 from hexactl.calibration.paper import identify_paper
@@ -139,6 +140,13 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded)
         + "".join(f"; {sentence}" for sentence in extra_estimates(result)),
     )
+
+
+def blocking_problems(problems: Sequence[RowProblem], method: Method) -> tuple[RowProblem, ...]:
+    """The screening's problems that stop ``method``: all of them, except that ``full`` (and
+    ``auto``, which runs it) tests every observation and excludes mis-sightings itself."""
+    robust = method in (Method.FULL, Method.AUTO)
+    return tuple(problem for problem in problems if not (robust and problem.mis_sighting))
 
 
 def calibration_geometry(nominal: Geometry, result: IdentificationResult, info: CalibrationInfo) -> Geometry:

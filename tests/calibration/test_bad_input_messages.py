@@ -40,3 +40,24 @@ def test_poses_in_radians_or_metres_are_named_as_a_unit_problem(nominal, leglock
     metres = screen_measurements(_pose_rows(nominal, leglock_campaign.data, translation_factor=1e-3), points, 0.25,
                                  legs=nominal.legs)
     assert len(metres) == 1 and "if the positions are metres" in metres[0].message and "convert the file" in metres[0].message
+
+
+def test_a_mis_sighted_point_goes_to_full_which_excludes_it_and_stops_the_methods_that_cannot(tmp_path, nominal,
+                                                                                            leglock_campaign, capsys):
+    from hexactl.adapters.cli.main import main
+    from hexactl.adapters.files.measurements import write_measurements
+    from tests.calibration.conftest import NOMINAL_PATH
+
+    data = leglock_campaign.data
+    points = np.array(data.points_mm)
+    points[7, 1] += [12.0, -5.0, 0.0]  # in the platform's plane: the distance screening sees it
+    path = write_measurements(tmp_path / "mis.csv", MeasurementData(data.locked_leg, data.readings_mm, data.lines,
+                                                                     points_mm=points))
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")]) == 0
+    captured = capsys.readouterr()
+    line = int(data.lines[7]) + 1  # the file's header line comes first
+    assert f"line {line}: distance p1-p2" in captured.err and "left to full" in captured.err
+    assert f"excluded as a mis-sighting: line {line}: feature point p2 off by" in captured.out
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "leglock.toml"),
+                 "--method", "leglock"]) == 2
+    assert "--skip-bad-rows" in capsys.readouterr().err

@@ -164,7 +164,7 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.files.measurements import MeasurementFileError, read_measurements
     from hexactl.adapters.report.html import REPORT_PAGE, CalibrationReport, ValidationComparison, write_report
     from hexactl.calibration.data import screen_measurements
-    from hexactl.calibration.identification import calibration_geometry, calibration_info, identify
+    from hexactl.calibration.identification import blocking_problems, calibration_geometry, calibration_info, identify
     from hexactl.calibration.results import IdentificationOptions, Method
     from hexactl.kinematics.geometry import GeometryError
 
@@ -180,10 +180,12 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
         measurements = read_measurements(arguments.data, len(nominal.measurement.feature_points))
     except MeasurementFileError as error:
         raise CliError(str(error)) from None
-    problems = measurements.problems + screen_measurements(
+    screened = measurements.problems + screen_measurements(
         measurements.data, np.array(nominal.measurement.feature_points), point_sigma, legs=nominal.legs)
-    for problem in problems:
-        print(f"{arguments.data}: {problem}", file=sys.stderr)
+    problems = blocking_problems(screened, Method(arguments.method))
+    for problem in screened:
+        handed = "" if problem in problems else " (left to full, which tests each observation and excludes mis-sightings)"
+        print(f"{arguments.data}: {problem}{handed}", file=sys.stderr)
     if any(problem.line == 0 for problem in problems):  # the whole file: no row to skip
         raise CliError(f"{arguments.data} cannot be used as it is (see above): fix the file and run again")
     if problems and not arguments.skip_bad_rows:

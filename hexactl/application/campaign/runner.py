@@ -68,7 +68,13 @@ from hexactl.adapters.report.html import (
 )
 from hexactl.calibration.campaign import CampaignDesign, improved, locked_path
 from hexactl.calibration.data import screen_measurements
-from hexactl.calibration.identification import calibration_geometry, calibration_info, identify
+from hexactl.calibration.identification import (
+    blocking_problems,
+    calibration_geometry,
+    calibration_info,
+    extra_estimates,
+    identify,
+)
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry, GeometryError
@@ -311,7 +317,11 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
     except MeasurementFileError as error:
         raise CampaignError(str(error)) from None
     sigma = geometry.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
-    problems = measured.problems + screen_measurements(measured.data, np.array(geometry.measurement.feature_points), sigma)
+    screened = measured.problems + screen_measurements(measured.data, np.array(geometry.measurement.feature_points), sigma)
+    problems = blocking_problems(screened, options.method)
+    for problem in screened:
+        if problem not in problems:
+            progress.say(f"{measured.source}: {problem} (left to full, which tests each observation)")
     if problems:
         lines = "\n".join(f"{measured.source}: {problem}" for problem in problems)
         raise CampaignError(f"{lines}\nthe measurements have {len(problems)} problem(s): calibrate with hexactl calibrate "
@@ -323,10 +333,14 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
                             + "; ".join(result.warnings) + f" (the data are in {measured.source})")
     predicted = result.predicted
     progress.say(f"fit residual RMS {result.residual_rms_mm:.4f} mm (noise model {result.expected_rms_mm:.4f} mm), "
-                 f"χ²/dof {result.chi2_per_dof:.3f}; predicted pose uncertainty {predicted.rms_position_mm:.4f} mm, "
+                 f"{result.consistency}; predicted pose uncertainty {predicted.rms_position_mm:.4f} mm, "
                  f"{predicted.rms_orientation_deg:.5f}° RMS")
+    for sentence in extra_estimates(result):
+        progress.say(f"also estimated: {sentence}")
     for warning in result.warnings:
         progress.say(f"warning: {warning}")
+    for observation in result.excluded:
+        progress.say(f"excluded as a mis-sighting: {observation}")
     path = store.path(CALIBRATION_FILE)
     calibrated = _saved_calibration(path, measured.sha256)
     if calibrated is None:
