@@ -1,12 +1,18 @@
 """``full``: every structural parameter from every posture, by maximum likelihood.
 
 Errors-in-variables model. Unknowns: the 42 structural parameters θ (optionally six sensor
-scale errors) and each posture's true pose (6 per posture). Observations and residuals,
-each divided by its noise standard deviation:
+scale errors) and each posture's true pose (6 per posture); optionally, as nuisance
+parameters after θ, each leg's offset drift d_i over the campaign (time τ_j from 0 at the
+first row to 1 at the last) and the feature points p_k themselves. Observations and
+residuals, each divided by its noise standard deviation:
 
 - feature points: T_j·p_k + R_j − m_jk (σ = point_sigma_mm per coordinate);
-- leg closure, all six legs, locked or free: ‖T_j·P_i + R_j − B_i‖ − zero_i − (1 + s_i)·l_ij
-  (σ = reading_sigma_mm).
+- leg closure, all six legs, locked or free: ‖T_j·P_i + R_j − B_i‖ − zero_i − d_i·(τ_j − 1)
+  − (1 + s_i)·l_ij (σ = reading_sigma_mm), so the zero lengths are the campaign's end;
+- with feature points as parameters, their prior p_k − p_k⁰ (σ = feature_point_sigma_mm).
+
+The result's covariance is the structural parameters' marginal (the nuisance block's
+Schur complement), so their uncertainty carries that of the drift and the feature points.
 
 Minimising their sum of squares is the maximum-likelihood estimate for Gaussian noise and
 reaches the Cramér–Rao bound. The fixed frame is the instrument's and the moving frame the
