@@ -50,7 +50,9 @@ class MeasurementData:
     ``locked_leg`` (N,) int, 1–6 or 0; ``readings_mm`` (N, 6) sensor readings; exactly one of
     ``poses`` (N, 6) absolute (mm, rad) or ``points_mm`` (N, K, 3) feature points in the
     fixed frame, point k being the geometry's ``feature_points[k]``; ``lines`` (N,) source
-    lines. Arrays are copied read-only.
+    lines; ``point_covariance_mm2`` (N, K, 3, 3): each point's covariance when an
+    instrument's own observations were turned into it (:mod:`hexactl.calibration.observations`;
+    None: isotropic, the geometry's ``point_sigma_mm``). Arrays are copied read-only.
     """
 
     locked_leg: NDArray[np.int64]
@@ -58,6 +60,7 @@ class MeasurementData:
     lines: NDArray[np.int64]
     poses: NDArray[np.float64] | None = None
     points_mm: NDArray[np.float64] | None = None
+    point_covariance_mm2: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         if (self.poses is None) == (self.points_mm is None):
@@ -70,6 +73,8 @@ class MeasurementData:
             "lines": (np.int64, (count,)),
             "poses": (float, (count, 6)),
             "points_mm": (float, (count, points_shape[1], 3) if points_shape and len(points_shape) == 3 else None),
+            "point_covariance_mm2": (float, (count, points_shape[1], 3, 3) if points_shape and len(points_shape) == 3
+                                     else None),
         }
         for name, (dtype, shape) in shapes.items():
             value = getattr(self, name)
@@ -100,6 +105,7 @@ class MeasurementData:
             self.lines[mask],
             None if self.poses is None else self.poses[mask],
             None if self.points_mm is None else self.points_mm[mask],
+            None if self.point_covariance_mm2 is None else self.point_covariance_mm2[mask],
         )
 
     def without_lines(self, lines: Iterable[int]) -> MeasurementData:

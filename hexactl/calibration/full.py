@@ -6,7 +6,9 @@ parameters after θ, each leg's offset drift d_i over the campaign (time τ_j fr
 first row to 1 at the last) and the feature points p_k themselves. Observations and
 residuals, each divided by its noise standard deviation:
 
-- feature points: T_j·p_k + R_j − m_jk (σ = point_sigma_mm per coordinate);
+- feature points: T_j·p_k + R_j − m_jk (σ = point_sigma_mm per coordinate, or whitened by
+  each point's own covariance where an instrument's angles and ranges implied it:
+  :mod:`hexactl.calibration.observations`);
 - leg closure, all six legs, locked or free: ‖T_j·P_i + R_j − B_i‖ − zero_i − d_i·(τ_j − 1)
   − (1 + s_i)·l_ij (σ = reading_sigma_mm), so the zero lengths are the campaign's end;
 - with feature points as parameters, their prior p_k − p_k⁰ (σ = feature_point_sigma_mm).
@@ -95,6 +97,19 @@ class _Problem:
     point_weights: NDArray[np.float64]  # (N, K): 1 used, 0 excluded
     times: NDArray[np.float64] | None = None
     target_sigma: float = 0.0
+    whitening: NDArray[np.float64] | None = None  # (N, K, 3, 3) L⁻¹ of each point's covariance L·Lᵀ; None: 1/σ
+
+    def whiten(self, vectors: NDArray) -> NDArray[np.float64]:
+        """Point-space vectors or Jacobians (N, K, 3, ...) divided by their noise."""
+        if self.whitening is None:
+            return vectors / self.point_sigma
+        return np.einsum("nkij,nkj...->nki...", self.whitening, vectors)
+
+    def in_mm(self, misfits: NDArray) -> NDArray[np.float64]:
+        """Whitened point misfits (N, K, 3) back in mm."""
+        if self.whitening is None:
+            return misfits * self.point_sigma
+        return np.linalg.solve(self.whitening, misfits[..., None])[..., 0]
 
     @property
     def structural_size(self) -> int:
@@ -165,8 +180,10 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     # Feature points are parameters only where they were observed: a pose-form row's points
     # are implied by its pose through the nominal ones.
     target_sigma = 0.0 if pose_form else nominal.measurement.feature_point_sigma_mm
+    covariance = data.point_covariance_mm2
+    whitening = None if covariance is None else np.linalg.inv(np.linalg.cholesky(covariance))
     problem = _Problem(observed, model, np.array(data.readings_mm), sigma, options.reading_sigma_mm,
-                       options.estimate_scales, np.ones(observed.shape[:2]), times, target_sigma)
+                       options.estimate_scales, np.ones(observed.shape[:2]), times, target_sigma, whitening)
     theta = np.concatenate((start.to_vector(), np.zeros(LEG_COUNT if times is not None else 0),
                             model.ravel() if target_sigma > 0.0 else np.zeros(0)))
     fit = _fit(problem, theta, np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
@@ -207,8 +224,9 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         warnings += (misplaced,)
     result = assemble_result(
         Method.FULL, reason, parameters, information, residuals, current.cost, dof,
-        residual_rms_mm=float(np.sqrt(np.sum(current.point_residuals**2) / point_residual_count)) * sigma,
-        expected_rms_mm=sigma * float(np.sqrt(point_dof_share)),
+        residual_rms_mm=float(np.sqrt(np.sum(problem.in_mm(current.point_residuals) ** 2) / point_residual_count)),
+        expected_rms_mm=float(np.sqrt(point_dof_share)) * (
+            sigma if covariance is None else float(np.sqrt(np.mean(np.trace(covariance, axis1=2, axis2=3)) / 3.0))),
         iterations=fit.iterations, converged=fit.converged, options=options, home_mm_deg=nominal.home,
         warnings=warnings, excluded=_excluded_observations(problem, fit.linear, pose_form, data),
     )
@@ -234,7 +252,9 @@ def _misplaced_targets(problem: _Problem, fit: _Fit) -> str | None:
     count = len(problem.model_points)
     dof = 3 * count - 6
     used = problem.point_weights > 0.0
-    if dof <= 0 or np.any(used.sum(axis=0) < 2):
+    # Seen from the platform the residuals must be whitened alike: an instrument's
+    # anisotropic noise is not (its form is tested by χ² alone).
+    if dof <= 0 or np.any(used.sum(axis=0) < 2) or problem.whitening is not None:
         return None
     in_platform = np.einsum("nji,nkj->nki", fit.rotations, fit.linear.point_residuals)  # Tᵀ·r, whitened
     sums = in_platform.sum(axis=0)  # excluded points' residuals are zero
@@ -384,7 +404,7 @@ def _excluded_observations(problem: _Problem, linear: _Linearisation, pose_form:
     if not np.any(excluded):
         return ()
     sigmas = np.sqrt(_standardised_residuals(problem, linear, pose_form))
-    distances = np.linalg.norm(linear.point_misfits, axis=2) * problem.point_sigma
+    distances = np.linalg.norm(problem.in_mm(linear.point_misfits), axis=2)
     if pose_form:
         return tuple(ExcludedObservation(int(data.lines[row]), int(row), 0, float(np.max(distances[row])),
                                          float(sigmas[row, 0])) for row in np.flatnonzero(excluded[:, 0]))
@@ -399,8 +419,8 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
     count = len(rotations)
 
     rotated_points = np.einsum("nij,kj->nki", rotations, problem.model_points if targets is None else targets)
-    point_misfits = (rotated_points + translations[:, None, :] - problem.observed) / problem.point_sigma
-    all_point_jacobian = point_twist_jacobians(rotated_points) / problem.point_sigma  # (N, K, 3, 6)
+    point_misfits = problem.whiten(rotated_points + translations[:, None, :] - problem.observed)
+    all_point_jacobian = problem.whiten(point_twist_jacobians(rotated_points))  # (N, K, 3, 6)
     point_residuals = point_misfits * problem.point_weights[:, :, None]
     point_jacobian = all_point_jacobian * problem.point_weights[:, :, None, None]
 
@@ -435,9 +455,11 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
     if targets is not None:
         # ∂(T·q_k + R)/∂q_k = T: each feature point's columns, and its prior (q_k − q_k⁰)/σ_t.
         first = len(theta) - targets.size
+        target_jacobians = problem.whiten(np.repeat(rotations[:, None], len(targets), axis=1)) \
+            * problem.point_weights[:, :, None, None]  # (N, K, 3, 3)
         for k in range(len(targets)):
             columns = slice(first + 3 * k, first + 3 * k + 3)
-            target_jacobian = rotations * (problem.point_weights[:, k, None, None] / problem.point_sigma)  # (N, 3, 3)
+            target_jacobian = target_jacobians[:, k]
             coupling[:, :, columns] += np.einsum("nri,nrj->nij", point_jacobian[:, k], target_jacobian)
             parameter_normal[columns, columns] += np.einsum("nri,nrj->ij", target_jacobian, target_jacobian)
             parameter_gradient[columns] += np.einsum("nri,nr->i", target_jacobian, point_residuals[:, k])

@@ -1,0 +1,94 @@
+"""The instruments' own observations: theodolite pairs and laser trackers, their Jacobians,
+the points they imply, and calibrations from them with their native noise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hexactl.calibration.observations import LaserTracker, Station, Theodolites, point_covariance, wrapped
+
+ARCSEC = np.radians(1.0 / 3600.0)
+THEODOLITES = Theodolites((Station((4000.0, -3000.0, 1500.0, 0.0, 0.0, 140.0)),
+                           Station((4000.0, 3000.0, 1500.0, 0.0, 0.0, -140.0))), 2 * ARCSEC)
+TRACKER = LaserTracker(Station((-3500.0, 500.0, 1000.0, 0.0, 0.0, 10.0)), 0.015, 1 * ARCSEC)
+points = st.tuples(st.floats(-900, 900), st.floats(-900, 900), st.floats(1500, 2600)).map(np.array)
+
+
+@settings(max_examples=40, deadline=None)
+@given(points, st.sampled_from([THEODOLITES, TRACKER]))
+def test_the_jacobians_match_finite_differences(point, instrument):
+    jacobian = instrument.jacobian(point)
+    step = 1e-4
+    for axis in range(3):
+        delta = np.zeros(3)
+        delta[axis] = step
+        numeric = wrapped(instrument.predict(point + delta) - instrument.predict(point - delta)) / (2 * step)
+        assert np.allclose(jacobian[:, axis], numeric, rtol=1e-5, atol=1e-10)
+
+
+@settings(max_examples=40, deadline=None)
+@given(points, st.sampled_from([THEODOLITES, TRACKER]))
+def test_the_observations_give_back_their_point(point, instrument):
+    assert np.allclose(instrument.points(instrument.predict(point)), point, atol=1e-6)
+
+
+def test_the_implied_points_scatter_as_their_covariance_says(rng=np.random.default_rng(0)):
+    point = np.array([300.0, -200.0, 2100.0])
+    for instrument in (THEODOLITES, TRACKER):
+        clean = instrument.predict(point)
+        draws = instrument.points(clean + rng.normal(size=(20000, instrument.size)) * instrument.sigmas)
+        whitening = np.linalg.inv(np.linalg.cholesky(point_covariance(instrument, point)))
+        assert np.allclose(np.cov((draws - point) @ whitening.T, rowvar=False), np.eye(3), atol=0.05)
+
+
+def test_parallel_rays_cannot_be_triangulated():
+    station = Station((0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="parallel"):
+        Theodolites((station, Station((0.0, 0.0, 100.0, 0.0, 0.0, 0.0))), ARCSEC).points(np.zeros(4))
+
+
+def _observed_campaign(nominal, true, instrument, seed):
+    """A leg-lock campaign measured by ``instrument``: its angles (and ranges) with their
+    native noise, turned into points with their own covariance."""
+    from hexactl.calibration.campaign import plan_campaign
+    from hexactl.calibration.data import MeasurementData
+    from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM
+    from hexactl.kinematics.rotation import rotation_matrices
+    from hexactl.sim.instrument import SimulatedInstrument
+    from hexactl.sim.offline_campaign import execute_plans
+    from tests.calibration.conftest import SMALL
+
+    campaign = execute_plans(nominal, true, plan_campaign(nominal, SMALL), SimulatedInstrument.for_geometry(nominal, seed),
+                             DEFAULT_READING_SIGMA_MM, seed)  # the readings' noise the identification assumes
+    poses = campaign.true_poses
+    true_points = (np.einsum("nij,kj->nki", rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5]),
+                             np.array(nominal.measurement.feature_points)) + poses[:, None, :3])
+    rng = np.random.default_rng(seed)
+    observed = instrument.predict(true_points) + rng.normal(size=true_points.shape[:2] + (instrument.size,)) * instrument.sigmas
+    points = instrument.points(observed)
+    data = campaign.data
+    return MeasurementData(data.locked_leg, data.readings_mm, data.lines, points_mm=points,
+                           point_covariance_mm2=point_covariance(instrument, points))
+
+
+@pytest.mark.parametrize("instrument", [THEODOLITES, TRACKER], ids=["theodolites", "tracker"])
+def test_a_campaign_measured_by_the_instrument_calibrates_with_an_honest_prediction(nominal, instrument):
+    from hexactl.calibration.identification import identify
+    from hexactl.calibration.results import IdentificationOptions, Method
+    from hexactl.calibration.validation import summarise_validation
+    from hexactl.sim.offline_campaign import validate_geometry
+    from hexactl.sim.true_platform import true_geometry
+    from tests.calibration.test_sensor_gains import _calibrated
+
+    ratios = []
+    for seed in range(4):
+        true = true_geometry(nominal, seed)
+        result = identify(_observed_campaign(nominal, true, instrument, seed), nominal,
+                          IdentificationOptions(method=Method.FULL))
+        assert result.ok and 0.6 < result.chi2_per_dof < 1.4
+        actual = summarise_validation(validate_geometry(_calibrated(nominal, result), true)).max_position_error_mm
+        ratios.append(actual / result.predicted.expected_max_position_mm)
+    assert 0.5 < np.mean(ratios) < 2.0, ratios
