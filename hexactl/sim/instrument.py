@@ -12,7 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.rotation import rotation_matrix
+from hexactl.calibration.observations import Instrument
+from hexactl.kinematics.rotation import rotation_matrices, rotation_matrix
 
 
 class SimulatedInstrument:
@@ -41,3 +42,14 @@ class SimulatedInstrument:
         rotation = rotation_matrix(pose[3], pose[4], pose[5])
         exact = self.feature_points_mm @ rotation.T + np.asarray(pose[:3], dtype=float)
         return exact + self._rng.normal(0.0, self.point_sigma_mm, exact.shape)
+
+
+def observe(instrument: Instrument, feature_points_mm: NDArray, poses: NDArray, seed: int) -> NDArray[np.float64]:
+    """The instrument's own observations (N, K, m; radians and mm) of the feature points
+    (K, 3, moving frame) at the true absolute poses (N, 6; mm, rad), each with its native
+    noise (seeded)."""
+    poses = np.asarray(poses, dtype=float)
+    rotations = rotation_matrices(poses[:, 3], poses[:, 4], poses[:, 5])
+    points = np.einsum("nij,kj->nki", rotations, np.asarray(feature_points_mm, dtype=float)) + poses[:, None, :3]
+    noise = np.random.default_rng(seed).normal(size=points.shape[:2] + (instrument.size,))
+    return instrument.predict(points) + noise * instrument.sigmas

@@ -50,7 +50,7 @@ def test_parallel_rays_cannot_be_triangulated():
         Theodolites((station, Station((0.0, 0.0, 100.0, 0.0, 0.0, 0.0))), ARCSEC).points(np.zeros(4))
 
 
-def _observed_campaign(nominal, true, instrument, seed):
+def _observed_campaign(nominal, true, instrument, seed, mis_sighted=None):
     """A leg-lock campaign measured by ``instrument``: its angles (and ranges) with their
     native noise, turned into points with their own covariance."""
     from hexactl.calibration.campaign import plan_campaign
@@ -68,6 +68,9 @@ def _observed_campaign(nominal, true, instrument, seed):
                              np.array(nominal.measurement.feature_points)) + poses[:, None, :3])
     rng = np.random.default_rng(seed)
     observed = instrument.predict(true_points) + rng.normal(size=true_points.shape[:2] + (instrument.size,)) * instrument.sigmas
+    if mis_sighted is not None:  # (row, point, observation, error)
+        row, point, which, error = mis_sighted
+        observed[row, point, which] += error
     points = instrument.points(observed)
     data = campaign.data
     return MeasurementData(data.locked_leg, data.readings_mm, data.lines, points_mm=points,
@@ -92,3 +95,72 @@ def test_a_campaign_measured_by_the_instrument_calibrates_with_an_honest_predict
         actual = summarise_validation(validate_geometry(_calibrated(nominal, result), true)).max_position_error_mm
         ratios.append(actual / result.predicted.expected_max_position_mm)
     assert 0.5 < np.mean(ratios) < 2.0, ratios
+
+
+THEODOLITE_FILE = """kind = "theodolites"
+stations = [[4000, -3000, 1500, 0, 0, 140], [4000, 3000, 1500, 0, 0, -140]]
+angle_sigma_arcsec = 2.0
+"""
+TRACKER_FILE = """kind = "tracker"
+stations = [[-3500, 500, 1000, 0, 0, 10]]
+angle_sigma_arcsec = 1.0
+range_sigma_mm = 0.015
+"""
+
+
+@pytest.mark.parametrize("text", [THEODOLITE_FILE, TRACKER_FILE], ids=["theodolites", "tracker"])
+def test_simulate_campaign_writes_the_instruments_observations_and_calibrate_reads_them(tmp_path, capsys, text):
+    from hexactl.adapters.cli.main import main
+    from hexactl.adapters.files.geometry_file import load_geometry
+    from hexactl.sim.offline_campaign import validate_geometry
+    from hexactl.calibration.validation import summarise_validation
+    from tests.calibration.conftest import NOMINAL_PATH
+
+    instrument = tmp_path / "instrument.toml"
+    instrument.write_text(text)
+    data, true = tmp_path / "data.csv", tmp_path / "true.toml"
+    assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(data), "--per-leg", "10",
+                 "--instrument", str(instrument), "--true-output", str(true)]) == 0
+    header = next(line for line in data.read_text().splitlines() if line.startswith("leg,"))
+    assert ("p3_v_b" in header) if "theodolites" in text else ("p3_range" in header)
+    assert main(["calibrate", str(data), "--config", str(NOMINAL_PATH), "--instrument", str(instrument),
+                 "-o", str(tmp_path / "cal.toml")]) == 0
+    assert "status: ok" in capsys.readouterr().out
+    summary = summarise_validation(validate_geometry(load_geometry(tmp_path / "cal.toml"), load_geometry(true)))
+    assert summary.max_position_error_mm < 0.1  # instruments far finer than the paper's 0.25 mm per coordinate
+
+
+def test_observation_files_name_what_is_missing_or_wrong(tmp_path, capsys):
+    from hexactl.adapters.cli.main import main
+    from tests.calibration.conftest import NOMINAL_PATH
+
+    theodolites, tracker = tmp_path / "theodolites.toml", tmp_path / "tracker.toml"
+    theodolites.write_text(THEODOLITE_FILE)
+    tracker.write_text(TRACKER_FILE)
+    data = tmp_path / "data.csv"
+    assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(data), "--per-leg", "5",
+                 "--instrument", str(theodolites)]) == 0
+    capsys.readouterr()
+    calibrate = ["calibrate", str(data), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")]
+    assert main(calibrate) == 2
+    assert "the columns hold theodolites observations" in capsys.readouterr().err
+    assert main([*calibrate, "--instrument", str(tracker)]) == 2
+    assert "the instrument file describes tracker" in capsys.readouterr().err
+    broken = tmp_path / "broken.toml"
+    broken.write_text(TRACKER_FILE.replace("range_sigma_mm = 0.015\n", ""))
+    assert main([*calibrate, "--instrument", str(broken)]) == 2
+    assert "range_sigma_mm: a tracker needs it" in capsys.readouterr().err
+    assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "x.csv"), "--pose-form",
+                 "--instrument", str(tracker)]) == 2
+    assert "exclude each other" in capsys.readouterr().err
+
+
+def test_a_mis_sighted_angle_is_excluded_by_full(nominal):
+    from hexactl.calibration.identification import identify
+    from hexactl.calibration.results import IdentificationOptions, Method
+    from hexactl.sim.true_platform import true_geometry
+
+    data = _observed_campaign(nominal, true_geometry(nominal, 0), THEODOLITES, 0,
+                              mis_sighted=(17, 1, 2, np.radians(0.02)))  # station B's horizontal angle of p2
+    result = identify(data, nominal, IdentificationOptions(method=Method.FULL))
+    assert [(observation.row, observation.point) for observation in result.excluded] == [(17, 2)]

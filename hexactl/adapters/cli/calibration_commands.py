@@ -31,6 +31,7 @@ from hexactl.adapters.cli.common import (
 
 if TYPE_CHECKING:
     from hexactl.adapters.api.client import HexactlClient
+    from hexactl.calibration.observations import Instrument
     from hexactl.calibration.results import IdentificationResult
     from hexactl.kinematics.geometry import Geometry
 
@@ -75,6 +76,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     simulate.add_argument("--seed", type=int, default=0, help="seed of errors, plans and noise (default 0)")
     simulate.add_argument("--point-sigma", type=float, metavar="MM", help="instrument noise (default: the geometry's)")
     simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
+    simulate.add_argument("--instrument", metavar="FILE", help="write the angles (and ranges) of the instrument this "
+                          "TOML file describes, with its noise, instead of points (docs/calibration.md)")
     simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
     simulate.set_defaults(run=run_simulate)
 
@@ -107,6 +110,8 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
     calibrate.add_argument("--skip-bad-rows", action="store_true",
                            help="exclude rows with problems (listed) instead of refusing the file")
     calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
+    calibrate.add_argument("--instrument", metavar="FILE", help="the instrument (TOML: theodolites or a laser tracker, "
+                           "its stations and noise) whose own angles and ranges DATA holds (docs/calibration.md)")
     calibrate.add_argument("--point-sigma", type=float, metavar="MM",
                            help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
     calibrate.add_argument("--reading-sigma", type=float, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
@@ -177,7 +182,8 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     true = _load_geometry(arguments.true) if arguments.true else None
     point_sigma = nominal.measurement.point_sigma_mm if arguments.point_sigma is None else arguments.point_sigma
     try:
-        measurements = read_measurements(arguments.data, len(nominal.measurement.feature_points))
+        instrument = _load_instrument(arguments.instrument) if arguments.instrument else None
+        measurements = read_measurements(arguments.data, len(nominal.measurement.feature_points), instrument)
     except MeasurementFileError as error:
         raise CliError(str(error)) from None
     screened = measurements.problems + screen_measurements(
@@ -305,9 +311,11 @@ def run_plan(arguments: argparse.Namespace) -> int:
 def run_simulate(arguments: argparse.Namespace) -> int:
     import numpy as np
 
+    from hexactl.adapters.files.atomic import write_atomic
     from hexactl.adapters.files.geometry_file import save_geometry
-    from hexactl.adapters.files.measurements import write_measurements
+    from hexactl.adapters.files.measurements import format_observations, write_measurements
     from hexactl.calibration.data import MeasurementData, measured_poses
+    from hexactl.sim.instrument import observe
     from hexactl.calibration.campaign import CampaignDesign
     from hexactl.sim.offline_campaign import SimulationError, run_offline_campaign
     from hexactl.sim.true_platform import true_geometry
@@ -316,6 +324,9 @@ def run_simulate(arguments: argparse.Namespace) -> int:
     for path in (arguments.output, arguments.true_output):
         if path and Path(path).exists() and not arguments.force:
             raise CliError(f"{path} exists; refusing to overwrite it (use --force)")
+    if arguments.instrument and arguments.pose_form:
+        raise CliError("--instrument and --pose-form exclude each other: an instrument's own observations are of points")
+    instrument = _load_instrument(arguments.instrument) if arguments.instrument else None
     true = true_geometry(nominal, arguments.seed)
     design = CampaignDesign(postures_per_leg=arguments.per_leg, free_postures=arguments.free,
                             point_sigma_mm=arguments.point_sigma, seed=arguments.seed)
@@ -330,7 +341,13 @@ def run_simulate(arguments: argparse.Namespace) -> int:
     comments = [f"hexactl simulate-campaign, seed {arguments.seed}: {arguments.per_leg} leg-lock postures per leg, "
                 f"{arguments.free} free", "simulated: not measured on a real platform"]
     try:
-        write_measurements(arguments.output, data, overwrite=arguments.force, comments=comments)
+        if instrument is not None:
+            observations = observe(instrument, np.array(nominal.measurement.feature_points), campaign.true_poses,
+                                   arguments.seed)
+            text = format_observations(data, observations, instrument, comments)
+            write_atomic(arguments.output, text.encode("utf-8"), overwrite=arguments.force)
+        else:
+            write_measurements(arguments.output, data, overwrite=arguments.force, comments=comments)
         if arguments.true_output:
             save_geometry(true, arguments.true_output, overwrite=arguments.force)
     except OSError as error:
@@ -377,6 +394,15 @@ def _stop(client: HexactlClient) -> None:
         client.request("stop")
     except ServiceUnavailable:
         pass  # the service is gone: nothing to brake through it
+
+
+def _load_instrument(path: str) -> Instrument:
+    from hexactl.adapters.files.instrument_file import InstrumentFileError, load_instrument
+
+    try:
+        return load_instrument(path)
+    except InstrumentFileError as error:
+        raise CliError(str(error)) from None
 
 
 def _load_geometry(path: str) -> Geometry:

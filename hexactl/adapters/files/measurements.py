@@ -9,6 +9,11 @@ blank lines allowed anywhere. Columns, in any order:
   the fixed frame; mm, deg) or feature points ``p1_x, p1_y, p1_z, p2_x, …`` (fixed frame,
   mm; three or more, point k being the geometry's ``[measurement] feature_points[k]``).
   When both are present the points are used: they are the instrument's raw output.
+- or the instrument's own observations of each point (read with the instrument's file,
+  :mod:`hexactl.adapters.files.instrument_file`): two theodolites' angles ``p1_hz_a,
+  p1_v_a, p1_hz_b, p1_v_b, p2_hz_a, …`` (horizontal and vertical, degrees), or a laser
+  tracker's ``p1_range, p1_hz, p1_v, …`` (mm, degrees). Each point is then the one its
+  observations imply, with its own covariance (:mod:`hexactl.calibration.observations`).
 
 Other columns are ignored (and listed). A row with a missing, non-numeric or non-finite
 value or a bad leg number is reported by its line and left out of the data; the caller
@@ -38,6 +43,7 @@ import numpy as np
 
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.calibration.data import MeasurementData, RowProblem
+from hexactl.calibration.observations import Instrument, Theodolites, point_covariance
 from hexactl.calibration.planning import PosturePlan
 from hexactl.kinematics.inverse import LEG_COUNT
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
@@ -67,21 +73,29 @@ class MeasurementFile:
     ignored_columns: tuple[str, ...]
 
 
-def read_measurements(path: str | os.PathLike[str], feature_point_count: int) -> MeasurementFile:
+def read_measurements(path: str | os.PathLike[str], feature_point_count: int,
+                      instrument: Instrument | None = None) -> MeasurementFile:
     """Read and parse a measurement file; ``feature_point_count`` is the geometry's number of
-    feature points. Raises :class:`MeasurementFileError` naming the file and the problem."""
+    feature points, ``instrument`` the one whose own observations the file may hold.
+    Raises :class:`MeasurementFileError` naming the file and the problem."""
     location = Path(path)
     try:
         raw = location.read_bytes()
         text = raw.decode("utf-8-sig")
     except (OSError, UnicodeDecodeError) as error:
         raise MeasurementFileError(f"{location}: cannot read: {error}") from None
-    return parse_measurements(text, str(location), feature_point_count, hashlib.sha256(raw).hexdigest())
+    return parse_measurements(text, str(location), feature_point_count, hashlib.sha256(raw).hexdigest(), instrument)
 
 
-def parse_measurements(text: str, source: str, feature_point_count: int, sha256: str = "") -> MeasurementFile:
-    """Parse measurement CSV ``text`` (see the module docstring)."""
+def parse_measurements(text: str, source: str, feature_point_count: int, sha256: str = "",
+                       instrument: Instrument | None = None) -> MeasurementFile:
+    """Parse measurement CSV ``text`` (see the module docstring); ``instrument`` turns its
+    own observations into points (needed when the file holds them)."""
     header_line, header, rows = _table(text, source)
+    kind, observation_columns = _observation_columns(header)
+    if observation_columns:
+        return _parse_observations(header_line, header, rows, source, feature_point_count, sha256, instrument, kind,
+                                   observation_columns)
     point_columns = _point_columns(header)
     form = "points" if point_columns else "pose"
     pose_columns = [] if point_columns else list(POSE_AXES)
@@ -197,6 +211,81 @@ def _leg_problem(leg: float, field: str) -> str | None:
     if leg == int(leg) and 0 <= leg <= LEG_COUNT:
         return None
     return f"leg {field.strip()!r} must be 0 (none locked) or a leg 1-{LEG_COUNT}"
+
+
+OBSERVATION_COLUMNS = {"theodolites": ("hz_a", "v_a", "hz_b", "v_b"), "tracker": ("range", "hz", "v")}
+"""Each instrument's columns per feature point (``p1_hz_a`` …); angles in degrees, range mm."""
+
+
+def instrument_kind(instrument: Instrument) -> str:
+    return "theodolites" if isinstance(instrument, Theodolites) else "tracker"
+
+
+def _observation_columns(header: Sequence[str]) -> tuple[str, list[tuple[str, ...]]]:
+    """The instrument whose observations the header holds and their columns per point."""
+    for kind, names in OBSERVATION_COLUMNS.items():
+        points: list[tuple[str, ...]] = []
+        while any(f"p{len(points) + 1}_{name}" in header for name in names):
+            points.append(tuple(f"p{len(points) + 1}_{name}" for name in names))
+        if points:
+            return kind, points
+    return "", []
+
+
+def _parse_observations(header_line: int, header: Sequence[str], rows: list[tuple[int, str]], source: str,
+                        feature_point_count: int, sha256: str, instrument: Instrument | None, kind: str,
+                        columns: list[tuple[str, ...]]) -> MeasurementFile:
+    if instrument is None:
+        raise MeasurementFileError(f"{source}: line {header_line}: the columns hold {kind} observations ({columns[0][0]} "
+                                   "…): give the instrument's file (hexactl calibrate --instrument FILE), which says "
+                                   "where it stood and its noise")
+    if instrument_kind(instrument) != kind:
+        raise MeasurementFileError(f"{source}: line {header_line}: the columns hold {kind} observations, the instrument "
+                                   f"file describes {instrument_kind(instrument)}: give the instrument that took them")
+    required = ["leg", *READING_COLUMNS, *(name for point in columns for name in point)]
+    if missing := [name for name in required if name not in header]:
+        raise MeasurementFileError(f"{source}: line {header_line}: missing columns {', '.join(missing)}")
+    _check_point_count(len(columns), source, feature_point_count)
+    position = {name: index for index, name in enumerate(header)}
+    problems: list[RowProblem] = []
+    legs, readings, lines, values = [], [], [], []
+    for number, leg, numbers in _valid_rows(rows, position, required, problems):
+        legs.append(leg)
+        readings.append([numbers[name] for name in READING_COLUMNS])
+        lines.append(number)
+        values.append([[numbers[name] for name in point] for point in columns])
+    count = len(legs)
+    observations = np.array(values, dtype=float).reshape(count, len(columns), instrument.size)
+    angles = slice(0, 4) if kind == "theodolites" else slice(1, 3)
+    observations[..., angles] = np.radians(observations[..., angles])
+    try:
+        points = instrument.points(observations)
+    except ValueError as error:
+        raise MeasurementFileError(f"{source}: {error}: check the instrument file's stations") from None
+    data = MeasurementData(np.array(legs, dtype=np.int64), np.array(readings).reshape(count, LEG_COUNT),
+                           np.array(lines, dtype=np.int64), points_mm=points,
+                           point_covariance_mm2=point_covariance(instrument, points))
+    ignored = tuple(name for name in header if name not in set(required))
+    return MeasurementFile(source, data, tuple(problems), kind, sha256, ignored)
+
+
+def format_observations(data: MeasurementData, observations: np.ndarray, instrument: Instrument,
+                        comments: Sequence[str] = ()) -> str:
+    """Measurement CSV text with the instrument's own ``observations`` (N, K, m; radians
+    and mm) in place of the points."""
+    kind = instrument_kind(instrument)
+    header = ["leg", *READING_COLUMNS, *(f"p{k}_{name}" for k in range(1, observations.shape[1] + 1)
+                                         for name in OBSERVATION_COLUMNS[kind])]
+    shown = np.array(observations, dtype=float)
+    angles = slice(0, 4) if kind == "theodolites" else slice(1, 3)
+    shown[..., angles] = np.degrees(shown[..., angles])
+    out = io.StringIO()
+    for comment in comments:
+        out.write(f"# {comment}\n")
+    out.write(",".join(header) + "\n")
+    for leg, reading, values in zip(data.locked_leg, data.readings_mm, shown.reshape(len(data), -1)):
+        out.write(",".join([str(int(leg)), *(f"{v:.6f}" for v in reading), *(f"{v:.9f}" for v in values)]) + "\n")
+    return out.getvalue()
 
 
 def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:

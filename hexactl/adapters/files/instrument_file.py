@@ -1,0 +1,82 @@
+"""Instrument files: which instrument measured the feature points, where it stood, and its
+native noise (TOML). Two forms::
+
+    kind = "theodolites"                  # the paper's: two stations, two angles each
+    stations = [[4000, -3000, 1500, 0, 0, 140], [4000, 3000, 1500, 0, 0, -140]]
+    angle_sigma_arcsec = 2.0
+
+    kind = "tracker"                      # a laser tracker: range and two angles
+    stations = [[-3500, 500, 1000, 0, 0, 10]]
+    angle_sigma_arcsec = 1.0
+    range_sigma_mm = 0.015
+
+A station is its pose in the fixed frame (x, y, z mm; roll, pitch, yaw deg): its local x
+axis is horizontal angle 0, its xy plane the horizontal. See
+:mod:`hexactl.calibration.observations`.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from math import radians
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from hexactl.calibration.observations import Instrument, LaserTracker, Station, Theodolites
+from hexactl.kinematics.geometry import describe_validation_error
+
+Six = tuple[float, float, float, float, float, float]
+
+
+class InstrumentFileError(ValueError):
+    """An instrument file that cannot be used; the message names the file, key and problem."""
+
+
+class _InstrumentDescription(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    kind: Literal["theodolites", "tracker"]
+    stations: tuple[Six, ...] = Field(description="each station's pose in the fixed frame, mm and deg")
+    angle_sigma_arcsec: float = Field(gt=0, description="each angle's noise, 1σ, arc-seconds")
+    range_sigma_mm: float | None = Field(default=None, gt=0, description="the tracker's range noise, 1σ, mm")
+
+    @model_validator(mode="after")
+    def _complete(self) -> _InstrumentDescription:
+        stations = 2 if self.kind == "theodolites" else 1
+        if len(self.stations) != stations:
+            raise ValueError(f"stations: {self.kind} need {stations} station pose(s), got {len(self.stations)}")
+        if (self.kind == "tracker") != (self.range_sigma_mm is not None):
+            raise ValueError("range_sigma_mm: a tracker needs it, theodolites have none")
+        return self
+
+    def instrument(self) -> Instrument:
+        stations = tuple(Station(pose) for pose in self.stations)
+        angle = radians(self.angle_sigma_arcsec / 3600.0)
+        if self.kind == "theodolites":
+            return Theodolites((stations[0], stations[1]), angle)
+        assert self.range_sigma_mm is not None
+        return LaserTracker(stations[0], self.range_sigma_mm, angle)
+
+
+def parse_instrument(text: str, source: str) -> Instrument:
+    """The instrument TOML ``text`` describes. Raises :class:`InstrumentFileError`."""
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise InstrumentFileError(f"{source}: not valid TOML: {error}") from None
+    try:
+        return _InstrumentDescription.model_validate(document).instrument()
+    except ValidationError as error:
+        raise InstrumentFileError(describe_validation_error(error, source)) from None
+
+
+def load_instrument(path: str | os.PathLike[str]) -> Instrument:
+    """Read and validate an instrument file. Raises :class:`InstrumentFileError`."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise InstrumentFileError(f"{path}: cannot read: {error}") from None
+    return parse_instrument(text, str(path))
