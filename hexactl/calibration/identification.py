@@ -60,6 +60,8 @@ def identify(data: MeasurementData, nominal: Geometry, options: IdentificationOp
 
 
 def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
+    if options.method is Method.FULL:
+        return _full_warning_of_extras(data, nominal, options)
     if options.method is not Method.AUTO:
         return _METHODS[options.method](data, nominal, options)
     full, extras_note = _full_with_significant_extras(data, nominal, options)
@@ -87,28 +89,54 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
                    f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}) and leglock offers nothing better for these data{extras_note}")
 
 
+EXTRAS = (("estimate_scales", "sensor scale errors", "--scales"), ("estimate_drift", "sensor offset drift", None))
+"""What ``full`` may add to the structural parameters, tested in this order."""
+
+
+def _significant_extra(data: MeasurementData, nominal: Geometry, options: IdentificationOptions,
+                       full: IdentificationResult, option: str) -> tuple[IdentificationResult, float, float] | None:
+    """``full`` refitted with ``option`` (an :data:`EXTRAS` flag) when the data show it
+    (richer result, χ² drop, threshold); None otherwise. The test is the likelihood ratio
+    (χ², 6 dof) at :data:`EXTRA_TEST_FALSE_ALARM`, with the χ² drop divided by the richer
+    fit's χ²/dof where that exceeds 1: a misfit of another kind (a sliding sensor) lowers χ²
+    with any added freedom, and must not pass for a gain or a drift (as the covariance is
+    scaled up by the same factor)."""
+    if getattr(options, option) or not full.ok:
+        return None
+    richer = identify_full(data, nominal, replace(options, **{option: True}))
+    threshold = float(chi2.isf(EXTRA_TEST_FALSE_ALARM, LEG_COUNT))
+    drop = (full.chi2 - richer.chi2) / max(1.0, richer.chi2_per_dof)
+    return (richer, drop, threshold) if richer.ok and drop > threshold else None  # also None for NaN
+
+
 def _full_with_significant_extras(data: MeasurementData, nominal: Geometry,
                                   options: IdentificationOptions) -> tuple[IdentificationResult, str]:
     """``full``, with sensor scale errors and then offset drift when asked or when the data
-    show them, and why (for the reason). Each is a likelihood-ratio test (χ², 6 dof) at
-    :data:`EXTRA_TEST_FALSE_ALARM`, with the χ² drop divided by the richer fit's χ²/dof
-    where that exceeds 1: a misfit of another kind (a sliding sensor) lowers χ² with any
-    added freedom, and must not pass for a gain or a drift (as the covariance is scaled up
-    by the same factor)."""
+    show them (:func:`_significant_extra`), and why (for the reason)."""
     full = identify_full(data, nominal, options)
-    threshold = float(chi2.isf(EXTRA_TEST_FALSE_ALARM, LEG_COUNT))
     notes = ""
-    for option, what in (("estimate_scales", "sensor scale errors"), ("estimate_drift", "sensor offset drift")):
-        if getattr(options, option) or not full.ok:
-            continue
-        richer_options = replace(options, **{option: True})
-        richer = identify_full(data, nominal, richer_options)
-        drop = (full.chi2 - richer.chi2) / max(1.0, richer.chi2_per_dof)
-        if richer.ok and drop > threshold:  # also false for NaN (no redundancy)
-            full, options = richer, richer_options
+    for option, what, _ in EXTRAS:
+        if (found := _significant_extra(data, nominal, options, full, option)) is not None:
+            full, drop, threshold = found
+            options = replace(options, **{option: True})
             notes += (f"; {what} identified: they lower χ² by {drop:.1f}, more than their absence would by chance "
                       f"({threshold:.1f} at probability {EXTRA_TEST_FALSE_ALARM:g})")
     return full, notes
+
+
+def _full_warning_of_extras(data: MeasurementData, nominal: Geometry,
+                            options: IdentificationOptions) -> IdentificationResult:
+    """``full`` as asked, with a warning for each extra the data show but it was not asked
+    to identify (the misspecification test of gains and drift)."""
+    full = identify_full(data, nominal, options)
+    warnings = []
+    for option, what, flag in EXTRAS:
+        if (found := _significant_extra(data, nominal, options, full, option)) is not None:
+            _, drop, threshold = found
+            remedy = f"pass {flag} or use --method auto" if flag else "use --method auto, which identifies it"
+            warnings.append(f"the data show {what} (modelling it lowers χ² by {drop:.1f}, beyond the {threshold:.1f} "
+                            f"chance gives with probability {EXTRA_TEST_FALSE_ALARM:g}): {remedy}")
+    return replace(full, warnings=full.warnings + tuple(warnings)) if warnings else full
 
 
 def _no_worse(candidate: IdentificationResult, reference: IdentificationResult) -> bool:

@@ -130,3 +130,12 @@ def test_misplaced_feature_points_are_named_when_their_tolerance_is_not_given(no
         result = identify(moved.data, nominal, IdentificationOptions(method=Method.FULL))
         warning = next(w for w in result.warnings if "feature points' residuals are the same in every posture" in w)
         assert "feature_point_sigma_mm" in warning
+
+
+def test_full_without_drift_warns_that_the_data_show_it(nominal):
+    data, _, _ = _drifting(nominal, 6)
+    result = identify(data, nominal, IdentificationOptions(method=Method.FULL))
+    assert any("the data show sensor offset drift" in warning for warning in result.warnings)
+    steady = identify(run_offline_campaign(nominal, true_geometry(nominal, 6), SMALL).data, nominal,
+                      IdentificationOptions(method=Method.FULL))
+    assert not any("the data show" in warning for warning in steady.warnings)

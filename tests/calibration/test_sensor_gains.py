@@ -106,3 +106,9 @@ def test_the_simulated_platform_with_gains_moves_by_its_true_sensor_model(nomina
     assert PhysicalPlatform(gained, lambda: readings).true_pose().absolute == pytest.approx(pose, abs=1e-6)
     ignored = PhysicalPlatform(gained, lambda: sensor_setpoints(exact.legs, pose)).true_pose().absolute
     assert np.max(np.abs(np.subtract(ignored[:3], pose[:3]))) > 0.01
+
+
+def test_full_without_scales_warns_that_the_data_show_gains(nominal, gained):
+    result = identify(run_offline_campaign(nominal, gained, SMALL).data, nominal, IdentificationOptions(method=Method.FULL))
+    assert not result.parameters.has_scales
+    assert any("the data show sensor scale errors" in warning and "--scales" in warning for warning in result.warnings)
