@@ -106,8 +106,10 @@ class FakeController:
     def operator_frames(self) -> OperatorFrames:
         return self.frames
 
+    accuracy: dict | None = None  # what the fake predicts everywhere (None: no covariance, as the nominal)
+
     def predicted_accuracy(self) -> dict | None:
-        return None  # the fake's geometry is the nominal: no covariance
+        return self.accuracy
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
                       frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
@@ -116,7 +118,8 @@ class FakeController:
             items = [{"waypoint": 1, "pose": tuple(pose), **{k: getattr(v, k) for k in ("kind", "message", "value", "limit", "leg", "axis")}}
                      for v in violations]
             return CommandResult.failure(ErrorCode.PATH_VIOLATION, f"waypoint 1: {violations[0].message}", violations=items)
-        return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1)
+        return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1,
+                                     predicted_accuracy=self.accuracy)
 
     def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
             deadline_ns: int | None = None) -> CommandResult:

@@ -95,6 +95,15 @@ def test_validate_pose_answers_what_move_would(service) -> None:
     assert service.controller.calls == []
 
 
+def test_status_and_validate_pose_carry_the_predicted_accuracy_and_move_its_tolerance(service) -> None:
+    assert send(service, "status")["predicted_accuracy"] is None  # the nominal: no covariance
+    service.controller.accuracy = {"position_mm": 0.05, "position_axes_mm": [0.03, 0.03, 0.02], "orientation_deg": 0.002,
+                                   "tool_point_mm": [0.0, 0.0, 300.0]}
+    assert send(service, "status")["predicted_accuracy"] == service.controller.accuracy
+    assert send(service, "validate_pose", pose=[0, 0, 50, 0, 0, 0])["predicted_accuracy"] == service.controller.accuracy
+    assert send(service, "move", pose=[0, 0, 50, 0, 0, 0], tolerance_mm=0)["error"]["code"] == "invalid_request"
+
+
 def test_status_carries_the_telemetry_record(service) -> None:
     reply = send(service, "status")
     assert reply["status"]["state"] == "disabled"
