@@ -106,18 +106,12 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
             f"{source}: line {header_line}: missing columns {', '.join(missing)} (a row needs leg, l1 … l6 and either "
             "x, y, z, roll, pitch, yaw or feature points p1_x, p1_y, p1_z … p3_z)")
     _check_point_count(len(point_columns), source, feature_point_count)
-    position = {name: index for index, name in enumerate(header)}
     used = set(required) | (set(POSE_AXES) if point_columns else set())
     ignored = tuple(name for name in header if name not in used)
 
     problems: list[RowProblem] = []
-    legs, readings, lines, values = [], [], [], []
-    for number, leg, numbers in _valid_rows(rows, position, required, problems):
-        legs.append(leg)
-        readings.append([numbers[name] for name in READING_COLUMNS])
-        lines.append(number)
-        values.append([numbers[name] for name in pose_columns] if pose_columns
-                      else [[numbers[name] for name in point] for point in point_columns])
+    legs, readings, lines, values = _good_rows(rows, header, required, [pose_columns] if pose_columns else point_columns,
+                                               problems)
     count = len(legs)
     arrays = dict(locked_leg=np.array(legs, dtype=np.int64), readings_mm=np.array(readings).reshape(count, LEG_COUNT),
                   lines=np.array(lines, dtype=np.int64))
@@ -246,14 +240,8 @@ def _parse_observations(header_line: int, header: Sequence[str], rows: list[tupl
     if missing := [name for name in required if name not in header]:
         raise MeasurementFileError(f"{source}: line {header_line}: missing columns {', '.join(missing)}")
     _check_point_count(len(columns), source, feature_point_count)
-    position = {name: index for index, name in enumerate(header)}
     problems: list[RowProblem] = []
-    legs, readings, lines, values = [], [], [], []
-    for number, leg, numbers in _valid_rows(rows, position, required, problems):
-        legs.append(leg)
-        readings.append([numbers[name] for name in READING_COLUMNS])
-        lines.append(number)
-        values.append([[numbers[name] for name in point] for point in columns])
+    legs, readings, lines, values = _good_rows(rows, header, required, columns, problems)
     count = len(legs)
     observations = np.array(values, dtype=float).reshape(count, len(columns), instrument.size)
     angles = slice(0, 4) if kind == "theodolites" else slice(1, 3)
@@ -286,6 +274,20 @@ def format_observations(data: MeasurementData, observations: np.ndarray, instrum
     for leg, reading, values in zip(data.locked_leg, data.readings_mm, shown.reshape(len(data), -1)):
         out.write(",".join([str(int(leg)), *(f"{v:.6f}" for v in reading), *(f"{v:.9f}" for v in values)]) + "\n")
     return out.getvalue()
+
+
+def _good_rows(rows: Iterable[tuple[int, str]], header: Sequence[str], required: Sequence[str],
+               groups: Sequence[Sequence[str]], problems: list[RowProblem]) -> tuple[list, list, list, list]:
+    """The good rows' legs, readings, lines and values of each column group (a point's
+    coordinates or observations, or the pose); the bad rows' problems into ``problems``."""
+    position = {name: index for index, name in enumerate(header)}
+    legs, readings, lines, values = [], [], [], []
+    for number, leg, numbers in _valid_rows(rows, position, required, problems):
+        legs.append(leg)
+        readings.append([numbers[name] for name in READING_COLUMNS])
+        lines.append(number)
+        values.append([[numbers[name] for name in group] for group in groups])
+    return legs, readings, lines, values
 
 
 def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:
