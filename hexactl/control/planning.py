@@ -42,7 +42,7 @@ from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState, MotionLimits, preview
 from hexactl.kinematics.frames import Frames, tools_in_work
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import lengths_from_readings, sensor_setpoints, sensor_setpoints_batch
+from hexactl.kinematics.inverse import leg_length_of_reading, sensor_setpoints, sensor_setpoints_batch
 from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
 from hexactl.kinematics.axes import (
     AbsoluteMmRad,
@@ -112,7 +112,7 @@ class LegLock:
 
     def length_mm(self, geometry: Geometry) -> float:
         """The locked joint-to-joint length in ``geometry``."""
-        return float(lengths_from_readings(geometry.legs, self.sensor_mm, self.leg - 1))
+        return leg_length_of_reading(geometry.legs, self.leg - 1, self.sensor_mm)
 
 
 @dataclass(frozen=True, slots=True)

@@ -84,8 +84,15 @@ def sensor_setpoints(model: LegModel, pose: Sequence[float]) -> list[float]:
     return [(length - row[6]) / row[7] for length, row in zip(leg_lengths(model, pose), model._rows)]
 
 
-# The sensor model, length = zero + gain·reading, lives in these two functions (and in
-# sensor_setpoints' scalar copy above, kept in plain floats for the loop).
+def leg_length_of_reading(model: LegModel, leg_index: int, reading: float) -> float:
+    """Leg ``leg_index``'s (0-based) length, mm, at sensor ``reading``, mm: the scalar copy
+    of :func:`lengths_from_readings` for the loop (leg-lock tracking, every cycle)."""
+    row = model._rows[leg_index]
+    return row[6] + row[7] * reading
+
+
+# The sensor model, length = zero + gain·reading, lives in these two functions (and in the
+# scalar copies above, sensor_setpoints and leg_length_of_reading, plain floats for the loop).
 def lengths_from_readings(model: LegModel, readings: ArrayLike, legs: int | slice = slice(None)) -> NDArray[np.float64]:
     """Joint-to-joint lengths, mm, of sensor readings, mm, shaped (..., 6), or of leg index
     ``legs`` (0-based) alone: ``zero + (1 + e)·reading``."""

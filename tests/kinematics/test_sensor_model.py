@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import GeometryError, geometry_from_mapping
 from hexactl.kinematics.inverse import (
-    leg_lengths, lengths_from_readings, readings_from_lengths, sensor_setpoints, sensor_setpoints_batch,
+    leg_length_of_reading, leg_lengths, lengths_from_readings, readings_from_lengths, sensor_setpoints,
+    sensor_setpoints_batch,
 )
 from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.kinematics.workspace import assess_readings
@@ -45,6 +46,7 @@ def test_one_leg_alone_follows_the_same_rule(nominal) -> None:
     every = lengths_from_readings(geometry.legs, readings)
     for leg in range(6):
         assert float(lengths_from_readings(geometry.legs, readings[leg], leg)) == pytest.approx(every[leg], abs=1e-12)
+        assert leg_length_of_reading(geometry.legs, leg, readings[leg]) == pytest.approx(every[leg], abs=1e-12)
         assert float(readings_from_lengths(geometry.legs, every[leg], leg)) == pytest.approx(readings[leg], abs=1e-12)
 
 
