@@ -19,8 +19,8 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
 from dataclasses import asdict, replace
+from typing import Any
 
 import numpy as np
 

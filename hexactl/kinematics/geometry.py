@@ -164,7 +164,8 @@ class Geometry(_Strict):
             data = {**data, "calibration": calibration}
             if older is not None:
                 if "sensor_scale_errors" in data and list(data["sensor_scale_errors"]) != list(older):
-                    raise ValueError("sensor_scale_errors and calibration.sensor_scale_errors differ: keep the top-level one")
+                    raise ValueError("sensor_scale_errors and calibration.sensor_scale_errors differ: the latter is an older "
+                                     "file's place for them; remove it, keeping the values the controller should apply")
                 data["sensor_scale_errors"] = older
         return data
 
