@@ -28,13 +28,15 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import select
 import signal
+import socket
 import sys
 import threading
 import time
 from collections.abc import Collection
 from importlib import resources
-from contextlib import ExitStack
+from contextlib import ExitStack, suppress
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -380,19 +382,12 @@ def run_service(config: ServiceConfig) -> NoReturn:
     :raises ServiceError: if the service does not start (see :meth:`Service.start`)
     """
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
-    stopping = threading.Event()
-
-    def stop(signum: int, frame: FrameType | None) -> None:
-        log.info("%s: shutting down", signal.Signals(signum).name)
-        stopping.set()
-
-    previous = {number: signal.signal(number, stop) for number in (signal.SIGINT, signal.SIGTERM)}
     status = 0
-    try:
+    with ShutdownSignals() as signals:
         service = Service.start(config)
         try:
             rejected = 0
-            while not stopping.wait(API_WATCH_INTERVAL_S):
+            while (received := signals.wait(API_WATCH_INTERVAL_S)) is None:
                 if service.link.rejected > rejected:  # a bug of ours if ever: the API process sends only commands
                     log.warning("the loop link dropped %d messages that were not commands", service.link.rejected - rejected)
                     rejected = service.link.rejected
@@ -400,21 +395,66 @@ def run_service(config: ServiceConfig) -> NoReturn:
                     log.error("%s: shutting down", problem)
                     status = 1
                     break
+            else:
+                log.info("%s: shutting down", received.name)
         finally:
             backstop = threading.Timer(SHUTDOWN_LIMIT_S, _exit_now)
             backstop.daemon = True
             backstop.start()
             service.close()
             backstop.cancel()
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
     # Everything is closed. End now rather than through the interpreter's finalisation,
     # which tears numpy, scipy and pydantic down module by module after "stopped" (0.2 s on
     # the host, seconds in a slow guest: BENCHMARKS.md) while a service manager waits.
     logging.shutdown()  # flush the log: os._exit skips it
     sys.stdout.flush()
     os._exit(status)
+
+
+class ShutdownSignals:
+    """SIGINT and SIGTERM for a main thread that watches the service: inside the ``with``,
+    :meth:`wait` returns the first one received.
+
+    The handler only appends to a list and the wake-up file descriptor (written by the
+    interpreter's C handler) ends the wait. It takes no lock: CPython runs a Python handler
+    between two bytecodes of the main thread, perhaps while that thread holds the very
+    lock a ``threading.Event.set()`` would take, and then waits for itself for ever (the
+    ``signal`` module's warning; python/cpython#126434). A service hung that way after
+    "SIGTERM" with no backstop running yet.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self._received: list[signal.Signals] = []
+        self._wake_read, self._wake_write = socket.socketpair()
+        self._previous: dict[signal.Signals, object] = {}
+        self._previous_wakeup_fd = -1
+
+    def __enter__(self) -> ShutdownSignals:
+        for sock in (self._wake_read, self._wake_write):
+            sock.setblocking(False)
+        self._previous_wakeup_fd = signal.set_wakeup_fd(self._wake_write.fileno(), warn_on_full_buffer=False)
+        self._previous = {number: signal.signal(number, self._handle) for number in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+        signal.set_wakeup_fd(self._previous_wakeup_fd)
+        self._wake_read.close()
+        self._wake_write.close()
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self._received.append(signal.Signals(signum))
+
+    def wait(self, timeout_s: float) -> signal.Signals | None:
+        """The first signal received, waiting up to ``timeout_s`` s for one (None: none)."""
+        if not self._received:
+            select.select([self._wake_read], [], [], timeout_s)
+            with suppress(BlockingIOError):
+                self._wake_read.recv(64)
+        return self._received[0] if self._received else None
 
 
 def _exit_now() -> None:

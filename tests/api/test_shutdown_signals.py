@@ -1,0 +1,94 @@
+"""``hexactl serve``'s main thread sees SIGINT/SIGTERM wherever the signal lands.
+
+CI once saw the service log "SIGTERM: shutting down" and then hang for good: the handler
+set a ``threading.Event`` while the main thread, interrupted inside ``Event.wait``, held
+the lock ``set()`` needed (python/cpython#126434). The probe below delivers the signal at
+every line the wait runs; the old way deadlocks at the first line that holds the lock.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+from hexactl.application.service import ShutdownSignals
+
+ROOT = Path(__file__).resolve().parents[2]
+
+WAIT_S = 120.0
+"""Longer than any scheduling delay: a wait that ends before this ended on the signal."""
+
+HANG_S = 120.0
+"""A probe still running after this long is deadlocked (it takes well under a second)."""
+
+PROBE = textwrap.dedent(
+    """
+    import os, signal, sys
+    from hexactl.application.service import ShutdownSignals
+
+    def lines_run_by(call, *arguments):
+        seen = []
+        def tracer(frame, event, arg):
+            if event == "line":
+                seen.append((frame.f_code.co_filename, frame.f_lineno))
+            return tracer
+        sys.settrace(tracer)
+        call(*arguments)
+        sys.settrace(None)
+        return list(dict.fromkeys(seen))
+
+    with ShutdownSignals() as signals:
+        positions = lines_run_by(signals.wait, 0.0)
+    for position in positions:
+        with ShutdownSignals() as signals:
+            sent = []
+            def tracer(frame, event, arg):
+                if event == "line" and not sent and (frame.f_code.co_filename, frame.f_lineno) == position:
+                    sent.append(position)
+                    os.kill(os.getpid(), signal.SIGTERM)
+                return tracer
+            sys.settrace(tracer)
+            received = signals.wait(0.0)  # whatever it waits for, the signal is already sent
+            sys.settrace(None)
+            assert sent and received == signal.SIGTERM, (position, sent, received)
+    print(len(positions))
+    """
+)
+
+
+def test_a_signal_at_any_line_of_the_wait_is_received() -> None:
+    # SIGKILL at the time-out: a deadlocked probe would never act on SIGTERM.
+    environment = {**os.environ, "PYTHONPATH": str(ROOT)}
+    probe = subprocess.run([sys.executable, "-c", PROBE], cwd=ROOT, env=environment, capture_output=True, text=True,
+                           timeout=HANG_S)
+    assert probe.returncode == 0, probe.stderr
+    assert int(probe.stdout) >= 3, probe.stdout  # the wait's own lines at least
+
+
+def test_a_signal_before_the_wait_is_returned_and_the_handlers_are_restored() -> None:
+    before = signal.getsignal(signal.SIGTERM)
+    with ShutdownSignals() as signals:
+        assert signals.wait(0.0) is None
+        os.kill(os.getpid(), signal.SIGINT)
+        assert signals.wait(60.0) == signal.SIGINT
+        assert signals.wait(0.0) == signal.SIGINT  # the first one stays the answer
+    assert signal.getsignal(signal.SIGTERM) is before
+    assert signal.set_wakeup_fd(-1) == -1  # no wake-up descriptor left behind
+
+
+def test_a_signal_during_the_wait_ends_it() -> None:
+    with ShutdownSignals() as signals:
+        sender = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM))
+        sender.start()
+        started = time.monotonic()
+        received = signals.wait(WAIT_S)
+        waited = time.monotonic() - started
+        sender.join()
+    assert received == signal.SIGTERM
+    assert waited < WAIT_S / 2, f"the wait went on for {waited:.1f} s after the signal"
