@@ -119,8 +119,14 @@ class FramePoseMmDeg(_SixAxes):
         return (self.x, self.y, self.z, radians(self.roll), radians(self.pitch), radians(self.yaw))
 
 
+POSE_MAGNITUDE_LIMIT = 1e6
+"""The largest magnitude a pose component may have (mm or deg): far beyond any platform's
+reach and any sensible angle, and small enough that squaring it cannot overflow."""
+
+
 def validate_pose_values(pose: Sequence[float]) -> str | None:
-    """None when ``pose`` is six finite numbers, else a sentence naming the problem."""
+    """None when ``pose`` is six finite numbers within ±:data:`POSE_MAGNITUDE_LIMIT`, else a
+    sentence naming the problem."""
     try:
         values = [float(v) for v in pose]
     except (TypeError, ValueError):
@@ -130,4 +136,8 @@ def validate_pose_values(pose: Sequence[float]) -> str | None:
     bad = [POSE_AXES[i] for i, v in enumerate(values) if not isfinite(v)]
     if bad:
         return f"pose {', '.join(bad)} is not a finite number"
+    huge = [f"{POSE_AXES[i]} {v:g}" for i, v in enumerate(values) if abs(v) > POSE_MAGNITUDE_LIMIT]
+    if huge:
+        return (f"pose {', '.join(huge)} is beyond any platform's reach (at most ±{POSE_MAGNITUDE_LIMIT:g} mm or deg); "
+                "check the units and the number")
     return None

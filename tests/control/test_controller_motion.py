@@ -112,12 +112,19 @@ def test_a_path_through_a_violation_is_refused_even_if_both_ends_are_valid(rig):
     assert start[1] < violation["pose"][1] < goal[1]  # where on the way it happens
 
 
+@pytest.mark.filterwarnings("error")  # numpy's overflow warning would mean a huge pose reached the math
 @pytest.mark.parametrize("pose", [[float("nan")] * 6, [0, 0, 0, 0, 0, math.inf], [1, 2, 3], None, "abcdef",
                                   [1e300] * 6, [0, 0, 0, 0, 0, "x"]])
 def test_malformed_poses_are_refused_not_raised(rig, pose):
     rig.enabled()
     result = rig.controller.move(pose)
     assert not result.ok and result.error in ("invalid_argument", "path_violation")
+
+
+def test_a_pose_beyond_any_reach_is_refused_with_its_units_named(rig):
+    result = rig.controller.validate_pose([0, 0, 1.5e9, 0, 0, 0])
+    assert not result.ok and result.error == "invalid_argument"
+    assert "z 1.5e+09" in result.message and "units" in result.message, result.message
 
 
 @pytest.mark.parametrize(("duration", "speed"), [(-1.0, None), (0.0, None), (math.nan, None), ("3", None),
@@ -217,6 +224,7 @@ wild = st.one_of(st.floats(-2000, 2000), st.sampled_from([math.nan, math.inf, -m
 anything = st.tuples(wild, wild, wild, st.floats(-40, 40), st.floats(-40, 40), st.floats(-80, 80))
 
 
+@pytest.mark.filterwarnings("error")
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(st.tuples(st.one_of(reachable, anything), st.integers(0, 400)), min_size=1, max_size=4))
 def test_random_targets_are_refused_or_reached_and_setpoints_stay_safe(make_rig, targets):
