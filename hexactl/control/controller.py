@@ -293,6 +293,24 @@ class Controller:
             return refusal
         return self._swap(new, f"calibration {calibration_id} loaded")
 
+    def validate_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
+        """Would :meth:`load_calibration` accept it now? The same checks, nothing swapped;
+        success details ``calibration_id`` and ``change_mm`` (the largest set-point change
+        the swap would make at the current pose)."""
+        if not isinstance(geometry, Geometry):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "validate_calibration takes a validated Geometry")
+        if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self.nominal):
+            return refusal
+        checked = self._swap_check(ActiveGeometry.of(geometry, calibration_id, source))
+        if isinstance(checked, CommandResult):
+            return checked
+        return CommandResult.success(f"calibration {calibration_id} would change the set-points by at most "
+                                     f"{checked:.3f} mm", calibration_id=calibration_id, change_mm=checked)
+
+    def active_geometry(self) -> ActiveGeometry:
+        """The geometry the loop runs now (calibrated or nominal), with its identity."""
+        return self.snapshot.active
+
     def rollback_calibration(self) -> CommandResult:
         """Swap back to the calibration active before the last load (validated and ramped
         like a load); again, to the one before that, and so on (the last
@@ -349,14 +367,19 @@ class Controller:
         """Check ``new`` (:func:`~hexactl.control.calibration_checks.swap_refusal`), then
         hand it over (with ``rollback``: the last of the history, which the loop drops)."""
         s = self.snapshot
-        if refusal := preconditions.check_swap(s, new):
-            return CommandResult.failure(*refusal)
-        checked = swap_refusal(s, new, self.config)
+        checked = self._swap_check(new)
         if isinstance(checked, CommandResult):
             return checked
         replaced = {"rolled_back_from": s.active.calibration_id} if rollback else {}
         return self._commands.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback), message,
                                      calibration_id=new.calibration_id, change_mm=checked, **replaced)
+
+    def _swap_check(self, new: ActiveGeometry) -> float | CommandResult:
+        """The largest set-point change swapping in ``new`` makes now, mm, or the refusal."""
+        s = self.snapshot
+        if refusal := preconditions.check_swap(s, new):
+            return CommandResult.failure(*refusal)
+        return swap_refusal(s, new, self.config)
 
     def _checked(self, check, factory: Callable[[int], cmd.Command], message: str,
                  deadline_ns: int | None = None) -> CommandResult:

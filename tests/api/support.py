@@ -23,6 +23,7 @@ from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.telemetry import SequenceTelemetry, Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.supervisor import Fault
+from hexactl.control.planning import ActiveGeometry
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import DwellRecord, MotionSequence
 from hexactl.control.stats import LoopStats, Percentiles
@@ -179,6 +180,14 @@ class FakeController:
         now = self.calibrations[-1] if self.calibrations else geometry_id(self.geometry)
         return CommandResult.success(f"rolled back from calibration {rolled_back_from} to {now}", calibration_id=now,
                                      rolled_back_from=rolled_back_from, change_mm=0.5)
+
+    def validate_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
+        self._call("validate_calibration", geometry, calibration_id, source)
+        return CommandResult.success(f"calibration {calibration_id} would change the set-points by at most 0.500 mm",
+                                     calibration_id=calibration_id, change_mm=0.5)
+
+    def active_geometry(self) -> ActiveGeometry:
+        return ActiveGeometry.of(self.geometry, geometry_id(self.geometry), "fake")
 
     def sequence_records(self) -> SequenceReport | None:
         return SequenceReport(self.sequence.name, "playing", RECORDS) if self.sequence else None

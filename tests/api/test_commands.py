@@ -41,6 +41,8 @@ def test_every_command_round_trips(service, kind) -> None:
     fields = {
         **ARGUMENTS,
         "load_calibration": {"toml": geometry_to_toml(service.controller.geometry)},
+        "validate_calibration": {"toml": geometry_to_toml(service.controller.geometry)},
+        "read_file": {"path": ARGUMENTS["save_recording"]["path"]},  # written by save_recording, earlier in the list
     }
     for cmd in COMMANDS:
         service.controller.state = "enabled"  # whatever the previous command left
@@ -50,7 +52,7 @@ def test_every_command_round_trips(service, kind) -> None:
     called = [name for name, _ in service.controller.calls]
     # queries and the instrument call nothing; clear_frames is a set_frames of no frames
     assert set(called) == set(COMMANDS) - {"status", "validate_pose", "validate_wave", "save_recording", "measure",
-                                           "frames", "clear_frames"}
+                                           "frames", "clear_frames", "geometry", "files", "read_file"}
 
 
 def test_move_passes_pose_and_pace(service) -> None:

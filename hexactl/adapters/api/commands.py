@@ -6,6 +6,7 @@ loop only ever receives validated objects.
 
 from __future__ import annotations
 
+import base64
 import csv
 import io
 from collections.abc import Callable, Sequence
@@ -15,6 +16,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from hexactl.adapters.api.messages import (
+    MAX_FILES_LISTED,
     AbortRequest,
     ClearFramesRequest,
     DisableRequest,
@@ -37,6 +39,10 @@ from hexactl.adapters.api.messages import (
     ResumeRequest,
     RollbackCalibrationRequest,
     SaveRecordingRequest,
+    ValidateCalibrationRequest,
+    GeometryRequest,
+    FilesRequest,
+    ReadFileRequest,
     SetFramesRequest,
     StatusRequest,
     StopRequest,
@@ -55,10 +61,14 @@ from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
 from hexactl.control.waves import WaveSpec
-from hexactl.kinematics.geometry import GeometryError, describe_validation_error
+from hexactl.kinematics.geometry import Geometry, GeometryError, describe_validation_error
 
 JOG_REPLY = ("jog", "goal", "speed", "end", "to_limit", "deadman_s")
 """The fields of a ``jog`` reply besides ``message``."""
+
+GEOMETRY_REPLY_EXCLUDES = {"calibration": {"parameter_covariance"}}
+"""Left out of ``geometry``'s reply: the covariance (48×48 numbers) is the calibration
+file's, not a drawing's."""
 
 TOML_SOURCE = "request"
 """The calibration source recorded for a calibration sent as text."""
@@ -137,8 +147,21 @@ class CommandHandler:
                 return _checked(controller.resume(deadline_ns=deadline_ns))
             case AbortRequest():
                 return _checked(controller.abort())
+            case ValidateCalibrationRequest():  # before its base class: a match takes the first case that fits
+                return self._validate_calibration(request)
             case LoadCalibrationRequest():
-                return self._load_calibration(request)
+                geometry, source = self._calibration(request)
+                return _calibration_fields(controller.load_calibration(geometry, geometry_id(geometry), source))
+            case GeometryRequest():
+                active = controller.active_geometry()
+                return {"calibration_id": active.calibration_id, "source": active.source,
+                        "geometry": active.geometry.model_dump(mode="json", exclude=GEOMETRY_REPLY_EXCLUDES)}
+            case FilesRequest():
+                return {"files": self.data.files(MAX_FILES_LISTED)}
+            case ReadFileRequest():
+                path, data, size = self.data.read_chunk(request.path, request.offset, request.length)
+                return {"path": str(path), "offset": request.offset, "data_b64": base64.b64encode(data).decode("ascii"),
+                        "size": size, "eof": request.offset + len(data) >= size}
             case RollbackCalibrationRequest():
                 return _calibration_fields(controller.rollback_calibration())
             case SaveRecordingRequest():
@@ -208,7 +231,8 @@ class CommandHandler:
                                "the ones before stay in force: free the disk or fix the permissions, then again") from None
         return {"message": message or result.message, "frames": jsonable(frames)}
 
-    def _load_calibration(self, request: LoadCalibrationRequest) -> dict[str, Any]:
+    def _calibration(self, request: LoadCalibrationRequest) -> tuple[Geometry, str]:
+        """The geometry a load or validate request names, parsed and validated, and its source."""
         if request.path is not None:
             path, text = self.data.read_text(request.path, ErrorCode.INVALID_CALIBRATION)
             source = str(path)
@@ -216,10 +240,22 @@ class CommandHandler:
             text = request.toml or ""
             source = f"{TOML_SOURCE} ({request.source})" if request.source else TOML_SOURCE
         try:
-            geometry = parse_geometry(text, source)
+            return parse_geometry(text, source), source
         except GeometryError as error:
             raise problems_error(ErrorCode.INVALID_CALIBRATION, str(error)) from None
-        return _calibration_fields(self.controller.load_calibration(geometry, geometry_id(geometry), source))
+
+    def _validate_calibration(self, request: ValidateCalibrationRequest) -> dict[str, Any]:
+        try:
+            geometry, source = self._calibration(request)
+        except ApiError as error:
+            return {"message": error.message, "valid": False, "calibration_id": None, "change_mm": None,
+                    "refusal": error_body(error.code, error.message, error.details)}
+        result = self.controller.validate_calibration(geometry, geometry_id(geometry), source)
+        if not result.ok:
+            return {"message": result.message, "valid": False, "calibration_id": None, "change_mm": None,
+                    "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+        return {"message": result.message, "valid": True, "calibration_id": result.details["calibration_id"],
+                "change_mm": result.details["change_mm"], "refusal": None}
 
     def _save_recording(self, request: SaveRecordingRequest) -> dict[str, Any]:
         report = self.controller.sequence_records()

@@ -12,7 +12,7 @@ can check what is sent.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union, get_args
+from typing import Annotated, Any, Literal, Union, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
@@ -35,6 +35,12 @@ DeadlineMs = Annotated[
 ]
 ErrorCodeText = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="snake_case error code")]
 RequestId = Annotated[JsonValue, Field(description="any JSON value; echoed in the reply")]
+MAX_READ_BYTES = 1024 * 1024
+"""The most ``read_file`` returns per request (base64 makes the reply a third larger)."""
+
+MAX_FILES_LISTED = 1000
+"""The most files ``files`` lists."""
+
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
 
@@ -270,6 +276,36 @@ class LoadCalibrationRequest(_Request):
         return self
 
 
+class ValidateCalibrationRequest(LoadCalibrationRequest):
+    """Would ``load_calibration`` accept it now? The same fields and checks; nothing is
+    swapped. The reply says the set-point change the load would make."""
+
+    cmd: Literal["validate_calibration"]  # type: ignore[assignment]
+
+
+class GeometryRequest(_Request):
+    """The geometry the loop runs now (calibrated or nominal): joints, zero lengths,
+    sensor gains, zero posture, limits and feature points, for a client that draws or
+    checks the platform."""
+
+    cmd: Literal["geometry"]
+
+
+class FilesRequest(_Request):
+    """The files directly in the service's data directories, with what each holds."""
+
+    cmd: Literal["files"]
+
+
+class ReadFileRequest(_Request):
+    """A chunk of a file in the data directories (a recording to download), base64."""
+
+    cmd: Literal["read_file"]
+    path: FilePath
+    offset: int = Field(default=0, ge=0, description="the first byte to read")
+    length: int = Field(default=MAX_READ_BYTES, ge=1, le=MAX_READ_BYTES, description="at most this many bytes")
+
+
 class RollbackCalibrationRequest(_Request):
     """Return to the calibration active before the last load (ramped like a load)."""
 
@@ -354,6 +390,10 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     SetFramesRequest,
     ClearFramesRequest,
     FramesRequest,
+    ValidateCalibrationRequest,
+    GeometryRequest,
+    FilesRequest,
+    ReadFileRequest,
 )
 
 Request = Annotated[Union[REQUEST_MODELS], Field(discriminator="cmd")]  # type: ignore[valid-type]
@@ -563,6 +603,43 @@ class CalibrationReply(OkReply):
     change_mm: float = Field(description="the largest set-point change the swap makes at the current pose, mm")
 
 
+class ValidateCalibrationReply(OkReply):
+    valid: bool = Field(description="whether load_calibration would accept it now")
+    calibration_id: str | None = Field(description="its content hash, when valid")
+    change_mm: float | None = Field(description="the largest set-point change the load would make now, mm, when valid")
+    refusal: ErrorBody | None = Field(description="what load_calibration would answer, when not valid")
+
+
+class GeometryReply(OkReply):
+    calibration_id: str = Field(description="content hash of the active geometry")
+    source: str = Field(description="where it was read from")
+    geometry: dict[str, Any] = Field(description="the geometry as its file holds it (the keys of a calibration "
+                                     "file: base_joints and platform_joints in mm, the fixed and the platform frame; "
+                                     "zero_lengths mm; sensor_scale_errors; home mm and deg; limits; measurement), "
+                                     "without the calibration's covariance")
+
+
+class DataFile(_Message):
+    name: str = Field(description="the file's name in its directory")
+    directory: str = Field(description="the data directory, on the service's machine")
+    kind: Literal["calibration", "sequence", "recording", "other"] = Field(
+        description="calibration (a geometry TOML), sequence (a TOML with [[waypoint]]), recording (CSV) or other")
+    size: int = Field(description="bytes")
+    modified: float = Field(description="last change, s since the epoch")
+
+
+class FilesReply(OkReply):
+    files: list[DataFile] = Field(description="each data directory's files, in order, by name")
+
+
+class ReadFileReply(OkReply):
+    path: str = Field(description="the file read, on the service's machine")
+    offset: int
+    data_b64: str = Field(description="the bytes read, base64")
+    size: int = Field(description="the file's size, bytes")
+    eof: bool = Field(description="true when the chunk reaches the end of the file")
+
+
 class SaveRecordingReply(OkReply):
     path: str = Field(description="the file written, on the service's machine")
     name: str = Field(description="the sequence recorded")
@@ -681,6 +758,10 @@ REPLY_MODELS: dict[str, type[OkReply]] = {
     "play": PlayReply,
     "load_calibration": CalibrationReply,
     "rollback_calibration": CalibrationReply,
+    "validate_calibration": ValidateCalibrationReply,
+    "geometry": GeometryReply,
+    "files": FilesReply,
+    "read_file": ReadFileReply,
     "save_recording": SaveRecordingReply,
     "measure": MeasureReply,
     "record": RecordReply,

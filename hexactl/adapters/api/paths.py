@@ -50,6 +50,66 @@ class DataDirectories:
         ``forbidden_path`` if it is outside every data directory; ``file_not_found`` if it
         is inside but missing, not a regular file, unreadable, or changed while being
         opened; ``too_large`` above :data:`MAX_FILE_BYTES`; ``invalid`` if not UTF-8."""
+        opened, descriptor, size_bytes = self._open(text)
+        try:
+            data = _read_bounded(text, descriptor, size_bytes)
+        finally:
+            os.close(descriptor)
+        try:
+            return opened, data.decode("utf-8")
+        except UnicodeDecodeError:
+            raise ApiError(invalid, f"{text}: not UTF-8 text") from None
+
+    def read_chunk(self, text: str, offset: int, length: int) -> tuple[Path, bytes, int]:
+        """(real path, at most ``length`` bytes from ``offset``, the file's size) of the file
+        ``text`` names, found and checked as :meth:`read_text` does, of any size: a long
+        recording is read a chunk per request."""
+        opened, descriptor, size_bytes = self._open(text)
+        try:
+            return opened, os.pread(descriptor, length, offset), size_bytes
+        except OSError as error:
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot read: {error.strerror}") from None
+        finally:
+            os.close(descriptor)
+
+    def files(self, limit: int) -> list[dict[str, object]]:
+        """The regular files directly in each data directory (symlinks not followed), at
+        most ``limit``: ``name``, ``directory``, ``kind`` (:func:`file_kind`), ``size``
+        (bytes) and ``modified`` (s since the epoch)."""
+        found: list[dict[str, object]] = []
+        for directory in self.directories:
+            try:
+                entries = sorted(os.scandir(directory), key=lambda entry: entry.name)
+            except OSError:
+                continue  # a data directory removed since start-up lists nothing
+            for entry in entries:
+                if len(found) >= limit:
+                    return found
+                try:
+                    if not entry.is_file(follow_symlinks=False):
+                        continue
+                    status = entry.stat(follow_symlinks=False)
+                except OSError:
+                    continue
+                found.append({"name": entry.name, "directory": str(directory), "kind": self._kind_of(entry),
+                              "size": status.st_size, "modified": status.st_mtime})
+        return found
+
+    def _kind_of(self, entry: os.DirEntry[str]) -> str:
+        suffix = Path(entry.name).suffix.lower()
+        if suffix == ".csv":
+            return "recording"
+        if suffix != ".toml":
+            return "other"
+        try:
+            _, head = self.read_text(entry.path, ErrorCode.FILE_NOT_FOUND)
+        except ApiError:
+            return "other"
+        return file_kind(head)
+
+    def _open(self, text: str) -> tuple[Path, int, int]:
+        """(real path, open descriptor, size) of the regular file ``text`` names inside a
+        data directory; the caller closes the descriptor. Refusals as :meth:`read_text`'s."""
         self._check_text(text)
         path = Path(text)
         candidates = [path] if path.is_absolute() else [*(directory / path for directory in self.directories), Path.cwd() / path]
@@ -76,15 +136,12 @@ class DataDirectories:
                 status = os.fstat(descriptor)
                 if kind := _kind(status.st_mode):
                     problem = problem or ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: not a regular file ({kind}); name a file")
+                    os.close(descriptor)
                     continue
-                opened = self._place(text, descriptor)
-                data = _read_bounded(text, descriptor, status.st_size)
-            finally:
+                return self._place(text, descriptor), descriptor, status.st_size
+            except BaseException:
                 os.close(descriptor)
-            try:
-                return opened, data.decode("utf-8")
-            except UnicodeDecodeError:
-                raise ApiError(invalid, f"{text}: not UTF-8 text") from None
+                raise
         if problem is not None:
             raise problem
         if missing:
@@ -188,6 +245,17 @@ def _read_bounded(text: str, descriptor: int, size_bytes: int) -> bytes:
     except OSError as error:
         raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot read: {error.strerror}") from None
     return b"".join(chunks)
+
+
+def file_kind(toml_text: str) -> str:
+    """What a TOML file in a data directory holds, by its keys: ``calibration`` (a
+    geometry: it has ``base_joints``), ``sequence`` (``[[waypoint]]``) or ``other``."""
+    lines = {line.split("=", 1)[0].strip() for line in toml_text.splitlines()}
+    if "base_joints" in lines:
+        return "calibration"
+    if "[[waypoint]]" in lines:
+        return "sequence"
+    return "other"
 
 
 def _kind(mode: int) -> str | None:

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from typing import Any, Protocol
 
 from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.planning import ActiveGeometry
 from hexactl.control.telemetry import Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
@@ -95,6 +96,12 @@ class ControllerPort(Protocol):
     def rollback_calibration(self) -> CommandResult:
         """Success details: ``calibration_id``, ``change_mm``."""
         ...
+
+    def validate_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
+        """Would load_calibration accept it? Success details: ``calibration_id``, ``change_mm``."""
+        ...
+
+    def active_geometry(self) -> ActiveGeometry: ...
 
     def sequence_records(self) -> SequenceReport | None:
         """The playing or last played sequence's dwell records."""
