@@ -127,7 +127,7 @@ def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], clean
         try:
             scenario()
             return
-        except AssertionError as error:
+        except (AssertionError, CommandError) as error:  # a stall latched between two steps refuses the next one
             print(f"attempt {attempt} failed: {error!r:.300}; latched: {status(client)['faults']}")
             if attempt == ATTEMPTS or not stalled(client):
                 raise
