@@ -28,14 +28,17 @@ def which(name: str) -> str | None:
     return shutil.which(name, path=os.environ.get("PATH", "") + ":" + SBIN_PATH)
 
 
-def ensure_executables(need: Mapping[str, str], log: Callable[[str], None]) -> dict[str, str]:
+def ensure_executables(need: Mapping[str, str], log: Callable[[str], None],
+                       files: Mapping[str, str] | None = None) -> dict[str, str]:
     """Paths of the executables ``need`` maps to their Debian packages, installing the
     packages of the missing ones first (``apt-get update`` then ``install``, output on
-    stderr; root only).
+    stderr; root only). ``files`` maps other files needed (absolute paths: a font) to
+    their packages, installed the same way when missing.
 
     :raises PackagesMissing: not root, no apt-get, apt-get failed, or still missing after
     """
-    missing = sorted({package for executable, package in need.items() if not which(executable)})
+    missing = sorted({package for executable, package in need.items() if not which(executable)}
+                     | {package for path, package in (files or {}).items() if not os.path.exists(path)})
     if missing:
         command = "apt-get update && apt-get install -y " + " ".join(missing)
         if not which("apt-get"):

@@ -106,7 +106,8 @@ class DemoSettings:
     """``directory`` for the results, the ``seed`` of the manufacturing errors, the
     instrument noise and the plan; the campaign's size; ``config`` the nominal geometry
     (None: the default); how many latched faults in a row to reset and go on after
-    (:data:`DEMO_FAULTS_IN_A_ROW`)."""
+    (:data:`DEMO_FAULTS_IN_A_ROW`); ``dashboard_http``: where to serve the browser
+    dashboard to watch it (None: none)."""
 
     directory: Path
     seed: int = 0
@@ -114,6 +115,7 @@ class DemoSettings:
     envelope_fraction: float = DEMO_ENVELOPE_FRACTION
     config: Path | None = None
     reset_faults: int = DEMO_FAULTS_IN_A_ROW
+    dashboard_http: str | None = None
 
 
 def clear_results(directory: Path) -> None:
@@ -146,7 +148,7 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     # Real-time where the process may, as hexactl serve (ServiceConfig's default).
     config = ServiceConfig(config_path=settings.config, api_endpoint=local, telemetry_endpoint=local,
                            data_dirs=(settings.directory,), simulator_seed=settings.seed, motion=DEMO_MOTION,
-                           log_level="WARNING")
+                           log_level="WARNING", dashboard_http=settings.dashboard_http)
     # The simulator's truth, rebuilt here from the same seed by the same function: for the
     # report's parameter table only; the campaign never sees it.
     truth = true_geometry(nominal, settings.seed)

@@ -62,6 +62,7 @@ from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
+from hexactl.application.dashboard import DashboardProcess
 from hexactl.application.loop_link import LoopExchange
 from hexactl.application.simulator import InstrumentPort, Simulator
 from hexactl.application.spawned import Spawned, SpawnError
@@ -170,7 +171,9 @@ class ServiceConfig:
     loop's process. Both on by default; each falls back, logged and in ``status``,
     without the privilege. ``frames_path``: where the operator's frames and soft limits
     are kept across restarts (None: ./frames.toml); read at start (a file that is not
-    valid refuses the start), written whenever they change.
+    valid refuses the start), written whenever they change. ``dashboard_http``: serve the
+    browser dashboard there too (``HOST:PORT`` on loopback; None: no dashboard), in a
+    process of its own, stopped first at shutdown.
     """
 
     config_path: Path | None = None
@@ -189,6 +192,7 @@ class ServiceConfig:
     lock_memory: bool = True
     log_level: str = "INFO"
     frames_path: Path | None = None
+    dashboard_http: str | None = None
 
 
 class Service:
@@ -232,6 +236,9 @@ class Service:
         for endpoint in (config.api_endpoint, config.telemetry_endpoint):
             if not is_local_endpoint(endpoint):
                 log.warning("%s is reachable from the network: CURVE keys given, only their clients get in", endpoint)
+        if config.dashboard_http and config.curve:
+            raise ServiceError("--dashboard serves a service on loopback without CURVE; with CURVE keys, run "
+                               "hexactl dashboard with a client's keys (--curve-server, --curve-client)")
         if config.curve:  # read here, before the actuators open (the API's process uses them)
             try:
                 load_server_keys(config.curve)
@@ -309,6 +316,9 @@ class Service:
             closers.callback(lambda: api.close(budget.left(SHUTDOWN_STEPS_S)))  # telemetry flows until at rest
             closers.callback(lambda: _bring_to_rest(controller, budget.left(SHUTDOWN_BRAKE_TIMEOUT_S)))
             closers.callback(lambda: api.close_api(budget.left(CLOSE_API_TIMEOUT_S)))
+            if config.dashboard_http:
+                board = DashboardProcess(api.api_endpoint, api.telemetry_endpoint, config.dashboard_http)
+                closers.callback(board.close)  # the first to go: it stops sending commands
             security = "CURVE" if config.curve else "no authentication (loopback)"
             log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)

@@ -216,3 +216,39 @@ def test_a_directory_swapped_for_a_symlink_during_a_write_is_not_followed(data, 
     directories.write_new("sub/run.csv", b"x")
     assert (data / "data" / "sub.away" / "run.csv").read_bytes() == b"x"
     assert not (data / "outside" / "run.csv").exists()
+
+
+def test_files_lists_each_directorys_regular_files_with_what_they_hold(tmp_path, nominal) -> None:
+    first, second = tmp_path / "a", tmp_path / "b"
+    first.mkdir()
+    second.mkdir()
+    (first / "cal.toml").write_text(geometry_to_toml(nominal))
+    (first / "steps.toml").write_text('name = "steps"\n\n[[waypoint]]\npose = [0, 0, 5, 0, 0, 0]\n')
+    (second / "run1.csv").write_text("t\n0\n")
+    (second / "notes.txt").write_text("x")
+    (second / "sub").mkdir()
+    (second / "link.toml").symlink_to(first / "cal.toml")  # not followed: listed by its target's directory only
+    os.mkfifo(second / "pipe.toml")  # not a regular file: not listed, never opened
+    listed = DataDirectories([first, second]).files(limit=100)
+    assert [(entry["name"], entry["kind"]) for entry in listed] == [
+        ("cal.toml", "calibration"), ("steps.toml", "sequence"), ("notes.txt", "other"), ("run1.csv", "recording")]
+    assert listed[0]["directory"] == str(first.resolve()) and listed[0]["size"] == len(geometry_to_toml(nominal))
+    assert len(DataDirectories([first, second]).files(limit=2)) == 2
+
+
+def test_read_chunk_reads_any_size_in_pieces_inside_the_data_directories_only(tmp_path) -> None:
+    data = bytes(range(256)) * (paths.MAX_FILE_BYTES // 256 + 10)  # larger than any whole-file read
+    (tmp_path / "big.csv").write_bytes(data)
+    directories = DataDirectories([tmp_path])
+    pieces, offset = [], 0
+    while True:
+        _, chunk, size = directories.read_chunk("big.csv", offset, 1 << 20)
+        assert size == len(data)
+        if not chunk:
+            break
+        pieces.append(chunk)
+        offset += len(chunk)
+    assert b"".join(pieces) == data
+    with pytest.raises(ApiError) as refused:
+        directories.read_chunk("../outside.csv", 0, 10)
+    assert refused.value.code == ErrorCode.FORBIDDEN_PATH

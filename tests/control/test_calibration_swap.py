@@ -283,3 +283,24 @@ def test_swaps_and_rollbacks_many_times_a_second_during_moves_never_clamp(rig, g
     assert accepted > 100
     rig.assert_setpoints_safe()
     assert rig.controller.telemetry().loop.guard_clamps == 0
+
+
+def test_validate_calibration_says_the_change_a_load_would_make_and_swaps_nothing(rig, calibrated):
+    rig.enabled()
+    rig.run(3)
+    before = rig.sent[-1].copy()
+    checked = rig.controller.validate_calibration(calibrated, "cal-1", "cal-1.toml")
+    assert checked.ok and checked.details["calibration_id"] == "cal-1"
+    rig.run(5)
+    assert rig.controller.telemetry().calibration_id != "cal-1" and not rig.controller.snapshot.ramp_active
+    assert rig.sent[-1] == pytest.approx(before, abs=1e-12)
+    loaded = rig.controller.load_calibration(calibrated, "cal-1", "cal-1.toml")
+    assert loaded.ok and loaded.details["change_mm"] == checked.details["change_mm"]
+
+
+def test_validate_calibration_refuses_what_a_load_would_refuse(rig, geometry):
+    rig.enabled()
+    other_limits = _variant(geometry, limits={"leg_velocity_mm_s": geometry.limits.leg_velocity_mm_s * 2})
+    checked = rig.controller.validate_calibration(other_limits, "cal-2")
+    loaded = rig.controller.load_calibration(other_limits, "cal-2")
+    assert not checked.ok and (checked.error, checked.message) == (loaded.error, loaded.message)

@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments
+from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 
 DEFAULT_OUT = Path("demo-out")
 
@@ -47,6 +48,8 @@ def _declare_demo(demo: argparse.ArgumentParser) -> None:
                       help=f"plan within this fraction of the pose envelope (default {DEMO_ENVELOPE_FRACTION:g}: shorter "
                       "moves)")
     demo.add_argument("--force", action="store_true", help="replace the results of a finished demo in DIR")
+    demo.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",
+                      help=f"watch it in the browser dashboard, served there (default {DEFAULT_HTTP}) while the demo runs")
     demo.add_argument("--reset-faults", type=int, default=DEMO_FAULTS_IN_A_ROW, metavar="N",
                       help="reset a latched fault and go on, unless it is the N+1-th in a row with no measurement saved "
                       f"between them (default {DEMO_FAULTS_IN_A_ROW}): a loaded host can stall the simulated actuators "
@@ -66,7 +69,8 @@ def run_demo_command(arguments: argparse.Namespace) -> int:
     if arguments.force:
         clear_results(arguments.out)
     settings = DemoSettings(arguments.out, arguments.seed, arguments.per_leg, arguments.envelope,
-                            Path(arguments.config) if arguments.config else None, arguments.reset_faults)
+                            Path(arguments.config) if arguments.config else None, arguments.reset_faults,
+                            checked_http(arguments.dashboard))
     progress = Progress()
     try:
         outcome = run_demo(settings, progress)

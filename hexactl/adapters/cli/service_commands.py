@@ -26,6 +26,7 @@ from hexactl.adapters.cli.common import (
     pose_argument,
     positive_float,
 )
+from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import format_telemetry, frames_lines, pose_text
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
@@ -165,6 +166,9 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
                        "kept across restarts (default ./frames.toml; read at start, written when they change)")
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
+    serve.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",
+                       help=f"also serve the browser dashboard (hexactl dashboard) there (default {DEFAULT_HTTP}), in "
+                       "a process of its own, stopped with the service")
     serve.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
 
@@ -337,6 +341,7 @@ def run_serve(arguments: argparse.Namespace) -> int:
         lock_memory=not arguments.no_realtime,
         log_level=arguments.log_level,
         frames_path=arguments.frames,
+        dashboard_http=checked_http(arguments.dashboard),
     )
     try:
         return run_service(config)  # it ends the process, with the service's exit status

@@ -1,0 +1,201 @@
+"""``hexactl dashboard``: the web page, its WebSocket and the recordings' downloads.
+
+Starlette (routing, static files, WebSockets) served by uvicorn: a maintained ASGI stack
+whose WebSocket endpoint and the ZeroMQ client threads meet on one asyncio loop without
+any glue of ours (docs/dashboard.md says why this one).
+
+The page and the vendored libraries (three.js, uPlot) come from the package: nothing
+from the internet. Commands arrive on the WebSocket as ``{"type": "command", "id": N,
+"cmd": NAME, …fields}`` and go to the API unchanged; the reply comes back as
+``{"type": "reply", "id": N, "reply": …}``.
+
+Loopback only, and a request whose ``Host`` or WebSocket ``Origin`` is not this server's
+is refused: another web site open in the operator's browser cannot drive the platform
+through it (DNS rebinding, cross-site WebSockets).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import json
+import logging
+import re
+import time
+from collections.abc import AsyncIterator
+from importlib import resources
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, Response, StreamingResponse
+from starlette.routing import Mount, Route, WebSocketRoute
+from starlette.staticfiles import StaticFiles
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from hexactl.adapters.web.bridge import ServiceBridge
+
+MAX_MESSAGE_BYTES = 64 * 1024
+"""The largest WebSocket message a page may send (a command is a few hundred bytes)."""
+
+MAX_COMMANDS_IN_FLIGHT = 16
+"""Commands one page may have waiting for replies; beyond, it is answered ``busy``."""
+
+RECORDING_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv$")
+"""A downloadable recording: the ``record`` command's name rule, with ``.csv``."""
+
+DOWNLOAD_CHUNK_BYTES = 1024 * 1024
+
+log = logging.getLogger("hexactl.dashboard")
+
+
+def static_directory() -> str:
+    return str(resources.files("hexactl.adapters.web") / "static")
+
+
+def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlette:
+    """The dashboard's ASGI application over ``bridge``; ``allowed_hosts``: the ``host:port``
+    forms a request's ``Host`` (and a WebSocket's ``Origin``) may name."""
+
+    async def index(request: Request) -> Response:
+        return FileResponse(f"{static_directory()}/index.html", headers={"Cache-Control": "no-store"})
+
+    async def download(request: Request) -> Response:
+        name = request.path_params["name"]
+        if not RECORDING_NAME.fullmatch(name):
+            return PlainTextResponse(f"{name}: not a recording's name (NAME.csv, as given to record)", status_code=400)
+        first = await bridge.command("read_file", {"path": name, "offset": 0, "length": DOWNLOAD_CHUNK_BYTES})
+        if not first.get("ok"):
+            error = first.get("error") or {}
+            status = 404 if error.get("code") in ("file_not_found", "forbidden_path") else 502
+            return PlainTextResponse(f"{name}: {error.get('message', 'no answer')}", status_code=status)
+        return StreamingResponse(_chunks(bridge, name, first), media_type="text/csv",
+                                 headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    async def health(request: Request) -> Response:
+        return JSONResponse({"connected": bridge.connected, "api": bridge.endpoints.api,
+                             "telemetry": bridge.endpoints.telemetry})
+
+    async def socket(websocket: WebSocket) -> None:
+        origin = websocket.headers.get("origin")
+        if origin is not None and origin.split("://", 1)[-1] not in allowed_hosts:
+            log.warning("refused a WebSocket from origin %s (not this dashboard's page)", origin)
+            await websocket.close(code=1008)
+            return
+        await websocket.accept()
+        await _serve_page(bridge, websocket)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        bridge.start(asyncio.get_running_loop())
+        try:
+            yield
+        finally:
+            bridge.close()
+
+    app = Starlette(routes=[
+        Route("/", index),
+        Route("/health", health),
+        Route("/recordings/{name}", download),
+        WebSocketRoute("/ws", socket),
+        Mount("/static", StaticFiles(directory=static_directory()), name="static"),
+    ], lifespan=lifespan)
+    return _HostCheck(app, allowed_hosts)
+
+
+class _HostCheck:
+    """Refuse an HTTP request or WebSocket whose ``Host`` is not this server's (a page
+    that reached us by DNS rebinding names its own host)."""
+
+    def __init__(self, app: Any, allowed_hosts: frozenset[str]) -> None:
+        self.app = app
+        self.allowed_hosts = allowed_hosts
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] in ("http", "websocket"):
+            host = dict(scope["headers"]).get(b"host", b"").decode("latin-1")
+            if host not in self.allowed_hosts:
+                if scope["type"] == "websocket":
+                    await send({"type": "websocket.close", "code": 1008})
+                    return
+                response = PlainTextResponse(f"Host {host!r} is not this dashboard's", status_code=421)
+                await response(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
+async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
+    """One page: updates out, commands in, until it goes."""
+    updates = bridge.subscribe()
+    in_flight: set[asyncio.Task[None]] = set()
+
+    async def send_updates() -> None:
+        while True:
+            message = await updates.get()
+            if message["type"] == "telemetry":
+                message = {**message, "sent_ms": time.time() * 1000.0}
+            await websocket.send_text(json.dumps(message))
+
+    async def answer(request_id: Any, cmd: str, fields: dict[str, Any]) -> None:
+        reply = await bridge.command(cmd, fields)
+        await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": reply}))
+
+    sender = asyncio.create_task(send_updates())
+    try:
+        while True:
+            text = await websocket.receive_text()
+            request_id, parsed = _command(text)
+            if isinstance(parsed, str):
+                await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": _error("invalid_request", parsed)}))
+                continue
+            if len(in_flight) >= MAX_COMMANDS_IN_FLIGHT and parsed[0] not in ("estop", "stop", "abort"):
+                await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": _error(
+                    "busy", f"{MAX_COMMANDS_IN_FLIGHT} commands of this page are waiting: wait for their replies")}))
+                continue
+            task = asyncio.create_task(answer(request_id, *parsed))
+            in_flight.add(task)
+            task.add_done_callback(in_flight.discard)
+    except WebSocketDisconnect:
+        pass
+    finally:
+        sender.cancel()
+        bridge.unsubscribe(updates)
+
+
+def _command(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | str]:
+    """(the message's id, (cmd, fields) or why it is not a command)."""
+    if len(text) > MAX_MESSAGE_BYTES:
+        return None, f"a message is at most {MAX_MESSAGE_BYTES} bytes"
+    try:
+        message = json.loads(text)
+    except json.JSONDecodeError as error:
+        return None, f"not JSON: {error}"
+    if not isinstance(message, dict):
+        return None, "a message is a JSON object"
+    request_id = message.get("id")
+    if message.get("type") != "command":
+        return request_id, "the page sends only {\"type\": \"command\", \"id\": N, \"cmd\": NAME, …}"
+    cmd = message.get("cmd")
+    if not isinstance(cmd, str):
+        return request_id, "a command names its cmd"
+    fields = {key: value for key, value in message.items() if key not in ("type", "id", "cmd")}
+    return request_id, (cmd, fields)
+
+
+def _error(code: str, message: str) -> dict[str, Any]:
+    return {"ok": False, "error": {"code": code, "message": message}}
+
+
+async def _chunks(bridge: ServiceBridge, name: str, first: dict[str, Any]) -> AsyncIterator[bytes]:
+    reply = first
+    while True:
+        data = base64.b64decode(reply["data_b64"])
+        yield data
+        if reply["eof"] or not data:
+            return
+        offset = reply["offset"] + len(data)
+        reply = await bridge.command("read_file", {"path": name, "offset": offset, "length": DOWNLOAD_CHUNK_BYTES})
+        if not reply.get("ok"):
+            log.warning("download of %s broke off: %s", name, (reply.get("error") or {}).get("message"))
+            return

@@ -1,0 +1,106 @@
+"""Run the dashboard: bind the loopback address, then serve until SIGINT or SIGTERM."""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass
+
+import uvicorn
+
+from hexactl.adapters.web.app import create_app
+from hexactl.adapters.web.bridge import ServiceBridge, ServiceEndpoints
+
+LOOPBACK_NAMES = ("localhost",)
+
+
+class DashboardError(Exception):
+    """The dashboard cannot start; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class HttpAddress:
+    host: str
+    port: int
+
+    @classmethod
+    def parse(cls, text: str) -> HttpAddress:
+        """``HOST:PORT`` (port 0: any free one) on a loopback address.
+
+        :raises DashboardError: for another form, or a host reachable from the network
+        """
+        host, separator, port_text = text.rpartition(":")
+        host = host.strip("[]")
+        if not separator or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+            raise DashboardError(f"--http {text!r}: give HOST:PORT, e.g. 127.0.0.1:8080")
+        if not _is_loopback(host):
+            raise DashboardError(
+                f"--http {text}: the dashboard drives the platform, so it listens on this machine only (127.0.0.1, ::1 "
+                f"or localhost); from another machine, tunnel to it: ssh -L 8080:127.0.0.1:8080 THIS_HOST")
+        return cls(host, int(port_text))
+
+
+def _is_loopback(host: str) -> bool:
+    if host in LOOPBACK_NAMES:
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def bind(address: HttpAddress) -> socket.socket:
+    """A listening socket on ``address``. :raises DashboardError: if it cannot be bound."""
+    family = socket.AF_INET6 if ":" in address.host else socket.AF_INET
+    host = "127.0.0.1" if address.host == "localhost" else address.host
+    listener = socket.socket(family, socket.SOCK_STREAM)
+    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        listener.bind((host, address.port))
+    except OSError as error:
+        listener.close()
+        raise DashboardError(f"cannot listen on {address.host}:{address.port}: {error.strerror}; choose another port "
+                             "with --http") from None
+    listener.listen(64)
+    return listener
+
+
+def run_dashboard(address: HttpAddress, endpoints: ServiceEndpoints, log_level: str = "info",
+                  parent: int | None = None) -> int:
+    """Serve the dashboard on ``address`` for the service at ``endpoints`` until SIGINT or
+    SIGTERM, or until process ``parent`` (the service that started it) is gone; prints its
+    URL first (``dashboard on http://HOST:PORT/``). Exit status 0.
+
+    :raises DashboardError: if the address cannot be bound
+    """
+    listener = bind(address)
+    port = listener.getsockname()[1]
+    allowed = frozenset(f"{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]", address.host))
+    app = create_app(ServiceBridge(endpoints), allowed)
+    host = f"[{address.host}]" if ":" in address.host else address.host
+    print(f"dashboard on http://{host}:{port}/ (service API {endpoints.api}, telemetry {endpoints.telemetry})",
+          flush=True)
+    logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                        stream=sys.stderr)
+    if parent is not None:
+        threading.Thread(target=_end_with, args=(parent,), name="dashboard-parent", daemon=True).start()
+    config = uvicorn.Config(app, log_level=log_level, access_log=False, ws_max_size=1 << 20, lifespan="on")
+    uvicorn.Server(config).run(sockets=[listener])
+    return 0
+
+
+PARENT_POLL_S = 1.0
+
+
+def _end_with(parent: int) -> None:
+    """SIGTERM to this process (uvicorn's clean stop) once ``parent`` is no longer its
+    parent: a service killed outright leaves no dashboard holding the port."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os.kill(os.getpid(), signal.SIGTERM)

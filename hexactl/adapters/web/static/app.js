@@ -1,0 +1,427 @@
+// hexactl dashboard: the WebSocket link to the dashboard server, the header, the
+// telemetry readouts and the wiring of the 3D view, the plots and the control panels.
+import { View3D, strokeMargin } from './view3d.js';
+import { History, Plots } from './plots.js';
+import { setupControls, fmt, fmtPose, AXES } from './controls.js';
+
+const $ = (id) => document.getElementById(id);
+const RECONNECT_MS = 1000;
+const COMMAND_TIMEOUT_MS = 15000;
+const LATENCY_RING = 2000;
+const STALE_MS = 2000;
+
+const state = {
+  ws: null,
+  wsOpen: false,
+  wsReason: 'connecting to the dashboard server…',
+  link: null,               // last `link` message
+  record: null,
+  geometry: null,
+  ghost: null,
+  nextId: 1,
+  pending: new Map(),       // id -> {cmd, resolve, timer}
+  newRecord: false,
+  drawInfo: null,           // {age_ms, sent_ms} of the newest record, until drawn
+  lastTelemetryAt: 0,
+  latencies: new Array(LATENCY_RING),
+  latencyCount: 0,
+};
+
+// ---------------- messages log ----------------
+const messagesEl = $('messages');
+function logMessage(kind, cmd, code, message) {
+  const text = `${cmd ? `${cmd}: ` : ''}${code ?? ''}|${message ?? ''}`;
+  const first = messagesEl.firstElementChild;
+  const now = new Date().toLocaleTimeString();
+  if (first && first.dataset.key === text) {
+    const count = Number(first.dataset.count || 1) + 1;
+    first.dataset.count = String(count);
+    first.querySelector('.time').textContent = `${now} `;
+    first.querySelector('.count').textContent = ` ×${count}`;
+    return;
+  }
+  const li = document.createElement('li');
+  li.className = `${kind} fresh`;
+  li.dataset.key = text;
+  const time = document.createElement('span'); time.className = 'time'; time.textContent = `${now} `;
+  const c = document.createElement('span'); c.className = 'code'; c.textContent = `${cmd ? `${cmd} ` : ''}${code ?? ''} `;
+  const m = document.createElement('span'); m.className = 'msg'; m.textContent = message ?? '';
+  const n = document.createElement('span'); n.className = 'count muted';
+  li.append(time, c, m, n);
+  messagesEl.prepend(li);
+  while (messagesEl.children.length > 200) messagesEl.lastElementChild.remove();
+}
+$('messages-clear').addEventListener('click', () => { messagesEl.textContent = ''; });
+
+// ---------------- commands ----------------
+function failure(code, message) { return { ok: false, error: { code, message } }; }
+
+/** Send one API command; resolves with its reply (never rejects). Failed replies are logged. */
+function send(cmd, fields = {}) {
+  return new Promise((resolve) => {
+    const done = (reply) => {
+      if (!reply || typeof reply !== 'object') reply = failure('bad_reply', 'the server sent no usable reply');
+      if (reply.ok === false) logMessage('error', cmd, reply.error?.code ?? 'error', reply.error?.message ?? '');
+      resolve(reply);
+    };
+    const ws = state.ws;
+    if (!ws || ws.readyState !== WebSocket.OPEN) {
+      done(failure('unavailable', `not connected to the dashboard server: ${cmd} not sent`));
+      return;
+    }
+    const id = state.nextId++;
+    const timer = setTimeout(() => {
+      state.pending.delete(id);
+      done(failure('timeout', `no reply within ${COMMAND_TIMEOUT_MS / 1000} s`));
+    }, COMMAND_TIMEOUT_MS);
+    state.pending.set(id, { cmd, done, timer });
+    try {
+      ws.send(JSON.stringify({ ...fields, type: 'command', id, cmd }));
+    } catch (e) {
+      clearTimeout(timer);
+      state.pending.delete(id);
+      done(failure('unavailable', `could not send: ${e && e.message ? e.message : e}`));
+    }
+  });
+}
+
+function failPending(reason) {
+  for (const [id, p] of state.pending) {
+    clearTimeout(p.timer);
+    state.pending.delete(id);
+    p.done(failure('unavailable', reason));
+  }
+}
+
+// ---------------- E-stop ----------------
+const estopButton = $('estop');
+async function estop() {
+  controls.releaseJog(false);
+  estopButton.classList.remove('sent');
+  void estopButton.offsetWidth;   // restart the flash animation
+  estopButton.classList.add('sent');
+  if (!state.wsOpen) {
+    logMessage('error', 'estop', 'NOT SENT', 'not connected to the dashboard server: use the hardware E-stop');
+    return;
+  }
+  const reply = await send('estop');
+  if (reply.ok) logMessage('info', 'estop', 'ok', reply.message ?? 'emergency stop latched');
+}
+estopButton.addEventListener('click', estop);
+window.addEventListener('keydown', (ev) => {
+  if (ev.key === 'Escape' || ev.code === 'Escape') {
+    ev.preventDefault();
+    if (!ev.repeat) estop();
+  }
+}, true);
+
+// ---------------- 3D view, plots, controls ----------------
+const view = new View3D($('view3d'));
+const history = new History();
+const plots = new Plots(history, { pose: $('plot-pose'), legs: $('plot-legs'), loop: $('plot-loop') });
+const controls = setupControls({
+  send,
+  record: () => state.record,
+  setGhost: (goal) => { state.ghost = Array.isArray(goal) ? goal.slice() : null; state.newRecord = true; schedule(); },
+});
+
+const UNIT = ['mm', 'mm', 'mm', '°', '°', '°'];
+function plotTitles() {
+  const a = Number($('plot-axis').value);
+  $('plot-pose-title').textContent = `pose ${AXES[a]}: commanded vs measured (${UNIT[a] === '°' ? 'deg' : 'mm'}, relative to home)`;
+  $('plot-leg-title').textContent = `leg ${$('plot-leg').value}: set-point vs feedback (sensor mm)`;
+}
+$('plot-axis').addEventListener('change', () => { plotTitles(); plots.setAxis(Number($('plot-axis').value)); });
+$('plot-leg').addEventListener('change', () => { plotTitles(); plots.setLeg(Number($('plot-leg').value) - 1); });
+$('plot-window').addEventListener('change', () => plots.setWindow(Number($('plot-window').value)));
+$('plot-pause').addEventListener('click', () => {
+  const paused = !plots.paused;
+  plots.setPaused(paused);
+  $('plot-pause').setAttribute('aria-pressed', String(paused));
+  $('plot-pause').textContent = paused ? 'Resume' : 'Pause';
+});
+$('plot-export').addEventListener('click', () => {
+  const blob = new Blob([history.toCSV()], { type: 'text/csv' });
+  const url = URL.createObjectURL(blob);
+  const a = document.createElement('a');
+  const d = new Date();
+  a.href = url;
+  a.download = `hexactl-dashboard-${d.toISOString().replace(/[:.]/g, '-').slice(0, 19)}.csv`;
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+});
+plotTitles();
+
+// ---------------- header and readouts ----------------
+const shown = {};
+function setText(id, text) {
+  if (shown[id] === text) return;
+  shown[id] = text;
+  $(id).textContent = text;
+}
+function setPill(id, value, prefix) {
+  setText(id, value ?? '–');
+  const el = $(id);
+  const cls = `pill ${prefix}-${value ?? 'none'}`;
+  if (el.className !== cls) el.className = cls;
+}
+
+function updateConnection() {
+  const connected = state.wsOpen && state.link !== null && state.link.connected === true;
+  let text;
+  if (!state.wsOpen) text = `disconnected: ${state.wsReason}`;
+  else if (state.link === null) text = 'disconnected: waiting for the link to the hexactl service…';
+  else if (!state.link.connected) text = `disconnected: the hexactl service is unreachable${state.link.message ? ` (${state.link.message})` : ''}; retrying`;
+  else text = 'connected';
+  setText('connection', text);
+  $('connection').title = state.link?.message ?? text;
+  document.body.dataset.connected = connected ? 'true' : 'false';
+}
+
+function updateFaults(faults) {
+  const list = Array.isArray(faults) ? faults : [];
+  const key = JSON.stringify(list);
+  if (shown.faults === key) return;
+  shown.faults = key;
+  const ul = $('faults');
+  ul.textContent = '';
+  for (const f of list) {
+    const li = document.createElement('li');
+    const b = document.createElement('b');
+    b.textContent = f?.code ?? 'fault';
+    li.append(b, document.createTextNode(` ${f?.message ?? ''}${f?.leg ? ` (leg ${f.leg})` : ''}`));
+    ul.append(li);
+  }
+}
+
+const poseRows = $('pose-table').tBodies[0].rows;
+const legRows = $('leg-table').tBodies[0].rows;
+const cellCache = new Map();
+function setCell(cell, text, cls) {
+  const prev = cellCache.get(cell);
+  if (prev && prev[0] === text && prev[1] === cls) return;
+  cellCache.set(cell, [text, cls]);
+  cell.textContent = text;
+  cell.className = cls ?? '';
+}
+function fillPoseRow(row, pose) {
+  for (let i = 0; i < 6; i++) setCell(row.cells[i + 1], Array.isArray(pose) ? fmt(pose[i], i < 3 ? 2 : 3) : '–');
+}
+
+function updateReadouts(r) {
+  setPill('state', r.state, 'st');
+  setPill('motion', r.motion, 'mo');
+  setText('calibration-id', r.calibration_id ?? '–');
+  const geomId = state.geometry?.calibration_id;
+  $('calibration-id').title = geomId && r.calibration_id && geomId !== r.calibration_id
+    ? `the telemetry's calibration ${r.calibration_id} differs from the drawn geometry's ${geomId}` : (state.geometry?.name ?? '');
+  updateFaults(r.faults);
+
+  const loop = r.loop && typeof r.loop === 'object' ? r.loop : null;
+  setText('loop-summary', loop
+    ? `${fmt(loop.rate_hz, 0)} Hz · p99 ${fmt(loop.lateness_us?.p99, 0)} µs · missed ${loop.missed ?? '–'}${loop.guard_clamps ? ` · clamps ${loop.guard_clamps}` : ''}`
+    : '–');
+
+  fillPoseRow(poseRows[0], r.pose_command);
+  fillPoseRow(poseRows[1], r.pose_measured);
+  fillPoseRow(poseRows[2], r.goal);
+  fillPoseRow(poseRows[3], r.tool_pose_command);
+  const g = view.geometry;
+  const lengths = view.legLengths();
+  for (let i = 0; i < 6; i++) {
+    const locked = r.locked_leg === i + 1 ? 'locked' : '';
+    setCell(legRows[0].cells[i + 1], fmt(r.leg_setpoints?.[i], 2), locked);
+    setCell(legRows[1].cells[i + 1], fmt(r.leg_feedback?.[i], 2), locked);
+    const m = g && lengths ? strokeMargin(g, i, lengths[i]) : null;
+    const cls = m === null ? '' : (m > 0.2 ? 'm-ok' : (m >= 0.05 ? 'm-warn' : 'm-bad'));
+    setCell(legRows[2].cells[i + 1], m === null ? '–' : `${(m * 100).toFixed(1)}%`, `${cls} ${locked}`.trim());
+  }
+  const extra = [];
+  if (typeof r.remaining_s === 'number') extra.push(`remaining ${r.remaining_s.toFixed(2)} s`);
+  if (r.wave && typeof r.wave === 'object') extra.push(`wave ${r.wave.cycle ?? '?'}/${r.wave.cycles ?? '?'} ${r.wave.phase ?? ''}`);
+  if (r.jog && typeof r.jog === 'object') extra.push(`jog ${r.jog.phase ?? ''}${r.jog.end ? ` to ${r.jog.end}` : ''}`);
+  if (loop) extra.push(`compute p99 ${fmt(loop.compute_us?.p99, 0)} µs, cycles ${loop.cycles ?? '–'}`);
+  setText('telemetry-extra', extra.join(' · '));
+
+  const hud = [`command  ${fmtPose(r.pose_command, 2)}`];
+  if (Array.isArray(r.pose_measured) && Array.isArray(r.pose_command)) {
+    const dp = Math.hypot(...[0, 1, 2].map((i) => (r.pose_measured[i] ?? 0) - (r.pose_command[i] ?? 0)));
+    const da = Math.max(...[3, 4, 5].map((i) => Math.abs((r.pose_measured[i] ?? 0) - (r.pose_command[i] ?? 0))));
+    hud.push(`measured Δ ${dp.toFixed(3)} mm, ${da.toFixed(4)} °`);
+  } else {
+    hud.push('measured  none');
+  }
+  if (Array.isArray(r.goal)) hud.push(`goal     ${fmtPose(r.goal, 2)}${typeof r.remaining_s === 'number' ? `  in ${r.remaining_s.toFixed(1)} s` : ''}`);
+  if (state.ghost) hud.push(`ghost    ${fmtPose(state.ghost, 2)} (validated)`);
+  if (Number.isInteger(r.locked_leg)) hud.push(`leg ${r.locked_leg} locked`);
+  setText('view3d-hud', hud.join('\n'));
+}
+
+function latencyValues() {
+  const n = Math.min(state.latencyCount, LATENCY_RING);
+  const out = new Array(n);
+  const start = state.latencyCount - n;
+  for (let k = 0; k < n; k++) out[k] = state.latencies[(start + k) % LATENCY_RING];
+  return out;
+}
+
+let latencyShownAt = 0;
+function updateLatencySummary(now) {
+  if (now - latencyShownAt < 500) return;
+  latencyShownAt = now;
+  const v = latencyValues().slice(-250);
+  if (!v.length) { setText('latency-summary', '–'); return; }
+  const sorted = v.slice().sort((a, b) => a - b);
+  const p = (q) => sorted[Math.min(sorted.length - 1, Math.floor(q * sorted.length))];
+  setText('latency-summary', `${p(0.5).toFixed(0)} ms · p99 ${p(0.99).toFixed(0)} ms`);
+}
+
+// ---------------- drawing: one requestAnimationFrame per change ----------------
+let frameScheduled = false;
+let plotTimer = null;
+function schedule() {
+  if (frameScheduled) return;
+  frameScheduled = true;
+  requestAnimationFrame(frame);
+}
+
+function frame(now) {
+  frameScheduled = false;
+  if (state.newRecord && state.record) {
+    state.newRecord = false;
+    const r = state.record;
+    try {
+      view.update(r, state.ghost);
+      view.render();
+    } catch (e) {
+      // a drawing problem must not stop telemetry, plots or controls
+      logMessage('error', '3D view', 'draw_failed', e && e.message ? e.message : String(e));
+    }
+    if (state.drawInfo) {
+      const { age_ms: age, sent_ms: sent } = state.drawInfo;
+      state.drawInfo = null;
+      if (Number.isFinite(age) && Number.isFinite(sent)) {
+        state.latencies[state.latencyCount % LATENCY_RING] = age + (Date.now() - sent);
+        state.latencyCount += 1;
+      }
+    }
+    updateReadouts(r);
+    controls.onRecord(r);
+    updateLatencySummary(now);
+  }
+  plots.maybeRedraw(now);
+  if (plots.dirty && !plots.paused && plotTimer === null) {
+    plotTimer = setTimeout(() => { plotTimer = null; schedule(); }, 220);
+  }
+}
+
+// ---------------- WebSocket ----------------
+function handleMessage(ev) {
+  let msg;
+  try { msg = JSON.parse(ev.data); } catch (e) { return; }
+  if (!msg || typeof msg !== 'object') return;
+  switch (msg.type) {
+    case 'telemetry': {
+      const r = msg.record;
+      if (!r || typeof r !== 'object') return;
+      state.record = r;
+      // a null age or send time (unknown) gives no latency sample rather than a wrong one
+      const numOrNaN = (v) => (typeof v === 'number' ? v : NaN);
+      state.drawInfo = { age_ms: numOrNaN(msg.age_ms), sent_ms: numOrNaN(msg.sent_ms) };
+      state.newRecord = true;
+      state.lastTelemetryAt = performance.now();
+      history.push(r);
+      plots.dirty = true;
+      schedule();
+      break;
+    }
+    case 'geometry': {
+      const g = msg.geometry;
+      if (!g || typeof g !== 'object') return;
+      state.geometry = g;
+      try { view.setGeometry(g); } catch (e) { logMessage('error', '3D view', 'geometry', e && e.message ? e.message : String(e)); }
+      const info = [
+        `${g.name ?? 'geometry'} · calibration ${g.calibration_id ?? '?'}`,
+        g.source ? `source: ${g.source}` : null,
+        Array.isArray(g.home) ? `home ${fmtPose(g.home, 1)}` : null,
+        Array.isArray(g.stroke) ? `stroke ${fmt(g.stroke[0], 1)} – ${fmt(g.stroke[1], 1)} mm` : null,
+      ].filter(Boolean).join('\n');
+      setText('geometry-info', info);
+      controls.invalidateMove('the calibration changed: validate again');
+      state.newRecord = true;
+      schedule();
+      break;
+    }
+    case 'link':
+      state.link = { connected: msg.connected === true, message: typeof msg.message === 'string' ? msg.message : '' };
+      updateConnection();
+      controls.onLink(state.link.connected);
+      if (!state.link.connected) controls.releaseJog(false);
+      break;
+    case 'reply': {
+      const p = state.pending.get(msg.id);
+      if (!p) return;
+      state.pending.delete(msg.id);
+      clearTimeout(p.timer);
+      p.done(msg.reply);
+      break;
+    }
+    default:
+      break;
+  }
+}
+
+function connect() {
+  const url = `${location.protocol === 'https:' ? 'wss:' : 'ws:'}//${location.host}/ws`;
+  let ws;
+  try {
+    ws = new WebSocket(url);
+  } catch (e) {
+    state.wsReason = `cannot open ${url}: ${e && e.message ? e.message : e}; retrying every 1 s`;
+    updateConnection();
+    setTimeout(connect, RECONNECT_MS);
+    return;
+  }
+  state.ws = ws;
+  ws.addEventListener('open', () => {
+    state.wsOpen = true;
+    state.link = null;
+    updateConnection();
+  });
+  ws.addEventListener('message', handleMessage);
+  ws.addEventListener('close', (ev) => {
+    const wasOpen = state.wsOpen;
+    state.wsOpen = false;
+    state.link = null;
+    if (state.ws === ws) state.ws = null;
+    state.wsReason = wasOpen
+      ? `connection to the dashboard server lost (code ${ev.code}${ev.reason ? `: ${ev.reason}` : ''}); reconnecting every 1 s`
+      : 'the dashboard server does not answer; retrying every 1 s';
+    updateConnection();
+    controls.onDisconnect();
+    failPending('the connection to the dashboard server closed before the reply');
+    setTimeout(connect, RECONNECT_MS);
+  });
+}
+
+// stale telemetry: say so rather than show old numbers as current
+setInterval(() => {
+  if (!state.wsOpen || !state.record) return;
+  const stale = performance.now() - state.lastTelemetryAt > STALE_MS;
+  document.body.classList.toggle('stale', stale);
+  if (stale) setText('loop-summary', `telemetry stale: none for ${((performance.now() - state.lastTelemetryAt) / 1000).toFixed(0)} s`);
+}, 500);
+
+window.hexactlDashboard = {
+  legLengths: () => view.legLengths(),
+  latencies: () => latencyValues(),
+  get connected() { return state.wsOpen && state.link !== null && state.link.connected === true; },
+  get record() { return state.record; },
+  get geometry() { return state.geometry; },
+  send,
+};
+
+updateConnection();
+connect();

@@ -1,0 +1,496 @@
+// The control panels: move (validate, then go), jog (press and hold), sequences, leg lock,
+// frames and soft limits, calibration, recorder. Each talks to the service through ctx.send.
+
+const $ = (id) => document.getElementById(id);
+export const AXES = ['x', 'y', 'z', 'roll', 'pitch', 'yaw'];
+const BUILT_IN_SEQUENCES = ['x_sweep', 'y_rotation', 'compound'];
+
+export const fmt = (v, digits = 3) => (typeof v === 'number' && Number.isFinite(v) ? v.toFixed(digits) : '–');
+
+/** "[x, y, z mm; roll, pitch, yaw °]" for a pose, "none" otherwise. */
+export function fmtPose(p, digits = 3) {
+  if (!Array.isArray(p) || p.length !== 6) return 'none';
+  const n = p.map((v) => (v === null ? 'null' : fmt(v, digits)));
+  return `[${n.slice(0, 3).join(', ')} mm; ${n.slice(3).join(', ')} °]`;
+}
+
+/** "code: message" of a failed reply or of a refusal, with up to four violations. */
+export function describeError(err) {
+  if (!err || typeof err !== 'object') return 'refused';
+  let text = `${err.code ?? 'error'}: ${err.message ?? ''}`;
+  const v = err.details && Array.isArray(err.details.violations) ? err.details.violations : null;
+  if (v && v.length) {
+    const lines = v.slice(0, 4).map((x) => {
+      if (x && typeof x === 'object') {
+        const where = x.axis ? x.axis : (x.leg ? `leg ${x.leg}` : '');
+        const wp = x.waypoint !== undefined && x.waypoint !== null ? `waypoint ${x.waypoint}: ` : '';
+        return `  • ${wp}${x.message ?? `${x.kind ?? ''} ${where} ${fmt(x.value)} beyond ${fmt(x.limit)}`}`;
+      }
+      return `  • ${String(x)}`;
+    });
+    if (v.length > 4) lines.push(`  • … and ${v.length - 4} more`);
+    text += `\n${lines.join('\n')}`;
+  } else if (err.details && Array.isArray(err.details)) {
+    text += `\n${err.details.slice(0, 4).map((d) => `  • ${typeof d === 'string' ? d : JSON.stringify(d)}`).join('\n')}`;
+  }
+  return text;
+}
+
+function setResult(el, cls, text) {
+  el.classList.remove('valid', 'refused', 'moving');
+  if (cls) el.classList.add(cls);
+  el.textContent = text;
+}
+
+/** Six comma-separated numbers ("null" or an empty entry allowed when allowNull); null when empty. */
+export function parseSix(text, allowNull, what) {
+  const s = text.trim();
+  if (!s) return null;
+  const inner = s.replace(/^\[|\]$/g, '').trim();
+  const parts = (inner.includes(',') ? inner.split(',') : inner.split(/\s+/)).map((x) => x.trim());
+  if (parts.length !== 6) throw new Error(`${what}: six values, x, y, z, roll, pitch, yaw (got ${parts.length})`);
+  return parts.map((x) => {
+    if (allowNull && (x === '' || x === 'null' || x === '-' || x === 'none')) return null;
+    const v = Number(x);
+    if (x === '' || !Number.isFinite(v)) throw new Error(`${what}: "${x}" is not a number${allowNull ? ' (null: none)' : ''}`);
+    return v;
+  });
+}
+
+function timestampName() {
+  const d = new Date();
+  const p = (n) => String(n).padStart(2, '0');
+  return `dashboard-${d.getFullYear()}${p(d.getMonth() + 1)}${p(d.getDate())}-${p(d.getHours())}${p(d.getMinutes())}${p(d.getSeconds())}`;
+}
+
+/**
+ * ctx: { send(cmd, fields) -> Promise<reply>, setGhost(goal|null), record() -> last record }
+ * Returns hooks the app calls: onRecord(record), onLink(connected), onDisconnect(), releaseJog(sendZero).
+ */
+export function setupControls(ctx) {
+  // ---------------- controller ----------------
+  const simple = (id, cmd, resultEl) => $(id).addEventListener('click', async () => {
+    const reply = await ctx.send(cmd);
+    if (resultEl) setResult(resultEl, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'ok' : describeError(reply.error));
+    return reply;
+  });
+  simple('enable', 'enable');
+  simple('disable', 'disable');
+  simple('reset', 'reset');
+  $('stop').addEventListener('click', () => { releaseJog(false); ctx.send('stop'); });
+
+  // ---------------- move ----------------
+  const moveIds = [...AXES.map((a) => `move-${a}`), 'move-frame', 'move-relative', 'move-duration', 'move-speed'];
+  const moveResult = $('move-result');
+  const goButton = $('move-go');
+  let validated = null;   // {key, fields, goal, ref}
+  let validating = 0;
+
+  function readMove() {
+    const pose = AXES.map((a) => {
+      const el = $(`move-${a}`);
+      if (el.validity && el.validity.badInput) throw new Error(`${a}: not a number`);
+      const t = el.value.trim();
+      const v = t === '' ? 0 : Number(t);
+      if (!Number.isFinite(v)) throw new Error(`${a}: not a number`);
+      return v;
+    });
+    const fields = { pose, frame: $('move-frame').value, relative: $('move-relative').checked };
+    for (const [id, key] of [['move-duration', 'duration'], ['move-speed', 'speed']]) {
+      const el = $(id);
+      if (el.validity && el.validity.badInput) throw new Error(`${key}: not a number`);
+      const t = el.value.trim();
+      if (t !== '') {
+        const v = Number(t);
+        if (!Number.isFinite(v)) throw new Error(`${key}: not a number`);
+        fields[key] = v;
+      }
+    }
+    if (fields.duration !== undefined && fields.speed !== undefined) throw new Error('give a duration or a speed, not both');
+    return fields;
+  }
+
+  const motionRef = (r) => (r ? (Array.isArray(r.goal) ? r.goal : r.pose_command) : null);
+
+  function invalidate(text) {
+    const had = validated !== null;
+    validated = null;
+    goButton.disabled = true;
+    goButton.title = 'Validate the inputs first';
+    ctx.setGhost(null);
+    if (text && had) setResult(moveResult, null, text);
+  }
+
+  moveIds.forEach((id) => {
+    $(id).addEventListener('input', () => invalidate('inputs changed: validate again'));
+    $(id).addEventListener('change', () => invalidate('inputs changed: validate again'));
+  });
+
+  $('move-validate').addEventListener('click', async () => {
+    let fields;
+    try { fields = readMove(); } catch (e) { invalidate(); setResult(moveResult, 'refused', e.message); return; }
+    invalidate();
+    const key = JSON.stringify(fields);
+    const token = ++validating;
+    setResult(moveResult, null, 'validating…');
+    const ref = motionRef(ctx.record());
+    const reply = await ctx.send('validate_pose', fields);
+    if (token !== validating) return;                       // a newer validation is under way
+    let current;
+    try { current = JSON.stringify(readMove()); } catch (e) { current = null; }
+    if (current !== key) { setResult(moveResult, null, 'inputs changed while validating: validate again'); return; }
+    if (!reply.ok) { setResult(moveResult, 'refused', describeError(reply.error)); return; }
+    if (!reply.valid) { setResult(moveResult, 'refused', describeError(reply.refusal ?? { code: 'refused', message: reply.message })); return; }
+    validated = { key, fields, goal: reply.goal ?? null, ref: Array.isArray(ref) ? ref.slice() : null };
+    goButton.disabled = false;
+    goButton.title = 'Move to the validated goal';
+    ctx.setGhost(Array.isArray(reply.goal) ? reply.goal : null);
+    const lines = [`valid: duration ${fmt(reply.duration, 2)} s`, `goal ${fmtPose(reply.goal)}`];
+    if (Array.isArray(reply.tool_goal)) lines.push(`tool goal (work frame) ${fmtPose(reply.tool_goal)}`);
+    const acc = reply.predicted_accuracy;
+    if (acc && typeof acc === 'object') {
+      lines.push(`predicted accuracy (1σ at the tool point): ${fmt(acc.position_mm, 3)} mm, ${fmt(acc.orientation_deg, 4)} °`);
+    } else if (typeof acc === 'number') {
+      lines.push(`predicted accuracy (1σ): ${fmt(acc, 3)} mm`);
+    } else {
+      lines.push('predicted accuracy: not available (no calibration covariance)');
+    }
+    setResult(moveResult, 'valid', lines.join('\n'));
+  });
+
+  goButton.addEventListener('click', async () => {
+    let key;
+    try { key = JSON.stringify(readMove()); } catch (e) { key = null; }
+    if (!validated || key !== validated.key) { invalidate(); setResult(moveResult, 'refused', 'validate the inputs first'); return; }
+    const fields = validated.fields;
+    invalidate();
+    setResult(moveResult, null, 'sending move…');
+    const reply = await ctx.send('move', fields);
+    if (reply.ok) {
+      setResult(moveResult, 'moving', `${reply.message ?? 'moving'}: goal ${fmtPose(reply.goal)}, duration ${fmt(reply.duration, 2)} s`);
+    } else {
+      setResult(moveResult, 'refused', describeError(reply.error));
+    }
+  });
+
+  $('move-from-current').addEventListener('click', () => {
+    const r = ctx.record();
+    if (!r || !Array.isArray(r.pose_command)) return;
+    AXES.forEach((a, i) => { $(`move-${a}`).value = (Math.round(r.pose_command[i] * 1000) / 1000).toString(); });
+    $('move-frame').value = 'zero';
+    $('move-relative').checked = false;
+    invalidate('inputs changed: validate again');
+  });
+
+  // ---------------- jog ----------------
+  const jogStatus = $('jog-status');
+  let jog = null;          // {button, velocity, frame, timer}
+  let jogSerial = 0;
+  let jogInFlight = 0;
+
+  function jogVelocity(button) {
+    const axis = AXES.indexOf(button.dataset.axis);
+    const dir = Number(button.dataset.direction) < 0 ? -1 : 1;
+    let speed = Number($('jog-speed').value);
+    if (!Number.isFinite(speed) || speed < 0) speed = 0;
+    const v = [0, 0, 0, 0, 0, 0];
+    if (axis >= 0) v[axis] = dir * speed;
+    return v;
+  }
+
+  async function sendJog(velocity, frame) {
+    const serial = ++jogSerial;
+    jogInFlight += 1;
+    let reply;
+    try { reply = await ctx.send('jog', { velocity, frame }); } finally { jogInFlight -= 1; }
+    if (serial !== jogSerial) return;   // only the newest request's reply is shown
+    if (reply.ok) {
+      const extra = [];
+      if (reply.end) extra.push(`to ${reply.end}`);
+      if (typeof reply.speed === 'number') extra.push(`speed ${(reply.speed * 100).toFixed(0)} %`);
+      setResult(jogStatus, jog ? 'moving' : null, `${reply.message ?? 'ok'}${extra.length ? ` (${extra.join(', ')})` : ''}`);
+    } else {
+      setResult(jogStatus, 'refused', describeError(reply.error));
+    }
+  }
+
+  function startJog(button) {
+    releaseJog(false);
+    const velocity = jogVelocity(button);
+    const frame = $('jog-frame').value;
+    jog = { button, velocity, frame, timer: null };
+    button.classList.add('held');
+    sendJog(velocity, frame);
+    jog.timer = setInterval(() => {
+      // never pile up renewals behind a slow link: a lapsed deadman brakes, which is safe
+      if (jog && jogInFlight < 3) sendJog(jog.velocity, jog.frame);
+    }, 100);
+  }
+
+  /** Stop renewing the jog; with sendZero, release it at once with a zero velocity. */
+  function releaseJog(sendZero = true) {
+    if (!jog) return;
+    const { button, frame, timer } = jog;
+    clearInterval(timer);
+    button.classList.remove('held');
+    jog = null;
+    if (sendZero) sendJog([0, 0, 0, 0, 0, 0], frame);
+  }
+
+  document.querySelectorAll('button.jog').forEach((button) => {
+    button.addEventListener('pointerdown', (ev) => {
+      if (ev.pointerType === 'mouse' && ev.button !== 0) return;
+      ev.preventDefault();
+      startJog(button);
+    });
+    for (const type of ['pointerup', 'pointerleave', 'pointercancel', 'lostpointercapture']) {
+      button.addEventListener(type, () => { if (jog && jog.button === button) releaseJog(true); });
+    }
+    button.addEventListener('contextmenu', (ev) => ev.preventDefault());
+  });
+  window.addEventListener('pointerup', () => { if (jog) releaseJog(true); });
+  window.addEventListener('blur', () => { if (jog) releaseJog(true); });
+  document.addEventListener('visibilitychange', () => { if (document.hidden && jog) releaseJog(true); });
+  $('jog-frame').addEventListener('change', () => { if (jog) releaseJog(true); });
+
+  // ---------------- sequence ----------------
+  const seqResult = $('sequence-result');
+  const seqReply = (reply, okText) => setResult(seqResult, reply.ok ? 'valid' : 'refused', reply.ok ? okText(reply) : describeError(reply.error));
+  $('play').addEventListener('click', async () => {
+    const name = $('sequence-name').value.trim();
+    if (!name) { setResult(seqResult, 'refused', 'name a sequence: a built-in or a file'); return; }
+    const reply = await ctx.send('play', { sequence: name });
+    seqReply(reply, (r) => `${r.message ?? 'playing'}${r.name ? `: ${r.name}` : ''}${r.waypoints !== undefined ? `, ${Array.isArray(r.waypoints) ? r.waypoints.length : r.waypoints} waypoints` : ''}${typeof r.duration === 'number' ? `, ${r.duration.toFixed(1)} s` : ''}`);
+  });
+  for (const cmd of ['pause', 'resume', 'abort']) {
+    $(cmd).addEventListener('click', async () => {
+      if (cmd === 'abort') releaseJog(false);
+      const reply = await ctx.send(cmd);
+      seqReply(reply, (r) => r.message ?? cmd);
+    });
+  }
+
+  // ---------------- leg lock ----------------
+  const lockResult = $('leglock-result');
+  $('leglock').addEventListener('click', async () => {
+    const reply = await ctx.send('leg_lock', { leg: Number($('leglock-leg').value) });
+    setResult(lockResult, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'locked' : describeError(reply.error));
+  });
+  $('unlock').addEventListener('click', async () => {
+    const reply = await ctx.send('leg_unlock');
+    setResult(lockResult, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'unlocked' : describeError(reply.error));
+  });
+
+  // ---------------- frames & soft limits ----------------
+  const framesResult = $('frames-result');
+  function describeFrames(f) {
+    if (!f || typeof f !== 'object') return 'work: none · tool: none · soft limits: none';
+    const sl = f.soft_limits;
+    let soft = 'none';
+    if (sl && typeof sl === 'object') {
+      const parts = [];
+      if (Array.isArray(sl.lower) && sl.lower.some((v) => v !== null)) parts.push(`lower ${fmtPose(sl.lower, 2)}`);
+      if (Array.isArray(sl.upper) && sl.upper.some((v) => v !== null)) parts.push(`upper ${fmtPose(sl.upper, 2)}`);
+      if (typeof sl.max_tilt_deg === 'number') parts.push(`tilt ≤ ${fmt(sl.max_tilt_deg, 2)} °`);
+      soft = parts.length ? parts.join('\n  ') : 'none';
+    }
+    return `work: ${fmtPose(f.work, 2)}\ntool: ${fmtPose(f.tool, 2)}\nsoft limits: ${soft}`;
+  }
+  $('frames-apply').addEventListener('click', async () => {
+    const fields = {};
+    try {
+      const work = parseSix($('frame-work').value, false, 'work frame');
+      const tool = parseSix($('frame-tool').value, false, 'tool frame');
+      const lower = parseSix($('soft-lower').value, true, 'soft lower bounds');
+      const upper = parseSix($('soft-upper').value, true, 'soft upper bounds');
+      const tiltText = $('soft-max-tilt').value.trim();
+      if ($('soft-max-tilt').validity.badInput) throw new Error('max tilt: not a number');
+      const tilt = tiltText === '' ? null : Number(tiltText);
+      if (tilt !== null && !Number.isFinite(tilt)) throw new Error('max tilt: not a number');
+      if (work) fields.work = work;
+      if (tool) fields.tool = tool;
+      if (lower || upper || tilt !== null) {
+        fields.soft_limits = {};
+        if (lower) fields.soft_limits.lower = lower;
+        if (upper) fields.soft_limits.upper = upper;
+        if (tilt !== null) fields.soft_limits.max_tilt_deg = tilt;
+      }
+    } catch (e) {
+      setResult(framesResult, 'refused', e.message);
+      return;
+    }
+    if (!Object.keys(fields).length) { setResult(framesResult, 'refused', 'nothing to apply: fill a frame or a soft limit'); return; }
+    const reply = await ctx.send('set_frames', fields);
+    setResult(framesResult, reply.ok ? 'valid' : 'refused', reply.ok ? `${reply.message ?? 'frames set'}\n${describeFrames(reply.frames)}` : describeError(reply.error));
+  });
+  $('frames-clear').addEventListener('click', async () => {
+    const reply = await ctx.send('clear_frames');
+    setResult(framesResult, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'frames cleared' : describeError(reply.error));
+  });
+  $('frames-fill').addEventListener('click', () => {
+    const f = ctx.record()?.frames;
+    const six = (p) => (Array.isArray(p) ? p.map((v) => (v === null ? 'null' : String(v))).join(', ') : '');
+    $('frame-work').value = six(f?.work);
+    $('frame-tool').value = six(f?.tool);
+    $('soft-lower').value = six(f?.soft_limits?.lower);
+    $('soft-upper').value = six(f?.soft_limits?.upper);
+    $('soft-max-tilt').value = typeof f?.soft_limits?.max_tilt_deg === 'number' ? String(f.soft_limits.max_tilt_deg) : '';
+  });
+
+  // ---------------- files: calibrations and sequences ----------------
+  const calSelect = $('calibration-files');
+  const calChange = $('calibration-change');
+  const calResult = $('calibration-result');
+  const calApply = $('calibration-apply');
+  let previewed = null;   // the file name whose preview was valid
+
+  async function refreshFiles() {
+    const reply = await ctx.send('files');
+    if (!reply.ok || !Array.isArray(reply.files)) return;
+    const files = reply.files.filter((f) => f && typeof f.name === 'string');
+    const cals = files.filter((f) => f.kind === 'calibration');
+    const keep = calSelect.value;
+    calSelect.textContent = '';
+    if (!cals.length) {
+      calSelect.append(new Option('(no calibration files)', ''));
+    } else {
+      for (const f of cals) {
+        const when = typeof f.modified === 'string' ? f.modified.replace('T', ' ').slice(0, 16) : '';
+        const opt = new Option(`${f.name}${when ? `  (${when})` : ''}`, f.name);
+        if (f.directory) opt.title = `${f.directory}/${f.name}`;
+        calSelect.append(opt);
+      }
+      if (cals.some((f) => f.name === keep)) calSelect.value = keep;
+    }
+    if (calSelect.value !== keep) resetPreview();
+    const list = $('sequence-list');
+    list.textContent = '';
+    const names = [...BUILT_IN_SEQUENCES, ...files.filter((f) => f.kind === 'sequence').map((f) => f.name)];
+    for (const n of [...new Set(names)]) list.append(new Option(n, n));
+  }
+  $('calibration-refresh').addEventListener('click', refreshFiles);
+  $('sequence-refresh').addEventListener('click', refreshFiles);
+
+  function resetPreview() {
+    previewed = null;
+    calApply.disabled = true;
+    setResult(calChange, null, '');
+  }
+  calSelect.addEventListener('change', resetPreview);
+
+  $('calibration-preview').addEventListener('click', async () => {
+    const path = calSelect.value;
+    resetPreview();
+    if (!path) { setResult(calChange, 'refused', 'no calibration file selected: refresh the list'); return; }
+    setResult(calChange, null, 'previewing…');
+    const reply = await ctx.send('validate_calibration', { path });
+    if (calSelect.value !== path) { resetPreview(); return; }
+    if (!reply.ok) { setResult(calChange, 'refused', describeError(reply.error)); return; }
+    if (reply.valid === false) { setResult(calChange, 'refused', describeError(reply.refusal ?? { code: 'refused', message: reply.message })); return; }
+    previewed = path;
+    calApply.disabled = false;
+    setResult(calChange, 'valid', `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id ?? '?'}`);
+  });
+  calApply.addEventListener('click', async () => {
+    const path = calSelect.value;
+    if (!previewed || previewed !== path) { resetPreview(); return; }
+    calApply.disabled = true;
+    previewed = null;
+    const reply = await ctx.send('load_calibration', { path });
+    setResult(calResult, reply.ok ? 'valid' : 'refused',
+      reply.ok ? `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm` : describeError(reply.error));
+  });
+  $('calibration-rollback').addEventListener('click', async () => {
+    const reply = await ctx.send('rollback_calibration');
+    setResult(calResult, reply.ok ? 'valid' : 'refused',
+      reply.ok ? `${reply.message ?? 'rolled back'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm` : describeError(reply.error));
+  });
+
+  // ---------------- recorder ----------------
+  const recName = $('record-name');
+  const recResult = $('record-result');
+  recName.value = timestampName();
+  $('record-start').addEventListener('click', async () => {
+    const name = recName.value.trim();
+    const duration = Number($('record-duration').value);
+    if (!name) { setResult(recResult, 'refused', 'name the recording'); return; }
+    if (!Number.isFinite(duration) || duration <= 0) { setResult(recResult, 'refused', 'duration: a positive number of seconds'); return; }
+    const reply = await ctx.send('record', { name, duration_s: duration });
+    if (reply.ok) {
+      setResult(recResult, 'valid', `${reply.message ?? 'recording'}${reply.rows ? `: ${reply.rows} rows` : ''}${reply.rate_hz ? ` at ${reply.rate_hz} Hz` : ''}`);
+      recName.value = timestampName();   // ready for the next one (an existing name is refused)
+    } else {
+      setResult(recResult, 'refused', describeError(reply.error));
+    }
+  });
+  $('record-stop').addEventListener('click', async () => {
+    const reply = await ctx.send('record_stop');
+    setResult(recResult, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'stopped' : describeError(reply.error));
+  });
+
+  // ---------------- per-record updates ----------------
+  const shown = {};
+  const setText = (id, text) => { if (shown[id] !== text) { shown[id] = text; $(id).textContent = text; } };
+
+  function onRecord(r) {
+    // sequence progress
+    const s = r.sequence;
+    if (s && typeof s === 'object') {
+      setText('sequence-text', `${s.name ?? '?'} ${s.index ?? '?'}/${s.total ?? '?'} ${s.phase ?? ''}`.trim());
+      const total = Number(s.total) || 0;
+      const done = Math.max(0, (Number(s.index) || 0) - (s.phase === 'dwelling' ? 0 : 1));
+      $('sequence-bar').value = total ? Math.min(1, done / total) : 0;
+    } else {
+      setText('sequence-text', 'none');
+      $('sequence-bar').value = 0;
+    }
+    // leg lock
+    setText('locked-leg', Number.isInteger(r.locked_leg) ? `leg ${r.locked_leg}` : 'none');
+    // frames
+    setText('frames-current', describeFrames(r.frames));
+    // recording
+    const rec = r.recording;
+    const link = $('record-download');
+    if (rec && typeof rec === 'object') {
+      const rows = `${rec.rows ?? 0}${rec.rows_requested ? `/${rec.rows_requested}` : ''} rows`;
+      const lost = rec.lost ? `, ${rec.lost} lost` : '';
+      const ended = rec.ended ? `, ended: ${rec.ended}` : '';
+      setText('record-status', `${rec.state ?? '?'}: ${rec.name ?? ''}, ${rows}${lost}${ended}`);
+      if (rec.state === 'done' && typeof rec.name === 'string' && rec.name) {
+        const href = `/recordings/${encodeURIComponent(rec.name)}.csv`;
+        if (link.getAttribute('href') !== href) {
+          link.setAttribute('href', href);
+          link.setAttribute('download', `${rec.name}.csv`);
+          link.textContent = `Download ${rec.name}.csv`;
+        }
+        link.hidden = false;
+      } else {
+        link.hidden = true;
+      }
+    } else {
+      setText('record-status', 'idle');
+      link.hidden = true;
+    }
+    // a validation holds only while the platform stays where it was validated from
+    if (validated && Array.isArray(validated.ref)) {
+      const ref = motionRef(r);
+      if (Array.isArray(ref) && ref.some((v, i) => typeof v === 'number' && Math.abs(v - validated.ref[i]) > 0.01)) {
+        invalidate('the platform moved since the validation: validate again');
+      }
+    }
+    if (!['enabled'].includes(r.state) && jog) {
+      // a jog cannot run disabled/latched: stop renewing (the service refuses it anyway)
+      releaseJog(false);
+      setResult(jogStatus, 'refused', `jog released: the controller is ${r.state}`);
+    }
+  }
+
+  let filesLoaded = false;
+  function onLink(connected) {
+    if (connected && !filesLoaded) { filesLoaded = true; refreshFiles(); }
+    if (!connected) filesLoaded = false;
+  }
+  function onDisconnect() { releaseJog(false); filesLoaded = false; }
+
+  return { onRecord, onLink, onDisconnect, releaseJog, invalidateMove: invalidate };
+}

@@ -1,0 +1,338 @@
+"""``hexactl dashboard`` in a real headless Chromium (Debian's, driven by Selenium),
+against a real ``hexactl serve`` on the simulator, each in a process of its own: what an
+operator sees and does on the page, checked through the service's own API.
+
+The bounds on waits only turn a hang into a failure: the service, the dashboard and a
+software-rendering browser share a possibly busy two-core machine.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.by import By
+from selenium.webdriver.common.keys import Keys
+from selenium.webdriver.support.ui import Select
+
+from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
+from tools.browser import dashboard, headless_chromium
+from tools.serving import serve
+
+ROOT = Path(__file__).resolve().parents[2]
+SCREENSHOTS = ROOT / "docs" / "images"
+WAIT_S = 60.0
+
+
+def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT_S) -> object:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}")
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def screenshot(driver, name: str) -> None:  # noqa: ANN001
+    """The view as the operator sees it, for docs/dashboard.md (where the checkout is writable)."""
+    if os.access(SCREENSHOTS.parent, os.W_OK):
+        SCREENSHOTS.mkdir(exist_ok=True)
+        driver.save_screenshot(str(SCREENSHOTS / f"dashboard-{name}.png"))
+
+
+class Rig:
+    """The service, the dashboard, the browser on the page, and an API client to check."""
+
+    def __init__(self, directory: Path, served, board, driver, client: HexactlClient) -> None:  # noqa: ANN001
+        self.directory, self.served, self.board, self.driver, self.client = directory, served, board, driver, client
+
+    def status(self) -> dict:
+        return self.client.call("status")["status"]
+
+    def element(self, selector: str):  # noqa: ANN201
+        return self.driver.find_element(By.CSS_SELECTOR, selector)
+
+    def shown(self, selector: str):  # noqa: ANN201
+        """The element, its collapsed panel opened first as an operator would (its summary clicked)."""
+        element = self.element(selector)
+        panel = self.driver.execute_script("return arguments[0].closest('details')", element)
+        if panel is not None and panel.get_attribute("open") is None:
+            panel.find_element(By.TAG_NAME, "summary").click()
+        return element
+
+    def click(self, selector: str) -> None:
+        self.shown(selector).click()
+
+    def fill(self, selector: str, value: object) -> None:
+        field = self.shown(selector)
+        field.clear()
+        field.send_keys(str(value))
+
+    def page(self, script: str) -> object:
+        return self.driver.execute_script(script)
+
+    def connected(self) -> bool:
+        return self.page("return document.body.dataset.connected") == "true"
+
+    def severe_console_entries(self) -> list[dict]:
+        return [entry for entry in self.driver.get_log("browser") if entry["level"] == "SEVERE"]
+
+    def at_rest_disabled(self) -> None:
+        """Whatever the previous test left: no fault, at rest, disabled."""
+        record = self.status()
+        if record["state"] in ("fault", "estop"):
+            self.client.call("reset")
+        elif record["state"] == "enabled":
+            self.client.call("stop")
+            wait_for(lambda: self.status()["motion"] == "holding", "the platform at rest")
+            self.client.call("disable")
+        wait_for(lambda: self.status()["state"] == "disabled", "disabled")
+
+    def enabled_from_the_page(self) -> None:
+        self.at_rest_disabled()
+        self.click("#enable")
+        wait_for(lambda: self.status()["state"] == "enabled", "enabled by the page's button")
+        wait_for(lambda: self.element("#state").text.strip() == "enabled", "the page showing enabled")
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory) -> Iterator[Rig]:
+    directory = tmp_path_factory.mktemp("dashboard")
+    with serve(directory) as served, dashboard(served.api, served.telemetry) as board:
+        driver = headless_chromium()
+        try:
+            with HexactlClient(served.api, timeout_s=30.0) as client:
+                driver.get(board.url)
+                rig = Rig(directory, served, board, driver, client)
+                wait_for(rig.connected, "the page connected")
+                wait_for(lambda: rig.page("return window.hexactlDashboard.geometry"), "the geometry on the page")
+                yield rig
+        finally:
+            driver.quit()
+
+
+def drawn_and_commanded(rig: Rig) -> tuple[list[float], list[float]]:
+    """The leg lengths the 3D view drew and the set-points of the record it drew (one read)."""
+    lengths, setpoints = rig.page("const d = window.hexactlDashboard; return [d.legLengths(), d.record.leg_setpoints];")
+    return lengths, setpoints
+
+
+def test_the_page_loads_with_no_console_error_and_draws_the_services_setpoints(rig) -> None:
+    assert rig.severe_console_entries() == []
+    reply = rig.client.call("geometry")
+    geometry = reply["geometry"]
+    assert rig.page("return window.hexactlDashboard.geometry.calibration_id") == reply["calibration_id"]
+    rig.enabled_from_the_page()
+    rig.client.call("move", pose=[40, -30, 60, 4, -3, 12], duration=1.0)  # legs of six different lengths
+    wait_for(lambda: rig.status()["motion"] == "holding" and rig.status()["goal"] is None, "the move's end")
+    time.sleep(0.5)  # a few telemetry records: the page draws the rest pose
+
+    def same_record() -> tuple[list[float], list[float]] | None:
+        lengths, setpoints = drawn_and_commanded(rig)
+        return (lengths, setpoints) if setpoints == rig.status()["leg_setpoints"] else None
+
+    lengths, setpoints = wait_for(same_record, "the page drawing the service's latest set-points")
+    expected = np.asarray(geometry["zero_lengths"]) + (1 + np.asarray(geometry["sensor_scale_errors"])) * np.asarray(setpoints)
+    assert len(set(np.round(lengths, 3))) == 6
+    np.testing.assert_allclose(lengths, expected, atol=1e-6)
+    screenshot(rig.driver, "overview")
+    assert rig.severe_console_entries() == []
+
+
+def test_enable_then_a_validated_move_moves_the_simulated_platform(rig) -> None:
+    rig.enabled_from_the_page()
+    goal = [25.0, 10.0, 40.0, 0.0, 3.0, -5.0]
+    for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), goal):
+        rig.fill(f"#move-{axis}", value)
+    assert not rig.element("#move-go").is_enabled()  # nothing to go to before a validation
+    rig.click("#move-validate")
+    wait_for(lambda: "valid" in rig.element("#move-result").get_attribute("class").split(), "the validation")
+    screenshot(rig.driver, "move-validated")
+    rig.click("#move-go")
+
+    def arrived() -> bool:
+        record = rig.status()
+        measured = record["pose_measured"]
+        return record["motion"] == "holding" and measured is not None and np.allclose(measured, goal, atol=0.05)
+
+    wait_for(arrived, "the simulated platform at the goal (its measured pose)")
+
+
+def test_an_out_of_reach_goal_shows_its_refusal_and_moves_nothing(rig) -> None:
+    rig.enabled_from_the_page()
+    before = rig.status()["pose_command"]
+    for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), (700, 0, 0, 0, 0, 0)):
+        rig.fill(f"#move-{axis}", value)
+    rig.click("#move-validate")
+    result = rig.element("#move-result")
+    wait_for(lambda: "refused" in result.get_attribute("class").split(), "the refusal")
+    assert "path_violation" in result.text or "700" in result.text, result.text
+    assert not rig.element("#move-go").is_enabled()
+    screenshot(rig.driver, "move-refused")
+    time.sleep(0.5)
+    record = rig.status()
+    assert record["motion"] == "holding" and record["pose_command"] == before
+
+
+def test_jog_moves_while_held_and_brakes_when_released(rig) -> None:
+    rig.enabled_from_the_page()
+    rig.fill("#jog-speed", 20)
+    start_x = rig.status()["pose_command"][0]
+    button = rig.element('.jog[data-axis="x"][data-direction="1"]')
+    actions = ActionChains(rig.driver)
+    actions.click_and_hold(button).perform()
+    try:
+        wait_for(lambda: rig.status()["pose_command"][0] > start_x + 5.0, "the platform jogging in +x while held")
+        assert rig.status()["motion"] == "moving"
+    finally:
+        ActionChains(rig.driver).release(button).perform()
+    wait_for(lambda: rig.status()["motion"] == "holding", "the jog braked to rest after the release")
+    rested = rig.status()["pose_command"]
+    time.sleep(0.5)
+    assert rig.status()["pose_command"] == rested  # at rest, not creeping on
+
+
+def test_escape_latches_the_estop_even_from_a_text_field(rig) -> None:
+    rig.enabled_from_the_page()
+    rig.element("#move-x").click()  # focus in a field: Escape must still stop
+    ActionChains(rig.driver).send_keys(Keys.ESCAPE).perform()
+    wait_for(lambda: rig.status()["state"] == "estop", "the E-stop latched by Escape")
+    wait_for(lambda: rig.element("#state").text.strip() == "estop", "the page showing the E-stop")
+    screenshot(rig.driver, "estop")
+    rig.click("#reset")
+    wait_for(lambda: rig.status()["state"] == "disabled", "reset by the page's button")
+
+
+def test_a_calibration_load_shows_the_change_then_applies_it(rig) -> None:
+    rig.enabled_from_the_page()
+    nominal = load_geometry(ROOT / "config" / "platform.toml")
+    calibrated = nominal.model_copy(update={"name": "dashboard test", "zero_lengths": tuple(
+        length + 0.2 for length in nominal.zero_lengths)})
+    (rig.directory / "calibrations" / "dashboard-test.toml").write_text(geometry_to_toml(calibrated))
+    rig.click("#calibration-refresh")
+    wait_for(lambda: any(option.get_attribute("value").endswith("dashboard-test.toml") for option in
+                         Select(rig.element("#calibration-files")).options), "the file in the list")
+    select = Select(rig.shown("#calibration-files"))
+    select.select_by_value(next(option.get_attribute("value") for option in select.options
+                                if option.get_attribute("value").endswith("dashboard-test.toml")))
+    assert not rig.element("#calibration-apply").is_enabled()  # not before the change is shown
+    rig.click("#calibration-preview")
+    change = rig.element("#calibration-change")
+    wait_for(lambda: "valid" in change.get_attribute("class").split(), "the change shown")
+    assert "0.200" in change.text and geometry_id(calibrated) in change.text, change.text
+    assert rig.status()["calibration_id"] == geometry_id(nominal)  # shown, not applied
+    screenshot(rig.driver, "calibration-preview")
+    rig.click("#calibration-apply")
+    wait_for(lambda: rig.status()["calibration_id"] == geometry_id(calibrated), "the calibration applied")
+    wait_for(lambda: rig.page("return window.hexactlDashboard.geometry.calibration_id") == geometry_id(calibrated),
+             "the page drawing the new geometry")
+    rig.client.call("rollback_calibration")
+    wait_for(lambda: rig.status()["calibration_id"] == geometry_id(nominal), "rolled back")
+
+
+def test_killing_and_restarting_the_service_reconnects_the_page(tmp_path) -> None:
+    api, telemetry = f"tcp://127.0.0.1:{free_port()}", f"tcp://127.0.0.1:{free_port()}"
+    driver = headless_chromium()
+    try:
+        with dashboard(api, telemetry) as board:
+            with serve(tmp_path, api=api, telemetry=telemetry) as served:
+                driver.get(board.url)
+                connected = lambda: driver.execute_script("return document.body.dataset.connected") == "true"  # noqa: E731
+                wait_for(connected, "the page connected")
+                served.process.send_signal(signal.SIGKILL)
+                served.process.wait()
+                wait_for(lambda: not connected(), "the page saying the service is gone")
+                assert "disconnected" in driver.find_element(By.ID, "connection").text
+            with serve(tmp_path, api=api, telemetry=telemetry):
+                wait_for(connected, "the page reconnected to the restarted service")
+                wait_for(lambda: driver.execute_script("return window.hexactlDashboard.record.state") == "disabled",
+                         "fresh telemetry on the page")
+                driver.find_element(By.ID, "enable").click()
+                with HexactlClient(api, timeout_s=30.0) as client:
+                    wait_for(lambda: client.call("status")["status"]["state"] == "enabled",
+                             "a command from the reconnected page carried out")
+    finally:
+        driver.quit()
+
+
+def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
+    from urllib.error import HTTPError
+    from urllib.request import Request, urlopen
+
+    with pytest.raises(HTTPError) as refused:
+        urlopen(Request(rig.board.url, headers={"Host": "attacker.example"}), timeout=30)
+    assert refused.value.code == 421
+    opened = rig.page(f"""
+        return await new Promise(done => {{
+            const socket = new WebSocket("{rig.board.url.replace('http', 'ws')}ws");
+            socket.onopen = () => done("open");
+            socket.onclose = () => done("closed");
+        }});""")
+    assert opened == "open"  # the page's own origin is let in; another origin is the next check
+    import asyncio
+
+    import websockets
+
+    async def from_elsewhere() -> str:
+        try:
+            async with websockets.connect(rig.board.url.replace("http", "ws") + "ws", origin="http://attacker.example"):
+                return "open"
+        except websockets.InvalidStatus as error:
+            return str(error.response.status_code)
+
+    assert asyncio.run(from_elsewhere()) == "403"
+
+
+
+def test_serve_with_dashboard_serves_the_page_beside_it_and_stops_it_with_it(tmp_path) -> None:
+    import json
+    from urllib.error import URLError
+    from urllib.request import urlopen
+
+    from tools.serving import terminate
+
+    port = free_port()
+    health = f"http://127.0.0.1:{port}/health"
+
+    def connected() -> bool:
+        try:
+            with urlopen(health, timeout=5) as answer:
+                return json.load(answer)["connected"]
+        except (URLError, OSError):
+            return False
+
+    with serve(tmp_path, "--dashboard", f"127.0.0.1:{port}") as served:
+        wait_for(connected, "the dashboard serving, connected to its service")
+        shutdown = terminate(served)
+        assert shutdown.problems() == [], served.log
+    with pytest.raises((URLError, OSError)):
+        urlopen(health, timeout=5)
+
+
+def test_the_dashboard_of_a_killed_service_ends_by_itself(tmp_path) -> None:
+    with serve(tmp_path, "--dashboard", f"127.0.0.1:{free_port()}") as served:
+        def board() -> list[int]:
+            children = [int(pid) for task in Path(f"/proc/{served.process.pid}/task").iterdir()
+                        for pid in (task / "children").read_text().split()]
+            return [pid for pid in children if b"dashboard" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+
+        [pid] = wait_for(board, "the dashboard's process")
+        served.process.kill()
+        served.process.wait()
+        wait_for(lambda: not Path(f"/proc/{pid}").exists() or
+                 Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z", "the dashboard ended")

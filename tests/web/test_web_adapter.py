@@ -1,0 +1,51 @@
+"""The dashboard's server parts without a browser: where it listens, what a page may send."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hexactl.adapters.cli.main import main
+from hexactl.adapters.web.app import MAX_MESSAGE_BYTES, _command
+from hexactl.adapters.web.server import DashboardError, HttpAddress
+
+
+@pytest.mark.parametrize("text", ["127.0.0.1:8080", "localhost:0", "[::1]:9000", "127.1.2.3:80"])
+def test_loopback_addresses_are_taken(text) -> None:
+    address = HttpAddress.parse(text)
+    assert str(address.port) == text.rsplit(":", 1)[1]
+
+
+@pytest.mark.parametrize("text", ["0.0.0.0:8080", "192.168.1.5:8080", "example.com:80", "[::]:8080"])
+def test_an_address_reachable_from_the_network_is_refused_with_the_remedy(text) -> None:
+    with pytest.raises(DashboardError, match="this machine only.*ssh -L"):
+        HttpAddress.parse(text)
+
+
+@pytest.mark.parametrize("text", ["8080", "127.0.0.1", "127.0.0.1:http", "127.0.0.1:70000", ":8080"])
+def test_a_malformed_address_names_the_form(text) -> None:
+    with pytest.raises(DashboardError, match="HOST:PORT"):
+        HttpAddress.parse(text)
+
+
+def test_the_command_line_refuses_a_network_address(capsys) -> None:
+    assert main(["dashboard", "--http", "0.0.0.0:8080"]) == 2
+    assert "listens on this machine only" in capsys.readouterr().err
+
+
+def test_a_command_goes_to_the_api_unchanged_but_its_envelope() -> None:
+    request_id, (cmd, fields) = _command(json.dumps({"type": "command", "id": 4, "cmd": "move", "pose": [1] * 6}))
+    assert (request_id, cmd, fields) == (4, "move", {"pose": [1] * 6})
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    ("{", "not JSON"),
+    ("[1]", "a JSON object"),
+    ('{"type": "hello", "id": 1}', "sends only"),
+    ('{"type": "command", "id": 1, "cmd": 5}', "names its cmd"),
+    ('{"type": "command", "id": 1, "cmd": "' + "x" * MAX_MESSAGE_BYTES + '"}', "at most"),
+])
+def test_what_is_not_a_command_is_answered_with_the_reason(text, problem) -> None:
+    _, parsed = _command(text)
+    assert isinstance(parsed, str) and problem in parsed

@@ -1,0 +1,118 @@
+"""A real headless Chromium (Debian's ``chromium`` and ``chromium-driver``) driven by
+Selenium, and ``hexactl dashboard`` in a process of its own: for the dashboard's tests,
+its screenshots (docs/dashboard.md) and its latency benchmark.
+
+The packages are installed with apt-get when missing (root), as the vcan runner installs
+user-mode Linux.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tools._debian import ensure_executables
+
+FONT = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf"
+"""Text in the screenshots needs a font; chromium does not depend on one."""
+
+CHROMIUM_FLAGS = (
+    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
+    # The machine's network is closed: without these Chromium keeps trying to reach Google.
+    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--disable-quic",
+    # WebGL on the CPU: the 3D view renders without a GPU.
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+)
+
+START_TIMEOUT_S = 120.0
+"""How long ``hexactl dashboard`` may take to say where it serves (seconds when idle)."""
+
+_SERVING = re.compile(r"dashboard on (?P<url>http://\S+/)")
+
+
+def ensure_chromium() -> dict[str, str]:
+    """Paths of ``chromium`` and ``chromedriver``, installed first if missing."""
+    return ensure_executables({"chromium": "chromium", "chromedriver": "chromium-driver"},
+                              lambda message: print(message, file=sys.stderr, flush=True), {FONT: "fonts-dejavu-core"})
+
+
+def headless_chromium(width: int = 1600, height: int = 1000):  # -> selenium.webdriver.Chrome
+    """A new headless Chromium with its console log kept (``driver.get_log("browser")``)
+    and a fresh profile; quit it when done."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    paths = ensure_chromium()
+    options = webdriver.ChromeOptions()
+    options.binary_location = paths["chromium"]
+    for flag in CHROMIUM_FLAGS:
+        options.add_argument(flag)
+    options.add_argument(f"--window-size={width},{height}")
+    options.add_argument(f"--user-data-dir={tempfile.mkdtemp(prefix='hexactl-chromium-')}")
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(options=options, service=Service(paths["chromedriver"]))
+
+
+@dataclass
+class Dashboard:
+    process: subprocess.Popen[str]
+    url: str = ""
+    lines: list[str] = field(default_factory=list)
+
+    @property
+    def log(self) -> str:
+        return "".join(self.lines)
+
+
+@contextmanager
+def dashboard(api: str, telemetry: str, *options: str) -> Iterator[Dashboard]:
+    """``hexactl dashboard`` for the service at ``api``/``telemetry`` on a free loopback
+    port, started; stopped (SIGTERM, then killed) on the way out.
+
+    :raises RuntimeError: if it does not say where it serves within :data:`START_TIMEOUT_S`
+    """
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hexactl.adapters.cli.main", "dashboard", "--api", api, "--telemetry", telemetry,
+         "--http", "127.0.0.1:0", *options],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    served = Dashboard(process)
+    started = threading.Event()
+
+    def read() -> None:  # all along: a full pipe would block the dashboard
+        assert process.stdout is not None
+        for line in process.stdout:
+            served.lines.append(line)
+            if found := _SERVING.search(line):
+                served.url = found["url"]
+                started.set()
+        started.set()
+
+    reader = threading.Thread(target=read, name="dashboard-log", daemon=True)
+    reader.start()
+    try:
+        if not started.wait(START_TIMEOUT_S) or not served.url:
+            raise RuntimeError(f"hexactl dashboard did not start:\n{served.log}")
+        yield served
+    finally:
+        process.terminate()
+        try:
+            process.wait(30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        reader.join(10)
+
+
+def save_screenshot(driver, path: Path) -> Path:  # noqa: ANN001 - selenium's driver
+    path.parent.mkdir(parents=True, exist_ok=True)
+    driver.save_screenshot(str(path))
+    return path
