@@ -31,7 +31,6 @@ from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError
 from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
-from hexactl.adapters.api.wire import jsonable
 from hexactl.application.loop_link import RemoteLoop
 from hexactl.application.recording import Recordings
 from hexactl.application.simulator import InstrumentLine, InstrumentSpec, SimulatedMeasurement
@@ -171,12 +170,12 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                 closers.callback(line.close)
                 measurement = SimulatedMeasurement(settings.instrument, line)
                 instrument = lambda: measurement.measure(_measured_pose(controller))  # noqa: E731
+            handler = CommandHandler(controller, data, instrument, settings.frames_file, recordings)
             try:
-                publisher = TelemetryPublisher(context, settings.telemetry_endpoint,
-                                               lambda: jsonable(controller.telemetry()), settings.telemetry_rate_hz, curve)
+                publisher = TelemetryPublisher(context, settings.telemetry_endpoint, handler.record,
+                                               settings.telemetry_rate_hz, curve)
                 closers.callback(publisher.close)
-                server = ApiServer(context, settings.api_endpoint, CommandHandler(controller,
-                                   data, instrument, settings.frames_file, recordings), curve,
+                server = ApiServer(context, settings.api_endpoint, handler, curve,
                                    handler_timeout_s=settings.handler_timeout_s, on_stuck=_end_stuck,
                                    worker_niceness=API_WORKER_NICENESS)  # fmt: skip
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate

@@ -26,6 +26,7 @@ ARGUMENTS: dict[str, dict] = {
     "record": {"name": "run1", "duration_s": 1.0},
     "wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
     "validate_wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
+    "progress": {"title": "postures", "done": 3, "total": 12, "label": "leg 1 locked", "said": "measuring"},
 }
 
 
@@ -52,7 +53,7 @@ def test_every_command_round_trips(service, kind) -> None:
     called = [name for name, _ in service.controller.calls]
     # queries and the instrument call nothing; clear_frames is a set_frames of no frames
     assert set(called) == set(COMMANDS) - {"status", "validate_pose", "validate_wave", "save_recording", "measure",
-                                           "frames", "clear_frames", "geometry", "files", "read_file"}
+                                           "frames", "clear_frames", "geometry", "files", "read_file", "progress"}
 
 
 def test_move_passes_pose_and_pace(service) -> None:

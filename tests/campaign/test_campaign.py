@@ -32,7 +32,7 @@ from hexactl.adapters.files.geometry_file import (
 from hexactl.adapters.files.measurements import read_measurements
 from hexactl.application.service import ServiceConfig, ServiceProcess
 from hexactl.calibration.campaign import CampaignDesign, achieved_pose
-from hexactl.calibration.test_motions import COMPOUND
+from hexactl.calibration.test_motions import COMPOUND, PAPER_TEST_MOTIONS
 from hexactl.control.trajectory import MotionLimits
 from tests.api.support import start_service
 
@@ -104,7 +104,17 @@ def test_interrupted_campaign_resumes_and_apply_calibrates_the_controller(servic
     calibration = load_geometry(out / CALIBRATION_FILE)
     target = list(COMPOUND.waypoints[-1])
     with HexactlClient(service.api_endpoint) as client:
-        assert client.call("status")["status"]["calibration_id"] == geometry_id(calibration)
+        record = client.call("status")["status"]
+        assert record["calibration_id"] == geometry_id(calibration)
+        # What displays (the dashboard) were told: the campaign's last words and its report.
+        report = record["campaign"]["report"]
+        assert report["calibration_id"] == geometry_id(calibration) and report["improved"]
+        assert [motion["motion"] for motion in report["validation"]] == [motion.name for motion in PAPER_TEST_MOTIONS]
+        assert max(motion["after_position_mm"] for motion in report["validation"]) == pytest.approx(errors["after"], abs=1e-6)
+        zero1 = next(parameter for parameter in report["parameters"] if parameter["name"] == "zero1")
+        assert zero1["value"] == pytest.approx(calibration.zero_lengths[0])
+        assert zero1["sigma"] == pytest.approx(calibration.calibration.zero_lengths_std_mm[0], rel=1e-6)
+        assert any("improved" in sentence for sentence in record["campaign"]["said"])
         driver = PlatformDriver(client)
         for _ in range(RESETS):
             try:

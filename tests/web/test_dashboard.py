@@ -25,6 +25,7 @@ from selenium.webdriver.support.ui import Select
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
+from tests.reliability.support import tolerating_stalls
 from tools.serving import serve
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -32,14 +33,17 @@ SCREENSHOTS = ROOT / "docs" / "images"
 WAIT_S = 60.0
 
 
-def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT_S) -> object:
+def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT_S,
+             seen: Callable[[], object] | None = None) -> object:
+    """``condition()`` once true; AssertionError after ``timeout_s`` naming ``what`` and,
+    to tell why, what ``seen()`` returns then."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         value = condition()
         if value:
             return value
         time.sleep(0.05)
-    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}")
+    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}" + (f"; seen: {seen()}" if seen else ""))
 
 
 def free_port() -> int:
@@ -48,8 +52,12 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
-def screenshot(driver, name: str) -> None:  # noqa: ANN001
-    """The view as the operator sees it, for docs/dashboard.md (where the checkout is writable)."""
+def screenshot(driver, name: str, showing: str | None = None) -> None:  # noqa: ANN001
+    """The view as the operator sees it, for docs/dashboard.md (where the checkout is
+    writable), with the element ``showing`` (a CSS selector) scrolled into its panel's view."""
+    if showing is not None:
+        driver.execute_script("arguments[0].scrollIntoView({block: 'center'})",
+                              driver.find_element(By.CSS_SELECTOR, showing))
     if os.access(SCREENSHOTS.parent, os.W_OK):
         SCREENSHOTS.mkdir(exist_ok=True)
         driver.save_screenshot(str(SCREENSHOTS / f"dashboard-{name}.png"))
@@ -62,7 +70,18 @@ class Rig:
         self.directory, self.served, self.board, self.driver, self.client = directory, served, board, driver, client
 
     def status(self) -> dict:
-        return self.client.call("status")["status"]
+        """The service's status record; AssertionError at once if a fault latched (a wait
+        for a motion then ends with its reason, and :meth:`scenario` judges it)."""
+        record = self.client.call("status")["status"]
+        assert record["state"] != "fault", f"fault latched: {record['faults']}"
+        return record
+
+    def scenario(self, body: Callable[[], None]) -> None:
+        """``body``, again from the start if it failed while only a stall's faults were
+        latched: the service, the dashboard and a software-rendering browser share a
+        possibly busy host, whose stalls stop the simulated actuators by their watchdog.
+        A fault of any other kind fails at once."""
+        tolerating_stalls(self.client, body, self.at_rest_disabled)
 
     def element(self, selector: str):  # noqa: ANN201
         return self.driver.find_element(By.CSS_SELECTOR, selector)
@@ -94,7 +113,7 @@ class Rig:
 
     def at_rest_disabled(self) -> None:
         """Whatever the previous test left: no fault, at rest, disabled."""
-        record = self.status()
+        record = self.client.call("status")["status"]
         if record["state"] in ("fault", "estop"):
             self.client.call("reset")
         elif record["state"] == "enabled":
@@ -133,116 +152,135 @@ def drawn_and_commanded(rig: Rig) -> tuple[list[float], list[float]]:
 
 
 def test_the_page_loads_with_no_console_error_and_draws_the_services_setpoints(rig) -> None:
-    assert rig.severe_console_entries() == []
-    reply = rig.client.call("geometry")
-    geometry = reply["geometry"]
-    assert rig.page("return window.hexactlDashboard.geometry.calibration_id") == reply["calibration_id"]
-    rig.enabled_from_the_page()
-    rig.client.call("move", pose=[40, -30, 60, 4, -3, 12], duration=1.0)  # legs of six different lengths
-    wait_for(lambda: rig.status()["motion"] == "holding" and rig.status()["goal"] is None, "the move's end")
-    time.sleep(0.5)  # a few telemetry records: the page draws the rest pose
+    def scenario() -> None:
+        assert rig.severe_console_entries() == []
+        reply = rig.client.call("geometry")
+        geometry = reply["geometry"]
+        assert rig.page("return window.hexactlDashboard.geometry.calibration_id") == reply["calibration_id"]
+        rig.enabled_from_the_page()
+        rig.client.call("move", pose=[40, -30, 60, 4, -3, 12], duration=1.0)  # legs of six different lengths
+        wait_for(lambda: rig.status()["motion"] == "holding" and rig.status()["goal"] is None, "the move's end")
+        time.sleep(0.5)  # a few telemetry records: the page draws the rest pose
 
-    def same_record() -> tuple[list[float], list[float]] | None:
-        lengths, setpoints = drawn_and_commanded(rig)
-        return (lengths, setpoints) if setpoints == rig.status()["leg_setpoints"] else None
+        def same_record() -> tuple[list[float], list[float]] | None:
+            lengths, setpoints = drawn_and_commanded(rig)
+            return (lengths, setpoints) if setpoints == rig.status()["leg_setpoints"] else None
 
-    lengths, setpoints = wait_for(same_record, "the page drawing the service's latest set-points")
-    expected = np.asarray(geometry["zero_lengths"]) + (1 + np.asarray(geometry["sensor_scale_errors"])) * np.asarray(setpoints)
-    assert len(set(np.round(lengths, 3))) == 6
-    np.testing.assert_allclose(lengths, expected, atol=1e-6)
-    screenshot(rig.driver, "overview")
-    assert rig.severe_console_entries() == []
+        lengths, setpoints = wait_for(same_record, "the page drawing the service's latest set-points")
+        expected = np.asarray(geometry["zero_lengths"]) + (1 + np.asarray(geometry["sensor_scale_errors"])) * np.asarray(setpoints)
+        assert len(set(np.round(lengths, 3))) == 6
+        np.testing.assert_allclose(lengths, expected, atol=1e-6)
+        screenshot(rig.driver, "overview")
+        assert rig.severe_console_entries() == []
+
+    rig.scenario(scenario)
 
 
 def test_enable_then_a_validated_move_moves_the_simulated_platform(rig) -> None:
-    rig.enabled_from_the_page()
-    goal = [25.0, 10.0, 40.0, 0.0, 3.0, -5.0]
-    for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), goal):
-        rig.fill(f"#move-{axis}", value)
-    assert not rig.element("#move-go").is_enabled()  # nothing to go to before a validation
-    rig.click("#move-validate")
-    wait_for(lambda: "valid" in rig.element("#move-result").get_attribute("class").split(), "the validation")
-    screenshot(rig.driver, "move-validated")
-    rig.click("#move-go")
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        goal = [25.0, 10.0, 40.0, 0.0, 3.0, -5.0]
+        for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), goal):
+            rig.fill(f"#move-{axis}", value)
+        assert not rig.element("#move-go").is_enabled()  # nothing to go to before a validation
+        rig.click("#move-validate")
+        wait_for(lambda: "valid" in rig.element("#move-result").get_attribute("class").split(), "the validation")
+        screenshot(rig.driver, "move-validated", "#move-result")
+        rig.click("#move-go")
 
-    def arrived() -> bool:
-        record = rig.status()
-        measured = record["pose_measured"]
-        return record["motion"] == "holding" and measured is not None and np.allclose(measured, goal, atol=0.05)
+        def arrived() -> bool:
+            record = rig.status()
+            measured = record["pose_measured"]
+            return record["motion"] == "holding" and measured is not None and np.allclose(measured, goal, atol=0.05)
 
-    wait_for(arrived, "the simulated platform at the goal (its measured pose)")
+        wait_for(arrived, "the simulated platform at the goal (its measured pose)", seen=lambda: (
+            rig.element("#move-result").text, rig.element("#messages").text[:500], rig.status()))
+
+    rig.scenario(scenario)
 
 
 def test_an_out_of_reach_goal_shows_its_refusal_and_moves_nothing(rig) -> None:
-    rig.enabled_from_the_page()
-    before = rig.status()["pose_command"]
-    for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), (700, 0, 0, 0, 0, 0)):
-        rig.fill(f"#move-{axis}", value)
-    rig.click("#move-validate")
-    result = rig.element("#move-result")
-    wait_for(lambda: "refused" in result.get_attribute("class").split(), "the refusal")
-    assert "path_violation" in result.text or "700" in result.text, result.text
-    assert not rig.element("#move-go").is_enabled()
-    screenshot(rig.driver, "move-refused")
-    time.sleep(0.5)
-    record = rig.status()
-    assert record["motion"] == "holding" and record["pose_command"] == before
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        before = rig.status()["pose_command"]
+        for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), (700, 0, 0, 0, 0, 0)):
+            rig.fill(f"#move-{axis}", value)
+        rig.click("#move-validate")
+        result = rig.element("#move-result")
+        wait_for(lambda: "refused" in result.get_attribute("class").split(), "the refusal")
+        assert "path_violation" in result.text or "700" in result.text, result.text
+        assert not rig.element("#move-go").is_enabled()
+        screenshot(rig.driver, "move-refused", "#move-result")
+        time.sleep(0.5)
+        record = rig.status()
+        assert record["motion"] == "holding" and record["pose_command"] == before
+
+    rig.scenario(scenario)
 
 
 def test_jog_moves_while_held_and_brakes_when_released(rig) -> None:
-    rig.enabled_from_the_page()
-    rig.fill("#jog-speed", 20)
-    start_x = rig.status()["pose_command"][0]
-    button = rig.element('.jog[data-axis="x"][data-direction="1"]')
-    actions = ActionChains(rig.driver)
-    actions.click_and_hold(button).perform()
-    try:
-        wait_for(lambda: rig.status()["pose_command"][0] > start_x + 5.0, "the platform jogging in +x while held")
-        assert rig.status()["motion"] == "moving"
-    finally:
-        ActionChains(rig.driver).release(button).perform()
-    wait_for(lambda: rig.status()["motion"] == "holding", "the jog braked to rest after the release")
-    rested = rig.status()["pose_command"]
-    time.sleep(0.5)
-    assert rig.status()["pose_command"] == rested  # at rest, not creeping on
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        rig.fill("#jog-speed", 20)
+        start_x = rig.status()["pose_command"][0]
+        button = rig.element('.jog[data-axis="x"][data-direction="1"]')
+        actions = ActionChains(rig.driver)
+        actions.click_and_hold(button).perform()
+        try:
+            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 5.0, "the platform jogging in +x while held")
+            assert rig.status()["motion"] == "moving"
+        finally:
+            ActionChains(rig.driver).release(button).perform()
+        wait_for(lambda: rig.status()["motion"] == "holding", "the jog braked to rest after the release")
+        rested = rig.status()["pose_command"]
+        time.sleep(0.5)
+        assert rig.status()["pose_command"] == rested  # at rest, not creeping on
+
+    rig.scenario(scenario)
 
 
 def test_escape_latches_the_estop_even_from_a_text_field(rig) -> None:
-    rig.enabled_from_the_page()
-    rig.element("#move-x").click()  # focus in a field: Escape must still stop
-    ActionChains(rig.driver).send_keys(Keys.ESCAPE).perform()
-    wait_for(lambda: rig.status()["state"] == "estop", "the E-stop latched by Escape")
-    wait_for(lambda: rig.element("#state").text.strip() == "estop", "the page showing the E-stop")
-    screenshot(rig.driver, "estop")
-    rig.click("#reset")
-    wait_for(lambda: rig.status()["state"] == "disabled", "reset by the page's button")
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        rig.element("#move-x").click()  # focus in a field: Escape must still stop
+        ActionChains(rig.driver).send_keys(Keys.ESCAPE).perform()
+        wait_for(lambda: rig.status()["state"] == "estop", "the E-stop latched by Escape")
+        wait_for(lambda: rig.element("#state").text.strip() == "estop", "the page showing the E-stop")
+        screenshot(rig.driver, "estop")
+        rig.click("#reset")
+        wait_for(lambda: rig.status()["state"] == "disabled", "reset by the page's button")
+
+    rig.scenario(scenario)
 
 
 def test_a_calibration_load_shows_the_change_then_applies_it(rig) -> None:
-    rig.enabled_from_the_page()
-    nominal = load_geometry(ROOT / "config" / "platform.toml")
-    calibrated = nominal.model_copy(update={"name": "dashboard test", "zero_lengths": tuple(
-        length + 0.2 for length in nominal.zero_lengths)})
-    (rig.directory / "calibrations" / "dashboard-test.toml").write_text(geometry_to_toml(calibrated))
-    rig.click("#calibration-refresh")
-    wait_for(lambda: any(option.get_attribute("value").endswith("dashboard-test.toml") for option in
-                         Select(rig.element("#calibration-files")).options), "the file in the list")
-    select = Select(rig.shown("#calibration-files"))
-    select.select_by_value(next(option.get_attribute("value") for option in select.options
-                                if option.get_attribute("value").endswith("dashboard-test.toml")))
-    assert not rig.element("#calibration-apply").is_enabled()  # not before the change is shown
-    rig.click("#calibration-preview")
-    change = rig.element("#calibration-change")
-    wait_for(lambda: "valid" in change.get_attribute("class").split(), "the change shown")
-    assert "0.200" in change.text and geometry_id(calibrated) in change.text, change.text
-    assert rig.status()["calibration_id"] == geometry_id(nominal)  # shown, not applied
-    screenshot(rig.driver, "calibration-preview")
-    rig.click("#calibration-apply")
-    wait_for(lambda: rig.status()["calibration_id"] == geometry_id(calibrated), "the calibration applied")
-    wait_for(lambda: rig.page("return window.hexactlDashboard.geometry.calibration_id") == geometry_id(calibrated),
-             "the page drawing the new geometry")
-    rig.client.call("rollback_calibration")
-    wait_for(lambda: rig.status()["calibration_id"] == geometry_id(nominal), "rolled back")
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        nominal = load_geometry(ROOT / "config" / "platform.toml")
+        calibrated = nominal.model_copy(update={"name": "dashboard test", "zero_lengths": tuple(
+            length + 0.2 for length in nominal.zero_lengths)})
+        (rig.directory / "calibrations" / "dashboard-test.toml").write_text(geometry_to_toml(calibrated))
+        rig.click("#calibration-refresh")
+        wait_for(lambda: any(option.get_attribute("value").endswith("dashboard-test.toml") for option in
+                             Select(rig.element("#calibration-files")).options), "the file in the list")
+        select = Select(rig.shown("#calibration-files"))
+        select.select_by_value(next(option.get_attribute("value") for option in select.options
+                                    if option.get_attribute("value").endswith("dashboard-test.toml")))
+        assert not rig.element("#calibration-apply").is_enabled()  # not before the change is shown
+        rig.click("#calibration-preview")
+        change = rig.element("#calibration-change")
+        wait_for(lambda: "valid" in change.get_attribute("class").split(), "the change shown")
+        assert "0.200" in change.text and geometry_id(calibrated) in change.text, change.text
+        assert rig.status()["calibration_id"] == geometry_id(nominal)  # shown, not applied
+        screenshot(rig.driver, "calibration-preview", "#calibration-change")
+        rig.click("#calibration-apply")
+        wait_for(lambda: rig.status()["calibration_id"] == geometry_id(calibrated), "the calibration applied")
+        wait_for(lambda: rig.page("return window.hexactlDashboard.geometry.calibration_id") == geometry_id(calibrated),
+                 "the page drawing the new geometry")
+        rig.client.call("rollback_calibration")
+        wait_for(lambda: rig.status()["calibration_id"] == geometry_id(nominal), "rolled back")
+
+    rig.scenario(scenario)
 
 
 def test_killing_and_restarting_the_service_reconnects_the_page(tmp_path) -> None:
@@ -336,3 +374,26 @@ def test_the_dashboard_of_a_killed_service_ends_by_itself(tmp_path) -> None:
         served.process.wait()
         wait_for(lambda: not Path(f"/proc/{pid}").exists() or
                  Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z", "the dashboard ended")
+
+
+def test_a_campaigns_progress_and_its_finished_report_show_in_the_page(rig) -> None:
+    """What ``hexactl campaign`` tells the service (``progress``), as the page renders it."""
+    rig.client.call("progress", title="postures", done=7, total=18, label="leg 3 locked", said="measuring with the simulator")
+    rig.shown("#campaign-progress")
+    wait_for(lambda: "postures 7/18 · leg 3 locked" in rig.element("#campaign-progress").text, "the progress shown")
+    assert "measuring with the simulator" in rig.element("#campaign-said").text
+    report = {"method": "full", "calibration_id": "0123456789abcdef", "postures": 18, "residual_rms_mm": 0.21,
+              "expected_rms_mm": 0.2, "fit": "χ²/dof 1.050", "improved": True, "warnings": ["weakly determined: zero6"],
+              "parameters": [{"name": "B1.x", "value": 612.3456, "sigma": 0.0213},
+                             {"name": "zero6", "value": 1750.5, "sigma": None},
+                             {"name": "scale2", "value": 4.2e-4, "sigma": 1.1e-5}],
+              "validation": [{"motion": "x_sweep", "before_position_mm": 31.2, "before_orientation_deg": 0.52,
+                              "after_position_mm": 0.14, "after_orientation_deg": 0.003}]}
+    rig.client.call("progress", title="identification", done=1, total=1, said="largest error: 31.200 mm → 0.140 mm",
+                    report=report)
+    box = rig.element("#campaign-report")
+    wait_for(lambda: box.is_displayed() and "0123456789abcdef" in box.text, "the report shown")
+    assert "improved" in box.text and "31.200" in box.text and "0.140" in box.text and "zero6" in box.text
+    box.find_element(By.TAG_NAME, "summary").click()  # the parameters with their σ
+    wait_for(lambda: "0.0213" in box.text and "undetermined" in box.text and "420.0" in box.text, "the parameters")
+    screenshot(rig.driver, "campaign", "#campaign-report")

@@ -42,6 +42,7 @@ from hexactl.adapters.api.messages import (
     ValidateCalibrationRequest,
     GeometryRequest,
     FilesRequest,
+    ProgressRequest,
     ReadFileRequest,
     SetFramesRequest,
     StatusRequest,
@@ -51,6 +52,7 @@ from hexactl.adapters.api.messages import (
     WaveFigures,
     WaveRequest,
 )
+from hexactl.adapters.api.campaign_board import CampaignBoard
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.port import ControllerPort, RecorderPort
 from hexactl.adapters.api.sequences import resolve_sequence
@@ -102,12 +104,17 @@ class CommandHandler:
         self.instrument = instrument
         self.frames_file = frames_file
         self.recorder = recorder
+        self.campaign = CampaignBoard()
+
+    def record(self) -> dict[str, Any]:
+        """A telemetry record: the controller's, with what a client's campaign said last."""
+        return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view()}
 
     def __call__(self, request: Request, deadline_ns: int | None = None) -> dict[str, Any]:
         controller = self.controller
         match request:
             case StatusRequest():
-                return {"status": jsonable(controller.telemetry()), "predicted_accuracy": controller.predicted_accuracy()}
+                return {"status": self.record(), "predicted_accuracy": controller.predicted_accuracy()}
             case EnableRequest():
                 return _checked(controller.enable(deadline_ns=deadline_ns))
             case DisableRequest():
@@ -158,6 +165,9 @@ class CommandHandler:
                         "geometry": active.geometry.model_dump(mode="json", exclude=GEOMETRY_REPLY_EXCLUDES)}
             case FilesRequest():
                 return {"files": self.data.files(MAX_FILES_LISTED)}
+            case ProgressRequest():
+                self.campaign.update(request)
+                return {"message": "noted"}
             case ReadFileRequest():
                 path, data, size = self.data.read_chunk(request.path, request.offset, request.length)
                 return {"path": str(path), "offset": request.offset, "data_b64": base64.b64encode(data).decode("ascii"),

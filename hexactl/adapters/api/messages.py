@@ -276,6 +276,49 @@ class LoadCalibrationRequest(_Request):
         return self
 
 
+class ParameterEstimate(_Message):
+    name: str = Field(max_length=40, description="B1.x … P6.z (joints, mm), zero1 … (zero lengths, mm), scale1 … "
+                      "(sensor scale errors)")
+    value: float
+    sigma: float | None = Field(description="1σ, same unit; null when not determined")
+
+
+class MotionErrors(_Message):
+    motion: str = Field(max_length=100, description="the test motion")
+    before_position_mm: float = Field(description="largest position error before calibration, mm")
+    before_orientation_deg: float = Field(description="largest orientation error before calibration, deg")
+    after_position_mm: float = Field(description="largest position error after calibration, mm")
+    after_orientation_deg: float = Field(description="largest orientation error after calibration, deg")
+
+
+class CampaignReport(_Message):
+    """A finished campaign's results, for displays."""
+
+    method: str = Field(max_length=40)
+    calibration_id: str = Field(max_length=64)
+    postures: int = Field(ge=0)
+    residual_rms_mm: float
+    expected_rms_mm: float = Field(description="the noise model's expectation of the residual RMS, mm")
+    fit: str = Field(max_length=200, description="the χ²/dof sentence")
+    parameters: list[ParameterEstimate] = Field(max_length=60)
+    validation: list[MotionErrors] = Field(max_length=20, description="each test motion before and after")
+    improved: bool
+    warnings: list[Annotated[str, Field(max_length=1000)]] = Field(default=[], max_length=20)
+
+
+class ProgressRequest(_Request):
+    """A client's campaign says how far it is (a phase's steps, a sentence it printed, its
+    report when finished); telemetry's ``campaign`` carries the latest to every display."""
+
+    cmd: Literal["progress"]
+    title: str = Field(max_length=200, description="the phase, e.g. postures")
+    done: int = Field(ge=0, description="steps of the phase done")
+    total: int = Field(ge=0, description="steps of the phase")
+    label: str = Field(default="", max_length=200, description="the latest step, e.g. leg 3 locked")
+    said: str | None = Field(default=None, max_length=2000, description="a sentence the campaign printed")
+    report: CampaignReport | None = Field(default=None, description="the finished campaign's results")
+
+
 class ValidateCalibrationRequest(LoadCalibrationRequest):
     """Would ``load_calibration`` accept it now? The same fields and checks; nothing is
     swapped. The reply says the set-point change the load would make."""
@@ -394,6 +437,7 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     GeometryRequest,
     FilesRequest,
     ReadFileRequest,
+    ProgressRequest,
 )
 
 Request = Annotated[Union[REQUEST_MODELS], Field(discriminator="cmd")]  # type: ignore[valid-type]
@@ -497,6 +541,18 @@ class JogTelemetry(_Message):
     renew_within_s: float = Field(ge=0, description="time left before the deadman lapses unless the jog is renewed, s")
 
 
+class CampaignTelemetry(_Message):
+    """The latest a client's campaign said (``progress``), for every display."""
+
+    title: str = Field(description="the phase")
+    done: int
+    total: int
+    label: str
+    said: list[str] = Field(description="the campaign's latest sentences, oldest first")
+    report: CampaignReport | None = Field(description="the finished campaign's results, once it has them")
+    age_s: float = Field(description="seconds since the campaign last said something")
+
+
 class Telemetry(_Message):
     """One control cycle's picture."""
 
@@ -528,6 +584,8 @@ class Telemetry(_Message):
     wave: WaveTelemetry | None = Field(default=None, description="the wave playing, or how the last one ended; null "
                                        "before the first wave")
     jog: JogTelemetry | None = Field(default=None, description="the jog under way; null when none is")
+    campaign: CampaignTelemetry | None = Field(default=None, description="the latest a client's campaign said "
+                                               "(progress); null before any")
 
 
 # -- replies -------------------------------------------------------------------------

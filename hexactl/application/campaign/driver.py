@@ -9,12 +9,13 @@ measured is saved, and the same command resumes after the operator has dealt wit
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
 
 Record = dict[str, Any]
 """A status record (``status`` reply's ``status``)."""
@@ -205,6 +206,13 @@ class PlatformDriver:
         """Carry out ``cmd`` (:meth:`_call`), then wait until the platform settles (:meth:`wait_settled`)."""
         self._call(cmd, **fields)
         return self.wait_settled(0.0)
+
+    def tell(self, progress: dict[str, Any]) -> None:
+        """Hand the campaign's progress to the service for its displays (``progress``); a
+        service that does not take it (an older one) or does not answer is not the
+        campaign's concern: its next command finds out."""
+        with contextlib.suppress(ServiceUnavailable):
+            self.client.request("progress", **progress)
 
     def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
         try:

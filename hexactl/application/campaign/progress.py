@@ -5,7 +5,11 @@ sentences and drops the bar's redraws."""
 from __future__ import annotations
 
 import sys
-from typing import TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
+
+Forward = Callable[[dict[str, Any]], None]
+"""Where a copy of the progress goes (the service's ``progress`` command: displays show it)."""
 
 BAR_WIDTH = 30
 """Characters of the bar itself."""
@@ -26,26 +30,46 @@ class Progress:
         self.title = ""
         """The phase being shown."""
         self._total = 0
+        self._done = 0
+        self._label = ""
         self._tenths = -1
         self._drawn = False
+        self._forward: Forward | None = None
+
+    def forward_to(self, forward: Forward | None) -> None:
+        """Also hand every phase, step and sentence to ``forward`` (None: no longer), as the
+        fields of the API's ``progress`` command."""
+        self._forward = forward
+
+    def report(self, report: dict[str, Any]) -> None:
+        """The finished campaign's results (the fields of the API's ``CampaignReport``), for displays."""
+        self._send(report=report)
 
     def say(self, text: str) -> None:
         self._clear()
         print(text, file=self.out, flush=True)
+        self._send(said=text)
 
     def start(self, title: str, total: int, done: int = 0) -> None:
         """A phase of ``total`` steps begins, ``done`` of them already done (a resumed campaign)."""
         self.title, self._total, self._tenths = title, total, -1
         self._draw(done, "resumed" if done else "")
+        self._send()
 
     def step(self, done: int, label: str) -> None:
         """``done`` steps of the phase are finished, the latest being ``label``."""
         self._draw(done, label)
+        self._send()
+
+    def _send(self, **extra: Any) -> None:
+        if self._forward is not None:
+            self._forward({"title": self.title, "done": self._done, "total": self._total, "label": self._label, **extra})
 
     def finish(self) -> None:
         self._clear()
 
     def _draw(self, done: int, label: str) -> None:
+        self._done, self._label = done, label
         filled = BAR_WIDTH * done // self._total if self._total else BAR_WIDTH
         text = f"{self.title} [{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {done}/{self._total} {label}"
         if self.bar.isatty():

@@ -75,6 +75,7 @@ from hexactl.calibration.identification import (
     extra_estimates,
     identify,
 )
+from hexactl.calibration.parameters import StructuralParameters, parameter_names
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry, GeometryError
@@ -128,10 +129,14 @@ def run_campaign(client: HexactlClient, geometry: Geometry, instrument: Instrume
     stays saved either way.
     """
     driver = PlatformDriver(client)
-    if not (settings.directory / PLAN_FILE).exists():  # nothing planned or written for a controller on another geometry
-        driver.require_calibration(geometry_id(geometry), _planned(geometry))
-    with CampaignStore.open(settings.directory, geometry, settings.design) as store:
-        return _run(driver, store, instrument, settings, progress)
+    progress.forward_to(driver.tell)  # displays of the service (the dashboard) follow the campaign
+    try:
+        if not (settings.directory / PLAN_FILE).exists():  # nothing planned or written for a controller on another geometry
+            driver.require_calibration(geometry_id(geometry), _planned(geometry))
+        with CampaignStore.open(settings.directory, geometry, settings.design) as store:
+            return _run(driver, store, instrument, settings, progress)
+    finally:
+        progress.forward_to(None)
 
 
 def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, settings: CampaignSettings,
@@ -166,6 +171,7 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
     before, after = store.validation_results("before"), store.validation_results("after")
     better = improved(summarise_validation(before), summarise_validation(after))
     _show(before, after, better, progress)
+    progress.report(campaign_report(result, calibrated_id, before, after, better))
     step(lambda: _conclude(driver, store, better, settings.apply, progress))
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
     report = write_report(store.path(REPORT_DIRECTORY),
@@ -374,6 +380,30 @@ def _show(before: Sequence[MotionResult], after: Sequence[MotionResult], better:
     verdict = "improved" if better else "NOT improved"
     progress.say(f"largest error over the test motions: {b.max_position_error_mm:.3f} mm → {a.max_position_error_mm:.3f} mm, "
                  f"{b.max_orientation_error_deg:.4f}° → {a.max_orientation_error_deg:.4f}°: {verdict}")
+
+
+def campaign_report(result: IdentificationResult, calibration_id: str, before: Sequence[MotionResult],
+                    after: Sequence[MotionResult], better: bool) -> dict[str, object]:
+    """The finished campaign's results as the API's ``CampaignReport`` (for displays)."""
+    parameters, std = result.parameters, result.std
+
+    def flat(values: StructuralParameters) -> list[float]:
+        per_leg = np.hstack((values.base_joints_mm, values.platform_joints_mm, values.zero_lengths_mm[:, None]))
+        scales = [] if values.scale_errors is None else list(values.scale_errors)
+        return [*per_leg.ravel().tolist(), *scales]
+
+    estimates = [{"name": name, "value": value, "sigma": sigma if np.isfinite(sigma) else None}
+                 for name, value, sigma in zip(parameter_names(parameters.has_scales), flat(parameters), flat(std))]
+    validation = []
+    for b_motion, a_motion in zip(before, after):
+        b, a = summarise_validation([b_motion]), summarise_validation([a_motion])
+        validation.append({"motion": b_motion.motion.name, "before_position_mm": b.max_position_error_mm,
+                           "before_orientation_deg": b.max_orientation_error_deg,
+                           "after_position_mm": a.max_position_error_mm, "after_orientation_deg": a.max_orientation_error_deg})
+    return {"method": str(result.method.value), "calibration_id": calibration_id, "postures": result.postures_used,
+            "residual_rms_mm": result.residual_rms_mm, "expected_rms_mm": result.expected_rms_mm,
+            "fit": result.consistency, "parameters": estimates, "validation": validation, "improved": better,
+            "warnings": list(result.warnings)[:20]}
 
 
 def _conclude(driver: PlatformDriver, store: CampaignStore, better: bool, apply: bool, progress: Progress) -> None:

@@ -1,6 +1,8 @@
 // The control panels: move (validate, then go), jog (press and hold), sequences, leg lock,
 // frames and soft limits, calibration, recorder. Each talks to the service through ctx.send.
 
+import { setupCampaign } from './campaign.js';
+
 const $ = (id) => document.getElementById(id);
 export const AXES = ['x', 'y', 'z', 'roll', 'pitch', 'yaw'];
 const BUILT_IN_SEQUENCES = ['x_sweep', 'y_rotation', 'compound'];
@@ -432,7 +434,10 @@ export function setupControls(ctx) {
   const shown = {};
   const setText = (id, text) => { if (shown[id] !== text) { shown[id] = text; $(id).textContent = text; } };
 
+  const updateCampaign = setupCampaign();
+
   function onRecord(r) {
+    updateCampaign(r.campaign);
     // sequence progress
     const s = r.sequence;
     if (s && typeof s === 'object') {
