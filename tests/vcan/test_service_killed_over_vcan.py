@@ -219,7 +219,11 @@ def move_through_stalls(client: HexactlClient, goal: list[float], reached: Calla
     attempt = 1
     while True:
         enabled_at_rest(client)  # after a stall, it resets the fault
-        client.call("move", pose=goal, duration=MOVE_S)
+        try:
+            client.call("move", pose=goal, duration=MOVE_S)
+        except CommandError as error:  # a stall latched between the two: the move is refused
+            if error.code != "latched":
+                raise
         record = wait_status(client, lambda r: reached(r) or r["state"] != "enabled", what)
         if record["state"] == "enabled":
             return record
