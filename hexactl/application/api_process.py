@@ -29,6 +29,7 @@ import zmq
 from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.security import CurveServer, CurveServerKeys, SecurityError
+from hexactl.adapters.api.stream_receiver import StreamReceiver
 from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.application.loop_link import RemoteLoop
@@ -98,6 +99,8 @@ class ApiSettings:
     urgent_niceness: int = 0  # for URGENT_THREAD_NAMES; 0: the process's
     frames: OperatorFrames = OperatorFrames()  # the operator's, as restored from frames_file
     frames_file: Path | None = None  # where a change of the frames is saved (None: not saved)
+    stream_endpoint: str = "tcp://127.0.0.1:*"  # the pose stream's ZeroMQ PULL socket
+    stream_udp: tuple[str, int] | None = None  # and its UDP port (None: none)
 
 
 class ApiProcess:
@@ -170,7 +173,14 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                 closers.callback(line.close)
                 measurement = SimulatedMeasurement(settings.instrument, line)
                 instrument = lambda: measurement.measure(_measured_pose(controller))  # noqa: E731
-            handler = CommandHandler(controller, data, instrument, settings.frames_file, recordings)
+            try:
+                stream_input = StreamReceiver(context, settings.stream_endpoint, settings.stream_udp,
+                                              controller.stream_target, settings.controller.loop.period_s,
+                                              lambda: controller.snapshot.stream, curve)
+            except (zmq.ZMQError, OSError) as error:
+                raise ApiStartError(f"cannot take a pose stream: {error}") from None
+            closers.callback(stream_input.close)
+            handler = CommandHandler(controller, data, instrument, settings.frames_file, recordings, stream_input)
             try:
                 publisher = TelemetryPublisher(context, settings.telemetry_endpoint, handler.record,
                                                settings.telemetry_rate_hz, curve)
@@ -184,6 +194,9 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
             control.send(str(error))
             return
         publisher.start()
+        stream_input.start()
+        log.info("pose stream input: %s", ", ".join(f"{kind} {where}" for kind, where in stream_input.endpoints.items()
+                                                      if where is not None))
         server.start()
         if settings.urgent_niceness:
             _raise_urgent_threads(settings.urgent_niceness)

@@ -25,6 +25,7 @@ without the privilege it runs normally and says why
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import multiprocessing
 import os
@@ -173,7 +174,9 @@ class ServiceConfig:
     are kept across restarts (None: ./frames.toml); read at start (a file that is not
     valid refuses the start), written whenever they change. ``dashboard_http``: serve the
     browser dashboard there too (``HOST:PORT`` on loopback; None: no dashboard), in a
-    process of its own, stopped first at shutdown.
+    process of its own, stopped first at shutdown. ``stream_endpoint``: the pose stream's
+    ZeroMQ socket (None: the API's host, a free port); ``stream_udp``: (host, port) where
+    its samples are also taken as UDP datagrams (None: no UDP).
     """
 
     config_path: Path | None = None
@@ -193,6 +196,15 @@ class ServiceConfig:
     log_level: str = "INFO"
     frames_path: Path | None = None
     dashboard_http: str | None = None
+    stream_endpoint: str | None = None
+    stream_udp: tuple[str, int] | None = None
+
+
+def _beside(api_endpoint: str) -> str:
+    """A free port on the API's host (a TCP endpoint), else on loopback."""
+    if api_endpoint.startswith("tcp://"):
+        return api_endpoint.rpartition(":")[0] + ":*"
+    return "tcp://127.0.0.1:*"
 
 
 class Service:
@@ -302,7 +314,12 @@ class Service:
                                    data_dirs, controller_config, nominal,
                                    simulator.instrument_spec if simulator else None, config.log_level,
                                    urgent_niceness=0 if realtime.fifo_priority is None
-                                   else API_URGENT_NICENESS, frames=frames, frames_file=frames_path)  # fmt: skip
+                                   else API_URGENT_NICENESS, frames=frames, frames_file=frames_path,
+                                   stream_endpoint=config.stream_endpoint or _beside(config.api_endpoint),
+                                   stream_udp=config.stream_udp)  # fmt: skip
+            if config.stream_udp and not ipaddress.ip_address(config.stream_udp[0]).is_loopback:
+                log.warning("pose stream on UDP %s:%d: UDP has no authentication; whoever reaches that port steers the "
+                            "platform while a stream is open (within the workspace and the limits)", *config.stream_udp)
             port = None
             if simulator:
                 port = InstrumentPort(simulator.runner.actual_positions_mm).start()

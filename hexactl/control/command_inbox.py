@@ -5,7 +5,7 @@ Producers (:class:`~hexactl.control.host.LoopHost` in any thread) append to
 is no lock the loop could wait on. Once a cycle the loop carries out at most
 :data:`MAX_COMMANDS_PER_CYCLE` of them (the rest wait for the next cycle): a command
 whose ``deadline_ns`` has passed is refused as ``expired``, any other goes to its
-handler. Every command gets an :class:`~hexactl.control.commands.Outcome` (the last
+handler. Every command (but a stream's targets: ``answered`` False) gets an :class:`~hexactl.control.commands.Outcome` (the last
 :data:`KEPT_OUTCOMES` are kept for the snapshot); a refusal is also logged.
 
 Owned by the loop thread apart from ``queue.append``.
@@ -58,4 +58,6 @@ class CommandInbox:
         code, message = refusal if refusal else (None, "done")
         if refusal:
             self._log("command_refused", f"{type(command).__name__}: {message}")
+        if not command.answered:
+            return
         self.outcomes = (self.outcomes + (cmd.Outcome(command.ticket, code, message),))[-KEPT_OUTCOMES:]

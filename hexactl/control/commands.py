@@ -19,16 +19,22 @@ a path nobody validated.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from hexactl.control.jog import JogPlan
 from hexactl.control.planning import ActiveGeometry, Segment
 from hexactl.control.wave_planning import WavePlan
+from hexactl.kinematics.axes import PerAxis, RelativeMmRad, ToolInWorkMmRad
+from hexactl.kinematics.frames import Frames
 
 
 @dataclass(frozen=True, slots=True)
 class Command:
     ticket: int
     deadline_ns: int | None = field(default=None, kw_only=True)
+    answered: ClassVar[bool] = True
+    """The loop publishes an :class:`Outcome` for it (a stream's targets: no, they would
+    push every other command's verdict out of the kept ones)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +155,45 @@ class PlayWave(Command):
 
     epoch: int
     plan: WavePlan
+
+
+@dataclass(frozen=True, slots=True)
+class OpenStream(Command):
+    """Open a stream (its number: this command's ticket) from ``source`` whose targets
+    are in ``frame`` (a :class:`~hexactl.control.frames.Frame` value): the trajectory
+    rebased at rest on ``start`` in the coordinates of ``frames`` (None: relative
+    mm/rad); targets move at ``velocity_scale`` of the velocity limits at most
+    (:func:`~hexactl.control.stream_commands.stream_velocity_scale`); the stream ends if
+    no target comes for ``timeout_ns``."""
+
+    epoch: int
+    source: str
+    frame: str
+    frames: Frames | None
+    start: RelativeMmRad | ToolInWorkMmRad
+    timeout_ns: int
+    velocity_scale: float
+
+
+@dataclass(frozen=True, slots=True)
+class StreamTarget(Command):
+    """Stream ``stream``'s newest target, checked reachable, in the stream's coordinates,
+    to pass at ``velocity`` (mm/s, rad/s) in no less than ``horizon_s`` (s; the goal lies that
+    far ahead of the sample along its velocity); ``sequence`` the sender's number,
+    ``received_ns`` when it arrived (monotonic)."""
+
+    stream: int
+    goal: RelativeMmRad | ToolInWorkMmRad
+    velocity: PerAxis
+    horizon_s: float
+    sequence: int
+    received_ns: int
+    answered: ClassVar[bool] = False
+
+
+@dataclass(frozen=True, slots=True)
+class CloseStream(Command):
+    """End the stream under way: brake to rest."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -46,6 +46,7 @@ from hexactl.control.planning import (
     plan_path,
 )
 from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.stream_commands import StreamCommands, TargetResult
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
@@ -81,6 +82,8 @@ class Controller:
         self._jogs = JogCommands(lambda: self.snapshot, self._context, self._commands, config.jog_deadman_s)
         self.recordings = RecordingCommands(self._commands, lambda: self.snapshot)
         self._waves = WaveCommands(lambda: self.snapshot, self._context, self._commands)
+        self._streams = StreamCommands(lambda: self.snapshot, self._context, self._commands, host.submit,
+                                       config.stream)
 
     @property
     def snapshot(self) -> CoreSnapshot:
@@ -276,6 +279,26 @@ class Controller:
         Success details: ``duration_s``, the peak leg speed and acceleration, the peak pose
         velocity. ``stop`` or ``abort`` brake it to rest; it cannot be paused."""
         return self._waves.play(spec, deadline_ns)
+
+    def stream_open(self, source: str, frame: Frame | str = Frame.ZERO, timeout_s: float = 0.1, *,
+                    deadline_ns: int | None = None) -> CommandResult:
+        """Open a pose stream from ``source`` (a name for people) of target poses in
+        ``frame`` (zero or work), ended if no target comes for ``timeout_s``: the loop
+        follows each target jerk-limited, a target out of reach replaced by the nearest
+        reachable pose on the way to it (:mod:`~hexactl.control.stream_commands`).
+        ``details.stream``: its number."""
+        return self._streams.open(source, frame, timeout_s, deadline_ns)
+
+    def stream_close(self) -> CommandResult:
+        """End the pose stream: brake to rest."""
+        return self._streams.close()
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult:
+        """The open stream's next target (finite; its frame, mm and deg), numbered
+        ``sequence`` and sent at ``sent_s`` (s, the sender's clock) by its sender, which
+        arrived at monotonic ``received_ns``. Not waited for: the loop takes the newest
+        each cycle."""
+        return self._streams.target(pose, sequence, sent_s, received_ns)
 
     def abort(self) -> CommandResult:
         """End the sequence or the wave and brake to rest; a sequence's records are kept."""

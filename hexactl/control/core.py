@@ -54,6 +54,7 @@ from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequenceProgress, dwell_record
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
+from hexactl.control.stream import StreamProgress
 from hexactl.control.supervisor import Fault, Supervisor
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
@@ -122,6 +123,10 @@ class ControlCore:
     @property
     def wave(self) -> WaveProgress | None:
         return self._motion.wave.progress
+
+    @property
+    def stream(self) -> StreamProgress | None:
+        return self._motion.stream.progress
 
     # -- the cycle ---------------------------------------------------------------------
 
@@ -293,5 +298,5 @@ class ControlCore:
             events=self._events, outcomes=self._commands.outcomes, clamped_cycles=path.clamped_cycles,
             clamped_legs=path.clamped_legs, fk_failures=self._measurement.failures, motion_end_ns=motion.end_ns,
             recorder=self.recorder.state, jog=motion.jogger.progress, last_jog=motion.jogger.report,
-            wave=motion.wave.progress,
+            wave=motion.wave.progress, stream=motion.stream.progress, last_stream=motion.stream.report,
         )

@@ -5,7 +5,8 @@
 (:class:`~hexactl.control.setpoint_path.SetpointPath`), the sequence player
 (:class:`~hexactl.control.sequence_player.SequencePlayer`), the wave player
 (:class:`~hexactl.control.wave_player.WavePlayer`: while a wave plays it, not the
-generator's update, gives each cycle's position) and the locked leg. Its
+generator's update, gives each cycle's position), a pose stream's follower
+(:class:`~hexactl.control.stream.StreamFollower`) and the locked leg. Its
 :meth:`Motion.update` is the ENABLED cycle's update: the trajectory's next target →
 the set-points → playback.
 
@@ -31,10 +32,13 @@ from hexactl.control.sequence_player import SequencePlayer, start_segment
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.setpoint_path import SetpointPath
 from hexactl.control.snapshot import MotionState
+from hexactl.control.stream import StreamFollower
 from hexactl.control.supervisor import Fault
 from hexactl.control.trajectory import PoseTrajectory, StepResult
 from hexactl.control.wave_planning import WavePlan
 from hexactl.control.wave_player import WavePhase, WavePlayer
+from hexactl.kinematics.axes import RelativeMmRad, ToolInWorkMmRad
+from hexactl.kinematics.frames import Frames
 
 
 class Motion:
@@ -48,6 +52,7 @@ class Motion:
         self.player = SequencePlayer(self.trajectory, record, log)
         self.jogger = Jogger(self.trajectory, log)
         self.wave = WavePlayer(self.trajectory)
+        self.stream = StreamFollower(self.trajectory, config.stream, log)
         self.lock: LegLock | None = None
         self.epoch = 0
         self.end_ns: int | None = None
@@ -76,10 +81,15 @@ class Motion:
         jogger = self.jogger
         if jogger.progress is not None:
             jogger.before_step(now_ns)
+        stream = self.stream
+        if stream.progress is not None:
+            stream.before_step(now_ns)
         wave = self.wave
         result = wave.update() if wave.playing else trajectory.update()  # a wave drives the generator's state
         if jogger.progress is not None:
             jogger.after_step()
+        if stream.progress is not None:
+            stream.after_step()
         if result is StepResult.ERROR:
             return Fault("planner_error", "the trajectory generator refused its input")
         if result is StepResult.WORKING and trajectory.replanned and not wave.playing:
@@ -108,6 +118,7 @@ class Motion:
         self.player.end(sequence_status)
         self.jogger.end(sequence_status)
         self.wave.end(WavePhase.FAULT if sequence_status == "fault" else WavePhase.ABORTED)
+        self.stream.end("a fault or E-stop latched" if sequence_status == "fault" else "the controller was disabled")
         self.epoch += 1
 
     # -- commands, once their preconditions hold -----------------------------------------
@@ -144,6 +155,23 @@ class Motion:
         self.wave.end(WavePhase.ABORTED)  # the generator has the wave's state: it brakes from there
         self.trajectory.halt()
         self.jogger.brake("stopped")
+        self.stream.brake("stopped")
+        self.epoch += 1
+
+    def open_stream(self, stream: int, source: str, frame: str, frames: Frames | None,
+                    start: RelativeMmRad | ToolInWorkMmRad, timeout_ns: int, velocity_scale: float,
+                    now_ns: int) -> None:
+        """Open stream ``stream`` (from rest): the generator rebased at rest on ``start`` in
+        the coordinates of ``frames``; see :class:`~hexactl.control.commands.OpenStream`."""
+        self.jogger.end("replaced by a stream")
+        self.trajectory.rebase(start, frames)
+        self.stream.start(stream, source, frame, timeout_ns, velocity_scale, now_ns)
+        self.epoch += 1
+
+    def close_stream(self) -> None:
+        """Brake to rest, then the stream ends."""
+        self.trajectory.halt()
+        self.stream.brake("closed by the client")
         self.epoch += 1
 
     def lock_leg(self, leg: int) -> None:

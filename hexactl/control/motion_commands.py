@@ -16,6 +16,7 @@ from hexactl.control import preconditions
 from hexactl.control.command_inbox import Handler
 from hexactl.control.motion import Motion
 from hexactl.control.preconditions import CoreView, Refusal
+from hexactl.control.results import ErrorCode
 
 
 class MotionCommands:
@@ -30,7 +31,8 @@ class MotionCommands:
     def handlers(self) -> dict[type[cmd.Command], Handler]:
         return {cmd.Move: self._move, cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog, cmd.Stop: self._stop,
                 cmd.Play: self._play, cmd.PlayWave: self._play_wave, cmd.Pause: self._pause, cmd.Resume: self._resume,
-                cmd.Abort: self._abort}
+                cmd.Abort: self._abort, cmd.OpenStream: self._open_stream, cmd.StreamTarget: self._stream_target,
+                cmd.CloseStream: self._close_stream}
 
     def _move(self, command: cmd.Move) -> Refusal:
         return preconditions.check_move(self._view) or self._motion.stale(command.epoch) or self._motion.move(command.segment)
@@ -67,6 +69,24 @@ class MotionCommands:
     def _resume(self, command: cmd.Resume) -> Refusal:
         return (preconditions.check_resume(self._view) or self._motion.stale(command.epoch)
                 or self._motion.resume(command.remainder, self._now_ns()))
+
+    def _open_stream(self, command: cmd.OpenStream) -> Refusal:
+        if refusal := preconditions.check_stream(self._view) or self._motion.stale(command.epoch):
+            return refusal
+        self._motion.open_stream(command.ticket, command.source, command.frame, command.frames, command.start,
+                                 command.timeout_ns, command.velocity_scale, self._now_ns())
+        return None
+
+    def _stream_target(self, command: cmd.StreamTarget) -> Refusal:
+        self._motion.stream.target(command.stream, command.goal, command.velocity, command.horizon_s, command.sequence,
+                                   command.received_ns, self._now_ns())
+        return None
+
+    def _close_stream(self, command: cmd.CloseStream) -> Refusal:
+        if not self._motion.stream.open:
+            return ErrorCode.NO_STREAM, "no stream is open"
+        self._motion.close_stream()
+        return None
 
     def _abort(self, command: cmd.Abort) -> Refusal:
         if refusal := preconditions.check_abort(self._view):

@@ -19,6 +19,7 @@ from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequenceProgress
 from hexactl.control.snapshot import ControlState, MotionState
+from hexactl.control.stream import StreamPhase, StreamProgress
 from hexactl.control.wave_player import WaveProgress
 
 Refusal = tuple[ErrorCode, str] | None  # (code, message) or None when allowed
@@ -45,6 +46,8 @@ class CoreView(Protocol):
     def ramp_active(self) -> bool: ...
     @property
     def wave(self) -> WaveProgress | None: ...
+    @property
+    def stream(self) -> StreamProgress | None: ...
 
 
 def _enabled(view: CoreView) -> Refusal:
@@ -63,8 +66,16 @@ def _no_wave(view: CoreView) -> Refusal:
     return (ErrorCode.BUSY, "a wave is playing: abort it (or stop) first") if _wave_playing(view) else None
 
 
+def _no_stream(view: CoreView) -> Refusal:
+    if view.stream is None:
+        return None
+    return ErrorCode.BUSY, (f"stream {view.stream.stream} from {view.stream.source!r} is "
+                            f"{'open' if view.stream.phase is StreamPhase.FOLLOWING else 'braking to its end'}: "
+                            "close it (stream_close) or stop first")
+
+
 def _at_rest(view: CoreView) -> Refusal:
-    if refusal := _no_wave(view):
+    if refusal := _no_wave(view) or _no_stream(view):
         return refusal
     if view.sequence is not None:
         return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
@@ -100,7 +111,7 @@ def check_disable(view: CoreView) -> Refusal:
 
 
 def check_move(view: CoreView) -> Refusal:
-    if refusal := _enabled(view) or _no_wave(view):
+    if refusal := _enabled(view) or _no_wave(view) or _no_stream(view):
         return refusal
     if view.sequence is not None:
         return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
@@ -175,10 +186,15 @@ def check_reset(view: CoreView) -> Refusal:
     return None
 
 
+def check_stream(view: CoreView) -> Refusal:
+    return _enabled(view) or _at_rest(view) or _all_six_legs(view, "a stream") or _not_ramping(view)
+
+
 def check_swap(view: CoreView, new: ActiveGeometry) -> Refusal:
     # The new geometry's limits equal the hardware's (Controller.load_calibration), so
-    # the set-points already respect its stroke.
-    if refusal := _no_wave(view):
+    # the set-points already respect its stroke. A stream's targets were checked on the
+    # geometry it opened with.
+    if refusal := _no_wave(view) or _no_stream(view):
         return refusal
     if view.lock is not None:
         return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: unlock before changing the calibration"

@@ -38,6 +38,7 @@ class ErrorCode(StrEnum):
     LOOP_FAILED = "loop_failed"  # the loop thread died: see status
     LOOP_TIMEOUT = "loop_timeout"  # the loop gave no verdict in time (the command may still run)
     NOT_RECORDING = "not_recording"  # record_stop with no recording under way
+    NO_STREAM = "no_stream"  # stream_close with no stream open
     JOG_ENDED = "jog_ended"  # a jog renewal for a jog that is no longer under way: send jog again
     EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
     ACCURACY_INSUFFICIENT = "accuracy_insufficient"  # the predicted error at the tool point exceeds the move's tolerance

@@ -15,6 +15,7 @@ from hexactl.control.jog import JogProgress, JogReport
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.recorder import IDLE, RecorderState
 from hexactl.control.sequence_player import SequenceProgress, SequenceReport
+from hexactl.control.stream import StreamProgress, StreamReport
 from hexactl.control.supervisor import Fault
 from hexactl.control.trajectory import KinematicState
 from hexactl.control.wave_player import WaveProgress
@@ -87,3 +88,5 @@ class CoreSnapshot:
     jog: JogProgress | None = None  # the jog under way
     last_jog: JogReport | None = None  # how the last jog ended
     wave: WaveProgress | None = None  # the wave playing, or how the last one ended
+    stream: StreamProgress | None = None  # the pose stream under way
+    last_stream: StreamReport | None = None  # how the last stream ended

@@ -11,6 +11,7 @@ from hexactl.control.host import LoopReport
 from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
 from hexactl.control.stats import LoopStats
+from hexactl.control.stream import StreamReport
 from hexactl.control.frames import OperatorFrames, convert
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
@@ -60,6 +61,25 @@ class JogTelemetry:
 
 
 @dataclass(frozen=True, slots=True)
+class StreamTelemetry:
+    """The pose stream under way: ``stream`` its number, ``source`` as its client named
+    it, poses in ``frame``, ``phase`` following or braking (to its end), ``timeout_s`` its
+    deadman; ``targets`` the loop took, the newest numbered ``last_sequence`` by its
+    sender, taken ``since_target_s`` ago, ``latency_ms`` after its arrival in the API's
+    process (None before the first)."""
+
+    stream: int
+    source: str
+    frame: str
+    phase: str
+    timeout_s: float
+    targets: int
+    last_sequence: int | None
+    since_target_s: float
+    latency_ms: float | None
+
+
+@dataclass(frozen=True, slots=True)
 class Telemetry:
     """One cycle's picture. ``t``: monotonic time of the cycle, s. Poses relative to the
     zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
@@ -92,6 +112,8 @@ class Telemetry:
     recording: RecordingTelemetry | None = None  # None: no recording since the start
     jog: JogTelemetry | None = None  # None: no jog under way
     wave: WaveProgress | None = None  # the wave playing, or how the last one ended; None: no wave since the start
+    stream: StreamTelemetry | None = None  # None: no pose stream under way
+    last_stream: StreamReport | None = None  # how the last pose stream ended; None: none since the start
 
 
 def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
@@ -120,6 +142,8 @@ def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
         jog=asdict(jog) if (jog := jog_telemetry(s)) else None,
         last_jog=asdict(s.last_jog) if s.last_jog else None,
         wave=asdict(s.wave) if s.wave else None,
+        stream=asdict(stream) if (stream := stream_telemetry(s)) else None,
+        last_stream=asdict(s.last_stream) if s.last_stream else None,
     )
 
 
@@ -155,6 +179,8 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         recording=recording_telemetry(s),
         jog=jog_telemetry(s),
         wave=s.wave,
+        stream=stream_telemetry(s),
+        last_stream=s.last_stream,
     )
 
 
@@ -186,3 +212,12 @@ def jog_telemetry(s: CoreSnapshot) -> JogTelemetry | None:
         return None
     return JogTelemetry(jog.jog, jog.frame, jog.velocity, jog.speed, jog.phase.value, jog.end, jog.to_limit,
                         max(0.0, (jog.deadline_ns - s.t_ns) / 1e9))
+
+
+def stream_telemetry(s: CoreSnapshot) -> StreamTelemetry | None:
+    stream = s.stream
+    if stream is None:
+        return None
+    return StreamTelemetry(stream.stream, stream.source, stream.frame, stream.phase.value, stream.timeout_ns / 1e9,
+                           stream.targets, stream.last_sequence, max(0.0, (s.t_ns - stream.last_target_ns) / 1e9),
+                           None if stream.latency_ns is None else stream.latency_ns / 1e6)

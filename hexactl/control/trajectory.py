@@ -141,6 +141,7 @@ def configure_input(
     parameters.duration_discretization = DurationDiscretization.Discrete
     parameters.target_velocity = _ZERO6
     parameters.target_acceleration = _ZERO6
+    parameters.minimum_duration = None
     if goal is None:
         parameters.control_interface = ControlInterface.Velocity
     else:
@@ -164,6 +165,7 @@ class PoseTrajectory:
         self._output = OutputParameter(DOFS)
         self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
         self._active = False
+        self._passing = False  # heading for a goal to pass at a velocity (a stream's)
         self.frames: Frames | None = None
         self._coordinates: type[RelativeMmRad | ToolInWorkMmRad] = RelativeMmRad
         self.goal: RelativeMmRad | ToolInWorkMmRad | None = None
@@ -214,6 +216,7 @@ class PoseTrajectory:
         configure_input(parameters, self.limits, pose)
         self.goal = self._coordinates._make(pose)
         self._active = False
+        self._passing = False
 
     def rebase(self, pose: RelativeMmRad | ToolInWorkMmRad, frames: Frames | None) -> None:
         """At rest at ``pose`` in new coordinates: relative mm/rad (``frames`` None) or the
@@ -248,13 +251,33 @@ class PoseTrajectory:
         configure_input(self._input, self.limits, goal, time_scale, velocity_scale)
         self.goal = self._coordinates._make(goal)
         self._active = True
+        self._passing = False
         return True
+
+    def follow(self, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, limits: MotionLimits,
+               velocity_scale: float, horizon_s: float) -> None:
+        """Head for ``goal`` (in the current coordinates), passing it at ``velocity`` (mm/s,
+        rad/s; within the scaled ``limits``) in no less than ``horizon_s`` (when moving),
+        from wherever the generator is: a stream's target (:mod:`hexactl.control.stream`),
+        under the stream's ``limits`` (a halt brakes under the motion's). Reached before a newer target comes, the
+        generator brakes to rest from there (the stream's receiver checked that where
+        that ends is reachable). Unlike :meth:`move_to` nothing is previewed: the next
+        target comes a cycle later, and a goal ruckig refuses shows as this cycle's
+        :attr:`StepResult.ERROR`."""
+        parameters = self._input
+        configure_input(parameters, limits, goal, velocity_scale=velocity_scale)
+        parameters.target_velocity = list(velocity)
+        self._passing = any(velocity)
+        parameters.minimum_duration = horizon_s if self._passing else None
+        self.goal = self._coordinates._make(goal)
+        self._active = True
 
     def halt(self) -> None:
         """Brake smoothly to rest (acceleration and jerk limited) wherever that ends."""
         if self._active:
             configure_input(self._input, self.limits, None)
             self.goal = None
+            self._passing = False
 
     def update(self) -> StepResult:
         """Advance one period; the new position is :attr:`position`."""
@@ -263,10 +286,20 @@ class PoseTrajectory:
         # ruckig recalculates only when the input changed since its last calculation: once
         # per new target (twice when the jerk retry is needed), not every cycle.
         result = _calculate(self._input, self._step)
+        if result is None and self._passing:
+            # ruckig refuses some (position, velocity, minimum duration) targets from some
+            # states; a stream's next target comes a cycle later: arrive at rest on this one.
+            parameters = self._input
+            parameters.target_velocity, parameters.minimum_duration = _ZERO6, None
+            self._passing = False
+            result = _calculate(parameters, self._step)
         if result is None:
             self.reset(self.position)
             return StepResult.ERROR
         self._output.pass_to_input(self._input)
+        if result == Result.Finished and self._passing:
+            self.halt()  # passed a stream's target with no newer one: brake from there
+            return StepResult.WORKING
         if result == Result.Finished:
             # Park so that later updates are no-ops: on the goal itself, where the planner
             # starts the next segment (a halt has no goal: where it ended).
@@ -297,14 +330,43 @@ def preview(
     return None if _calculate(parameters, lambda: generator.calculate(parameters, trajectory)) is None else trajectory
 
 
+NEGLIGIBLE = (1e-6, 1e-6, 1e-3)
+"""Position (mm, rad), velocity (/s) and acceleration (/s²) of an axis that count as
+rounding when they are all this close to its target: :func:`_settle_negligible`."""
+
+
+def _settle_negligible(parameters: InputParameter) -> bool:
+    """Put each axis that is within :data:`NEGLIGIBLE` of its target state exactly on it;
+    True if one moved. Why: ruckig 0.19.4 refuses (an error in its step 1) an axis that
+    is to travel a few 1e-8 mm at 1e-9 mm/s, as one does whose start came from forward
+    kinematics of the feedback and whose target is a round zero (a stream along x alone
+    moves y by nothing). Settling it moves the commanded pose by at most a nanometre."""
+    position, velocity, acceleration = (list(values) for values in (
+        parameters.current_position, parameters.current_velocity, parameters.current_acceleration))
+    settled = False
+    for axis, (p, v, a, goal, goal_v) in enumerate(zip(position, velocity, acceleration, parameters.target_position,
+                                                       parameters.target_velocity)):
+        if (p, v, a) != (goal, goal_v, 0.0) and abs(p - goal) <= NEGLIGIBLE[0] and abs(v - goal_v) <= NEGLIGIBLE[1] \
+                and abs(a) <= NEGLIGIBLE[2]:
+            position[axis], velocity[axis], acceleration[axis] = goal, goal_v, 0.0
+            settled = True
+    if settled:
+        parameters.current_position, parameters.current_velocity, parameters.current_acceleration = (
+            position, velocity, acceleration)
+    return settled
+
+
 def _calculate(parameters: InputParameter, calculate: Callable[[], Result]) -> Result | None:
     """``calculate()`` (ruckig on ``parameters``): its result, or None if ruckig refused
-    the input even after one retry with the jerk limits scaled by
-    :data:`JERK_RETRY_SCALE`. The scaled limits stay in ``parameters``: the online
+    the input even after a retry with the jerk limits scaled by
+    :data:`JERK_RETRY_SCALE` and one with the axes that are a rounding away from their
+    target settled on it (:func:`_settle_negligible`). The scaled limits stay in ``parameters``: the online
     generator would otherwise see a changed input and recalculate every cycle."""
-    for attempt in range(2):
-        if attempt:
+    for attempt in range(3):
+        if attempt == 1:
             parameters.max_jerk = [j * JERK_RETRY_SCALE for j in parameters.max_jerk]
+        elif attempt == 2 and not _settle_negligible(parameters):
+            break
         try:
             result = calculate()
         except (RuckigError, ValueError):  # raised for some inputs; ValueError: a code the binding lacks (-101)

@@ -24,6 +24,7 @@ from hexactl.control.telemetry import SequenceTelemetry, Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.supervisor import Fault
 from hexactl.control.planning import ActiveGeometry
+from hexactl.control.stream_commands import TargetResult
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import DwellRecord, MotionSequence
 from hexactl.control.stats import LoopStats, Percentiles
@@ -45,6 +46,16 @@ def wave_figures(spec: WaveSpec) -> dict[str, Any]:
     return {"duration_s": spec.duration_s, "cycles": spec.cycles, "samples": 500 * spec.cycles,
             "peak_leg_speed_mm_s": 12.5, "peak_leg_speed_leg": 2, "peak_leg_acceleration_mm_s2": 80.0,
             "peak_leg_acceleration_leg": 2, "peak_pose_velocity": [0.0, 0.0, 12.5, 0.0, 0.0, 0.0]}
+
+
+class FakeStreamInput:
+    """A stream receiver's endpoints and an empty view."""
+
+    endpoints = {"zmq": "tcp://127.0.0.1:5557", "udp": None}
+
+    def view(self) -> dict[str, Any]:
+        return {"stream": None, "received": 0, "malformed": 0, "out_of_order": 0, "no_stream": 0, "coalesced": 0,
+                "forwarded": 0, "clamped": 0, "last_problem": "", "rate_hz": 0, "loop_latency_ms": None, "age_ms": None}
 
 
 @dataclass
@@ -127,6 +138,21 @@ class FakeController:
         self._call("jog", list(velocity), frame)
         return CommandResult.success("jogging", jog=1, goal=[5.0, 0, 0, 0, 0, 0], speed=1.0,
                                      end="the soft limit on x at 5", to_limit=True, deadman_s=0.2)
+
+    def stream_open(self, source: str, frame: Frame | str = Frame.ZERO, timeout_s: float = 0.1, *,
+                    deadline_ns: int | None = None) -> CommandResult:
+        self._call("stream_open", source, frame, timeout_s)
+        if self.state != "enabled":
+            return CommandResult.failure(ErrorCode.NOT_ENABLED, "the controller is disabled: enable first")
+        return CommandResult.success("stream open", stream=3, velocity_scale=0.5)
+
+    def stream_close(self) -> CommandResult:
+        self._call("stream_close")
+        return CommandResult.success("stream closed: braking to rest")
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult:
+        self._call("stream_target", list(pose), sequence, sent_s)
+        return TargetResult(True)
 
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("leg_lock", leg)
@@ -244,7 +270,7 @@ def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float =
     if instrument is None:
         instrument = lambda: [[p + h for p, h in zip(point, geometry.home[:3])] for point in geometry.measurement.feature_points]  # noqa: E731
     server = ApiServer(context, LOCAL, CommandHandler(controller, DataDirectories([data_dir]), instrument, frames_file,
-                                                      FakeRecorder(controller)))
+                                                      FakeRecorder(controller), FakeStreamInput()))
     publisher = TelemetryPublisher(context, LOCAL, lambda: jsonable(controller.telemetry()), telemetry_rate_hz)
     server.start()
     publisher.start()

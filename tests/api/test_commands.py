@@ -27,6 +27,7 @@ ARGUMENTS: dict[str, dict] = {
     "wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
     "validate_wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
     "progress": {"title": "postures", "done": 3, "total": 12, "label": "leg 1 locked", "said": "measuring"},
+    "stream_open": {"source": "simulator", "timeout_ms": 50},
 }
 
 

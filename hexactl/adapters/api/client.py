@@ -30,7 +30,7 @@ from hexactl.adapters.api.protocol import (
     TOPIC,
 )
 
-if TYPE_CHECKING:  # CURVE's modules load only for a client that uses it (see _Connection)
+if TYPE_CHECKING:  # CURVE's modules load only for a client that uses it (see ZmqConnection)
     from hexactl.adapters.api.security import CurveClientKeys
 
 DEADLINE_MARGIN_FRACTION = 0.2
@@ -52,8 +52,8 @@ class CommandError(Exception):
         self.details = details
 
 
-class _Connection:
-    """A socket of its own context, closed with the object."""
+class ZmqConnection:
+    """A ZeroMQ socket of ``kind`` connected to ``endpoint``, in a context of its own, closed with the object."""
 
     def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int]) -> None:
         self.endpoint = endpoint
@@ -79,7 +79,7 @@ class _Connection:
         self.close()
 
 
-class HexactlClient(_Connection):
+class HexactlClient(ZmqConnection):
     """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
 
     A DEALER socket rather than REQ so that a timed-out request leaves the client
@@ -146,7 +146,7 @@ def deadline_ms(timeout_s: float) -> float:
     return min(timeout_ms - margin_ms, MAX_DEADLINE_MS)
 
 
-class TelemetrySubscriber(_Connection):
+class TelemetrySubscriber(ZmqConnection):
     """The newest telemetry records of the service at ``endpoint``.
 
     ``conflate`` (default) keeps only the latest record unread, for displays; without it

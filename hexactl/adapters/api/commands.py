@@ -47,6 +47,8 @@ from hexactl.adapters.api.messages import (
     SetFramesRequest,
     StatusRequest,
     StopRequest,
+    StreamCloseRequest,
+    StreamOpenRequest,
     ValidatePoseRequest,
     ValidateWaveRequest,
     WaveFigures,
@@ -54,7 +56,7 @@ from hexactl.adapters.api.messages import (
 )
 from hexactl.adapters.api.campaign_board import CampaignBoard
 from hexactl.adapters.api.paths import DataDirectories
-from hexactl.adapters.api.port import ControllerPort, RecorderPort
+from hexactl.adapters.api.port import ControllerPort, RecorderPort, StreamInput
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
 from hexactl.adapters.files.frames_file import save_frames
@@ -95,10 +97,14 @@ class CommandHandler:
     sender has stopped waiting. ``load_calibration`` and ``rollback_calibration`` are
     checked against it when taken from the queue only. ``frames_file``: where the
     operator's frames are saved whenever they change (None: not saved). ``recorder``:
-    the data recorder's writer (None: ``record`` is refused ``no_recorder``)."""
+    the data recorder's writer (None: ``record`` is refused ``no_recorder``).
+    ``stream_input``: where a pose stream's samples are taken (None: ``stream_open`` is
+    refused ``no_stream_input``)."""
 
     def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None,
-                 frames_file: Path | None = None, recorder: RecorderPort | None = None) -> None:
+                 frames_file: Path | None = None, recorder: RecorderPort | None = None,
+                 stream_input: StreamInput | None = None) -> None:
+        self.stream_input = stream_input
         self.controller = controller
         self.data = data
         self.instrument = instrument
@@ -108,7 +114,8 @@ class CommandHandler:
 
     def record(self) -> dict[str, Any]:
         """A telemetry record: the controller's, with what a client's campaign said last."""
-        return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view()}
+        stream_input = self.stream_input.view() if self.stream_input is not None else None
+        return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view(), "stream_input": stream_input}
 
     def __call__(self, request: Request, deadline_ns: int | None = None) -> dict[str, Any]:
         controller = self.controller
@@ -140,6 +147,10 @@ class CommandHandler:
                 return _checked(result, **_wave_figures(result))
             case ValidateWaveRequest():
                 return self._validate_wave(request)
+            case StreamOpenRequest():
+                return self._stream_open(request, deadline_ns)
+            case StreamCloseRequest():
+                return _checked(controller.stream_close())
             case LegLockRequest():
                 return _checked(controller.leg_lock(request.leg, deadline_ns=deadline_ns))
             case LegUnlockRequest():
@@ -192,6 +203,15 @@ class CommandHandler:
             case RecordStatusRequest():
                 return self._recorder().state()
         raise AssertionError(f"no handler for {type(request).__name__}")  # the union and this match disagree
+
+    def _stream_open(self, request: StreamOpenRequest, deadline_ns: int | None) -> dict[str, Any]:
+        if self.stream_input is None:
+            raise ApiError(ErrorCode.NO_STREAM_INPUT, "this service takes no stream input (a test's handler): stream "
+                           "with hexactl serve")
+        result = self.controller.stream_open(request.source, Frame(request.frame), request.timeout_ms / 1000.0,
+                                             deadline_ns=deadline_ns)
+        return _checked(result, stream=result.details.get("stream"), velocity_scale=result.details.get("velocity_scale"),
+                        endpoints=self.stream_input.endpoints)
 
     def _recorder(self) -> RecorderPort:
         if self.recorder is None:

@@ -398,6 +398,29 @@ class RecordStatusRequest(_Request):
     cmd: Literal["record_status"]
 
 
+class StreamOpenRequest(_Request):
+    """Open a pose stream: from now on target poses sent to the stream socket (ZeroMQ
+    PUSH, or UDP when the service listens for it; the reply's ``endpoints``) are followed
+    by the loop, jerk-limited, each target out of reach replaced by the nearest reachable
+    pose on the way to it. At rest, enabled, all six legs. If no target comes for
+    ``timeout_ms`` the platform brakes to rest and the stream ends. One stream at a time;
+    ``stream_close``, ``stop`` and ``estop`` end it (docs/stream.md)."""
+
+    cmd: Literal["stream_open"]
+    source: str = Field(min_length=1, max_length=64, pattern=r"^[\x20-\x7e]+$",
+                        description="who sends the stream, for people (printable ASCII)")
+    frame: Literal["zero", "work"] = Field(default="zero", description="the targets' frame: zero (relative to the "
+                                           "zero posture) or work (the tool's pose in the work frame)")
+    timeout_ms: float = Field(default=100.0, ge=5.0, le=10_000.0,
+                              description="the stream ends, braking to rest, when no target comes for this long")
+
+
+class StreamCloseRequest(_Request):
+    """End the pose stream: the platform brakes to rest."""
+
+    cmd: Literal["stream_close"]
+
+
 class MeasureRequest(_Request):
     """Measure the platform's feature points with the measuring instrument: the
     simulator's (``no_instrument`` when the service drives real actuators)."""
@@ -438,6 +461,8 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     FilesRequest,
     ReadFileRequest,
     ProgressRequest,
+    StreamOpenRequest,
+    StreamCloseRequest,
 )
 
 Request = Annotated[Union[REQUEST_MODELS], Field(discriminator="cmd")]  # type: ignore[valid-type]
@@ -541,6 +566,57 @@ class JogTelemetry(_Message):
     renew_within_s: float = Field(ge=0, description="time left before the deadman lapses unless the jog is renewed, s")
 
 
+class StreamTelemetry(_Message):
+    """The pose stream under way, as the loop follows it."""
+
+    stream: int = Field(description="its number (stream_open's reply says it)")
+    source: str = Field(description="who sends it, as stream_open named it")
+    frame: Literal["zero", "work"] = Field(description="the targets' frame")
+    phase: Literal["following", "braking"] = Field(description="following the newest target; braking: timed out, "
+                                                   "stopped or closed, braking to rest, then it ends")
+    timeout_s: float = Field(description="it ends when no target comes for this long, s")
+    targets: int = Field(ge=0, description="targets the loop took")
+    last_sequence: int | None = Field(description="the sender's number of the newest target taken")
+    since_target_s: float = Field(ge=0, description="time since the loop took the newest target, s")
+    latency_ms: float | None = Field(description="from the newest target's arrival to the loop cycle that took it, ms")
+
+
+class StreamEnd(_Message):
+    """How the last pose stream ended."""
+
+    stream: int = Field(description="its number")
+    reason: str = Field(description="why, for people: closed by the client, stopped, a timeout, a fault or E-stop, …")
+    targets: int = Field(ge=0, description="targets the loop took")
+
+
+class StreamPercentiles(_Message):
+    p50: float
+    p99: float
+    max: float
+    count: int = Field(ge=1, description="samples they are over")
+
+
+class StreamInputTelemetry(_Message):
+    """What the pose stream's receiver counted since the current (or last) stream opened."""
+
+    stream: int | None = Field(description="the stream the counts are for; null before the first")
+    received: int = Field(ge=0, description="messages read, well formed or not")
+    malformed: int = Field(ge=0, description="not a sample (docs/stream.md), dropped")
+    out_of_order: int = Field(ge=0, description="a sequence not above the last one taken: reordered or duplicated, "
+                              "dropped")
+    no_stream: int = Field(ge=0, description="well formed, but no stream was open: dropped")
+    coalesced: int = Field(ge=0, description="superseded by a newer sample before the loop's next cycle (not lost: "
+                           "the newest wins)")
+    forwarded: int = Field(ge=0, description="handed to the loop")
+    clamped: int = Field(ge=0, description="of those, out of reach and replaced by the nearest reachable pose on the "
+                         "way")
+    last_problem: str = Field(description="the last malformed message's problem, or empty")
+    rate_hz: int = Field(ge=0, description="samples taken over the last second")
+    loop_latency_ms: StreamPercentiles | None = Field(description="arrival → the loop cycle whose set-points carry it")
+    age_ms: StreamPercentiles | None = Field(description="the sender's sent_s → arrival: meaningful only when the "
+                                             "sender stamps with this host's CLOCK_MONOTONIC")
+
+
 class CampaignTelemetry(_Message):
     """The latest a client's campaign said (``progress``), for every display."""
 
@@ -584,6 +660,11 @@ class Telemetry(_Message):
     wave: WaveTelemetry | None = Field(default=None, description="the wave playing, or how the last one ended; null "
                                        "before the first wave")
     jog: JogTelemetry | None = Field(default=None, description="the jog under way; null when none is")
+    stream: StreamTelemetry | None = Field(default=None, description="the pose stream under way; null when none is")
+    last_stream: StreamEnd | None = Field(default=None, description="how the last pose stream ended; null before "
+                                          "the first")
+    stream_input: StreamInputTelemetry | None = Field(default=None, description="the pose stream's receiver; null "
+                                                      "in a service without one")
     campaign: CampaignTelemetry | None = Field(default=None, description="the latest a client's campaign said "
                                                "(progress); null before any")
 
@@ -648,6 +729,19 @@ class JogReply(OkReply):
     end: str | None = Field(description="where its plan ends: the limit ahead by name, or the horizon")
     to_limit: bool | None = Field(description="its plan ends on a limit (false: at the horizon a renewal extends)")
     deadman_s: float | None = Field(description="renew the jog at least this often, s")
+
+
+class StreamEndpoints(_Message):
+    zmq: str = Field(description="connect a ZeroMQ PUSH socket here and send samples (docs/stream.md); a wildcard "
+                     "host (0.0.0.0) means the API's host")
+    udp: str | None = Field(description="HOST:PORT where samples are also taken as UDP datagrams; null: no UDP")
+
+
+class StreamOpenReply(OkReply):
+    stream: int = Field(description="the stream's number")
+    velocity_scale: float = Field(gt=0, le=1, description="the fraction of the stream's velocity limits its targets "
+                                  "may move at: no leg can then exceed its speed")
+    endpoints: StreamEndpoints = Field(description="where to send the samples")
 
 
 class PlayReply(OkReply):
@@ -808,6 +902,7 @@ class ValidateWaveReply(OkReply):
 
 REPLY_MODELS: dict[str, type[OkReply]] = {
     "status": StatusReply,
+    "stream_open": StreamOpenReply,
     "move": MoveReply,
     "validate_pose": ValidatePoseReply,
     "jog": JogReply,

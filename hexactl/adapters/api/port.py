@@ -19,6 +19,7 @@ from hexactl.control.telemetry import Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
 from hexactl.control.sequences import MotionSequence
+from hexactl.control.stream_commands import TargetResult
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry
 
@@ -75,6 +76,16 @@ class ControllerPort(Protocol):
         """What :meth:`wave` would answer, without moving."""
         ...
 
+    def stream_open(self, source: str, frame: Frame | str = Frame.ZERO, timeout_s: float = 0.1, *,
+                    deadline_ns: int | None = None) -> CommandResult:
+        """Success details: ``stream`` (its number), ``velocity_scale`` (the fraction of the
+        stream's velocity limits its targets may move at)."""
+        ...
+
+    def stream_close(self) -> CommandResult: ...
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult: ...
+
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult: ...
 
     def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult: ...
@@ -121,3 +132,17 @@ class RecorderPort(Protocol):
     def stop(self) -> dict[str, Any]: ...
 
     def state(self) -> dict[str, Any]: ...
+
+
+class StreamInput(Protocol):
+    """Where the service takes a pose stream's samples
+    (:class:`~hexactl.adapters.api.stream_receiver.StreamReceiver`)."""
+
+    @property
+    def endpoints(self) -> dict[str, str | None]:
+        """``zmq``: the endpoint to connect a PUSH socket to; ``udp``: HOST:PORT, or None."""
+        ...
+
+    def view(self) -> dict[str, Any]:
+        """What it counted and measured, for telemetry's ``stream_input``."""
+        ...

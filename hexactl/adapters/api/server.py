@@ -69,7 +69,7 @@ URGENT_COMMANDS = frozenset({"estop", "stop", "abort"})
 """Carried out on the socket thread as they arrive, ahead of every queued request."""
 
 CANCELLED_BY_STOP = frozenset({"move", "jog", "play", "resume", "leg_lock", "leg_unlock", "load_calibration",
-                               "rollback_calibration"})
+                               "rollback_calibration", "stream_open", "wave"})
 """Queued requests an urgent command discards: everything that would set the platform
 moving or change its motion or calibration. ``enable`` is not among them (it holds the
 pose the platform is at, and is refused while an E-stop is latched), nor are queries."""

@@ -50,6 +50,7 @@ class ErrorCode(StrEnum):
     NO_RECORDING = "no_recording"  # save_recording before any sequence was played
     NO_RECORDER = "no_recorder"  # record on a handler built without the data recorder's writer
     NOT_RECORDING = "not_recording"  # record_stop with no recording under way
+    NO_STREAM_INPUT = "no_stream_input"  # stream_open on a handler built without a stream receiver
     NO_INSTRUMENT = "no_instrument"  # measure on a service without a measuring instrument (real actuators)
     MEASUREMENT_FAILED = "measurement_failed"  # the instrument could not measure (the simulated platform has no pose)
     BUSY = "busy"  # too many requests queued from this client (or from all): wait for replies

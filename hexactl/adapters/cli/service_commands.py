@@ -169,7 +169,29 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",
                        help=f"also serve the browser dashboard (hexactl dashboard) there (default {DEFAULT_HTTP}), in "
                        "a process of its own, stopped with the service")
+    serve.add_argument("--stream", metavar="ENDPOINT", help="the pose stream's ZeroMQ socket (default: the API's "
+                       "host, a free port; stream_open's reply and status tell clients where)")
+    serve.add_argument("--stream-udp", metavar="HOST:PORT", help="also take the pose stream's samples as UDP "
+                       "datagrams there, for motion-simulator software (docs/stream.md). UDP has no authentication: "
+                       "beyond loopback, whoever reaches the port steers the platform while a stream is open")
     serve.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+
+
+def udp_address(text: str) -> tuple[str, int]:
+    """``--stream-udp``'s HOST:PORT (an IPv4 address, a port 1–65535, or 0: a free one,
+    which ``stream_open``'s reply names); CliError otherwise."""
+    import ipaddress
+
+    host, _, port = text.rpartition(":")
+    try:
+        ipaddress.IPv4Address(host)
+        number = int(port)
+    except ValueError:
+        number = -1
+    if not 0 <= number <= 65535:
+        raise CliError(f"--stream-udp wants HOST:PORT with an IPv4 address and a port 0-65535 (e.g. 127.0.0.1:5558), "
+                       f"got {text!r}")
+    return host, number
 
 
 def _waiting(parser: argparse.ArgumentParser) -> None:
@@ -342,6 +364,8 @@ def run_serve(arguments: argparse.Namespace) -> int:
         log_level=arguments.log_level,
         frames_path=arguments.frames,
         dashboard_http=checked_http(arguments.dashboard),
+        stream_endpoint=arguments.stream,
+        stream_udp=udp_address(arguments.stream_udp) if arguments.stream_udp else None,
     )
     try:
         return run_service(config)  # it ends the process, with the service's exit status

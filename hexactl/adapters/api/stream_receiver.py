@@ -1,0 +1,235 @@
+"""The pose stream's input: a ZeroMQ PULL socket and, optionally, a UDP port, read by a thread of their own.
+
+Samples (:mod:`hexactl.adapters.api.stream_wire`) arrive at whatever rate the sender
+keeps; the loop takes one target a cycle. So the receiver reads everything that
+arrived, drops what is malformed, out of order or duplicated (each counted), keeps the
+newest sample and hands it to the controller (which makes it reachable and queues it
+for the loop: :meth:`~hexactl.control.controller.Controller.stream_target`) at most once
+a loop period. What it counts and how late the targets reach the loop are in
+telemetry's ``stream_input`` (:meth:`StreamReceiver.view`).
+
+Samples that arrive while no stream is open are counted and dropped: a stream is opened
+by the ``stream_open`` command, never by its data.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import socket
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import zmq
+
+from hexactl.adapters.api.security import CurveServer
+from hexactl.adapters.api.socket_thread import SocketThread
+from hexactl.adapters.api.stream_wire import MalformedSample, Sample, decode
+from hexactl.control.stream import StreamProgress
+from hexactl.control.stream_commands import TargetResult
+
+POLL_MS = 100
+"""How often the idle thread wakes to check for shutdown."""
+
+MAX_PER_WAKE = 1024
+"""Messages read per wake at most: a flood cannot keep the thread from forwarding."""
+
+KEPT_LATENCIES = 2000
+"""Latencies kept for the percentiles (4 s at 500 Hz)."""
+
+UDP_BUFFER_BYTES = 1 << 20
+
+log = logging.getLogger("hexactl.stream")
+
+Target = Callable[[Sequence[float], int, float, int], TargetResult]
+"""The controller's ``stream_target(pose, sequence, sent_s, received_ns)``."""
+
+
+class StreamCounters:
+    """What the receiver counted since the stream it last saw opened."""
+
+    def __init__(self) -> None:
+        self.received = 0  # messages read, well formed or not
+        self.malformed = 0
+        self.out_of_order = 0  # a sequence not above the last one taken: reordered or duplicated
+        self.no_stream = 0  # well formed, but no stream open
+        self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
+        self.forwarded = 0
+        self.clamped = 0  # out of reach, replaced by the nearest reachable pose on the way
+        self.last_problem = ""
+
+
+class StreamReceiver(SocketThread):
+    """The stream socket bound to ``endpoint`` (``tcp://HOST:*``: a free port; CURVE
+    with ``curve``) and, with ``udp`` (host, port), a UDP socket; samples go to
+    ``target`` at most every ``period_s``; ``progress()`` is the loop's stream.
+
+    :raises zmq.ZMQError: the endpoint is malformed or in use
+    :raises OSError: the UDP address cannot be bound (nothing is left open)
+    """
+
+    def __init__(self, context: zmq.Context, endpoint: str, udp: tuple[str, int] | None, target: Target,
+                 period_s: float, progress: Callable[[], StreamProgress | None],
+                 curve: CurveServer | None = None) -> None:
+        super().__init__(context, zmq.PULL, endpoint, name="hexactl-stream", curve=curve,
+                         options={zmq.RCVHWM: 10_000})
+        self._udp: socket.socket | None = None
+        if udp is not None:
+            try:
+                self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                self._udp.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_BUFFER_BYTES)
+                self._udp.bind(udp)
+                self._udp.setblocking(False)
+            except OSError:
+                if self._udp is not None:
+                    self._udp.close()
+                self._socket.close()
+                raise
+        self._target = target
+        self._period_ns = round(period_s * 1e9)
+        self._progress = progress
+        self.counters = StreamCounters()
+        self._stream: int | None = None  # the loop's stream the counters are for
+        self._last_sequence: int | None = None
+        self._arrivals = 0  # numbers the samples that carry none
+        self._pending: tuple[Sample, int] | None = None
+        self._forwarded_ns = 0
+        self._taken = 0  # the loop's target count when last looked at
+        self._loop_latency_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
+        self._age_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
+        self._arrived_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
+
+    @property
+    def endpoints(self) -> dict[str, str | None]:
+        """Where samples are taken: ``zmq`` (connect a PUSH socket) and ``udp`` (HOST:PORT or None)."""
+        udp = None
+        if self._udp is not None:
+            host, port = self._udp.getsockname()[:2]
+            udp = f"{host}:{port}"
+        return {"zmq": self.endpoint, "udp": udp}
+
+    def view(self) -> dict[str, Any]:
+        """The counters, the rate of samples taken over the last second (Hz), and
+        percentiles (ms) of ``loop_latency`` (arrival here → the loop cycle whose set-points
+        carry it) and ``age`` (the sender's time → arrival; meaningful only when the sender
+        stamps its samples with this host's CLOCK_MONOTONIC, as tools/bench_stream.py does)."""
+        now = time.monotonic_ns()
+        c = self.counters
+        return {"stream": self._stream, "received": c.received, "malformed": c.malformed,
+                "out_of_order": c.out_of_order, "no_stream": c.no_stream, "coalesced": c.coalesced,
+                "forwarded": c.forwarded, "clamped": c.clamped, "last_problem": c.last_problem,
+                "rate_hz": sum(1 for t in list(self._arrived_ns) if now - t <= 1_000_000_000),
+                "loop_latency_ms": _percentiles(self._loop_latency_ns), "age_ms": _percentiles(self._age_ns)}
+
+    def close(self) -> None:
+        super().close()
+        if self._udp is not None:
+            self._udp.close()
+
+    # -- the thread ------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        poller = zmq.Poller()
+        poller.register(self._socket, zmq.POLLIN)
+        if self._udp is not None:
+            poller.register(self._udp.fileno(), zmq.POLLIN)
+        while not self._stopping.is_set():
+            wait_ms = POLL_MS
+            if self._pending is not None:
+                wait_ms = max(0, (self._forwarded_ns + self._period_ns - time.monotonic_ns()) // 1_000_000)
+            poller.poll(wait_ms)
+            self._watch_loop()  # first: samples that follow a stream_open's reply count for the new stream
+            self._read()
+            if self._pending is not None and time.monotonic_ns() - self._forwarded_ns >= self._period_ns:
+                self._forward()
+
+    def _read(self) -> None:
+        for _ in range(MAX_PER_WAKE):
+            try:
+                message = self._socket.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                break
+            self._take(message)
+        if self._udp is None:
+            return
+        for _ in range(MAX_PER_WAKE):
+            try:
+                message = self._udp.recv(2048)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
+                self._problem(f"UDP receive failed: {error}")
+                break
+            self._take(message)
+
+    def _take(self, message: bytes) -> None:
+        received_ns = time.monotonic_ns()
+        c = self.counters
+        c.received += 1
+        try:
+            sample = decode(message)
+        except MalformedSample as error:
+            c.malformed += 1
+            self._problem(f"malformed sample: {error}")
+            return
+        if self._stream is None:
+            c.no_stream += 1
+            return
+        if sample.sequence is None:
+            self._arrivals += 1
+            sample = Sample(self._arrivals, received_ns / 1e9, sample.pose)
+        elif self._last_sequence is not None and sample.sequence <= self._last_sequence:
+            c.out_of_order += 1
+            return
+        else:
+            self._age_ns.append(received_ns - round(sample.sent_s * 1e9))
+        self._last_sequence = sample.sequence
+        self._arrived_ns.append(received_ns)
+        if self._pending is not None:
+            c.coalesced += 1
+        self._pending = (sample, received_ns)
+
+    def _watch_loop(self) -> None:
+        """Follow the loop's stream: a new one resets the counters; each target it took
+        gives a latency."""
+        progress = self._progress()
+        stream = progress.stream if progress is not None else None
+        if stream != self._stream:
+            if stream is not None:
+                self.counters = StreamCounters()
+                self._last_sequence = None
+                self._arrivals = 0
+                self._loop_latency_ns.clear()
+                self._age_ns.clear()
+                self._arrived_ns.clear()
+                self._taken = 0
+            self._stream = stream
+            self._pending = None
+        if progress is not None and progress.targets != self._taken and progress.latency_ns is not None:
+            self._taken = progress.targets
+            self._loop_latency_ns.append(progress.latency_ns)
+
+    def _forward(self) -> None:
+        (sample, received_ns), self._pending = self._pending, None  # type: ignore[misc]
+        assert sample.sequence is not None and sample.sent_s is not None
+        result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns)
+        self._forwarded_ns = time.monotonic_ns()
+        if result.sent:
+            self.counters.forwarded += 1
+            self.counters.clamped += result.clamped
+        else:
+            self.counters.no_stream += 1
+
+    def _problem(self, problem: str) -> None:
+        if problem != self.counters.last_problem:
+            log.warning("stream input: %s", problem)
+        self.counters.last_problem = problem
+
+
+def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
+    values = sorted(list(values_ns))
+    if not values:
+        return None
+    pick = lambda q: values[min(len(values) - 1, int(q * len(values)))] / 1e6  # noqa: E731
+    return {"p50": pick(0.5), "p99": pick(0.99), "max": values[-1] / 1e6, "count": len(values)}

@@ -1,0 +1,243 @@
+"""The facade's pose stream: open and close a stream, and each target made reachable.
+
+A stream's targets are not validated as moves are (a whole path refused or run): each
+target that lies outside the workspace (the hardware's limits and the soft limits, as
+every planned path is checked: :func:`~hexactl.control.planning.path_violations`) is
+replaced by the reachable pose nearest to it on the straight line from the last target
+handed to the loop, found by bisection. The platform then slows and stops on the
+boundary instead of being refused. The loop follows the targets
+(:mod:`hexactl.control.stream`) within the motion limits, scaled down by
+:func:`stream_velocity_scale` so that no leg can be asked to move faster than the
+planning budget whatever the targets do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+import time
+from math import hypot, isfinite, radians
+
+import numpy as np
+
+from hexactl.control import commands as cmd
+from hexactl.control import preconditions
+from hexactl.control.frames import Frame, convert, relative_poses
+from hexactl.control.planning import PlanningContext, path_violations
+from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.snapshot import CoreSnapshot
+from hexactl.control.stream import HORIZON_S
+from hexactl.control.submitter import CommandSubmitter
+from hexactl.control.trajectory import MotionLimits
+from hexactl.kinematics.axes import RelativeMmDeg, RelativeMmRad, ToolInWorkMmDeg, ToolInWorkMmRad
+from hexactl.kinematics.frames import Frames, pose_of
+
+STREAM_FRAMES = (Frame.ZERO, Frame.WORK)
+"""The frames a stream's poses may be in (a tool-frame pose is a relative move, and a
+stream's targets are absolute)."""
+
+TIMEOUT_RANGE_S = (0.005, 10.0)
+"""A stream's timeout, s: shorter than a few cycles would end every stream at once, longer
+would leave a platform moving towards a target nobody sends any more."""
+
+MAX_SOURCE_LENGTH = 64
+
+MAX_HORIZON_S = 0.25
+"""The longest :meth:`_OpenStream.horizon`: targets further apart are not a stream to follow
+smoothly, and the platform brakes between them."""
+
+MAX_SAMPLE_GAP_S = 0.1
+"""Two requests further apart than this (by their sender's clock) give no velocity."""
+
+MIN_SAMPLE_GAP_S = 1e-4
+"""Nor two closer than this: no stream is faster than 10 kHz, and a sender's clock
+resolution (a time printed to the microsecond) would make a jump look like a huge speed."""
+
+BISECTION_STEPS = 12
+"""Halvings of the line to an unreachable target: the pose found lies within 1/4096 of
+the step from the last target of the boundary (a stream's steps are small; a jump far
+out is approached again from there by the next targets)."""
+
+
+def stream_velocity_scale(context: PlanningContext, limits: MotionLimits, frames: Frames | None) -> float:
+    """The fraction of the stream's velocity ``limits`` that keeps every leg within
+    ``context.leg_speed_mm_s`` for any direction of motion: a leg's speed is at most the
+    speed of its platform joint, |v| + |ω|·r, where |v| ≤ the norm of the x, y, z limits,
+    |ω| ≤ the sum of the roll, pitch and yaw rate limits, and r is the farthest platform
+    joint from the point the rotations turn about (the platform's origin, or the tool's
+    in the work frame)."""
+    velocity = limits.max_velocity
+    pivot = np.zeros(3) if frames is None else np.asarray(pose_of(frames.tool)[:3])
+    joints = np.asarray(context.active.geometry.platform_joints, dtype=float)
+    reach_mm = float(np.max(np.linalg.norm(joints - pivot, axis=1)))
+    worst_mm_s = hypot(*velocity[:3]) + sum(radians(rate) for rate in velocity[3:]) * reach_mm
+    return min(1.0, context.leg_speed_mm_s / worst_mm_s)
+
+
+@dataclass
+class _OpenStream:
+    """What the facade keeps of the stream it opened: its number, the coordinates of its
+    targets, its motion limits (mm and rad, per axis: velocity scaled, acceleration,
+    jerk), the last target handed to the loop (reachable) and the last request with its
+    sender's time (for the velocity)."""
+
+    stream: int
+    frames: Frames | None
+    context: PlanningContext
+    limits: tuple[np.ndarray, np.ndarray, np.ndarray]
+    last: np.ndarray
+    requested: np.ndarray | None = None
+    requested_at_s: float | None = None
+    replaced: tuple[np.ndarray, np.ndarray] | None = None  # (request, goal): a target held outside is bisected once
+    sent_ns: int | None = None  # when the last target went to the loop (monotonic)
+    interval_s: float = 0.0  # between targets sent, smoothed
+
+    def horizon(self, now_ns: int) -> float:
+        """How far ahead the loop aims along this target's velocity, s: :data:`HORIZON_S`,
+        longer when targets reach the loop less often (a slow sender, or a receiver held
+        up on a busy host), so that the platform keeps moving between them instead of
+        braking at each."""
+        if self.sent_ns is not None:
+            self.interval_s += 0.2 * ((now_ns - self.sent_ns) / 1e9 - self.interval_s)
+        self.sent_ns = now_ns
+        return min(MAX_HORIZON_S, max(HORIZON_S, 2.0 * self.interval_s))
+
+    def braking_s(self, velocity: np.ndarray) -> np.ndarray:
+        """Per axis, how far braking from ``velocity`` goes, in seconds of it: jerk-limited
+        braking covers at most v²/(2a) + v·a/(2j)."""
+        _, acceleration, jerk = self.limits
+        return np.abs(velocity) / (2 * acceleration) + acceleration / (2 * jerk)
+
+
+@dataclass(frozen=True, slots=True)
+class TargetResult:
+    """What became of a target: ``sent`` False when no stream is open; ``clamped`` True
+    when it was out of reach and replaced; ``goal`` what the loop got, mm/deg."""
+
+    sent: bool
+    clamped: bool = False
+    goal: RelativeMmDeg | ToolInWorkMmDeg | None = None
+
+
+class StreamCommands:
+    """The pose stream of one facade: ``snapshot()`` the loop's latest, ``context(snapshot)``
+    what a plan depends on, commands queued by ``submitter`` (targets by ``host_submit``,
+    unanswered), ``limits`` the stream's (``ControllerConfig.stream``). ``target`` is called by one
+    thread at a time (the stream's receiver)."""
+
+    def __init__(self, snapshot: Callable[[], CoreSnapshot], context: Callable[[CoreSnapshot], PlanningContext],
+                 submitter: CommandSubmitter, host_submit: Callable[[cmd.Command], None], limits: MotionLimits) -> None:
+        self._limits = limits
+        self._snapshot = snapshot
+        self._context = context
+        self._submitter = submitter
+        self._host_submit = host_submit
+        self._open: _OpenStream | None = None
+
+    def open(self, source: str, frame: Frame | str, timeout_s: float, deadline_ns: int | None = None) -> CommandResult:
+        """Open a stream from ``source`` of target poses in ``frame`` (zero or work) that
+        ends if no target comes for ``timeout_s``. At rest, enabled, all six legs."""
+        if problem := _open_problem(source, frame, timeout_s):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, problem)
+        s = self._snapshot()
+        if refusal := preconditions.check_stream(s):
+            return CommandResult.failure(*refusal)
+        frame = Frame(frame)
+        context = self._context(s)
+        frames = context.frames if frame is Frame.WORK else None
+        start = convert(s.trajectory.position, s.frames, frames, s.active.home)
+        scale = stream_velocity_scale(context, self._limits, frames)
+        result = self._submitter.submit(
+            lambda t: cmd.OpenStream(t, s.epoch, source, frame.value, frames, start, round(timeout_s * 1e9), scale),
+            "stream open", deadline_ns=deadline_ns, velocity_scale=scale)
+        if result.ok:
+            stream = result.details["ticket"]
+            velocity, acceleration, jerk = (np.asarray(v) for v in self._limits.in_mm_rad())
+            self._open = _OpenStream(stream, frames, context, (velocity * scale, acceleration, jerk),
+                                     np.asarray(start, dtype=float))
+            result = CommandResult.success(result.message, stream=stream, **result.details)
+        return result
+
+    def close(self) -> CommandResult:
+        """End the stream: the platform brakes to rest."""
+        self._open = None
+        return self._submitter.submit(cmd.CloseStream, "stream closed: braking to rest")
+
+    def target(self, pose_mm_deg: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult:
+        """Hand the loop ``pose_mm_deg`` (finite; in the stream's frame, mm and deg), made
+        reachable, for the stream this facade opened, with the velocity it moves at (from
+        the request before and the sender's times ``sent_s``, s). Nothing is sent when no
+        stream is open or it ended (the loop ignores targets for a stream it ended).
+
+        One workspace check in the usual case (it is most of the cost): for a moving
+        stream, of where the platform would come to rest if this were the last target
+        (every pose before it on the way lies between two that were checked); at rest,
+        or when that is out of reach, of the target itself, then without velocity (the
+        loop arrives at rest on it), bisected towards the last target if out of reach."""
+        stream = self._open
+        if stream is None:
+            return TargetResult(False)
+        ended = self._snapshot().last_stream
+        if ended is not None and ended.stream == stream.stream:
+            self._open = None
+            return TargetResult(False)
+        requested = np.array([*pose_mm_deg[:3], *(radians(v) for v in pose_mm_deg[3:])], dtype=float)
+        now_ns = time.monotonic_ns()
+        horizon_s = stream.horizon(now_ns)
+        velocity = self._velocity(stream, requested, sent_s)
+        stream.requested, stream.requested_at_s = requested, sent_s
+        clamped = False
+        goal = requested + velocity * horizon_s
+        if not velocity.any() or not self._ok(stream, goal + velocity * stream.braking_s(velocity)):
+            velocity = np.zeros(6)
+            goal, clamped = self._reachable(stream, requested)
+        stream.last = goal
+        coordinates = RelativeMmRad if stream.frames is None else ToolInWorkMmRad
+        target = coordinates._make(float(v) for v in goal)
+        self._host_submit(cmd.StreamTarget(0, stream.stream, target, tuple(float(v) for v in velocity),  # type: ignore[arg-type]
+                                           horizon_s, sequence, received_ns))
+        return TargetResult(True, clamped, target.in_degrees())
+
+    @staticmethod
+    def _velocity(stream: _OpenStream, requested: np.ndarray, sent_s: float) -> np.ndarray:
+        """The stream's velocity at ``requested`` (mm/s, rad/s) from the request before,
+        within its limits; zero after a gap."""
+        before, before_s = stream.requested, stream.requested_at_s
+        if before is None or before_s is None or not MIN_SAMPLE_GAP_S <= sent_s - before_s <= MAX_SAMPLE_GAP_S:
+            return np.zeros(6)
+        max_velocity = stream.limits[0]
+        return np.clip((requested - before) / (sent_s - before_s), -max_velocity, max_velocity)
+
+    def _reachable(self, stream: _OpenStream, requested: np.ndarray) -> tuple[np.ndarray, bool]:
+        if self._ok(stream, requested):
+            return requested, False
+        if stream.replaced is not None and np.array_equal(stream.replaced[0], requested):
+            return stream.replaced[1], True
+        inside, outside = stream.last, requested
+        for _ in range(BISECTION_STEPS):
+            middle = (inside + outside) / 2.0
+            if self._ok(stream, middle):
+                inside = middle
+            else:
+                outside = middle
+        stream.replaced = (requested, inside)
+        return inside, True
+
+    @staticmethod
+    def _ok(stream: _OpenStream, position: np.ndarray) -> bool:
+        context = stream.context
+        relative = relative_poses(stream.frames, position[None, :], context.active.home)
+        return not path_violations(context, relative, 0)
+
+
+def _open_problem(source: object, frame: object, timeout_s: object) -> str | None:
+    if not isinstance(source, str) or not 0 < len(source) <= MAX_SOURCE_LENGTH or not source.isprintable():
+        return f"a stream's source is a printable name of 1 to {MAX_SOURCE_LENGTH} characters, got {source!r}"
+    if frame not in tuple(STREAM_FRAMES):
+        return (f"a stream's frame is one of {', '.join(f.value for f in STREAM_FRAMES)} (a stream's targets are "
+                f"absolute poses), got {frame!r}")
+    low, high = TIMEOUT_RANGE_S
+    if isinstance(timeout_s, bool) or not isinstance(timeout_s, (int, float)) or not isfinite(timeout_s) \
+            or not low <= timeout_s <= high:
+        return f"a stream's timeout is a number of seconds in [{low:g}, {high:g}], got {timeout_s!r}"
+    return None

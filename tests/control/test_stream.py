@@ -1,0 +1,152 @@
+"""A pose stream in the loop, in simulated time (issue 15): followed jerk-limited with a
+bounded lag and no guard clamp; a target out of reach brings the platform to the boundary,
+not a refusal; a quiet stream brakes to rest; stop and E-stop end it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hexactl.control.frames import OperatorFrames
+from hexactl.control.stream_commands import stream_velocity_scale
+from hexactl.kinematics.soft_limits import SoftLimits
+from hexactl.kinematics.workspace import assess_pose
+
+
+def _stream(rig, poses, start_sequence: int = 1) -> list:
+    """Send ``poses`` (mm, deg), one a cycle; every TargetResult."""
+    results = []
+    for n, pose in enumerate(poses):
+        results.append(rig.controller.stream_target(pose, start_sequence + n, rig.clock.now_ns / 1e9, rig.clock.now_ns))
+        rig.run()
+    return results
+
+
+def _opened(rig, **options):
+    rig.enabled()
+    reply = rig.controller.stream_open("test", **options)
+    assert reply.ok, reply.message
+    rig.run()
+    assert rig.controller.snapshot.stream is not None
+    return reply
+
+
+def test_a_sine_is_followed_with_a_bounded_lag_and_no_guard_clamp(rig) -> None:
+    _opened(rig)
+    rate_hz = 1e9 / rig.period_ns
+    t = np.arange(int(3 * rate_hz)) / rate_hz
+    poses = [(10.0 * math.sin(2 * math.pi * s), 0, 0, 0, 0, 0.5 * math.sin(2 * math.pi * s)) for s in t]
+    commanded = []
+    for n, pose in enumerate(poses):
+        assert rig.controller.stream_target(pose, n, rig.clock.now_ns / 1e9, rig.clock.now_ns).sent
+        rig.run()
+        commanded.append(rig.controller.snapshot.pose_command[0])
+    s = rig.controller.snapshot
+    assert s.clamped_cycles == 0 and s.state.value == "enabled"
+    assert s.stream.targets == len(poses)
+    # After the first period the platform traces the sine: amplitude kept, no lag to speak of.
+    last_period = slice(int(2 * rate_hz), None)
+    x = np.array(commanded)[last_period]
+    target = np.array([p[0] for p in poses])[last_period]
+    assert np.max(np.abs(x - target)) < 0.5  # mm, of a 10 mm sine moving at up to 63 mm/s
+    rig.assert_setpoints_safe()
+
+
+def test_a_jump_far_outside_brings_the_platform_to_the_boundary_smoothly(rig, geometry) -> None:
+    _opened(rig)
+    results = _stream(rig, [(300.0, 0, 900.0, 0, 0, 0)] * 4500)  # 9 s: the boundary is 250 mm away at 42 mm/s
+    assert all(r.sent and r.clamped for r in results)
+    s = rig.controller.snapshot
+    assert s.motion.value == "holding" and s.clamped_cycles == 0 and s.state.value == "enabled"
+    x = s.pose_command.in_degrees()
+    assert x[2] / x[0] == pytest.approx(3.0)  # on the line to the target
+    assert assess_pose(geometry, x).ok
+    beyond = assess_pose(geometry, (x[0] + 0.5, x[1], x[2] + 1.5, *x[3:]))
+    assert not beyond.ok  # on the boundary: a millimetre further is out of reach
+    rig.assert_setpoints_safe()
+
+
+def test_a_soft_limit_is_a_boundary_too_in_the_work_frame(rig) -> None:
+    assert rig.controller.set_frames(OperatorFrames(soft_limits=SoftLimits(upper=(5, None, None, None, None, None)))).ok
+    _opened(rig, frame="work")
+    results = _stream(rig, [(x, 0, 0, 0, 0, 0) for x in np.linspace(0, 50, 500)] + [(50, 0, 0, 0, 0, 0)] * 500)
+    assert results[-1].clamped and results[-1].goal[0] == pytest.approx(5.0, abs=1e-2)
+    s = rig.controller.snapshot
+    assert s.pose_command[0] == pytest.approx(5.0, abs=1e-2) and s.pose_command[0] <= 5.0 + 1e-9
+    assert s.clamped_cycles == 0
+
+
+def test_a_quiet_stream_brakes_to_rest_within_its_timeout_and_the_braking_time(rig) -> None:
+    _opened(rig, timeout_s=0.1)
+    rate_hz = 1e9 / rig.period_ns
+    _stream(rig, [(0.1 * n, 0, 0, 0, 0, 0) for n in range(200)])  # 50 mm/s along x
+    last_target_ns = rig.clock.now_ns
+    cycles = rig.run_until(lambda: rig.controller.snapshot.stream is None, limit=2000)
+    s = rig.controller.snapshot
+    assert "timeout" in s.last_stream.reason and s.motion.value == "holding"
+    braking_s = cycles / rate_hz - 0.1
+    assert 0 < braking_s < 0.5, braking_s
+    assert rig.clock.now_ns - last_target_ns > 0.1e9
+    assert s.clamped_cycles == 0
+
+
+def test_stop_ends_the_stream_braking_and_later_targets_are_ignored(rig) -> None:
+    _opened(rig)
+    _stream(rig, [(0.1 * n, 0, 0, 0, 0, 0) for n in range(100)])
+    assert rig.controller.stop().ok
+    rig.settle()
+    rig.run(2)
+    s = rig.controller.snapshot
+    assert s.stream is None and s.last_stream.reason == "stopped"
+    at_rest = s.pose_command
+    results = _stream(rig, [(30.0, 0, 0, 0, 0, 0)] * 50)
+    assert not any(r.sent for r in results[1:])
+    assert rig.controller.snapshot.pose_command == at_rest
+
+
+def test_estop_during_a_stream_latches_within_a_cycle(rig) -> None:
+    _opened(rig)
+    _stream(rig, [(0.1 * n, 0, 0, 0, 0, 0) for n in range(100)])
+    rig.controller.estop()
+    rig.run()
+    s = rig.controller.snapshot
+    assert s.state.value == "estop" and s.stream is None
+
+
+def test_moves_and_calibration_swaps_are_refused_while_a_stream_is_open(rig, geometry) -> None:
+    _opened(rig)
+    refused = rig.controller.move([1, 0, 0, 0, 0, 0])
+    assert not refused.ok and refused.error == "busy" and "stream" in refused.message
+    assert not rig.controller.stream_open("again").ok
+
+
+def test_the_velocity_scale_keeps_every_leg_within_the_budget(rig) -> None:
+    _opened(rig)
+    reply_scale = rig.controller.snapshot  # the loop runs the stream at that scale
+    assert reply_scale.stream is not None
+    rate_hz = 1e9 / rig.period_ns
+    # Opposite corners, one after the other, as fast as the stream may go.
+    corners = [(200.0, 200.0, 100.0, 10.0, 10.0, 15.0), (-200.0, -200.0, -100.0, -10.0, -10.0, -15.0)]
+    _stream(rig, [corners[(n // int(rate_hz)) % 2] for n in range(int(4 * rate_hz))])
+    s = rig.controller.snapshot
+    assert s.clamped_cycles == 0
+    speeds = np.abs(np.diff(rig.sent, axis=0)) * rate_hz
+    context = rig.controller._context(s)
+    assert np.max(speeds) <= context.leg_speed_mm_s * (1 + 1e-6)
+    assert 0 < stream_velocity_scale(context, rig.controller.config.stream, None) < 1
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(*[st.floats(-1500, 1500)] * 3, *[st.floats(-60, 60)] * 3), min_size=1, max_size=5))
+def test_any_targets_give_reachable_goals_and_safe_setpoints(make_rig, geometry, targets) -> None:
+    rig = make_rig()
+    _opened(rig)
+    results = _stream(rig, [target for target in targets for _ in range(60)])
+    for result in results:
+        assert result.sent and assess_pose(geometry, result.goal).ok
+    assert rig.controller.snapshot.clamped_cycles == 0
+    rig.assert_setpoints_safe()

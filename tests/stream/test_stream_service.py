@@ -1,0 +1,132 @@
+"""A pose stream into ``hexactl serve`` as a client sends it (issue 15): over ZeroMQ with
+:class:`~hexactl.adapters.api.stream_client.PoseStream` and as UDP datagrams; what is
+malformed, reordered or duplicated is counted and dropped and the loop goes on; a stream
+that goes quiet ends braking; ``estop`` ends it."""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.api.stream_client import PoseStream
+from hexactl.adapters.api.stream_wire import encode
+from tests.reliability.support import recover, status, tolerating_stalls, wait_for
+from tools.serving import Served, serve
+
+WAIT_S = 30.0
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
+    # Real-time, as a stream is run: the loop and the simulated firmwares at SCHED_FIFO keep their
+    # rate beside a sender and a receiver busy at hundreds of samples a second.
+    with serve(tmp_path_factory.mktemp("stream"), "--stream-udp", "127.0.0.1:0") as running:
+        yield running
+
+
+@pytest.fixture
+def client(served: Served) -> Iterator[HexactlClient]:
+    with HexactlClient(served.api, timeout_s=WAIT_S) as connected:
+        recover(connected)
+        yield connected
+
+
+def _sine(stream: PoseStream, seconds: float, rate_hz: float = 250.0) -> None:
+    """A 1 Hz, 5 mm sine in x, paced in real time."""
+    start = time.monotonic()
+    n = 0
+    while (now := time.monotonic()) - start < seconds:
+        stream.send((5.0 * math.sin(2 * math.pi * (now - start)), 0, 0, 0, 0, 0))
+        n += 1
+        time.sleep(max(0.0, start + n / rate_hz - time.monotonic()))
+
+
+def test_a_stream_over_zeromq_moves_the_platform_and_closes_braking(client) -> None:
+    def scenario() -> None:
+        with PoseStream(client, "a test", timeout_ms=500) as stream:
+            assert 0 < stream.opened["velocity_scale"] <= 1
+            _sine(stream, 1.5)
+            record = status(client)
+            assert record["stream"]["source"] == "a test" and record["stream"]["targets"] > 50
+            assert record["stream_input"]["forwarded"] > 50 and record["stream_input"]["malformed"] == 0
+            assert record["stream_input"]["loop_latency_ms"]["p50"] >= 0
+            assert max(abs(v) for v in record["pose_command"][:1]) > 0.0
+            assert record["loop"]["guard_clamps"] == 0
+        wait_for(lambda: status(client)["stream"] is None, "the stream's end")
+        record = status(client)
+        assert record["last_stream"]["reason"] == "closed by the client" and record["state"] == "enabled"
+
+    tolerating_stalls(client, scenario)
+
+
+def test_bad_samples_are_counted_and_dropped_over_zeromq_and_udp(client) -> None:
+    def scenario() -> None:
+        with PoseStream(client, "bad samples", timeout_ms=2000) as stream:
+            push = stream._push.socket  # the stream's own socket: the samples a broken sender would send
+            udp_host, udp_port = stream.opened["endpoints"]["udp"].split(":")
+            t = time.monotonic()  # the senders' clock: 10 ms a sample
+            sent = [
+                (push, encode(10, t, [1, 0, 0, 0, 0, 0])),
+                (push, encode(5, t + 0.01, [2, 0, 0, 0, 0, 0])),  # older: reordered
+                (push, encode(10, t + 0.02, [3, 0, 0, 0, 0, 0])),  # duplicate
+                (push, b"HXS1 too short"),
+                (push, encode(11, t + 0.04, [float("nan"), 0, 0, 0, 0, 0])),
+                (None, b"12 %f 1.5 0 0 0 0 0\n" % (t + 0.05)),  # text, well formed
+                (None, b"12 %f 1.6 0 0 0 0 0\n" % (t + 0.06)),  # duplicate
+                (None, b"hello"),
+                (None, b"1 2 3"),
+                (None, encode(13, t + 0.09, [1.7, 0, 0, 0, 0, 0])),
+                (push, encode(14, t + 0.10, [1.7, 0, 0, 0, 0, 0])),  # the same pose: at rest there
+            ]
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+                for target, message in sent:
+                    if target is None:
+                        udp.sendto(message, (udp_host, int(udp_port)))
+                    else:
+                        target.send(message)
+                    time.sleep(0.01)
+            wait_for(lambda: status(client)["stream_input"]["received"] >= len(sent), "every message read")
+            counted = status(client)["stream_input"]
+            assert counted["out_of_order"] == 3 and counted["malformed"] == 4, counted
+            assert "malformed sample" in counted["last_problem"]
+            wait_for(lambda: status(client)["stream"]["last_sequence"] == 14, "the last good sample followed")
+            record = status(client)
+            assert record["state"] == "enabled" and record["loop"]["guard_clamps"] == 0
+            wait_for(lambda: abs(status(client)["pose_command"][0] - 1.7) < 1e-6, "the platform at the last target")
+
+    tolerating_stalls(client, scenario)
+
+
+def test_a_quiet_stream_brakes_to_rest_and_ends(client) -> None:
+    def scenario() -> None:
+        stream = PoseStream(client, "goes quiet", timeout_ms=100).open()
+        try:
+            _sine(stream, 0.5)
+            wait_for(lambda: status(client)["stream"] is None, "the stream's end")
+            record = status(client)
+            assert record["last_stream"]["reason"].startswith("timeout") and record["motion"] == "holding"
+        finally:
+            stream._push.close()
+
+    tolerating_stalls(client, scenario)
+
+
+def test_estop_ends_a_stream(client) -> None:
+    def scenario() -> None:
+        stream = PoseStream(client, "estopped", timeout_ms=1000).open()
+        try:
+            _sine(stream, 0.3)
+            client.call("estop")
+            record = status(client)
+            assert record["state"] == "estop" and record["stream"] is None
+            with pytest.raises(CommandError, match="latched"):
+                PoseStream(client, "refused while the E-stop is latched").open()
+        finally:
+            stream._push.close()
+
+    tolerating_stalls(client, scenario)
