@@ -1,0 +1,151 @@
+"""Motion cueing files: the parameters (TOML) and a vehicle trajectory (CSV).
+
+The parameters file is ``config/cueing.toml``'s format: tables ``[translational]``,
+``[rotational]``, ``[tilt]`` and ``[workspace]`` of
+:class:`~hexactl.cueing.parameters.CueingParameters`; a key left out keeps its default.
+
+A vehicle trajectory is CSV with a header naming the columns (any order; others ignored)::
+
+    t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z
+    0.00,0.000000,0.000000,9.810000,0.000000,0.000000,0.000000
+    0.01,...
+
+``t_s`` in s, increasing by one sample period (uniform, to 0.1 % of it) from line to
+line; ``f_*`` the specific force (m/s², body axes x forward, y left, z up: (0, 0, 9.81)
+at rest) and ``omega_*`` the angular rate (rad/s). Every error names the file, the line
+and the column, and what to do.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import tomllib
+from math import isfinite
+from pathlib import Path
+
+import numpy as np
+from pydantic import ValidationError
+
+from hexactl.cueing.parameters import CueingParameters
+from hexactl.cueing.washout import VehicleTrajectory
+
+VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
+
+PERIOD_TOLERANCE = 1e-3
+"""How far, as a fraction of the sample period, a time step may differ from the first:
+the text's rounding (times written to 0.01 s), not a change of rate."""
+
+
+class CueingFileError(ValueError):
+    """A cueing file could not be read; the message names the file, where, and the problem."""
+
+
+def parse_cueing_parameters(text: str, source: str) -> CueingParameters:
+    """Validate TOML text into :class:`CueingParameters`; :class:`CueingFileError` names
+    every problem as ``source: table.key[index]: problem``."""
+    try:
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
+        raise CueingFileError(f"{source}: not valid TOML: {error}") from None
+    try:
+        return CueingParameters.model_validate(data)
+    except ValidationError as error:
+        raise CueingFileError(_describe(error, source)) from None
+
+
+def load_cueing_parameters(path: str | os.PathLike[str]) -> CueingParameters:
+    """Read a parameters file; :class:`CueingFileError` names the file, key and problem."""
+    return parse_cueing_parameters(_read(path), str(path))
+
+
+def _describe(error: ValidationError, source: str) -> str:
+    """One line per problem, ``source: table.key[index]: what is wrong and what to do``."""
+    lines = []
+    for problem in error.errors():
+        where = list(problem["loc"])
+        message = problem["msg"].removeprefix("Value error, ")
+        if problem["type"] == "extra_forbidden":
+            message = "not a cueing parameter; config/cueing.toml lists every key (check the spelling and the table)"
+        elif problem["type"] == "finite_number":
+            message = "must be a finite number (NaN and inf are refused)"
+        elif problem["type"] == "missing" and where and isinstance(where[-1], int):  # a list one value short
+            message = f"too few values, one per axis as in config/cueing.toml (value {where.pop() + 1} is missing)"
+        elif problem["type"] == "too_long":
+            message = "too many values, one per axis as in config/cueing.toml"
+        elif problem["type"] == "tuple_type":
+            message = "must be a list of numbers, one per axis as in config/cueing.toml"
+        location = ""
+        for part in where:
+            location += f"[{part}]" if isinstance(part, int) else (f".{part}" if location else str(part))
+        lines.append(f"{source}: {location}: {message}" if location else f"{source}: {message}")
+    return "\n".join(lines)
+
+
+def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
+    """Validate CSV text into a :class:`VehicleTrajectory`; :class:`CueingFileError` names
+    the first problem's line and column."""
+    rows = csv.reader(io.StringIO(text))
+    header = next(rows, None)
+    if header is None:
+        raise CueingFileError(f"{source}: empty: a vehicle trajectory needs the header {','.join(VEHICLE_COLUMNS)}")
+    names = [name.strip() for name in header]
+    missing = [column for column in VEHICLE_COLUMNS if column not in names]
+    if missing:
+        unknown = [name for name in names if name not in VEHICLE_COLUMNS]
+        hint = f" (the header has {', '.join(unknown)} instead: check the spelling)" if unknown else ""
+        raise CueingFileError(f"{source}: line 1: missing column {', '.join(missing)}{hint}; the header must name "
+                              f"{','.join(VEHICLE_COLUMNS)}")
+    where = [names.index(column) for column in VEHICLE_COLUMNS]
+    values, lines = [], []
+    for line, row in enumerate(rows, start=2):
+        if any(cell.strip() for cell in row):
+            values.append([_number(row, index, column, line, source) for index, column in zip(where, VEHICLE_COLUMNS)])
+            lines.append(line)
+    if len(values) < 2:
+        raise CueingFileError(f"{source}: {len(values)} samples: a vehicle trajectory needs at least two lines of values")
+    table = np.array(values)
+    return VehicleTrajectory(period_s=_uniform_period(table[:, 0], lines, source),
+                             specific_force=table[:, 1:4], angular_rate=table[:, 4:7])
+
+
+def load_vehicle_trajectory(path: str | os.PathLike[str]) -> VehicleTrajectory:
+    """Read a vehicle trajectory file; :class:`CueingFileError` names the file, line and column."""
+    return parse_vehicle_trajectory(_read(path), str(path))
+
+
+def _number(row: list[str], index: int, column: str, line: int, source: str) -> float:
+    cell = row[index].strip() if index < len(row) else ""
+    try:
+        value = float(cell)
+    except ValueError:
+        value = float("nan")
+    if not isfinite(value):
+        shown = f"'{cell}'" if cell else "nothing"
+        raise CueingFileError(f"{source}: line {line}, column {column}: {shown} is not a finite number")
+    return value
+
+
+def _uniform_period(times: np.ndarray, lines: list[int], source: str) -> float:
+    """The sample period, if every time step is the first one (to :data:`PERIOD_TOLERANCE`);
+    ``lines``: each time's line in the file."""
+    steps = np.diff(times)
+    period = float(steps[0])
+    for step, time, before, line in zip(steps.tolist(), times[1:].tolist(), times.tolist(), lines[1:]):
+        if not step > 0:
+            raise CueingFileError(f"{source}: line {line}, column t_s: {time:g} s is not after the sample before it "
+                                  f"({before:g} s): times must increase")
+        if abs(step - period) > PERIOD_TOLERANCE * period:
+            raise CueingFileError(
+                f"{source}: line {line}, column t_s: {time:g} s is {step:g} s after the sample before it, not the "
+                f"sample period {period:g} s of the first two: samples must be evenly spaced (resample the "
+                "trajectory at one rate)")
+    return period
+
+
+def _read(path: str | os.PathLike[str]) -> str:
+    try:
+        return Path(path).read_text(encoding="utf-8-sig")  # -sig: a spreadsheet's byte-order mark is not a column name
+    except (OSError, UnicodeDecodeError) as error:
+        raise CueingFileError(f"{path}: cannot read: {error}") from None

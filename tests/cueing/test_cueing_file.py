@@ -1,0 +1,123 @@
+"""The cueing files: the parameters TOML and the vehicle trajectory CSV, and their errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexactl.adapters.files.cueing_file import (
+    CueingFileError,
+    load_cueing_parameters,
+    load_vehicle_trajectory,
+    parse_cueing_parameters,
+    parse_vehicle_trajectory,
+)
+from hexactl.cueing.parameters import CueingParameters
+
+REPOSITORY = Path(__file__).resolve().parents[2]
+
+HEADER = "t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z"
+
+
+def test_the_shipped_parameters_file_holds_the_defaults_and_sets_every_key() -> None:
+    path = REPOSITORY / "config" / "cueing.toml"
+    assert load_cueing_parameters(path) == CueingParameters()
+    text = path.read_text(encoding="utf-8")
+    for table, model in CueingParameters().model_dump().items():
+        assert f"[{table}]" in text
+        for key in model:
+            assert f"\n{key} = " in text, f"{table}.{key} is not in config/cueing.toml"
+
+
+def test_a_key_left_out_keeps_its_default() -> None:
+    parameters = parse_cueing_parameters("[tilt]\nrate_limit_deg_s = 2.0\n", "mine.toml")
+    assert parameters.tilt.rate_limit_deg_s == 2.0
+    assert parameters.translational == CueingParameters().translational
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    ("[tilt]\nrate_limt_deg_s = 2.0\n", "mine.toml: tilt.rate_limt_deg_s: not a cueing parameter; config/cueing.toml"),
+    ("[translational]\nbreak_rad_s = [1.0, -1.0, 2.0]\n",
+     "mine.toml: translational.break_rad_s[1]: Input should be greater than 0"),
+    ("[translational]\ngain = [1.0, 1.0]\n", "mine.toml: translational.gain: too few values, one per axis"),
+    ("[translational]\ngain = [1.0, 1.0, 1.0, 1.0]\n", "mine.toml: translational.gain: too many values, one per axis"),
+    ("[translational]\ngain = 0.5\n", "mine.toml: translational.gain: must be a list of numbers"),
+    ("[tilt]\nlimit_deg = nan\n", "mine.toml: tilt.limit_deg: must be a finite number"),
+    ("[workspace]\nlimiter_knee = 0.98\n", "mine.toml: workspace: limiter_knee 0.98 must be below limiter_ceiling 0.97"),
+    ("[wash]\ngain = 1\n", "mine.toml: wash: not a cueing parameter"),
+    ("[tilt\n", "mine.toml: not valid TOML"),
+])
+def test_a_bad_parameters_file_is_refused_naming_the_file_and_the_key(text: str, expected: str) -> None:
+    with pytest.raises(CueingFileError) as refused:
+        parse_cueing_parameters(text, "mine.toml")
+    assert expected in str(refused.value)
+
+
+def test_every_problem_of_a_parameters_file_is_named_at_once() -> None:
+    with pytest.raises(CueingFileError) as refused:
+        parse_cueing_parameters("[tilt]\nlimit_deg = 100.0\ndamping = 0\n", "mine.toml")
+    lines = str(refused.value).splitlines()
+    assert [line.split(":")[1].strip() for line in lines] == ["tilt.damping", "tilt.limit_deg"]
+
+
+def test_an_unreadable_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(CueingFileError, match="missing.toml: cannot read"):
+        load_cueing_parameters(tmp_path / "missing.toml")
+    with pytest.raises(CueingFileError, match="missing.csv: cannot read"):
+        load_vehicle_trajectory(tmp_path / "missing.csv")
+
+
+def test_the_shipped_vehicle_trajectories_load_at_100_hz(vehicles) -> None:
+    for name, vehicle in vehicles.items():
+        assert vehicle.period_s == pytest.approx(0.01), name
+        assert 10.0 <= vehicle.times_s[-1] <= 15.0, name
+        np.testing.assert_allclose(vehicle.specific_force[0], [0.0, 0.0, 9.81])  # starts at rest or cruising
+    assert vehicles["braking"].specific_force[:, 0].min() == pytest.approx(-7.0)
+    assert np.abs(vehicles["lane_change"].specific_force[:, 1]).max() == pytest.approx(3.5)
+
+
+def test_a_vehicle_file_takes_its_columns_by_name_in_any_order() -> None:
+    text = "omega_z,t_s,f_x,f_y,f_z,omega_x,omega_y,speed\n0.1,0.0,1,2,9.81,0,0,25\n0.2,0.5,3,4,9.81,0,0,25\n"
+    vehicle = parse_vehicle_trajectory(text, "mine.csv")
+    assert vehicle.period_s == 0.5
+    np.testing.assert_array_equal(vehicle.specific_force, [[1, 2, 9.81], [3, 4, 9.81]])
+    np.testing.assert_array_equal(vehicle.angular_rate, [[0, 0, 0.1], [0, 0, 0.2]])
+
+
+def test_a_spreadsheets_byte_order_mark_is_not_part_of_the_first_column(tmp_path: Path) -> None:
+    path = tmp_path / "exported.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,0,0\n").encode())
+    assert len(load_vehicle_trajectory(path)) == 2
+
+
+def rows(*times: float) -> str:
+    return HEADER + "\n" + "".join(f"{t},0,0,9.81,0,0,0\n" for t in times)
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    ("", "mine.csv: empty"),
+    ("t_s,f_x,f_y,f_z,omega_x,omega_y\n0,0,0,9.81,0,0\n", "mine.csv: line 1: missing column omega_z"),
+    ("t_s,f_x,f_y,f_z,omega_x,omega_y,omega_Z\n", "missing column omega_z (the header has omega_Z instead"),
+    (rows(0.0, 0.01, 0.02, 0.04, 0.05), "mine.csv: line 5, column t_s: 0.04 s is 0.02 s after the sample before it, "
+                                         "not the sample period 0.01 s"),
+    (rows(0.0, 0.01, 0.01), "mine.csv: line 4, column t_s: 0.01 s is not after the sample before it (0.01 s): "
+                            "times must increase"),
+    (rows(0.0, 0.01, 0.005), "mine.csv: line 4, column t_s: 0.005 s is not after the sample before it"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,x,9.81,0,0,0\n", "mine.csv: line 3, column f_y: 'x' is not a finite number"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,inf,0\n", "mine.csv: line 3, column omega_y: 'inf' is not a finite"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81\n", "mine.csv: line 3, column omega_x: nothing is not a finite number"),
+    (rows(0.0), "mine.csv: 1 samples: a vehicle trajectory needs at least two lines of values"),
+])
+def test_a_bad_vehicle_file_is_refused_naming_the_line_and_column(text: str, expected: str) -> None:
+    with pytest.raises(CueingFileError) as refused:
+        parse_vehicle_trajectory(text, "mine.csv")
+    assert expected in str(refused.value)
+
+
+def test_times_rounded_in_the_text_are_uniform_and_blank_lines_are_skipped_keeping_line_numbers() -> None:
+    vehicle = parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03) + "\n" + "0.04,0,0,9.81,0,0,0\n", "mine.csv")
+    assert len(vehicle) == 5 and vehicle.period_s == pytest.approx(0.01)
+    with pytest.raises(CueingFileError, match="line 7, column t_s"):
+        parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03) + "\n" + "0.05,0,0,9.81,0,0,0\n", "mine.csv")
