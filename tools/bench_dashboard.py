@@ -47,19 +47,11 @@ from bench_service import Cyclictest, load_average  # noqa: E402
 from hexactl.adapters.api.client import CommandError, HexactlClient  # noqa: E402
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY  # noqa: E402
 from tools.browser import dashboard, headless_chromium  # noqa: E402
-from tools.serving import serve  # noqa: E402
+from tools.serving import serve, wait_for_tool as wait_for  # noqa: E402
 
 RATE_HZ = 500
 WAIT_S = 60.0
 
-
-def wait_for(condition, what: str) -> Any:  # noqa: ANN001
-    deadline = time.monotonic() + WAIT_S
-    while time.monotonic() < deadline:
-        if value := condition():
-            return value
-        time.sleep(0.1)
-    raise SystemExit(f"timed out waiting for {what}")
 
 
 def keep_moving(client: HexactlClient) -> int:

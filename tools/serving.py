@@ -15,7 +15,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -176,3 +176,14 @@ def spawned_children(pid: int) -> list[int]:
             except OSError:  # ended meanwhile
                 continue
     return found
+
+
+def wait_for_tool(condition: Callable[[], object], what: str, timeout_s: float = HANG_S) -> object:
+    """For the benchmark tools: poll ``condition`` until it returns something true; the
+    tool ends (SystemExit naming ``what``) if it does not within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if value := condition():
+            return value
+        time.sleep(0.1)
+    raise SystemExit(f"timed out waiting for {what}")

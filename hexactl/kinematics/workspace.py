@@ -169,11 +169,32 @@ def jacobian_condition(geometry: Geometry, pose_absolute: Sequence[float]) -> fl
 
 def _angle_deg(a: NDArray, b: NDArray) -> NDArray:
     """Angle between unit vectors along the last axis, deg; atan2 keeps it exact near 0°."""
-    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...i,...i->...", a, b)))
+    a, b = np.broadcast_arrays(a, b)
+    # The cross product written out: np.cross's axis handling costs more than the
+    # arithmetic on a few vectors (a stream checks one pose per target).
+    cross = np.stack((a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), axis=-1)
+    return np.degrees(np.arctan2(np.sqrt(np.einsum("...i,...i->...", cross, cross)), np.einsum("...i,...i->...", a, b)))
+
+
+_NEUTRAL_AXES: dict[int, tuple[Geometry, tuple[NDArray, NDArray]]] = {}
+_NEUTRAL_AXES_KEPT = 8
 
 
 def _neutral_axes(geometry: Geometry) -> tuple[NDArray, NDArray]:
-    """Each joint's neutral axis: the leg direction in the zero posture (fixed, moving frame)."""
+    """Each joint's neutral axis: the leg direction in the zero posture (fixed, moving
+    frame). Kept for the last few geometries: the same one is checked pose after pose."""
+    cached = _NEUTRAL_AXES.get(id(geometry))
+    if cached is not None and cached[0] is geometry:
+        return cached[1]
+    axes = _neutral_axes_of(geometry)
+    if len(_NEUTRAL_AXES) >= _NEUTRAL_AXES_KEPT:
+        _NEUTRAL_AXES.pop(next(iter(_NEUTRAL_AXES)))
+    _NEUTRAL_AXES[id(geometry)] = (geometry, axes)
+    return axes
+
+
+def _neutral_axes_of(geometry: Geometry) -> tuple[NDArray, NDArray]:
     home = absolute_from_relative(geometry.home, np.zeros((1, 6)))
     vectors = leg_vectors_batch(geometry.legs, home)[0]
     units = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import socket
 import time
+from pathlib import Path
 from collections.abc import Iterator
 
 import pytest
@@ -128,5 +129,26 @@ def test_estop_ends_a_stream(client) -> None:
                 PoseStream(client, "refused while the E-stop is latched").open()
         finally:
             stream._push.close()
+
+    tolerating_stalls(client, scenario)
+
+
+def test_hexactl_cue_streams_a_vehicle_file_into_the_service(served, client, tmp_path, capsys) -> None:
+    from hexactl.adapters.cli.main import main
+
+    braking = Path(__file__).resolve().parents[2] / "config" / "vehicles" / "braking.csv"
+    lines = braking.read_text().splitlines()
+    short = tmp_path / "braking-2s.csv"
+    short.write_text("\n".join(lines[:1] + lines[151:351]) + "\n")  # 2 s at 100 Hz: the braking's onset
+
+    def scenario() -> None:
+        assert main(["cue", str(short), "--api", served.api, "--timeout", str(WAIT_S)]) == 0
+        out = capsys.readouterr().out
+        assert "200 poses at 100 Hz" in out and "streamed 200 poses" in out, out
+        wait_for(lambda: status(client)["stream"] is None, "the stream's end")
+        record = status(client)
+        assert record["last_stream"]["reason"] == "closed by the client" and record["last_stream"]["targets"] > 100
+        assert record["stream_input"]["malformed"] == 0 and record["loop"]["guard_clamps"] == 0
+        assert record["pose_command"] != [0.0] * 6
 
     tolerating_stalls(client, scenario)

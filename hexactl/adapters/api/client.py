@@ -57,6 +57,7 @@ class ZmqConnection:
 
     def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int]) -> None:
         self.endpoint = endpoint
+        self.curve = curve
         self._context = zmq.Context()
         self.socket = self._context.socket(kind)
         self.socket.linger = 0

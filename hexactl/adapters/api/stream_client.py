@@ -22,8 +22,7 @@ from typing import Any, Self
 
 import zmq
 
-from hexactl.adapters.api.client import CommandError, HexactlClient, ZmqConnection
-from hexactl.adapters.api.security import CurveClientKeys
+from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable, ZmqConnection
 from hexactl.adapters.api.stream_wire import encode
 
 SEND_QUEUE = 16
@@ -33,17 +32,16 @@ SEND_QUEUE = 16
 class PoseStream:
     """A stream from ``source`` (a name for people) of poses in ``frame`` (``zero`` or
     ``work``), ended by the service when no sample comes for ``timeout_ms``, through
-    ``client``; ``curve`` the client's CURVE keys when the service uses them. Opened by
-    ``with`` (or :meth:`open`), closed on leaving it.
+    ``client`` (its CURVE keys, if any, secure the stream too). Opened by ``with`` (or
+    :meth:`open`), closed on leaving it.
 
     :raises hexactl.adapters.api.client.CommandError: the service refused to open it
+    :raises hexactl.adapters.api.client.ServiceUnavailable: its stream socket did not connect
     """
 
-    def __init__(self, client: HexactlClient, source: str, *, frame: str = "zero", timeout_ms: float = 100.0,
-                 curve: CurveClientKeys | None = None) -> None:
+    def __init__(self, client: HexactlClient, source: str, *, frame: str = "zero", timeout_ms: float = 100.0) -> None:
         self._client = client
         self._request = {"source": source, "frame": frame, "timeout_ms": timeout_ms}
-        self._curve = curve
         self._push: ZmqConnection | None = None
         self._sequence = 0
         self.opened: dict[str, Any] | None = None
@@ -54,7 +52,12 @@ class PoseStream:
     def open(self) -> Self:
         self.opened = self._client.call("stream_open", **self._request)
         endpoint = beside_api(self.opened["endpoints"]["zmq"], self._client.endpoint)
-        self._push = ZmqConnection(zmq.PUSH, endpoint, self._curve, {zmq.SNDHWM: SEND_QUEUE, zmq.IMMEDIATE: 1})
+        self._push = ZmqConnection(zmq.PUSH, endpoint, self._client.curve, {zmq.SNDHWM: SEND_QUEUE, zmq.IMMEDIATE: 1})
+        # IMMEDIATE: nothing is queued before the connection is up, so wait for it rather
+        # than drop the first samples.
+        if not self._push.socket.poll(round(self._client.timeout_s * 1000), zmq.POLLOUT):
+            self.close()
+            raise ServiceUnavailable(f"the stream socket {endpoint} did not connect within {self._client.timeout_s:g} s")
         return self
 
     def send(self, pose: Sequence[float], sent_s: float | None = None) -> bool:
@@ -73,6 +76,16 @@ class PoseStream:
             self.dropped += 1
             return False
         return True
+
+    def send_paced(self, poses: Sequence[Sequence[float]], period_s: float) -> int:
+        """Send ``poses`` one every ``period_s`` in real time (absolute deadlines: a late
+        one does not delay the rest); the samples dropped."""
+        start = time.monotonic()
+        dropped = self.dropped
+        for n, pose in enumerate(poses):
+            time.sleep(max(0.0, start + n * period_s - time.monotonic()))
+            self.send(pose)
+        return self.dropped - dropped
 
     def close(self) -> None:
         """Close the stream (the platform brakes to rest) and the socket. A stream the

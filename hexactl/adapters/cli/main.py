@@ -20,6 +20,7 @@ from collections.abc import Sequence
 
 from hexactl.adapters.cli import (
     calibration_commands,
+    cue_commands,
     dashboard_commands,
     demo_commands,
     jog_commands,
@@ -34,7 +35,7 @@ from hexactl.adapters.cli.common import CliError, DeferredParser, common_parser
 from hexactl.adapters.cli.endpoints import fill_endpoints
 
 COMMAND_MODULES = (kinematics_commands, sim_commands, service_commands, jog_commands, recording_commands, wave_commands,
-                   monitor, dashboard_commands, calibration_commands, demo_commands)
+                   monitor, dashboard_commands, calibration_commands, demo_commands, cue_commands)
 
 EXIT_BROKEN_PIPE = 141
 """The shell's status for a command killed by SIGPIPE (128 + 13), e.g. ``hexactl … | head``."""

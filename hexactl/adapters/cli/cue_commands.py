@@ -1,0 +1,79 @@
+"""``hexactl cue FILE``: replay a vehicle's recorded motion into a running service as motion cues.
+
+The washout filter (:mod:`hexactl.cueing`) turns the vehicle's specific force and angular
+rate into platform poses, on the service's active (calibrated) geometry with the
+workspace-aware gain, and the poses go to the service as a pose stream
+(docs/stream.md) in real time. Exit 0 when the whole file was streamed, 1 when the
+service refused the stream or ended it early (a fault, an E-stop, a stop), 2 when
+nobody answered or the arguments or files are bad.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from hexactl.adapters.cli.common import CliError, connect
+from hexactl.adapters.cli.service_commands import EXIT_OK, EXIT_REFUSED, client_parser
+
+CUE_SOURCE = "hexactl cue"
+
+
+def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    cue = subparsers.add_parser(
+        "cue", parents=[client_parser()], help="replay a vehicle's motion into a running service as motion cues",
+        description="turn a vehicle trajectory (specific force and angular rate, docs/cueing.md) into platform "
+        "poses with the washout filter, on the service's active geometry, and stream them to it in real time "
+        "(docs/stream.md); the platform must be enabled and at rest")
+    cue.add_argument("file", type=Path, help="the vehicle trajectory, CSV: t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z "
+                     "(e.g. config/vehicles/braking.csv)")
+    cue.add_argument("--parameters", type=Path, metavar="TOML", help="the washout's parameters (default: "
+                     "config/cueing.toml's values)")
+    cue.add_argument("--no-workspace-gain", action="store_true", help="leave the cues at their gains, with only the "
+                     "limiter between them and the workspace")
+    cue.add_argument("--plan-only", action="store_true", help="only print the plan's figures; nothing moves")
+    cue.set_defaults(run=run_cue)
+
+
+def run_cue(arguments: argparse.Namespace) -> int:
+    from hexactl.adapters.api.client import CommandError, HexactlClient
+    from hexactl.adapters.api.stream_client import PoseStream
+    from hexactl.adapters.files.cueing_file import CueingFileError, load_cueing_parameters, load_vehicle_trajectory
+    from hexactl.application.cueing import plan_cue
+    from hexactl.cueing.parameters import CueingParameters
+    from hexactl.cueing.workspace_gain import WorkspaceError
+    from hexactl.kinematics.geometry import Geometry
+
+    try:
+        vehicle = load_vehicle_trajectory(arguments.file)
+        parameters = load_cueing_parameters(arguments.parameters) if arguments.parameters else CueingParameters()
+    except CueingFileError as error:
+        raise CliError(str(error)) from None
+    client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
+    assert isinstance(client, HexactlClient)
+    with client:
+        geometry = Geometry.model_validate(client.call("geometry")["geometry"])
+        try:
+            plan = plan_cue(vehicle, parameters, geometry, workspace_gain=not arguments.no_workspace_gain)
+        except WorkspaceError as error:
+            raise CliError(f"{arguments.file}: {error}") from None
+        print(f"{arguments.file}: {len(plan.poses)} poses at {1 / plan.period_s:g} Hz "
+              f"({len(plan.poses) * plan.period_s:.1f} s), workspace gain {plan.gain:.2f}, "
+              f"specific force RMS error {plan.rms_error:.3f} m/s² (planned)")
+        if arguments.plan_only:
+            return EXIT_OK
+        try:
+            with PoseStream(client, CUE_SOURCE, timeout_ms=max(100.0, 5000.0 * plan.period_s)) as stream:
+                dropped = stream.send_paced(plan.poses, plan.period_s)
+                record = client.call("status")["status"]
+        except CommandError as error:
+            print(f"refused: {error.code}: {error}")
+            return EXIT_REFUSED
+        received = record.get("stream_input") or {}
+        ended = record.get("last_stream") if record.get("stream") is None else None
+        print(f"streamed {len(plan.poses) - dropped} poses ({dropped} dropped here); the service forwarded "
+              f"{received.get('forwarded', 0)}, replaced {received.get('clamped', 0)} out of reach")
+        if ended is not None:
+            print(f"the stream ended early: {ended['reason']}")
+            return EXIT_REFUSED
+    return EXIT_OK
