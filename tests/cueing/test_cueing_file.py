@@ -65,8 +65,10 @@ def test_every_problem_of_a_parameters_file_is_named_at_once() -> None:
 def test_an_unreadable_file_is_named(tmp_path: Path) -> None:
     with pytest.raises(CueingFileError, match="missing.toml: cannot read"):
         load_cueing_parameters(tmp_path / "missing.toml")
-    with pytest.raises(CueingFileError, match="missing.csv: cannot read"):
+    with pytest.raises(CueingFileError, match="missing.csv: no such file"):
         load_vehicle_trajectory(tmp_path / "missing.csv")
+    with pytest.raises(CueingFileError, match="cannot read"):
+        load_vehicle_trajectory(tmp_path)  # a directory
 
 
 def test_the_shipped_vehicle_trajectories_load_at_100_hz(vehicles) -> None:
@@ -121,3 +123,13 @@ def test_times_rounded_in_the_text_are_uniform_and_blank_lines_are_skipped_keepi
     assert len(vehicle) == 5 and vehicle.period_s == pytest.approx(0.01)
     with pytest.raises(CueingFileError, match="line 7, column t_s"):
         parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03) + "\n" + "0.05,0,0,9.81,0,0,0\n", "mine.csv")
+
+
+def test_a_shipped_trajectory_is_found_by_its_name_and_a_missing_file_names_them(tmp_path, monkeypatch) -> None:
+    from hexactl.adapters.files.cueing_file import load_vehicle_trajectory, shipped_vehicles
+
+    monkeypatch.chdir(tmp_path)  # not the checkout: as an operator runs hexactl cue braking anywhere
+    assert shipped_vehicles() == ["braking", "lane_change"]
+    assert load_vehicle_trajectory("braking").period_s == pytest.approx(0.01)
+    with pytest.raises(CueingFileError, match="no such file; the shipped trajectories are braking, lane_change"):
+        load_vehicle_trajectory("brakign")

@@ -65,6 +65,8 @@ SUPERVISION_S = 2.0
 when the host was loaded by other work (a starved guest, not a lost link)."""
 COMMAND_TIMEOUT_S = 5.0
 """How long the API waits for the loop's verdict on a command (the service's 0.5 s ran out once in the guest)."""
+ENABLE_TRIES = 3
+"""Enabling again after a stall of the starved guest latched a fault on the way to rest."""
 SIMULATOR_FIFO = 20
 SERVICE_FIFO = 10
 SIMULATOR_TICK_MS = 4.0
@@ -308,8 +310,14 @@ def enabled_at_rest(client: HexactlClient) -> dict:
             return False
         return True
 
-    wait_for(attempt, "the actuators to enable")
-    return wait_status(client, at_rest, "the platform at rest")
+    for tries in range(1, ENABLE_TRIES + 1):
+        wait_for(attempt, "the actuators to enable")
+        record = wait_status(client, lambda r: at_rest(r) or r["state"] in ("fault", "estop"), "the platform at rest")
+        if at_rest(record) or tries == ENABLE_TRIES:
+            break
+        print(f"a {record['state']} latched while coming to rest, reset and enabled again: {record['faults']}")
+    assert at_rest(record), record["faults"]
+    return record
 
 
 def test_serve_drives_the_six_actuators_on_vcan(service: Served, client: HexactlClient, nominal: Geometry) -> None:

@@ -25,8 +25,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         description="turn a vehicle trajectory (specific force and angular rate, docs/cueing.md) into platform "
         "poses with the washout filter, on the service's active geometry, and stream them to it in real time "
         "(docs/stream.md); the platform must be enabled and at rest")
-    cue.add_argument("file", type=Path, help="the vehicle trajectory, CSV: t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z "
-                     "(e.g. config/vehicles/braking.csv)")
+    cue.add_argument("file", type=Path, help="the vehicle trajectory, CSV: t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z, "
+                     "or a shipped one by name: braking, lane_change")
     cue.add_argument("--parameters", type=Path, metavar="TOML", help="the washout's parameters (default: "
                      "config/cueing.toml's values)")
     cue.add_argument("--no-workspace-gain", action="store_true", help="leave the cues at their gains, with only the "

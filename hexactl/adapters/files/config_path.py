@@ -21,3 +21,7 @@ def default_config_path() -> Path:
     if from_environment:
         return Path(from_environment)
     return DEFAULT_CONFIG if DEFAULT_CONFIG.exists() else _REPOSITORY_CONFIG
+
+
+SHIPPED_VEHICLES = _REPOSITORY_CONFIG.parent / "vehicles"
+"""The vehicle trajectories hexactl ships (``hexactl cue braking``)."""

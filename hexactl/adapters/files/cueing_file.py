@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import ValidationError
 
+from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import VehicleTrajectory
 
@@ -111,8 +112,21 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
 
 
 def load_vehicle_trajectory(path: str | os.PathLike[str]) -> VehicleTrajectory:
-    """Read a vehicle trajectory file; :class:`CueingFileError` names the file, line and column."""
+    """Read a vehicle trajectory file, or a shipped one by its name (``braking``,
+    ``lane_change``: :func:`shipped_vehicles`) when no such file exists;
+    :class:`CueingFileError` names the file, line and column."""
+    shipped = SHIPPED_VEHICLES / f"{path}.csv"
+    if not Path(path).exists() and Path(path).name == str(path) and shipped.is_file():
+        path = shipped
+    elif not Path(path).exists():
+        raise CueingFileError(f"{path}: no such file; the shipped trajectories are {', '.join(shipped_vehicles())} "
+                              f"(by name), in {SHIPPED_VEHICLES}")
     return parse_vehicle_trajectory(_read(path), str(path))
+
+
+def shipped_vehicles() -> list[str]:
+    """The names of the vehicle trajectories hexactl ships."""
+    return sorted(path.stem for path in SHIPPED_VEHICLES.glob("*.csv"))
 
 
 def _number(row: list[str], index: int, column: str, line: int, source: str) -> float:
