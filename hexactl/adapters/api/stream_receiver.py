@@ -42,8 +42,8 @@ UDP_BUFFER_BYTES = 1 << 20
 
 log = logging.getLogger("hexactl.stream")
 
-Target = Callable[[Sequence[float], int, float, int], TargetResult]
-"""The controller's ``stream_target(pose, sequence, sent_s, received_ns)``."""
+Target = Callable[[Sequence[float], int, float, int, tuple[Sequence[float], float] | None], TargetResult]
+"""The controller's ``stream_target(pose, sequence, sent_s, received_ns, before)``."""
 
 
 class StreamCounters:
@@ -93,7 +93,8 @@ class StreamReceiver(SocketThread):
         self._stream: int | None = None  # the loop's stream the counters are for
         self._last_sequence: int | None = None
         self._arrivals = 0  # numbers the samples that carry none
-        self._pending: tuple[Sample, int] | None = None
+        self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
+        self._last: Sample | None = None  # the newest sample taken
         self._forwarded_ns = 0
         self._taken = 0  # the loop's target count when last looked at
         self._loop_latency_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
@@ -188,7 +189,9 @@ class StreamReceiver(SocketThread):
         self._arrived_ns.append(received_ns)
         if self._pending is not None:
             c.coalesced += 1
-        self._pending = (sample, received_ns)
+        # The sample before goes along: the stream's velocity is between the last two samples
+        # sent, not the last two forwarded (two equal poses in a row mean at rest there).
+        self._pending, self._last = (sample, received_ns, self._last), sample
 
     def _watch_loop(self) -> None:
         """Follow the loop's stream: a new one resets the counters; each target it took
@@ -199,6 +202,7 @@ class StreamReceiver(SocketThread):
             if stream is not None:
                 self.counters = StreamCounters()
                 self._last_sequence = None
+                self._last = None
                 self._arrivals = 0
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()
@@ -211,9 +215,10 @@ class StreamReceiver(SocketThread):
             self._loop_latency_ns.append(progress.latency_ns)
 
     def _forward(self) -> None:
-        (sample, received_ns), self._pending = self._pending, None  # type: ignore[misc]
+        (sample, received_ns, before), self._pending = self._pending, None  # type: ignore[misc]
         assert sample.sequence is not None and sample.sent_s is not None
-        result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns)
+        result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns,
+                              None if before is None or before.sent_s is None else (before.pose, before.sent_s))
         self._forwarded_ns = time.monotonic_ns()
         if result.sent:
             self.counters.forwarded += 1
