@@ -36,6 +36,9 @@ CONFIG = LinkConfig(loop_rate=LoopRate.HZ_250, watchdog_cycles=100)
 PERIOD_S = 1 / CONFIG.loop_rate
 WATCHDOG_S = (CONFIG.watchdog_cycles + 0.5) * PERIOD_S
 DEADLINE_S = 10.0  # for anything to happen; generous for a slow guest
+ANALYSER_BUFFER_BYTES = 64 << 20
+"""The analyser's receive buffer (about 80 000 frames): its thread shares the GIL with the
+loop here, and frames that find a full buffer are lost to the capture."""
 
 
 class Simulator:
@@ -141,7 +144,7 @@ def all_in(state: ActuatorState) -> Callable[[FeedbackSnapshot], bool]:
 
 def test_enable_stream_follow_and_the_capture_decodes_with_the_dbc(simulator, link, tmp_path: Path):
     capture = tmp_path / "capture.log"  # python-can's .log is candump -L format
-    analyser = open_bus(SPEC)
+    analyser = open_bus(SPEC, receive_buffer_bytes=ANALYSER_BUFFER_BYTES)  # its thread may lag a busy guest
     logger = can.Logger(str(capture))
     leg_3 = FeedbackWatch(node=3, at_least_um=329_999)
     notifier = can.Notifier(analyser, [logger, leg_3])

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import re
 import signal
-import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -93,9 +92,6 @@ CAPTURE_BYTES = 256 << 20
 classic frame (measured in the guest), so it holds about 700 000 frames, over six minutes
 of a service at 250 Hz (about 1750 frames/s: four set-point frames and six FEEDBACK a
 cycle); only what is queued takes memory."""
-SO_RCVBUFFORCE = 33
-"""Linux's socket option (asm-generic/socket.h; Python's socket module does not name it):
-a receive buffer beyond the kernel's rmem_max, for root (as in the guest)."""
 _COMM_TIMEOUT_ONLY = re.compile(rf"fault bits 0x{int(Fault.COMM_TIMEOUT):x}\b")
 
 
@@ -143,13 +139,11 @@ def open_capture() -> can.BusABC:
     :raises AssertionError: without the privilege for it (root): a smaller buffer would
         drop frames unnoticed while nobody reads
     """
-    bus = open_bus(SPEC)
-    try:
-        bus.socket.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, CAPTURE_BYTES)
-    except PermissionError:
+    bus = open_bus(SPEC, receive_buffer_bytes=CAPTURE_BYTES)
+    if bus.receive_buffer_bytes < CAPTURE_BYTES:
         bus.shutdown()
         raise AssertionError("capturing the bus for the whole test needs SO_RCVBUFFORCE: run it as root "
-                             "(tools/uml_vcan.py's guest does)") from None
+                             "(tools/uml_vcan.py's guest does)")
     return bus
 
 

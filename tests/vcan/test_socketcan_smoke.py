@@ -12,6 +12,8 @@ import time
 import can
 import pytest
 
+from hexactl.adapters.can.socketcan_bus import LeanSocketcanBus
+
 pytestmark = pytest.mark.vcan
 
 CHANNEL = "vcan0"
@@ -117,3 +119,47 @@ def test_echo_across_processes():
             child.wait()
     assert child.returncode == 0, err
     assert out.strip() == "ECHOED 3"
+
+
+def test_the_lean_bus_sends_and_receives_what_python_can_does():
+    """hexactl's SocketCAN bus (one system call per non-waiting transfer) against python-can's."""
+    frames = [
+        can.Message(arbitration_id=0x181, data=bytes(range(8)), is_extended_id=False),
+        can.Message(arbitration_id=0x1ABCDE0, data=b"\x01\x02", is_extended_id=True),
+        can.Message(arbitration_id=0x080, data=b"", is_extended_id=False),
+    ]
+    with LeanSocketcanBus(CHANNEL) as lean, open_bus() as plain:
+        assert lean.recv(0.0) is None  # nothing waiting: at once
+        before = time.time()
+        for frame in frames:
+            lean.send(frame, 0.0)
+        for frame in frames:
+            got = plain.recv(timeout=RECV_TIMEOUT)
+            assert (got.arbitration_id, got.is_extended_id, bytes(got.data)) == (
+                frame.arbitration_id, frame.is_extended_id, bytes(frame.data))
+        for frame in frames:
+            plain.send(frame)
+        received = []
+        deadline = time.monotonic() + RECV_TIMEOUT
+        while len(received) < len(frames) and time.monotonic() < deadline:
+            if (got := lean.recv(0.0)) is not None:
+                received.append(got)
+        assert [(m.arbitration_id, m.is_extended_id, bytes(m.data), m.channel) for m in received] == [
+            (f.arbitration_id, f.is_extended_id, bytes(f.data), CHANNEL) for f in frames]
+        assert all(before <= m.timestamp <= time.time() for m in received)  # the kernel's receive time
+        assert lean.recv(0.0) is None
+        lean.send(frames[0], timeout=0.5)  # a bounded wait for room: python-can's own path
+        assert plain.recv(timeout=RECV_TIMEOUT).arbitration_id == frames[0].arbitration_id
+
+
+def test_the_lean_bus_keeps_the_kernel_filter_when_draining():
+    flt = [{"can_id": 0x120, "can_mask": 0x7F0, "extended": False}]
+    with open_bus() as tx, LeanSocketcanBus(CHANNEL, can_filters=flt) as rx:
+        for can_id in (0x100, 0x121, 0x130, 0x12F):
+            tx.send(can.Message(arbitration_id=can_id, data=[can_id & 0xFF], is_extended_id=False))
+        assert rx.recv(timeout=RECV_TIMEOUT).arbitration_id == 0x121  # waits: python-can's path
+        deadline = time.monotonic() + RECV_TIMEOUT
+        while (msg := rx.recv(0.0)) is None and time.monotonic() < deadline:
+            pass
+        assert msg.arbitration_id == 0x12F
+        assert rx.recv(0.0) is None

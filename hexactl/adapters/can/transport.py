@@ -13,7 +13,9 @@ A *bus spec* names an interface and a channel, ``INTERFACE:CHANNEL``:
                               its own copy of each frame
 ============================  =================================================================
 
-Everything below the spec is plain python-can: :func:`open_bus` returns a :class:`can.BusABC`.
+Everything below the spec is python-can: :func:`open_bus` returns a :class:`can.BusABC`, for
+SocketCAN python-can's own bus with a leaner non-waiting send and receive
+(:mod:`hexactl.adapters.can.socketcan_bus`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from typing import Any
 import can
 
 from hexactl.adapters.can.memory_bus import MemoryBus
+from hexactl.adapters.can.socketcan_bus import LeanSocketcanBus
 from hexactl.control.hardware import BusState
 
 IN_PROCESS_INTERFACES = ("memory", "virtual")
@@ -69,7 +72,8 @@ def parse_bus_spec(spec: str) -> BusSpec:
 
 
 def open_bus(spec: str | BusSpec, **options: Any) -> can.BusABC:
-    """Open the bus named by ``spec``; ``options`` go unchanged to :class:`can.Bus`, or for
+    """Open the bus named by ``spec``; ``options`` go unchanged to :class:`can.Bus`, for
+    ``socketcan:`` to :class:`LeanSocketcanBus` (python-can's SocketCAN bus) and for
     ``memory:`` to :class:`MemoryBus`.
 
     In-process buses get a bounded receive queue (:data:`IN_PROCESS_RX_QUEUE_SIZE`) unless
@@ -90,6 +94,8 @@ def open_bus(spec: str | BusSpec, **options: Any) -> can.BusABC:
         # entry point works only once the package's metadata is reinstalled, and can.Bus
         # would also merge in python-can's configuration files and CAN_* environment variables.
         return MemoryBus(parsed.channel, **options)
+    if parsed.interface == "socketcan":
+        return LeanSocketcanBus(parsed.channel, **options)
     return can.Bus(interface=parsed.interface, channel=parsed.channel, **options)
 
 

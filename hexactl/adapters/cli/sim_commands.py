@@ -14,6 +14,10 @@ from hexactl.adapters.cli.common import LEG_LABELS, CliError, load_config, parse
 if TYPE_CHECKING:  # the simulator and python-can load when the command runs, not for every command
     from hexactl.kinematics.geometry import Geometry
 
+SIMULATOR_RECEIVE_BUFFER_BYTES = 8 << 20
+"""The simulator's SocketCAN receive buffer: about 10 000 classic frames, over 5 s of a
+controller at 500 Hz (four frames a cycle)."""
+
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     sim = subparsers.add_parser(
@@ -78,7 +82,10 @@ def run_sim_actuators(arguments: argparse.Namespace) -> int:
         firmware.inject.drop_probability = arguments.drop_probability
         firmware.inject.corrupt_probability = arguments.corrupt_probability
     try:
-        bus = open_bus(spec)
+        # On SocketCAN, room for seconds of the controller's frames: a simulator held up by
+        # a loaded host reads them late, at their arrival times, instead of losing them (real
+        # actuators have a processor each).
+        bus = open_bus(spec, **({"receive_buffer_bytes": SIMULATOR_RECEIVE_BUFFER_BYTES} if spec.interface == "socketcan" else {}))
     except (can.CanError, OSError) as error:
         raise CliError(f"cannot open {spec}: {error}") from None
 
