@@ -10,8 +10,11 @@ in a process of their own (:mod:`hexactl.application.api_process`); what crosses
 - **commands** (API → loop): the immutable :mod:`hexactl.control.commands` objects the
   facade builds after planning and validating, pickled, one message each, on a pipe;
 - **reports** (loop → API): the loop's :class:`~hexactl.control.host.LoopReport`
-  (snapshot, statistics, health, the data recorder's rows), at most every
-  :data:`REPORT_INTERVAL_S`, on another pipe. A report may be dropped, the recorder's rows
+  (snapshot, statistics, health, the data recorder's rows) on another pipe, every
+  ``interval_s`` (at most :data:`REPORT_INTERVAL_S`; the service matches it to its telemetry
+  rate) and at once when a command's verdict is new, so that replies do not wait for it.
+  Publishing is the loop thread's largest cost after the cycle itself (pickling the
+  snapshot): one report per cycle would double it. A report may be dropped, the recorder's rows
   may not: they are taken from the recorder only for a report the pipe takes whole.
   (The built-in simulator's instrument has a port of its own:
   :mod:`hexactl.application.simulator`.)
@@ -49,8 +52,9 @@ from hexactl.control.core import CoreSnapshot
 from hexactl.control.host import LoopReport, LoopThread
 from hexactl.control.recorder import Row
 
-REPORT_INTERVAL_S = 0.002
-"""The loop publishes a report at most this often (every cycle at 500 Hz)."""
+REPORT_INTERVAL_S = 0.01
+"""The longest time between two reports: how old the API's view of the loop (``status``,
+telemetry) may be, besides a report dropped. Verdicts do not wait for it."""
 
 MAX_ROWS_PER_REPORT = 64
 """Recorder rows per report at most: bounds the loop's pickling; a backlog (after reports
@@ -157,20 +161,22 @@ class LoopExchange:
     a thread of lower priority, or with the API's process, would make the loop wait for
     that one's turn on the CPU: priority inversion). Commands are read and reports written
     as far as the pipes allow without waiting; a report the pipe has no room for is
-    dropped (the next one follows within :data:`REPORT_INTERVAL_S`).
+    dropped (the next one follows within ``interval_s``).
 
     ``rejected``: messages that were not commands (a bug if ever non-zero);
     ``reports_dropped``: reports the pipe had no room for.
     """
 
-    def __init__(self, thread: LoopThread, commands: Connection, reports: Connection) -> None:
+    def __init__(self, thread: LoopThread, commands: Connection, reports: Connection,
+                 interval_s: float = REPORT_INTERVAL_S) -> None:
         self._thread = thread
         self._commands = commands  # kept open: the reader uses its descriptor
         self._reports = reports
         self._reader = _FrameReader(commands.fileno())
         self._writer = _FrameWriter(reports.fileno())
-        self._interval_ns = round(REPORT_INTERVAL_S * 1e9)
+        self._interval_ns = round(min(interval_s, REPORT_INTERVAL_S) * 1e9)
         self._next_report_ns = 0
+        self._outcomes_published: tuple[cmd.Outcome, ...] | None = None
         self.rejected = 0
         self.reports_dropped = 0
 
@@ -187,6 +193,7 @@ class LoopExchange:
 
     def start(self) -> LoopExchange:
         """Publish the first report; returns self."""
+        self._next_report_ns = time.monotonic_ns() + self._interval_ns
         self._publish()
         return self
 
@@ -202,7 +209,7 @@ class LoopExchange:
             else:
                 self.rejected += 1
         now = time.monotonic_ns()
-        if now >= self._next_report_ns:
+        if now >= self._next_report_ns or self._thread.snapshot.outcomes is not self._outcomes_published:
             self._next_report_ns = now + self._interval_ns
             self._publish()
         else:
@@ -222,6 +229,8 @@ class LoopExchange:
                          recorded=tuple(self._thread.take_recorded(MAX_ROWS_PER_REPORT)))
         if not self._writer.offer(pickle.dumps(report, protocol=pickle.HIGHEST_PROTOCOL)):
             self.reports_dropped += 1
+            return
+        self._outcomes_published = report.snapshot.outcomes
 
 
 class RemoteLoop:

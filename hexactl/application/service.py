@@ -302,7 +302,9 @@ class Service:
             pipes = multiprocessing.get_context("spawn")
             commands_in, commands_out = pipes.Pipe(duplex=False)
             reports_in, reports_out = pipes.Pipe(duplex=False)
-            exchange = LoopExchange(controller.thread, commands_in, reports_out).start()
+            # Reports as often as telemetry takes them (verdicts at once whatever the rate).
+            exchange = LoopExchange(controller.thread, commands_in, reports_out,
+                                    interval_s=1 / config.telemetry_rate_hz).start()
             closers.callback(exchange.close)
             realtime = controller.start(exchange)
             closers.callback(controller.shutdown)

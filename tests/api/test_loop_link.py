@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import pytest
 
+from hexactl.application import loop_link
 from hexactl.application.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop, _FrameReader, _FrameWriter
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
@@ -88,6 +89,41 @@ def test_commands_cross_and_the_verdicts_come_back(link: Link) -> None:
     link.cycle_until_reported(lambda s: s.motion.value == "holding")
     assert link.controller.telemetry().pose_command == pytest.approx((0, 0, 10, 0, 0, 0), abs=1e-6)
     assert link.exchange.rejected == 0
+
+
+def test_a_verdict_is_reported_at_once_and_nothing_else_before_the_interval(
+        nominal: Geometry, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(loop_link, "REPORT_INTERVAL_S", 3600.0)
+    start = sensor_setpoints(nominal.legs, absolute_from_relative(nominal.home, (0.0,) * 6))
+    clock = SimClock()
+    config = ControllerConfig()
+    thread = LoopThread(IdealActuators(start, clock_ns=clock), ActiveGeometry.of(nominal, "nominal"), config, clock_ns=clock)
+    pipes = multiprocessing.get_context("spawn")
+    commands_in, commands_out = pipes.Pipe(duplex=False)
+    reports_in, reports_out = pipes.Pipe(duplex=False)
+    exchange = LoopExchange(thread, commands_in, reports_out, interval_s=3600.0).start()
+    remote = RemoteLoop(commands_out, reports_in)
+    try:
+        first = remote.snapshot.cycle
+        for _ in range(5):  # an hour between reports: these cycles are not reported
+            thread.loop.step(clock.advance(thread.loop.period_ns))
+            exchange()
+        time.sleep(0.2)
+        assert remote.snapshot.cycle == first
+        ticket = Controller(remote, config=config, nominal=nominal).enable().details["ticket"]
+
+        def judged() -> bool:  # the command crosses, the next cycle gives its verdict
+            exchange()
+            thread.loop.step(clock.advance(thread.loop.period_ns))
+            return any(outcome.ticket == ticket for outcome in thread.snapshot.outcomes)
+
+        wait_for(judged, "the loop's verdict")
+        exchange()
+        wait_for(lambda: any(outcome.ticket == ticket for outcome in remote.snapshot.outcomes), "the verdict")
+        assert remote.snapshot.cycle > first
+    finally:
+        remote.close()
+        exchange.close()
 
 
 def test_anything_but_a_command_is_dropped_and_counted(link: Link) -> None:
