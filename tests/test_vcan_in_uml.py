@@ -18,7 +18,7 @@ pytestmark = pytest.mark.uml_runner
 
 REPO = Path(__file__).resolve().parent.parent
 TOOL = REPO / "tools" / "uml_vcan.py"
-UML_TIMEOUT = int(os.environ.get("HEXACTL_UML_TIMEOUT", "600"))
+UML_TIMEOUT = int(os.environ.get("HEXACTL_UML_TIMEOUT", "1500"))
 # extra room for a first-run apt-get install of user-mode-linux/kmod/iproute2
 HOST_TIMEOUT = UML_TIMEOUT + 600
 

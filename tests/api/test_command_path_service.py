@@ -16,7 +16,7 @@ import pytest
 import zmq
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
-from tests.reliability.support import enable
+from tests.reliability.support import enable, tolerating_stalls
 from tools.serving import serve, terminate
 
 WAIT_S = 60.0  # only turns a hang into a failure (the machine is shared and busy)
@@ -53,18 +53,25 @@ def wait_for(condition, what: str):
 def test_a_move_whose_client_timed_out_behind_a_flood_never_runs(tmp_path: Path) -> None:
     with serving(tmp_path) as (api, _), HexactlClient(api, timeout_s=WAIT_S) as operator:
         enable(operator)
-        wait_for(lambda: status(operator)["motion"] == "holding", "the platform at rest")
-        start = status(operator)["pose_command"]
-        context = zmq.Context.instance()
-        flooders = []
+        # A stall of a loaded host that latches a fault refuses every move, the timed-out one
+        # too: then the whole flood again, from enabled and at rest (each failure printed).
+        tolerating_stalls(operator, lambda: flood_then_move(api, operator))
+
+
+def flood_then_move(api: str, operator: HexactlClient) -> None:
+    wait_for(lambda: status(operator)["motion"] == "holding", "the platform at rest")
+    start = status(operator)["pose_command"]
+    context = zmq.Context.instance()
+    flooders = []
+    try:
         for number in range(FLOODERS):  # each validates a slow move: planning 60 s of motion, every cycle checked
             flooder = context.socket(zmq.DEALER)
             flooder.linger = 0
+            flooders.append(flooder)
             flooder.connect(api)
             for request_id in range(VALIDATIONS):
                 flooder.send(json.dumps({"v": 1, "id": request_id, "cmd": "validate_pose",
                                          "pose": [0, 0, number + 1, 0, 0, 0], "duration": 60.0}).encode())
-            flooders.append(flooder)
         with HexactlClient(api, timeout_s=0.1) as mover:
             # The mover's own slow validations first: one client's requests are served in
             # order, so its move waits for them whatever the other clients' turns.
@@ -79,38 +86,47 @@ def test_a_move_whose_client_timed_out_behind_a_flood_never_runs(tmp_path: Path)
             for _ in range(VALIDATIONS):
                 assert flooder.poll(5 * WAIT_S * 1000)
                 assert json.loads(flooder.recv())["ok"]
+    finally:
+        for flooder in flooders:
             flooder.close()
-        record = status(operator)
-        assert record["motion"] == "holding" and record["pose_command"] == pytest.approx(start, abs=1e-9), record
-        # The service still moves for a client that waits long enough.
-        operator.call("move", pose=[20, 0, 0, 0, 0, 0])
-        wait_for(lambda: status(operator)["pose_command"][0] == pytest.approx(20.0, abs=1e-6), "the move")
+    record = status(operator)
+    assert record["motion"] == "holding" and record["pose_command"] == pytest.approx(start, abs=1e-9), record
+    # The service still moves for a client that waits long enough.
+    operator.call("move", pose=[20, 0, 0, 0, 0, 0])
+    wait_for(lambda: status(operator)["pose_command"][0] == pytest.approx(20.0, abs=1e-6), "the move")
 
 
 def test_stop_ends_the_moves_a_vanished_client_left_queued(tmp_path: Path) -> None:
     with serving(tmp_path) as (api, telemetry), HexactlClient(api, timeout_s=WAIT_S) as operator:
         enable(operator)
-        orphan = zmq.Context.instance().socket(zmq.DEALER)
-        orphan.linger = 0
-        orphan.connect(api)
-        for number in range(600):  # slow moves: planning each takes a while, so many are still queued at the stop
-            pose = [100 if number % 2 else -100, 0, 0, 0, 0, 0]
-            orphan.send(json.dumps({"v": 1, "id": number, "cmd": "move", "pose": pose, "duration": 20.0}).encode())
-        with TelemetrySubscriber(telemetry) as records:  # not through the command queue
-            wait_for(lambda: records.receive(WAIT_S)["motion"] == "moving", "the orphaned moves to start")
-        orphan.close()
-        # Until a stop is answered ok: on a host this busy the loop may take over 0.5 s to
-        # give its verdict (loop_timeout), and then nothing says when it was carried out.
-        wait_for(lambda: operator.request("stop")["ok"], "a stop answered in time")
-        # From the stop on (a status sent after a reply reflects it), the platform brakes
-        # and stays at rest: no queued move starts again, for a second of the service's time.
+        # After a loaded host's stall latched a fault: a stop cancels what the last attempt
+        # left queued, then all again from enabled and at rest.
+        tolerating_stalls(operator, lambda: orphaned_moves_then_stop(api, telemetry, operator),
+                          cleanup=lambda: operator.request("stop"))
+
+
+def orphaned_moves_then_stop(api: str, telemetry: str, operator: HexactlClient) -> None:
+    orphan = zmq.Context.instance().socket(zmq.DEALER)
+    orphan.linger = 0
+    orphan.connect(api)
+    for number in range(600):  # slow moves: planning each takes a while, so many are still queued at the stop
+        pose = [100 if number % 2 else -100, 0, 0, 0, 0, 0]
+        orphan.send(json.dumps({"v": 1, "id": number, "cmd": "move", "pose": pose, "duration": 20.0}).encode())
+    with TelemetrySubscriber(telemetry) as records:  # not through the command queue
+        wait_for(lambda: records.receive(WAIT_S)["motion"] == "moving", "the orphaned moves to start")
+    orphan.close()
+    # Until a stop is answered ok: on a host this busy the loop may take over 0.5 s to
+    # give its verdict (loop_timeout), and then nothing says when it was carried out.
+    wait_for(lambda: operator.request("stop")["ok"], "a stop answered in time")
+    # From the stop on (a status sent after a reply reflects it), the platform brakes
+    # and stays at rest: no queued move starts again, for a second of the service's time.
+    record = status(operator)
+    at_rest = None
+    while at_rest is None or record["t"] < at_rest["t"] + 1.0:
+        assert record["motion"] in ("stopping", "holding"), record
+        if record["motion"] == "holding":
+            at_rest = at_rest or record
+            assert record["pose_command"] == pytest.approx(at_rest["pose_command"], abs=1e-9)
+        time.sleep(0.02)
         record = status(operator)
-        at_rest = None
-        while at_rest is None or record["t"] < at_rest["t"] + 1.0:
-            assert record["motion"] in ("stopping", "holding"), record
-            if record["motion"] == "holding":
-                at_rest = at_rest or record
-                assert record["pose_command"] == pytest.approx(at_rest["pose_command"], abs=1e-9)
-            time.sleep(0.02)
-            record = status(operator)
-        assert record["state"] == "enabled" and record["faults"] == []
+    assert record["state"] == "enabled" and record["faults"] == []
