@@ -111,9 +111,10 @@ scheduler stall of either thread beyond 11 ms (seen under load) would trip a wat
 that measures host load, not the controller. Real actuators keep the defaults; missed
 cycles show in the loop statistics either way."""
 
-SERVICE_THREAD_NAMES = frozenset({"actuator-bus"})
+SERVICE_THREAD_NAMES = frozenset({"actuator-bus", "MainThread"})
 """The threads that share the loop's process (and GIL): with ``fifo_priority`` they run
-just below it."""
+just below it. The main thread too: it wakes every :data:`API_WATCH_INTERVAL_S`, and
+preempted by other processes while it holds the GIL it would stall the loop."""
 
 API_START_TIMEOUT_S = 240.0
 """How long the service waits for its API process to start: seconds on an idle host, over

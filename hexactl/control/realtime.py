@@ -171,9 +171,10 @@ def set_fifo(priority: int, native_id: int = 0) -> str | None:
 
     Threads that share the GIL with the loop need it too: one preempted by another
     process while it holds the GIL stalls the loop however high the loop's priority.
+    A process such a thread starts begins with normal scheduling (SCHED_RESET_ON_FORK).
     """
     try:
-        os.sched_setscheduler(native_id, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(native_id, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
     except (OSError, AttributeError) as error:
         return f"SCHED_FIFO {priority} not set: {error}"
     return None
