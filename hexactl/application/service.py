@@ -111,10 +111,10 @@ scheduler stall of either thread beyond 11 ms (seen under load) would trip a wat
 that measures host load, not the controller. Real actuators keep the defaults; missed
 cycles show in the loop statistics either way."""
 
-SERVICE_THREAD_NAMES = frozenset({"actuator-bus", "MainThread"})
+SERVICE_THREAD_NAMES = frozenset({"actuator-bus"})
 """The threads that share the loop's process (and GIL): with ``fifo_priority`` they run
-just below it. The main thread too: it wakes every :data:`API_WATCH_INTERVAL_S`, and
-preempted by other processes while it holds the GIL it would stall the loop."""
+just below it (the main thread too where the service owns its process:
+:func:`main_thread_below_loop`)."""
 
 API_START_TIMEOUT_S = 240.0
 """How long the service waits for its API process to start: seconds on an idle host, over
@@ -394,6 +394,7 @@ def _serve(config: ServiceConfig, connection: Connection) -> None:
     except (ServiceError, SecurityError) as error:
         connection.send(str(error))
         return
+    main_thread_below_loop(service)
     try:
         connection.send((service.api_endpoint, service.telemetry_endpoint))
         connection.recv()
@@ -415,6 +416,7 @@ def run_service(config: ServiceConfig) -> NoReturn:
     status = 0
     with ShutdownSignals() as signals:
         service = Service.start(config)
+        main_thread_below_loop(service)
         try:
             rejected = 0
             while (received := signals.wait(API_WATCH_INTERVAL_S)) is None:
@@ -515,6 +517,18 @@ def fifo_below_loop(loop_priority: int, names: Collection[str] = SERVICE_THREAD_
     priority = max(1, loop_priority - 1)
     for name, refused in fifo_for_threads(priority, names).items():
         log.info("%s thread: %s", name, refused or f"SCHED_FIFO {priority}")
+
+
+def main_thread_below_loop(service: Service) -> None:
+    """The calling thread, the main thread of a process the service owns (``hexactl serve``,
+    :class:`ServiceProcess`), under SCHED_FIFO just below the service's real-time loop: it
+    wakes to watch the service and shares the loop's GIL, and preempted by other processes
+    while holding it, it stalls the loop (up to 0.5 s seen in the vcan tests' guest, past
+    the actuators' watchdog). Not done by :meth:`Service.start`: a program that embeds a
+    service keeps its own thread's scheduling."""
+    realtime = service.controller.thread.loop.realtime
+    if realtime is not None and realtime.fifo_priority is not None:
+        fifo_below_loop(realtime.fifo_priority, {threading.current_thread().name})
 
 
 def _bring_to_rest(controller: LocalController, timeout_s: float) -> None:

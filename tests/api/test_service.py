@@ -4,6 +4,7 @@ shuts down cleanly on SIGTERM."""
 
 from __future__ import annotations
 
+import os
 import re
 import time
 from collections.abc import Callable, Iterator
@@ -16,7 +17,7 @@ from hexactl.adapters.api.messages import StatusReply, Telemetry
 from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create_keys
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
-from hexactl.application.service import Service, ServiceConfig, ServiceError
+from hexactl.application.service import Service, ServiceConfig, ServiceError, main_thread_below_loop
 from tools.serving import serve, terminate
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
@@ -131,6 +132,26 @@ def test_serve_starts_with_a_calibration(nominal, tmp_path) -> None:
         with HexactlClient(service.api_endpoint) as client:
             assert status(client)["calibration_id"] == geometry_id(calibrated)
     finally:
+        service.close()
+
+
+def test_a_program_that_starts_a_service_keeps_its_threads_scheduling(tmp_path) -> None:
+    """Only the service's own threads become real-time: the caller's thread may run
+    anything (here pytest); ``main_thread_below_loop`` is for processes the service owns."""
+    policy = os.sched_getscheduler(0)
+    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                          data_dirs=(tmp_path,)))
+    try:
+        assert os.sched_getscheduler(0) == policy
+        loop_priority = service.controller.thread.loop.realtime.fifo_priority
+        main_thread_below_loop(service)
+        if loop_priority is None:  # no privilege for real time here: nothing changes
+            assert os.sched_getscheduler(0) == policy
+        else:
+            assert os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK == os.SCHED_FIFO
+            assert os.sched_getparam(0).sched_priority == loop_priority - 1
+    finally:
+        os.sched_setscheduler(0, policy, os.sched_param(0))
         service.close()
 
 
