@@ -1,6 +1,6 @@
 """Where the CPU of the vcan tests' user-mode Linux guest goes: the service and the simulated
 actuators on vcan0, set up as tests/vcan/test_service_over_vcan.py sets them up, for
-``--seconds`` disabled and as long enabled at rest; prints the guest's idle share, each
+``HEXACTL_GUEST_LOAD_SECONDS`` (default 10) disabled and as long enabled at rest; prints the guest's idle share, each
 process's CPU share and the loop's statistics.
 
 Run inside the guest (it is a pytest module, marked ``vcan``)::
@@ -9,7 +9,8 @@ Run inside the guest (it is a pytest module, marked ``vcan``)::
 
 Why: in the guest every system call costs about 0.1 ms (ptrace), the clock included, and
 one CPU carries the loop, the simulator, the API and pytest; this shows what a change to the
-cycle's system calls is worth there (BENCHMARKS.md, "CAN protocol and link").
+cycle's system calls is worth there (BENCHMARKS.md, "The service on SocketCAN inside
+user-mode Linux").
 """
 
 from __future__ import annotations

@@ -64,7 +64,7 @@ from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.dashboard import DashboardProcess
-from hexactl.application.loop_link import LoopExchange
+from hexactl.application.loop_link import REPORT_INTERVAL_S, LoopExchange
 from hexactl.application.simulator import InstrumentPort, Simulator
 from hexactl.application.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
@@ -303,9 +303,11 @@ class Service:
             pipes = multiprocessing.get_context("spawn")
             commands_in, commands_out = pipes.Pipe(duplex=False)
             reports_in, reports_out = pipes.Pipe(duplex=False)
-            # Reports as often as telemetry takes them (verdicts at once whatever the rate).
+            # Reports as often as telemetry takes them (verdicts at once whatever the rate); a
+            # rate out of range is refused by the telemetry publisher, which names it.
+            rate = config.telemetry_rate_hz
             exchange = LoopExchange(controller.thread, commands_in, reports_out,
-                                    interval_s=1 / config.telemetry_rate_hz).start()
+                                    interval_s=1 / rate if rate > 0 else REPORT_INTERVAL_S).start()
             closers.callback(exchange.close)
             realtime = controller.start(exchange)
             closers.callback(controller.shutdown)

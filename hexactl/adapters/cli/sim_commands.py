@@ -85,7 +85,8 @@ def run_sim_actuators(arguments: argparse.Namespace) -> int:
         # On SocketCAN, room for seconds of the controller's frames: a simulator held up by
         # a loaded host reads them late, at their arrival times, instead of losing them (real
         # actuators have a processor each).
-        bus = open_bus(spec, **({"receive_buffer_bytes": SIMULATOR_RECEIVE_BUFFER_BYTES} if spec.interface == "socketcan" else {}))
+        options = {"receive_buffer_bytes": SIMULATOR_RECEIVE_BUFFER_BYTES} if spec.interface == "socketcan" else {}
+        bus = open_bus(spec, **options)
     except (can.CanError, OSError) as error:
         raise CliError(f"cannot open {spec}: {error}") from None
 
