@@ -11,7 +11,10 @@
   own process on ``socketcan:vcan0`` or a real bus.
 
 Live runs use a fixed physics tick (1 ms by default) and handle each frame as it arrives, so a
-SYNC is answered with FEEDBACK at once, not at the next tick.
+SYNC is answered with FEEDBACK at once, not at the next tick. What the six answer to the
+frames handled together goes out together, in one system call where the bus can batch frames
+(a ``send_batch`` method, as :class:`~hexactl.adapters.can.socketcan_bus.LeanSocketcanBus`
+has), as six nodes answering one SYNC would reach the bus at once.
 """
 
 from __future__ import annotations
@@ -88,6 +91,8 @@ class ActuatorBus:
         self._thread: threading.Thread | None = None
         self.frames_sent = 0
         self.send_failures = 0
+        self._outbox: list[can.Message] = []  # the answers of the step under way
+        self._send_batch = getattr(bus, "send_batch", None)
 
     # -- stepping ------------------------------------------------------------------------
 
@@ -101,6 +106,7 @@ class ActuatorBus:
                     break
                 self._deliver(message, t_s)
             self._advance(t_s)
+            self._flush()
 
     def actual_positions_mm(self) -> tuple[float, ...]:
         """The six drives' true (unquantised) positions, mm, as of the last completed step.
@@ -125,11 +131,29 @@ class ActuatorBus:
         self._positions_mm = self._positions()
 
     def _send_all(self, frames: list[tuple[int, bytes]]) -> None:
-        for can_id, payload in frames:
+        self._outbox.extend(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False)
+                            for can_id, payload in frames)  # fmt: skip
+
+    def _flush(self) -> None:
+        """Send the outbox; a frame that cannot be sent is lost, as a real node's would be
+        (nobody retries), and counted."""
+        outbox, self._outbox = self._outbox, []
+        if self._send_batch is not None and outbox:
             try:
-                self.bus.send(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False), 0.0)
+                self._send_batch(outbox)
+            except can.CanError as error:
+                sent = getattr(error, "sent", 0)
+                self.frames_sent += sent
+                outbox = outbox[sent + 1 :]  # the one that failed is lost; the rest go one by one
+                self.send_failures += 1
+            else:
+                self.frames_sent += len(outbox)
+                return
+        for message in outbox:
+            try:
+                self.bus.send(message, 0.0)
             except can.CanError:
-                self.send_failures += 1  # a real node's frame is lost the same way: nobody retries
+                self.send_failures += 1
             else:
                 self.frames_sent += 1
 
@@ -170,6 +194,7 @@ class ActuatorBus:
                     self._advance(now_s)
                     # Keep to the tick grid; after a stall, resume from now instead of catching up.
                     next_tick = next_tick + self.tick_s if next_tick + self.tick_s > now_s + origin else now_s + origin + self.tick_s
+                self._flush()
 
     def start(self) -> ActuatorBus:
         """Run :meth:`serve` in a daemon thread; returns self."""

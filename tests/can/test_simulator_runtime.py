@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 import time
 
+import can
 import pytest
 
+from firmware_proto.codec import Feedback, Heartbeat, decode, encode_sync
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import open_bus
 from hexactl.adapters.files.geometry_file import load_geometry
@@ -110,6 +112,55 @@ def test_a_stalled_runner_replays_queued_set_points_at_their_arrival_times(nomin
         runner.close()
     assert states == {ActuatorState.ENABLED}
     assert all(firmware.faults == 0 for firmware in runner.firmwares)
+
+
+class BatchingBus(can.BusABC):
+    """A bus that can send frames together, as LeanSocketcanBus can: it records each batch;
+    ``fail_at`` makes one batch fail at that frame (the ones before it sent)."""
+
+    def __init__(self, incoming: list[can.Message], fail_at: int | None = None) -> None:
+        super().__init__(channel="batching")
+        self.incoming, self.fail_at = incoming, fail_at
+        self.batches: list[list[can.Message]] = []
+        self.singles: list[can.Message] = []
+
+    def _recv_internal(self, timeout):
+        return (self.incoming.pop(0) if self.incoming else None), False
+
+    def send(self, msg, timeout=None):
+        self.singles.append(msg)
+
+    def send_batch(self, msgs):
+        if self.fail_at is not None:
+            sent, self.fail_at = self.fail_at, None
+            self.batches.append(list(msgs[:sent]))
+            error = can.CanOperationError("Failed to transmit: No buffer space available", 105)
+            error.sent = sent
+            raise error
+        self.batches.append(list(msgs))
+
+
+def sync_frame(counter: int) -> can.Message:
+    can_id, payload = encode_sync(counter)
+    return can.Message(arbitration_id=can_id, data=payload, is_extended_id=False)
+
+
+def test_what_the_six_answer_in_one_step_goes_out_in_one_batch(nominal):
+    bus = BatchingBus([sync_frame(7)])
+    with ActuatorBus(bus, make_firmwares(zero_posture_readings_mm(nominal), actuator_params_for(nominal))) as runner:
+        runner.step(0.0)  # their first heartbeats, and FEEDBACK to the SYNC
+    answers = [decode(m.arbitration_id, bytes(m.data)) for m in bus.batches[0]]
+    assert [a.node for a in answers if isinstance(a, Heartbeat)] == [1, 2, 3, 4, 5, 6]
+    assert any(isinstance(a, Feedback) for a in answers)
+    assert (len(bus.batches), bus.singles, runner.frames_sent) == (1, [], len(answers))
+
+
+def test_a_batch_that_fails_loses_one_frame_and_sends_the_rest(nominal):
+    bus = BatchingBus([sync_frame(7)], fail_at=2)
+    with ActuatorBus(bus, make_firmwares(zero_posture_readings_mm(nominal), actuator_params_for(nominal))) as runner:
+        runner.step(0.0)
+    assert len(bus.batches[0]) == 2 and len(bus.singles) >= 4  # six heartbeats at least: two, one lost, the rest
+    assert (runner.frames_sent, runner.send_failures) == (2 + len(bus.singles), 1)
 
 
 def test_true_pose_at_the_zero_posture_readings_is_the_zero_posture(truth):

@@ -163,3 +163,76 @@ def test_the_lean_bus_keeps_the_kernel_filter_when_draining():
             pass
         assert msg.arbitration_id == 0x12F
         assert rx.recv(0.0) is None
+
+
+def test_the_lean_bus_sends_a_batch_in_order_in_one_system_call_per_sixteen(monkeypatch):
+    from hexactl.adapters.can import socketcan_bus
+
+    calls = []
+    real = socketcan_bus._sendmmsg
+
+    def counted(fd, headers, count, flags):
+        calls.append(count)
+        return real(fd, headers, count, flags)
+
+    monkeypatch.setattr(socketcan_bus, "_sendmmsg", counted)
+    frames = [can.Message(arbitration_id=0x200 + i, data=bytes([i] * (i % 9)), is_extended_id=False) for i in range(20)]
+    frames[3] = can.Message(arbitration_id=0x1ABCDE0, data=b"\x01\x02", is_extended_id=True)
+    with LeanSocketcanBus(CHANNEL) as lean, open_bus() as plain:
+        lean.send_batch(frames)
+        received = [plain.recv(timeout=RECV_TIMEOUT) for _ in frames]
+        assert plain.recv(timeout=0.2) is None
+    assert calls == [16, 4]
+    assert [(m.arbitration_id, m.is_extended_id, bytes(m.data)) for m in received] == [
+        (f.arbitration_id, f.is_extended_id, bytes(f.data)) for f in frames]
+
+
+def test_a_batch_the_kernel_takes_in_part_is_finished_frame_by_frame(monkeypatch):
+    """sendmmsg(2) stops at a frame it cannot send; the bus sends that one alone (which says
+    why, or sends it) and goes on, so the order holds."""
+    from hexactl.adapters.can import socketcan_bus
+
+    real = socketcan_bus._sendmmsg
+    monkeypatch.setattr(socketcan_bus, "_sendmmsg", lambda fd, headers, count, flags: real(fd, headers, min(count, 2), flags))
+    frames = [can.Message(arbitration_id=0x300 + i, data=bytes([i]), is_extended_id=False) for i in range(7)]
+    with LeanSocketcanBus(CHANNEL) as lean, open_bus() as plain:
+        lean.send_batch(frames)
+        received = [plain.recv(timeout=RECV_TIMEOUT) for _ in frames]
+        assert plain.recv(timeout=0.2) is None
+    assert [m.arbitration_id for m in received] == [f.arbitration_id for f in frames]
+
+
+def test_a_batch_that_cannot_be_sent_says_why_and_how_many_went():
+    from hexactl.adapters.can.socketcan_bus import BatchSendError
+
+    lean = LeanSocketcanBus(CHANNEL)
+    lean.shutdown()  # its socket closed: every send fails
+    with pytest.raises(BatchSendError) as caught:
+        lean.send_batch([can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False)])
+    assert caught.value.sent == 0 and caught.value.error_code is not None
+
+
+def test_the_lean_bus_reads_what_arrived_in_order_whichever_way_it_is_asked():
+    """More frames than one read takes, read without waiting and waiting, mixed: every one
+    once, in order, with the kernel's receive time; then nothing."""
+    frames = [can.Message(arbitration_id=0x400 + i, data=bytes([i] * (i % 9)), is_extended_id=bool(i % 5 == 0))
+              for i in range(37)]  # fmt: skip
+    with open_bus() as plain, LeanSocketcanBus(CHANNEL) as lean:
+        before = time.time()
+        for frame in frames:
+            plain.send(frame)
+        received = []
+        deadline = time.monotonic() + RECV_TIMEOUT
+        while len(received) < len(frames) and time.monotonic() < deadline:
+            got = lean.recv(0.0) if len(received) % 3 else lean.recv(timeout=RECV_TIMEOUT)
+            if got is not None:
+                received.append(got)
+        assert [(m.arbitration_id, m.is_extended_id, bytes(m.data), m.channel) for m in received] == [
+            (f.arbitration_id, f.is_extended_id, bytes(f.data), CHANNEL) for f in frames]
+        assert all(before <= m.timestamp <= time.time() for m in received)
+        assert lean.recv(0.0) is None and lean.recv(timeout=0.1) is None
+        plain.send(frames[0])  # after a None, the next read looks again
+        deadline = time.monotonic() + RECV_TIMEOUT
+        while (got := lean.recv(0.0)) is None and time.monotonic() < deadline:
+            pass
+        assert got.arbitration_id == frames[0].arbitration_id

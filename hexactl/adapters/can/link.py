@@ -58,6 +58,7 @@ from firmware_proto.codec import (
     encode_sync,
 )
 from firmware_proto.codec import ActuatorState as WireState
+from hexactl.adapters.can.socketcan_bus import BatchSendError, LeanSocketcanBus
 from hexactl.adapters.can.transport import (
     BusSpec,
     bus_state_after_send_error,
@@ -227,9 +228,9 @@ class CanActuatorLink:
     time source for ages and retries (``time.monotonic_ns`` by default; tests pass their own).
 
     Threading: as the interface requires, only :meth:`send_estop` may be called from another
-    thread than the loop's. python-can's SocketCAN ``send`` is one ``send(2)`` per frame and the
-    in-process buses' puts into thread-safe queues, so frames need no lock; the shared failure
-    counters take one.
+    thread than the loop's. A SocketCAN ``send`` is one ``send(2)`` per frame, a cycle's batch
+    one ``sendmmsg(2)``, and the in-process buses' puts into thread-safe queues, so frames need
+    no lock; the shared failure counters take one.
     """
 
     def __init__(
@@ -240,6 +241,7 @@ class CanActuatorLink:
         clock_ns: Callable[[], int] = time.monotonic_ns,
     ) -> None:
         self._bus = bus
+        self._send_batch = bus.send_batch if isinstance(bus, LeanSocketcanBus) else None
         self.config = config
         self._clock_ns = clock_ns
         self._nodes = tuple(_Node() for _ in NODE_IDS)
@@ -303,10 +305,8 @@ class CanActuatorLink:
             return False
         self._cycle_sent = True
         self._next_sync_counter = (counter + 1) & 0xFF
-        send = self._send
-        for can_id, payload in frames:
-            if not send(can_id, payload, 0.0):
-                return False
+        if not self._send_cycle(frames):
+            return False
         if self._first_counter is None:
             self._first_counter = counter
         self._last_counter = counter
@@ -420,11 +420,31 @@ class CanActuatorLink:
         try:
             self._bus.send(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False), timeout_s)
         except Exception as error:  # any failure, expected (CanOperationError) or not, is counted
-            with self._lock:
-                self._send_failures += 1
-                self._bus_state = BusState.DOWN if self._closed else bus_state_after_send_error(error, self._bus_state)
-                self._detail = f"send 0x{can_id:03X} failed: {error}"
-            return False
+            return self._send_failed(can_id, error)
+        return self._sent()
+
+    def _send_cycle(self, frames: Sequence[tuple[int, bytes]]) -> bool:
+        """Send a cycle's frames in order, in one system call where the bus can batch them
+        (:meth:`LeanSocketcanBus.send_batch`); stops at the first that cannot be sent."""
+        if self._send_batch is None:
+            return all(self._send(can_id, payload, 0.0) for can_id, payload in frames)
+        try:
+            self._send_batch([can.Message(arbitration_id=can_id, data=payload, is_extended_id=False)
+                              for can_id, payload in frames])  # fmt: skip
+        except BatchSendError as error:
+            return self._send_failed(frames[error.sent][0], error)
+        except Exception as error:  # as in _send
+            return self._send_failed(frames[0][0], error)
+        return self._sent()
+
+    def _send_failed(self, can_id: int, error: Exception) -> bool:
+        with self._lock:
+            self._send_failures += 1
+            self._bus_state = BusState.DOWN if self._closed else bus_state_after_send_error(error, self._bus_state)
+            self._detail = f"send 0x{can_id:03X} failed: {error}"
+        return False
+
+    def _sent(self) -> bool:
         if self._bus_state is BusState.DOWN and not self._closed:
             self._bus_state = BusState.ACTIVE  # the interface is back
         return True

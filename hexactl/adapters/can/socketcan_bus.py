@@ -1,34 +1,106 @@
-"""python-can's SocketCAN bus with one system call per frame on the paths every cycle takes.
+"""python-can's SocketCAN bus with as few system calls as the cycle's frames allow.
 
 Why: python-can's :class:`~can.interfaces.socketcan.SocketcanBus` spends three system calls
-on each frame it sends or receives (``time.time()``, a ``select`` and the transfer) and two
-on a receive that finds nothing. The loop sends four frames and reads six every cycle, and
-the simulated actuators the reverse; where a system call is dear (a loaded host, user-mode
-Linux, where each costs about 0.1 ms) that is most of a 4 ms cycle. A send that must not
-wait (``timeout`` 0 or None: the set-points, SYNC, commands) and a receive that must not
-wait (``timeout`` 0: draining what arrived) need only the transfer itself on a
-non-blocking socket; everything else (a bounded wait, filtering, set-up, shutdown) is
-python-can's own.
+on each frame it sends (``time.time()``, a ``select`` and the transfer) and four on each it
+receives (Python's ``recvmsg`` on a CAN socket also asks the interface's name with an
+``ioctl``), two on a receive that finds nothing. The loop sends four frames and reads six
+every cycle, and the simulated actuators the reverse; where a system call is dear (a loaded
+host, user-mode Linux, where each costs about 0.1 ms) that was most of a 4 ms cycle. Here:
 
-Frames are python-can's :class:`can.Message`, parsed by python-can (``capture_message``,
-``build_can_frame``), with the kernel's receive timestamp as before. Errors are python-can's
+- frames that go out together (a cycle's set-points and SYNC, the actuators' answers to one
+  SYNC) go in one ``sendmmsg(2)`` (:meth:`LeanSocketcanBus.send_batch`), and a reader of
+  higher priority is woken once for the lot instead of once per frame; a single frame that
+  must not wait is one ``send(2)``;
+- what has arrived is read in one ``recvmmsg(2)`` (up to :data:`BATCH_FRAMES`, without the
+  interface's name, with the kernel's receive timestamps) and handed out frame by frame.
+
+Python's socket module has neither call, hence :mod:`ctypes`. A bounded wait, filtering,
+set-up and shutdown are python-can's own, and frames are python-can's :class:`can.Message`,
+parsed by python-can (``capture_message``, ``build_can_frame``). Errors are python-can's
 :class:`can.CanOperationError`, carrying the OS error number: a full transmit queue is
 ``ENOBUFS`` or ``EAGAIN``, an interface gone down ``ENETDOWN``.
 """
 
 from __future__ import annotations
 
+import ctypes
 import errno
+import os
+import select
 import socket
+import struct
+from collections import deque
+from collections.abc import Sequence
 from typing import Any
 
 import can
+from can.interfaces.socketcan.constants import CANFD_MTU
 from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, capture_message
 
 _NOTHING_WAITING = frozenset({errno.EAGAIN, errno.EWOULDBLOCK})
 SO_RCVBUFFORCE = 33
 """Linux's socket option (asm-generic/socket.h; Python's socket module does not name it): a
 receive buffer beyond the kernel's ``rmem_max``, for root or CAP_NET_ADMIN."""
+
+
+
+
+class _IoVec(ctypes.Structure):
+    _fields_ = [("iov_base", ctypes.c_void_p), ("iov_len", ctypes.c_size_t)]
+
+
+class _MsgHdr(ctypes.Structure):
+    _fields_ = [("msg_name", ctypes.c_void_p), ("msg_namelen", ctypes.c_uint32),
+                ("msg_iov", ctypes.POINTER(_IoVec)), ("msg_iovlen", ctypes.c_size_t),
+                ("msg_control", ctypes.c_void_p), ("msg_controllen", ctypes.c_size_t),
+                ("msg_flags", ctypes.c_int)]  # fmt: skip
+
+
+class _MMsgHdr(ctypes.Structure):
+    _fields_ = [("msg_hdr", _MsgHdr), ("msg_len", ctypes.c_uint)]
+
+
+_libc = ctypes.CDLL(None, use_errno=True)
+_sendmmsg = _libc.sendmmsg
+_sendmmsg.argtypes = [ctypes.c_int, ctypes.POINTER(_MMsgHdr), ctypes.c_uint, ctypes.c_int]
+_sendmmsg.restype = ctypes.c_int
+_recvmmsg = _libc.recvmmsg
+_recvmmsg.argtypes = [ctypes.c_int, ctypes.POINTER(_MMsgHdr), ctypes.c_uint, ctypes.c_int, ctypes.c_void_p]
+_recvmmsg.restype = ctypes.c_int
+_MSG_DONTWAIT = 0x40
+_TIMESTAMP_BYTES = 16  # struct timespec: python-can asks SO_TIMESTAMPNS
+_CONTROL_BYTES = socket.CMSG_SPACE(_TIMESTAMP_BYTES)
+_CONTROL_HEADER = socket.CMSG_LEN(0)
+_CMSGHDR = struct.Struct("@Nii")  # struct cmsghdr: length, level, type
+BATCH_FRAMES = 16
+"""The most frames one ``sendmmsg(2)`` or ``recvmmsg(2)`` carries."""
+
+
+class _Received:
+    """One frame as ``recvmmsg(2)`` left it, answering ``recvmsg`` as a socket would, so
+    that python-can's ``capture_message`` parses it."""
+
+    __slots__ = ("answer",)
+
+    def __init__(self, frame: bytes, control: bytes, flags: int) -> None:
+        ancillary = []
+        if len(control) >= _CONTROL_HEADER:
+            _, level, kind = _CMSGHDR.unpack_from(control)
+            ancillary.append((level, kind, control[_CONTROL_HEADER : _CONTROL_HEADER + _TIMESTAMP_BYTES]))
+        self.answer = (frame, ancillary, flags, None)
+
+    def recvmsg(self, _bufsize: int, _ancbufsize: int) -> tuple[bytes, list, int, None]:
+        return self.answer
+
+
+class BatchSendError(can.CanOperationError):
+    """A frame of a batch could not be sent: ``sent`` frames before it were (in order), the
+    rest were not. ``error_code``: the OS error (``ENOBUFS`` or ``EAGAIN``: the transmit
+    queue is full; ``ENETDOWN``: the interface is down)."""
+
+    def __init__(self, message: str, error_code: int | None, sent: int) -> None:
+        super().__init__(message, error_code)
+        self.sent = sent
 
 
 class LeanSocketcanBus(SocketcanBus):
@@ -55,6 +127,22 @@ class LeanSocketcanBus(SocketcanBus):
                 self.socket.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, receive_buffer_bytes)
             except PermissionError:
                 self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
+        self._batch_iov = (_IoVec * BATCH_FRAMES)()
+        self._batch_headers = (_MMsgHdr * BATCH_FRAMES)()
+        for header, iov in zip(self._batch_headers, self._batch_iov):
+            header.msg_hdr.msg_iov = ctypes.pointer(iov)
+            header.msg_hdr.msg_iovlen = 1
+        self._received: deque[can.Message] = deque()
+        self._empty_when_read = False  # the last recvmmsg(2) left the socket's queue empty
+        self._rx_frames = ctypes.create_string_buffer(CANFD_MTU * BATCH_FRAMES)
+        self._rx_control = ctypes.create_string_buffer(_CONTROL_BYTES * BATCH_FRAMES)
+        self._rx_iov = (_IoVec * BATCH_FRAMES)()
+        self._rx_headers = (_MMsgHdr * BATCH_FRAMES)()
+        for i, (header, iov) in enumerate(zip(self._rx_headers, self._rx_iov)):
+            iov.iov_base, iov.iov_len = ctypes.addressof(self._rx_frames) + i * CANFD_MTU, CANFD_MTU
+            header.msg_hdr.msg_iov = ctypes.pointer(iov)
+            header.msg_hdr.msg_iovlen = 1
+            header.msg_hdr.msg_control = ctypes.addressof(self._rx_control) + i * _CONTROL_BYTES
 
     @property
     def receive_buffer_bytes(self) -> int:
@@ -78,21 +166,90 @@ class LeanSocketcanBus(SocketcanBus):
         if sent != len(data):
             raise can.CanOperationError("Transmit buffer full")
 
+    def send_batch(self, msgs: Sequence[can.Message]) -> None:
+        """Send ``msgs`` in order, at once or not at all, :data:`BATCH_FRAMES` to a system call.
+        One thread at a time (the batch's buffers are the bus's); :meth:`send` may run beside it.
+
+        :raises BatchSendError: a frame could not be sent; those before it were
+            (:attr:`BatchSendError.sent`), it and those after it were not
+        """
+        frames = [build_can_frame(msg) for msg in msgs]
+        sent = 0
+        while sent < len(frames):
+            chunk = frames[sent : sent + BATCH_FRAMES]
+            # One buffer for the chunk, kept alive until the call returns.
+            buffer = ctypes.create_string_buffer(b"".join(chunk), sum(map(len, chunk)))
+            address = ctypes.addressof(buffer)
+            for iov, frame in zip(self._batch_iov, chunk):
+                iov.iov_base, iov.iov_len = address, len(frame)
+                address += len(frame)
+            done = _sendmmsg(self.socket.fileno(), self._batch_headers, len(chunk), 0)
+            if done < 0:
+                code = ctypes.get_errno()
+                raise BatchSendError(f"Failed to transmit: {os.strerror(code)}", code, sent)
+            sent += done
+            if done < len(chunk):
+                # sendmmsg(2) reports the error of a frame after the first only by stopping
+                # there; sending that frame alone says why (or sends it, if room has appeared).
+                try:
+                    self.send(msgs[sent])
+                except can.CanOperationError as error:
+                    raise BatchSendError(str(error), error.error_code, sent) from error
+                sent += 1
+
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """The next frame that passes the filters, or None; with ``timeout`` 0 without
-        waiting (one system call per frame read), else python-can's receive.
+        waiting, else python-can's receive. What has arrived is read in one system call and
+        handed out one frame a call; a call with ``timeout`` 0 after the read that emptied
+        the socket's queue says None without another (nothing had arrived microseconds ago),
+        the next one reads again.
 
         :raises can.CanOperationError: the receive failed (``error_code``: the OS error)
         """
         if timeout != 0:
             return super().recv(timeout)
         while True:
+            while self._received:
+                msg = self._received.popleft()
+                if self._is_filtered or self._matches_filters(msg):
+                    return msg
+            if self._empty_when_read:
+                self._empty_when_read = False
+                return None
+            self._read_arrived()
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if not self._received:
             try:
-                msg = capture_message(self.socket)
-            except can.CanOperationError as error:
-                if error.error_code in _NOTHING_WAITING:
-                    return None
-                raise
+                ready = select.select([self.socket], [], [], timeout)[0]
+            except OSError as error:
+                raise can.CanOperationError(f"Failed to receive: {error.strerror}", error.errno) from error
+            if not ready:
+                return None, self._is_filtered
+            self._read_arrived()
+        return (self._received.popleft() if self._received else None), self._is_filtered
+
+    def _read_arrived(self) -> None:
+        """Queue what has arrived, up to :data:`BATCH_FRAMES` frames, in one ``recvmmsg(2)``."""
+        headers = self._rx_headers
+        for header in headers:  # the kernel rewrites both
+            header.msg_hdr.msg_controllen = _CONTROL_BYTES
+            header.msg_hdr.msg_flags = 0
+        count = _recvmmsg(self.socket.fileno(), headers, BATCH_FRAMES, _MSG_DONTWAIT, None)
+        if count < 0:
+            code = ctypes.get_errno()
+            if code in _NOTHING_WAITING:
+                self._empty_when_read = True
+                return
+            raise can.CanOperationError(f"Error receiving: {os.strerror(code)}", code)
+        self._empty_when_read = count < BATCH_FRAMES
+        frames, control = self._rx_frames.raw, self._rx_control.raw
+        for i in range(count):
+            header = headers[i]
+            at, control_at = i * CANFD_MTU, i * _CONTROL_BYTES
+            received = _Received(frames[at : at + header.msg_len],
+                                 control[control_at : control_at + header.msg_hdr.msg_controllen],
+                                 header.msg_hdr.msg_flags)  # fmt: skip
+            msg = capture_message(received)  # type: ignore[arg-type]  # python-can's parsing
             msg.channel = self.channel
-            if self._is_filtered or self._matches_filters(msg):
-                return msg
+            self._received.append(msg)
