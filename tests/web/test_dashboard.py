@@ -23,6 +23,7 @@ from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select
 
 from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
 from tests.reliability.support import tolerating_stalls
@@ -397,3 +398,26 @@ def test_a_campaigns_progress_and_its_finished_report_show_in_the_page(rig) -> N
     box.find_element(By.TAG_NAME, "summary").click()  # the parameters with their σ
     wait_for(lambda: "0.0213" in box.text and "undetermined" in box.text and "420.0" in box.text, "the parameters")
     screenshot(rig.driver, "campaign", "#campaign-report")
+
+
+def test_a_pose_stream_shows_while_it_runs_and_how_it_ended(rig) -> None:
+    summary = rig.shown("#stream-summary")
+
+    def body() -> None:
+        rig.at_rest_disabled()
+        rig.client.call("enable")
+        wait_for(lambda: rig.status()["motion"] == "holding", "enabled at rest")
+        with PoseStream(rig.client, "page test", timeout_ms=2000) as stream:
+            number = stream.opened["stream"]
+
+            def following() -> bool:
+                stream.send((0.5, 0, 0, 0, 0, 0))
+                text = summary.text
+                return f"stream {number} from page test (zero) following" in text and "clamped 0" in text
+
+            wait_for(following, "the stream on the page", seen=lambda: summary.text)
+        wait_for(lambda: summary.text.startswith(f"last stream {number}: "), "how it ended", seen=lambda: summary.text)
+        assert "closed by the client" in summary.text, summary.text
+        rig.client.call("disable")
+
+    rig.scenario(body)

@@ -210,6 +210,24 @@ function fillPoseRow(row, pose) {
   for (let i = 0; i < 6; i++) setCell(row.cells[i + 1], Array.isArray(pose) ? fmt(pose[i], i < 3 ? 2 : 3) : '–');
 }
 
+// The pose stream under way (what the loop follows and what the receiver counted), or how the last one ended.
+function streamSummary(r) {
+  const s = r.stream && typeof r.stream === 'object' ? r.stream : null;
+  const input = r.stream_input && typeof r.stream_input === 'object' ? r.stream_input : null;
+  if (s) {
+    const parts = [`stream ${s.stream} from ${s.source} (${s.frame}) ${s.phase}: ${s.targets} targets`];
+    if (input && input.stream === s.stream) {
+      parts.push(`${input.rate_hz} Hz`);
+      parts.push(`dropped ${(input.malformed ?? 0) + (input.out_of_order ?? 0)}`);
+      parts.push(`clamped ${input.clamped ?? 0}`);
+      if (input.loop_latency_ms) parts.push(`latency p50 ${fmt(input.loop_latency_ms.p50, 1)} ms`);
+    }
+    return parts.join(' · ');
+  }
+  const last = r.last_stream && typeof r.last_stream === 'object' ? r.last_stream : null;
+  return last ? `last stream ${last.stream}: ${last.reason} (${last.targets} targets)` : '';
+}
+
 function updateReadouts(r) {
   setPill('state', r.state, 'st');
   setPill('motion', r.motion, 'mo');
@@ -244,6 +262,7 @@ function updateReadouts(r) {
   if (r.jog && typeof r.jog === 'object') extra.push(`jog ${r.jog.phase ?? ''}${r.jog.end ? ` to ${r.jog.end}` : ''}`);
   if (loop) extra.push(`compute p99 ${fmt(loop.compute_us?.p99, 0)} µs, cycles ${loop.cycles ?? '–'}`);
   setText('telemetry-extra', extra.join(' · '));
+  setText('stream-summary', streamSummary(r));
 
   const hud = [`command  ${fmtPose(r.pose_command, 2)}`];
   if (Array.isArray(r.pose_measured) && Array.isArray(r.pose_command)) {
