@@ -43,8 +43,6 @@ SO_RCVBUFFORCE = 33
 receive buffer beyond the kernel's ``rmem_max``, for root or CAP_NET_ADMIN."""
 
 
-
-
 class _IoVec(ctypes.Structure):
     _fields_ = [("iov_base", ctypes.c_void_p), ("iov_len", ctypes.c_size_t)]
 
@@ -105,7 +103,7 @@ class BatchSendError(can.CanOperationError):
 
 class LeanSocketcanBus(SocketcanBus):
     """A :class:`~can.interfaces.socketcan.SocketcanBus` on one CAN interface (``channel``
-    must name it) whose non-waiting send and receive cost one system call each.
+    must name it) on which a cycle's frames cost one system call each way (see the module).
 
     ``receive_buffer_bytes``: the socket's receive buffer (None: the kernel's default, about
     270 classic frames, since the kernel charges about 768 bytes for each). Beyond the
