@@ -72,13 +72,13 @@ COMMAND_TIMEOUT_S = 5.0
 """How long the API waits for the loop's verdict on a command (the service's 0.5 s ran out once in the guest)."""
 ENABLE_TRIES = 3
 """Enabling again after a stall of the starved guest latched a fault on the way to rest."""
-SIMULATOR_FIFO = 10
 SERVICE_FIFO = 10
+SIMULATOR_FIFO = SERVICE_FIFO
+"""The same priority: neither preempts the other (see the module's docstring)."""
 SIMULATOR_TICK_MS = 4.0
 """The simulator's physics tick, ms (``hexactl sim-actuators`` defaults to 1): its ticks
 alone took 39 % of the guest's CPU on an idle host and all of it on a busy one (the
-guest's CPU is a host process's share), so that, above everything else under SCHED_FIFO, it
-left the service and pytest the kernel's 5 % for non-real-time tasks: services that took
+guest's CPU is a host process's share), so that, under SCHED_FIFO, it left the service and pytest the kernel's 5 % for non-real-time tasks: services that took
 minutes to start, verdicts later than any timeout. A tick of the loop's period keeps the
 drives' lag and the watchdog's resolution well inside what the tests judge (mm, 0.4 s);
 frames are still answered as they arrive, not on the tick."""

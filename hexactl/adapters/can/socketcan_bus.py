@@ -132,6 +132,7 @@ class LeanSocketcanBus(SocketcanBus):
             header.msg_hdr.msg_iovlen = 1
         self._received: deque[can.Message] = deque()
         self._empty_when_read = False  # the last recvmmsg(2) left the socket's queue empty
+        self._rx_written = BATCH_FRAMES  # headers to reset before the next recvmmsg(2): at first, all
         self._rx_frames = ctypes.create_string_buffer(CANFD_MTU * BATCH_FRAMES)
         self._rx_control = ctypes.create_string_buffer(_CONTROL_BYTES * BATCH_FRAMES)
         self._rx_iov = (_IoVec * BATCH_FRAMES)()
@@ -165,7 +166,7 @@ class LeanSocketcanBus(SocketcanBus):
             raise can.CanOperationError("Transmit buffer full")
 
     def send_batch(self, msgs: Sequence[can.Message]) -> None:
-        """Send ``msgs`` in order, at once or not at all, :data:`BATCH_FRAMES` to a system call.
+        """Send ``msgs`` in order without waiting for room, :data:`BATCH_FRAMES` to a system call.
         One thread at a time (the batch's buffers are the bus's); :meth:`send` may run beside it.
 
         :raises BatchSendError: a frame could not be sent; those before it were
@@ -230,10 +231,11 @@ class LeanSocketcanBus(SocketcanBus):
     def _read_arrived(self) -> None:
         """Queue what has arrived, up to :data:`BATCH_FRAMES` frames, in one ``recvmmsg(2)``."""
         headers = self._rx_headers
-        for header in headers:  # the kernel rewrites both
+        for header in headers[: self._rx_written]:  # what the kernel rewrote for the frames it filled
             header.msg_hdr.msg_controllen = _CONTROL_BYTES
             header.msg_hdr.msg_flags = 0
         count = _recvmmsg(self.socket.fileno(), headers, BATCH_FRAMES, _MSG_DONTWAIT, None)
+        self._rx_written = max(count, 1)  # a failed call may have written the first
         if count < 0:
             code = ctypes.get_errno()
             if code in _NOTHING_WAITING:
