@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from math import isfinite
+from math import degrees, isfinite
 from operator import add, sub
 
 import numpy as np
@@ -53,7 +53,7 @@ from hexactl.kinematics.axes import (
 )
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.soft_limits import SoftLimits
-from hexactl.kinematics.workspace import Violation, assess_poses
+from hexactl.kinematics.workspace import Violation, assess_poses, pose_within_limits
 
 
 MAX_MOTION_S = 600.0
@@ -258,6 +258,19 @@ def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) 
                 violation.kind, violation.value, violation.limit, violation.message, axis=violation.axis,
                 waypoint=waypoint, pose=RelativeMmDeg._make(pose_mm_rad_to_mm_deg(relative[n]))))
     return found + list(first.values())
+
+
+def pose_allowed(context: PlanningContext, relative: Sequence[float]) -> bool:
+    """Whether :func:`path_violations` finds nothing at one relative mm/rad pose: the same
+    limits, in plain floats, stopping at the first broken (a stream's per-target check)."""
+    relative_deg = (*relative[:3], *map(degrees, relative[3:]))
+    if not pose_within_limits(context.active.geometry, relative_deg):
+        return False
+    limits, frames = context.soft_limits, context.frames
+    if limits is None or frames is None:
+        return True
+    tool = frames.tool_in_work(tuple(map(add, relative, context.active.home)))
+    return limits.allow((*tool[:3], *map(degrees, tool[3:])))
 
 
 def assess_path(

@@ -1,8 +1,9 @@
 """The facade's pose stream: open and close a stream, and each target made reachable.
 
 A stream's targets are not validated as moves are (a whole path refused or run): each
-target that lies outside the workspace (the hardware's limits and the soft limits, as
-every planned path is checked: :func:`~hexactl.control.planning.path_violations`) is
+target that lies outside the workspace (the hardware's limits and the soft limits that
+every planned path is checked against, asked of one pose:
+:func:`~hexactl.control.planning.pose_allowed`) is
 replaced by the reachable pose nearest to it on the straight line from the last target
 handed to the loop, found by bisection. The platform then slows and stops on the
 boundary instead of being refused. The loop follows the targets
@@ -22,8 +23,8 @@ import numpy as np
 
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
-from hexactl.control.frames import Frame, convert, relative_poses
-from hexactl.control.planning import PlanningContext, path_violations
+from hexactl.control.frames import Frame, convert
+from hexactl.control.planning import PlanningContext, pose_allowed
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.stream import HORIZON_S
@@ -230,8 +231,7 @@ class StreamCommands:
     @staticmethod
     def _ok(stream: _OpenStream, position: np.ndarray) -> bool:
         context = stream.context
-        relative = relative_poses(stream.frames, position[None, :], context.active.home)
-        return not path_violations(context, relative, 0)
+        return pose_allowed(context, convert(position.tolist(), stream.frames, None, context.active.home))
 
 
 def _mm_rad(pose_mm_deg: Sequence[float]) -> np.ndarray:

@@ -80,8 +80,15 @@ def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
 
 
 def sensor_setpoints(model: LegModel, pose: Sequence[float]) -> list[float]:
-    """Actuator sensor readings, mm, that put the platform at ``pose``: (length − zero) / gain."""
-    return [(length - row[6]) / row[7] for length, row in zip(leg_lengths(model, pose), model._rows)]
+    """Actuator sensor readings, mm, that put the platform at ``pose``."""
+    return [reading_of_leg_length(model, leg, length) for leg, length in enumerate(leg_lengths(model, pose))]
+
+
+def reading_of_leg_length(model: LegModel, leg_index: int, length: float) -> float:
+    """Leg ``leg_index``'s (0-based) sensor reading, mm, at joint-to-joint ``length``, mm:
+    (length − zero) / gain, the scalar copy of :func:`readings_from_lengths`."""
+    row = model._rows[leg_index]
+    return (length - row[6]) / row[7]
 
 
 def leg_length_of_reading(model: LegModel, leg_index: int, reading: float) -> float:
@@ -92,7 +99,7 @@ def leg_length_of_reading(model: LegModel, leg_index: int, reading: float) -> fl
 
 
 # The sensor model, length = zero + gain·reading, lives in these two functions (and in the
-# scalar copies above, sensor_setpoints and leg_length_of_reading, plain floats for the loop).
+# scalar copies above, reading_of_leg_length and leg_length_of_reading, plain floats for the loop).
 def lengths_from_readings(model: LegModel, readings: ArrayLike, legs: int | slice = slice(None)) -> NDArray[np.float64]:
     """Joint-to-joint lengths, mm, of sensor readings, mm, shaped (..., 6), or of leg index
     ``legs`` (0-based) alone: ``zero + (1 + e)·reading``."""

@@ -10,6 +10,7 @@ narrow what is allowed and never widen it.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from math import acos, cos, degrees, radians
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,25 +66,41 @@ class SoftLimits(BaseModel):
         limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``)."""
         poses = np.asarray(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
         found: list[list[Violation]] = [[] for _ in range(len(poses))]
-        for bounds, side, broken, open_end in ((self.lower, "below", np.less, -np.inf),
-                                               (self.upper, "above", np.greater, np.inf)):
+        for bounds, side, open_end in ((self.lower, "below", -np.inf), (self.upper, "above", np.inf)):
             limits = np.array([open_end if bound is None else bound for bound in bounds])
-            for n, axis in zip(*np.nonzero(broken(poses, limits))):
+            broken = poses < limits if side == "below" else poses > limits
+            for n, axis in zip(*np.nonzero(broken)):
                 value, limit, unit = float(poses[n, axis]), bounds[axis], POSE_UNITS[axis]
                 found[n].append(Violation(
                     ViolationKind.SOFT_LIMIT, value, limit,
                     f"{POSE_AXES[axis]} {value:.3f} {unit} {side} the soft limit {limit:g} {unit}", axis=POSE_AXES[axis]))
         if self.max_tilt_deg is not None:
             for n, tilt in enumerate(tilt_deg(poses)):
-                if tilt > self.max_tilt_deg:
+                if self._beyond_tilt(tilt):
                     found[n].append(Violation(ViolationKind.SOFT_TILT, float(tilt), self.max_tilt_deg,
                                               f"tilt {tilt:.3f} deg beyond the soft limit {self.max_tilt_deg:g} deg"))
         return found
 
+    def allow(self, tool_in_work_mm_deg: Sequence[float]) -> bool:
+        """Whether one pose of the tool in the work frame (mm, deg) breaks none of these
+        limits: :meth:`violations` finds none. Plain floats for a stream's per-target check
+        (:func:`~hexactl.kinematics.workspace.pose_within_limits` says why)."""
+        for value, low, high in zip(tool_in_work_mm_deg, self.lower, self.upper):
+            if (low is not None and value < low) or (high is not None and value > high):
+                return False
+        if self.max_tilt_deg is None:
+            return True
+        roll, pitch = radians(tool_in_work_mm_deg[3]), radians(tool_in_work_mm_deg[4])
+        return not self._beyond_tilt(degrees(acos(max(-1.0, min(1.0, cos(roll) * cos(pitch))))))
+
+    def _beyond_tilt(self, tilt: float) -> bool:
+        return self.max_tilt_deg is not None and tilt > self.max_tilt_deg
+
 
 def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:
     """The angle (deg) between the moving z axis and the frame's z axis of (N, 6) poses
-    (mm, deg; orientation Rz·Ry·Rx): element (3, 3) of the rotation is cos(roll)·cos(pitch)."""
+    (mm, deg; orientation Rz·Ry·Rx): element (3, 3) of the rotation is cos(roll)·cos(pitch)
+    (:meth:`SoftLimits.allow` has its plain-float copy)."""
     roll, pitch = np.radians(poses_mm_deg[:, 3]), np.radians(poses_mm_deg[:, 4])
     return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
 

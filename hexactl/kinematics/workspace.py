@@ -2,6 +2,8 @@
 
 A move is accepted or refused whole, so the check reports all violations at once rather
 than the first: leg stroke, joint cone angles, the pose envelope and near-singularity.
+A stream, which checks a pose or two per target, asks only whether one pose is inside
+(:func:`pose_within_limits`); both apply each limit through the same predicate.
 """
 
 from __future__ import annotations
@@ -9,16 +11,24 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from math import atan2, degrees, radians, sqrt
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.kinematics.forward import forward_kinematics
-from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import leg_vectors_batch, lengths_from_readings, readings_from_lengths, twist_jacobian
+from hexactl.kinematics.geometry import Geometry, Limits
+from hexactl.kinematics.inverse import (
+    leg_jacobian_rows,
+    leg_vectors_batch,
+    lengths_from_readings,
+    reading_of_leg_length,
+    readings_from_lengths,
+)
 from hexactl.kinematics.pose import absolute_from_relative, relative_from_absolute
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
-from hexactl.kinematics.rotation import rotation_matrices
+from hexactl.kinematics.rotation import rotation_elements, rotation_matrices
 
 
 ENVELOPE_ROUNDING = 1e-9
@@ -84,7 +94,7 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
     sensor = readings_from_lengths(geometry.legs, lengths)
     stroke_low, stroke_high = limits.stroke
 
-    base_axes, platform_axes = _neutral_axes(geometry)
+    base_axes, platform_axes, _, _ = _neutral_axes(geometry)
     rotations = rotation_matrices(absolute[:, 3], absolute[:, 4], absolute[:, 5])
     base_cone = _angle_deg(units, base_axes[None])
     units_moving = np.einsum("nji,nkj->nki", rotations, units)  # Tᵀ·u: leg seen from the platform
@@ -97,10 +107,10 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
         violations: list[Violation] = []
         for leg in range(6):
             reading = float(sensor[n, leg])
-            if reading < stroke_low:
+            if _below_stroke(reading, limits):
                 violations.append(Violation(ViolationKind.STROKE_LOW, reading, stroke_low,
                     f"leg {leg + 1} below stroke: {reading:.3f} mm < {stroke_low:g} mm", leg=leg + 1))
-            elif reading > stroke_high:
+            elif _above_stroke(reading, limits):
                 violations.append(Violation(ViolationKind.STROKE_HIGH, reading, stroke_high,
                     f"leg {leg + 1} above stroke: {reading:.3f} mm > {stroke_high:g} mm", leg=leg + 1))
             for kind, angles, limit, where in (
@@ -108,16 +118,16 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
                 (ViolationKind.PLATFORM_CONE, platform_cone, limits.platform_cone_deg, "platform"),
             ):
                 angle = float(angles[n, leg])
-                if angle > limit:
+                if _outside_cone(angle, limit):
                     violations.append(Violation(kind, angle, limit,
                         f"leg {leg + 1} {where} joint at {angle:.2f}° exceeds its {limit:g}° cone", leg=leg + 1))
         for axis, unit, value, low, high in zip(POSE_AXES, POSE_UNITS, relative[n], limits.pose_min, limits.pose_max):
-            if not low - ENVELOPE_ROUNDING <= value <= high + ENVELOPE_ROUNDING:
+            if _outside_envelope(value, low, high):
                 bound = high if value > high else low
                 violations.append(Violation(ViolationKind.POSE_RANGE, float(value), bound,
                     f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit} "
                     f"(by {abs(value - bound):.3g} {unit})", axis=axis))
-        if not condition <= limits.max_jacobian_condition:
+        if near_singular(condition, limits):
             violations.append(Violation(ViolationKind.SINGULAR, condition, limits.max_jacobian_condition,
                 f"near-singular pose: Jacobian condition {condition:.1f} > {limits.max_jacobian_condition:g}"))
         assessments.append(PoseAssessment(
@@ -136,6 +146,32 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
 def assess_pose(geometry: Geometry, pose_relative: Sequence[float]) -> PoseAssessment:
     """Check one pose relative to the zero posture (mm, deg) against every limit."""
     return assess_poses(geometry, [pose_relative])[0]
+
+
+def pose_within_limits(geometry: Geometry, pose_relative: Sequence[float]) -> bool:
+    """Whether one pose relative to the zero posture (mm, deg) breaks none of the limits
+    :func:`assess_poses` checks (its ``ok``), the cheapest first, stopping at the first
+    broken. Plain floats, not numpy: a stream checks a pose or two per target, and at one
+    pose numpy's per-call overhead costs more than the arithmetic (as in
+    :func:`~hexactl.kinematics.inverse.leg_lengths`)."""
+    limits = geometry.limits
+    if any(_outside_envelope(value, low, high) for value, low, high in zip(pose_relative, limits.pose_min, limits.pose_max)):
+        return False
+    x, y, z, roll, pitch, yaw = (home + value for home, value in zip(geometry.home, pose_relative))
+    absolute = (x, y, z, radians(roll), radians(pitch), radians(yaw))
+    rows, lengths = leg_jacobian_rows(geometry.legs, absolute)
+    for leg, length in enumerate(lengths):
+        reading = reading_of_leg_length(geometry.legs, leg, length)
+        if _below_stroke(reading, limits) or _above_stroke(reading, limits):
+            return False
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = rotation_elements(*absolute[3:])
+    _, _, base_axes, platform_axes = _neutral_axes(geometry)
+    for (ux, uy, uz, *_), base_axis, platform_axis in zip(rows, base_axes, platform_axes):
+        moving = (r0 * ux + r3 * uy + r6 * uz, r1 * ux + r4 * uy + r7 * uz, r2 * ux + r5 * uy + r8 * uz)  # Tᵀ·u
+        if _outside_cone(_angle_between_deg((ux, uy, uz), base_axis), limits.base_cone_deg) \
+                or _outside_cone(_angle_between_deg(moving, platform_axis), limits.platform_cone_deg):
+            return False
+    return not near_singular(_condition(geometry, rows), limits)
 
 
 def assess_readings(geometry: Geometry, readings: Sequence[Sequence[float]] | NDArray,
@@ -161,10 +197,45 @@ def jacobian_condition(geometry: Geometry, pose_absolute: Sequence[float]) -> fl
     The rotation columns (mm/rad) are divided by the mean platform-joint radius so that
     both halves are dimensionless; ``inf`` for a singular pose.
     """
-    jacobian, _ = twist_jacobian(geometry.legs, pose_absolute)
-    scaled = jacobian * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
+    return _condition(geometry, leg_jacobian_rows(geometry.legs, pose_absolute)[0])
+
+
+def near_singular(condition: float, limits: Limits) -> bool:
+    """Whether a Jacobian condition number is beyond the limits' near-singularity threshold
+    (a NaN condition is)."""
+    return not condition <= limits.max_jacobian_condition
+
+
+# Each limit's rule, in one place for the full assessment and the yes/no check.
+def _below_stroke(reading_mm: float, limits: Limits) -> bool:
+    return reading_mm < limits.stroke[0]
+
+
+def _above_stroke(reading_mm: float, limits: Limits) -> bool:
+    return reading_mm > limits.stroke[1]
+
+
+def _outside_cone(angle_deg: float, limit_deg: float) -> bool:
+    return angle_deg > limit_deg
+
+
+def _outside_envelope(value: float, low: float, high: float) -> bool:
+    return not low - ENVELOPE_ROUNDING <= value <= high + ENVELOPE_ROUNDING
+
+
+def _condition(geometry: Geometry, jacobian_rows: Sequence[Sequence[float]]) -> float:
+    """:func:`jacobian_condition` of the twist Jacobian's rows."""
+    scaled = np.array(jacobian_rows) * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
     singular = np.linalg.svd(scaled, compute_uv=False)
     return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
+
+
+def _angle_between_deg(a: Sequence[float], b: Sequence[float]) -> float:
+    """:func:`_angle_deg` of two plain-float unit vectors."""
+    ax, ay, az = a
+    bx, by, bz = b
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    return degrees(atan2(sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz))
 
 
 def _angle_deg(a: NDArray, b: NDArray) -> NDArray:
@@ -177,13 +248,23 @@ def _angle_deg(a: NDArray, b: NDArray) -> NDArray:
     return np.degrees(np.arctan2(np.sqrt(np.einsum("...i,...i->...", cross, cross)), np.einsum("...i,...i->...", a, b)))
 
 
-_NEUTRAL_AXES: dict[int, tuple[Geometry, tuple[NDArray, NDArray]]] = {}
+class _NeutralAxes(NamedTuple):
+    """Each joint's neutral axis: the leg direction in the zero posture, (6, 3) in the
+    fixed (base joints) and the moving frame (platform joints), and as plain floats."""
+
+    base: NDArray
+    platform: NDArray
+    base_rows: tuple[tuple[float, ...], ...]
+    platform_rows: tuple[tuple[float, ...], ...]
+
+
+_NEUTRAL_AXES: dict[int, tuple[Geometry, _NeutralAxes]] = {}
 _NEUTRAL_AXES_KEPT = 8
 
 
-def _neutral_axes(geometry: Geometry) -> tuple[NDArray, NDArray]:
-    """Each joint's neutral axis: the leg direction in the zero posture (fixed, moving
-    frame). Kept for the last few geometries: the same one is checked pose after pose."""
+def _neutral_axes(geometry: Geometry) -> _NeutralAxes:
+    """The joints' neutral axes of ``geometry``, kept for the last few geometries: the same
+    one is checked pose after pose."""
     cached = _NEUTRAL_AXES.get(id(geometry))
     if cached is not None and cached[0] is geometry:
         return cached[1]
@@ -194,9 +275,10 @@ def _neutral_axes(geometry: Geometry) -> tuple[NDArray, NDArray]:
     return axes
 
 
-def _neutral_axes_of(geometry: Geometry) -> tuple[NDArray, NDArray]:
+def _neutral_axes_of(geometry: Geometry) -> _NeutralAxes:
     home = absolute_from_relative(geometry.home, np.zeros((1, 6)))
     vectors = leg_vectors_batch(geometry.legs, home)[0]
     units = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
     rotation = rotation_matrices(home[:, 3], home[:, 4], home[:, 5])[0]
-    return units, units @ rotation
+    moving = units @ rotation
+    return _NeutralAxes(units, moving, tuple(map(tuple, units.tolist())), tuple(map(tuple, moving.tolist())))

@@ -4,10 +4,12 @@ hardware's, and the loop follows frames safely (issue 12)."""
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.planning import ActiveGeometry, PlanningContext, path_violations, pose_allowed
 from hexactl.kinematics.axes import ToolInWorkMmDeg
 from hexactl.kinematics.frames import apply, compose, pose_of, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits
@@ -196,3 +198,23 @@ def test_a_sequence_in_the_work_frame_turns_about_the_pivot_at_every_waypoint(ri
     records = rig.controller.sequence_records().records
     assert len(records) == 3 and records[0].pose_command[3] == pytest.approx(6.0, abs=1e-9)  # dwell records: zero frame
     rig.assert_setpoints_safe()
+
+
+frame_poses = st.tuples(*[st.floats(-300.0, 300.0)] * 3, *[st.floats(-30.0, 30.0)] * 3)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(pose=st.tuples(*[st.floats(-700.0, 700.0)] * 3, *[st.floats(-0.5, 0.5)] * 3), work=frame_poses, tool=frame_poses,
+       box=st.floats(10.0, 600.0), tilt=st.one_of(st.none(), st.floats(1.0, 30.0)))
+def test_one_pose_is_allowed_exactly_when_no_path_violation_is_found_there(geometry, pose, work, tool, box, tilt):
+    """The stream's per-target check (plain floats) and every plan's check (numpy) agree,
+    hardware and soft limits in the operator's frames alike."""
+    active = ActiveGeometry.of(geometry, "nominal")
+    operator = OperatorFrames(work=work, tool=tool, soft_limits=SoftLimits(lower=(-box,) * 3 + (None,) * 3,
+                                                                           upper=(box,) * 3 + (None,) * 3, max_tilt_deg=tilt))
+    config = ControllerConfig()
+    context = PlanningContext(active, config.motion, config.loop.period_s, geometry.limits.leg_velocity_mm_s,
+                              frames=operator.frames(active.home), soft_limits=operator.soft_limits)
+    violations = path_violations(context, np.array([pose]), 0)
+    assume(all(abs(v.value - v.limit) > 1e-6 for v in violations))  # on a bound, the two paths' rounding may differ
+    assert pose_allowed(context, pose) == (not violations), [v.message for v in violations]

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
@@ -53,3 +53,12 @@ def test_a_pose_passes_exactly_when_every_axis_is_within_its_bounds(samples, a, 
         outside = {axis for axis, value, low, high in zip(("x", "y", "z", "roll", "pitch", "yaw"), pose, lower, upper)
                    if not low <= value <= high}
         assert {v.axis for v in found} == outside
+
+
+@given(poses, poses, poses, st.one_of(st.none(), st.floats(1.0, 90.0)), st.lists(st.booleans(), min_size=12, max_size=12))
+def test_allow_says_what_violations_say(pose, a, b, tilt, open_ends):
+    bounds = [(None if open_low else min(x, y), None if open_high else max(x, y) + 1.0)
+              for x, y, open_low, open_high in zip(a, b, open_ends[:6], open_ends[6:])]
+    limits = SoftLimits(lower=tuple(low for low, _ in bounds), upper=tuple(high for _, high in bounds), max_tilt_deg=tilt)
+    assume(tilt is None or abs(tilt_deg(np.array([pose]))[0] - tilt) > 1e-9)  # the two paths round differently
+    assert limits.allow(pose) == (limits.violations([pose]) == [[]])

@@ -153,7 +153,7 @@ def run_fk(arguments: argparse.Namespace) -> int:
     from hexactl.kinematics.forward import forward_kinematics
     from hexactl.kinematics.inverse import lengths_from_readings
     from hexactl.kinematics.pose import relative_from_absolute
-    from hexactl.kinematics.workspace import jacobian_condition
+    from hexactl.kinematics.workspace import jacobian_condition, near_singular
 
     geometry = load_config(arguments)
     readings = parse_numbers([getattr(arguments, label) for label in LEG_LABELS], LEG_LABELS)
@@ -164,15 +164,15 @@ def run_fk(arguments: argparse.Namespace) -> int:
     warnings = [f"{label} {reading:g} mm is outside the stroke [{low:g}, {high:g}] mm"
                 for label, reading in zip(LEG_LABELS, readings) if not low <= reading <= high]
     condition = jacobian_condition(geometry, result.pose) if result.ok else None
-    near_singular = condition is not None and not condition <= geometry.limits.max_jacobian_condition
-    if near_singular:
+    singular = condition is not None and near_singular(condition, geometry.limits)
+    if singular:
         warnings.append(f"near-singular: Jacobian condition {condition:.1f} > {geometry.limits.max_jacobian_condition:g} "
                         "([limits] max_jacobian_condition); other poses (another assembly mode) have almost these "
                         "leg lengths, so this one may be tens of mm from the platform's: do not rely on it")
     if arguments.json:
         print(json.dumps({"pose": pose if result.ok else None, "status": result.status.name.lower(),
                           "iterations": result.iterations, "residual_mm": result.residual_mm,
-                          "jacobian_condition": condition, "near_singular": near_singular,
+                          "jacobian_condition": condition, "near_singular": singular,
                           "warnings": warnings}, indent=2))
     elif result.ok:
         print("  ".join(f"{axis} {value:.4f} {unit}" for axis, value, unit in zip(POSE_AXES, pose, POSE_UNITS)))
@@ -183,4 +183,4 @@ def run_fk(arguments: argparse.Namespace) -> int:
               f"{result.iterations} iterations (residual {result.residual_mm:.3g} mm)")
     for warning in warnings if not arguments.json else ():
         print(f"warning: {warning}")
-    return 0 if result.ok and not near_singular else 1
+    return 0 if result.ok and not singular else 1
