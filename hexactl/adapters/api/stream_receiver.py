@@ -4,9 +4,11 @@ Samples (:mod:`hexactl.adapters.api.stream_wire`) arrive at whatever rate the se
 keeps; the loop takes one target a cycle. So the receiver reads everything that
 arrived, drops what is malformed, out of order or duplicated (each counted), keeps the
 newest sample and hands it to the controller (which makes it reachable and queues it
-for the loop: :meth:`~hexactl.control.controller.Controller.stream_target`) at most once
-a loop period. What it counts and how late the targets reach the loop are in
-telemetry's ``stream_input`` (:meth:`StreamReceiver.view`).
+for the loop: :meth:`~hexactl.control.controller.Controller.stream_target`) once a loop
+period at most, on average: each hand-over is due a period after the one before was due,
+so the millisecond by which a wake-up can be late does not lower the rate. What it counts
+and how late the targets reach the loop are in telemetry's ``stream_input``
+(:meth:`StreamReceiver.view`).
 
 Samples that arrive while no stream is open are counted and dropped: a stream is opened
 by the ``stream_open`` command, never by its data.
@@ -63,7 +65,7 @@ class StreamCounters:
 class StreamReceiver(SocketThread):
     """The stream socket bound to ``endpoint`` (``tcp://HOST:*``: a free port; CURVE
     with ``curve``) and, with ``udp`` (host, port), a UDP socket; samples go to
-    ``target`` at most every ``period_s``; ``progress()`` is the loop's stream.
+    ``target`` once every ``period_s`` at most, on average; ``progress()`` is the loop's stream.
 
     :raises zmq.ZMQError: the endpoint is malformed or in use
     :raises OSError: the UDP address cannot be bound (nothing is left open)
@@ -95,7 +97,7 @@ class StreamReceiver(SocketThread):
         self._arrivals = 0  # numbers the samples that carry none
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
         self._last: Sample | None = None  # the newest sample taken
-        self._forwarded_ns = 0
+        self._due_ns = 0  # when the next sample may go to ``target``
         self._taken = 0  # the loop's target count when last looked at
         self._loop_latency_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
         self._age_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
@@ -137,13 +139,18 @@ class StreamReceiver(SocketThread):
             poller.register(self._udp.fileno(), zmq.POLLIN)
         while not self._stopping.is_set():
             wait_ms = POLL_MS
-            if self._pending is not None:
-                wait_ms = max(0, (self._forwarded_ns + self._period_ns - time.monotonic_ns()) // 1_000_000)
+            if self._pending is not None:  # rounded up: a wait rounded down would spin until the time is due
+                wait_ms = max(0, -((time.monotonic_ns() - self._due_ns) // 1_000_000))
             poller.poll(wait_ms)
             self._watch_loop()  # first: samples that follow a stream_open's reply count for the new stream
             self._read()
-            if self._pending is not None and time.monotonic_ns() - self._forwarded_ns >= self._period_ns:
+            now_ns = time.monotonic_ns()
+            if self._pending is not None and now_ns >= self._due_ns:
                 self._forward()
+                # The next is due a period after this one was due (the wake-up may have been
+                # late), or a period from now when the thread was idle or fell behind.
+                due_ns = self._due_ns + self._period_ns
+                self._due_ns = due_ns if due_ns > now_ns else now_ns + self._period_ns
 
     def _read(self) -> None:
         for _ in range(MAX_PER_WAKE):
@@ -219,7 +226,6 @@ class StreamReceiver(SocketThread):
         assert sample.sequence is not None and sample.sent_s is not None
         result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns,
                               None if before is None or before.sent_s is None else (before.pose, before.sent_s))
-        self._forwarded_ns = time.monotonic_ns()
         if result.sent:
             self.counters.forwarded += 1
             self.counters.clamped += result.clamped
