@@ -13,7 +13,11 @@ Per manoeuvre and mode (default parameters, config/cueing.toml):
   geometry's ``leg_velocity_mm_s`` (reachability does not include it: the stream mode's
   tracking holds the legs to it, so a faster plan is followed with a lag);
 - limited: the share of samples the limiter changed;
-- plan: the wall-clock time of :func:`hexactl.application.cueing.plan_cue`.
+- plan: the wall-clock time of :func:`hexactl.application.cueing.plan_cue`;
+- as performed: the RMS error of what the loop's commanded poses make felt, the plan
+  streamed at its own rate (as ``hexactl cue`` does) into the 500 Hz loop on ideal
+  actuators in simulated time (tools/simulated_stream.py: no host's timing in it), each
+  commanded pose taken at the instant of the vehicle's sample it is compared with.
 
 A row with the platform at rest gives the RMS error of no cueing at all, for reference.
 
@@ -37,6 +41,7 @@ import numpy as np
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPOSITORY))
+sys.path.insert(0, str(REPOSITORY / "tools"))
 
 from hexactl.adapters.files.cueing_file import (  # noqa: E402
     load_cueing_parameters,
@@ -52,9 +57,25 @@ from hexactl.cueing.washout import (  # noqa: E402
 )
 from hexactl.cueing.workspace_gain import ray_reach, stroke_use  # noqa: E402
 from hexactl.kinematics.workspace import assess_poses  # noqa: E402
+from simulated_stream import SimulatedStream  # noqa: E402
 
 MANOEUVRES = ("braking", "lane_change")
 STEPS_PER_BATCH = 100
+
+
+def performed(plan, geometry) -> tuple[float, int]:
+    """The RMS error (m/s²) of the specific force the loop's commanded poses make felt, the
+    plan streamed into it at the plan's rate in simulated time, and the loop's guard clamps."""
+    stream = SimulatedStream(geometry, source="cue")
+    cycles_per_sample = round(plan.period_s * 1e9 / stream.period_ns)
+    commanded = []
+    for sequence, pose in enumerate(plan.poses):
+        commanded.append(stream.pose_command)  # at the instant of this sample, before the loop has it
+        stream.send(pose, sequence, sequence * plan.period_s)
+        for _ in range(cycles_per_sample):
+            stream.step()
+    felt = perceived_specific_force(np.array(commanded), plan.period_s)
+    return rms_difference(plan.vehicle_specific_force, felt), stream.guard_clamps
 
 
 def step_cost_us(parameters, vehicle, batches: int) -> float:
@@ -78,13 +99,14 @@ def main() -> None:
     geometry = load_geometry(REPOSITORY / "config" / "platform.toml")
     parameters = load_cueing_parameters(REPOSITORY / "config" / "cueing.toml")
     print(f"| manoeuvre | workspace-aware gain | RMS error, m/s² | peak stroke use | peak workspace use | "
-          f"peak leg speed, mm/s (limit {geometry.limits.leg_velocity_mm_s:g}) | limited | plan, s |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+          f"peak leg speed, mm/s (limit {geometry.limits.leg_velocity_mm_s:g}) | limited | plan, s | "
+          f"RMS error as performed, m/s² (guard clamps) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name in MANOEUVRES:
         vehicle = load_vehicle_trajectory(REPOSITORY / "config" / "vehicles" / f"{name}.csv")
         channels = wash_out(parameters, vehicle)
         at_rest = rms_difference(vehicle.specific_force, perceived_specific_force(np.zeros((len(vehicle), 6)), 1.0))
-        print(f"| {name} | (no cueing: the platform at rest) | {at_rest:.3f} | 0 | 0 | 0 | | |")
+        print(f"| {name} | (no cueing: the platform at rest) | {at_rest:.3f} | 0 | 0 | 0 | | | |")
         for with_gain in (True, False):
             start = time.perf_counter()
             plan = plan_cue(vehicle, parameters, geometry, workspace_gain=with_gain)
@@ -96,8 +118,9 @@ def main() -> None:
             readings = np.array([assessment.sensor_mm for assessment in assess_poses(geometry, poses)])
             leg_speed = np.abs(np.diff(readings, axis=0)).max() / plan.period_s
             mode = f"on ({plan.gain:.2f})" if with_gain else "off (limiter only)"
+            error, clamps = performed(plan, geometry)
             print(f"| {name} | {mode} | {plan.rms_error:.3f} | {stroke_use(geometry, poses).max():.2f} | "
-                  f"{workspace:.2f} | {leg_speed:.0f} | {limited:.0%} | {elapsed:.2f} |")
+                  f"{workspace:.2f} | {leg_speed:.0f} | {limited:.0%} | {elapsed:.2f} | {error:.3f} ({clamps}) |")
     cost = step_cost_us(parameters, load_vehicle_trajectory(REPOSITORY / "config" / "vehicles" / "lane_change.csv"),
                         arguments.batches)
     print(f"\nWashout filter step: median {cost:.1f} µs ({arguments.batches} batches of {STEPS_PER_BATCH} steps)")

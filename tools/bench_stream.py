@@ -92,43 +92,22 @@ def tracking(input_hz: int, seconds: float = 3.0) -> dict[str, float]:
     """How closely the loop follows a 1 Hz, 10 mm sine in x streamed at ``input_hz``:
     the controller on ideal actuators in simulated time (no host timing in it), the
     commanded x against the sine at the same instant, over the last period."""
-    from hexactl.adapters.files.config_path import default_config_path
-    from hexactl.adapters.files.geometry_file import load_geometry
-    from hexactl.control.config import ControllerConfig
-    from hexactl.control.local_controller import LocalController
-    from hexactl.kinematics.inverse import sensor_setpoints
-    from hexactl.kinematics.pose import absolute_from_relative
-    from hexactl.sim.ideal_actuators import IdealActuators
+    from simulated_stream import SimulatedStream
 
-    geometry = load_geometry(default_config_path())
-    clock = [1_000_000_000]
-    actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, (0.0,) * 6)),
-                               clock_ns=lambda: clock[0])
-    controller = LocalController.in_thread(actuators, geometry, "nominal", config=ControllerConfig(),
-                                           clock_ns=lambda: clock[0])
-    period_ns = controller.config.loop.period_ns
-
-    def step() -> None:
-        clock[0] += period_ns
-        controller.step(clock[0])
-
-    controller.enable()
-    step(), step()
-    controller.stream_open("tracking")
-    step()
-    cycles, every = round(seconds * 1e9 / period_ns), round(1e9 / period_ns / input_hz)
+    stream = SimulatedStream(source="tracking")
+    cycles, every = round(seconds * 1e9 / stream.period_ns), round(1e9 / stream.period_ns / input_hz)
     errors = []
     for n in range(cycles):
-        t = n * period_ns / 1e9
+        t = n * stream.period_ns / 1e9
         target = 10.0 * math.sin(2 * math.pi * t)
         if n % every == 0:
-            controller.stream_target((target, 0, 0, 0, 0, 0), n, t, clock[0])
-        step()
+            stream.send((target, 0, 0, 0, 0, 0), n, t)
+        stream.step()
         if t >= seconds - 1.0:
-            errors.append(controller.snapshot.pose_command[0] - target)
+            errors.append(stream.pose_command[0] - target)
     errors_mm = [abs(e) for e in errors]
     return {"input_hz": input_hz, "max_mm": max(errors_mm), "rms_mm": math.sqrt(sum(e * e for e in errors) / len(errors)),
-            "guard_clamps": controller.snapshot.clamped_cycles}
+            "guard_clamps": stream.guard_clamps}
 
 
 def main() -> int:

@@ -162,9 +162,7 @@ class OpenStream(Command):
     """Open a stream (its number: this command's ticket) from ``source`` whose targets
     are in ``frame`` (a :class:`~hexactl.control.frames.Frame` value): the trajectory
     rebased at rest on ``start`` in the coordinates of ``frames`` (None: relative
-    mm/rad); targets move at ``velocity_scale`` of the velocity limits at most
-    (:func:`~hexactl.control.stream_commands.stream_velocity_scale`); the stream ends if
-    no target comes for ``timeout_ns``."""
+    mm/rad); the stream ends if no target comes for ``timeout_ns``."""
 
     epoch: int
     source: str
@@ -172,19 +170,20 @@ class OpenStream(Command):
     frames: Frames | None
     start: RelativeMmRad | ToolInWorkMmRad
     timeout_ns: int
-    velocity_scale: float
 
 
 @dataclass(frozen=True, slots=True)
 class StreamTarget(Command):
     """Stream ``stream``'s newest target, checked reachable, in the stream's coordinates,
     to pass at ``velocity`` (mm/s, rad/s) in no less than ``horizon_s`` (s; the goal lies that
-    far ahead of the sample along its velocity); ``sequence`` the sender's number,
-    ``received_ns`` when it arrived (monotonic)."""
+    far ahead of the sample along its velocity), no axis faster than ``max_velocity``
+    (mm/s, rad/s: :func:`~hexactl.control.stream_commands.stream_velocity_limits`);
+    ``sequence`` the sender's number, ``received_ns`` when it arrived (monotonic)."""
 
     stream: int
     goal: RelativeMmRad | ToolInWorkMmRad
     velocity: PerAxis
+    max_velocity: PerAxis
     horizon_s: float
     sequence: int
     received_ns: int

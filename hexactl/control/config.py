@@ -59,11 +59,13 @@ class ControllerConfig(_Frozen):
     loop: LoopConfig = LoopConfig()
     motion: MotionLimits = MotionLimits()
     stream: MotionLimits = Field(
-        default=MotionLimits(max_acceleration=(2000.0, 2000.0, 1500.0, 100.0, 100.0, 150.0),
+        default=MotionLimits(max_velocity=(600.0, 600.0, 400.0, 30.0, 30.0, 40.0),
+                             max_acceleration=(2000.0, 2000.0, 1500.0, 100.0, 100.0, 150.0),
                              max_jerk=(50000.0, 50000.0, 40000.0, 2500.0, 2500.0, 4000.0)),
-        description="limits of a pose stream's tracking (hexactl.control.stream): the motion's velocities (scaled "
-                    "down so that no leg can exceed its speed), with the acceleration and jerk a simulator's cues need: "
-                    "with the motion's jerk a stream would lag by a quarter of a second")
+        description="limits of a pose stream's tracking (hexactl.control.stream), with the velocities, acceleration "
+                    "and jerk a simulator's cues need (with the motion's jerk a stream would lag by a quarter of a "
+                    "second). The velocities are caps per axis: what limits a stream is its legs' speed, the box "
+                    "shaped per target so that none exceeds it (hexactl.control.stream_commands.stream_velocity_limits)")
     supervision: SupervisionConfig = SupervisionConfig()
     calibration_ramp_fraction: float = Field(
         default=0.1, gt=0, lt=1,

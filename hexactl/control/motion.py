@@ -153,24 +153,23 @@ class Motion:
         """Abort any sequence or wave and brake to rest."""
         self.player.end("aborted")
         self.wave.end(WavePhase.ABORTED)  # the generator has the wave's state: it brakes from there
-        self.trajectory.halt()
+        self.trajectory.halt(self.stream.braking_limits)
         self.jogger.brake("stopped")
         self.stream.brake("stopped")
         self.epoch += 1
 
     def open_stream(self, stream: int, source: str, frame: str, frames: Frames | None,
-                    start: RelativeMmRad | ToolInWorkMmRad, timeout_ns: int, velocity_scale: float,
-                    now_ns: int) -> None:
+                    start: RelativeMmRad | ToolInWorkMmRad, timeout_ns: int, now_ns: int) -> None:
         """Open stream ``stream`` (from rest): the generator rebased at rest on ``start`` in
         the coordinates of ``frames``; see :class:`~hexactl.control.commands.OpenStream`."""
         self.jogger.end("replaced by a stream")
         self.trajectory.rebase(start, frames)
-        self.stream.start(stream, source, frame, timeout_ns, velocity_scale, now_ns)
+        self.stream.start(stream, source, frame, timeout_ns, now_ns)
         self.epoch += 1
 
     def close_stream(self) -> None:
         """Brake to rest, then the stream ends."""
-        self.trajectory.halt()
+        self.trajectory.halt(self.stream.braking_limits)
         self.stream.brake("closed by the client")
         self.epoch += 1
 

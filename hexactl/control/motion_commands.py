@@ -74,12 +74,12 @@ class MotionCommands:
         if refusal := preconditions.check_stream(self._view) or self._motion.stale(command.epoch):
             return refusal
         self._motion.open_stream(command.ticket, command.source, command.frame, command.frames, command.start,
-                                 command.timeout_ns, command.velocity_scale, self._now_ns())
+                                 command.timeout_ns, self._now_ns())
         return None
 
     def _stream_target(self, command: cmd.StreamTarget) -> Refusal:
-        self._motion.stream.target(command.stream, command.goal, command.velocity, command.horizon_s, command.sequence,
-                                   command.received_ns, self._now_ns())
+        self._motion.stream.target(command.stream, command.goal, command.velocity, command.max_velocity,
+                                   command.horizon_s, command.sequence, command.received_ns, self._now_ns())
         return None
 
     def _close_stream(self, command: cmd.CloseStream) -> Refusal:

@@ -6,13 +6,15 @@ out of reach is replaced by the reachable pose nearest to it along the way) and 
 the loop the newest, at most one a cycle. :class:`StreamFollower` is the loop's part:
 each target becomes the trajectory generator's new goal (ruckig, online: jerk-limited,
 replanned from the current state, arriving at rest on the target if no newer one
-comes), so the platform follows the stream with a lag set by the motion limits and
-never faster than they allow. Nothing is refused mid-stream: a stream cannot be refused
+comes), so the platform follows the stream with a lag set by the stream's limits and
+never faster than they allow (its velocity box shaped per target so that no leg exceeds
+its speed: :func:`~hexactl.control.stream_commands.stream_velocity_limits`). Nothing is refused mid-stream: a stream cannot be refused
 sample by sample.
 
 Its timeout is the stream's deadman: once a cycle finds no target for longer than the
 stream's timeout (the client stopped, lost its network or stalled), the trajectory
-brakes to rest along its path and the stream ends with that reason. ``stop`` ends it the
+brakes to rest along its path (under the stream's acceleration and jerk, as its
+receiver's reachability check assumed) and the stream ends with that reason. ``stop`` ends it the
 same way; a fault, an E-stop or ``disable`` end it at once.
 
 Times monotonic ns. Owned by the loop thread: not thread-safe.
@@ -81,7 +83,6 @@ class StreamFollower:
         self._trajectory = trajectory
         self._limits = limits
         self._log = log
-        self._velocity_scale = 1.0
         self._reason = ""
         self.progress: StreamProgress | None = None
         """The stream under way as published; made anew when a target arrives, not every cycle."""
@@ -92,24 +93,28 @@ class StreamFollower:
         """A stream is following (not braking to its end)."""
         return self.progress is not None and self.progress.phase is StreamPhase.FOLLOWING
 
-    def start(self, stream: int, source: str, frame: str, timeout_ns: int, velocity_scale: float, now_ns: int) -> None:
-        """Stream ``stream`` starts (the trajectory at rest where it begins); its targets
-        move at ``velocity_scale`` of the velocity limits at most."""
-        self._velocity_scale = velocity_scale
+    @property
+    def braking_limits(self) -> MotionLimits | None:
+        """The limits to brake a following stream under (its own, which its receiver's
+        reachability check assumed); None when no stream is following."""
+        return self._limits if self.open else None
+
+    def start(self, stream: int, source: str, frame: str, timeout_ns: int, now_ns: int) -> None:
+        """Stream ``stream`` starts (the trajectory at rest where it begins)."""
         self.progress = StreamProgress(stream, source, frame, StreamPhase.FOLLOWING, timeout_ns, last_target_ns=now_ns)
         self._log("stream_opened", f"stream {stream} from {source!r} in the {frame} frame, timeout "
                   f"{timeout_ns / 1e6:g} ms")
 
-    def target(self, stream: int, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, horizon_s: float,
-               sequence: int, received_ns: int, now_ns: int) -> None:
+    def target(self, stream: int, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, max_velocity: PerAxis,
+               horizon_s: float, sequence: int, received_ns: int, now_ns: int) -> None:
         """Head for ``goal`` (in the trajectory's coordinates), passing it at ``velocity``
-        (mm/s, rad/s) in no less than ``horizon_s``. A target for a stream that
-        is not following (it ended or is braking) is ignored: it was on its way when the
-        stream ended."""
+        (mm/s, rad/s) in no less than ``horizon_s``, no axis faster than ``max_velocity``.
+        A target for a stream that is not following (it ended or is braking) is ignored:
+        it was on its way when the stream ended."""
         progress = self.progress
         if progress is None or progress.stream != stream or progress.phase is not StreamPhase.FOLLOWING:
             return
-        self._trajectory.follow(goal, velocity, self._limits, self._velocity_scale, horizon_s)
+        self._trajectory.follow(goal, velocity, self._limits, max_velocity, horizon_s)
         self.progress = replace(progress, targets=progress.targets + 1, last_sequence=sequence,
                                 last_target_ns=now_ns, latency_ns=now_ns - received_ns)
 
@@ -131,7 +136,7 @@ class StreamFollower:
         progress = self.progress
         if progress is not None and progress.phase is StreamPhase.FOLLOWING and \
                 now_ns - progress.last_target_ns > progress.timeout_ns:
-            self._trajectory.halt()
+            self._trajectory.halt(self._limits)
             self.brake(f"timeout: no target for {(now_ns - progress.last_target_ns) / 1e6:.0f} ms "
                        f"(the stream's timeout is {progress.timeout_ns / 1e6:g} ms)")
 

@@ -7,17 +7,17 @@ every planned path is checked against, asked of one pose:
 replaced by the reachable pose nearest to it on the straight line from the last target
 handed to the loop, found by bisection. The platform then slows and stops on the
 boundary instead of being refused. The loop follows the targets
-(:mod:`hexactl.control.stream`) within the motion limits, scaled down by
-:func:`stream_velocity_scale` so that no leg can be asked to move faster than the
-planning budget whatever the targets do.
+(:mod:`hexactl.control.stream`) within the stream's limits, its velocity box shaped per
+target by :func:`stream_velocity_limits` so that no leg can be asked to move faster than
+the planning budget whatever the targets do.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-import time
-from math import hypot, isfinite, radians
+from math import isfinite, radians
+from operator import add
 
 import numpy as np
 
@@ -31,7 +31,8 @@ from hexactl.control.stream import HORIZON_S
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.trajectory import MotionLimits
 from hexactl.kinematics.axes import RelativeMmDeg, RelativeMmRad, ToolInWorkMmDeg, ToolInWorkMmRad
-from hexactl.kinematics.frames import Frames, pose_of
+from hexactl.kinematics.frames import Frames
+from hexactl.kinematics.inverse import leg_lengths
 
 STREAM_FRAMES = (Frame.ZERO, Frame.WORK)
 """The frames a stream's poses may be in (a tool-frame pose is a relative move, and a
@@ -60,27 +61,53 @@ the step from the last target of the boundary (a stream's steps are small; a jum
 out is approached again from there by the next targets)."""
 
 
-def stream_velocity_scale(context: PlanningContext, limits: MotionLimits, frames: Frames | None) -> float:
-    """The fraction of the stream's velocity ``limits`` that keeps every leg within
-    ``context.leg_speed_mm_s`` for any direction of motion: a leg's speed is at most the
-    speed of its platform joint, |v| + |ω|·r, where |v| ≤ the norm of the x, y, z limits,
-    |ω| ≤ the sum of the roll, pitch and yaw rate limits, and r is the farthest platform
-    joint from the point the rotations turn about (the platform's origin, or the tool's
-    in the work frame)."""
-    velocity = limits.max_velocity
-    pivot = np.zeros(3) if frames is None else np.asarray(pose_of(frames.tool)[:3])
-    joints = np.asarray(context.active.geometry.platform_joints, dtype=float)
-    reach_mm = float(np.max(np.linalg.norm(joints - pivot, axis=1)))
-    worst_mm_s = hypot(*velocity[:3]) + sum(radians(rate) for rate in velocity[3:]) * reach_mm
-    return min(1.0, context.leg_speed_mm_s / worst_mm_s)
+VELOCITY_FLOOR = 0.1
+"""The share of each axis's velocity limit that a stream's velocity box keeps before it is
+scaled, whatever the direction the stream moves in: room to change course on every axis."""
+
+RATE_STEPS = (1e-3, 1e-3, 1e-3, 1e-6, 1e-6, 1e-6)
+"""Steps (mm, rad) of the finite differences in :func:`leg_rates`."""
+
+
+def leg_rates(context: PlanningContext, frames: Frames | None, position: Sequence[float]) -> np.ndarray:
+    """(6 axes, 6 legs): how fast each leg's length changes (mm per mm, mm per rad) with each
+    coordinate of a stream's ``position`` (relative mm/rad, or the tool's pose in the work
+    frame of ``frames``), by forward differences of the plain-float inverse kinematics: in
+    the stream's own coordinates, whatever its frames."""
+    legs, home = context.active.geometry.legs, context.active.home
+
+    def lengths(coordinates: Sequence[float]) -> list[float]:
+        absolute = frames.platform_pose(coordinates) if frames is not None else tuple(map(add, home, coordinates))
+        return leg_lengths(legs, absolute)
+
+    base = lengths(position)
+    rates = []
+    for axis, step in enumerate(RATE_STEPS):
+        moved = list(position)
+        moved[axis] += step
+        rates.append([(after - before) / step for after, before in zip(lengths(moved), base)])
+    return np.array(rates)
+
+
+def stream_velocity_limits(context: PlanningContext, frames: Frames | None, position: Sequence[float],
+                           velocity: np.ndarray, caps: np.ndarray) -> np.ndarray:
+    """Per-axis velocity limits (mm/s, rad/s) for following a stream that moves at
+    ``velocity`` through ``position`` (its coordinates, :func:`leg_rates`): a box shaped
+    like |velocity| plus :data:`VELOCITY_FLOOR` of ``caps`` on every axis, made as large as
+    keeps every leg within ``context.leg_speed_mm_s`` for any velocity inside it (a leg's
+    speed is at most Σ |∂l/∂x_j|·limit_j), and never above ``caps``. So the legs' speed,
+    not a worst case over every direction, limits a stream along the way it goes."""
+    shape = np.abs(velocity) + VELOCITY_FLOOR * caps
+    worst_leg_mm_s = float((np.abs(leg_rates(context, frames, position)) * shape[:, None]).sum(axis=0).max())
+    return np.minimum(caps, shape * (context.leg_speed_mm_s / worst_leg_mm_s))
 
 
 @dataclass
 class _OpenStream:
     """What the facade keeps of the stream it opened: its number, the coordinates of its
-    targets, its motion limits (mm and rad, per axis: velocity scaled, acceleration,
-    jerk), the last target handed to the loop (reachable) and the last request with its
-    sender's time (for the velocity)."""
+    targets, its motion limits (mm and rad, per axis: velocity, acceleration, jerk), the
+    last target handed to the loop (reachable) and the last request with its sender's
+    time (for the velocity)."""
 
     stream: int
     frames: Frames | None
@@ -90,17 +117,17 @@ class _OpenStream:
     requested: np.ndarray | None = None
     requested_at_s: float | None = None
     replaced: tuple[np.ndarray, np.ndarray] | None = None  # (request, goal): a target held outside is bisected once
-    sent_ns: int | None = None  # when the last target went to the loop (monotonic)
+    sent_ns: int | None = None  # when the last target handed to the loop arrived (monotonic)
     interval_s: float = 0.0  # between targets sent, smoothed
 
-    def horizon(self, now_ns: int) -> float:
-        """How far ahead the loop aims along this target's velocity, s: :data:`HORIZON_S`,
-        longer when targets reach the loop less often (a slow sender, or a receiver held
-        up on a busy host), so that the platform keeps moving between them instead of
-        braking at each."""
+    def horizon(self, received_ns: int) -> float:
+        """How far ahead the loop aims along the velocity of a target that arrived at
+        ``received_ns`` (monotonic), s: :data:`HORIZON_S`, longer when targets reach the
+        loop less often (a slow sender, or a receiver held up on a busy host), so that the
+        platform keeps moving between them instead of braking at each."""
         if self.sent_ns is not None:
-            self.interval_s += 0.2 * ((now_ns - self.sent_ns) / 1e9 - self.interval_s)
-        self.sent_ns = now_ns
+            self.interval_s += 0.2 * ((received_ns - self.sent_ns) / 1e9 - self.interval_s)
+        self.sent_ns = received_ns
         return min(MAX_HORIZON_S, max(HORIZON_S, 2.0 * self.interval_s))
 
     def braking_s(self, velocity: np.ndarray) -> np.ndarray:
@@ -147,14 +174,15 @@ class StreamCommands:
         context = self._context(s)
         frames = context.frames if frame is Frame.WORK else None
         start = convert(s.trajectory.position, s.frames, frames, s.active.home)
-        scale = stream_velocity_scale(context, self._limits, frames)
+        velocity, acceleration, jerk = (np.asarray(v) for v in self._limits.in_mm_rad())
+        # The box at rest on the start is the same fraction of every axis's limit: that fraction.
+        scale = float((stream_velocity_limits(context, frames, start, np.zeros(6), velocity) / velocity).min())
         result = self._submitter.submit(
-            lambda t: cmd.OpenStream(t, s.epoch, source, frame.value, frames, start, round(timeout_s * 1e9), scale),
+            lambda t: cmd.OpenStream(t, s.epoch, source, frame.value, frames, start, round(timeout_s * 1e9)),
             "stream open", deadline_ns=deadline_ns, velocity_scale=scale)
         if result.ok:
             stream = result.details["ticket"]
-            velocity, acceleration, jerk = (np.asarray(v) for v in self._limits.in_mm_rad())
-            self._open = _OpenStream(stream, frames, context, (velocity * scale, acceleration, jerk),
+            self._open = _OpenStream(stream, frames, context, (velocity, acceleration, jerk),
                                      np.asarray(start, dtype=float))
             result = CommandResult.success(result.message, stream=stream, **result.details)
         return result
@@ -187,8 +215,7 @@ class StreamCommands:
         requested = _mm_rad(pose_mm_deg)
         if before is not None:
             stream.requested, stream.requested_at_s = _mm_rad(before[0]), before[1]
-        now_ns = time.monotonic_ns()
-        horizon_s = stream.horizon(now_ns)
+        horizon_s = stream.horizon(received_ns)
         velocity = self._velocity(stream, requested, sent_s)
         stream.requested, stream.requested_at_s = requested, sent_s
         clamped = False
@@ -197,10 +224,16 @@ class StreamCommands:
             velocity = np.zeros(6)
             goal, clamped = self._reachable(stream, requested)
         stream.last = goal
+        max_velocity = stream_velocity_limits(stream.context, stream.frames, goal, velocity, stream.limits[0])
+        # Faster than the legs allow along its way: passed slower, its direction kept.
+        moving = velocity != 0.0
+        if moving.any():
+            velocity = velocity * min(1.0, float(np.min(max_velocity[moving] / np.abs(velocity[moving]))))
         coordinates = RelativeMmRad if stream.frames is None else ToolInWorkMmRad
         target = coordinates._make(float(v) for v in goal)
         self._host_submit(cmd.StreamTarget(0, stream.stream, target, tuple(float(v) for v in velocity),  # type: ignore[arg-type]
-                                           horizon_s, sequence, received_ns))
+                                           tuple(float(v) for v in max_velocity), horizon_s, sequence,  # type: ignore[arg-type]
+                                           received_ns))
         return TargetResult(True, clamped, target.in_degrees())
 
     @staticmethod

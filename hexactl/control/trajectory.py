@@ -255,27 +255,29 @@ class PoseTrajectory:
         return True
 
     def follow(self, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, limits: MotionLimits,
-               velocity_scale: float, horizon_s: float) -> None:
+               max_velocity: PerAxis, horizon_s: float) -> None:
         """Head for ``goal`` (in the current coordinates), passing it at ``velocity`` (mm/s,
-        rad/s; within the scaled ``limits``) in no less than ``horizon_s`` (when moving),
-        from wherever the generator is: a stream's target (:mod:`hexactl.control.stream`),
-        under the stream's ``limits`` (a halt brakes under the motion's). Reached before a newer target comes, the
-        generator brakes to rest from there (the stream's receiver checked that where
-        that ends is reachable). Unlike :meth:`move_to` nothing is previewed: the next
-        target comes a cycle later, and a goal ruckig refuses shows as this cycle's
-        :attr:`StepResult.ERROR`."""
+        rad/s) in no less than ``horizon_s`` (when moving), from wherever the generator is:
+        a stream's target (:mod:`hexactl.control.stream`), under the acceleration and jerk
+        of ``limits`` and the per-axis ``max_velocity`` (mm/s, rad/s; ``velocity`` within
+        it). Reached before a newer target comes, the generator brakes to rest from there
+        (the stream's receiver checked that where that ends is reachable). Unlike
+        :meth:`move_to` nothing is previewed: the next target comes a cycle later, and a
+        goal ruckig refuses shows as this cycle's :attr:`StepResult.ERROR`."""
         parameters = self._input
-        configure_input(parameters, limits, goal, velocity_scale=velocity_scale)
+        configure_input(parameters, limits, goal)
+        parameters.max_velocity = list(max_velocity)
         parameters.target_velocity = list(velocity)
         self._passing = any(velocity)
         parameters.minimum_duration = horizon_s if self._passing else None
         self.goal = self._coordinates._make(goal)
         self._active = True
 
-    def halt(self) -> None:
-        """Brake smoothly to rest (acceleration and jerk limited) wherever that ends."""
+    def halt(self, limits: MotionLimits | None = None) -> None:
+        """Brake smoothly to rest (acceleration and jerk limited, by ``limits``, default
+        the motion's) wherever that ends."""
         if self._active:
-            configure_input(self._input, self.limits, None)
+            configure_input(self._input, limits or self.limits, None)
             self.goal = None
             self._passing = False
 

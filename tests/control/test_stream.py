@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexactl.control.frames import OperatorFrames
-from hexactl.control.stream_commands import stream_velocity_scale
+from hexactl.control.stream_commands import leg_rates, stream_velocity_limits
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_pose
 
@@ -124,10 +124,8 @@ def test_moves_and_calibration_swaps_are_refused_while_a_stream_is_open(rig, geo
     assert not rig.controller.stream_open("again").ok
 
 
-def test_the_velocity_scale_keeps_every_leg_within_the_budget(rig) -> None:
+def test_the_velocity_limits_keep_every_leg_within_the_budget(rig) -> None:
     _opened(rig)
-    reply_scale = rig.controller.snapshot  # the loop runs the stream at that scale
-    assert reply_scale.stream is not None
     rate_hz = 1e9 / rig.period_ns
     # Opposite corners, one after the other, as fast as the stream may go.
     corners = [(200.0, 200.0, 100.0, 10.0, 10.0, 15.0), (-200.0, -200.0, -100.0, -10.0, -10.0, -15.0)]
@@ -137,7 +135,25 @@ def test_the_velocity_scale_keeps_every_leg_within_the_budget(rig) -> None:
     speeds = np.abs(np.diff(rig.sent, axis=0)) * rate_hz
     context = rig.controller._context(s)
     assert np.max(speeds) <= context.leg_speed_mm_s * (1 + 1e-6)
-    assert 0 < stream_velocity_scale(context, rig.controller.config.stream, None) < 1
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(position=st.tuples(*[st.floats(-300, 300)] * 3, *[st.floats(-0.2, 0.2)] * 3),
+       velocity=st.tuples(*[st.floats(-800, 800)] * 3, *[st.floats(-1.0, 1.0)] * 3),
+       corner=st.tuples(*[st.sampled_from((-1.0, 1.0))] * 6))
+def test_the_velocity_box_is_shaped_along_the_stream_and_no_corner_of_it_outruns_a_leg(rig, position, velocity,
+                                                                                      corner) -> None:
+    context = rig.controller._context(rig.controller.snapshot)
+    caps = np.array(rig.controller.config.stream.in_mm_rad()[0])
+    box = stream_velocity_limits(context, None, position, np.array(velocity), caps)
+    assert np.all(box > 0) and np.all(box <= caps)
+    # Any velocity inside the box, its corners the worst: every leg within the budget.
+    leg_speeds = np.abs(np.array(corner) * box @ leg_rates(context, None, position))
+    assert leg_speeds.max() <= context.leg_speed_mm_s * (1 + 1e-9)
+    at_rest = stream_velocity_limits(context, None, position, np.zeros(6), caps)
+    assert np.allclose(at_rest / caps, (at_rest / caps)[0])  # at rest, the same fraction of every cap
+    fastest = int(np.argmax(np.abs(velocity) / caps))
+    assert box[fastest] / caps[fastest] >= at_rest[fastest] / caps[fastest] - 1e-12  # stretched along the stream
 
 
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
