@@ -57,7 +57,7 @@ from hexactl.cueing.washout import (  # noqa: E402
 )
 from hexactl.cueing.workspace_gain import ray_reach, stroke_use  # noqa: E402
 from hexactl.kinematics.workspace import assess_poses  # noqa: E402
-from simulated_stream import SimulatedStream  # noqa: E402
+from simulated_stream import perform  # noqa: E402
 
 MANOEUVRES = ("braking", "lane_change")
 STEPS_PER_BATCH = 100
@@ -66,16 +66,8 @@ STEPS_PER_BATCH = 100
 def performed(plan, geometry) -> tuple[float, int]:
     """The RMS error (m/s²) of the specific force the loop's commanded poses make felt, the
     plan streamed into it at the plan's rate in simulated time, and the loop's guard clamps."""
-    stream = SimulatedStream(geometry, source="cue")
-    cycles_per_sample = round(plan.period_s * 1e9 / stream.period_ns)
-    commanded = []
-    for sequence, pose in enumerate(plan.poses):
-        commanded.append(stream.pose_command)  # at the instant of this sample, before the loop has it
-        stream.send(pose, sequence, sequence * plan.period_s)
-        for _ in range(cycles_per_sample):
-            stream.step()
-    felt = perceived_specific_force(np.array(commanded), plan.period_s)
-    return rms_difference(plan.vehicle_specific_force, felt), stream.guard_clamps
+    commanded, clamps = perform(plan.poses, plan.period_s, geometry)
+    return rms_difference(plan.vehicle_specific_force, perceived_specific_force(commanded, plan.period_s)), clamps
 
 
 def step_cost_us(parameters, vehicle, batches: int) -> float:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.control.config import ControllerConfig
@@ -60,3 +62,19 @@ class SimulatedStream:
     @property
     def guard_clamps(self) -> int:
         return self.controller.snapshot.clamped_cycles
+
+
+def perform(poses_mm_deg: Sequence[Sequence[float]], period_s: float, geometry: Geometry | None = None
+            ) -> tuple[np.ndarray, int]:
+    """Stream ``poses_mm_deg`` (relative mm and deg), one every ``period_s``, stamped with
+    their simulated time; the pose the loop commanded at the instant of each (before the
+    loop has it: the stream's lag counts), (N, 6) mm and deg, and the loop's guard clamps."""
+    stream = SimulatedStream(geometry, source="performed")
+    cycles_per_sample = round(period_s * 1e9 / stream.period_ns)
+    commanded = []
+    for sequence, pose in enumerate(poses_mm_deg):
+        commanded.append(stream.pose_command)
+        stream.send(pose, sequence, sequence * period_s)
+        for _ in range(cycles_per_sample):
+            stream.step()
+    return np.array(commanded), stream.guard_clamps
