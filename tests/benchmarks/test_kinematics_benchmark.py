@@ -11,6 +11,7 @@ from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints, sensor_setpoints_batch
 from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.workspace import assess_pose, pose_within_limits
 
 BATCH = 10_000
 
@@ -60,3 +61,14 @@ def test_fk_cold_start_from_the_zero_posture(benchmark, geometry, pose) -> None:
     home = absolute_from_relative(geometry.home, [0.0] * 6)
     result = benchmark(forward_kinematics, geometry.legs, lengths, home)
     assert result.ok
+
+
+def test_workspace_yes_no_single_pose_plain_floats(benchmark, geometry) -> None:
+    """A stream's per-target check: does one pose break any limit?"""
+    assert benchmark(pose_within_limits, geometry, [100.0, 100.0, 100.0, 5.0, 5.0, 5.0])
+
+
+def test_workspace_full_assessment_single_pose(benchmark, geometry) -> None:
+    """The same pose through the full assessment (every violation, every margin): what a
+    stream's check cost before it had its own."""
+    assert benchmark(assess_pose, geometry, [100.0, 100.0, 100.0, 5.0, 5.0, 5.0]).ok
