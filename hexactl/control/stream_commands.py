@@ -200,11 +200,12 @@ class StreamCommands:
         last one handed here, and the sender's times ``sent_s``, s). Nothing is sent when no
         stream is open or it ended (the loop ignores targets for a stream it ended).
 
-        One workspace check in the usual case (it is most of the cost): for a moving
-        stream, of where the platform would come to rest if this were the last target
-        (every pose before it on the way lies between two that were checked); at rest,
-        or when that is out of reach, of the target itself, then without velocity (the
-        loop arrives at rest on it), bisected towards the last target if out of reach."""
+        One workspace check in the usual case: for a moving stream, of where the platform
+        would come to rest if this were the last target (every pose before it on the way
+        lies between two that were checked); at rest, or when that is out of reach, of the
+        target itself, then without velocity (the loop arrives at rest on it), bisected
+        towards the last target if out of reach. Then the velocity box at the goal
+        (:func:`stream_velocity_limits`), which slows a velocity the legs cannot keep."""
         stream = self._open
         if stream is None:
             return TargetResult(False)
