@@ -200,11 +200,11 @@ class StreamCommands:
         last one handed here, and the sender's times ``sent_s``, s). Nothing is sent when no
         stream is open or it ended (the loop ignores targets for a stream it ended).
 
-        One workspace check in the usual case: for a moving stream, of where the platform
-        would come to rest if this were the last target (every pose before it on the way
-        lies between two that were checked); at rest, or when that is out of reach, of the
-        target itself, then without velocity (the loop arrives at rest on it), bisected
-        towards the last target if out of reach. Then the velocity box at the goal
+        Two workspace checks in the usual case: for a moving stream, of the aim and of
+        where the platform would come to rest if this were the last target (every pose on
+        the way lies between two that were checked); at rest, or when either is out of
+        reach, of the target itself, then without velocity (the loop arrives at rest on it),
+        bisected towards the last target if out of reach. Then the velocity box at the goal
         (:func:`stream_velocity_limits`), which slows a velocity the legs cannot keep."""
         stream = self._open
         if stream is None:
@@ -221,7 +221,11 @@ class StreamCommands:
         stream.requested, stream.requested_at_s = requested, sent_s
         clamped = False
         goal = requested + velocity * horizon_s
-        if not velocity.any() or not self._ok(stream, goal + velocity * stream.braking_s(velocity)):
+        # The way on is the last target (checked) → the aim → where braking from it ends: each
+        # end checked. The aim alone is not enough, nor the braking end alone: a sample out of
+        # reach whose velocity points back inside has its aim outside and its braking end inside.
+        if not velocity.any() or not (self._ok(stream, goal)
+                                      and self._ok(stream, goal + velocity * stream.braking_s(velocity))):
             velocity = np.zeros(6)
             goal, clamped = self._reachable(stream, requested)
         stream.last = goal

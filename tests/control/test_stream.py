@@ -166,3 +166,15 @@ def test_any_targets_give_reachable_goals_and_safe_setpoints(make_rig, geometry,
         assert result.sent and assess_pose(geometry, result.goal).ok
     assert rig.controller.snapshot.clamped_cycles == 0
     rig.assert_setpoints_safe()
+
+
+def test_a_sample_out_of_reach_moving_back_inside_is_not_aimed_at_outside(rig, geometry) -> None:
+    """Found by the property test above: after samples above the envelope's z (255 mm), one a
+    millimetre lower heads back inside at the stream's top speed. Where braking from its aim
+    ends is inside; the aim itself (256 mm) is not, and must not be handed to the loop."""
+    _opened(rig)
+    results = _stream(rig, [(0.0, 0.0, 277.0, 0.0, 0.0, 0.0)] * 60 + [(0.0, 0.0, 276.0, 0.0, 0.0, 0.0)] * 60)
+    for result in results:
+        assert result.sent and assess_pose(geometry, result.goal).ok, result
+    assert rig.controller.snapshot.clamped_cycles == 0
+    rig.assert_setpoints_safe()

@@ -14,8 +14,8 @@ process that a loaded host preempts. There:
   (100 cycles, 0.4 s) and 2 s supervision. ``hexactl serve`` cannot be told either (its
   ``--rate`` takes 500 or 1000, the protocol's LoopRate also 250; ServiceConfig has no
   timeouts), so the service process runs ``run_service`` — what ``hexactl serve`` runs —
-  with those settings (and a longer wait for the loop's verdict on a command) replaced
-  (:data:`SERVE`);
+  with those settings (and longer waits for the loop's verdict on a command and for a
+  shutdown) replaced (:data:`SERVE`);
 - the simulator, which stands for actuators with microcontrollers of their own, falls behind
   the bus when the guest is starved, and its firmwares' watchdogs tripped even at 0.4 s
   while the loop was never more than 25 ms late. So it runs under SCHED_FIFO
@@ -70,6 +70,11 @@ SUPERVISION_S = 2.0
 when the host was loaded by other work (a starved guest, not a lost link)."""
 COMMAND_TIMEOUT_S = 5.0
 """How long the API waits for the loop's verdict on a command (the service's 0.5 s ran out once in the guest)."""
+SHUTDOWN_STEPS_S = 20.0
+SHUTDOWN_LIMIT_S = 30.0
+"""The service's shutdown budget and its backstop (5 and 7 s, hexactl.application.service):
+in a guest starved to a tenth of a CPU a SIGTERM'd service took 7 s to log its first step,
+and the backstop ended it with status 1, the safe way, but not the one these tests check."""
 ENABLE_TRIES = 3
 """Enabling again after a stall of the starved guest latched a fault on the way to rest."""
 SERVICE_FIFO = 10
@@ -98,6 +103,7 @@ service.LinkConfig = functools.partial(service.LinkConfig, watchdog_cycles=guest
 supervision = SupervisionConfig(heartbeat_timeout_s=guest["supervision_s"], setpoint_lag_s=guest["supervision_s"])
 service.ControllerConfig = functools.partial(service.ControllerConfig, supervision=supervision,
                                              command_timeout_s=guest["command_timeout_s"])
+service.SHUTDOWN_STEPS_S, service.SHUTDOWN_LIMIT_S = guest["shutdown_steps_s"], guest["shutdown_limit_s"]
 sys.exit(service.run_service(service.ServiceConfig(
     can=guest["can"], rate_hz=guest["rate_hz"], api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
     data_dirs=(Path(guest["data_dir"]),), fifo_priority=guest["fifo"])))
@@ -139,9 +145,10 @@ class Served:
 
 def guest_settings(data_dir: Path) -> dict:
     """What :data:`SERVE` reads: the bus, rate (Hz), data directory, actuator watchdog
-    (cycles), supervision and command timeouts (s), SCHED_FIFO priority."""
+    (cycles), supervision, command and shutdown timeouts (s), SCHED_FIFO priority."""
     return {"can": SPEC, "rate_hz": RATE_HZ, "data_dir": str(data_dir), "watchdog_cycles": WATCHDOG_CYCLES,
-            "supervision_s": SUPERVISION_S, "command_timeout_s": COMMAND_TIMEOUT_S, "fifo": SERVICE_FIFO}
+            "supervision_s": SUPERVISION_S, "command_timeout_s": COMMAND_TIMEOUT_S,
+            "shutdown_steps_s": SHUTDOWN_STEPS_S, "shutdown_limit_s": SHUTDOWN_LIMIT_S, "fifo": SERVICE_FIFO}
 
 
 @pytest.fixture(scope="module")
