@@ -26,7 +26,7 @@ from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
-from tests.reliability.support import tolerating_stalls
+from tests.reliability.support import enable, tolerating_stalls
 from tools.serving import serve
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -405,7 +405,7 @@ def test_a_pose_stream_shows_while_it_runs_and_how_it_ended(rig) -> None:
 
     def body() -> None:
         rig.at_rest_disabled()
-        rig.client.call("enable")
+        enable(rig.client)  # resets an actuator its watchdog stopped while disabled (a busy host), as an operator would
         wait_for(lambda: rig.status()["motion"] == "holding", "enabled at rest")
         with PoseStream(rig.client, "page test", timeout_ms=2000) as stream:
             number = stream.opened["stream"]
