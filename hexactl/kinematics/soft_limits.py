@@ -66,10 +66,10 @@ class SoftLimits(BaseModel):
         limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``)."""
         poses = np.asarray(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
         found: list[list[Violation]] = [[] for _ in range(len(poses))]
-        for bounds, side, open_end in ((self.lower, "below", -np.inf), (self.upper, "above", np.inf)):
+        for bounds, side, broken, open_end in ((self.lower, "below", np.less, -np.inf),
+                                               (self.upper, "above", np.greater, np.inf)):
             limits = np.array([open_end if bound is None else bound for bound in bounds])
-            broken = poses < limits if side == "below" else poses > limits
-            for n, axis in zip(*np.nonzero(broken)):
+            for n, axis in zip(*np.nonzero(broken(poses, limits))):
                 value, limit, unit = float(poses[n, axis]), bounds[axis], POSE_UNITS[axis]
                 found[n].append(Violation(
                     ViolationKind.SOFT_LIMIT, value, limit,
