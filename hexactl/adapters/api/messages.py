@@ -739,8 +739,9 @@ class StreamEndpoints(_Message):
 
 class StreamOpenReply(OkReply):
     stream: int = Field(description="the stream's number")
-    velocity_scale: float = Field(gt=0, le=1, description="the fraction of the stream's velocity limits its targets "
-                                  "may move at: no leg can then exceed its speed")
+    velocity_scale: float = Field(gt=0, le=1, description="the fraction of the stream's velocity limits available "
+                                  "in every direction at once where it starts; along the way the stream moves, its "
+                                  "targets may go faster, up to the legs' speed")
     endpoints: StreamEndpoints = Field(description="where to send the samples")
 
 

@@ -79,7 +79,7 @@ class ControllerPort(Protocol):
     def stream_open(self, source: str, frame: Frame | str = Frame.ZERO, timeout_s: float = 0.1, *,
                     deadline_ns: int | None = None) -> CommandResult:
         """Success details: ``stream`` (its number), ``velocity_scale`` (the fraction of the
-        stream's velocity limits its targets may move at)."""
+        stream's velocity limits available in every direction at once where it starts)."""
         ...
 
     def stream_close(self) -> CommandResult: ...
