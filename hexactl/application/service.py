@@ -55,7 +55,7 @@ from hexactl.adapters.api.security import (
     load_server_keys,
 )
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
-from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
+from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, check_telemetry_rate
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError
@@ -64,7 +64,7 @@ from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.dashboard import DashboardProcess
-from hexactl.application.loop_link import REPORT_INTERVAL_S, LoopExchange
+from hexactl.application.loop_link import LoopExchange
 from hexactl.application.simulator import InstrumentPort, Simulator
 from hexactl.application.spawned import Spawned, SpawnError
 from hexactl.control.config import ControllerConfig, LoopConfig, SupervisionConfig
@@ -200,6 +200,10 @@ class ServiceConfig:
     stream_endpoint: str | None = None
     stream_udp: tuple[str, int] | None = None
 
+    def __post_init__(self) -> None:
+        """:raises ValueError: a telemetry rate the publisher cannot keep, named with its range"""
+        check_telemetry_rate(self.telemetry_rate_hz)
+
 
 def _beside(api_endpoint: str) -> str:
     """A free port on the API's host (a TCP endpoint), else on loopback."""
@@ -303,11 +307,9 @@ class Service:
             pipes = multiprocessing.get_context("spawn")
             commands_in, commands_out = pipes.Pipe(duplex=False)
             reports_in, reports_out = pipes.Pipe(duplex=False)
-            # Reports as often as telemetry takes them (verdicts at once whatever the rate); a
-            # rate out of range is refused by the telemetry publisher, which names it.
-            rate = config.telemetry_rate_hz
+            # Reports as often as telemetry takes them (verdicts at once whatever the rate).
             exchange = LoopExchange(controller.thread, commands_in, reports_out,
-                                    interval_s=1 / rate if rate > 0 else REPORT_INTERVAL_S).start()
+                                    interval_s=1 / config.telemetry_rate_hz).start()
             closers.callback(exchange.close)
             realtime = controller.start(exchange)
             closers.callback(controller.shutdown)

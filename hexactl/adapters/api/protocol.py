@@ -13,6 +13,7 @@ PROTOCOL_VERSION = 1
 DEFAULT_API_ENDPOINT = "tcp://127.0.0.1:5555"
 DEFAULT_TELEMETRY_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_TELEMETRY_RATE_HZ = 50.0
+MAX_TELEMETRY_RATE_HZ = 1000.0
 
 TOPIC = b"telemetry "
 """The prefix of every telemetry message (a single frame: ``telemetry <json>``)."""
@@ -22,3 +23,14 @@ DEFAULT_TIMEOUT_S = 5.0
 
 MAX_DEADLINE_MS = 3_600_000
 """The largest ``deadline_ms`` (an hour): a bound, so that a deadline is always a time."""
+
+
+def check_telemetry_rate(rate_hz: float) -> float:
+    """``rate_hz`` if it is a rate telemetry can be published at, records per second.
+
+    :raises ValueError: outside (0, :data:`MAX_TELEMETRY_RATE_HZ`], naming the range
+    """
+    if not 0 < rate_hz <= MAX_TELEMETRY_RATE_HZ:
+        raise ValueError(f"telemetry rate {rate_hz:g} Hz outside (0, {MAX_TELEMETRY_RATE_HZ:g}]: "
+                         f"choose a rate in that range, e.g. {DEFAULT_TELEMETRY_RATE_HZ:g}")
+    return rate_hz

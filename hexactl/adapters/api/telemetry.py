@@ -18,12 +18,10 @@ from typing import Any
 
 import zmq
 
-from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_RATE_HZ, TOPIC
+from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_RATE_HZ, TOPIC, check_telemetry_rate
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import encode
-
-MAX_TELEMETRY_RATE_HZ = 1000.0
 
 _SEND_HIGH_WATER_MARK = 100  # records queued per slow subscriber before PUB drops them
 
@@ -43,7 +41,7 @@ class TelemetryPublisher(SocketThread):
     the control loop); an exception from it is logged (first occurrence and then every
     thousandth) and that period is skipped.
 
-    :raises ValueError: ``rate_hz`` outside (0, :data:`MAX_TELEMETRY_RATE_HZ`]
+    :raises ValueError: ``rate_hz`` outside (0, :data:`~hexactl.adapters.api.protocol.MAX_TELEMETRY_RATE_HZ`]
     :raises zmq.ZMQError: the endpoint is malformed or in use
     """
 
@@ -55,10 +53,8 @@ class TelemetryPublisher(SocketThread):
         rate_hz: float = DEFAULT_TELEMETRY_RATE_HZ,
         curve: CurveServer | None = None,
     ) -> None:
-        if not 0 < rate_hz <= MAX_TELEMETRY_RATE_HZ:
-            raise ValueError(f"telemetry rate {rate_hz} Hz outside (0, {MAX_TELEMETRY_RATE_HZ:g}]")
         self._record = record
-        self._period_s = 1.0 / rate_hz
+        self._period_s = 1.0 / check_telemetry_rate(rate_hz)
         self._failures = 0
         self.published = 0
         super().__init__(context, zmq.PUB, endpoint, name="hexactl-telemetry",

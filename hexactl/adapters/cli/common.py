@@ -20,7 +20,7 @@ from math import isfinite
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
-from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S
+from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, check_telemetry_rate
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
 
@@ -249,6 +249,14 @@ def positive_float(text: str) -> float:
     if not 0 < value < float("inf"):
         raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
     return value
+
+
+def telemetry_rate(text: str) -> float:
+    """An argparse ``type``: a telemetry rate, records per second, that the publisher can keep."""
+    try:
+        return check_telemetry_rate(positive_float(text))
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def fraction(text: str) -> float:

@@ -25,6 +25,7 @@ from hexactl.adapters.cli.common import (
     fraction,
     pose_argument,
     positive_float,
+    telemetry_rate,
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import format_telemetry, frames_lines, pose_text
@@ -156,7 +157,7 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
                        help="accepted for compatibility: the memory is locked by default (--no-realtime: not)")
     serve.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
     serve.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
-    serve.add_argument("--telemetry-rate", type=positive_float, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
+    serve.add_argument("--telemetry-rate", type=telemetry_rate, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
     serve.add_argument(
         "--data-dir", action="append", type=Path, metavar="DIR",
         help="directory requests may read calibration and sequence files from and write recordings to "
