@@ -259,6 +259,21 @@ def telemetry_rate(text: str) -> float:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
+def fifo_priority(lowest: int) -> Callable[[str], int]:
+    """An argparse ``type``: a SCHED_FIFO priority from ``lowest`` to 99."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if not lowest <= value <= 99:
+            raise argparse.ArgumentTypeError(f"{value} is not a SCHED_FIFO priority from {lowest} to 99")
+        return value
+
+    return parse
+
+
 def fraction(text: str) -> float:
     """An argparse ``type``: a number in (0, 1] (``move --speed``)."""
     try:

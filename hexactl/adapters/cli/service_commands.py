@@ -22,6 +22,7 @@ from hexactl.adapters.cli.common import (
     bounds_argument,
     connect,
     connection_parser,
+    fifo_priority,
     fraction,
     pose_argument,
     positive_float,
@@ -146,7 +147,7 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
     realtime = serve.add_mutually_exclusive_group()
-    realtime.add_argument("--fifo", type=int, choices=range(2, 100), default=DEFAULT_FIFO_PRIORITY, metavar="PRIO",
+    realtime.add_argument("--fifo", type=fifo_priority(2), default=DEFAULT_FIFO_PRIORITY, metavar="PRIO",
                           help=f"SCHED_FIFO priority 2-99 of the loop (default {DEFAULT_FIFO_PRIORITY}: real-time is the "
                           "default, --no-realtime turns it off); PRIO-1 for the simulator's thread, which shares the "
                           f"loop's GIL; the API process's threads on the way of a stop get nice {API_URGENT_NICENESS}; "

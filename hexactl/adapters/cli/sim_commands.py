@@ -9,7 +9,7 @@ import sys
 from types import FrameType
 from typing import TYPE_CHECKING
 
-from hexactl.adapters.cli.common import LEG_LABELS, CliError, load_config, parse_numbers
+from hexactl.adapters.cli.common import LEG_LABELS, CliError, fifo_priority, load_config, parse_numbers
 
 if TYPE_CHECKING:  # the simulator and python-can load when the command runs, not for every command
     from hexactl.kinematics.geometry import Geometry
@@ -42,6 +42,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     sim.add_argument("--drop-probability", type=float, default=0.0, help="each received frame is lost with this probability")
     sim.add_argument("--corrupt-probability", type=float, default=0.0,
                      help="each received frame is corrupted (bad CRC) with this probability")  # fmt: skip
+    sim.add_argument("--fifo", type=fifo_priority(1), metavar="PRIO",
+                     help="SCHED_FIFO priority 1-99 of the simulator, set once it is ready (its start-up would "
+                     "hold up the rest of a busy host); the ready line says what it got (default: normal "
+                     "scheduling)")  # fmt: skip
     sim.set_defaults(run=run_sim_actuators)
 
 
@@ -98,7 +102,8 @@ def run_sim_actuators(arguments: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
-    _print_json({"ready": True, "can": str(spec), "positions_mm": positions, "true_geometry": truth.name})
+    _print_json({"ready": True, "can": str(spec), "positions_mm": positions, "true_geometry": truth.name,
+                 "scheduling": _scheduling(arguments.fifo)})
     try:
         runner.serve(arguments.duration)
     finally:
@@ -120,6 +125,16 @@ def run_sim_actuators(arguments: argparse.Namespace) -> int:
         }
     )
     return 0
+
+
+def _scheduling(priority: int | None) -> str:
+    """Put this process's one thread under SCHED_FIFO at ``priority`` (None: leave it);
+    what it runs under, or why not, in words."""
+    from hexactl.control.realtime import set_fifo
+
+    if priority is None:
+        return "normal scheduling"
+    return set_fifo(priority) or f"SCHED_FIFO {priority}"
 
 
 def _print_json(document: dict[str, object]) -> None:
