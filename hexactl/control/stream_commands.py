@@ -1,12 +1,11 @@
 """The facade's pose stream: open and close a stream, and each target made reachable.
 
 A stream's targets are not validated as moves are (a whole path refused or run): each
-target that lies outside the workspace (the hardware's limits and the soft limits that
-every planned path is checked against, asked of one pose:
-:func:`~hexactl.control.planning.pose_allowed`) is
-replaced by the reachable pose nearest to it on the straight line from the last target
-handed to the loop, found by bisection. The platform then slows and stops on the
-boundary instead of being refused. The loop follows the targets
+target whose way from the last target handed to the loop leaves the workspace (the
+hardware's limits and the soft limits that every planned path is checked against, asked
+of one pose at a time, :func:`~hexactl.control.planning.pose_allowed`, along the straight
+line at the path step of moves) is replaced by the last reachable pose on that way, found
+by bisection. The platform then slows and stops on the boundary instead of being refused. The loop follows the targets
 (:mod:`hexactl.control.stream`) within the stream's limits, its velocity box shaped per
 target by :func:`stream_velocity_limits` so that no leg can be asked to move faster than
 the planning budget whatever the targets do.
@@ -16,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from math import isfinite, radians
+from math import ceil, isfinite, radians
 from operator import add
 
 import numpy as np
@@ -56,9 +55,8 @@ MIN_SAMPLE_GAP_S = 1e-4
 resolution (a time printed to the microsecond) would make a jump look like a huge speed."""
 
 BISECTION_STEPS = 12
-"""Halvings of the line to an unreachable target: the pose found lies within 1/4096 of
-the step from the last target of the boundary (a stream's steps are small; a jump far
-out is approached again from there by the next targets)."""
+"""Halvings of the path step in which the way to a target leaves the workspace: the pose
+found lies within 1/4096 of it of the boundary."""
 
 
 VELOCITY_FLOOR = 0.1
@@ -200,12 +198,13 @@ class StreamCommands:
         last one handed here, and the sender's times ``sent_s``, s). Nothing is sent when no
         stream is open or it ended (the loop ignores targets for a stream it ended).
 
-        Two workspace checks in the usual case: for a moving stream, of the aim and of
-        where the platform would come to rest if this were the last target (every pose on
-        the way lies between two that were checked); at rest, or when either is out of
-        reach, of the target itself, then without velocity (the loop arrives at rest on it),
-        bisected towards the last target if out of reach. Then the velocity box at the goal
-        (:func:`stream_velocity_limits`), which slows a velocity the legs cannot keep."""
+        Two workspace checks in the usual case: for a moving stream, of the way to the aim
+        (one sample: a stream's steps are shorter than the path step) and of where the
+        platform would come to rest if this were the last target; at rest, or when either is
+        out of reach, of the way to the target itself, then without velocity (the loop
+        arrives at rest on it), stopped where the way first leaves the workspace. Then the
+        velocity box at the goal (:func:`stream_velocity_limits`), which slows a velocity
+        the legs cannot keep."""
         stream = self._open
         if stream is None:
             return TargetResult(False)
@@ -221,10 +220,10 @@ class StreamCommands:
         stream.requested, stream.requested_at_s = requested, sent_s
         clamped = False
         goal = requested + velocity * horizon_s
-        # The way on is the last target (checked) → the aim → where braking from it ends: each
-        # end checked. The aim alone is not enough, nor the braking end alone: a sample out of
-        # reach whose velocity points back inside has its aim outside and its braking end inside.
-        if not velocity.any() or not (self._ok(stream, goal)
+        # The way on is the last target (checked) → the aim → where braking from it ends. The
+        # aim alone is not enough, nor the braking end alone: a sample out of reach whose
+        # velocity points back inside has its aim outside and its braking end inside.
+        if not velocity.any() or not (self._way_stop(stream, stream.last, goal) is None
                                       and self._ok(stream, goal + velocity * stream.braking_s(velocity))):
             velocity = np.zeros(6)
             goal, clamped = self._reachable(stream, requested)
@@ -252,19 +251,38 @@ class StreamCommands:
         return np.clip((requested - before) / (sent_s - before_s), -max_velocity, max_velocity)
 
     def _reachable(self, stream: _OpenStream, requested: np.ndarray) -> tuple[np.ndarray, bool]:
-        if self._ok(stream, requested):
-            return requested, False
+        """``requested`` if the way to it from the last target is allowed, else where that way
+        first leaves the workspace (once per request: a target held there is not walked again)."""
         if stream.replaced is not None and np.array_equal(stream.replaced[0], requested):
             return stream.replaced[1], True
-        inside, outside = stream.last, requested
-        for _ in range(BISECTION_STEPS):
-            middle = (inside + outside) / 2.0
-            if self._ok(stream, middle):
-                inside = middle
-            else:
-                outside = middle
-        stream.replaced = (requested, inside)
-        return inside, True
+        stop = self._way_stop(stream, stream.last, requested)
+        if stop is None:
+            return requested, False
+        stream.replaced = (requested, stop)
+        return stop, True
+
+    def _way_stop(self, stream: _OpenStream, start: np.ndarray, end: np.ndarray) -> np.ndarray | None:
+        """None when every pose on the straight way from ``start`` (allowed) to ``end`` is
+        allowed, sampled at the path step of moves (the workspace is not convex: two allowed
+        ends do not make the way between them allowed); else the farthest allowed pose before
+        the first sample that is not, bisected within that step."""
+        context = stream.context
+        step = end - start
+        samples = max(1, ceil(max(float(np.abs(step[:3]).max()) / context.path_step_mm,
+                                  float(np.abs(step[3:]).max()) / radians(context.path_step_deg))))
+        inside = start
+        for sample in range(1, samples + 1):
+            outside = start + step * (sample / samples)
+            if not self._ok(stream, outside):
+                for _ in range(BISECTION_STEPS):
+                    middle = (inside + outside) / 2.0
+                    if self._ok(stream, middle):
+                        inside = middle
+                    else:
+                        outside = middle
+                return inside
+            inside = outside
+        return None
 
     @staticmethod
     def _ok(stream: _OpenStream, position: np.ndarray) -> bool:

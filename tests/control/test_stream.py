@@ -178,3 +178,31 @@ def test_a_sample_out_of_reach_moving_back_inside_is_not_aimed_at_outside(rig, g
         assert result.sent and assess_pose(geometry, result.goal).ok, result
     assert rig.controller.snapshot.clamped_cycles == 0
     rig.assert_setpoints_safe()
+
+
+@pytest.mark.parametrize("start, target", [
+    ((558.0, -500.7, -159.1, -11.3, 7.8, -10.6), (-103.3, -75.5, -185.9, -12.6, 10.1, -18.6)),
+    ((-103.3, -75.5, -185.9, -12.6, 10.1, -18.6), (558.0, -500.7, -159.1, -11.3, 7.8, -10.6)),
+])
+def test_a_target_in_reach_whose_way_leaves_the_workspace_stops_the_platform_on_the_boundary(
+        make_rig, geometry, start, target) -> None:
+    """Found from outside: both poses are in reach, the straight way between them is not (leg 2
+    would pass below its stroke midway). Checking the target alone handed it to the loop, and
+    the set-point guard held leg 2 at its stroke end for 4.5 s while the other legs moved on."""
+    assert assess_pose(geometry, start).ok and assess_pose(geometry, target).ok
+    rig = make_rig(start_pose=start)
+    _opened(rig)
+    commanded = []
+    for n in range(1500):
+        result = rig.controller.stream_target(target, n + 1, rig.clock.now_ns / 1e9, rig.clock.now_ns)
+        assert result.sent and result.clamped and assess_pose(geometry, result.goal).ok, result
+        rig.run()
+        commanded.append(rig.controller.snapshot.pose_command.in_degrees())
+    assert all(assess_pose(geometry, pose).ok for pose in commanded[::10])
+    s = rig.controller.snapshot
+    assert s.clamped_cycles == 0 and s.state.value == "enabled" and s.motion.value == "holding"
+    way = np.subtract(target, start)
+    travelled = np.subtract(s.pose_command.in_degrees(), start)
+    assert np.allclose(travelled, way * (travelled[0] / way[0]), atol=0.2)  # on the way to the target
+    assert not assess_pose(geometry, start + way * (travelled[0] / way[0] + 0.01)).ok  # and on its boundary
+    rig.assert_setpoints_safe()
