@@ -52,10 +52,12 @@ class FakeStreamInput:
     """A stream receiver's endpoints and an empty view."""
 
     endpoints = {"zmq": "tcp://127.0.0.1:5557", "udp": None}
+    running = True
 
     def view(self) -> dict[str, Any]:
-        return {"stream": None, "received": 0, "malformed": 0, "out_of_order": 0, "no_stream": 0, "coalesced": 0,
-                "forwarded": 0, "clamped": 0, "last_problem": "", "rate_hz": 0, "loop_latency_ms": None, "age_ms": None}
+        return {"running": self.running, "stream": None, "received": 0, "malformed": 0, "out_of_order": 0,
+                "no_stream": 0, "coalesced": 0, "forwarded": 0, "clamped": 0, "failed": 0, "last_problem": "",
+                "rate_hz": 0, "loop_latency_ms": None, "age_ms": None}
 
 
 @dataclass

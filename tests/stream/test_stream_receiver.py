@@ -4,16 +4,25 @@ and the newest wins."""
 
 from __future__ import annotations
 
+import socket
 import time
 from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 import pytest
 import zmq
 
+from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.messages import StreamOpenRequest
+from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.stream_receiver import StreamReceiver
-from hexactl.adapters.api.stream_wire import encode
+from hexactl.adapters.api.stream_wire import MalformedSample, decode, encode
+from hexactl.adapters.api.wire import ApiError, ErrorCode
+from hexactl.adapters.files.config_path import default_config_path
+from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.control.stream import StreamPhase, StreamProgress
 from hexactl.control.stream_commands import TargetResult
+from tests.api.support import FakeController, FakeStreamInput
 from tests.reliability.support import wait_for
 
 PERIOD_S = 0.01
@@ -88,3 +97,109 @@ def test_after_a_quiet_spell_the_periods_missed_are_not_caught_up(receiving) -> 
     send_samples(push, 2, more)
     wait_for(lambda: controller.targets[-1][1] == 1 + more, "the newest sample to go on")
     assert_once_a_period_at_most(controller.targets[1:])
+
+
+class FailingController(RecordingController):
+    """Fails to take the target with ``failing`` as its sequence; records the others."""
+
+    def __init__(self, failing: int) -> None:
+        super().__init__()
+        self.failing = failing
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+                      before: tuple[Sequence[float], float] | None) -> TargetResult:
+        if sequence == self.failing:
+            raise RuntimeError("a controller that fails")
+        return super().stream_target(pose, sequence, sent_s, received_ns, before)
+
+
+@contextmanager
+def receiver_with_udp(controller: RecordingController) -> Iterator[tuple[StreamReceiver, zmq.Socket, socket.socket]]:
+    """A started receiver with a UDP port, a PUSH socket and a UDP socket connected to it."""
+    progress = StreamProgress(1, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+    with zmq.Context() as context:
+        receiver = StreamReceiver(context, "tcp://127.0.0.1:*", ("127.0.0.1", 0), controller.stream_target, PERIOD_S,
+                                  lambda: progress)
+        receiver.start()
+        push = context.socket(zmq.PUSH)
+        push.linger = 0
+        push.connect(receiver.endpoint)
+        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        host, port = receiver.endpoints["udp"].rsplit(":", 1)
+        udp.connect((host, int(port)))
+        try:
+            yield receiver, push, udp
+        finally:
+            udp.close()
+            push.close()
+            receiver.close()
+
+
+def send_slowly(send, messages: list[bytes]) -> None:
+    """Each message a period and a half after the one before: each is handed on alone."""
+    for message in messages:
+        send(message)
+        time.sleep(1.5 * PERIOD_S)
+
+
+def test_a_sender_time_too_large_for_any_clock_is_malformed_and_the_input_goes_on() -> None:
+    """Found from outside: sent_s 1e300 (finite) overflowed the age in nanoseconds, and the
+    exception ended the receiver's thread for good while status looked healthy."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, udp):
+        send_slowly(push.send, [encode(1, 1e300, [0.0] * 6)])
+        send_slowly(udp.send, [b"2 1e300 0 0 1 0 0 0\n", encode(3, time.monotonic(), [1.0, 0, 0, 0, 0, 0])])
+        wait_for(lambda: [sequence for _, sequence in controller.targets] == [3], "the good sample to go on")
+        assert receiver.running and receiver.counters.malformed == 2
+        assert "sent_s is a time in s within" in receiver.counters.last_problem
+
+
+def test_an_error_handing_a_target_on_is_counted_and_the_next_target_goes_on() -> None:
+    controller = FailingController(failing=1)
+    with receiver_with_udp(controller) as (receiver, push, _):
+        send_slowly(push.send, [encode(1, time.monotonic(), [0.0] * 6), encode(2, time.monotonic(), [0.1, 0, 0, 0, 0, 0])])
+        wait_for(lambda: [sequence for _, sequence in controller.targets] == [2], "the next sample to go on")
+        view = receiver.view()
+        assert view["running"] and view["failed"] == 1 and view["forwarded"] == 1
+        assert "target 1 could not be handed to the loop: RuntimeError" in view["last_problem"]
+
+
+def test_a_message_of_several_frames_is_not_a_sample() -> None:
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        send_slowly(push.send_multipart, [[encode(1, time.monotonic(), [0.0] * 6), b"extra"]])
+        send_slowly(push.send, [encode(2, time.monotonic(), [0.1, 0, 0, 0, 0, 0])])
+        wait_for(lambda: controller.targets, "the one-frame sample to go on")
+        assert [sequence for _, sequence in controller.targets] == [2]
+        assert receiver.counters.received == 2 and receiver.counters.malformed == 1
+        assert "one frame, this one has 2" in receiver.counters.last_problem
+
+
+def test_a_six_number_line_is_the_newest_and_does_not_let_an_old_sample_back_in() -> None:
+    """Found from outside: a 6-number line was numbered by arrival (1, 2, …), which let a
+    binary sample older than the last one taken in again after it."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, udp):
+        send_slowly(push.send, [encode(100, time.monotonic(), [0.0] * 6), encode(50, time.monotonic(), [5.0, 0, 0, 0, 0, 0])])
+        send_slowly(udp.send, [b"1 0 0 0 0 0\n"])
+        send_slowly(push.send, [encode(50, time.monotonic(), [9.0, 0, 0, 0, 0, 0])])
+        wait_for(lambda: receiver.counters.received == 4, "every message read")
+        wait_for(lambda: len(controller.targets) == 2, "the line to go on")
+        assert [sequence for _, sequence in controller.targets] == [100, 101]
+        assert receiver.counters.out_of_order == 2
+
+
+@pytest.mark.parametrize("line", [b"1_0 0 0 0 0 0", b"inf 0 0 0 0 0", b"0x10 0 0 0 0 0", b"nan 0 0 0 0 0"])
+def test_a_text_line_takes_decimal_numbers_only(line: bytes) -> None:
+    with pytest.raises(MalformedSample, match="text line of decimal numbers"):
+        decode(line)
+
+
+def test_stream_open_is_refused_once_the_input_has_stopped(tmp_path) -> None:
+    stopped = FakeStreamInput()
+    stopped.running = False
+    handler = CommandHandler(FakeController(load_geometry(default_config_path())), DataDirectories([tmp_path]),
+                             stream_input=stopped)
+    with pytest.raises(ApiError) as refused:
+        handler(StreamOpenRequest(v=1, id=1, cmd="stream_open", source="simulator", timeout_ms=100))
+    assert refused.value.code == ErrorCode.NO_STREAM_INPUT and "restart the service" in refused.value.message

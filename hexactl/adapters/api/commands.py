@@ -208,6 +208,9 @@ class CommandHandler:
         if self.stream_input is None:
             raise ApiError(ErrorCode.NO_STREAM_INPUT, "this service takes no stream input (a test's handler): stream "
                            "with hexactl serve")
+        if not self.stream_input.running:
+            raise ApiError(ErrorCode.NO_STREAM_INPUT, "the stream input has stopped (the service's log says why): "
+                           "restart the service to stream")
         result = self.controller.stream_open(request.source, Frame(request.frame), request.timeout_ms / 1000.0,
                                              deadline_ns=deadline_ns)
         return _checked(result, stream=result.details.get("stream"), velocity_scale=result.details.get("velocity_scale"),

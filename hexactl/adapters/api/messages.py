@@ -599,6 +599,8 @@ class StreamPercentiles(_Message):
 class StreamInputTelemetry(_Message):
     """What the pose stream's receiver counted since the current (or last) stream opened."""
 
+    running: bool = Field(description="the input takes samples; false: it stopped (the service's log says why) and "
+                          "stream_open is refused until the service restarts")
     stream: int | None = Field(description="the stream the counts are for; null before the first")
     received: int = Field(ge=0, description="messages read, well formed or not")
     malformed: int = Field(ge=0, description="not a sample (docs/stream.md), dropped")
@@ -608,9 +610,11 @@ class StreamInputTelemetry(_Message):
     coalesced: int = Field(ge=0, description="superseded by a newer sample before the loop's next cycle (not lost: "
                            "the newest wins)")
     forwarded: int = Field(ge=0, description="handed to the loop")
-    clamped: int = Field(ge=0, description="of those, out of reach and replaced by the nearest reachable pose on the "
-                         "way")
-    last_problem: str = Field(description="the last malformed message's problem, or empty")
+    clamped: int = Field(ge=0, description="of those, out of reach (or their way from the last one) and replaced by "
+                         "the last reachable pose on the way")
+    failed: int = Field(ge=0, description="could not be handed to the loop (an error, in the service's log)")
+    last_problem: str = Field(description="the last problem with a message (malformed, or an error taking it), or "
+                              "empty")
     rate_hz: int = Field(ge=0, description="samples taken over the last second")
     loop_latency_ms: StreamPercentiles | None = Field(description="arrival → the loop cycle whose set-points carry it")
     age_ms: StreamPercentiles | None = Field(description="the sender's sent_s → arrival: meaningful only when the "

@@ -144,6 +144,11 @@ class StreamInput(Protocol):
         """``zmq``: the endpoint to connect a PUSH socket to; ``udp``: HOST:PORT, or None."""
         ...
 
+    @property
+    def running(self) -> bool:
+        """Whether it takes samples."""
+        ...
+
     def view(self) -> dict[str, Any]:
         """What it counted and measured, for telemetry's ``stream_input``."""
         ...

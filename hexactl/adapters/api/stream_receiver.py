@@ -12,6 +12,11 @@ and how late the targets reach the loop are in telemetry's ``stream_input``
 
 Samples that arrive while no stream is open are counted and dropped: a stream is opened
 by the ``stream_open`` command, never by its data.
+
+Nothing a sender does stops the thread: a message that cannot be taken, for whatever
+reason, is counted as malformed, and an error handing a target to the controller is
+logged and counted; the thread goes on with the next. Should it end all the same,
+``running`` says so in telemetry and ``stream_open`` is refused.
 """
 
 from __future__ import annotations
@@ -42,6 +47,9 @@ KEPT_LATENCIES = 2000
 
 UDP_BUFFER_BYTES = 1 << 20
 
+LOG_INTERVAL_S = 1.0
+"""A new problem with the input is logged at most this often (all are counted)."""
+
 log = logging.getLogger("hexactl.stream")
 
 Target = Callable[[Sequence[float], int, float, int, tuple[Sequence[float], float] | None], TargetResult]
@@ -59,6 +67,7 @@ class StreamCounters:
         self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
         self.forwarded = 0
         self.clamped = 0  # out of reach, replaced by the nearest reachable pose on the way
+        self.failed = 0  # could not be handed to the controller (an error, logged)
         self.last_problem = ""
 
 
@@ -94,10 +103,10 @@ class StreamReceiver(SocketThread):
         self.counters = StreamCounters()
         self._stream: int | None = None  # the loop's stream the counters are for
         self._last_sequence: int | None = None
-        self._arrivals = 0  # numbers the samples that carry none
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
         self._last: Sample | None = None  # the newest sample taken
         self._due_ns = 0  # when the next sample may go to ``target``
+        self._next_log_ns = 0  # when a new problem may be logged
         self._taken = 0  # the loop's target count when last looked at
         self._loop_latency_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
         self._age_ns: collections.deque[int] = collections.deque(maxlen=KEPT_LATENCIES)
@@ -119,11 +128,16 @@ class StreamReceiver(SocketThread):
         stamps its samples with this host's CLOCK_MONOTONIC, as tools/bench_stream.py does)."""
         now = time.monotonic_ns()
         c = self.counters
-        return {"stream": self._stream, "received": c.received, "malformed": c.malformed,
+        return {"running": self.running, "stream": self._stream, "received": c.received, "malformed": c.malformed,
                 "out_of_order": c.out_of_order, "no_stream": c.no_stream, "coalesced": c.coalesced,
-                "forwarded": c.forwarded, "clamped": c.clamped, "last_problem": c.last_problem,
+                "forwarded": c.forwarded, "clamped": c.clamped, "failed": c.failed, "last_problem": c.last_problem,
                 "rate_hz": sum(1 for t in list(self._arrived_ns) if now - t <= 1_000_000_000),
                 "loop_latency_ms": _percentiles(self._loop_latency_ns), "age_ms": _percentiles(self._age_ns)}
+
+    @property
+    def running(self) -> bool:
+        """Whether the thread takes samples (started and not ended)."""
+        return self._thread.is_alive()
 
     def close(self) -> None:
         super().close()
@@ -142,7 +156,10 @@ class StreamReceiver(SocketThread):
             if self._pending is not None:  # rounded up: a wait rounded down would spin until the time is due
                 wait_ms = max(0, -((time.monotonic_ns() - self._due_ns) // 1_000_000))
             poller.poll(wait_ms)
-            self._watch_loop()  # first: samples that follow a stream_open's reply count for the new stream
+            try:
+                self._watch_loop()  # first: samples that follow a stream_open's reply count for the new stream
+            except Exception as error:  # the controller's view, in this process: logged, and read again next wake
+                self._failed("reading the loop's stream failed", error)
             self._read()
             now_ns = time.monotonic_ns()
             if self._pending is not None and now_ns >= self._due_ns:
@@ -155,10 +172,10 @@ class StreamReceiver(SocketThread):
     def _read(self) -> None:
         for _ in range(MAX_PER_WAKE):
             try:
-                message = self._socket.recv(zmq.NOBLOCK)
+                frames = self._socket.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
                 break
-            self._take(message)
+            self._taken_or_counted(frames[0] if len(frames) == 1 else None, len(frames))
         if self._udp is None:
             return
         for _ in range(MAX_PER_WAKE):
@@ -169,13 +186,24 @@ class StreamReceiver(SocketThread):
             except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
                 self._problem(f"UDP receive failed: {error}")
                 break
-            self._take(message)
+            self._taken_or_counted(message)
 
-    def _take(self, message: bytes) -> None:
+    def _taken_or_counted(self, message: bytes | None, frames: int = 1) -> None:
+        """Take ``message`` (None: a ZeroMQ message of ``frames`` frames, not a sample), or
+        count it as malformed, whatever goes wrong."""
+        try:
+            self._take(message, frames)
+        except Exception as error:  # a sample no check foresaw must not end the thread
+            self.counters.malformed += 1
+            self._failed("a message could not be taken", error)
+
+    def _take(self, message: bytes | None, frames: int) -> None:
         received_ns = time.monotonic_ns()
         c = self.counters
         c.received += 1
         try:
+            if message is None:
+                raise MalformedSample(f"a sample is a ZeroMQ message of one frame, this one has {frames}")
             sample = decode(message)
         except MalformedSample as error:
             c.malformed += 1
@@ -184,9 +212,8 @@ class StreamReceiver(SocketThread):
         if self._stream is None:
             c.no_stream += 1
             return
-        if sample.sequence is None:
-            self._arrivals += 1
-            sample = Sample(self._arrivals, received_ns / 1e9, sample.pose)
+        if sample.sequence is None:  # numbered after the last taken, of either form: the newest
+            sample = Sample((self._last_sequence or 0) + 1, received_ns / 1e9, sample.pose)
         elif self._last_sequence is not None and sample.sequence <= self._last_sequence:
             c.out_of_order += 1
             return
@@ -210,7 +237,6 @@ class StreamReceiver(SocketThread):
                 self.counters = StreamCounters()
                 self._last_sequence = None
                 self._last = None
-                self._arrivals = 0
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()
                 self._arrived_ns.clear()
@@ -224,17 +250,33 @@ class StreamReceiver(SocketThread):
     def _forward(self) -> None:
         (sample, received_ns, before), self._pending = self._pending, None  # type: ignore[misc]
         assert sample.sequence is not None and sample.sent_s is not None
-        result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns,
-                              None if before is None or before.sent_s is None else (before.pose, before.sent_s))
+        try:
+            result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns,
+                                  None if before is None or before.sent_s is None else (before.pose, before.sent_s))
+        except Exception as error:  # the controller's, in this process: the loop brakes if no target follows
+            self.counters.failed += 1
+            self._failed(f"target {sample.sequence} could not be handed to the loop", error)
+            return
         if result.sent:
             self.counters.forwarded += 1
             self.counters.clamped += result.clamped
         else:
             self.counters.no_stream += 1
 
-    def _problem(self, problem: str) -> None:
-        if problem != self.counters.last_problem:
-            log.warning("stream input: %s", problem)
+    def _failed(self, what: str, error: Exception) -> None:
+        """A failure no check foresaw: named in ``last_problem``, logged with its traceback."""
+        self._problem(f"{what}: {type(error).__name__}: {error}", error)
+
+    def _problem(self, problem: str, error: Exception | None = None) -> None:
+        """``problem`` becomes ``last_problem``; it is logged when it is new, at most once
+        every :data:`LOG_INTERVAL_S` (a sender alternating two bad messages cannot flood the log)."""
+        now_ns = time.monotonic_ns()
+        if problem != self.counters.last_problem and now_ns >= self._next_log_ns:
+            self._next_log_ns = now_ns + round(LOG_INTERVAL_S * 1e9)
+            if error is None:
+                log.warning("stream input: %s", problem)
+            else:
+                log.error("stream input: %s", problem, exc_info=error)
         self.counters.last_problem = problem
 
 

@@ -19,8 +19,13 @@ network.
 **Text** (ASCII, what motion-simulator software can be set up to emit: FlyPT Mover's
 and SimTools' UDP outputs send a line built from a template): 8 numbers, ``sequence
 sent_s x y z roll pitch yaw``, or 6, ``x y z roll pitch yaw`` (then the receiver numbers
-them in arrival order and stamps them on arrival: reordering cannot be detected),
-separated by spaces, commas or semicolons, an optional line end.
+them after the last sample taken and stamps them on arrival: reordering cannot be
+detected), separated by spaces, commas or semicolons, an optional line end. Each number is
+written as a decimal (``-12``, ``0.5``, ``1e-3``); Python's other spellings (``1_0``,
+``inf``) are refused.
+
+``sent_s`` is a time in seconds of the sender's clock (its origin is the sender's):
+within ±:data:`MAX_SENT_S`.
 """
 
 from __future__ import annotations
@@ -35,7 +40,11 @@ from hexactl.kinematics.axes import POSE_MAGNITUDE_LIMIT
 MAGIC = b"HXS1"
 BINARY = struct.Struct("<4sId6d")
 MAX_TEXT_BYTES = 512
+MAX_SENT_S = 1e12
+"""The largest sender's time, s (31 700 years): any clock a sender keeps, and far from where
+a time in nanoseconds would overflow."""
 _SEPARATORS = re.compile(r"[\s,;]+")
+_DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
 
 class MalformedSample(ValueError):
@@ -74,9 +83,11 @@ def decode(message: bytes) -> Sample:
                               f"{MAX_TEXT_BYTES} bytes ({len(message)} bytes)")
     try:
         fields = [field for field in _SEPARATORS.split(message.decode("ascii").strip()) if field]
-        values = [float(field) for field in fields]
-    except (UnicodeDecodeError, ValueError):
-        raise MalformedSample("neither a binary sample (magic b'HXS1') nor a text line of numbers") from None
+    except UnicodeDecodeError:
+        fields = []
+    if not fields or not all(_DECIMAL.fullmatch(field) for field in fields):
+        raise MalformedSample("neither a binary sample (magic b'HXS1') nor a text line of decimal numbers")
+    values = [float(field) for field in fields]
     if len(values) == 6:
         return _checked(None, None, values)
     if len(values) == 8:
@@ -89,8 +100,8 @@ def decode(message: bytes) -> Sample:
 
 
 def _checked(sequence: int | None, sent_s: float | None, pose: list[float]) -> Sample:
-    if sent_s is not None and not isfinite(sent_s):
-        raise MalformedSample(f"a sample's sent_s is a finite time in s, got {sent_s}")
+    if sent_s is not None and not (isfinite(sent_s) and abs(sent_s) <= MAX_SENT_S):
+        raise MalformedSample(f"a sample's sent_s is a time in s within ±{MAX_SENT_S:g}, got {sent_s}")
     for value in pose:
         if not isfinite(value) or abs(value) > POSE_MAGNITUDE_LIMIT:
             raise MalformedSample(f"a sample's pose is six finite numbers (mm, deg) within ±{POSE_MAGNITUDE_LIMIT:g}, "
