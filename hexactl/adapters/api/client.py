@@ -80,6 +80,10 @@ class ZmqConnection:
         self.close()
 
 
+ENVELOPE_FIELDS = frozenset({"v", "id", "cmd"})
+"""What every request carries besides its command's fields."""
+
+
 class HexactlClient(ZmqConnection):
     """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
 
@@ -103,21 +107,31 @@ class HexactlClient(ZmqConnection):
         self.timeout_s = timeout_s
         self._ids = itertools.count(1)
 
-    def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
-        """Send a command and return the whole reply, ok or not.
+    def request(self, cmd: str, /, **fields: Any) -> dict[str, Any]:
+        """Send a command and return the whole reply, ok or not. A request the service could
+        not read (too large, not JSON) is answered without its ``id``: that error is the reply.
 
-        Raises :class:`ServiceUnavailable` when it cannot be sent or no reply arrives
-        within ``timeout_s``.
+        :raises ValueError: a field is the envelope's (``v``, ``id``, ``cmd``), not finite (NaN
+            or infinity) or not JSON-able; nothing is sent
+        :raises ServiceUnavailable: it cannot be sent or no reply arrives within ``timeout_s``
         """
+        if envelope := sorted(ENVELOPE_FIELDS & fields.keys()):
+            raise ValueError(f"{cmd}: {', '.join(envelope)}: the request's envelope, not a command's field")
         request_id = next(self._ids)
         fields = {"deadline_ms": deadline_ms(self.timeout_s), **fields}
+        try:
+            message = json.dumps({"v": PROTOCOL_VERSION, "id": request_id, "cmd": cmd, **fields}, allow_nan=False)
+        except ValueError as error:
+            raise ValueError(f"{cmd}: the API takes finite numbers only, not NaN or infinity ({error})") from None
+        except TypeError as error:
+            raise ValueError(f"{cmd}: a field is not a JSON value ({error})") from None
         deadline = time.monotonic() + self.timeout_s
         unavailable = ServiceUnavailable(
             f"no answer from {self.endpoint} within {self.timeout_s:g} s: is `hexactl serve` running there?"
         )
         self.socket.sndtimeo = max(1, round(self.timeout_s * 1000))
         try:
-            self.socket.send(json.dumps({"v": PROTOCOL_VERSION, "id": request_id, "cmd": cmd, **fields}).encode())
+            self.socket.send(message.encode())
         except zmq.Again:
             raise unavailable from None
         while True:
@@ -125,10 +139,10 @@ class HexactlClient(ZmqConnection):
             if remaining_s <= 0 or not self.socket.poll(remaining_s * 1000.0):
                 raise unavailable
             reply = json.loads(self.socket.recv_multipart()[-1])
-            if reply.get("id") == request_id:
+            if reply.get("id") == request_id or (reply.get("id") is None and reply.get("ok") is False):
                 return reply
 
-    def call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+    def call(self, cmd: str, /, **fields: Any) -> dict[str, Any]:
         """Send a command; return its reply when ok, else raise :class:`CommandError`
         (and :class:`ServiceUnavailable` on no reply)."""
         reply = self.request(cmd, **fields)

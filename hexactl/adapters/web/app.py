@@ -34,7 +34,7 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from hexactl.adapters.web.bridge import ServiceBridge
+from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply
 
 MAX_MESSAGE_BYTES = 64 * 1024
 """The largest WebSocket message a page may send (a command is a few hundred bytes)."""
@@ -137,21 +137,33 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
                 message = {**message, "sent_ms": time.time() * 1000.0}
             await websocket.send_text(json.dumps(message))
 
-    async def answer(request_id: Any, cmd: str, fields: dict[str, Any]) -> None:
-        reply = await bridge.command(cmd, fields)
+    async def reply(request_id: Any, reply: dict[str, Any]) -> None:
         await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": reply}))
+
+    async def answer(request_id: Any, cmd: str, fields: dict[str, Any]) -> None:
+        try:
+            outcome = await bridge.command(cmd, fields)
+        except Exception as error:  # every command gets a reply, whatever fails on the way
+            log.exception("command %s from a page failed", cmd)
+            outcome = error_reply("internal_error", f"the dashboard could not carry {cmd}: {type(error).__name__}: {error}")
+        await reply(request_id, outcome)
 
     sender = asyncio.create_task(send_updates())
     try:
         while True:
-            text = await websocket.receive_text()
-            request_id, parsed = _command(text)
-            if isinstance(parsed, str):
-                await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": _error("invalid_request", parsed)}))
+            received = await websocket.receive()
+            if received["type"] == "websocket.disconnect":
+                break
+            if received.get("text") is None:
+                await reply(None, error_reply("invalid_request", "the page sends text messages (JSON), not binary"))
                 continue
-            if len(in_flight) >= MAX_COMMANDS_IN_FLIGHT and parsed[0] not in ("estop", "stop", "abort"):
-                await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": _error(
-                    "busy", f"{MAX_COMMANDS_IN_FLIGHT} commands of this page are waiting: wait for their replies")}))
+            request_id, parsed = _command(received["text"])
+            if isinstance(parsed, str):
+                await reply(request_id, error_reply("invalid_request", parsed))
+                continue
+            if len(in_flight) >= MAX_COMMANDS_IN_FLIGHT and parsed[0] not in URGENT_COMMANDS:
+                await reply(request_id, error_reply(
+                    "busy", f"{MAX_COMMANDS_IN_FLIGHT} commands of this page are waiting: wait for their replies"))
                 continue
             task = asyncio.create_task(answer(request_id, *parsed))
             in_flight.add(task)
@@ -163,13 +175,17 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
         bridge.unsubscribe(updates)
 
 
+def _not_json(constant: str) -> Any:
+    raise ValueError(f"{constant} is not a JSON number: commands take finite numbers")
+
+
 def _command(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | str]:
     """(the message's id, (cmd, fields) or why it is not a command)."""
     if len(text) > MAX_MESSAGE_BYTES:
         return None, f"a message is at most {MAX_MESSAGE_BYTES} bytes"
     try:
-        message = json.loads(text)
-    except json.JSONDecodeError as error:
+        message = json.loads(text, parse_constant=_not_json)
+    except (ValueError, RecursionError) as error:  # JSONDecodeError, NaN, a number of thousands of digits, deep nesting
         return None, f"not JSON: {error}"
     if not isinstance(message, dict):
         return None, "a message is a JSON object"
@@ -181,10 +197,6 @@ def _command(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | str]:
         return request_id, "a command names its cmd"
     fields = {key: value for key, value in message.items() if key not in ("type", "id", "cmd")}
     return request_id, (cmd, fields)
-
-
-def _error(code: str, message: str) -> dict[str, Any]:
-    return {"ok": False, "error": {"code": code, "message": message}}
 
 
 async def _chunks(bridge: ServiceBridge, name: str, first: dict[str, Any]) -> AsyncIterator[bytes]:

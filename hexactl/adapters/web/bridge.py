@@ -5,7 +5,8 @@ record to the pages' queues (newest only: a page that draws slowly skips records
 never falls behind); it fetches the active geometry whenever the calibration changes; and
 it carries the pages' commands to the API, each on a client of its own in a worker
 thread, so that a slow command never holds up another. ``estop``, ``stop`` and ``abort``
-have their own worker: a page that floods the others cannot delay them.
+each have a worker of their own (:class:`UrgentCommand`): a page that floods the others,
+or floods one of them, cannot delay another.
 
 The dashboard adds no privilege: every command is an API request like any client's, and
 the service validates it.
@@ -24,8 +25,9 @@ from typing import Any
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
 
-URGENT_COMMANDS = frozenset({"estop", "stop", "abort"})
-"""Commands carried out on their own worker, never queued behind others."""
+URGENT_COMMANDS = ("estop", "stop", "abort")
+"""Commands carried out each on a worker of its own, never queued behind others. None
+takes fields."""
 
 COMMAND_WORKERS = 4
 """Worker threads for the other commands (a command waits at most the API timeout)."""
@@ -52,6 +54,33 @@ class ServiceEndpoints:
     connect: Callable[..., Any]
 
 
+class UrgentCommand:
+    """``name`` (an urgent command, no fields) sent by ``request(name, {})`` on a thread of
+    its own, one at a time. A press while one is waiting to be sent shares its reply; a
+    press while one is being sent waits for the next. So every press is carried out after
+    it was made, and a flood of presses costs one request at a time, never a queue."""
+
+    def __init__(self, name: str, request: Callable[[str, dict[str, Any]], dict[str, Any]]) -> None:
+        self.name = name
+        self._request = request
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix=f"dashboard-{name}")
+        self._one_at_a_time = asyncio.Lock()
+        self._waiting: asyncio.Task[dict[str, Any]] | None = None
+
+    async def __call__(self) -> dict[str, Any]:
+        if self._waiting is None:
+            self._waiting = asyncio.get_running_loop().create_task(self._send())
+        return await asyncio.shield(self._waiting)
+
+    async def _send(self) -> dict[str, Any]:
+        async with self._one_at_a_time:
+            self._waiting = None  # being sent: a press from now on waits for the next
+            return await asyncio.get_running_loop().run_in_executor(self._worker, self._request, self.name, {})
+
+    def close(self) -> None:
+        self._worker.shutdown(wait=False, cancel_futures=True)
+
+
 @dataclass(frozen=True)
 class Update:
     """What a page receives: one JSON-able message (see :meth:`ServiceBridge.subscribe`)."""
@@ -68,7 +97,7 @@ class ServiceBridge:
         self._pages: set[asyncio.Queue[dict[str, Any]]] = set()
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
-        self._urgent = ThreadPoolExecutor(1, thread_name_prefix="dashboard-urgent")
+        self._urgent = {name: UrgentCommand(name, self._request) for name in URGENT_COMMANDS}
         self._workers = ThreadPoolExecutor(COMMAND_WORKERS, thread_name_prefix="dashboard-command")
         self.connected = False
         self.geometry: dict[str, Any] | None = None
@@ -86,7 +115,8 @@ class ServiceBridge:
         self._stopping.set()
         if self._thread is not None:
             self._thread.join(timeout=2 * LINK_TIMEOUT_S)
-        self._urgent.shutdown(wait=False, cancel_futures=True)
+        for urgent in self._urgent.values():
+            urgent.close()
         self._workers.shutdown(wait=False, cancel_futures=True)
 
     # -- pages -----------------------------------------------------------------------
@@ -120,9 +150,13 @@ class ServiceBridge:
 
     async def command(self, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
         """The API's reply to ``cmd`` with ``fields``, ok or not; an ``unavailable`` error
-        reply when the service does not answer in time."""
-        pool = self._urgent if cmd in URGENT_COMMANDS else self._workers
-        return await asyncio.get_running_loop().run_in_executor(pool, self._request, cmd, fields)
+        reply when the service does not answer in time, ``invalid_request`` for fields no
+        request can carry (an urgent command's, the envelope's, a number not finite)."""
+        if (urgent := self._urgent.get(cmd)) is not None:
+            if fields:
+                return error_reply("invalid_request", f"{cmd} takes no fields, got {', '.join(sorted(fields))}")
+            return await urgent()
+        return await asyncio.get_running_loop().run_in_executor(self._workers, self._request, cmd, fields)
 
     def _request(self, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
         endpoints = self.endpoints
@@ -130,7 +164,9 @@ class ServiceBridge:
             with endpoints.connect(HexactlClient, endpoints.api, timeout_s=endpoints.timeout_s) as client:
                 return client.request(cmd, **fields)
         except ServiceUnavailable as error:
-            return {"ok": False, "error": {"code": "unavailable", "message": str(error)}}
+            return error_reply("unavailable", str(error))
+        except ValueError as error:  # refused by the client before sending
+            return error_reply("invalid_request", str(error))
 
     # -- telemetry -------------------------------------------------------------------
 
@@ -175,6 +211,11 @@ class ServiceBridge:
     def _call(self, function: Callable[..., None], *arguments: Any) -> None:
         if self._loop is not None and not self._loop.is_closed():
             self._loop.call_soon_threadsafe(function, *arguments)
+
+
+def error_reply(code: str, message: str) -> dict[str, Any]:
+    """An error reply as the API's, for what the dashboard answers itself."""
+    return {"ok": False, "error": {"code": code, "message": message}}
 
 
 def drawing_geometry(reply: dict[str, Any]) -> dict[str, Any]:

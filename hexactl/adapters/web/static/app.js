@@ -220,12 +220,15 @@ function streamSummary(r) {
       parts.push(`${input.rate_hz} Hz`);
       parts.push(`dropped ${(input.malformed ?? 0) + (input.out_of_order ?? 0)}`);
       parts.push(`clamped ${input.clamped ?? 0}`);
+      if (input.failed) parts.push(`failed ${input.failed}`);
       if (input.loop_latency_ms) parts.push(`latency p50 ${fmt(input.loop_latency_ms.p50, 1)} ms`);
     }
+    if (input && input.running === false) parts.push('INPUT STOPPED: see the service log');
     return parts.join(' · ');
   }
+  const stopped = input && input.running === false ? 'stream input stopped (see the service log): restart the service to stream' : '';
   const last = r.last_stream && typeof r.last_stream === 'object' ? r.last_stream : null;
-  return last ? `last stream ${last.stream}: ${last.reason} (${last.targets} targets)` : '';
+  return [last ? `last stream ${last.stream}: ${last.reason} (${last.targets} targets)` : '', stopped].filter(Boolean).join(' · ');
 }
 
 function updateReadouts(r) {

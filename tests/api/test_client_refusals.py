@@ -1,0 +1,41 @@
+"""The Python client: a request it cannot send is refused before sending, naming why, and
+the service's answer to a request it could not read is the reply, not a time-out."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.wire import MAX_REQUEST_BYTES
+
+WAIT_S = 30.0  # bounds a hang only: a reply takes milliseconds
+
+
+def test_a_request_too_large_to_read_gets_its_error_not_a_timeout(shared_service) -> None:
+    with HexactlClient(shared_service.api, timeout_s=WAIT_S) as client:
+        reply = client.request("stream_open", source="x" * MAX_REQUEST_BYTES)
+        assert reply["ok"] is False and reply["error"]["code"] == "too_large" and reply["id"] is None
+        assert client.call("status")["ok"]  # and the next request gets its own reply
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_a_number_that_is_not_finite_is_refused_before_sending(value: float) -> None:
+    with HexactlClient("tcp://127.0.0.1:9", timeout_s=0.1) as client:  # nobody there: nothing may be sent
+        with pytest.raises(ValueError, match="move: the API takes finite numbers only"):
+            client.request("move", pose=[0, 0, value, 0, 0, 0])
+
+
+@pytest.mark.parametrize("field", ["v", "id", "cmd"])
+def test_the_envelope_is_not_a_commands_field(field: str) -> None:
+    with HexactlClient("tcp://127.0.0.1:9", timeout_s=0.1) as client:
+        with pytest.raises(ValueError, match=f"status: {field}: the request's envelope"):
+            client.request("status", **{field: 1})
+
+
+def test_self_is_a_field_like_any_other(shared_service) -> None:
+    """Found from outside: ``request(cmd, **fields)`` took ``self`` as its own argument."""
+    with HexactlClient(shared_service.api, timeout_s=WAIT_S) as client:
+        reply = client.request("status", self=1)
+        assert reply["error"]["code"] == "invalid_request" and "self" in reply["error"]["message"]
