@@ -8,18 +8,16 @@ user-mode Linux.
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
 import sys
 import tempfile
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from tools._debian import ensure_executables
+from tools.serving import Logged, hexactl_process
 
 FONT = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf"
 """Text in the screenshots needs a font; chromium does not depend on one."""
@@ -62,14 +60,10 @@ def headless_chromium(width: int = 1600, height: int = 1000):  # -> selenium.web
 
 
 @dataclass
-class Dashboard:
-    process: subprocess.Popen[str]
-    url: str = ""
-    lines: list[str] = field(default_factory=list)
+class Dashboard(Logged):
+    """A running ``hexactl dashboard``: its process, page and log as it grows."""
 
-    @property
-    def log(self) -> str:
-        return "".join(self.lines)
+    url: str = ""
 
 
 @contextmanager
@@ -79,37 +73,10 @@ def dashboard(api: str, telemetry: str, *options: str) -> Iterator[Dashboard]:
 
     :raises RuntimeError: if it does not say where it serves within :data:`START_TIMEOUT_S`
     """
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "dashboard", "--api", api, "--telemetry", telemetry,
-         "--http", "127.0.0.1:0", *options],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    served = Dashboard(process)
-    started = threading.Event()
-
-    def read() -> None:  # all along: a full pipe would block the dashboard
-        assert process.stdout is not None
-        for line in process.stdout:
-            served.lines.append(line)
-            if found := _SERVING.search(line):
-                served.url = found["url"]
-                started.set()
-        started.set()
-
-    reader = threading.Thread(target=read, name="dashboard-log", daemon=True)
-    reader.start()
-    try:
-        if not started.wait(START_TIMEOUT_S) or not served.url:
-            raise RuntimeError(f"hexactl dashboard did not start:\n{served.log}")
-        yield served
-    finally:
-        process.terminate()
-        try:
-            process.wait(30)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        reader.join(10)
+    with hexactl_process(Dashboard, ["dashboard", "--api", api, "--telemetry", telemetry, "--http", "127.0.0.1:0",
+                                     *options], _SERVING, START_TIMEOUT_S, merge_stdout=True,
+                         sigterm_grace_s=30) as board:
+        yield board
 
 
 def save_screenshot(driver, path: Path) -> Path:  # noqa: ANN001 - selenium's driver

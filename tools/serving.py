@@ -4,10 +4,12 @@ SIGTERM and checked against the promise a service manager relies on: exit status
 within :data:`SHUTDOWN_BOUND_S`, both endpoints free to bind again.
 
 One helper for the tests and tools that need the real command (``tools/file_race.py``,
-``tests/api``, ``tests/reliability``)."""
+``tests/api``, ``tests/reliability``); :func:`hexactl_process` also starts ``hexactl
+dashboard`` (``tools/browser.py``), and :func:`wait_until` is their one polling wait."""
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import signal
@@ -19,6 +21,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import zmq
 
@@ -40,18 +43,25 @@ _SERVING = re.compile(r"API on (?P<api>\S+), telemetry on (?P<telemetry>\S+) at"
 
 
 @dataclass
-class Served:
-    """A running ``hexactl serve``: its process, endpoints, and its log as it grows."""
+class Logged:
+    """A ``hexactl`` command in a process of its own and its log as it grows, read all along
+    by a thread (a full pipe would block the command's logging)."""
 
     process: subprocess.Popen[str]
-    api: str = ""
-    telemetry: str = ""
     lines: list[str] = field(default_factory=list)
     reader: threading.Thread | None = None
 
     @property
     def log(self) -> str:
         return "".join(self.lines)
+
+
+@dataclass
+class Served(Logged):
+    """A running ``hexactl serve``: its process, endpoints, and its log as it grows."""
+
+    api: str = ""
+    telemetry: str = ""
 
     def wait(self, timeout_s: float) -> int:
         """The exit status, once the process has exited and its whole log is read.
@@ -91,6 +101,62 @@ class Shutdown:
                 f"in use after: {', '.join(self.endpoints_in_use) or 'nothing'}")
 
 
+LoggedT = TypeVar("LoggedT", bound=Logged)
+
+
+@contextmanager
+def hexactl_process(kind: type[LoggedT], arguments: list[str], ready: re.Pattern[str], timeout_s: float, *,
+                    cwd: Path | None = None, merge_stdout: bool = False,
+                    sigterm_grace_s: float | None = None) -> Iterator[LoggedT]:
+    """``hexactl *arguments`` in a process of its own (held by a ``kind``), once it has
+    logged a line that ``ready`` matches, whose named groups set the same-named fields of
+    ``kind``; its stderr is its log (with its stdout if ``merge_stdout``). On the way out,
+    if still running, it is killed: at once, or when it has not exited ``sigterm_grace_s``
+    after SIGTERM.
+
+    :raises RuntimeError: if it exits, or logs no such line, within ``timeout_s``
+    """
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hexactl.adapters.cli.main", *arguments],
+        stdout=subprocess.PIPE if merge_stdout else None, stderr=subprocess.STDOUT if merge_stdout else subprocess.PIPE,
+        text=True, cwd=cwd, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    logged = kind(process)
+    log = process.stdout if merge_stdout else process.stderr
+    started = threading.Event()
+    said_ready = False
+
+    def read() -> None:
+        nonlocal said_ready
+        assert log is not None
+        for line in log:
+            logged.lines.append(line)
+            if found := ready.search(line):
+                for name, value in found.groupdict().items():
+                    setattr(logged, name, value)
+                said_ready = True
+                started.set()
+        started.set()  # exited: not ready
+
+    reader = logged.reader = threading.Thread(target=read, name=f"{arguments[0]}-log", daemon=True)
+    reader.start()
+    try:
+        if not started.wait(timeout_s) or not said_ready:
+            raise RuntimeError(f"hexactl {arguments[0]} did not start:\n{logged.log}")
+        yield logged
+    finally:
+        if process.poll() is None and sigterm_grace_s is not None:
+            process.terminate()
+            try:
+                process.wait(sigterm_grace_s)
+            except subprocess.TimeoutExpired:
+                pass
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+        reader.join(10)
+
+
 @contextmanager
 def serve(directory: Path, *options: str, api: str = LOOPBACK, telemetry: str = LOOPBACK) -> Iterator[Served]:
     """``hexactl serve *options`` with ``directory`` as its working directory (so its data
@@ -100,33 +166,9 @@ def serve(directory: Path, *options: str, api: str = LOOPBACK, telemetry: str = 
     :raises RuntimeError: if it exits, or does not say where it serves within
         :data:`START_TIMEOUT_S`
     """
-    process = subprocess.Popen(
-        [sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", api, "--telemetry", telemetry, *options],
-        stderr=subprocess.PIPE, text=True, cwd=directory, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    served = Served(process)
-    started = threading.Event()
-
-    def read() -> None:  # the whole log, all along: a full pipe would block the service's logging
-        assert process.stderr is not None
-        for line in process.stderr:
-            served.lines.append(line)
-            if found := _SERVING.search(line):
-                served.api, served.telemetry = found["api"], found["telemetry"]
-                started.set()
-        started.set()  # exited: the caller finds no endpoints
-
-    reader = served.reader = threading.Thread(target=read, name="serve-log", daemon=True)
-    reader.start()
-    try:
-        if not started.wait(START_TIMEOUT_S) or not served.api:
-            raise RuntimeError(f"hexactl serve did not start:\n{served.log}")
+    with hexactl_process(Served, ["serve", "--api", api, "--telemetry", telemetry, *options], _SERVING,
+                         START_TIMEOUT_S, cwd=directory) as served:
         yield served
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-        reader.join(10)
 
 
 def terminate(served: Served) -> Shutdown:
@@ -178,12 +220,23 @@ def spawned_children(pid: int) -> list[int]:
     return found
 
 
-def wait_for_tool(condition: Callable[[], object], what: str, timeout_s: float = HANG_S) -> object:
-    """For the benchmark tools: poll ``condition`` until it returns something true; the
-    tool ends (SystemExit naming ``what``) if it does not within ``timeout_s``."""
+ConditionT = TypeVar("ConditionT")
+
+
+def wait_until(condition: Callable[[], ConditionT], what: str, timeout_s: float, *, poll_s: float = 0.05,
+               seen: Callable[[], object] | None = None,
+               failure: type[BaseException] = AssertionError) -> ConditionT:
+    """The first true value ``condition()`` returns, asked every ``poll_s``; after
+    ``timeout_s``, ``failure`` (AssertionError for a test, SystemExit for a tool) naming
+    ``what`` and, to tell why, what ``seen()`` returns then. The bound only turns a hang
+    into a failure: it asserts nothing about timing."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if value := condition():
-            return value
-        time.sleep(0.1)
-    raise SystemExit(f"timed out waiting for {what}")
+    while not (value := condition()):
+        if time.monotonic() >= deadline:
+            raise failure(f"timed out after {timeout_s:g} s waiting for {what}" + (f"; seen: {seen()}" if seen else ""))
+        time.sleep(poll_s)
+    return value
+
+
+wait_for_tool = functools.partial(wait_until, timeout_s=HANG_S, poll_s=0.1, failure=SystemExit)
+"""For the benchmark tools: :func:`wait_until` that ends the tool."""

@@ -23,6 +23,7 @@ from hexactl.control.planning import MAX_MOTION_S
 from hexactl.adapters.files.sequence_file import sequence_from_toml
 from hexactl.control.sequences import SequenceError
 from tests.api.support import LOCAL, request
+from tools.serving import wait_until
 
 WAIT_S = 10.0  # only turns a hang into a failure
 POSE = [0, 0, 10, 0, 0, 0]
@@ -138,10 +139,8 @@ def test_an_urgent_command_cancels_queued_motion_from_every_client(server, handl
 
 def wait_queued(server: ApiServer, count: int) -> None:
     """Wait until ``count`` requests wait in the server's queues (its own counter)."""
-    deadline = time.monotonic() + WAIT_S
-    while server._queued < count:
-        assert time.monotonic() < deadline, f"{server._queued} queued, expected {count}"
-        time.sleep(0.005)
+    wait_until(lambda: server._queued >= count, f"{count} requests queued", WAIT_S, poll_s=0.005,
+               seen=lambda: f"{server._queued} queued")
 
 
 def test_a_flooding_client_gets_busy_and_others_are_served_in_turn(server, handler) -> None:

@@ -5,6 +5,7 @@ SIGTERM and checks that it exits and frees both ports."""
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 from collections.abc import Iterator
@@ -17,7 +18,7 @@ import zmq
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
 from tests.reliability.support import enable, tolerating_stalls
-from tools.serving import serve, terminate
+from tools.serving import serve, terminate, wait_until
 
 WAIT_S = 60.0  # only turns a hang into a failure (the machine is shared and busy)
 LOCAL = "tcp://127.0.0.1:*"
@@ -41,13 +42,7 @@ def status(client: HexactlClient) -> dict[str, Any]:
     return client.call("status")["status"]
 
 
-def wait_for(condition, what: str):
-    deadline = time.monotonic() + WAIT_S
-    while time.monotonic() < deadline:
-        if value := condition():
-            return value
-        time.sleep(0.01)
-    raise AssertionError(f"timed out waiting for {what}")
+wait_for = functools.partial(wait_until, timeout_s=WAIT_S, poll_s=0.01)
 
 
 def test_a_move_whose_client_timed_out_behind_a_flood_never_runs(tmp_path: Path) -> None:

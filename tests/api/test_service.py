@@ -4,10 +4,10 @@ shuts down cleanly on SIGTERM."""
 
 from __future__ import annotations
 
+import functools
 import os
 import re
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -18,21 +18,12 @@ from hexactl.adapters.api.security import CurveServerKeys, SecurityError, create
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.application.service import Service, ServiceConfig, ServiceError, main_thread_below_loop
-from tools.serving import serve, terminate
+from tools.serving import serve, terminate, wait_until
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
 
-
-def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT_S) -> object:
-    """Poll ``condition`` until it returns something true (not a timing assertion: the
-    bound only turns a hang into a failure)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = condition()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
+wait_for = functools.partial(wait_until, timeout_s=WAIT_S, poll_s=0.02)
+"""The wait of these tests and of those that import it (tests/reliability)."""
 
 
 @pytest.fixture

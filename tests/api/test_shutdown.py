@@ -10,12 +10,11 @@ from __future__ import annotations
 import os
 import re
 import signal
-import time
 from pathlib import Path
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY, RealtimeConfig, allowed, probe_privileges
-from tools.serving import HANG_S, serve, spawned_children, terminate
+from tools.serving import HANG_S, serve, spawned_children, terminate, wait_until
 
 
 def gone(pid: int) -> bool:
@@ -34,10 +33,8 @@ def enable_and_move(client: HexactlClient) -> None:
         client.call("enable")
     except CommandError as error:
         assert error.code == "loop_timeout", error
-    deadline = time.monotonic() + HANG_S
-    while client.call("status")["status"]["state"] != "enabled":
-        assert time.monotonic() < deadline, "not enabled"
-        time.sleep(0.05)
+    wait_until(lambda: client.call("status")["status"]["state"] == "enabled", "the platform enabled", HANG_S,
+               seen=lambda: client.call("status")["status"]["state"])
     try:
         client.call("move", pose=[150.0, 0, 0, 0, 0, 0], duration=5.0)
     except CommandError as error:

@@ -23,6 +23,7 @@ from hexactl.application.campaign.store import VALIDATION_FILE
 from hexactl.application.service import ServiceConfig, ServiceProcess
 from hexactl.calibration.campaign import CampaignDesign
 from tests.campaign.test_campaign import ENVELOPE, FAST, LOCAL, PER_LEG, InterruptAfter
+from tools.serving import wait_until
 
 START_TIMEOUT_S = 300.0  # seconds on an idle host, minutes on one loaded by other work
 
@@ -48,10 +49,8 @@ class StallDuring:
             os.kill(service.pid, signal.SIGSTOP)
             time.sleep(STALL_S)
             os.kill(service.pid, signal.SIGCONT)
-            deadline = time.monotonic() + 10
-            while self.client.call("status")["status"]["state"] != "fault":
-                assert time.monotonic() < deadline, f"no fault latched after a {STALL_S} s stall"
-                time.sleep(0.01)
+            wait_until(lambda: self.client.call("status")["status"]["state"] == "fault",
+                       f"a fault latched after a {STALL_S} s stall", 10, poll_s=0.01)
         points = self.instrument.measure(index, label)
         self.given.append((index, points))
         return points

@@ -19,6 +19,7 @@ from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
 from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
 from hexactl.sim.true_platform import true_geometry
+from tools.serving import wait_until
 
 DEADLINE_S = 10.0  # only a bound on waiting for a condition; nothing asserts a duration
 
@@ -34,13 +35,9 @@ def truth(nominal):
 
 
 def wait_for(link: CanActuatorLink, condition, what: str):
-    end = time.monotonic() + DEADLINE_S
-    while True:
-        snapshot = link.read_feedback()
-        if condition(snapshot):
-            return snapshot
-        assert time.monotonic() < end, f"timed out waiting for {what}: {snapshot}"
-        time.sleep(0.002)
+    """The first feedback snapshot that ``condition`` accepts."""
+    return wait_until(lambda: condition(snapshot := link.read_feedback()) and snapshot, what, DEADLINE_S,
+                      poll_s=0.002, seen=link.read_feedback)
 
 
 def test_threaded_runner_serves_a_link_in_the_same_process(nominal, truth):

@@ -19,7 +19,8 @@ from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
-from tests.reliability.support import ATTEMPTS, recover, stalled, status, tolerating_stalls, wait_for
+from tests.reliability.support import (ATTEMPTS, recover, recovered_client, recovered_client_fixture, stalled, status,
+                                       tolerating_stalls, wait_for)
 from tools.serving import HANG_S, Served, serve
 
 WAIT_S = 30.0  # generous: the simulator and the loop share a possibly busy machine
@@ -36,11 +37,7 @@ def served(directory: Path) -> Iterator[Served]:
         yield running
 
 
-@pytest.fixture
-def client(served: Served) -> Iterator[HexactlClient]:
-    with HexactlClient(served.api, timeout_s=WAIT_S) as connected:
-        recover(connected)
-        yield connected
+client = recovered_client_fixture(WAIT_S)
 
 
 def hexactl(served: Served, *arguments: str) -> int:
@@ -162,8 +159,7 @@ def test_a_leg_locked_move_prints_the_goal_it_runs_to(served, client, capsys) ->
 
 def test_ctrl_c_mid_move_logs_where_the_platform_came_to_rest(tmp_path) -> None:
     with serve(tmp_path, "--no-realtime") as running:
-        with HexactlClient(running.api, timeout_s=WAIT_S) as connected:
-            recover(connected)
+        with recovered_client(running.api, WAIT_S) as connected:
 
             def moving() -> None:
                 reply = connected.request("move", pose=[0.0, 0.0, 100.0, 0.0, 0.0, 0.0], duration=30.0)

@@ -2,6 +2,7 @@
 falls back without privileges, an overrun re-anchors, a crash E-stops. Nothing here
 asserts on timing figures."""
 
+import functools
 import gc
 import os
 import sys
@@ -17,13 +18,10 @@ from hexactl.control.realtime import RealtimeConfig
 from hexactl.kinematics.inverse import sensor_setpoints
 from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.sim.ideal_actuators import IdealActuators
+from tools.serving import wait_until
 
 
-def _wait(condition, timeout_s=10.0):
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "condition not reached"
-        time.sleep(0.005)
+wait_for = functools.partial(wait_until, timeout_s=10.0, poll_s=0.005)
 
 
 @pytest.mark.parametrize("rate_hz", [500.0, 1000.0])
@@ -38,7 +36,8 @@ def test_the_thread_runs_commands_to_completion(geometry, rate_hz):
         enabled = controller.enable()
         assert enabled.ok and "pending" not in enabled.details  # the loop's verdict, not just queued
         assert controller.move([20, 0, 10, 0, 1, 0], duration=0.2).ok
-        _wait(lambda: controller.telemetry().pose_command == pytest.approx((20, 0, 10, 0, 1, 0), abs=1e-9))
+        wait_for(lambda: controller.telemetry().pose_command == pytest.approx((20, 0, 10, 0, 1, 0), abs=1e-9),
+                 "the move's end")
         refused = controller.move([20, 0, 10, 0, 1, 0], speed=3.0)
         assert refused.error == "invalid_argument"
         with pytest.raises(RuntimeError):
@@ -66,7 +65,7 @@ def test_realtime_set_up_falls_back_and_says_why(monkeypatch):
     try:
         assert report.fifo_priority is None and report.cpus is None and not report.memory_locked
         assert len(report.notes) == 3 and all("not permitted" in note for note in report.notes)
-        _wait(lambda: loop.stats.cycles > 10)
+        wait_for(lambda: loop.stats.cycles > 10, "more than ten cycles")
     finally:
         loop.stop()
 
@@ -92,7 +91,7 @@ def test_an_overrun_in_the_thread_is_counted_as_skipped():
     loop = ControlLoop(cycle, LoopConfig(realtime=RealtimeConfig(manage_gc=False)), on_crash=lambda: None)
     loop.start()
     try:
-        _wait(lambda: len(calls) > 40)
+        wait_for(lambda: len(calls) > 40, "more than forty cycles")
     finally:
         loop.stop()
     # Sleeping never returns early, so at least four whole deadlines had passed.
@@ -105,7 +104,7 @@ def test_a_crashing_cycle_estops_and_commands_report_it(geometry):
         realtime=RealtimeConfig(manage_gc=False))))
     actuators.read_feedback = lambda: 1 / 0  # a bug in a cycle
     controller.start()
-    _wait(lambda: not controller.status().details["loop_running"])
+    wait_for(lambda: not controller.status().details["loop_running"], "the crashed loop to end")
     assert actuators.estops == 1
     assert "ZeroDivisionError" in controller.status().details["loop_failure"]
     assert controller.enable().error == "loop_failed"

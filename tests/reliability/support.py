@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Iterator
+from contextlib import contextmanager
+
+import pytest
 
 from firmware_proto.codec import Fault
 from hexactl.adapters.api.client import CommandError, HexactlClient
@@ -11,6 +14,7 @@ from hexactl.application.service import Service
 from hexactl.control.local_controller import LocalController
 from hexactl.sim.actuator_firmware import ActuatorFirmware
 from tests.api.test_service import status, wait_for
+from tools.serving import Served
 
 LOCAL = "tcp://127.0.0.1:*"
 RATE_HZ = 500
@@ -64,6 +68,27 @@ def recover(client: HexactlClient) -> None:
         wait_for(lambda: status(client)["state"] == "disabled", "the reset")
     enable(client)
     wait_for(lambda: status(client)["motion"] == "holding", "the platform at rest")
+
+
+@contextmanager
+def recovered_client(api: str, timeout_s: float) -> Iterator[HexactlClient]:
+    """A client of the service at ``api`` that finds the platform enabled and at rest,
+    whatever was latched before (:func:`recover`)."""
+    with HexactlClient(api, timeout_s=timeout_s) as client:
+        recover(client)
+        yield client
+
+
+def recovered_client_fixture(timeout_s: float):  # -> a pytest fixture
+    """A ``client`` fixture (:func:`recovered_client`) for a module whose ``served``
+    fixture shares one ``hexactl serve`` between its tests."""
+
+    @pytest.fixture
+    def client(served: Served) -> Iterator[HexactlClient]:
+        with recovered_client(served.api, timeout_s) as connected:
+            yield connected
+
+    return client
 
 
 STALL_FAULTS = ("heartbeat_lost", "setpoints_not_applied")

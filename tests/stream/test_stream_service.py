@@ -10,13 +10,14 @@ import socket
 import time
 from pathlib import Path
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
-from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.api.client import CommandError
 from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.api.stream_wire import encode
-from tests.reliability.support import recover, status, tolerating_stalls, wait_for
+from tests.reliability.support import recovered_client_fixture, status, tolerating_stalls, wait_for
 from tools.serving import Served, serve
 
 WAIT_S = 30.0
@@ -30,11 +31,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
         yield running
 
 
-@pytest.fixture
-def client(served: Served) -> Iterator[HexactlClient]:
-    with HexactlClient(served.api, timeout_s=WAIT_S) as connected:
-        recover(connected)
-        yield connected
+client = recovered_client_fixture(WAIT_S)
 
 
 def _sine(stream: PoseStream, seconds: float, rate_hz: float = 250.0) -> None:
@@ -105,32 +102,37 @@ def test_bad_samples_are_counted_and_dropped_over_zeromq_and_udp(client) -> None
     tolerating_stalls(client, scenario)
 
 
+@contextmanager
+def ended_by_the_service(stream: PoseStream) -> Iterator[PoseStream]:
+    """``stream`` opened; on the way out only its socket is closed, never ``stream_close``:
+    the service itself ends the stream in these scenarios."""
+    stream.open()
+    try:
+        yield stream
+    finally:
+        stream._push.close()
+
+
 def test_a_quiet_stream_brakes_to_rest_and_ends(client) -> None:
     def scenario() -> None:
-        stream = PoseStream(client, "goes quiet", timeout_ms=100).open()
-        try:
+        with ended_by_the_service(PoseStream(client, "goes quiet", timeout_ms=100)) as stream:
             _sine(stream, 0.5)
             wait_for(lambda: status(client)["stream"] is None, "the stream's end")
             record = status(client)
             assert record["last_stream"]["reason"].startswith("timeout") and record["motion"] == "holding"
-        finally:
-            stream._push.close()
 
     tolerating_stalls(client, scenario)
 
 
 def test_estop_ends_a_stream(client) -> None:
     def scenario() -> None:
-        stream = PoseStream(client, "estopped", timeout_ms=1000).open()
-        try:
+        with ended_by_the_service(PoseStream(client, "estopped", timeout_ms=1000)) as stream:
             _sine(stream, 0.3)
             client.call("estop")
             record = status(client)
             assert record["state"] == "estop" and record["stream"] is None
             with pytest.raises(CommandError, match="latched"):
                 PoseStream(client, "refused while the E-stop is latched").open()
-        finally:
-            stream._push.close()
 
     tolerating_stalls(client, scenario)
 

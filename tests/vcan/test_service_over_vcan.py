@@ -38,6 +38,7 @@ rest.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -59,6 +60,7 @@ from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, 
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.geometry import Geometry
 from tests.reliability.support import tolerating_stalls
+from tools.serving import wait_until
 
 pytestmark = pytest.mark.vcan
 
@@ -113,12 +115,7 @@ neither ``hexactl serve`` nor ServiceConfig can set, under SCHED_FIFO where perm
 module's docstring). Its argument: those settings as JSON (:func:`guest_settings`)."""
 
 
-def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S) -> None:
-    """Poll ``condition`` until it is true."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out after {timeout_s:g} s waiting for {what}"
-        time.sleep(0.05)
+wait_for = functools.partial(wait_until, timeout_s=WAIT_S)
 
 
 @dataclass
@@ -277,16 +274,16 @@ def status(client: HexactlClient) -> dict:
 
 
 def wait_status(client: HexactlClient, accept: Callable[[dict], bool], what: str, timeout_s: float = WAIT_S) -> dict:
-    """Poll the status until ``accept`` takes a record; that record. On time-out the last
-    record's state, motion, faults and loop counters say why."""
-    deadline = time.monotonic() + timeout_s
-    while not accept(record := status(client)):
-        assert time.monotonic() < deadline, (
-            f"timed out after {timeout_s:g} s waiting for {what}; last status: {record['state']}, {record['motion']}, "
-            f"faults {record['faults']}, sequence {record['sequence']}, "
-            f"loop {dict((k, record['loop'][k]) for k in ('cycles', 'missed', 'skipped', 'lateness_us'))}")
-        time.sleep(0.05)
-    return record
+    """Poll the status until ``accept`` takes a record; that record. On time-out the
+    status's state, motion, faults and loop counters say why."""
+
+    def why(record: dict) -> str:
+        loop = {k: record["loop"][k] for k in ("cycles", "missed", "skipped", "lateness_us")}
+        return (f"status {record['state']}, {record['motion']}, faults {record['faults']}, "
+                f"sequence {record['sequence']}, loop {loop}")
+
+    return wait_until(lambda: accept(record := status(client)) and record, what, timeout_s,
+                      seen=lambda: why(status(client)))
 
 
 def at_rest(record: dict) -> bool:

@@ -8,6 +8,7 @@ software-rendering browser share a possibly busy two-core machine.
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import socket
@@ -27,24 +28,12 @@ from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
 from tests.reliability.support import enable, tolerating_stalls
-from tools.serving import serve
+from tools.serving import serve, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 SCREENSHOTS = ROOT / "docs" / "images"
 WAIT_S = 60.0
-
-
-def wait_for(condition: Callable[[], object], what: str, timeout_s: float = WAIT_S,
-             seen: Callable[[], object] | None = None) -> object:
-    """``condition()`` once true; AssertionError after ``timeout_s`` naming ``what`` and,
-    to tell why, what ``seen()`` returns then."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = condition()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}" + (f"; seen: {seen()}" if seen else ""))
+wait_for = functools.partial(wait_until, timeout_s=WAIT_S)
 
 
 def free_port() -> int:
