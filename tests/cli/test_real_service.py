@@ -33,7 +33,7 @@ def directory(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def served(directory: Path) -> Iterator[Served]:
-    with serve(directory, "--no-realtime") as running:
+    with serve(directory) as running:
         yield running
 
 
@@ -158,7 +158,7 @@ def test_a_leg_locked_move_prints_the_goal_it_runs_to(served, client, capsys) ->
 
 
 def test_ctrl_c_mid_move_logs_where_the_platform_came_to_rest(tmp_path) -> None:
-    with serve(tmp_path, "--no-realtime") as running:
+    with serve(tmp_path) as running:
         with recovered_client(running.api, WAIT_S) as connected:
 
             def moving() -> None:
