@@ -18,7 +18,7 @@ import zmq
 
 from hexactl.adapters.api.client import DEADLINE_MARGIN_MIN_MS, HexactlClient, deadline_ms
 from hexactl.adapters.api.messages import Request
-from hexactl.adapters.api.server import MAX_QUEUED, MAX_QUEUED_PER_CLIENT, ApiServer
+from hexactl.adapters.api.server import MAX_QUEUED, MAX_QUEUED_PER_CLIENT, QUERY_COMMANDS, ApiServer
 from hexactl.control.planning import MAX_MOTION_S
 from hexactl.adapters.files.sequence_file import sequence_from_toml
 from hexactl.control.sequences import SequenceError
@@ -91,9 +91,9 @@ class Client:
 
 
 def blocked(server: ApiServer, handler: BlockingHandler) -> Client:
-    """A client whose request holds the worker until ``handler.release``."""
+    """A client whose request holds the command worker until ``handler.release``."""
     client = Client(server.endpoint)
-    client.send("block", "status")
+    client.send("block", "validate_pose", pose=POSE)
     assert handler.entered.wait(WAIT_S)
     return client
 
@@ -109,13 +109,26 @@ def test_estop_stop_abort_are_answered_while_the_worker_is_stuck(server, handler
     holder.close()
 
 
+def test_queries_are_answered_while_the_command_worker_plans(server, handler) -> None:
+    """Found from outside: ``status`` waited behind another client's long plan, and the
+    command line said the service was not running."""
+    holder = blocked(server, handler)
+    for cmd in sorted(QUERY_COMMANDS):
+        reply = request(server.endpoint, {"v": 1, "id": cmd, "cmd": cmd})
+        assert reply["ok"] and reply["message"] == f"{cmd} done"
+    assert not handler.release.is_set()  # the plan is still under way
+    handler.release.set()
+    assert holder.receive()["id"] == "block"
+    holder.close()
+
+
 @pytest.mark.parametrize("urgent", ["stop", "abort", "estop"])
 def test_an_urgent_command_cancels_queued_motion_from_every_client(server, handler, urgent) -> None:
     holder = blocked(server, handler)
     mover, player = Client(server.endpoint), Client(server.endpoint)
     for number in range(3):
         mover.send(f"move{number}", "move", pose=POSE)
-    mover.send("status", "status")
+    mover.send("frames", "frames")
     player.send("play", "play", sequence="x_sweep")
     player.send("lock", "leg_lock", leg=2)
     player.send("validate", "validate_pose", pose=POSE)
@@ -131,7 +144,7 @@ def test_an_urgent_command_cancels_queued_motion_from_every_client(server, handl
         assert item["error"]["code"] == "cancelled" and urgent in item["error"]["message"], item
     handler.release.set()
     kept = {**mover.replies(2), **player.replies(2)}
-    assert all(reply["ok"] for reply in kept.values()) and set(kept) == {"status", "marker-m", "validate", "marker-p"}
+    assert all(reply["ok"] for reply in kept.values()) and set(kept) == {"frames", "marker-m", "validate", "marker-p"}
     assert not {"move0", "move1", "move2", "play", "lock"} & set(handler.ids())  # never carried out
     for client in (holder, mover, player):
         client.close()
@@ -154,7 +167,7 @@ def test_a_flooding_client_gets_busy_and_others_are_served_in_turn(server, handl
     for reply in busy:
         assert reply["error"]["code"] == "busy", reply
         assert f"{MAX_QUEUED_PER_CLIENT} requests queued from this client" in reply["error"]["message"]
-    other.send("other", "status")
+    other.send("other", "frames")
     wait_queued(server, MAX_QUEUED_PER_CLIENT + 1)
     handler.release.set()
     assert other.receive()["ok"]
@@ -169,10 +182,10 @@ def test_the_total_queue_is_bounded(server, handler) -> None:
     clients = [Client(server.endpoint) for _ in range(MAX_QUEUED // MAX_QUEUED_PER_CLIENT)]
     for client in clients:
         for number in range(MAX_QUEUED_PER_CLIENT):
-            client.send(number, "status")
+            client.send(number, "frames")
     wait_queued(server, MAX_QUEUED)
     late = Client(server.endpoint)
-    late.send("late", "status")
+    late.send("late", "frames")
     reply = late.receive()
     assert reply["error"]["code"] == "busy" and f"{MAX_QUEUED} requests queued from all clients" in reply["error"]["message"]
     handler.release.set()
@@ -235,7 +248,8 @@ def test_the_watchdog_reports_a_stuck_handler_and_stops_go_on(handler) -> None:
     try:
         holder = blocked(served, handler)
         assert stuck.wait(WAIT_S)
-        assert reports == ['the API worker has been handling status (id "block") for more than 0.2 s: the API is stuck']
+        assert reports == ['the API worker has been handling validate_pose (id "block") for more than 0.2 s: the API is '
+                           'stuck']
         assert request(served.endpoint, {"v": 1, "id": 2, "cmd": "estop"})["ok"]
         holder.close()
     finally:

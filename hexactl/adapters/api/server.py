@@ -18,15 +18,19 @@ and never runs a slow handler. For each request it:
   the worker is planning meanwhile is refused by the loop as a stale plan if planned
   before the stop was carried out; if it got through all the same, the worker stops the
   platform again after it and answers ``cancelled``;
-- queues anything else for the **worker thread**: one queue per client (the ROUTER's
-  routing identity), served round-robin, bounded per client and in all (``busy`` beyond).
+- queues anything else for a **worker thread**: the :data:`QUERY_COMMANDS` (snapshots:
+  ``status``, ``geometry``, ``record_status``) for the query worker, the rest for the
+  command worker; each has one queue per client (the ROUTER's routing identity), served
+  round-robin, bounded per client and in all (``busy`` beyond). So a plan that takes
+  seconds (a long sequence or wave) holds up other plans, never an operator's ``status``.
 
-The worker takes requests in turn, answers ``expired`` for one whose ``deadline_ms`` has
+A worker takes requests in turn, answers ``expired`` for one whose ``deadline_ms`` has
 passed, else runs the handler with the absolute deadline (the loop refuses a motion
 command past it). Its replies reach the socket thread through an inproc PUSH→PULL pair
-the socket thread polls with the ROUTER.
+the socket thread polls with the ROUTER (a PUSH per worker: ZeroMQ sockets are not
+thread-safe).
 
-A watchdog: when the worker has been inside one handler longer than
+A watchdog: when a worker has been inside one handler longer than
 ``handler_timeout_s``, the socket thread logs an error naming the request and calls
 ``on_stuck`` (the API process ends itself: :mod:`hexactl.application.api_process`). Until
 then, and after, the socket thread goes on answering stops and refusals.
@@ -74,13 +78,18 @@ CANCELLED_BY_STOP = frozenset({"move", "jog", "play", "resume", "leg_lock", "leg
 moving or change its motion or calibration. ``enable`` is not among them (it holds the
 pose the platform is at, and is refused while an E-stop is latched), nor are queries."""
 
+QUERY_COMMANDS = frozenset({"status", "geometry", "record_status"})
+"""Snapshots of the service, answered by a worker of their own in milliseconds: a monitor
+asking ``status`` while another client's long plan is under way gets its answer, not a
+time-out that reads as a service gone."""
+
 MAX_QUEUED_PER_CLIENT = 32
 """Requests one client may have waiting. :class:`~hexactl.adapters.api.client.HexactlClient`
 has one in flight; a DEALER pipelining a batch (poses to validate) rarely needs more,
 and one client must not fill the whole queue."""
 
 MAX_QUEUED = 256
-"""Requests waiting from all clients together. Planning a move or validating a pose takes
+"""Requests waiting for one worker from all clients together. Planning a move or validating a pose takes
 about 20 ms (measured), so a full queue is some 5 s of work: what waits longer would
 outlive the client library's default 5 s timeout, so it is refused ``busy`` at once
 instead."""
@@ -162,6 +171,94 @@ def _cancelled(request: Request, cause: str) -> bytes:
                               f"{request.cmd} cancelled, not carried out: {cause} arrived while it was queued"))
 
 
+class _RoundRobin:
+    """Requests waiting for one worker: a queue per client (routing identity) in arrival
+    order, the clients served in turn; bounded per client and in all. ``discards`` counts
+    :meth:`discard` calls, so that a worker can tell whether one happened while it handled
+    what it took."""
+
+    def __init__(self) -> None:
+        self._ready = threading.Condition()
+        self._queues: dict[bytes, deque[_Queued]] = {}
+        self._turns: deque[bytes] = deque()
+        self.queued = 0
+        self.discards = 0
+
+    def put(self, client: bytes, item: _Queued) -> str | None:
+        """Queue ``item`` from ``client``; None, or why it is refused (``busy``)."""
+        with self._ready:
+            mine = len(self._queues.get(client, ()))
+            if mine >= MAX_QUEUED_PER_CLIENT:
+                return f"{mine} requests queued from this client; wait for replies before sending more"
+            if self.queued >= MAX_QUEUED:
+                return f"{self.queued} requests queued from all clients; wait for a reply and send it again"
+            if not mine:
+                self._queues[client] = deque()
+                self._turns.append(client)
+            self._queues[client].append(item)
+            self.queued += 1
+            self._ready.notify()
+        return None
+
+    def take(self, stopping: threading.Event) -> tuple[_Queued, int] | None:
+        """The next request in turn and the discards so far; None once ``stopping``."""
+        with self._ready:
+            while not self._turns:
+                if stopping.is_set():
+                    return None
+                self._ready.wait(POLL_INTERVAL_MS / 1000)
+            if stopping.is_set():
+                return None
+            client = self._turns.popleft()
+            queue = self._queues[client]
+            item = queue.popleft()
+            if queue:
+                self._turns.append(client)
+            else:
+                del self._queues[client]
+            self.queued -= 1
+            return item, self.discards
+
+    def discard(self, commands: frozenset[str]) -> list[_Queued]:
+        """Remove and return every queued request for one of ``commands``."""
+        with self._ready:
+            discarded: list[_Queued] = []
+            for client in list(self._turns):
+                queue = self._queues[client]
+                kept = deque(item for item in queue if item.request.cmd not in commands)
+                discarded += [item for item in queue if item.request.cmd in commands]
+                if kept:
+                    self._queues[client] = kept
+                else:
+                    del self._queues[client]
+                    self._turns.remove(client)
+            self.queued -= len(discarded)
+            self.discards += 1
+            return discarded
+
+    def wake(self) -> None:
+        with self._ready:
+            self._ready.notify_all()
+
+
+class _Worker:
+    """A worker thread's parts: its ``lane`` of requests, its PUSH of replies to the socket
+    thread, and what it is handling since when (monotonic ns), for the watchdog."""
+
+    def __init__(self, name: str, lane: _RoundRobin, context: zmq.Context, replies: str) -> None:
+        self.name = name
+        self.lane = lane
+        self.replies = context.socket(zmq.PUSH)
+        self.replies.linger = 0
+        self.replies.sndhwm = 2 * MAX_QUEUED
+        self.replies.connect(replies)
+        self.thread: threading.Thread | None = None
+        self.in_handler: tuple[int, str] | None = None
+
+    def describe(self) -> str:
+        return self.in_handler[1] if self.in_handler is not None else "no request"
+
+
 class ApiServer(SocketThread):
     """Serve ``handle`` on a ROUTER bound to ``endpoint`` (``tcp://HOST:*`` picks a free
     port), as the module describes. ``on_stuck(description)`` is called once when the
@@ -191,40 +288,40 @@ class ApiServer(SocketThread):
         super().__init__(context, zmq.ROUTER, endpoint, name="hexactl-api",
                          options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES}, curve=curve)
         replies = f"inproc://hexactl-api-replies-{id(self)}"
-        # Never full while the socket thread drains it: at most MAX_QUEUED replies are owed.
+        # Never full while the socket thread drains it: at most MAX_QUEUED replies a worker are owed.
         self._replies_in = context.socket(zmq.PULL)
-        self._replies_out = context.socket(zmq.PUSH)
-        for socket in (self._replies_in, self._replies_out):
-            socket.linger = 0
-            socket.sndhwm = socket.rcvhwm = 2 * MAX_QUEUED
+        self._replies_in.linger = 0
+        self._replies_in.rcvhwm = 4 * MAX_QUEUED
         self._replies_in.bind(replies)
-        self._replies_out.connect(replies)
-        # The queues: per client (routing identity) in arrival order, and the clients with
-        # requests waiting in round-robin order. Guarded by _ready's lock, held briefly.
-        self._ready = threading.Condition()
-        self._queues: dict[bytes, deque[_Queued]] = {}
-        self._turns: deque[bytes] = deque()
-        self._queued = 0
-        self._stops = 0  # urgent commands so far: the worker compares it across a motion request
-        self._in_handler: tuple[int, str] | None = None  # (since, monotonic ns; what), set by the worker
+        self._commands = _RoundRobin()  # discards: the urgent commands, compared across a motion request
+        self._queries = _RoundRobin()
+        self._workers = [_Worker("hexactl-api-worker", self._commands, context, replies),
+                         _Worker("hexactl-api-queries", self._queries, context, replies)]
         self._reported: tuple[int, str] | None = None  # the stuck handling already reported
-        self._worker = threading.Thread(target=self._work, name="hexactl-api-worker", daemon=True)
+
+    @property
+    def _queued(self) -> int:
+        """Requests waiting for either worker."""
+        return self._commands.queued + self._queries.queued
 
     def start(self) -> None:
         super().start()
-        self._worker.start()
+        for worker in self._workers:
+            worker.thread = threading.Thread(target=self._work, args=(worker,), name=worker.name, daemon=True)
+            worker.thread.start()
 
     def close(self) -> None:
         super().close()  # the socket thread has stopped and the ROUTER is closed
-        with self._ready:
-            self._ready.notify_all()
-        if self._worker.is_alive():
-            self._worker.join(WORKER_JOIN_S)
-            if self._worker.is_alive():
-                log.warning("the API worker is still in %s: left behind", self._describe_in_handler())
-        # Closed even under a worker left behind: it is in a handler, not in ZeroMQ, and a
-        # send on a closed socket raises there (caught) instead of holding up shutdown.
-        self._replies_out.close()
+        for worker in self._workers:
+            worker.lane.wake()
+        for worker in self._workers:
+            if worker.thread is not None and worker.thread.is_alive():
+                worker.thread.join(WORKER_JOIN_S)
+                if worker.thread.is_alive():
+                    log.warning("%s is still in %s: left behind", worker.name, worker.describe())
+            # Closed even under a worker left behind: it is in a handler, not in ZeroMQ, and a
+            # send on a closed socket raises there (caught) instead of holding up shutdown.
+            worker.replies.close()
         self._replies_in.close()
 
     # -- the socket thread -------------------------------------------------------------
@@ -273,21 +370,8 @@ class ApiServer(SocketThread):
             self._send([*envelope, reply])
             return
         deadline_ns = None if request.deadline_ms is None else received_ns + round(request.deadline_ms * 1e6)
-        client = envelope[0]
-        with self._ready:
-            mine = len(self._queues.get(client, ()))
-            if mine >= MAX_QUEUED_PER_CLIENT:
-                refusal = f"{mine} requests queued from this client; wait for replies before sending more"
-            elif self._queued >= MAX_QUEUED:
-                refusal = f"{self._queued} requests queued from all clients; wait for a reply and send it again"
-            else:
-                refusal = None
-                if not mine:
-                    self._queues[client] = deque()
-                    self._turns.append(client)
-                self._queues[client].append(_Queued(envelope, request, deadline_ns))
-                self._queued += 1
-                self._ready.notify()
+        lane = self._queries if request.cmd in QUERY_COMMANDS else self._commands
+        refusal = lane.put(envelope[0], _Queued(envelope, request, deadline_ns))
         if refusal is not None:
             self._send([*envelope, encode(error_reply(request.id, ErrorCode.BUSY, refusal,
                                                       {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": MAX_QUEUED}))])
@@ -305,34 +389,22 @@ class ApiServer(SocketThread):
 
     def _cancel_queued(self, cause: str) -> None:
         """Discard every queued :data:`CANCELLED_BY_STOP` request, answering each ``cancelled``."""
-        cancelled: list[_Queued] = []
-        with self._ready:
-            for client in list(self._turns):
-                queue = self._queues[client]
-                kept = deque(item for item in queue if item.request.cmd not in CANCELLED_BY_STOP)
-                cancelled += [item for item in queue if item.request.cmd in CANCELLED_BY_STOP]
-                if kept:
-                    self._queues[client] = kept
-                else:
-                    del self._queues[client]
-                    self._turns.remove(client)
-            self._queued -= len(cancelled)
-            self._stops += 1
-        for item in cancelled:
+        for item in self._commands.discard(CANCELLED_BY_STOP):
             self._send([*item.envelope, _cancelled(item.request, cause)])
 
     def _watch(self) -> None:
-        in_handler = self._in_handler
-        if in_handler is None or in_handler is self._reported:
-            return
-        since_ns, what = in_handler
-        if time.monotonic_ns() - since_ns > self._handler_timeout_ns:
-            self._reported = in_handler
-            description = (f"the API worker has been handling {what} for more than "
-                           f"{self._handler_timeout_ns / 1e9:g} s: the API is stuck")
-            log.error("%s", description)
-            if self._on_stuck is not None:
-                self._on_stuck(description)
+        for worker in self._workers:
+            in_handler = worker.in_handler
+            if in_handler is None or in_handler is self._reported:
+                continue
+            since_ns, what = in_handler
+            if time.monotonic_ns() - since_ns > self._handler_timeout_ns:
+                self._reported = in_handler
+                description = (f"the API worker has been handling {what} for more than "
+                               f"{self._handler_timeout_ns / 1e9:g} s: the API is stuck")
+                log.error("%s", description)
+                if self._on_stuck is not None:
+                    self._on_stuck(description)
 
     def _send(self, frames: list[bytes]) -> None:
         try:
@@ -341,16 +413,12 @@ class ApiServer(SocketThread):
         except zmq.ZMQError as error:
             log.warning("reply not sent: %s", error)
 
-    def _describe_in_handler(self) -> str:
-        in_handler = self._in_handler
-        return in_handler[1] if in_handler is not None else "no request"
+    # -- the workers ---------------------------------------------------------------------
 
-    # -- the worker ----------------------------------------------------------------------
-
-    def _work(self) -> None:
+    def _work(self, worker: _Worker) -> None:
         if self._worker_niceness:  # Linux: a thread's own niceness (its thread id), not the process's
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), self._worker_niceness)
-        while (taken := self._next()) is not None:
+        while (taken := worker.lane.take(self._stopping)) is not None:
             item, stops = taken
             request = item.request
             if item.deadline_ns is not None and (late_ns := time.monotonic_ns() - item.deadline_ns) >= 0:
@@ -359,13 +427,13 @@ class ApiServer(SocketThread):
                                     f"({request.deadline_ms:g}) passed {late_ns / 1e6:.1f} ms before its "
                                     "turn came; send it again with a longer deadline if it is still wanted")
             else:
-                self._in_handler = (time.monotonic_ns(), describe(request))
+                worker.in_handler = (time.monotonic_ns(), describe(request))
                 reply = reply_to(request, self._handle, item.deadline_ns)
-                if request.cmd in CANCELLED_BY_STOP and self._stops != stops and reply["ok"]:
+                if request.cmd in CANCELLED_BY_STOP and worker.lane.discards != stops and reply["ok"]:
                     reply = self._stop_after_race(request)
-                self._in_handler = None
+                worker.in_handler = None
             try:
-                self._replies_out.send_multipart([*item.envelope, encoded(request.id, reply)], zmq.NOBLOCK)
+                worker.replies.send_multipart([*item.envelope, encoded(request.id, reply)], zmq.NOBLOCK)
             except zmq.ZMQError as error:  # closed under a worker left behind by close()
                 log.warning("reply to %s not sent: %s", describe(request), error)
                 return
@@ -377,23 +445,3 @@ class ApiServer(SocketThread):
         reply_to(_STOP_AFTER_RACE, self._handle, None)
         return error_reply(request.id, ErrorCode.CANCELLED, f"{request.cmd} cancelled: a stop, abort or estop arrived "
                            "while it was being planned, and the platform was stopped again after it")
-
-    def _next(self) -> tuple[_Queued, int] | None:
-        """The next request in round-robin order between clients, and the count of urgent
-        commands so far; None once stopping."""
-        with self._ready:
-            while not self._turns:
-                if self._stopping.is_set():
-                    return None
-                self._ready.wait(POLL_INTERVAL_MS / 1000)
-            if self._stopping.is_set():
-                return None
-            client = self._turns.popleft()
-            queue = self._queues[client]
-            item = queue.popleft()
-            if queue:
-                self._turns.append(client)
-            else:
-                del self._queues[client]
-            self._queued -= 1
-            return item, self._stops
