@@ -107,6 +107,8 @@ def test_the_command_line_knows_every_frame_the_controller_does() -> None:
     ("tool = [0, 0, 300", "not valid TOML"),
     ("[soft_limits.lower]\ntilt = 3\n", "soft_limits.lower: unknown axis tilt; the axes are x, y, z, roll, pitch, yaw"),
     ("tool = [0, 0, 300, 0, 0, 0]\npivot = 1\n", "pivot"),
+    ("", "empty (no work, tool or soft_limits)"),  # found from outside: it started the service with no soft limits
+    ("# hexactl operator frames\n\n", "empty"),
 ])
 def test_a_frames_file_that_cannot_be_used_is_named_with_the_problem(tmp_path: Path, text, fragment) -> None:
     from hexactl.adapters.files.frames_file import FramesFileError

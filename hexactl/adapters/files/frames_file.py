@@ -42,7 +42,7 @@ class FramesFileError(ValueError):
 def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
     """The frames in ``path``.
 
-    :raises FramesFileError: unreadable, not TOML, or a value refused (each named)
+    :raises FramesFileError: unreadable, not TOML, empty, or a value refused (each named)
     """
     location = Path(path)
     try:
@@ -51,6 +51,9 @@ def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
         raise FramesFileError(f"{location}: cannot read: {error}") from None
     except (tomllib.TOMLDecodeError, RecursionError) as error:
         raise FramesFileError(f"{location}: not valid TOML: {error}") from None
+    if not data:  # a saved file always holds work and tool: an empty one lost what it held
+        raise FramesFileError(f"{location}: empty (no work, tool or soft_limits): the file lost its content, and "
+                              "with it perhaps the operator's soft limits")
     limits = data.get("soft_limits")
     if isinstance(limits, dict):
         for side in ("lower", "upper"):
