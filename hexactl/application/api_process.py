@@ -34,6 +34,7 @@ from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.application.loop_link import RemoteLoop
 from hexactl.application.recording import Recordings
+from hexactl.application.safety_log import SafetyLog
 from hexactl.application.simulator import InstrumentLine, InstrumentSpec, SimulatedMeasurement
 from hexactl.application.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
@@ -150,7 +151,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
     sys.setswitchinterval(API_SWITCH_INTERVAL_S)
     with ExitStack() as closers:
         try:
-            remote = RemoteLoop(commands, reports)
+            remote = RemoteLoop(commands, reports, observe=SafetyLog().observe)
             closers.callback(remote.close)
             controller = Controller(remote, config=settings.controller, nominal=settings.nominal,
                                     ticket_start=API_TICKET_START, frames=settings.frames)

@@ -44,6 +44,7 @@ import struct
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import replace
 from multiprocessing.connection import Connection
 
@@ -238,11 +239,15 @@ class RemoteLoop:
 
     Construction waits (at most ``first_report_timeout_s``) for the first report.
 
+    ``observe`` (the receiver thread; it must not raise): called with each report's snapshot.
+
     :raises ConnectionError: if no report arrives in time or the loop's end is closed
     """
 
-    def __init__(self, commands: Connection, reports: Connection, first_report_timeout_s: float = 10.0) -> None:
+    def __init__(self, commands: Connection, reports: Connection, first_report_timeout_s: float = 10.0,
+                 observe: Callable[[CoreSnapshot], None] | None = None) -> None:
         self._commands = commands
+        self._observe = observe
         self._reports = reports
         self._send_lock = threading.Lock()
         self._gone: str | None = None
@@ -305,6 +310,11 @@ class RemoteLoop:
     def _received(self, data: bytes) -> LoopReport:
         """The report in ``data``, its recorder rows moved to :meth:`take_recorded`'s queue."""
         report: LoopReport = pickle.loads(data)
+        if self._observe is not None:
+            try:
+                self._observe(report.snapshot)
+            except Exception:  # an observer's bug must not end the receiver (the API would see a frozen loop)
+                log.exception("observing the loop's report failed")
         if report.recorded:
             self._recorded.extend(report.recorded)
             report = replace(report, recorded=())

@@ -277,7 +277,8 @@ class ControlCore:
         self._motion.swap(new, self.state is ControlState.ENABLED)
         self.history = self.history[:-1] if command.rollback else (self.history + (old,))[-KEPT_CALIBRATIONS:]
         self._measurement.geometry_changed()
-        self._event("calibration_swapped", f"calibration {old.calibration_id} → {new.calibration_id}")
+        self._event("calibration_swapped", f"calibration {old.calibration_id} → {new.calibration_id}"
+                    f"{' (rollback)' if command.rollback else ''} from {new.source}")
         return None
 
     # -- publishing ----------------------------------------------------------------------

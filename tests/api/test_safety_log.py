@@ -1,0 +1,46 @@
+"""The service's log says what happened to the platform: each state change with its faults,
+and each of the loop's events, once (found from outside: after a fault on all six legs, an
+E-stop, a reset and two calibration swaps the log held nothing beyond the start-up lines)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import pytest
+
+from hexactl.application.safety_log import SafetyLog
+from hexactl.control.snapshot import ControlState, Event
+from hexactl.control.supervisor import Fault
+from tests.control.conftest import Rig
+
+
+@pytest.fixture
+def snapshot(nominal):
+    rig = Rig(nominal)
+    rig.run()
+    return rig.controller.snapshot
+
+
+def test_state_changes_and_new_events_are_logged_once(snapshot, caplog) -> None:
+    caplog.set_level(logging.INFO, logger="hexactl.safety")
+    safety = SafetyLog()
+    history = (Event(1, "estop", "an E-stop before the service's API started"),)
+    safety.observe(replace(snapshot, state=ControlState.DISABLED, events=history))
+    safety.observe(replace(snapshot, state=ControlState.ENABLED, events=history))
+    fault = Fault("heartbeat_lost", "leg 3 silent for 0.05 s", 3)
+    faulted = replace(snapshot, state=ControlState.FAULT, faults=(fault,),
+                      events=(*history, Event(5, fault.code, fault.message)))
+    safety.observe(faulted)
+    safety.observe(faulted)  # the same report again: nothing new
+    swapped = (*faulted.events, Event(9, "calibration_swapped", "calibration a → b from cal.toml"))
+    safety.observe(replace(snapshot, state=ControlState.DISABLED, events=swapped))
+    lines = [(record.levelname, record.getMessage()) for record in caplog.records]
+    assert lines == [
+        ("INFO", f"state disabled → enabled (calibration {snapshot.active.calibration_id})"),
+        ("WARNING", "loop heartbeat_lost: leg 3 silent for 0.05 s"),
+        ("WARNING", f"state enabled → fault (heartbeat_lost: leg 3 silent for 0.05 s) (calibration "
+                    f"{snapshot.active.calibration_id})"),
+        ("INFO", "loop calibration_swapped: calibration a → b from cal.toml"),
+        ("INFO", f"state fault → disabled (calibration {snapshot.active.calibration_id})"),
+    ]
