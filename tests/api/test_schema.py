@@ -37,3 +37,13 @@ def test_every_reference_resolves() -> None:
 
     for reference in references(schema):
         assert reference.removeprefix("#/$defs/") in schema["$defs"], reference
+
+
+def test_every_error_code_is_documented() -> None:
+    """Found from outside: ``invalid_argument`` reached clients and was in neither table."""
+    from hexactl.adapters.api.wire import ErrorCode as ApiErrorCode
+    from hexactl.control.results import ErrorCode as ControllerErrorCode
+
+    text = DOCUMENT.read_text(encoding="utf-8").split("### Error codes", 1)[1].split("## Telemetry", 1)[0]
+    missing = [code.value for code in (*ApiErrorCode, *ControllerErrorCode) if f"`{code.value}`" not in text]
+    assert not missing, f"error codes not in docs/api.md's Error codes: {missing}"
