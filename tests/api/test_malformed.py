@@ -49,6 +49,8 @@ CASES: list[tuple[str, bytes, str, object]] = [
     ("leg as bool", b'{"v": 1, "id": 3, "cmd": "leg_lock", "leg": true}', "invalid_request", 3),
     ("leg out of range", b'{"v": 1, "id": 3, "cmd": "leg_lock", "leg": 7}', "invalid_request", 3),
     ("negative duration", b'{"v": 1, "id": 3, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "duration": -1}', "invalid_request", 3),
+    ("progress done over total", b'{"v": 1, "id": 3, "cmd": "progress", "title": "t", "done": 5, "total": 3}',
+     "invalid_request", 3),
     ("too large", json.dumps({"v": 1, "id": 3, "cmd": "status", "pad": "x" * MAX_REQUEST_BYTES}).encode(), "too_large", None),
     *((name, body, "malformed_json", None) for name, body in NOT_UTF8.items()),
 ]

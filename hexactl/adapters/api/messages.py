@@ -318,6 +318,12 @@ class ProgressRequest(_Request):
     said: str | None = Field(default=None, max_length=2000, description="a sentence the campaign printed")
     report: CampaignReport | None = Field(default=None, description="the finished campaign's results")
 
+    @model_validator(mode="after")
+    def _done_within_total(self) -> ProgressRequest:
+        if self.done > self.total:
+            raise ValueError(f"done ({self.done}) is more than total ({self.total})")
+        return self
+
 
 class ValidateCalibrationRequest(LoadCalibrationRequest):
     """Would ``load_calibration`` accept it now? The same fields and checks; nothing is
