@@ -28,6 +28,7 @@ Poses inside the control layer are relative to the zero posture in mm and *radia
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from math import degrees, isfinite
@@ -59,12 +60,38 @@ from hexactl.kinematics.workspace import Violation, assess_poses, pose_within_li
 MAX_MOTION_S = 600.0
 """The longest motion one plan may hold, s: a move, or a sequence's moves together (dwells
 not counted). Planning samples every loop period, so its work grows with the motion's
-length (600 s of motion: about 1.3 s of planning, measured on the 2-core test machine);
-no posture of a calibration campaign takes a tenth of it."""
+length and its path's (measured on the 2-core test machine, idle: 600 s of slow motion
+about 1 s of planning; of full-speed motion, or leg-locked, 8 to 12 s, which
+:data:`PLANNING_BUDGET_S` bounds at load); no posture of a calibration campaign takes a
+tenth of it."""
+
+MAX_WAYPOINTS = 500
+"""The most waypoints one plan (a sequence) may hold, counted before any planning
+(:func:`waypoint_count_problem`). Planning's work grows with the number of waypoints as
+well as with the motion (:data:`MAX_MOTION_S` bounds that): each waypoint is a trajectory,
+its leg speeds and its path's limits. Measured on the 2-core test machine: 1000 tiny
+waypoints plan in 0.8 s idle and 16 s at load 11 (ten busy processes), and the API's
+watchdog ends the service when one request takes 120 s (the server's
+``DEFAULT_HANDLER_TIMEOUT_S``; a 10,000-waypoint file did). 500 keep a sequence's
+per-waypoint work near 8 s at that load, about a fifteenth of the watchdog; what the
+motion itself costs is bounded by :data:`PLANNING_BUDGET_S`."""
+
+PLANNING_BUDGET_S = 60.0
+"""The longest one plan may take, s, checked between waypoints and between batches of
+samples (a fraction of a second apart idle): :data:`MAX_WAYPOINTS` and :data:`MAX_MOTION_S`
+keep a plan to at most about 12 s on an idle core, but a loaded machine runs it ten to
+twenty times slower. Half the API's watchdog (120 s), which would end the service.
+Refused with ``planning_failed``, naming where planning was: split the sequence."""
 
 MAX_DWELL_S = 86_400.0
 """The longest dwell at a waypoint, s (a day): dwells cost no planning, but a sequence's
 duration must stay a number."""
+
+_CHECK_BATCH = 4096  # poses assessed per call of assess_poses: its cost per call is amortised, its memory bounded
+
+_BUDGET_CYCLES = 4096  # leg-lock samples between two looks at the planning budget (a fraction of a second idle)
+
+_clock = time.monotonic  # the planning budget's clock (tests replace it)
 
 _MAX_STRETCH_ATTEMPTS = 4  # leg speeds scale exactly as 1/k: one stretch normally suffices
 _STRETCH_MARGIN = 1.001  # covers the rounding of durations to whole periods
@@ -198,17 +225,53 @@ class Plan:
         return self.refusal is None
 
 
+def waypoint_count_problem(count: int) -> str | None:
+    """What is wrong with a plan (a sequence) of ``count`` waypoints, or None: more than
+    :data:`MAX_WAYPOINTS` (checked before any planning)."""
+    if count <= MAX_WAYPOINTS:
+        return None
+    return (f"{count} waypoints: a sequence may have at most {MAX_WAYPOINTS} (planning time grows with each "
+            f"waypoint): split it into sequences of at most {MAX_WAYPOINTS} waypoints")
+
+
+class PlanningBudget:
+    """The time one plan may still take (:data:`PLANNING_BUDGET_S` from its creation, by
+    ``_clock``); :meth:`refusal` once it is spent."""
+
+    def __init__(self, budget_s: float | None = None) -> None:
+        self.budget_s = PLANNING_BUDGET_S if budget_s is None else budget_s
+        self._deadline = _clock() + self.budget_s
+
+    def refusal(self, where: str, remedy: str) -> Refusal | None:
+        """None while time is left; else the refusal, saying ``where`` planning was and the
+        ``remedy``."""
+        if _clock() <= self._deadline:
+            return None
+        return Refusal(ErrorCode.PLANNING_FAILED, f"planning took longer than {self.budget_s:g} s, {where}: {remedy} "
+                       "(the machine may be busy)", details={"budget_s": self.budget_s})
+
+
 def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequence[Waypoint],
               start_frames: Frames | None = None) -> Plan:
     """Plan and validate moves through ``waypoints`` from the generator state ``start``,
     in the coordinates of ``start_frames`` (None: relative mm/rad). Each waypoint after the
     first starts at rest on the previous one; one in other coordinates than the motion
     before it starts from rest (refused while moving). Never raises for bad input: it is
-    refused."""
+    refused. More than :data:`MAX_WAYPOINTS` are refused before any planning, and a plan
+    that takes longer than :data:`PLANNING_BUDGET_S` is refused."""
+    total = len(waypoints)
+    if problem := waypoint_count_problem(total):
+        return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, problem,
+                                    details={"waypoints": total, "limit": MAX_WAYPOINTS}))
+    budget = PlanningBudget()
+    remedy = "split it into shorter sequences" if total > 1 else "split the move"
     segments = []
-    violations: list[PathViolation] = []
+    checks = _PathChecks(context)
+    motion_s = 0.0  # the segments' durations so far
     home = context.active.home
     for number, waypoint in enumerate(waypoints, start=1):
+        if refusal := budget.refusal(f"at waypoint {number} of {total}", remedy):
+            return Plan(refusal=refusal)
         problem = _check_waypoint(waypoint)
         if problem:
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"waypoint {number}: {problem}", details={"waypoint": number}))
@@ -224,22 +287,111 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
             rebased = convert(start.position, start_frames, frames, home)
             start, start_frames = KinematicState.at_rest(rebased), frames
         # The goal alone first: cheap, and no trajectory is previewed towards a goal
-        # that is out of reach anyway (ruckig raises on absurd ones).
-        goal_violations = path_violations(context, relative_poses(frames, np.array([goal]), home), number)
-        if goal_violations:
-            return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
-        planned = _plan_segment(context, start, goal, frames, waypoint,
-                                MAX_MOTION_S - sum(done.duration_s for done in segments))
+        # that is out of reach anyway (ruckig raises on absurd ones). The one-pose check
+        # in plain floats screens it; the full assessment names what a refused goal breaks,
+        # and an accepted goal is assessed with its path below.
+        goal_relative = relative_poses(frames, np.array([goal], dtype=float), home)
+        if not pose_allowed(context, goal_relative[0]):
+            goal_violations = path_violations(context, goal_relative, number)
+            if goal_violations:
+                return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
+        planned = _plan_segment(context, start, goal, frames, waypoint, MAX_MOTION_S - motion_s, budget, remedy)
         if isinstance(planned, Refusal):
             return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
                                         details={"waypoint": number, **planned.details}))
         segment, samples = planned
-        violations += path_violations(context, samples, number)
+        checks.add(samples, number)
+        if not np.array_equal(samples[-1], goal_relative[0]):
+            checks.add(goal_relative, number)  # the goal is checked even where the last sample is not it
+        if refusal := checks.flush(budget, lambda: f"checking the paths up to waypoint {number} of {total}", remedy):
+            return Plan(refusal=refusal)
         segments.append(replace(segment, start=rebased))
+        motion_s += segment.duration_s
         start = KinematicState.at_rest(goal)
-    if violations:
+    if refusal := checks.flush(budget, lambda: f"checking the paths of {total} waypoints", remedy, final=True):
+        return Plan(refusal=refusal)
+    if violations := checks.violations():
         return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(violations), tuple(violations)))
     return Plan(segments=tuple(segments))
+
+
+def budgeted_path_violations(context: PlanningContext, relative: NDArray, waypoint: int, budget: PlanningBudget,
+                             where: str, remedy: str) -> list[PathViolation] | Refusal:
+    """:func:`path_violations` of a long path (a wave's), assessed in batches with a look
+    at ``budget`` between them: the violations, or the budget's refusal (``where`` and
+    ``remedy`` for its message)."""
+    checks = _PathChecks(context)
+    checks.add(relative, waypoint)
+    if refusal := checks.flush(budget, lambda: where, remedy, final=True):
+        return refusal
+    return checks.violations()
+
+
+class _PathChecks:
+    """:func:`path_violations` of the paths of a plan's waypoints, added in order and
+    assessed in batches of :data:`_CHECK_BATCH` poses: the same samples, thinned per path as
+    :func:`assess_path` does, the same first violation of each kind per waypoint, in the
+    same order; without the per-call cost of :func:`assess_poses` at every waypoint. A
+    path's first sample is the previous path's last when the waypoint starts at rest where
+    the one before ended (the same pose, bit for bit): it is assessed once, for the earlier
+    waypoint (and where it breaks a limit, the plan is refused all the same)."""
+
+    def __init__(self, context: PlanningContext) -> None:
+        self._context = context
+        self._pending: list[NDArray] = []  # thinned relative mm/deg poses not assessed yet
+        self._owners: list[NDArray] = []  # their waypoints
+        self._count = 0
+        self._last: NDArray | None = None  # the last relative mm/rad sample added
+        self._hardware: dict[tuple, PathViolation] = {}  # by (waypoint, kind, leg, axis), first found
+        self._soft: dict[int, list[PathViolation]] = {}  # the soft limits' by waypoint
+
+    def add(self, relative: NDArray, waypoint: int) -> None:
+        """The (N, 6) relative mm/rad samples of waypoint ``waypoint``'s path."""
+        context = self._context
+        if context.soft_limits is not None and context.frames is not None:
+            if soft := _soft_violations(context, relative, waypoint):
+                self._soft.setdefault(waypoint, []).extend(soft)
+        relative_deg = pose_mm_rad_to_mm_deg(relative)
+        keep = _thinned(relative_deg, context.path_step_mm, context.path_step_deg)
+        if self._last is not None and keep[0] == 0 and np.array_equal(relative[0], self._last):
+            keep = keep[1:]
+        self._last = relative[-1].copy()
+        if len(keep):
+            self._pending.append(relative_deg[keep])
+            self._owners.append(np.full(len(keep), waypoint))
+            self._count += len(keep)
+
+    def flush(self, budget: PlanningBudget, where, remedy: str, final: bool = False) -> Refusal | None:
+        """Assess the pending poses once a batch is full (all of them if ``final``), in
+        batches, checking ``budget`` between them (``where()`` says where for its refusal)."""
+        if not self._count or (self._count < _CHECK_BATCH and not final):
+            return None
+        poses, owners = np.concatenate(self._pending), np.concatenate(self._owners)
+        self._pending, self._owners, self._count = [], [], 0
+        geometry = self._context.active.geometry
+        for begin in range(0, len(poses), _CHECK_BATCH):
+            if begin and (refusal := budget.refusal(where(), remedy)):
+                return refusal
+            for assessment, owner in zip(assess_poses(geometry, poses[begin:begin + _CHECK_BATCH]),
+                                         owners[begin:begin + _CHECK_BATCH].tolist()):
+                for violation in assessment.violations:
+                    key = (owner, violation.kind, violation.leg, violation.axis)
+                    if key not in self._hardware:
+                        self._hardware[key] = PathViolation(violation.kind, violation.value, violation.limit,
+                                                            violation.message, violation.leg, violation.axis,
+                                                            waypoint=owner, pose=assessment.pose_relative)
+        return None
+
+    def violations(self) -> list[PathViolation]:
+        """Every violation found, by waypoint: the hardware's limits', then the soft limits'
+        (as :func:`path_violations` orders them)."""
+        by_waypoint: dict[int, list[PathViolation]] = {}
+        for (waypoint, *_), violation in self._hardware.items():
+            by_waypoint.setdefault(waypoint, []).append(violation)
+        for waypoint in self._soft:
+            by_waypoint.setdefault(waypoint, [])
+        return [violation for waypoint in sorted(by_waypoint)
+                for violation in by_waypoint[waypoint] + _first_of_each(self._soft.get(waypoint, []))]
 
 
 def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
@@ -247,9 +399,16 @@ def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) 
     near-singularity) and the soft limits broken by (N, 6) relative mm/rad samples of
     waypoint ``waypoint``'s path: what every commanded path is checked against."""
     found = assess_path(context.active.geometry, relative, waypoint, context.path_step_mm, context.path_step_deg)
-    limits, frames = context.soft_limits, context.frames
-    if limits is None or frames is None:
+    if context.soft_limits is None or context.frames is None:
         return found
+    return found + _soft_violations(context, relative, waypoint)
+
+
+def _soft_violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
+    """The soft limits broken by every one of (N, 6) relative mm/rad samples (the context
+    has soft limits and frames): the first of each kind (per axis) with its pose."""
+    limits, frames = context.soft_limits, context.frames
+    assert limits is not None and frames is not None
     tool = pose_mm_rad_to_mm_deg(tools_in_work(frames, relative + np.asarray(context.active.home)))
     first: dict[tuple, PathViolation] = {}
     for n, broken in enumerate(limits.violations(tool)):
@@ -257,7 +416,16 @@ def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) 
             first.setdefault((violation.kind, violation.axis), PathViolation(
                 violation.kind, violation.value, violation.limit, violation.message, axis=violation.axis,
                 waypoint=waypoint, pose=RelativeMmDeg._make(pose_mm_rad_to_mm_deg(relative[n]))))
-    return found + list(first.values())
+    return list(first.values())
+
+
+def _first_of_each(violations: Sequence[PathViolation]) -> list[PathViolation]:
+    """The first of each kind (per axis) of ``violations``, in order (one waypoint's soft
+    limits, found over several calls of :func:`_soft_violations`)."""
+    first: dict[tuple, PathViolation] = {}
+    for violation in violations:
+        first.setdefault((violation.kind, violation.axis), violation)
+    return list(first.values())
 
 
 def pose_allowed(context: PlanningContext, relative: Sequence[float]) -> bool:
@@ -280,10 +448,7 @@ def assess_path(
     of translation or ``step_deg`` of rotation (first and last always kept); the first
     violation of each kind (per leg or axis) with the pose where it happens."""
     relative_deg = pose_mm_rad_to_mm_deg(samples)
-    steps = np.abs(np.diff(relative_deg, axis=0))
-    progress = np.concatenate(([0.0], np.cumsum(np.maximum(steps[:, :3].max(axis=1) / step_mm, steps[:, 3:].max(axis=1) / step_deg))))
-    keep = np.flatnonzero(np.diff(np.floor(progress), prepend=-1.0) > 0)
-    keep = np.union1d(keep, [len(samples) - 1])
+    keep = _thinned(relative_deg, step_mm, step_deg)
     found: dict[tuple, PathViolation] = {}
     for assessment in assess_poses(geometry, relative_deg[keep]):
         for violation in assessment.violations:
@@ -293,6 +458,15 @@ def assess_path(
                                            violation.leg, violation.axis, waypoint=waypoint,
                                            pose=assessment.pose_relative)
     return list(found.values())
+
+
+def _thinned(relative_deg: NDArray, step_mm: float, step_deg: float) -> NDArray:
+    """The indices of (N, 6) relative mm/deg samples kept at one per ``step_mm`` of
+    translation or ``step_deg`` of rotation, ascending; the first and the last always."""
+    steps = np.abs(np.diff(relative_deg, axis=0))
+    progress = np.concatenate(([0.0], np.cumsum(np.maximum(steps[:, :3].max(axis=1) / step_mm, steps[:, 3:].max(axis=1) / step_deg))))
+    keep = np.flatnonzero(np.diff(np.floor(progress), prepend=-1.0) > 0)  # ascending, and the first
+    return keep if keep[-1] == len(relative_deg) - 1 else np.append(keep, len(relative_deg) - 1)
 
 
 def piecewise_line(poses: Sequence[Sequence[float]], step_mm: float, step_deg: float) -> NDArray:
@@ -390,25 +564,29 @@ def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float],
 
 
 def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordinates, frames: Frames | None,
-                  waypoint: Waypoint, motion_left_s: float) -> tuple[Segment, NDArray] | Refusal:
+                  waypoint: Waypoint, motion_left_s: float, budget: PlanningBudget | None = None,
+                  remedy: str = "split the move") -> tuple[Segment, NDArray] | Refusal:
     """The segment to ``goal`` (in the coordinates of ``frames``, as ``start``) and its
     samples (relative mm/rad); refused before sampling when it would move for longer than
-    ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan)."""
+    ``motion_left_s`` (what :data:`MAX_MOTION_S` leaves of the plan), and when ``budget``
+    runs out while sampling in leg-lock mode (``remedy`` for its message)."""
     velocity_scale = waypoint.speed or 1.0
     natural = preview(context.limits, context.period_s, start, goal, 1.0, velocity_scale)
     if natural is None:
         return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
     # a move to where it already is takes no time, however long it was asked to take
     time_scale = max(1.0, waypoint.duration_s / natural.duration) if waypoint.duration_s and natural.duration else 1.0
-    for _ in range(_MAX_STRETCH_ATTEMPTS):
-        trajectory = preview(context.limits, context.period_s, start, goal, time_scale, velocity_scale)
+    for attempt in range(_MAX_STRETCH_ATTEMPTS):
+        # the natural trajectory is the first attempt's when nothing stretches it
+        trajectory = (natural if attempt == 0 and time_scale == 1.0
+                      else preview(context.limits, context.period_s, start, goal, time_scale, velocity_scale))
         if trajectory is None:
             return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
         if trajectory.duration > motion_left_s:
             return Refusal(ErrorCode.PLANNING_FAILED,
                            f"the move would take {trajectory.duration:.6g} s; a move, or a sequence's moves together, "
                            f"may take at most {MAX_MOTION_S:g} s: raise the speed or shorten the duration")
-        samples = _samples(context, start, trajectory, frames)
+        samples = _samples(context, start, trajectory, frames, budget, remedy)
         if isinstance(samples, Refusal):
             return samples
         peak = _peak_leg_speed(context, samples)
@@ -419,12 +597,14 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
     return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
 
 
-def _samples(context: PlanningContext, start: KinematicState, trajectory, frames: Frames | None) -> NDArray | Refusal:
+def _samples(context: PlanningContext, start: KinematicState, trajectory, frames: Frames | None,
+             budget: PlanningBudget | None = None, remedy: str = "split the move") -> NDArray | Refusal:
     """The start and the position of every cycle of ``trajectory`` (in the coordinates of
     ``frames``) as poses relative mm/rad. In leg-lock mode (relative coordinates):
     projected as the loop will, each cycle's from the one before, starting at the start's
     full projection (where the loop's commanded pose is); refused if the loop's
-    iterations would not converge at some cycle."""
+    iterations would not converge at some cycle, or when ``budget`` runs out (checked
+    every :data:`_BUDGET_CYCLES` cycles: a projection per cycle is planning's dearest work)."""
     count = max(1, int(round(trajectory.duration / context.period_s)))
     targets = [start.position] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
     lock = context.lock
@@ -433,6 +613,9 @@ def _samples(context: PlanningContext, start: KinematicState, trajectory, frames
     active = context.active
     projected: list[RelativeMmRad] = []
     for cycle, target in enumerate(targets):
+        if budget is not None and cycle and cycle % _BUDGET_CYCLES == 0 and (refusal := budget.refusal(
+                f"{cycle * context.period_s:.1f} s into the move of {trajectory.duration:.1f} s", remedy)):
+            return refusal
         result = (track_locked(active, lock, target, targets[cycle - 1], projected[-1], context.lock_cycle_iterations)
                   if cycle else project_locked(active, lock, target))
         if not result.ok:

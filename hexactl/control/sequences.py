@@ -4,7 +4,8 @@ A sequence is a name and waypoints (poses relative to the zero posture, mm and d
 with ``frame = "work"`` the tool's poses in the operator's work frame; each with an
 optional duration or speed, and a dwell). Its file format (TOML) and the dwell
 records' table are :mod:`hexactl.adapters.files.sequence_file`'s. A sequence is validated
-whole before anything moves (every move path, see :mod:`hexactl.control.planning`).
+whole before anything moves (every move path, see :mod:`hexactl.control.planning`); it
+holds at most :data:`~hexactl.control.planning.MAX_WAYPOINTS` waypoints.
 During playback the controller records, at the end of each waypoint's dwell (the platform
 settled, the instrument done), the commanded and the measured pose: :class:`DwellRecord`.
 """
@@ -15,10 +16,10 @@ import difflib
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
-from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, Waypoint, pace_problem
+from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, MAX_WAYPOINTS, Waypoint, pace_problem, waypoint_count_problem
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.geometry import describe_validation_error
 
@@ -73,7 +74,16 @@ class MotionSequence(BaseModel):
     description: str = ""
     frame: Literal["zero", "work"] = Field(default="zero", description="what the poses are: relative to the zero "
                                            "posture (zero), or the tool's poses in the work frame (work)")
-    waypoints: tuple[SequenceWaypoint, ...] = Field(alias="waypoint", min_length=1)
+    waypoints: tuple[SequenceWaypoint, ...] = Field(alias="waypoint", min_length=1, description=(
+        f"at most {MAX_WAYPOINTS} (hexactl.control.planning.MAX_WAYPOINTS: planning time grows with each)"))
+
+    @field_validator("waypoints", mode="before")
+    @classmethod
+    def _not_too_many(cls, value: object) -> object:
+        """Counted before any waypoint is validated, let alone planned."""
+        if isinstance(value, (list, tuple)) and (problem := waypoint_count_problem(len(value))):
+            raise ValueError(problem)
+        return value
 
     def planning_waypoints(self) -> list[Waypoint]:
         in_work = self.frame == "work"

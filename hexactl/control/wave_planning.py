@@ -6,7 +6,9 @@ its whole path has been checked, from rest:
 1. every loop cycle's position (:meth:`~hexactl.control.waves.WavePath.at`, the function
    the loop will run) as a pose relative to the zero posture;
 2. the limits of every commanded path (:func:`~hexactl.control.planning.path_violations`:
-   stroke, joint cones, envelope, near-singularity, soft limits);
+   stroke, joint cones, envelope, near-singularity, soft limits), in batches, with a look
+   at the planning budget (:data:`~hexactl.control.planning.PLANNING_BUDGET_S`) between
+   them and between batches of cycles in 1;
 3. the legs' speed: set-points by batch IK, the peak change per cycle against the budget
    moves are planned within (``PlanningContext.leg_speed_mm_s``). A move that is too fast
    is stretched in time; a wave is refused, never stretched: its frequency is what was
@@ -30,9 +32,10 @@ import numpy as np
 from hexactl.control.frames import Frame, convert, relative_poses
 from hexactl.control.planning import (
     MAX_MOTION_S,
+    PlanningBudget,
     PlanningContext,
     Refusal,
-    path_violations,
+    budgeted_path_violations,
 )
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState
@@ -40,6 +43,11 @@ from hexactl.control.waves import WavePath, WaveSpec
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import sensor_setpoints_batch
+
+
+_BUDGET_SAMPLES = 50_000
+"""Cycles of a wave computed between two looks at the planning budget
+(:data:`~hexactl.control.planning.PLANNING_BUDGET_S`; a fraction of a second idle)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,9 +93,18 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
         return Refusal(ErrorCode.INVALID_ARGUMENT, "a wave in the work or tool frame needs the operator's frames")
     origin = start.position if frames == start_frames else convert(start.position, start_frames, frames, home)
     path = WavePath(spec, origin, context.period_s)
-    positions = np.array([path.at(k) for k in range(path.samples + 1)], dtype=float)
+    budget, remedy = PlanningBudget(), "fewer cycles"
+    rows: list = []
+    for begin in range(0, path.samples + 1, _BUDGET_SAMPLES):
+        if begin and (refusal := budget.refusal(f"at cycle {begin} of {path.samples}", remedy)):
+            return refusal
+        rows += [path.at(k) for k in range(begin, min(begin + _BUDGET_SAMPLES, path.samples + 1))]
+    positions = np.array(rows, dtype=float)
     relative = relative_poses(frames, positions, home)
-    if violations := path_violations(context, relative, 1):
+    violations = budgeted_path_violations(context, relative, 1, budget, "checking the wave's path", remedy)
+    if isinstance(violations, Refusal):
+        return violations
+    if violations:
         more = f" (and {len(violations) - 1} more)" if len(violations) > 1 else ""
         return Refusal(ErrorCode.PATH_VIOLATION, f"the wave leaves the limits: {violations[0].message}{more}",
                        tuple(violations))

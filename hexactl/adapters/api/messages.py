@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.sequences import Paced, SequenceWaypoint
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import FramePoseMmDeg, RelativeMmDeg, ToolInWorkMmDeg
@@ -225,7 +226,7 @@ class InlineSequence(_Message):
     description: str = ""
     frame: Literal["zero", "work"] = Field(default="zero", description="the waypoints' poses: relative to the zero "
                                            "posture (zero), or the tool's poses in the work frame (work)")
-    waypoints: list[Waypoint] = Field(min_length=1, max_length=1000)
+    waypoints: list[Waypoint] = Field(min_length=1, max_length=MAX_WAYPOINTS)
 
 
 class PlayRequest(_Request):

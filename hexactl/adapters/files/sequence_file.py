@@ -15,7 +15,9 @@ File format (TOML; poses relative to the zero posture, mm and deg)::
     pose = [0.0, 0.0, 0.0, 0.0, 5.0, 0.0]
     speed = 0.5       # optional, (0, 1]: fraction of the velocity limits; not with duration
 
-The model it validates into is :class:`~hexactl.control.sequences.MotionSequence`.
+The model it validates into is :class:`~hexactl.control.sequences.MotionSequence`. A file
+(and a plan) holds at most :data:`~hexactl.control.planning.MAX_WAYPOINTS` (500) waypoints,
+counted before any is planned: split a longer one into several.
 
 A posture plan (the CSV ``hexactl plan-leglock`` writes, read by
 :func:`~hexactl.adapters.files.measurements.parse_plan`) is a sequence too
@@ -36,6 +38,7 @@ from collections.abc import Sequence
 from pathlib import PurePath
 
 from hexactl.adapters.files.measurements import MeasurementFileError, parse_plan
+from hexactl.control.planning import waypoint_count_problem
 from hexactl.control.sequences import (
     BUILTIN_DWELL_S,
     DwellRecord,
@@ -68,6 +71,8 @@ def sequence_from_plan(text: str, source: str) -> MotionSequence:
         raise SequenceError("\n".join(f"{source}: {problem}" for problem in plan.problems))
     if not plan.poses:
         raise SequenceError(f"{source}: a header but no postures: a plan to play needs at least one row")
+    if problem := waypoint_count_problem(len(plan.poses)):
+        raise SequenceError(f"{source}: {problem}")
     legs = sorted(set(plan.legs) - {0})
     locked = f", planned with leg {', '.join(map(str, legs))} locked" if legs else ""
     return MotionSequence(name=PurePath(source).stem or source,
