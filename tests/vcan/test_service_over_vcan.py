@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import re
 import signal
 import subprocess
@@ -161,17 +160,17 @@ def data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @contextmanager
 def simulated_actuators() -> Iterator[subprocess.Popen]:
     """``hexactl sim-actuators --can SPEC`` in its own process, under SCHED_FIFO
-    :data:`SIMULATOR_FIFO` where permitted, once it says it is ready; killed on leaving
-    unless it has ended (:func:`terminate_simulator` ends it cleanly)."""
-    process = subprocess.Popen([*CLI, "sim-actuators", "--can", SPEC, "--seed", "3", "--tick-ms", str(SIMULATOR_TICK_MS)],
+    :data:`SIMULATOR_FIFO` where permitted (``--fifo``: set once it is ready, as its
+    start-up, imports taking tens of seconds of the guest's CPU, would starve the rest),
+    once it says it is ready; killed on leaving unless it has ended
+    (:func:`terminate_simulator` ends it cleanly)."""
+    process = subprocess.Popen([*CLI, "sim-actuators", "--can", SPEC, "--seed", "3", "--tick-ms", str(SIMULATOR_TICK_MS),
+                                "--fifo", str(SIMULATOR_FIFO)],
                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         ready = json.loads(process.stdout.readline() or "{}")
         assert ready.get("ready"), process.stderr.read()
-        try:  # once ready: its start-up (imports, tens of seconds of the guest's CPU) would starve the rest
-            os.sched_setscheduler(process.pid, os.SCHED_FIFO, os.sched_param(SIMULATOR_FIFO))  # its one thread
-        except PermissionError:
-            pass
+        assert ready["scheduling"].startswith(f"SCHED_FIFO {SIMULATOR_FIFO}"), ready  # set, or why not
         yield process
     finally:
         if process.poll() is None:
