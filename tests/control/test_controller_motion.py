@@ -57,6 +57,17 @@ def test_a_requested_duration_is_honoured(rig):
     assert cycles * rig.period_ns / 1e9 == pytest.approx(3.0, abs=2 * rig.period_ns / 1e9)
 
 
+@pytest.mark.parametrize("pose", [(0, 0, 10, 0, 0, 0), (100, 50, -30, 2, 3, 4), (0, 0, 0, 0, 0, 5)])
+@pytest.mark.parametrize("duration", [2.0, 60.0, 300.0, 600.0])
+def test_a_requested_duration_is_a_minimum_even_when_long(rig, pose, duration):
+    """Found from outside: 60 s took 59.952 s, 300 s 299.76 s (scaled limits give nearly, not
+    exactly, k times the natural duration)."""
+    rig.enabled()
+    result = rig.controller.validate_pose(pose, duration)
+    assert result.ok, result.message
+    assert duration - 1e-6 <= result.details["duration_s"] <= duration * 1.001
+
+
 def test_a_move_to_where_it_is_with_a_duration_is_taken_and_moves_nothing(rig):
     rig.enabled()
     here = list(rig.controller.telemetry().pose_command)
