@@ -107,6 +107,8 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
 
 
 def check_disable(view: CoreView) -> Refusal:
+    if view.state is ControlState.DISABLED:
+        return ErrorCode.NOT_ENABLED, "the controller is already disabled"
     return _enabled(view) or _at_rest(view)
 
 

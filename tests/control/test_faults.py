@@ -198,3 +198,5 @@ def test_disable_at_rest_only(rig):
     rig.run()
     assert rig.controller.snapshot.state.value == "disabled"
     assert rig.actuators.commands[-1] == (None, ActuatorCommand.DISABLE)
+    again = rig.controller.disable()  # found from outside: it said "enable first"
+    assert again.error == "not_enabled" and again.message == "the controller is already disabled"
