@@ -574,7 +574,9 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
     velocity_scale = waypoint.speed or 1.0
     natural = preview(context.limits, context.period_s, start, goal, 1.0, velocity_scale)
     if natural is None:
-        return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
+        slow = (f" at speed {velocity_scale:g} of the velocity limits: raise the speed (a move may take at most "
+                f"{MAX_MOTION_S:g} s)") if velocity_scale < 1.0 else ""
+        return Refusal(ErrorCode.PLANNING_FAILED, f"the trajectory generator refused the move{slow}")
     # a move to where it already is takes no time, however long it was asked to take
     time_scale = max(1.0, waypoint.duration_s / natural.duration) if waypoint.duration_s and natural.duration else 1.0
     for attempt in range(_MAX_STRETCH_ATTEMPTS):

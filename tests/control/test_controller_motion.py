@@ -68,6 +68,12 @@ def test_a_requested_duration_is_a_minimum_even_when_long(rig, pose, duration):
     assert duration - 1e-6 <= result.details["duration_s"] <= duration * 1.001
 
 
+def test_a_speed_too_low_for_the_trajectory_generator_is_refused_saying_what_to_do(rig):
+    rig.enabled()
+    refused = rig.controller.validate_pose((0, 0, 10, 0, 0, 0), None, 1e-9)
+    assert refused.error == "planning_failed" and "at speed 1e-09 of the velocity limits: raise the speed" in refused.message
+
+
 def test_a_move_to_where_it_is_with_a_duration_is_taken_and_moves_nothing(rig):
     rig.enabled()
     here = list(rig.controller.telemetry().pose_command)
