@@ -18,7 +18,8 @@ with the outcomes the API documents for it (docs/api.md):
 ``truncated``       a valid request cut short: ``malformed_json``
 ``non_finite``      NaN, Infinity or 1e400 where a number goes: ``malformed_json``
 ``huge``            above 64 KiB (``too_large``), 60 KiB arrays (``invalid_request``),
-                    nesting 20 000 deep (``malformed_json``), 1000-waypoint sequences
+                    nesting 20 000 deep (``malformed_json``), sequences of the most waypoints
+                    allowed (carried out) and one more (``invalid_request``)
 ``envelope``        ``v``, ``id`` or ``cmd`` missing or wrong, not an object
 ``unknown_command`` a ``cmd`` that is none: ``unknown_command``
 ``wrong_type``      one field of a valid request of the wrong type: ``invalid_request``
@@ -90,6 +91,7 @@ from hexactl.adapters.api.wire import MAX_REQUEST_BYTES  # noqa: E402
 from hexactl.adapters.api.wire import ErrorCode as ApiCode  # noqa: E402
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
 from hexactl.adapters.files.config_path import default_config_path  # noqa: E402
+from hexactl.control.planning import MAX_WAYPOINTS  # noqa: E402
 from hexactl.control.results import ErrorCode as ControlCode  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
@@ -287,10 +289,15 @@ class Strategies:
         nested = st.tuples(st.integers(20_000, 60_000), st.sampled_from(["[", '{"a":'])).map(
             lambda drawn: Case("huge", ((drawn[1] * (drawn[0] // len(drawn[1]))).encode(),),
                                frozenset({ApiCode.MALFORMED_JSON})))
-        long_sequence = st.integers(0, 2**32).map(  # drawn from a seed: 1000 poses overrun hypothesis's buffer
+        long_sequence = st.integers(0, 2**32).map(  # drawn from a seed: 500 poses overrun hypothesis's buffer
             lambda value: Case("huge", (request_bytes("play", 1, sequence={"name": "long", "waypoints": [
-                {"pose": pose} for pose in self._random_poses(random.Random(value), 1000)]}),), CARRIED_OUT, "play"))
-        return st.one_of(padded, long_pose, nested, long_sequence)
+                {"pose": pose} for pose in self._random_poses(random.Random(value), MAX_WAYPOINTS)]}),),
+                CARRIED_OUT, "play"))
+        too_long_sequence = st.integers(0, 2**32).map(
+            lambda value: Case("huge", (request_bytes("play", 1, sequence={"name": "too long", "waypoints": [
+                {"pose": pose} for pose in self._random_poses(random.Random(value), MAX_WAYPOINTS + 1)]}),),
+                frozenset({ApiCode.INVALID_REQUEST})))
+        return st.one_of(padded, long_pose, nested, long_sequence, too_long_sequence)
 
     def _random_poses(self, rng: random.Random, count: int) -> list[list[float]]:
         low, high = self.geometry.limits.pose_min, self.geometry.limits.pose_max

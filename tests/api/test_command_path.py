@@ -117,8 +117,9 @@ def test_queries_are_answered_while_the_command_worker_plans(server, handler) ->
         reply = request(server.endpoint, {"v": 1, "id": cmd, "cmd": cmd})
         assert reply["ok"] and reply["message"] == f"{cmd} done"
     assert not handler.release.is_set()  # the plan is still under way
+    holder.send("own status", "status")  # behind its own client's plan: it reflects it
     handler.release.set()
-    assert holder.receive()["id"] == "block"
+    assert [holder.receive()["id"] for _ in range(2)] == ["block", "own status"]
     holder.close()
 
 

@@ -19,10 +19,12 @@ and never runs a slow handler. For each request it:
   before the stop was carried out; if it got through all the same, the worker stops the
   platform again after it and answers ``cancelled``;
 - queues anything else for a **worker thread**: the :data:`QUERY_COMMANDS` (snapshots:
-  ``status``, ``geometry``, ``record_status``) for the query worker, the rest for the
-  command worker; each has one queue per client (the ROUTER's routing identity), served
-  round-robin, bounded per client and in all (``busy`` beyond). So a plan that takes
-  seconds (a long sequence or wave) holds up other plans, never an operator's ``status``.
+  ``status``, ``geometry``, ``record_status``) for the query worker unless their client has
+  a command waiting or being handled (then behind it, so that what it asks after its
+  commands reflects them), the rest for the command worker; each has one queue per client
+  (the ROUTER's routing identity), served round-robin, bounded per client and in all
+  (``busy`` beyond). So another client's plan that takes seconds (a long sequence or
+  wave) never holds up an operator's ``status``.
 
 A worker takes requests in turn, answers ``expired`` for one whose ``deadline_ms`` has
 passed, else runs the handler with the absolute deadline (the loop refuses a motion
@@ -181,8 +183,19 @@ class _RoundRobin:
         self._ready = threading.Condition()
         self._queues: dict[bytes, deque[_Queued]] = {}
         self._turns: deque[bytes] = deque()
+        self._handling: bytes | None = None  # the client whose request the worker took last, until done
         self.queued = 0
         self.discards = 0
+
+    def holds(self, client: bytes) -> bool:
+        """Whether ``client`` has a request here, waiting or being handled."""
+        with self._ready:
+            return client in self._queues or client == self._handling
+
+    def done(self) -> None:
+        """The worker has answered what it took."""
+        with self._ready:
+            self._handling = None
 
     def put(self, client: bytes, item: _Queued) -> str | None:
         """Queue ``item`` from ``client``; None, or why it is refused (``busy``)."""
@@ -217,6 +230,7 @@ class _RoundRobin:
             else:
                 del self._queues[client]
             self.queued -= 1
+            self._handling = client
             return item, self.discards
 
     def discard(self, commands: frozenset[str]) -> list[_Queued]:
@@ -370,8 +384,11 @@ class ApiServer(SocketThread):
             self._send([*envelope, reply])
             return
         deadline_ns = None if request.deadline_ms is None else received_ns + round(request.deadline_ms * 1e6)
-        lane = self._queries if request.cmd in QUERY_COMMANDS else self._commands
-        refusal = lane.put(envelope[0], _Queued(envelope, request, deadline_ns))
+        client = envelope[0]
+        # A query waits behind its own client's commands (what it asks after them reflects
+        # them), never behind another client's.
+        quick = request.cmd in QUERY_COMMANDS and not self._commands.holds(client)
+        refusal = (self._queries if quick else self._commands).put(client, _Queued(envelope, request, deadline_ns))
         if refusal is not None:
             self._send([*envelope, encode(error_reply(request.id, ErrorCode.BUSY, refusal,
                                                       {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": MAX_QUEUED}))])
@@ -437,6 +454,8 @@ class ApiServer(SocketThread):
             except zmq.ZMQError as error:  # closed under a worker left behind by close()
                 log.warning("reply to %s not sent: %s", describe(request), error)
                 return
+            finally:
+                worker.lane.done()  # after the reply: a query of its client sent before it waits for it
 
     def _stop_after_race(self, request: Request) -> dict[str, Any]:
         """An urgent command arrived while ``request`` was being planned, and it was still
