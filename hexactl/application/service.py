@@ -35,7 +35,7 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from importlib import resources
 from contextlib import ExitStack, suppress
 from dataclasses import dataclass
@@ -240,9 +240,11 @@ class Service:
         return self._api.exitcode
 
     @classmethod
-    def start(cls, config: ServiceConfig) -> Service:
+    def start(cls, config: ServiceConfig, serving: Callable[[], object] | None = None) -> Service:
         """Load the geometry, open the actuators, start the loop, then the API process;
-        what was started is stopped again if a later step fails.
+        what was started is stopped again if a later step fails. ``serving`` is called
+        once the API process serves (clients may enable the actuators from then on):
+        :func:`run_service` stops ending the process at once on a signal then.
 
         :raises ServiceError: for a refused geometry or key file, a bus that cannot be
             opened or an endpoint that cannot be bound
@@ -336,6 +338,8 @@ class Service:
                                  port.line_end if port else None)
             except ApiStartError as error:
                 raise ServiceError(str(error)) from None
+            if serving is not None:
+                serving()
             budget = _Budget()
             closers.callback(lambda: api.close(budget.left(SHUTDOWN_STEPS_S)))  # telemetry flows until at rest
             closers.callback(lambda: _bring_to_rest(controller, budget.left(SHUTDOWN_BRAKE_TIMEOUT_S)))
@@ -414,12 +418,20 @@ def run_service(config: ServiceConfig) -> NoReturn:
     broke (the platform is then brought to rest as at a stop); the link's dropped
     non-commands are logged.
 
+    A signal during the start, before the API process serves, ends the process at once
+    (:func:`_end_start_up`: nothing can have been enabled yet). SIGINT inherited as
+    ignored (``hexactl serve … &`` from a script, ``nohup``) stays ignored, as the parent
+    wished; SIGTERM always ends the service.
+
     :raises ServiceError: if the service does not start (see :meth:`Service.start`)
     """
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     status = 0
-    with ShutdownSignals() as signals:
-        service = Service.start(config)
+    numbers = [number for number in ShutdownSignals.SIGNALS
+               if number != signal.SIGINT or signal.getsignal(number) is not signal.SIG_IGN]
+    with ShutdownSignals(numbers, on_start_up=_end_start_up) as signals:
+        service = Service.start(config, serving=signals.serving)
+        signals.serving()
         main_thread_below_loop(service)
         try:
             rejected = 0
@@ -439,12 +451,32 @@ def run_service(config: ServiceConfig) -> NoReturn:
             backstop.start()
             service.close()
             backstop.cancel()
-    # Everything is closed. End now rather than through the interpreter's finalisation,
-    # which tears numpy, scipy and pydantic down module by module after "stopped" (0.2 s on
-    # the host, seconds in a slow guest: BENCHMARKS.md) while a service manager waits.
-    logging.shutdown()  # flush the log: os._exit skips it
-    sys.stdout.flush()
-    os._exit(status)
+        # Everything is closed. End now (a signal from here on is only noted) rather than
+        # through the interpreter's finalisation, which tears numpy, scipy and pydantic down
+        # module by module after "stopped" (0.2 s on the host, seconds in a slow guest:
+        # BENCHMARKS.md) while a service manager waits.
+        logging.shutdown()  # flush the log: os._exit skips it
+        sys.stdout.flush()
+        os._exit(status)
+
+
+def _end_start_up(received: signal.Signals) -> NoReturn:
+    """A signal while the service starts, before its API process serves: no client can
+    have enabled the actuators, so nothing moves and nothing needs braking. End at once,
+    however long the start would still take (an API process starting on a loaded host: a
+    minute and more), with one line and no traceback: the child processes killed (the
+    dashboard's ends by itself), status 130 for SIGINT (as the command line's Ctrl-C),
+    death by SIGTERM for SIGTERM (143 to a shell; what it did before the handler was set).
+
+    Runs in the signal handler: no lock, no logging (the interrupted main thread may hold
+    the log's)."""
+    os.write(sys.stderr.fileno(), f"hexactl serve: {received.name} during start-up: stopped before serving\n".encode())
+    for child in multiprocessing.active_children():
+        child.kill()
+    if received == signal.SIGTERM:
+        signal.signal(received, signal.SIG_DFL)
+        os.kill(os.getpid(), received)
+    os._exit(128 + received)
 
 
 class ShutdownSignals:
@@ -457,11 +489,18 @@ class ShutdownSignals:
     lock a ``threading.Event.set()`` would take, and then waits for itself for ever (the
     ``signal`` module's warning; python/cpython#126434). A service hung that way after
     "SIGTERM" with no backstop running yet.
+
+    ``numbers``: the signals it takes (default :data:`SIGNALS`). ``on_start_up``: called
+    with a signal received before :meth:`serving` instead of noting it (it may end the
+    process).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def __init__(self) -> None:
+    def __init__(self, numbers: Collection[signal.Signals] = SIGNALS,
+                 on_start_up: Callable[[signal.Signals], object] | None = None) -> None:
+        self._numbers = tuple(numbers)
+        self._on_start_up = on_start_up
         self._received: list[signal.Signals] = []
         self._wake_read, self._wake_write = socket.socketpair()
         self._previous: dict[signal.Signals, object] = {}
@@ -471,7 +510,7 @@ class ShutdownSignals:
         for sock in (self._wake_read, self._wake_write):
             sock.setblocking(False)
         self._previous_wakeup_fd = signal.set_wakeup_fd(self._wake_write.fileno(), warn_on_full_buffer=False)
-        self._previous = {number: signal.signal(number, self._handle) for number in self.SIGNALS}
+        self._previous = {number: signal.signal(number, self._handle) for number in self._numbers}
         return self
 
     def __exit__(self, *exc_info: object) -> None:
@@ -482,7 +521,13 @@ class ShutdownSignals:
         self._wake_write.close()
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
+        if self._on_start_up is not None:
+            self._on_start_up(signal.Signals(signum))
         self._received.append(signal.Signals(signum))
+
+    def serving(self) -> None:
+        """From now on a signal is noted, for :meth:`wait` (no more ``on_start_up``)."""
+        self._on_start_up = None
 
     def wait(self, timeout_s: float) -> signal.Signals | None:
         """The first signal received, waiting up to ``timeout_s`` s for one (None: none)."""

@@ -24,6 +24,7 @@ from hexactl.adapters.cli.common import (
     CliError,
     campaign_stopped,
     check_campaign_arguments,
+    client_endpoint,
     connect,
     connection_parser,
     load_config,
@@ -142,7 +143,7 @@ def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
     from hexactl.calibration.planning import DEFAULT_CANDIDATES
 
     campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
-    campaign.add_argument("--api", metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, "
+    campaign.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, "
                           f"else the client file's api, else {DEFAULT_API_ENDPOINT})")
     campaign.add_argument("--instrument", default="sim", metavar="SOURCE",
                           help="sim: the service's simulated instrument (default); csv:FILE: a real instrument's file of "

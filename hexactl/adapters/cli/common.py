@@ -104,6 +104,25 @@ class DeferredParser(argparse.ArgumentParser):
         return super().format_help()
 
 
+class VersionAction(argparse.Action):
+    """``hexactl --version``: the installed package's version, looked up only when asked
+    (importlib.metadata is too slow to load for every command)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help="print the version and exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            found = version("hexactl")
+        except PackageNotFoundError:
+            found = "unknown (not installed: python3 -m pip install -e .)"
+        print(f"hexactl {found}")  # to stdout, as argparse's own version action
+        parser.exit()
+
+
 def common_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
@@ -125,17 +144,71 @@ def connection_parser() -> argparse.ArgumentParser:
 
 def connect(kind: type[Connection], endpoint: str, arguments: argparse.Namespace, **options: Any) -> Connection:
     """A client of ``kind`` with the CURVE keys the arguments (:func:`connection_parser`)
-    name; CliError for bad keys."""
+    name; CliError for bad keys, or for an endpoint ZeroMQ refuses (the parsers and
+    :func:`~hexactl.adapters.cli.endpoints.fill_endpoints` check its form before)."""
     if (arguments.curve_server is None) != (arguments.curve_client is None):
         raise CliError("give both --curve-server and --curve-client, or neither")
-    if arguments.curve_server is None:
-        return kind(endpoint, **options)
-    from hexactl.adapters.api.security import CurveClientKeys, SecurityError  # zmq.auth: only with keys
+    import zmq  # loaded by ``kind``'s module already
 
     try:
-        return kind(endpoint, curve=CurveClientKeys(arguments.curve_server, arguments.curve_client), **options)
-    except (SecurityError, OSError, ValueError) as error:  # missing or malformed key files
-        raise CliError(f"CURVE keys: {error}") from None
+        if arguments.curve_server is None:
+            return kind(endpoint, **options)
+        from hexactl.adapters.api.security import CurveClientKeys, SecurityError  # zmq.auth: only with keys
+
+        try:
+            return kind(endpoint, curve=CurveClientKeys(arguments.curve_server, arguments.curve_client), **options)
+        except (SecurityError, OSError, ValueError) as error:  # missing or malformed key files
+            raise CliError(f"CURVE keys: {error}") from None
+    except zmq.ZMQError as error:
+        raise CliError(f"cannot connect to {endpoint!r}: {zmq.strerror(error.errno)}; {ENDPOINT_FORMS['connect']}") from None
+
+
+ENDPOINT_FORMS = {
+    "connect": "expected tcp://HOST:PORT with a port 1-65535 (e.g. tcp://127.0.0.1:5555) or ipc://PATH",
+    "bind": "expected tcp://HOST:PORT with a port 1-65535, or * for a free one (e.g. tcp://127.0.0.1:5555, "
+            "tcp://127.0.0.1:*), or ipc://PATH",
+}
+"""What an endpoint of a client (``connect``) or of ``hexactl serve`` (``bind``) looks like."""
+
+
+def endpoint_problem(text: str, use: str = "connect") -> str | None:
+    """What is wrong with ``text`` as a ZeroMQ endpoint to ``use`` (``connect`` or
+    ``bind``), with the form expected; None if nothing. Only the forms hexactl's services
+    speak: TCP (a host name, an address, ``[IPv6]``, an interface; for a client also
+    ``SOURCE;DESTINATION``) and ``ipc://`` (a local socket file). Checked here, before
+    ZeroMQ, whose ``Invalid argument`` names neither the option nor the form, and whose
+    bind takes a port above 65535 modulo 65536."""
+    expected = ENDPOINT_FORMS[use]
+    scheme, separator, address = text.partition("://")
+    if not separator:
+        return f"{text!r} is not an endpoint: {expected}"
+    if scheme == "ipc":
+        return None if address.strip() else f"{text!r} names no socket file: {expected}"
+    if scheme != "tcp":
+        return f"{text!r}: {scheme}:// is not a transport hexactl serves: {expected}"
+    destination = address.rpartition(";")[2] if use == "connect" else address
+    host, colon, port = destination.rpartition(":")
+    if not colon or not host.strip("[]") or any(character.isspace() for character in host):
+        return f"{text!r} names no host and port: {expected}"
+    if use == "bind" and port == "*":
+        return None
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        return f"{text!r}: {port!r} is not a port 1-65535: {expected}"
+    return None
+
+
+def client_endpoint(text: str) -> str:
+    """An argparse ``type``: an endpoint to connect to (``--api``, ``--telemetry``)."""
+    if problem := endpoint_problem(text, "connect"):
+        raise argparse.ArgumentTypeError(problem)
+    return text
+
+
+def bind_endpoint(text: str) -> str:
+    """An argparse ``type``: an endpoint ``hexactl serve`` binds (``--api``, ``--telemetry``, ``--stream``)."""
+    if problem := endpoint_problem(text, "bind"):
+        raise argparse.ArgumentTypeError(problem)
+    return text
 
 
 def load_config(arguments: argparse.Namespace) -> Geometry:
@@ -180,16 +253,24 @@ def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt
 
 _KEYED = re.compile(r"^\s*(x|y|z|roll|pitch|yaw)\s*=\s*(\S+)\s*$")
 
+POSE_FORMS = "six numbers X,Y,Z,ROLL,PITCH,YAW (e.g. 10,0,50,0,0,5) or axis=value pairs, the others 0 (e.g. x=10,z=50,yaw=5)"
+
 
 def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
     """A pose typed on the command line, mm and deg (relative to the zero posture, or in the
     frame the command names), or six values of another ``what`` per axis (a velocity).
 
     Either six comma-separated numbers ``X,Y,Z,ROLL,PITCH,YAW`` or ``axis=value`` pairs
-    separated by commas, missing axes 0: ``x=600``, ``pitch=-20,yaw=5``.
+    separated by commas, missing axes 0: ``x=600``, ``pitch=-20,yaw=5``; not both in one
+    argument, and each axis once (as the API, which refuses a repeated key).
     """
     parts = [part for part in text.split(",") if part.strip()]
-    if parts and all("=" in part for part in parts):
+    keyed = [part for part in parts if "=" in part]
+    if keyed and len(keyed) < len(parts):
+        plain = next(part.strip() for part in parts if "=" not in part)
+        raise CliError(f"{what} {text!r}: axis=value pairs and plain numbers cannot be mixed ({keyed[0].strip()!r} "
+                       f"and {plain!r}): give {POSE_FORMS}")
+    if keyed:
         pose = _keyed_values(what, text, parts, 0.0)
     else:
         pose = [_number(part, text) for part in parts]
@@ -201,7 +282,7 @@ def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
 
 def parse_bounds_argument(text: str) -> list[float | None]:
     """Soft bounds typed on the command line: ``axis=value`` pairs (mm, deg), the axes not
-    named unbounded: ``x=-50,z=-10``."""
+    named unbounded, each axis once: ``x=-50,z=-10``."""
     bounds = _keyed_values("bounds", text, [part for part in text.split(",") if part.strip()], None)
     if any(bound is not None and not isfinite(bound) for bound in bounds):
         raise CliError(f"bounds {text!r}: every value must be a finite number")
@@ -210,11 +291,18 @@ def parse_bounds_argument(text: str) -> list[float | None]:
 
 def _keyed_values(what: str, text: str, parts: list[str], missing: float | None) -> list[float | None]:
     values: list[float | None] = [missing] * 6
+    given: dict[str, str] = {}
     for part in parts:
         match = _KEYED.match(part)
         if not match:
-            raise CliError(f"{what} {text!r}: {part.strip()!r} is not axis=value with axis one of {', '.join(POSE_AXES)}")
-        values[POSE_AXES.index(match.group(1))] = _number(match.group(2), text)
+            raise CliError(f"{what} {text!r}: {part.strip()!r} is not axis=value with axis one of {', '.join(POSE_AXES)}"
+                           f" (e.g. x=10,yaw=5)")
+        axis = match.group(1)
+        if axis in given:
+            raise CliError(f"{what} {text!r}: axis {axis} is given twice ({given[axis]!r} and {part.strip()!r}): give "
+                           "each axis once")
+        given[axis] = part.strip()
+        values[POSE_AXES.index(axis)] = _number(match.group(2), text)
     return values
 
 

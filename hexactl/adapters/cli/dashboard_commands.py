@@ -6,7 +6,7 @@ import argparse
 import functools
 
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT
-from hexactl.adapters.cli.common import CliError, connect, connection_parser
+from hexactl.adapters.cli.common import CliError, client_endpoint, connect, connection_parser
 
 DEFAULT_HTTP = "127.0.0.1:8080"
 """Where the dashboard is served unless told (``--http``; ``serve --dashboard``, ``demo --dashboard``)."""
@@ -23,9 +23,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     dashboard.add_argument("--http", default=DEFAULT_HTTP, metavar="HOST:PORT",
                            help=f"where the page is served (default {DEFAULT_HTTP}; loopback only: tunnel to reach it "
                            "from elsewhere; port 0: any free port)")
-    dashboard.add_argument("--api", metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, else "
+    dashboard.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, else "
                            f"the client file's api, else {DEFAULT_API_ENDPOINT})")
-    dashboard.add_argument("--telemetry", metavar="ENDPOINT", help="telemetry endpoint (default $HEXACTL_TELEMETRY, else "
+    dashboard.add_argument("--telemetry", type=client_endpoint, metavar="ENDPOINT", help="telemetry endpoint (default $HEXACTL_TELEMETRY, else "
                            f"the client file's telemetry, else {DEFAULT_TELEMETRY_ENDPOINT})")
     dashboard.add_argument("--log-level", default="warning", choices=("debug", "info", "warning", "error"))
     dashboard.add_argument("--exit-with", type=int, metavar="PID", help=argparse.SUPPRESS)  # serve --dashboard's

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT
-from hexactl.adapters.cli.common import CliError
+from hexactl.adapters.cli.common import CliError, endpoint_problem
 
 CLIENT_CONFIG_VARIABLE = "HEXACTL_CLIENT_CONFIG"
 
@@ -48,7 +48,9 @@ def fill_endpoints(arguments: argparse.Namespace) -> None:
     where each came from in ``arguments.origins`` (``--api``, ``HEXACTL_API``, the file,
     ``default``). The CURVE keys come from one place, as a pair.
 
-    :raises CliError: the client file is not valid TOML, has unknown keys or non-string values
+    :raises CliError: the client file is not valid TOML, has unknown keys or non-string values;
+        an endpoint from the environment or the file is not one (the command line's are
+        checked by their parsers: :func:`~hexactl.adapters.cli.common.client_endpoint`)
     """
     declared = [name for name in SETTINGS if hasattr(arguments, name)]
     if not declared:
@@ -72,6 +74,8 @@ def fill_endpoints(arguments: argparse.Namespace) -> None:
             value, origin = file_values.get(key), str(client_config_path())
         if value is None:
             value, origin = default, "default"
+        elif name not in _PATHS and (problem := endpoint_problem(value)):  # the command line's: argparse checked
+            raise CliError(f"{origin if origin == variable else f'{origin}: {key}'}: {problem}")
         setattr(arguments, name, Path(value) if name in _PATHS and value is not None else value)
         origins[name] = origin
     arguments.origins = origins

@@ -27,7 +27,7 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT
-from hexactl.adapters.cli.common import connect, connection_parser
+from hexactl.adapters.cli.common import client_endpoint, connect, connection_parser
 from hexactl.adapters.cli.telemetry_text import (
     NO_FRAMES,
     fault_text,
@@ -69,9 +69,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                     "With --once, --json or output to a pipe or file: plain records.",
     )
     # None: main() fills them in from the environment, the client file or the default (cli/endpoints.py).
-    monitor.add_argument("--api", metavar="ENDPOINT", help="the service's command endpoint, for the keys (default "
+    monitor.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help="the service's command endpoint, for the keys (default "
                          f"$HEXACTL_API, else the client file's api, else {DEFAULT_API_ENDPOINT})")
-    monitor.add_argument("--telemetry", metavar="ENDPOINT", help="telemetry endpoint (default $HEXACTL_TELEMETRY, else "
+    monitor.add_argument("--telemetry", type=client_endpoint, metavar="ENDPOINT", help="telemetry endpoint (default $HEXACTL_TELEMETRY, else "
                          f"the client file's telemetry, else {DEFAULT_TELEMETRY_ENDPOINT})")
     monitor.add_argument("--once", action="store_true", help="print one record and exit")
     monitor.add_argument("--json", action="store_true", help="print records as JSON, one per line")

@@ -19,7 +19,9 @@ from typing import Any
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
 from hexactl.adapters.cli.common import (
     CliError,
+    bind_endpoint,
     bounds_argument,
+    client_endpoint,
     connect,
     connection_parser,
     fifo_priority,
@@ -156,8 +158,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
                           help="normal scheduling and no memory locking, even with the privilege")
     serve.add_argument("--mlock", action="store_true",
                        help="accepted for compatibility: the memory is locked by default (--no-realtime: not)")
-    serve.add_argument("--api", default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
-    serve.add_argument("--telemetry", default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
+    serve.add_argument("--api", type=bind_endpoint, default=DEFAULT_API_ENDPOINT, metavar="ENDPOINT", help=f"command endpoint (default {DEFAULT_API_ENDPOINT})")
+    serve.add_argument("--telemetry", type=bind_endpoint, default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
     serve.add_argument("--telemetry-rate", type=telemetry_rate, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
     serve.add_argument(
         "--data-dir", action="append", type=Path, metavar="DIR",
@@ -171,7 +173,7 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",
                        help=f"also serve the browser dashboard (hexactl dashboard) there (default {DEFAULT_HTTP}), in "
                        "a process of its own, stopped with the service")
-    serve.add_argument("--stream", metavar="ENDPOINT", help="the pose stream's ZeroMQ socket (default: the API's "
+    serve.add_argument("--stream", type=bind_endpoint, metavar="ENDPOINT", help="the pose stream's ZeroMQ socket (default: the API's "
                        "host, a free port; stream_open's reply and status tell clients where)")
     serve.add_argument("--stream-udp", metavar="HOST:PORT", help="also take the pose stream's samples as UDP "
                        "datagrams there, for motion-simulator software (docs/stream.md). UDP has no authentication: "
@@ -203,7 +205,7 @@ def _waiting(parser: argparse.ArgumentParser) -> None:
 
 def client_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(add_help=False, parents=[connection_parser()])
-    parser.add_argument("--api", metavar="ENDPOINT", help=f"the service's command endpoint (default $HEXACTL_API, else the "
+    parser.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help=f"the service's command endpoint (default $HEXACTL_API, else the "
                         f"client file's api, else {DEFAULT_API_ENDPOINT})")
     parser.add_argument("--json", action="store_true", help="print the raw JSON reply")
     return parser
@@ -350,6 +352,10 @@ def run_serve(arguments: argparse.Namespace) -> int:
 
     if (arguments.curve_secret is None) != (arguments.curve_clients is None):
         raise CliError("give both --curve-secret and --curve-clients, or neither")
+    for directory in arguments.data_dir or ():  # the service says "no such directory" of any that is none
+        if directory.exists() and not directory.is_dir():
+            raise CliError(f"--data-dir {directory}: {'is a file' if directory.is_file() else 'exists'}, not a "
+                           "directory: give a directory")
     curve = CurveServerKeys(arguments.curve_secret, arguments.curve_clients) if arguments.curve_secret else None
     config = ServiceConfig(
         config_path=Path(arguments.config) if arguments.config else None,
