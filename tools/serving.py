@@ -120,6 +120,9 @@ def hexactl_process(kind: type[LoggedT], arguments: list[str], ready: re.Pattern
         [sys.executable, "-m", "hexactl.adapters.cli.main", *arguments],
         stdout=subprocess.PIPE if merge_stdout else None, stderr=subprocess.STDOUT if merge_stdout else subprocess.PIPE,
         text=True, cwd=cwd, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        # As from a terminal, whatever this process's own: a test run as a background job
+        # ignores SIGINT, and a service started so keeps ignoring it (its parent's wish).
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     logged = kind(process)
     log = process.stdout if merge_stdout else process.stderr
