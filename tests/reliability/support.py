@@ -134,15 +134,19 @@ def tolerating_loop_stalls(scenario: Callable[[], None], controller: Callable[[]
             cleanup()
 
 
+def is_stall(fault: dict) -> bool:
+    """Whether a latched fault (as in a status record) is one a held-up loop causes on a
+    loaded host: the actuators' watchdog (COMM_TIMEOUT), the loop's heartbeat or set-point
+    supervision."""
+    return fault["code"] in STALL_FAULTS or (fault["code"] == "actuator_fault"
+                                             and fault["message"].endswith(f"fault bits {Fault.COMM_TIMEOUT:#x}"))
+
+
 def stalled(client: HexactlClient) -> bool:
-    """Whether every fault latched is one a held-up loop causes on a loaded host (the
-    actuators' watchdog, COMM_TIMEOUT; the loop's heartbeat or set-point supervision):
-    the service did its job, but not what these tests are about."""
+    """Whether every fault latched is a stall's (:func:`is_stall`): the service did its
+    job, but not what these tests are about."""
     faults = status(client)["faults"]
-    watchdog = f"fault bits {Fault.COMM_TIMEOUT:#x}"
-    return bool(faults) and all(fault["code"] in STALL_FAULTS
-                                or (fault["code"] == "actuator_fault" and fault["message"].endswith(watchdog))
-                                for fault in faults)
+    return bool(faults) and all(map(is_stall, faults))
 
 
 def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], cleanup: Callable[[], None] = lambda: None) -> None:

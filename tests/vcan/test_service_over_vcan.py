@@ -58,7 +58,7 @@ from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySu
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.kinematics.geometry import Geometry
-from tests.reliability.support import tolerating_stalls
+from tests.reliability.support import ATTEMPTS, is_stall, tolerating_stalls
 from tools.serving import wait_until
 
 pytestmark = pytest.mark.vcan
@@ -444,10 +444,19 @@ def test_load_a_calibration_and_roll_it_back(client: HexactlClient, nominal: Geo
 
 
 def test_estop_latches_until_reset(client: HexactlClient) -> None:
-    enabled_at_rest(client)
-    client.call("estop")
-    record = status(client)
-    assert record["state"] == "estop" and [fault["code"] for fault in record["faults"]] == ["estop"], record["faults"]
+    for attempt in range(1, ATTEMPTS + 1):
+        enabled_at_rest(client)
+        client.call("estop")
+        record = status(client)
+        assert record["state"] == "estop", record
+        besides = [fault for fault in record["faults"] if fault["code"] != "estop"]
+        if not besides:
+            break
+        # A stall of the starved guest latched the actuators' watchdog just before the E-stop
+        # (CI: 3 s before it): what the service must do, not what this tests. Again, from the
+        # reset enabled_at_rest makes.
+        print(f"attempt {attempt}: besides the E-stop, latched: {besides}")
+        assert attempt < ATTEMPTS and all(map(is_stall, besides)), record["faults"]
     with pytest.raises(CommandError, match="latched"):
         client.call("enable")
     client.call("reset")
