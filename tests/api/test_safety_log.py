@@ -33,7 +33,8 @@ def test_state_changes_and_new_events_are_logged_once(snapshot, caplog) -> None:
                       events=(*history, Event(5, fault.code, fault.message)))
     safety.observe(faulted)
     safety.observe(faulted)  # the same report again: nothing new
-    swapped = (*faulted.events, Event(9, "calibration_swapped", "calibration a → b from cal.toml"))
+    swapped = (*faulted.events, Event(9, "calibration_swapped", "calibration a → b from cal.toml"),
+               Event(10, "sequence_started", "sequence 'x_sweep': 9 waypoints"))
     safety.observe(replace(snapshot, state=ControlState.DISABLED, events=swapped))
     lines = [(record.levelname, record.getMessage()) for record in caplog.records]
     assert lines == [
@@ -42,5 +43,6 @@ def test_state_changes_and_new_events_are_logged_once(snapshot, caplog) -> None:
         ("WARNING", f"state enabled → fault (heartbeat_lost: leg 3 silent for 0.05 s) (calibration "
                     f"{snapshot.active.calibration_id})"),
         ("INFO", "loop calibration_swapped: calibration a → b from cal.toml"),
+        ("INFO", "loop sequence_started: sequence 'x_sweep': 9 waypoints"),
         ("INFO", f"state fault → disabled (calibration {snapshot.active.calibration_id})"),
     ]
