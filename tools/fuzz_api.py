@@ -106,8 +106,10 @@ beside two CPU-bound processes)."""
 SYNTAX = frozenset({ApiCode.MALFORMED_JSON, ApiCode.INVALID_REQUEST, ApiCode.UNKNOWN_COMMAND,
                     ApiCode.UNSUPPORTED_VERSION, ApiCode.TOO_LARGE})
 """Outcomes of requests the API cannot read as a command."""
-BUGS = frozenset({ApiCode.INTERNAL_ERROR, ControlCode.INVALID_ARGUMENT, ControlCode.LOOP_FAILED})
-"""Never a right answer: a bug, the API letting a malformed request through, the loop dead."""
+BUGS = frozenset({ApiCode.INTERNAL_ERROR, ControlCode.LOOP_FAILED})
+"""Never a right answer: a bug, the loop dead. (The controller's ``invalid_argument`` is a
+refusal of a value the request's form allows, e.g. a pose component beyond ±1e6 mm or deg:
+docs/api.md, Error codes.)"""
 REFUSED = (frozenset(str(code) for code in (*ApiCode, *ControlCode)) - SYNTAX - BUGS) | {str(ApiCode.TOO_LARGE)}
 """Every documented refusal of a well-formed request, for a reason of state or content
 (``too_large`` too: a file may be)."""
