@@ -21,6 +21,7 @@ import pytest
 from hexactl.adapters.cli import service_commands
 from hexactl.adapters.cli.common import CliError, connect, endpoint_problem, parse_bounds_argument, parse_pose_argument
 from hexactl.adapters.cli.main import main
+from tools.serving import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -236,11 +237,11 @@ class Launched:
         return status, "".join(self.lines)
 
     def wait_for(self, text: str) -> None:
-        deadline = time.monotonic() + START_S
-        while not any(text in line for line in self.lines):
+        def logged() -> bool:
             assert self.process.poll() is None, "".join(self.lines)
-            assert time.monotonic() < deadline, f"no {text!r} within {START_S:g} s:\n{''.join(self.lines)}"
-            time.sleep(0.05)
+            return any(text in line for line in self.lines)
+
+        wait_until(logged, repr(text), START_S, seen=lambda: "".join(self.lines))
 
 
 DELAYS_S = (0.0, 0.2, 0.5, 1.0, 2.0, 4.0)

@@ -135,11 +135,16 @@ def receiver_with_udp(controller: RecordingController) -> Iterator[tuple[StreamR
             receiver.close()
 
 
-def send_slowly(send, messages: list[bytes]) -> None:
-    """Each message a period and a half after the one before: each is handed on alone."""
-    for message in messages:
-        send(message)
-        time.sleep(1.5 * PERIOD_S)
+def sent(send, message, until, what: str) -> None:
+    """``send(message)``, then wait until ``until()`` says the receiver has dealt with it:
+    each message is taken alone, in order, however slowly the receiver's thread runs (no
+    coalescing, no race between the ZeroMQ and the UDP socket)."""
+    send(message)
+    wait_for(until, what)
+
+
+def sequences(controller: RecordingController) -> list[int]:
+    return [sequence for _, sequence in controller.targets]
 
 
 def test_a_sender_time_too_large_for_any_clock_is_malformed_and_the_input_goes_on() -> None:
@@ -147,18 +152,21 @@ def test_a_sender_time_too_large_for_any_clock_is_malformed_and_the_input_goes_o
     exception ended the receiver's thread for good while status looked healthy."""
     controller = RecordingController()
     with receiver_with_udp(controller) as (receiver, push, udp):
-        send_slowly(push.send, [encode(1, 1e300, [0.0] * 6)])
-        send_slowly(udp.send, [b"2 1e300 0 0 1 0 0 0\n", encode(3, time.monotonic(), [1.0, 0, 0, 0, 0, 0])])
-        wait_for(lambda: [sequence for _, sequence in controller.targets] == [3], "the good sample to go on")
-        assert receiver.running and receiver.counters.malformed == 2
-        assert "sent_s is a time in s within" in receiver.counters.last_problem
+        sent(push.send, encode(1, 1e300, [0.0] * 6), lambda: receiver.counters.malformed == 1,
+             "the binary sample refused")
+        sent(udp.send, b"2 1e300 0 0 1 0 0 0\n", lambda: receiver.counters.malformed == 2, "the text sample refused")
+        sent(udp.send, encode(3, time.monotonic(), [1.0, 0, 0, 0, 0, 0]), lambda: sequences(controller) == [3],
+             "the good sample to go on")
+        assert receiver.running and "sent_s is a time in s within" in receiver.counters.last_problem
 
 
 def test_an_error_handing_a_target_on_is_counted_and_the_next_target_goes_on() -> None:
     controller = FailingController(failing=1)
     with receiver_with_udp(controller) as (receiver, push, _):
-        send_slowly(push.send, [encode(1, time.monotonic(), [0.0] * 6), encode(2, time.monotonic(), [0.1, 0, 0, 0, 0, 0])])
-        wait_for(lambda: [sequence for _, sequence in controller.targets] == [2], "the next sample to go on")
+        sent(push.send, encode(1, time.monotonic(), [0.0] * 6), lambda: receiver.counters.failed == 1,
+             "the failing hand-over counted")
+        sent(push.send, encode(2, time.monotonic(), [0.1, 0, 0, 0, 0, 0]), lambda: sequences(controller) == [2],
+             "the next sample to go on")
         view = receiver.view()
         assert view["running"] and view["failed"] == 1 and view["forwarded"] == 1
         assert "target 1 could not be handed to the loop: RuntimeError" in view["last_problem"]
@@ -167,11 +175,11 @@ def test_an_error_handing_a_target_on_is_counted_and_the_next_target_goes_on() -
 def test_a_message_of_several_frames_is_not_a_sample() -> None:
     controller = RecordingController()
     with receiver_with_udp(controller) as (receiver, push, _):
-        send_slowly(push.send_multipart, [[encode(1, time.monotonic(), [0.0] * 6), b"extra"]])
-        send_slowly(push.send, [encode(2, time.monotonic(), [0.1, 0, 0, 0, 0, 0])])
-        wait_for(lambda: controller.targets, "the one-frame sample to go on")
-        assert [sequence for _, sequence in controller.targets] == [2]
-        assert receiver.counters.received == 2 and receiver.counters.malformed == 1
+        sent(push.send_multipart, [encode(1, time.monotonic(), [0.0] * 6), b"extra"],
+             lambda: receiver.counters.malformed == 1, "the message refused")
+        sent(push.send, encode(2, time.monotonic(), [0.1, 0, 0, 0, 0, 0]), lambda: controller.targets,
+             "the one-frame sample to go on")
+        assert sequences(controller) == [2] and receiver.counters.received == 2
         assert "one frame, this one has 2" in receiver.counters.last_problem
 
 
@@ -180,13 +188,13 @@ def test_a_six_number_line_is_the_newest_and_does_not_let_an_old_sample_back_in(
     binary sample older than the last one taken in again after it."""
     controller = RecordingController()
     with receiver_with_udp(controller) as (receiver, push, udp):
-        send_slowly(push.send, [encode(100, time.monotonic(), [0.0] * 6), encode(50, time.monotonic(), [5.0, 0, 0, 0, 0, 0])])
-        send_slowly(udp.send, [b"1 0 0 0 0 0\n"])
-        send_slowly(push.send, [encode(50, time.monotonic(), [9.0, 0, 0, 0, 0, 0])])
-        wait_for(lambda: receiver.counters.received == 4, "every message read")
-        wait_for(lambda: len(controller.targets) == 2, "the line to go on")
-        assert [sequence for _, sequence in controller.targets] == [100, 101]
-        assert receiver.counters.out_of_order == 2
+        sent(push.send, encode(100, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [100], "sample 100")
+        sent(push.send, encode(50, time.monotonic(), [5.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
+             "sample 50 dropped")
+        sent(udp.send, b"1 0 0 0 0 0\n", lambda: len(controller.targets) == 2, "the line to go on")
+        sent(push.send, encode(50, time.monotonic(), [9.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.received == 4,
+             "every message read")
+        assert sequences(controller) == [100, 101] and receiver.counters.out_of_order == 2
 
 
 @pytest.mark.parametrize("line", [b"1_0 0 0 0 0 0", b"inf 0 0 0 0 0", b"0x10 0 0 0 0 0", b"nan 0 0 0 0 0"])
