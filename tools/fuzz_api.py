@@ -106,10 +106,8 @@ beside two CPU-bound processes)."""
 SYNTAX = frozenset({ApiCode.MALFORMED_JSON, ApiCode.INVALID_REQUEST, ApiCode.UNKNOWN_COMMAND,
                     ApiCode.UNSUPPORTED_VERSION, ApiCode.TOO_LARGE})
 """Outcomes of requests the API cannot read as a command."""
-BUGS = frozenset({ApiCode.INTERNAL_ERROR, ControlCode.LOOP_FAILED})
-"""Never a right answer: a bug, the loop dead. (The controller's ``invalid_argument`` is a
-refusal of a value the request's form allows, e.g. a pose component beyond ±1e6 mm or deg:
-docs/api.md, Error codes.)"""
+BUGS = frozenset({ApiCode.INTERNAL_ERROR, ControlCode.INVALID_ARGUMENT, ControlCode.LOOP_FAILED})
+"""Never a right answer: a bug, the API letting a malformed request through, the loop dead."""
 REFUSED = (frozenset(str(code) for code in (*ApiCode, *ControlCode)) - SYNTAX - BUGS) | {str(ApiCode.TOO_LARGE)}
 """Every documented refusal of a well-formed request, for a reason of state or content
 (``too_large`` too: a file may be)."""
@@ -217,8 +215,11 @@ class Strategies:
         self.poses_inside = st.tuples(*(st.floats(0.5 * a, 0.5 * b) for a, b in zip(low, high))).map(list)
         # 20 % beyond at least: leg-lock mode projects a goal up to lock_max_correction_mm (25 mm) onto
         # the locked leg's constraint, which may bring one just beyond back inside (and then it is valid).
-        self.poses_outside = st.builds(self._push_out, st.integers(0, 5), st.booleans(), st.floats(1.2, 1e300),
+        # Out of reach, yet within the ±1e6 any pose may have (beyond, it is malformed: poses_absurd).
+        self.poses_outside = st.builds(self._push_out, st.integers(0, 5), st.booleans(), st.floats(1.2, 1e3),
                                        self.poses_inside)
+        self.poses_absurd = st.builds(self._push_out, st.integers(0, 5), st.booleans(), st.floats(1e7, 1e300),
+                                      self.poses_inside)
         self.paces = st.one_of(st.just({}), st.builds(lambda d: {"duration": d}, st.floats(0.05, 3.0)),
                                st.builds(lambda s: {"speed": s}, st.floats(0.05, 1.0)))
         waypoints = st.lists(st.builds(lambda pose, dwell, pace: {"pose": pose, "dwell": dwell, **pace},
@@ -381,6 +382,9 @@ class Strategies:
             self.poses_outside.map(lambda pose: ("play", {"sequence": {"name": "out", "waypoints": [{"pose": pose}]}},
                                                  REFUSED)),
             self.poses_outside.map(lambda pose: ("validate_pose", {"pose": pose}, frozenset({"ok"}))),
+            st.tuples(self.poses_absurd, st.sampled_from(["move", "validate_pose", "play"])).map(
+                lambda d: (d[1], {"sequence": {"name": "absurd", "waypoints": [{"pose": d[0]}]}} if d[1] == "play"
+                           else {"pose": d[0]}, invalid)),
         )
 
         def case(drawn: tuple, request_id: Any) -> Case:

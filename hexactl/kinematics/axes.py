@@ -48,9 +48,14 @@ class _SixAxes(NamedTuple):
                 raise ValueError(validate_pose_values(value) or "a pose is six numbers [x, y, z, roll, pitch, yaw]")
             return list(value)
 
+        def made(values: list[float]) -> _SixAxes:  # within reach of any platform, in the type: every model checks it
+            if problem := validate_pose_values(values):
+                raise ValueError(problem)
+            return cls._make(values)
+
         values = core_schema.list_schema(core_schema.float_schema(), min_length=6, max_length=6)
         return core_schema.no_info_before_validator_function(six, core_schema.no_info_after_validator_function(
-            cls._make, values, serialization=core_schema.plain_serializer_function_ser_schema(list)))
+            made, values, serialization=core_schema.plain_serializer_function_ser_schema(list)))
 
 
 class RelativeMmDeg(_SixAxes):
