@@ -175,7 +175,7 @@ class StreamReceiver(SocketThread):
                 frames = self._socket.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
                 break
-            self._taken_or_counted(frames[0] if len(frames) == 1 else None, len(frames))
+            self._taken_or_counted(frames)
         if self._udp is None:
             return
         for _ in range(MAX_PER_WAKE):
@@ -186,25 +186,25 @@ class StreamReceiver(SocketThread):
             except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
                 self._problem(f"UDP receive failed: {error}")
                 break
-            self._taken_or_counted(message)
+            self._taken_or_counted([message])
 
-    def _taken_or_counted(self, message: bytes | None, frames: int = 1) -> None:
-        """Take ``message`` (None: a ZeroMQ message of ``frames`` frames, not a sample), or
-        count it as malformed, whatever goes wrong."""
+    def _taken_or_counted(self, frames: list[bytes]) -> None:
+        """Take the message of ``frames`` (a datagram is one), or count it as malformed,
+        whatever goes wrong."""
         try:
-            self._take(message, frames)
+            self._take(frames)
         except Exception as error:  # a sample no check foresaw must not end the thread
             self.counters.malformed += 1
             self._failed("a message could not be taken", error)
 
-    def _take(self, message: bytes | None, frames: int) -> None:
+    def _take(self, frames: list[bytes]) -> None:
         received_ns = time.monotonic_ns()
         c = self.counters
         c.received += 1
         try:
-            if message is None:
-                raise MalformedSample(f"a sample is a ZeroMQ message of one frame, this one has {frames}")
-            sample = decode(message)
+            if len(frames) != 1:
+                raise MalformedSample(f"a sample is a ZeroMQ message of one frame, this one has {len(frames)}")
+            sample = decode(frames[0])
         except MalformedSample as error:
             c.malformed += 1
             self._problem(f"malformed sample: {error}")
