@@ -7,6 +7,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from hexactl.control.realtime import RealtimeConfig
 from hexactl.control.stats import DEFAULT_WINDOW
 from hexactl.control.trajectory import MotionLimits
+from hexactl.kinematics.numbers import Number, WholeNumber
 
 
 class _Frozen(BaseModel):
@@ -16,13 +17,13 @@ class _Frozen(BaseModel):
 class LoopConfig(_Frozen):
     """Timing of the loop thread."""
 
-    rate_hz: float = Field(default=500.0, ge=10.0, le=2000.0, description="cycle rate; 500 or 1000 in practice")
-    spin_window_us: float = Field(
+    rate_hz: Number = Field(default=500.0, ge=10.0, le=2000.0, description="cycle rate; 500 or 1000 in practice")
+    spin_window_us: Number = Field(
         default=300.0, ge=0.0,
         description="the last stretch before a deadline is busy-waited instead of slept: a sleep wakes only as "
         "precisely as the timer slack allows, and the loop then holds the GIL when the deadline comes",
     )
-    stats_window: int = Field(default=DEFAULT_WINDOW, ge=1, description="cycles kept for lateness percentiles")
+    stats_window: WholeNumber = Field(default=DEFAULT_WINDOW, ge=1, description="cycles kept for lateness percentiles")
     realtime: RealtimeConfig = RealtimeConfig()
 
     @property
@@ -37,16 +38,16 @@ class LoopConfig(_Frozen):
 class SupervisionConfig(_Frozen):
     """When the loop declares a FAULT (checked every cycle while ENABLED)."""
 
-    heartbeat_timeout_s: float = Field(default=0.05, gt=0, description="an actuator silent this long is lost")
-    state_timeout_s: float = Field(
+    heartbeat_timeout_s: Number = Field(default=0.05, gt=0, description="an actuator silent this long is lost")
+    state_timeout_s: Number = Field(
         default=0.5, gt=0, description="time an actuator has to reach a commanded state (enabled, locked …)"
     )
-    setpoint_lag_s: float = Field(
+    setpoint_lag_s: Number = Field(
         default=0.05, gt=0, description="set-points the actuators have not applied for this long mean a broken link"
     )
-    max_send_failures: int = Field(default=3, ge=1, description="consecutive failed set-point sends before FAULT")
-    estop_repeat_s: float = Field(default=0.1, gt=0, description="while ESTOP is latched, the E-stop is re-sent this often")
-    estop_clear_holdoff_s: float = Field(
+    max_send_failures: WholeNumber = Field(default=3, ge=1, description="consecutive failed set-point sends before FAULT")
+    estop_repeat_s: Number = Field(default=0.1, gt=0, description="while ESTOP is latched, the E-stop is re-sent this often")
+    estop_clear_holdoff_s: Number = Field(
         default=0.3, ge=0,
         description="actuators refuse to clear an E-stop until they have seen none for a while (firmware_proto: "
         "250 ms); reset sends CLEAR_FAULT this long after the last E-stop the loop sent",
@@ -67,29 +68,29 @@ class ControllerConfig(_Frozen):
                     "second). The velocities are caps per axis: what limits a stream is its legs' speed, the box "
                     "shaped per target so that none exceeds it (hexactl.control.stream_commands.stream_velocity_limits)")
     supervision: SupervisionConfig = SupervisionConfig()
-    calibration_ramp_fraction: float = Field(
+    calibration_ramp_fraction: Number = Field(
         default=0.1, gt=0, lt=1,
         description="share of leg_velocity_mm_s a calibration swap ramps at; moves are planned within the rest",
     )
-    calibration_max_change_mm: float = Field(
+    calibration_max_change_mm: Number = Field(
         default=25.0, gt=0, description="a calibration that moves a set-point more than this at the current pose is refused"
     )
-    lock_max_correction_mm: float = Field(
+    lock_max_correction_mm: Number = Field(
         default=25.0, gt=0, description="leg-lock: a goal farther than this from the locked-leg constraint is refused"
     )
-    lock_cycle_iterations: int = Field(default=3, ge=1, description="leg-lock: projection iterations per cycle")
-    path_step_mm: float = Field(default=2.0, gt=0, description="move validation: sample spacing in translation")
-    path_step_deg: float = Field(default=0.1, gt=0, description="move validation: sample spacing in rotation")
-    fk_rate_hz: float = Field(
+    lock_cycle_iterations: WholeNumber = Field(default=3, ge=1, description="leg-lock: projection iterations per cycle")
+    path_step_mm: Number = Field(default=2.0, gt=0, description="move validation: sample spacing in translation")
+    path_step_deg: Number = Field(default=0.1, gt=0, description="move validation: sample spacing in rotation")
+    fk_rate_hz: Number = Field(
         default=100.0, gt=0,
         description="while ENABLED, forward kinematics of the feedback (the measured pose) runs at about this rate "
         "(every round(loop rate / this) cycles) and at every dwell it records; in the other states, every cycle. "
         "It is the costliest step of a cycle (≈ 40 µs) and feeds telemetry and records only",
     )
-    fk_tolerance_mm: float = Field(default=1e-6, gt=0, description="forward kinematics of the feedback: tolerance")
-    fk_max_iterations: int = Field(default=10, ge=1, description="forward kinematics of the feedback: iteration cap")
-    command_timeout_s: float = Field(default=0.5, gt=0, description="how long a caller waits for the loop's verdict")
-    jog_deadman_s: float = Field(
+    fk_tolerance_mm: Number = Field(default=1e-6, gt=0, description="forward kinematics of the feedback: tolerance")
+    fk_max_iterations: WholeNumber = Field(default=10, ge=1, description="forward kinematics of the feedback: iteration cap")
+    command_timeout_s: Number = Field(default=0.5, gt=0, description="how long a caller waits for the loop's verdict")
+    jog_deadman_s: Number = Field(
         default=0.2, ge=0.02, le=5.0,
         description="a jog goes on for this long after each renewal (its client sends jog again at least this "
         "often), then brakes to rest",

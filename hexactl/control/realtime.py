@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
+from hexactl.kinematics.numbers import Flag, Number, WholeNumber
 
 _MCL_CURRENT = 1
 _MCL_FUTURE = 2
@@ -63,20 +64,20 @@ class RealtimeConfig(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    fifo_priority: int | None = Field(
+    fifo_priority: WholeNumber | None = Field(
         default=None, ge=1, le=99, description="SCHED_FIFO priority of the loop thread; None: normal scheduling"
     )
-    cpus: tuple[int, ...] | None = Field(default=None, description="CPUs the loop thread may run on; None: any")
-    lock_memory: bool = Field(default=False, description="mlockall(MCL_CURRENT | MCL_FUTURE): no page faults")
-    switch_interval_s: float | None = Field(
+    cpus: tuple[WholeNumber, ...] | None = Field(default=None, description="CPUs the loop thread may run on; None: any")
+    lock_memory: Flag = Field(default=False, description="mlockall(MCL_CURRENT | MCL_FUTURE): no page faults")
+    switch_interval_s: Number | None = Field(
         default=0.001,
         gt=0,
         description="sys.setswitchinterval while running: how long another thread may keep the GIL once the "
         "loop asks for it, and how long the loop may keep it once another asks (longer than a cycle, so no "
         "cycle is cut in two; CPython's default, 5 ms, is 2.5 periods at 500 Hz); None: leave it",
     )
-    manage_gc: bool = Field(default=True, description="apply the garbage collection policy of this module")
-    gc_interval_s: float = Field(default=1.0, gt=0, description="period of the loop's young-generation collection")
+    manage_gc: Flag = Field(default=True, description="apply the garbage collection policy of this module")
+    gc_interval_s: Number = Field(default=1.0, gt=0, description="period of the loop's young-generation collection")
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,6 +22,7 @@ from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, MAX_WAYPOINTS, Waypoint, pace_problem, waypoint_count_problem
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.geometry import describe_validation_error
+from hexactl.kinematics.numbers import Number
 
 
 class SequenceError(ValueError):
@@ -36,9 +37,9 @@ class UnknownSequence(SequenceError, KeyError):
         return str(self.args[0])
 
 
-Duration = Annotated[float, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
-Speed = Annotated[float, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
-Dwell = Annotated[float, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
+Duration = Annotated[Number, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
+Speed = Annotated[Number, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
+Dwell = Annotated[Number, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
 
 
 class Paced(BaseModel):
@@ -74,15 +75,20 @@ class MotionSequence(BaseModel):
     description: str = ""
     frame: Literal["zero", "work"] = Field(default="zero", description="what the poses are: relative to the zero "
                                            "posture (zero), or the tool's poses in the work frame (work)")
-    waypoints: tuple[SequenceWaypoint, ...] = Field(alias="waypoint", min_length=1, description=(
-        f"at most {MAX_WAYPOINTS} (hexactl.control.planning.MAX_WAYPOINTS: planning time grows with each)"))
+    waypoints: tuple[SequenceWaypoint, ...] = Field(alias="waypoint", description=(
+        f"at least one, at most {MAX_WAYPOINTS} (hexactl.control.planning.MAX_WAYPOINTS: planning time grows with "
+        "each)"), json_schema_extra={"minItems": 1})
 
     @field_validator("waypoints", mode="before")
     @classmethod
-    def _not_too_many(cls, value: object) -> object:
-        """Counted before any waypoint is validated, let alone planned."""
-        if isinstance(value, (list, tuple)) and (problem := waypoint_count_problem(len(value))):
-            raise ValueError(problem)
+    def _counted(cls, value: object) -> object:
+        """Counted before any waypoint is validated, let alone planned; here rather than by
+        ``min_length``, which also reports a list whose waypoints all failed as empty."""
+        if isinstance(value, (list, tuple)):
+            if not value:
+                raise ValueError("a sequence needs at least one [[waypoint]]")
+            if problem := waypoint_count_problem(len(value)):
+                raise ValueError(problem)
         return value
 
     def planning_waypoints(self) -> list[Waypoint]:

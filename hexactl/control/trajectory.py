@@ -45,6 +45,7 @@ from ruckig import (
 
 from hexactl.kinematics.axes import PerAxis, RelativeMmRad, ToolInWorkMmRad
 from hexactl.kinematics.frames import Frames
+from hexactl.kinematics.numbers import SixNumbers
 
 DOFS = 6
 _ZERO6 = [0.0] * DOFS
@@ -69,9 +70,9 @@ class MotionLimits(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
-    max_velocity: PerAxis = (200.0, 200.0, 100.0, 10.0, 10.0, 15.0)
-    max_acceleration: PerAxis = (500.0, 500.0, 300.0, 30.0, 30.0, 45.0)
-    max_jerk: PerAxis = (2500.0, 2500.0, 1500.0, 150.0, 150.0, 225.0)
+    max_velocity: SixNumbers = (200.0, 200.0, 100.0, 10.0, 10.0, 15.0)
+    max_acceleration: SixNumbers = (500.0, 500.0, 300.0, 30.0, 30.0, 45.0)
+    max_jerk: SixNumbers = (2500.0, 2500.0, 1500.0, 150.0, 150.0, 225.0)
 
     @field_validator("max_velocity", "max_acceleration", "max_jerk")
     @classmethod

@@ -14,9 +14,10 @@ from __future__ import annotations
 from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+from hexactl.kinematics.numbers import Number
 
-NonNegative = Annotated[float, Field(ge=0)]
-Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[Number, Field(ge=0)]
+Positive = Annotated[Number, Field(gt=0)]
 
 
 class _Frozen(BaseModel):
@@ -68,7 +69,7 @@ class TiltCoordination(_Frozen):
     damping: Positive = Field(1.0, description="the second-order low-pass's damping ratio, dimensionless")
     rate_limit_deg_s: Positive = Field(
         3.0, description="the fastest the tilt turns (about any horizontal axis), deg/s")
-    limit_deg: float = Field(15.0, gt=0, lt=90, description="the largest tilt from level (in any direction), deg")
+    limit_deg: Number = Field(15.0, gt=0, lt=90, description="the largest tilt from level (in any direction), deg")
 
 
 class WorkspaceUse(_Frozen):
@@ -77,13 +78,13 @@ class WorkspaceUse(_Frozen):
     A pose's *use* of the workspace is the fraction of the way from the zero posture to
     the first limit along the straight line (in pose space) through it: below 1 reachable."""
 
-    use_fraction: float = Field(
+    use_fraction: Number = Field(
         0.85, gt=0, le=1, description="the workspace-aware gain keeps every pose's use at most this, dimensionless")
     max_gain: Positive = Field(
         2.5, description="the largest workspace-aware gain on the onset (high-pass) channels, dimensionless")
-    limiter_knee: float = Field(
+    limiter_knee: Number = Field(
         0.75, gt=0, lt=1, description="the limiter leaves poses of a use up to this alone, dimensionless")
-    limiter_ceiling: float = Field(
+    limiter_ceiling: Number = Field(
         0.97, gt=0, lt=1, description="no pose the limiter passes has a use above this, dimensionless")
 
     @model_validator(mode="after")

@@ -53,7 +53,8 @@ class _SixAxes(NamedTuple):
                 raise ValueError(problem)
             return cls._make(values)
 
-        values = core_schema.list_schema(core_schema.float_schema(), min_length=6, max_length=6)
+        # strict numbers: a file's "1.5" or true is a slip to refuse (hexactl.kinematics.numbers)
+        values = core_schema.list_schema(core_schema.float_schema(strict=True), min_length=6, max_length=6)
         return core_schema.no_info_before_validator_function(six, core_schema.no_info_after_validator_function(
             made, values, serialization=core_schema.plain_serializer_function_ser_schema(list)))
 

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from hexactl.kinematics.inverse import LegModel, sensor_setpoints, twist_jacobian
 from hexactl.kinematics.axes import POSE_AXES, AbsoluteMmDeg, RelativeMmDeg
+from hexactl.kinematics.numbers import Number, SixNumbers, WholeNumber
 
 MIN_JOINT_SEPARATION_MM = 1.0
 """Joints closer than this are taken as a typing error (two legs on one joint)."""
@@ -27,8 +28,7 @@ COVARIANCE_SIZES = (42, 48)
 MAX_SENSOR_SCALE_ERROR = 0.01
 """A sensor gain error beyond 1 % is a unit or lead mistake, not a calibration (lead errors are ~1e-4)."""
 
-Vector3 = Annotated[tuple[float, float, float], Field(description="[x, y, z], mm")]
-Six = tuple[float, float, float, float, float, float]
+Vector3 = Annotated[tuple[Number, Number, Number], Field(description="[x, y, z], mm")]
 
 
 class _Strict(BaseModel):
@@ -38,22 +38,22 @@ class _Strict(BaseModel):
 class Limits(_Strict):
     """Actuator, joint and pose limits."""
 
-    stroke: tuple[float, float] = Field(description="sensor range [min, max], mm")
-    base_cone_deg: float = Field(gt=0, lt=90, description="base joint cone-angle limit, deg")
-    platform_cone_deg: float = Field(gt=0, lt=90, description="platform joint cone-angle limit, deg")
+    stroke: tuple[Number, Number] = Field(description="sensor range [min, max], mm")
+    base_cone_deg: Number = Field(gt=0, lt=90, description="base joint cone-angle limit, deg")
+    platform_cone_deg: Number = Field(gt=0, lt=90, description="platform joint cone-angle limit, deg")
     pose_min: RelativeMmDeg = Field(description="pose envelope lower bound, relative to the zero posture, mm and deg")
     pose_max: RelativeMmDeg = Field(description="pose envelope upper bound, relative to the zero posture, mm and deg")
-    leg_velocity_mm_s: float = Field(gt=0, description="fastest allowed actuator speed, mm/s")
-    max_jacobian_condition: float = Field(gt=1, description="near-singularity threshold")
+    leg_velocity_mm_s: Number = Field(gt=0, description="fastest allowed actuator speed, mm/s")
+    max_jacobian_condition: Number = Field(gt=1, description="near-singularity threshold")
     # Plausibility bounds of a calibration around the nominal geometry (see
     # hexactl.kinematics.plausibility; the defaults' reasons: docs/calibration.md).
-    calibration_joint_tolerance_mm: float = Field(
+    calibration_joint_tolerance_mm: Number = Field(
         default=60.0, gt=0, description="a calibrated joint centre's largest distance from its nominal position, mm")
-    calibration_zero_length_tolerance_mm: float = Field(
+    calibration_zero_length_tolerance_mm: Number = Field(
         default=60.0, gt=0, description="a calibrated zero length's largest difference from the nominal, mm")
-    calibration_home_tolerance_mm: float = Field(
+    calibration_home_tolerance_mm: Number = Field(
         default=10.0, gt=0, description="a calibration's zero posture: largest distance from the nominal's, mm")
-    calibration_home_tolerance_deg: float = Field(
+    calibration_home_tolerance_deg: Number = Field(
         default=0.5, gt=0, description="a calibration's zero posture: largest roll, pitch or yaw difference, deg")
 
     @model_validator(mode="after")
@@ -74,8 +74,8 @@ class Measurement(_Strict):
     feature_points: tuple[Vector3, ...] = Field(
         min_length=3, description="targets on the platform, moving frame, mm"
     )
-    point_sigma_mm: float = Field(gt=0, description="instrument noise, 1 sigma per coordinate, mm")
-    feature_point_sigma_mm: float = Field(
+    point_sigma_mm: Number = Field(gt=0, description="instrument noise, 1 sigma per coordinate, mm")
+    feature_point_sigma_mm: Number = Field(
         default=0.0, ge=0,
         description="how well feature_points are known, 1 sigma per coordinate, mm (0: exactly); above 0 the "
                     "calibration identifies them too, with this prior",
@@ -96,16 +96,16 @@ class CalibrationInfo(_Strict):
     method: str = Field(description="identification method, e.g. leglock or full")
     created: str = Field(description="ISO 8601 time of the identification")
     input_sha256: str = Field(description="hash of the measurement data file")
-    postures: int = Field(ge=1, description="postures used")
-    residual_rms_mm: float = Field(ge=0, description="fit residual, RMS, mm")
+    postures: WholeNumber = Field(ge=1, description="postures used")
+    residual_rms_mm: Number = Field(ge=0, description="fit residual, RMS, mm")
     nominal: str = Field(default="", description="the nominal geometry it started from")
     base_joints_std_mm: tuple[Vector3, ...] | None = None
     platform_joints_std_mm: tuple[Vector3, ...] | None = None
-    zero_lengths_std_mm: Six | None = None
-    sensor_scale_errors_std: Six | None = Field(
+    zero_lengths_std_mm: SixNumbers | None = None
+    sensor_scale_errors_std: SixNumbers | None = Field(
         default=None, description="standard deviations of the identified sensor_scale_errors (dimensionless)"
     )
-    parameter_covariance: tuple[tuple[float, ...], ...] | None = Field(
+    parameter_covariance: tuple[tuple[Number, ...], ...] | None = Field(
         default=None,
         description="covariance of the identified parameters, 42×42 (per leg B x y z, P x y z, zero; mm²) or 48×48 "
                     "with the six sensor scale errors after them (in mm per metre of reading): what the controller's "
@@ -140,8 +140,8 @@ class Geometry(_Strict):
     platform_joints: tuple[Vector3, Vector3, Vector3, Vector3, Vector3, Vector3] = Field(
         description="platform joint centres P_mi, moving frame, mm"
     )
-    zero_lengths: Six = Field(description="joint-to-joint leg length at sensor reading 0, mm")
-    sensor_scale_errors: Six = Field(
+    zero_lengths: SixNumbers = Field(description="joint-to-joint leg length at sensor reading 0, mm")
+    sensor_scale_errors: SixNumbers = Field(
         default=(0.0,) * 6,
         description="per-leg sensor gain error e_i, dimensionless: leg length = zero_length + (1 + e_i)·reading "
                     "(a ball screw's lead error; identified by `hexactl calibrate --scales`)",
@@ -237,6 +237,25 @@ def geometry_from_mapping(data: object, source: str = "geometry") -> Geometry:
         raise GeometryError(describe_validation_error(error, source)) from None
 
 
+_WRONG_TYPE = {"float_type": "must be a number", "int_type": "must be a whole number", "bool_type": "must be true or false"}
+
+
+def _as_written(value: str | bool | float) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return f'the string "{value}"' + (" (write it without quotes)" if _numeric(value) else "")
+
+
+def _numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def describe_validation_error(error: ValidationError, source: str) -> str:
     """One line per problem, ``source: key[index]: message``, for people rather than parsers."""
     lines = []
@@ -247,5 +266,7 @@ def describe_validation_error(error: ValidationError, source: str) -> str:
         message = problem["msg"].removeprefix("Value error, ")
         if problem["type"] == "finite_number":
             message = "must be a finite number (NaN and inf are refused)"
+        elif problem["type"] in _WRONG_TYPE and isinstance(problem["input"], (str, bool, float)):
+            message = f"{_WRONG_TYPE[problem['type']]}, not {_as_written(problem['input'])}"
         lines.append(f"{source}: {location}: {message}" if location else f"{source}: {message}")
     return "\n".join(lines)

@@ -17,12 +17,13 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.numbers import Number
 from hexactl.kinematics.workspace import Violation, ViolationKind
 
 MAX_TILT_DEG = 90.0
 """The largest tilt bound: beyond it the tool's z axis points down."""
 
-Bound = float | None
+Bound = Number | None
 """One axis's soft bound in its unit (mm or deg); None: none on that side."""
 
 Bounds = tuple[Bound, Bound, Bound, Bound, Bound, Bound]
@@ -42,7 +43,7 @@ class SoftLimits(BaseModel):
 
     lower: Bounds = Field(default=NO_BOUNDS, description="lower bound per axis (x, y, z mm; roll, pitch, yaw deg) or null")
     upper: Bounds = Field(default=NO_BOUNDS, description="upper bound per axis (x, y, z mm; roll, pitch, yaw deg) or null")
-    max_tilt_deg: float | None = Field(default=None, gt=0.0, le=MAX_TILT_DEG,
+    max_tilt_deg: Number | None = Field(default=None, gt=0.0, le=MAX_TILT_DEG,
                                        description="largest angle between the tool's z axis and the work frame's, deg")
 
     @field_validator("lower", "upper", mode="before")

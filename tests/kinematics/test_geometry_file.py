@@ -75,7 +75,15 @@ def _set(path, value):
         (_set(["zero_lengths", 0], -5.0), r"zero_lengths: leg 1 has non-positive zero length"),
         (_set(["measurement", "feature_points"], [[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]]), r"collinear"),
         (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: Extra inputs are not permitted"),
-        (_set(["zero_lengths", 0], "long"), r"zero_lengths\[0\]: Input should be a valid number"),
+        (_set(["zero_lengths", 0], "long"), r'zero_lengths\[0\]: must be a number, not the string "long"$'),
+        # numbers are numbers: a quoted one or a bool is a slip to refuse, not to read
+        (_set(["zero_lengths", 0], "1750.0"), r'zero_lengths\[0\]: must be a number, not the string "1750.0" '
+                                              r"\(write it without quotes\)"),
+        (_set(["zero_lengths", 0], True), r"zero_lengths\[0\]: must be a number, not true"),
+        (_set(["base_joints", 1, 2], "0"), r"base_joints\[1\]\[2\]: must be a number"),
+        (_set(["limits", "leg_velocity_mm_s"], "100"), r"limits.leg_velocity_mm_s: must be a number"),
+        (_set(["limits", "stroke", 1], False), r"limits.stroke\[1\]: must be a number, not false"),
+        (_set(["home", 0], "0"), r"home\[0\]: must be a number"),
     ],
 )
 def test_bad_geometry_files_are_refused_naming_the_key(edit, expected) -> None:

@@ -27,9 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from hexactl.calibration.observations import Instrument, LaserTracker, Station, Theodolites
 from hexactl.kinematics.geometry import describe_validation_error
-
-Six = tuple[float, float, float, float, float, float]
-
+from hexactl.kinematics.numbers import Number, SixNumbers
 
 class InstrumentFileError(ValueError):
     """An instrument file that cannot be used; the message names the file, key and problem."""
@@ -39,9 +37,9 @@ class _InstrumentDescription(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     kind: Literal["theodolites", "tracker"]
-    stations: tuple[Six, ...] = Field(description="each station's pose in the fixed frame, mm and deg")
-    angle_sigma_arcsec: float = Field(gt=0, description="each angle's noise, 1σ, arc-seconds")
-    range_sigma_mm: float | None = Field(default=None, gt=0, description="the tracker's range noise, 1σ, mm")
+    stations: tuple[SixNumbers, ...] = Field(description="each station's pose in the fixed frame, mm and deg")
+    angle_sigma_arcsec: Number = Field(gt=0, description="each angle's noise, 1σ, arc-seconds")
+    range_sigma_mm: Number | None = Field(default=None, gt=0, description="the tracker's range noise, 1σ, mm")
 
     @model_validator(mode="after")
     def _complete(self) -> _InstrumentDescription:
