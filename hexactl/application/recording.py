@@ -332,6 +332,8 @@ def _request_problem(request: RecordingRequest) -> str | None:
         return f"unknown signals {unknown}: choose among {', '.join(SIGNALS)}"
     if not request.signals:
         return f"no signals: choose among {', '.join(SIGNALS)}"
+    if repeated := sorted({s for s in request.signals if request.signals.count(s) > 1}):
+        return f"signals {', '.join(repeated)} named more than once: name each signal once"
     if isinstance(request.divisor, bool) or not isinstance(request.divisor, int) or request.divisor < 1:
         return f"divisor {request.divisor!r}: a whole number ≥ 1 (1: every cycle)"
     if not (0 < request.duration_s <= MAX_DURATION_S):
