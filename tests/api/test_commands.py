@@ -12,6 +12,7 @@ from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, Me
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
+from hexactl.control.results import CommandResult, ErrorCode
 from tests.api.support import FakeController, request
 
 REPLY = TypeAdapter(ErrorReply | OkReply)
@@ -69,6 +70,16 @@ def test_controller_refusal_keeps_its_code(service) -> None:
     reply = send(service, "move", pose=[0, 0, 10, 0, 0, 0])
     assert reply["error"]["code"] == "not_enabled"
     assert reply["id"] == 7
+
+
+def test_a_loop_refusal_keeps_its_details_but_not_the_loop_ticket(service, monkeypatch) -> None:
+    """The loop's verdicts carry the command's ticket, which numbers commands inside the
+    service: a client sees the refusal and its details, not that number."""
+    monkeypatch.setattr(service.controller, "stream_close", lambda: CommandResult.failure(
+        ErrorCode.NO_STREAM, "no stream is open", ticket=1_000_042, stream=None))
+    reply = send(service, "stream_close")
+    assert reply["error"]["code"] == "no_stream" and reply["error"]["message"] == "no stream is open"
+    assert reply["error"]["details"] == {"stream": None}
 
 
 def test_path_violation_lists_violations(service) -> None:

@@ -230,14 +230,14 @@ class CommandHandler:
                     "duration": result.details.get("duration_s"),
                     "predicted_accuracy": result.details.get("predicted_accuracy"), "refusal": None}
         return {"valid": False, "goal": None, "tool_goal": None, "duration": None, "predicted_accuracy": None,
-                "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+                "refusal": error_body(_code(result), result.message, _details(result))}
 
     def _validate_wave(self, request: ValidateWaveRequest) -> dict[str, Any]:
         result = self.controller.validate_wave(_wave_spec(request))
         if result.ok:
             return {"valid": True, "refusal": None,
                     "wave": jsonable(_wave_figures(result))}
-        return {"valid": False, "wave": None, "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+        return {"valid": False, "wave": None, "refusal": error_body(_code(result), result.message, _details(result))}
 
     def _set_frames(self, request: SetFramesRequest) -> dict[str, Any]:
         current = self.controller.operator_frames()
@@ -254,7 +254,7 @@ class CommandHandler:
         before = self.controller.operator_frames()
         result = self.controller.set_frames(frames)
         if not result.ok:
-            raise ApiError(_code(result), result.message, jsonable(result.details))
+            raise ApiError(_code(result), result.message, _details(result))
         if self.frames_file is not None:
             try:
                 save_frames(frames, self.frames_file)
@@ -286,7 +286,7 @@ class CommandHandler:
         result = self.controller.validate_calibration(geometry, geometry_id(geometry), source)
         if not result.ok:
             return {"message": result.message, "valid": False, "calibration_id": None, "change_mm": None,
-                    "refusal": error_body(_code(result), result.message, jsonable(result.details))}
+                    "refusal": error_body(_code(result), result.message, _details(result))}
         return {"message": result.message, "valid": True, "calibration_id": result.details["calibration_id"],
                 "change_mm": result.details["change_mm"], "refusal": None}
 
@@ -317,6 +317,12 @@ def _code(result: CommandResult) -> str:
     return result.error.value if result.error is not None else ErrorCode.INTERNAL_ERROR.value
 
 
+def _details(result: CommandResult) -> dict[str, Any]:
+    """A refusal's details for a client: without the loop's ``ticket``, which numbers
+    commands inside the service and means nothing to a client."""
+    return jsonable({key: value for key, value in result.details.items() if key != "ticket"})
+
+
 def _wave_spec(request: WaveRequest | ValidateWaveRequest) -> WaveSpec:
     """The wave a request asks for (validated with it: the request is one)."""
     return WaveSpec.model_validate({name: getattr(request, name) for name in WaveSpec.model_fields})
@@ -332,7 +338,7 @@ def _checked(result: CommandResult, **fields: Any) -> dict[str, Any]:
     """``message`` and ``fields`` for a successful result; :class:`ApiError` with the
     controller's code and details for a refusal."""
     if not result.ok:
-        raise ApiError(_code(result), result.message, jsonable(result.details))
+        raise ApiError(_code(result), result.message, _details(result))
     return {"message": result.message, **jsonable(fields)}
 
 
