@@ -191,6 +191,11 @@ def test_special_files_large_files_and_bad_paths(data) -> None:
     assert refused.code == ErrorCode.FILE_NOT_FOUND and "symlink loop" in refused.message
     refused = refusal(read, directories, "sub/race.toml/x.toml")
     assert refused.code == ErrorCode.FILE_NOT_FOUND and "not a directory" in refused.message
+    (data / "data" / "x.toml").write_text("a = 1\n")
+    assert read(directories, "x.toml") == "a = 1\n"
+    for named_as_directory in ("x.toml/", "x.toml/.", "x.toml//"):  # pathlib would drop the ending and read x.toml
+        refused = refusal(read, directories, named_as_directory)
+        assert refused.code == ErrorCode.FILE_NOT_FOUND and "name a file" in refused.message, named_as_directory
 
 
 def test_writes_land_in_the_checked_directory(data) -> None:
@@ -224,14 +229,17 @@ def test_files_lists_each_directorys_regular_files_with_what_they_hold(tmp_path,
     second.mkdir()
     (first / "cal.toml").write_text(geometry_to_toml(nominal))
     (first / "steps.toml").write_text('name = "steps"\n\n[[waypoint]]\npose = [0, 0, 5, 0, 0, 0]\n')
-    (second / "run1.csv").write_text("t\n0\n")
+    (second / "run1.csv").write_text("t_s,cycle,lateness_us\n0.000000,1,12\n")
+    (second / "plan.csv").write_text("# hexactl plan-leglock\n\nleg,x,y,z,roll,pitch,yaw,l1_setpoint\n3,0,0,0,0,0,0,1\n")
+    (second / "postures.csv").write_text("posture,point,x,y,z\n1,1,0,0,0\n")  # a measurement file
     (second / "notes.txt").write_text("x")
     (second / "sub").mkdir()
     (second / "link.toml").symlink_to(first / "cal.toml")  # not followed: listed by its target's directory only
     os.mkfifo(second / "pipe.toml")  # not a regular file: not listed, never opened
     listed = DataDirectories([first, second]).files(limit=100)
     assert [(entry["name"], entry["kind"]) for entry in listed] == [
-        ("cal.toml", "calibration"), ("steps.toml", "sequence"), ("notes.txt", "other"), ("run1.csv", "recording")]
+        ("cal.toml", "calibration"), ("steps.toml", "sequence"), ("notes.txt", "other"), ("plan.csv", "sequence"),
+        ("postures.csv", "other"), ("run1.csv", "recording")]
     assert listed[0]["directory"] == str(first.resolve()) and listed[0]["size"] == len(geometry_to_toml(nominal))
     assert len(DataDirectories([first, second]).files(limit=2)) == 2
 

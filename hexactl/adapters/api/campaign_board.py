@@ -11,7 +11,11 @@ from typing import Any
 from hexactl.adapters.api.messages import ProgressRequest
 
 SENTENCES_KEPT = 12
-"""The campaign's latest sentences that telemetry carries."""
+"""The campaign's latest sentences that telemetry carries: at most this many …"""
+
+SAID_CHARACTERS_KEPT = 4000
+"""… and at most this many characters of them, the newest sentence always whole (it is at
+most 2000): every telemetry record carries them, at up to 200 records a second."""
 
 
 class CampaignBoard:
@@ -25,6 +29,8 @@ class CampaignBoard:
     def update(self, request: ProgressRequest) -> None:
         if request.said is not None:
             self._said.append(request.said)
+            while sum(map(len, self._said)) > SAID_CHARACTERS_KEPT:
+                self._said.popleft()
         report = request.report.model_dump(mode="json") if request.report is not None else None
         if report is None and self._latest is not None:
             report = self._latest[0]["report"]  # a report stays until the next campaign's first phase

@@ -635,7 +635,8 @@ class CampaignTelemetry(_Message):
     done: int
     total: int
     label: str
-    said: list[str] = Field(description="the campaign's latest sentences, oldest first")
+    said: list[str] = Field(description="the campaign's latest sentences, oldest first (at most 12, and 4000 "
+                            "characters with the newest whole)")
     report: CampaignReport | None = Field(description="the finished campaign's results, once it has them")
     age_s: float = Field(description="seconds since the campaign last said something")
 
@@ -787,7 +788,8 @@ class DataFile(_Message):
     name: str = Field(description="the file's name in its directory")
     directory: str = Field(description="the data directory, on the service's machine")
     kind: Literal["calibration", "sequence", "recording", "other"] = Field(
-        description="calibration (a geometry TOML), sequence (a TOML with [[waypoint]]), recording (CSV) or other")
+        description="calibration (a geometry TOML), sequence (a TOML with [[waypoint]], or a posture plan's CSV: "
+        "play takes both), recording (the data recorder's CSV) or other")
     size: int = Field(description="bytes")
     modified: float = Field(description="last change, s since the epoch")
 

@@ -23,6 +23,8 @@ from pathlib import Path, PurePath
 
 from hexactl.adapters.api.wire import ApiError, ErrorCode
 from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.recording_file import LEADING_COLUMNS
+from hexactl.kinematics.axes import POSE_AXES
 
 MAX_FILE_BYTES = 4 * 1024 * 1024
 """Largest calibration or sequence file read (a 1000-waypoint sequence is ~100 kB)."""
@@ -30,6 +32,7 @@ MAX_FILE_BYTES = 4 * 1024 * 1024
 _DIRECTORY_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
 _FILE_FLAGS = os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_NOCTTY | os.O_CLOEXEC
 _READ_CHUNK_BYTES = 64 * 1024
+_CSV_HEAD_BYTES = 64 * 1024  # a plan's comments and header fit many times over
 
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
           (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
@@ -74,7 +77,7 @@ class DataDirectories:
 
     def files(self, limit: int) -> list[dict[str, object]]:
         """The regular files directly in each data directory (symlinks not followed), at
-        most ``limit``: ``name``, ``directory``, ``kind`` (:func:`file_kind`), ``size``
+        most ``limit``: ``name``, ``directory``, ``kind`` (:func:`toml_kind`, :func:`csv_kind`), ``size``
         (bytes) and ``modified`` (s since the epoch)."""
         found: list[dict[str, object]] = []
         for directory in self.directories:
@@ -97,15 +100,14 @@ class DataDirectories:
 
     def _kind_of(self, entry: os.DirEntry[str]) -> str:
         suffix = Path(entry.name).suffix.lower()
-        if suffix == ".csv":
-            return "recording"
-        if suffix != ".toml":
-            return "other"
         try:
-            _, head = self.read_text(entry.path, ErrorCode.FILE_NOT_FOUND)
+            if suffix == ".toml":
+                return toml_kind(self.read_text(entry.path, ErrorCode.FILE_NOT_FOUND)[1])
+            if suffix == ".csv":  # its header tells, and a recording may be large: its head only
+                return csv_kind(self.read_chunk(entry.path, 0, _CSV_HEAD_BYTES)[1].decode("utf-8", errors="replace"))
         except ApiError:
-            return "other"
-        return file_kind(head)
+            pass
+        return "other"
 
     def _open(self, text: str) -> tuple[Path, int, int]:
         """(real path, open descriptor, size) of the regular file ``text`` names inside a
@@ -203,6 +205,9 @@ class DataDirectories:
     def _check_text(text: str) -> None:
         if not text or "\0" in text:
             raise ApiError(ErrorCode.FORBIDDEN_PATH, "a path is a non-empty string without NUL characters")
+        if text.rsplit("/", 1)[-1] in ("", "."):  # pathlib would drop it and name the file before it
+            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: ends as a directory's name does ('/' or '/.'); "
+                           "name a file")
 
 
 def _open_directory_beneath(directory: Path, relative: PurePath) -> int:
@@ -247,13 +252,27 @@ def _read_bounded(text: str, descriptor: int, size_bytes: int) -> bytes:
     return b"".join(chunks)
 
 
-def file_kind(toml_text: str) -> str:
+def toml_kind(toml_text: str) -> str:
     """What a TOML file in a data directory holds, by its keys: ``calibration`` (a
     geometry: it has ``base_joints``), ``sequence`` (``[[waypoint]]``) or ``other``."""
     lines = {line.split("=", 1)[0].strip() for line in toml_text.splitlines()}
     if "base_joints" in lines:
         return "calibration"
     if "[[waypoint]]" in lines:
+        return "sequence"
+    return "other"
+
+
+def csv_kind(head: str) -> str:
+    """What a CSV file in a data directory holds, by its header (its first line that is
+    not blank or a ``#`` comment): ``recording`` (``t_s,cycle,…``, the data recorder's),
+    ``sequence`` (a posture plan's ``leg`` and pose columns: ``play`` takes it) or
+    ``other`` (a measurement file, anything else)."""
+    header = next((line for line in head.splitlines() if line.strip() and not line.lstrip().startswith("#")), "")
+    names = [name.strip() for name in header.split(",")]
+    if names[:len(LEADING_COLUMNS)] == [column for column, _ in LEADING_COLUMNS]:
+        return "recording"
+    if {"leg", *POSE_AXES} <= set(names):
         return "sequence"
     return "other"
 

@@ -30,10 +30,14 @@ SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness",
 """What a recording may hold, in the order of the CSV's columns (after ``t_s`` and ``cycle``)."""
 
 
+LEADING_COLUMNS = (("t_s", "s"), ("cycle", ""))
+"""Every recording's first (column, unit)s: its header starts ``t_s,cycle``."""
+
+
 def columns(signals: Sequence[str]) -> list[tuple[str, str]]:
     """The CSV's (column, unit) for ``signals``, in file order."""
     pose_units = ["mm"] * 3 + ["deg"] * 3
-    out = [("t_s", "s"), ("cycle", "")]
+    out = list(LEADING_COLUMNS)
     for signal in SIGNALS:
         if signal not in signals:
             continue
