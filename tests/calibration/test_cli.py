@@ -48,6 +48,27 @@ def test_calibrate_writes_a_reloadable_file_and_refuses_to_overwrite(tmp_path, d
     assert load_geometry(output).calibration.method == "leglock"
 
 
+def test_no_command_writes_over_its_own_input_even_with_force(tmp_path, data_file, capsys):
+    """A measurement file is hours of measuring: -o naming it (or the geometry read) is a
+    slip, refused before any work, whatever --force says."""
+    before = _sha(data_file)
+    config = tmp_path / "platform.toml"
+    config.write_bytes(NOMINAL_PATH.read_bytes())
+    (tmp_path / "link.csv").symlink_to(data_file)
+    for argv in (
+        ["calibrate", str(data_file), "--config", str(config), "-o", str(data_file), "--force"],
+        ["calibrate", str(data_file), "--config", str(config), "-o", str(tmp_path / "link.csv"), "--force"],
+        ["calibrate", str(data_file), "--config", str(config), "-o", str(config), "--force"],
+        ["plan-leglock", "--leg", "1", "--count", "8", "--config", str(config), "-o", str(config), "--force"],
+        ["simulate-campaign", "--config", str(config), "-o", str(config), "--force"],
+        ["simulate-campaign", "--config", str(config), "-o", str(data_file), "--true-output", str(data_file), "--force"],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "never written over" in err or "is the measurement file too: name two files" in err, (argv, err)
+    assert _sha(data_file) == before and config.read_bytes() == NOMINAL_PATH.read_bytes()
+
+
 def test_report_with_simulated_validation(tmp_path, data_file, true_platform):
     true_path = tmp_path / "true.toml"
     from hexactl.adapters.files.geometry_file import save_geometry

@@ -24,7 +24,9 @@ from hexactl.adapters.cli.common import (
     CliError,
     campaign_stopped,
     check_campaign_arguments,
+    check_output,
     client_endpoint,
+    config_input,
     connect,
     connection_parser,
     load_config,
@@ -174,10 +176,10 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     from hexactl.calibration.results import IdentificationOptions, Method
     from hexactl.kinematics.geometry import GeometryError
 
+    check_output(arguments.output, arguments.force, arguments.data, config_input(arguments), arguments.instrument,
+                 arguments.true)
     nominal = load_config(arguments)
     output = Path(arguments.output)
-    if output.exists() and not arguments.force:
-        raise CliError(f"{output} exists; refusing to overwrite it (use --force)")
     if arguments.report and (Path(arguments.report) / REPORT_PAGE).exists() and not arguments.force:
         raise CliError(f"{arguments.report} already holds a report; refusing to overwrite it (use --force)")
     true = _load_geometry(arguments.true) if arguments.true else None
@@ -276,9 +278,8 @@ def run_plan(arguments: argparse.Namespace) -> int:
     from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
     from hexactl.kinematics.inverse import leg_lengths, lengths_from_readings
 
+    check_output(arguments.output, arguments.force, config_input(arguments))
     geometry = load_config(arguments)
-    if arguments.output and Path(arguments.output).exists() and not arguments.force:
-        raise CliError(f"{arguments.output} exists; refusing to overwrite it (use --force)")
     if not 0 <= arguments.leg <= 6:
         raise CliError(f"--leg {arguments.leg}: a leg is 1-6 (0 for free postures)")
     length = arguments.length
@@ -321,10 +322,11 @@ def run_simulate(arguments: argparse.Namespace) -> int:
     from hexactl.sim.offline_campaign import SimulationError, run_offline_campaign
     from hexactl.sim.true_platform import true_geometry
 
-    nominal = load_config(arguments)
     for path in (arguments.output, arguments.true_output):
-        if path and Path(path).exists() and not arguments.force:
-            raise CliError(f"{path} exists; refusing to overwrite it (use --force)")
+        check_output(path, arguments.force, config_input(arguments), arguments.instrument)
+    if arguments.true_output and Path(arguments.true_output).resolve() == Path(arguments.output).resolve():
+        raise CliError(f"--true-output {arguments.true_output} is the measurement file too: name two files")
+    nominal = load_config(arguments)
     if arguments.instrument and arguments.pose_form:
         raise CliError("--instrument and --pose-form exclude each other: an instrument's own observations are of points")
     instrument = _load_instrument(arguments.instrument) if arguments.instrument else None

@@ -214,13 +214,40 @@ def bind_endpoint(text: str) -> str:
 def load_config(arguments: argparse.Namespace) -> Geometry:
     """The geometry named by --config, or the default one; CliError if it is refused."""
     from hexactl.adapters.files.geometry_file import load_geometry
-    from hexactl.adapters.files.config_path import default_config_path
     from hexactl.kinematics.geometry import GeometryError
 
     try:
-        return load_geometry(arguments.config or default_config_path())
+        return load_geometry(config_input(arguments))
     except GeometryError as error:
         raise CliError(str(error)) from None
+
+
+def check_output(output: str | None, force: bool, *inputs: str | Path | None) -> None:
+    """Before any work: :class:`CliError` if ``output`` is one of the command's ``inputs``
+    (never written over, even with --force: a measurement file can be hours of measuring),
+    or exists and ``force`` is not given."""
+    if output is None:
+        return
+    for given in inputs:
+        if given is not None and _same_file(Path(output), Path(given)):
+            raise CliError(f"{output} is this command's input {given}: an input is never written over, even with "
+                           "--force; choose another output")
+    if Path(output).exists() and not force:
+        raise CliError(f"{output} exists; refusing to overwrite it (use --force)")
+
+
+def config_input(arguments: argparse.Namespace) -> Path:
+    """The geometry file the command reads (--config, else the default one)."""
+    from hexactl.adapters.files.config_path import default_config_path
+
+    return Path(arguments.config) if arguments.config else default_config_path()
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:  # unresolvable or unreadable: not known to be the same; the write reports it
+        return False
 
 
 def check_campaign_arguments(arguments: argparse.Namespace) -> None:
