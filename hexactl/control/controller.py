@@ -123,8 +123,8 @@ class Controller:
         return self._commands.submit(cmd.Enable, "enabled", deadline_ns=deadline_ns)
 
     def disable(self) -> CommandResult:
-        """Disable the actuators (at rest only: stop first)."""
-        return self._checked(preconditions.check_disable, cmd.Disable, "disabled")
+        """Disable the actuators (at rest only: stop first); a leg lock ends, and the reply says so."""
+        return self._checked(preconditions.check_disable, cmd.Disable, "disabled" + self._lock_released())
 
     def stop(self) -> CommandResult:
         """Brake smoothly to rest where the motion happens to end; aborts a sequence.
@@ -149,8 +149,14 @@ class Controller:
         return result
 
     def reset(self) -> CommandResult:
-        """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED."""
-        return self._checked(preconditions.check_reset, cmd.Reset, "reset to disabled")
+        """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED; a
+        leg lock ends, and the reply says so."""
+        return self._checked(preconditions.check_reset, cmd.Reset, "reset to disabled" + self._lock_released())
+
+    def _lock_released(self) -> str:
+        """What disabling says of the leg lock it ends: the next enable drives all six legs."""
+        lock = self.snapshot.lock
+        return f"; leg {lock.leg} is no longer locked: the next enable drives all six legs" if lock is not None else ""
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
                       frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:

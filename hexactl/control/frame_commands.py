@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hexactl.control import preconditions
 from hexactl.control.frames import OperatorFrames
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
@@ -24,11 +25,15 @@ class FrameCommands:
         self._snapshot = snapshot
 
     def set(self, frames: OperatorFrames) -> CommandResult:
-        """Make ``frames`` the operator's; refused (``outside_soft_limits``) when the pose
-        being commanded breaks its soft limits, since no move could then start."""
+        """Make ``frames`` the operator's, at rest only (``busy`` while a motion, sequence,
+        wave or stream is under way or a sequence is paused); refused
+        (``outside_soft_limits``) when the pose being commanded breaks its soft limits,
+        since no move could then start."""
         if not isinstance(frames, OperatorFrames):
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "set_frames takes validated OperatorFrames")
         s = self._snapshot()
+        if refusal := preconditions.check_set_frames(s):
+            return CommandResult.failure(*refusal)
         home = s.active.home
         tool = tools_in_work(frames.frames(home), np.asarray(s.pose_command) + np.asarray(home))
         (broken,) = frames.soft_limits.violations(pose_mm_rad_to_mm_deg(tool))

@@ -29,8 +29,9 @@ from hexactl.control.trajectory import PoseTrajectory
 class JogPlan:
     """A planned jog: ``velocity`` (mm/s for x, y, z; deg/s for roll, pitch, yaw) in
     ``frame`` (a :class:`~hexactl.control.frames.Frame` value) as requested; ``segment``
-    the move that carries it out; ``speed`` the fraction of the requested velocity that
-    the motion limits allow (1: all of it); ``end`` why the segment ends where it does,
+    the move that carries it out; ``speed`` its velocity scale, as a move's: the fraction
+    of the motion limits that ``velocity`` is (1: the limits, when it asks as much or
+    more, and then it runs slower than asked); ``end`` why the segment ends where it does,
     for people; ``to_limit`` True when that is a limit (False: the horizon, which a
     renewal extends); ``deadman_ns`` how long each renewal lasts."""
 

@@ -74,11 +74,16 @@ def _no_stream(view: CoreView) -> Refusal:
                             "close it (stream_close) or stop first")
 
 
+def _no_sequence(view: CoreView) -> Refusal:
+    if view.sequence is None:
+        return None
+    doing = "paused" if view.sequence.phase is SequencePhase.PAUSED else "playing"
+    return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is {doing}: abort it first"
+
+
 def _at_rest(view: CoreView) -> Refusal:
-    if refusal := _no_wave(view) or _no_stream(view):
+    if refusal := _no_wave(view) or _no_stream(view) or _no_sequence(view):
         return refusal
-    if view.sequence is not None:
-        return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
     if view.motion is not MotionState.HOLDING:
         return ErrorCode.BUSY, "the platform is moving: stop first"
     return None
@@ -113,11 +118,7 @@ def check_disable(view: CoreView) -> Refusal:
 
 
 def check_move(view: CoreView) -> Refusal:
-    if refusal := _enabled(view) or _no_wave(view) or _no_stream(view):
-        return refusal
-    if view.sequence is not None:
-        return ErrorCode.BUSY, f"sequence {view.sequence.name!r} is playing: abort it first"
-    return None
+    return _enabled(view) or _no_wave(view) or _no_stream(view) or _no_sequence(view)
 
 
 def _all_six_legs(view: CoreView, what: str) -> Refusal:
@@ -180,6 +181,15 @@ def check_abort(view: CoreView) -> Refusal:
 
 def check_wave(view: CoreView) -> Refusal:
     return _enabled(view) or _at_rest(view) or _all_six_legs(view, "a wave") or _not_ramping(view)
+
+
+def check_set_frames(view: CoreView) -> Refusal:
+    """At rest only: a motion keeps the frames and soft limits it was planned in, so new
+    soft limits set under way would neither stop it nor let the platform back inside."""
+    if refusal := _at_rest(view):
+        code, message = refusal
+        return code, f"{message}: frames and soft limits change only at rest (a motion keeps those it was planned in)"
+    return None
 
 
 def check_reset(view: CoreView) -> Refusal:

@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, replace
 
 from hexactl.control.core import CoreSnapshot, Fault, MotionState
 from hexactl.control.host import LoopReport
+from hexactl.control.jog import JogReport
 from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
 from hexactl.control.stats import LoopStats
@@ -111,6 +112,7 @@ class Telemetry:
     frames: OperatorFrames | None = None
     recording: RecordingTelemetry | None = None  # None: no recording since the start
     jog: JogTelemetry | None = None  # None: no jog under way
+    last_jog: JogReport | None = None  # how the last jog ended; None: none since the start
     wave: WaveProgress | None = None  # the wave playing, or how the last one ended; None: no wave since the start
     stream: StreamTelemetry | None = None  # None: no pose stream under way
     last_stream: StreamReport | None = None  # how the last pose stream ended; None: none since the start
@@ -178,6 +180,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         frames=frames,
         recording=recording_telemetry(s),
         jog=jog_telemetry(s),
+        last_jog=s.last_jog,
         wave=s.wave,
         stream=stream_telemetry(s),
         last_stream=s.last_stream,

@@ -122,16 +122,46 @@ def test_a_move_in_another_frame_waits_for_rest_and_the_running_one_goes_on(rig)
     rig.assert_setpoints_safe()
 
 
-def test_new_frames_leave_the_motion_under_way_in_the_frames_it_was_planned_in(rig):
+def test_frames_and_soft_limits_change_only_at_rest(rig):
+    """New soft limits set under way would neither stop the motion (it keeps the limits it
+    was planned in) nor let the platform back inside afterwards: refused until rest."""
     assert rig.controller.set_frames(TOOL_ABOVE).ok
     rig.enabled()
     before = _tool_point(rig, TOOL_ABOVE)
     assert rig.controller.move([0, 0, 0, 8, 0, 0], frame=Frame.WORK).ok
     rig.run(20)
-    assert rig.controller.set_frames(OperatorFrames(tool=(0, 0, 100, 0, 0, 0))).ok
+    refused = rig.controller.set_frames(OperatorFrames(tool=(0, 0, 100, 0, 0, 0)))
+    rig.run(20)
+    assert np.linalg.norm(np.subtract(_tool_point(rig, TOOL_ABOVE), before)) < MICROMETRE  # the turn about it goes on
+    assert refused.error == "busy" and "the platform is moving: stop first: frames and soft limits change only at " \
+        "rest" in refused.message
     rig.settle()
-    assert np.linalg.norm(np.subtract(_tool_point(rig, TOOL_ABOVE), before)) < MICROMETRE
+    assert rig.controller.move([300, 0, 0, 0, 0, 0]).ok
+    rig.run(20)
+    narrow = OperatorFrames(soft_limits=SoftLimits(lower=(-50,) + (None,) * 5, upper=(50,) + (None,) * 5))
+    assert rig.controller.set_frames(narrow).error == "busy"
+    assert rig.controller.operator_frames() == TOOL_ABOVE
+    rig.settle()
+    assert rig.controller.telemetry().pose_command == pytest.approx((300, 0, 0, 0, 0, 0), abs=1e-9)
+    assert rig.controller.set_frames(narrow).error == "outside_soft_limits"  # at rest: the usual check
+    assert rig.controller.move([0, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    assert rig.controller.set_frames(narrow).ok
     rig.assert_setpoints_safe()
+
+
+def test_frames_wait_for_a_paused_sequence_to_end(rig):
+    rig.enabled()
+    assert rig.controller.play("x_sweep").ok
+    rig.run(40)
+    assert rig.controller.pause().ok
+    rig.run_until(lambda: rig.controller.telemetry().motion == "holding")
+    refused = rig.controller.set_frames(TOOL_ABOVE)
+    assert refused.error == "busy" and "sequence 'x_sweep' is paused: abort it first" in refused.message
+    assert rig.controller.move([1, 0, 0, 0, 0, 0]).message.startswith("sequence 'x_sweep' is paused")
+    assert rig.controller.abort().ok
+    rig.settle()
+    assert rig.controller.set_frames(TOOL_ABOVE).ok
 
 
 def test_soft_limits_name_the_limit_and_cannot_be_set_around_a_platform_outside_them(rig):

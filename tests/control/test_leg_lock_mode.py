@@ -77,6 +77,24 @@ def test_unlock_is_bumpless_and_the_leg_follows_again(rig):
     rig.assert_setpoints_safe()
 
 
+def test_disable_and_reset_say_that_they_end_the_lock(rig):
+    rig.enabled()
+    _locked(rig, 3)
+    disabled = rig.controller.disable()
+    assert disabled.ok and disabled.message == "disabled; leg 3 is no longer locked: the next enable drives all six legs"
+    rig.run(3)
+    assert rig.controller.telemetry().locked_leg is None
+    rig.enabled()
+    _locked(rig, 2)
+    assert rig.controller.estop().ok
+    rig.run(3)
+    reset = rig.controller.reset()
+    assert reset.ok and reset.message == "reset to disabled; leg 2 is no longer locked: the next enable drives all six legs"
+    rig.run(3)
+    assert rig.controller.telemetry().locked_leg is None
+    assert rig.controller.reset().message == "reset to disabled"  # no lock: nothing more to say
+
+
 def test_lock_preconditions(rig):
     assert rig.controller.leg_lock(1).error == "not_enabled"
     rig.enabled()

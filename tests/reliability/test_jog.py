@@ -72,6 +72,7 @@ def test_a_jog_into_a_soft_limit_rests_on_it_and_a_lapsed_one_brakes(client: Hex
         ended = wait_for(lambda: (s := status(client))["jog"] is None and s["motion"] == "holding" and s,
                          "the lapsed jog to brake to rest")
         assert -20 < ended["pose_command"][0] < SOFT_X_MM  # it did not run on to a limit
+        assert ended["last_jog"]["reason"] == "the deadman lapsed (no renewal in time)"
         assert ended["loop"]["guard_clamps"] == clamps
         assert client.call("status")["status"]["state"] == "enabled"
 
@@ -90,6 +91,8 @@ def test_the_jog_command_line_jogs_for_a_while_and_releases(client: HexactlClien
         out = capsys.readouterr().out
         assert exit_code == 0, out
         assert "jogging (jog " in out and "released; at rest at" in out
+        limit_z = service.controller.config.motion.max_velocity[2]
+        assert f"at the velocity asked ({10 / limit_z:.0%} of the motion limits)" in out  # 10 mm/s asked
         final = status(client)
         assert final["jog"] is None and final["motion"] == "holding" and 1.0 < final["pose_command"][2] < 20.0  # 10 mm/s for 1 s, and the release's latency
 

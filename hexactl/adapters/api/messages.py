@@ -141,8 +141,9 @@ class ValidatePoseRequest(_PoseInFrame):
 class SetFramesRequest(_Request):
     """Set the operator's work frame, tool frame (its origin is the pivot point) and soft
     limits; what is not given stays as it is. Saved, and restored when the service
-    restarts. Refused (``outside_soft_limits``) when the pose being commanded breaks the
-    new soft limits. A motion under way keeps the frames it was planned in."""
+    restarts. At rest only (``busy`` while a motion, a sequence, paused too, a wave or a
+    stream is under way: a motion keeps the frames it was planned in). Refused
+    (``outside_soft_limits``) when the pose being commanded breaks the new soft limits."""
 
     cmd: Literal["set_frames"]
     work: FramePoseMmDeg | None = Field(default=None, description="the work frame in the zero frame, mm and deg")
@@ -558,13 +559,17 @@ class WaveTelemetry(_Message):
         "aborted (by stop or abort: braked to rest) or fault (a fault, an E-stop or a disable froze it)")
 
 
+JOG_SPEED = ("its velocity scale, as a move's speed: the fraction of the motion's velocity limits it runs at, "
+             "that of the velocity asked (1: the limits, when the velocity asked reaches them)")
+
+
 class JogTelemetry(_Message):
     """The jog under way."""
 
     jog: int = Field(description="its number (the reply to the jog that started it says it)")
     frame: FrameName
     velocity: JogVelocity
-    speed: float = Field(gt=0, le=1, description="the fraction of the velocity the motion limits allow it")
+    speed: float = Field(gt=0, le=1, description=JOG_SPEED)
     phase: Literal["jogging", "at_end", "braking"] = Field(
         description="jogging; at_end: at rest where its plan ends (on a limit, or at the horizon a renewal extends); "
         "braking: released, replaced or lapsed, braking to rest")
@@ -586,6 +591,13 @@ class StreamTelemetry(_Message):
     last_sequence: int | None = Field(description="the sender's number of the newest target taken")
     since_target_s: float = Field(ge=0, description="time since the loop took the newest target, s")
     latency_ms: float | None = Field(description="from the newest target's arrival to the loop cycle that took it, ms")
+
+
+class JogEnd(_Message):
+    """How the last jog ended."""
+
+    jog: int = Field(description="its number")
+    reason: str = Field(description="why, for people: the deadman lapsed, released, replaced by a move, a fault, …")
 
 
 class StreamEnd(_Message):
@@ -672,6 +684,7 @@ class Telemetry(_Message):
     wave: WaveTelemetry | None = Field(default=None, description="the wave playing, or how the last one ended; null "
                                        "before the first wave")
     jog: JogTelemetry | None = Field(default=None, description="the jog under way; null when none is")
+    last_jog: JogEnd | None = Field(default=None, description="how the last jog ended; null before the first")
     stream: StreamTelemetry | None = Field(default=None, description="the pose stream under way; null when none is")
     last_stream: StreamEnd | None = Field(default=None, description="how the last pose stream ended; null before "
                                           "the first")
@@ -737,7 +750,7 @@ class JogReply(OkReply):
     jog: int | None = Field(description="the jog's number (null when the reply releases one)")
     goal: RelativeMmDeg | None = Field(description="where its plan ends, relative to the zero posture; null on a "
                                        "renewal or a release")
-    speed: float | None = Field(description="the fraction of the velocity its plan runs at")
+    speed: float | None = Field(description=JOG_SPEED)
     end: str | None = Field(description="where its plan ends: the limit ahead by name, or the horizon")
     to_limit: bool | None = Field(description="its plan ends on a limit (false: at the horizon a renewal extends)")
     deadman_s: float | None = Field(description="renew the jog at least this often, s")

@@ -65,8 +65,7 @@ def run_jog(arguments: argparse.Namespace) -> int:
             if arguments.json:
                 print(json.dumps(reply), flush=True)
             else:
-                print(f"jogging (jog {reply['jog']}): heading for {reply['end']}, at {reply['speed']:.0%} of the "
-                      f"velocity asked", flush=True)
+                print(f"jogging (jog {reply['jog']}): heading for {reply['end']}, {_pace(reply['speed'])}", flush=True)
             try:
                 refused = _renew(client, fields, arguments.for_s, reply["deadman_s"] / RENEWALS_PER_DEADMAN)
             finally:
@@ -86,6 +85,13 @@ def run_jog(arguments: argparse.Namespace) -> int:
     except ServiceUnavailable as error:
         print(f"hexactl jog: {error}", file=sys.stderr)
         return EXIT_NO_ANSWER
+
+
+def _pace(speed: float) -> str:
+    """The jog's pace from its velocity scale (the fraction of the motion limits it runs at)."""
+    if speed < 1.0:
+        return f"at the velocity asked ({speed:.0%} of the motion limits)"
+    return "at the motion limits (the velocity asked reaches them)"
 
 
 def _renew(client: Any, fields: dict[str, Any], for_s: float, every_s: float) -> dict[str, Any] | None:
