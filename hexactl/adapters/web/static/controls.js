@@ -209,7 +209,7 @@ export function setupControls(ctx) {
     if (reply.ok) {
       const extra = [];
       if (reply.end) extra.push(`to ${reply.end}`);
-      if (typeof reply.speed === 'number') extra.push(`speed ${(reply.speed * 100).toFixed(0)} %`);
+      if (typeof reply.speed === 'number') extra.push(`${(reply.speed * 100).toFixed(0)} % of the motion limits`);
       setResult(jogStatus, jog ? 'moving' : null, `${reply.message ?? 'ok'}${extra.length ? ` (${extra.join(', ')})` : ''}`);
     } else {
       setResult(jogStatus, 'refused', describeError(reply.error));
