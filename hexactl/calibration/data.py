@@ -151,6 +151,7 @@ def screen_measurements(
     distance_tolerance_mm: float | None = None,
     locked_reading_tolerance_mm: float = LOCKED_READING_TOLERANCE_MM,
     legs: LegModel | None = None,
+    stroke_mm: tuple[float, float] | None = None,
 ) -> tuple[RowProblem, ...]:
     """Rows that must not be used as they are, one :class:`RowProblem` per finding.
 
@@ -158,7 +159,9 @@ def screen_measurements(
       known one by more than ``distance_tolerance_mm`` (default
       ``DISTANCE_TOLERANCE_SIGMAS · √2 · point_sigma_mm``): a mis-sighted target or a typo;
     - a leg marked locked whose reading is more than ``locked_reading_tolerance_mm`` from the
-      median of that leg's locked rows: the leg did not hold, or the row is mislabelled.
+      median of that leg's locked rows: the leg did not hold, or the row is mislabelled;
+    - a reading more than :data:`STROKE_READING_TOLERANCE_MM` outside ``stroke_mm`` (the
+      actuators' [min, max], when given), where no actuator can be: a typo.
 
     Measured points whose typical spread differs from the feature points' by more than
     :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
@@ -190,6 +193,13 @@ def screen_measurements(
                         f"distance p{i + 1}-p{j + 1} is {known + error_mm:.3f} mm, the feature points are "
                         f"{known:.3f} mm apart (error {error_mm:+.3f} mm, tolerance {tolerance:.3f} mm)",
                         mis_sighting=True))
+    if stroke_mm is not None:
+        low, high = stroke_mm
+        for line, readings in zip(data.lines, data.readings_mm):
+            for leg, reading in enumerate(readings, start=1):
+                if not low - STROKE_READING_TOLERANCE_MM <= reading <= high + STROKE_READING_TOLERANCE_MM:
+                    problems.append(RowProblem(int(line), f"l{leg} reads {reading:.4f} mm, outside the actuators' "
+                                               f"stroke [{low:g}, {high:g}] mm where no leg can be: a typo?"))
     for leg in range(1, LEG_COUNT + 1):
         rows = data.locked_rows(leg)
         if len(rows) == 0:
@@ -203,6 +213,9 @@ def screen_measurements(
                     f"its locked rows' median {median:.4f} mm (tolerance {locked_reading_tolerance_mm:g} mm)"))
     return tuple(sorted(problems, key=lambda problem: problem.line))
 
+
+STROKE_READING_TOLERANCE_MM = 1.0
+"""A reading this far beyond the stroke is not noise (a sensor's is ~0.01 mm): no leg can be there."""
 
 POSE_UNIT_MISFIT_MM = 20.0
 """Readings this far (median) from what the nominal geometry gives for the measured poses

@@ -114,6 +114,24 @@ def test_screening_names_inconsistent_collinear_and_unlocked_rows(nominal, leglo
     assert not screen_measurements(data, np.array(nominal.measurement.feature_points), nominal.measurement.point_sigma_mm)
 
 
+def test_screening_names_readings_outside_the_stroke(nominal, leglock_campaign):
+    data = leglock_campaign.data
+    low, high = nominal.limits.stroke
+    readings = np.array(data.readings_mm)
+    readings[3, 2] = low - 50.0  # a typo no leg can make
+    readings[5, 0] = high + 1.5
+    readings[7, 4] = high + 0.5  # within the tolerance: noise at the stroke's end is not flagged
+    bad = MeasurementData(data.locked_leg, readings, data.lines, points_mm=data.points_mm)
+    feature_points = np.array(nominal.measurement.feature_points)
+    problems = screen_measurements(bad, feature_points, nominal.measurement.point_sigma_mm, stroke_mm=(low, high))
+    by_line = {problem.line: str(problem) for problem in problems if "stroke" in str(problem)}
+    assert set(by_line) == {int(data.lines[3]), int(data.lines[5])}
+    assert f"l3 reads {low - 50.0:.4f} mm, outside the actuators' stroke [{low:g}, {high:g}] mm" in by_line[int(data.lines[3])]
+    assert "l1 reads" in by_line[int(data.lines[5])]
+    assert not [p for p in screen_measurements(bad, feature_points, nominal.measurement.point_sigma_mm)
+                if "stroke" in str(p)]  # without a stroke, nothing to check against
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     legs=st.lists(st.integers(0, 6), min_size=1, max_size=8),
