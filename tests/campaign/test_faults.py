@@ -125,20 +125,27 @@ def test_with_no_resets_allowed_a_fault_stops_the_campaign_for_the_operator() ->
 
 
 class LateVerdicts:
-    """A client whose API answers ``loop_timeout`` to the first ``late`` moves (a loaded
-    host), then carries them out; the platform is at rest throughout."""
+    """A client whose API answers ``code`` (``loop_timeout``, or ``expired`` for any
+    command) to the first ``late`` moves or other commands (a loaded host), then carries
+    them out; the platform is at rest throughout."""
 
-    def __init__(self, late: int) -> None:
-        self.late, self.moves = late, 0
+    def __init__(self, late: int, code: str = "loop_timeout") -> None:
+        self.late, self.code, self.moves, self.others, self.polls = late, code, 0, 0, 0
 
     def call(self, cmd: str, **fields: object) -> dict:
         if cmd == "move":
             self.moves += 1
             if self.moves <= self.late:
-                raise CommandError("loop_timeout", "the loop gave no verdict in time; the command may still be carried out")
+                raise CommandError(self.code, "the loop gave no verdict in time; the command may still be carried out")
             return {"duration": 0.0}
+        if cmd == "leg_lock":
+            self.others += 1
+            if self.others <= self.late:
+                raise CommandError("expired", "its deadline passed before the loop reached it: not carried out")
+            return {}
+        self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
-                  "t": 0.1 * self.moves, "faults": []}
+                  "t": 0.1 * self.polls, "faults": []}
         return {"status": record}
 
 
@@ -150,3 +157,15 @@ def test_a_move_without_a_verdict_is_sent_again_a_few_times_then_stops_the_campa
     with pytest.raises(CampaignError, match="no verdict on the move .* in time, 3 times"):
         PlatformDriver(hopeless).move([1.0, 0, 0, 0, 0, 0])  # type: ignore[arg-type]
     assert hopeless.moves == MOVE_ATTEMPTS
+
+
+def test_a_command_that_expired_unrun_is_sent_again_then_names_the_timeout() -> None:
+    late = LateVerdicts(late=MOVE_ATTEMPTS - 1, code="expired")
+    assert PlatformDriver(late).move([1.0, 0, 0, 0, 0, 0], settle=False)["motion"] == "holding"  # type: ignore[arg-type]
+    assert late.moves == MOVE_ATTEMPTS
+    assert PlatformDriver(late).lock(2)["motion"] == "holding"  # type: ignore[arg-type]
+    assert late.others == MOVE_ATTEMPTS
+    hopeless = LateVerdicts(late=MOVE_ATTEMPTS)
+    with pytest.raises(CampaignError, match=r"refused leg_lock: .*not carried out.*raise --timeout"):
+        PlatformDriver(hopeless).lock(2)  # type: ignore[arg-type]
+    assert hopeless.others == MOVE_ATTEMPTS

@@ -26,7 +26,10 @@ MOVE_ATTEMPTS = 3
 """How many times :meth:`PlatformDriver.move` sends a move that the API answered with
 ``loop_timeout`` (the loop's verdict came too late for it, on a loaded host): the move may
 or may not have run, so the driver waits for rest and sends it again (a move to where the
-platform already is ends at once)."""
+platform already is ends at once). Any command refused ``expired`` (its deadline passed
+in the loop's queue, on a loaded host: not carried out) is sent again as often."""
+
+_LATE = ("loop_timeout", "expired")
 
 FAULT_CLEAR_S = 2.0
 """How long enabling waits for actuators that report a fault to clear it (they do after
@@ -124,12 +127,12 @@ class PlatformDriver:
                 return self.wait_settled(float(reply["duration"]), settle=settle)
             except CommandError as error:
                 self._latched(error)
-                if error.code != "loop_timeout":
+                if error.code not in _LATE:
                     raise
             self.wait_settled(0.0, settle=False)
         raise CampaignError(f"the controller's API gave no verdict on the move to {list(pose)} in time, "
-                            f"{MOVE_ATTEMPTS} times (loop_timeout): the host is too loaded for it; stop other work on "
-                            "it, then run the same command again to resume")
+                            f"{MOVE_ATTEMPTS} times (loop_timeout or expired): the host is too loaded for it; stop "
+                            "other work on it or raise --timeout, then run the same command again to resume")
 
     def confirm_still(self, settled: Record) -> None:
         """Check, once a measurement of the platform settled at ``settled`` (a
@@ -215,11 +218,16 @@ class PlatformDriver:
             self.client.request("progress", **progress)
 
     def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
-        try:
-            return self.client.call(cmd, **fields)
-        except CommandError as error:
-            self._latched(error)
-            raise CampaignError(f"the controller refused {cmd}: {error}") from None
+        for attempt in range(1, MOVE_ATTEMPTS + 1):
+            try:
+                return self.client.call(cmd, **fields)
+            except CommandError as error:
+                self._latched(error)
+                if error.code == "expired" and attempt < MOVE_ATTEMPTS:
+                    continue  # not carried out: asking again cannot do it twice
+                hint = " (the host is too loaded for the command timeout: raise --timeout)" if error.code == "expired" else ""
+                raise CampaignError(f"the controller refused {cmd}: {error}{hint}") from None
+        raise AssertionError("unreachable: the last attempt returns or raises")
 
     def _latched(self, error: CommandError) -> None:
         """A refusal because a fault latched meanwhile is that fault (:class:`ControllerFault`)."""
