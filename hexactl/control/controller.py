@@ -322,6 +322,9 @@ class Controller:
         new = ActiveGeometry.of(geometry, calibration_id, source)
         if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self.nominal):
             return refusal
+        if calibration_id == self.snapshot.active.calibration_id:  # nothing to swap, nor to roll back to later
+            return CommandResult.success(f"calibration {calibration_id} is already active: nothing changed",
+                                         calibration_id=calibration_id, change_mm=0.0)
         return self._swap(new, f"calibration {calibration_id} loaded")
 
     def validate_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:

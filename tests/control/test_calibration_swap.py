@@ -90,6 +90,19 @@ def test_rollback_ramps_back_to_the_previous_calibration(rig, calibrated):
     rig.assert_setpoints_safe()
 
 
+def test_loading_the_active_calibration_again_changes_nothing(rig, calibrated):
+    rig.enabled()
+    assert rig.controller.load_calibration(calibrated, "cal-1").ok
+    rig.run(2)
+    rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
+    again = rig.controller.load_calibration(calibrated, "cal-1")
+    assert again.ok and again.message == "calibration cal-1 is already active: nothing changed"
+    assert again.details["change_mm"] == 0.0
+    rig.run(2)
+    rolled = rig.controller.rollback_calibration()  # back to what came before, not to cal-1 again
+    assert rolled.ok and rolled.message == "rolled back from calibration cal-1 to nominal"
+
+
 def test_rollbacks_walk_back_through_every_load_in_order(rig, geometry):
     from hexactl.control.core import KEPT_CALIBRATIONS
 
