@@ -113,6 +113,14 @@ class CalibrationInfo(_Strict):
     )
     notes: str = ""
 
+    @field_validator("base_joints_std_mm", "platform_joints_std_mm", "zero_lengths_std_mm", "sensor_scale_errors_std")
+    @classmethod
+    def _deviations(cls, values: tuple | None) -> tuple | None:
+        if values is not None and np.min(values) < 0.0:
+            raise ValueError(f"a standard deviation cannot be negative, got {float(np.min(values)):g}: the file was "
+                             "edited or damaged; calibrate again")
+        return values
+
     @field_validator("parameter_covariance")
     @classmethod
     def _covariance(cls, rows: tuple[tuple[float, ...], ...] | None) -> tuple[tuple[float, ...], ...] | None:

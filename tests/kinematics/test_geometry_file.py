@@ -84,6 +84,11 @@ def _set(path, value):
         (_set(["limits", "leg_velocity_mm_s"], "100"), r"limits.leg_velocity_mm_s: must be a number"),
         (_set(["limits", "stroke", 1], False), r"limits.stroke\[1\]: must be a number, not false"),
         (_set(["home", 0], "0"), r"home\[0\]: must be a number"),
+        (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60,
+                                "residual_rms_mm": 0.02, "zero_lengths_std_mm": [0.01, 0.01, -0.01, 0.01, 0.01, 0.01]}),
+         r"calibration.zero_lengths_std_mm: a standard deviation cannot be negative, got -0.01: the file was edited"),
+        (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60.0,
+                                "residual_rms_mm": 0.02}), r"calibration.postures: must be a whole number, not 60.0"),
     ],
 )
 def test_bad_geometry_files_are_refused_naming_the_key(edit, expected) -> None:
