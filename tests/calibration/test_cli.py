@@ -127,6 +127,10 @@ def test_plan_leglock_file_holds_the_lock_and_the_limits(tmp_path, nominal, caps
     assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "1", "--count", "3", "--candidates", "100"]) == 0
     assert capsys.readouterr().out.count("\n1,") == 3
     assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "8", "--count", "3"]) == 2
+    capsys.readouterr()
+    for lock in (["--reading", "2000"], ["--reading", "-5"], ["--length", "10"]):  # where no leg can be
+        assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "2", "--count", "3", *lock]) == 2
+        assert "leg 2 cannot be locked there: outside its stroke [0, 850] mm" in capsys.readouterr().err, lock
 
 
 def test_simulate_campaign_then_calibrate_pose_form(tmp_path, capsys):

@@ -277,7 +277,7 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
 def run_plan(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.files.measurements import format_plan, write_plan
     from hexactl.calibration.planning import PlanRequest, PlanStatus, plan_postures
-    from hexactl.kinematics.inverse import leg_lengths, lengths_from_readings
+    from hexactl.kinematics.inverse import leg_lengths, lengths_from_readings, readings_from_lengths
 
     check_output(arguments.output, arguments.force, config_input(arguments))
     geometry = load_config(arguments)
@@ -288,6 +288,14 @@ def run_plan(arguments: argparse.Namespace) -> int:
         if not arguments.leg:
             raise CliError("--reading needs a locked leg (--leg 1-6)")
         length = float(lengths_from_readings(geometry.legs, arguments.reading, arguments.leg - 1))
+    if arguments.leg and length is not None:
+        reading = float(readings_from_lengths(geometry.legs, length, arguments.leg - 1))
+        low, high = geometry.limits.stroke
+        if not low <= reading <= high:
+            given = (f"--reading {arguments.reading:g}" if arguments.reading is not None
+                     else f"--length {arguments.length:g} (a reading of {reading:.3f} mm)")
+            raise CliError(f"{given}: leg {arguments.leg} cannot be locked there: outside its stroke "
+                           f"[{low:g}, {high:g}] mm")
     plan = plan_postures(geometry, PlanRequest(arguments.leg, arguments.count, length, arguments.candidates, arguments.seed))
     if plan.status is PlanStatus.INVALID_REQUEST:
         raise CliError(plan.message)
