@@ -101,7 +101,10 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
         if not actuator.heartbeat_age_s <= heartbeat_timeout_s:
             return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s"
         if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
-            return ErrorCode.ACTUATOR_FAULT, f"leg {leg}: {actuator.state.name}, fault bits 0x{actuator.fault_bits:x}"
+            cleared_soon = (" (after a reset an actuator leaves ESTOP once it has seen no E-stop for a moment: "
+                            "enable again shortly)" if actuator.state is ActuatorState.ESTOP else "")
+            return ErrorCode.ACTUATOR_FAULT, (f"leg {leg}: {actuator.state.name}, fault bits "
+                                              f"0x{actuator.fault_bits:x}{cleared_soon}")
         if isnan(actuator.position_mm):
             return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no position reported yet"
         if not low <= actuator.position_mm <= high:

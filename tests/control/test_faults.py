@@ -148,6 +148,17 @@ def test_a_fault_during_a_sequence_ends_it(rig):
     assert rig.controller.telemetry().sequence is None
 
 
+def test_enable_just_after_a_reset_from_an_estop_says_to_wait_a_moment(rig):
+    rig.enabled()
+    assert rig.controller.estop().ok
+    rig.run(5)
+    assert rig.controller.reset().ok
+    rig.run(1)
+    held = rig.controller.enable()
+    assert held.error == "actuator_fault" and ": ESTOP" in held.message and "enable again shortly" in held.message
+    rig.run_until(lambda: rig.controller.enable().ok, limit=2000)
+
+
 def test_enable_refusals(make_rig, geometry):
     rig = make_rig()
     rig.actuators.silence(1)
@@ -156,7 +167,8 @@ def test_enable_refusals(make_rig, geometry):
     rig.actuators.silence(1, False)
     rig.actuators.inject_fault(4)
     rig.run()
-    assert rig.controller.enable().error == "actuator_fault"
+    faulted = rig.controller.enable()
+    assert faulted.error == "actuator_fault" and "leg 4: FAULT" in faulted.message and "E-stop" not in faulted.message
     rig.actuators.states[3] = rig.actuators.states[0]
     rig.actuators.fault_bits[3] = 0
     original = rig.actuators.positions[0]
