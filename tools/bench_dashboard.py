@@ -21,19 +21,42 @@ own statistics give its missed cycles (counted over the phase) and its lateness 
 compute percentiles (the service's stats window, which the phase fits in).
 
 The latency is the page's own measure of each record it draws: the record's age when the
-dashboard forwarded it (the service's monotonic clock is this host's) plus the time from
+dashboard received it (the service's monotonic clock is this host's) plus the time from
 then to the end of the animation frame that drew it. It includes the PUB/SUB hop, the
 dashboard's WebSocket, the page's parsing and the three.js and uPlot drawing.
+
+``--idle-pages N [N …]`` measures something else: a new page's E-stop round trip while N
+other pages are connected and do nothing (an outside report: 0.6–0.9 s behind 400 idle
+pages on a loaded host).
+
+    python3 tools/bench_dashboard.py --idle-pages 0 100 400
+    python3 tools/bench_dashboard.py --idle-pages 400 --stalled   # pages that never read
+
+For each N, a child process opens N WebSockets on ``/ws`` and keeps them as a browser tab
+left open would: it offers permessage-deflate as browsers do, reads every message (and
+throws it away) and answers the server's pings; with ``--stalled`` it reads nothing (a
+frozen tab, a wedged client). Then ``--estops`` times, a fresh page connects, waits for
+its first message, sends ``estop`` and times the reply. The table gives p50, p95 and max,
+the dashboard process's CPU over the phase and the load average; the service's own E-stop
+round trip through its API, without the dashboard, comes first for reference.
 """
 
 from __future__ import annotations
 
 import argparse
+import base64
 import json
+import multiprocessing
+import os
+import random
+import selectors
+import socket
 import statistics
+import struct
 import sys
 import tempfile
 import time
+from urllib.parse import urlsplit
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +70,7 @@ from bench_service import Cyclictest, load_average  # noqa: E402
 from hexactl.adapters.api.client import CommandError, HexactlClient  # noqa: E402
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY  # noqa: E402
 from tools.browser import dashboard, headless_chromium  # noqa: E402
-from tools.serving import serve, wait_for_tool as wait_for  # noqa: E402
+from tools.serving import LOOPBACK, serve, wait_for_tool as wait_for  # noqa: E402
 
 RATE_HZ = 500
 WAIT_S = 60.0
@@ -109,12 +132,231 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q / 100.0 * len(ordered)))]
 
 
+# -- a new page's E-stop while other pages idle ----------------------------------------
+
+ESTOP_GAP_S = (0.1, 0.3)
+"""Pause between two E-stops, drawn at random so that they do not lock to telemetry's period."""
+
+
+def open_page(host: str, port: int) -> tuple[socket.socket, bytes]:
+    """A WebSocket on ``/ws`` opened as a browser does (permessage-deflate offered), and the
+    bytes that came after the handshake's response."""
+    sock = socket.create_connection((host, port), timeout=WAIT_S)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET /ws HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                  f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+                  "Sec-WebSocket-Extensions: permessage-deflate; client_max_window_bits\r\n\r\n").encode())
+    received = b""
+    while b"\r\n\r\n" not in received:
+        chunk = sock.recv(4096)
+        if not chunk:
+            raise SystemExit(f"the dashboard closed a WebSocket during its handshake: {received[:200]!r}")
+        received += chunk
+    head, _, rest = received.partition(b"\r\n\r\n")
+    if not head.startswith(b"HTTP/1.1 101"):
+        raise SystemExit(f"the dashboard refused a WebSocket: {head[:200]!r}")
+    return sock, rest
+
+
+def _frames(buffer: bytearray) -> list[tuple[int, bytes]]:
+    """The whole frames at the start of ``buffer`` (removed from it): (opcode, payload of a
+    control frame, else b"")."""
+    frames = []
+    while len(buffer) >= 2:
+        opcode, length, start = buffer[0] & 0x0F, buffer[1] & 0x7F, 2
+        if length == 126:
+            if len(buffer) < 4:
+                break
+            length, start = struct.unpack_from("!H", buffer, 2)[0], 4
+        elif length == 127:
+            if len(buffer) < 10:
+                break
+            length, start = struct.unpack_from("!Q", buffer, 2)[0], 10
+        if len(buffer) < start + length:
+            break
+        frames.append((opcode, bytes(buffer[start:start + length]) if opcode >= 8 else b""))
+        del buffer[:start + length]
+    return frames
+
+
+def _pong(payload: bytes) -> bytes:
+    mask = os.urandom(4)
+    return bytes([0x8A, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+
+
+def hold_pages(url: str, count: int, stalled: bool, ready: Any, stop: Any, still_open: Any) -> None:
+    """In a child process: ``count`` pages on ``url`` held until ``stop`` is set; ``ready``
+    set once all are open, ``still_open`` the number not closed by the dashboard at the end.
+    A reading page takes every message and answers pings from the start (opening 400 takes
+    long enough for the ones opened first to miss a ping otherwise)."""
+    address = urlsplit(url)
+    selector = selectors.DefaultSelector()
+    opened: list[socket.socket] = []
+    closed = 0
+
+    def read(timeout_s: float) -> None:
+        nonlocal closed
+        for key, _ in selector.select(timeout_s):
+            try:
+                data = key.fileobj.recv(1 << 16)
+            except BlockingIOError:
+                continue
+            except ConnectionError:
+                data = b""
+            if not data:
+                selector.unregister(key.fileobj)
+                closed += 1
+                continue
+            key.data.extend(data)
+            for opcode, payload in _frames(key.data):
+                if opcode == 0x9:
+                    key.fileobj.sendall(_pong(payload))
+
+    for _ in range(count):
+        sock, rest = open_page(address.hostname or "127.0.0.1", address.port or 80)
+        opened.append(sock)
+        if not stalled:
+            sock.setblocking(False)
+            selector.register(sock, selectors.EVENT_READ, bytearray(rest))
+            read(0.0)
+    ready.set()
+    while not stop.is_set():
+        if stalled:
+            stop.wait(0.1)
+        else:
+            read(0.1)
+    if stalled:  # the ones the dashboard closed (a ping unanswered) read as end of file
+        closed = sum(1 for sock in opened if _closed(sock))
+    still_open.value = count - closed
+
+
+def _closed(sock: socket.socket) -> bool:
+    try:
+        return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+    except BlockingIOError:
+        return False
+    except ConnectionError:
+        return True
+
+
+def estop_round_trips(url: str, count: int) -> tuple[list[float], int]:
+    """``count`` E-stops, each from a fresh page: seconds from sending to its reply, and how
+    many replies were errors (an overloaded service's ``loop_timeout``: a reply all the same)."""
+    from websockets.sync.client import connect
+
+    socket_url = url.replace("http://", "ws://", 1) + "ws"
+    times, errors = [], 0
+    for number in range(count):
+        with connect(socket_url, open_timeout=WAIT_S, max_size=None) as page:
+            page.recv(WAIT_S)  # the link's state: the page is served
+            sent = time.perf_counter()
+            page.send(json.dumps({"type": "command", "id": number, "cmd": "estop"}))
+            while True:
+                message = json.loads(page.recv(WAIT_S))
+                if message["type"] == "reply" and message["id"] == number:
+                    break
+            times.append(time.perf_counter() - sent)
+            if not message["reply"].get("ok"):
+                errors += 1
+                print(f"estop: {message['reply']['error']}", file=sys.stderr)
+        time.sleep(random.uniform(*ESTOP_GAP_S))
+    return times, errors
+
+
+def cpu_seconds(pid: int) -> float:
+    """User and system CPU time of process ``pid`` so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+OPEN_WAIT_S = 1200.0
+"""How long N pages may take to open (a dashboard that serialised each record once per
+page took 457 s for 400 on a loaded host: the time is one of the figures)."""
+
+
+def estop_phase(board_url: str, board_pid: int, pages: int, stalled: bool, count: int) -> dict[str, Any]:
+    """``count`` E-stops from fresh pages while ``pages`` others are held open."""
+    context = multiprocessing.get_context("spawn")
+    ready, stop, still_open = context.Event(), context.Event(), context.Value("i", -1)
+    holder = context.Process(target=hold_pages, args=(board_url, pages, stalled, ready, stop, still_open), daemon=True)
+    opening = time.monotonic()
+    holder.start()
+    try:
+        if not ready.wait(OPEN_WAIT_S):
+            raise SystemExit(f"{pages} pages did not open in {OPEN_WAIT_S:g} s")
+        open_s = time.monotonic() - opening
+        time.sleep(2.0)  # the last pages' first messages are out
+        load_start, cpu_start, started = load_average(), cpu_seconds(board_pid), time.monotonic()
+        times, errors = estop_round_trips(board_url, count)
+        cpu = (cpu_seconds(board_pid) - cpu_start) / (time.monotonic() - started)
+        load_end = load_average()
+    finally:
+        stop.set()
+        holder.join(WAIT_S)
+        if holder.is_alive():
+            holder.kill()
+    return {"pages": pages, "still_open": still_open.value, "stalled": stalled, "open_s": open_s, "errors": errors,
+            "round_trips_ms": [t * 1000.0 for t in times], "p50_ms": statistics.median(times) * 1000.0,
+            "p95_ms": percentile(times, 95.0) * 1000.0, "max_ms": max(times) * 1000.0, "dashboard_cpu": cpu,
+            "load_start": load_start, "load_end": load_end}
+
+
+def api_round_trips(client: HexactlClient, count: int) -> tuple[list[float], int]:
+    """``count`` E-stops straight to the API, on one client: seconds each, and the errors."""
+    times, errors = [], 0
+    for _ in range(count):
+        sent = time.perf_counter()
+        reply = client.request("estop")
+        times.append(time.perf_counter() - sent)
+        errors += not reply.get("ok")
+        time.sleep(random.uniform(*ESTOP_GAP_S))
+    return times, errors
+
+
+def estop_under_idle_pages(args: argparse.Namespace) -> int:
+    """The table of a new page's E-stop round trip for each ``--idle-pages`` N, row by row."""
+    kind = "stalled (never read)" if args.stalled else "idle (reading)"
+    print(f"E-stop round trip, {args.estops} each, from a fresh page while N other pages are {kind}:\n")
+    print("| N pages (still open at the end) | opened in s | p50 ms | p95 ms | max ms | error replies | dashboard CPU | "
+          "load average (1 min) start → end |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |", flush=True)
+    phases = []
+    with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
+        workdir = Path(directory)
+        with serve(workdir, "--rate", str(RATE_HZ), api=args.api, telemetry=args.telemetry) as served, \
+                HexactlClient(served.api, timeout_s=30.0) as client:
+            times, errors = api_round_trips(client, args.estops)
+            api = [t * 1000.0 for t in times]
+            print(f"| API alone, no dashboard | | {statistics.median(api):.1f} | {percentile(api, 95.0):.1f} | "
+                  f"{max(api):.1f} | {errors} | | |", flush=True)
+            with dashboard(served.api, served.telemetry, "--http", args.http, "--log-level", "warning") as board:
+                for pages in args.idle_pages:
+                    figures = estop_phase(board.url, board.process.pid, pages, args.stalled, args.estops)
+                    phases.append(figures)
+                    print(f"| {pages} ({figures['still_open']}) | {figures['open_s']:.1f} | {figures['p50_ms']:.1f} | "
+                          f"{figures['p95_ms']:.1f} | {figures['max_ms']:.1f} | {figures['errors']} | "
+                          f"{figures['dashboard_cpu'] * 100:.0f} % | "
+                          f"{figures['load_start'][0]:.2f} → {figures['load_end'][0]:.2f} |", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps({"api_ms": api, "phases": phases}, indent=2))
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=30.0, help="each phase's length (default 30; at most the "
                         "loop's stats window, 32.8 s at 500 Hz)")
     parser.add_argument("--json", type=Path, help="also write the figures here")
+    parser.add_argument("--idle-pages", type=int, nargs="+", metavar="N",
+                        help="instead: a new page's E-stop round trip with N other pages connected, for each N")
+    parser.add_argument("--stalled", action="store_true", help="with --idle-pages: the pages never read")
+    parser.add_argument("--estops", type=int, default=30, help="with --idle-pages: E-stops per N (default 30)")
+    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages: the service's API endpoint")
+    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages: its telemetry endpoint")
+    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages: the dashboard's address")
     args = parser.parse_args()
+    if args.idle_pages is not None:
+        return estop_under_idle_pages(args)
     cyclictest_path = ensure_executables({"cyclictest": "rt-tests"}, lambda line: print(line, file=sys.stderr))["cyclictest"]
     with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
         workdir = Path(directory)

@@ -1,34 +1,50 @@
 """The page's WebSocket protocol without a browser: every message gets a reply, and no page
 can hold up an E-stop by flooding commands (found from outside: 3000 ``abort`` messages from
-one page held another page's E-stop back for 10.8 s)."""
+one page held another page's E-stop back for 10.8 s), nor by not reading; telemetry is
+serialised once for every page (found from outside: 400 idle pages held a new page's E-stop
+back 0.6–0.9 s)."""
 
 from __future__ import annotations
 
 import asyncio
 import json
+import queue
 import threading
 from typing import Any
 
+from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
 from hexactl.adapters.web.app import _serve_page
-from hexactl.adapters.web.bridge import ServiceBridge, ServiceEndpoints, UrgentCommand
+from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, Outbox, ServiceBridge, ServiceEndpoints,
+                                         UrgentCommand)
 
 WAIT_S = 30.0  # bounds a hang only: nothing here waits on anything but the test's own events
 
 
-class FakePage:
-    """A page's WebSocket: what it sends (then it goes away), and what it was sent."""
+DISCONNECT = {"type": "websocket.disconnect", "code": 1000}
 
-    def __init__(self, *messages: dict[str, Any]) -> None:
+
+class FakePage:
+    """A page's WebSocket: what it sends (then it goes away, unless ``stays``), and what it
+    was sent (parsed, and as the very text)."""
+
+    def __init__(self, *messages: dict[str, Any], stays: bool = False) -> None:
         self.incoming: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
-        for message in (*messages, {"type": "websocket.disconnect", "code": 1000}):
+        for message in messages if stays else (*messages, DISCONNECT):
             self.incoming.put_nowait(message)
         self.sent: list[dict[str, Any]] = []
+        self.texts: list[str] = []
 
     async def receive(self) -> dict[str, Any]:
         return await self.incoming.get()
 
     async def send_text(self, text: str) -> None:
+        self.texts.append(text)
         self.sent.append(json.loads(text))
+
+    def telemetry(self) -> dict[Any, str]:
+        """The telemetry texts it was sent, by their record's ``t``."""
+        return {message["record"]["t"]: text for message, text in zip(self.sent, self.texts)
+                if message["type"] == "telemetry"}
 
     def replies(self) -> list[tuple[Any, dict[str, Any]]]:
         return [(message["id"], message["reply"]) for message in self.sent if message["type"] == "reply"]
@@ -37,10 +53,10 @@ class FakePage:
 class EchoBridge:
     """The bridge's page-facing part: a command's reply echoes it; ``explode`` fails."""
 
-    def subscribe(self) -> asyncio.Queue[dict[str, Any]]:
-        return asyncio.Queue()
+    def subscribe(self) -> Outbox:
+        return Outbox()
 
-    def unsubscribe(self, queue: asyncio.Queue[dict[str, Any]]) -> None:
+    def unsubscribe(self, outbox: Outbox) -> None:
         pass
 
     async def command(self, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
@@ -121,3 +137,141 @@ def test_a_flood_of_one_urgent_command_costs_one_request_at_a_time_and_delays_no
     assert calls.count("abort") == 2 and calls.count("estop") == 1
     assert {reply["request"] for reply in before} == {1}
     assert {reply["request"] for reply in during} == {3}  # the presses made while one was sent: the next one
+
+
+class StalledPage(FakePage):
+    """A page that never reads: a send to it never completes, as uvicorn's does not while
+    the socket's buffer is full."""
+
+    def __init__(self) -> None:
+        super().__init__(stays=True)
+        self.stuck_sends = 0
+
+    async def send_text(self, text: str) -> None:
+        self.stuck_sends += 1
+        await asyncio.Event().wait()
+
+
+GEOMETRY_REPLY = {"ok": True, "calibration_id": "c1", "source": "test",
+                  "geometry": {"limits": {"stroke": [0, 1], "pose_min": [0] * 6, "pose_max": [1] * 6},
+                               "measurement": {"feature_points": []}}}
+
+
+class FakeService:
+    """The service as the bridge reaches it through ``connect``: the records the test puts
+    as telemetry, a reply to every command (and the commands, in order)."""
+
+    def __init__(self) -> None:
+        self.records: queue.Queue[dict[str, Any]] = queue.Queue()
+        self.commands: list[str] = []
+
+    def connect(self, kind: type, endpoint: str, **options: Any) -> Any:
+        return self.Telemetry(self) if kind is TelemetrySubscriber else self.Client(self)
+
+    class Telemetry:
+        def __init__(self, service: FakeService) -> None:
+            self.service = service
+
+        def __enter__(self) -> FakeService.Telemetry:
+            return self
+
+        def __exit__(self, *exception: object) -> None:
+            pass
+
+        def receive(self, timeout_s: float) -> dict[str, Any]:
+            try:
+                return self.service.records.get(timeout=timeout_s)
+            except queue.Empty:
+                raise ServiceUnavailable("no record") from None
+
+    class Client(Telemetry):
+        def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+            self.service.commands.append(cmd)
+            return GEOMETRY_REPLY if cmd == "geometry" else {"ok": True, "cmd": cmd}
+
+
+class SubscribedBridge(ServiceBridge):
+    """The bridge, with the outbox of each page it served kept for the test to look into."""
+
+    def __init__(self, service: FakeService) -> None:
+        super().__init__(ServiceEndpoints("api", "telemetry", WAIT_S, connect=service.connect))
+        self.outboxes: list[Outbox] = []
+
+    def subscribe(self) -> Outbox:
+        self.outboxes.append(outbox := super().subscribe())
+        return outbox
+
+
+async def until(condition: Any, what: str) -> None:
+    """Until ``condition()``, letting the loop run; a hang fails after WAIT_S (no timing asserted)."""
+    async def polled() -> None:
+        while not condition():
+            await asyncio.sleep(0.005)
+
+    try:
+        await asyncio.wait_for(polled(), WAIT_S)
+    except TimeoutError:
+        raise AssertionError(f"never: {what}") from None
+
+
+def test_one_text_for_every_page_and_a_page_that_does_not_read_holds_up_nothing_and_piles_up_nothing() -> None:
+    service = FakeService()
+    records = 300
+    readers = [FakePage(stays=True) for _ in range(3)]
+    stalled = StalledPage()
+
+    async def scenario() -> None:
+        bridge = SubscribedBridge(service)
+        bridge.start(asyncio.get_running_loop())
+        pages = [asyncio.create_task(_serve_page(bridge, page)) for page in (stalled, *readers)]  # type: ignore[arg-type]
+        try:
+            for t in range(records):
+                service.records.put({"t": t, "calibration_id": "c1"})
+            await until(lambda: all(records - 1 in page.telemetry() for page in readers), "every record's last")
+            # A page that never read: its outbox holds the newest message of each kind at
+            # most (one more is the send it is stuck on), not the hundreds it missed.
+            assert stalled.stuck_sends == 1 and len(bridge.outboxes[0]) <= len(OUTBOX_KINDS)
+            # The record is serialised once: every page is sent that very text.
+            last = [page.telemetry()[records - 1] for page in readers]
+            assert all(text is last[0] for text in last)
+            # While the stalled page still holds its sender, another page's E-stop is answered.
+            readers[0].incoming.put_nowait(text({"type": "command", "id": 7, "cmd": "estop"}))
+            await until(lambda: readers[0].replies(), "the E-stop's reply")
+            assert readers[0].replies() == [(7, {"ok": True, "cmd": "estop"})] and stalled.stuck_sends == 1
+        finally:
+            for page in (stalled, *readers):
+                page.incoming.put_nowait(DISCONNECT)
+            await asyncio.wait_for(asyncio.gather(*pages), WAIT_S)
+            bridge.close()
+
+    asyncio.run(scenario())
+    assert service.commands.count("estop") == 1
+
+
+def test_a_commands_steps_on_the_loop_do_not_wait_for_a_record_to_reach_every_page() -> None:
+    """A command takes several turns of the event loop (its receipt, its task, the worker's
+    answer, the reply); the fan-out of a record to hundreds of pages gives the loop back
+    every :data:`FAN_OUT_CHUNK` pages, so the command is through before the record has
+    reached them all, and does not wait behind a whole fan-out at each step."""
+    pages = 10 * FAN_OUT_CHUNK
+    handed: list[int] = []
+
+    async def scenario() -> None:
+        bridge = SubscribedBridge(FakeService())
+        bridge.start(asyncio.get_running_loop())
+        try:
+            outboxes = [bridge.subscribe() for _ in range(pages)]  # each holds the link's state
+            bridge._broadcast("telemetry", '{"type": "telemetry"}')
+
+            async def command() -> None:
+                for _ in range(4):
+                    await asyncio.sleep(0)
+                    handed.append(sum(len(outbox) == 2 for outbox in outboxes))
+
+            await command()
+            await until(lambda: all(len(outbox) == 2 for outbox in outboxes), "the record in every outbox")
+        finally:
+            bridge.close()
+
+    asyncio.run(scenario())
+    assert handed == sorted(handed) and 0 < handed[-1] < pages

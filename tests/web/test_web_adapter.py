@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
+import socket
 
 import pytest
 
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.web.app import MAX_MESSAGE_BYTES, _command
-from hexactl.adapters.web.server import DashboardError, HttpAddress
+from hexactl.adapters.web.server import DashboardError, HttpAddress, bind
 
 
 @pytest.mark.parametrize("text", ["127.0.0.1:8080", "localhost:0", "[::1]:9000", "127.1.2.3:80"])
@@ -49,3 +51,29 @@ def test_a_command_goes_to_the_api_unchanged_but_its_envelope() -> None:
 def test_what_is_not_a_command_is_answered_with_the_reason(text, problem) -> None:
     _, parsed = _command(text)
     assert isinstance(parsed, str) and problem in parsed
+
+
+def test_the_pages_connections_do_not_hold_small_messages_back() -> None:
+    """The listening socket the dashboard binds itself makes connections on which asyncio
+    (so uvicorn) turns Nagle's algorithm off: with it on, a reply (an E-stop's) waited for
+    the page's delayed ACK of the telemetry before it, 40 ms."""
+    listener = bind(HttpAddress("127.0.0.1", 0))
+
+    async def accepted_nodelay() -> int:
+        loop = asyncio.get_running_loop()
+        accepted: asyncio.Future[int] = loop.create_future()
+
+        class Probe(asyncio.Protocol):
+            def connection_made(self, transport: asyncio.BaseTransport) -> None:
+                connection = transport.get_extra_info("socket")
+                accepted.set_result(connection.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY))
+                transport.close()
+
+        server = await loop.create_server(Probe, sock=listener)  # as uvicorn serves the socket
+        try:
+            with socket.create_connection(listener.getsockname()[:2]):
+                return await asyncio.wait_for(accepted, 30)
+        finally:
+            server.close()
+
+    assert asyncio.run(accepted_nodelay())

@@ -22,7 +22,6 @@ import contextlib
 import json
 import logging
 import re
-import time
 from collections.abc import AsyncIterator
 from importlib import resources
 from typing import Any
@@ -126,16 +125,18 @@ class _HostCheck:
 
 
 async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
-    """One page: updates out, commands in, until it goes."""
+    """One page: updates out, commands in, until it goes.
+
+    The updates have a task of this page's own, and replies go out from each command's
+    task: a page that does not read blocks only its own sends (its outbox keeps the newest
+    update of each kind meanwhile), never another page's, nor the receipt of its own
+    commands."""
     updates = bridge.subscribe()
     in_flight: set[asyncio.Task[None]] = set()
 
     async def send_updates() -> None:
         while True:
-            message = await updates.get()
-            if message["type"] == "telemetry":
-                message = {**message, "sent_ms": time.time() * 1000.0}
-            await websocket.send_text(json.dumps(message))
+            await websocket.send_text(await updates.get())
 
     async def reply(request_id: Any, reply: dict[str, Any]) -> None:
         await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": reply}))

@@ -1,12 +1,12 @@
 """The dashboard's way to the service: the public ZeroMQ API and telemetry, nothing else.
 
 A :class:`ServiceBridge` follows the telemetry in a thread of its own and hands each
-record to the pages' queues (newest only: a page that draws slowly skips records, it
-never falls behind); it fetches the active geometry whenever the calibration changes; and
-it carries the pages' commands to the API, each on a client of its own in a worker
-thread, so that a slow command never holds up another. ``estop``, ``stop`` and ``abort``
-each have a worker of their own (:class:`UrgentCommand`): a page that floods the others,
-or floods one of them, cannot delay another.
+record to the pages' outboxes, serialised once for all of them (newest only: a page that
+draws slowly skips records, it never falls behind); it fetches the active geometry
+whenever the calibration changes; and it carries the pages' commands to the API, each on
+a client of its own in a worker thread, so that a slow command never holds up another.
+``estop``, ``stop`` and ``abort`` each have a worker of their own (:class:`UrgentCommand`):
+a page that floods the others, or floods one of them, cannot delay another.
 
 The dashboard adds no privilege: every command is an API request like any client's, and
 the service validates it.
@@ -15,6 +15,7 @@ the service validates it.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import threading
 import time
@@ -35,6 +36,12 @@ COMMAND_WORKERS = 4
 LINK_TIMEOUT_S = 1.0
 """No telemetry for this long: the service is reported unreachable (50 records at the
 default rate; it reconnects by itself when the service is back)."""
+
+FAN_OUT_CHUNK = 16
+"""Pages handed a message between two turns of the event loop. The fan-out of a record to
+every page is cut in chunks so that a command waits behind at most one chunk's sends, not
+behind every page's (with 400 pages on a loaded host, a page's E-stop waited behind whole
+fan-outs at each of its steps on the loop)."""
 
 MAX_RECORD_AGE_S = 60.0
 """A record's age is reported only when the service's clock is this host's (a record
@@ -81,11 +88,40 @@ class UrgentCommand:
         self._worker.shutdown(wait=False, cancel_futures=True)
 
 
-@dataclass(frozen=True)
-class Update:
-    """What a page receives: one JSON-able message (see :meth:`ServiceBridge.subscribe`)."""
+OUTBOX_KINDS = ("link", "geometry", "telemetry")
+"""What the bridge sends a page, in the order an outbox sends what it holds: the link's
+state, then the geometry that telemetry is drawn with, then the newest record."""
 
-    message: dict[str, Any]
+
+class Outbox:
+    """A page's messages not yet sent, as JSON text: the newest of each kind only.
+
+    The same text goes to every page, serialised once by the bridge: at hundreds of pages
+    and 50 records a second a serialisation per page kept the event loop busy enough to
+    hold an E-stop's reply back for most of a second. A page that does not read (a frozen
+    tab, a wedged client) holds at most one message of each kind here, and the one its
+    sender is stuck on: what it missed is replaced, never queued. Commands' replies do not
+    pass through here: they are sent by the command's own task, never dropped."""
+
+    def __init__(self) -> None:
+        self._pending: dict[str, str] = {}
+        self._filled = asyncio.Event()
+
+    def put(self, kind: str, text: str) -> None:
+        """On the event loop: ``text`` (a message of ``kind``, one of :data:`OUTBOX_KINDS`)
+        replaces the one of that kind not yet sent."""
+        self._pending[kind] = text
+        self._filled.set()
+
+    async def get(self) -> str:
+        """The next message to send: the first kind of :data:`OUTBOX_KINDS` held."""
+        while not self._pending:
+            self._filled.clear()
+            await self._filled.wait()
+        return self._pending.pop(next(kind for kind in OUTBOX_KINDS if kind in self._pending))
+
+    def __len__(self) -> int:
+        return len(self._pending)
 
 
 class ServiceBridge:
@@ -94,20 +130,26 @@ class ServiceBridge:
     def __init__(self, endpoints: ServiceEndpoints) -> None:
         self.endpoints = endpoints
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._pages: set[asyncio.Queue[dict[str, Any]]] = set()
+        self._pages: dict[Outbox, None] = {}  # the pages served (a dict: in the order they came)
+        self._news: dict[str, str] = {}  # the newest message of each kind not yet fanned out
+        self._news_came = asyncio.Event()
+        self._fan_out: asyncio.Task[None] | None = None
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
         self._urgent = {name: UrgentCommand(name, self._request) for name in URGENT_COMMANDS}
         self._workers = ThreadPoolExecutor(COMMAND_WORKERS, thread_name_prefix="dashboard-command")
         self.connected = False
         self.geometry: dict[str, Any] | None = None
+        self._geometry_text: str | None = None  # the geometry message, serialised for new pages
         self._link_message = f"waiting for telemetry from {endpoints.telemetry}"
         self._announced: bool | None = None  # the link state the pages were last told
 
     # -- life ------------------------------------------------------------------------
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """On ``loop``: start following the telemetry and fanning it out to the pages."""
         self._loop = loop
+        self._fan_out = loop.create_task(self._fan_out_news())
         self._thread = threading.Thread(target=self._follow_telemetry, name="dashboard-telemetry", daemon=True)
         self._thread.start()
 
@@ -115,36 +157,50 @@ class ServiceBridge:
         self._stopping.set()
         if self._thread is not None:
             self._thread.join(timeout=2 * LINK_TIMEOUT_S)
+        if self._fan_out is not None:
+            self._fan_out.cancel()
         for urgent in self._urgent.values():
             urgent.close()
         self._workers.shutdown(wait=False, cancel_futures=True)
 
     # -- pages -----------------------------------------------------------------------
 
-    def subscribe(self) -> asyncio.Queue[dict[str, Any]]:
-        """A page's queue of messages: ``link``, ``geometry`` and ``telemetry`` (the newest
-        only). It starts with the link's state and the geometry, when known."""
-        queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
-        queue.put_nowait(self._link())
-        if self.geometry is not None:
-            queue.put_nowait({"type": "geometry", "geometry": self.geometry})
-        self._pages.add(queue)
-        return queue
+    def subscribe(self) -> Outbox:
+        """On the event loop: a page's outbox of ``link``, ``geometry`` and ``telemetry``
+        messages. It starts with the link's state and the geometry, when known."""
+        outbox = Outbox()
+        outbox.put("link", self._link())
+        if (geometry := self._geometry_text) is not None:
+            outbox.put("geometry", geometry)
+        self._pages[outbox] = None
+        return outbox
 
-    def unsubscribe(self, queue: asyncio.Queue[dict[str, Any]]) -> None:
-        self._pages.discard(queue)
+    def unsubscribe(self, outbox: Outbox) -> None:
+        self._pages.pop(outbox, None)
 
-    def _broadcast(self, message: dict[str, Any]) -> None:
-        """On the event loop: to every page; a telemetry record replaces one not yet sent."""
-        for queue in self._pages:
-            if message["type"] == "telemetry" and not queue.empty():
-                kept = [item for item in _drain(queue) if item["type"] != "telemetry"]
-                for item in kept:
-                    queue.put_nowait(item)
-            queue.put_nowait(message)
+    def _broadcast(self, kind: str, text: str) -> None:
+        """On the event loop: ``text`` (of ``kind``) is news for every page; it replaces
+        news of that kind not yet fanned out."""
+        self._news[kind] = text
+        self._news_came.set()
 
-    def _link(self) -> dict[str, Any]:
-        return {"type": "link", "connected": self.connected, "message": self._link_message}
+    async def _fan_out_news(self) -> None:
+        """The news to every page's outbox, the same text to all, :data:`FAN_OUT_CHUNK`
+        pages at a time with a turn of the loop between chunks. No page's sending is waited
+        for; what comes meanwhile is fanned out next, the newest only."""
+        while True:
+            await self._news_came.wait()
+            self._news_came.clear()
+            news, self._news = self._news, {}
+            pages = list(self._pages)
+            for first in range(0, len(pages), FAN_OUT_CHUNK):
+                await asyncio.sleep(0)  # a turn of the loop: what came meanwhile (a command's step) goes first
+                for outbox in pages[first:first + FAN_OUT_CHUNK]:
+                    for kind, text in news.items():
+                        outbox.put(kind, text)
+
+    def _link(self) -> str:
+        return json.dumps({"type": "link", "connected": self.connected, "message": self._link_message})
 
     # -- commands --------------------------------------------------------------------
 
@@ -186,19 +242,23 @@ class ServiceBridge:
                 if self.geometry is None or self.geometry.get("calibration_id") != record.get("calibration_id"):
                     self._fetch_geometry()
                 age_s = received - float(record.get("t", received))
-                message = {"type": "telemetry", "record": record, "sent_ms": None,
+                # Stamped here, with the age, not as each page is sent it: one text for
+                # every page, and the page's age_ms + (its clock − sent_ms) then also
+                # counts the time the record waited in the dashboard.
+                message = {"type": "telemetry", "record": record, "sent_ms": time.time() * 1000.0,
                            "age_ms": age_s * 1000.0 if 0.0 <= age_s <= MAX_RECORD_AGE_S else None}
-                self._call(self._broadcast, message)
+                self._call(self._broadcast, "telemetry", json.dumps(message))
 
     def _set_link(self, connected: bool, message: str) -> None:
         if connected != self.connected:
             log.info("%s", message)
             if not connected:
-                self.geometry = None  # fetched afresh when the service is back: it may have restarted
+                # fetched afresh when the service is back: it may have restarted
+                self.geometry = self._geometry_text = None
         self.connected, self._link_message = connected, message
         if connected != self._announced:
             self._announced = connected
-            self._call(self._broadcast, self._link())
+            self._call(self._broadcast, "link", self._link())
 
     def _fetch_geometry(self) -> None:
         reply = self._request("geometry", {})
@@ -206,7 +266,8 @@ class ServiceBridge:
             log.warning("geometry: %s", (reply.get("error") or {}).get("message"))
             return
         self.geometry = drawing_geometry(reply)
-        self._call(self._broadcast, {"type": "geometry", "geometry": self.geometry})
+        self._geometry_text = json.dumps({"type": "geometry", "geometry": self.geometry})
+        self._call(self._broadcast, "geometry", self._geometry_text)
 
     def _call(self, function: Callable[..., None], *arguments: Any) -> None:
         if self._loop is not None and not self._loop.is_closed():
@@ -225,10 +286,3 @@ def drawing_geometry(reply: dict[str, Any]) -> dict[str, Any]:
     return {**geometry, "calibration_id": reply["calibration_id"], "source": reply["source"],
             "stroke": geometry["limits"]["stroke"], "pose_min": geometry["limits"]["pose_min"],
             "pose_max": geometry["limits"]["pose_max"], "feature_points": geometry["measurement"]["feature_points"]}
-
-
-def _drain(queue: asyncio.Queue[dict[str, Any]]) -> list[dict[str, Any]]:
-    items = []
-    while not queue.empty():
-        items.append(queue.get_nowait())
-    return items

@@ -59,7 +59,10 @@ def bind(address: HttpAddress) -> socket.socket:
     """A listening socket on ``address``. :raises DashboardError: if it cannot be bound."""
     family = socket.AF_INET6 if ":" in address.host else socket.AF_INET
     host = "127.0.0.1" if address.host == "localhost" else address.host
-    listener = socket.socket(family, socket.SOCK_STREAM)
+    # IPPROTO_TCP named, not left 0: asyncio sets TCP_NODELAY only on a connection whose
+    # socket says TCP, so with 0 Nagle's algorithm held each small reply (an E-stop's)
+    # behind the page's unacknowledged telemetry until its delayed ACK, 40 ms later.
+    listener = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)
     listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         listener.bind((host, address.port))
@@ -90,7 +93,11 @@ def run_dashboard(address: HttpAddress, endpoints: ServiceEndpoints, log_level: 
                         stream=sys.stderr)
     if parent is not None:
         threading.Thread(target=_end_with, args=(parent,), name="dashboard-parent", daemon=True).start()
-    config = uvicorn.Config(app, log_level=log_level, access_log=False, ws_max_size=1 << 20, lifespan="on")
+    # No permessage-deflate (browsers offer it): its compressor is per connection, so each
+    # telemetry record would be compressed once per page, not sent as the one text every
+    # page shares; on this loopback-only server it saves nothing worth that CPU.
+    config = uvicorn.Config(app, log_level=log_level, access_log=False, ws_max_size=1 << 20, lifespan="on",
+                            ws_per_message_deflate=False)
     uvicorn.Server(config).run(sockets=[listener])
     return 0
 
