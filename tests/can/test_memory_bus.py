@@ -149,9 +149,20 @@ def test_shutdown_wakes_a_receiver_waiting_without_timeout():
 
 
 def test_receive_times_out_with_none(buses):
-    start = time.monotonic()
-    assert buses[0].recv(0.05) is None
-    assert 0.04 <= time.monotonic() - start < 2.0
+    """recv(timeout) waits at least that long, then returns None. How much longer is the
+    host's scheduling, not the bus's: only that it returns at all is bounded here."""
+    waited: list[tuple[object, float]] = []
+
+    def receive() -> None:
+        start = time.monotonic()
+        waited.append((buses[0].recv(0.05), time.monotonic() - start))
+
+    receiver = threading.Thread(target=receive)
+    receiver.start()
+    receiver.join(60.0)
+    assert not receiver.is_alive(), "recv(0.05) did not return"
+    (received, seconds), = waited
+    assert received is None and seconds >= 0.04
     assert buses[0].recv(0.0) is None
 
 
