@@ -218,16 +218,18 @@ class PlatformDriver:
             self.client.request("progress", **progress)
 
     def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
-        for attempt in range(1, MOVE_ATTEMPTS + 1):
+        attempts = 1
+        while True:
             try:
                 return self.client.call(cmd, **fields)
             except CommandError as error:
                 self._latched(error)
-                if error.code == "expired" and attempt < MOVE_ATTEMPTS:
-                    continue  # not carried out: asking again cannot do it twice
-                hint = " (the host is too loaded for the command timeout: raise --timeout)" if error.code == "expired" else ""
-                raise CampaignError(f"the controller refused {cmd}: {error}{hint}") from None
-        raise AssertionError("unreachable: the last attempt returns or raises")
+                if error.code != "expired":
+                    raise CampaignError(f"the controller refused {cmd}: {error}") from None
+                if attempts == MOVE_ATTEMPTS:
+                    raise CampaignError(f"the controller refused {cmd}: {error} (the host is too loaded for the "
+                                        "command timeout: raise --timeout)") from None
+                attempts += 1  # not carried out: asking again cannot do it twice
 
     def _latched(self, error: CommandError) -> None:
         """A refusal because a fault latched meanwhile is that fault (:class:`ControllerFault`)."""
