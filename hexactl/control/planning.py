@@ -31,6 +31,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from itertools import chain
 from math import degrees, isfinite
 from operator import add, sub
 
@@ -44,7 +45,7 @@ from hexactl.control.trajectory import KinematicState, MotionLimits, preview
 from hexactl.kinematics.frames import Frames, tools_in_work
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import leg_length_of_reading, sensor_setpoints, sensor_setpoints_batch
-from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, ProjectionResult, project_to_locked_leg
+from hexactl.kinematics.leg_lock import PROJECTION_MAX_ITERATIONS, LockedLeg, ProjectionResult
 from hexactl.kinematics.axes import (
     AbsoluteMmRad,
     RelativeMmDeg,
@@ -54,16 +55,14 @@ from hexactl.kinematics.axes import (
 )
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.soft_limits import SoftLimits
-from hexactl.kinematics.workspace import Violation, assess_poses, pose_within_limits
+from hexactl.kinematics.workspace import Violation, check_poses, pose_within_limits
 
 
 MAX_MOTION_S = 600.0
 """The longest motion one plan may hold, s: a move, or a sequence's moves together (dwells
 not counted). Planning samples every loop period, so its work grows with the motion's
-length and its path's (measured on the 2-core test machine, idle: 600 s of slow motion
-about 1 s of planning; of full-speed motion, or leg-locked, 8 to 12 s, which
-:data:`PLANNING_BUDGET_S` bounds at load); no posture of a calibration campaign takes a
-tenth of it."""
+length and its path's (BENCHMARKS.md, "Planning long motion"; :data:`PLANNING_BUDGET_S`
+bounds it at load); no posture of a calibration campaign takes a tenth of it."""
 
 MAX_WAYPOINTS = 500
 """The most waypoints one plan (a sequence) may hold, counted before any planning
@@ -79,15 +78,15 @@ motion itself costs is bounded by :data:`PLANNING_BUDGET_S`."""
 PLANNING_BUDGET_S = 60.0
 """The longest one plan may take, s, checked between waypoints and between batches of
 samples (a fraction of a second apart idle): :data:`MAX_WAYPOINTS` and :data:`MAX_MOTION_S`
-keep a plan to at most about 12 s on an idle core, but a loaded machine runs it ten to
-twenty times slower. Half the API's watchdog (120 s), which would end the service.
+keep a plan to seconds on an idle core, but a loaded machine runs it ten to twenty times
+slower. Half the API's watchdog (120 s), which would end the service.
 Refused with ``planning_failed``, naming where planning was: split the sequence."""
 
 MAX_DWELL_S = 86_400.0
 """The longest dwell at a waypoint, s (a day): dwells cost no planning, but a sequence's
 duration must stay a number."""
 
-_CHECK_BATCH = 4096  # poses assessed per call of assess_poses: its cost per call is amortised, its memory bounded
+_CHECK_BATCH = 4096  # poses checked per call of check_poses: its cost per call is amortised, its memory bounded
 
 _BUDGET_CYCLES = 4096  # leg-lock samples between two looks at the planning budget (a fraction of a second idle)
 
@@ -332,10 +331,11 @@ class _PathChecks:
     """:func:`path_violations` of the paths of a plan's waypoints, added in order and
     assessed in batches of :data:`_CHECK_BATCH` poses: the same samples, thinned per path as
     :func:`assess_path` does, the same first violation of each kind per waypoint, in the
-    same order; without the per-call cost of :func:`assess_poses` at every waypoint. A
-    path's first sample is the previous path's last when the waypoint starts at rest where
-    the one before ended (the same pose, bit for bit): it is assessed once, for the earlier
-    waypoint (and where it breaks a limit, the plan is refused all the same)."""
+    same order; without the per-call cost of :func:`~hexactl.kinematics.workspace.check_poses`
+    at every waypoint. A path's first sample is the previous path's last when the waypoint
+    starts at rest where the one before ended (the same pose, bit for bit): it is assessed
+    once, for the earlier waypoint (and where it breaks a limit, the plan is refused all
+    the same)."""
 
     def __init__(self, context: PlanningContext) -> None:
         self._context = context
@@ -373,14 +373,8 @@ class _PathChecks:
         for begin in range(0, len(poses), _CHECK_BATCH):
             if begin and (refusal := budget.refusal(where(), remedy)):
                 return refusal
-            for assessment, owner in zip(assess_poses(geometry, poses[begin:begin + _CHECK_BATCH]),
-                                         owners[begin:begin + _CHECK_BATCH].tolist()):
-                for violation in assessment.violations:
-                    key = (owner, violation.kind, violation.leg, violation.axis)
-                    if key not in self._hardware:
-                        self._hardware[key] = PathViolation(violation.kind, violation.value, violation.limit,
-                                                            violation.message, violation.leg, violation.axis,
-                                                            waypoint=owner, pose=assessment.pose_relative)
+            _note_first_violations(geometry, poses[begin:begin + _CHECK_BATCH], owners[begin:begin + _CHECK_BATCH],
+                                   self._hardware)
         return None
 
     def violations(self) -> list[PathViolation]:
@@ -451,14 +445,28 @@ def assess_path(
     relative_deg = pose_mm_rad_to_mm_deg(samples)
     keep = _thinned(relative_deg, step_mm, step_deg)
     found: dict[tuple, PathViolation] = {}
-    for assessment in assess_poses(geometry, relative_deg[keep]):
+    _note_first_violations(geometry, relative_deg[keep], np.full(len(keep), waypoint), found)
+    return list(found.values())
+
+
+def _note_first_violations(geometry: Geometry, poses: NDArray, owners: NDArray, found: dict[tuple, PathViolation]) -> None:
+    """Add to ``found``, by (waypoint, kind, leg, axis), each violation of (N, 6) relative
+    mm/deg ``poses`` of waypoints ``owners`` (N,) that is not in it yet, at the first pose
+    that has it, in the order of :func:`~hexactl.kinematics.workspace.assess_poses`'
+    violations pose by pose. Only a pose that is its waypoint's first to break some limit
+    can add one, so only those poses' violations are built."""
+    checks = check_poses(geometry, poses)
+    if checks.ok.all():
+        return
+    rows, columns = np.nonzero(checks.broken)  # by pose, then in the order of a pose's violations
+    _, first = np.unique(owners[rows] * checks.broken.shape[1] + columns, return_index=True)
+    for n in np.unique(rows[first]).tolist():
+        assessment, owner = checks.assessment(n), int(owners[n])
         for violation in assessment.violations:
-            key = (violation.kind, violation.leg, violation.axis)
+            key = (owner, violation.kind, violation.leg, violation.axis)
             if key not in found:
                 found[key] = PathViolation(violation.kind, violation.value, violation.limit, violation.message,
-                                           violation.leg, violation.axis, waypoint=waypoint,
-                                           pose=assessment.pose_relative)
-    return list(found.values())
+                                           violation.leg, violation.axis, waypoint=owner, pose=assessment.pose_relative)
 
 
 def _thinned(relative_deg: NDArray, step_mm: float, step_deg: float) -> NDArray:
@@ -537,23 +545,32 @@ def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> tuple[Coord
     return context.active.relative_from_absolute_mm_rad(projected.pose), None
 
 
-def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float],
-                   max_iterations: int = PROJECTION_MAX_ITERATIONS, start: Sequence[float] | None = None
-                   ) -> ProjectionResult:
-    """:func:`project_to_locked_leg` of a relative mm/rad pose, from ``start`` (relative
-    mm/rad, default the pose); the result's pose is absolute."""
+def locked_leg(active: ActiveGeometry, lock: LegLock) -> LockedLeg:
+    """``lock``'s constraint in ``active``'s geometry, for :func:`project_locked`."""
     geometry = active.geometry
-    return project_to_locked_leg(geometry.legs, active.absolute_from_relative_mm_rad(relative), lock.leg,
-                                 lock.length_mm(geometry),
-                                 geometry.characteristic_length_mm, max_iterations=max_iterations,
-                                 start=None if start is None else active.absolute_from_relative_mm_rad(start))
+    return LockedLeg(geometry.legs, lock.leg, lock.length_mm(geometry), geometry.characteristic_length_mm)
+
+
+def project_locked(active: ActiveGeometry, lock: LegLock, relative: Sequence[float],
+                   max_iterations: int = PROJECTION_MAX_ITERATIONS, start: Sequence[float] | None = None,
+                   constraint: LockedLeg | None = None) -> ProjectionResult:
+    """:func:`~hexactl.kinematics.leg_lock.project_to_locked_leg` of a relative mm/rad
+    pose, from ``start`` (relative mm/rad, default the pose); the result's pose is
+    absolute. ``constraint``: the two's :func:`locked_leg`, where the caller keeps it for
+    many projections."""
+    if constraint is None:
+        constraint = locked_leg(active, lock)
+    return constraint.project(active.absolute_from_relative_mm_rad(relative), max_iterations,
+                              None if start is None else active.absolute_from_relative_mm_rad(start))
 
 
 def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float], previous_target: Sequence[float],
-                 previous_projected: Sequence[float], max_iterations: int) -> ProjectionResult:
+                 previous_projected: Sequence[float], max_iterations: int,
+                 constraint: LockedLeg | None = None) -> ProjectionResult:
     """The loop's leg-lock projection of one cycle's ``target``, at most ``max_iterations``;
     ``previous_target`` and ``previous_projected``: the cycle before's target and the pose
-    it was projected to (all relative mm/rad). The result's pose is absolute.
+    it was projected to (all relative mm/rad); ``constraint`` as for :func:`project_locked`.
+    The result's pose is absolute.
 
     Warm-started at ``target`` corrected as the previous one was: the correction changes
     little from one cycle to the next, so two iterations reach the tolerance (three at the
@@ -561,7 +578,7 @@ def track_locked(active: ActiveGeometry, lock: LegLock, target: Sequence[float],
     itself, 30 mm away, four are needed. Planning runs exactly this over every cycle of a
     move, so the loop can follow whatever it accepted."""
     start = [t + p - q for t, p, q in zip(target, previous_projected, previous_target)]
-    return project_locked(active, lock, target, max_iterations, start=start)
+    return project_locked(active, lock, target, max_iterations, start, constraint)
 
 
 def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordinates, frames: Frames | None,
@@ -617,15 +634,16 @@ def _samples(context: PlanningContext, start: KinematicState, trajectory, frames
     targets = [start.position] + [trajectory.at_time(k * context.period_s)[0] for k in range(1, count + 1)]
     lock = context.lock
     if lock is None:
-        return relative_poses(frames, np.array(targets, dtype=float), context.active.home)
+        return relative_poses(frames, _pose_array(targets), context.active.home)
     active = context.active
+    constraint, iterations = locked_leg(active, lock), context.lock_cycle_iterations
     projected: list[RelativeMmRad] = []
     for cycle, target in enumerate(targets):
         if budget is not None and cycle and cycle % _BUDGET_CYCLES == 0 and (refusal := budget.refusal(
                 f"{cycle * context.period_s:.1f} s into the move of {trajectory.duration:.1f} s", remedy)):
             return refusal
-        result = (track_locked(active, lock, target, targets[cycle - 1], projected[-1], context.lock_cycle_iterations)
-                  if cycle else project_locked(active, lock, target))
+        result = (track_locked(active, lock, target, targets[cycle - 1], projected[-1], iterations, constraint)
+                  if cycle else project_locked(active, lock, target, constraint=constraint))
         if not result.ok:
             return Refusal(ErrorCode.LOCK_UNREACHABLE,
                            f"the loop cannot keep leg {lock.leg} at its locked length {cycle * context.period_s:.3f} s "
@@ -633,7 +651,13 @@ def _samples(context: PlanningContext, start: KinematicState, trajectory, frames
                            "the path strays too far from the constraint; split the move",
                            details={"t_s": cycle * context.period_s})
         projected.append(active.relative_from_absolute_mm_rad(result.pose))
-    return np.array(projected, dtype=float)
+    return _pose_array(projected)
+
+
+def _pose_array(poses: Sequence[Sequence[float]]) -> NDArray:
+    """(N, 6) floats of N poses, through their flat floats: numpy converts a list of
+    sequences one by one, several times slower (a path has a pose per cycle)."""
+    return np.fromiter(chain.from_iterable(poses), float, 6 * len(poses)).reshape(-1, 6)
 
 
 def _peak_leg_speed(context: PlanningContext, samples: NDArray) -> float:

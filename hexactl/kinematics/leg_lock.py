@@ -102,55 +102,91 @@ def project_to_locked_leg(
     e.g. the projection of the pose a cycle ago; default ``pose``. From a ``start`` other
     than ``pose`` at least one iteration is made, since a start on the surface is the
     projection of another pose. Never raises; see :class:`ProjectionStatus`."""
-    try:
-        x0, y0, z0, roll0, pitch0, yaw0 = target = tuple(float(v) for v in pose)
-        first = target if start is None else tuple(float(v) for v in start)
-        valid = (1 <= leg <= LEG_COUNT and isfinite(length_mm) and length_mm > 0
-                 and isfinite(characteristic_length_mm) and characteristic_length_mm > 0
-                 and len(first) == 6 and all(abs(v) < _MAX_INPUT for v in target + first))  # also false for NaN
-    except (TypeError, ValueError):
-        valid = False
-    if not valid:
-        return ProjectionResult(ProjectionStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"), float("inf"))
-    px, py, pz, bx, by, bz, _, _ = legs._rows[leg - 1]
-    angle_weight = 1.0 / (characteristic_length_mm * characteristic_length_mm)  # W⁻¹ on angles
-    x, y, z, roll, pitch, yaw = first
-    iteration = 0
-    min_iterations = 0 if first == target else 1
-    while True:
-        r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
-        tx = r11 * px + r12 * py + r13 * pz  # T·P_N
-        ty = r21 * px + r22 * py + r23 * pz
-        tz = r31 * px + r32 * py + r33 * pz
-        vx, vy, vz = tx + x - bx, ty + y - by, tz + z - bz
-        current = sqrt(vx * vx + vy * vy + vz * vz)
-        residual = current - length_mm
+    constraint = LockedLeg(legs, leg, length_mm, characteristic_length_mm, tolerance_mm)
+    return constraint.project(pose, max_iterations, start)
+
+
+class LockedLeg:
+    """The constraint of :func:`project_to_locked_leg` (its arguments but the pose, the
+    start and the iteration cap), checked and prepared once: a path is projected cycle
+    after cycle onto the same one."""
+
+    __slots__ = ("_valid", "_row", "_length_mm", "_characteristic_length_mm", "_angle_weight", "_tolerance_mm")
+
+    def __init__(self, legs: LegModel, leg: int, length_mm: float, characteristic_length_mm: float,
+                 tolerance_mm: float = PROJECTION_TOLERANCE_MM) -> None:
+        try:
+            self._valid = (1 <= leg <= LEG_COUNT and isfinite(length_mm) and length_mm > 0
+                           and isfinite(characteristic_length_mm) and characteristic_length_mm > 0)
+        except (TypeError, ValueError):
+            self._valid = False
+        self._row = legs._rows[leg - 1][:6] if self._valid else None  # P_N, B_N
+        self._length_mm = length_mm
+        self._characteristic_length_mm = characteristic_length_mm
+        # W⁻¹ on angles
+        self._angle_weight = 1.0 / (characteristic_length_mm * characteristic_length_mm) if self._valid else 0.0
+        self._tolerance_mm = tolerance_mm
+
+    def project(self, pose: Sequence[float], max_iterations: int = PROJECTION_MAX_ITERATIONS,
+                start: Sequence[float] | None = None) -> ProjectionResult:
+        """:func:`project_to_locked_leg` of ``pose`` from ``start`` onto this constraint."""
+        try:
+            target = tuple(map(float, pose))
+            first = target if start is None else tuple(map(float, start))
+            valid = (self._valid and len(target) == 6 and len(first) == 6
+                     # map, not a generator: the loop projects every cycle. False for NaN too.
+                     and all(map(_MAX_INPUT.__gt__, map(abs, target + first))))
+        except (TypeError, ValueError):
+            valid = False
+        if not valid:
+            return ProjectionResult(ProjectionStatus.INVALID_INPUT, _NO_POSE, 0, float("inf"), float("inf"))
+        x0, y0, z0, roll0, pitch0, yaw0 = target
+        px, py, pz, bx, by, bz = self._row
+        length_mm, characteristic_length_mm = self._length_mm, self._characteristic_length_mm
+        angle_weight, tolerance_mm = self._angle_weight, self._tolerance_mm
+        x, y, z, roll, pitch, yaw = first
+        iteration = 0
+        min_iterations = 0 if first == target else 1
+        while True:
+            r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
+            tx = r11 * px + r12 * py + r13 * pz  # T·P_N
+            ty = r21 * px + r22 * py + r23 * pz
+            tz = r31 * px + r32 * py + r33 * pz
+            vx, vy, vz = tx + x - bx, ty + y - by, tz + z - bz
+            current = sqrt(vx * vx + vy * vy + vz * vz)
+            residual = current - length_mm
+            if abs(residual) <= tolerance_mm and iteration >= min_iterations:
+                status = ProjectionStatus.OK
+                break
+            if iteration >= max_iterations:
+                status = ProjectionStatus.MAX_ITERATIONS
+                break
+            if current < 1e-9:
+                status = ProjectionStatus.SINGULAR
+                break
+            ux, uy, uz = vx / current, vy / current, vz / current
+            mx, my, mz = ty * uz - tz * uy, tz * ux - tx * uz, tx * uy - ty * ux  # (T·P_N) × u
+            # ∂l/∂(roll, pitch, yaw) = m·∂ω/∂angle; ∂ω/∂roll = Rz·Ry·ex, ∂ω/∂pitch = Rz·ey, ∂ω/∂yaw = ez.
+            g_roll = mx * r11 + my * r21 + mz * r31  # Rz·Ry·ex is T's first column
+            sy, cy = sin(yaw), cos(yaw)
+            g_pitch = -mx * sy + my * cy
+            g_yaw = mz
+            denominator = ux * ux + uy * uy + uz * uz + (g_roll * g_roll + g_pitch * g_pitch + g_yaw * g_yaw) * angle_weight
+            if not 0.0 < denominator < float("inf"):  # overflowed: no gradient to follow
+                status = ProjectionStatus.SINGULAR
+                break
+            multiplier = (residual + ux * (x0 - x) + uy * (y0 - y) + uz * (z0 - z)
+                          + g_roll * (roll0 - roll) + g_pitch * (pitch0 - pitch) + g_yaw * (yaw0 - yaw)) / denominator
+            x, y, z = x0 - multiplier * ux, y0 - multiplier * uy, z0 - multiplier * uz
+            roll = roll0 - multiplier * g_roll * angle_weight
+            pitch = pitch0 - multiplier * g_pitch * angle_weight
+            yaw = yaw0 - multiplier * g_yaw * angle_weight
+            iteration += 1
+            if not (abs(pitch) < _MAX_PITCH_RAD and isfinite(x + y + z + roll + yaw)):
+                return ProjectionResult(ProjectionStatus.DIVERGED, _NO_POSE, iteration, float("inf"), float("inf"))
+        # Once, at the iterate it stops at: the iteration itself needs neither.
         correction = sqrt((x - x0) ** 2 + (y - y0) ** 2 + (z - z0) ** 2
                           + ((roll - roll0) ** 2 + (pitch - pitch0) ** 2 + (yaw - yaw0) ** 2)
                           * characteristic_length_mm * characteristic_length_mm)
-        here = tuple.__new__(AbsoluteMmRad, (x, y, z, roll, pitch, yaw))  # each iteration: no Python-level __new__
-        if abs(residual) <= tolerance_mm and iteration >= min_iterations:
-            return ProjectionResult(ProjectionStatus.OK, here, iteration, residual, correction)
-        if iteration >= max_iterations:
-            return ProjectionResult(ProjectionStatus.MAX_ITERATIONS, here, iteration, residual, correction)
-        if current < 1e-9:
-            return ProjectionResult(ProjectionStatus.SINGULAR, here, iteration, residual, correction)
-        ux, uy, uz = vx / current, vy / current, vz / current
-        mx, my, mz = ty * uz - tz * uy, tz * ux - tx * uz, tx * uy - ty * ux  # (T·P_N) × u
-        # ∂l/∂(roll, pitch, yaw) = m·∂ω/∂angle; ∂ω/∂roll = Rz·Ry·ex, ∂ω/∂pitch = Rz·ey, ∂ω/∂yaw = ez.
-        g_roll = mx * r11 + my * r21 + mz * r31  # Rz·Ry·ex is T's first column
-        sy, cy = sin(yaw), cos(yaw)
-        g_pitch = -mx * sy + my * cy
-        g_yaw = mz
-        denominator = ux * ux + uy * uy + uz * uz + (g_roll * g_roll + g_pitch * g_pitch + g_yaw * g_yaw) * angle_weight
-        if not 0.0 < denominator < float("inf"):  # overflowed: no gradient to follow
-            return ProjectionResult(ProjectionStatus.SINGULAR, here, iteration, residual, correction)
-        multiplier = (residual + ux * (x0 - x) + uy * (y0 - y) + uz * (z0 - z)
-                      + g_roll * (roll0 - roll) + g_pitch * (pitch0 - pitch) + g_yaw * (yaw0 - yaw)) / denominator
-        x, y, z = x0 - multiplier * ux, y0 - multiplier * uy, z0 - multiplier * uz
-        roll = roll0 - multiplier * g_roll * angle_weight
-        pitch = pitch0 - multiplier * g_pitch * angle_weight
-        yaw = yaw0 - multiplier * g_yaw * angle_weight
-        iteration += 1
-        if not (abs(pitch) < _MAX_PITCH_RAD and isfinite(x + y + z + roll + yaw)):
-            return ProjectionResult(ProjectionStatus.DIVERGED, _NO_POSE, iteration, float("inf"), float("inf"))
+        here = tuple.__new__(AbsoluteMmRad, (x, y, z, roll, pitch, yaw))  # no Python-level __new__
+        return ProjectionResult(status, here, iteration, residual, correction)

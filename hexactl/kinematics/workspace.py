@@ -2,8 +2,10 @@
 
 A move is accepted or refused whole, so the check reports all violations at once rather
 than the first: leg stroke, joint cone angles, the pose envelope and near-singularity.
-A stream, which checks a pose or two per target, asks only whether one pose is inside
-(:func:`pose_within_limits`); both apply each limit through the same predicate.
+A path of many poses is checked as arrays (:func:`check_poses`), a pose's violations built
+only where it breaks a limit; a stream, which checks a pose or two per target, asks only
+whether one pose is inside (:func:`pose_within_limits`). All apply each limit through the
+same predicate.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.geometry import Geometry, Limits
 from hexactl.kinematics.inverse import (
     leg_jacobian_rows,
+    leg_jacobians_batch,
     leg_vectors_batch,
     lengths_from_readings,
     reading_of_leg_length,
@@ -85,12 +88,86 @@ class PoseAssessment:
 
 def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] | NDArray) -> list[PoseAssessment]:
     """Check (N, 6) poses relative to the zero posture (mm, deg) against every limit."""
+    checks = check_poses(geometry, poses_relative)
+    return [checks.assessment(n) for n in range(len(checks.relative))]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PoseChecks:
+    """Every limit applied to (N, 6) poses at once (:func:`check_poses`): the figures as
+    arrays, ``broken`` (N, K) whether each pose breaks each of the K limits (per leg, per
+    axis; a column stands for one kind and leg or axis, in the order a
+    :class:`PoseAssessment` lists its violations) and ``ok`` (N,) whether it breaks none.
+    A pose's :class:`PoseAssessment` is built on demand: a long path needs only its
+    broken poses'."""
+
+    limits: Limits
+    relative: NDArray
+    sensor: NDArray
+    stroke_margin: NDArray
+    base_cone: NDArray
+    platform_cone: NDArray
+    pose_margin: NDArray
+    condition: NDArray
+    broken: NDArray
+    ok: NDArray
+
+    def assessment(self, n: int) -> PoseAssessment:
+        """Pose ``n``'s :class:`PoseAssessment`."""
+        return PoseAssessment(
+            pose_relative=tuple(self.relative[n].tolist()),
+            sensor_mm=tuple(self.sensor[n].tolist()),
+            stroke_margin_mm=tuple(self.stroke_margin[n].tolist()),
+            base_cone_deg=tuple(self.base_cone[n].tolist()),
+            platform_cone_deg=tuple(self.platform_cone[n].tolist()),
+            pose_margin=tuple(self.pose_margin[n].tolist()),
+            jacobian_condition=float(self.condition[n]),
+            violations=() if self.ok[n] else tuple(self._violation(n, column)
+                                                   for column in np.flatnonzero(self.broken[n]).tolist()),
+        )
+
+    def _violation(self, n: int, column: int) -> Violation:
+        """Pose ``n``'s violation of the limit in column ``column`` of ``broken``."""
+        limits = self.limits
+        if column < _LEG_COLUMNS:
+            leg, check = divmod(column, _CHECKS_PER_LEG)
+            if check < 2:
+                reading = float(self.sensor[n, leg])
+                if check == 0:
+                    return Violation(ViolationKind.STROKE_LOW, reading, limits.stroke[0],
+                        f"leg {leg + 1} below stroke: {reading:.3f} mm < {limits.stroke[0]:g} mm", leg=leg + 1)
+                return Violation(ViolationKind.STROKE_HIGH, reading, limits.stroke[1],
+                    f"leg {leg + 1} above stroke: {reading:.3f} mm > {limits.stroke[1]:g} mm", leg=leg + 1)
+            kind, angles, limit, where = ((ViolationKind.BASE_CONE, self.base_cone, limits.base_cone_deg, "base")
+                if check == 2 else (ViolationKind.PLATFORM_CONE, self.platform_cone, limits.platform_cone_deg, "platform"))
+            angle = float(angles[n, leg])
+            return Violation(kind, angle, limit,
+                f"leg {leg + 1} {where} joint at {angle:.2f}° exceeds its {limit:g}° cone", leg=leg + 1)
+        if column < _LEG_COLUMNS + 6:
+            index = column - _LEG_COLUMNS
+            axis, unit, low, high = POSE_AXES[index], POSE_UNITS[index], limits.pose_min[index], limits.pose_max[index]
+            value = float(self.relative[n, index])
+            bound = high if value > high else low
+            return Violation(ViolationKind.POSE_RANGE, value, bound,
+                f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit} "
+                f"(by {abs(value - bound):.3g} {unit})", axis=axis)
+        condition = float(self.condition[n])
+        return Violation(ViolationKind.SINGULAR, condition, limits.max_jacobian_condition,
+            f"near-singular pose: Jacobian condition {condition:.1f} > {limits.max_jacobian_condition:g}")
+
+
+_CHECKS_PER_LEG = 4  # PoseChecks.broken's columns per leg: stroke low, stroke high, base cone, platform cone
+_LEG_COLUMNS = 6 * _CHECKS_PER_LEG  # then one per pose axis (the envelope), then near-singularity
+
+
+def check_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] | NDArray) -> PoseChecks:
+    """Check (N, 6) poses relative to the zero posture (mm, deg) against every limit, as
+    arrays: what :func:`assess_poses` finds, without a Python object per pose."""
     relative = np.asarray(poses_relative, dtype=float).reshape(-1, 6)
     absolute = absolute_from_relative(geometry.home, relative)
     limits = geometry.limits
-    vectors = leg_vectors_batch(geometry.legs, absolute)
-    lengths = np.linalg.norm(vectors, axis=2)
-    units = vectors / lengths[..., None]
+    jacobians, lengths = leg_jacobians_batch(geometry.legs, absolute)
+    units = jacobians[..., :3]
     sensor = readings_from_lengths(geometry.legs, lengths)
     stroke_low, stroke_high = limits.stroke
 
@@ -99,48 +176,18 @@ def assess_poses(geometry: Geometry, poses_relative: Sequence[Sequence[float]] |
     base_cone = _angle_deg(units, base_axes[None])
     units_moving = np.einsum("nji,nkj->nki", rotations, units)  # Tᵀ·u: leg seen from the platform
     platform_cone = _angle_deg(units_moving, platform_axes[None])
-    pose_margin = np.minimum(relative - np.array(limits.pose_min), np.array(limits.pose_max) - relative)
+    pose_min, pose_max = np.array(limits.pose_min), np.array(limits.pose_max)
+    pose_margin = np.minimum(relative - pose_min, pose_max - relative)
+    condition = _conditions(geometry, jacobians)
 
-    assessments = []
-    for n in range(len(relative)):
-        condition = jacobian_condition(geometry, absolute[n])
-        violations: list[Violation] = []
-        for leg in range(6):
-            reading = float(sensor[n, leg])
-            if _below_stroke(reading, limits):
-                violations.append(Violation(ViolationKind.STROKE_LOW, reading, stroke_low,
-                    f"leg {leg + 1} below stroke: {reading:.3f} mm < {stroke_low:g} mm", leg=leg + 1))
-            elif _above_stroke(reading, limits):
-                violations.append(Violation(ViolationKind.STROKE_HIGH, reading, stroke_high,
-                    f"leg {leg + 1} above stroke: {reading:.3f} mm > {stroke_high:g} mm", leg=leg + 1))
-            for kind, angles, limit, where in (
-                (ViolationKind.BASE_CONE, base_cone, limits.base_cone_deg, "base"),
-                (ViolationKind.PLATFORM_CONE, platform_cone, limits.platform_cone_deg, "platform"),
-            ):
-                angle = float(angles[n, leg])
-                if _outside_cone(angle, limit):
-                    violations.append(Violation(kind, angle, limit,
-                        f"leg {leg + 1} {where} joint at {angle:.2f}° exceeds its {limit:g}° cone", leg=leg + 1))
-        for axis, unit, value, low, high in zip(POSE_AXES, POSE_UNITS, relative[n], limits.pose_min, limits.pose_max):
-            if _outside_envelope(value, low, high):
-                bound = high if value > high else low
-                violations.append(Violation(ViolationKind.POSE_RANGE, float(value), bound,
-                    f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit} "
-                    f"(by {abs(value - bound):.3g} {unit})", axis=axis))
-        if near_singular(condition, limits):
-            violations.append(Violation(ViolationKind.SINGULAR, condition, limits.max_jacobian_condition,
-                f"near-singular pose: Jacobian condition {condition:.1f} > {limits.max_jacobian_condition:g}"))
-        assessments.append(PoseAssessment(
-            pose_relative=tuple(float(v) for v in relative[n]),
-            sensor_mm=tuple(float(v) for v in sensor[n]),
-            stroke_margin_mm=tuple(float(v) for v in np.minimum(sensor[n] - stroke_low, stroke_high - sensor[n])),
-            base_cone_deg=tuple(float(v) for v in base_cone[n]),
-            platform_cone_deg=tuple(float(v) for v in platform_cone[n]),
-            pose_margin=tuple(float(v) for v in pose_margin[n]),
-            jacobian_condition=condition,
-            violations=tuple(violations),
-        ))
-    return assessments
+    below = _below_stroke(sensor, limits)
+    above = _above_stroke(sensor, limits) & ~below  # one stroke violation per leg: a reading is below or above
+    legs = np.stack((below, above, _outside_cone(base_cone, limits.base_cone_deg),
+                     _outside_cone(platform_cone, limits.platform_cone_deg)), axis=2).reshape(len(relative), _LEG_COLUMNS)
+    broken = np.concatenate((legs, _outside_envelope(relative, pose_min, pose_max),
+                             near_singular(condition, limits)[:, None]), axis=1)
+    return PoseChecks(limits, relative, sensor, np.minimum(sensor - stroke_low, stroke_high - sensor), base_cone,
+                      platform_cone, pose_margin, condition, broken, ~broken.any(axis=1))
 
 
 def assess_pose(geometry: Geometry, pose_relative: Sequence[float]) -> PoseAssessment:
@@ -200,34 +247,42 @@ def jacobian_condition(geometry: Geometry, pose_absolute: Sequence[float]) -> fl
     return _condition(geometry, leg_jacobian_rows(geometry.legs, pose_absolute)[0])
 
 
-def near_singular(condition: float, limits: Limits) -> bool:
-    """Whether a Jacobian condition number is beyond the limits' near-singularity threshold
-    (a NaN condition is)."""
-    return not condition <= limits.max_jacobian_condition
+def near_singular(condition: float | NDArray, limits: Limits) -> bool | NDArray:
+    """Whether a Jacobian condition number, or each of an array of them, is beyond the
+    limits' near-singularity threshold (a NaN condition is)."""
+    return (condition != condition) | (condition > limits.max_jacobian_condition)
 
 
-# Each limit's rule, in one place for the full assessment and the yes/no check.
-def _below_stroke(reading_mm: float, limits: Limits) -> bool:
+# Each limit's rule, in one place for the full assessment and the yes/no check. Written
+# with comparisons and | so that they apply to plain floats (a bool) and to arrays (of
+# bools) alike; x != x is NaN, which counts as outside.
+def _below_stroke(reading_mm: float | NDArray, limits: Limits) -> bool | NDArray:
     return reading_mm < limits.stroke[0]
 
 
-def _above_stroke(reading_mm: float, limits: Limits) -> bool:
+def _above_stroke(reading_mm: float | NDArray, limits: Limits) -> bool | NDArray:
     return reading_mm > limits.stroke[1]
 
 
-def _outside_cone(angle_deg: float, limit_deg: float) -> bool:
+def _outside_cone(angle_deg: float | NDArray, limit_deg: float) -> bool | NDArray:
     return angle_deg > limit_deg
 
 
-def _outside_envelope(value: float, low: float, high: float) -> bool:
-    return not low - ENVELOPE_ROUNDING <= value <= high + ENVELOPE_ROUNDING
+def _outside_envelope(value: float | NDArray, low: float | NDArray, high: float | NDArray) -> bool | NDArray:
+    return (value != value) | (value < low - ENVELOPE_ROUNDING) | (value > high + ENVELOPE_ROUNDING)
 
 
 def _condition(geometry: Geometry, jacobian_rows: Sequence[Sequence[float]]) -> float:
     """:func:`jacobian_condition` of the twist Jacobian's rows."""
-    scaled = np.array(jacobian_rows) * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
+    return float(_conditions(geometry, np.array(jacobian_rows)[None])[0])
+
+
+def _conditions(geometry: Geometry, jacobians: NDArray) -> NDArray:
+    """:func:`jacobian_condition` of (N, 6, 6) twist Jacobians → (N,): one batched SVD."""
+    scaled = jacobians * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
     singular = np.linalg.svd(scaled, compute_uv=False)
-    return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
+    largest, smallest = singular[:, 0], singular[:, -1]
+    return np.divide(largest, smallest, out=np.full(len(singular), np.inf), where=smallest > 0)
 
 
 def _angle_between_deg(a: Sequence[float], b: Sequence[float]) -> float:

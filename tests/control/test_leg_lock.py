@@ -3,8 +3,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hexactl.control import planning
 from hexactl.control.config import ControllerConfig
-from hexactl.control.planning import ActiveGeometry, LegLock, project_locked, track_locked
+from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, project_locked, track_locked
+from hexactl.control.trajectory import KinematicState, preview
+from hexactl.kinematics.axes import RelativeMmRad
 from hexactl.kinematics.inverse import leg_lengths
 from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.pose import absolute_from_relative, pose_mm_deg_to_mm_rad
@@ -120,3 +123,24 @@ def test_the_loops_tracking_converges_in_its_few_iterations_where_a_cold_start_d
         assert result.correction <= cold.correction + 1e-6
         assert _distance(geometry, result.pose, cold.pose) < 1e-4
         projected = np.subtract(result.pose, active.home)
+
+
+@pytest.mark.parametrize("leg, goal_mm_deg", [(3, [0, 0, 0, -15, -15, -30]), (1, [60, 40, 20, 3, -2, 5])])
+def test_planning_samples_a_locked_move_as_the_loop_commands_it_bit_for_bit(geometry, leg, goal_mm_deg):
+    """Planning keeps the locked leg's constraint prepared for the whole path; the loop
+    calls :func:`track_locked` afresh each cycle: the same poses, to the last bit."""
+    config = ControllerConfig()
+    active = ActiveGeometry.of(geometry, "nominal")
+    lock = LegLock(leg, leg_lengths(geometry.legs, active.absolute_from_relative_mm_rad([0.0] * 6))[leg - 1]
+                   - geometry.zero_lengths[leg - 1])
+    context = PlanningContext(active, config.motion, config.loop.period_s, geometry.limits.leg_velocity_mm_s, lock)
+    start = KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    goal = RelativeMmRad._make(np.subtract(project_locked(active, lock, pose_mm_deg_to_mm_rad(goal_mm_deg)).pose, active.home))
+    trajectory = preview(config.motion, config.loop.period_s, start, goal)
+    samples = planning._samples(context, start, trajectory, None)
+    targets = [start.position] + [trajectory.at_time(k * config.loop.period_s)[0] for k in range(1, len(samples))]
+    commanded = [active.relative_from_absolute_mm_rad(project_locked(active, lock, targets[0]).pose)]
+    for previous, target in zip(targets[:-1], targets[1:]):
+        result = track_locked(active, lock, target, previous, commanded[-1], config.lock_cycle_iterations)
+        commanded.append(active.relative_from_absolute_mm_rad(result.pose))
+    assert np.array_equal(samples, np.array(commanded, dtype=float))

@@ -1,13 +1,27 @@
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from hexactl.adapters.cli.kinematics_commands import paper_extremes
+from hexactl.kinematics import workspace
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.workspace import PoseAssessment, ViolationKind, assess_pose, assess_poses, pose_within_limits
+from hexactl.kinematics.inverse import leg_jacobian_rows, reading_of_leg_length
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.kinematics.rotation import rotation_elements
+from hexactl.kinematics.workspace import (
+    PoseAssessment,
+    ViolationKind,
+    assess_pose,
+    assess_poses,
+    check_poses,
+    jacobian_condition,
+    pose_within_limits,
+)
 from tests.kinematics.strategies import relative_poses
 
 
@@ -132,3 +146,81 @@ def test_the_stroke_is_checked_on_the_sensors_readings(nominal) -> None:
         limited = variant(nominal, "nominal", gains=True, stroke=(0.0, bound))
         assert assess_pose(limited, pose).ok is inside
         assert pose_within_limits(limited, pose) is inside
+
+
+def _angle_between_deg(a, b) -> float:
+    cross = np.cross(a, b)
+    return float(np.degrees(np.arctan2(np.linalg.norm(cross), np.dot(a, b))))
+
+
+def _assessed_alone(geometry: Geometry, pose) -> dict:
+    """What the limits say about one pose, pose by pose in plain floats (the twist
+    Jacobian's rows of :func:`leg_jacobian_rows`, as the stream's check and the condition
+    number one pose at a time): the reference for the batch."""
+    limits = geometry.limits
+    absolute = absolute_from_relative(geometry.home, pose)
+    rows, lengths = leg_jacobian_rows(geometry.legs, absolute)
+    home_rows, _ = leg_jacobian_rows(geometry.legs, absolute_from_relative(geometry.home, [0.0] * 6))
+    rotation = np.reshape(rotation_elements(*absolute[3:]), (3, 3))
+    home_rotation = np.reshape(rotation_elements(*np.radians(geometry.home[3:])), (3, 3))
+    sensor = [reading_of_leg_length(geometry.legs, leg, length) for leg, length in enumerate(lengths)]
+    base = [_angle_between_deg(row[:3], neutral[:3]) for row, neutral in zip(rows, home_rows)]
+    platform = [_angle_between_deg(rotation.T @ row[:3], home_rotation.T @ neutral[:3]) for row, neutral in zip(rows, home_rows)]
+    condition = jacobian_condition(geometry, absolute)
+    broken = []
+    for leg in range(6):
+        if sensor[leg] < limits.stroke[0]:
+            broken.append((ViolationKind.STROKE_LOW, leg + 1, None, limits.stroke[0], sensor[leg]))
+        elif sensor[leg] > limits.stroke[1]:
+            broken.append((ViolationKind.STROKE_HIGH, leg + 1, None, limits.stroke[1], sensor[leg]))
+        if base[leg] > limits.base_cone_deg:
+            broken.append((ViolationKind.BASE_CONE, leg + 1, None, limits.base_cone_deg, base[leg]))
+        if platform[leg] > limits.platform_cone_deg:
+            broken.append((ViolationKind.PLATFORM_CONE, leg + 1, None, limits.platform_cone_deg, platform[leg]))
+    for axis, value, low, high in zip("x y z roll pitch yaw".split(), pose, limits.pose_min, limits.pose_max):
+        if not low - 1e-9 <= value <= high + 1e-9:
+            broken.append((ViolationKind.POSE_RANGE, None, axis, high if value > high else low, value))
+    if not condition <= limits.max_jacobian_condition:
+        broken.append((ViolationKind.SINGULAR, None, None, limits.max_jacobian_condition, condition))
+    return {"sensor": sensor, "base": base, "platform": platform, "condition": condition, "broken": broken}
+
+
+@settings(max_examples=150, deadline=None)
+@given(poses=st.lists(relative_poses(scale=1.3), min_size=1, max_size=12), name=st.sampled_from(sorted(VARIANTS)),
+       gains=st.booleans())
+def test_the_batch_says_what_each_pose_alone_says(nominal, poses, name, gains) -> None:
+    """The batch (one stacked SVD for the condition numbers, the limits as arrays, objects
+    built from them) against each pose checked alone in plain floats, the reachable and the
+    violating: the same figures, the same violations in the same order; and each pose's
+    assessment in the batch is the one it gets alone."""
+    geometry = variant(nominal, name, gains)
+    batch = assess_poses(geometry, poses)
+    checks = check_poses(geometry, poses)
+    assert checks.ok.tolist() == [assessment.ok for assessment in batch]
+    for pose, assessment in zip(poses, batch):
+        alone = _assessed_alone(geometry, pose)
+        assert assessment == assess_pose(geometry, pose)
+        assert assessment.jacobian_condition == pytest.approx(alone["condition"], rel=1e-12)
+        assert assessment.sensor_mm == pytest.approx(alone["sensor"], abs=1e-9)
+        assert assessment.base_cone_deg == pytest.approx(alone["base"], abs=1e-7)
+        assert assessment.platform_cone_deg == pytest.approx(alone["platform"], abs=1e-7)
+        if margin(assessment, geometry) > 1e-6:  # on a bound, the two paths' rounding may differ
+            assert [(v.kind, v.leg, v.axis, v.limit) for v in assessment.violations] == [b[:4] for b in alone["broken"]]
+            assert [v.value for v in assessment.violations] == pytest.approx([b[4] for b in alone["broken"]], rel=1e-9)
+
+
+@settings(max_examples=100, deadline=None)
+@given(poses=st.lists(relative_poses(scale=1.5), min_size=1, max_size=30))
+def test_the_batch_condition_number_is_each_poses_own(nominal, poses) -> None:
+    absolute = absolute_from_relative(nominal.home, poses)
+    batch = check_poses(nominal, poses).condition
+    assert batch.tolist() == pytest.approx([jacobian_condition(nominal, pose) for pose in absolute], rel=1e-12)
+
+
+def test_a_rank_deficient_jacobian_has_an_infinite_condition_number_in_the_batch(nominal) -> None:
+    """A zero smallest singular value gives inf, without a division warning, beside a
+    finite one (the identity scaled: the characteristic length)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        condition = workspace._conditions(nominal, np.stack((np.zeros((6, 6)), np.eye(6))))
+    assert condition[0] == np.inf and condition[1] == pytest.approx(nominal.characteristic_length_mm, rel=1e-12)
