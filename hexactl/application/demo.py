@@ -44,6 +44,7 @@ from hexactl.application.campaign.store import (
     REPORT_DIRECTORY,
     VALIDATION_FILE,
     ensure_unfinished,
+    make_directory,
 )
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.adapters.files.config_path import default_config_path
@@ -139,7 +140,7 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     """
     started = time.monotonic()
     ensure_unfinished(settings.directory)  # before anything starts
-    settings.directory.mkdir(parents=True, exist_ok=True)  # the service's data directory: it must exist
+    make_directory(settings.directory)  # the service's data directory: it must exist
     try:
         nominal = load_geometry(settings.config or default_config_path())
     except GeometryError as error:

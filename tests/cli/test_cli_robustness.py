@@ -179,6 +179,46 @@ def test_a_data_directory_that_is_a_file_is_called_a_file(tmp_path, capsys) -> N
     assert f"--data-dir {a_file}: is a file, not a directory" in error and "no such directory" not in error, error
 
 
+# -- where a command writes -----------------------------------------------------------
+
+
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize("argv", [
+    ["calibrate", "{data}", "-o", "{file}/cal.toml"],
+    ["calibrate", "{data}", "-o", "{tmp}/cal.toml", "--report", "{file}/report"],
+    ["simulate-campaign", "-o", "{file}/sub/data.csv"],
+    ["plan-leglock", "--leg", "1", "--count", "8", "-o", "{file}/plan.csv"],
+    ["demo", "--out", "{file}/demo"],
+    ["campaign", "--out", "{file}", "--instrument", "simulated"],
+    ["keys", "--out", "{file}/keys"],
+])
+def test_a_file_where_a_folder_must_be_is_named_before_any_work(argv, tmp_path, capsys) -> None:
+    """An output under a file used to fail after the identification (or the demo's
+    service start) with "[Errno 17] File exists" or a traceback."""
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("kept\n")
+    data = tmp_path / "data.csv"
+    data.write_text("leg,l1,l2,l3,l4,l5,l6,x,y,z,roll,pitch,yaw\n")
+    assert exits_with([word.format(data=data, file=a_file, tmp=tmp_path) for word in argv]) == 2
+    captured = capsys.readouterr()
+    assert f"{a_file} is a file, not a folder; choose another place" in captured.err, captured.err
+    assert captured.out == "" and a_file.read_text() == "kept\n"
+
+
+def test_an_output_that_is_a_folder_is_refused_naming_it(tmp_path, capsys) -> None:
+    assert exits_with(["simulate-campaign", "-o", str(tmp_path), "--force"]) == 2
+    assert f"{tmp_path} is a folder: name the file to write" in capsys.readouterr().err
+
+
+def test_a_folder_without_write_permission_is_named(tmp_path, monkeypatch, capsys) -> None:
+    """Root may write anywhere, so the permission the check asks for is stubbed."""
+    asked = []
+    monkeypatch.setattr(os, "access", lambda path, mode: asked.append((Path(path), mode)) or False)
+    assert exits_with(["simulate-campaign", "-o", str(tmp_path / "new" / "data.csv")]) == 2
+    assert f"no permission to write into {tmp_path}" in capsys.readouterr().err
+    assert asked == [(tmp_path, os.W_OK | os.X_OK)]
+
+
 # -- Ctrl-C in main ------------------------------------------------------------------
 
 

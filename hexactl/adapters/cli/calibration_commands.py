@@ -25,6 +25,7 @@ from hexactl.adapters.cli.common import (
     campaign_stopped,
     check_campaign_arguments,
     check_output,
+    check_writable,
     client_endpoint,
     config_input,
     connect,
@@ -182,6 +183,8 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     output = Path(arguments.output)
     if arguments.report and (Path(arguments.report) / REPORT_PAGE).exists() and not arguments.force:
         raise CliError(f"{arguments.report} already holds a report; refusing to overwrite it (use --force)")
+    if arguments.report:
+        check_writable(Path(arguments.report), folder=True)
     true = _load_geometry(arguments.true) if arguments.true else None
     point_sigma = nominal.measurement.point_sigma_mm if arguments.point_sigma is None else arguments.point_sigma
     try:
@@ -379,6 +382,7 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
 
     geometry = load_config(arguments)
     check_campaign_arguments(arguments)
+    check_writable(arguments.out, folder=True)
     progress = Progress()
     design = CampaignDesign(postures_per_leg=arguments.per_leg, candidates=arguments.candidates,
                             envelope_fraction=arguments.envelope, seed=arguments.seed)

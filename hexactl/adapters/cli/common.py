@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import os
 import re
 import sys
 from collections.abc import Callable, Sequence
@@ -232,8 +233,24 @@ def check_output(output: str | None, force: bool, *inputs: str | Path | None) ->
         if given is not None and _same_file(Path(output), Path(given)):
             raise CliError(f"{output} is this command's input {given}: an input is never written over, even with "
                            "--force; choose another output")
+    if Path(output).is_dir():
+        raise CliError(f"{output} is a folder: name the file to write")
     if Path(output).exists() and not force:
         raise CliError(f"{output} exists; refusing to overwrite it (use --force)")
+    check_writable(Path(output))
+
+
+def check_writable(path: Path, *, folder: bool = False) -> None:
+    """Before any work: :class:`CliError` if the file (or, with ``folder``, the folder)
+    ``path`` could not be written because a file stands where a folder must be, or because
+    of permissions. Missing folders are fine: writing makes them."""
+    existing = path if folder else path.parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise CliError(f"cannot write {path}: {existing} is a file, not a folder; choose another place")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise CliError(f"cannot write {path}: no permission to write into {existing}; choose another place")
 
 
 def config_input(arguments: argparse.Namespace) -> Path:

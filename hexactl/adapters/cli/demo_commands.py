@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments
+from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments, check_writable
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 
 DEFAULT_OUT = Path("demo-out")
@@ -66,6 +66,7 @@ def run_demo_command(arguments: argparse.Namespace) -> int:
     from hexactl.application.service import ServiceError
 
     check_campaign_arguments(arguments)
+    check_writable(arguments.out, folder=True)
     if arguments.force:
         clear_results(arguments.out)
     settings = DemoSettings(arguments.out, arguments.seed, arguments.per_leg, arguments.envelope,

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hexactl.adapters.cli.common import CliError, connect, positive_float
+from hexactl.adapters.cli.common import CliError, check_writable, connect, positive_float
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
@@ -157,6 +157,7 @@ def run_plot(arguments: argparse.Namespace) -> int:
     header, columns = _read_recording(path)
     side = _side_file(path)
     out = arguments.out or path.with_suffix(".png")
+    check_writable(out)
     import matplotlib  # heavy: only for plot
 
     matplotlib.use("Agg")

@@ -21,6 +21,7 @@ from hexactl.adapters.cli.common import (
     CliError,
     bind_endpoint,
     bounds_argument,
+    check_writable,
     client_endpoint,
     connect,
     connection_parser,
@@ -336,6 +337,7 @@ def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
 def run_keys(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.api.security import create_keys
 
+    check_writable(arguments.out, folder=True)
     try:
         made = create_keys(arguments.out, arguments.name)
     except (FileExistsError, OSError) as error:

@@ -311,10 +311,18 @@ class CampaignStore:
         return out.getvalue()
 
 
+def make_directory(directory: Path) -> None:
+    """``directory`` and its missing parents; :class:`DirectoryError` naming why it cannot be made."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise DirectoryError(f"cannot make the directory {directory}: {error.strerror or error}") from None
+
+
 def _lock(directory: Path) -> TextIO:
     """The directory's lock file, locked (released when closed or when the process ends);
     :class:`DirectoryError` if another campaign holds it."""
-    directory.mkdir(parents=True, exist_ok=True)
+    make_directory(directory)
     handle = (directory / LOCK_FILE).open("a", encoding="utf-8")
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
