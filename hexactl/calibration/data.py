@@ -162,6 +162,9 @@ def screen_measurements(
       median of that leg's locked rows: the leg did not hold, or the row is mislabelled;
     - a reading more than :data:`STROKE_READING_TOLERANCE_MM` outside ``stroke_mm`` (the
       actuators' [min, max], when given), where no actuator can be: a typo.
+    - a row that repeats an earlier one to the last digit: no instrument measures a
+      posture twice alike, so it was pasted or appended twice (counted twice, it would
+      claim a better calibration than the data give).
 
     Measured points whose typical spread differs from the feature points' by more than
     :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
@@ -200,6 +203,7 @@ def screen_measurements(
                 if not low - STROKE_READING_TOLERANCE_MM <= reading <= high + STROKE_READING_TOLERANCE_MM:
                     problems.append(RowProblem(int(line), f"l{leg} reads {reading:.4f} mm, outside the actuators' "
                                                f"stroke [{low:g}, {high:g}] mm where no leg can be: a typo?"))
+    problems.extend(_repeated_rows(data))
     for leg in range(1, LEG_COUNT + 1):
         rows = data.locked_rows(leg)
         if len(rows) == 0:
@@ -216,6 +220,18 @@ def screen_measurements(
 
 STROKE_READING_TOLERANCE_MM = 1.0
 """A reading this far beyond the stroke is not noise (a sensor's is ~0.01 mm): no leg can be there."""
+
+
+def _repeated_rows(data: MeasurementData) -> list[RowProblem]:
+    """A problem for each row equal in every value to an earlier one, naming that one."""
+    measured = data.points_mm if data.points_mm is not None else data.poses
+    values = np.column_stack([data.locked_leg, data.readings_mm, measured.reshape(len(data), -1)])
+    _, first, which = np.unique(values, axis=0, return_index=True, return_inverse=True)
+    earliest = first[which.ravel()]
+    return [RowProblem(int(data.lines[row]), f"repeats line {int(data.lines[earliest[row]])} exactly: no instrument "
+                       "measures a posture twice alike, so it was pasted or appended twice; remove it")
+            for row in np.flatnonzero(earliest != np.arange(len(data)))]
+
 
 POSE_UNIT_MISFIT_MM = 20.0
 """Readings this far (median) from what the nominal geometry gives for the measured poses

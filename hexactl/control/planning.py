@@ -603,9 +603,12 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
         if trajectory is None:
             return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
         if trajectory.duration > motion_left_s:
+            before = (f", after {MAX_MOTION_S - motion_left_s:.6g} s of the moves before it"
+                      if motion_left_s < MAX_MOTION_S else "")
             return Refusal(ErrorCode.PLANNING_FAILED,
-                           f"the move would take {trajectory.duration:.6g} s; a move, or a sequence's moves together, "
-                           f"may take at most {MAX_MOTION_S:g} s: raise the speed or shorten the duration")
+                           f"the move would take {trajectory.duration:.6g} s{before}; a move, or a sequence's moves "
+                           f"together, may take at most {MAX_MOTION_S:g} s: raise the speed, shorten the duration"
+                           + (" or split the sequence" if before else ""))
         if waypoint.duration_s and 0 < trajectory.duration < waypoint.duration_s - _DURATION_TOLERANCE_S:
             # The duration asked for is a minimum, and scaled limits give nearly, not exactly,
             # k times the natural duration (0.08 % short at 60 s): stretch by what is missing.

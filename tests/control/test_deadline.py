@@ -70,3 +70,5 @@ def test_planning_refuses_unbounded_durations_dwells_and_speeds(rig):
     plan = plan_path(controller._context(controller.snapshot), controller.snapshot.trajectory,
                      [Waypoint(POSE, 250.0), Waypoint((0,) * 6, 250.0), Waypoint(POSE, 250.0)])
     assert plan.refusal is not None and "waypoint 3" in plan.refusal.message and "at most 600 s" in plan.refusal.message
+    assert "after 500 s of the moves before it" in plan.refusal.message and "split the sequence" in plan.refusal.message
+    assert "moves before it" not in result.message  # a single move has none
