@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
-from itertools import combinations
+from itertools import combinations, permutations
 
 import numpy as np
 from numpy.typing import NDArray
@@ -170,10 +170,12 @@ def screen_measurements(
     :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
     (line 0), instead of one per row. So are measured poses whose readings ``legs`` (the
     nominal geometry, when given) explain far better with the angles read as radians or
-    the positions as metres.
+    the positions as metres, and measured points whose readings it explains far better
+    with the points' columns in another order (a header naming them wrongly).
     """
     problems: list[RowProblem] = []
-    unit_problem = _unit_problem(data, feature_points_mm) or (None if legs is None else _pose_unit_problem(data, legs))
+    unit_problem = _unit_problem(data, feature_points_mm) or (
+        None if legs is None else _pose_unit_problem(data, legs) or _label_problem(data, feature_points_mm, legs))
     if unit_problem is not None:
         return (unit_problem,)
     if data.points_mm is not None:
@@ -262,6 +264,42 @@ def _pose_unit_problem(data: MeasurementData, legs: LegModel) -> RowProblem | No
         return None
     return RowProblem(0, f"the readings are {as_read:.3g} mm (median) from what the nominal geometry gives for the "
                          f"measured poses, {best:.3g} mm if the {name}: hexactl reads degrees and mm; convert the file")
+
+
+LABEL_CHECK_ROWS = 30
+"""The rows (a file's first) on which other orders of the feature points are tried: enough
+to tell a wrong order from the right one, whose misfit is a calibration's millimetres."""
+
+
+def _label_problem(data: MeasurementData, feature_points_mm: NDArray, legs: LegModel) -> RowProblem | None:
+    """A file-level problem if the readings fit the measured points' poses far better with
+    the points in another order than the file's columns name them (up to four points)."""
+    count = data.point_count
+    if data.points_mm is None or len(data) == 0 or count > 4:
+        return None
+    model = np.asarray(feature_points_mm, dtype=float)[:count]
+    points, readings = data.points_mm[:LABEL_CHECK_ROWS], data.readings_mm[:LABEL_CHECK_ROWS]
+
+    def misfit(order: tuple[int, ...]) -> float:
+        try:
+            poses = np.array([pose_from_points(model, row[list(order)]).pose for row in points])
+        except DegeneratePointsError:  # a row problem of its own
+            return float("inf")
+        return float(np.median(np.abs(sensor_setpoints_batch(legs, poses) - readings)))
+
+    as_named = tuple(range(count))
+    as_read = misfit(as_named)
+    if not POSE_UNIT_MISFIT_MM < as_read < float("inf"):
+        return None
+    order, best = min(((order, misfit(order)) for order in permutations(as_named) if order != as_named),
+                      key=lambda item: item[1])
+    if best > min(as_read / 5.0, POSE_UNIT_MISFIT_MM):
+        return None
+    swaps = " and ".join(f"the columns named p{column + 1} hold p{point + 1}"
+                         for point, column in enumerate(order) if column != point)
+    return RowProblem(0, f"the readings are {as_read:.3g} mm (median) from what the nominal geometry gives for the "
+                         f"poses of the measured points, {best:.3g} mm if {swaps}: check the file's header (p1, p2, "
+                         "… are the geometry's feature_points in their order)")
 
 
 def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProblem | None:
