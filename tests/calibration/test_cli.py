@@ -160,10 +160,12 @@ def test_points_in_metres_are_named_once_and_refused(tmp_path, leglock_campaign,
 def test_undetermined_data_give_no_library_warning_and_say_why(tmp_path, leglock_campaign, capsys):
     """One posture measured 60 times: most combinations undetermined. Nothing but hexactl's
     own messages reaches stderr (numpy's "covariance is not symmetric positive-semidefinite"
-    came from rounding in a barely determined covariance)."""
+    came from rounding in a barely determined covariance). Each measurement differs in its
+    readings' last digit, as measured again, not pasted (screening refuses exact repeats)."""
     data = leglock_campaign.data
     first = np.zeros(len(data), dtype=int)
-    same = type(data)(data.locked_leg[first], data.readings_mm[first], data.lines, points_mm=data.points_mm[first])
+    readings = data.readings_mm[first] + 1e-6 * np.arange(len(data))[:, None]
+    same = type(data)(data.locked_leg[first], readings, data.lines, points_mm=data.points_mm[first])
     path = write_measurements(tmp_path / "same.csv", same)
     code = main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")])
     captured = capsys.readouterr()
