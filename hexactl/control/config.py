@@ -45,6 +45,14 @@ class SupervisionConfig(_Frozen):
     setpoint_lag_s: Number = Field(
         default=0.05, gt=0, description="set-points the actuators have not applied for this long mean a broken link"
     )
+    following_error_mm: Number = Field(
+        default=5.0, gt=0,
+        description="an enabled actuator farther than this from the set-point it reports applied, for "
+        "following_error_s, is jammed, overloaded or slipping (the firmware's own limit is a last resort)",
+    )
+    following_error_s: Number = Field(
+        default=0.1, ge=0, description="how long the following error may exceed following_error_mm before FAULT"
+    )
     max_send_failures: WholeNumber = Field(default=3, ge=1, description="consecutive failed set-point sends before FAULT")
     estop_repeat_s: Number = Field(default=0.1, gt=0, description="while ESTOP is latched, the E-stop is re-sent this often")
     estop_clear_holdoff_s: Number = Field(

@@ -170,7 +170,8 @@ class ControlCore:
         now_ns = self._now_ns
         supervisor = self._supervisor
         if self.state in (ControlState.ENABLED, ControlState.FAULT):  # FAULT: hold (module docstring)
-            supervisor.sent(hardware.send_setpoints(self._counter, self._motion.path.setpoints))
+            setpoints = self._motion.path.setpoints
+            supervisor.sent(self._counter, setpoints, hardware.send_setpoints(self._counter, setpoints))
             self._counter += 1
         elif self.state is ControlState.ESTOP and supervisor.estop_due(now_ns):
             self._send_estop()

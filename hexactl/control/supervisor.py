@@ -3,9 +3,11 @@
 :class:`Supervisor` decides; the core acts (latches FAULT or ESTOP, sends). While
 ENABLED, :meth:`Supervisor.faults` lists what is wrong this cycle: an actuator silent
 longer than ``heartbeat_timeout_s``, reporting a fault, in another state than the one
-it was told to reach (after ``state_timeout_s`` to get there), or not applying the
-set-points (more than ``setpoint_lag_s`` behind); the link failed; too many set-point
-sends failed in a row. In any state, an actuator reporting E-stop is the hardware
+it was told to reach (after ``state_timeout_s`` to get there), not applying the
+set-points (more than ``setpoint_lag_s`` behind), or farther than ``following_error_mm``
+from the set-point it applied for ``following_error_s`` (jammed, overloaded, slipping:
+compared with the set-point of the counter it reports, so a late frame adds nothing);
+the link failed; too many set-point sends failed in a row. In any state, an actuator reporting E-stop is the hardware
 chain's E-stop (:meth:`Supervisor.estop_reported`), except in the grace time a reset
 gives the actuators to leave it.
 
@@ -22,7 +24,14 @@ from dataclasses import dataclass
 from math import ceil
 
 from hexactl.control.config import SupervisionConfig
-from hexactl.control.hardware import ACTUATOR_COUNT, LINK_FAILED_STATES, ActuatorState, FeedbackSnapshot, LinkHealth
+from hexactl.control.hardware import (
+    ACTUATOR_COUNT,
+    LINK_FAILED_STATES,
+    ActuatorFeedback,
+    ActuatorState,
+    FeedbackSnapshot,
+    LinkHealth,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,6 +50,12 @@ class Supervisor:
         self.heartbeat_timeout_s = supervision.heartbeat_timeout_s
         self._state_timeout_ns = round(supervision.state_timeout_s * 1e9)
         self._lag_limit = ceil(supervision.setpoint_lag_s / period_s)  # cycles
+        self._following_error_mm = supervision.following_error_mm
+        self._following_error_ns = round(supervision.following_error_s * 1e9)
+        # The set-points of the last counters sent, at counter % len: all a healthy actuator
+        # may report applied (an older counter is a lag fault of its own).
+        self._sent: list[tuple[int, tuple[float, ...]] | None] = [None] * (self._lag_limit + 2)
+        self._following_since_ns: list[int | None] = [None] * ACTUATOR_COUNT
         self._max_send_failures = supervision.max_send_failures
         self._estop_repeat_ns = round(supervision.estop_repeat_s * 1e9)
         self._estop_clear_holdoff_ns = round(supervision.estop_clear_holdoff_s * 1e9)
@@ -78,20 +93,45 @@ class Supervisor:
             elif expected is ActuatorState.ENABLED and last_sent - actuator.setpoint_counter > self._lag_limit:
                 faults.append(Fault("setpoints_not_applied", f"leg {leg} applied set-point {actuator.setpoint_counter}, "
                                     f"last sent {last_sent}", leg))
+            elif expected is ActuatorState.ENABLED and (fault := self._following(leg, actuator, now_ns)):
+                faults.append(fault)
         if link is not None and link.bus_state in LINK_FAILED_STATES:
             faults.append(Fault("link_failed", f"bus {link.bus_state.value}" + (f": {link.detail}" if link.detail else "")))
         if self._send_failures >= self._max_send_failures:
             faults.append(Fault("send_failed", f"{self._send_failures} set-point sends failed in a row"))
         return faults
 
-    def sent(self, ok: bool) -> None:
-        """Count a set-point send that failed (``ok`` False) or end the run of failures."""
+    def _following(self, leg: int, actuator: ActuatorFeedback, now_ns: int) -> Fault | None:
+        """The following-error fault of an enabled ``leg`` (1–6) whose error has lasted too long."""
+        counter = actuator.setpoint_counter
+        kept = self._sent[counter % len(self._sent)]
+        if kept is None or kept[0] != counter:
+            return None  # nothing of ours applied yet
+        error_mm = actuator.position_mm - kept[1][leg - 1]
+        if not abs(error_mm) > self._following_error_mm:  # NaN too: a missing position is not an error here
+            self._following_since_ns[leg - 1] = None
+            return None
+        since = self._following_since_ns[leg - 1]
+        if since is None:
+            self._following_since_ns[leg - 1] = since = now_ns
+        if now_ns - since < self._following_error_ns:
+            return None
+        return Fault("following_error", f"leg {leg} is {error_mm:+.3f} mm from its set-point for "
+                     f"{(now_ns - since) / 1e9:.3f} s (limit {self._following_error_mm:g} mm): jammed, overloaded "
+                     "or slipping; check the leg before reset and enable", leg)
+
+    def sent(self, counter: int, setpoints: tuple[float, ...], ok: bool) -> None:
+        """The set-points sent with ``counter``: kept for the following error; count a send
+        that failed (``ok`` False) or end the run of failures."""
+        self._sent[counter % len(self._sent)] = (counter, setpoints)
         self._send_failures = 0 if ok else self._send_failures + 1
 
     def enabled(self, now_ns: int) -> None:
-        """The actuators were told to enable at ``now_ns``: expect ENABLED, forget old send failures."""
+        """The actuators were told to enable at ``now_ns``: expect ENABLED, forget old send
+        failures and following errors."""
         self.expect(None, ActuatorState.ENABLED, now_ns)
         self._send_failures = 0
+        self._following_since_ns = [None] * ACTUATOR_COUNT
 
     def estop_reported(self, feedback: FeedbackSnapshot, now_ns: int) -> bool:
         """An actuator reports E-stop, outside a reset's grace time."""

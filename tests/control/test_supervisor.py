@@ -16,6 +16,8 @@ CONFIG = SupervisionConfig(heartbeat_timeout_s=0.05, state_timeout_s=0.5, setpoi
                            estop_repeat_s=0.1, estop_clear_holdoff_s=0.3)
 MS = 1_000_000
 HEALTHY = LinkHealth(BusState.ACTIVE, 0)
+HELD = (100.0,) * 6
+"""Set-points where :func:`feedback`'s actuators stand."""
 
 
 def feedback(state=ActuatorState.ENABLED, counter=100, **leg) -> FeedbackSnapshot:
@@ -74,6 +76,32 @@ def test_setpoints_not_applied_for_longer_than_the_lag_is_a_fault(supervisor):
         ("setpoints_not_applied", leg) for leg in range(1, 7)]
 
 
+def test_a_leg_away_from_the_setpoint_it_applied_for_the_time_allowed_is_a_following_error(supervisor):
+    """Compared with the set-point of the counter the leg reports applied: a leg that is
+    where an older set-point put it (late frames, a slow host) is not in error."""
+    supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)  # arrived
+    limit, hold_ms = CONFIG.following_error_mm, round(CONFIG.following_error_s * 1000)
+    for counter in (100, 101, 102):  # leg 1 moves on 20 mm a cycle, the others hold
+        supervisor.sent(counter, (100.0 + 20.0 * (counter - 100),) + HELD[1:], True)
+    assert supervisor.faults(feedback(counter=100), HEALTHY, 102, 2 * MS) == []  # where counter 100 put them
+    stuck = feedback(counter=102, leg3={"position_mm": 100.0 - 1.01 * limit})  # leg 1 40 mm behind, leg 3 just over
+    assert supervisor.faults(stuck, HEALTHY, 102, 10 * MS) == []  # over the limit from now
+    assert supervisor.faults(stuck, HEALTHY, 102, (10 + hold_ms - 1) * MS) == []
+    faults = supervisor.faults(stuck, HEALTHY, 102, (10 + hold_ms) * MS)
+    assert codes(faults) == [("following_error", 1), ("following_error", 3)]
+    assert faults[0].message.startswith(f"leg 1 is -40.000 mm from its set-point for {hold_ms / 1000:.3f} s "
+                                        f"(limit {limit:g} mm): jammed")
+    # Back within the limit, the time starts again; so does it on enable.
+    assert supervisor.faults(feedback(counter=102, leg1={"position_mm": 140.0}), HEALTHY, 102, 200 * MS) == []
+    assert supervisor.faults(stuck, HEALTHY, 102, 201 * MS) == []
+    assert codes(supervisor.faults(stuck, HEALTHY, 102, (201 + hold_ms) * MS)) == [("following_error", 1),
+                                                                                   ("following_error", 3)]
+    supervisor.enabled(400 * MS)
+    supervisor.faults(stuck, HEALTHY, 102, 401 * MS)  # arrived in ENABLED
+    assert supervisor.faults(stuck, HEALTHY, 102, 402 * MS) == []
+    assert supervisor.faults(stuck, HEALTHY, 102, (402 + hold_ms - 1) * MS) == []
+
+
 @pytest.mark.parametrize("state,failed", [(BusState.ACTIVE, False), (BusState.WARNING, False),
                                           (BusState.PASSIVE, False), (BusState.BUS_OFF, True), (BusState.DOWN, True)])
 def test_only_a_bus_that_sends_nothing_fails_the_link(supervisor, state, failed):
@@ -85,13 +113,13 @@ def test_only_a_bus_that_sends_nothing_fails_the_link(supervisor, state, failed)
 
 def test_send_failures_in_a_row_fault_and_a_success_ends_the_run(supervisor):
     for _ in range(2):
-        supervisor.sent(False)
+        supervisor.sent(100, HELD, False)
     assert supervisor.faults(feedback(), HEALTHY, 100, 1 * MS) == []
-    supervisor.sent(True)
+    supervisor.sent(100, HELD, True)
     for _ in range(2):
-        supervisor.sent(False)
+        supervisor.sent(100, HELD, False)
     assert supervisor.faults(feedback(), HEALTHY, 100, 1 * MS) == []
-    supervisor.sent(False)
+    supervisor.sent(100, HELD, False)
     assert codes(supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)) == [("send_failed", None)]
     supervisor.enabled(2 * MS)  # enabling starts afresh
     assert supervisor.faults(feedback(), HEALTHY, 100, 3 * MS) == []

@@ -96,6 +96,24 @@ def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service
     tolerating_loop_stalls(scenario, lambda: service.controller, {("actuator_fault", 5)}, lambda: clear_injections(service))
 
 
+def test_a_jammed_leg_is_a_following_error_before_the_drive_notices(client, actuators, service) -> None:
+    """Leg 2's drive stops moving mid-motion: the loop latches ``following_error`` on leg 2
+    once it is more than the limit from the set-point it applied, for longer than allowed;
+    before that, the move went on and was reported done with the leg 19 mm off."""
+    supervision = service.controller.config.supervision
+
+    def scenario() -> None:
+        record = fault_during_motion(client, lambda: setattr(actuators[1].inject, "stall", True))
+        assert codes(record)[0] == ("following_error", 2), record["faults"]
+        assert f"(limit {supervision.following_error_mm:g} mm): jammed" in record["faults"][0]["message"]
+        assert_held(client)
+        actuators[1].inject.stall = False
+        back_in_service(client)
+
+    tolerating_loop_stalls(scenario, lambda: service.controller, {("following_error", 2)},
+                           lambda: clear_injections(service))
+
+
 def test_a_short_burst_of_lost_or_corrupted_frames_is_ridden_through(client, actuators, service) -> None:
     """Two frames lost, then two corrupted: at most one missed cycle each, inside the
     actuator's watchdog; the corrupted ones are rejected and reported in its heartbeat."""
