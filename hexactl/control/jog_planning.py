@@ -31,7 +31,14 @@ from numpy.typing import NDArray
 
 from hexactl.control.frames import Frame, convert, relative_poses, requested_goal
 from hexactl.control.jog import JogPlan
-from hexactl.control.planning import PlanningContext, Refusal, Waypoint, plan_path
+from hexactl.control.planning import (
+    OUTSIDE_SOFT_LIMITS,
+    PlanningContext,
+    Refusal,
+    Waypoint,
+    outside_soft_limits,
+    plan_path,
+)
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
@@ -79,8 +86,9 @@ def plan_jog(context: PlanningContext, start: KinematicState, start_frames: Fram
         return _violations_each(context, frames, [goal(s).in_radians() for s in seconds])
 
     if at_start := broken([0.0])[0]:
-        return Refusal(ErrorCode.PATH_VIOLATION, f"the platform is outside its limits ({at_start[0].message}): "
-                       "move back inside with a move before jogging")
+        remedy = (OUTSIDE_SOFT_LIMITS if outside_soft_limits(context, start.position, start_frames)
+                  else "move back inside with a move before jogging")
+        return Refusal(ErrorCode.PATH_VIOLATION, f"the platform is outside its limits ({at_start[0].message}): {remedy}")
     step_s = _step_s(context, velocity)
     candidates = np.arange(1, ceil(JOG_HORIZON_S / step_s) + 1) * step_s
     first = next((n for n, found in enumerate(broken(candidates)) if found), None)

@@ -265,6 +265,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
                                     details={"waypoints": total, "limit": MAX_WAYPOINTS}))
     budget = PlanningBudget()
     remedy = "split it into shorter sequences" if total > 1 else "split the move"
+    origin, origin_frames = start.position, start_frames
     segments = []
     checks = _PathChecks(context)
     motion_s = 0.0  # the segments' durations so far
@@ -311,8 +312,23 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
     if refusal := checks.flush(budget, lambda: f"checking the paths of {total} waypoints", remedy, final=True):
         return Plan(refusal=refusal)
     if violations := checks.violations():
-        return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(violations), tuple(violations)))
+        message = _summary(violations)
+        if outside_soft_limits(context, origin, origin_frames):
+            message += f": {OUTSIDE_SOFT_LIMITS}"
+        return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, message, tuple(violations)))
     return Plan(segments=tuple(segments))
+
+
+OUTSIDE_SOFT_LIMITS = ("the platform is outside the soft limits already (they were set, or restored at start-up, "
+                       "around another pose): widen them, or clear them, to bring it back inside")
+
+
+def outside_soft_limits(context: PlanningContext, position: Coordinates, frames: Frames | None) -> bool:
+    """Whether ``position`` (in the coordinates of ``frames``) breaks the operator's soft limits."""
+    if context.soft_limits is None or context.frames is None:
+        return False
+    relative = relative_poses(frames, np.array([position], dtype=float), context.active.home)
+    return bool(_soft_violations(context, relative, 1))
 
 
 def budgeted_path_violations(context: PlanningContext, relative: NDArray, waypoint: int, budget: PlanningBudget,

@@ -5,6 +5,7 @@ zero posture, mm and degrees; legs in actuator sensor mm."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from math import isfinite
 
 from hexactl.control.core import CoreSnapshot, Fault, MotionState
 from hexactl.control.host import LoopReport
@@ -81,6 +82,17 @@ class StreamTelemetry:
 
 
 @dataclass(frozen=True, slots=True)
+class LegStatus:
+    """One actuator as it last reported: ``state`` disabled, enabled, locked, fault or
+    estop; ``fault_bits`` its drive's fault word (0: none); ``report_age_s`` since its
+    last report, s (None: never heard from)."""
+
+    state: str
+    fault_bits: int
+    report_age_s: float | None
+
+
+@dataclass(frozen=True, slots=True)
 class Telemetry:
     """One cycle's picture. ``t``: monotonic time of the cycle, s. Poses relative to the
     zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
@@ -116,6 +128,15 @@ class Telemetry:
     wave: WaveProgress | None = None  # the wave playing, or how the last one ended; None: no wave since the start
     stream: StreamTelemetry | None = None  # None: no pose stream under way
     last_stream: StreamReport | None = None  # how the last pose stream ended; None: none since the start
+    legs: tuple[LegStatus, ...] | None = None  # None before the first read
+
+
+def leg_statuses(s: CoreSnapshot) -> tuple[LegStatus, ...] | None:
+    """Each actuator's last report (None before the first read)."""
+    if s.feedback is None:
+        return None
+    return tuple(LegStatus(a.state.name.lower(), a.fault_bits, a.heartbeat_age_s if isfinite(a.heartbeat_age_s) else None)
+                 for a in s.feedback.actuators)
 
 
 def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
@@ -184,6 +205,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         wave=s.wave,
         stream=stream_telemetry(s),
         last_stream=s.last_stream,
+        legs=leg_statuses(s),
     )
 
 

@@ -105,6 +105,17 @@ def test_telemetry_text_with_unknown_values(service) -> None:
     assert "sequence       s 2/3 (dwelling)" in text and "leg 4: heartbeat_lost (no report)" in text
 
 
+def test_telemetry_text_names_each_legs_state_fault_bits_and_silence(service) -> None:
+    record = jsonable(service.controller.telemetry())
+    healthy = {"state": "disabled", "fault_bits": 0, "report_age_s": 0.002}
+    assert "legs           unknown\n" in format_telemetry({**record, "legs": None})
+    assert "legs           all disabled\n" in format_telemetry({**record, "legs": [healthy] * 6})
+    record["legs"] = [healthy] * 4 + [{"state": "fault", "fault_bits": 0x80, "report_age_s": 0.01},
+                                      {**healthy, "report_age_s": 6.3}]
+    line = next(line for line in format_telemetry(record).splitlines() if line.startswith("legs "))
+    assert line.endswith("L4 disabled  L5 fault 0x80  L6 disabled; no report lately: L6 6.3 s"), line
+
+
 def test_monitor_without_service_exits_two(tmp_path, capsys) -> None:
     assert main(["monitor", "--once", "--telemetry", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
     assert "no telemetry" in capsys.readouterr().err

@@ -9,7 +9,13 @@ from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
-from hexactl.control.planning import ActiveGeometry, PlanningContext, path_violations, pose_allowed
+from hexactl.control.planning import (
+    OUTSIDE_SOFT_LIMITS,
+    ActiveGeometry,
+    PlanningContext,
+    path_violations,
+    pose_allowed,
+)
 from hexactl.kinematics.axes import ToolInWorkMmDeg
 from hexactl.kinematics.frames import apply, compose, pose_of, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits
@@ -181,6 +187,25 @@ def test_soft_limits_name_the_limit_and_cannot_be_set_around_a_platform_outside_
     outside = rig.controller.set_frames(narrower)
     assert outside.error == "outside_soft_limits" and "x 40.000 mm above the soft limit 30 mm" in outside.message
     assert rig.controller.operator_frames().soft_limits == limits  # unchanged
+    assert OUTSIDE_SOFT_LIMITS not in refused.message  # it started inside them
+
+
+def test_a_platform_outside_restored_soft_limits_is_told_how_to_come_back(rig):
+    """Soft limits restored at start-up around another pose than the platform's: every
+    move and jog is refused, and each refusal says how to get out (it said to move back
+    inside with a move, which was refused too)."""
+    rig.enabled()
+    assert rig.controller.move([-10, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    restored = OperatorFrames(soft_limits=SoftLimits(lower=(-5, None, None, None, None, None),
+                                                     upper=(650, None, None, None, None, None)))
+    rig.controller.frames.current = restored  # as the service's start-up restores them, unchecked
+    for refused in (rig.controller.move([0, 0, 0, 0, 0, 0]), rig.controller.move([10, 0, 0, 0, 0, 0]),
+                    rig.controller.jog([5, 0, 0, 0, 0, 0])):
+        assert refused.error == "path_violation" and "below the soft limit -5 mm" in refused.message
+        assert refused.message.endswith(OUTSIDE_SOFT_LIMITS), refused.message
+    assert rig.controller.set_frames(OperatorFrames()).ok  # the way out it names
+    assert rig.controller.move([0, 0, 0, 0, 0, 0]).ok
 
 
 axis_values = st.floats(-700.0, 700.0)

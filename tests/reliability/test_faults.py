@@ -87,6 +87,9 @@ def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service
         assert_held(client)
         client.call("reset")  # the controller resets; the actuator refuses CLEAR_FAULT while its sensor is bad
         wait_for(lambda: status(client)["state"] == "disabled", "the reset")
+        # The latched faults are cleared, but the telemetry still shows the actuator's.
+        leg5 = wait_for(lambda: (legs := status(client)["legs"])[4]["state"] == "fault" and legs[4], "leg 5's state")
+        assert leg5["fault_bits"] & int(Fault.SENSOR)
         refusal = wait_for(lambda: (reply := client.request("enable"))["ok"] is False
                            and reply["error"]["code"] == "actuator_fault" and reply, "enable to be refused")
         assert "leg 5" in refusal["error"]["message"]

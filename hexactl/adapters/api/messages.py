@@ -538,6 +538,14 @@ class Fault(_Message):
     leg: Leg | None = Field(default=None, description="the actuator at fault, if one is")
 
 
+class LegStatus(_Message):
+    """One actuator as it last reported."""
+
+    state: Literal["disabled", "enabled", "locked", "fault", "estop"] = Field(description="what it reports it is doing")
+    fault_bits: int = Field(ge=0, description="its drive's latched fault word (docs/can.md, FEEDBACK); 0: none")
+    report_age_s: float | None = Field(ge=0, description="time since its last report, s; null: never heard from")
+
+
 class RecorderTelemetry(_Message):
     """The data recorder as the loop sees it (the file: ``record_status``)."""
 
@@ -692,6 +700,9 @@ class Telemetry(_Message):
                                                       "in a service without one")
     campaign: CampaignTelemetry | None = Field(default=None, description="the latest a client's campaign said "
                                                "(progress); null before any")
+    legs: list[LegStatus] | None = Field(default=None, min_length=6, max_length=6,
+                                         description="legs 1–6 as each last reported: a fault that outlasts a reset "
+                                         "shows here; null before the first read")
 
 
 # -- replies -------------------------------------------------------------------------

@@ -322,6 +322,9 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         legs.add_column(f"L{leg} mm" + (" locked" if leg == locked else ""), justify="right")
     for label, values in (("set-point", record.get("leg_setpoints")), ("feedback", record.get("leg_feedback"))):
         legs.add_row(label, *(["—" if value is None else f"{value:.3f}" for value in values] if values else ["—"] * 6))
+    states = record.get("legs")
+    legs.add_row("state", *([state["state"] + (f" 0x{state['fault_bits']:x}" if state["fault_bits"] else "")
+                             for state in states] if states else ["—"] * 6))
     loop = record["loop"]
     faults = record.get("faults") or []
     facts = Table.grid(padding=(0, 2))

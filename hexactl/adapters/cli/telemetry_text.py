@@ -23,6 +23,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("remaining", remaining_text(record.get("remaining_s"))),
         ("leg set-points", legs_text(record.get("leg_setpoints"))),
         ("leg feedback", legs_text(record.get("leg_feedback"))),
+        ("legs", leg_states_text(record.get("legs"))),
         *frames_lines(record),
         ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
         ("calibration", record["calibration_id"]),
@@ -81,6 +82,24 @@ def legs_text(values: list[float | None] | None) -> str:
         return "unknown"
     return "  ".join(f"L{leg} {'?' if value is None else format(value, '8.3f'):>8}"
                      for leg, value in enumerate(values, start=1)) + " mm"
+
+
+SILENT_AFTER_S = 0.5
+"""A leg whose last report is older than this is named as silent (they report every few ms)."""
+
+
+def leg_states_text(legs: list[dict[str, Any]] | None) -> str:
+    """``all enabled``, or each leg's state with its fault bits (``L5 fault 0x80``), then
+    the legs not heard from lately; ``unknown`` for None."""
+    if not legs:
+        return "unknown"
+    states = [leg["state"] + (f" 0x{leg['fault_bits']:x}" if leg["fault_bits"] else "") for leg in legs]
+    text = f"all {states[0]}" if len(set(states)) == 1 else "  ".join(
+        f"L{number} {state}" for number, state in enumerate(states, start=1))
+    silent = [f"L{number} " + ("never" if leg["report_age_s"] is None else f"{leg['report_age_s']:.1f} s")
+              for number, leg in enumerate(legs, start=1)
+              if leg["report_age_s"] is None or leg["report_age_s"] > SILENT_AFTER_S]
+    return text + (f"; no report lately: {', '.join(silent)}" if silent else "")
 
 
 def remaining_text(remaining_s: float | None) -> str:
