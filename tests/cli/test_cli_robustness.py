@@ -219,6 +219,29 @@ def test_a_folder_without_write_permission_is_named(tmp_path, monkeypatch, capsy
     assert asked == [(tmp_path, os.W_OK | os.X_OK)]
 
 
+# -- what the operator is told when a command cannot finish -------------------------
+
+
+def test_an_estop_nobody_answered_says_it_is_not_confirmed(tmp_path, capsys) -> None:
+    assert exits_with(["estop", "--api", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert "no answer from" in err and err.endswith("hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop\n")
+
+
+@pytest.mark.parametrize("command,goes_on", [(["move", "x=5"], True), (["play", "x_sweep"], True),
+                                             (["status"], False), (["enable"], False)])
+def test_ctrl_c_in_a_command_that_starts_a_motion_says_the_motion_goes_on(command, goes_on, monkeypatch,
+                                                                         capsys) -> None:
+    def interrupted(*arguments: object) -> int:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(service_commands, "run_client_command", interrupted)
+    assert main(command) == 130
+    err = capsys.readouterr().err
+    assert err == f"hexactl {command[0]}: interrupted" + (
+        " (a motion the service accepted goes on: `hexactl stop` halts it)" if goes_on else "") + "\n"
+
+
 # -- Ctrl-C in main ------------------------------------------------------------------
 
 

@@ -193,6 +193,7 @@ def test_wait_returns_at_rest_and_says_when_a_pause_or_an_estop_holds_the_motion
         client.request("estop")
         _, err = resuming.communicate(timeout=WAIT_S)
         assert resuming.returncode == 1 and "the motion ended: the controller is estop" in err
+        assert "once its cause is dealt with, `hexactl reset`, then `hexactl enable`" in err
 
     try:
         tolerating_stalls(client, scenario)

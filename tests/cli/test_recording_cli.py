@@ -60,3 +60,15 @@ def test_plot_refuses_missing_and_garbled_files(tmp_path, capsys) -> None:
     other.write_text("a,b\n1,2\n")
     assert main(["plot", str(other)]) == 2
     assert "not a recording" in capsys.readouterr().err
+
+
+def test_record_wait_exits_1_when_a_fault_came_during_the_recording(capsys) -> None:
+    from hexactl.adapters.cli.recording_commands import _report_written
+
+    side = {"csv": "/data/run.csv", "rows_written": 150, "ended": "duration", "cycles_missing": 0}
+    assert _report_written(side, as_json=False) == 0
+    assert _report_written({**side, "faults_during": True}, as_json=False) == 1
+    captured = capsys.readouterr()
+    assert "/data/run.csv: 150 rows, ended: duration" in captured.out
+    assert captured.err == ("hexactl record: the controller was in FAULT or ESTOP during it: the motion recorded is "
+                            "not the one planned (the service's log says when)\n")

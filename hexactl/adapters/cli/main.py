@@ -74,6 +74,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+MOTION_GOES_ON = " (a motion the service accepted goes on: `hexactl stop` halts it)"
+"""Said when Ctrl-C ends a command that starts a motion: only the command ends, not the motion."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``hexactl ARGV`` (None: the command line of this process); its exit status.
 
@@ -90,7 +94,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # and, under `python3 -m`, kills the process with SIGINT at exit though it was caught
         # here: an exec() of its own forgets it, so that the status is 130 whatever was importing.
         exec("")  # noqa: S102
-        print(f"hexactl{''.join(' ' + name for name in command)}: interrupted", file=sys.stderr)
+        print(f"hexactl{''.join(' ' + name for name in command)}: interrupted"
+              + (MOTION_GOES_ON if command[:1] in (["move"], ["play"], ["wave"]) else ""), file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:
         if argv is None:

@@ -141,6 +141,9 @@ def _report_written(side: dict[str, Any], as_json: bool) -> int:
         problems.append(f"{side['cycles_missing']} cycles are missing ({side.get('rows_lost', 0)} rows lost)")
     if side.get("side_file_error"):
         problems.append(f"its side file was not written: {side['side_file_error']}")
+    if side.get("faults_during"):
+        problems.append("the controller was in FAULT or ESTOP during it: the motion recorded is not the one "
+                        "planned (the service's log says when)")
     if not as_json:
         print(f"{side.get('csv')}: {side.get('rows_written', 0)} rows, ended: {side.get('ended')}")
     if problems:

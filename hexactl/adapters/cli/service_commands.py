@@ -297,6 +297,8 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
             return wait_until_at_rest(client, arguments.command, reply) if getattr(arguments, "wait", False) else EXIT_OK
     except ServiceUnavailable as error:
         print(f"hexactl {arguments.command}: {error}", file=sys.stderr)
+        if cmd == "estop":
+            print("hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop", file=sys.stderr)
         return EXIT_NO_ANSWER
 
 
@@ -321,7 +323,9 @@ def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
         problem = None
         if status["state"] != "enabled":
             faults = "; ".join(fault["message"] for fault in status.get("faults") or [])
-            problem = f"the motion ended: the controller is {status['state']}" + (f" ({faults})" if faults else "")
+            problem = (f"the motion ended: the controller is {status['state']}" + (f" ({faults})" if faults else "")
+                       + ("; once its cause is dealt with, `hexactl reset`, then `hexactl enable`"
+                          if status["state"] in ("fault", "estop") else ""))
         elif sequence and sequence["phase"] == "paused":
             problem = f"sequence {sequence['name']} is paused: `hexactl resume` or `hexactl abort`"
         elif status["motion"] == "holding" and sequence is None:
@@ -417,6 +421,8 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
         said.append(f"{reply['duration']:.2f} s")
     if "change_mm" in reply:
         said.append(f"set-points change by up to {reply['change_mm']:.3f} mm")
+    if cmd == "load_calibration":
+        said.append("active until the service stops: start it with `hexactl serve --calibration FILE` to keep it")
     if "records" in reply:
         said.append(f"{reply['records']} records of {reply['name']} ({reply['status']}) written to {reply['path']}")
     return "ok" + (": " + "; ".join(said) if said else "")
