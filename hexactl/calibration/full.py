@@ -24,17 +24,22 @@ varied postures (the singular values in the result check it on the actual data).
 Pose-form data (no points) are handled by the same model: the measured pose is turned into
 the feature points it implies, which weights it exactly as a point fit would.
 
-Gross mis-sightings: after the fit, each observation's standardised residual is tested, a
-feature point's 3-D residual (χ², 3 dof) or, in pose form, a row's whole pose (χ², 6 dof),
-with the leverage of the pose it belongs to taken out so a point the fit pulls toward
-itself is not hidden. Those beyond the cut that a campaign without mis-sightings passes
-with probability 1 − ``exclusion_false_alarm`` (Bonferroni over all observations) are
-excluded, at most the worst one per posture per round (a bad point drags its posture's
-good ones along), and the fit repeated; an excluded observation the new fit predicts
-within the cut comes back; until nothing changes. It stops and says so
-where exclusion would stop being about isolated mis-sightings: more than
-:data:`MAX_EXCLUDED_FRACTION` of the postures touched (the misfit is a model error), or
-parameters left undetermined.
+Gross errors, mis-sightings and wrong readings (a typo, a wrong column): after the fit, each
+observation's standardised residual is tested, a feature point's 3-D residual (χ², 3 dof) or,
+in pose form, a row's whole pose (χ², 6 dof), and each reading's leg closure (χ², 1 dof),
+with its leverage taken out (its pull on its posture's pose and on the parameters) so an
+observation the fit pulls toward itself is not hidden. Those beyond the cut that a campaign
+without gross errors passes with probability 1 − ``exclusion_false_alarm`` (Bonferroni over
+all observations, points and readings) are excluded, at most the worst one per posture per
+round (a bad observation drags its posture's good ones along; the worst is the least
+probable, and a pose-form row's pose, whose exclusion would drop the row, only once its
+worst reading has been tried), and the fit repeated; an excluded observation drops out of
+the fit as if it had not been measured (weight 0), and one the new fit predicts within the
+cut comes back; until nothing changes. It stops and says so where exclusion would stop
+being about isolated gross errors: more than :data:`MAX_EXCLUDED_FRACTION` of the postures
+touched (the misfit is a model error, unless one observation carries
+:data:`CONCENTRATED_MISFIT_SHARE` of it: a wrong reading drags its pose by tens of mm and
+biases every posture, and it alone is excluded then), or parameters left undetermined.
 
 Solver: Levenberg–Marquardt on the sparse problem by the Schur complement, as in bundle
 adjustment. Each posture's 6×6 pose block is eliminated, leaving a p×p system; the reduced
@@ -75,7 +80,12 @@ _STEP_TOLERANCE_MM = 1e-9  # parameter and pose steps below this end the iterati
 _COST_TOLERANCE = 1e-10  # relative cost decrease below this ends the iteration
 _MAX_EXCLUSION_ROUNDS = 10
 MAX_EXCLUDED_FRACTION = 0.1
-"""Exclusion stops before it touches more than this share of the postures."""
+"""Exclusion stops before it touches more than this share of the postures: the misfit is a
+model error then, unless it is concentrated (:data:`CONCENTRATED_MISFIT_SHARE`)."""
+CONCENTRATED_MISFIT_SHARE = 0.1
+"""While observations beyond the cut touch more than :data:`MAX_EXCLUDED_FRACTION` of the
+postures, the worst of all is still excluded, alone, if it carries at least this share of the
+fit's χ²: a gross error that biases the whole fit, where a model error's misfit is spread thin."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -95,6 +105,7 @@ class _Problem:
     reading_sigma: float
     with_scales: bool
     point_weights: NDArray[np.float64]  # (N, K): 1 used, 0 excluded
+    reading_weights: NDArray[np.float64]  # (N, 6): 1 used, 0 excluded
     times: NDArray[np.float64] | None = None
     target_sigma: float = 0.0
     whitening: NDArray[np.float64] | None = None  # (N, K, 3, 3) L⁻¹ of each point's covariance L·Lᵀ; None: 1/σ
@@ -110,6 +121,25 @@ class _Problem:
         if self.whitening is None:
             return misfits * self.point_sigma
         return np.linalg.solve(self.whitening, misfits[..., None])[..., 0]
+
+    def observation_weights(self, pose_form: bool) -> NDArray[np.float64]:
+        """(N, M) weights of the observations tested for gross errors, 1 used and 0 excluded:
+        each posture's feature points (pose form: its pose, one observation), then its six
+        readings."""
+        observed = self.point_weights[:, :1] if pose_form else self.point_weights
+        return np.concatenate((observed, self.reading_weights), axis=1)
+
+    def with_observation_weights(self, weights: NDArray, pose_form: bool) -> _Problem:
+        """The problem with :meth:`observation_weights` set to ``weights``."""
+        observed = weights[:, :-LEG_COUNT]
+        if pose_form:  # a pose-form row's points stand or fall together
+            observed = np.repeat(observed, self.point_weights.shape[1], axis=1)
+        return replace(self, point_weights=observed, reading_weights=weights[:, -LEG_COUNT:])
+
+    def observation_dof(self, pose_form: bool) -> NDArray[np.float64]:
+        """(M,): each tested observation's degrees of freedom, as in :meth:`observation_weights`."""
+        observed = [6.0] if pose_form else [3.0] * self.point_weights.shape[1]
+        return np.array(observed + [1.0] * LEG_COUNT)
 
     @property
     def structural_size(self) -> int:
@@ -131,7 +161,10 @@ class _Linearisation:
     point_misfits: NDArray[np.float64]  # (N, K, 3), whitened, excluded points included
     point_jacobian: NDArray[np.float64]  # (N, K, 3, 6), whitened, excluded points included
     point_residuals: NDArray[np.float64]  # (N, K, 3), whitened, excluded points zero
-    leg_residuals: NDArray[np.float64]  # (N, 6), whitened
+    leg_misfits: NDArray[np.float64]  # (N, 6), whitened, excluded readings included
+    leg_pose_jacobian: NDArray[np.float64]  # (N, 6, 6), whitened, excluded readings included
+    leg_parameter_jacobian: NDArray[np.float64]  # (N, 6, p), whitened, excluded readings included
+    leg_residuals: NDArray[np.float64]  # (N, 6), whitened, excluded readings zero
     pose_normal: NDArray[np.float64]  # U (N, 6, 6)
     coupling: NDArray[np.float64]  # W (N, 6, p)
     parameter_normal: NDArray[np.float64]  # V (p, p)
@@ -183,23 +216,26 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     covariance = data.point_covariance_mm2
     whitening = None if covariance is None else np.linalg.inv(np.linalg.cholesky(covariance))
     problem = _Problem(observed, model, np.array(data.readings_mm), sigma, options.reading_sigma_mm,
-                       options.estimate_scales, np.ones(observed.shape[:2]), times, target_sigma, whitening)
+                       options.estimate_scales, np.ones(observed.shape[:2]), np.ones((len(data), LEG_COUNT)), times,
+                       target_sigma, whitening)
     theta = np.concatenate((start.to_vector(), np.zeros(LEG_COUNT if times is not None else 0),
                             model.ravel() if target_sigma > 0.0 else np.zeros(0)))
     fit = _fit(problem, theta, np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
-    fit, problem, exclusion_notes = _exclude_mis_sightings(problem, fit, pose_form, options)
+    fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, pose_form, options)
     current, theta = fit.linear, fit.theta
 
     full_information = _reduced_normal(current, 0.0)[0]
     information = _marginal(full_information, problem.structural_size)
     used_points = problem.point_weights.sum(axis=1)
+    used_readings = problem.reading_weights.sum(axis=1)
     posture_chi2 = np.sum(current.point_residuals**2, axis=(1, 2)) + np.sum(current.leg_residuals**2, axis=1)
-    # Per posture: 3K point + 6 leg residuals against 6 pose unknowns (the parameters' share
-    # of the degrees of freedom is spread thin over the postures and neglected here). A
-    # pose-form row's points are those of a rigid pose: only 6 of its 3K residuals are free
-    # (the others are zero whatever the noise). A posture whose points are all excluded is
-    # pinned by its readings alone: no test.
-    posture_dof = np.where(used_points > 0, 6.0, 0.0) if pose_form else 3 * used_points
+    # Per posture: 3 residuals per used point and 1 per used reading against 6 pose unknowns
+    # (the parameters' share of the degrees of freedom is spread thin over the postures and
+    # neglected here). A pose-form row's points are those of a rigid pose: only 6 of its 3K
+    # residuals are free (the others are zero whatever the noise). A posture whose points are
+    # all excluded is pinned by its readings alone: no test.
+    observed_dof = np.where(used_points > 0, 6.0, 0.0) if pose_form else 3 * used_points
+    posture_dof = np.maximum(observed_dof + used_readings - 6.0, 0.0)
     posture_chi2 = np.where(posture_dof > 0, posture_chi2, np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         normalised = posture_chi2 / posture_dof
@@ -212,7 +248,7 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         outlier=flag_outliers(posture_chi2, np.maximum(posture_dof, 1), options.outlier_probability),
     )
     point_residual_count = 3 * int(used_points.sum())
-    dof = (int(posture_dof.sum()) + current.leg_residuals.size + current.prior_residuals.size - 6 * len(data)
+    dof = (int(observed_dof.sum() + used_readings.sum()) + current.prior_residuals.size - 6 * len(data)
            - len(theta))
     # The leg closures are near-exact constraints (σ_reading ≪ the pose noise they carry), so
     # the point residuals hold practically all the degrees of freedom.
@@ -312,104 +348,226 @@ def _fit(problem: _Problem, theta: NDArray, rotations: NDArray, translations: ND
     return _Fit(theta, rotations, translations, current, iteration, converged)
 
 
-def _exclude_mis_sightings(problem: _Problem, fit: _Fit, pose_form: bool,
-                           options: IdentificationOptions) -> tuple[_Fit, _Problem, tuple[str, ...]]:
-    """Exclude gross mis-sightings and refit, round by round (see the module docstring).
+def _exclude_gross_errors(problem: _Problem, fit: _Fit, pose_form: bool,
+                          options: IdentificationOptions) -> tuple[_Fit, _Problem, tuple[str, ...]]:
+    """Exclude gross mis-sightings and reading errors and refit, round by round (see the
+    module docstring).
 
-    Returns the final fit, the problem with its point weights, and notes for people.
+    Returns the final fit, the problem with its observation weights, and notes for people.
     """
-    from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
-
     if options.exclusion_false_alarm <= 0.0 or not fit.converged or not _determined(fit.linear):
         return fit, problem, ()
-    units = len(problem.observed) if pose_form else problem.point_weights.size
-    cut = float(chi2.isf(options.exclusion_false_alarm / units, 6 if pose_form else 3))
-    fit, problem, notes = _exclusion_rounds(problem, fit, pose_form, cut, options.max_iterations)
-    excluded = int(np.count_nonzero(problem.point_weights[:, :1] == 0.0 if pose_form else problem.point_weights == 0.0))
-    if excluded:
-        what = "row(s)' measured pose" if pose_form else "feature point(s)"
-        notes = (f"{excluded} {what} excluded as gross mis-sightings: standardised residual beyond {np.sqrt(cut):.1f} σ, "
-                 f"a cut that all {units} observations of a campaign without mis-sightings pass with probability "
-                 f"{1.0 - options.exclusion_false_alarm:g} (each is listed; measure those postures again if in doubt)",
-                 *notes)
+    observations = problem.observation_weights(pose_form).size
+    false_alarm = options.exclusion_false_alarm / observations  # Bonferroni: points, poses and readings alike
+    cuts = _cuts(false_alarm, pose_form)
+    fit, problem, notes = _exclusion_rounds(problem, fit, pose_form, false_alarm, cuts, options.max_iterations)
+    excluded = problem.observation_weights(pose_form) == 0.0
+    sightings = int(np.count_nonzero(excluded[:, :-LEG_COUNT]))
+    readings = int(np.count_nonzero(excluded[:, -LEG_COUNT:]))
+    if sightings or readings:
+        sighted = "row(s)' measured pose" if pose_form else "feature point(s)"
+        what = ([f"{sightings} {sighted} excluded as gross mis-sightings"] if sightings else []) + (
+            [f"{readings} reading(s) excluded as gross reading errors"] if readings else [])
+        remedy = ("check each listed reading against the posture's record (a typo, a wrong column, a value written "
+                  "twice?) and correct it on its line, or measure those postures again" if readings
+                  else "measure those postures again if in doubt")
+        notes = (f"{' and '.join(what)}: standardised residual beyond the cut ({cuts}) that all {observations} "
+                 f"observations of a campaign without gross errors pass with probability "
+                 f"{1.0 - options.exclusion_false_alarm:g}; each is listed: {remedy}", *notes)
     return fit, problem, notes
 
 
-def _exclusion_rounds(problem: _Problem, fit: _Fit, pose_form: bool, cut: float,
+def _cuts(false_alarm: float, pose_form: bool) -> str:
+    """The cut on each kind of observation's standardised residual at probability
+    ``false_alarm``, in σ, for people."""
+    from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
+
+    observed = "a row's pose" if pose_form else "a feature point"
+    return (f"{np.sqrt(chi2.isf(false_alarm, 6 if pose_form else 3)):.1f} σ for {observed}, "
+            f"{np.sqrt(chi2.isf(false_alarm, 1)):.1f} σ for a reading")
+
+
+def _exclusion_rounds(problem: _Problem, fit: _Fit, pose_form: bool, false_alarm: float, cuts: str,
                       max_iterations: int) -> tuple[_Fit, _Problem, tuple[str, ...]]:
     count = len(problem.observed)
+    log_cut = np.log(false_alarm)
+    # Before single-observation rounds (below): the fit to fall back on, and how many postures were touched.
+    fallback: tuple[_Fit, _Problem, int] | None = None
     for _ in range(_MAX_EXCLUSION_ROUNDS):
-        statistics = _standardised_residuals(problem, fit.linear, pose_form)
-        used = problem.point_weights > 0.0
-        candidates = np.where(used, statistics, 0.0)
-        worst = np.argmax(candidates, axis=1)
-        rows = np.flatnonzero(candidates[np.arange(count), worst] > cut)
+        statistics, dof = _standardised_residuals(problem, fit.linear, pose_form)
+        log_tails = _log_tail_probabilities(statistics, dof)
+        weights = problem.observation_weights(pose_form)
+        rows, worst, dropping = _worst_observations(problem, pose_form, log_tails, log_cut)
         # Bad observations bias the first fits and can push good ones beyond the cut: an
         # excluded observation that the current fit predicts within the cut comes back.
-        readmitted = ~used & (statistics <= cut)
+        readmitted = (weights == 0.0) & (log_tails >= log_cut)
         if len(rows) == 0 and not np.any(readmitted):
             return fit, problem, ()
-        weights = np.where(readmitted, 1.0, problem.point_weights)
-        if pose_form:
-            weights[rows] = 0.0
+        weights = np.where(readmitted, 1.0, weights)
+        touched = int(np.count_nonzero(np.any(weights == 0.0, axis=1) | np.isin(np.arange(count), rows)))
+        if touched <= MAX_EXCLUDED_FRACTION * count:
+            fallback = None
         else:
-            weights[rows, worst[rows]] = 0.0
-        touched = int(np.count_nonzero(np.any(weights == 0.0, axis=1)))
-        if touched > MAX_EXCLUDED_FRACTION * count:
-            return fit, problem, (
-                f"{touched} of {count} postures have observations beyond the mis-sighting cut ({np.sqrt(cut):.1f} σ): "
-                "too many for isolated mis-sightings, so no more are excluded; the model does not fit these data "
-                "(drifting sensor offsets, joint play, wrong feature-point coordinates or units?)",)
-        trial_problem = replace(problem, point_weights=weights)
+            # Too many postures for isolated gross errors: a model error, its misfit spread over
+            # the fit, or a few gross errors biasing the whole fit (a wrong reading moves its
+            # posture's pose by tens of mm, and the parameters with it), their misfit concentrated.
+            # Only the worst observation of all is excluded, while it is concentrated misfit.
+            fallback = fallback or (fit, problem, touched)
+            rows = rows[[np.argmin(log_tails[rows, worst[rows]])]]
+            if statistics[rows[0], worst[rows[0]]] < CONCENTRATED_MISFIT_SHARE * fit.linear.cost:
+                return fallback[0], fallback[1], (_too_many(fallback[2], count, cuts),)
+        weights[rows[dropping[rows]], -LEG_COUNT:] = 1.0  # see _worst_observations
+        weights[rows, worst[rows]] = 0.0
+        trial_problem = problem.with_observation_weights(weights, pose_form)
         trial = _fit(trial_problem, fit.theta, fit.rotations, fit.translations, max_iterations)
         if not trial.converged or not _determined(trial.linear):
+            if fallback is not None:  # never end with more than the fraction touched
+                fit, problem = fallback[0], fallback[1]
             return fit, problem, (
-                f"{len(rows)} more observation(s) lie beyond the mis-sighting cut ({np.sqrt(cut):.1f} σ), but without "
-                "them some parameter combination would be undetermined: they are kept; measure those postures again",)
+                f"{len(rows)} more observation(s) lie beyond the gross-error cut ({cuts}), but without them some "
+                "parameter combination would be undetermined: they are kept; measure those postures again",)
         fit, problem = trial, trial_problem
-    return fit, problem, (f"mis-sightings still found after {_MAX_EXCLUSION_ROUNDS} rounds of exclusion: "
-                          "the data may hold more bad observations than listed; measure the listed postures again",)
+    if fallback is not None:
+        return fallback[0], fallback[1], (_too_many(fallback[2], count, cuts),)
+    return fit, problem, (f"gross errors still found after {_MAX_EXCLUSION_ROUNDS} rounds of exclusion: the data "
+                          "may hold more bad observations than listed; measure the listed postures again",)
+
+
+def _worst_observations(problem: _Problem, pose_form: bool, log_tails: NDArray,
+                        log_cut: float) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+    """The observation each posture would exclude this round, from each observation's log
+    tail probability (N, M): the postures with one beyond ``log_cut``, its column (N,), and
+    whether the posture's excluded readings come back with it (N,).
+
+    The worst is the least probable under the noise model, which weighs a reading (1 dof)
+    against a point (3) or a pose (6). But an observation whose exclusion would leave its
+    posture no redundancy (a pose-form row's pose: as if the row were dropped) absorbs any
+    misfit of its posture, a wrong reading's too, and a wrong reading drags the pose the test
+    is linearised at by tens of mm, so that test cannot tell which is wrong. The posture's
+    least probable other observation beyond the cut is tried first; if the refit still finds
+    the first beyond the cut, it goes, and the readings tried come back (it and they cannot
+    all go: they pin the posture's pose).
+    """
+    used = problem.observation_weights(pose_form) > 0.0
+    dof = problem.observation_dof(pose_form)
+    wide = (np.sum(used * dof, axis=1) - 6.0)[:, None] - dof <= 0.0  # no redundancy left without it
+    candidates = np.where(used & (log_tails < log_cut), log_tails, np.inf)
+    narrow, broad = np.where(wide, np.inf, candidates), np.where(wide, candidates, np.inf)
+    postures = np.arange(len(used))
+    worst = np.argmin(candidates, axis=1)
+    tried = np.any(~used, axis=1)
+    dropping = tried & np.isfinite(np.min(broad, axis=1))
+    narrow_first = ~tried & wide[postures, worst] & np.isfinite(np.min(narrow, axis=1))
+    worst = np.where(dropping, np.argmin(broad, axis=1), np.where(narrow_first, np.argmin(narrow, axis=1), worst))
+    return np.flatnonzero(np.isfinite(candidates[postures, worst])), worst, dropping
+
+
+def _too_many(touched: int, count: int, cuts: str) -> str:
+    return (f"{touched} of {count} postures have observations beyond the gross-error cut ({cuts}): too many for "
+            "isolated mis-sightings or wrong readings, so no more are excluded; the model does not fit these data "
+            "(drifting sensor offsets, joint play, wrong feature-point coordinates or units?)")
 
 
 def _determined(linear: _Linearisation) -> bool:
     return analyse_information(_reduced_normal(linear, 0.0)[0])[1].full_rank
 
 
-def _standardised_residuals(problem: _Problem, linear: _Linearisation, pose_form: bool) -> NDArray[np.float64]:
-    """χ² of each observation's standardised residual: (N, K) per feature point, or, in
-    pose form, (N, 1) per row's pose. A used observation's residual has covariance
-    I − H (H its leverage: its own pull on the fit); an excluded one's, as a prediction,
-    I + H."""
-    reduced = _reduced_normal(linear, 0.0)[0]
-    pose_inverse = np.linalg.inv(linear.pose_normal)
-    spread = pose_inverse @ linear.coupling  # U⁻¹W: how the parameters move each pose
-    # The pose block of the inverse normal matrix: each pose's covariance, parameters' included.
-    pose_covariance = pose_inverse + spread @ np.linalg.pinv(reduced) @ np.transpose(spread, (0, 2, 1))
-    sign = np.where(problem.point_weights > 0.0, -1.0, 1.0)
+def _log_tail_probabilities(statistics: NDArray, dof: NDArray) -> NDArray[np.float64]:
+    """log P(χ²(dof) > statistic) of each statistic, 0 where dof is 0 (no test), finite
+    however far out: where scipy's tail underflows, the leading term of the upper incomplete
+    gamma function's asymptotic series (relative error O(dof/statistic), negligible there)."""
+    from scipy.special import gammaln  # imported here: slow to import (see results.flag_outliers)
+    from scipy.stats import chi2
+
+    log_tails = np.zeros(statistics.shape)
+    tested = dof > 0
+    with np.errstate(divide="ignore"):
+        log_tails[tested] = chi2.logsf(statistics[tested], dof[tested])
+    far = ~np.isfinite(log_tails)
+    half, shape = statistics[far] / 2.0, dof[far] / 2.0
+    log_tails[far] = (shape - 1.0) * np.log(half) - half - gammaln(shape)
+    return log_tails
+
+
+_UNTESTABLE = 1e-9
+"""Where a used observation's whitened residual covariance I − H has an eigenvalue below this,
+it alone pins that direction of its posture's pose: nothing else predicts it there."""
+
+
+def _standardised_residuals(problem: _Problem, linear: _Linearisation,
+                            pose_form: bool) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """χ² of each tested observation's standardised residual and its degrees of freedom, (N, M)
+    in the order of :meth:`_Problem.observation_weights`: a feature point's 3-D residual (pose
+    form: a row's whole pose, 6-D), then each reading's leg closure (1-D). A used observation's
+    whitened residual has covariance I − H (H its leverage: the share of it the fit absorbs by
+    moving its posture's pose and the parameters); an excluded one's, as a prediction, I + H. A
+    used observation is tested only in the directions the others predict (:data:`_UNTESTABLE`):
+    a reading of a posture whose points are all excluded has none."""
+    reduced, _, pose_inverse = _reduced_normal(linear, 0.0)
+    blocks = pose_inverse, pose_inverse @ linear.coupling, np.linalg.pinv(reduced)
     a, r = linear.point_jacobian, linear.point_misfits
     if pose_form:
-        # The synthetic points of a row move together: its pose (6 dof) is the observation.
-        point_information = np.einsum("nkri,nkrj->nij", a, a)
-        pose_misfit = np.linalg.solve(point_information, np.einsum("nkri,nkr->ni", a, r)[..., None])[..., 0]
-        covariance = np.linalg.inv(point_information) + sign[:, :1, None] * pose_covariance
-        return np.einsum("ni,ni->n", pose_misfit, np.linalg.solve(covariance, pose_misfit[..., None])[..., 0])[:, None]
-    leverage = np.einsum("nkri,nij,nksj->nkrs", a, pose_covariance, a)
-    covariance = np.eye(3) + sign[..., None, None] * leverage
-    return np.einsum("nkr,nkr->nk", r, np.linalg.solve(covariance, r[..., None])[..., 0])
+        # The synthetic points of a row move together: its pose (6 dof) is the observation,
+        # whitened by its information Aᵀ·A = C·Cᵀ: misfit C⁻¹·Aᵀ·r, Jacobian Cᵀ.
+        factor = np.linalg.cholesky(np.einsum("nkri,nkrj->nij", a, a))
+        misfits = np.linalg.solve(factor, np.einsum("nkri,nkr->ni", a, r)[..., None])[:, None, :, 0]
+        jacobians = np.swapaxes(factor, 1, 2)[:, None]
+    else:
+        misfits, jacobians = r, a
+    used = problem.observation_weights(pose_form) > 0.0
+    observed = _chi2(misfits, _leverage(blocks, jacobians, None), used[:, :-LEG_COUNT])
+    leverage = _leverage(blocks, linear.leg_pose_jacobian[:, :, None], linear.leg_parameter_jacobian[:, :, None])
+    readings = _chi2(linear.leg_misfits[..., None], leverage, used[:, -LEG_COUNT:])
+    return np.concatenate((observed[0], readings[0]), axis=1), np.concatenate((observed[1], readings[1]), axis=1)
+
+
+def _leverage(blocks: tuple[NDArray, NDArray, NDArray], pose_jacobian: NDArray,
+              parameter_jacobian: NDArray | None) -> NDArray[np.float64]:
+    """H (N, M, d, d) of observations with whitened Jacobians (N, M, d, 6) on their posture's
+    pose and (N, M, d, p) on the parameters (None: none of their own), from ``blocks`` = (U⁻¹,
+    U⁻¹W, S⁻¹) of the normal equations: [a b]·(inverse normal matrix)·[a b]ᵀ, which by blocks
+    is a·U⁻¹·aᵀ + c·S⁻¹·cᵀ with c = b − a·U⁻¹W, the observation's sensitivity to the
+    parameters once its pose follows them."""
+    pose_inverse, spread, reduced_inverse = blocks
+    through_parameters = -np.einsum("nmdi,nip->nmdp", pose_jacobian, spread)
+    if parameter_jacobian is not None:
+        through_parameters += parameter_jacobian
+    return (np.einsum("nmdi,nij,nmej->nmde", pose_jacobian, pose_inverse, pose_jacobian)
+            + np.einsum("nmdp,nmep->nmde", through_parameters @ reduced_inverse, through_parameters))
+
+
+def _chi2(misfits: NDArray, leverage: NDArray, used: NDArray) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """(N, M) χ² of whitened misfits (N, M, d) with covariance I − H where ``used``, I + H where
+    not (H: ``leverage``), and its degrees of freedom: d, less a used one's directions that are
+    :data:`_UNTESTABLE`."""
+    sign = np.where(used, -1.0, 1.0)[..., None, None]
+    variances, directions = np.linalg.eigh(np.eye(misfits.shape[-1]) + sign * leverage)
+    projected = np.einsum("nmde,nmd->nme", directions, misfits)
+    tested = variances > _UNTESTABLE
+    chi2 = np.sum(np.where(tested, projected**2 / np.where(tested, variances, 1.0), 0.0), axis=-1)
+    return chi2, np.count_nonzero(tested, axis=-1)
 
 
 def _excluded_observations(problem: _Problem, linear: _Linearisation, pose_form: bool,
                            data: MeasurementData) -> tuple[ExcludedObservation, ...]:
-    excluded = problem.point_weights == 0.0
+    excluded = problem.observation_weights(pose_form) == 0.0
     if not np.any(excluded):
         return ()
-    sigmas = np.sqrt(_standardised_residuals(problem, linear, pose_form))
+    sigmas = np.sqrt(_standardised_residuals(problem, linear, pose_form)[0])
     distances = np.linalg.norm(problem.in_mm(linear.point_misfits), axis=2)
-    if pose_form:
-        return tuple(ExcludedObservation(int(data.lines[row]), int(row), 0, float(np.max(distances[row])),
-                                         float(sigmas[row, 0])) for row in np.flatnonzero(excluded[:, 0]))
-    return tuple(ExcludedObservation(int(data.lines[row]), int(row), int(point) + 1, float(distances[row, point]),
-                                     float(sigmas[row, point])) for row, point in zip(*np.nonzero(excluded)))
+    reading_errors = np.abs(linear.leg_misfits) * problem.reading_sigma
+    first_reading = excluded.shape[1] - LEG_COUNT
+    found = []
+    for row, column in zip(*np.nonzero(excluded)):
+        line, sigma = int(data.lines[row]), float(sigmas[row, column])
+        if column >= first_reading:
+            leg = column - first_reading
+            found.append(ExcludedObservation(line, int(row), 0, float(reading_errors[row, leg]), sigma, int(leg) + 1))
+        elif pose_form:  # its distance: the farthest of the feature points its pose implies
+            found.append(ExcludedObservation(line, int(row), 0, float(np.max(distances[row])), sigma))
+        else:
+            found.append(ExcludedObservation(line, int(row), int(column) + 1, float(distances[row, column]), sigma))
+    return tuple(found)
 
 
 def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translations: NDArray) -> _Linearisation:
@@ -430,7 +588,7 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
     units = vectors / lengths[:, :, None]
     gains = 1.0 + (parameters.scale_errors if parameters.scale_errors is not None else np.zeros(LEG_COUNT))
     offsets = parameters.zero_lengths_mm + (0.0 if drift is None else np.outer(problem.times - 1.0, drift))
-    leg_residuals = (lengths - offsets - gains * problem.readings) / problem.reading_sigma
+    leg_misfits = (lengths - offsets - gains * problem.readings) / problem.reading_sigma
     leg_pose_jacobian = np.concatenate((units, np.cross(rotated_joints, units)), axis=2) / problem.reading_sigma
 
     size = len(theta)
@@ -445,12 +603,16 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
         if drift is not None:
             leg_parameter_jacobian[:, leg, problem.structural_size + leg] = 1.0 - problem.times
     leg_parameter_jacobian /= problem.reading_sigma
+    # An excluded reading drops out as an excluded point does: weight 0 on residual and Jacobians.
+    leg_residuals = leg_misfits * problem.reading_weights
+    used_pose_jacobian = leg_pose_jacobian * problem.reading_weights[:, :, None]
+    used_parameter_jacobian = leg_parameter_jacobian * problem.reading_weights[:, :, None]
 
     pose_normal = np.einsum("nkri,nkrj->nij", point_jacobian, point_jacobian) + np.einsum(
-        "nli,nlj->nij", leg_pose_jacobian, leg_pose_jacobian)
-    coupling = np.einsum("nli,nlp->nip", leg_pose_jacobian, leg_parameter_jacobian)
-    parameter_normal = np.einsum("nlp,nlq->pq", leg_parameter_jacobian, leg_parameter_jacobian)
-    parameter_gradient = np.einsum("nlp,nl->p", leg_parameter_jacobian, leg_residuals)
+        "nli,nlj->nij", used_pose_jacobian, used_pose_jacobian)
+    coupling = np.einsum("nli,nlp->nip", used_pose_jacobian, used_parameter_jacobian)
+    parameter_normal = np.einsum("nlp,nlq->pq", used_parameter_jacobian, used_parameter_jacobian)
+    parameter_gradient = np.einsum("nlp,nl->p", used_parameter_jacobian, leg_residuals)
     prior_residuals = np.zeros(0)
     if targets is not None:
         # ∂(T·q_k + R)/∂q_k = T: each feature point's columns, and its prior (q_k − q_k⁰)/σ_t.
@@ -471,12 +633,15 @@ def _linearise(problem: _Problem, theta: NDArray, rotations: NDArray, translatio
         point_misfits=point_misfits,
         point_jacobian=all_point_jacobian,
         point_residuals=point_residuals,
+        leg_misfits=leg_misfits,
+        leg_pose_jacobian=leg_pose_jacobian,
+        leg_parameter_jacobian=leg_parameter_jacobian,
         leg_residuals=leg_residuals,
         pose_normal=pose_normal,
         coupling=coupling,
         parameter_normal=parameter_normal,
         pose_gradient=np.einsum("nkri,nkr->ni", point_jacobian, point_residuals)
-        + np.einsum("nli,nl->ni", leg_pose_jacobian, leg_residuals),
+        + np.einsum("nli,nl->ni", used_pose_jacobian, leg_residuals),
         parameter_gradient=parameter_gradient,
         prior_residuals=prior_residuals,
     )

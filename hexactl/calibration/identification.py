@@ -1,8 +1,8 @@
 """Identification entry point: pick the method, run it, describe the result for the file.
 
 ``auto`` runs ``full`` (maximum likelihood from everything measured, gross mis-sightings
-excluded), with the six sensor scale errors and each sensor offset's drift over the
-campaign when the data show them (likelihood-ratio tests). Its residuals are then tested against the noise model: if they are too large
+and wrong readings excluded), with the six sensor scale errors and each sensor offset's
+drift over the campaign when the data show them (likelihood-ratio tests). Its residuals are then tested against the noise model: if they are too large
 (χ²/dof above ``consistency_limit``) while every leg has enough locked postures and
 ``leglock``'s fit is consistent, the free legs' readings are what disagrees with the
 measured poses (a drifting sensor offset, joint play). ``leglock``, which trusts only each
@@ -25,7 +25,7 @@ from hexactl.calibration.full import identify_full
 from hexactl.calibration.leglock import identify_leglock, too_few_locked
 from hexactl.calibration.paper import identify_paper
 from hexactl.calibration.parameters import calibrated_geometry
-from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method
+from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method, excluded_summary
 from hexactl.kinematics.geometry import CalibrationInfo, Geometry, geometry_from_mapping
 from hexactl.kinematics.inverse import LEG_COUNT
 
@@ -65,7 +65,7 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
     if options.method is not Method.AUTO:
         return _METHODS[options.method](data, nominal, options)
     full, extras_note = _full_with_significant_extras(data, nominal, options)
-    excluded = f"; {len(full.excluded)} mis-sighted observation(s) excluded" if full.excluded else ""
+    excluded = f"; {excluded_summary(full.excluded)}" if full.excluded else ""
     consistent = full.ok and full.chi2_per_dof <= options.consistency_limit
     if consistent:
         return replace(full, reason=f"auto chose full: every posture's pose and all six readings are used at once "
@@ -165,7 +165,7 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         zero_lengths_std_mm=_six(std.zero_lengths_mm),
         sensor_scale_errors_std=None if std.scale_errors is None else _six(std.scale_errors),
         parameter_covariance=tuple(tuple(float(v) for v in row) for row in result.covariance),
-        notes=result.reason + "".join(f"; excluded as a mis-sighting: {observation}" for observation in result.excluded)
+        notes=result.reason + "".join(f"; excluded as a {observation.kind}: {observation}" for observation in result.excluded)
         + "".join(f"; {sentence}" for sentence in extra_estimates(result)),
     )
 

@@ -66,7 +66,7 @@ class IdentificationOptions:
     do not match the noise model. ``outlier_probability``: a posture whose residual is
     less likely than this under the noise model is flagged. ``exclusion_false_alarm``: the
     probability that ``full`` excludes any observation of a campaign that has no
-    mis-sighting (0 disables the exclusion).
+    gross error, mis-sighting or wrong reading (0 disables the exclusion).
     """
 
     method: Method = Method.AUTO
@@ -107,12 +107,14 @@ class PostureResiduals:
 
 @dataclass(frozen=True, slots=True)
 class ExcludedObservation:
-    """An observation ``full`` left out as a gross mis-sighting.
+    """An observation ``full`` left out as a gross error: a mis-sighting or a wrong reading.
 
-    ``line`` its source line, ``row`` its index in the data; ``point`` the feature point
-    (1-based), or 0 for a pose-form row's whole pose; ``residual_mm`` how far the final fit
-    puts it from its measured value (pose form: the farthest implied feature point);
-    ``sigmas`` its standardised residual (the Mahalanobis length, leverage included).
+    ``line`` its source line, ``row`` its index in the data. Which observation: ``leg`` the
+    leg (1–6) whose sensor reading it is, else 0; ``point`` the feature point (1-based), else
+    0; both 0 for a pose-form row's whole pose. ``residual_mm`` how far the final fit puts it
+    from its measured value (pose form: the farthest implied feature point; a reading: the
+    leg length the fit implies against the one the reading gives); ``sigmas`` its
+    standardised residual (the Mahalanobis length, leverage included).
     """
 
     line: int
@@ -120,10 +122,25 @@ class ExcludedObservation:
     point: int
     residual_mm: float
     sigmas: float
+    leg: int = 0
+
+    @property
+    def kind(self) -> str:
+        """What its exclusion takes it for, for people: "mis-sighting" or "reading error"."""
+        return "reading error" if self.leg else "mis-sighting"
 
     def __str__(self) -> str:
-        what = f"feature point p{self.point}" if self.point else "measured pose"
+        what = f"leg {self.leg}'s reading" if self.leg else f"feature point p{self.point}" if self.point else "measured pose"
         return f"line {self.line}: {what} off by {self.residual_mm:.3f} mm ({self.sigmas:.1f} σ)"
+
+
+def excluded_summary(excluded: tuple[ExcludedObservation, ...]) -> str:
+    """How many observations of each kind ``full`` excluded, for people ("" for none)."""
+    sightings = sum(1 for observation in excluded if not observation.leg)
+    readings = len(excluded) - sightings
+    counts = ([f"{sightings} mis-sighted observation(s)"] if sightings else []) + (
+        [f"{readings} wrong reading(s)"] if readings else [])
+    return f"{' and '.join(counts)} excluded" if counts else ""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -144,7 +161,8 @@ class IdentificationResult:
     ``predicted``: the pose error the parameter uncertainty alone leaves on the paper's
     test motions (the Cramér–Rao prediction when the method is ``full``);
     ``reason``: why this method (auto's choice explained); ``warnings``: for people;
-    ``excluded``: the observations ``full`` left out as mis-sightings (empty for the others);
+    ``excluded``: the observations ``full`` left out as gross errors, mis-sightings and wrong
+    readings (empty for the others);
     ``offset_drift_mm`` and ``feature_points_mm``: what ``full`` estimated besides the
     structural parameters, when it did (``covariance`` is the structural parameters'
     marginal: their uncertainty is in it).

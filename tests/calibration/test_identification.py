@@ -104,13 +104,20 @@ def test_too_few_postures_for_full(nominal, leglock_campaign):
 
 
 def test_a_bad_posture_is_excluded_or_with_exclusion_off_flagged(nominal, leglock_campaign):
+    """The whole target set of one posture shifted (distances still fine). Two of its readings
+    explain that as well as its three points do (a leg's motion moves every point), with fewer
+    degrees of freedom, so what goes may be either: but only on that line, and the calibration
+    stays the clean data's."""
     data = leglock_campaign.data
     points = np.array(data.points_mm)
-    points[7] += np.array([1.5, -1.0, 1.2])  # the whole target set shifted: distances still fine
+    points[7] += np.array([1.5, -1.0, 1.2])
     shifted = type(data)(data.locked_leg, data.readings_mm, data.lines, points_mm=points)
     result = identify(shifted, nominal, IdentificationOptions(method=Method.FULL))
     line = int(data.lines[7])
-    assert sorted((observation.line, observation.point) for observation in result.excluded) == [(line, 1), (line, 2), (line, 3)]
-    assert line not in result.residuals.outlier_lines and result.postures_used == len(data) - 1
+    assert len(result.excluded) >= 2 and {observation.line for observation in result.excluded} == {line}
+    clean = identify(data, nominal, IdentificationOptions(method=Method.FULL))
+    std = np.sqrt(np.diag(clean.covariance))
+    assert np.max(np.abs(result.parameters.to_vector() - clean.parameters.to_vector()) / std) < 1.0
+    assert result.chi2_per_dof < 1.3
     plain = identify(shifted, nominal, IdentificationOptions(method=Method.FULL, exclusion_false_alarm=0.0))
     assert plain.excluded == () and line in plain.residuals.outlier_lines

@@ -274,7 +274,7 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     for warning in result.warnings:
         print(f"warning: {warning}")
     for observation in result.excluded:
-        print(f"excluded as a mis-sighting: {observation}")
+        print(f"excluded as a {observation.kind}: {observation}")
 
 
 def run_plan(arguments: argparse.Namespace) -> int:

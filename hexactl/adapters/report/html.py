@@ -134,7 +134,7 @@ def _summary(result: IdentificationResult) -> str:
 def _warnings(result: IdentificationResult, excluded: Sequence[RowProblem]) -> str:
     items = [f"<li>{_e(w)}</li>" for w in result.warnings]
     items += [f"<li>excluded: {_e(str(problem))}</li>" for problem in excluded]
-    items += [f"<li>excluded as a mis-sighting: {_e(str(observation))}</li>" for observation in result.excluded]
+    items += [f"<li>excluded as a {observation.kind}: {_e(str(observation))}</li>" for observation in result.excluded]
     return f"<div class='warn'><h3>Warnings</h3><ul>{''.join(items)}</ul></div>" if items else ""
 
 

@@ -347,7 +347,7 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
     for warning in result.warnings:
         progress.say(f"warning: {warning}")
     for observation in result.excluded:
-        progress.say(f"excluded as a mis-sighting: {observation}")
+        progress.say(f"excluded as a {observation.kind}: {observation}")
     path = store.path(CALIBRATION_FILE)
     calibrated = _saved_calibration(path, measured.sha256)
     if calibrated is None:
