@@ -46,9 +46,11 @@ class SupervisionConfig(_Frozen):
         default=0.05, gt=0, description="set-points the actuators have not applied for this long mean a broken link"
     )
     following_error_mm: Number = Field(
-        default=5.0, gt=0,
+        default=15.0, gt=0,
         description="an enabled actuator farther than this from the set-point it reports applied, for "
-        "following_error_s, is jammed, overloaded or slipping (the firmware's own limit is a last resort)",
+        "following_error_s, is jammed, overloaded or slipping (the firmware's own limit is a last resort). "
+        "Above what a healthy drive lags at full speed: the protocol's actuators (400 mm/s, 10 m/s²) brake "
+        "toward their target, so they trail it by v²/2a, 8 mm at 400 mm/s",
     )
     following_error_s: Number = Field(
         default=0.1, ge=0, description="how long the following error may exceed following_error_mm before FAULT"

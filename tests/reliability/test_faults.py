@@ -27,10 +27,11 @@ from tests.reliability.support import (
 MOVE_S = 2.0  # long enough that the fault always strikes mid-motion
 
 
-def fault_during_motion(client: HexactlClient, inject: Callable[[], None], z_mm: float = 60.0) -> dict:
+def fault_during_motion(client: HexactlClient, inject: Callable[[], None], z_mm: float = 60.0,
+                        duration_s: float = MOVE_S) -> dict:
     """Recover, start a move, ``inject`` while moving; the telemetry record once FAULT is latched."""
     recover(client)
-    client.call("move", pose=[0, 0, z_mm, 0, 0, 0], duration=MOVE_S)
+    client.call("move", pose=[0, 0, z_mm, 0, 0, 0], duration=duration_s)
     wait_for(lambda: status(client)["motion"] == "moving", "the move to start")
     inject()
     return wait_for(lambda: (record := status(client))["state"] == "fault" and record, "the fault to latch")
@@ -102,11 +103,12 @@ def test_actuator_fault_stays_until_its_cause_is_gone(client, actuators, service
 def test_a_jammed_leg_is_a_following_error_before_the_drive_notices(client, actuators, service) -> None:
     """Leg 2's drive stops moving mid-motion: the loop latches ``following_error`` on leg 2
     once it is more than the limit from the set-point it applied, for longer than allowed;
-    before that, the move went on and was reported done with the leg 19 mm off."""
+    before that, the move went on and was reported done with the leg 19 mm off. Slow enough
+    (about 15 mm/s a leg) that the drive's own 25 mm limit comes well after the loop's."""
     supervision = service.controller.config.supervision
 
     def scenario() -> None:
-        record = fault_during_motion(client, lambda: setattr(actuators[1].inject, "stall", True))
+        record = fault_during_motion(client, lambda: setattr(actuators[1].inject, "stall", True), duration_s=6.0)
         assert codes(record)[0] == ("following_error", 2), record["faults"]
         assert f"(limit {supervision.following_error_mm:g} mm): jammed" in record["faults"][0]["message"]
         assert_held(client)
