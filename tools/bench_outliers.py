@@ -27,6 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.calibration.campaign import CampaignDesign
@@ -45,13 +46,18 @@ MIS_SIGHTED_ROWS = 4
 MISTYPED_ROWS = 4
 
 
+def _rows_to_corrupt(campaign: OfflineCampaign, seed: int, rows: int
+                     ) -> tuple[np.random.Generator, MeasurementData, NDArray[np.intp]]:
+    """A generator seeded with ``seed``, the campaign's data and ``rows`` distinct rows of it drawn by it."""
+    rng = np.random.default_rng(seed)
+    return rng, campaign.data, rng.choice(len(campaign.data), size=rows, replace=False)
+
+
 def mis_sight(campaign: OfflineCampaign, seed: int, rows: int = MIS_SIGHTED_ROWS) -> tuple[MeasurementData, list[tuple[int, int]]]:
     """The campaign's rows with ``rows`` feature points each moved 5–20 mm; every second one
     along the platform normal (its true z axis). Returns the data and (line, point) moved."""
-    rng = np.random.default_rng(1000 + seed)
-    data = campaign.data
+    rng, data, chosen = _rows_to_corrupt(campaign, 1000 + seed, rows)
     points = np.array(data.points_mm)
-    chosen = rng.choice(len(data), size=rows, replace=False)
     moved = []
     for number, row in enumerate(chosen):
         point = int(rng.integers(points.shape[1]))
@@ -71,10 +77,8 @@ def mistype(campaign: OfflineCampaign, seed: int, stroke_mm: tuple[float, float]
     """The campaign's rows with ``rows`` readings each off by 5–60 mm, staying inside
     ``stroke_mm``, alternately in a free leg and in the locked one (a free leg in a free
     posture). Returns the data and (line, leg 1–6) changed."""
-    rng = np.random.default_rng(2000 + seed)
-    data = campaign.data
+    rng, data, chosen = _rows_to_corrupt(campaign, 2000 + seed, rows)
     readings = np.array(data.readings_mm)
-    chosen = rng.choice(len(data), size=rows, replace=False)
     changed = []
     for number, row in enumerate(chosen):
         locked = int(data.locked_leg[row])
