@@ -8,7 +8,9 @@ const $ = (id) => document.getElementById(id);
 const RECONNECT_MS = 1000;
 const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
-const STALE_MS = 2000;
+const STALE_MS = 2000;        // no telemetry for longer: nothing on the page is shown as current
+const TICK_MS = 250;          // the staleness check and the "no data for N s" count
+const pageStartedAt = performance.now();
 
 const state = {
   ws: null,
@@ -25,6 +27,15 @@ const state = {
   lastTelemetryAt: 0,
   latencies: new Array(LATENCY_RING),
   latencyCount: 0,
+  loss: null,               // what the page shows as lost (dataLoss()); null while live
+};
+
+// The E-stop's confirmation: a press is confirmed only by an ok reply to an `estop`.
+const estopState = {
+  presses: 0,
+  awaiting: 0,              // presses sent whose reply has not come
+  warning: false,           // "E-STOP NOT CONFIRMED" on screen
+  events: [],               // {press, what, detail, t}: for the tests and tools (window.hexactlDashboard)
 };
 
 // ---------------- messages log ----------------
@@ -95,17 +106,81 @@ function failPending(reason) {
 
 // ---------------- E-stop ----------------
 const estopButton = $('estop');
-async function estop() {
+const estopWarning = $('estop-warning');
+
+function estopEvent(press, what, detail = '') {
+  estopState.events.push({ press, what, detail, t: performance.now() });
+  if (estopState.events.length > 200) estopState.events.splice(0, estopState.events.length - 200);
+}
+
+/** "E-STOP NOT CONFIRMED — use the hardware E-stop" until an ok reply to an estop. */
+function showEstopWarning(press, detail) {
+  setText('estop-warning-detail', detail);
+  if (!estopState.warning) {
+    estopState.warning = true;
+    estopWarning.hidden = false;
+    estopButton.classList.add('unconfirmed');
+    updateDismiss();
+  }
+  estopEvent(press, 'warning', detail);
+}
+
+function clearEstopWarning(press, why) {
+  if (!estopState.warning) return;
+  estopState.warning = false;
+  estopWarning.hidden = true;
+  estopButton.classList.remove('unconfirmed');
+  estopEvent(press, 'cleared', why);
+}
+
+function updateDismiss() {
+  // dismissing without a confirmation is offered only once live data show the platform again
+  const button = $('estop-warning-dismiss');
+  const live = state.loss === null && state.record !== null;
+  button.disabled = !live;
+  button.title = live ? 'The page has live data again: check the state shown, then dismiss'
+    : 'Available once live data return';
+}
+$('estop-warning-dismiss').addEventListener('click', () => clearEstopWarning(0, 'dismissed by the operator'));
+
+const LOSS_SHORT = {
+  server: 'the page has no connection to the dashboard server',
+  service: 'the dashboard server has no telemetry from the hexactl service',
+  telemetry: 'no telemetry has reached the page',
+  starting: 'no telemetry has reached the page yet',
+};
+
+function estop() {
+  // first on the wire: nothing the page does for the display comes before the request
+  const replied = state.wsOpen ? send('estop') : null;
+  const loss = dataLoss(performance.now());
+  const press = ++estopState.presses;
+  estopEvent(press, 'pressed', loss ?? 'live');
+  if (replied) estopEvent(press, 'sent');
   controls.releaseJog(false);
   estopButton.classList.remove('sent');
   void estopButton.offsetWidth;   // restart the flash animation
   estopButton.classList.add('sent');
-  if (!state.wsOpen) {
+  if (!replied) {
     logMessage('error', 'estop', 'NOT SENT', 'not connected to the dashboard server: use the hardware E-stop');
+    showEstopWarning(press, 'NOT SENT: the page has no connection to the dashboard server, so no button can reach the service.');
     return;
   }
-  const reply = await send('estop');
-  if (reply.ok) logMessage('info', 'estop', 'ok', reply.message ?? 'emergency stop latched');
+  // no live data: whether the service gets it is unknown, so say so now, not after the request's timeout
+  if (loss !== null) showEstopWarning(press, `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so the service may not be running.`);
+  estopState.awaiting += 1;
+  replied.then((reply) => {
+    estopState.awaiting -= 1;
+    if (reply.ok) {
+      estopEvent(press, 'reply-ok');
+      logMessage('info', 'estop', 'ok', reply.message ?? 'emergency stop latched');
+      clearEstopWarning(press, 'confirmed by the service');
+    } else {
+      const code = reply.error?.code ?? 'error';
+      estopEvent(press, 'reply-failed', code);
+      showEstopWarning(press, `The service did not confirm it: ${code}: ${reply.error?.message ?? ''}`);
+    }
+  });
 }
 estopButton.addEventListener('click', estop);
 window.addEventListener('keydown', (ev) => {
@@ -332,6 +407,7 @@ function frame(now) {
     updateReadouts(r);
     controls.onRecord(r);
     updateLatencySummary(now);
+    applyLiveness(performance.now());   // a record drawn while no data are live is not shown as current
   }
   plots.maybeRedraw(now);
   if (plots.dirty && !plots.paused && plotTimer === null) {
@@ -379,6 +455,7 @@ function handleMessage(ev) {
     case 'link':
       state.link = { connected: msg.connected === true, message: typeof msg.message === 'string' ? msg.message : '' };
       updateConnection();
+      applyLiveness(performance.now());
       controls.onLink(state.link.connected);
       if (!state.link.connected) controls.releaseJog(false);
       break;
@@ -411,6 +488,7 @@ function connect() {
     state.wsOpen = true;
     state.link = null;
     updateConnection();
+    applyLiveness(performance.now());
   });
   ws.addEventListener('message', handleMessage);
   ws.addEventListener('close', (ev) => {
@@ -422,19 +500,99 @@ function connect() {
       ? `connection to the dashboard server lost (code ${ev.code}${ev.reason ? `: ${ev.reason}` : ''}); reconnecting every 1 s`
       : 'the dashboard server does not answer; retrying every 1 s';
     updateConnection();
+    applyLiveness(performance.now());
     controls.onDisconnect();
     failPending('the connection to the dashboard server closed before the reply');
     setTimeout(connect, RECONNECT_MS);
   });
 }
 
-// stale telemetry: say so rather than show old numbers as current
-setInterval(() => {
-  if (!state.wsOpen || !state.record) return;
-  const stale = performance.now() - state.lastTelemetryAt > STALE_MS;
-  document.body.classList.toggle('stale', stale);
-  if (stale) setText('loop-summary', `telemetry stale: none for ${((performance.now() - state.lastTelemetryAt) / 1000).toFixed(0)} s`);
-}, 500);
+// ---------------- no live data: never show the last state as current ----------------
+/**
+ * What the page has lost, or null while its telemetry is live:
+ * 'server' (the WebSocket to the dashboard server is closed), 'service' (the dashboard server
+ * says it has no telemetry from the service), 'telemetry' (none reached the page for STALE_MS),
+ * 'starting' (none yet since the page opened; shown as lost after STALE_MS).
+ */
+function dataLoss(now) {
+  const fresh = state.record !== null && now - state.lastTelemetryAt <= STALE_MS;
+  if (state.wsOpen && state.link?.connected !== false && fresh) return null;
+  if (!state.wsOpen) return state.record === null && now - pageStartedAt <= STALE_MS ? 'starting' : 'server';
+  if (state.link && !state.link.connected) return 'service';
+  return state.record === null && now - pageStartedAt <= STALE_MS ? 'starting' : 'telemetry';
+}
+
+function noDataFor(now) {
+  const since = state.record !== null ? state.lastTelemetryAt : pageStartedAt;
+  return `no data for ${Math.max(0, Math.floor((now - since) / 1000))} s`;
+}
+
+const dataLost = $('data-lost');
+const LOSS_TEXT = {
+  server: 'The page has lost the dashboard server: nothing on it is current, and no button of it, E-STOP included, can reach the service.',
+  service: "The dashboard server has no telemetry from the hexactl service: the service may have stopped, or its telemetry stalled. The page's E-STOP is still sent, but may not be carried out.",
+  telemetry: "No telemetry from the hexactl service has reached the page: the service, or the dashboard's link to it, may have stopped. The page's E-STOP is still sent, but may not be carried out.",
+};
+const LOSS_TODO = {
+  server: 'If the platform may be moving, use the HARDWARE E-STOP. The page reconnects by itself every 1 s.',
+  service: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when telemetry returns.',
+  telemetry: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when telemetry returns.',
+};
+
+/** Live: the readouts as drawn. No live data: state and motion UNKNOWN, the banner, the rest greyed. */
+function applyLiveness(now) {
+  const loss = dataLoss(now);
+  const was = state.loss;
+  state.loss = loss;
+  const lost = loss !== null && loss !== 'starting';
+  if (loss !== was) {
+    document.body.classList.toggle('stale', lost);
+    document.body.dataset.live = loss === null ? 'true' : 'false';
+    document.body.dataset.loss = loss ?? '';
+    dataLost.hidden = !lost;
+    if (lost) {
+      setText('data-lost-what', LOSS_TEXT[loss]);
+      setText('data-lost-do', LOSS_TODO[loss]);
+    }
+    updateDismiss();
+    if (loss === null) {
+      // live again: redraw every readout from the newest record
+      for (const id of ['state', 'motion']) $(id).title = '';
+      state.newRecord = state.record !== null;
+      schedule();
+    }
+  }
+  // an E-stop sent while live whose reply has not come when the data are lost: not confirmed
+  if (loss !== null && estopState.awaiting > 0 && !estopState.warning) {
+    showEstopWarning(0, `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so the service may not be running.`);
+  }
+  if (!lost) return;
+  const age = noDataFor(now);
+  const r = state.record;
+  for (const [id, key] of [['state', 'state'], ['motion', 'motion']]) {
+    setText(id, 'UNKNOWN');
+    const el = $(id);
+    if (el.className !== 'pill pill-unknown') el.className = 'pill pill-unknown';
+    el.title = `${age}${r && typeof r[key] === 'string' ? `; last received: ${r[key]}` : ''}`;
+  }
+  setText('data-age', age);
+  setText('data-lost-title', `NO LIVE DATA: STATE UNKNOWN (${age})`);
+  setText('telemetry-stale', `${age}: the values below are the last received, not the platform now`);
+  setText('loop-summary', 'no data');
+  setText('latency-summary', 'no data');
+  const hud = [`NO LIVE DATA: ${age}`];
+  if (r && Array.isArray(r.pose_command)) hud.push(`last command received ${fmtPose(r.pose_command, 2)}`);
+  hud.push('state, motion, goal and time to go: unknown');
+  setText('view3d-hud', hud.join('\n'));
+}
+
+setInterval(() => applyLiveness(performance.now()), TICK_MS);
+
+// the banners sit between the header and the panels: the layout moves down by their height
+const alarms = $('alarms');
+new ResizeObserver(() => {
+  document.documentElement.style.setProperty('--alarms-h', `${alarms.offsetHeight}px`);
+}).observe(alarms);
 
 window.hexactlDashboard = {
   legLengths: () => view.legLengths(),
@@ -442,8 +600,14 @@ window.hexactlDashboard = {
   get connected() { return state.wsOpen && state.link !== null && state.link.connected === true; },
   get record() { return state.record; },
   get geometry() { return state.geometry; },
+  /** null while live telemetry is shown, else 'server', 'service', 'telemetry' or 'starting'. */
+  get dataLoss() { return state.loss; },
+  /** The E-stop presses' events in order: {press, what ('pressed', 'sent', 'warning', 'reply-ok', 'reply-failed', 'cleared'), detail}. */
+  estopEvents: () => estopState.events.map((e) => ({ ...e })),
+  get estopWarning() { return estopState.warning; },
   send,
 };
 
 updateConnection();
+applyLiveness(performance.now());
 connect();
