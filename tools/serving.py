@@ -13,6 +13,7 @@ import functools
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -187,6 +188,13 @@ def terminate(served: Served) -> Shutdown:
     seconds = time.monotonic() - started
     served.wait(HANG_S)
     return Shutdown(exit_status, seconds, tuple(endpoints_in_use(served.api, served.telemetry)))
+
+
+def free_port() -> int:
+    """A TCP port on the loopback that nothing listens on now (the kernel's pick)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
 
 
 def endpoints_in_use(*endpoints: str) -> list[str]:

@@ -12,7 +12,6 @@ import functools
 import json
 import os
 import signal
-import socket
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -29,18 +28,12 @@ from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
 from tests.reliability.support import enable, tolerating_stalls
-from tools.serving import serve, wait_until
+from tools.serving import free_port, serve, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 SCREENSHOTS = ROOT / "docs" / "images"
 WAIT_S = 60.0
 wait_for = functools.partial(wait_until, timeout_s=WAIT_S)
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def screenshot(driver, name: str, showing: str | None = None) -> None:  # noqa: ANN001

@@ -15,8 +15,10 @@ import functools
 import json
 import re
 import signal
-import socket
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 from urllib.error import URLError
 from urllib.request import urlopen
 
@@ -27,16 +29,11 @@ from selenium.webdriver.common.keys import Keys
 from hexactl.adapters.api.client import HexactlClient
 from tests.reliability.support import enable
 from tools.browser import dashboard, headless_chromium
-from tools.serving import serve, wait_until
+from tools.serving import Served, free_port, serve, wait_until
 
 WAIT_S = 60.0
 wait_for = functools.partial(wait_until, timeout_s=WAIT_S)
 
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 GREEN_BACKGROUND = "rgb(20, 83, 45)"  # .pill.st-enabled
 MARGIN_GREEN = "rgb(134, 239, 172)"  # td.m-ok
@@ -149,32 +146,47 @@ def counting_up(driver, page: dict) -> None:  # noqa: ANN001
     assert later["state"] == "UNKNOWN" and later["banner_shown"], later
 
 
-def test_a_killed_service_shows_state_unknown_and_the_banner_until_telemetry_returns(tmp_path) -> None:
+@contextmanager
+def page_of_a_dashboard() -> Iterator[tuple[Any, Any, str, str]]:
+    """A headless page, and a dashboard of its own (``hexactl dashboard``) for a service on
+    free API and telemetry ports: (driver, dashboard, api, telemetry)."""
     api, telemetry = f"tcp://127.0.0.1:{free_port()}", f"tcp://127.0.0.1:{free_port()}"
     driver = headless_chromium()
     try:
         with dashboard(api, telemetry) as board:
-            with serve(tmp_path, api=api, telemetry=telemetry) as served, \
-                    HexactlClient(api, timeout_s=30.0) as client:
-                driver.get(board.url)
-                wait_for(lambda: live(driver), "live data on the page", seen=lambda: shown(driver))
-                showing_enabled_and_moving(driver, client)
-                served.process.send_signal(signal.SIGKILL)
-                served.process.wait()
-                page_when(driver, lambda p: p["state"] == "UNKNOWN", "the page saying the state is unknown")
-                page = page_when(driver, lambda p: p["banner_shown"], "the banner")
-                assert page["loss"] in ("service", "telemetry"), page  # the dashboard server still answers
-                assert_no_live_data_shown(page, "hexactl service")
-                assert "lost the dashboard server" not in page["banner"], page  # the service, not the server
-                counting_up(driver, page)
-            with serve(tmp_path, api=api, telemetry=telemetry):
-                page = page_when(driver, lambda p: p["loss"] is None and p["state"] == "disabled",
-                                 "live data again: the restarted service's state")
-                assert not page["banner_shown"] and not page["stale"] and not page["age_shown"], page
-                assert "pill-unknown" not in page["state_class"] and page["loop"] != "no data", page
-                assert not page["hud"].startswith("NO LIVE DATA"), page
+            yield driver, board, api, telemetry
     finally:
         driver.quit()
+
+
+@contextmanager
+def service_shown(tmp_path: Path, driver, board, api: str, telemetry: str  # noqa: ANN001
+                  ) -> Iterator[tuple[Served, HexactlClient]]:
+    """A service on ``api`` and ``telemetry``, its client, and the page showing its live data."""
+    with serve(tmp_path, api=api, telemetry=telemetry) as served, HexactlClient(api, timeout_s=30.0) as client:
+        driver.get(board.url)
+        wait_for(lambda: live(driver), "live data on the page", seen=lambda: shown(driver))
+        yield served, client
+
+
+def test_a_killed_service_shows_state_unknown_and_the_banner_until_telemetry_returns(tmp_path) -> None:
+    with page_of_a_dashboard() as (driver, board, api, telemetry):
+        with service_shown(tmp_path, driver, board, api, telemetry) as (served, client):
+            showing_enabled_and_moving(driver, client)
+            served.process.send_signal(signal.SIGKILL)
+            served.process.wait()
+            page_when(driver, lambda p: p["state"] == "UNKNOWN", "the page saying the state is unknown")
+            page = page_when(driver, lambda p: p["banner_shown"], "the banner")
+            assert page["loss"] in ("service", "telemetry"), page  # the dashboard server still answers
+            assert_no_live_data_shown(page, "hexactl service")
+            assert "lost the dashboard server" not in page["banner"], page  # the service, not the server
+            counting_up(driver, page)
+        with serve(tmp_path, api=api, telemetry=telemetry):
+            page = page_when(driver, lambda p: p["loss"] is None and p["state"] == "disabled",
+                             "live data again: the restarted service's state")
+            assert not page["banner_shown"] and not page["stale"] and not page["age_shown"], page
+            assert "pill-unknown" not in page["state_class"] and page["loop"] != "no data", page
+            assert not page["hud"].startswith("NO LIVE DATA"), page
 
 
 def test_the_dashboard_server_gone_shows_state_unknown_the_banner_and_an_estop_not_sent(tmp_path) -> None:
@@ -216,57 +228,49 @@ def test_the_dashboard_server_gone_shows_state_unknown_the_banner_and_an_estop_n
 
 
 def test_escape_with_stale_telemetry_warns_not_confirmed_before_any_reply(tmp_path) -> None:
-    api, telemetry = f"tcp://127.0.0.1:{free_port()}", f"tcp://127.0.0.1:{free_port()}"
-    driver = headless_chromium()
-    try:
-        with dashboard(api, telemetry) as board:
-            with serve(tmp_path, api=api, telemetry=telemetry) as served, \
-                    HexactlClient(api, timeout_s=30.0) as client:
-                driver.get(board.url)
-                wait_for(lambda: live(driver), "live data on the page", seen=lambda: shown(driver))
-                enable(client)
+    with page_of_a_dashboard() as (driver, board, api, telemetry):
+        with service_shown(tmp_path, driver, board, api, telemetry) as (served, client):
+            enable(client)
 
-                # live data: the service answers, and the page shows no warning (as before)
-                def pressed_while_live() -> list[dict] | None:
-                    press = press_escape(driver)
-                    wait_for(lambda: any(e["what"].startswith("reply") for e in estop_events(driver, press)),
-                             "the E-stop's reply", seen=lambda: estop_events(driver, press))
-                    events = estop_events(driver, press)
-                    return events if events[0]["detail"] == "live" else None  # a busy host's stall: again
-
-                events = wait_for(pressed_while_live, "an E-stop pressed while the page had live data")
-                assert [e["what"] for e in events][:3] == ["pressed", "sent", "reply-ok"], events
-                assert "warning" not in [e["what"] for e in events], events
-                assert client.call("status")["status"]["state"] == "estop"
-                assert not shown(driver)["warning_shown"]
-                client.call("reset")
-
-                served.process.send_signal(signal.SIGKILL)
-                served.process.wait()
-                wait_for(lambda: shown(driver)["stale"], "the page showing stale telemetry", seen=lambda: shown(driver))
-                assert driver.execute_script("return window.hexactlDashboard.connected") is False
-
+            # live data: the service answers, and the page shows no warning (as before)
+            def pressed_while_live() -> list[dict] | None:
                 press = press_escape(driver)
-                page, events = shown(driver), estop_events(driver, press)
-                # sent (the socket is open: the service might only have lost its telemetry), and
-                # warned at once: before any reply, whenever that reply comes
-                assert [e["what"] for e in events][:3] == ["pressed", "sent", "warning"], events
-                assert page["warning_shown"] and "E-STOP NOT CONFIRMED — use the hardware E-stop" in page["warning"], page
-                assert not page["dismiss_enabled"], page
+                wait_for(lambda: any(e["what"].startswith("reply") for e in estop_events(driver, press)),
+                         "the E-stop's reply", seen=lambda: estop_events(driver, press))
+                events = estop_events(driver, press)
+                return events if events[0]["detail"] == "live" else None  # a busy host's stall: again
 
-                failed = wait_for(lambda: [e for e in estop_events(driver, press) if e["what"].startswith("reply")],
-                                  "the dashboard's answer for the dead service", seen=lambda: estop_events(driver, press))
-                assert failed[0]["what"] == "reply-failed", failed
-                page = shown(driver)
-                assert page["warning_shown"] and "E-STOP NOT CONFIRMED" in page["warning"], page  # a failure confirms nothing
+            events = wait_for(pressed_while_live, "an E-stop pressed while the page had live data")
+            assert [e["what"] for e in events][:3] == ["pressed", "sent", "reply-ok"], events
+            assert "warning" not in [e["what"] for e in events], events
+            assert client.call("status")["status"]["state"] == "estop"
+            assert not shown(driver)["warning_shown"]
+            client.call("reset")
 
-            with serve(tmp_path, api=api, telemetry=telemetry):
-                wait_for(lambda: live(driver), "live data again", seen=lambda: shown(driver))
-                page = shown(driver)
-                assert page["warning_shown"] and page["dismiss_enabled"], page  # stays until confirmed or dismissed
-                press = press_escape(driver)
-                wait_for(lambda: not shown(driver)["warning_shown"], "the warning cleared by a confirmed E-stop",
-                         seen=lambda: estop_events(driver, press))
-                assert [e["what"] for e in estop_events(driver, press)][-2:] == ["reply-ok", "cleared"]
-    finally:
-        driver.quit()
+            served.process.send_signal(signal.SIGKILL)
+            served.process.wait()
+            wait_for(lambda: shown(driver)["stale"], "the page showing stale telemetry", seen=lambda: shown(driver))
+            assert driver.execute_script("return window.hexactlDashboard.connected") is False
+
+            press = press_escape(driver)
+            page, events = shown(driver), estop_events(driver, press)
+            # sent (the socket is open: the service might only have lost its telemetry), and
+            # warned at once: before any reply, whenever that reply comes
+            assert [e["what"] for e in events][:3] == ["pressed", "sent", "warning"], events
+            assert page["warning_shown"] and "E-STOP NOT CONFIRMED — use the hardware E-stop" in page["warning"], page
+            assert not page["dismiss_enabled"], page
+
+            failed = wait_for(lambda: [e for e in estop_events(driver, press) if e["what"].startswith("reply")],
+                              "the dashboard's answer for the dead service", seen=lambda: estop_events(driver, press))
+            assert failed[0]["what"] == "reply-failed", failed
+            page = shown(driver)
+            assert page["warning_shown"] and "E-STOP NOT CONFIRMED" in page["warning"], page  # a failure confirms nothing
+
+        with serve(tmp_path, api=api, telemetry=telemetry):
+            wait_for(lambda: live(driver), "live data again", seen=lambda: shown(driver))
+            page = shown(driver)
+            assert page["warning_shown"] and page["dismiss_enabled"], page  # stays until confirmed or dismissed
+            press = press_escape(driver)
+            wait_for(lambda: not shown(driver)["warning_shown"], "the warning cleared by a confirmed E-stop",
+                     seen=lambda: estop_events(driver, press))
+            assert [e["what"] for e in estop_events(driver, press)][-2:] == ["reply-ok", "cleared"]
