@@ -34,6 +34,7 @@ from hexactl.adapters.cli.telemetry_text import (
     format_telemetry,
     frames_lines,
     jog_text,
+    leg_state_text,
     loop_text,
     percentiles_text,
     realtime_text,
@@ -323,8 +324,7 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
     for label, values in (("set-point", record.get("leg_setpoints")), ("feedback", record.get("leg_feedback"))):
         legs.add_row(label, *(["—" if value is None else f"{value:.3f}" for value in values] if values else ["—"] * 6))
     states = record.get("legs")
-    legs.add_row("state", *([state["state"] + (f" 0x{state['fault_bits']:x}" if state["fault_bits"] else "")
-                             for state in states] if states else ["—"] * 6))
+    legs.add_row("state", *([leg_state_text(state) for state in states] if states else ["—"] * 6))
     loop = record["loop"]
     faults = record.get("faults") or []
     facts = Table.grid(padding=(0, 2))

@@ -88,12 +88,17 @@ SILENT_AFTER_S = 0.5
 """A leg whose last report is older than this is named as silent (they report every few ms)."""
 
 
+def leg_state_text(leg: dict[str, Any]) -> str:
+    """One leg's state with its fault bits when it has any: ``enabled``, ``fault 0x80``."""
+    return leg["state"] + (f" 0x{leg['fault_bits']:x}" if leg["fault_bits"] else "")
+
+
 def leg_states_text(legs: list[dict[str, Any]] | None) -> str:
     """``all enabled``, or each leg's state with its fault bits (``L5 fault 0x80``), then
     the legs not heard from lately; ``unknown`` for None."""
     if not legs:
         return "unknown"
-    states = [leg["state"] + (f" 0x{leg['fault_bits']:x}" if leg["fault_bits"] else "") for leg in legs]
+    states = [leg_state_text(leg) for leg in legs]
     text = f"all {states[0]}" if len(set(states)) == 1 else "  ".join(
         f"L{number} {state}" for number, state in enumerate(states, start=1))
     silent = [f"L{number} " + ("never" if leg["report_age_s"] is None else f"{leg['report_age_s']:.1f} s")
