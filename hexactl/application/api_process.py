@@ -188,7 +188,7 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                 closers.callback(publisher.close)
                 server = ApiServer(context, settings.api_endpoint, handler, curve,
                                    handler_timeout_s=settings.handler_timeout_s, on_stuck=_end_stuck,
-                                   worker_niceness=API_WORKER_NICENESS)  # fmt: skip
+                                   worker_niceness=API_WORKER_NICENESS, on_wake=remote.heartbeat)  # fmt: skip
             except (zmq.ZMQError, ValueError) as error:  # an endpoint in use or malformed, a bad telemetry rate
                 raise ApiStartError(f"cannot serve: {error}") from None
         except (ApiStartError, ConnectionError) as error:

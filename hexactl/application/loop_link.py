@@ -18,6 +18,12 @@ in a process of their own (:mod:`hexactl.application.api_process`); what crosses
   may not: they are taken from the recorder only for a report the pipe takes whole.
   (The built-in simulator's instrument has a port of its own:
   :mod:`hexactl.application.simulator`.)
+- **heartbeats** (API → loop): an empty frame on the command pipe each time the API's
+  socket thread, the one that carries out ``estop``, wakes (at least every 0.1 s), at
+  most one per :data:`HEARTBEAT_INTERVAL_S`. A frozen API process (stopped, swapped out, a C call holding its GIL) cannot
+  pass on an E-stop; the loop's end then hears nothing and, past ``silence_s``, has the
+  loop brake any motion to rest (:class:`~hexactl.control.commands.CommandLinkSilent`)
+  instead of running on unattended for as long as the motion lasts.
 
 Loop side, :class:`LoopExchange`: the loop thread calls it in its slack (see
 :class:`~hexactl.control.loop.ControlLoop`). It takes at most
@@ -40,6 +46,7 @@ from __future__ import annotations
 import logging
 import os
 import pickle
+import select
 import struct
 import threading
 import time
@@ -60,6 +67,11 @@ telemetry) may be, besides a report dropped. Verdicts do not wait for it."""
 MAX_ROWS_PER_REPORT = 64
 """Recorder rows per report at most: bounds the loop's pickling; a backlog (after reports
 that did not fit) drains at this many per report."""
+
+HEARTBEAT_INTERVAL_S = 0.05
+"""The least time between two heartbeats (a busy socket thread wakes far more often than
+it needs to be heard): a twentieth of the default silence limit
+(:attr:`~hexactl.control.config.SupervisionConfig.command_silence_s`)."""
 
 MAX_COMMANDS_PER_EXCHANGE = 8
 """Commands taken per exchange: bounds the loop's slack work when many arrive at once."""
@@ -164,12 +176,18 @@ class LoopExchange:
     as far as the pipes allow without waiting; a report the pipe has no room for is
     dropped (the next one follows within ``interval_s``).
 
+    ``silence_s``: once the API has been heard (a heartbeat or a command), nothing from it
+    for this long has the loop brake a motion to rest (a
+    :class:`~hexactl.control.commands.CommandLinkSilent`; a
+    :class:`~hexactl.control.commands.CommandLinkHeard` when it is heard again); None:
+    no watch. :meth:`expect_silence` ends the watch (the service stops the API).
+
     ``rejected``: messages that were not commands (a bug if ever non-zero);
     ``reports_dropped``: reports the pipe had no room for.
     """
 
     def __init__(self, thread: LoopThread, commands: Connection, reports: Connection,
-                 interval_s: float = REPORT_INTERVAL_S) -> None:
+                 interval_s: float = REPORT_INTERVAL_S, silence_s: float | None = None) -> None:
         self._thread = thread
         self._commands = commands  # kept open: the reader uses its descriptor
         self._reports = reports
@@ -178,6 +196,9 @@ class LoopExchange:
         self._interval_ns = round(min(interval_s, REPORT_INTERVAL_S) * 1e9)
         self._next_report_ns = 0
         self._outcomes_published: tuple[cmd.Outcome, ...] | None = None
+        self._silence_ns = None if silence_s is None else round(silence_s * 1e9)
+        self._heard_ns: int | None = None  # when the API was last heard (None: not yet)
+        self._silent = False  # the loop has been told of the present silence
         self.rejected = 0
         self.reports_dropped = 0
 
@@ -192,6 +213,17 @@ class LoopExchange:
         """Why the command stream was closed as unreadable (None: it was not)."""
         return self._reader.corrupt
 
+    @property
+    def silent_s(self) -> float:
+        """How long the API has not been heard from (s; 0 before it first was, or once
+        :meth:`expect_silence` was called). Any thread may read it."""
+        heard_ns = self._heard_ns
+        return 0.0 if heard_ns is None or self._silence_ns is None else (time.monotonic_ns() - heard_ns) / 1e9
+
+    def expect_silence(self) -> None:
+        """Stop watching for the API's silence: it is being stopped (any thread)."""
+        self._silence_ns = None
+
     def start(self) -> LoopExchange:
         """Publish the first report; returns self."""
         self._next_report_ns = time.monotonic_ns() + self._interval_ns
@@ -199,8 +231,12 @@ class LoopExchange:
         return self
 
     def __call__(self) -> None:
-        """The loop's slack work: take waiting commands, publish when due."""
-        for data in self._reader.frames(MAX_COMMANDS_PER_EXCHANGE):
+        """The loop's slack work: take waiting commands, watch for silence, publish when due."""
+        frames = self._reader.frames(MAX_COMMANDS_PER_EXCHANGE)
+        now = time.monotonic_ns()
+        for data in frames:
+            if not data:  # a heartbeat
+                continue
             try:
                 command = pickle.loads(data)
             except Exception:  # noqa: BLE001 - nothing may raise into the loop
@@ -209,12 +245,24 @@ class LoopExchange:
                 self._thread.submit(command)
             else:
                 self.rejected += 1
-        now = time.monotonic_ns()
+        self._watch_silence(now, heard=bool(frames))
         if now >= self._next_report_ns or self._thread.snapshot.outcomes is not self._outcomes_published:
             self._next_report_ns = now + self._interval_ns
             self._publish()
         else:
             self._writer.flush()
+
+    def _watch_silence(self, now_ns: int, heard: bool) -> None:
+        silence_ns, heard_ns = self._silence_ns, self._heard_ns
+        if heard:
+            if self._silent and silence_ns is not None and heard_ns is not None:
+                self._thread.submit(cmd.CommandLinkHeard(0, silent_s=(now_ns - heard_ns) / 1e9))
+            self._silent = False
+            self._heard_ns = now_ns
+        elif (silence_ns is not None and heard_ns is not None and not self._silent
+              and now_ns - heard_ns > silence_ns):
+            self._silent = True
+            self._thread.submit(cmd.CommandLinkSilent(0, silent_s=(now_ns - heard_ns) / 1e9))
 
     def close(self) -> None:
         """Close both ends (after the loop has stopped)."""
@@ -250,6 +298,7 @@ class RemoteLoop:
         self._observe = observe
         self._reports = reports
         self._send_lock = threading.Lock()
+        self._sent_at = -HEARTBEAT_INTERVAL_S  # monotonic s: the last frame sent
         self._gone: str | None = None
         self._recorded: deque[Row] = deque()
         try:
@@ -279,8 +328,25 @@ class RemoteLoop:
         try:
             with self._send_lock:  # one message at a time on the pipe
                 self._commands.send_bytes(data)
+                self._sent_at = time.monotonic()
         except (OSError, ValueError) as error:
             self._gone = self._gone or f"the control loop's link is closed: {error!r}"
+
+    def heartbeat(self) -> None:
+        """Tell the loop this process runs (an empty frame), unless something was sent
+        within :data:`HEARTBEAT_INTERVAL_S` (that told it already). Never waits: skipped
+        while another thread sends, or while the pipe is full (a loop that does not read
+        is not listening for heartbeats either)."""
+        if time.monotonic() - self._sent_at < HEARTBEAT_INTERVAL_S or not self._send_lock.acquire(blocking=False):
+            return
+        try:
+            if select.select([], [self._commands], [], 0)[1]:  # room in the pipe: a 4-byte write cannot block
+                self._commands.send_bytes(b"")
+                self._sent_at = time.monotonic()
+        except (OSError, ValueError) as error:
+            self._gone = self._gone or f"the control loop's link is closed: {error!r}"
+        finally:
+            self._send_lock.release()
 
     def take_recorded(self) -> list[Row]:
         """The recorder's rows received and not taken yet, oldest first (one taker)."""

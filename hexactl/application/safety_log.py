@@ -17,7 +17,8 @@ log = logging.getLogger("hexactl.safety")
 
 _WARNING_STATES = (ControlState.FAULT, ControlState.ESTOP)
 
-_ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "calibration_swapped", "command_refused")
+_ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "calibration_swapped", "command_refused",
+                   "command_link_heard")
 """Codes (or their prefixes) of the loop's events that are its daily work, logged as INFO;
 the others (faults, E-stops, a guard's clamp) as WARNING."""
 

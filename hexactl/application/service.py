@@ -312,7 +312,8 @@ class Service:
             reports_in, reports_out = pipes.Pipe(duplex=False)
             # Reports as often as telemetry takes them (verdicts at once whatever the rate).
             exchange = LoopExchange(controller.thread, commands_in, reports_out,
-                                    interval_s=1 / config.telemetry_rate_hz).start()
+                                    interval_s=1 / config.telemetry_rate_hz,
+                                    silence_s=controller_config.supervision.command_silence_s).start()
             closers.callback(exchange.close)
             realtime = controller.start(exchange)
             closers.callback(controller.shutdown)
@@ -359,6 +360,7 @@ class Service:
         in at most about :data:`SHUTDOWN_STEPS_S` + 1 s."""
         started = time.monotonic()
         self._budget.start(SHUTDOWN_STEPS_S)
+        self.link.expect_silence()  # the API is stopped first: its silence is no reason to brake
         self._closers.close()
         log.info("stopped (shutdown took %.2f s)", time.monotonic() - started)
 
@@ -436,10 +438,12 @@ def run_service(config: ServiceConfig) -> NoReturn:
         main_thread_below_loop(service)
         try:
             rejected = 0
+            silence = _SilenceLog(service.controller.config.supervision.command_silence_s)
             while (received := signals.wait(API_WATCH_INTERVAL_S)) is None:
                 if service.link.rejected > rejected:  # a bug of ours if ever: the API process sends only commands
                     log.warning("the loop link dropped %d messages that were not commands", service.link.rejected - rejected)
                     rejected = service.link.rejected
+                silence.watch(service.link.silent_s)
                 if problem := _api_problem(service):
                     log.error("%s: shutting down", problem)
                     status = 1
@@ -459,6 +463,27 @@ def run_service(config: ServiceConfig) -> NoReturn:
         logging.shutdown()  # flush the log: os._exit skips it
         sys.stdout.flush()
         os._exit(status)
+
+
+class _SilenceLog:
+    """Says on the service's log when the API process falls silent and when it is heard
+    again: the API's own log, where the loop's events are written, is silent with it."""
+
+    def __init__(self, limit_s: float) -> None:
+        self._limit_s = limit_s
+        self._longest_s = 0.0  # of the present silence; 0: none
+
+    def watch(self, silent_s: float) -> None:
+        """Called every :data:`API_WATCH_INTERVAL_S` with the link's ``silent_s``."""
+        if silent_s > self._limit_s:
+            if not self._longest_s:
+                log.warning("nothing from the API process for %.1f s (frozen or starved of CPU): a motion under way "
+                            "is braked to rest; an E-stop through the API may not arrive: use the hardware E-stop",
+                            silent_s)
+            self._longest_s = max(self._longest_s, silent_s)
+        elif self._longest_s:
+            log.info("the API process is heard again after %.1f s or more of silence", self._longest_s)
+            self._longest_s = 0.0
 
 
 def _end_start_up(received: signal.Signals) -> NoReturn:

@@ -196,6 +196,25 @@ class CloseStream(Command):
 
 
 @dataclass(frozen=True, slots=True)
+class CommandLinkSilent(Command):
+    """Nothing has come from the commands' sender (the API) for ``silent_s`` (s): whatever
+    it would send, an E-stop too, may not arrive. A motion under way brakes to rest.
+    From the link's own end in the loop's thread, with ticket 0: not answered."""
+
+    silent_s: float
+    answered: ClassVar[bool] = False
+
+
+@dataclass(frozen=True, slots=True)
+class CommandLinkHeard(Command):
+    """The commands' sender is heard again after ``silent_s`` (s) of silence (ticket 0,
+    not answered)."""
+
+    silent_s: float
+    answered: ClassVar[bool] = False
+
+
+@dataclass(frozen=True, slots=True)
 class Outcome:
     """The loop's verdict on command ``ticket``: ``code`` None when carried out."""
 

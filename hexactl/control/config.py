@@ -36,7 +36,7 @@ class LoopConfig(_Frozen):
 
 
 class SupervisionConfig(_Frozen):
-    """When the loop declares a FAULT (checked every cycle while ENABLED)."""
+    """When the loop declares a FAULT (checked every cycle while ENABLED), or brakes on its own."""
 
     heartbeat_timeout_s: Number = Field(default=0.05, gt=0, description="an actuator silent this long is lost")
     state_timeout_s: Number = Field(
@@ -54,6 +54,12 @@ class SupervisionConfig(_Frozen):
     )
     following_error_s: Number = Field(
         default=0.1, ge=0, description="how long the following error may exceed following_error_mm before FAULT"
+    )
+    command_silence_s: Number = Field(
+        default=1.0, gt=0,
+        description="nothing from the API (no command, no heartbeat) for this long, and the loop brakes a motion "
+        "under way to rest: a frozen API process could not pass on an E-stop. Ten times the API's longest "
+        "heartbeat interval (0.1 s), so that a host under load does not stop a motion",
     )
     max_send_failures: WholeNumber = Field(default=3, ge=1, description="consecutive failed set-point sends before FAULT")
     estop_repeat_s: Number = Field(default=0.1, gt=0, description="while ESTOP is latched, the E-stop is re-sent this often")

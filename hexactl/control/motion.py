@@ -28,7 +28,7 @@ from hexactl.control.jog import Jogger, JogPlan
 from hexactl.control.planning import ActiveGeometry, LegLock, Segment
 from hexactl.control.preconditions import Refusal
 from hexactl.control.results import ErrorCode
-from hexactl.control.sequence_player import SequencePlayer, start_segment
+from hexactl.control.sequence_player import SequencePhase, SequencePlayer, start_segment
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.setpoint_path import SetpointPath
 from hexactl.control.snapshot import MotionState
@@ -63,6 +63,15 @@ class Motion:
         if not enabled or not trajectory.moving:
             return MotionState.HOLDING
         return MotionState.STOPPING if trajectory.halting else MotionState.MOVING
+
+    @property
+    def under_way(self) -> bool:
+        """Whether the platform moves or will move by itself: a move, a halt, a sequence
+        (not paused), a wave, a jog or a stream."""
+        sequence = self.player.progress
+        return (self.trajectory.moving or self.wave.playing or self.jogger.progress is not None
+                or self.stream.progress is not None
+                or (sequence is not None and sequence.phase is not SequencePhase.PAUSED))
 
     def stale(self, epoch: int) -> Refusal:
         """The refusal of a command planned at ``epoch`` if that is not the current one."""

@@ -17,22 +17,26 @@ from hexactl.control.command_inbox import Handler
 from hexactl.control.motion import Motion
 from hexactl.control.preconditions import CoreView, Refusal
 from hexactl.control.results import ErrorCode
+from hexactl.control.snapshot import ControlState
 
 
 class MotionCommands:
     """The handlers of the motion's commands for ``motion``, checked on ``view`` (the core);
-    ``now_ns()`` is the cycle's monotonic time."""
+    ``now_ns()`` is the cycle's monotonic time; ``log(code, message)`` notes an event."""
 
-    def __init__(self, view: CoreView, motion: Motion, now_ns: Callable[[], int]) -> None:
+    def __init__(self, view: CoreView, motion: Motion, now_ns: Callable[[], int],
+                 log: Callable[[str, str], None]) -> None:
         self._view = view
         self._motion = motion
         self._now_ns = now_ns
+        self._log = log
 
     def handlers(self) -> dict[type[cmd.Command], Handler]:
         return {cmd.Move: self._move, cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog, cmd.Stop: self._stop,
                 cmd.Play: self._play, cmd.PlayWave: self._play_wave, cmd.Pause: self._pause, cmd.Resume: self._resume,
                 cmd.Abort: self._abort, cmd.OpenStream: self._open_stream, cmd.StreamTarget: self._stream_target,
-                cmd.CloseStream: self._close_stream}
+                cmd.CloseStream: self._close_stream, cmd.CommandLinkSilent: self._command_link_silent,
+                cmd.CommandLinkHeard: self._command_link_heard}
 
     def _move(self, command: cmd.Move) -> Refusal:
         return preconditions.check_move(self._view) or self._motion.stale(command.epoch) or self._motion.move(command.segment)
@@ -46,6 +50,22 @@ class MotionCommands:
 
     def _stop(self, command: cmd.Stop) -> Refusal:
         self._motion.stop()
+        return None
+
+    def _command_link_silent(self, command: cmd.CommandLinkSilent) -> Refusal:
+        # Brake rather than latch a FAULT: the platform comes to rest on its trajectory
+        # instead of the drives' own deceleration, and stays enabled for when the API is back.
+        braking = self._view.state is ControlState.ENABLED and self._motion.under_way
+        if braking:
+            self._motion.stop()
+        self._log("command_link_silent", (
+            f"nothing from the API for {command.silent_s:.1f} s (its process frozen or starved of CPU): "
+            + ("the motion is braked to rest; " if braking else "nothing was moving; ")
+            + "an E-stop sent through the API may not arrive now: use the hardware E-stop"))
+        return None
+
+    def _command_link_heard(self, command: cmd.CommandLinkHeard) -> Refusal:
+        self._log("command_link_heard", f"the API is heard again after {command.silent_s:.1f} s of silence")
         return None
 
     def _play(self, command: cmd.Play) -> Refusal:

@@ -9,6 +9,7 @@ import multiprocessing
 import os
 import pickle
 import struct
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -38,12 +39,16 @@ class Link:
     remote: RemoteLoop
     controller: Controller
     clock: SimClock
+    beating: bool = False
+    """Send the API's heartbeat before each exchange, as its socket thread does."""
 
     def cycle(self) -> None:
         """One cycle, then the exchange, as the loop thread runs them; spaced so that the
         exchange publishes every time."""
         self.thread.loop.step(self.clock.advance(self.thread.loop.period_ns))
         time.sleep(REPORT_INTERVAL_S)
+        if self.beating:
+            self.remote.heartbeat()
         self.exchange()
 
     def cycle_until_reported(self, condition) -> None:
@@ -58,6 +63,10 @@ class Link:
 
 @pytest.fixture
 def link(nominal: Geometry) -> Iterator[Link]:
+    yield from _linked(nominal)
+
+
+def _linked(nominal: Geometry, silence_s: float | None = None) -> Iterator[Link]:
     start = sensor_setpoints(nominal.legs, absolute_from_relative(nominal.home, (0.0,) * 6))
     clock = SimClock()
     actuators = IdealActuators(start, clock_ns=clock)
@@ -66,10 +75,10 @@ def link(nominal: Geometry) -> Iterator[Link]:
     pipes = multiprocessing.get_context("spawn")
     commands_in, commands_out = pipes.Pipe(duplex=False)
     reports_in, reports_out = pipes.Pipe(duplex=False)
-    exchange = LoopExchange(thread, commands_in, reports_out).start()
+    exchange = LoopExchange(thread, commands_in, reports_out, silence_s=silence_s).start()
     remote = RemoteLoop(commands_out, reports_in)
     controller = Controller(remote, config=config, nominal=nominal)
-    yield Link(thread, exchange, remote, controller, clock)
+    yield Link(thread, exchange, remote, controller, clock, beating=silence_s is not None)
     remote.close()
     exchange.close()
 
@@ -185,3 +194,70 @@ def test_a_frame_header_no_writer_of_ours_sends_closes_the_stream(link: Link) ->
     assert link.exchange.corrupt == "a frame header of length -1"
     assert link.thread.snapshot.state.value == "disabled"  # the loop cycles on
     link.cycle()
+
+
+SILENCE_S = 0.5
+
+
+def _events(snapshot, code: str) -> list[str]:
+    return [event.message for event in snapshot.events if event.code == code]
+
+
+def test_a_silent_api_has_the_loop_brake_and_heartbeats_keep_it_going(nominal: Geometry) -> None:
+    """Heartbeats (or commands) at any spacing under ``silence_s`` leave a motion alone;
+    nothing for longer has the loop brake it and say so, and the next heartbeat is news
+    too. Once the service stops the API on purpose, silence is nothing."""
+    link = next(links := _linked(nominal, SILENCE_S))
+    try:
+        ticket = link.controller.enable().details["ticket"]
+        link.cycle_until_reported(lambda s: any(outcome.ticket == ticket for outcome in s.outcomes))
+        ticket = link.controller.move([0, 0, 50, 0, 0, 0], duration=60.0).details["ticket"]
+        link.cycle_until_reported(lambda s: any(outcome.ticket == ticket for outcome in s.outcomes))
+        assert link.remote.snapshot.motion.value == "moving"
+
+        link.beating = False  # the socket thread wakes seldom, then not at all
+        for _ in range(3):
+            time.sleep(0.6 * SILENCE_S)
+            link.remote.heartbeat()
+            link.cycle()
+        assert link.remote.snapshot.motion.value == "moving" and not _events(link.remote.snapshot, "command_link_silent")
+
+        time.sleep(1.5 * SILENCE_S)
+        assert link.exchange.silent_s > SILENCE_S
+        link.cycle_until_reported(lambda s: s.motion.value != "moving")
+        [message] = _events(link.remote.snapshot, "command_link_silent")
+        assert "braked to rest" in message
+        assert link.remote.snapshot.state.value == "enabled"
+
+        link.beating = True
+        link.cycle_until_reported(lambda s: _events(s, "command_link_heard"))
+        assert link.exchange.silent_s < SILENCE_S
+
+        link.exchange.expect_silence()
+        link.beating = False
+        time.sleep(1.5 * SILENCE_S)
+        link.cycle()
+        link.cycle()
+        assert link.exchange.silent_s == 0.0 and len(_events(link.thread.snapshot, "command_link_silent")) == 1
+    finally:
+        next(links, None)
+
+
+def test_a_heartbeat_never_waits_for_a_full_pipe(link: Link) -> None:
+    """The API's socket thread sends it: were it to wait for a loop that does not read,
+    it would carry out no ``estop`` either. Nothing is read here: the pipe fills."""
+    sender = link.remote._commands
+    filler = b"x" * 4096
+    os.set_blocking(sender.fileno(), False)
+    try:
+        while True:
+            sender.send_bytes(filler)
+    except BlockingIOError:
+        pass
+    finally:
+        os.set_blocking(sender.fileno(), True)
+    time.sleep(2 * loop_link.HEARTBEAT_INTERVAL_S)
+    beat = threading.Thread(target=link.remote.heartbeat, daemon=True)
+    beat.start()
+    beat.join(10.0)  # only a bound on a hang
+    assert not beat.is_alive(), "the heartbeat waits for room in the pipe"

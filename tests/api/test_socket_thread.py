@@ -15,6 +15,7 @@ from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from tests.api.support import LOCAL
+from tools.serving import wait_until
 
 WAIT_S = 30.0  # only turns a hang into a failure
 
@@ -55,3 +56,35 @@ def test_a_busy_endpoint_is_refused_with_nothing_left_open(make) -> None:
         make(context, first.endpoint)
     first.close()  # never started
     assert terminated(context)  # the refused one's socket was closed too
+
+
+def test_the_api_socket_thread_wakes_the_loop_links_heartbeat_while_a_handler_works() -> None:
+    """``on_wake`` is the loop link's heartbeat: it comes from the thread that carries out
+    ``estop``, idle or not, and not from the worker, which may be busy planning for long."""
+    release = threading.Event()
+
+    def handle(request, deadline_ns) -> dict:
+        release.wait(WAIT_S)  # the worker is held in a long request
+        return {"message": "done"}
+
+    wakes: list[str] = []
+    context = zmq.Context()
+    server = ApiServer(context, LOCAL, handle, on_wake=lambda: wakes.append(threading.current_thread().name))
+    server.start()
+    try:
+        wait_until(lambda: len(wakes) >= 3, "the idle socket thread's wakes", WAIT_S)
+        dealer = context.socket(zmq.DEALER)
+        dealer.linger = 0
+        dealer.connect(server.endpoint)
+        dealer.send(b'{"v": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "id": 1}')
+        wait_until(lambda: server._workers[0].in_handler is not None, "the worker in its handler", WAIT_S)
+        held = len(wakes)
+        wait_until(lambda: len(wakes) >= held + 3, "wakes while the worker is held", WAIT_S)
+        assert set(wakes) == {"hexactl-api"}
+        release.set()
+        assert dealer.poll(round(WAIT_S * 1000)) and b"done" in dealer.recv_multipart()[-1]
+        dealer.close()
+    finally:
+        release.set()
+        server.close()
+    assert terminated(context)

@@ -279,7 +279,9 @@ class ApiServer(SocketThread):
     worker has spent ``handler_timeout_s`` in one request (None: only logged).
     :meth:`close` stops both threads (the worker within :data:`WORKER_JOIN_S`, else it is
     left behind: it is a daemon) and closes the sockets. ``worker_niceness``: the worker
-    thread's ``nice`` (the socket thread keeps the process's).
+    thread's ``nice`` (the socket thread keeps the process's). ``on_wake()``: called by the
+    socket thread each time it wakes, at least every :data:`POLL_INTERVAL_MS` (the loop
+    link's heartbeat: the thread that carries out ``estop`` runs); it must not block.
 
     :raises zmq.ZMQError: the endpoint is malformed or in use
     """
@@ -294,8 +296,10 @@ class ApiServer(SocketThread):
         handler_timeout_s: float = DEFAULT_HANDLER_TIMEOUT_S,
         on_stuck: Callable[[str], None] | None = None,
         worker_niceness: int = 0,
+        on_wake: Callable[[], None] | None = None,
     ) -> None:
         self._handle = handle
+        self._on_wake = on_wake
         self._worker_niceness = worker_niceness
         self._handler_timeout_ns = round(handler_timeout_s * 1e9)
         self._on_stuck = on_stuck
@@ -346,6 +350,8 @@ class ApiServer(SocketThread):
         poller.register(self._replies_in, zmq.POLLIN)
         while not self._stopping.is_set():
             ready = dict(poller.poll(POLL_INTERVAL_MS))
+            if self._on_wake is not None:
+                self._on_wake()
             self._watch()
             if self._replies_in in ready:
                 for _ in range(_BATCH):
