@@ -177,6 +177,24 @@ def test_ctrl_c_mid_move_logs_where_the_platform_came_to_rest(tmp_path) -> None:
     assert braked or re.search(rf"fault at {pose} \(measured\): nothing to brake", running.log), running.log
 
 
+def test_wait_says_when_a_stop_left_the_move_short_of_its_goal(served, client) -> None:
+    """At rest is not arrived: a move that another client stopped (or the service, when its
+    API fell silent) ends ``--wait`` with status 1 and where it rests."""
+
+    def scenario() -> None:
+        moving = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "move", "z=40", "--duration",
+                                   "20", "--wait", "--api", served.api],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for(lambda: status(client)["motion"] == "moving", "the move")
+        client.request("stop")
+        _, err = moving.communicate(timeout=WAIT_S)
+        assert moving.returncode == 1, err
+        assert "hexactl move: stopped short of its goal, at x " in err and "(its log says why)" in err, err
+        assert hexactl(served, "move", "z=0", "--duration", "1", "--wait") == 0  # one that arrives: 0
+
+    tolerating_stalls(client, scenario)
+
+
 def test_wait_returns_at_rest_and_says_when_a_pause_or_an_estop_holds_the_motion(served, client, capsys) -> None:
     def scenario() -> None:
         assert hexactl(served, "move", "z=30", "--duration", "1", "--wait") == 0

@@ -201,7 +201,8 @@ def udp_address(text: str) -> tuple[str, int]:
 
 def _waiting(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait", action="store_true", help="then wait until the platform is at rest and the sequence "
-                        "over (exit 1, saying why, if a fault, an E-stop or a pause ends or holds it)")
+                        "over (exit 1, saying why, if a fault, an E-stop or a pause ends or holds it, or a stop leaves it short of "
+                        "its goal)")
 
 
 def client_parser() -> argparse.ArgumentParser:
@@ -309,10 +310,15 @@ WAIT_SLACK_S = 30.0
 does not judge time. A sequence that goes on from waypoint to waypoint is progress."""
 
 
+GOAL_TOLERANCE = 1e-3
+"""mm and deg: a motion that ran its course rests on its goal to rounding (1e-12 seen)."""
+
+
 def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
     """``--wait``: poll the service until the platform is at rest and no sequence plays.
     0 then; 1 (saying why) when a fault, an E-stop or a disable ended the motion, the
-    sequence is paused, or the motion goes on well past its plan."""
+    sequence is paused, the motion goes on well past its plan, or it came to rest short
+    of the reply's ``goal`` (stopped)."""
     deadline = time.monotonic() + float(reply.get("duration") or 0.0) + WAIT_SLACK_S
     while True:
         status = client.request("status")["status"]
@@ -329,13 +335,22 @@ def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
         elif sequence and sequence["phase"] == "paused":
             problem = f"sequence {sequence['name']} is paused: `hexactl resume` or `hexactl abort`"
         elif status["motion"] == "holding" and sequence is None:
-            return EXIT_OK
+            if not (problem := _short_of_goal(reply.get("goal"), status["pose_command"])):
+                return EXIT_OK
         elif time.monotonic() > deadline:
             problem = f"still moving {WAIT_SLACK_S:g} s after its plan said it would be at rest"
         if problem:
             print(f"hexactl {command}: {problem}", file=sys.stderr)
             return EXIT_REFUSED
         time.sleep(WAIT_POLL_S)
+
+
+def _short_of_goal(goal: list[float] | None, pose: list[float]) -> str | None:
+    """Why a motion at rest at ``pose`` did not end on ``goal`` (None: it did, or has none)."""
+    if goal is None or max(abs(at - aim) for at, aim in zip(pose, goal)) <= GOAL_TOLERANCE:
+        return None
+    return (f"stopped short of its goal, at {pose_text(pose)}: a stop from a client, the dashboard or a "
+            "sequence's abort, or the service's own (its log says why)")
 
 
 def run_keys(arguments: argparse.Namespace) -> int:
