@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.numbers import Number
-from hexactl.kinematics.workspace import Violation, ViolationKind
+from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, Violation, ViolationKind
 
 MAX_TILT_DEG = 90.0
 """The largest tilt bound: beyond it the tool's z axis points down."""
@@ -64,12 +64,13 @@ class SoftLimits(BaseModel):
 
     def violations(self, tool_in_work_mm_deg: Sequence[Sequence[float]] | NDArray) -> list[list[Violation]]:
         """For each of the (N, 6) poses of the tool in the work frame (mm, deg), the soft
-        limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``)."""
+        limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``); a pose
+        within :data:`~hexactl.kinematics.workspace.POSE_BOUND_ROUNDING` of a bound is on it."""
         poses = np.asarray(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
         found: list[list[Violation]] = [[] for _ in range(len(poses))]
-        for bounds, side, broken, open_end in ((self.lower, "below", np.less, -np.inf),
-                                               (self.upper, "above", np.greater, np.inf)):
-            limits = np.array([open_end if bound is None else bound for bound in bounds])
+        for bounds, side, broken, open_end, rounding in ((self.lower, "below", np.less, -np.inf, -POSE_BOUND_ROUNDING),
+                                                         (self.upper, "above", np.greater, np.inf, POSE_BOUND_ROUNDING)):
+            limits = np.array([open_end if bound is None else bound + rounding for bound in bounds])
             for n, axis in zip(*np.nonzero(broken(poses, limits))):
                 value, limit, unit = float(poses[n, axis]), bounds[axis], POSE_UNITS[axis]
                 found[n].append(Violation(
@@ -87,7 +88,8 @@ class SoftLimits(BaseModel):
         limits: :meth:`violations` finds none. Plain floats for a stream's per-target check
         (:func:`~hexactl.kinematics.workspace.pose_within_limits` says why)."""
         for value, low, high in zip(tool_in_work_mm_deg, self.lower, self.upper):
-            if (low is not None and value < low) or (high is not None and value > high):
+            if (low is not None and value < low - POSE_BOUND_ROUNDING) or \
+                    (high is not None and value > high + POSE_BOUND_ROUNDING):
                 return False
         if self.max_tilt_deg is None:
             return True
@@ -95,7 +97,7 @@ class SoftLimits(BaseModel):
         return not self._beyond_tilt(degrees(acos(max(-1.0, min(1.0, cos(roll) * cos(pitch))))))
 
     def _beyond_tilt(self, tilt: float) -> bool:
-        return self.max_tilt_deg is not None and tilt > self.max_tilt_deg
+        return self.max_tilt_deg is not None and tilt > self.max_tilt_deg + POSE_BOUND_ROUNDING
 
 
 def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:

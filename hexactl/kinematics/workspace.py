@@ -34,10 +34,11 @@ from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.rotation import rotation_elements, rotation_matrices
 
 
-ENVELOPE_ROUNDING = 1e-9
-"""mm or deg a pose may pass the envelope's bound by and count as on it: the trajectory
-generator's samples of a move to a goal on the bound overshoot it by an ulp or so
-(610.0000000000001 for x = 610), which is rounding, not motion. The stroke has no such
+POSE_BOUND_ROUNDING = 1e-9
+"""mm or deg a pose may pass a bound on its coordinates by and count as on it (the
+envelope's here, the soft limits' in :mod:`~hexactl.kinematics.soft_limits`): the
+trajectory generator's samples of a move to a goal on the bound overshoot it by an ulp or
+so (610.0000000000001 for x = 610), which is rounding, not motion. The stroke has no such
 allowance: the loop's set-point guard enforces it exactly."""
 
 
@@ -269,7 +270,7 @@ def _outside_cone(angle_deg: float | NDArray, limit_deg: float) -> bool | NDArra
 
 
 def _outside_envelope(value: float | NDArray, low: float | NDArray, high: float | NDArray) -> bool | NDArray:
-    return (value != value) | (value < low - ENVELOPE_ROUNDING) | (value > high + ENVELOPE_ROUNDING)
+    return (value != value) | (value < low - POSE_BOUND_ROUNDING) | (value > high + POSE_BOUND_ROUNDING)
 
 
 def _condition(geometry: Geometry, jacobian_rows: Sequence[Sequence[float]]) -> float:

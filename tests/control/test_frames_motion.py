@@ -208,6 +208,19 @@ def test_a_platform_outside_restored_soft_limits_is_told_how_to_come_back(rig):
     assert rig.controller.move([0, 0, 0, 0, 0, 0]).ok
 
 
+def test_a_goal_on_a_soft_limit_is_accepted_whatever_its_path_rounds_to(rig):
+    """A goal on a soft bound, with a rotation on the way, was refused: its path's samples
+    ended an ulp beyond the bound ("x 50.000 mm above the soft limit 50 mm"). A micrometre
+    beyond is still beyond."""
+    limits = SoftLimits(lower=(-400.0,) * 3 + (None,) * 3, upper=(50.0, 7.3, 123.456, None, None, None))
+    assert rig.controller.set_frames(OperatorFrames(soft_limits=limits)).ok
+    for goal in ([50.0, 3.3, 0, 2.258172906097336, 0, 0], [0, 7.3, -17.0, -11.248758506492456, 0, 0],
+                 [-17.0, 0, 123.456, 13.847896737132508, 0, 0]):
+        assert rig.controller.validate_pose(goal).ok, (goal, rig.controller.validate_pose(goal).message)
+    refused = rig.controller.validate_pose([50.001, 0, 0, 0, 0, 0])
+    assert not refused.ok and "x 50.001 mm above the soft limit 50 mm" in refused.message
+
+
 axis_values = st.floats(-700.0, 700.0)
 angle_values = st.floats(-30.0, 30.0)
 goal_poses = st.tuples(axis_values, axis_values, st.floats(-300.0, 300.0), angle_values, angle_values, angle_values)
