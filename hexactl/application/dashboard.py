@@ -10,26 +10,60 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import subprocess
 import sys
+import time
 
 STOP_TIMEOUT_S = 5.0
 """How long the dashboard gets to end on SIGTERM before it is killed."""
+
+FIRST_RESTART_DELAY_S = 1.0
+"""A dashboard that ended is started again after this long, twice as long after each end
+that follows within :data:`STEADY_S` of its start (a crash at start-up), at most
+:data:`MOST_RESTART_DELAY_S`."""
+MOST_RESTART_DELAY_S = 60.0
+STEADY_S = 60.0
 
 log = logging.getLogger("hexactl.service")
 
 
 class DashboardProcess:
     """``hexactl dashboard --http HTTP`` for the service at ``api`` and ``telemetry`` (loopback
-    endpoints), started; :meth:`close` ends it, and it ends by itself if this process dies."""
+    endpoints), started; :meth:`close` ends it, and it ends by itself if this process dies.
+    :meth:`watch`, called now and then, says when it has ended and starts it again."""
 
     def __init__(self, api: str, telemetry: str, http: str) -> None:
-        self._process = subprocess.Popen(
-            [sys.executable, "-m", "hexactl.adapters.cli.main", "dashboard", "--api", api, "--telemetry", telemetry,
-             "--http", http, "--exit-with", str(os.getpid())],
-            stdin=subprocess.DEVNULL,
-        )
-        log.info("dashboard starting on http://%s/ (its own process, %d)", http, self._process.pid)
+        self._command = [sys.executable, "-m", "hexactl.adapters.cli.main", "dashboard", "--api", api,
+                         "--telemetry", telemetry, "--http", http, "--exit-with", str(os.getpid())]
+        self._http = http
+        self._delay_s = FIRST_RESTART_DELAY_S
+        self._restart_at: float | None = None  # monotonic s: when to start it again (None: it runs)
+        self._process = self._start()
+
+    def _start(self) -> subprocess.Popen:
+        process = subprocess.Popen(self._command, stdin=subprocess.DEVNULL)
+        self._started_at = time.monotonic()
+        log.info("dashboard starting on http://%s/ (its own process, %d)", self._http, process.pid)
+        return process
+
+    def watch(self) -> None:
+        """Log a dashboard that has ended (its pages lose their live data and say so) and
+        start it again once its delay is over."""
+        now = time.monotonic()
+        if self._restart_at is None:
+            if (status := self._process.poll()) is None:
+                return
+            if now - self._started_at >= STEADY_S:
+                self._delay_s = FIRST_RESTART_DELAY_S
+            how = f"killed by {signal.Signals(-status).name}" if status < 0 else f"exit status {status}"
+            log.error("the dashboard's process ended (%s): its pages have no live data and no E-stop; starting it "
+                      "again in %g s", how, self._delay_s)
+            self._restart_at = now + self._delay_s
+            self._delay_s = min(2 * self._delay_s, MOST_RESTART_DELAY_S)
+        elif now >= self._restart_at:
+            self._restart_at = None
+            self._process = self._start()
 
     def close(self) -> None:
         if self._process.poll() is None:
