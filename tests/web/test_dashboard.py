@@ -15,6 +15,8 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from urllib.error import URLError
+from urllib.request import urlopen
 
 import numpy as np
 import pytest
@@ -28,7 +30,7 @@ from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
 from tests.reliability.support import enable, tolerating_stalls
-from tools.serving import free_port, serve, wait_until
+from tools.serving import free_port, serve, terminate, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 SCREENSHOTS = ROOT / "docs" / "images"
@@ -345,43 +347,68 @@ def test_pages_are_sent_one_uncompressed_text_per_record(rig) -> None:
         assert seen[0][t] == seen[1][t]
 
 
-def test_serve_with_dashboard_serves_the_page_beside_it_and_stops_it_with_it(tmp_path) -> None:
-    import json
-    from urllib.error import URLError
-    from urllib.request import urlopen
+def dashboard_connected(port: int) -> bool:
+    """Whether the dashboard on ``port`` answers and is connected to its service."""
+    try:
+        with urlopen(f"http://127.0.0.1:{port}/health", timeout=5) as answer:
+            return json.load(answer)["connected"]
+    except (URLError, OSError):
+        return False
 
-    from tools.serving import terminate
 
-    port = free_port()
-    health = f"http://127.0.0.1:{port}/health"
-
-    def connected() -> bool:
+def dashboard_children(pid: int) -> list[int]:
+    """The dashboard processes among ``pid``'s children."""
+    found = []
+    for child in (int(child) for task in Path(f"/proc/{pid}/task").iterdir()
+                  for child in (task / "children").read_text().split()):
         try:
-            with urlopen(health, timeout=5) as answer:
-                return json.load(answer)["connected"]
-        except (URLError, OSError):
-            return False
+            if b"dashboard" in Path(f"/proc/{child}/cmdline").read_bytes():
+                found.append(child)
+        except OSError:  # ended meanwhile
+            continue
+    return found
 
+
+def ended(pid: int) -> bool:
+    """No such process, or only its zombie."""
+    return not Path(f"/proc/{pid}").exists() or Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+
+
+def test_serve_with_dashboard_serves_the_page_beside_it_and_stops_it_with_it(tmp_path) -> None:
+    port = free_port()
     with serve(tmp_path, "--dashboard", f"127.0.0.1:{port}") as served:
-        wait_for(connected, "the dashboard serving, connected to its service")
+        wait_for(lambda: dashboard_connected(port), "the dashboard serving, connected to its service")
         shutdown = terminate(served)
         assert shutdown.problems() == [], served.log
     with pytest.raises((URLError, OSError)):
-        urlopen(health, timeout=5)
+        urlopen(f"http://127.0.0.1:{port}/health", timeout=5)
+
+
+def test_a_dashboard_that_dies_is_said_and_started_again(tmp_path) -> None:
+    """The pages of a dead dashboard show that they have no live data (test_data_loss.py);
+    the service says so on its log and starts it again on the same address."""
+    port = free_port()
+    with serve(tmp_path, "--dashboard", f"127.0.0.1:{port}") as served:
+        wait_for(lambda: dashboard_connected(port), "the dashboard serving, connected to its service")
+        [first] = dashboard_children(served.process.pid)
+        os.kill(first, signal.SIGKILL)
+        wait_for(lambda: "the dashboard's process ended (killed by SIGKILL)" in served.log, "the service to say so",
+                 seen=lambda: served.log)
+        [second] = wait_for(lambda: [pid for pid in dashboard_children(served.process.pid) if pid != first],
+                            "a new dashboard process", seen=lambda: served.log)
+        wait_for(lambda: dashboard_connected(port), "the new dashboard serving on the same address")
+        assert served.log.count("dashboard starting on http://127.0.0.1:") == 2, served.log
+        shutdown = terminate(served)
+        assert shutdown.problems() == [], served.log
+    assert ended(second)
 
 
 def test_the_dashboard_of_a_killed_service_ends_by_itself(tmp_path) -> None:
     with serve(tmp_path, "--dashboard", f"127.0.0.1:{free_port()}") as served:
-        def board() -> list[int]:
-            children = [int(pid) for task in Path(f"/proc/{served.process.pid}/task").iterdir()
-                        for pid in (task / "children").read_text().split()]
-            return [pid for pid in children if b"dashboard" in Path(f"/proc/{pid}/cmdline").read_bytes()]
-
-        [pid] = wait_for(board, "the dashboard's process")
+        [pid] = wait_for(lambda: dashboard_children(served.process.pid), "the dashboard's process")
         served.process.kill()
         served.process.wait()
-        wait_for(lambda: not Path(f"/proc/{pid}").exists() or
-                 Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z", "the dashboard ended")
+        wait_for(lambda: ended(pid), "the dashboard ended")
 
 
 def test_a_campaigns_progress_and_its_finished_report_show_in_the_page(rig) -> None:
