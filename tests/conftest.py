@@ -36,6 +36,17 @@ def _session_working_directory(tmp_path_factory):
     os.chdir(before)
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _module_working_directory(tmp_path_factory):
+    """A module's own fixtures (its service) start in a working directory of the module's:
+    what one module's service keeps there (./frames.toml, ./active_calibration.toml) is
+    not another module's service's start."""
+    before = os.getcwd()
+    os.chdir(tmp_path_factory.mktemp("module-cwd"))
+    yield
+    os.chdir(before)
+
+
 @pytest.fixture(autouse=True)
 def _working_directory(tmp_path_factory, monkeypatch):
     """Each test runs in an empty working directory of its own: a service started with its

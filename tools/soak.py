@@ -98,6 +98,7 @@ class MonitoredService:
         self.geometry = load_geometry(config_path or default_config_path())
         config = ServiceConfig(config_path=config_path, api_endpoint=LOCAL, telemetry_endpoint=LOCAL,
                                data_dirs=(data_dir,), rate_hz=rate_hz, log_level="WARNING",
+                               kept_calibration_path=data_dir / "active_calibration.toml",  # not the caller's
                                fifo_priority=scheduling.fifo_priority, lock_memory=scheduling.lock_memory)
         try:
             self._child = Spawned(_serve_monitored, (config, self.geometry), name="monitored service", daemon=False,

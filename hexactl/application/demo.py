@@ -25,6 +25,7 @@ drives with :data:`DEMO_MOTION` (the legs' speed limit unchanged);
 
 from __future__ import annotations
 
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -47,9 +48,10 @@ from hexactl.application.campaign.store import (
     make_directory,
 )
 from hexactl.adapters.files.geometry_file import load_geometry
+from hexactl.adapters.files.kept_calibration import DEFAULT_FILE as DEFAULT_KEPT_CALIBRATION_FILE
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.report.html import REPORT_PAGE
-from hexactl.application.service import ServiceConfig, ServiceError, ServiceProcess
+from hexactl.application.service import DEFAULT_FRAMES_FILE, ServiceConfig, ServiceError, ServiceProcess
 from hexactl.calibration.test_motions import PAPER_MAX_STROKE_ERROR, PAPER_STROKES, PAPER_TABLE_1
 from hexactl.calibration.uncertainty import pose_fit_noise_rms
 from hexactl.calibration.validation import MotionResult, largest_stroke_error, summarise_validation
@@ -147,9 +149,14 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
         raise ServiceError(str(error)) from None
     local = "tcp://127.0.0.1:*"  # the real API path, on ports nobody else has
     # Real-time where the process may, as hexactl serve (ServiceConfig's default).
+    # The demo's service starts on the nominal geometry and without frames whatever a service
+    # run here kept, and keeps the calibration it applies nowhere a later service would find it.
+    kept = tempfile.TemporaryDirectory(prefix="hexactl-demo-")
     config = ServiceConfig(config_path=settings.config, api_endpoint=local, telemetry_endpoint=local,
                            data_dirs=(settings.directory,), simulator_seed=settings.seed, motion=DEMO_MOTION,
-                           log_level="WARNING", dashboard_http=settings.dashboard_http)
+                           log_level="WARNING", dashboard_http=settings.dashboard_http,
+                           frames_path=Path(kept.name) / DEFAULT_FRAMES_FILE,
+                           kept_calibration_path=Path(kept.name) / DEFAULT_KEPT_CALIBRATION_FILE)
     # The simulator's truth, rebuilt here from the same seed by the same function: for the
     # report's parameter table only; the campaign never sees it.
     truth = true_geometry(nominal, settings.seed)
@@ -157,7 +164,7 @@ def run_demo(settings: DemoSettings, progress: Progress) -> CampaignOutcome:
     design = CampaignDesign(postures_per_leg=settings.postures_per_leg, envelope_fraction=settings.envelope_fraction,
                             seed=settings.seed)
     campaign = CampaignSettings(settings.directory, design, apply=True, true=truth, reset_faults=settings.reset_faults)
-    with (ServiceProcess(config, DEMO_START_TIMEOUT_S) as service,
+    with (kept, ServiceProcess(config, DEMO_START_TIMEOUT_S) as service,
           HexactlClient(service.api_endpoint, timeout_s=DEMO_CLIENT_TIMEOUT_S) as client):
         outcome = run_campaign(client, nominal, ServiceInstrument(client), campaign, progress)
     progress.say("")

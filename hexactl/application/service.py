@@ -62,6 +62,8 @@ from hexactl.adapters.can.transport import BusSpecError
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
+from hexactl.adapters.files.kept_calibration import DEFAULT_FILE as DEFAULT_KEPT_CALIBRATION_FILE
+from hexactl.adapters.files.kept_calibration import KeptCalibration, restore_calibration
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.dashboard import DashboardProcess
 from hexactl.application.loop_link import LoopExchange
@@ -174,7 +176,11 @@ class ServiceConfig:
     loop's process. Both on by default; each falls back, logged and in ``status``,
     without the privilege. ``frames_path``: where the operator's frames and soft limits
     are kept across restarts (None: ./frames.toml); read at start (a file that is not
-    valid refuses the start), written whenever they change. ``dashboard_http``: serve the
+    valid refuses the start), written whenever they change. ``kept_calibration_path``: where
+    the calibration in force is kept across restarts (None: ./active_calibration.toml;
+    :mod:`~hexactl.adapters.files.kept_calibration`): restored at start without
+    ``calibration_path`` (a file that cannot be used refuses the start), written whenever
+    it changes. ``dashboard_http``: serve the
     browser dashboard there too (``HOST:PORT`` on loopback; None: no dashboard), in a
     process of its own, stopped first at shutdown. ``stream_endpoint``: the pose stream's
     ZeroMQ socket (None: the API's host, a free port); ``stream_udp``: (host, port) where
@@ -197,6 +203,7 @@ class ServiceConfig:
     lock_memory: bool = True
     log_level: str = "INFO"
     frames_path: Path | None = None
+    kept_calibration_path: Path | None = None
     dashboard_http: str | None = None
     stream_endpoint: str | None = None
     stream_udp: tuple[str, int] | None = None
@@ -272,12 +279,9 @@ class Service:
         frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
         frames = _restored_frames(frames_path)
         log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
-        active, source = (_load(config.calibration_path), config.calibration_path) if config.calibration_path else (nominal, config_path)
+        kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
+        active, source, refused = _start_calibration(config.calibration_path, kept_path, nominal, config_path)
         calibration_id = geometry_id(active)
-        if config.calibration_path:
-            log.info("active calibration %r (%s) from %s", active.name, calibration_id, source)
-        else:
-            log.info("no calibration: the nominal geometry is active")
 
         with ExitStack() as closers:  # unwound in reverse: API, bring to rest, telemetry, loop, link, simulator
             simulator = None
@@ -306,8 +310,11 @@ class Service:
             try:
                 controller = LocalController.in_thread(link, active, calibration_id, calibration_source=str(source),
                                                        config=controller_config, nominal=nominal)
-            except ValueError as error:  # a calibration whose [limits] are not the nominal's
-                raise ServiceError(f"{source}: {error}") from None
+            except ValueError as error:  # a calibration whose [limits] are not the nominal's, or implausible
+                raise ServiceError(f"{source}: {error}{refused}") from None
+            kept = KeptCalibration(kept_path, geometry_id(nominal))
+            if config.calibration_path:  # what is in force is what a restart restores
+                _keep(kept, active, calibration_id, source)
 
             pipes = multiprocessing.get_context("spawn")
             commands_in, commands_out = pipes.Pipe(duplex=False)
@@ -328,6 +335,7 @@ class Service:
                                    simulator.instrument_spec if simulator else None, config.log_level,
                                    urgent_niceness=0 if realtime.fifo_priority is None
                                    else API_URGENT_NICENESS, frames=frames, frames_file=frames_path,
+                                   kept_calibration=kept,
                                    stream_endpoint=config.stream_endpoint or _beside(config.api_endpoint),
                                    stream_udp=config.stream_udp)  # fmt: skip
             if config.stream_udp and not ipaddress.ip_address(config.stream_udp[0]).is_loopback:
@@ -662,6 +670,41 @@ def _restored_frames(path: Path) -> OperatorFrames:
         raise ServiceError(f"{error}\nfix the file, or remove it to start with no frames and no soft limits") from None
     log.info("operator frames restored from %s", path)
     return frames
+
+
+def _start_calibration(calibration_path: Path | None, kept_path: Path, nominal: Geometry,
+                       config_path: Path) -> tuple[Geometry, str, str]:
+    """The geometry to start with, where it came from, and what to add to its refusal:
+    ``calibration_path``'s, else the one kept in ``kept_path`` (the calibration in force
+    when the service last ran), else ``nominal``.
+
+    :raises ServiceError: for a calibration file, or a kept one, that cannot be used
+    """
+    if calibration_path:
+        active = _load(calibration_path)
+        log.info("active calibration %r (%s) from %s", active.name, geometry_id(active), calibration_path)
+        return active, str(calibration_path), ""
+    remedy = (f"\n{kept_path} keeps the calibration in force when the service last ran: give --calibration FILE, "
+              "or remove the file to start on the nominal geometry")
+    if not kept_path.exists():
+        log.info("no calibration: the nominal geometry is active")
+        return nominal, str(config_path), ""
+    try:
+        active, source = restore_calibration(kept_path)
+    except GeometryError as error:
+        raise ServiceError(f"{error}{remedy}") from None
+    log.info("active calibration %r (%s) restored from %s (loaded from %s)", active.name, geometry_id(active),
+             kept_path, source)
+    return active, source, remedy
+
+
+def _keep(kept: KeptCalibration, active: Geometry, calibration_id: str, source: str) -> None:
+    """Keep ``active`` for a restart, saying so, or say that it is not kept."""
+    try:
+        log.info("calibration %s: %s", calibration_id, kept.keep(active, calibration_id, source))
+    except OSError as error:
+        log.warning("the calibration in force is not kept for a restart (%s: %s): a restart without --calibration "
+                    "would start on what was kept before", kept.path, error)
 
 
 def _load(path: Path) -> Geometry:

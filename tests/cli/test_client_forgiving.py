@@ -71,9 +71,7 @@ def test_a_calibration_file_here_is_sent_with_its_name(service, nominal, tmp_pat
     assert run(service, "load-calibration", "demo-out/calibration.toml") == 0
     where = tmp_path / "demo-out" / "calibration.toml"
     assert capsys.readouterr().out.strip() == (f"ok: calibration {geometry_id(calibrated)} loaded; read from {where} "
-                                               "here and sent; set-points change by up to 0.500 mm; active until "
-                                               "the service stops: start it with `hexactl serve --calibration FILE` "
-                                               "to keep it")
+                                               "here and sent; set-points change by up to 0.500 mm")
     assert service.controller.calls[-1][1][2] == f"{TOML_SOURCE} ({where})"  # the service records which file
     assert run(service, "load-calibration", "--send", "demo-out/calibration.toml") == 0  # still accepted
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import csv
 import io
+import logging
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -61,11 +62,14 @@ from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
 from hexactl.adapters.files.frames_file import save_frames
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
+from hexactl.adapters.files.kept_calibration import KeptCalibration
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry, GeometryError, describe_validation_error
+
+log = logging.getLogger("hexactl.api")
 
 JOG_REPLY = ("jog", "goal", "speed", "end", "to_limit", "deadman_s")
 """The fields of a ``jog`` reply besides ``message``."""
@@ -99,11 +103,13 @@ class CommandHandler:
     operator's frames are saved whenever they change (None: not saved). ``recorder``:
     the data recorder's writer (None: ``record`` is refused ``no_recorder``).
     ``stream_input``: where a pose stream's samples are taken (None: ``stream_open`` is
-    refused ``no_stream_input``)."""
+    refused ``no_stream_input``). ``kept_calibration``: where the calibration in force is
+    kept for a restart after each load and rollback (None: not kept)."""
 
     def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None,
                  frames_file: Path | None = None, recorder: RecorderPort | None = None,
-                 stream_input: StreamInput | None = None) -> None:
+                 stream_input: StreamInput | None = None, *, kept_calibration: KeptCalibration | None = None) -> None:
+        self.kept_calibration = kept_calibration
         self.stream_input = stream_input
         self.controller = controller
         self.data = data
@@ -169,7 +175,8 @@ class CommandHandler:
                 return self._validate_calibration(request)
             case LoadCalibrationRequest():
                 geometry, source = self._calibration(request)
-                return _calibration_fields(controller.load_calibration(geometry, geometry_id(geometry), source))
+                return self._kept(_calibration_fields(controller.load_calibration(geometry, geometry_id(geometry),
+                                                                                  source)))
             case GeometryRequest():
                 active = controller.active_geometry()
                 return {"calibration_id": active.calibration_id, "source": active.source,
@@ -184,7 +191,7 @@ class CommandHandler:
                 return {"path": str(path), "offset": request.offset, "data_b64": base64.b64encode(data).decode("ascii"),
                         "size": size, "eof": request.offset + len(data) >= size}
             case RollbackCalibrationRequest():
-                return _calibration_fields(controller.rollback_calibration())
+                return self._kept(_calibration_fields(controller.rollback_calibration()))
             case SaveRecordingRequest():
                 return self._save_recording(request)
             case MeasureRequest():
@@ -263,6 +270,20 @@ class CommandHandler:
                 raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{self.frames_file}: the frames could not be saved ({error}); "
                                "the ones before stay in force: free the disk or fix the permissions, then again") from None
         return {"message": message or result.message, "frames": jsonable(frames)}
+
+    def _kept(self, fields: dict[str, Any]) -> dict[str, Any]:
+        """A calibration change's reply ``fields``, once the calibration now in force is kept
+        for a restart; its message says so, or why it is not."""
+        if self.kept_calibration is None:
+            return fields
+        active = self.controller.active_geometry()
+        try:
+            said = self.kept_calibration.keep(active.geometry, active.calibration_id, active.source)
+        except OSError as error:
+            said = (f"NOT kept for a restart ({self.kept_calibration.path}: {error}): a restart would start on the "
+                    "calibration kept before; free the disk or fix the permissions, then load it again")
+            log.warning("calibration %s %s", active.calibration_id, said)
+        return {**fields, "message": f"{fields['message']}; {said}"}
 
     def _calibration(self, request: LoadCalibrationRequest) -> tuple[Geometry, str]:
         """The geometry a load or validate request names, parsed and validated, and its source."""

@@ -146,7 +146,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
         "actuators and stop, within 10 s."
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
-    serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the --config geometry")
+    serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the one kept from "
+                       "the last run (--keep-calibration) or, if none, the --config geometry")
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
     realtime = serve.add_mutually_exclusive_group()
@@ -169,6 +170,10 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     )
     serve.add_argument("--frames", type=Path, metavar="FILE", help="where the operator's frames and soft limits are "
                        "kept across restarts (default ./frames.toml; read at start, written when they change)")
+    serve.add_argument("--keep-calibration", type=Path, metavar="FILE",
+                       help="where the calibration in force is kept across restarts (default ./active_calibration.toml;"
+                       " restored at start without --calibration, written when it changes, removed when the nominal "
+                       "geometry is back)")
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
     serve.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",
@@ -392,6 +397,7 @@ def run_serve(arguments: argparse.Namespace) -> int:
         lock_memory=not arguments.no_realtime,
         log_level=arguments.log_level,
         frames_path=arguments.frames,
+        kept_calibration_path=arguments.keep_calibration,
         dashboard_http=checked_http(arguments.dashboard),
         stream_endpoint=arguments.stream,
         stream_udp=udp_address(arguments.stream_udp) if arguments.stream_udp else None,
@@ -436,8 +442,6 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
         said.append(f"{reply['duration']:.2f} s")
     if "change_mm" in reply:
         said.append(f"set-points change by up to {reply['change_mm']:.3f} mm")
-    if cmd == "load_calibration":
-        said.append("active until the service stops: start it with `hexactl serve --calibration FILE` to keep it")
     if "records" in reply:
         said.append(f"{reply['records']} records of {reply['name']} ({reply['status']}) written to {reply['path']}")
     return "ok" + (": " + "; ".join(said) if said else "")
