@@ -25,7 +25,10 @@ def measure(calls: int, repeats: int) -> float:
 
     supervisor = Supervisor(SupervisionConfig(), 0.002)
     supervisor.enabled(0)
-    healthy = ActuatorFeedback(100.0, 0.0, ActuatorState.ENABLED, 0, 0.001, 100)
+    # Since the fault bits are named; a tree from before has no such field.
+    named = {"fault_names": ()} if "fault_names" in inspect.signature(ActuatorFeedback).parameters else {}
+    healthy = ActuatorFeedback(position_mm=100.0, velocity_mm_s=0.0, state=ActuatorState.ENABLED, fault_bits=0, **named,
+                               heartbeat_age_s=0.001, setpoint_counter=100)
     feedback, link = FeedbackSnapshot((healthy,) * 6, 0), LinkHealth(BusState.ACTIVE, 0)
     if len(inspect.signature(supervisor.sent).parameters) == 3:  # since the following error: the set-points too
         supervisor.sent(100, (100.0,) * 6, True)

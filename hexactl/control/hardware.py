@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from enum import IntEnum, StrEnum
+from enum import Flag, IntEnum, StrEnum
 from typing import Protocol, runtime_checkable
 
 ACTUATOR_COUNT = 6
@@ -69,15 +69,59 @@ class ActuatorFeedback:
     be enabled, e.g. announced its protocol version). ``setpoint_counter``: the ``counter`` of the last
     :meth:`ActuatorInterface.send_setpoints` call whose value the actuator applied, as
     passed to that call (an implementation with a narrower wire field unwraps it), or
-    −1 if none yet. ``fault_bits``: the drive's fault word, 0 when healthy.
+    −1 if none yet. ``fault_bits``: the drive's fault word, 0 when healthy;
+    ``fault_names``: its set bits' names, lowest bit first (:class:`FaultNames`).
     """
 
     position_mm: float
     velocity_mm_s: float
     state: ActuatorState
     fault_bits: int
+    fault_names: tuple[str, ...]
     heartbeat_age_s: float
     setpoint_counter: int
+
+
+class FaultNames:
+    """Names the bits of a fault word from the protocol's own definition of them.
+
+    Why the feedback carries the names (:attr:`ActuatorFeedback.fault_names`) rather than
+    the loop asking the interface: the bits and their meaning are the implementation's
+    protocol, which the control layer does not know, and the feedback is what reaches
+    every reader (supervision, the enable check on a snapshot in the API's process,
+    telemetry), so the names travel with the word they describe and cannot disagree.
+
+    ``bits``: an :class:`enum.Flag` type with one member per defined bit (the CAN link and
+    the simulator pass ``firmware_proto.codec.Fault``). A bit's name is its member's name
+    lower-cased (``LIMIT_SWITCH`` → ``limit_switch``): the protocol's spelling, so that
+    PROTOCOL.md finds what an operator reads. A set bit the type does not define is named
+    ``bit_N`` (N counted from 0), never dropped.
+    """
+
+    def __init__(self, bits: type[Flag]) -> None:
+        self._by_mask = {member.value: member.name.lower() for member in bits}
+        self._named: dict[int, tuple[str, ...]] = {0: ()}  # each word named once: implementations ask every read
+
+    def __call__(self, fault_bits: int) -> tuple[str, ...]:
+        """The names of the bits set in ``fault_bits``, lowest bit first; ``()`` for 0.
+
+        :raises ValueError: if ``fault_bits`` is negative.
+        """
+        names = self._named.get(fault_bits)
+        if names is None:
+            if fault_bits < 0:
+                raise ValueError(f"a fault word is not negative, got {fault_bits}")
+            masks = (1 << bit for bit in range(fault_bits.bit_length()) if fault_bits >> bit & 1)
+            names = self._named[fault_bits] = tuple(self._by_mask.get(mask) or f"bit_{mask.bit_length() - 1}"
+                                                    for mask in masks)
+        return names
+
+
+def fault_text(fault_names: Sequence[str], fault_bits: int) -> str:
+    """A fault word for people: its bits' names and the word in hex, ``sensor, supply
+    (0x180)``; ``none`` for 0. (The CLI, which loads no control module, writes a leg's
+    the same way: :func:`hexactl.adapters.cli.telemetry_text.leg_state_text`.)"""
+    return f"{', '.join(fault_names)} ({fault_bits:#x})" if fault_bits else "none"
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,7 +184,8 @@ class ActuatorInterface(Protocol):
 
     def read_feedback(self) -> FeedbackSnapshot:
         """Process what has arrived since the last call and return the latest state of
-        all six actuators (never waits for new frames)."""
+        all six actuators (never waits for new frames), their fault bits named by the
+        implementation's protocol (:class:`FaultNames`)."""
         ...
 
     def link_health(self) -> LinkHealth:

@@ -14,7 +14,7 @@ from math import isnan
 from typing import Protocol
 
 from hexactl.control.commands import SwapGeometry
-from hexactl.control.hardware import ActuatorState, FeedbackSnapshot
+from hexactl.control.hardware import ActuatorState, FeedbackSnapshot, fault_text
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequenceProgress
@@ -103,8 +103,8 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
         if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
             cleared_soon = (" (after a reset an actuator leaves ESTOP once it has seen no E-stop for a moment: "
                             "enable again shortly)" if actuator.state is ActuatorState.ESTOP else "")
-            return ErrorCode.ACTUATOR_FAULT, (f"leg {leg}: {actuator.state.name}, fault bits "
-                                              f"0x{actuator.fault_bits:x}{cleared_soon}")
+            return ErrorCode.ACTUATOR_FAULT, (f"leg {leg}: {actuator.state.name}, faults: "
+                                              f"{fault_text(actuator.fault_names, actuator.fault_bits)}{cleared_soon}")
         if isnan(actuator.position_mm):
             return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no position reported yet"
         if not low <= actuator.position_mm <= high:

@@ -31,6 +31,7 @@ from hexactl.control.hardware import (
     ActuatorState,
     FeedbackSnapshot,
     LinkHealth,
+    fault_text,
 )
 
 
@@ -84,7 +85,8 @@ class Supervisor:
             if not actuator.heartbeat_age_s <= self.heartbeat_timeout_s:
                 faults.append(Fault("heartbeat_lost", f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s", leg))
             elif actuator.state is ActuatorState.FAULT or actuator.fault_bits:
-                faults.append(Fault("actuator_fault", f"leg {leg} reports fault bits 0x{actuator.fault_bits:x}", leg))
+                faults.append(Fault("actuator_fault", f"leg {leg} reports {actuator.state.name}, faults: "
+                                    f"{fault_text(actuator.fault_names, actuator.fault_bits)}", leg))
             elif actuator.state is not expected:
                 if now_ns >= self._settling_until_ns[leg - 1]:
                     faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected {expected.name}", leg))

@@ -84,11 +84,13 @@ class StreamTelemetry:
 @dataclass(frozen=True, slots=True)
 class LegStatus:
     """One actuator as it last reported: ``state`` disabled, enabled, locked, fault or
-    estop; ``fault_bits`` its drive's fault word (0: none); ``report_age_s`` since its
-    last report, s (None: never heard from)."""
+    estop; ``fault_bits`` its drive's fault word (0: none) and ``fault_names`` its set
+    bits' names, lowest first (``sensor``; ``bit_N`` for one the protocol does not
+    define); ``report_age_s`` since its last report, s (None: never heard from)."""
 
     state: str
     fault_bits: int
+    fault_names: tuple[str, ...]
     report_age_s: float | None
 
 
@@ -135,7 +137,8 @@ def leg_statuses(s: CoreSnapshot) -> tuple[LegStatus, ...] | None:
     """Each actuator's last report (None before the first read)."""
     if s.feedback is None:
         return None
-    return tuple(LegStatus(a.state.name.lower(), a.fault_bits, a.heartbeat_age_s if isfinite(a.heartbeat_age_s) else None)
+    return tuple(LegStatus(a.state.name.lower(), a.fault_bits, a.fault_names,
+                           a.heartbeat_age_s if isfinite(a.heartbeat_age_s) else None)
                  for a in s.feedback.actuators)
 
 

@@ -15,16 +15,19 @@ import time
 from collections.abc import Callable, Sequence
 from math import exp, isfinite
 
+from firmware_proto.codec import Fault
 from hexactl.control.hardware import (
     ACTUATOR_COUNT,
     ActuatorCommand,
     ActuatorFeedback,
     ActuatorState,
     BusState,
+    FaultNames,
     FeedbackSnapshot,
     LinkHealth,
 )
 
+_FAULT_NAMES = FaultNames(Fault)  # the real actuators' bits (PROTOCOL.md section 9), so injected faults read the same
 _HOLDING = (ActuatorState.DISABLED, ActuatorState.LOCKED, ActuatorState.FAULT, ActuatorState.ESTOP)
 
 
@@ -105,6 +108,7 @@ class IdealActuators:
                     velocity_mm_s=self.velocities[i],
                     state=self.states[i],
                     fault_bits=self.fault_bits[i],
+                    fault_names=_FAULT_NAMES(self.fault_bits[i]),
                     heartbeat_age_s=(now - self._heard_ns[i]) * 1e-9,
                     setpoint_counter=self.applied_counter[i],
                 )
@@ -123,7 +127,8 @@ class IdealActuators:
         self.silenced[leg - 1] = silent
 
     def inject_fault(self, leg: int, bits: int = 1) -> None:
-        """Put leg 1–6 into FAULT with the given fault word; it holds its length."""
+        """Put leg 1–6 into FAULT with the given fault word (``firmware_proto.codec.Fault``
+        bits; any other bit is reported too, named ``bit_N``); it holds its length."""
         self.states[leg - 1] = ActuatorState.FAULT
         self.fault_bits[leg - 1] = bits
 

@@ -11,7 +11,9 @@ from hexactl.adapters.api.messages import Telemetry
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.cli.main import main
 from hexactl.adapters.cli.service_commands import format_telemetry
+from hexactl.adapters.cli.telemetry_text import leg_state_text
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
+from hexactl.control.hardware import fault_text
 
 
 def run(service, command: str, *arguments: str) -> int:
@@ -107,13 +109,17 @@ def test_telemetry_text_with_unknown_values(service) -> None:
 
 def test_telemetry_text_names_each_legs_state_fault_bits_and_silence(service) -> None:
     record = jsonable(service.controller.telemetry())
-    healthy = {"state": "disabled", "fault_bits": 0, "report_age_s": 0.002}
+    healthy = {"state": "disabled", "fault_bits": 0, "fault_names": [], "report_age_s": 0.002}
     assert "legs           unknown\n" in format_telemetry({**record, "legs": None})
     assert "legs           all disabled\n" in format_telemetry({**record, "legs": [healthy] * 6})
-    record["legs"] = [healthy] * 4 + [{"state": "fault", "fault_bits": 0x80, "report_age_s": 0.01},
-                                      {**healthy, "report_age_s": 6.3}]
+    faulted = {"state": "fault", "fault_bits": 0x2081, "fault_names": ["comm_timeout", "sensor", "bit_13"],
+               "report_age_s": 0.01}
+    record["legs"] = [healthy] * 4 + [faulted, {**healthy, "report_age_s": 6.3}]
     line = next(line for line in format_telemetry(record).splitlines() if line.startswith("legs "))
-    assert line.endswith("L4 disabled  L5 fault 0x80  L6 disabled; no report lately: L6 6.3 s"), line
+    assert line.endswith("L4 disabled  L5 fault: comm_timeout, sensor, bit_13 (0x2081)  L6 disabled; "
+                         "no report lately: L6 6.3 s"), line
+    # The same form as the service's messages (the CLI does not import it: status loads no control module).
+    assert leg_state_text(faulted) == "fault: " + fault_text(faulted["fault_names"], faulted["fault_bits"])
 
 
 def test_monitor_without_service_exits_two(tmp_path, capsys) -> None:

@@ -18,6 +18,7 @@ from firmware_proto.codec import CommandCode, EStopReason, Fault, LoopRate
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpec, BusSpecError, parse_bus_spec
 from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, BusState
+from tests.firmware_proto.frames import dbc_fault_names
 
 ENOBUFS = can.CanOperationError("Failed to transmit: No buffer space available", errno.ENOBUFS)
 ENETDOWN = can.CanOperationError("Failed to transmit: Network is down", errno.ENETDOWN)
@@ -291,6 +292,7 @@ def test_feedback_heartbeat_and_emergency_become_actuator_state(link, bus, clock
     assert (one.position_mm, one.velocity_mm_s, one.state) == (123.456, -2.5, ActuatorState.ENABLED)
     assert two.state is ActuatorState.LOCKED and math.isnan(two.position_mm)
     assert three.state is ActuatorState.FAULT and three.fault_bits == int(Fault.SENSOR | Fault.ESTOP)
+    assert three.fault_names == ("estop", "sensor") and one.fault_names == ()
     assert four.heartbeat_age_s == math.inf and four.state is ActuatorState.DISABLED
     assert one.heartbeat_age_s == math.inf  # FEEDBACK alone: not yet known to speak protocol 1
     assert two.heartbeat_age_s == 0.0  # heard at this read
@@ -299,6 +301,17 @@ def test_feedback_heartbeat_and_emergency_become_actuator_state(link, bus, clock
     clock.t_ns = 105_000_000
     assert link.read_feedback().actuators[0].heartbeat_age_s == pytest.approx(0.1)
     assert link.stats().emergencies == (0, 0, 1, 0, 0, 0)
+
+
+def test_every_fault_bit_is_named_as_the_dbc_names_it(link, bus):
+    names = dbc_fault_names()
+    assert sorted(names) == list(range(12))
+    for bit, name in names.items():
+        bus.push(*codec.encode_feedback(4, 0, 0, WireState.FAULT, Fault(1 << bit), 0))
+        assert link.read_feedback().actuators[3].fault_names == (name.lower(),), name
+    bus.push(*codec.encode_emergency(4, codec.FaultCode.INTERNAL, WireState.FAULT, Fault((1 << 12) - 1)))
+    every = link.read_feedback().actuators[3]
+    assert (every.fault_bits, every.fault_names) == (0xFFF, tuple(names[bit].lower() for bit in range(12)))
 
 
 def test_bad_frames_are_counted_not_raised(link, bus):

@@ -71,6 +71,17 @@ def test_the_view_shows_every_value_with_its_unit() -> None:
     assert rows["feedback"][1] == "—"  # leg 2 not heard from
 
 
+def test_the_view_names_a_legs_fault_bits_beside_the_word() -> None:
+    healthy = {"state": "enabled", "fault_bits": 0, "fault_names": [], "report_age_s": 0.001}
+    faulted = {"state": "fault", "fault_bits": 0x81, "fault_names": ["comm_timeout", "sensor"], "report_age_s": 0.001}
+    *_, legs_row = (line for line in rendered({**RECORD, "legs": [healthy] * 4 + [faulted, healthy]}).splitlines()
+                    if line.startswith("legs "))  # the last: the first heads the table of lengths
+    assert legs_row.split() == ["legs", "L1", "enabled", "L2", "enabled", "L3", "enabled", "L4", "enabled",
+                                "L5", "fault:", "comm_timeout,", "sensor", "(0x81)", "L6", "enabled"]
+    estop = {"state": "estop", "fault_bits": 0x2, "fault_names": ["estop"], "report_age_s": 0.001}
+    assert "legs         all estop: estop (0x2)" in rendered({**RECORD, "legs": [estop] * 6})
+
+
 def test_the_view_shows_the_frames_the_tool_pose_and_the_soft_limits() -> None:
     assert "frames" in rendered(RECORD) and "none (poses relative to the zero posture)" in rendered(RECORD)
     framed = {**RECORD, "tool_pose_command": [0.0, 0.0, 0.0, 5.0, 0.0, 0.0],

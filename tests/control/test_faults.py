@@ -55,6 +55,19 @@ def test_actuator_and_link_failures_fault(rig, inject, code):
     assert code in {f.code for f in rig.controller.snapshot.faults}
 
 
+def test_an_actuator_fault_is_named_in_the_fault_and_the_telemetry(rig):
+    rig.enabled()
+    rig.run(10)
+    rig.actuators.inject_fault(2, 0x20 | 0x80 | 1 << 13)  # OVERCURRENT, SENSOR and a bit the protocol does not define
+    _until_state(rig, "fault", seconds=0.1)
+    fault = rig.controller.snapshot.faults[0]
+    assert (fault.code, fault.leg, fault.message) == (
+        "actuator_fault", 2, "leg 2 reports FAULT, faults: overcurrent, sensor, bit_13 (0x20a0)")
+    leg = rig.controller.telemetry().legs[1]
+    assert (leg.state, leg.fault_bits, leg.fault_names) == ("fault", 0x20A0, ("overcurrent", "sensor", "bit_13"))
+    assert rig.controller.telemetry().legs[0].fault_names == ()
+
+
 def test_setpoints_that_are_not_applied_fault(rig):
     rig.enabled()
     rig.run(10)
@@ -168,7 +181,7 @@ def test_enable_refusals(make_rig, geometry):
     rig.actuators.inject_fault(4)
     rig.run()
     faulted = rig.controller.enable()
-    assert faulted.error == "actuator_fault" and "leg 4: FAULT" in faulted.message and "E-stop" not in faulted.message
+    assert (faulted.error, faulted.message) == ("actuator_fault", "leg 4: FAULT, faults: comm_timeout (0x1)")
     rig.actuators.states[3] = rig.actuators.states[0]
     rig.actuators.fault_bits[3] = 0
     original = rig.actuators.positions[0]

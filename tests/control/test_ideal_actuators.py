@@ -1,5 +1,6 @@
 from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, BusState
 from hexactl.sim.ideal_actuators import IdealActuators
+from tests.firmware_proto.frames import dbc_fault_names
 
 MS = 1_000_000
 
@@ -28,7 +29,7 @@ def test_faults_heartbeats_and_estop(clock):
     assert actuators.read_feedback().actuators[2].heartbeat_age_s == 0.05
     actuators.inject_fault(1, 0x4)
     feedback = actuators.read_feedback().actuators[0]
-    assert (feedback.state, feedback.fault_bits) == (ActuatorState.FAULT, 0x4)
+    assert (feedback.state, feedback.fault_bits, feedback.fault_names) == (ActuatorState.FAULT, 0x4, ("setpoint_range",))
     actuators.send_command(None, ActuatorCommand.CLEAR_FAULT)
     assert actuators.read_feedback().actuators[0].state is ActuatorState.DISABLED
     actuators.bus_state = BusState.BUS_OFF
@@ -37,3 +38,14 @@ def test_faults_heartbeats_and_estop(clock):
     actuators.bus_state = BusState.ACTIVE
     assert actuators.send_estop()
     assert {a.state for a in actuators.read_feedback().actuators} == {ActuatorState.ESTOP}
+
+
+def test_injected_fault_bits_are_named_as_the_dbc_names_them_and_unknown_ones_by_number(clock):
+    actuators = IdealActuators([100.0] * 6, clock_ns=clock)
+    for bit, name in dbc_fault_names().items():
+        actuators.inject_fault(2, 1 << bit)
+        assert actuators.read_feedback().actuators[1].fault_names == (name.lower(),), name
+    actuators.inject_fault(2, 1 << 13 | 0x81)
+    assert actuators.read_feedback().actuators[1].fault_names == ("comm_timeout", "sensor", "bit_13")
+    actuators.fault_bits[1] = 0  # what the names follow
+    assert actuators.read_feedback().actuators[1].fault_names == ()

@@ -13,7 +13,7 @@ POSE = (12.0, -8.0, 5.0, 0.02, -0.01, 0.03)  # relative mm/rad
 
 
 def feedback_at(active: ActiveGeometry, positions) -> FeedbackSnapshot:
-    return FeedbackSnapshot(tuple(ActuatorFeedback(p, 0.0, ActuatorState.ENABLED, 0, 0.0, 0) for p in positions), 0)
+    return FeedbackSnapshot(tuple(ActuatorFeedback(p, 0.0, ActuatorState.ENABLED, 0, (), 0.0, 0) for p in positions), 0)
 
 
 @pytest.fixture

@@ -150,7 +150,7 @@ def test_a_new_sequence_starts_with_no_records(rig):
 
 def test_a_dwell_record_is_in_mm_and_degrees_and_nan_without_feedback():
     pose = RelativeMmRad(1.0, 2.0, 3.0, radians(10), radians(-20), radians(30))
-    legs = FeedbackSnapshot(tuple(ActuatorFeedback(float(i), 0.0, ActuatorState.ENABLED, 0, 0.0, 0) for i in range(6)), 0)
+    legs = FeedbackSnapshot(tuple(ActuatorFeedback(float(i), 0.0, ActuatorState.ENABLED, 0, (), 0.0, 0) for i in range(6)), 0)
     record = dwell_record("tour", 2, 3 * S, pose, None, [5.0] * 6, legs)
     assert (record.sequence, record.waypoint, record.t_s) == ("tour", 2, 3.0)
     assert record.pose_command == pytest.approx((1.0, 2.0, 3.0, 10.0, -20.0, 30.0))

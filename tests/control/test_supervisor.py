@@ -22,7 +22,7 @@ HELD = (100.0,) * 6
 
 def feedback(state=ActuatorState.ENABLED, counter=100, **leg) -> FeedbackSnapshot:
     """Six actuators in ``state`` that applied set-point ``counter``; ``leg`` ({leg_n: changes}) alters some."""
-    healthy = ActuatorFeedback(100.0, 0.0, state, 0, 0.001, counter)
+    healthy = ActuatorFeedback(100.0, 0.0, state, 0, (), 0.001, counter)
     return FeedbackSnapshot(tuple(replace(healthy, **leg.get(f"leg{n}", {})) for n in range(1, 7)), 0)
 
 
@@ -42,9 +42,12 @@ def test_healthy_actuators_that_reached_their_state_give_no_fault(supervisor):
 
 
 def test_each_fault_is_named_with_its_leg(supervisor):
-    bad = feedback(leg2={"heartbeat_age_s": 0.06}, leg4={"fault_bits": 0x8}, leg5={"state": ActuatorState.FAULT})
-    assert codes(supervisor.faults(bad, HEALTHY, 100, 1 * MS)) == [
-        ("heartbeat_lost", 2), ("actuator_fault", 4), ("actuator_fault", 5)]
+    bad = feedback(leg2={"heartbeat_age_s": 0.06}, leg4={"fault_bits": 0x9, "fault_names": ("comm_timeout", "sensor")},
+                   leg5={"state": ActuatorState.FAULT})
+    faults = supervisor.faults(bad, HEALTHY, 100, 1 * MS)
+    assert codes(faults) == [("heartbeat_lost", 2), ("actuator_fault", 4), ("actuator_fault", 5)]
+    assert [f.message for f in faults[1:]] == ["leg 4 reports ENABLED, faults: comm_timeout, sensor (0x9)",
+                                               "leg 5 reports FAULT, faults: none"]
     never_heard = feedback(leg1={"heartbeat_age_s": float("inf")})
     assert codes(supervisor.faults(never_heard, HEALTHY, 100, 1 * MS)) == [("heartbeat_lost", 1)]
 

@@ -65,6 +65,13 @@ def fault_signal_name(fault: codec.Fault) -> str:
     return "Fault" + fault.name.title().replace("_", "")
 
 
+def dbc_fault_names() -> dict[int, str]:
+    """Bit → name of every fault bit as the DBC defines it: FaultCode n + 1 names bit n
+    (PROTOCOL.md section 9)."""
+    choices = DB.get_message_by_name("EMCY_1").get_signal_by_name("FaultCode").choices
+    return {code - 1: str(name) for code, name in choices.items() if code}
+
+
 def _fault_signals(faults: int) -> dict[str, int]:
     return {fault_signal_name(fault): int(bool(faults & fault)) for fault in codec.Fault}
 

@@ -139,7 +139,7 @@ def is_stall(fault: dict) -> bool:
     loaded host: the actuators' watchdog (COMM_TIMEOUT), the loop's heartbeat or set-point
     supervision."""
     return fault["code"] in STALL_FAULTS or (fault["code"] == "actuator_fault"
-                                             and fault["message"].endswith(f"fault bits {Fault.COMM_TIMEOUT:#x}"))
+                                             and fault["message"].endswith("faults: comm_timeout (0x1)"))
 
 
 def stalled(client: HexactlClient) -> bool:

@@ -93,7 +93,7 @@ CAPTURE_BYTES = 256 << 20
 classic frame (measured in the guest), so it holds about 700 000 frames, over six minutes
 of a service at 250 Hz (about 1750 frames/s: four set-point frames and six FEEDBACK a
 cycle); only what is queued takes memory."""
-_COMM_TIMEOUT_ONLY = re.compile(rf"fault bits 0x{int(Fault.COMM_TIMEOUT):x}\b")
+_COMM_TIMEOUT_ONLY = re.compile(r"faults: comm_timeout \(0x1\)")
 
 
 @dataclass(frozen=True, slots=True)

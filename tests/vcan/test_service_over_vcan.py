@@ -205,7 +205,8 @@ ACTUATOR_ESTOP = "an actuator reports E-stop (hardware chain)"
 RESET_RETRY_S = 0.5  # beyond the actuators' E-stop hold-off (firmware_proto: 250 ms)
 
 
-_STOPPED_BY_WATCHDOGS = re.compile(r"hexactl\.service: fault \(((?:actuator_fault: leg \d reports fault bits 0x1(?:; )?)+)\)"
+_STOPPED_BY_WATCHDOGS = re.compile(r"hexactl\.service: fault \(((?:actuator_fault: leg \d reports \w+, faults: "
+                                   r"comm_timeout \(0x1\)(?:; )?)+)\)"
                                    r" at .*: nothing to brake")
 
 

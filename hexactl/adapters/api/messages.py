@@ -543,6 +543,9 @@ class LegStatus(_Message):
 
     state: Literal["disabled", "enabled", "locked", "fault", "estop"] = Field(description="what it reports it is doing")
     fault_bits: int = Field(ge=0, description="its drive's latched fault word (docs/can.md, FEEDBACK); 0: none")
+    fault_names: list[str] = Field(description="the names of the bits set in fault_bits, lowest bit first, as "
+                                   "firmware_proto/PROTOCOL.md section 9 spells them, in lower case (sensor, "
+                                   "limit_switch, …); bit_N for a bit it does not define; empty: none")
     report_age_s: float | None = Field(ge=0, description="time since its last report, s; null: never heard from")
 
 

@@ -47,6 +47,7 @@ from firmware_proto.codec import (
     CommandResult,
     Emergency,
     EStopReason,
+    Fault,
     Feedback,
     FrameError,
     Heartbeat,
@@ -70,6 +71,7 @@ from hexactl.control.hardware import (
     ActuatorFeedback,
     ActuatorState,
     BusState,
+    FaultNames,
     FeedbackSnapshot,
     LinkHealth,
 )
@@ -94,6 +96,9 @@ COMMAND_TO_WIRE: dict[ActuatorCommand, CommandCode] = {
     ActuatorCommand.UNLOCK: CommandCode.UNLOCK,
 }
 """Control-layer command → protocol command."""
+
+FAULT_NAMES = FaultNames(Fault)
+"""The fault bits' names (PROTOCOL.md section 9), from the codec's definition of them."""
 
 _ENGAGED = (WireState.ENABLED, WireState.LOCKED)
 _LOOP_RATES = (LoopRate.HZ_250, LoopRate.HZ_500, LoopRate.HZ_1000)
@@ -549,6 +554,7 @@ class CanActuatorLink:
             velocity_mm_s=node.velocity_mm_s,
             state=STATE_FROM_WIRE[node.wire_state],
             fault_bits=node.fault_bits,
+            fault_names=FAULT_NAMES(node.fault_bits),
             # Not heard (inf) until a HEARTBEAT shows it speaks this protocol: frames before
             # that do not make an actuator the loop may enable (send_command refuses ENABLE).
             heartbeat_age_s=_age_s(node.heard_ns if node.protocol_version == PROTOCOL_VERSION else None, now),

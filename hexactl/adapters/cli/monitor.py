@@ -34,7 +34,7 @@ from hexactl.adapters.cli.telemetry_text import (
     format_telemetry,
     frames_lines,
     jog_text,
-    leg_state_text,
+    leg_states_text,
     loop_text,
     percentiles_text,
     realtime_text,
@@ -323,8 +323,6 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         legs.add_column(f"L{leg} mm" + (" locked" if leg == locked else ""), justify="right")
     for label, values in (("set-point", record.get("leg_setpoints")), ("feedback", record.get("leg_feedback"))):
         legs.add_row(label, *(["—" if value is None else f"{value:.3f}" for value in values] if values else ["—"] * 6))
-    states = record.get("legs")
-    legs.add_row("state", *([leg_state_text(state) for state in states] if states else ["—"] * 6))
     loop = record["loop"]
     faults = record.get("faults") or []
     facts = Table.grid(padding=(0, 2))
@@ -332,6 +330,9 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
     facts.add_column()
     for label, value in (
         *frames_lines({"frames": record.get("frames")}),
+        # Not a row of the table above: a named fault word is wider than a column (an
+        # E-stop's wrapped into three lines and pushed the key's result off a 40-line screen).
+        ("legs", leg_states_text(record.get("legs"))),
         ("locked leg", f"L{locked}" if locked else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),

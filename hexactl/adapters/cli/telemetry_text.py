@@ -89,12 +89,15 @@ SILENT_AFTER_S = 0.5
 
 
 def leg_state_text(leg: dict[str, Any]) -> str:
-    """One leg's state with its fault bits when it has any: ``enabled``, ``fault 0x80``."""
-    return leg["state"] + (f" 0x{leg['fault_bits']:x}" if leg["fault_bits"] else "")
+    """One leg's state with its fault bits, named, when it has any: ``enabled``,
+    ``fault: comm_timeout, sensor (0x81)``; as :func:`hexactl.control.hardware.fault_text`
+    writes them, which is not imported because ``status`` loads no control module."""
+    bits = leg["fault_bits"]
+    return leg["state"] + (f": {', '.join(leg['fault_names'])} ({bits:#x})" if bits else "")
 
 
 def leg_states_text(legs: list[dict[str, Any]] | None) -> str:
-    """``all enabled``, or each leg's state with its fault bits (``L5 fault 0x80``), then
+    """``all enabled``, or each leg's state with its fault bits (``L5 fault: sensor (0x80)``), then
     the legs not heard from lately; ``unknown`` for None."""
     if not legs:
         return "unknown"
