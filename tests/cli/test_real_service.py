@@ -185,7 +185,8 @@ def test_wait_says_when_a_stop_left_the_move_short_of_its_goal(served, client) -
         moving = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "move", "z=40", "--duration",
                                    "20", "--wait", "--api", served.api],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        wait_for(lambda: status(client)["motion"] == "moving", "the move")
+        wait_for(lambda: moving.poll() is not None or status(client)["motion"] == "moving", "the move")
+        assert moving.poll() is None, moving.communicate()  # refused (a stall's fault latched): said, tried again
         client.request("stop")
         _, err = moving.communicate(timeout=WAIT_S)
         assert moving.returncode == 1, err
