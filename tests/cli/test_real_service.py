@@ -63,8 +63,9 @@ def test_the_readme_session_runs_as_written(served, directory, client, monkeypat
     def scenario() -> None:
         capsys.readouterr()
         assert hexactl(served, "load-calibration", "demo-out/calibration.toml") == 0
-        assert capsys.readouterr().out.startswith(f"ok: calibration {geometry_id(demo)} loaded; read from "
-                                                  f"{directory / 'demo-out' / 'calibration.toml'} here and sent")
+        assert capsys.readouterr().out.startswith(
+            f"ok: calibration {geometry_id(demo)} loaded; kept for a restart in {directory / 'active_calibration.toml'};"
+            f" read from {directory / 'demo-out' / 'calibration.toml'} here and sent")
         assert hexactl(served, "play", "x_sweep") == 0
         assert hexactl(served, "save-recording", "recordings/run1.csv") == 0
         assert recording.is_file()
