@@ -50,6 +50,7 @@ from hexactl.control.stream_commands import StreamCommands, TargetResult
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
+from hexactl.control.validated_under import ValidatedUnder, changed_since_validation
 from hexactl.control.wave_commands import WaveCommands
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import validate_pose_values
@@ -159,23 +160,30 @@ class Controller:
         return f"; leg {lock.leg} is no longer locked: the next enable drives all six legs" if lock is not None else ""
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
+                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
+                      validated_under: ValidatedUnder | None = None) -> CommandResult:
         """Would :meth:`move` accept this? Plans and checks the whole path, moves nothing;
         with the predicted accuracy at the tool point on arrival (``details.predicted_accuracy``,
-        None without a calibration covariance)."""
-        s = self.snapshot
-        plan = self._plan_move(s, pose, duration, speed, frame, relative)
+        None without a calibration covariance) and what it was validated under
+        (``details.validated_under``, a :class:`~hexactl.control.validated_under.ValidatedUnder`
+        to send back with the move)."""
+        s, frames = self.snapshot, self.frames.current
+        in_force = ValidatedUnder(calibration_id=s.active.calibration_id, frames=frames)
+        if refusal := changed_since_validation(validated_under, in_force):
+            return refusal
+        plan = self._plan_move(s, frames, pose, duration, speed, frame, relative)
         if not plan.ok:
             return _plan_result(plan, "valid", s.active.home)
-        accuracy = self._accuracy_at_goal(s, plan)
+        accuracy = self._accuracy_at_goal(s, frames, plan)
         if refusal := tolerance_refusal(tolerance_mm, accuracy):
             return refusal
         result = _plan_result(plan, "valid", s.active.home)
-        return CommandResult.success(result.message, **result.details, predicted_accuracy=accuracy)
+        return CommandResult.success(result.message, **result.details, predicted_accuracy=accuracy,
+                                     validated_under=in_force)
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None, *,
-             deadline_ns: int | None = None) -> CommandResult:
+             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
+             validated_under: ValidatedUnder | None = None, *, deadline_ns: int | None = None) -> CommandResult:
         """Move to ``pose`` (mm/deg) in ``frame`` (:class:`~hexactl.control.frames.Frame`),
         or by it from where the motion is headed with ``relative``; validated whole first,
         soft limits too; ``duration`` s (at least, to one loop period) or ``speed`` (0, 1]
@@ -183,14 +191,22 @@ class Controller:
         leg's constraint (see ``details.goal``). A move while moving replaces the running
         one (in the same frame: another frame needs rest). With ``tolerance_mm`` it is
         refused (``accuracy_insufficient``) if the predicted error at the tool point on
-        arrival exceeds it (:mod:`~hexactl.control.accuracy`)."""
-        s = self.snapshot
+        arrival exceeds it (:mod:`~hexactl.control.accuracy`). With ``validated_under`` (what
+        :meth:`validate_pose` said it validated under) it is refused
+        (``changed_since_validation``) if the frames or the calibration changed since: it
+        is planned in the very frames and on the very calibration it checks (a swap that
+        reaches the loop before the move makes the loop refuse it as ``stale_plan``), so
+        the platform goes to the goal validated or not at all."""
+        s, frames = self.snapshot, self.frames.current
         if refusal := preconditions.check_move(s):
             return CommandResult.failure(*refusal)
-        plan = self._plan_move(s, pose, duration, speed, frame, relative)
+        in_force = ValidatedUnder(calibration_id=s.active.calibration_id, frames=frames)
+        if refusal := changed_since_validation(validated_under, in_force):
+            return refusal
+        plan = self._plan_move(s, frames, pose, duration, speed, frame, relative)
         if not plan.ok:
             return _plan_result(plan, "", s.active.home)
-        accuracy = self._accuracy_at_goal(s, plan) if tolerance_mm is not None else None
+        accuracy = self._accuracy_at_goal(s, frames, plan) if tolerance_mm is not None else None
         if refusal := tolerance_refusal(tolerance_mm, accuracy):
             return refusal
         (segment,) = plan.segments
@@ -203,9 +219,9 @@ class Controller:
         s = self.snapshot
         return predicted_accuracy(s.active, self.frames.current.tool[:3], s.pose_command)
 
-    def _accuracy_at_goal(self, s: CoreSnapshot, plan: Plan) -> dict[str, Any] | None:
+    def _accuracy_at_goal(self, s: CoreSnapshot, frames: OperatorFrames, plan: Plan) -> dict[str, Any] | None:
         last = plan.segments[-1]
-        return predicted_accuracy(s.active, self.frames.current.tool[:3], convert(last.goal, last.frames, None, s.active.home))
+        return predicted_accuracy(s.active, frames.tool[:3], convert(last.goal, last.frames, None, s.active.home))
 
     def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
             deadline_ns: int | None = None) -> CommandResult:
@@ -378,17 +394,18 @@ class Controller:
 
     # -- helpers ----------------------------------------------------------------------------
 
-    def _context(self, s: CoreSnapshot) -> PlanningContext:
-        config, frames = self.config, self.frames.current
+    def _context(self, s: CoreSnapshot, frames: OperatorFrames | None = None) -> PlanningContext:
+        """What a plan from ``s`` is checked with, in ``frames`` (None: those in force now)."""
+        config, frames = self.config, self.frames.current if frames is None else frames
         budget = s.active.geometry.limits.leg_velocity_mm_s * (1.0 - config.calibration_ramp_fraction)
         return PlanningContext(s.active, config.motion, config.loop.period_s, budget, s.lock,
                                config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg,
                                config.lock_cycle_iterations, frames.frames(s.active.home),
                                None if frames.soft_limits == NO_SOFT_LIMITS else frames.soft_limits)
 
-    def _plan_move(self, s: CoreSnapshot, pose: Sequence[float], duration: float | None, speed: float | None,
-                   frame: Frame, relative: bool) -> Plan:
-        context = self._context(s)
+    def _plan_move(self, s: CoreSnapshot, frames: OperatorFrames, pose: Sequence[float], duration: float | None,
+                   speed: float | None, frame: Frame, relative: bool) -> Plan:
+        context = self._context(s, frames)
         if problem := validate_pose_values(pose) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, problem))
         target = s.goal if s.goal is not None else s.trajectory.position

@@ -42,6 +42,7 @@ class ErrorCode(StrEnum):
     JOG_ENDED = "jog_ended"  # a jog renewal for a jog that is no longer under way: send jog again
     EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
     ACCURACY_INSUFFICIENT = "accuracy_insufficient"  # the predicted error at the tool point exceeds the move's tolerance
+    CHANGED_SINCE_VALIDATION = "changed_since_validation"  # a move's frames or calibration changed since it was validated
 
 
 @dataclass(frozen=True, slots=True)

@@ -28,6 +28,7 @@ from hexactl.control.stream_commands import TargetResult
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import DwellRecord, MotionSequence
 from hexactl.control.stats import LoopStats, Percentiles
+from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.workspace import assess_pose
@@ -104,8 +105,8 @@ class FakeController:
         return CommandResult.success("reset to disabled")
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None, *,
-             deadline_ns: int | None = None) -> CommandResult:
+             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
+             validated_under: ValidatedUnder | None = None, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("move", list(pose), duration, speed)
         self.frames_of_moves.append((frame, relative))
         if self.state != "enabled":
@@ -126,7 +127,8 @@ class FakeController:
         return self.accuracy
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
+                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
+                      validated_under: ValidatedUnder | None = None) -> CommandResult:
         violations = assess_pose(self.geometry, pose).violations
         if violations:
             items = [{"waypoint": 1, "pose": tuple(pose), **{k: getattr(v, k) for k in ("kind", "message", "value", "limit", "leg", "axis")}}

@@ -140,7 +140,8 @@ class CommandHandler:
                 return _checked(controller.reset())
             case MoveRequest():
                 result = controller.move(request.pose, request.duration, request.speed, Frame(request.frame),
-                                         request.relative, request.tolerance_mm, deadline_ns=deadline_ns)
+                                         request.relative, request.tolerance_mm, request.validated_under,
+                                         deadline_ns=deadline_ns)
                 return _checked(result, goal=result.details.get("goal"), tool_goal=result.details.get("tool_goal"),
                                 duration=result.details.get("duration_s"))
             case ValidatePoseRequest():
@@ -231,13 +232,14 @@ class CommandHandler:
 
     def _validate_pose(self, request: ValidatePoseRequest) -> dict[str, Any]:
         result = self.controller.validate_pose(request.pose, request.duration, request.speed, Frame(request.frame),
-                                               request.relative, request.tolerance_mm)
+                                               request.relative, request.tolerance_mm, request.validated_under)
         if result.ok:
             return {"valid": True, "goal": result.details.get("goal"), "tool_goal": result.details.get("tool_goal"),
                     "duration": result.details.get("duration_s"),
-                    "predicted_accuracy": result.details.get("predicted_accuracy"), "refusal": None}
+                    "predicted_accuracy": result.details.get("predicted_accuracy"), "refusal": None,
+                    "validated_under": jsonable(result.details.get("validated_under"))}
         return {"valid": False, "goal": None, "tool_goal": None, "duration": None, "predicted_accuracy": None,
-                "refusal": error_body(_code(result), result.message, _details(result))}
+                "refusal": error_body(_code(result), result.message, _details(result)), "validated_under": None}
 
     def _validate_wave(self, request: ValidateWaveRequest) -> dict[str, Any]:
         result = self.controller.validate_wave(_wave_spec(request))

@@ -20,6 +20,7 @@ from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.sequences import Paced, SequenceWaypoint
+from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import FramePoseMmDeg, RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.soft_limits import SoftLimits
@@ -110,6 +111,9 @@ class _PoseInFrame(_Request, Paced):
                            "(or the pose at rest): component by component in zero and work, composed in tool")
     tolerance_mm: float | None = Field(default=None, gt=0, description="refuse (accuracy_insufficient) if the "
                                        "predicted 1σ position error at the tool point on arrival exceeds this, mm")
+    validated_under: ValidatedUnder | None = Field(
+        default=None, description="validate_pose's validated_under, sent back unchanged: refuse "
+        "(changed_since_validation) if the frames, soft limits or calibration in force differ from these")
 
 
 class PredictedAccuracy(BaseModel):
@@ -758,6 +762,9 @@ class ValidatePoseReply(OkReply):
     predicted_accuracy: PredictedAccuracy | None = Field(
         default=None, description="at the goal, when valid; null without a calibration covariance")
     refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
+    validated_under: ValidatedUnder | None = Field(
+        default=None, description="when valid: the calibration and the frames it was validated under; send it with "
+        "the move to have the move refused if either changed meanwhile")
 
 
 class JogReply(OkReply):

@@ -20,6 +20,7 @@ from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
 from hexactl.control.sequences import MotionSequence
 from hexactl.control.stream_commands import TargetResult
+from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry
 
@@ -38,17 +39,19 @@ class ControllerPort(Protocol):
     def reset(self) -> CommandResult: ...
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None, *,
-             deadline_ns: int | None = None) -> CommandResult:
+             frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
+             validated_under: ValidatedUnder | None = None, *, deadline_ns: int | None = None) -> CommandResult:
         """Success details: ``goal`` (as planned, relative to the zero posture),
-        ``duration_s``. ``deadline_ns``, here and below: monotonic time after which the
-        loop refuses the command as ``expired``."""
+        ``duration_s``; refused ``changed_since_validation`` when the frames or the
+        calibration differ from ``validated_under``. ``deadline_ns``, here and below:
+        monotonic time after which the loop refuses the command as ``expired``."""
         ...
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
-                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None) -> CommandResult:
+                      frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
+                      validated_under: ValidatedUnder | None = None) -> CommandResult:
         """What :meth:`move` would answer, without moving; success details also
-        ``predicted_accuracy``."""
+        ``predicted_accuracy`` and ``validated_under`` (what it validated under)."""
         ...
 
     def predicted_accuracy(self) -> dict[str, Any] | None:

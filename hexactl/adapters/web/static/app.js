@@ -197,6 +197,7 @@ const plots = new Plots(history, { pose: $('plot-pose'), legs: $('plot-legs'), l
 const controls = setupControls({
   send,
   record: () => state.record,
+  noLiveData: () => { const loss = dataLoss(performance.now()); return loss === null ? null : LOSS_SHORT[loss]; },
   setGhost: (goal) => { state.ghost = Array.isArray(goal) ? goal.slice() : null; state.newRecord = true; schedule(); },
 });
 
@@ -447,7 +448,6 @@ function handleMessage(ev) {
         Array.isArray(g.stroke) ? `stroke ${fmt(g.stroke[0], 1)} – ${fmt(g.stroke[1], 1)} mm` : null,
       ].filter(Boolean).join('\n');
       setText('geometry-info', info);
-      controls.invalidateMove('the calibration changed: validate again');
       state.newRecord = true;
       schedule();
       break;
@@ -457,7 +457,6 @@ function handleMessage(ev) {
       updateConnection();
       applyLiveness(performance.now());
       controls.onLink(state.link.connected);
-      if (!state.link.connected) controls.releaseJog(false);
       break;
     case 'reply': {
       const p = state.pending.get(msg.id);
@@ -553,6 +552,7 @@ function applyLiveness(now) {
     if (lost) {
       setText('data-lost-what', LOSS_TEXT[loss]);
       setText('data-lost-do', LOSS_TODO[loss]);
+      controls.onDataLoss(LOSS_SHORT[loss]);
     }
     updateDismiss();
     if (loss === null) {

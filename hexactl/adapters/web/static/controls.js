@@ -66,8 +66,25 @@ function timestampName() {
 }
 
 /**
- * ctx: { send(cmd, fields) -> Promise<reply>, setGhost(goal|null), record() -> last record }
- * Returns hooks the app calls: onRecord(record), onLink(connected), onDisconnect(), releaseJog(sendZero).
+ * What a record shows changed since a move was validated under `under` (validate_pose's
+ * validated_under: {calibration_id, frames}), named for people; [] when nothing did.
+ */
+function changedSince(under, r) {
+  const same = (a, b) => JSON.stringify(a) === JSON.stringify(b);
+  const frames = r.frames ?? {};
+  return [
+    ['work frame', same(under.frames.work, frames.work)],
+    ['tool frame', same(under.frames.tool, frames.tool)],
+    ['soft limits', same(under.frames.soft_limits, frames.soft_limits)],
+    ['calibration', under.calibration_id === r.calibration_id],
+  ].filter(([, unchanged]) => !unchanged).map(([name]) => name);
+}
+
+/**
+ * ctx: { send(cmd, fields) -> Promise<reply>, setGhost(goal|null), record() -> last record,
+ *        noLiveData() -> null while the page has live data, else what is lost (a phrase) }
+ * Returns hooks the app calls: onRecord(record), onLink(connected), onDisconnect(), onDataLoss(why),
+ * releaseJog(sendZero).
  */
 export function setupControls(ctx) {
   // ---------------- controller ----------------
@@ -85,7 +102,7 @@ export function setupControls(ctx) {
   const moveIds = [...AXES.map((a) => `move-${a}`), 'move-frame', 'move-relative', 'move-duration', 'move-speed'];
   const moveResult = $('move-result');
   const goButton = $('move-go');
-  let validated = null;   // {key, fields, goal, ref}
+  let validated = null;   // {key, fields, goal, ref, under}
   let validating = 0;
 
   function readMove() {
@@ -143,7 +160,11 @@ export function setupControls(ctx) {
     if (current !== key) { setResult(moveResult, null, 'inputs changed while validating: validate again'); return; }
     if (!reply.ok) { setResult(moveResult, 'refused', describeError(reply.error)); return; }
     if (!reply.valid) { setResult(moveResult, 'refused', describeError(reply.refusal ?? { code: 'refused', message: reply.message })); return; }
-    validated = { key, fields, goal: reply.goal ?? null, ref: Array.isArray(ref) ? ref.slice() : null };
+    const blind = ctx.noLiveData();
+    if (blind) { setResult(moveResult, 'refused', `valid, but the page has no live data (${blind}): validate again once live data return`); return; }
+    // what it was validated under goes with the move: the service refuses it if that changed meanwhile
+    const under = reply.validated_under && typeof reply.validated_under.frames === 'object' ? reply.validated_under : null;
+    validated = { key, fields, goal: reply.goal ?? null, ref: Array.isArray(ref) ? ref.slice() : null, under };
     goButton.disabled = false;
     goButton.title = 'Move to the validated goal';
     ctx.setGhost(Array.isArray(reply.goal) ? reply.goal : null);
@@ -164,8 +185,11 @@ export function setupControls(ctx) {
     let key;
     try { key = JSON.stringify(readMove()); } catch (e) { key = null; }
     if (!validated || key !== validated.key) { invalidate(); setResult(moveResult, 'refused', 'validate the inputs first'); return; }
-    const fields = validated.fields;
+    const { under } = validated;
+    const fields = under ? { ...validated.fields, validated_under: under } : validated.fields;
     invalidate();
+    const blind = ctx.noLiveData();   // lost since the last liveness tick, which calls onDataLoss
+    if (blind) { setResult(moveResult, 'refused', `not sent: the page has no live data (${blind}); validate again once live data return`); return; }
     setResult(moveResult, null, 'sending move…');
     const reply = await ctx.send('move', fields);
     if (reply.ok) {
@@ -218,6 +242,8 @@ export function setupControls(ctx) {
 
   function startJog(button) {
     releaseJog(false);
+    const blind = ctx.noLiveData();
+    if (blind) { setResult(jogStatus, 'refused', `not sent: the page has no live data (${blind})`); return; }
     const velocity = jogVelocity(button);
     const frame = $('jog-frame').value;
     jog = { button, velocity, frame, timer: null };
@@ -229,7 +255,7 @@ export function setupControls(ctx) {
     }, 100);
   }
 
-  /** Stop renewing the jog; with sendZero, release it at once with a zero velocity. */
+  /** Stop renewing the jog; with sendZero, release it at once with a zero velocity, else let the deadman brake it. */
   function releaseJog(sendZero = true) {
     if (!jog) return;
     const { button, frame, timer } = jog;
@@ -237,6 +263,7 @@ export function setupControls(ctx) {
     button.classList.remove('held');
     jog = null;
     if (sendZero) sendJog([0, 0, 0, 0, 0, 0], frame);
+    else jogSerial += 1;   // a renewal's late reply must not say "jogging" over why it stopped
   }
 
   document.querySelectorAll('button.jog').forEach((button) => {
@@ -483,6 +510,11 @@ export function setupControls(ctx) {
         invalidate('the platform moved since the validation: validate again');
       }
     }
+    // … and in the frames and on the calibration it was validated under (another client may change them)
+    if (validated && validated.under) {
+      const changed = changedSince(validated.under, r);
+      if (changed.length) invalidate(`the ${changed.join(' and the ')} changed since you validated: validate again`);
+    }
     if (!['enabled'].includes(r.state) && jog) {
       // a jog cannot run disabled/latched: stop renewing (the service refuses it anyway)
       releaseJog(false);
@@ -495,7 +527,16 @@ export function setupControls(ctx) {
     if (connected && !filesLoaded) { filesLoaded = true; refreshFiles(); }
     if (!connected) filesLoaded = false;
   }
-  function onDisconnect() { releaseJog(false); filesLoaded = false; }
+  function onDisconnect() { filesLoaded = false; }
 
-  return { onRecord, onLink, onDisconnect, releaseJog, invalidateMove: invalidate };
+  /** No live data (why: what is lost): nothing shown is current, so no validated move may go and no jog is renewed. */
+  function onDataLoss(why) {
+    invalidate(`no live data (${why}): Go is disabled; validate again once live data return`);
+    if (jog) {
+      releaseJog(false);
+      setResult(jogStatus, 'refused', `jog released: no live data (${why}); the page stopped renewing it, so the service brakes within its deadman time`);
+    }
+  }
+
+  return { onRecord, onLink, onDisconnect, onDataLoss, releaseJog };
 }

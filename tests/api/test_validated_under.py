@@ -1,0 +1,131 @@
+"""A move sent with what ``validate_pose`` validated it under is refused once another
+client has changed the frames, the soft limits or the calibration (found from outside: two
+operators on one platform; a move validated in the work frame went, after the other
+operator moved the work frame, to where the new frame put it, since the service checked
+it again only in the new frames). Through the whole service on its simulator: the
+platform does not move."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
+from hexactl.application.service import Service, ServiceConfig
+from hexactl.kinematics.geometry import Geometry
+from tests.api.test_commands import send
+from tests.api.test_service import WAIT_S, at_rest, status, wait_for
+from tests.reliability.support import recover, tolerating_loop_stalls
+
+TOOL_300 = [0, 0, 300, 0, 0, 0]
+WORK_GOAL = [0, 0, 0, 4, 0, 0]  # a 4° roll about the pivot, 300 mm above the platform
+
+
+@pytest.fixture(scope="module")
+def framed_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
+    directory = tmp_path_factory.mktemp("validated")
+    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                          data_dirs=(directory,), frames_path=directory / "frames.toml"))
+    yield service
+    service.close()
+
+
+@pytest.fixture
+def operators(framed_service: Service) -> Iterator[tuple[HexactlClient, HexactlClient]]:
+    """Two clients of the service (two operators), the platform enabled and at rest at the
+    zero posture, the tool and work frames on a pivot 300 mm above the platform."""
+    with HexactlClient(framed_service.api_endpoint, timeout_s=WAIT_S) as first, \
+            HexactlClient(framed_service.api_endpoint, timeout_s=WAIT_S) as second:
+        yield first, second
+
+
+def at_zero_in_frames(client: HexactlClient) -> dict:
+    """Enabled, at rest at the zero posture, the frames on the pivot; the status record."""
+    recover(client)
+    if status(client)["pose_command"] != pytest.approx([0] * 6, abs=1e-9):
+        client.call("move", pose=[0] * 6, duration=0.5)
+        wait_for(lambda: at_rest(client), "back at the zero posture")
+    client.call("set_frames", tool=TOOL_300, work=TOOL_300, soft_limits={})
+    return status(client)
+
+
+def test_a_move_validated_before_another_client_moved_the_work_frame_is_refused_and_nothing_moves(
+        framed_service, operators) -> None:
+    first, second = operators
+
+    def scenario() -> None:
+        at_zero_in_frames(first)
+        validation = first.call("validate_pose", pose=WORK_GOAL, frame="work", duration=0.5)
+        assert validation["valid"], validation
+        under = validation["validated_under"]
+        assert under["frames"]["work"] == TOOL_300 and under["calibration_id"] == status(first)["calibration_id"]
+
+        second.call("set_frames", work=[30, 0, 300, 0, 0, 0])  # the other operator
+        before = status(first)
+        refused = first.request("move", pose=WORK_GOAL, frame="work", duration=0.5, validated_under=under)
+        error = refused["error"]
+        assert error["code"] == "changed_since_validation", refused
+        assert error["details"]["changed"] == ["work frame"], error
+        assert "the work frame changed since this move was validated" in error["message"], error
+        assert "validate it again" in error["message"], error
+        assert error["details"]["in_force"]["frames"]["work"] == [30, 0, 300, 0, 0, 0], error
+        # nothing was sent to the loop: at rest where it was (a move would be under way from its reply on)
+        after = status(first)
+        assert after["motion"] == "holding" and after["goal"] is None, after
+        assert after["pose_command"] == before["pose_command"], (before, after)
+
+        # validate_pose answers as move would
+        again = first.call("validate_pose", pose=WORK_GOAL, frame="work", duration=0.5, validated_under=under)
+        assert not again["valid"] and again["refusal"]["code"] == "changed_since_validation", again
+
+        # validated anew, under the new frame, it goes, to the goal this validation gave
+        fresh = first.call("validate_pose", pose=WORK_GOAL, frame="work", duration=0.5)
+        moved = first.call("move", pose=WORK_GOAL, frame="work", duration=0.5, validated_under=fresh["validated_under"])
+        assert moved["goal"] == pytest.approx(fresh["goal"], abs=1e-9)
+        assert fresh["goal"][0] == pytest.approx(validation["goal"][0] + 30, abs=1e-6)  # where the old one would have gone
+        wait_for(lambda: at_rest(first), "the move's end")
+
+    tolerating_loop_stalls(scenario, lambda: framed_service.controller)
+
+
+def test_a_move_validated_before_another_client_loaded_a_calibration_is_refused_until_it_is_rolled_back(
+        framed_service, operators, nominal: Geometry, tmp_path: Path) -> None:
+    first, second = operators
+    calibrated = nominal.model_copy(update={"name": "other operator's", "zero_lengths": tuple(
+        length + 0.3 for length in nominal.zero_lengths)})
+
+    def scenario() -> None:
+        at_zero_in_frames(first)
+        under = first.call("validate_pose", pose=WORK_GOAL, frame="work", duration=0.5)["validated_under"]
+        second.call("load_calibration", toml=geometry_to_toml(calibrated))
+        wait_for(lambda: status(first)["calibration_id"] == geometry_id(calibrated), "the calibration swapped in")
+        wait_for(lambda: at_rest(first), "the calibration's ramp at its end")
+        refused = first.request("move", pose=WORK_GOAL, frame="work", duration=0.5, validated_under=under)
+        assert refused["error"]["code"] == "changed_since_validation", refused
+        assert refused["error"]["details"]["changed"] == ["calibration"], refused
+        assert "the calibration changed since this move was validated" in refused["error"]["message"], refused
+        assert status(first)["motion"] == "holding"
+
+        # what it was validated under is in force again: the validation holds again
+        second.call("rollback_calibration")
+        wait_for(lambda: status(first)["calibration_id"] == under["calibration_id"], "rolled back")
+        wait_for(lambda: at_rest(first), "the rollback's ramp at its end")
+        first.call("move", pose=WORK_GOAL, frame="work", duration=0.5, validated_under=under)
+        wait_for(lambda: at_rest(first), "the move's end")
+
+    tolerating_loop_stalls(scenario, lambda: framed_service.controller)
+
+
+@pytest.mark.parametrize("validated_under, fragment", [
+    ({"calibration_id": 7, "frames": {}}, "calibration_id"),
+    ({"calibration_id": "abc"}, "frames"),
+    ({"calibration_id": "abc", "frames": {"work": ["0", 0, 0, 0, 0, 0]}}, "work"),
+    ({"calibration_id": "abc", "frames": {}, "epoch": 3}, "epoch"),
+])
+def test_a_malformed_validated_under_is_an_invalid_request(service, validated_under, fragment) -> None:
+    reply = send(service, "move", pose=[0] * 6, validated_under=validated_under)
+    assert reply["error"]["code"] == "invalid_request" and fragment in reply["error"]["message"], reply
+    assert service.controller.calls == []

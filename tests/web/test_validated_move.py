@@ -1,0 +1,259 @@
+"""The dashboard's "validate, then go" and its jog with two operators on one platform and
+with stale data, in a real headless Chromium against a real ``hexactl serve`` (found from
+outside, at 3 a.m.: a move validated before another operator changed the work frame or
+the calibration went, at Go, where the new frame put it; Go stayed enabled with no live
+data; a held jog was still renewed while only the page's telemetry was stale).
+
+The other operator is an API client. What reaches the page is tapped in the page itself
+(:data:`TAP`, installed before the page's scripts): its telemetry dropped (stale, with the
+WebSocket open) or its frames held (the page not yet told of a change: the race the
+service's guard closes), and the commands it sends counted. Everything is judged by the
+page's state and the service's, never by how long anything took.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import pytest
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.support.ui import Select
+
+from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.files.config_path import default_config_path
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
+from tests.web.test_dashboard import Rig, screenshot, wait_for
+from tools.browser import dashboard, headless_chromium
+from tools.serving import serve
+
+TAP = """
+(() => {
+  const Native = window.WebSocket;
+  const tap = { dropTelemetry: false, heldFrames: null, sent: [], lastTelemetryAt: null, losses: 0 };
+  window.hexactlTestTap = tap;
+  window.WebSocket = class extends Native {
+    constructor(...args) {
+      super(...args);
+      super.addEventListener('close', () => { tap.losses += 1; });
+    }
+    addEventListener(type, listener, options) {
+      if (type !== 'message') return super.addEventListener(type, listener, options);
+      return super.addEventListener(type, (event) => {
+        const message = JSON.parse(event.data);
+        if (message.type === 'link' && message.connected !== true) tap.losses += 1;
+        if (message.type !== 'telemetry') { listener(event); return; }
+        const now = performance.now();
+        if (tap.dropTelemetry) { tap.lastTelemetryAt = null; return; }
+        if (tap.lastTelemetryAt !== null && now - tap.lastTelemetryAt > LOSS_GAP_MS) tap.losses += 1;
+        tap.lastTelemetryAt = now;
+        if (tap.heldFrames === null) { listener(event); return; }
+        message.record.frames = tap.heldFrames;
+        listener(new MessageEvent('message', { data: JSON.stringify(message) }));
+      }, options);
+    }
+    send(data) {
+      tap.sent.push(JSON.parse(data).cmd);
+      return super.send(data);
+    }
+  };
+})();
+""".replace("LOSS_GAP_MS", "1500")
+"""Wraps the page's WebSocket: ``hexactlTestTap.dropTelemetry`` drops every telemetry
+record, ``heldFrames`` (not null) replaces each record's frames by it, ``sent`` lists the
+``cmd`` of every message the page sends, and ``losses`` counts the times the page may
+have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
+service's link down, or records further apart than 1.5 s (the page calls 2 s stale), as
+when a busy host holds up the browser or the dashboard."""
+
+ATTEMPTS = 3
+
+PIVOT = [0, 0, 300, 0, 0, 0]
+MOVED_WORK = [30, 0, 300, 0, 0, 0]
+WORK_GOAL = [0, 0, 0, 4, 0, 0]  # a 4° roll about the pivot
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory) -> Iterator[Rig]:
+    directory = tmp_path_factory.mktemp("validated-move")
+    with serve(directory) as served, dashboard(served.api, served.telemetry) as board:
+        driver = headless_chromium()
+        try:
+            driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": TAP})
+            with HexactlClient(served.api, timeout_s=30.0) as client:
+                driver.get(board.url)
+                rig = Rig(directory, served, board, driver, client)
+                wait_for(rig.connected, "the page connected")
+                yield rig
+        finally:
+            driver.quit()
+
+
+def tap(rig: Rig, *, drop: bool = False, hold_frames: bool = False) -> None:
+    """What the page's tap does from now on (both off: the page sees everything)."""
+    rig.page(f"const t = window.hexactlTestTap; t.dropTelemetry = {str(drop).lower()}; "
+             f"t.heldFrames = {'window.hexactlDashboard.record.frames' if hold_frames else 'null'};")
+
+
+def sent(rig: Rig, cmd: str) -> int:
+    """How many ``cmd`` commands the page has sent."""
+    return rig.page(f"return window.hexactlTestTap.sent.filter(c => c === '{cmd}').length")
+
+
+def live(rig: Rig) -> bool:
+    return rig.page("return window.hexactlDashboard.dataLoss === null")
+
+
+def go_enabled(rig: Rig) -> bool:
+    return rig.element("#move-go").is_enabled()
+
+
+def move_result(rig: Rig) -> str:
+    return rig.element("#move-result").text
+
+
+def ready_in_frames(rig: Rig) -> dict:
+    """The page sees everything and has live data; enabled from the page, at rest, the
+    frames on a pivot 300 mm above the platform; the service's status record."""
+    tap(rig)
+    wait_for(lambda: live(rig), "live data on the page")
+    rig.enabled_from_the_page()
+    rig.client.call("set_frames", tool=PIVOT, work=PIVOT, soft_limits={})
+    wait_for(lambda: rig.page("return window.hexactlDashboard.record.frames.work") == PIVOT, "the frames on the page")
+    return rig.status()
+
+
+def validated_in_page(rig: Rig, pose: list[float], frame: str) -> None:
+    """The operator types ``pose`` in ``frame`` and validates it: valid, Go enabled."""
+    for axis, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), pose):
+        rig.fill(f"#move-{axis}", value)
+    Select(rig.shown("#move-frame")).select_by_value(frame)
+    rig.fill("#move-duration", 1)
+    rig.click("#move-validate")
+    wait_for(lambda: move_result(rig) != "validating…", "the validation's answer")  # set by the click itself
+    assert move_result(rig).startswith("valid: duration") and go_enabled(rig), move_result(rig)
+
+
+def attempted(rig: Rig, scenario: Callable[[], None]) -> None:
+    """``scenario`` (judged by :meth:`Rig.scenario`, which runs it again after a stall's
+    faults), again from the start if it failed after the page lost its live data on its
+    own (the tap's ``losses``): a validation is rightly withdrawn then. :data:`ATTEMPTS` in all."""
+    for attempt in range(1, ATTEMPTS + 1):
+        losses = rig.page("return window.hexactlTestTap.losses")
+        try:
+            rig.scenario(scenario)
+            return
+        except (AssertionError, CommandError) as error:
+            if attempt == ATTEMPTS or rig.page("return window.hexactlTestTap.losses") == losses:
+                raise
+            print(f"attempt {attempt} failed after the page lost its live data on its own: {error!r:.300}")
+
+
+def assert_not_moved(rig: Rig, before: dict) -> None:
+    after = rig.status()
+    assert after["motion"] == "holding" and after["goal"] is None, after
+    assert after["pose_command"] == before["pose_command"], (before["pose_command"], after["pose_command"])
+
+
+def test_a_work_frame_changed_by_another_operator_after_validation_disables_go_and_says_why(rig) -> None:
+    def scenario() -> None:
+        before = ready_in_frames(rig)
+        validated_in_page(rig, WORK_GOAL, "work")
+        moves = sent(rig, "move")
+        rig.client.call("set_frames", work=MOVED_WORK)  # the other operator
+        wait_for(lambda: not go_enabled(rig), "Go disabled", seen=lambda: move_result(rig))
+        assert move_result(rig) == "the work frame changed since you validated: validate again"
+        assert "ghost" not in rig.element("#view3d-hud").text  # the goal previewed is gone
+        screenshot(rig.driver, "move-frames-changed", "#move-result")
+        assert sent(rig, "move") == moves
+        assert_not_moved(rig, before)
+
+    attempted(rig, scenario)
+
+
+def test_go_pressed_before_the_page_saw_another_operators_frame_is_refused_by_the_service(rig) -> None:
+    def scenario() -> None:
+        before = ready_in_frames(rig)
+        validated_in_page(rig, WORK_GOAL, "work")
+        tap(rig, hold_frames=True)  # the page is not told of the change yet
+        rig.client.call("set_frames", work=MOVED_WORK)
+        changed_at = rig.status()["t"]
+        wait_for(lambda: rig.page("return window.hexactlDashboard.record.t") > changed_at,
+                 "a record from after the change on the page")
+        assert go_enabled(rig), move_result(rig)  # the page cannot know: the race
+        rig.click("#move-go")
+        wait_for(lambda: "changed_since_validation" in move_result(rig), "the service's refusal on the page",
+                 seen=lambda: move_result(rig))
+        assert "the work frame changed since this move was validated" in move_result(rig), move_result(rig)
+        assert "validate it again" in move_result(rig), move_result(rig)
+        assert sent(rig, "move") >= 1
+        assert_not_moved(rig, before)
+        assert not go_enabled(rig)
+        tap(rig)
+
+    attempted(rig, scenario)
+
+
+def test_a_calibration_loaded_by_another_operator_after_validation_disables_go_and_says_why(rig) -> None:
+    nominal = load_geometry(default_config_path())
+    calibrated = nominal.model_copy(update={"name": "other operator's", "zero_lengths": tuple(
+        length + 0.3 for length in nominal.zero_lengths)})
+
+    def scenario() -> None:
+        ready_in_frames(rig)
+        validated_in_page(rig, WORK_GOAL, "work")
+        moves = sent(rig, "move")
+        try:
+            rig.client.call("load_calibration", toml=geometry_to_toml(calibrated))
+            wait_for(lambda: not go_enabled(rig), "Go disabled", seen=lambda: move_result(rig))
+            assert move_result(rig) == "the calibration changed since you validated: validate again"
+            assert sent(rig, "move") == moves
+        finally:
+            if rig.status()["calibration_id"] == geometry_id(calibrated):
+                rig.client.call("rollback_calibration")
+        wait_for(lambda: rig.status()["calibration_id"] == geometry_id(nominal), "rolled back")
+
+    attempted(rig, scenario)
+
+
+def test_go_is_disabled_while_the_page_has_no_live_data_with_its_socket_open(rig) -> None:
+    def scenario() -> None:
+        before = ready_in_frames(rig)
+        validated_in_page(rig, WORK_GOAL, "work")
+        moves = sent(rig, "move")
+        tap(rig, drop=True)
+        wait_for(lambda: rig.page("return window.hexactlDashboard.dataLoss") == "telemetry", "the page's data stale")
+        assert not go_enabled(rig)
+        assert move_result(rig).startswith("no live data (no telemetry has reached the page)"), move_result(rig)
+        assert "validate again once live data return" in move_result(rig), move_result(rig)
+        tap(rig)
+        wait_for(lambda: live(rig), "live data again")
+        assert not go_enabled(rig)  # withdrawn, not suspended: validate again
+        assert sent(rig, "move") == moves
+        assert_not_moved(rig, before)
+
+    attempted(rig, scenario)
+
+
+def test_a_held_jog_stops_being_renewed_when_only_the_pages_telemetry_is_stale(rig) -> None:
+    def scenario() -> None:
+        ready_in_frames(rig)
+        rig.fill("#jog-speed", 5)
+        start_x = rig.status()["pose_command"][0]
+        button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
+        ActionChains(rig.driver).click_and_hold(button).perform()
+        try:
+            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+            tap(rig, drop=True)
+            wait_for(lambda: rig.element("#jog-status").text.startswith("jog released: no live data"),
+                     "the page saying why the jog stopped", seen=lambda: rig.element("#jog-status").text)
+            assert "held" not in button.get_attribute("class").split()
+            renewals = sent(rig, "jog")
+            record = wait_for(lambda: (r := rig.status())["motion"] == "holding" and r["last_jog"] and r,
+                              "the service's deadman braking the jog", seen=rig.status)
+            assert record["last_jog"]["reason"].startswith("the deadman lapsed"), record["last_jog"]
+            assert sent(rig, "jog") == renewals  # none since: the button is still held
+        finally:
+            ActionChains(rig.driver).release(button).perform()
+            tap(rig)
+
+    attempted(rig, scenario)
