@@ -14,6 +14,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from urllib.error import URLError
 from urllib.request import urlopen
@@ -115,20 +116,29 @@ class Rig:
         wait_for(lambda: self.element("#state").text.strip() == "enabled", "the page showing enabled")
 
 
-@pytest.fixture(scope="module")
-def rig(tmp_path_factory) -> Iterator[Rig]:
-    directory = tmp_path_factory.mktemp("dashboard")
+@contextmanager
+def page_on_a_service(directory: Path, before_load: str | None = None) -> Iterator[Rig]:
+    """``hexactl serve`` in ``directory``, its dashboard, and the page open in headless
+    Chromium, connected; ``before_load``: a script the page runs before its own."""
     with serve(directory) as served, dashboard(served.api, served.telemetry) as board:
         driver = headless_chromium()
         try:
+            if before_load is not None:
+                driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": before_load})
             with HexactlClient(served.api, timeout_s=30.0) as client:
                 driver.get(board.url)
                 rig = Rig(directory, served, board, driver, client)
                 wait_for(rig.connected, "the page connected")
-                wait_for(lambda: rig.page("return window.hexactlDashboard.geometry"), "the geometry on the page")
                 yield rig
         finally:
             driver.quit()
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory) -> Iterator[Rig]:
+    with page_on_a_service(tmp_path_factory.mktemp("dashboard")) as rig:
+        wait_for(lambda: rig.page("return window.hexactlDashboard.geometry"), "the geometry on the page")
+        yield rig
 
 
 def drawn_and_commanded(rig: Rig) -> tuple[list[float], list[float]]:

@@ -19,12 +19,10 @@ import pytest
 from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.support.ui import Select
 
-from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.api.client import CommandError
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
-from tests.web.test_dashboard import Rig, screenshot, wait_for
-from tools.browser import dashboard, headless_chromium
-from tools.serving import serve
+from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_for
 
 TAP = """
 (() => {
@@ -74,18 +72,8 @@ WORK_GOAL = [0, 0, 0, 4, 0, 0]  # a 4° roll about the pivot
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory) -> Iterator[Rig]:
-    directory = tmp_path_factory.mktemp("validated-move")
-    with serve(directory) as served, dashboard(served.api, served.telemetry) as board:
-        driver = headless_chromium()
-        try:
-            driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": TAP})
-            with HexactlClient(served.api, timeout_s=30.0) as client:
-                driver.get(board.url)
-                rig = Rig(directory, served, board, driver, client)
-                wait_for(rig.connected, "the page connected")
-                yield rig
-        finally:
-            driver.quit()
+    with page_on_a_service(tmp_path_factory.mktemp("validated-move"), before_load=TAP) as rig:
+        yield rig
 
 
 def tap(rig: Rig, *, drop: bool = False, hold_frames: bool = False) -> None:
