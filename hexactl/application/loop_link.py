@@ -220,6 +220,12 @@ class LoopExchange:
         heard_ns = self._heard_ns
         return 0.0 if heard_ns is None or self._silence_ns is None else (time.monotonic_ns() - heard_ns) / 1e9
 
+    @property
+    def silent(self) -> bool:
+        """Whether the API has been silent past ``silence_s`` and the loop was told so (until
+        it is heard again). Any thread may read it."""
+        return self._silent
+
     def expect_silence(self) -> None:
         """Stop watching for the API's silence: it is being stopped (any thread)."""
         self._silence_ns = None

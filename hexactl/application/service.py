@@ -449,12 +449,12 @@ def run_service(config: ServiceConfig) -> NoReturn:
         main_thread_below_loop(service)
         try:
             rejected = 0
-            silence = _SilenceLog(service.controller.config.supervision.command_silence_s)
+            silence = _SilenceLog()
             while (received := signals.wait(API_WATCH_INTERVAL_S)) is None:
                 if service.link.rejected > rejected:  # a bug of ours if ever: the API process sends only commands
                     log.warning("the loop link dropped %d messages that were not commands", service.link.rejected - rejected)
                     rejected = service.link.rejected
-                silence.watch(service.link.silent_s)
+                silence.watch(service.link)
                 if service.dashboard is not None:
                     service.dashboard.watch()
                 if problem := _api_problem(service):
@@ -479,16 +479,17 @@ def run_service(config: ServiceConfig) -> NoReturn:
 
 
 class _SilenceLog:
-    """Says on the service's log when the API process falls silent and when it is heard
-    again: the API's own log, where the loop's events are written, is silent with it."""
+    """Says on the service's log when the loop link finds the API process silent and when
+    it is heard again: the API's own log, where the loop's events are written, is silent
+    with it."""
 
-    def __init__(self, limit_s: float) -> None:
-        self._limit_s = limit_s
-        self._longest_s = 0.0  # of the present silence; 0: none
+    def __init__(self) -> None:
+        self._longest_s = 0.0  # of the present silence as seen; 0: none
 
-    def watch(self, silent_s: float) -> None:
-        """Called every :data:`API_WATCH_INTERVAL_S` with the link's ``silent_s``."""
-        if silent_s > self._limit_s:
+    def watch(self, link: LoopExchange) -> None:
+        """Called every :data:`API_WATCH_INTERVAL_S`."""
+        silent_s = link.silent_s
+        if link.silent:
             if not self._longest_s:
                 log.warning("nothing from the API process for %.1f s (frozen or starved of CPU): a motion under way "
                             "is braked to rest; an E-stop through the API may not arrive: use the hardware E-stop",

@@ -223,15 +223,18 @@ def test_a_silent_api_has_the_loop_brake_and_heartbeats_keep_it_going(nominal: G
         assert link.remote.snapshot.motion.value == "moving" and not _events(link.remote.snapshot, "command_link_silent")
 
         time.sleep(1.5 * SILENCE_S)
-        assert link.exchange.silent_s > SILENCE_S
+        assert link.exchange.silent_s > SILENCE_S and not link.exchange.silent  # the loop's end has not looked yet
         link.cycle_until_reported(lambda s: s.motion.value != "moving")
+        assert link.exchange.silent
         [message] = _events(link.remote.snapshot, "command_link_silent")
         assert "braked to rest" in message
         assert link.remote.snapshot.state.value == "enabled"
 
         link.beating = True
         link.cycle_until_reported(lambda s: _events(s, "command_link_heard"))
-        assert link.exchange.silent_s < SILENCE_S
+        [heard] = _events(link.remote.snapshot, "command_link_heard")
+        assert float(heard.split("after ")[1].split(" s")[0]) > SILENCE_S  # the silence it ended
+        assert not link.exchange.silent
 
         link.exchange.expect_silence()
         link.beating = False

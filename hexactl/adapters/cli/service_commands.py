@@ -308,15 +308,17 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
         return EXIT_NO_ANSWER
 
 
+GOAL_TOLERANCE = 5e-4
+"""mm or deg: two poses closer than this on every axis (what shows in 3 decimals) are the
+same to an operator: a goal farther from the requested pose is printed (the service
+projected it, leg-lock), and a motion at rest farther from its goal stopped short of it
+(one that ran its course rests on it to 1e-12)."""
+
 WAIT_POLL_S = 0.1
 WAIT_SLACK_S = 30.0
 """``--wait`` gives up when a motion has gone on WAIT_SLACK_S longer than its plan said
 (the reply's ``duration``, telemetry's ``remaining_s``), a stuck platform: it waits, it
 does not judge time. A sequence that goes on from waypoint to waypoint is progress."""
-
-
-GOAL_TOLERANCE = 1e-3
-"""mm and deg: a motion that ran its course rests on its goal to rounding (1e-12 seen)."""
 
 
 def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
@@ -409,11 +411,6 @@ def run_serve(arguments: argparse.Namespace) -> int:
 
 
 # -- output --------------------------------------------------------------------------
-
-
-GOAL_TOLERANCE = 5e-4
-"""mm or deg: a goal farther than this from the requested pose on some axis (what shows in
-3 decimals) is printed: the service projected it (leg-lock)."""
 
 
 def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | None = None) -> str:
