@@ -1,7 +1,8 @@
 """What an operator reads in the service's log after the fact: every change of the
 controller's state (enabled, disabled, fault, E-stop) with its faults, and every event the
-loop recorded (faults, E-stops and guard clamps as warnings; calibration swaps, sequences,
-jogs and streams as information), each once, from the loop's reports.
+loop recorded (faults, E-stops and guard clamps as warnings; the commands it carried out,
+calibration swaps, sequences, jogs and streams as information) with who sent the command
+behind it, each once, from the loop's reports.
 
 The loop keeps its events in its snapshot and never logs (a log write could stall a
 cycle); the API process reads every report anyway, so it writes them down.
@@ -17,8 +18,8 @@ log = logging.getLogger("hexactl.safety")
 
 _WARNING_STATES = (ControlState.FAULT, ControlState.ESTOP)
 
-_ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "calibration_swapped", "command_refused",
-                   "command_link_heard")
+_ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "leg_", "calibration_swapped", "command_refused",
+                   "command_link_heard", "enabled", "disabled", "stop", "reset", "move", "pause", "resume", "abort")
 """Codes (or their prefixes) of the loop's events that are its daily work, logged as INFO;
 the others (faults, E-stops, a guard's clamp) as WARNING."""
 
@@ -38,7 +39,8 @@ class SafetyLog:
         for event in snapshot.events:
             if event.t_ns > self._last_event_ns:
                 level = logging.INFO if event.code.startswith(_ROUTINE_EVENTS) else logging.WARNING
-                log.log(level, "loop %s: %s", event.code, event.message)
+                log.log(level, "loop %s: %s%s", event.code, event.message,
+                        f" (sent by {event.sender})" if event.sender else "")
         self._last_event_ns = max((event.t_ns for event in snapshot.events), default=self._last_event_ns)
         if snapshot.state is not self._state:
             level = logging.WARNING if snapshot.state in _WARNING_STATES else logging.INFO

@@ -5,7 +5,8 @@ Producers (:class:`~hexactl.control.host.LoopHost` in any thread) append to
 is no lock the loop could wait on. Once a cycle the loop carries out at most
 :data:`MAX_COMMANDS_PER_CYCLE` of them (the rest wait for the next cycle): a command
 whose ``deadline_ns`` has passed is refused as ``expired``, any other goes to its
-handler. Every command (but a stream's targets: ``answered`` False) gets an :class:`~hexactl.control.commands.Outcome` (the last
+handler, and once carried out the command's own :meth:`~hexactl.control.commands.Command.event`
+is noted. Every command (but a stream's targets: ``answered`` False) gets an :class:`~hexactl.control.commands.Outcome` (the last
 :data:`KEPT_OUTCOMES` are kept for the snapshot); a refusal is also logged.
 
 Owned by the loop thread apart from ``queue.append``.
@@ -31,11 +32,14 @@ Handler = Callable[[cmd.Command], Refusal]
 
 class CommandInbox:
     """Commands waiting for the loop; ``handlers`` carry out each command type (the
-    refusal, or None when done); ``log(code, message)`` notes refusals."""
+    refusal, or None when done); ``log(code, message)`` notes refusals and the commands'
+    own events. While a command is carried out, :attr:`sender` is its sender (else None):
+    every event noted meanwhile, by its handler too, is that sender's doing."""
 
     def __init__(self, handlers: Mapping[type[cmd.Command], Handler], log: Callable[[str, str], None]) -> None:
         self.queue: deque[cmd.Command] = deque()
         self.outcomes: tuple[cmd.Outcome, ...] = ()
+        self.sender: str | None = None
         self._handlers = handlers
         self._log = log
 
@@ -48,6 +52,13 @@ class CommandInbox:
             self._execute(queue.popleft(), now_ns)
 
     def _execute(self, command: cmd.Command, now_ns: int) -> None:
+        self.sender = command.sender
+        try:
+            self._carry_out(command, now_ns)
+        finally:
+            self.sender = None
+
+    def _carry_out(self, command: cmd.Command, now_ns: int) -> None:
         deadline_ns = command.deadline_ns
         if deadline_ns is not None and now_ns > deadline_ns:
             refusal: Refusal = ErrorCode.EXPIRED, (
@@ -58,6 +69,8 @@ class CommandInbox:
         code, message = refusal if refusal else (None, "done")
         if refusal:
             self._log("command_refused", f"{type(command).__name__}: {message}")
+        elif (event := command.event()) is not None:
+            self._log(*event)
         if not command.answered:
             return
         self.outcomes = (self.outcomes + (cmd.Outcome(command.ticket, code, message),))[-KEPT_OUTCOMES:]

@@ -9,6 +9,10 @@ atomic in CPython, so there is no lock the loop could wait on.
 it: the loop refuses it as ``expired`` from then on rather than carry out what nobody
 waits for any more. The loop and the API's process share the host's monotonic clock.
 
+``sender`` says who sent it, for people (the API's name for its client: the name the
+client gave and where it connected from; None: a caller in the loop's own process, or
+the loop's own link). The loop's events while it carries the command out name it.
+
 ``ticket`` numbers a command; the loop publishes its verdict per ticket
 (:class:`Outcome`). ``epoch`` is the loop's plan epoch the command was planned at: the
 loop advances it whenever what a plan starts from changes (a new goal, a halt, leg-lock,
@@ -32,24 +36,34 @@ from hexactl.kinematics.frames import Frames
 class Command:
     ticket: int
     deadline_ns: int | None = field(default=None, kw_only=True)
+    sender: str | None = field(default=None, kw_only=True)
     answered: ClassVar[bool] = True
     """The loop publishes an :class:`Outcome` for it (a stream's targets: no, they would
     push every other command's verdict out of the kept ones)."""
 
+    def event(self) -> tuple[str, str] | None:
+        """The event (code, message) the loop records once it has carried this out, when
+        carrying it out records none of its own (a jog, a sequence, a stream, an E-stop and
+        a calibration swap do)."""
+        return None
+
 
 @dataclass(frozen=True, slots=True)
 class Enable(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "enabled", "the actuators hold the pose they are at"
 
 
 @dataclass(frozen=True, slots=True)
 class Disable(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "disabled", "the actuators are de-energised"
 
 
 @dataclass(frozen=True, slots=True)
 class Stop(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "stop", "any motion under way brakes to rest"
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,7 +73,8 @@ class EStop(Command):
 
 @dataclass(frozen=True, slots=True)
 class Reset(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "reset", "fault or E-stop cleared, disabled"
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,15 +82,22 @@ class Move(Command):
     epoch: int
     segment: Segment
 
+    def event(self) -> tuple[str, str]:
+        return "move", f"{self.segment.duration_s:.3g} s as planned"
+
 
 @dataclass(frozen=True, slots=True)
 class LockLeg(Command):
     leg: int
 
+    def event(self) -> tuple[str, str]:
+        return "leg_locked", f"leg {self.leg} locked"
+
 
 @dataclass(frozen=True, slots=True)
 class UnlockLeg(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "leg_unlocked", "all six legs driven again"
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,7 +109,8 @@ class Play(Command):
 
 @dataclass(frozen=True, slots=True)
 class Pause(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "pause", "the sequence pauses"
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,10 +121,14 @@ class Resume(Command):
     epoch: int
     remainder: Segment | None
 
+    def event(self) -> tuple[str, str]:
+        return "resume", "the sequence goes on"
+
 
 @dataclass(frozen=True, slots=True)
 class Abort(Command):
-    pass
+    def event(self) -> tuple[str, str]:
+        return "abort", "the sequence ends, braking to rest"
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,6 +182,9 @@ class PlayWave(Command):
 
     epoch: int
     plan: WavePlan
+
+    def event(self) -> tuple[str, str]:
+        return "wave_started", f"{self.plan.path.duration_s:.3g} s as planned"
 
 
 @dataclass(frozen=True, slots=True)

@@ -199,11 +199,12 @@ class ControlCore:
         self.hardware.send_estop()
         self._supervisor.estop_sent(self._now_ns)
 
-    def _enter_estop(self, reason: str) -> None:
+    def _enter_estop(self, reason: str, sender: str | None = None) -> None:
+        """Latch ESTOP for ``reason``; its fault names ``sender`` (who sent the E-stop), as the event does."""
         self._send_estop()
         self._supervisor.latched_estop()
         self.state = ControlState.ESTOP
-        self._faults = self._faults + (Fault("estop", reason),)
+        self._faults = self._faults + (Fault("estop", f"{reason} from {sender}" if sender else reason),)
         self._motion.freeze("fault")
         self._event("estop", reason)
 
@@ -240,7 +241,7 @@ class ControlCore:
 
     def _estop(self, command: cmd.EStop) -> Refusal:
         if self.state is not ControlState.ESTOP:
-            self._enter_estop("estop command")
+            self._enter_estop("estop command", command.sender)
         return None
 
     def _reset(self, command: cmd.Reset) -> Refusal:
@@ -285,7 +286,7 @@ class ControlCore:
     # -- publishing ----------------------------------------------------------------------
 
     def _event(self, code: str, message: str) -> None:
-        self._events = (self._events + (Event(self._now_ns, code, message),))[-KEPT_EVENTS:]
+        self._events = (self._events + (Event(self._now_ns, code, message, self._commands.sender),))[-KEPT_EVENTS:]
 
     def _publish(self) -> None:
         motion = self._motion

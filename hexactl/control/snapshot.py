@@ -38,11 +38,14 @@ class MotionState(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """Something the loop did or refused, for the log; ``t_ns`` monotonic."""
+    """Something the loop did or refused, for the log; ``t_ns`` monotonic; ``sender``
+    who sent the command it carried out or refused (None: the loop's own doing, or a
+    caller in its own process)."""
 
     t_ns: int
     code: str
     message: str
+    sender: str | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import replace
 
 from hexactl.control import commands as cmd
@@ -12,6 +14,22 @@ from hexactl.control.config import ControllerConfig
 from hexactl.control.host import LoopHost
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S
+
+# A context variable rather than a parameter: who sent a request is the request's context,
+# like a log's, and no business of the thirty controller methods between it and the loop.
+_SENDER: ContextVar[str | None] = ContextVar("hexactl_command_sender", default=None)
+
+
+@contextmanager
+def commands_from(sender: str | None) -> Iterator[None]:
+    """Within it, the commands this thread (this context) submits carry ``sender``, who
+    sent them for people (:attr:`~hexactl.control.commands.Command.sender`)."""
+    token = _SENDER.set(sender)
+    try:
+        yield
+    finally:
+        _SENDER.reset(token)
+
 
 class CommandSubmitter:
     """Queues commands on ``host`` with tickets from ``ticket_start`` on (facades sharing
@@ -38,12 +56,12 @@ class CommandSubmitter:
         """Queue the command ``factory`` builds for its ticket; with the loop running by
         itself, wait for its verdict (``message`` and ``details`` join an accepted one).
         With ``deadline_ns`` (monotonic) the loop refuses it as ``expired`` once that has
-        passed. ``loop_failed`` if the loop died; ``loop_timeout`` if no verdict came in time."""
+        passed. It carries the sender of :func:`commands_from`. ``loop_failed`` if the loop died; ``loop_timeout`` if no verdict came in time."""
         report = self._host.report(PERCENTILES_MAX_AGE_S)  # only its liveness is read
         if report.failure is not None:
             return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {report.failure}")
         ticket = next(self._tickets)
-        self._host.submit(replace(factory(ticket), deadline_ns=deadline_ns))
+        self._host.submit(replace(factory(ticket), deadline_ns=deadline_ns, sender=_SENDER.get()))
         if not report.running:
             return CommandResult.success(message, ticket=ticket, pending=True, **details)
         deadline = time.monotonic() + self._config.command_timeout_s

@@ -21,6 +21,11 @@ from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 PERCENTILES_MAX_AGE_S = 0.25
 """Status and telemetry recompute the loop's percentiles (a sort of its window) at most this often."""
 
+TELEMETRY_EVENTS = 8
+"""The loop's latest events in each telemetry record: enough that a display that skips
+records (telemetry is conflated) still sees a burst of them (an E-stop's fault and its
+reset), few enough not to double a record's size."""
+
 
 @dataclass(frozen=True, slots=True)
 class SequenceTelemetry:
@@ -95,6 +100,18 @@ class LegStatus:
 
 
 @dataclass(frozen=True, slots=True)
+class EventTelemetry:
+    """One of the loop's events: at ``t`` (s, the clock of :attr:`Telemetry.t`), ``code``
+    (snake_case) and ``message`` for people; ``sender`` who sent the command it carried
+    out or refused, as the API names its client (None: the loop's own doing)."""
+
+    t: float
+    code: str
+    message: str
+    sender: str | None
+
+
+@dataclass(frozen=True, slots=True)
 class Telemetry:
     """One cycle's picture. ``t``: monotonic time of the cycle, s. Poses relative to the
     zero posture, mm and deg (``pose_measured`` None when the feedback has no FK
@@ -131,6 +148,7 @@ class Telemetry:
     stream: StreamTelemetry | None = None  # None: no pose stream under way
     last_stream: StreamReport | None = None  # how the last pose stream ended; None: none since the start
     legs: tuple[LegStatus, ...] | None = None  # None before the first read
+    events: tuple[EventTelemetry, ...] = ()  # the loop's latest (TELEMETRY_EVENTS), oldest first
 
 
 def leg_statuses(s: CoreSnapshot) -> tuple[LegStatus, ...] | None:
@@ -209,6 +227,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         stream=stream_telemetry(s),
         last_stream=s.last_stream,
         legs=leg_statuses(s),
+        events=tuple(EventTelemetry(e.t_ns / 1e9, e.code, e.message, e.sender) for e in s.events[-TELEMETRY_EVENTS:]),
     )
 
 

@@ -8,6 +8,7 @@ durations and dwells)."""
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 from collections.abc import Iterator
@@ -18,6 +19,7 @@ import zmq
 
 from hexactl.adapters.api.client import DEADLINE_MARGIN_MIN_MS, HexactlClient, deadline_ms
 from hexactl.adapters.api.messages import Request
+from hexactl.adapters.api.protocol import default_client_name
 from hexactl.adapters.api.server import MAX_QUEUED, MAX_QUEUED_PER_CLIENT, QUERY_COMMANDS, ApiServer
 from hexactl.control.planning import MAX_MOTION_S
 from hexactl.adapters.files.sequence_file import sequence_from_toml
@@ -37,15 +39,21 @@ class BlockingHandler:
         self.release = threading.Event()
         self.entered = threading.Event()
         self.done: list[tuple[str, Any, int | None]] = []
+        self.senders: list[str | None] = []
         self.lock = threading.Lock()
 
-    def __call__(self, request: Request, deadline_ns: int | None) -> dict[str, Any]:
+    def __call__(self, request: Request, deadline_ns: int | None, sender: str | None) -> dict[str, Any]:
         if isinstance(request.id, str) and request.id.startswith("block"):
             self.entered.set()
             assert self.release.wait(WAIT_S * 3), "never released"
         with self.lock:
             self.done.append((request.cmd, request.id, deadline_ns))
+            self.senders.append(sender)
         return {"message": f"{request.cmd} done"}
+
+    def sender(self, request_id: Any) -> str | None:
+        with self.lock:
+            return next(sender for (_, done_id, _), sender in zip(self.done, self.senders) if done_id == request_id)
 
     def ids(self) -> list[Any]:
         with self.lock:
@@ -88,6 +96,52 @@ class Client:
 
     def close(self) -> None:
         self.socket.close()
+
+
+def named(name: bytes, endpoint: str) -> zmq.Socket:
+    """A DEALER whose connection names its client ``name`` (raw bytes, as any client may send)."""
+    socket = zmq.Context.instance().socket(zmq.DEALER)
+    socket.linger = 0
+    socket.setsockopt(zmq.METADATA, b"X-Client:" + name)
+    socket.connect(endpoint)
+    return socket
+
+
+@pytest.mark.parametrize("cmd", ["status", "move", "stop"])  # the query worker, the command worker, the socket thread
+def test_the_handler_is_told_who_sent_each_request(server: ApiServer, handler: BlockingHandler, cmd: str) -> None:
+    fields = {"pose": POSE} if cmd == "move" else {}
+    with HexactlClient(server.endpoint, timeout_s=WAIT_S, name="bench-2 operator") as client:
+        reply = client.request(cmd, **fields)
+    assert reply["ok"], reply
+    assert handler.sender(reply["id"]) == "bench-2 operator (127.0.0.1)"
+
+
+def test_an_unnamed_client_and_a_name_that_is_not_text_are_still_told_apart(server: ApiServer,
+                                                                           handler: BlockingHandler) -> None:
+    assert request(server.endpoint, {"v": 1, "id": "unnamed", "cmd": "status"})["ok"]
+    assert handler.sender("unnamed") == "an unnamed client (127.0.0.1)"
+    socket = named(b"\xffevil\x1b[2J" + b"x" * 100, server.endpoint)
+    try:
+        socket.send(json.dumps({"v": 1, "id": "odd", "cmd": "status"}).encode())
+        assert socket.poll(WAIT_S * 1000)
+        assert json.loads(socket.recv())["ok"]
+    finally:
+        socket.close()
+    name = handler.sender("odd")
+    assert name == "\ufffdevil?[2J" + "x" * 55 + " (127.0.0.1)", name  # printable, cut to 64 characters
+
+
+def test_a_client_on_this_host_is_named_by_its_process_and_user_over_ipc(tmp_path, handler: BlockingHandler) -> None:
+    context = zmq.Context()
+    served = ApiServer(context, f"ipc://{tmp_path}/api.ipc", handler)
+    served.start()
+    try:
+        with HexactlClient(served.endpoint, timeout_s=WAIT_S) as client:
+            reply = client.request("status")
+        assert handler.sender(reply["id"]) == f"{default_client_name()} (pid {os.getpid()}, uid {os.getuid()})"
+    finally:
+        served.close()
+        context.term()
 
 
 def blocked(server: ApiServer, handler: BlockingHandler) -> Client:

@@ -110,15 +110,15 @@ def test_req_envelope_is_kept_for_dealer_that_mimics_req(shared_service) -> None
 
 
 def test_handler_bug_becomes_internal_error() -> None:
-    def broken(request, deadline_ns):
+    def broken(request, deadline_ns, sender):
         raise KeyError("boom")
 
-    reply = json.loads(carry_out(decode_body([json.dumps(STATUS).encode()]), broken, None))
+    reply = json.loads(carry_out(decode_body([json.dumps(STATUS).encode()]), broken, None, None))
     assert reply["error"]["code"] == "internal_error" and reply["id"] == "after"
 
 
 def test_non_finite_reply_becomes_internal_error() -> None:
-    reply = json.loads(carry_out(decode_body([json.dumps(STATUS).encode()]), lambda request, deadline_ns: {"value": float("nan")}, None))
+    reply = json.loads(carry_out(decode_body([json.dumps(STATUS).encode()]), lambda request, deadline_ns, sender: {"value": float("nan")}, None, None))
     assert reply["error"]["code"] == "internal_error"
 
 

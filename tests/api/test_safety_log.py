@@ -33,8 +33,10 @@ def test_state_changes_and_new_events_are_logged_once(snapshot, caplog) -> None:
                       events=(*history, Event(5, fault.code, fault.message)))
     safety.observe(faulted)
     safety.observe(faulted)  # the same report again: nothing new
-    swapped = (*faulted.events, Event(9, "calibration_swapped", "calibration a → b from cal.toml"),
-               Event(10, "sequence_started", "sequence 'x_sweep': 9 waypoints"))
+    swapped = (*faulted.events, Event(9, "calibration_swapped", "calibration a → b from cal.toml", "hexactl ann@b2 (::1)"),
+               Event(10, "sequence_started", "sequence 'x_sweep': 9 waypoints"),
+               Event(11, "estop", "estop command", "dashboard (127.0.0.1)"),
+               Event(11, "stop", "any motion under way brakes to rest", "dashboard (127.0.0.1)"))
     safety.observe(replace(snapshot, state=ControlState.DISABLED, events=swapped))
     lines = [(record.levelname, record.getMessage()) for record in caplog.records]
     assert lines == [
@@ -42,7 +44,9 @@ def test_state_changes_and_new_events_are_logged_once(snapshot, caplog) -> None:
         ("WARNING", "loop heartbeat_lost: leg 3 silent for 0.05 s"),
         ("WARNING", f"state enabled → fault (heartbeat_lost: leg 3 silent for 0.05 s) (calibration "
                     f"{snapshot.active.calibration_id})"),
-        ("INFO", "loop calibration_swapped: calibration a → b from cal.toml"),
+        ("INFO", "loop calibration_swapped: calibration a → b from cal.toml (sent by hexactl ann@b2 (::1))"),
         ("INFO", "loop sequence_started: sequence 'x_sweep': 9 waypoints"),
+        ("WARNING", "loop estop: estop command (sent by dashboard (127.0.0.1))"),
+        ("INFO", "loop stop: any motion under way brakes to rest (sent by dashboard (127.0.0.1))"),
         ("INFO", f"state fault → disabled (calibration {snapshot.active.calibration_id})"),
     ]

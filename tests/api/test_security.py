@@ -69,16 +69,17 @@ def test_create_keys_adds_clients_and_never_overwrites(tmp_path) -> None:
 
 
 def test_curve_end_to_end(tmp_path) -> None:
-    keys = create_keys(tmp_path / "keys")
+    keys = create_keys(tmp_path / "keys", "alice")
     stranger = create_keys(tmp_path / "stranger")  # a client whose key is not in clients/
     context = zmq.Context()
     curve = CurveServer(context, CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
-    server = ApiServer(context, "tcp://127.0.0.1:*", lambda request, deadline_ns: {"message": "hello"}, curve)
+    server = ApiServer(context, "tcp://127.0.0.1:*", lambda request, deadline_ns, sender: {"message": sender}, curve)
     server.start()
     try:
         allowed = CurveClientKeys(keys["server_public"], keys["client_secret"])
-        with HexactlClient(server.endpoint, curve=allowed) as client:
-            assert client.call("status")["message"] == "hello"
+        with HexactlClient(server.endpoint, curve=allowed, name="I say I am bob") as client:
+            # The name is the client's word; the key's name is the authenticator's.
+            assert client.call("status")["message"] == "I say I am bob (127.0.0.1, key alice)"
         refused = CurveClientKeys(keys["server_public"], stranger["client_secret"])
         with HexactlClient(server.endpoint, timeout_s=0.5, curve=refused) as client:
             with pytest.raises(ServiceUnavailable):

@@ -20,7 +20,7 @@ from tools.serving import wait_until
 WAIT_S = 30.0  # only turns a hang into a failure
 
 MAKERS: dict[str, Callable[[zmq.Context, str], SocketThread]] = {
-    "api": lambda context, endpoint: ApiServer(context, endpoint, lambda request, deadline_ns: {"message": "hello"}),
+    "api": lambda context, endpoint: ApiServer(context, endpoint, lambda request, deadline_ns, sender: {"message": "hello"}),
     "telemetry": lambda context, endpoint: TelemetryPublisher(context, endpoint, lambda: {"t": 0.0}),
 }
 
@@ -63,7 +63,7 @@ def test_the_api_socket_thread_wakes_the_loop_links_heartbeat_while_a_handler_wo
     ``estop``, idle or not, and not from the worker, which may be busy planning for long."""
     release = threading.Event()
 
-    def handle(request, deadline_ns) -> dict:
+    def handle(request, deadline_ns, sender) -> dict:
         release.wait(WAIT_S)  # the worker is held in a long request
         return {"message": "done"}
 

@@ -82,6 +82,22 @@ def test_the_view_names_a_legs_fault_bits_beside_the_word() -> None:
     assert "legs         all estop: estop (0x2)" in rendered({**RECORD, "legs": [estop] * 6})
 
 
+def test_a_long_fault_keeps_to_one_line_and_status_prints_it_whole_with_the_last_event() -> None:
+    from hexactl.adapters.cli.telemetry_text import format_telemetry
+
+    sender = "hexactl operator@hexapod-controller-01.beamline.example.org (10.20.30.40, key operator)"
+    estop = {**RECORD, "state": "estop", "faults": [{"code": "estop", "message": f"estop command from {sender}"}],
+             "events": [{"t": RECORD["t"] - 2.5, "code": "estop", "message": "estop command", "sender": sender}]}
+    text = rendered(estop, "estop: ok")
+    [faults] = [line for line in text.splitlines() if line.startswith("faults")]
+    assert faults.startswith("faults       estop (estop command from hexactl operator@") and faults.endswith("…")
+    assert "estop: ok" in text.splitlines()[-1]  # the key's result stays in place under it
+    printed = format_telemetry(estop)
+    assert f"estop (estop command from {sender})" in printed
+    assert f"last event     estop: estop command, sent by {sender} (2.5 s ago)" in printed
+    assert "last event     none" in format_telemetry(RECORD)
+
+
 def test_the_view_shows_the_frames_the_tool_pose_and_the_soft_limits() -> None:
     assert "frames" in rendered(RECORD) and "none (poses relative to the zero posture)" in rendered(RECORD)
     framed = {**RECORD, "tool_pose_command": [0.0, 0.0, 0.0, 5.0, 0.0, 0.0],

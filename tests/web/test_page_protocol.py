@@ -12,6 +12,8 @@ import queue
 import threading
 from typing import Any
 
+from starlette.datastructures import Address
+
 from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
 from hexactl.adapters.web.app import _serve_page
 from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, Outbox, ServiceBridge, ServiceEndpoints,
@@ -33,6 +35,7 @@ class FakePage:
             self.incoming.put_nowait(message)
         self.sent: list[dict[str, Any]] = []
         self.texts: list[str] = []
+        self.client = Address("10.0.0.9", 51000)  # where the browser connected from
 
     async def receive(self) -> dict[str, Any]:
         return await self.incoming.get()
@@ -59,10 +62,10 @@ class EchoBridge:
     def unsubscribe(self, outbox: Outbox) -> None:
         pass
 
-    async def command(self, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
+    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
         if cmd == "explode":
             raise RuntimeError("a dashboard bug")
-        return {"ok": True, "cmd": cmd, "fields": fields}
+        return {"ok": True, "cmd": cmd, "fields": fields, "browser": browser}
 
 
 def served(page: FakePage, bridge: Any) -> FakePage:
@@ -95,7 +98,7 @@ def test_every_message_gets_a_reply_and_the_page_stays_connected() -> None:
     assert "NaN is not a JSON number" in replies[1][1]["error"]["message"]
     by_id = dict(replies[4:])
     assert by_id[3]["error"]["code"] == "internal_error" and "a dashboard bug" in by_id[3]["error"]["message"]
-    assert by_id[4] == {"ok": True, "cmd": "status", "fields": {"self": 1}}
+    assert by_id[4] == {"ok": True, "cmd": "status", "fields": {"self": 1}, "browser": "10.0.0.9"}  # the service is told
 
 
 def test_an_urgent_command_takes_no_fields() -> None:
@@ -110,9 +113,11 @@ def test_an_urgent_command_takes_no_fields() -> None:
 def test_a_flood_of_one_urgent_command_costs_one_request_at_a_time_and_delays_no_other() -> None:
     release = threading.Event()
     calls: list[str] = []
+    clients: list[str] = []
 
-    def request(cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
+    def request(cmd: str, fields: dict[str, Any], client: str) -> dict[str, Any]:
         calls.append(cmd)
+        clients.append(client)
         number = len(calls)
         if cmd == "abort":
             release.wait(WAIT_S)
@@ -121,11 +126,11 @@ def test_a_flood_of_one_urgent_command_costs_one_request_at_a_time_and_delays_no
     async def scenario() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
         abort, estop = UrgentCommand("abort", request), UrgentCommand("estop", request)
         try:
-            before = [asyncio.create_task(abort()) for _ in range(1000)]
+            before = [asyncio.create_task(abort(f"page {n}")) for n in range(1000)]
             while "abort" not in calls:  # until the first abort is being sent
                 await asyncio.sleep(0.001)
-            during = [asyncio.create_task(abort()) for _ in range(1000)]
-            stopped = await asyncio.wait_for(estop(), WAIT_S)
+            during = [asyncio.create_task(abort(f"page {n}")) for n in range(1000, 2000)]
+            stopped = await asyncio.wait_for(estop("page E"), WAIT_S)
             assert stopped["ok"] and not release.is_set()  # through while the abort's request is still out
             release.set()
             return await asyncio.gather(*before), await asyncio.gather(*during)
@@ -135,6 +140,7 @@ def test_a_flood_of_one_urgent_command_costs_one_request_at_a_time_and_delays_no
 
     before, during = asyncio.run(scenario())
     assert calls.count("abort") == 2 and calls.count("estop") == 1
+    assert clients == ["page 0", "page E", "page 1000"]  # each request names the press that made it wait
     assert {reply["request"] for reply in before} == {1}
     assert {reply["request"] for reply in during} == {3}  # the presses made while one was sent: the next one
 

@@ -22,12 +22,14 @@ from typing import TYPE_CHECKING, Any, Self
 import zmq
 
 from hexactl.adapters.api.protocol import (
+    CLIENT_NAME_PROPERTY,
     DEFAULT_API_ENDPOINT,
     DEFAULT_TELEMETRY_ENDPOINT,
     DEFAULT_TIMEOUT_S,
     MAX_DEADLINE_MS,
     PROTOCOL_VERSION,
     TOPIC,
+    default_client_name,
 )
 
 if TYPE_CHECKING:  # CURVE's modules load only for a client that uses it (see ZmqConnection)
@@ -55,7 +57,7 @@ class CommandError(Exception):
 class ZmqConnection:
     """A ZeroMQ socket of ``kind`` connected to ``endpoint``, in a context of its own, closed with the object."""
 
-    def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int]) -> None:
+    def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int | bytes]) -> None:
         self.endpoint = endpoint
         self.curve = curve
         self._context = zmq.Context()
@@ -86,6 +88,9 @@ ENVELOPE_FIELDS = frozenset({"v", "id", "cmd"})
 
 class HexactlClient(ZmqConnection):
     """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
+``name`` names this client to the service, for people (its events and log say who sent
+each command by it: :data:`~hexactl.adapters.api.protocol.CLIENT_NAME_PROPERTY`); by
+default ``PROGRAM USER@HOST``.
 
     A DEALER socket rather than REQ so that a timed-out request leaves the client
     usable: a late reply to it is recognised by its ``id`` and dropped. ``IMMEDIATE``
@@ -101,9 +106,11 @@ class HexactlClient(ZmqConnection):
     """
 
     def __init__(
-        self, endpoint: str = DEFAULT_API_ENDPOINT, *, timeout_s: float = DEFAULT_TIMEOUT_S, curve: CurveClientKeys | None = None
+        self, endpoint: str = DEFAULT_API_ENDPOINT, *, timeout_s: float = DEFAULT_TIMEOUT_S, curve: CurveClientKeys | None = None,
+        name: str | None = None,
     ) -> None:
-        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1})
+        metadata = f"{CLIENT_NAME_PROPERTY}:{default_client_name() if name is None else name}".encode()
+        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1, zmq.METADATA: metadata})
         self.timeout_s = timeout_s
         self._ids = itertools.count(1)
 

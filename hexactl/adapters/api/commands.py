@@ -66,6 +66,7 @@ from hexactl.adapters.files.kept_calibration import KeptCalibration
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
+from hexactl.control.submitter import commands_from
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry, GeometryError, describe_validation_error
 
@@ -123,7 +124,12 @@ class CommandHandler:
         stream_input = self.stream_input.view() if self.stream_input is not None else None
         return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view(), "stream_input": stream_input}
 
-    def __call__(self, request: Request, deadline_ns: int | None = None) -> dict[str, Any]:
+    def __call__(self, request: Request, deadline_ns: int | None = None, sender: str | None = None) -> dict[str, Any]:
+        """Carry out ``request``; the commands it hands the loop name ``sender`` (who sent it, for people)."""
+        with commands_from(sender):
+            return self._carry_out(request, deadline_ns)
+
+    def _carry_out(self, request: Request, deadline_ns: int | None) -> dict[str, Any]:
         controller = self.controller
         match request:
             case StatusRequest():

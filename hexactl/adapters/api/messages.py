@@ -20,6 +20,7 @@ from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.sequences import Paced, SequenceWaypoint
+from hexactl.control.telemetry import TELEMETRY_EVENTS
 from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import FramePoseMmDeg, RelativeMmDeg, ToolInWorkMmDeg
@@ -668,6 +669,21 @@ class CampaignTelemetry(_Message):
     age_s: float = Field(description="seconds since the campaign last said something")
 
 
+class LoopEvent(_Message):
+    """Something the loop did or refused."""
+
+    t: float = Field(description="when, s, on the clock of the record's t")
+    code: str = Field(description="what, snake_case: a command carried out (enabled, disabled, stop, reset, move, "
+                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started), one that started something "
+                      "(sequence_started, jog_started, stream_opened, calibration_swapped), estop, a fault's code, "
+                      "command_refused, the end of something (sequence_*, jog_ended, stream_ended), "
+                      "command_link_silent, …")
+    message: str = Field(description="for people")
+    sender: str | None = Field(description="who sent the command it carried out or refused: the name its client gave "
+                               "(the X-Client connection property), then its address, or its process and user on "
+                               "the service's host, and with CURVE its key's name; null: the loop's own doing")
+
+
 class Telemetry(_Message):
     """One control cycle's picture."""
 
@@ -710,6 +726,8 @@ class Telemetry(_Message):
     legs: list[LegStatus] | None = Field(default=None, min_length=6, max_length=6,
                                          description="legs 1–6 as each last reported: a fault that outlasts a reset "
                                          "shows here; null before the first read")
+    events: list[LoopEvent] = Field(default_factory=list, max_length=TELEMETRY_EVENTS,
+                                    description="the loop's latest events, oldest first (its log has them all)")
 
 
 # -- replies -------------------------------------------------------------------------

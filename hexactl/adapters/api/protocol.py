@@ -1,5 +1,5 @@
 """What the service and its clients agree on, without the models: the protocol version,
-the default endpoints, the telemetry topic and rate, the bound on ``deadline_ms``, how long
+the default endpoints, how a client names itself, the telemetry topic and rate, the bound on ``deadline_ms``, how long
 a client waits for an answer by default.
 
 Standard library only: a client (``hexactl status``, ``move``, …) imports this and not
@@ -8,12 +8,44 @@ the pydantic models (:mod:`~hexactl.adapters.api.messages`), so that it starts f
 
 from __future__ import annotations
 
+import getpass
+import os
+import socket
+import sys
+from pathlib import Path
+
 PROTOCOL_VERSION = 1
 
 DEFAULT_API_ENDPOINT = "tcp://127.0.0.1:5555"
 DEFAULT_TELEMETRY_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_TELEMETRY_RATE_HZ = 50.0
 MAX_TELEMETRY_RATE_HZ = 1000.0
+
+CLIENT_NAME_PROPERTY = "X-Client"
+"""The ZeroMQ connection property (``ZMQ_METADATA``, set before connecting) by which a
+client names itself to the service, for people: the service's events and log name who
+sent each command by it and by where the connection comes from. A connection property,
+not a request field, so that a named client works with a service that knows nothing of
+names, and a service with any client."""
+
+MAX_CLIENT_NAME = 64
+"""The most characters of a client's name the service keeps."""
+
+
+def default_client_name() -> str:
+    """``PROGRAM USER@HOST`` (``hexactl alice@bench-2``): who this process is, for people;
+    PROGRAM the package run with ``python -m``, else the script's file name."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None:
+        program = spec.name.partition(".")[0]
+    else:
+        program = Path(sys.argv[0]).name if sys.argv and sys.argv[0] not in ("", "-c") else "python"
+    try:
+        user = getpass.getuser()
+    except (KeyError, OSError):  # no name for this uid (a container)
+        user = f"uid {os.getuid()}"
+    return f"{program} {user}@{socket.gethostname()}"[:MAX_CLIENT_NAME]
+
 
 TOPIC = b"telemetry "
 """The prefix of every telemetry message (a single frame: ``telemetry <json>``)."""

@@ -9,6 +9,7 @@ allowed in (ZeroMQ certificate files, made by :func:`create_keys`).
 
 from __future__ import annotations
 
+import functools
 import ipaddress
 import shutil
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import zmq
 import zmq.auth
+from zmq.utils import z85
 
 _LOCAL_HOSTS = frozenset({"localhost", "lo"})
 
@@ -93,7 +95,8 @@ def load_server_keys(keys: CurveServerKeys) -> tuple[bytes, bytes]:
 
 class CurveServer:
     """CURVE on the service's sockets, with ZeroMQ's authenticator thread checking
-    every client's public key against :attr:`CurveServerKeys.clients_dir`."""
+    every client's public key against :attr:`CurveServerKeys.clients_dir`. A connection's
+    ``User-Id`` property names its key (:func:`key_name`): who sent a command, for people."""
 
     def __init__(self, context: zmq.Context, keys: CurveServerKeys) -> None:
         from zmq.auth.thread import ThreadAuthenticator  # loads asyncio: only a server needs it, not every client
@@ -102,6 +105,9 @@ class CurveServer:
         self._authenticator = ThreadAuthenticator(context)
         self._authenticator.start()
         self._authenticator.configure_curve(domain="*", location=str(keys.clients_dir))
+        # The authenticator names a connection's user by this method (by default the key's
+        # z85 text, which no one reads); an instance attribute replaces it.
+        self._authenticator.curve_user_id = functools.partial(key_name, keys.clients_dir)  # type: ignore[method-assign]
 
     def secure(self, socket: zmq.Socket) -> None:
         """Make ``socket`` (before it binds) a CURVE server."""
@@ -111,6 +117,21 @@ class CurveServer:
 
     def close(self) -> None:
         self._authenticator.stop()
+
+
+def key_name(clients_dir: Path, public_key: bytes) -> str:
+    """The name of the client certificate in ``clients_dir`` that holds ``public_key``
+    (32 bytes): its file's stem (``alice`` for ``alice.key``), or the key's z85 text when
+    no file there holds it now."""
+    text = z85.encode(public_key)
+    for path in sorted(clients_dir.glob("*.key")):
+        try:
+            public, _ = zmq.auth.load_certificate(path)
+        except (OSError, ValueError):  # being written, or not a certificate: not this key
+            continue
+        if public == text:
+            return path.stem
+    return text.decode("ascii")
 
 
 def secure_client(socket: zmq.Socket, keys: CurveClientKeys) -> None:

@@ -26,6 +26,10 @@ and never runs a slow handler. For each request it:
   (``busy`` beyond). So another client's plan that takes seconds (a long sequence or
   wave) never holds up an operator's ``status``.
 
+Each request goes to its handler with its **sender**, for people (:func:`sender_of`): the
+name its client gave its connection, where it connected from, and with CURVE the name of
+its key; the commands it sets off carry it, and the loop's events name it.
+
 A worker takes requests in turn, answers ``expired`` for one whose ``deadline_ms`` has
 passed, else runs the handler with the absolute deadline (the loop refuses a motion
 command past it). Its replies reach the socket thread through an inproc PUSH→PULL pair
@@ -43,6 +47,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 import threading
 import time
 from collections import deque
@@ -53,7 +58,7 @@ from typing import Any
 import zmq
 
 from hexactl.adapters.api.messages import Request, StopRequest
-from hexactl.adapters.api.protocol import PROTOCOL_VERSION
+from hexactl.adapters.api.protocol import CLIENT_NAME_PROPERTY, MAX_CLIENT_NAME, PROTOCOL_VERSION
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import (
@@ -109,9 +114,13 @@ WORKER_JOIN_S = 2.0
 _BATCH = 64  # messages taken from a socket per wake before polling again
 _TRANSPORT_DRAIN_LIMIT = 4096  # bounds the reading after an urgent command under a flood that never ends
 
-Handler = Callable[[Request, int | None], dict[str, Any]]
-"""Carries out a request by its absolute deadline (monotonic ns, None: none): returns
-the reply's fields beyond v/id/ok, or raises :class:`~hexactl.adapters.api.wire.ApiError`."""
+Handler = Callable[[Request, int | None, str | None], dict[str, Any]]
+"""Carries out a request by its absolute deadline (monotonic ns, None: none) for its
+sender (:func:`sender_of`; None: the API itself): returns the reply's fields beyond
+v/id/ok, or raises :class:`~hexactl.adapters.api.wire.ApiError`."""
+
+_IPC_PEER = re.compile(r"localhost:(\d+):(\d+):(\d+)")
+"""ZeroMQ's ``Peer-Address`` of an IPC connection: the peer's uid, gid and pid (SO_PEERCRED)."""
 
 log = logging.getLogger(__name__)
 
@@ -128,15 +137,40 @@ def decode_body(body: list[bytes]) -> Request:
     return decode_request(body[0])
 
 
-def carry_out(request: Request, handle: Handler, deadline_ns: int | None) -> bytes:
+def sender_of(frame: zmq.Frame) -> str:
+    """Who sent the request ``frame`` came with, for people: the name its client gave its
+    connection (:data:`~hexactl.adapters.api.protocol.CLIENT_NAME_PROPERTY`, made printable
+    and cut to :data:`~hexactl.adapters.api.protocol.MAX_CLIENT_NAME`), then what the
+    client cannot choose: the peer's IP address over TCP, its process and user over IPC,
+    and with CURVE the name of its key (:class:`~hexactl.adapters.api.security.CurveServer`)."""
+    name = _connection_property(frame, CLIENT_NAME_PROPERTY)[:MAX_CLIENT_NAME]
+    name = "".join(c if c.isprintable() else "?" for c in name) or "an unnamed client"
+    peer = _connection_property(frame, "Peer-Address")
+    local = _IPC_PEER.fullmatch(peer)
+    key = _connection_property(frame, "User-Id")
+    where = ", ".join(part for part in (f"pid {local[3]}, uid {local[1]}" if local else peer, key and f"key {key}") if part)
+    return f"{name} ({where})" if where else name
+
+
+def _connection_property(frame: zmq.Frame, name: str) -> str:
+    """The connection's property ``name`` ("" when it has none)."""
+    try:
+        return frame.get(name)
+    except UnicodeDecodeError as error:  # pyzmq reads properties as UTF-8; a client may send any bytes
+        return error.object.decode("utf-8", "replace")
+    except zmq.ZMQError:  # not set on this connection
+        return ""
+
+
+def carry_out(request: Request, handle: Handler, deadline_ns: int | None, sender: str | None) -> bytes:
     """The encoded reply to ``request``, carried out by ``handle``. Never raises."""
-    return encoded(request.id, reply_to(request, handle, deadline_ns))
+    return encoded(request.id, reply_to(request, handle, deadline_ns, sender))
 
 
-def reply_to(request: Request, handle: Handler, deadline_ns: int | None) -> dict[str, Any]:
+def reply_to(request: Request, handle: Handler, deadline_ns: int | None, sender: str | None) -> dict[str, Any]:
     """The reply to ``request``, carried out by ``handle``. Never raises."""
     try:
-        return ok_reply(request.id, **handle(request, deadline_ns))
+        return ok_reply(request.id, **handle(request, deadline_ns, sender))
     except ApiError as error:
         return error_reply(request.id, error.code, error.message, error.details)
     except Exception as error:  # a bug in a handler must not end the service: log it, say so
@@ -163,6 +197,7 @@ class _Queued:
     envelope: list[bytes]
     request: Request
     deadline_ns: int | None  # monotonic
+    sender: str
 
 
 _STOP_AFTER_RACE = StopRequest(v=PROTOCOL_VERSION, id=None, cmd="stop")
@@ -362,15 +397,15 @@ class ApiServer(SocketThread):
             if self._socket in ready:
                 for _ in range(_BATCH):
                     try:
-                        frames = self._socket.recv_multipart(zmq.NOBLOCK)
+                        frames = self._socket.recv_multipart(zmq.NOBLOCK, copy=False)  # frames: their sender's properties
                     except zmq.Again:
                         break
                     self._admit(frames, time.monotonic_ns())
 
-    def _admit(self, frames: list[bytes], received_ns: int, stopped_by: str | None = None) -> None:
+    def _admit(self, frames: list[zmq.Frame], received_ns: int, stopped_by: str | None = None) -> None:
         """Answer, carry out or queue one request. ``stopped_by``: the urgent command just
         carried out, which cancels a motion request read after it from the transport."""
-        envelope, body = split_envelope(frames)
+        envelope, body = split_envelope([frame.bytes for frame in frames])
         try:
             request = decode_body(body)
         except ApiError as error:
@@ -382,7 +417,7 @@ class ApiServer(SocketThread):
         if request.cmd in URGENT_COMMANDS:
             cause = describe(request)
             self._cancel_queued(cause)  # first: the worker must not take one of them meanwhile
-            reply = carry_out(request, self._handle, None)
+            reply = carry_out(request, self._handle, None, sender_of(frames[-1]))
             if stopped_by is None:
                 # Before the reply: what a client sends once it has seen the reply was
                 # sent after the stop, and must not be cancelled by it.
@@ -394,7 +429,8 @@ class ApiServer(SocketThread):
         # A query waits behind its own client's commands (what it asks after them reflects
         # them), never behind another client's.
         quick = request.cmd in QUERY_COMMANDS and not self._commands.holds(client)
-        refusal = (self._queries if quick else self._commands).put(client, _Queued(envelope, request, deadline_ns))
+        item = _Queued(envelope, request, deadline_ns, sender_of(frames[-1]))
+        refusal = (self._queries if quick else self._commands).put(client, item)
         if refusal is not None:
             self._send([*envelope, encode(error_reply(request.id, ErrorCode.BUSY, refusal,
                                                       {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": MAX_QUEUED}))])
@@ -405,7 +441,7 @@ class ApiServer(SocketThread):
         by a client gone since (600 moves, then closed): they must not run after it either."""
         for _ in range(_TRANSPORT_DRAIN_LIMIT):
             try:
-                frames = self._socket.recv_multipart(zmq.NOBLOCK)
+                frames = self._socket.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:
                 return
             self._admit(frames, time.monotonic_ns(), stopped_by=cause)
@@ -451,7 +487,7 @@ class ApiServer(SocketThread):
                                     "turn came; send it again with a longer deadline if it is still wanted")
             else:
                 worker.in_handler = (time.monotonic_ns(), describe(request))
-                reply = reply_to(request, self._handle, item.deadline_ns)
+                reply = reply_to(request, self._handle, item.deadline_ns, item.sender)
                 if request.cmd in CANCELLED_BY_STOP and worker.lane.discards != stops and reply["ok"]:
                     reply = self._stop_after_race(request)
                 worker.in_handler = None
@@ -467,6 +503,6 @@ class ApiServer(SocketThread):
         """An urgent command arrived while ``request`` was being planned, and it was still
         handed to the loop, perhaps after the urgent one: stop, so that it does not outlive
         it, and say so."""
-        reply_to(_STOP_AFTER_RACE, self._handle, None)
+        reply_to(_STOP_AFTER_RACE, self._handle, None, f"the API, as {describe(request)} raced a stop")
         return error_reply(request.id, ErrorCode.CANCELLED, f"{request.cmd} cancelled: a stop, abort or estop arrived "
                            "while it was being planned, and the platform was stopped again after it")

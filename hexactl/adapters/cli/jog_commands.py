@@ -21,6 +21,7 @@ from hexactl.adapters.cli.service_commands import (
     FRAMES,
     client_parser,
     format_error_reply,
+    newest_event_t,
     wait_until_at_rest,
 )
 from hexactl.adapters.cli.telemetry_text import pose_text
@@ -58,6 +59,7 @@ def run_jog(arguments: argparse.Namespace) -> int:
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     try:
         with client:
+            since = newest_event_t(client)
             reply = client.request("jog", **fields)
             if not reply.get("ok"):
                 print(format_error_reply(reply), file=sys.stderr)
@@ -73,7 +75,7 @@ def run_jog(arguments: argparse.Namespace) -> int:
             if refused is not None:
                 print(format_error_reply(refused), file=sys.stderr)
                 return EXIT_REFUSED
-            waited = wait_until_at_rest(client, "jog", {})
+            waited = wait_until_at_rest(client, "jog", {}, since)
             status = client.request("status")["status"]
             if arguments.json:
                 print(json.dumps(status))

@@ -339,7 +339,10 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         ("jog", jog_text(record.get("jog"))),
         ("wave", wave_text(record.get("wave"))),
         ("recording", recording_text(record.get("recording"))),
-        ("faults", Text("\n".join(fault_text(fault) for fault in faults), style="bold red") if faults else "none"),
+        # One line each, cut at the screen's edge: a long one (an E-stop names its sender) must
+        # not push the key's result off the screen; `hexactl status` prints them whole.
+        ("faults", Text("\n".join(fault_text(fault) for fault in faults), style="bold red", no_wrap=True,
+                        overflow="ellipsis") if faults else "none"),
         ("loop", loop_text(loop)),
         ("lateness µs", percentiles_text(loop["lateness_us"])),
         ("compute µs", percentiles_text(loop["compute_us"])),

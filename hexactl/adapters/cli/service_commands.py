@@ -32,7 +32,7 @@ from hexactl.adapters.cli.common import (
     telemetry_rate,
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
-from hexactl.adapters.cli.telemetry_text import format_telemetry, frames_lines, pose_text
+from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 FRAMES = ("zero", "work", "tool")
@@ -287,8 +287,10 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
     from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
 
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
+    waits = getattr(arguments, "wait", False)
     try:
         with client:
+            since = newest_event_t(client) if waits else None
             reply = client.request(cmd, **fields)
             if arguments.json:
                 print(json.dumps(reply))
@@ -300,7 +302,7 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
                 print(format_error_reply(reply), file=sys.stderr)
             if not reply.get("ok"):
                 return EXIT_REFUSED
-            return wait_until_at_rest(client, arguments.command, reply) if getattr(arguments, "wait", False) else EXIT_OK
+            return wait_until_at_rest(client, cmd, reply, since) if waits else EXIT_OK
     except ServiceUnavailable as error:
         print(f"hexactl {arguments.command}: {error}", file=sys.stderr)
         if cmd == "estop":
@@ -321,11 +323,24 @@ WAIT_SLACK_S = 30.0
 does not judge time. A sequence that goes on from waypoint to waypoint is progress."""
 
 
-def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
+STARTED_BY = {"move": "move", "play": "sequence_started", "resume": "resume", "wave": "wave_started",
+              "jog": "jog_started"}
+"""The loop's event that a command's motion started with (the API command → the event's code)."""
+
+
+def newest_event_t(client: Any) -> float | None:
+    """When the loop's newest event happened (telemetry's ``t``; None: none yet)."""
+    events = client.request("status")["status"].get("events") or []
+    return events[-1]["t"] if events else None
+
+
+def wait_until_at_rest(client: Any, cmd: str, reply: dict[str, Any], since: float | None = None) -> int:
     """``--wait``: poll the service until the platform is at rest and no sequence plays.
     0 then; 1 (saying why) when a fault, an E-stop or a disable ended the motion, the
     sequence is paused, the motion goes on well past its plan, or it came to rest short
-    of the reply's ``goal`` (stopped)."""
+    of the reply's ``goal`` (stopped). What the loop recorded after the motion's own start
+    (the events after ``since``, the newest before ``cmd`` was sent) names the cause and who
+    sent it."""
     deadline = time.monotonic() + float(reply.get("duration") or 0.0) + WAIT_SLACK_S
     while True:
         status = client.request("status")["status"]
@@ -347,17 +362,27 @@ def wait_until_at_rest(client: Any, command: str, reply: dict[str, Any]) -> int:
         elif time.monotonic() > deadline:
             problem = f"still moving {WAIT_SLACK_S:g} s after its plan said it would be at rest"
         if problem:
-            print(f"hexactl {command}: {problem}", file=sys.stderr)
+            print(f"hexactl {cmd.replace('_', '-')}: {problem}{since_then(status, cmd, since)}", file=sys.stderr)
             return EXIT_REFUSED
         time.sleep(WAIT_POLL_S)
+
+
+def since_then(status: dict[str, Any], cmd: str, since: float | None) -> str:
+    """What the loop recorded after ``cmd``'s motion started (the first event of its kind
+    after ``since``), newest last, with who sent it and how long ago: "" if nothing."""
+    events = [event for event in status.get("events") or [] if since is None or event["t"] > since]
+    started = next((n for n, event in enumerate(events) if event["code"] == STARTED_BY.get(cmd)), None)
+    if started is None:  # its start has left the record's events: what followed it cannot be told apart
+        return ""
+    told = [event_text(event, status["t"]) for event in events[started + 1:]]
+    return f"\n  the service recorded since it started: {'; '.join(told)}" if told else ""
 
 
 def _short_of_goal(goal: list[float] | None, pose: list[float]) -> str | None:
     """Why a motion at rest at ``pose`` did not end on ``goal`` (None: it did, or has none)."""
     if goal is None or max(abs(at - aim) for at, aim in zip(pose, goal)) <= GOAL_TOLERANCE:
         return None
-    return (f"stopped short of its goal, at {pose_text(pose)}: a stop from a client, the dashboard or a "
-            "sequence's abort, or the service's own (its log says why)")
+    return f"stopped short of its goal, at {pose_text(pose)}"
 
 
 def run_keys(arguments: argparse.Namespace) -> int:

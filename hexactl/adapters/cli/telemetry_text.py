@@ -32,6 +32,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("wave", wave_text(record.get("wave"))),
         ("recording", recording_text(record.get("recording"))),
         ("faults", "; ".join(fault_text(fault) for fault in record.get("faults") or []) or "none"),
+        ("last event", event_text(events[-1], record["t"]) if (events := record.get("events")) else "none"),
         ("loop", loop_text(loop)),
         ("lateness µs", percentiles_text(loop["lateness_us"])),
         ("compute µs", percentiles_text(loop["compute_us"])),
@@ -145,6 +146,13 @@ def recording_text(recording: dict[str, Any] | None) -> str:
     lost = f", {recording['lost']} lost" if recording.get("lost") else ""
     ended = f" ({recording['ended']})" if recording.get("ended") else ""
     return f"{recording['name']} {recording['state']} {recording['rows']}/{recording['rows_requested']} rows{lost}{ended}"
+
+
+def event_text(event: dict[str, Any], now_t: float) -> str:
+    """One of the loop's events as ``code: message, sent by SENDER (N s ago)``, its age at
+    the record time ``now_t`` (s)."""
+    sender = f", sent by {event['sender']}" if event.get("sender") else ""
+    return f"{event['code']}: {event['message']}{sender} ({now_t - event['t']:.1f} s ago)"
 
 
 def fault_text(fault: dict[str, Any]) -> str:

@@ -20,6 +20,7 @@ from hexactl.adapters.cli.service_commands import (
     FRAMES,
     client_parser,
     format_error_reply,
+    newest_event_t,
     wait_until_at_rest,
 )
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
@@ -107,6 +108,7 @@ def run_wave(arguments: argparse.Namespace) -> int:
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     try:
         with client:
+            since = newest_event_t(client) if arguments.wait else None
             reply = client.request(command, **fields)
             refusal = reply.get("error") if not reply.get("ok") else reply.get("refusal")
             if arguments.json:
@@ -119,7 +121,7 @@ def run_wave(arguments: argparse.Namespace) -> int:
                 return EXIT_REFUSED
             if not arguments.wait:
                 return EXIT_OK
-            if (waited := wait_until_at_rest(client, "wave", reply)) != EXIT_OK:
+            if (waited := wait_until_at_rest(client, "wave", reply, since)) != EXIT_OK:
                 return waited
             ended = client.request("status")["status"].get("wave") or {}
             if ended.get("phase") != "finished":

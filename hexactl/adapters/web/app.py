@@ -133,6 +133,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
     commands."""
     updates = bridge.subscribe()
     in_flight: set[asyncio.Task[None]] = set()
+    browser = websocket.client.host if websocket.client else None  # the service's events name it
 
     async def send_updates() -> None:
         while True:
@@ -143,7 +144,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
 
     async def answer(request_id: Any, cmd: str, fields: dict[str, Any]) -> None:
         try:
-            outcome = await bridge.command(cmd, fields)
+            outcome = await bridge.command(cmd, fields, browser)
         except Exception as error:  # every command gets a reply, whatever fails on the way
             log.exception("command %s from a page failed", cmd)
             outcome = error_reply("internal_error", f"the dashboard could not carry {cmd}: {type(error).__name__}: {error}")

@@ -62,27 +62,28 @@ class ServiceEndpoints:
 
 
 class UrgentCommand:
-    """``name`` (an urgent command, no fields) sent by ``request(name, {})`` on a thread of
-    its own, one at a time. A press while one is waiting to be sent shares its reply; a
-    press while one is being sent waits for the next. So every press is carried out after
-    it was made, and a flood of presses costs one request at a time, never a queue."""
+    """``name`` (an urgent command, no fields) sent by ``request(name, {}, client)`` on a
+    thread of its own, one at a time. A press while one is waiting to be sent shares its
+    reply (and the client name of the press that made it wait); a press while one is
+    being sent waits for the next. So every press is carried out after it was made, and a
+    flood of presses costs one request at a time, never a queue."""
 
-    def __init__(self, name: str, request: Callable[[str, dict[str, Any]], dict[str, Any]]) -> None:
+    def __init__(self, name: str, request: Callable[[str, dict[str, Any], str], dict[str, Any]]) -> None:
         self.name = name
         self._request = request
         self._worker = ThreadPoolExecutor(1, thread_name_prefix=f"dashboard-{name}")
         self._one_at_a_time = asyncio.Lock()
         self._waiting: asyncio.Task[dict[str, Any]] | None = None
 
-    async def __call__(self) -> dict[str, Any]:
+    async def __call__(self, client: str) -> dict[str, Any]:
         if self._waiting is None:
-            self._waiting = asyncio.get_running_loop().create_task(self._send())
+            self._waiting = asyncio.get_running_loop().create_task(self._send(client))
         return await asyncio.shield(self._waiting)
 
-    async def _send(self) -> dict[str, Any]:
+    async def _send(self, client: str) -> dict[str, Any]:
         async with self._one_at_a_time:
             self._waiting = None  # being sent: a press from now on waits for the next
-            return await asyncio.get_running_loop().run_in_executor(self._worker, self._request, self.name, {})
+            return await asyncio.get_running_loop().run_in_executor(self._worker, self._request, self.name, {}, client)
 
     def close(self) -> None:
         self._worker.shutdown(wait=False, cancel_futures=True)
@@ -204,20 +205,23 @@ class ServiceBridge:
 
     # -- commands --------------------------------------------------------------------
 
-    async def command(self, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
+    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
         """The API's reply to ``cmd`` with ``fields``, ok or not; an ``unavailable`` error
         reply when the service does not answer in time, ``invalid_request`` for fields no
-        request can carry (an urgent command's, the envelope's, a number not finite)."""
+        request can carry (an urgent command's, the envelope's, a number not finite). The
+        service is told it comes from the dashboard for ``browser`` (its address), so that
+        its events say who sent it."""
+        client = f"dashboard, browser {browser}" if browser else "dashboard"
         if (urgent := self._urgent.get(cmd)) is not None:
             if fields:
                 return error_reply("invalid_request", f"{cmd} takes no fields, got {', '.join(sorted(fields))}")
-            return await urgent()
-        return await asyncio.get_running_loop().run_in_executor(self._workers, self._request, cmd, fields)
+            return await urgent(client)
+        return await asyncio.get_running_loop().run_in_executor(self._workers, self._request, cmd, fields, client)
 
-    def _request(self, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
+    def _request(self, cmd: str, fields: dict[str, Any], client_name: str) -> dict[str, Any]:
         endpoints = self.endpoints
         try:
-            with endpoints.connect(HexactlClient, endpoints.api, timeout_s=endpoints.timeout_s) as client:
+            with endpoints.connect(HexactlClient, endpoints.api, timeout_s=endpoints.timeout_s, name=client_name) as client:
                 return client.request(cmd, **fields)
         except ServiceUnavailable as error:
             return error_reply("unavailable", str(error))
@@ -261,7 +265,7 @@ class ServiceBridge:
             self._call(self._broadcast, "link", self._link())
 
     def _fetch_geometry(self) -> None:
-        reply = self._request("geometry", {})
+        reply = self._request("geometry", {}, "dashboard")
         if not reply.get("ok"):
             log.warning("geometry: %s", (reply.get("error") or {}).get("message"))
             return
