@@ -32,7 +32,7 @@ from hexactl.adapters.api.security import CurveServer, CurveServerKeys, Security
 from hexactl.adapters.api.stream_receiver import StreamReceiver
 from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S, ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
-from hexactl.adapters.files.kept_calibration import KeptCalibration
+from hexactl.adapters.files.kept_calibration import CalibrationKeeper, KeptCalibration
 from hexactl.application.loop_link import RemoteLoop
 from hexactl.application.recording import Recordings
 from hexactl.application.safety_log import SafetyLog
@@ -101,7 +101,7 @@ class ApiSettings:
     urgent_niceness: int = 0  # for URGENT_THREAD_NAMES; 0: the process's
     frames: OperatorFrames = OperatorFrames()  # the operator's, as restored from frames_file
     frames_file: Path | None = None  # where a change of the frames is saved (None: not saved)
-    kept_calibration: KeptCalibration | None = None  # where a change of the calibration is kept (None: not kept)
+    kept_calibration: KeptCalibration | None = None  # where the calibration in force is kept (None: not kept)
     stream_endpoint: str = "tcp://127.0.0.1:*"  # the pose stream's ZeroMQ PULL socket
     stream_udp: tuple[str, int] | None = None  # and its UDP port (None: none)
 
@@ -183,8 +183,12 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
             except (zmq.ZMQError, OSError) as error:
                 raise ApiStartError(f"cannot take a pose stream: {error}") from None
             closers.callback(stream_input.close)
+            keeper = None
+            if settings.kept_calibration is not None:  # follows the loop's calibration in force from now on
+                keeper = CalibrationKeeper(settings.kept_calibration, controller.active_geometry)
+                keeper.keep_now()  # the one it starts on (--calibration's, restored, nominal): before serving
             handler = CommandHandler(controller, data, instrument, settings.frames_file, recordings, stream_input,
-                                     kept_calibration=settings.kept_calibration)
+                                     keeper=keeper)
             try:
                 publisher = TelemetryPublisher(context, settings.telemetry_endpoint, handler.record,
                                                settings.telemetry_rate_hz, curve)

@@ -179,8 +179,9 @@ class ServiceConfig:
     valid refuses the start), written whenever they change. ``kept_calibration_path``: where
     the calibration in force is kept across restarts (None: ./active_calibration.toml;
     :mod:`~hexactl.adapters.files.kept_calibration`): restored at start without
-    ``calibration_path`` (a file that cannot be used refuses the start), written whenever
-    it changes. ``dashboard_http``: serve the
+    ``calibration_path`` (a file that cannot be used refuses the start), written by the
+    API process whenever the calibration the loop has in force changes, however it came
+    about (even a load answered ``loop_timeout``). ``dashboard_http``: serve the
     browser dashboard there too (``HOST:PORT`` on loopback; None: no dashboard), in a
     process of its own, stopped first at shutdown. ``stream_endpoint``: the pose stream's
     ZeroMQ socket (None: the API's host, a free port); ``stream_udp``: (host, port) where
@@ -312,9 +313,8 @@ class Service:
                                                        config=controller_config, nominal=nominal)
             except ValueError as error:  # a calibration whose [limits] are not the nominal's, or implausible
                 raise ServiceError(f"{source}: {error}{refused}") from None
+            # What is in force is what a restart restores: the API process keeps it from its start on.
             kept = KeptCalibration(kept_path, geometry_id(nominal))
-            if config.calibration_path:  # what is in force is what a restart restores
-                _keep(kept, active, calibration_id, source)
 
             pipes = multiprocessing.get_context("spawn")
             commands_in, commands_out = pipes.Pipe(duplex=False)
@@ -697,15 +697,6 @@ def _start_calibration(calibration_path: Path | None, kept_path: Path, nominal: 
     log.info("active calibration %r (%s) restored from %s (loaded from %s)", active.name, geometry_id(active),
              kept_path, source)
     return active, source, remedy
-
-
-def _keep(kept: KeptCalibration, active: Geometry, calibration_id: str, source: str) -> None:
-    """Keep ``active`` for a restart, saying so, or say that it is not kept."""
-    try:
-        log.info("calibration %s: %s", calibration_id, kept.keep(active, calibration_id, source))
-    except OSError as error:
-        log.warning("the calibration in force is not kept for a restart (%s: %s): a restart without --calibration "
-                    "would start on what was kept before", kept.path, error)
 
 
 def _load(path: Path) -> Geometry:

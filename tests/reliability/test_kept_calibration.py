@@ -1,18 +1,40 @@
 """The calibration in force survives a restart of the service: kept after each load and
 rollback, and with ``--calibration``; restored at start; forgotten once the nominal
-geometry is back; a kept file that cannot be used refuses the start, saying what to do."""
+geometry is back; a kept file that cannot be used refuses the start, saying what to do.
+What is kept follows what the loop has in force, not the replies: a swap the loop carried
+out after the reply said ``loop_timeout`` is kept too; a file that cannot be written is
+reported once, and kept once it can be."""
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.commands import CommandHandler
+from hexactl.adapters.api.messages import LoadCalibrationRequest, RollbackCalibrationRequest
+from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.wire import ApiError
+from hexactl.adapters.files import kept_calibration
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
+from hexactl.adapters.files.kept_calibration import CalibrationKeeper, KeptCalibration
 from hexactl.application.service import Service, ServiceConfig, ServiceError
-from tests.api.test_service import WAIT_S, status
+from hexactl.control import commands as cmd
+from hexactl.control.config import ControllerConfig
+from hexactl.control.controller import Controller
+from hexactl.control.core import CoreSnapshot
+from hexactl.control.host import LoopReport, LoopThread
+from hexactl.control.planning import ActiveGeometry
+from hexactl.kinematics.inverse import sensor_setpoints
+from hexactl.kinematics.pose import absolute_from_relative
+from hexactl.sim.ideal_actuators import IdealActuators
+from tests.api.test_service import WAIT_S, status, wait_for
+from tests.control.conftest import SimClock
 from tests.reliability.support import LOCAL
 
 NOMINAL = load_geometry(default_config_path())
@@ -89,3 +111,143 @@ def test_calibration_at_start_is_kept_and_a_kept_file_that_cannot_be_used_refuse
     again = _service(kept, tmp_path, calibration=calibration)  # --calibration chooses, and is kept
     again.close()
     assert load_geometry(kept) == CALIBRATED
+
+
+def test_a_calibration_changed_by_another_client_of_the_loop_is_kept_all_the_same(tmp_path: Path) -> None:
+    """The service's own facade, in the loop's process, swaps calibrations: no reply of the
+    API's says so, and its process keeps them from its telemetry."""
+    kept = tmp_path / "active_calibration.toml"
+    service = _service(kept, tmp_path)
+    try:
+        loaded = service.controller.load_calibration(CALIBRATED, geometry_id(CALIBRATED), "the service's own")
+        assert loaded.ok or loaded.error == "loop_timeout", loaded  # a busy host: carried out all the same
+        wait_for(lambda: kept.exists() and load_geometry(kept) == CALIBRATED, "the calibration kept")
+        rolled_back = service.controller.rollback_calibration()
+        assert rolled_back.ok or rolled_back.error == "loop_timeout", rolled_back
+        wait_for(lambda: not kept.exists(), "the nominal geometry back, nothing kept")
+    finally:
+        service.close()
+
+
+# -- what is kept follows the loop, not the replies (in this process, the loop stepped by hand) --
+
+LATE = ControllerConfig(command_timeout_s=0.01)
+"""The facade waits this little for a verdict: the test's loop gives none before it is stepped."""
+
+
+class LateLoop:
+    """A loop that says it runs by itself, so the facade waits for its verdicts, but that
+    only the test steps: each command is answered ``loop_timeout`` and carried out when
+    the test steps the loop, as on a busy host whose loop came late."""
+
+    def __init__(self, nominal) -> None:
+        start = sensor_setpoints(nominal.legs, absolute_from_relative(nominal.home, (0.0,) * 6))
+        self.clock = SimClock()
+        self.thread = LoopThread(IdealActuators(start, clock_ns=self.clock),
+                                 ActiveGeometry.of(nominal, geometry_id(nominal), "nominal.toml"), LATE,
+                                 clock_ns=self.clock)
+
+    @property
+    def snapshot(self) -> CoreSnapshot:
+        return self.thread.snapshot
+
+    def report(self, stats_max_age_s: float) -> LoopReport:
+        return replace(self.thread.report(stats_max_age_s), running=True)
+
+    def submit(self, command: cmd.Command) -> None:
+        self.thread.submit(command)
+
+    def estop_now(self) -> bool:
+        return self.thread.estop_now()
+
+    def take_recorded(self) -> list:
+        return self.thread.take_recorded()
+
+    def step_until(self, done: Callable[[], bool], limit: int = 100) -> None:
+        for _ in range(limit):
+            self.thread.loop.step(self.clock.advance(self.thread.loop.period_ns))
+            if done():
+                return
+        raise AssertionError(f"not done after {limit} cycles")
+
+
+class Seconds:
+    """Monotonic seconds under the test's control (the keeper's retry interval)."""
+
+    now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _late_handler(tmp_path: Path, kept: Path, clock: Seconds | None = None) -> tuple[CommandHandler, LateLoop]:
+    (tmp_path / "cal.toml").write_text(geometry_to_toml(CALIBRATED))
+    loop = LateLoop(NOMINAL)
+    controller = Controller(loop, config=LATE, nominal=NOMINAL)
+    keeper = CalibrationKeeper(KeptCalibration(kept, geometry_id(NOMINAL)), controller.active_geometry,
+                               clock=clock or Seconds())
+    return CommandHandler(controller, DataDirectories([tmp_path]), keeper=keeper), loop
+
+
+LOAD = LoadCalibrationRequest(v=1, id=1, cmd="load_calibration", path="cal.toml")
+ROLLBACK = RollbackCalibrationRequest(v=1, id=2, cmd="rollback_calibration")
+
+
+def _in_force(loop: LateLoop, calibration: str) -> Callable[[], bool]:
+    return lambda: loop.snapshot.active.calibration_id == calibration
+
+
+def test_a_calibration_the_loop_swaps_in_after_a_loop_timeout_is_kept_and_forgotten_the_same_way(tmp_path: Path) -> None:
+    kept = tmp_path / "active_calibration.toml"
+    handler, loop = _late_handler(tmp_path, kept)
+    with pytest.raises(ApiError) as late:
+        handler(LOAD)
+    assert late.value.code == "loop_timeout", late.value.message
+    loop.step_until(_in_force(loop, geometry_id(CALIBRATED)))  # the loop carries it out all the same
+    handler.record()  # as the telemetry publisher does each period
+    assert load_geometry(kept) == CALIBRATED
+    assert kept.read_text().startswith(f"# the calibration hexactl serve had in force, kept for its restart; loaded "
+                                       f"from {tmp_path / 'cal.toml'}\n")
+
+    with pytest.raises(ApiError) as late:
+        handler(ROLLBACK)
+    assert late.value.code == "loop_timeout", late.value.message
+    loop.step_until(_in_force(loop, geometry_id(NOMINAL)))
+    handler.record()
+    assert not kept.exists()  # the nominal geometry is back in force: nothing kept
+
+
+def _logged(caplog: pytest.LogCaptureFixture) -> list[tuple[int, str]]:
+    """What the keeper logged: (level, message)."""
+    return [(record.levelno, record.getMessage()) for record in caplog.records if record.name == kept_calibration.__name__]
+
+
+def test_a_calibration_that_cannot_be_kept_is_reported_once_and_kept_once_it_can_be(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("")
+    kept = blocker / "active_calibration.toml"
+    clock = Seconds()
+    handler, loop = _late_handler(tmp_path, kept, clock)
+    caplog.set_level(logging.INFO, logger=kept_calibration.__name__)
+    with pytest.raises(ApiError):
+        handler(LOAD)
+    loop.step_until(_in_force(loop, geometry_id(CALIBRATED)))
+    for _ in range(50):  # a second of telemetry
+        handler.record()
+    said = _logged(caplog)
+    assert [level for level, _ in said] == [logging.WARNING], said
+    assert f"calibration {geometry_id(CALIBRATED)} NOT kept for a restart ({kept}: " in said[0][1], said
+
+    again = handler(LOAD)  # already in force: the reply says it is not kept (tried again), not the log again
+    assert "NOT kept for a restart" in again["message"], again
+    assert len(_logged(caplog)) == 1
+
+    blocker.unlink()
+    handler.record()
+    assert not kept.exists()  # not tried again on every record
+    clock.now += kept_calibration.RETRY_INTERVAL_S
+    handler.record()
+    assert load_geometry(kept) == CALIBRATED
+    assert _logged(caplog)[1:] == [(logging.INFO, f"calibration {geometry_id(CALIBRATED)}: kept for a restart in {kept}")]
+    assert handler(LOAD)["message"].endswith(f"; kept for a restart in {kept}")

@@ -9,7 +9,6 @@ from __future__ import annotations
 import base64
 import csv
 import io
-import logging
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -62,15 +61,13 @@ from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
 from hexactl.adapters.files.frames_file import save_frames
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
-from hexactl.adapters.files.kept_calibration import KeptCalibration
+from hexactl.adapters.files.kept_calibration import CalibrationKeeper
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
 from hexactl.control.submitter import commands_from
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry, GeometryError, describe_validation_error
-
-log = logging.getLogger("hexactl.api")
 
 JOG_REPLY = ("jog", "goal", "speed", "end", "to_limit", "deadman_s")
 """The fields of a ``jog`` reply besides ``message``."""
@@ -104,13 +101,14 @@ class CommandHandler:
     operator's frames are saved whenever they change (None: not saved). ``recorder``:
     the data recorder's writer (None: ``record`` is refused ``no_recorder``).
     ``stream_input``: where a pose stream's samples are taken (None: ``stream_open`` is
-    refused ``no_stream_input``). ``kept_calibration``: where the calibration in force is
-    kept for a restart after each load and rollback (None: not kept)."""
+    refused ``no_stream_input``). ``keeper``: keeps the calibration in force for a restart,
+    following the loop's snapshot with each telemetry :meth:`record` and after each load
+    and rollback, whose reply says where it is kept (None: not kept)."""
 
     def __init__(self, controller: ControllerPort, data: DataDirectories, instrument: Instrument | None = None,
                  frames_file: Path | None = None, recorder: RecorderPort | None = None,
-                 stream_input: StreamInput | None = None, *, kept_calibration: KeptCalibration | None = None) -> None:
-        self.kept_calibration = kept_calibration
+                 stream_input: StreamInput | None = None, *, keeper: CalibrationKeeper | None = None) -> None:
+        self.keeper = keeper
         self.stream_input = stream_input
         self.controller = controller
         self.data = data
@@ -120,7 +118,11 @@ class CommandHandler:
         self.campaign = CampaignBoard()
 
     def record(self) -> dict[str, Any]:
-        """A telemetry record: the controller's, with what a client's campaign said last."""
+        """A telemetry record: the controller's, with what a client's campaign said last.
+        The calibration in force is kept first if it changed (the publisher calls this
+        every period: a swap is kept however it came about, even after ``loop_timeout``)."""
+        if self.keeper is not None:
+            self.keeper.follow()
         stream_input = self.stream_input.view() if self.stream_input is not None else None
         return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view(), "stream_input": stream_input}
 
@@ -281,17 +283,12 @@ class CommandHandler:
 
     def _kept(self, fields: dict[str, Any]) -> dict[str, Any]:
         """A calibration change's reply ``fields``, once the calibration now in force is kept
-        for a restart; its message says so, or why it is not."""
-        if self.kept_calibration is None:
+        for a restart; its message says so, or why it is not. (A change refused, or answered
+        ``loop_timeout``, raised before this: what the loop does with it is kept by
+        :meth:`record`.)"""
+        if self.keeper is None:
             return fields
-        active = self.controller.active_geometry()
-        try:
-            said = self.kept_calibration.keep(active.geometry, active.calibration_id, active.source)
-        except OSError as error:
-            said = (f"NOT kept for a restart ({self.kept_calibration.path}: {error}): a restart would start on the "
-                    "calibration kept before; free the disk or fix the permissions, then load it again")
-            log.warning("calibration %s %s", active.calibration_id, said)
-        return {**fields, "message": f"{fields['message']}; {said}"}
+        return {**fields, "message": f"{fields['message']}; {self.keeper.keep_now()}"}
 
     def _calibration(self, request: LoadCalibrationRequest) -> tuple[Geometry, str]:
         """The geometry a load or validate request names, parsed and validated, and its source."""

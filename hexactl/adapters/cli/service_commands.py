@@ -172,8 +172,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
                        "kept across restarts (default ./frames.toml; read at start, written when they change)")
     serve.add_argument("--keep-calibration", type=Path, metavar="FILE",
                        help="where the calibration in force is kept across restarts (default ./active_calibration.toml;"
-                       " restored at start without --calibration, written when it changes, removed when the nominal "
-                       "geometry is back)")
+                       " restored at start without --calibration; follows the calibration the loop has in force, even "
+                       "after a loop_timeout: written when it changes, removed when the nominal geometry is back)")
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
     serve.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",

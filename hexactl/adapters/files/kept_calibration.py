@@ -1,26 +1,39 @@
 """The calibration in force, kept by ``hexactl serve`` across its restarts: a geometry file.
 
-The service writes the active calibration here whenever it changes (a load, a rollback,
-``--calibration`` at start-up) and removes the file once the nominal geometry is in force
-again; started without ``--calibration``, it restores what the file holds. The first line,
-a comment, says where the calibration was loaded from, for the log. Written atomically
-(whole, old or new, whatever happens during the write).
+The service's :class:`CalibrationKeeper` follows the calibration the loop has in force
+(its snapshot's, not a command's reply): it writes it here whenever it changes (a load,
+a rollback, ``--calibration`` at start-up, a swap the loop carried out after the reply
+said ``loop_timeout``) and removes the file once the nominal geometry is in force again;
+started without ``--calibration``, the service restores what the file holds. The first
+line, a comment, says where the calibration was loaded from, for the log. Written
+atomically (whole, old or new, whatever happens during the write).
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import geometry_to_toml, load_geometry
+from hexactl.control.planning import ActiveGeometry
 from hexactl.kinematics.geometry import Geometry
 
 DEFAULT_FILE = "active_calibration.toml"
 """Where the service keeps it, in its working directory, unless set."""
 
 _FROM = "# the calibration hexactl serve had in force, kept for its restart; loaded from "
+
+RETRY_INTERVAL_S = 10.0
+"""After a calibration could not be kept, :meth:`CalibrationKeeper.follow` tries it again
+once this long at most (not on every telemetry record)."""
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +55,77 @@ class KeptCalibration:
             return "the nominal geometry is in force: no calibration kept for a restart"
         keep_calibration(geometry, source, self.path)
         return f"kept for a restart in {self.path}"
+
+
+class CalibrationKeeper:
+    """Keeps the calibration in force for a restart: whenever the one ``in_force()`` returns
+    (the loop's latest snapshot) is not the one it kept last, :attr:`kept` is written, or
+    removed for the nominal geometry. One rule, whatever made the calibration change: a
+    load or rollback answered ok, one answered ``loop_timeout`` and carried out a moment
+    later, another client of the loop.
+
+    :meth:`follow` is called where the snapshot is looked at regularly (each telemetry
+    record); :meth:`keep_now` after a load or rollback, for its reply. Both write from the
+    calling thread, never the loop's, and only when the calibration in force has changed
+    (a telemetry record that does it is late by the write, once per change). Neither
+    raises: a calibration that cannot be kept (``OSError``, or anything else keeping
+    raised) is logged as a warning once, and tried again at most every
+    ``retry_interval_s`` (``clock``: monotonic s) by :meth:`follow`, at once by
+    :meth:`keep_now`; success after it is logged too.
+    """
+
+    def __init__(self, kept: KeptCalibration, in_force: Callable[[], ActiveGeometry], *,
+                 retry_interval_s: float = RETRY_INTERVAL_S, clock: Callable[[], float] = time.monotonic) -> None:
+        self.kept = kept
+        self._in_force = in_force
+        self._retry_interval_s = retry_interval_s
+        self._clock = clock
+        self._lock = threading.Lock()  # one keeping at a time: the latest to take it reads what is in force last
+        self._kept_id: str | None = None  # the calibration kept last (None: none yet, by this keeper)
+        self._said = ""  # what keeping it did, for people
+        self._failed: tuple[str, float] | None = None  # the calibration that could not be kept, and when tried
+
+    def follow(self) -> None:
+        """Keep the calibration in force if it changed; at once, without waiting for a
+        keeping under way in another thread (it reads what is in force itself)."""
+        if not self._lock.acquire(blocking=False):
+            return
+        try:
+            active = self._in_force()
+            if active.calibration_id == self._kept_id:
+                self._failed = None  # one that could not be kept is no longer in force
+                return
+            if (self._failed is not None and self._failed[0] == active.calibration_id
+                    and self._clock() < self._failed[1] + self._retry_interval_s):
+                return
+            self._keep(active)
+        finally:
+            self._lock.release()
+
+    def keep_now(self) -> str:
+        """Keep the calibration in force if it changed (or could not be kept before); what
+        is kept for a restart, or why it is not, for people."""
+        with self._lock:
+            active = self._in_force()
+            if active.calibration_id == self._kept_id:
+                self._failed = None
+                return self._said
+            return self._keep(active)
+
+    def _keep(self, active: ActiveGeometry) -> str:
+        calibration_id = active.calibration_id
+        try:
+            said = self.kept.keep(active.geometry, calibration_id, active.source)
+        except Exception as error:  # OSError (a full disk, permissions); nothing else may stop telemetry either
+            said = (f"NOT kept for a restart ({self.kept.path}: {error}): a restart would start on the calibration "
+                    "kept before; free the disk or fix the permissions: it is kept as soon as it can be written")
+            if self._failed is None or self._failed[0] != calibration_id:
+                log.warning("calibration %s %s", calibration_id, said, exc_info=not isinstance(error, OSError))
+            self._failed = (calibration_id, self._clock())
+            return said
+        log.info("calibration %s: %s", calibration_id, said)
+        self._kept_id, self._said, self._failed = calibration_id, said, None
+        return said
 
 
 def keep_calibration(geometry: Geometry, source: str, path: str | os.PathLike[str]) -> Path:
