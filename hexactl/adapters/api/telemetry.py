@@ -37,9 +37,10 @@ class TelemetryPublisher(SocketThread):
     """Publish ``record()`` at ``rate_hz`` on a PUB bound to ``endpoint`` (``tcp://HOST:*``
     picks a free port) from its own thread, between :meth:`start` and :meth:`close`.
 
-    ``record`` runs in the publisher's thread and must be cheap (the GIL is shared with
-    the control loop); an exception from it is logged (first occurrence and then every
-    thousandth) and that period is skipped.
+    ``record`` runs in the publisher's thread and should be cheap (what it takes is the
+    record's lateness, and it shares the GIL with the process's command server); an
+    exception from it is logged (first occurrence and then every thousandth) and that
+    period is skipped.
 
     :raises ValueError: ``rate_hz`` outside (0, :data:`~hexactl.adapters.api.protocol.MAX_TELEMETRY_RATE_HZ`]
     :raises zmq.ZMQError: the endpoint is malformed or in use
