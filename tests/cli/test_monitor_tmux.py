@@ -36,12 +36,14 @@ wait_for = functools.partial(service_wait_for, timeout_s=WAIT_S)
 class Terminal:
     """A detached 120×40 tmux session running one command, on a tmux server of its own."""
 
-    def __init__(self, tmux: str, command: str) -> None:
+    def __init__(self, tmux: str, command: str, columns: int = 120, lines: int = 40) -> None:
         self._tmux = [tmux, "-L", f"hexactl-test-{os.getpid()}-{next(_servers)}", "-f", "/dev/null"]
         # The pane outlives the command, so that what it printed on leaving can be read; the
         # shell survives the Ctrl-C sent to the monitor (its handler is not inherited).
-        self.run("new-session", "-d", "-x", "120", "-y", "40", "-s", "monitor",
-                 f"trap : INT; {command}; echo monitor exited $?; sleep 600")
+        # COLUMNS and LINES as a shell (or readline in this process) may have exported them,
+        # wrong: the monitor must go by the terminal's own size.
+        self.run("new-session", "-d", "-x", str(columns), "-y", str(lines), "-s", "monitor",
+                 f"trap : INT; export COLUMNS=80 LINES=24; {command}; echo monitor exited $?; sleep 600")
 
     def run(self, *arguments: str) -> str:
         return subprocess.run([*self._tmux, *arguments], check=True, capture_output=True, text=True,
@@ -69,11 +71,15 @@ def tmux() -> str:
     return ensure_executables({"tmux": "tmux"}, lambda line: print(line, file=sys.stderr))["tmux"]
 
 
-@pytest.fixture
-def terminal(tmux, running) -> Iterator[Terminal]:
+def monitor_command(running) -> str:
     command = shlex.join(["env", f"PYTHONPATH={ROOT}", sys.executable, "-m", "hexactl.adapters.cli.main", "monitor",
                           "--api", running.api_endpoint, "--telemetry", running.telemetry_endpoint])
-    opened = Terminal(tmux, f"cd {shlex.quote(str(ROOT))} && {command}")
+    return f"cd {shlex.quote(str(ROOT))} && {command}"
+
+
+@pytest.fixture
+def terminal(tmux, running) -> Iterator[Terminal]:
+    opened = Terminal(tmux, monitor_command(running))
     yield opened
     opened.kill()
 
@@ -95,6 +101,7 @@ def test_the_monitor_shows_the_values_with_units_in_place_and_its_keys_stop_the_
     goal_row = next(line.split() for line in screen.splitlines() if line.startswith("goal"))
     assert goal_row[1:] == ["0.000", "0.000", "80.000", "0.000", "0.000", "5.000"]
     assert "space stop" in screen and "Esc or e E-STOP" in screen and "q quit" in screen
+    assert screen.splitlines()[0].endswith("x reset · q quit")  # on the pane's 120 columns, not COLUMNS' 80
 
     terminal.keys("Space")
     wait_for(lambda: status(client)["motion"] == "holding", "the platform at rest after space")
@@ -114,6 +121,19 @@ def test_the_monitor_shows_the_values_with_units_in_place_and_its_keys_stop_the_
 
     # Redrawn in place on the alternate screen: nothing went into the scrollback.
     assert terminal.run("display-message", "-p", "-t", "monitor", "#{history_size}").strip() == "0"
+
+
+def test_on_a_screen_too_short_for_the_record_the_keys_answer_still_shows(tmux, running, client) -> None:
+    short = Terminal(tmux, monitor_command(running), columns=100, lines=16)
+    try:
+        short.wait_for_screen("hexactl monitor", "x mm")
+        moving(client)
+        short.keys("Space")
+        wait_for(lambda: status(client)["motion"] == "holding", "the platform at rest after space")
+        screen = short.wait_for_screen("stop: ok")
+        assert len(screen.rstrip("\n").splitlines()) <= 16 and "real-time" not in screen  # the record's end cut
+    finally:
+        short.kill()
 
 
 def _leave_while_moving(terminal: Terminal, client: HexactlClient, key: str, exit_status: int) -> str:

@@ -30,6 +30,7 @@ from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETR
 from hexactl.adapters.cli.common import client_endpoint, connect, connection_parser
 from hexactl.adapters.cli.telemetry_text import (
     NO_FRAMES,
+    event_text,
     fault_text,
     format_telemetry,
     frames_lines,
@@ -139,6 +140,11 @@ def _run_screen(arguments: argparse.Namespace) -> int:
 
     from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
 
+    # The screen is the terminal's own size (rich asks the terminal, ioctl), not what
+    # COLUMNS and LINES say: a shell, or readline in the process that started this one,
+    # may have exported them, stale after a resize (80×24 under a 120×40 tmux pane).
+    for name in ("COLUMNS", "LINES"):
+        os.environ.pop(name, None)
     record: dict[str, Any] | None = None
     received_at = time.monotonic()
     status = StatusLine(f"keys send commands to {arguments.api}")
@@ -290,14 +296,16 @@ def view(record: dict[str, Any] | None, status: str, waiting: str | None = None)
     from rich.console import Group
     from rich.text import Text
 
-    parts: list[RenderableType] = [Text.assemble(("hexactl monitor", "bold"), "   ", (LEGEND, "cyan"))]
+    # The status line (what a key did) under the legend: a screen too short for the whole
+    # record cuts the record's last lines, never the answer to an E-stop key.
+    parts: list[RenderableType] = [Text.assemble(("hexactl monitor", "bold"), "   ", (LEGEND, "cyan")),
+                                   Text(status, style="bold")]
     if waiting:
         parts.append(Text(waiting, style="bold red"))
     if record is None:
         parts.append(Text("waiting for telemetry …"))
     else:
         parts.extend(_record_view(record))
-    parts.append(Text(status, style="bold"))
     return Group(*parts)
 
 
@@ -343,6 +351,8 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         # not push the key's result off the screen; `hexactl status` prints them whole.
         ("faults", Text("\n".join(fault_text(fault) for fault in faults), style="bold red", no_wrap=True,
                         overflow="ellipsis") if faults else "none"),
+        ("last event", Text(event_text(events[-1], record["t"]), no_wrap=True, overflow="ellipsis")
+         if (events := record.get("events")) else "none"),
         ("loop", loop_text(loop)),
         ("lateness µs", percentiles_text(loop["lateness_us"])),
         ("compute µs", percentiles_text(loop["compute_us"])),
