@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 STOP_TIMEOUT_S = 5.0
@@ -25,13 +26,18 @@ that follows within :data:`STEADY_S` of its start (a crash at start-up), at most
 MOST_RESTART_DELAY_S = 60.0
 STEADY_S = 60.0
 
+WATCH_INTERVAL_S = 0.5
+"""How often the dashboard's process is looked at."""
+
 log = logging.getLogger("hexactl.service")
 
 
 class DashboardProcess:
     """``hexactl dashboard --http HTTP`` for the service at ``api`` and ``telemetry`` (loopback
     endpoints), started; :meth:`close` ends it, and it ends by itself if this process dies.
-    :meth:`watch`, called now and then, says when it has ended and starts it again."""
+    A thread of its own looks at it every :data:`WATCH_INTERVAL_S`, says when it has ended
+    and starts it again, whatever this process's main thread is doing (``hexactl serve``
+    waits for signals, ``hexactl demo`` runs its campaign)."""
 
     def __init__(self, api: str, telemetry: str, http: str) -> None:
         self._command = [sys.executable, "-m", "hexactl.adapters.cli.main", "dashboard", "--api", api,
@@ -40,6 +46,13 @@ class DashboardProcess:
         self._delay_s = FIRST_RESTART_DELAY_S
         self._restart_at: float | None = None  # monotonic s: when to start it again (None: it runs)
         self._process = self._start()
+        self._closing = threading.Event()
+        self._watcher = threading.Thread(target=self._watch_until_closed, name="hexactl-dashboard-watch", daemon=True)
+        self._watcher.start()
+
+    def _watch_until_closed(self) -> None:
+        while not self._closing.wait(WATCH_INTERVAL_S):
+            self._watch()
 
     def _start(self) -> subprocess.Popen:
         process = subprocess.Popen(self._command, stdin=subprocess.DEVNULL)
@@ -47,7 +60,7 @@ class DashboardProcess:
         log.info("dashboard starting on http://%s/ (its own process, %d)", self._http, process.pid)
         return process
 
-    def watch(self) -> None:
+    def _watch(self) -> None:
         """Log a dashboard that has ended (its pages lose their live data and say so) and
         start it again once its delay is over."""
         now = time.monotonic()
@@ -66,6 +79,8 @@ class DashboardProcess:
             self._process = self._start()
 
     def close(self) -> None:
+        self._closing.set()
+        self._watcher.join()  # first: it must not start a dashboard after this one is ended
         if self._process.poll() is None:
             self._process.terminate()
             try:

@@ -227,13 +227,11 @@ class Service:
     ``simulator``: the built-in one (None with real actuators)."""
 
     def __init__(self, controller: LocalController, simulator: Simulator | None, api: ApiProcess, link: LoopExchange,
-                 dashboard: DashboardProcess | None, closers: ExitStack, budget: _Budget) -> None:
+                 closers: ExitStack, budget: _Budget) -> None:
         self.controller = controller
         self.simulator = simulator
         self.link = link
         """The loop's end of the link to the API process: its counters and state."""
-        self.dashboard = dashboard
-        """``--dashboard``'s process (None: none); :meth:`DashboardProcess.watch` restarts it."""
         self.api_endpoint = api.api_endpoint
         self.telemetry_endpoint = api.telemetry_endpoint
         self._api = api
@@ -356,15 +354,14 @@ class Service:
             closers.callback(lambda: api.close(budget.left(SHUTDOWN_STEPS_S)))  # telemetry flows until at rest
             closers.callback(lambda: _bring_to_rest(controller, budget.left(SHUTDOWN_BRAKE_TIMEOUT_S)))
             closers.callback(lambda: api.close_api(budget.left(CLOSE_API_TIMEOUT_S)))
-            board = None
-            if config.dashboard_http:
+            if config.dashboard_http:  # started again by its own watcher should it end
                 board = DashboardProcess(api.api_endpoint, api.telemetry_endpoint, config.dashboard_http)
                 closers.callback(board.close)  # the first to go: it stops sending commands
             security = "CURVE" if config.curve else "no authentication (loopback)"
             log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)
             log.info("data directories: %s", ", ".join(str(directory) for directory in data_dirs))
-            return cls(controller, simulator, api, exchange, board, closers.pop_all(), budget)
+            return cls(controller, simulator, api, exchange, closers.pop_all(), budget)
 
     def close(self) -> None:
         """Stop taking commands, bring the platform to rest disabled, close everything,
@@ -455,8 +452,6 @@ def run_service(config: ServiceConfig) -> NoReturn:
                     log.warning("the loop link dropped %d messages that were not commands", service.link.rejected - rejected)
                     rejected = service.link.rejected
                 silence.watch(service.link)
-                if service.dashboard is not None:
-                    service.dashboard.watch()
                 if problem := _api_problem(service):
                     log.error("%s: shutting down", problem)
                     status = 1

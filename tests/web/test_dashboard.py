@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import re
 import signal
 import time
 from collections.abc import Callable, Iterator
@@ -31,7 +32,7 @@ from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from tools.browser import dashboard, headless_chromium
 from tests.reliability.support import enable, tolerating_stalls
-from tools.serving import free_port, serve, terminate, wait_until
+from tools.serving import HANG_S, START_TIMEOUT_S, Logged, free_port, hexactl_process, serve, terminate, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 SCREENSHOTS = ROOT / "docs" / "images"
@@ -367,15 +368,22 @@ def dashboard_connected(port: int) -> bool:
 
 
 def dashboard_children(pid: int) -> list[int]:
-    """The dashboard processes among ``pid``'s children."""
+    """The dashboard processes among ``pid``'s descendants (``hexactl demo`` runs its
+    service in a process of its own)."""
     found = []
-    for child in (int(child) for task in Path(f"/proc/{pid}/task").iterdir()
-                  for child in (task / "children").read_text().split()):
+    try:
+        children = [int(child) for task in Path(f"/proc/{pid}/task").iterdir()
+                    for child in (task / "children").read_text().split()]
+    except OSError:  # ended meanwhile
+        return found
+    for child in children:
         try:
             if b"dashboard" in Path(f"/proc/{child}/cmdline").read_bytes():
                 found.append(child)
-        except OSError:  # ended meanwhile
+                continue
+        except OSError:
             continue
+        found.extend(dashboard_children(child))
     return found
 
 
@@ -411,6 +419,25 @@ def test_a_dashboard_that_dies_is_said_and_started_again(tmp_path) -> None:
         shutdown = terminate(served)
         assert shutdown.problems() == [], served.log
     assert ended(second)
+
+
+def test_the_demo_starts_its_dashboard_again_too(tmp_path) -> None:
+    """``hexactl demo --dashboard``'s main thread runs the campaign: the dashboard's own
+    watcher starts it again all the same."""
+    port = free_port()
+    with hexactl_process(Logged, ["demo", "--dashboard", f"127.0.0.1:{port}"], re.compile(r"dashboard on http://"),
+                         START_TIMEOUT_S, cwd=tmp_path, merge_stdout=True, sigterm_grace_s=HANG_S) as demo:
+        wait_for(lambda: dashboard_connected(port), "the demo's dashboard serving, connected", seen=lambda: demo.log)
+        [first] = dashboard_children(demo.process.pid)
+        os.kill(first, signal.SIGKILL)
+        wait_for(lambda: "the dashboard's process ended (killed by SIGKILL)" in demo.log, "the demo to say so",
+                 seen=lambda: demo.log)
+        [second] = wait_for(lambda: [pid for pid in dashboard_children(demo.process.pid) if pid != first],
+                            "a new dashboard process", seen=lambda: demo.log)
+        wait_for(lambda: dashboard_connected(port), "the new dashboard serving on the same address", seen=lambda: demo.log)
+        demo.process.send_signal(signal.SIGINT)
+        demo.process.wait(HANG_S)
+    wait_for(lambda: ended(second), "the dashboard ended with the demo")
 
 
 def test_the_dashboard_of_a_killed_service_ends_by_itself(tmp_path) -> None:
