@@ -402,19 +402,28 @@ def test_serve_with_dashboard_serves_the_page_beside_it_and_stops_it_with_it(tmp
         urlopen(f"http://127.0.0.1:{port}/health", timeout=5)
 
 
+def killed_and_started_again(running: Logged, port: int) -> int:
+    """Kill the dashboard that ``running`` serves on ``port``, once it is connected; the
+    pid of the one started again, once ``running``'s log said so and it serves there."""
+    wait_for(lambda: dashboard_connected(port), "the dashboard serving, connected to its service",
+             seen=lambda: running.log)
+    [first] = dashboard_children(running.process.pid)
+    os.kill(first, signal.SIGKILL)
+    wait_for(lambda: "the dashboard's process ended (killed by SIGKILL)" in running.log, "the log to say so",
+             seen=lambda: running.log)
+    [second] = wait_for(lambda: [pid for pid in dashboard_children(running.process.pid) if pid != first],
+                        "a new dashboard process", seen=lambda: running.log)
+    wait_for(lambda: dashboard_connected(port), "the new dashboard serving on the same address",
+             seen=lambda: running.log)
+    return second
+
+
 def test_a_dashboard_that_dies_is_said_and_started_again(tmp_path) -> None:
     """The pages of a dead dashboard show that they have no live data (test_data_loss.py);
     the service says so on its log and starts it again on the same address."""
     port = free_port()
     with serve(tmp_path, "--dashboard", f"127.0.0.1:{port}") as served:
-        wait_for(lambda: dashboard_connected(port), "the dashboard serving, connected to its service")
-        [first] = dashboard_children(served.process.pid)
-        os.kill(first, signal.SIGKILL)
-        wait_for(lambda: "the dashboard's process ended (killed by SIGKILL)" in served.log, "the service to say so",
-                 seen=lambda: served.log)
-        [second] = wait_for(lambda: [pid for pid in dashboard_children(served.process.pid) if pid != first],
-                            "a new dashboard process", seen=lambda: served.log)
-        wait_for(lambda: dashboard_connected(port), "the new dashboard serving on the same address")
+        second = killed_and_started_again(served, port)
         assert served.log.count("dashboard starting on http://127.0.0.1:") == 2, served.log
         shutdown = terminate(served)
         assert shutdown.problems() == [], served.log
@@ -427,14 +436,7 @@ def test_the_demo_starts_its_dashboard_again_too(tmp_path) -> None:
     port = free_port()
     with hexactl_process(Logged, ["demo", "--dashboard", f"127.0.0.1:{port}"], re.compile(r"dashboard on http://"),
                          START_TIMEOUT_S, cwd=tmp_path, merge_stdout=True, sigterm_grace_s=HANG_S) as demo:
-        wait_for(lambda: dashboard_connected(port), "the demo's dashboard serving, connected", seen=lambda: demo.log)
-        [first] = dashboard_children(demo.process.pid)
-        os.kill(first, signal.SIGKILL)
-        wait_for(lambda: "the dashboard's process ended (killed by SIGKILL)" in demo.log, "the demo to say so",
-                 seen=lambda: demo.log)
-        [second] = wait_for(lambda: [pid for pid in dashboard_children(demo.process.pid) if pid != first],
-                            "a new dashboard process", seen=lambda: demo.log)
-        wait_for(lambda: dashboard_connected(port), "the new dashboard serving on the same address", seen=lambda: demo.log)
+        second = killed_and_started_again(demo, port)
         demo.process.send_signal(signal.SIGINT)
         demo.process.wait(HANG_S)
     wait_for(lambda: ended(second), "the dashboard ended with the demo")
