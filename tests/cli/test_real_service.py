@@ -77,8 +77,9 @@ def test_the_readme_session_runs_as_written(served, directory, client, monkeypat
 
 
 README = Path(__file__).resolve().parents[2] / "README.md"
-INTERACTIVE = ("hexactl monitor",)
-"""README lines a script cannot run (the monitor's screen: tests/cli/test_monitor_tmux.py)."""
+INTERACTIVE = ("hexactl monitor", "hexactl events --follow")
+"""README lines a script cannot run: the monitor's screen (tests/cli/test_monitor_tmux.py),
+events followed until Ctrl-C (tests/cli/test_events_command.py)."""
 
 
 def readme_session() -> list[str]:

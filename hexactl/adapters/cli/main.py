@@ -44,6 +44,7 @@ def command_modules() -> tuple[ModuleType, ...]:
         cue_commands,
         dashboard_commands,
         demo_commands,
+        event_commands,
         jog_commands,
         kinematics_commands,
         monitor,
@@ -54,7 +55,7 @@ def command_modules() -> tuple[ModuleType, ...]:
     )
 
     return (kinematics_commands, sim_commands, service_commands, jog_commands, recording_commands, wave_commands,
-            monitor, dashboard_commands, calibration_commands, demo_commands, cue_commands)
+            monitor, event_commands, dashboard_commands, calibration_commands, demo_commands, cue_commands)
 
 
 def build_parser() -> argparse.ArgumentParser:
