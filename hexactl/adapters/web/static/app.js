@@ -1,8 +1,10 @@
 // hexactl dashboard: the WebSocket link to the dashboard server, the header, the
-// telemetry readouts and the wiring of the 3D view, the plots and the control panels.
+// telemetry readouts and the wiring of the 3D view, the plots, the control panels and
+// the loop's events.
 import { View3D, strokeMargin } from './view3d.js';
 import { History, Plots } from './plots.js';
 import { setupControls, fmt, fmtPose, AXES } from './controls.js';
+import { setupEvents, isWarning } from './events.js';
 
 const $ = (id) => document.getElementById(id);
 const RECONNECT_MS = 1000;
@@ -229,6 +231,7 @@ $('plot-export').addEventListener('click', () => {
   setTimeout(() => URL.revokeObjectURL(url), 10000);
 });
 plotTitles();
+const eventsPanel = setupEvents();
 
 // ---------------- header and readouts ----------------
 const shown = {};
@@ -407,6 +410,7 @@ function frame(now) {
     }
     updateReadouts(r);
     controls.onRecord(r);
+    eventsPanel.draw(now);
     updateLatencySummary(now);
     applyLiveness(performance.now());   // a record drawn while no data are live is not shown as current
   }
@@ -434,6 +438,8 @@ function handleMessage(ev) {
       history.push(r);
       plots.dirty = true;
       schedule();
+      // every record, drawn or not (a hidden page draws none): its eight events may be gone from the next ones
+      eventsPanel.onRecord(r);
       break;
     }
     case 'geometry': {
@@ -605,6 +611,10 @@ window.hexactlDashboard = {
   /** The E-stop presses' events in order: {press, what ('pressed', 'sent', 'warning', 'reply-ok', 'reply-failed', 'cleared'), detail}. */
   estopEvents: () => estopState.events.map((e) => ({ ...e })),
   get estopWarning() { return estopState.warning; },
+  /** The Events panel's lines, newest first: {t, code, message, sender, warning, ago}. */
+  events: () => eventsPanel.entries(),
+  /** Whether the panel shows an event of this code as a warning. */
+  eventIsWarning: (code) => isWarning(code),
   send,
 };
 

@@ -1,0 +1,149 @@
+// The Events panel: the control loop's recent events (telemetry's `events`, docs/api.md),
+// newest first, each with how long before the newest record it happened, its code, its
+// message and who sent the command behind it. The page keeps the last EVENTS_KEPT it has
+// seen, so an event stays listed after it has left the records' window of eight.
+//
+// Cheap at 50 records a second: a record whose newest event is the one seen last costs a
+// comparison; the list is built again only when an event is new, and the "ago" texts are
+// rewritten at most every AGO_EVERY_MS. Text goes in with textContent only: senders are
+// names clients chose.
+
+const $ = (id) => document.getElementById(id);
+
+export const EVENTS_KEPT = 50;
+const AGO_EVERY_MS = 500;
+
+// The loop's daily work, as the service's log counts it (INFO, not WARNING:
+// hexactl/application/safety_log.py, _ROUTINE_EVENTS): these codes, and those starting
+// with one of ROUTINE_PREFIXES. Every other code is shown as a warning: an E-stop, a
+// fault's code (heartbeat_lost, leg_lock_projection, …), command_link_silent, a guard's
+// clamp, and any code this page does not know.
+const ROUTINE_CODES = new Set([
+  'enabled', 'disabled', 'stop', 'reset', 'move', 'pause', 'resume', 'abort',
+  'leg_locked', 'leg_unlocked', 'calibration_swapped', 'command_refused', 'command_link_heard',
+]);
+const ROUTINE_PREFIXES = ['sequence_', 'jog_', 'stream_', 'wave_'];
+
+/** Whether an event of this code stands out as a warning (see ROUTINE_CODES). */
+export function isWarning(code) {
+  return !(ROUTINE_CODES.has(code) || ROUTINE_PREFIXES.some((prefix) => code.startsWith(prefix)));
+}
+
+/** "4.2 s ago", "37 s ago", "5 min 3 s ago", "2 h 10 min ago", "3 d 4 h ago" for an age in seconds. */
+export function agoText(seconds) {
+  if (!Number.isFinite(seconds)) return '';
+  const s = Math.max(0, seconds);
+  if (s < 10) return `${s.toFixed(1)} s ago`;
+  if (s < 60) return `${Math.floor(s)} s ago`;
+  if (s < 3600) return `${Math.floor(s / 60)} min ${Math.floor(s % 60)} s ago`;
+  if (s < 86400) return `${Math.floor(s / 3600)} h ${Math.floor((s % 3600) / 60)} min ago`;
+  return `${Math.floor(s / 86400)} d ${Math.floor((s % 86400) / 3600)} h ago`;
+}
+
+const finite = (v) => typeof v === 'number' && Number.isFinite(v);
+
+/** {t, code, message, sender} of a record's event, or null for one the page cannot show. */
+function clean(e) {
+  if (!e || typeof e !== 'object' || !finite(e.t) || typeof e.code !== 'string') return null;
+  return {
+    t: e.t,
+    code: e.code,
+    message: typeof e.message === 'string' ? e.message : '',
+    sender: typeof e.sender === 'string' && e.sender !== '' ? e.sender : null,
+  };
+}
+
+const sameEvent = (a, b) => a.t === b.t && a.code === b.code && a.message === b.message && a.sender === b.sender;
+
+/**
+ * The panel (#events). Returns hooks the app calls: onRecord(record) for every telemetry
+ * record received, draw(now) from the draw loop; entries() what the panel lists.
+ */
+export function setupEvents() {
+  const list = $('events');
+  const kept = [];          // newest first: {t, code, message, sender, warning, key, seq, run, li, ago}
+  const keys = new Set();   // kept's keys: JSON of [t, code, message, sender]
+  let newest = null;        // the newest event of the last record taken in, as received
+  let recordT = null;       // the newest record's t (s, the service's clock)
+  let run = 0;              // +1 each time the service's clock goes back: a new service, another clock
+  let seq = 0;
+  let dirty = false;
+  let agoAt = -Infinity;    // performance.now() of the last "ago" update (only to limit their rate)
+  let agoFor = null;        // the record t they were computed at
+
+  function onRecord(r) {
+    if (finite(r.t)) {
+      if (recordT !== null && r.t < recordT) run += 1;
+      recordT = r.t;
+    }
+    const events = r.events;
+    if (!Array.isArray(events) || events.length === 0) return;
+    const last = clean(events[events.length - 1]);
+    if (last === null || (newest !== null && sameEvent(last, newest))) return;
+    newest = last;
+    for (const raw of events) {
+      const e = clean(raw);
+      if (e === null) continue;
+      const key = JSON.stringify([e.t, e.code, e.message, e.sender]);
+      if (keys.has(key)) continue;
+      keys.add(key);
+      kept.push({ ...e, warning: isWarning(e.code), key, seq: seq++, run, li: null, ago: null });
+      dirty = true;
+    }
+    if (!dirty) return;
+    kept.sort((a, b) => (b.run - a.run) || (b.t - a.t) || (b.seq - a.seq));
+    while (kept.length > EVENTS_KEPT) keys.delete(kept.pop().key);
+  }
+
+  function line(e) {
+    const li = document.createElement('li');
+    li.className = e.warning ? 'warning' : 'routine';
+    li.dataset.code = e.code;
+    li.dataset.t = String(e.t);
+    const ago = document.createElement('span'); ago.className = 'ago';
+    ago.title = `t = ${e.t.toFixed(3)} s on the service's clock`;
+    const code = document.createElement('span'); code.className = 'code'; code.textContent = e.code;
+    const message = document.createElement('span'); message.className = 'msg'; message.textContent = e.message;
+    li.append(ago, ' ', code, ' ', message);
+    if (e.sender !== null) {
+      const by = document.createElement('span'); by.className = 'by'; by.textContent = `by ${e.sender}`;
+      li.append(' ', by);
+    }
+    e.li = li;
+    e.ago = ago;
+    return li;
+  }
+
+  function updateAgo() {
+    for (const e of kept) {
+      // an event of an earlier clock (the service restarted on another one) has no age on this one
+      const text = e.run === run ? agoText(recordT - e.t) : 'before the service restarted';
+      if (e.ago.textContent !== text) e.ago.textContent = text;
+    }
+  }
+
+  /** From the draw loop: the list again if an event is new; the "ago" texts at most every AGO_EVERY_MS. */
+  function draw(now) {
+    if (dirty) {
+      dirty = false;
+      list.replaceChildren(...kept.map((e) => e.li ?? line(e)));
+      agoAt = -Infinity;   // the new lines get their "ago" now
+      agoFor = null;
+    }
+    if (recordT !== null && recordT !== agoFor && now - agoAt >= AGO_EVERY_MS) {
+      agoAt = now;
+      agoFor = recordT;
+      updateAgo();
+    }
+  }
+
+  /** What the panel lists, newest first (for tests and tools). */
+  function entries() {
+    return kept.map((e) => ({
+      t: e.t, code: e.code, message: e.message, sender: e.sender, warning: e.warning,
+      ago: e.ago ? e.ago.textContent : '',
+    }));
+  }
+
+  return { onRecord, draw, entries };
+}
