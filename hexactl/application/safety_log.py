@@ -18,10 +18,12 @@ log = logging.getLogger("hexactl.safety")
 
 _WARNING_STATES = (ControlState.FAULT, ControlState.ESTOP)
 
-_ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "leg_", "calibration_swapped", "command_refused",
-                   "command_link_heard", "enabled", "disabled", "stop", "reset", "move", "pause", "resume", "abort")
+_ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "leg_locked", "leg_unlocked", "calibration_swapped",
+                   "command_refused", "command_link_heard", "enabled", "disabled", "stop", "reset", "move", "pause",
+                   "resume", "abort")
 """Codes (or their prefixes) of the loop's events that are its daily work, logged as INFO;
-the others (faults, E-stops, a guard's clamp) as WARNING."""
+the others (faults such as ``leg_lock_projection``, E-stops, a guard's clamp) as WARNING.
+The dashboard's Events panel draws the same line (``events.js``, ``isWarning``)."""
 
 
 class SafetyLog:
