@@ -1,6 +1,6 @@
 """What the service and its clients agree on, without the models: the protocol version,
-the default endpoints, how a client names itself, the telemetry topic and rate, the bound on ``deadline_ms``, how long
-a client waits for an answer by default.
+the default endpoints, how a client names itself, the telemetry topic and rate, the bound
+on ``deadline_ms``, how long a client waits for an answer by default.
 
 Standard library only: a client (``hexactl status``, ``move``, …) imports this and not
 the pydantic models (:mod:`~hexactl.adapters.api.messages`), so that it starts fast.
