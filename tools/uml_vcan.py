@@ -29,8 +29,8 @@ paths relative to your cwd are made absolute first.
 
 Recipe (what happens)
 ---------------------
-1. Ensure ``linux.uml`` (user-mode-linux), ``insmod`` (kmod) and ``ip``
-   (iproute2) exist; if not, ``apt-get update && apt-get install -y`` them
+1. Ensure ``linux.uml`` (user-mode-linux), ``insmod`` (kmod), ``ip``
+   (iproute2) and ``gcc`` (for the XSAVE shim, see the gotchas) exist; if not, ``apt-get update && apt-get install -y`` them
    (root only; otherwise fail with a clear message, exit 120).
 2. Resolve the UML kernel version (``linux.uml --version``) and the ``.ko``
    files for ``can-raw`` and ``vcan`` *with their dependencies* from
@@ -78,6 +78,14 @@ Gotchas found while building this
   containers; the sysrq trigger is kernel-only and makes linux.uml exit 0.
   If init exits instead, the kernel panics and linux.uml aborts (SIGABRT) -
   it does not hang, and the host timeout is the last resort anyway.
+* On a host with AVX-512 or AMX (XSAVE state beyond the 832 bytes UML 6.1 keeps per
+  task) init dies at once: "userspace - ptrace set fp regs failed, errno = 14", then
+  "Kernel panic - not syncing: Attempted to kill init! exitcode=0x0000000b". The host
+  kernel takes PTRACE_SETREGSET (NT_X86_XSTATE) only of the whole XSAVE buffer; UML
+  sizes it at run time only since 6.13. linux.uml runs with ``tools/uml_xstate.c``
+  preloaded (built with the host's gcc), which keeps the rest of each task's state
+  beside UML's part and puts them back together: each guest task gets its whole
+  state back, AVX-512 registers included. Elsewhere it passes everything through.
 * The UML kernel is single-CPU with HZ=100 but high-resolution timers
   (``hres_active``: a 4 ms sleep lasts 5.3 ms median); boot to the pytest start
   takes about 2 s. Each guest system call costs about 28 us (ptrace), and the
@@ -151,9 +159,21 @@ class ToolError(Exception):
 # host prerequisites
 
 
+def build_xstate_shim(gcc: str, work: str) -> str:
+    """tools/uml_xstate.c built into ``work``: the library preloaded into linux.uml so
+    that it can hand a host's whole XSAVE state back (see the gotcha); its path."""
+    shim = os.path.join(work, "uml_xstate.so")
+    built = subprocess.run([gcc, "-shared", "-fPIC", "-O2", "-o", shim, str(Path(__file__).with_name("uml_xstate.c")),
+                            "-ldl", "-lpthread"], capture_output=True, text=True)
+    if built.returncode != 0:
+        raise ToolError(EXIT_PREREQ, f"could not build the XSAVE shim for linux.uml:\n{built.stderr}")
+    return shim
+
+
 def ensure_packages() -> dict[str, str]:
     try:
-        return ensure_executables({"linux.uml": "user-mode-linux", "insmod": "kmod", "ip": "iproute2"}, log)
+        return ensure_executables({"linux.uml": "user-mode-linux", "insmod": "kmod", "ip": "iproute2", "gcc": "gcc"},
+                                  log)
     except PackagesMissing as e:
         raise ToolError(EXIT_PREREQ, str(e))
 
@@ -416,7 +436,8 @@ def run_uml(args: argparse.Namespace, pytest_args: list[str]) -> int:
         cmdline = [exes["linux.uml"], f"mem={mem_bytes >> 20}M", "root=/dev/root",
                    "rootfstype=hostfs", "rootflags=/", "rw", f"init={init}",
                    "con=null", "con0=null,fd:1", "ssl=null"]
-        uml_env = dict(os.environ, TMPDIR=memdir, TMP=memdir, TEMP=memdir)
+        uml_env = dict(os.environ, TMPDIR=memdir, TMP=memdir, TEMP=memdir,
+                       LD_PRELOAD=build_xstate_shim(exes["gcc"], work))
         log(f"booting UML {ver} (mem {args.mem}, RAM file in {memdir}, timeout {args.timeout:g} s); "
             f"inner: pytest -m vcan {' '.join(pytest_args)}")
         if args.verbose:
