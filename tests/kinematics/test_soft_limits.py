@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
-from hypothesis import assume, given
+from hypothesis import assume, example, given
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from hexactl.kinematics.soft_limits import SoftLimits, tilt_deg
-from hexactl.kinematics.workspace import ViolationKind
+from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, ViolationKind
 
 poses = st.tuples(*[st.floats(-500.0, 500.0)] * 3, *[st.floats(-40.0, 40.0)] * 3)
 
@@ -45,13 +45,16 @@ def test_malformed_soft_limits_are_refused_naming_the_problem(bad, fragment):
 
 
 @given(st.lists(poses, min_size=1, max_size=20), poses, poses)
+@example([(0.0,) * 5 + (-8.330176226831006e-35,), (0.0,) * 5 + (-2e-9,)], (0.0,) * 5 + (1.0,), (0.0,) * 5 + (0.001,))
 def test_a_pose_passes_exactly_when_every_axis_is_within_its_bounds(samples, a, b):
     lower = tuple(min(x, y) - 1e-3 for x, y in zip(a, b))
     upper = tuple(max(x, y) + 1e-3 for x, y in zip(a, b))
     limits = SoftLimits(lower=lower, upper=upper)
     for pose, found in zip(samples, limits.violations(samples)):
+        # On a bound within rounding counts as on it (POSE_BOUND_ROUNDING): -8e-35 against a
+        # lower bound of 0 is not outside (this test found its model wanting there).
         outside = {axis for axis, value, low, high in zip(("x", "y", "z", "roll", "pitch", "yaw"), pose, lower, upper)
-                   if not low <= value <= high}
+                   if not low - POSE_BOUND_ROUNDING <= value <= high + POSE_BOUND_ROUNDING}
         assert {v.axis for v in found} == outside
 
 
