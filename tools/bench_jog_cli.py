@@ -24,18 +24,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from hexactl.adapters.api.client import HexactlClient  # noqa: E402
 from hexactl.adapters.cli.main import main as hexactl  # noqa: E402
 from hexactl.application.service import ServiceConfig, ServiceProcess  # noqa: E402
+from tools.serving import wait_until  # noqa: E402
 
 ASKED_MM = 10.0  # z=10 mm/s for 1 s
 WAIT_S = 60.0
 
 
 def at_rest(client: HexactlClient) -> dict:
-    deadline = time.monotonic() + WAIT_S
-    while (record := client.call("status")["status"])["motion"] != "holding" or record["jog"] is not None:
-        if time.monotonic() > deadline:
-            raise SystemExit(f"not at rest after {WAIT_S:g} s: {record['state']}, {record['faults']}")
-        time.sleep(0.05)
-    return record
+    """The status record once the platform is at rest with no jog (SystemExit after WAIT_S)."""
+    status = lambda: client.call("status")["status"]  # noqa: E731
+    return wait_until(lambda: (record := status())["motion"] == "holding" and record["jog"] is None and record,
+                      "the platform at rest", WAIT_S, seen=lambda: status()["faults"], failure=SystemExit)
 
 
 def main() -> int:

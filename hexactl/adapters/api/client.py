@@ -88,9 +88,9 @@ ENVELOPE_FIELDS = frozenset({"v", "id", "cmd"})
 
 class HexactlClient(ZmqConnection):
     """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
-``name`` names this client to the service, for people (its events and log say who sent
-each command by it: :data:`~hexactl.adapters.api.protocol.CLIENT_NAME_PROPERTY`); by
-default ``PROGRAM USER@HOST``.
+    ``name`` names this client to the service, for people (its events and log say who sent
+    each command by it: :data:`~hexactl.adapters.api.protocol.CLIENT_NAME_PROPERTY`); by
+    default ``PROGRAM USER@HOST``.
 
     A DEALER socket rather than REQ so that a timed-out request leaves the client
     usable: a late reply to it is recognised by its ``id`` and dropped. ``IMMEDIATE``
