@@ -18,42 +18,34 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, replace
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
-from hexactl.control.accuracy import predicted_accuracy, tolerance_refusal
-from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
+from hexactl.control.calibration_swaps import CalibrationSwaps
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frame_commands import FrameCommands
-from hexactl.control.frames import Frame, OperatorFrames, convert, requested_goal
+from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.jog_commands import JogCommands
+from hexactl.control.move_commands import MoveCommands
 from hexactl.control.recording_commands import RecordingCommands
 from hexactl.control.recorder import Row
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.host import LoopHost
-from hexactl.control.planning import (
-    ActiveGeometry,
-    Plan,
-    PlanningContext,
-    Refusal,
-    Waypoint,
-    plan_path,
-)
+from hexactl.control.planning import ActiveGeometry, PlanningContext
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.stream_commands import StreamCommands, TargetResult
+from hexactl.control.sequence_commands import SequenceCommands
 from hexactl.control.submitter import CommandSubmitter
-from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
+from hexactl.control.sequences import MotionSequence
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
-from hexactl.control.validated_under import ValidatedUnder, changed_since_validation
+from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.wave_commands import WaveCommands
 from hexactl.control.waves import WaveSpec
-from hexactl.kinematics.axes import validate_pose_values
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS
 
@@ -85,6 +77,9 @@ class Controller:
         self._waves = WaveCommands(lambda: self.snapshot, self._context, self._commands)
         self._streams = StreamCommands(lambda: self.snapshot, self._context, self._commands, host.submit,
                                        config.stream)
+        self._moves = MoveCommands(lambda: self.snapshot, lambda: self.frames.current, self._context, self._commands)
+        self._sequences = SequenceCommands(lambda: self.snapshot, self._context, self._commands)
+        self._calibrations = CalibrationSwaps(lambda: self.snapshot, self._commands, config, nominal)
 
     @property
     def snapshot(self) -> CoreSnapshot:
@@ -125,7 +120,7 @@ class Controller:
 
     def disable(self) -> CommandResult:
         """Disable the actuators (at rest only: stop first); a leg lock ends, and the reply says so."""
-        return self._checked(preconditions.check_disable, cmd.Disable, "disabled" + self._lock_released())
+        return self._commands.submit_unless(preconditions.check_disable, cmd.Disable, "disabled" + self._lock_released())
 
     def stop(self) -> CommandResult:
         """Brake smoothly to rest where the motion happens to end; aborts a sequence.
@@ -152,7 +147,8 @@ class Controller:
     def reset(self) -> CommandResult:
         """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED; a
         leg lock ends, and the reply says so."""
-        return self._checked(preconditions.check_reset, cmd.Reset, "reset to disabled" + self._lock_released())
+        return self._commands.submit_unless(preconditions.check_reset, cmd.Reset,
+                                            "reset to disabled" + self._lock_released())
 
     def _lock_released(self) -> str:
         """What disabling says of the leg lock it ends: the next enable drives all six legs."""
@@ -167,19 +163,7 @@ class Controller:
         None without a calibration covariance) and what it was validated under
         (``details.validated_under``, a :class:`~hexactl.control.validated_under.ValidatedUnder`
         to send back with the move)."""
-        s, frames = self.snapshot, self.frames.current
-        in_force = ValidatedUnder(calibration_id=s.active.calibration_id, frames=frames)
-        if refusal := changed_since_validation(validated_under, in_force):
-            return refusal
-        plan = self._plan_move(s, frames, pose, duration, speed, frame, relative)
-        if not plan.ok:
-            return _plan_result(plan, "valid", s.active.home)
-        accuracy = self._accuracy_at_goal(s, frames, plan)
-        if refusal := tolerance_refusal(tolerance_mm, accuracy):
-            return refusal
-        result = _plan_result(plan, "valid", s.active.home)
-        return CommandResult.success(result.message, **result.details, predicted_accuracy=accuracy,
-                                     validated_under=in_force)
+        return self._moves.validate(pose, duration, speed, frame, relative, tolerance_mm, validated_under)
 
     def move(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
              frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
@@ -197,31 +181,12 @@ class Controller:
         is planned in the very frames and on the very calibration it checks (a swap that
         reaches the loop before the move makes the loop refuse it as ``stale_plan``), so
         the platform goes to the goal validated or not at all."""
-        s, frames = self.snapshot, self.frames.current
-        if refusal := preconditions.check_move(s):
-            return CommandResult.failure(*refusal)
-        in_force = ValidatedUnder(calibration_id=s.active.calibration_id, frames=frames)
-        if refusal := changed_since_validation(validated_under, in_force):
-            return refusal
-        plan = self._plan_move(s, frames, pose, duration, speed, frame, relative)
-        if not plan.ok:
-            return _plan_result(plan, "", s.active.home)
-        accuracy = self._accuracy_at_goal(s, frames, plan) if tolerance_mm is not None else None
-        if refusal := tolerance_refusal(tolerance_mm, accuracy):
-            return refusal
-        (segment,) = plan.segments
-        return self._commands.submit(lambda t: cmd.Move(t, s.epoch, segment), "moving", deadline_ns=deadline_ns,
-                            **_plan_result(plan, "", s.active.home).details)
+        return self._moves.move(pose, duration, speed, frame, relative, tolerance_mm, validated_under, deadline_ns)
 
     def predicted_accuracy(self) -> dict[str, Any] | None:
         """The predicted 1σ error at the tool point for the commanded pose now
         (:mod:`~hexactl.control.accuracy`); None without a calibration covariance."""
-        s = self.snapshot
-        return predicted_accuracy(s.active, self.frames.current.tool[:3], s.pose_command)
-
-    def _accuracy_at_goal(self, s: CoreSnapshot, frames: OperatorFrames, plan: Plan) -> dict[str, Any] | None:
-        last = plan.segments[-1]
-        return predicted_accuracy(s.active, frames.tool[:3], convert(last.goal, last.frames, None, s.active.home))
+        return self._moves.accuracy_now()
 
     def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
             deadline_ns: int | None = None) -> CommandResult:
@@ -236,60 +201,32 @@ class Controller:
         """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""
         if isinstance(leg, bool) or not isinstance(leg, (int, np.integer)) or not 1 <= leg <= 6:
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"leg is a number from 1 to 6, got {leg!r}")
-        return self._checked(preconditions.check_lock, lambda t: cmd.LockLeg(t, int(leg)), f"leg {leg} locked", deadline_ns)
+        return self._commands.submit_unless(preconditions.check_lock, lambda t: cmd.LockLeg(t, int(leg)),
+                                            f"leg {leg} locked", deadline_ns=deadline_ns)
 
     def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Release the locked leg; the pose being held becomes the target (no step)."""
-        return self._checked(preconditions.check_unlock, cmd.UnlockLeg, "unlocked", deadline_ns)
+        return self._commands.submit_unless(preconditions.check_unlock, cmd.UnlockLeg, "unlocked",
+                                            deadline_ns=deadline_ns)
 
     def validate_sequence(self, sequence: MotionSequence | str) -> CommandResult:
         """Would :meth:`play` accept this sequence (or built-in name) from here? Plans and
         checks every waypoint's path, moves nothing."""
-        resolved = _resolve_sequence(sequence)
-        if isinstance(resolved, CommandResult):
-            return resolved
-        s = self.snapshot
-        return _plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames), "valid",
-                            s.active.home)
+        return self._sequences.validate(sequence)
 
     def play(self, sequence: MotionSequence | str, *, deadline_ns: int | None = None) -> CommandResult:
         """Play a sequence, or a built-in one by name; every waypoint's path is validated
         before the first moves."""
-        resolved = _resolve_sequence(sequence)
-        if isinstance(resolved, CommandResult):
-            return resolved
-        s = self.snapshot
-        if refusal := preconditions.check_play(s):
-            return CommandResult.failure(*refusal)
-        plan = plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames)
-        if not plan.ok:
-            return _plan_result(plan, "", s.active.home)
-        name = resolved.name
-        return self._commands.submit(lambda t: cmd.Play(t, s.epoch, name, plan.segments), f"playing {name}",
-                            deadline_ns=deadline_ns, **_plan_result(plan, "", s.active.home).details)
+        return self._sequences.play(sequence, deadline_ns)
 
     def pause(self) -> CommandResult:
         """Pause the sequence: brake to rest mid-move, or freeze the dwell's clock."""
-        return self._checked(preconditions.check_pause, cmd.Pause, "pausing")
+        return self._sequences.pause()
 
     def resume(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Continue a paused sequence; the rest of an interrupted move is planned and
         validated from where it stopped, at the segment's cruise speed."""
-        s = self.snapshot
-        if refusal := preconditions.check_resume(s):
-            return CommandResult.failure(*refusal)
-        progress = s.sequence
-        assert progress is not None
-        remainder = None
-        if progress.paused_in_move:
-            segment = progress.segment
-            waypoint = Waypoint(segment.goal.in_degrees(), None, segment.velocity_scale / segment.time_scale)
-            context = self._context(s)  # the remainder runs in the frames the segment was planned in
-            plan = plan_path(replace(context, frames=segment.frames or context.frames), s.trajectory, [waypoint], s.frames)
-            if not plan.ok:
-                return _plan_result(plan, "", s.active.home)
-            (remainder,) = plan.segments
-        return self._commands.submit(lambda t: cmd.Resume(t, s.epoch, remainder), "resumed", deadline_ns=deadline_ns)
+        return self._sequences.resume(deadline_ns)
 
     def validate_wave(self, spec: WaveSpec) -> CommandResult:
         """Would :meth:`wave` accept this? Plans and checks the whole path, moves nothing."""
@@ -326,36 +263,18 @@ class Controller:
 
     def abort(self) -> CommandResult:
         """End the sequence or the wave and brake to rest; a sequence's records are kept."""
-        return self._checked(preconditions.check_abort, cmd.Abort, "aborted")
+        return self._sequences.abort()
 
     def load_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
         """Validate a calibrated geometry and swap it in at a cycle boundary, ramping the
         set-points to it; refused with the reason otherwise (the active one stays)."""
-        if not isinstance(geometry, Geometry):
-            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "load_calibration takes a validated Geometry")
-        if not isinstance(calibration_id, str) or not calibration_id:
-            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "the calibration needs a non-empty id")
-        new = ActiveGeometry.of(geometry, calibration_id, source)
-        if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self.nominal):
-            return refusal
-        if calibration_id == self.snapshot.active.calibration_id:  # nothing to swap, nor to roll back to later
-            return CommandResult.success(f"calibration {calibration_id} is already active: nothing changed",
-                                         calibration_id=calibration_id, change_mm=0.0)
-        return self._swap(new, f"calibration {calibration_id} loaded")
+        return self._calibrations.load(geometry, calibration_id, source)
 
     def validate_calibration(self, geometry: Geometry, calibration_id: str, source: str = "") -> CommandResult:
         """Would :meth:`load_calibration` accept it now? The same checks, nothing swapped;
         success details ``calibration_id`` and ``change_mm`` (the largest set-point change
         the swap would make at the current pose)."""
-        if not isinstance(geometry, Geometry):
-            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "validate_calibration takes a validated Geometry")
-        if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self.nominal):
-            return refusal
-        checked = self._swap_check(ActiveGeometry.of(geometry, calibration_id, source))
-        if isinstance(checked, CommandResult):
-            return checked
-        return CommandResult.success(f"calibration {calibration_id} would change the set-points by at most "
-                                     f"{checked:.3f} mm", calibration_id=calibration_id, change_mm=checked)
+        return self._calibrations.validate(geometry, calibration_id, source)
 
     def active_geometry(self) -> ActiveGeometry:
         """The geometry the loop runs now (calibrated or nominal), with its identity."""
@@ -365,12 +284,7 @@ class Controller:
         """Swap back to the calibration active before the last load (validated and ramped
         like a load); again, to the one before that, and so on (the last
         :data:`~hexactl.control.core.KEPT_CALIBRATIONS`)."""
-        s = self.snapshot
-        if s.previous is None:
-            return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no earlier calibration to roll "
-                                         f"back to ({s.active.calibration_id} is the first since start-up)")
-        return self._swap(s.previous, f"rolled back from calibration {s.active.calibration_id} to "
-                          f"{s.previous.calibration_id}", rollback=True)
+        return self._calibrations.rollback()
 
     def set_frames(self, frames: OperatorFrames) -> CommandResult:
         """Make ``frames`` the operator's work and tool frames and soft limits (see
@@ -402,69 +316,3 @@ class Controller:
                                config.lock_max_correction_mm, config.path_step_mm, config.path_step_deg,
                                config.lock_cycle_iterations, frames.frames(s.active.home),
                                None if frames.soft_limits == NO_SOFT_LIMITS else frames.soft_limits)
-
-    def _plan_move(self, s: CoreSnapshot, frames: OperatorFrames, pose: Sequence[float], duration: float | None,
-                   speed: float | None, frame: Frame, relative: bool) -> Plan:
-        context = self._context(s, frames)
-        if problem := validate_pose_values(pose) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
-            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, problem))
-        target = s.goal if s.goal is not None else s.trajectory.position
-        goal = requested_goal(pose, Frame(frame), bool(relative), target, s.frames, context.frames, s.active.home)
-        if isinstance(goal, str):
-            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, goal))
-        return plan_path(context, s.trajectory, [Waypoint(goal, duration, speed)], s.frames)
-
-    def _swap(self, new: ActiveGeometry, message: str, *, rollback: bool = False) -> CommandResult:
-        """Check ``new`` (:func:`~hexactl.control.calibration_checks.swap_refusal`), then
-        hand it over (with ``rollback``: the last of the history, which the loop drops)."""
-        s = self.snapshot
-        checked = self._swap_check(new)
-        if isinstance(checked, CommandResult):
-            return checked
-        replaced = {"rolled_back_from": s.active.calibration_id} if rollback else {}
-        return self._commands.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback), message,
-                                     calibration_id=new.calibration_id, change_mm=checked, **replaced)
-
-    def _swap_check(self, new: ActiveGeometry) -> float | CommandResult:
-        """The largest set-point change swapping in ``new`` makes now, mm, or the refusal."""
-        s = self.snapshot
-        if refusal := preconditions.check_swap(s, new):
-            return CommandResult.failure(*refusal)
-        return swap_refusal(s, new, self.config)
-
-    def _checked(self, check, factory: Callable[[int], cmd.Command], message: str,
-                 deadline_ns: int | None = None) -> CommandResult:
-        if refusal := check(self.snapshot):
-            return CommandResult.failure(*refusal)
-        return self._commands.submit(factory, message, deadline_ns=deadline_ns)
-
-
-def _resolve_sequence(sequence: object) -> MotionSequence | CommandResult:
-    """A sequence, a built-in one by name, or the refusal."""
-    if isinstance(sequence, str):
-        try:
-            return builtin_sequence(sequence)
-        except UnknownSequence as error:
-            return CommandResult.failure(ErrorCode.UNKNOWN_SEQUENCE, str(error), built_in=list(BUILTIN_SEQUENCES))
-    if not isinstance(sequence, MotionSequence):
-        return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "a sequence is a MotionSequence or a built-in name")
-    return sequence
-
-
-def _plan_result(plan: Plan, message: str, home_mm_rad: Sequence[float]) -> CommandResult:
-    """The result of ``plan``: its refusal, or ``goal`` relative to the zero posture
-    ``home_mm_rad`` (and ``tool_goal``, the tool's pose in the work frame, for a motion in
-    it; mm and deg), ``duration_s`` and ``waypoints``."""
-    if plan.refusal is not None:
-        refusal = plan.refusal
-        return CommandResult.failure(refusal.code, refusal.message, violations=[asdict(v) for v in refusal.violations],
-                                     **refusal.details)
-    last = plan.segments[-1]
-    in_work = {"tool_goal": list(last.goal.in_degrees())} if last.frames is not None else {}
-    return CommandResult.success(
-        message,
-        goal=list(convert(last.goal, last.frames, None, home_mm_rad).in_degrees()),
-        duration_s=sum(seg.duration_s + seg.dwell_s for seg in plan.segments),
-        waypoints=len(plan.segments),
-        **in_work,
-    )

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, replace
+from dataclasses import replace
 from math import isfinite
 
 from hexactl.control import commands as cmd
@@ -51,8 +51,7 @@ class JogCommands:
         context = self._context(s)
         plan = plan_jog(context, s.trajectory, s.frames, velocity, frame, round(self.deadman_s * 1e9))
         if isinstance(plan, Refusal):
-            return CommandResult.failure(plan.code, plan.message, violations=[asdict(v) for v in plan.violations],
-                                         **plan.details)
+            return plan.result()
         goal = convert(plan.segment.goal, plan.segment.frames, None, s.active.home).in_degrees()
         result = self._submitter.submit(lambda t: cmd.Jog(t, s.epoch, plan), "jogging", deadline_ns=deadline_ns,
                                         goal=list(goal), **_details(None, plan.speed, plan.end, plan.to_limit,

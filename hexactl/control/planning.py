@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from itertools import chain
 from math import degrees, isfinite
 from operator import add, sub
@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Coordinates, convert, relative_poses
-from hexactl.control.results import ErrorCode
+from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.trajectory import KinematicState, MotionLimits, preview
 from hexactl.kinematics.frames import Frames, tools_in_work
 from hexactl.kinematics.geometry import Geometry
@@ -190,6 +190,11 @@ class Refusal:
     message: str
     violations: tuple[PathViolation, ...] = ()
     details: dict = field(default_factory=dict)
+
+    def result(self) -> CommandResult:
+        """The refusal as a command's result: its code, message, violations and details."""
+        return CommandResult.failure(self.code, self.message, violations=[asdict(v) for v in self.violations],
+                                     **self.details)
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,7 +12,9 @@ from dataclasses import replace
 from hexactl.control import commands as cmd
 from hexactl.control.config import ControllerConfig
 from hexactl.control.host import LoopHost
+from hexactl.control.preconditions import Refusal
 from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S
 
 # A context variable rather than a parameter: who sent a request is the request's context,
@@ -50,6 +52,14 @@ class CommandSubmitter:
                     return CommandResult.success(outcome.message, ticket=ticket)
                 return CommandResult.failure(outcome.code, outcome.message, ticket=ticket)
         return None
+
+    def submit_unless(self, check: Callable[[CoreSnapshot], Refusal], factory: Callable[[int], cmd.Command],
+                      message: str, *, deadline_ns: int | None = None) -> CommandResult:
+        """:meth:`submit`, unless ``check`` refuses it on the loop's latest snapshot (the
+        loop checks again when it carries it out)."""
+        if refusal := check(self._host.snapshot):
+            return CommandResult.failure(*refusal)
+        return self.submit(factory, message, deadline_ns=deadline_ns)
 
     def submit(self, factory: Callable[[int], cmd.Command], message: str, *, deadline_ns: int | None = None,
                **details: object) -> CommandResult:

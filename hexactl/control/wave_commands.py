@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict
 
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
@@ -50,6 +49,5 @@ class WaveCommands:
 def _result(plan: WavePlan | Refusal, message: str) -> CommandResult:
     """The refusal (its violations and details), or ``message`` with the plan's figures."""
     if isinstance(plan, Refusal):
-        return CommandResult.failure(plan.code, plan.message, violations=[asdict(v) for v in plan.violations],
-                                     **plan.details)
+        return plan.result()
     return CommandResult.success(message, **plan.summary())

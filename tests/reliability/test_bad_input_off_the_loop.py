@@ -16,7 +16,8 @@ import zmq
 
 import hexactl.adapters.api.commands as commands_module
 import hexactl.adapters.api.server as server_module
-import hexactl.control.controller as controller_module
+import hexactl.control.move_commands as move_commands_module
+import hexactl.control.sequence_commands as sequence_commands_module
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.files.geometry_file import geometry_to_toml
 from hexactl.application.service import Service
@@ -73,7 +74,8 @@ def handled_here(monkeypatch: pytest.MonkeyPatch) -> Counter:
 
     counting(server_module, "decode_request")
     counting(commands_module, "parse_geometry")
-    counting(controller_module, "plan_path")
+    counting(move_commands_module, "plan_path")
+    counting(sequence_commands_module, "plan_path")
     counting(commands_module.CommandHandler, "__call__")
     return calls
 

@@ -1,0 +1,85 @@
+"""The facade's calibration swaps: validate or load a calibrated geometry, or roll back to
+the one before, each checked (:mod:`hexactl.control.calibration_checks`) and handed to the
+loop, which ramps the set-points to it (:mod:`hexactl.control.calibration_ramp`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from hexactl.control import commands as cmd
+from hexactl.control import preconditions
+from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
+from hexactl.control.config import ControllerConfig
+from hexactl.control.planning import ActiveGeometry
+from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.snapshot import CoreSnapshot
+from hexactl.control.submitter import CommandSubmitter
+from hexactl.kinematics.geometry import Geometry
+
+
+class CalibrationSwaps:
+    """Calibration swaps of one facade: ``snapshot()`` the loop's latest, commands queued by
+    ``submitter``; a calibration must be acceptable against ``nominal`` (its limits equal
+    the hardware's, its parameters plausible) and change no set-point more than
+    ``config`` allows."""
+
+    def __init__(self, snapshot: Callable[[], CoreSnapshot], submitter: CommandSubmitter, config: ControllerConfig,
+                 nominal: Geometry) -> None:
+        self._snapshot = snapshot
+        self._submitter = submitter
+        self._config = config
+        self._nominal = nominal
+
+    def load(self, geometry: Geometry, calibration_id: str, source: str) -> CommandResult:
+        """See :meth:`hexactl.control.controller.Controller.load_calibration`."""
+        if not isinstance(geometry, Geometry):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "load_calibration takes a validated Geometry")
+        if not isinstance(calibration_id, str) or not calibration_id:
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "the calibration needs a non-empty id")
+        new = ActiveGeometry.of(geometry, calibration_id, source)
+        if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self._nominal):
+            return refusal
+        if calibration_id == self._snapshot().active.calibration_id:  # nothing to swap, nor to roll back to later
+            return CommandResult.success(f"calibration {calibration_id} is already active: nothing changed",
+                                         calibration_id=calibration_id, change_mm=0.0)
+        return self._swap(new, f"calibration {calibration_id} loaded")
+
+    def validate(self, geometry: Geometry, calibration_id: str, source: str) -> CommandResult:
+        """See :meth:`hexactl.control.controller.Controller.validate_calibration`."""
+        if not isinstance(geometry, Geometry):
+            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "validate_calibration takes a validated Geometry")
+        if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self._nominal):
+            return refusal
+        checked = self._check(ActiveGeometry.of(geometry, calibration_id, source))
+        if isinstance(checked, CommandResult):
+            return checked
+        return CommandResult.success(f"calibration {calibration_id} would change the set-points by at most "
+                                     f"{checked:.3f} mm", calibration_id=calibration_id, change_mm=checked)
+
+    def rollback(self) -> CommandResult:
+        """See :meth:`hexactl.control.controller.Controller.rollback_calibration`."""
+        s = self._snapshot()
+        if s.previous is None:
+            return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no earlier calibration to roll "
+                                         f"back to ({s.active.calibration_id} is the first since start-up)")
+        return self._swap(s.previous, f"rolled back from calibration {s.active.calibration_id} to "
+                          f"{s.previous.calibration_id}", rollback=True)
+
+    def _swap(self, new: ActiveGeometry, message: str, *, rollback: bool = False) -> CommandResult:
+        """Check ``new``, then hand it over (with ``rollback``: the last of the history,
+        which the loop drops)."""
+        s = self._snapshot()
+        checked = self._check(new)
+        if isinstance(checked, CommandResult):
+            return checked
+        replaced = {"rolled_back_from": s.active.calibration_id} if rollback else {}
+        return self._submitter.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback), message,
+                                      calibration_id=new.calibration_id, change_mm=checked, **replaced)
+
+    def _check(self, new: ActiveGeometry) -> float | CommandResult:
+        """The largest set-point change swapping in ``new`` makes now, mm
+        (:func:`~hexactl.control.calibration_checks.swap_refusal`), or the refusal."""
+        s = self._snapshot()
+        if refusal := preconditions.check_swap(s, new):
+            return CommandResult.failure(*refusal)
+        return swap_refusal(s, new, self._config)
