@@ -380,7 +380,9 @@ class ServiceProcess:
     must not hold up the control loop through the GIL: ``hexactl demo``, tests.
 
     The child ignores SIGINT: Ctrl-C at the terminal interrupts the client, which then
-    decides when the service stops.
+    decides when the service stops. Like ``hexactl serve`` it watches its API process
+    (:class:`ServiceWatch`): if that dies, it brings the platform to rest, disables the
+    actuators and ends (:attr:`exitcode` 1).
 
     :raises ServiceError: if the service does not start (within ``start_timeout_s``)
     """
@@ -395,6 +397,17 @@ class ServiceProcess:
             raise ServiceError(str(error)) from None
         self.api_endpoint, self.telemetry_endpoint = self._child.served
 
+    @property
+    def pid(self) -> int | None:
+        """The service's process id (its API process is a child of it)."""
+        return self._child.pid
+
+    @property
+    def exitcode(self) -> int | None:
+        """None while the service runs; 1 if it ended because its API process died or its
+        command stream ended or broke (its log says which)."""
+        return self._child.exitcode
+
     def close(self, timeout_s: float = 30.0) -> None:
         self._child.close(timeout_s)
 
@@ -406,21 +419,29 @@ class ServiceProcess:
 
 
 def _serve(config: ServiceConfig, connection: Connection) -> None:
-    """The child's life: start, say where, serve until told to stop (or orphaned), close."""
+    """The child's life: start, say where, serve until told to stop (or orphaned, or the API
+    process fails: then exit status 1), close."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     try:
         service = Service.start(config)
     except (ServiceError, SecurityError) as error:
         connection.send(str(error))
         return
     main_thread_below_loop(service)
+    watch, problem = ServiceWatch(service), None
     try:
         connection.send((service.api_endpoint, service.telemetry_endpoint))
-        connection.recv()
-    except EOFError:
+        while not connection.poll(API_WATCH_INTERVAL_S):  # until told to stop, or the parent is gone
+            if problem := watch.problem():
+                log.error("%s: shutting down", problem)
+                break
+    except (EOFError, OSError):
         pass  # the parent is gone: stop too
     finally:
         service.close()
+    if problem:
+        sys.exit(1)
 
 
 def run_service(config: ServiceConfig) -> NoReturn:
@@ -445,14 +466,9 @@ def run_service(config: ServiceConfig) -> NoReturn:
         signals.serving()
         main_thread_below_loop(service)
         try:
-            rejected = 0
-            silence = _SilenceLog()
+            watch = ServiceWatch(service)
             while (received := signals.wait(API_WATCH_INTERVAL_S)) is None:
-                if service.link.rejected > rejected:  # a bug of ours if ever: the API process sends only commands
-                    log.warning("the loop link dropped %d messages that were not commands", service.link.rejected - rejected)
-                    rejected = service.link.rejected
-                silence.watch(service.link)
-                if problem := _api_problem(service):
+                if problem := watch.problem():
                     log.error("%s: shutting down", problem)
                     status = 1
                     break
@@ -473,26 +489,39 @@ def run_service(config: ServiceConfig) -> NoReturn:
         os._exit(status)
 
 
-class _SilenceLog:
-    """Says on the service's log when the loop link finds the API process silent and when
-    it is heard again: the API's own log, where the loop's events are written, is silent
-    with it."""
+class ServiceWatch:
+    """What the main thread of a service's own process (``hexactl serve``,
+    :class:`ServiceProcess`) watches every :data:`API_WATCH_INTERVAL_S`: it says on the
+    service's log when the loop link drops a message that is not a command, and when it
+    finds the API process silent and heard again (the API's own log, where the loop's
+    events are written, is silent with it)."""
 
-    def __init__(self) -> None:
-        self._longest_s = 0.0  # of the present silence as seen; 0: none
+    def __init__(self, service: Service) -> None:
+        self._service = service
+        self._rejected = 0
+        self._longest_silence_s = 0.0  # of the present silence as seen; 0: none
 
-    def watch(self, link: LoopExchange) -> None:
-        """Called every :data:`API_WATCH_INTERVAL_S`."""
+    def problem(self) -> str | None:
+        """Log what changed since the last call; why the service cannot go on taking
+        commands (its API process died, or its command stream ended or broke), or None."""
+        link = self._service.link
+        if link.rejected > self._rejected:  # a bug of ours if ever: the API process sends only commands
+            log.warning("the loop link dropped %d messages that were not commands", link.rejected - self._rejected)
+            self._rejected = link.rejected
+        self._watch_silence(link)
+        return _api_problem(self._service)
+
+    def _watch_silence(self, link: LoopExchange) -> None:
         silent_s = link.silent_s
         if link.silent:
-            if not self._longest_s:
+            if not self._longest_silence_s:
                 log.warning("nothing from the API process for %.1f s (frozen or starved of CPU): a motion under way "
                             "is braked to rest; an E-stop through the API may not arrive: use the hardware E-stop",
                             silent_s)
-            self._longest_s = max(self._longest_s, silent_s)
-        elif self._longest_s:
-            log.info("the API process is heard again after %.1f s or more of silence", self._longest_s)
-            self._longest_s = 0.0
+            self._longest_silence_s = max(self._longest_silence_s, silent_s)
+        elif self._longest_silence_s:
+            log.info("the API process is heard again after %.1f s or more of silence", self._longest_silence_s)
+            self._longest_silence_s = 0.0
 
 
 def _end_start_up(received: signal.Signals) -> NoReturn:

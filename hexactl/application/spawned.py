@@ -62,6 +62,10 @@ class Spawned:
         self.served = message
 
     @property
+    def pid(self) -> int | None:
+        return self._process.pid
+
+    @property
     def alive(self) -> bool:
         return self._process.is_alive()
 
