@@ -265,11 +265,14 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
     path = Path(arguments.file)
     if not (arguments.send or path.is_file()):
         return "load_calibration", {"path": arguments.file}
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise CliError(f"{arguments.file}: cannot read: {error}") from None
     import tomllib  # light; only for this command
+
+    from hexactl.adapters.files.text import TextFileError, read_text
+
+    try:
+        text = read_text(arguments.file)
+    except TextFileError as error:
+        raise CliError(str(error)) from None
 
     try:
         tomllib.loads(text)
