@@ -1,17 +1,22 @@
 """Files an operator hands the command line, as an outside tester found them: a file saved
 by a Windows editor (a UTF-8 byte-order mark) was refused as "not valid TOML: Invalid
 statement (at line 1, column 1)" though its first line looked right, and one saved as
-UTF-16 was "'utf-8' codec can't decode byte 0xff in position 0"."""
+UTF-16 was "'utf-8' codec can't decode byte 0xff in position 0"; a full disk under an
+output said "[Errno 28] No space left on device" naming no file, and under `calibrate
+--report` ended in a traceback with the status of an untrustworthy calibration (1)."""
 
 from __future__ import annotations
 
 import codecs
+import errno
+import os
 from pathlib import Path
 
 import pytest
 
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError, ErrorCode
+from hexactl.adapters.cli.common import write_failed
 from hexactl.adapters.files.text import TextFileError, decode_text
 from tests.cli.test_cli_robustness import exits_with
 
@@ -77,3 +82,45 @@ def test_the_service_reads_a_sequence_with_a_byte_order_mark_and_names_one_in_ut
 def test_a_nul_byte_is_named_with_its_line() -> None:
     with pytest.raises(TextFileError, match=r"^f.csv: a NUL byte on line 2 .* not UTF-8 text"):
         decode_text(b"a,b\n1,\0\n", "f.csv")
+
+
+# -- writing on a full disk ---------------------------------------------------------------
+
+
+def no_space(*arguments: object, **options: object) -> None:
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+@pytest.fixture
+def full_disk(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every file written fails as on a full disk (where an atomic write finds out: its fsync)."""
+    monkeypatch.setattr(os, "fsync", no_space)
+
+
+@pytest.mark.usefixtures("full_disk")
+def test_a_full_disk_under_an_output_names_the_file_and_what_to_do(tmp_path, capsys) -> None:
+    plan = tmp_path / "plan.csv"
+    assert exits_with(["plan-leglock", "--leg", "1", "--count", "8", "--candidates", "200", "-o", str(plan)]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot write {plan}: No space left on device; free some space there, or choose another place" in err
+    assert not plan.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_under_the_report_is_bad_input_not_a_traceback(tmp_path, monkeypatch, capsys) -> None:
+    """The calibration is written; the report is not: exit 2 naming the report's folder."""
+    data = tmp_path / "data.csv"
+    assert exits_with(["simulate-campaign", "-o", str(data), "--per-leg", "4"]) == 0
+    from hexactl.adapters.report import html
+
+    monkeypatch.setattr(html, "write_report", no_space)
+    report = tmp_path / "report"
+    argv = ["calibrate", str(data), "-o", str(tmp_path / "cal.toml"), "--report", str(report)]
+    assert exits_with(argv) == 2
+    captured = capsys.readouterr()
+    assert f"wrote {tmp_path / 'cal.toml'}" in captured.out
+    assert f"error: cannot write {report}: No space left on device; free some space there" in captured.err
+
+
+def test_a_refusal_of_hexactl_s_own_is_passed_on_as_it_says_what_to_do() -> None:
+    refusal = FileExistsError("plan.csv exists; refusing to overwrite it (use --force)")
+    assert str(write_failed("plan.csv", refusal)) == str(refusal)
