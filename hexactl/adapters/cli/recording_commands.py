@@ -135,6 +135,8 @@ def _report_written(side: dict[str, Any], as_json: bool) -> int:
     problems = []
     if problem := side.get("problem"):
         problems.append(problem)
+    elif side.get("write_error"):
+        problems.append(f"it could not be written whole: {side['write_error']}")
     elif side.get("ended") not in GOOD_ENDINGS:
         problems.append(f"it ended early: {side.get('ended')} (the service stopped, or its loop failed)")
     if side.get("cycles_missing"):
