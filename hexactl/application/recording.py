@@ -67,6 +67,7 @@ class RecordingEnded(StrEnum):
     STOPPED = "stopped"  # record_stop
     SHUTDOWN = "shutdown"  # the service stopped during the recording
     FAULT = "fault"  # the control loop died during the recording
+    WRITE_FAILED = "write_failed"  # its file could not be written (a full disk): the loop stops recording
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,7 +233,12 @@ class Recordings:
             if known is not None:
                 self._geometries[known.calibration_id] = known
         current.faults_seen |= snapshot.state in (ControlState.FAULT, ControlState.ESTOP)
-        self._write(current, [row for row in rows if row[0] == current.recording])
+        try:
+            self._write(current, [row for row in rows if row[0] == current.recording])
+        except OSError as error:  # a full disk: end this recording, saying why; the writer stays for the next
+            self._controller.record_stop()
+            self._finish(current, RecordingEnded.WRITE_FAILED, error)
+            return
         state = snapshot.recorder
         if state.recording == current.recording and state.phase is RecorderPhase.DONE \
                 and current.received >= state.rows:
@@ -290,8 +296,9 @@ class Recordings:
         return _Open(next(self._ids), request, rows, rate, file, self._controller.operator_frames(), time.time(),
                      time.monotonic_ns())
 
-    def _finish(self, current: _Open, ended: RecordingEnded) -> None:
-        """Finish the files: the CSV under its final name and the side file."""
+    def _finish(self, current: _Open, ended: RecordingEnded, write_error: OSError | None = None) -> None:
+        """Finish the files: the CSV under its final name and the side file (after
+        ``write_error``, the CSV under its partial name)."""
         self._open = None
         request, recorder = current.request, self._controller.snapshot.recorder
         first_t_ns = current.first_t_ns
@@ -309,7 +316,7 @@ class Recordings:
             "rows_written": current.received, "cycles_missing": current.cycles_missing,
             "rows_lost": recorder.lost if recorder.recording == current.recording else 0, "faults_during": current.faults_seen,
             "ended": ended.value,
-        })
+        }, write_error)
         self._finished.notify_all()
 
 

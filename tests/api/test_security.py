@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 
 import pytest
@@ -93,3 +94,24 @@ def test_curve_end_to_end(tmp_path) -> None:
         server.close()
         curve.close()
         context.term()
+
+
+def test_create_keys_on_a_full_disk_leaves_no_half_pair(tmp_path, monkeypatch) -> None:
+    """A key pair half written (an empty server.key on a full disk) refused every later
+    `hexactl keys` there: 'has half of the server's key pair'."""
+    import zmq.auth
+
+    real = zmq.auth.create_certificates
+
+    def full_after_the_server(directory, name, *arguments, **options):
+        if name != "server":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(directory, name, *arguments, **options)
+
+    monkeypatch.setattr(zmq.auth, "create_certificates", full_after_the_server)
+    with pytest.raises(OSError, match="No space left"):
+        create_keys(tmp_path / "keys")
+    assert [path.name for path in (tmp_path / "keys").iterdir()] == ["clients"]
+    monkeypatch.undo()
+    keys = create_keys(tmp_path / "keys")
+    assert keys["server_secret"].is_file() and (keys["clients_dir"] / "client.key").is_file()

@@ -222,6 +222,45 @@ def test_a_folder_without_write_permission_is_named(tmp_path, monkeypatch, capsy
 # -- what the operator is told when a command cannot finish -------------------------
 
 
+def test_cue_with_nobody_answering_is_no_answer_not_a_traceback(tmp_path, capsys) -> None:
+    """It ended in ServiceUnavailable's traceback, exit 1."""
+    assert exits_with(["cue", "braking", "--api", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"hexactl cue: no answer from ipc://{tmp_path}/nobody") and "Traceback" not in err
+
+
+def test_cue_refused_prints_the_refusal_as_every_command_does(monkeypatch, capsys) -> None:
+    """It printed `refused: latched: latched: fault is latched: reset first` on stdout."""
+    from hexactl.adapters.api import client as client_module
+    from hexactl.adapters.api import stream_client
+    from hexactl.adapters.files.geometry_file import load_geometry
+
+    geometry = load_geometry(ROOT / "config" / "platform.toml").model_dump(mode="json")
+
+    class Service:
+        def __init__(self, endpoint: str, **options: object) -> None:
+            pass
+
+        def __enter__(self) -> Service:
+            return self
+
+        def __exit__(self, *exception: object) -> None:
+            pass
+
+        def call(self, cmd: str, **fields: object) -> dict:
+            assert cmd == "geometry"
+            return {"ok": True, "geometry": geometry}
+
+    def refused(*arguments: object, **options: object) -> None:
+        raise client_module.CommandError("latched", "fault is latched: reset first")
+
+    monkeypatch.setattr(client_module, "HexactlClient", Service)
+    monkeypatch.setattr(stream_client, "PoseStream", refused)
+    assert exits_with(["cue", "braking"]) == 1
+    captured = capsys.readouterr()
+    assert captured.err == "error latched: fault is latched: reset first\n" and "refused" not in captured.out
+
+
 def test_an_estop_nobody_answered_says_it_is_not_confirmed(tmp_path, capsys) -> None:
     assert exits_with(["estop", "--api", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
     err = capsys.readouterr().err

@@ -72,3 +72,12 @@ def test_record_wait_exits_1_when_a_fault_came_during_the_recording(capsys) -> N
     assert "/data/run.csv: 150 rows, ended: duration" in captured.out
     assert captured.err == ("hexactl record: the controller was in FAULT or ESTOP during it: the motion recorded is "
                             "not the one planned (the service's log says when)\n")
+
+
+def test_record_wait_says_why_a_recording_could_not_be_written(capsys) -> None:
+    from hexactl.adapters.cli.recording_commands import _report_written
+
+    error = "/data/run.csv.partial: No space left on device: the rows after those in it are not recorded; free some space"
+    side = {"csv": "/data/run.csv.partial", "rows_written": 40, "ended": "write_failed", "write_error": error}
+    assert _report_written(side, as_json=False) == 1
+    assert capsys.readouterr().err == f"hexactl record: it could not be written whole: {error}\n"

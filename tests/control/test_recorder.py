@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -180,3 +181,28 @@ def test_close_finishes_a_recording_under_way_as_shutdown(rig, recordings, tmp_p
     recordings.close()
     side = json.loads(Path(tmp_path / "c.json").read_text())
     assert side["ended"] == "shutdown" and side["rows_written"] == 25 and side["cycles_missing"] == 0
+
+
+def test_a_full_disk_ends_the_recording_saying_so_and_the_next_one_is_written(rig, recordings, tmp_path,
+                                                                                monkeypatch):
+    """A write that failed (ENOSPC) used to end the writer's thread with a traceback: the
+    recording never finished (`record --wait`: "not written 30 s after it should have
+    ended"), and every later one was refused busy or lost until the service restarted."""
+    def full_disk(descriptor, *arguments, **options):  # /dev/full: every write fails with ENOSPC
+        os.close(descriptor)
+        return open("/dev/full", *arguments, **options)
+
+    with monkeypatch.context() as patched:
+        patched.setattr(os, "fdopen", full_disk)
+        recordings.start("full", duration_s=10.0)
+    rig.run(25)
+    recordings.poll()
+    side = recordings.last
+    assert side["ended"] == "write_failed" and side["csv"] == str(tmp_path / "full.csv.partial")
+    assert side["write_error"].startswith(f"{tmp_path / 'full.csv.partial'}: No space left on device")
+    assert recordings.state()["state"] == "done" and not (tmp_path / "full.csv").exists()
+    rig.run()  # the stop the writer sent, carried out at the next cycle
+    assert not rig.controller.snapshot.recorder.active, "the loop goes on recording for nobody"
+    recordings.start("next", duration_s=0.05)
+    side = _finish(rig, recordings)
+    assert side["ended"] == "duration" and "write_error" not in side and (tmp_path / "next.csv").exists()

@@ -897,9 +897,12 @@ class RecordingSideFile(_Message):
     cycles_missing: int = Field(description="gaps in the cycle column (0 normally)")
     rows_lost: int = Field(description="rows the loop could not keep for want of room (0 normally)")
     faults_during: bool = Field(description="the controller was in FAULT or ESTOP during the recording")
-    ended: Literal["duration", "stopped", "shutdown", "fault"] = Field(
-        description="duration reached, stopped (record_stop), shutdown of the service, or fault (the loop died)")
+    ended: Literal["duration", "stopped", "shutdown", "fault", "write_failed"] = Field(
+        description="duration reached, stopped (record_stop), shutdown of the service, fault (the loop died), or "
+        "write_failed (the CSV could not be written: see write_error)")
     columns: list[dict[str, str]] = Field(description="each CSV column's name and unit")
+    write_error: str | None = Field(default=None, description="why the CSV could not be written whole (a full disk): "
+                                    "it keeps its name NAME.csv.partial and lacks the rows from then on")
     side_file_error: str | None = Field(default=None, description="why the side file could not be written")
 
 

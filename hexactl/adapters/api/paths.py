@@ -24,6 +24,7 @@ from pathlib import Path, PurePath
 from hexactl.adapters.api.wire import ApiError, ErrorCode
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.recording_file import LEADING_COLUMNS
+from hexactl.adapters.files.text import TextFileError, decode_text
 from hexactl.kinematics.axes import POSE_AXES
 
 MAX_FILE_BYTES = 4 * 1024 * 1024
@@ -59,9 +60,9 @@ class DataDirectories:
         finally:
             os.close(descriptor)
         try:
-            return opened, data.decode("utf-8")
-        except UnicodeDecodeError:
-            raise ApiError(invalid, f"{text}: not UTF-8 text") from None
+            return opened, decode_text(data, text)
+        except TextFileError as error:
+            raise ApiError(invalid, str(error)) from None
 
     def read_chunk(self, text: str, offset: int, length: int) -> tuple[Path, bytes, int]:
         """(real path, at most ``length`` bytes from ``offset``, the file's size) of the file

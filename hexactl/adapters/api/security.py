@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import functools
 import ipaddress
+import os
 import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -162,11 +164,29 @@ def create_keys(directory: Path, client_name: str = "client") -> dict[str, Path]
         raise FileExistsError(f"refusing to overwrite {', '.join(existing)}")
     server = [names[key].exists() for key in ("server_secret", "server_public")]
     if any(server) and not all(server):
-        raise FileExistsError(f"{directory} has half of the server's key pair; refusing to replace it")
+        raise FileExistsError(f"{directory} has half of the server's key pair; refusing to replace it: move that "
+                              "half away to make a new pair, or choose another folder")
     names["clients_dir"].mkdir(parents=True, exist_ok=True)
     made = ["server", client_name] if not any(server) else [client_name]
-    for name in made:
-        zmq.auth.create_certificates(directory, name)
-        (directory / f"{name}.key_secret").chmod(0o600)  # pyzmq writes it with the umask's permissions
-    shutil.copy(names["client_public"], names["clients_dir"] / names["client_public"].name)
+    # Made in a folder of its own (mode 0700) beside them, then linked in: pyzmq writes a secret key with the
+    # umask's permissions, and a write that fails (a full disk) must not leave half a pair, which refuses the next.
+    staging = Path(tempfile.mkdtemp(prefix=".keys.", dir=directory))
+    try:
+        for name in made:
+            zmq.auth.create_certificates(staging, name)
+            (staging / f"{name}.key_secret").chmod(0o600)
+        allowed = shutil.copy(staging / names["client_public"].name, staging / "allowed")
+        linked: list[Path] = []
+        try:
+            for name in made:
+                for suffix in (".key", ".key_secret"):
+                    os.link(staging / f"{name}{suffix}", directory / f"{name}{suffix}")  # never over a file
+                    linked.append(directory / f"{name}{suffix}")
+            os.replace(allowed, names["clients_dir"] / names["client_public"].name)
+        except OSError:
+            for path in linked:
+                path.unlink(missing_ok=True)
+            raise
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     return names

@@ -31,6 +31,7 @@ from hexactl.adapters.cli.common import (
     connect,
     connection_parser,
     load_config,
+    write_failed,
 )
 
 if TYPE_CHECKING:
@@ -223,8 +224,10 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     try:
         calibrated = calibration_geometry(nominal, result, info)
         save_geometry(calibrated, output, overwrite=arguments.force)
-    except (GeometryError, OSError) as error:
+    except GeometryError as error:
         raise CliError(str(error)) from None
+    except OSError as error:
+        raise write_failed(output, error) from None
     print(f"wrote {output}")
     if arguments.report:
         validation = None
@@ -233,7 +236,10 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
 
             validation = ValidationComparison(validate_geometry(nominal, true), validate_geometry(calibrated, true))
         report = CalibrationReport(str(arguments.data), created, nominal, result, problems, validation, true)
-        page = write_report(arguments.report, report, overwrite=arguments.force)
+        try:
+            page = write_report(arguments.report, report, overwrite=arguments.force)
+        except OSError as error:
+            raise write_failed(arguments.report, error) from None
         print(f"wrote {page}")
     return 0
 
@@ -315,7 +321,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
         try:
             write_plan(arguments.output, plan, overwrite=arguments.force, comments=comments)
         except OSError as error:
-            raise CliError(str(error)) from None
+            raise write_failed(arguments.output, error) from None
         print(f"{plan.message}\nwrote {arguments.output}")
     else:
         sys.stdout.write(format_plan(plan, comments))
@@ -363,10 +369,13 @@ def run_simulate(arguments: argparse.Namespace) -> int:
             write_atomic(arguments.output, text.encode("utf-8"), overwrite=arguments.force)
         else:
             write_measurements(arguments.output, data, overwrite=arguments.force, comments=comments)
-        if arguments.true_output:
-            save_geometry(true, arguments.true_output, overwrite=arguments.force)
     except OSError as error:
-        raise CliError(str(error)) from None
+        raise write_failed(arguments.output, error) from None
+    if arguments.true_output:
+        try:
+            save_geometry(true, arguments.true_output, overwrite=arguments.force)
+        except OSError as error:
+            raise write_failed(arguments.true_output, error) from None
     print(f"wrote {arguments.output} ({len(data)} postures)" + (f" and {arguments.true_output}" if arguments.true_output else ""))
     return 0
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import errno
 import os
 import re
 import sys
@@ -251,6 +252,16 @@ def check_writable(path: Path, *, folder: bool = False) -> None:
         raise CliError(f"cannot write {path}: {existing} is a file, not a folder; choose another place")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise CliError(f"cannot write {path}: no permission to write into {existing}; choose another place")
+
+
+def write_failed(path: str | os.PathLike[str], error: OSError) -> CliError:
+    """The :class:`CliError` for ``error`` while writing ``path``: the file, why, and what
+    to do (a full disk's ``[Errno 28]`` named neither the file nor that). An error of
+    hexactl's own (a file it refuses to replace: it says to use --force) is passed on."""
+    if error.strerror is None:
+        return CliError(str(error))
+    advice = "free some space there" if error.errno in (errno.ENOSPC, errno.EDQUOT) else "check the place"
+    return CliError(f"cannot write {path}: {error.strerror}; {advice}, or choose another place")
 
 
 def config_input(arguments: argparse.Namespace) -> Path:

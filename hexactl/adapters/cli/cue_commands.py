@@ -11,10 +11,23 @@ nobody answered or the arguments or files are bad.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hexactl.adapters.cli.common import CliError, connect
-from hexactl.adapters.cli.service_commands import EXIT_OK, EXIT_REFUSED, client_parser
+from hexactl.adapters.cli.service_commands import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
+    EXIT_REFUSED,
+    client_parser,
+    format_error_reply,
+)
+
+if TYPE_CHECKING:  # loaded by the command only
+    from hexactl.adapters.api.client import HexactlClient
+    from hexactl.cueing.parameters import CueingParameters
+    from hexactl.cueing.washout import VehicleTrajectory
 
 CUE_SOURCE = "hexactl cue"
 
@@ -41,13 +54,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 
 def run_cue(arguments: argparse.Namespace) -> int:
-    from hexactl.adapters.api.client import CommandError, HexactlClient
-    from hexactl.adapters.api.stream_client import PoseStream
+    from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
     from hexactl.adapters.files.cueing_file import CueingFileError, load_cueing_parameters, load_vehicle_trajectory
-    from hexactl.application.cueing import plan_cue
     from hexactl.cueing.parameters import CueingParameters
-    from hexactl.cueing.workspace_gain import WorkspaceError
-    from hexactl.kinematics.geometry import Geometry
 
     try:
         vehicle = load_vehicle_trajectory(arguments.file)
@@ -56,6 +65,25 @@ def run_cue(arguments: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     assert isinstance(client, HexactlClient)
+    try:
+        return _cue(client, vehicle, parameters, arguments)
+    except ServiceUnavailable as error:
+        print(f"hexactl cue: {error}", file=sys.stderr)
+        return EXIT_NO_ANSWER
+    except CommandError as error:  # printed as every command prints a refusal
+        print(format_error_reply({"error": {"code": error.code, "message": error.message, "details": error.details}}),
+              file=sys.stderr)
+        return EXIT_REFUSED
+
+
+def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingParameters,
+         arguments: argparse.Namespace) -> int:
+    """Plan the cues on the service's geometry and stream them; the exit status."""
+    from hexactl.adapters.api.stream_client import PoseStream
+    from hexactl.application.cueing import plan_cue
+    from hexactl.cueing.workspace_gain import WorkspaceError
+    from hexactl.kinematics.geometry import Geometry
+
     with client:
         geometry = Geometry.model_validate(client.call("geometry")["geometry"])
         try:
@@ -67,13 +95,9 @@ def run_cue(arguments: argparse.Namespace) -> int:
               f"specific force RMS error {plan.rms_error:.3f} m/s² (planned)")
         if arguments.plan_only:
             return EXIT_OK
-        try:
-            with PoseStream(client, CUE_SOURCE, timeout_ms=CUE_TIMEOUT_MS) as stream:
-                dropped = stream.send_paced(plan.poses, plan.period_s)
-                record = client.call("status")["status"]
-        except CommandError as error:
-            print(f"refused: {error.code}: {error}")
-            return EXIT_REFUSED
+        with PoseStream(client, CUE_SOURCE, timeout_ms=CUE_TIMEOUT_MS) as stream:
+            dropped = stream.send_paced(plan.poses, plan.period_s)
+            record = client.call("status")["status"]
         received = record.get("stream_input") or {}
         ended = record.get("last_stream") if record.get("stream") is None else None
         print(f"streamed {len(plan.poses) - dropped} poses ({dropped} dropped here); the service forwarded "

@@ -84,12 +84,19 @@ def fill_endpoints(arguments: argparse.Namespace) -> None:
 def _read_client_file() -> dict[str, Any]:
     path = client_config_path()
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except FileNotFoundError:
         return {}
-    except (OSError, UnicodeDecodeError) as error:
+    except OSError as error:
         raise CliError(f"{path}: cannot read the client file: {error}; fix it or set {CLIENT_CONFIG_VARIABLE}") from None
     import tomllib  # only when there is a file
+
+    from hexactl.adapters.files.text import TextFileError, decode_text
+
+    try:
+        text = decode_text(data, f"{path} (the client file)")
+    except TextFileError as error:
+        raise CliError(str(error)) from None
 
     try:
         values = tomllib.loads(text)

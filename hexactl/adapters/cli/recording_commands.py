@@ -135,6 +135,8 @@ def _report_written(side: dict[str, Any], as_json: bool) -> int:
     problems = []
     if problem := side.get("problem"):
         problems.append(problem)
+    elif side.get("write_error"):
+        problems.append(f"it could not be written whole: {side['write_error']}")
     elif side.get("ended") not in GOOD_ENDINGS:
         problems.append(f"it ended early: {side.get('ended')} (the service stopped, or its loop failed)")
     if side.get("cycles_missing"):
@@ -202,14 +204,18 @@ _UNITS = {"us": "µs", "deg": "°"}
 def _read_recording(path: Path) -> tuple[list[str], list[list[float]]]:
     """The header and the columns (NaN for an empty cell); CliError for a missing or garbled file."""
     import csv
+    import io
+
+    from hexactl.adapters.files.text import TextFileError, decode_text
 
     try:
-        with open(path, encoding="utf-8", newline="") as handle:
-            rows = list(csv.reader(handle))
+        rows = list(csv.reader(io.StringIO(decode_text(path.read_bytes(), str(path)), newline="")))
     except FileNotFoundError:
         raise CliError(f"{path}: no such file (a recording is NAME.csv in the service's data directory)") from None
-    except (OSError, UnicodeDecodeError) as error:
+    except OSError as error:
         raise CliError(f"{path}: cannot read it: {error}") from None
+    except TextFileError as error:
+        raise CliError(str(error)) from None
     if not rows or "t_s" not in rows[0] or "cycle" not in rows[0]:
         raise CliError(f"{path}: not a recording (its header has no t_s and cycle columns): plot a file made by "
                        "hexactl record")

@@ -30,6 +30,7 @@ from hexactl.adapters.cli.common import (
     pose_argument,
     positive_float,
     telemetry_rate,
+    write_failed,
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
@@ -265,11 +266,14 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
     path = Path(arguments.file)
     if not (arguments.send or path.is_file()):
         return "load_calibration", {"path": arguments.file}
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise CliError(f"{arguments.file}: cannot read: {error}") from None
     import tomllib  # light; only for this command
+
+    from hexactl.adapters.files.text import TextFileError, read_text
+
+    try:
+        text = read_text(arguments.file)
+    except TextFileError as error:
+        raise CliError(str(error)) from None
 
     try:
         tomllib.loads(text)
@@ -391,8 +395,8 @@ def run_keys(arguments: argparse.Namespace) -> int:
     check_writable(arguments.out, folder=True)
     try:
         made = create_keys(arguments.out, arguments.name)
-    except (FileExistsError, OSError) as error:
-        raise CliError(str(error)) from None
+    except OSError as error:
+        raise write_failed(arguments.out, error) from None
     print(f"server: --curve-secret {made['server_secret']} --curve-clients {made['clients_dir']}")
     print(f"client: --curve-server {made['server_public']} --curve-client {made['client_secret']}")
     print("keep the .key_secret files private; copy a client's .key into the clients directory to allow it")

@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
+from hexactl.adapters.files.text import TextFileError, read_text
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import VehicleTrajectory
 
@@ -160,6 +161,6 @@ def _uniform_period(times: np.ndarray, lines: list[int], source: str) -> float:
 
 def _read(path: str | os.PathLike[str]) -> str:
     try:
-        return Path(path).read_text(encoding="utf-8-sig")  # -sig: a spreadsheet's byte-order mark is not a column name
-    except (OSError, UnicodeDecodeError) as error:
-        raise CueingFileError(f"{path}: cannot read: {error}") from None
+        return read_text(path)
+    except TextFileError as error:
+        raise CueingFileError(str(error)) from None

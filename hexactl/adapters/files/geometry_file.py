@@ -15,6 +15,7 @@ from pathlib import Path
 import tomli_w
 
 from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.text import TextFileError, read_text
 from hexactl.kinematics.geometry import Geometry, GeometryError, geometry_from_mapping
 
 
@@ -29,12 +30,11 @@ def parse_geometry(text: str, source: str) -> Geometry:
 
 def load_geometry(path: str | os.PathLike[str]) -> Geometry:
     """Read a geometry or calibration file; :class:`GeometryError` names the file, key and problem."""
-    location = Path(path)
     try:
-        text = location.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise GeometryError(f"{location}: cannot read: {error}") from None
-    return parse_geometry(text, str(location))
+        text = read_text(path)
+    except TextFileError as error:
+        raise GeometryError(str(error)) from None
+    return parse_geometry(text, str(path))
 
 
 def geometry_to_toml(geometry: Geometry) -> str:

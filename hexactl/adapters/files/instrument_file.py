@@ -20,11 +20,11 @@ from __future__ import annotations
 import os
 import tomllib
 from math import radians
-from pathlib import Path
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from hexactl.adapters.files.text import TextFileError, read_text
 from hexactl.calibration.observations import Instrument, LaserTracker, Station, Theodolites
 from hexactl.kinematics.geometry import describe_validation_error
 from hexactl.kinematics.numbers import Number, SixNumbers
@@ -74,7 +74,7 @@ def parse_instrument(text: str, source: str) -> Instrument:
 def load_instrument(path: str | os.PathLike[str]) -> Instrument:
     """Read and validate an instrument file. Raises :class:`InstrumentFileError`."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InstrumentFileError(f"{path}: cannot read: {error}") from None
+        text = read_text(path)
+    except TextFileError as error:
+        raise InstrumentFileError(str(error)) from None
     return parse_instrument(text, str(path))

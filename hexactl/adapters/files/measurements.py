@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.text import TextFileError, decode_text
 from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.observations import Instrument, Theodolites, point_covariance
 from hexactl.calibration.planning import PosturePlan
@@ -81,9 +82,11 @@ def read_measurements(path: str | os.PathLike[str], feature_point_count: int,
     location = Path(path)
     try:
         raw = location.read_bytes()
-        text = raw.decode("utf-8-sig")
-    except (OSError, UnicodeDecodeError) as error:
+        text = decode_text(raw, str(location))
+    except OSError as error:
         raise MeasurementFileError(f"{location}: cannot read: {error}") from None
+    except TextFileError as error:
+        raise MeasurementFileError(str(error)) from None
     return parse_measurements(text, str(location), feature_point_count, hashlib.sha256(raw).hexdigest(), instrument)
 
 

@@ -149,22 +149,36 @@ class RecordingFile:
             pass
         os.close(self._descriptor)
 
-    def finish(self, description: Mapping[str, Any]) -> dict[str, Any]:
+    def finish(self, description: Mapping[str, Any], write_error: OSError | None = None) -> dict[str, Any]:
         """Close the CSV, move it to ``NAME.csv`` (kept under its partial name if a file of
         that name appeared meanwhile) and write ``NAME.json``: ``description`` with the
         CSV's path (``csv``) and ``columns``. Returns the side file's content, with
-        ``side_file_error`` if it could not be written (the CSV stands)."""
+        ``side_file_error`` if it could not be written (the CSV stands). After a write that
+        failed (``write_error``, or one here: a full disk) the rows are not all in the CSV:
+        it keeps its partial name and the side file says why (``write_error``)."""
         handle, descriptor = self._handle, self._descriptor
-        handle.flush()
-        os.fsync(handle.fileno())
-        handle.close()
-        path = self.path
         try:
-            os.link(self._partial, path.name, src_dir_fd=descriptor, dst_dir_fd=descriptor, follow_symlinks=False)
-            os.unlink(self._partial, dir_fd=descriptor)
-        except FileExistsError:
+            handle.flush()
+            os.fsync(handle.fileno())
+        except OSError as error:
+            write_error = write_error or error
+        try:
+            handle.close()
+        except OSError:  # what the flush could not write: write_error says so
+            pass
+        path = self.path
+        failed = {}
+        if write_error is not None:
             path = self.directory / self._partial
-        side = {**description, "csv": str(path),
+            failed["write_error"] = (f"{path}: {write_error.strerror or write_error}: the rows after those in it are "
+                                     f"not recorded; free some space in {self.directory}")
+        else:
+            try:
+                os.link(self._partial, path.name, src_dir_fd=descriptor, dst_dir_fd=descriptor, follow_symlinks=False)
+                os.unlink(self._partial, dir_fd=descriptor)
+            except FileExistsError:
+                path = self.directory / self._partial
+        side = {**description, "csv": str(path), **failed,
                 "columns": [{"name": name, "unit": unit} for name, unit in columns(self._signals)]}
         try:
             # Through the descriptor, like the CSV: into the directory the recording started in.

@@ -28,6 +28,7 @@ from hexactl.adapters.files.measurements import (
     PointRows,
     parse_point_rows,
 )
+from hexactl.adapters.files.text import TextFileError, read_text
 from hexactl.calibration.data import MeasurementData, screen_measurements
 from hexactl.kinematics.geometry import Geometry
 
@@ -80,9 +81,9 @@ class CsvInstrument:
 
     def _rows(self) -> PointRows:
         try:
-            text = self.path.read_text(encoding="utf-8-sig")
-        except (OSError, UnicodeDecodeError) as error:
-            raise InstrumentError(f"{self.path}: cannot read: {error}") from None
+            text = read_text(self.path)
+        except TextFileError as error:
+            raise InstrumentError(str(error)) from None
         try:
             rows = parse_point_rows(text, str(self.path), self._feature_point_count)
         except MeasurementFileError as error:
