@@ -55,13 +55,16 @@ class CommandError(Exception):
 
 
 class ZmqConnection:
-    """A ZeroMQ socket of ``kind`` connected to ``endpoint``, in a context of its own, closed with the object."""
+    """A ZeroMQ socket of ``kind`` connected to ``endpoint``, closed with the object.
+
+    In the process's shared context: a context of its own, left to the garbage collector
+    unclosed within a reference cycle (a timed-out request's traceback makes one), is
+    finalised before its socket and waits for it for ever, hanging the program."""
 
     def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int | bytes]) -> None:
         self.endpoint = endpoint
         self.curve = curve
-        self._context = zmq.Context()
-        self.socket = self._context.socket(kind)
+        self.socket = zmq.Context.instance().socket(kind)
         self.socket.linger = 0
         for option, value in options.items():
             self.socket.setsockopt(option, value)
@@ -73,7 +76,6 @@ class ZmqConnection:
 
     def close(self) -> None:
         self.socket.close()
-        self._context.term()
 
     def __enter__(self) -> Self:
         return self
