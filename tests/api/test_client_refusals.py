@@ -8,8 +8,10 @@ import subprocess
 import sys
 
 import pytest
+import zmq
 
-from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
+from hexactl.adapters.api.server import sender_of
 from hexactl.adapters.api.wire import MAX_REQUEST_BYTES
 
 WAIT_S = 30.0  # bounds a hang only: a reply takes milliseconds
@@ -68,3 +70,17 @@ def test_a_client_left_unclosed_is_collected_without_hanging_its_program() -> No
                           capture_output=True, text=True, timeout=120)  # a hang guard only
     assert done.returncode == 0 and done.stdout.strip() == "collected", done.stderr
 
+
+def test_an_empty_name_is_an_unnamed_client() -> None:
+    """Found from outside: ``HexactlClient(endpoint, name="")`` raised ZMQError 'Invalid
+    argument' (ZeroMQ takes no empty connection property), naming nothing."""
+    context = zmq.Context.instance()
+    with context.socket(zmq.ROUTER) as router:
+        router.linger = 0
+        port = router.bind_to_random_port("tcp://127.0.0.1")
+        with HexactlClient(f"tcp://127.0.0.1:{port}", timeout_s=0.5, name="") as client:
+            with pytest.raises(ServiceUnavailable):  # nobody answers: the request is all this needs
+                client.request("status")
+        assert router.poll(WAIT_S * 1000)
+        frames = router.recv_multipart(copy=False)
+        assert sender_of(frames[-1]) == "an unnamed client (127.0.0.1)"

@@ -92,7 +92,7 @@ class HexactlClient(ZmqConnection):
     """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
     ``name`` names this client to the service, for people (its events and log say who sent
     each command by it: :data:`~hexactl.adapters.api.protocol.CLIENT_NAME_PROPERTY`); by
-    default ``PROGRAM USER@HOST``.
+    default ``PROGRAM USER@HOST``; ``""``: none (the service says "an unnamed client").
 
     A DEALER socket rather than REQ so that a timed-out request leaves the client
     usable: a late reply to it is recognised by its ``id`` and dropped. ``IMMEDIATE``
@@ -111,8 +111,10 @@ class HexactlClient(ZmqConnection):
         self, endpoint: str = DEFAULT_API_ENDPOINT, *, timeout_s: float = DEFAULT_TIMEOUT_S, curve: CurveClientKeys | None = None,
         name: str | None = None,
     ) -> None:
-        metadata = f"{CLIENT_NAME_PROPERTY}:{default_client_name() if name is None else name}".encode()
-        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1, zmq.METADATA: metadata})
+        name = default_client_name() if name is None else name
+        # ZeroMQ refuses an empty property: "" leaves the client unnamed.
+        metadata = {zmq.METADATA: f"{CLIENT_NAME_PROPERTY}:{name}".encode()} if name else {}
+        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1, **metadata})
         self.timeout_s = timeout_s
         self._ids = itertools.count(1)
 
