@@ -60,7 +60,10 @@ def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig)
     if s.state is not ControlState.DISABLED and change > config.calibration_max_change_mm:
         return CommandResult.failure(ErrorCode.CALIBRATION_CHANGE_TOO_LARGE,
                                      f"calibration {new.calibration_id} would move a leg by {change:.2f} mm "
-                                     f"(limit {config.calibration_max_change_mm:g} mm)", change_mm=change)
+                                     f"(limit {config.calibration_max_change_mm:g} mm), too far to ramp in while "
+                                     "enabled: check the file; if it is right, stop and disable first (disabled, "
+                                     "nothing is ramped: the next enable holds where it puts the measured legs)",
+                                     change_mm=change)
     return change
 
 

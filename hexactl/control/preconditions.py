@@ -171,8 +171,10 @@ def check_pause(view: CoreView) -> Refusal:
 def check_resume(view: CoreView) -> Refusal:
     if view.sequence is None:
         return ErrorCode.NO_SEQUENCE, "no sequence is playing"
+    if view.sequence.phase is SequencePhase.PAUSING:
+        return ErrorCode.NOT_PAUSED, "the sequence is still braking to its pause: resume once it is paused"
     if view.sequence.phase is not SequencePhase.PAUSED:
-        return ErrorCode.NOT_PAUSED, f"the sequence is {view.sequence.phase.value}, not paused"
+        return ErrorCode.NOT_PAUSED, f"the sequence is {view.sequence.phase.value}, not paused: pause it first"
     return None
 
 

@@ -4,10 +4,14 @@ the service's answer to a request it could not read is the reply, not a time-out
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import pytest
+import zmq
 
-from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
+from hexactl.adapters.api.server import sender_of
 from hexactl.adapters.api.wire import MAX_REQUEST_BYTES
 
 WAIT_S = 30.0  # bounds a hang only: a reply takes milliseconds
@@ -39,3 +43,44 @@ def test_self_is_a_field_like_any_other(shared_service) -> None:
     with HexactlClient(shared_service.api, timeout_s=WAIT_S) as client:
         reply = client.request("status", self=1)
         assert reply["error"]["code"] == "invalid_request" and "self" in reply["error"]["message"]
+
+
+UNCLOSED_CLIENTS = """
+import gc
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
+
+client = HexactlClient("tcp://127.0.0.1:9", timeout_s=0.05)  # nobody there: it times out
+try:
+    client.request("status")
+except ServiceUnavailable:
+    pass
+holder = {"telemetry": TelemetrySubscriber("tcp://127.0.0.1:9")}
+holder["itself"] = holder  # a cycle, as any object holding a client and a bound method of its own has
+del client, holder
+gc.collect()
+print("collected")
+"""
+
+
+def test_a_client_left_unclosed_is_collected_without_hanging_its_program() -> None:
+    """Found from outside: a client dropped without close() (the README's example never
+    closes it) after a time-out hung its program for ever at the next garbage collection:
+    its private ZeroMQ context's finaliser waited for a socket the collector had not closed."""
+    done = subprocess.run([sys.executable, "-W", "ignore::ResourceWarning", "-c", UNCLOSED_CLIENTS],
+                          capture_output=True, text=True, timeout=120)  # a hang guard only
+    assert done.returncode == 0 and done.stdout.strip() == "collected", done.stderr
+
+
+def test_an_empty_name_is_an_unnamed_client() -> None:
+    """Found from outside: ``HexactlClient(endpoint, name="")`` raised ZMQError 'Invalid
+    argument' (ZeroMQ takes no empty connection property), naming nothing."""
+    context = zmq.Context.instance()
+    with context.socket(zmq.ROUTER) as router:
+        router.linger = 0
+        port = router.bind_to_random_port("tcp://127.0.0.1")
+        with HexactlClient(f"tcp://127.0.0.1:{port}", timeout_s=0.5, name="") as client:
+            with pytest.raises(ServiceUnavailable):  # nobody answers: the request is all this needs
+                client.request("status")
+        assert router.poll(WAIT_S * 1000)
+        frames = router.recv_multipart(copy=False)
+        assert sender_of(frames[-1]) == "an unnamed client (127.0.0.1)"

@@ -260,3 +260,13 @@ def test_read_chunk_reads_any_size_in_pieces_inside_the_data_directories_only(tm
     with pytest.raises(ApiError) as refused:
         directories.read_chunk("../outside.csv", 0, 10)
     assert refused.value.code == ErrorCode.FORBIDDEN_PATH
+
+
+@pytest.mark.parametrize("offset", [1000, 2**62, 2**63 - 1, 2**63, 2**64, 10**30])
+def test_read_file_from_any_offset_beyond_the_end_is_the_end(service, offset) -> None:
+    """Found from outside: an offset from 2**63 on was an internal_error (OverflowError),
+    2**63 - 1 a file_not_found ("Invalid argument"); the schema allows any integer."""
+    (service.data_dir / "small.csv").write_bytes(b"t_s\n0.0\n")
+    reply = call(service, "read_file", path="small.csv", offset=offset)
+    assert reply["ok"], reply
+    assert (reply["data_b64"], reply["size"], reply["eof"], reply["offset"]) == ("", 8, True, offset)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from hexactl.adapters.api.messages import COMMANDS
@@ -47,3 +48,36 @@ def test_every_error_code_is_documented() -> None:
     text = DOCUMENT.read_text(encoding="utf-8").split("### Error codes", 1)[1].split("## Telemetry", 1)[0]
     missing = [code.value for code in (*ApiErrorCode, *ControllerErrorCode) if f"`{code.value}`" not in text]
     assert not missing, f"error codes not in docs/api.md's Error codes: {missing}"
+
+
+def _table_rows(section: str) -> dict[str, str]:
+    """The rows of a section's tables by the names in their first cell (backquoted)."""
+    rows: dict[str, str] = {}
+    for line in section.splitlines():
+        first, _, rest = line.removeprefix("| ").partition(" | ")
+        if line.startswith("| `") and rest:
+            rows.update(dict.fromkeys(re.findall(r"`([a-z_]+)`", first), rest))
+    return rows
+
+
+def test_every_request_field_and_telemetry_field_is_in_its_table() -> None:
+    """Found from outside: ``move``'s ``tolerance_mm``, the ``predicted_accuracy`` of
+    ``status`` and ``validate_pose`` and telemetry's ``jog`` were in the schema only."""
+    from hexactl.adapters.api.messages import REPLY_MODELS, REQUEST_MODELS, OkReply, Telemetry
+
+    text = DOCUMENT.read_text(encoding="utf-8")
+    commands = _table_rows(text.split("### Commands", 1)[1].split("**Sequences.**", 1)[0])
+    missing = []
+    for model in REQUEST_MODELS:
+        command = model.model_fields["cmd"].annotation.__args__[0]
+        fields = [name for name in model.model_fields if name not in ("v", "id", "cmd", "deadline_ms")]
+        row = commands[command]
+        if not row.startswith("as "):  # "as move": the same fields
+            missing += [f"{command}: {name}" for name in fields if f"`{name}`" not in row.split(" | ")[0]]
+        reply = REPLY_MODELS.get(command)
+        if reply is not None and "the side file's fields" not in row:
+            missing += [f"{command} reply: {name}" for name in reply.model_fields
+                        if name not in OkReply.model_fields and f"`{name}`" not in row.split(" | ")[-1]]
+    telemetry = _table_rows(text.split("## Telemetry", 1)[1].split("## Command line", 1)[0])
+    missing += [f"telemetry: {name}" for name in Telemetry.model_fields if name not in telemetry]
+    assert not missing, f"not in docs/api.md's tables: {missing}"

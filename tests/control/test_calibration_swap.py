@@ -189,6 +189,12 @@ def test_a_calibration_that_would_move_a_leg_far_is_refused(rig, geometry):
     result = rig.controller.load_calibration(shifted, "shifted")
     assert not result.ok and result.error == "calibration_change_too_large"
     assert result.details["change_mm"] == pytest.approx(30.0)
+    # Found from outside: the refusal said no way out (a rollback to the nominal one was
+    # refused the same way). What it says to do works: disabled, the swap ramps nothing.
+    assert "stop and disable first" in result.message
+    assert rig.controller.disable().ok
+    rig.run(2)
+    assert rig.controller.load_calibration(shifted, "shifted").ok
 
 
 def test_the_remaining_sequence_is_checked_against_the_new_calibration(make_rig, geometry):

@@ -100,7 +100,13 @@ def test_pause_mid_move_resume_and_finish_on_the_path(rig):
     rig.run(5)  # waypoint 1 is the zero posture: already there, dwelling
     rig.run_until(lambda: rig.controller.telemetry().sequence.index == 2)
     rig.run(300)
+    refused = rig.controller.resume()
+    assert refused.error == "not_paused" and refused.message.endswith("pause it first"), refused
     assert rig.controller.pause().ok
+    rig.run(2)
+    # Found from outside: resumed while still braking, the refusal said only "pausing, not paused".
+    refused = rig.controller.resume()
+    assert refused.error == "not_paused" and "resume once it is paused" in refused.message, refused
     rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "paused")
     paused = rig.controller.telemetry().pose_command
     rig.run(200)

@@ -55,13 +55,16 @@ class CommandError(Exception):
 
 
 class ZmqConnection:
-    """A ZeroMQ socket of ``kind`` connected to ``endpoint``, in a context of its own, closed with the object."""
+    """A ZeroMQ socket of ``kind`` connected to ``endpoint``, closed with the object.
+
+    In the process's shared context: a context of its own, left to the garbage collector
+    unclosed within a reference cycle (a timed-out request's traceback makes one), is
+    finalised before its socket and waits for it for ever, hanging the program."""
 
     def __init__(self, kind: int, endpoint: str, curve: CurveClientKeys | None, options: dict[int, int | bytes]) -> None:
         self.endpoint = endpoint
         self.curve = curve
-        self._context = zmq.Context()
-        self.socket = self._context.socket(kind)
+        self.socket = zmq.Context.instance().socket(kind)
         self.socket.linger = 0
         for option, value in options.items():
             self.socket.setsockopt(option, value)
@@ -73,7 +76,6 @@ class ZmqConnection:
 
     def close(self) -> None:
         self.socket.close()
-        self._context.term()
 
     def __enter__(self) -> Self:
         return self
@@ -90,7 +92,7 @@ class HexactlClient(ZmqConnection):
     """Commands to the service at ``endpoint``; one request at a time, not thread-safe.
     ``name`` names this client to the service, for people (its events and log say who sent
     each command by it: :data:`~hexactl.adapters.api.protocol.CLIENT_NAME_PROPERTY`); by
-    default ``PROGRAM USER@HOST``.
+    default ``PROGRAM USER@HOST``; ``""``: none (the service says "an unnamed client").
 
     A DEALER socket rather than REQ so that a timed-out request leaves the client
     usable: a late reply to it is recognised by its ``id`` and dropped. ``IMMEDIATE``
@@ -109,8 +111,10 @@ class HexactlClient(ZmqConnection):
         self, endpoint: str = DEFAULT_API_ENDPOINT, *, timeout_s: float = DEFAULT_TIMEOUT_S, curve: CurveClientKeys | None = None,
         name: str | None = None,
     ) -> None:
-        metadata = f"{CLIENT_NAME_PROPERTY}:{default_client_name() if name is None else name}".encode()
-        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1, zmq.METADATA: metadata})
+        name = default_client_name() if name is None else name
+        # ZeroMQ refuses an empty property: "" leaves the client unnamed.
+        metadata = {zmq.METADATA: f"{CLIENT_NAME_PROPERTY}:{name}".encode()} if name else {}
+        super().__init__(zmq.DEALER, endpoint, curve, {zmq.IMMEDIATE: 1, **metadata})
         self.timeout_s = timeout_s
         self._ids = itertools.count(1)
 

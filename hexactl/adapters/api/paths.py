@@ -70,7 +70,8 @@ class DataDirectories:
         recording is read a chunk per request."""
         opened, descriptor, size_bytes = self._open(text)
         try:
-            return opened, os.pread(descriptor, length, offset), size_bytes
+            # Beyond the end there is nothing to read: pread refuses offsets from 2**63 - 1 on.
+            return opened, os.pread(descriptor, length, offset) if offset < size_bytes else b"", size_bytes
         except OSError as error:
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot read: {error.strerror}") from None
         finally:
