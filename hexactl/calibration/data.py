@@ -226,6 +226,8 @@ STROKE_READING_TOLERANCE_MM = 1.0
 
 def _repeated_rows(data: MeasurementData) -> list[RowProblem]:
     """A problem for each row equal in every value to an earlier one, naming that one."""
+    if len(data) == 0:
+        return []
     measured = data.points_mm if data.points_mm is not None else data.poses
     values = np.column_stack([data.locked_leg, data.readings_mm, measured.reshape(len(data), -1)])
     _, first, which = np.unique(values, axis=0, return_index=True, return_inverse=True)
