@@ -164,7 +164,9 @@ def screen_measurements(
       actuators' [min, max], when given), where no actuator can be: a typo.
     - a row that repeats an earlier one to the last digit: no instrument measures a
       posture twice alike, so it was pasted or appended twice (counted twice, it would
-      claim a better calibration than the data give).
+      claim a better calibration than the data give);
+    - a row whose readings ``legs`` (the nominal geometry, when given) explain far better
+      with its points in another order: targets swapped in that row.
 
     Measured points whose typical spread differs from the feature points' by more than
     :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
@@ -206,6 +208,8 @@ def screen_measurements(
                     problems.append(RowProblem(int(line), f"l{leg} reads {reading:.4f} mm, outside the actuators' "
                                                f"stroke [{low:g}, {high:g}] mm where no leg can be: a typo?"))
     problems.extend(_repeated_rows(data))
+    if legs is not None:
+        problems.extend(_swapped_rows(data, feature_points_mm, legs))
     for leg in range(1, LEG_COUNT + 1):
         rows = data.locked_rows(leg)
         if len(rows) == 0:
@@ -226,6 +230,8 @@ STROKE_READING_TOLERANCE_MM = 1.0
 
 def _repeated_rows(data: MeasurementData) -> list[RowProblem]:
     """A problem for each row equal in every value to an earlier one, naming that one."""
+    if len(data) == 0:
+        return []
     measured = data.points_mm if data.points_mm is not None else data.poses
     values = np.column_stack([data.locked_leg, data.readings_mm, measured.reshape(len(data), -1)])
     _, first, which = np.unique(values, axis=0, return_index=True, return_inverse=True)
@@ -274,12 +280,41 @@ to tell a wrong order from the right one, whose misfit is a calibration's millim
 def _label_problem(data: MeasurementData, feature_points_mm: NDArray, legs: LegModel) -> RowProblem | None:
     """A file-level problem if the readings fit the measured points' poses far better with
     the points in another order than the file's columns name them (up to four points)."""
-    count = data.point_count
-    if data.points_mm is None or len(data) == 0 or count > 4:
+    if data.points_mm is None or len(data) == 0 or data.point_count > 4:
         return None
-    model = np.asarray(feature_points_mm, dtype=float)[:count]
-    points, readings = data.points_mm[:LABEL_CHECK_ROWS], data.readings_mm[:LABEL_CHECK_ROWS]
+    model = np.asarray(feature_points_mm, dtype=float)[:data.point_count]
+    found = _better_order(data.points_mm[:LABEL_CHECK_ROWS], data.readings_mm[:LABEL_CHECK_ROWS], model, legs)
+    if found is None:
+        return None
+    as_read, best, swaps = found
+    return RowProblem(0, f"the readings are {as_read:.3g} mm (median) from what the nominal geometry gives for the "
+                         f"poses of the measured points, {best:.3g} mm if {swaps}: check the file's header (p1, p2, "
+                         "… are the geometry's feature_points in their order)")
 
+
+def _swapped_rows(data: MeasurementData, feature_points_mm: NDArray, legs: LegModel) -> list[RowProblem]:
+    """A problem for each row whose readings fit its points' pose far better with the points
+    in another order (up to four points): targets swapped in sighting or in typing. On a
+    symmetric target the distances are right, and such a row tilts its pose so far that
+    the fit follows it to a machine a metre off."""
+    if data.points_mm is None or data.point_count > 4:
+        return []
+    model = np.asarray(feature_points_mm, dtype=float)[:data.point_count]
+    problems = []
+    for line, points, readings in zip(data.lines, data.points_mm, data.readings_mm):
+        if (found := _better_order(points[None], readings[None], model, legs)) is not None:
+            as_read, best, swaps = found
+            problems.append(RowProblem(int(line), f"the readings are {as_read:.3g} mm (median) from what the nominal "
+                                       f"geometry gives for the pose of this row's points, {best:.3g} mm if {swaps}: "
+                                       "targets swapped? correct the row, or measure the posture again"))
+    return problems
+
+
+def _better_order(points: NDArray, readings: NDArray, model: NDArray, legs: LegModel
+                  ) -> tuple[float, float, str] | None:
+    """(misfit as named, misfit in the best other order, that order in words) when the
+    readings of the rows ``points`` (N, K, 3) fit their poses far better with the points in
+    another order; misfit: the readings' median distance from the nominal's, mm."""
     def misfit(order: tuple[int, ...]) -> float:
         try:
             poses = np.array([pose_from_points(model, row[list(order)]).pose for row in points])
@@ -287,7 +322,7 @@ def _label_problem(data: MeasurementData, feature_points_mm: NDArray, legs: LegM
             return float("inf")
         return float(np.median(np.abs(sensor_setpoints_batch(legs, poses) - readings)))
 
-    as_named = tuple(range(count))
+    as_named = tuple(range(len(model)))
     as_read = misfit(as_named)
     if not POSE_UNIT_MISFIT_MM < as_read < float("inf"):
         return None
@@ -295,11 +330,8 @@ def _label_problem(data: MeasurementData, feature_points_mm: NDArray, legs: LegM
                       key=lambda item: item[1])
     if best > min(as_read / 5.0, POSE_UNIT_MISFIT_MM):
         return None
-    swaps = " and ".join(f"the columns named p{column + 1} hold p{point + 1}"
-                         for point, column in enumerate(order) if column != point)
-    return RowProblem(0, f"the readings are {as_read:.3g} mm (median) from what the nominal geometry gives for the "
-                         f"poses of the measured points, {best:.3g} mm if {swaps}: check the file's header (p1, p2, "
-                         "… are the geometry's feature_points in their order)")
+    return as_read, best, " and ".join(f"the columns named p{column + 1} hold p{point + 1}"
+                                       for point, column in enumerate(order) if column != point)
 
 
 def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProblem | None:

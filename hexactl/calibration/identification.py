@@ -25,9 +25,11 @@ from hexactl.calibration.full import identify_full
 from hexactl.calibration.leglock import identify_leglock, too_few_locked
 from hexactl.calibration.paper import identify_paper
 from hexactl.calibration.parameters import calibrated_geometry
-from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method, excluded_summary
+from hexactl.calibration.results import (IdentificationOptions, IdentificationResult, IdentificationStatus, Method,
+                                         excluded_summary)
 from hexactl.kinematics.geometry import CalibrationInfo, Geometry, geometry_from_mapping
 from hexactl.kinematics.inverse import LEG_COUNT
+from hexactl.kinematics.plausibility import parameter_implausibilities
 
 _METHODS = {Method.FULL: identify_full, Method.LEGLOCK: identify_leglock, Method.PAPER: identify_paper}
 
@@ -49,14 +51,29 @@ def identify(data: MeasurementData, nominal: Geometry, options: IdentificationOp
     composed with the nominal's in the result.
     """
     if not np.any(nominal.legs.sensor_scale_errors):
-        return _identify(data, nominal, options)
+        return _plausible(_identify(data, nominal, options), nominal)
     gains = nominal.legs.sensor_gains
     exact = geometry_from_mapping({**nominal.model_dump(), "sensor_scale_errors": (0.0,) * 6}, "nominal geometry")
     result = _identify(replace(data, readings_mm=data.readings_mm * gains), exact, options)
     identified = result.parameters.scale_errors
-    if identified is None:
+    if identified is not None:
+        result = replace(result, parameters=replace(result.parameters, scale_errors=gains * (1.0 + identified) - 1.0))
+    return _plausible(result, nominal)
+
+
+def _plausible(result: IdentificationResult, nominal: Geometry) -> IdentificationResult:
+    """``result``, or IMPLAUSIBLE when its parameters lie beyond the nominal's plausibility
+    bounds, which the controller refuses to load: data that fit a machine that far from
+    the design are wrong (another unit or frame, targets swapped), not a calibration."""
+    parameters = result.parameters
+    if not result.ok or not (problems := parameter_implausibilities(
+            parameters.base_joints_mm, parameters.platform_joints_mm, parameters.zero_lengths_mm, nominal)):
         return result
-    return replace(result, parameters=replace(result.parameters, scale_errors=gains * (1.0 + identified) - 1.0))
+    shown = "; ".join(problems[:3]) + (f"; and {len(problems) - 3} more" if len(problems) > 3 else "")
+    return replace(result, status=IdentificationStatus.IMPLAUSIBLE, warnings=result.warnings + (
+        f"the identified parameters are not this machine's: {shown}; the controller refuses such a calibration. "
+        "The data do not measure the nominal platform as they should: check their units (mm, degrees), that the "
+        "instrument's frame is the platform's base frame, and the rows flagged above",))
 
 
 def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:

@@ -38,6 +38,7 @@ class IdentificationStatus(IntEnum):
     NOT_CONVERGED = 2  # the iteration cap was reached: do not use the parameters
     NOT_OBSERVABLE = 3  # the data cannot determine some parameter combination at all
     INSUFFICIENT_DATA = 4  # too few postures for the method: nothing was identified
+    IMPLAUSIBLE = 5  # beyond the nominal's plausibility bounds: not this machine, the data are wrong
 
 
 MIN_LOCKED_POSTURES = 8

@@ -13,6 +13,7 @@ their defaults and why: docs/calibration.md).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.axes import POSE_AXES
@@ -24,16 +25,7 @@ def implausibilities(geometry: Geometry, nominal: Geometry) -> list[str]:
     key (mm and deg); empty when the calibration is plausible. The bounds are
     ``nominal.limits``' (a calibration's limits must equal them anyway)."""
     limits = nominal.limits
-    problems = []
-    for key in ("base_joints", "platform_joints"):
-        distances = np.linalg.norm(np.subtract(getattr(geometry, key), getattr(nominal, key)), axis=1)
-        problems += [_beyond(f"{key}[{i}] (leg {i + 1})", float(d), "mm", limits.calibration_joint_tolerance_mm,
-                             "calibration_joint_tolerance_mm")
-                     for i, d in enumerate(distances) if not d <= limits.calibration_joint_tolerance_mm]
-    for i, (length, design) in enumerate(zip(geometry.zero_lengths, nominal.zero_lengths)):
-        if not abs(length - design) <= limits.calibration_zero_length_tolerance_mm:
-            problems.append(_beyond(f"zero_lengths[{i}] (leg {i + 1})", abs(length - design), "mm",
-                                    limits.calibration_zero_length_tolerance_mm, "calibration_zero_length_tolerance_mm"))
+    problems = parameter_implausibilities(geometry.base_joints, geometry.platform_joints, geometry.zero_lengths, nominal)
     shift = float(np.linalg.norm(np.subtract(geometry.home[:3], nominal.home[:3])))
     if not shift <= limits.calibration_home_tolerance_mm:
         problems.append(_beyond("home[0:3] (x, y, z)", shift, "mm", limits.calibration_home_tolerance_mm,
@@ -43,6 +35,24 @@ def implausibilities(geometry: Geometry, nominal: Geometry) -> list[str]:
         if not turn <= limits.calibration_home_tolerance_deg:
             problems.append(_beyond(f"home[{i}] ({POSE_AXES[i]})", turn, "deg", limits.calibration_home_tolerance_deg,
                                     "calibration_home_tolerance_deg"))
+    return problems
+
+
+def parameter_implausibilities(base_joints: ArrayLike, platform_joints: ArrayLike, zero_lengths: ArrayLike,
+                               nominal: Geometry) -> list[str]:
+    """:func:`implausibilities` of the identified quantities alone (joints (6, 3) and zero
+    lengths (6,), mm), before they are made into a geometry."""
+    limits = nominal.limits
+    problems = []
+    for key, joints in (("base_joints", base_joints), ("platform_joints", platform_joints)):
+        distances = np.linalg.norm(np.subtract(joints, getattr(nominal, key)), axis=1)
+        problems += [_beyond(f"{key}[{i}] (leg {i + 1})", float(d), "mm", limits.calibration_joint_tolerance_mm,
+                             "calibration_joint_tolerance_mm")
+                     for i, d in enumerate(distances) if not d <= limits.calibration_joint_tolerance_mm]
+    for i, (length, design) in enumerate(zip(zero_lengths, nominal.zero_lengths)):
+        if not abs(length - design) <= limits.calibration_zero_length_tolerance_mm:
+            problems.append(_beyond(f"zero_lengths[{i}] (leg {i + 1})", abs(length - design), "mm",
+                                    limits.calibration_zero_length_tolerance_mm, "calibration_zero_length_tolerance_mm"))
     return problems
 
 

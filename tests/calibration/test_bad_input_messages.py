@@ -4,6 +4,7 @@ undetermined combinations, and poses in the wrong units named as such."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hexactl.calibration.data import MeasurementData, measured_poses, screen_measurements
 from hexactl.calibration.identification import identify
@@ -61,3 +62,35 @@ def test_a_mis_sighted_point_goes_to_full_which_excludes_it_and_stops_the_method
     assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "leglock.toml"),
                  "--method", "leglock"]) == 2
     assert "--skip-bad-rows" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method", ["full", "auto"])
+def test_data_that_fit_another_machine_are_refused_not_written(tmp_path, nominal, leglock_campaign, capsys, method):
+    """One column of a pose-form file in radians (the file-level unit check needs them all):
+    the fit explains it with joints hundreds of mm from the design, which the controller
+    refuses to load. `calibrate` wrote it (exit 0) with --method full, and with auto failed
+    only by chance, on a sensor gain beyond ±1 %; it now refuses it as implausible."""
+    from hexactl.adapters.cli.main import main
+    from hexactl.adapters.files.measurements import write_measurements
+    from tests.calibration.conftest import NOMINAL_PATH
+
+    data = _pose_rows(nominal, leglock_campaign.data)
+    poses = np.array(data.poses)
+    poses[:, 3] = np.radians(poses[:, 3])  # the file's roll in radians, read as degrees
+    path = write_measurements(tmp_path / "roll.csv", MeasurementData(data.locked_leg, data.readings_mm, data.lines,
+                                                                     poses=poses))
+    output = tmp_path / "cal.toml"
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output), "--method", method]) == 1
+    out = capsys.readouterr().out
+    assert "the identified parameters are not this machine's" in out and "(bound 60 mm" in out
+    assert "check their units" in out and "no calibration written: implausible" in out and not output.exists()
+
+
+def test_a_result_beyond_the_plausibility_bounds_is_implausible_whatever_the_method(nominal, leglock_campaign):
+    """The rule is the controller's (kinematics.plausibility): what it would refuse to load
+    is never a calibration, whichever method produced it."""
+    tight = nominal.limits.model_copy(update={"calibration_joint_tolerance_mm": 0.5})
+    strict = nominal.model_copy(update={"limits": tight})
+    result = identify(leglock_campaign.data, strict)
+    assert result.status is IdentificationStatus.IMPLAUSIBLE and not result.ok
+    assert identify(leglock_campaign.data, nominal).ok

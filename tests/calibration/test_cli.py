@@ -171,3 +171,19 @@ def test_undetermined_data_give_no_library_warning_and_say_why(tmp_path, leglock
     captured = capsys.readouterr()
     assert code == 1 and "cannot determine" in captured.out and "no calibration written" in captured.out
     assert "Warning" not in captured.err
+
+
+@pytest.mark.parametrize("bad", ["header only", "every row bad"])
+def test_a_file_with_no_usable_row_says_so_without_a_traceback(tmp_path, leglock_campaign, capsys, bad):
+    """An export that kept only the header, or whose every row is bad and skipped, leaves no
+    posture: the screening of repeated rows crashed on it (reshape of an empty array)."""
+    lines = format_measurements(leglock_campaign.data).splitlines()
+    header, rows = lines[0], lines[1:]
+    body = [] if bad == "header only" else [",".join(["9", *row.split(",")[1:]]) for row in rows]  # leg 9
+    path = tmp_path / "empty.csv"
+    path.write_text("\n".join([header, *body]) + "\n", encoding="utf-8")
+    output = tmp_path / "cal.toml"
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output), "--skip-bad-rows"]) == 1
+    out = capsys.readouterr().out
+    assert "needs at least 8 postures, the data have 0" in out and "no calibration written" in out
+    assert not output.exists()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,6 +13,7 @@ from hexactl.adapters.files.measurements import (
     MeasurementFileError,
     format_measurements,
     parse_measurements,
+    parse_point_rows,
     read_measurements,
     write_measurements,
 )
@@ -63,6 +66,23 @@ def test_missing_columns_are_refused_by_name(leglock_campaign, drop, missing):
     cut = [",".join(c for k, c in enumerate(row.split(",")) if k != index) for row in [header_line, *rows]]
     with pytest.raises(MeasurementFileError, match=f"missing columns {missing}"):
         parse_measurements("\n".join(cut), "cut.csv", 3)
+
+
+@pytest.mark.parametrize("separator, decimal", [(";", ","), (";", "."), ("\t", ".")])
+def test_a_spreadsheet_export_with_other_separators_is_refused_by_name(leglock_campaign, tmp_path, separator, decimal):
+    """Excel in a decimal-comma locale writes ';' between columns (and a BOM and CRLF): the
+    one-column header was reported as 'missing columns leg, l1, …', which hides the cause."""
+    text = _points_text(leglock_campaign).replace(",", separator).replace(".", decimal).replace("\n", "\r\n")
+    path = tmp_path / "excel.csv"
+    path.write_bytes(text.encode("utf-8-sig"))
+    expected = re.escape(f"line 2: the columns are separated by {separator!r}, not commas")
+    with pytest.raises(MeasurementFileError, match=expected + ".*save the file as CSV with ','"):
+        read_measurements(path, 3)
+    with pytest.raises(MeasurementFileError, match=expected):  # a campaign's instrument file
+        parse_point_rows(text, "tracker.csv", 3)
+    path.write_bytes(_points_text(leglock_campaign).replace("\n", "\r\n").encode("utf-8-sig"))  # BOM, CRLF: fine
+    parsed = read_measurements(path, 3)
+    assert not parsed.problems and len(parsed.data) == 6
 
 
 def test_too_few_or_too_many_points(leglock_campaign):

@@ -158,3 +158,25 @@ def test_saved_rows_that_do_not_match_the_plan_are_refused(nominal, tmp_path) ->
     path.write_text(path.read_text().replace(f"\n{posture.leg},", "\n6,"))
     with pytest.raises(CampaignError, match="does not match"):
         CampaignStore.open(tmp_path / "c", nominal, DESIGN)
+
+
+def test_the_campaign_screens_its_measurements_as_calibrate_does(nominal, tmp_path) -> None:
+    """An instrument file whose header names p1's columns p2 and p2's p1: on the symmetric
+    target the distances are right, and only the nominal's readings tell. The campaign
+    screened without the nominal's legs, so it skipped that check (and the unit checks)
+    that `hexactl calibrate` makes on the very same file."""
+    import io
+
+    from hexactl.application.campaign.progress import Progress
+    from hexactl.application.campaign.runner import _identify
+    from hexactl.calibration.results import IdentificationOptions
+    from hexactl.kinematics.inverse import leg_lengths, readings_from_lengths
+
+    store = CampaignStore.open(tmp_path / "c", nominal, DESIGN)
+    for posture in store.postures:
+        absolute = absolute_from_relative(nominal.home, posture.pose)
+        readings = readings_from_lengths(nominal.legs, np.array(leg_lengths(nominal.legs, absolute)))
+        store.add_posture(posture.leg, readings, points_at(nominal, posture.pose)[[1, 0, 2]])
+    with pytest.raises(CampaignError, match="the columns named p2 hold p1 and the columns named p1 hold p2"):
+        _identify(store, IdentificationOptions(), Progress(io.StringIO()))
+    store.close()

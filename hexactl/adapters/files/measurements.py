@@ -173,6 +173,13 @@ def _table(text: str, source: str) -> tuple[int, list[str], list[tuple[int, str]
         raise MeasurementFileError(f"{source}: no header line and no data")
     header_line, header_text = rows[0]
     header = [name.strip().lower() for name in next(csv.reader([header_text]))]
+    if len(header) == 1 and (separator := next((mark for mark in ";\t" if mark in header_text), None)):
+        # A spreadsheet's export where the decimal mark is a comma: reading its numbers
+        # would need guessing which comma is which, so it is refused by name.
+        locale = " (a spreadsheet's export in a locale with decimal commas?)" if separator == ";" else ""
+        raise MeasurementFileError(
+            f"{source}: line {header_line}: the columns are separated by {separator!r}, not commas{locale}: save the "
+            "file as CSV with ',' between columns and '.' as the decimal mark")
     duplicates = sorted({name for name in header if header.count(name) > 1})
     if duplicates:
         raise MeasurementFileError(f"{source}: line {header_line}: duplicate columns {', '.join(duplicates)}")

@@ -324,7 +324,7 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
         raise CampaignError(str(error)) from None
     sigma = geometry.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
     screened = measured.problems + screen_measurements(measured.data, np.array(geometry.measurement.feature_points), sigma,
-                                                       stroke_mm=geometry.limits.stroke)
+                                                       legs=geometry.legs, stroke_mm=geometry.limits.stroke)
     problems = blocking_problems(screened, options.method)
     for problem in screened:
         if problem not in problems:
