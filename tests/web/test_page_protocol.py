@@ -242,6 +242,8 @@ class FakeService:
     def __init__(self) -> None:
         self.records: queue.Queue[dict[str, Any]] = queue.Queue()
         self.commands: list[str] = []
+        self.geometry_answers = threading.Event()  # cleared: the API is stuck before it answers geometry
+        self.geometry_answers.set()
 
     def connect(self, kind: type, endpoint: str, **options: Any) -> Any:
         return self.Telemetry(self) if kind is TelemetrySubscriber else self.Client(self)
@@ -265,7 +267,10 @@ class FakeService:
     class Client(Telemetry):
         def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
             self.service.commands.append(cmd)
-            return GEOMETRY_REPLY if cmd == "geometry" else {"ok": True, "cmd": cmd}
+            if cmd == "geometry":
+                self.service.geometry_answers.wait(WAIT_S)
+                return GEOMETRY_REPLY
+            return {"ok": True, "cmd": cmd}
 
 
 class SubscribedBridge(ServiceBridge):
@@ -353,3 +358,31 @@ def test_a_commands_steps_on_the_loop_do_not_wait_for_a_record_to_reach_every_pa
 
     asyncio.run(scenario())
     assert handed == sorted(handed) and 0 < handed[-1] < pages
+
+
+def test_records_reach_the_pages_while_the_api_does_not_answer_the_geometry() -> None:
+    """Found from outside: with telemetry flowing and the API not answering (a wrong
+    ``--api``, or the API stuck), the telemetry thread waited for each geometry request's
+    timeout: pages got one record every 5 s and flickered between live and NO LIVE DATA."""
+    service = FakeService()
+    service.geometry_answers.clear()
+    page = FakePage(stays=True)
+
+    async def scenario() -> None:
+        bridge = SubscribedBridge(service)
+        bridge.start(asyncio.get_running_loop())
+        serving = asyncio.create_task(_serve_page(bridge, page))  # type: ignore[arg-type]
+        try:
+            for t in range(3):
+                service.records.put({"t": t, "calibration_id": "c1"})
+                await until(lambda: t in page.telemetry(), f"record {t} while the geometry is asked for")
+            assert service.commands == ["geometry"]  # asked once, not once a record
+            service.geometry_answers.set()
+            await until(lambda: any(message["type"] == "geometry" for message in page.sent), "the geometry")
+        finally:
+            service.geometry_answers.set()
+            page.incoming.put_nowait(DISCONNECT)
+            await asyncio.wait_for(serving, WAIT_S)
+            bridge.close()
+
+    asyncio.run(scenario())
