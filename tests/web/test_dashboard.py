@@ -305,6 +305,27 @@ def test_killing_and_restarting_the_service_reconnects_the_page(tmp_path) -> Non
         driver.quit()
 
 
+def test_a_narrow_window_still_shows_the_state_the_motion_and_the_estop(rig) -> None:
+    """Found from outside: in a window 683 px wide (half a laptop's screen) the E-STOP
+    button covered the MOTION pill, and at 500 px the header clipped both pills away."""
+    def hidden() -> list[str]:  # the ones not shown whole, on top, inside the window
+        return rig.page("""
+            return ['state', 'motion', 'estop'].filter((id) => {
+                const element = document.getElementById(id), r = element.getBoundingClientRect();
+                const across = [0.15, 0.5, 0.85].map((f) => [r.left + f * r.width, (r.top + r.bottom) / 2]);
+                return r.width === 0 || r.left < 0 || r.right > innerWidth || !across.every(([x, y]) =>
+                    element.contains(document.elementFromPoint(x, y)));
+            });""")
+
+    try:
+        for width in (683, 500):
+            rig.driver.set_window_size(width, 1000)
+            wait_for(lambda: rig.page("return innerWidth") <= width, f"the window {width} px wide")
+            assert hidden() == [], width
+    finally:
+        rig.driver.set_window_size(1600, 1000)
+
+
 def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
     from urllib.error import HTTPError
     from urllib.request import Request, urlopen

@@ -13,9 +13,10 @@ import threading
 from typing import Any
 
 from starlette.datastructures import Address
+from starlette.websockets import WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
-from hexactl.adapters.web.app import _serve_page
+from hexactl.adapters.web.app import MAX_URGENT_IN_FLIGHT, _serve_page
 from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, Outbox, ServiceBridge, ServiceEndpoints,
                                          UrgentCommand)
 
@@ -36,11 +37,18 @@ class FakePage:
         self.sent: list[dict[str, Any]] = []
         self.texts: list[str] = []
         self.client = Address("10.0.0.9", 51000)  # where the browser connected from
+        self.application_state = WebSocketState.CONNECTED
+        self.gone = False
 
     async def receive(self) -> dict[str, Any]:
-        return await self.incoming.get()
+        message = await self.incoming.get()
+        self.gone = message is DISCONNECT
+        return message
 
     async def send_text(self, text: str) -> None:
+        if self.gone:  # as Starlette's WebSocket on uvicorn's closed connection
+            self.application_state = WebSocketState.DISCONNECTED
+            raise WebSocketDisconnect(1006)
         self.texts.append(text)
         self.sent.append(json.loads(text))
 
@@ -68,11 +76,23 @@ class EchoBridge:
         return {"ok": True, "cmd": cmd, "fields": fields, "browser": browser}
 
 
-def served(page: FakePage, bridge: Any) -> FakePage:
+def served(page: FakePage, bridge: Any, replies: int = 0) -> FakePage:
+    """``page`` served until it has ``replies`` replies and goes, and every task it started
+    ended; none may end failed."""
     async def scenario() -> None:
-        await _serve_page(bridge, page)  # type: ignore[arg-type]
-        others = [task for task in asyncio.all_tasks() if task is not asyncio.current_task()]
-        await asyncio.wait_for(asyncio.gather(*others, return_exceptions=True), WAIT_S)
+        started: list[asyncio.Task[Any]] = []
+
+        def kept(loop: asyncio.AbstractEventLoop, coroutine: Any, **options: Any) -> asyncio.Task[Any]:
+            started.append(task := asyncio.Task(coroutine, loop=loop, **options))
+            return task
+
+        asyncio.get_running_loop().set_task_factory(kept)
+        serving = asyncio.create_task(_serve_page(bridge, page))  # type: ignore[arg-type]
+        await until(lambda: len(page.replies()) >= replies, f"{replies} replies")
+        page.incoming.put_nowait(DISCONNECT)
+        await asyncio.wait_for(serving, WAIT_S)
+        ended = await asyncio.wait_for(asyncio.gather(*started, return_exceptions=True), WAIT_S)
+        assert not [outcome for outcome in ended if isinstance(outcome, Exception)]  # its sender: cancelled
 
     asyncio.run(scenario())
     return page
@@ -90,7 +110,7 @@ def test_every_message_gets_a_reply_and_the_page_stays_connected() -> None:
         text("[" * 30000 + "]" * 30000),
         text({"type": "command", "id": 3, "cmd": "explode"}),
         text({"type": "command", "id": 4, "cmd": "status", "self": 1}),
-    ), EchoBridge())
+        stays=True), EchoBridge(), replies=6)
     replies = page.replies()
     assert [request_id for request_id, _ in replies[:4]] == [None] * 4  # unreadable: no id to answer with
     assert all(reply["error"]["code"] == "invalid_request" for _, reply in replies[:4])
@@ -99,6 +119,58 @@ def test_every_message_gets_a_reply_and_the_page_stays_connected() -> None:
     by_id = dict(replies[4:])
     assert by_id[3]["error"]["code"] == "internal_error" and "a dashboard bug" in by_id[3]["error"]["message"]
     assert by_id[4] == {"ok": True, "cmd": "status", "fields": {"self": 1}, "browser": "10.0.0.9"}  # the service is told
+
+
+class HungBridge(EchoBridge):
+    """A service that answers nothing until ``answer`` is set; ``commands``: what it was sent."""
+
+    def __init__(self) -> None:
+        self.answer = asyncio.Event()
+        self.commands: list[str] = []
+
+    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
+        self.commands.append(cmd)
+        await self.answer.wait()
+        return await super().command(cmd, fields, browser)
+
+
+def test_a_page_that_went_before_its_reply_had_its_command_carried_out_and_leaves_no_failed_task() -> None:
+    """Found from outside: each reply to a page already gone ended its task failed, logged
+    with a traceback ('Task exception was never retrieved'), 227 000 of them after a flood."""
+    bridge = HungBridge()
+
+    class Leaving(FakePage):
+        async def receive(self) -> dict[str, Any]:
+            message = await super().receive()
+            if message is DISCONNECT:
+                asyncio.get_running_loop().call_soon(bridge.answer.set)  # the replies come once it has gone
+            return message
+
+    page = served(Leaving(*(text({"type": "command", "id": n, "cmd": cmd}) for n, cmd in enumerate(("estop", "status")))),
+                  bridge)
+    assert sorted(bridge.commands) == ["estop", "status"] and page.replies() == []
+
+
+def test_a_page_flooding_e_stops_is_read_as_they_are_answered_and_every_press_gets_its_reply() -> None:
+    """Found from outside: 300 000 ``estop`` messages from one client that did not read held
+    a task each; the dashboard grew past 1 GB and answered no other page for minutes."""
+    presses = 10 * MAX_URGENT_IN_FLIGHT
+    bridge = HungBridge()
+    page = FakePage(*(text({"type": "command", "id": n, "cmd": "estop"}) for n in range(presses)), stays=True)
+
+    async def scenario() -> None:
+        serving = asyncio.create_task(_serve_page(bridge, page))  # type: ignore[arg-type]
+        await until(lambda: len(bridge.commands) >= MAX_URGENT_IN_FLIGHT, "the first presses taken")
+        for _ in range(100):  # turns of the loop, for a page read on regardless to take more
+            await asyncio.sleep(0)
+        assert len(bridge.commands) == MAX_URGENT_IN_FLIGHT and page.incoming.qsize() == presses - MAX_URGENT_IN_FLIGHT
+        bridge.answer.set()
+        await until(lambda: len(page.replies()) == presses, "every press answered")
+        page.incoming.put_nowait(DISCONNECT)
+        await asyncio.wait_for(serving, WAIT_S)
+
+    asyncio.run(scenario())
+    assert sorted(request_id for request_id, reply in page.replies() if reply["ok"]) == list(range(presses))
 
 
 def test_an_urgent_command_takes_no_fields() -> None:
@@ -170,6 +242,8 @@ class FakeService:
     def __init__(self) -> None:
         self.records: queue.Queue[dict[str, Any]] = queue.Queue()
         self.commands: list[str] = []
+        self.geometry_answers = threading.Event()  # cleared: the API is stuck before it answers geometry
+        self.geometry_answers.set()
 
     def connect(self, kind: type, endpoint: str, **options: Any) -> Any:
         return self.Telemetry(self) if kind is TelemetrySubscriber else self.Client(self)
@@ -193,7 +267,10 @@ class FakeService:
     class Client(Telemetry):
         def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
             self.service.commands.append(cmd)
-            return GEOMETRY_REPLY if cmd == "geometry" else {"ok": True, "cmd": cmd}
+            if cmd == "geometry":
+                self.service.geometry_answers.wait(WAIT_S)
+                return GEOMETRY_REPLY
+            return {"ok": True, "cmd": cmd}
 
 
 class SubscribedBridge(ServiceBridge):
@@ -281,3 +358,31 @@ def test_a_commands_steps_on_the_loop_do_not_wait_for_a_record_to_reach_every_pa
 
     asyncio.run(scenario())
     assert handed == sorted(handed) and 0 < handed[-1] < pages
+
+
+def test_records_reach_the_pages_while_the_api_does_not_answer_the_geometry() -> None:
+    """Found from outside: with telemetry flowing and the API not answering (a wrong
+    ``--api``, or the API stuck), the telemetry thread waited for each geometry request's
+    timeout: pages got one record every 5 s and flickered between live and NO LIVE DATA."""
+    service = FakeService()
+    service.geometry_answers.clear()
+    page = FakePage(stays=True)
+
+    async def scenario() -> None:
+        bridge = SubscribedBridge(service)
+        bridge.start(asyncio.get_running_loop())
+        serving = asyncio.create_task(_serve_page(bridge, page))  # type: ignore[arg-type]
+        try:
+            for t in range(3):
+                service.records.put({"t": t, "calibration_id": "c1"})
+                await until(lambda: t in page.telemetry(), f"record {t} while the geometry is asked for")
+            assert service.commands == ["geometry"]  # asked once, not once a record
+            service.geometry_answers.set()
+            await until(lambda: any(message["type"] == "geometry" for message in page.sent), "the geometry")
+        finally:
+            service.geometry_answers.set()
+            page.incoming.put_nowait(DISCONNECT)
+            await asyncio.wait_for(serving, WAIT_S)
+            bridge.close()
+
+    asyncio.run(scenario())

@@ -31,7 +31,7 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, Response, StreamingResponse
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply
 
@@ -40,6 +40,10 @@ MAX_MESSAGE_BYTES = 64 * 1024
 
 MAX_COMMANDS_IN_FLIGHT = 16
 """Commands one page may have waiting for replies; beyond, it is answered ``busy``."""
+
+MAX_URGENT_IN_FLIGHT = 64
+"""Commands one page may have waiting, ``estop``, ``stop`` and ``abort`` included (never
+answered ``busy``); beyond, its next message is read once one is answered."""
 
 RECORDING_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv$")
 """A downloadable recording: the ``record`` command's name rule, with ``.csv``."""
@@ -135,12 +139,20 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
     in_flight: set[asyncio.Task[None]] = set()
     browser = websocket.client.host if websocket.client else None  # the service's events name it
 
+    async def send(text: str) -> None:
+        # A page gone is sent nothing: the commands it sent are carried out all the same,
+        # and their replies must not end their tasks failed (a traceback each in the log).
+        if websocket.application_state is WebSocketState.DISCONNECTED:  # a send to it failed already
+            return
+        with contextlib.suppress(WebSocketDisconnect):
+            await websocket.send_text(text)
+
     async def send_updates() -> None:
         while True:
-            await websocket.send_text(await updates.get())
+            await send(await updates.get())
 
     async def reply(request_id: Any, reply: dict[str, Any]) -> None:
-        await websocket.send_text(json.dumps({"type": "reply", "id": request_id, "reply": reply}))
+        await send(json.dumps({"type": "reply", "id": request_id, "reply": reply}))
 
     async def answer(request_id: Any, cmd: str, fields: dict[str, Any]) -> None:
         try:
@@ -170,6 +182,11 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
             task = asyncio.create_task(answer(request_id, *parsed))
             in_flight.add(task)
             task.add_done_callback(in_flight.discard)
+            if len(in_flight) >= MAX_URGENT_IN_FLIGHT:
+                # Flooding estop, stop or abort: a task each would pile up without end. The
+                # page is read on once one is answered (its presses not yet read are
+                # carried out no later: each waits for the request being sent to end).
+                await asyncio.wait(in_flight, return_when=asyncio.FIRST_COMPLETED)
     except WebSocketDisconnect:
         pass
     finally:

@@ -139,6 +139,10 @@ class ServiceBridge:
         self._thread: threading.Thread | None = None
         self._urgent = {name: UrgentCommand(name, self._request) for name in URGENT_COMMANDS}
         self._workers = ThreadPoolExecutor(COMMAND_WORKERS, thread_name_prefix="dashboard-command")
+        # The geometry is fetched beside the telemetry, never in its way: an API that does
+        # not answer would hold each record back for the request's timeout.
+        self._geometry_worker = ThreadPoolExecutor(1, thread_name_prefix="dashboard-geometry")
+        self._fetching = threading.Event()
         self.connected = False
         self.geometry: dict[str, Any] | None = None
         self._geometry_text: str | None = None  # the geometry message, serialised for new pages
@@ -163,6 +167,7 @@ class ServiceBridge:
         for urgent in self._urgent.values():
             urgent.close()
         self._workers.shutdown(wait=False, cancel_futures=True)
+        self._geometry_worker.shutdown(wait=False, cancel_futures=True)
 
     # -- pages -----------------------------------------------------------------------
 
@@ -243,8 +248,10 @@ class ServiceBridge:
                     continue
                 received = time.monotonic()
                 self._set_link(True, f"telemetry from {endpoints.telemetry}")
-                if self.geometry is None or self.geometry.get("calibration_id") != record.get("calibration_id"):
-                    self._fetch_geometry()
+                if not self._fetching.is_set() and (
+                        self.geometry is None or self.geometry.get("calibration_id") != record.get("calibration_id")):
+                    self._fetching.set()
+                    self._geometry_worker.submit(self._fetch_geometry)
                 age_s = received - float(record.get("t", received))
                 # Stamped here, with the age, not as each page is sent it: one text for
                 # every page, and the page's age_ms + (its clock − sent_ms) then also
@@ -265,13 +272,19 @@ class ServiceBridge:
             self._call(self._broadcast, "link", self._link())
 
     def _fetch_geometry(self) -> None:
-        reply = self._request("geometry", {}, "dashboard")
-        if not reply.get("ok"):
-            log.warning("geometry: %s", (reply.get("error") or {}).get("message"))
-            return
-        self.geometry = drawing_geometry(reply)
-        self._geometry_text = json.dumps({"type": "geometry", "geometry": self.geometry})
-        self._call(self._broadcast, "geometry", self._geometry_text)
+        """On the geometry's worker; the next record asks again if this fails."""
+        try:
+            reply = self._request("geometry", {}, "dashboard")
+            if not reply.get("ok"):
+                log.warning("geometry: %s", (reply.get("error") or {}).get("message"))
+                return
+            self.geometry = drawing_geometry(reply)
+            self._geometry_text = json.dumps({"type": "geometry", "geometry": self.geometry})
+            self._call(self._broadcast, "geometry", self._geometry_text)
+        except Exception as error:  # a worker's exception would go unseen
+            log.warning("geometry: %s: %s", type(error).__name__, error)
+        finally:
+            self._fetching.clear()
 
     def _call(self, function: Callable[..., None], *arguments: Any) -> None:
         if self._loop is not None and not self._loop.is_closed():
