@@ -7,6 +7,7 @@ directory". docs/cli.md has the behaviour these check."""
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import re
 import signal
@@ -112,6 +113,20 @@ def test_an_endpoint_zeromq_refuses_is_a_cli_error_not_a_traceback() -> None:
     unchecked = argparse.Namespace(curve_server=None, curve_client=None)  # past the parsers: connect() says it
     with pytest.raises(CliError, match=r"cannot connect to 'garbage': Invalid argument; expected tcp://HOST:PORT"):
         connect(HexactlClient, "garbage", unchecked, timeout_s=0.05)
+
+
+def test_no_file_descriptor_left_is_said_as_such_not_as_a_malformed_endpoint() -> None:
+    import zmq
+
+    def out_of_files(endpoint: str, **options: object) -> None:
+        raise zmq.ZMQError(errno.EMFILE)  # what ZeroMQ raises for a socket past the process's limit
+
+    unchecked = argparse.Namespace(curve_server=None, curve_client=None)
+    with pytest.raises(CliError) as raised:
+        connect(out_of_files, "tcp://127.0.0.1:5555", unchecked)
+    message = str(raised.value)
+    assert "no file descriptor left" in message and "ulimit -n" in message, message
+    assert "expected tcp://" not in message, message
 
 
 @pytest.mark.parametrize(("endpoint", "use"), [

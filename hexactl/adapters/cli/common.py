@@ -162,6 +162,10 @@ def connect(kind: type[Connection], endpoint: str, arguments: argparse.Namespace
         except (SecurityError, OSError, ValueError) as error:  # missing or malformed key files
             raise CliError(f"CURVE keys: {error}") from None
     except zmq.ZMQError as error:
+        if error.errno in (errno.EMFILE, errno.ENFILE):  # not the endpoint's fault: the form would mislead
+            raise CliError(f"cannot connect to {endpoint!r}: {zmq.strerror(error.errno)}: this process (or the "
+                           "system) has no file descriptor left; close what holds them, or raise the limit "
+                           "(ulimit -n)") from None
         raise CliError(f"cannot connect to {endpoint!r}: {zmq.strerror(error.errno)}; {ENDPOINT_FORMS['connect']}") from None
 
 
