@@ -152,6 +152,7 @@ def screen_measurements(
     locked_reading_tolerance_mm: float = LOCKED_READING_TOLERANCE_MM,
     legs: LegModel | None = None,
     stroke_mm: tuple[float, float] | None = None,
+    zero_readings_mm: NDArray | None = None,
 ) -> tuple[RowProblem, ...]:
     """Rows that must not be used as they are, one :class:`RowProblem` per finding.
 
@@ -173,10 +174,12 @@ def screen_measurements(
     (line 0), instead of one per row. So are measured poses whose readings ``legs`` (the
     nominal geometry, when given) explain far better with the angles read as radians or
     the positions as metres, and measured points whose readings it explains far better
-    with the points' columns in another order (a header naming them wrongly).
+    with the points' columns in another order (a header naming them wrongly). So are
+    readings far below what the legs read in the zero posture (``zero_readings_mm``, when
+    given), throughout the file: metres, cm or inches.
     """
     problems: list[RowProblem] = []
-    unit_problem = _unit_problem(data, feature_points_mm) or (
+    unit_problem = _unit_problem(data, feature_points_mm) or _readings_unit_problem(data, zero_readings_mm) or (
         None if legs is None else _pose_unit_problem(data, legs) or _label_problem(data, feature_points_mm, legs))
     if unit_problem is not None:
         return (unit_problem,)
@@ -332,6 +335,29 @@ def _better_order(points: NDArray, readings: NDArray, model: NDArray, legs: LegM
         return None
     return as_read, best, " and ".join(f"the columns named p{column + 1} hold p{point + 1}"
                                        for point, column in enumerate(order) if column != point)
+
+
+READINGS_UNIT_RATIO = 8.0
+"""Readings whose median is this many times below the zero posture's, and of which none
+comes within half of it, are not a campaign around the zero posture in mm: every posture
+would have every leg drawn in far below it. Metres, cm and inches all fall below."""
+
+
+def _readings_unit_problem(data: MeasurementData, zero_readings_mm: NDArray | None) -> RowProblem | None:
+    """A file-level problem if the legs read far less than in the zero posture throughout
+    the file: readings in another unit (their range would pass the stroke's check)."""
+    if zero_readings_mm is None or len(data) == 0:
+        return None
+    zero = float(np.median(zero_readings_mm))
+    typical, largest = float(np.median(data.readings_mm)), float(np.max(np.abs(data.readings_mm)))
+    if zero <= 0.0 or typical > zero / READINGS_UNIT_RATIO or largest > zero / 2.0:
+        return None
+    guess = {1e-3: "metres", 1e-1: "cm", 1.0 / 25.4: "inches"}
+    unit = next((name for factor, name in guess.items() if abs(np.log(max(typical, 1e-12) / zero / factor)) < np.log(1.5)),
+                None)
+    question = f"are they in {unit}? " if unit else ""
+    return RowProblem(0, f"the legs read {typical:.4g} (median) and at most {largest:.4g}, in the zero posture "
+                         f"{zero:.1f} mm: {question}hexactl reads the sensors in mm; convert the readings to mm")
 
 
 def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProblem | None:

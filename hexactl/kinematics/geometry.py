@@ -194,8 +194,7 @@ class Geometry(_Strict):
                     f"this far off is in another unit or has the wrong lead; fix the sensor's configuration"
                 )
         low, high = self.limits.stroke
-        home_readings = sensor_setpoints(self.legs, self.home.in_radians())
-        for i, reading in enumerate(home_readings):
+        for i, reading in enumerate(self.zero_readings_mm()):
             if not low <= reading <= high:
                 raise ValueError(
                     f"limits.stroke: leg {i + 1} needs sensor reading {reading:.3f} mm in the zero "
@@ -213,6 +212,10 @@ class Geometry(_Strict):
             np.array(self.base_joints), np.array(self.platform_joints), np.array(self.zero_lengths),
             np.array(self.sensor_scale_errors),
         )
+
+    def zero_readings_mm(self) -> np.ndarray:
+        """The six sensor readings in the zero posture, mm."""
+        return np.asarray(sensor_setpoints(self.legs, self.home.in_radians()), dtype=float)
 
     @cached_property
     def characteristic_length_mm(self) -> float:

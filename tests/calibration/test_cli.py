@@ -156,6 +156,17 @@ def test_points_in_metres_are_named_once_and_refused(tmp_path, leglock_campaign,
         assert not output.exists()
 
 
+def test_readings_in_metres_are_named_once_and_refused(tmp_path, leglock_campaign, capsys):
+    data = leglock_campaign.data
+    metres = type(data)(data.locked_leg, np.array(data.readings_mm) / 1000.0, data.lines, points_mm=data.points_mm)
+    path = write_measurements(tmp_path / "metres.csv", metres)
+    output = tmp_path / "cal.toml"
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("are they in metres? hexactl reads the sensors in mm") == 1, err
+    assert not output.exists()
+
+
 @pytest.mark.filterwarnings("error")  # a library warning fails the test
 def test_undetermined_data_give_no_library_warning_and_say_why(tmp_path, leglock_campaign, capsys):
     """One posture measured 60 times: most combinations undetermined. Nothing but hexactl's

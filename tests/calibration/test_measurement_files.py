@@ -152,6 +152,19 @@ def test_screening_names_readings_outside_the_stroke(nominal, leglock_campaign):
                 if "stroke" in str(p)]  # without a stroke, nothing to check against
 
 
+@pytest.mark.parametrize(("factor", "unit"), [(1e-3, "metres"), (0.1, "cm"), (1.0 / 25.4, "inches")])
+def test_screening_names_readings_in_another_unit_once_for_the_file(nominal, leglock_campaign, factor, unit):
+    data = leglock_campaign.data
+    scaled = MeasurementData(data.locked_leg, np.array(data.readings_mm) * factor, data.lines, points_mm=data.points_mm)
+    feature_points = np.array(nominal.measurement.feature_points)
+    problems = screen_measurements(scaled, feature_points, nominal.measurement.point_sigma_mm,
+                                   stroke_mm=nominal.limits.stroke, zero_readings_mm=nominal.zero_readings_mm())
+    assert [problem.line for problem in problems] == [0]  # the file, not every row
+    assert f"are they in {unit}? hexactl reads the sensors in mm" in str(problems[0])
+    assert not screen_measurements(data, feature_points, nominal.measurement.point_sigma_mm,
+                                   stroke_mm=nominal.limits.stroke, zero_readings_mm=nominal.zero_readings_mm())
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     legs=st.lists(st.integers(0, 6), min_size=1, max_size=8),

@@ -195,7 +195,7 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     screened = measurements.problems + screen_measurements(
         measurements.data, np.array(nominal.measurement.feature_points), point_sigma, legs=nominal.legs,
-        stroke_mm=nominal.limits.stroke)
+        stroke_mm=nominal.limits.stroke, zero_readings_mm=nominal.zero_readings_mm())
     problems = blocking_problems(screened, Method(arguments.method))
     for problem in screened:
         handed = "" if problem in problems else " (left to full, which tests each observation and excludes mis-sightings)"

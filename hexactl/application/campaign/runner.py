@@ -324,7 +324,8 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
         raise CampaignError(str(error)) from None
     sigma = geometry.measurement.point_sigma_mm if options.point_sigma_mm is None else options.point_sigma_mm
     screened = measured.problems + screen_measurements(measured.data, np.array(geometry.measurement.feature_points), sigma,
-                                                       legs=geometry.legs, stroke_mm=geometry.limits.stroke)
+                                                       legs=geometry.legs, stroke_mm=geometry.limits.stroke,
+                                                       zero_readings_mm=geometry.zero_readings_mm())
     problems = blocking_problems(screened, options.method)
     for problem in screened:
         if problem not in problems:
