@@ -32,6 +32,13 @@ pages on a loaded host).
     python3 tools/bench_dashboard.py --idle-pages 0 100 400
     python3 tools/bench_dashboard.py --idle-pages 400 --stalled   # pages that never read
 
+``--flood N`` measures a page that floods instead: it sends N ``estop`` commands as fast
+as the dashboard takes them and reads none of the replies (a wedged or hostile client;
+``estop`` is never answered ``busy``). While it does, ``--estops`` fresh pages time their
+E-stop as above; the table adds the dashboard's resident memory before and at its peak.
+
+    python3 tools/bench_dashboard.py --flood 300000
+
 For each N, a child process opens N WebSockets on ``/ws`` and keeps them as a browser tab
 left open would: it offers permessage-deflate as browsers do, reads every message (and
 throws it away) and answers the server's pings; with ``--stalled`` it reads nothing (a
@@ -55,6 +62,7 @@ import statistics
 import struct
 import sys
 import tempfile
+import threading
 import time
 from urllib.parse import urlsplit
 from pathlib import Path
@@ -180,8 +188,34 @@ def _frames(buffer: bytearray) -> list[tuple[int, bytes]]:
 
 
 def _pong(payload: bytes) -> bytes:
+    return _client_frame(0xA, payload)
+
+
+def _client_frame(opcode: int, payload: bytes) -> bytes:
+    """A whole, masked frame as a client sends it (payloads under 64 KiB)."""
     mask = os.urandom(4)
-    return bytes([0x8A, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    length = bytes([0x80 | len(payload)]) if len(payload) < 126 else bytes([0x80 | 126]) + struct.pack("!H", len(payload))
+    return bytes([0x80 | opcode]) + length + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+
+
+def flood(url: str, count: int, sent: Any) -> None:
+    """In a child process: one page sends ``count`` E-stops as fast as the dashboard reads
+    them and reads no reply; ``sent`` counts them. Holds the page open until killed."""
+    address = urlsplit(url)
+    sock, _ = open_page(address.hostname or "127.0.0.1", address.port or 80)
+    sock.settimeout(None)  # blocks while the dashboard reads nothing: that is its back-pressure
+    for number in range(count):
+        sock.sendall(_client_frame(0x1, json.dumps({"type": "command", "id": number, "cmd": "estop"}).encode()))
+        sent.value = number + 1
+    threading.Event().wait()
+
+
+def resident_mb(pid: int) -> float:
+    """Process ``pid``'s resident memory, MB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
 
 
 def hold_pages(url: str, count: int, stalled: bool, ready: Any, stop: Any, still_open: Any) -> None:
@@ -342,6 +376,49 @@ def estop_under_idle_pages(args: argparse.Namespace) -> int:
     return 0
 
 
+FLOOD_HEAD_START_S = 2.0
+"""How long the flood runs before the first timed E-stop."""
+
+
+def estop_under_a_flood(args: argparse.Namespace) -> int:
+    """A new page's E-stop round trip while another page floods E-stops it never reads."""
+    context = multiprocessing.get_context("spawn")
+    sent = context.Value("q", 0)
+    with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
+        with serve(Path(directory), "--rate", str(RATE_HZ), api=args.api, telemetry=args.telemetry) as served, \
+                dashboard(served.api, served.telemetry, "--http", args.http, "--log-level", "warning") as board:
+            pid = board.process.pid
+            rss_start, peak = resident_mb(pid), 0.0
+            flooder = context.Process(target=flood, args=(board.url, args.flood, sent), daemon=True)
+            flooder.start()
+            try:
+                load_start, cpu_start, started = load_average(), cpu_seconds(pid), time.monotonic()
+                time.sleep(FLOOD_HEAD_START_S)
+                times = []
+                for _ in range(args.estops):
+                    times += estop_round_trips(board.url, 1)[0]
+                    peak = max(peak, resident_mb(pid))
+                cpu = (cpu_seconds(pid) - cpu_start) / (time.monotonic() - started)
+                load_end = load_average()
+            finally:
+                flooder.kill()
+                flooder.join(WAIT_S)
+    ms = [t * 1000.0 for t in times]
+    figures = {"flood": args.flood, "sent_by_the_end": sent.value, "round_trips_ms": ms, "p50_ms": statistics.median(ms),
+               "p95_ms": percentile(ms, 95.0), "max_ms": max(ms), "rss_start_mb": rss_start, "rss_peak_mb": peak,
+               "dashboard_cpu": cpu, "load_start": load_start, "load_end": load_end}
+    print(f"E-stop round trip, {args.estops} from fresh pages, while one page floods {args.flood} E-stops and reads "
+          "no reply:\n")
+    print("| flood sent by the end | p50 ms | p95 ms | max ms | dashboard memory, start → peak | dashboard CPU | "
+          "load average (1 min) start → end |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print(f"| {sent.value} of {args.flood} | {figures['p50_ms']:.1f} | {figures['p95_ms']:.1f} | {figures['max_ms']:.1f} | "
+          f"{rss_start:.0f} → {peak:.0f} MB | {cpu * 100:.0f} % | {load_start[0]:.2f} → {load_end[0]:.2f} |")
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2))
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=30.0, help="each phase's length (default 30; at most the "
@@ -350,13 +427,18 @@ def main() -> int:
     parser.add_argument("--idle-pages", type=int, nargs="+", metavar="N",
                         help="instead: a new page's E-stop round trip with N other pages connected, for each N")
     parser.add_argument("--stalled", action="store_true", help="with --idle-pages: the pages never read")
-    parser.add_argument("--estops", type=int, default=30, help="with --idle-pages: E-stops per N (default 30)")
-    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages: the service's API endpoint")
-    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages: its telemetry endpoint")
-    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages: the dashboard's address")
+    parser.add_argument("--flood", type=int, metavar="N", help="instead: a new page's E-stop round trip while another "
+                        "page sends N E-stops and reads no reply")
+    parser.add_argument("--estops", type=int, default=30, help="with --idle-pages or --flood: E-stops per phase "
+                        "(default 30)")
+    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages or --flood: the service's API endpoint")
+    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages or --flood: its telemetry endpoint")
+    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages or --flood: the dashboard's address")
     args = parser.parse_args()
     if args.idle_pages is not None:
         return estop_under_idle_pages(args)
+    if args.flood is not None:
+        return estop_under_a_flood(args)
     cyclictest_path = ensure_executables({"cyclictest": "rt-tests"}, lambda line: print(line, file=sys.stderr))["cyclictest"]
     with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
         workdir = Path(directory)
