@@ -268,12 +268,9 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
         return "load_calibration", {"path": arguments.file}
     import tomllib  # light; only for this command
 
-    from hexactl.adapters.files.text import TextFileError, read_text
+    from hexactl.adapters.files.text import read_text
 
-    try:
-        text = read_text(arguments.file)
-    except TextFileError as error:
-        raise CliError(str(error)) from None
+    text = read_text(arguments.file, CliError)
 
     try:
         tomllib.loads(text)

@@ -29,7 +29,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
-from hexactl.adapters.files.text import TextFileError, read_text
+from hexactl.adapters.files.text import read_text
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import VehicleTrajectory
 
@@ -59,7 +59,7 @@ def parse_cueing_parameters(text: str, source: str) -> CueingParameters:
 
 def load_cueing_parameters(path: str | os.PathLike[str]) -> CueingParameters:
     """Read a parameters file; :class:`CueingFileError` names the file, key and problem."""
-    return parse_cueing_parameters(_read(path), str(path))
+    return parse_cueing_parameters(read_text(path, CueingFileError), str(path))
 
 
 def _describe(error: ValidationError, source: str) -> str:
@@ -122,7 +122,7 @@ def load_vehicle_trajectory(path: str | os.PathLike[str]) -> VehicleTrajectory:
     elif not Path(path).exists():
         raise CueingFileError(f"{path}: no such file; the shipped trajectories are {', '.join(shipped_vehicles())} "
                               f"(by name), in {SHIPPED_VEHICLES}")
-    return parse_vehicle_trajectory(_read(path), str(path))
+    return parse_vehicle_trajectory(read_text(path, CueingFileError), str(path))
 
 
 def shipped_vehicles() -> list[str]:
@@ -157,10 +157,3 @@ def _uniform_period(times: np.ndarray, lines: list[int], source: str) -> float:
                 f"sample period {period:g} s of the first two: samples must be evenly spaced (resample the "
                 "trajectory at one rate)")
     return period
-
-
-def _read(path: str | os.PathLike[str]) -> str:
-    try:
-        return read_text(path)
-    except TextFileError as error:
-        raise CueingFileError(str(error)) from None

@@ -30,7 +30,7 @@ from pydantic import ValidationError
 
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.geometry_file import toml_value
-from hexactl.adapters.files.text import TextFileError, read_text
+from hexactl.adapters.files.text import read_text
 from hexactl.control.frames import OperatorFrames
 from hexactl.kinematics.axes import POSE_AXES
 from hexactl.kinematics.geometry import describe_validation_error
@@ -46,10 +46,9 @@ def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
     :raises FramesFileError: unreadable, not TOML, empty, or a value refused (each named)
     """
     location = Path(path)
+    text = read_text(location, FramesFileError)
     try:
-        data = tomllib.loads(read_text(location))
-    except TextFileError as error:
-        raise FramesFileError(str(error)) from None
+        data = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, RecursionError) as error:
         raise FramesFileError(f"{location}: not valid TOML: {error}") from None
     if not data:  # a saved file always holds work and tool: an empty one lost what it held

@@ -15,7 +15,7 @@ from pathlib import Path
 import tomli_w
 
 from hexactl.adapters.files.atomic import write_atomic
-from hexactl.adapters.files.text import TextFileError, read_text
+from hexactl.adapters.files.text import read_text
 from hexactl.kinematics.geometry import Geometry, GeometryError, geometry_from_mapping
 
 
@@ -30,11 +30,7 @@ def parse_geometry(text: str, source: str) -> Geometry:
 
 def load_geometry(path: str | os.PathLike[str]) -> Geometry:
     """Read a geometry or calibration file; :class:`GeometryError` names the file, key and problem."""
-    try:
-        text = read_text(path)
-    except TextFileError as error:
-        raise GeometryError(str(error)) from None
-    return parse_geometry(text, str(path))
+    return parse_geometry(read_text(path, GeometryError), str(path))
 
 
 def geometry_to_toml(geometry: Geometry) -> str:

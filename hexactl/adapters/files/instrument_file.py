@@ -24,7 +24,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from hexactl.adapters.files.text import TextFileError, read_text
+from hexactl.adapters.files.text import read_text
 from hexactl.calibration.observations import Instrument, LaserTracker, Station, Theodolites
 from hexactl.kinematics.geometry import describe_validation_error
 from hexactl.kinematics.numbers import Number, SixNumbers
@@ -73,8 +73,4 @@ def parse_instrument(text: str, source: str) -> Instrument:
 
 def load_instrument(path: str | os.PathLike[str]) -> Instrument:
     """Read and validate an instrument file. Raises :class:`InstrumentFileError`."""
-    try:
-        text = read_text(path)
-    except TextFileError as error:
-        raise InstrumentFileError(str(error)) from None
-    return parse_instrument(text, str(path))
+    return parse_instrument(read_text(path, InstrumentFileError), str(path))

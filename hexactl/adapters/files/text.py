@@ -42,11 +42,15 @@ def _line(data: bytes, offset: int) -> int:
     return data.count(b"\n", 0, offset) + 1
 
 
-def read_text(path: str | os.PathLike[str]) -> str:
-    """The text of the file ``path`` (:func:`decode_text`). :class:`TextFileError`
-    naming the file when it cannot be read or is not UTF-8."""
+def read_text(path: str | os.PathLike[str], error: type[Exception] = TextFileError) -> str:
+    """The text of the file ``path`` (:func:`decode_text`). Raises ``error`` (the
+    reader's own error type, :class:`TextFileError` by default) naming the file when it
+    cannot be read or is not UTF-8."""
     try:
         data = Path(path).read_bytes()
-    except OSError as error:
-        raise TextFileError(f"{path}: cannot read: {error}") from None
-    return decode_text(data, str(path))
+    except OSError as cause:
+        raise error(f"{path}: cannot read: {cause}") from None
+    try:
+        return decode_text(data, str(path))
+    except TextFileError as cause:
+        raise error(str(cause)) from None

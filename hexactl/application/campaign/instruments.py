@@ -28,7 +28,7 @@ from hexactl.adapters.files.measurements import (
     PointRows,
     parse_point_rows,
 )
-from hexactl.adapters.files.text import TextFileError, read_text
+from hexactl.adapters.files.text import read_text
 from hexactl.calibration.data import MeasurementData, screen_measurements
 from hexactl.kinematics.geometry import Geometry
 
@@ -80,10 +80,7 @@ class CsvInstrument:
         self._rows()
 
     def _rows(self) -> PointRows:
-        try:
-            text = read_text(self.path)
-        except TextFileError as error:
-            raise InstrumentError(str(error)) from None
+        text = read_text(self.path, InstrumentError)
         try:
             rows = parse_point_rows(text, str(self.path), self._feature_point_count)
         except MeasurementFileError as error:
