@@ -10,6 +10,7 @@ import asyncio
 import json
 import queue
 import threading
+import time
 from typing import Any
 
 from starlette.datastructures import Address
@@ -215,6 +216,29 @@ def test_a_flood_of_one_urgent_command_costs_one_request_at_a_time_and_delays_no
     assert clients == ["page 0", "page E", "page 1000"]  # each request names the press that made it wait
     assert {reply["request"] for reply in before} == {1}
     assert {reply["request"] for reply in during} == {3}  # the presses made while one was sent: the next one
+
+
+def test_a_jogs_release_reaches_the_service_after_every_renewal_sent_before_it() -> None:
+    arrived: list[list[float]] = []
+
+    def request(cmd: str, fields: dict[str, Any], client: str) -> dict[str, Any]:
+        if any(fields["velocity"]):
+            time.sleep(0.05)  # a renewal slow to connect, as on a loaded host
+        arrived.append(fields["velocity"])
+        return {"ok": True}
+
+    bridge = ServiceBridge(ServiceEndpoints("tcp://127.0.0.1:9", "tcp://127.0.0.1:9", 0.1, connect=None))
+    bridge._request = request  # type: ignore[method-assign]  # the API, as the worker calls it
+
+    async def held_then_released() -> None:
+        renewals = [bridge.command("jog", {"velocity": [0, 0, 5, 0, 0, 0]}) for _ in range(3)]
+        await asyncio.gather(*renewals, bridge.command("jog", {"velocity": [0] * 6}))
+
+    try:
+        asyncio.run(held_then_released())
+    finally:
+        bridge.close()
+    assert arrived == [[0, 0, 5, 0, 0, 0]] * 3 + [[0] * 6]  # the release last: nothing starts the jog again
 
 
 class StalledPage(FakePage):

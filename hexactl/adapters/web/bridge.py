@@ -6,7 +6,8 @@ draws slowly skips records, it never falls behind); it fetches the active geomet
 whenever the calibration changes; and it carries the pages' commands to the API, each on
 a client of its own in a worker thread, so that a slow command never holds up another.
 ``estop``, ``stop`` and ``abort`` each have a worker of their own (:class:`UrgentCommand`):
-a page that floods the others, or floods one of them, cannot delay another.
+a page that floods the others, or floods one of them, cannot delay another. ``jog`` has one
+too, in order: a release must never reach the service before a renewal sent ahead of it.
 
 The dashboard adds no privilege: every command is an API request like any client's, and
 the service validates it.
@@ -139,6 +140,9 @@ class ServiceBridge:
         self._thread: threading.Thread | None = None
         self._urgent = {name: UrgentCommand(name, self._request) for name in URGENT_COMMANDS}
         self._workers = ThreadPoolExecutor(COMMAND_WORKERS, thread_name_prefix="dashboard-command")
+        # One jog at a time, in the order sent: on the shared workers a release could overtake
+        # the renewals still in flight, and one of those would start the jog again after it.
+        self._jog_worker = ThreadPoolExecutor(1, thread_name_prefix="dashboard-jog")
         # The geometry is fetched beside the telemetry, never in its way: an API that does
         # not answer would hold each record back for the request's timeout.
         self._geometry_worker = ThreadPoolExecutor(1, thread_name_prefix="dashboard-geometry")
@@ -167,6 +171,7 @@ class ServiceBridge:
         for urgent in self._urgent.values():
             urgent.close()
         self._workers.shutdown(wait=False, cancel_futures=True)
+        self._jog_worker.shutdown(wait=False, cancel_futures=True)
         self._geometry_worker.shutdown(wait=False, cancel_futures=True)
 
     # -- pages -----------------------------------------------------------------------
@@ -221,7 +226,8 @@ class ServiceBridge:
             if fields:
                 return error_reply("invalid_request", f"{cmd} takes no fields, got {', '.join(sorted(fields))}")
             return await urgent(client)
-        return await asyncio.get_running_loop().run_in_executor(self._workers, self._request, cmd, fields, client)
+        workers = self._jog_worker if cmd == "jog" else self._workers
+        return await asyncio.get_running_loop().run_in_executor(workers, self._request, cmd, fields, client)
 
     def _request(self, cmd: str, fields: dict[str, Any], client_name: str) -> dict[str, Any]:
         endpoints = self.endpoints
