@@ -352,12 +352,9 @@ def _readings_unit_problem(data: MeasurementData, zero_readings_mm: NDArray | No
     typical, largest = float(np.median(data.readings_mm)), float(np.max(np.abs(data.readings_mm)))
     if zero <= 0.0 or typical > zero / READINGS_UNIT_RATIO or largest > zero / 2.0:
         return None
-    guess = {1e-3: "metres", 1e-1: "cm", 1.0 / 25.4: "inches"}
-    unit = next((name for factor, name in guess.items() if abs(np.log(max(typical, 1e-12) / zero / factor)) < np.log(1.5)),
-                None)
-    question = f"are they in {unit}? " if unit else ""
     return RowProblem(0, f"the legs read {typical:.4g} (median) and at most {largest:.4g}, in the zero posture "
-                         f"{zero:.1f} mm: {question}hexactl reads the sensors in mm; convert the readings to mm")
+                         f"{zero:.1f} mm: {_unit_question(typical / zero)}hexactl reads the sensors in mm; convert "
+                         "the readings to mm")
 
 
 def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProblem | None:
@@ -371,8 +368,17 @@ def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProbl
     span = float(np.median(np.linalg.norm(measured, axis=2)))
     if known <= 0.0 or 1.0 / SCALE_TOLERANCE <= span / known <= SCALE_TOLERANCE:
         return None
-    guess = {1e-3: "metres", 1e-1: "cm", 1.0 / 25.4: "inches", 1e3: "µm"}
-    unit = next((name for factor, name in guess.items() if abs(np.log(span / known / factor)) < np.log(1.5)), None)
-    question = f"are they in {unit}? " if unit else ""
     return RowProblem(0, f"the measured feature points lie {span:.3g} from their centre (median), the geometry's "
-                         f"{known:.1f} mm: {question}hexactl reads mm; convert the file to mm")
+                         f"{known:.1f} mm: {_unit_question(span / known)}hexactl reads mm; convert the file to mm")
+
+
+_UNITS_IN_MM = {1e-3: "metres", 1e-1: "cm", 1.0 / 25.4: "inches", 1e3: "µm"}
+"""What a length in mm reads as in another unit, by that unit (the factor from mm)."""
+
+
+def _unit_question(ratio: float) -> str:
+    """``"are they in UNIT? "`` for the unit whose factor lies within 1.5× of ``ratio``
+    (values as read over what mm would give), else nothing."""
+    unit = next((name for factor, name in _UNITS_IN_MM.items()
+                 if ratio > 0.0 and abs(np.log(ratio / factor)) < np.log(1.5)), None)
+    return f"are they in {unit}? " if unit else ""

@@ -17,7 +17,7 @@ from starlette.datastructures import Address
 from starlette.websockets import WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
-from hexactl.adapters.web.app import MAX_URGENT_IN_FLIGHT, _serve_page
+from hexactl.adapters.web.app import MAX_READ_AHEAD, _serve_page
 from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, Outbox, ServiceBridge, ServiceEndpoints,
                                          UrgentCommand)
 
@@ -155,16 +155,16 @@ def test_a_page_that_went_before_its_reply_had_its_command_carried_out_and_leave
 def test_a_page_flooding_e_stops_is_read_as_they_are_answered_and_every_press_gets_its_reply() -> None:
     """Found from outside: 300 000 ``estop`` messages from one client that did not read held
     a task each; the dashboard grew past 1 GB and answered no other page for minutes."""
-    presses = 10 * MAX_URGENT_IN_FLIGHT
+    presses = 10 * MAX_READ_AHEAD
     bridge = HungBridge()
     page = FakePage(*(text({"type": "command", "id": n, "cmd": "estop"}) for n in range(presses)), stays=True)
 
     async def scenario() -> None:
         serving = asyncio.create_task(_serve_page(bridge, page))  # type: ignore[arg-type]
-        await until(lambda: len(bridge.commands) >= MAX_URGENT_IN_FLIGHT, "the first presses taken")
+        await until(lambda: len(bridge.commands) >= MAX_READ_AHEAD, "the first presses taken")
         for _ in range(100):  # turns of the loop, for a page read on regardless to take more
             await asyncio.sleep(0)
-        assert len(bridge.commands) == MAX_URGENT_IN_FLIGHT and page.incoming.qsize() == presses - MAX_URGENT_IN_FLIGHT
+        assert len(bridge.commands) == MAX_READ_AHEAD and page.incoming.qsize() == presses - MAX_READ_AHEAD
         bridge.answer.set()
         await until(lambda: len(page.replies()) == presses, "every press answered")
         page.incoming.put_nowait(DISCONNECT)

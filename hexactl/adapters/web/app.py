@@ -41,9 +41,9 @@ MAX_MESSAGE_BYTES = 64 * 1024
 MAX_COMMANDS_IN_FLIGHT = 16
 """Commands one page may have waiting for replies; beyond, it is answered ``busy``."""
 
-MAX_URGENT_IN_FLIGHT = 64
+MAX_READ_AHEAD = 64
 """Commands one page may have waiting, ``estop``, ``stop`` and ``abort`` included (never
-answered ``busy``); beyond, its next message is read once one is answered."""
+answered ``busy``), before its next message is read only once one is answered."""
 
 RECORDING_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv$")
 """A downloadable recording: the ``record`` command's name rule, with ``.csv``."""
@@ -182,7 +182,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
             task = asyncio.create_task(answer(request_id, *parsed))
             in_flight.add(task)
             task.add_done_callback(in_flight.discard)
-            if len(in_flight) >= MAX_URGENT_IN_FLIGHT:
+            if len(in_flight) >= MAX_READ_AHEAD:
                 # Flooding estop, stop or abort: a task each would pile up without end. The
                 # page is read on once one is answered (its presses not yet read are
                 # carried out no later: each waits for the request being sent to end).
