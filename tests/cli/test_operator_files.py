@@ -124,3 +124,10 @@ def test_a_full_disk_under_the_report_is_bad_input_not_a_traceback(tmp_path, mon
 def test_a_refusal_of_hexactl_s_own_is_passed_on_as_it_says_what_to_do() -> None:
     refusal = FileExistsError("plan.csv exists; refusing to overwrite it (use --force)")
     assert str(write_failed("plan.csv", refusal)) == str(refusal)
+
+
+def test_a_write_refused_for_permission_says_to_write_where_one_may() -> None:
+    denied = PermissionError(errno.EACCES, "Permission denied")
+    assert str(write_failed("/etc/plan.csv", denied)) == ("cannot write /etc/plan.csv: Permission denied; write where "
+                                                          "you have permission (and the file system is not "
+                                                          "read-only), or choose another place")

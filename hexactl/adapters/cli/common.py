@@ -264,7 +264,12 @@ def write_failed(path: str | os.PathLike[str], error: OSError) -> CliError:
     hexactl's own (a file it refuses to replace: it says to use --force) is passed on."""
     if error.strerror is None:
         return CliError(str(error))
-    advice = "free some space there" if error.errno in (errno.ENOSPC, errno.EDQUOT) else "check the place"
+    if error.errno in (errno.ENOSPC, errno.EDQUOT):
+        advice = "free some space there"
+    elif error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        advice = "write where you have permission (and the file system is not read-only)"
+    else:
+        advice = "check the folder and the disk"
     return CliError(f"cannot write {path}: {error.strerror}; {advice}, or choose another place")
 
 
