@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 
+from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.snapshot import ControlState, CoreSnapshot
 
 log = logging.getLogger("hexactl.safety")
@@ -31,19 +32,23 @@ class SafetyLog:
 
     def __init__(self) -> None:
         self._state: ControlState | None = None
-        self._last_event_ns = -1
+        self._last_seq = 0
 
     def observe(self, snapshot: CoreSnapshot) -> None:
+        last_seq = snapshot.events[-1].seq if snapshot.events else 0
         if self._state is None:  # the first report: the events before it are the loop's history, not news
             self._state = snapshot.state
-            self._last_event_ns = max((event.t_ns for event in snapshot.events), default=-1)
+            self._last_seq = last_seq
             return
-        for event in snapshot.events:
-            if event.t_ns > self._last_event_ns:
-                level = logging.INFO if event.code.startswith(_ROUTINE_EVENTS) else logging.WARNING
-                log.log(level, "loop %s: %s%s", event.code, event.message,
-                        f" (sent by {event.sender})" if event.sender else "")
-        self._last_event_ns = max((event.t_ns for event in snapshot.events), default=self._last_event_ns)
+        new = [event for event in snapshot.events if event.seq > self._last_seq]
+        if new and new[0].seq > self._last_seq + 1:
+            log.warning("%d of the loop's events are not logged: more came between two of its reports than it "
+                        "keeps (%d)", new[0].seq - self._last_seq - 1, KEPT_EVENTS)
+        for event in new:
+            level = logging.INFO if event.code.startswith(_ROUTINE_EVENTS) else logging.WARNING
+            log.log(level, "loop %s: %s%s", event.code, event.message,
+                    f" (sent by {event.sender})" if event.sender else "")
+        self._last_seq = max(self._last_seq, last_seq)
         if snapshot.state is not self._state:
             level = logging.WARNING if snapshot.state in _WARNING_STATES else logging.INFO
             faults = "; ".join(f"{fault.code}: {fault.message}" for fault in snapshot.faults)

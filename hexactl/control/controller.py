@@ -34,7 +34,7 @@ from hexactl.control.move_commands import MoveCommands
 from hexactl.control.recording_commands import RecordingCommands
 from hexactl.control.recorder import Row
 from hexactl.control.sequence_player import SequenceReport
-from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
+from hexactl.control.snapshot import ControlState, CoreSnapshot, MotionState
 from hexactl.control.host import LoopHost
 from hexactl.control.planning import ActiveGeometry, PlanningContext
 from hexactl.control.results import CommandResult, ErrorCode
@@ -42,7 +42,7 @@ from hexactl.control.stream_commands import StreamCommands, TargetResult
 from hexactl.control.sequence_commands import SequenceCommands
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.sequences import MotionSequence
-from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, Telemetry, status_result, telemetry_of
+from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S, EventLog, Telemetry, events_after, status_result, telemetry_of
 from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.wave_commands import WaveCommands
 from hexactl.control.waves import WaveSpec
@@ -96,9 +96,11 @@ class Controller:
         ``PERCENTILES_MAX_AGE_S`` old; counters and maxima are current."""
         return telemetry_of(self._host.report(PERCENTILES_MAX_AGE_S), self.frames.current)
 
-    def events(self) -> tuple[Event, ...]:
-        """The loop's recent events (faults, refusals, sequence and calibration changes)."""
-        return self.snapshot.events
+    def events(self, after: int = 0) -> EventLog:
+        """The loop's kept events (faults, refusals, commands, sequence and calibration
+        changes) numbered after ``after``, oldest first."""
+        snapshot = self.snapshot
+        return events_after(snapshot.events, snapshot.t_ns, after)
 
     def sequence_records(self) -> SequenceReport | None:
         """The playing or last played sequence's dwell records."""

@@ -60,7 +60,9 @@ from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
 
 KEPT_EVENTS = 64
-"""Recent events kept in the snapshot."""
+"""Recent events kept in the snapshot: the API process reads them from each report it
+takes (the service's log, the ``events`` request), so a burst loses events to it only
+past this many between two reports (their numbers say how many)."""
 KEPT_CALIBRATIONS = 16
 """Calibrations a rollback can return to, the most recent first."""
 
@@ -286,7 +288,8 @@ class ControlCore:
     # -- publishing ----------------------------------------------------------------------
 
     def _event(self, code: str, message: str) -> None:
-        self._events = (self._events + (Event(self._now_ns, code, message, self._commands.sender),))[-KEPT_EVENTS:]
+        seq = self._events[-1].seq + 1 if self._events else 1
+        self._events = (self._events + (Event(seq, self._now_ns, code, message, self._commands.sender),))[-KEPT_EVENTS:]
 
     def _publish(self) -> None:
         motion = self._motion

@@ -38,10 +38,12 @@ class MotionState(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """Something the loop did or refused, for the log; ``t_ns`` monotonic; ``sender``
-    who sent the command it carried out or refused (None: the loop's own doing, or a
-    caller in its own process)."""
+    """Something the loop did or refused, for the log; ``seq`` its number (the loop's
+    first event is 1, each next one more: a reader that sees a gap missed events);
+    ``t_ns`` monotonic; ``sender`` who sent the command it carried out or refused (None:
+    the loop's own doing, or a caller in its own process)."""
 
+    seq: int
     t_ns: int
     code: str
     message: str

@@ -14,6 +14,7 @@ from hexactl.control.realtime import RealtimeReport
 from hexactl.control.results import CommandResult
 from hexactl.control.stats import LoopStats
 from hexactl.control.stream import StreamReport
+from hexactl.control.snapshot import Event
 from hexactl.control.frames import OperatorFrames, convert
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
@@ -101,10 +102,12 @@ class LegStatus:
 
 @dataclass(frozen=True, slots=True)
 class EventTelemetry:
-    """One of the loop's events: at ``t`` (s, the clock of :attr:`Telemetry.t`), ``code``
-    (snake_case) and ``message`` for people; ``sender`` who sent the command it carried
-    out or refused, as the API names its client (None: the loop's own doing)."""
+    """One of the loop's events: ``seq`` its number (one more than the one before), at
+    ``t`` (s, the clock of :attr:`Telemetry.t`), ``code`` (snake_case) and ``message``
+    for people; ``sender`` who sent the command it carried out or refused, as the API
+    names its client (None: the loop's own doing)."""
 
+    seq: int
     t: float
     code: str
     message: str
@@ -227,8 +230,32 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         stream=stream_telemetry(s),
         last_stream=s.last_stream,
         legs=leg_statuses(s),
-        events=tuple(EventTelemetry(e.t_ns / 1e9, e.code, e.message, e.sender) for e in s.events[-TELEMETRY_EVENTS:]),
+        events=tuple(event_telemetry(e) for e in s.events[-TELEMETRY_EVENTS:]),
     )
+
+
+def event_telemetry(e: Event) -> EventTelemetry:
+    return EventTelemetry(e.seq, e.t_ns / 1e9, e.code, e.message, e.sender)
+
+
+@dataclass(frozen=True, slots=True)
+class EventLog:
+    """The loop's kept events numbered after ``after`` (a reader's last seen), oldest
+    first, as the snapshot taken at ``t`` (s, the clock of :attr:`Telemetry.t`) had them.
+    ``missed``: how many came after ``after`` that the loop no longer keeps; ``last``: the
+    newest event's number (0: none yet; less than ``after``: the loop has restarted since)."""
+
+    t: float
+    events: tuple[EventTelemetry, ...]
+    missed: int
+    last: int
+
+
+def events_after(kept: tuple[Event, ...], t_ns: int, after: int) -> EventLog:
+    """The events ``kept`` at ``t_ns`` (the loop's clock) numbered after ``after`` (see
+    :class:`EventLog`)."""
+    newer = tuple(event_telemetry(e) for e in kept if e.seq > after)
+    return EventLog(t_ns / 1e9, newer, newer[0].seq - after - 1 if newer else 0, kept[-1].seq if kept else 0)
 
 
 def recording_telemetry(s: CoreSnapshot) -> RecordingTelemetry | None:

@@ -20,7 +20,8 @@ from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.files.geometry_file import geometry_id
 from hexactl.control.frames import Frame, OperatorFrames
-from hexactl.control.telemetry import SequenceTelemetry, Telemetry
+from hexactl.control.snapshot import Event
+from hexactl.control.telemetry import EventLog, SequenceTelemetry, Telemetry, events_after
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.supervisor import Fault
 from hexactl.control.planning import ActiveGeometry
@@ -74,6 +75,7 @@ class FakeController:
     sequence: MotionSequence | None = None
     frames: OperatorFrames = field(default_factory=OperatorFrames)
     frames_of_moves: list[tuple[Frame, bool]] = field(default_factory=list)
+    kept_events: tuple[Event, ...] = ()
 
     def _call(self, name: str, *arguments: Any) -> None:
         self.calls.append((name, arguments))
@@ -222,6 +224,9 @@ class FakeController:
 
     def sequence_records(self) -> SequenceReport | None:
         return SequenceReport(self.sequence.name, "playing", RECORDS) if self.sequence else None
+
+    def events(self, after: int = 0) -> EventLog:
+        return events_after(self.kept_events, time.monotonic_ns(), after)
 
     def telemetry(self) -> Telemetry:
         percentiles = Percentiles(10.0, 20.0, 30.0, 40.0)

@@ -7,6 +7,7 @@ import pytest
 import zmq
 from pydantic import TypeAdapter
 
+from hexactl.control.snapshot import Event
 from hexactl.adapters.api.commands import CommandHandler, MeasurementError
 from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, MeasureRequest, OkReply, PathViolation
 from hexactl.adapters.api.paths import DataDirectories
@@ -54,8 +55,20 @@ def test_every_command_round_trips(service, kind) -> None:
         assert reply["id"] == {"n": cmd}
     called = [name for name, _ in service.controller.calls]
     # queries and the instrument call nothing; clear_frames is a set_frames of no frames
-    assert set(called) == set(COMMANDS) - {"status", "validate_pose", "validate_wave", "save_recording", "measure",
-                                           "frames", "clear_frames", "geometry", "files", "read_file", "progress"}
+    assert set(called) == set(COMMANDS) - {"status", "events", "validate_pose", "validate_wave", "save_recording",
+                                           "measure", "frames", "clear_frames", "geometry", "files", "read_file",
+                                           "progress"}
+
+
+def test_events_reads_on_from_the_last_seen_and_counts_what_the_loop_dropped(service) -> None:
+    service.controller.kept_events = tuple(Event(seq, seq * 1_000_000, "stop", f"stop {seq}", "ann (127.0.0.1)")
+                                           for seq in range(11, 15))
+    reply = send(service, "events", after=8)
+    assert [event["seq"] for event in reply["events"]] == [11, 12, 13, 14] and reply["missed"] == 2
+    assert reply["last"] == 14 and reply["events"][0] == {"seq": 11, "t": 0.011, "code": "stop", "message": "stop 11",
+                                                          "sender": "ann (127.0.0.1)"}
+    assert send(service, "events", after=14)["events"] == [] and send(service, "events")["missed"] == 10
+    assert send(service, "events", after=-1)["error"]["code"] == "invalid_request"
 
 
 def test_move_passes_pose_and_pace(service) -> None:

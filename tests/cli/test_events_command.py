@@ -1,5 +1,6 @@
 """``hexactl events`` on a real ``hexactl serve``: the loop's latest events with who sent the
-command behind each, once or followed as they come (--follow), as text or JSON."""
+command behind each, once or followed as they come (--follow), as text or JSON; a burst
+printed whole, and what the loop no longer kept counted."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import pytest
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.cli.main import main
+from hexactl.control.core import KEPT_EVENTS
 from tests.api.test_service import wait_for
 from tests.reliability.support import recover
 from tools.serving import HANG_S, Served, serve
@@ -43,35 +45,90 @@ def test_events_prints_the_latest_with_their_senders_and_exits(served, ann, caps
                          for event in ann.call("status")["status"]["events"]), "the stop's event")
     capsys.readouterr()
     started = time.time()
-    assert main(["events", "--telemetry", served.telemetry, "--json"]) == 0
+    assert main(["events", "--api", served.api, "--json"]) == 0
     printed = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert 1 <= len(printed) <= 8 and [event["t"] for event in printed] == sorted(event["t"] for event in printed)
+    assert 1 <= len(printed) <= 20 and [event["seq"] for event in printed] == list(range(printed[0]["seq"], printed[-1]["seq"] + 1))
     stop = [event for event in printed if event["code"] == "stop"][-1]
     assert stop["sender"] == f"{ANN} (127.0.0.1)" and stop["message"] == "any motion under way brakes to rest"
     assert stop["at"] <= started + 1.0  # this host's clock, when it happened: before the command ran
 
-    assert main(["events", "--telemetry", served.telemetry]) == 0
+    assert main(["events", "--api", served.api]) == 0
     text = [line for line in capsys.readouterr().out.splitlines() if line.split()[1:2] == ["stop"]][-1]
     assert text.endswith(f" any motion under way brakes to rest  (sent by {ANN} (127.0.0.1))"), text
 
 
-def test_follow_prints_each_new_event_once_as_it_comes_until_ctrl_c(served, ann) -> None:
-    follower = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "events", "--follow", "--json",
-                                 "--telemetry", served.telemetry], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True, cwd=Path(__file__).resolve().parents[2])
-    lines: list[dict] = []
-    reader = threading.Thread(target=lambda: lines.extend(json.loads(line) for line in follower.stdout), daemon=True)
-    reader.start()
+class Follower:
+    """``hexactl events --follow --json`` in a process of its own, its lines read as they come."""
+
+    def __init__(self, api: str) -> None:
+        self.process = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "events", "--follow",
+                                         "--json", "--api", api], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        text=True, cwd=Path(__file__).resolve().parents[2])
+        self.lines: list[dict] = []
+        threading.Thread(target=lambda: self.lines.extend(json.loads(line) for line in self.process.stdout),
+                         daemon=True).start()
+
+    def interrupted(self) -> tuple[int, str]:
+        """Ctrl-C: its exit status and what it said on stderr."""
+        self.process.send_signal(signal.SIGINT)
+        self.process.wait(HANG_S)
+        return self.process.returncode, self.process.stderr.read()
+
+
+@pytest.fixture
+def follower(served: Served) -> Iterator[Follower]:
+    running = Follower(served.api)
     try:
-        wait_for(lambda: lines, "the latest events printed")  # there is at least the enable
-        shown = len(lines)
-        for _ in range(3):
-            ann.call("stop")
-        wait_for(lambda: sum(1 for event in lines[shown:] if event["code"] == "stop") == 3, "three new stops",
-                 seen=lambda: lines[shown:])
-        assert all(event["sender"] == f"{ANN} (127.0.0.1)" for event in lines[shown:] if event["code"] == "stop")
-        assert len({(e["t"], e["code"], e["message"], e["sender"]) for e in lines}) == len(lines)  # each once
+        yield running
     finally:
-        follower.send_signal(signal.SIGINT)
-        follower.wait(HANG_S)
-    assert follower.returncode == 130, follower.stderr.read()
+        if running.process.poll() is None:
+            running.process.kill()
+            running.process.wait(HANG_S)
+
+
+def test_follow_prints_each_new_event_once_as_it_comes_until_ctrl_c(follower, ann) -> None:
+    lines = follower.lines
+    wait_for(lambda: lines, "the latest events printed")  # there is at least the enable
+    shown = len(lines)
+    for _ in range(3):
+        ann.call("stop")
+    wait_for(lambda: sum(1 for event in lines[shown:] if event["code"] == "stop") == 3, "three new stops",
+             seen=lambda: lines[shown:])
+    assert all(event["sender"] == f"{ANN} (127.0.0.1)" for event in lines[shown:] if event["code"] == "stop")
+    assert [event["seq"] for event in lines] == list(range(lines[0]["seq"], lines[-1]["seq"] + 1))  # each once
+    status, said = follower.interrupted()
+    assert status == 130, said
+
+
+def _burst_while_frozen(follower: Follower, client: HexactlClient, stops: int) -> int:
+    """``stops`` stops sent while the follower is frozen (SIGSTOP), so that they all come
+    between two of its asks; the number of the last event it printed before."""
+    wait_for(lambda: follower.lines, "the latest events printed")
+    seen = follower.lines[-1]["seq"]
+    follower.process.send_signal(signal.SIGSTOP)
+    try:
+        for _ in range(stops):
+            client.call("stop")
+    finally:
+        follower.process.send_signal(signal.SIGCONT)
+    return seen
+
+
+def test_follow_prints_a_burst_whole_though_it_outnumbers_what_telemetry_carries(follower, ann) -> None:
+    seen = _burst_while_frozen(follower, ann, 20)  # telemetry carries the latest 8: --follow once showed those only
+    wait_for(lambda: sum(1 for event in follower.lines if event["seq"] > seen and event["code"] == "stop") == 20,
+             "the burst's twenty stops", seen=lambda: follower.lines[-3:])
+    new = [event["seq"] for event in follower.lines if event["seq"] > seen]
+    assert new == list(range(seen + 1, new[-1] + 1))
+    status, said = follower.interrupted()
+    assert status == 130 and "came and went" not in said, said
+
+
+def test_follow_counts_the_events_of_a_burst_the_loop_no_longer_kept(follower, ann) -> None:
+    seen = _burst_while_frozen(follower, ann, KEPT_EVENTS + 6)
+    last = ann.call("events", after=seen)["last"]
+    wait_for(lambda: follower.lines[-1]["seq"] >= last, "the burst printed", seen=lambda: follower.lines[-3:])
+    printed = [event["seq"] for event in follower.lines if seen < event["seq"] <= last]
+    assert printed == list(range(last - KEPT_EVENTS + 1, last + 1))  # all the loop kept, each once
+    status, said = follower.interrupted()
+    assert status == 130 and f"hexactl events: {printed[0] - seen - 1} events came and went between two asks" in said

@@ -16,7 +16,7 @@ def silent(rig, seconds: float = 1.2) -> None:
 
 
 def events(rig, code: str) -> list[str]:
-    return [event.message for event in rig.controller.events() if event.code == code]
+    return [event.message for event in rig.controller.events().events if event.code == code]
 
 
 def test_a_move_under_way_brakes_to_rest_short_of_its_goal_and_stays_enabled(rig):

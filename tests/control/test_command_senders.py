@@ -13,7 +13,7 @@ BOB = "dashboard, browser 10.0.0.7 (127.0.0.1)"
 
 def recorded(rig, since: int = 0) -> list[tuple[str, str | None]]:
     """The loop's events after the first ``since``: (code, sender)."""
-    return [(event.code, event.sender) for event in rig.controller.events()[since:]]
+    return [(event.code, event.sender) for event in rig.controller.events().events[since:]]
 
 
 def test_each_command_names_its_sender_in_the_event_it_leaves(rig):
@@ -30,13 +30,13 @@ def test_each_command_names_its_sender_in_the_event_it_leaves(rig):
         assert rig.controller.disable().ok
     rig.run()
     assert recorded(rig) == [("enabled", ALICE), ("move", BOB), ("stop", ALICE), ("disabled", ALICE)]
-    move = next(event for event in rig.controller.events() if event.code == "move")
+    move = next(event for event in rig.controller.events().events if event.code == "move")
     assert move.message == "2 s as planned"
 
 
 def test_an_estop_names_who_pressed_it_in_its_fault_and_a_refusal_names_who_was_refused(rig):
     rig.enabled()
-    before = len(rig.controller.events())
+    before = len(rig.controller.events().events)
     with commands_from(ALICE):
         assert rig.controller.move([0, 0, 5, 0, 0, 0], deadline_ns=rig.clock()).ok  # handed over; the loop finds it expired
     rig.run()
@@ -53,7 +53,7 @@ def test_an_estop_names_who_pressed_it_in_its_fault_and_a_refusal_names_who_was_
 
 def test_what_the_loop_does_of_its_own_accord_names_no_sender(rig):
     rig.enabled()
-    before = len(rig.controller.events())
+    before = len(rig.controller.events().events)
     sequence = MotionSequence(name="up", waypoint=[SequenceWaypoint(pose=[0, 0, 5, 0, 0, 0])])
     with commands_from(ALICE):
         assert rig.controller.play(sequence).ok

@@ -27,7 +27,7 @@ def test_a_command_reaching_the_loop_after_its_deadline_is_refused_expired(rig, 
     assert not outcome.ok and outcome.error == "expired" and "not carried out" in outcome.message
     snapshot = rig.controller.snapshot
     assert snapshot.motion.value == "holding" and snapshot.sequence is None and snapshot.lock is None
-    assert rig.controller.events()[-1].code == "command_refused"
+    assert rig.controller.events().events[-1].code == "command_refused"
     rig.run(50)
     assert rig.controller.telemetry().pose_command == pytest.approx((0,) * 6, abs=1e-9)  # nothing ran later
 

@@ -210,7 +210,7 @@ def test_enable_refused_by_the_loop_when_the_state_changed_meanwhile(rig):
     verdict = rig.controller.outcome(1)
     assert not verdict.ok and verdict.error == "heartbeat_missing"
     assert rig.controller.snapshot.state.value == "disabled"
-    assert any(e.code == "command_refused" for e in rig.controller.events())
+    assert any(e.code == "command_refused" for e in rig.controller.events().events)
 
 
 def test_disable_at_rest_only(rig):

@@ -22,6 +22,7 @@ from hexactl.adapters.api.messages import (
     DisableRequest,
     EnableRequest,
     EstopRequest,
+    EventsRequest,
     FramesRequest,
     JogRequest,
     LegLockRequest,
@@ -186,6 +187,8 @@ class CommandHandler:
                 geometry, source = self._calibration(request)
                 return self._kept(_calibration_fields(controller.load_calibration(geometry, geometry_id(geometry),
                                                                                   source)))
+            case EventsRequest():
+                return jsonable(controller.events(request.after))
             case GeometryRequest():
                 active = controller.active_geometry()
                 return {"calibration_id": active.calibration_id, "source": active.source,

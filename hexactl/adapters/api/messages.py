@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
+from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.sequences import Paced, SequenceWaypoint
@@ -65,6 +66,15 @@ class StatusRequest(_Request):
     """Reply with the current telemetry record."""
 
     cmd: Literal["status"]
+
+
+class EventsRequest(_Request):
+    """Reply with the loop's kept events numbered after ``after``, oldest first: send the
+    last reply's ``last`` to have each event once (telemetry carries only the newest few)."""
+
+    cmd: Literal["events"]
+    after: int = Field(default=0, ge=0, description="the number (seq) of the last event already seen; 0: every "
+                       "event the loop keeps")
 
 
 class EnableRequest(_Request):
@@ -443,6 +453,7 @@ class MeasureRequest(_Request):
 
 REQUEST_MODELS: tuple[type[_Request], ...] = (
     StatusRequest,
+    EventsRequest,
     EnableRequest,
     DisableRequest,
     StopRequest,
@@ -672,6 +683,8 @@ class CampaignTelemetry(_Message):
 class LoopEvent(_Message):
     """Something the loop did or refused."""
 
+    seq: int = Field(description="its number: the loop's first event is 1, each next one more (a gap: events the "
+                     "reader missed; fewer than the last seen: the service has restarted)")
     t: float = Field(description="when, s, on the clock of the record's t")
     code: str = Field(description="what, snake_case: a command carried out (enabled, disabled, stop, reset, move, "
                       "leg_locked, leg_unlocked, pause, resume, abort, wave_started), one that started something "
@@ -727,7 +740,8 @@ class Telemetry(_Message):
                                          description="legs 1–6 as each last reported: a fault that outlasts a reset "
                                          "shows here; null before the first read")
     events: list[LoopEvent] = Field(default_factory=list, max_length=TELEMETRY_EVENTS,
-                                    description="the loop's latest events, oldest first (its log has them all)")
+                                    description="the loop's latest events, oldest first (a burst of more: the events request "
+                                    "has them)")
 
 
 # -- replies -------------------------------------------------------------------------
@@ -761,6 +775,15 @@ class StatusReply(OkReply):
     status: Telemetry
     predicted_accuracy: PredictedAccuracy | None = Field(
         default=None, description="at the commanded pose now; null without a calibration covariance")
+
+
+class EventsReply(OkReply):
+    t: float = Field(description="when the loop's events were read, s, on the clock of the events' t")
+    events: list[LoopEvent] = Field(max_length=KEPT_EVENTS, description="the loop's kept events numbered after "
+                                    "the request's after, oldest first")
+    missed: int = Field(description=f"events numbered after the request's after that the loop no longer keeps (it "
+                        f"keeps its latest {KEPT_EVENTS}): read at least every few seconds to miss none")
+    last: int = Field(description="the newest event's number (0: none yet); send it as after to read on")
 
 
 class MoveReply(OkReply):
@@ -971,6 +994,7 @@ class ValidateWaveReply(OkReply):
 
 REPLY_MODELS: dict[str, type[OkReply]] = {
     "status": StatusReply,
+    "events": EventsReply,
     "stream_open": StreamOpenReply,
     "move": MoveReply,
     "validate_pose": ValidatePoseReply,

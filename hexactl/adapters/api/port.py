@@ -15,7 +15,7 @@ from typing import Any, Protocol
 
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import ActiveGeometry
-from hexactl.control.telemetry import Telemetry
+from hexactl.control.telemetry import EventLog, Telemetry
 from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.results import CommandResult
 from hexactl.control.sequences import MotionSequence
@@ -123,6 +123,10 @@ class ControllerPort(Protocol):
         ...
 
     def telemetry(self) -> Telemetry: ...
+
+    def events(self, after: int = 0) -> EventLog:
+        """The loop's kept events numbered after ``after``, oldest first."""
+        ...
 
 
 class RecorderPort(Protocol):

@@ -19,7 +19,7 @@ and never runs a slow handler. For each request it:
   before the stop was carried out; if it got through all the same, the worker stops the
   platform again after it and answers ``cancelled``;
 - queues anything else for a **worker thread**: the :data:`QUERY_COMMANDS` (snapshots:
-  ``status``, ``geometry``, ``record_status``) for the query worker unless their client has
+  ``status``, ``events``, ``geometry``, ``record_status``) for the query worker unless their client has
   a command waiting or being handled (then behind it, so that what it asks after its
   commands reflects them), the rest for the command worker; each has one queue per client
   (the ROUTER's routing identity), served round-robin, bounded per client and in all
@@ -85,7 +85,7 @@ CANCELLED_BY_STOP = frozenset({"move", "jog", "play", "resume", "leg_lock", "leg
 moving or change its motion or calibration. ``enable`` is not among them (it holds the
 pose the platform is at, and is refused while an E-stop is latched), nor are queries."""
 
-QUERY_COMMANDS = frozenset({"status", "geometry", "record_status"})
+QUERY_COMMANDS = frozenset({"status", "events", "geometry", "record_status"})
 """Snapshots of the service, answered by a worker of their own in milliseconds: a monitor
 asking ``status`` while another client's long plan is under way gets its answer, not a
 time-out that reads as a service gone."""

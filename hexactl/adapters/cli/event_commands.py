@@ -1,11 +1,13 @@
 """``hexactl events``: what the control loop did and who sent the command behind it.
 
-The loop's latest events come in every telemetry record (docs/api.md, "Telemetry":
-``events``, at most 8). ``events`` prints those, oldest first, and exits; ``--follow``
-then prints each new one as it comes, until Ctrl-C, like ``journalctl -f``: a burst of
-more events than a record carries between two records read shows its last 8 only (the
-service's log has them all). Each line: this host's clock when it happened (the
-record's age aside), the code, the message and the sender.
+The service answers ``events`` (docs/api.md) with the loop's kept events (its latest 64),
+each numbered. ``events`` prints the last ``--last`` of them, oldest first, and exits;
+``--follow`` then asks for those numbered after the last it printed, every
+:data:`FOLLOW_POLL_S`, and prints each once as it comes, until Ctrl-C, like
+``journalctl -f``; so a burst of events is printed whole. Should more come between two
+asks than the loop keeps, a line says how many were missed (the service's log has them).
+Each line: this host's clock when it happened (the reply's age aside), the code, the
+message and the sender.
 
 Standard library only at the top (start-up: :mod:`hexactl.adapters.cli.common`).
 """
@@ -20,46 +22,59 @@ import time
 from datetime import datetime
 from typing import Any
 
-from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT
-from hexactl.adapters.cli.common import client_endpoint, connect, connection_parser
+from hexactl.adapters.cli.common import connect, positive_int
+from hexactl.adapters.cli.service_commands import (
+    EXIT_NO_ANSWER,
+    EXIT_OK,
+    EXIT_REFUSED,
+    client_parser,
+    format_error_reply,
+)
 
-EXIT_OK, EXIT_NO_ANSWER, EXIT_INTERRUPTED = 0, 2, 130
-FOLLOW_POLL_S = 0.02
-"""How often ``--follow`` reads the newest record (telemetry is conflated: it skips none of
-the 8 events a record carries unless 8 more came within this)."""
+EXIT_INTERRUPTED = 130
+FOLLOW_POLL_S = 0.1
+"""How often ``--follow`` asks for new events (the loop keeps 64: a burst of more within
+this is the only way to miss one)."""
+DEFAULT_LAST = 20
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     events = subparsers.add_parser(
-        "events", parents=[connection_parser()], help="what the control loop did, and who sent the command behind it",
-        description="Print the control loop's latest events (what a telemetry record carries, at most 8), oldest "
-                    "first: when (this host's clock), what, and who sent the command behind it. With --follow, then "
-                    "each new one as it comes, until Ctrl-C.",
+        "events", parents=[client_parser()], help="what the control loop did, and who sent the command behind it",
+        description="Print the control loop's latest events, oldest first: when (this host's clock), what, and who "
+                    "sent the command behind it. With --follow, then each new one as it comes, until Ctrl-C.",
     )
-    # None: main() fills it in from the environment, the client file or the default (cli/endpoints.py).
-    events.add_argument("--telemetry", type=client_endpoint, metavar="ENDPOINT", help="telemetry endpoint (default "
-                        f"$HEXACTL_TELEMETRY, else the client file's telemetry, else {DEFAULT_TELEMETRY_ENDPOINT})")
+    events.add_argument("--last", type=positive_int, default=DEFAULT_LAST, metavar="N",
+                        help=f"how many of the latest to print first (default {DEFAULT_LAST}; the loop keeps 64)")
     events.add_argument("--follow", "-f", action="store_true", help="go on printing each new event until Ctrl-C")
-    events.add_argument("--json", action="store_true", help="one JSON event a line, with its time as this host's "
-                        "clock reads it (at: Unix s)")
+    events.epilog = "--json: one JSON event a line, with its time as this host's clock reads it (at: Unix s)."
     events.set_defaults(run=run)
 
 
 def run(arguments: argparse.Namespace) -> int:
-    """Exit 0; 2 when no telemetry arrives within ``--timeout``; 130 after Ctrl-C."""
-    from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber  # zmq: not for --help
+    """Exit 0; 1 when the service refuses; 2 when it does not answer within ``--timeout``; 130 after Ctrl-C."""
+    from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
 
-    seen: set[tuple[Any, ...]] = set()
     try:
-        with connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry:
+        with connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout) as client:
+            after, first = 0, True
             while True:
-                record = telemetry.receive(arguments.timeout)
+                reply = client.request("events", after=after)
                 received = time.time()
-                events = record.get("events") or []
-                for event in events:
-                    if _key(event) not in seen:
-                        print(_line(event, received - (record["t"] - event["t"]), arguments.json), flush=True)
-                seen = {_key(event) for event in events}  # the record's window: older ones cannot come back
+                if not reply.get("ok"):
+                    print(format_error_reply(reply), file=sys.stderr)
+                    return EXIT_REFUSED
+                if reply["last"] < after:  # numbered from 1 again: the service restarted
+                    print("hexactl events: the service has restarted: its events from the start", file=sys.stderr)
+                    after, first = 0, False
+                    continue
+                shown = reply["events"][-arguments.last:] if first else reply["events"]
+                if reply["missed"] and not first:
+                    print(f"hexactl events: {reply['missed']} events came and went between two asks (the service's "
+                          "log has them)", file=sys.stderr)
+                for event in shown:
+                    print(_line(event, received - (reply["t"] - event["t"]), arguments.json), flush=True)
+                after, first = reply["last"], False
                 if not arguments.follow:
                     return EXIT_OK
                 time.sleep(FOLLOW_POLL_S)
@@ -71,10 +86,6 @@ def run(arguments: argparse.Namespace) -> int:
         return EXIT_OK
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
-
-
-def _key(event: dict[str, Any]) -> tuple[Any, ...]:
-    return event["t"], event["code"], event["message"], event.get("sender")
 
 
 def _line(event: dict[str, Any], at: float, as_json: bool) -> str:
