@@ -6,7 +6,7 @@ the noise-consistency test and the status follow one rule whatever produced the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum, StrEnum
 
 import numpy as np
@@ -230,12 +230,13 @@ def assemble_result(
 ) -> IdentificationResult:
     """Covariance, observability, χ² test, predicted accuracy and status from a method's
     raw outcome; ``home_mm_deg`` is the zero posture the test motions are relative to."""
-    covariance, observability = analyse_information(information)
     # Without redundant observations the residuals are zero by construction: no test.
     chi2_per_dof = chi2_total / degrees_of_freedom if degrees_of_freedom > 0 else float("nan")
-    notes = list(warnings)
-    if chi2_per_dof > 1.0:
+    covariance, observability = analyse_information(information)  # what the postures determine: the noise model's
+    if chi2_per_dof > 1.0:  # the noise is larger than its model says: every σ scaled up alike
         covariance = covariance * chi2_per_dof
+        observability = replace(observability, worst_std_mm=observability.worst_std_mm * np.sqrt(chi2_per_dof))
+    notes = list(warnings)
     if chi2_per_dof > options.consistency_limit:
         notes.append(
             f"residuals are {np.sqrt(chi2_per_dof):.2g}× the noise model (χ²/dof {chi2_per_dof:.3g}): the noise "

@@ -4,6 +4,7 @@ consistency warning fires on a misfit, not on the form of the file."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hexactl.calibration.data import MeasurementData, measured_poses
 from hexactl.calibration.identification import identify
@@ -31,3 +32,17 @@ def test_chi2_per_dof_is_about_one_in_points_and_pose_form(nominal):
         pose_form.append(result.chi2_per_dof)
     assert abs(np.mean(pose_form) - np.mean(points_form)) < 0.16, (pose_form, points_form)
     assert 0.84 < np.mean(pose_form) < 1.16, pose_form
+
+
+def test_the_worst_combinations_sigma_is_scaled_as_the_covariance_when_the_noise_model_is_optimistic(
+        nominal, leglock_campaign) -> None:
+    """Found in review: with residuals beyond the noise model the covariance was scaled up
+    but the observability line's "worst combination ±σ" kept the noise model's figure."""
+    model = nominal.measurement
+    optimistic = nominal.model_copy(update={"measurement": model.model_copy(
+        update={"point_sigma_mm": model.point_sigma_mm / 4})})
+    result = identify(leglock_campaign.data, optimistic, IdentificationOptions(method=Method.FULL))
+    assert result.chi2_per_dof > 4.0
+    direction = result.observability.worst_direction
+    assert result.observability.worst_std_mm == pytest.approx(np.sqrt(direction @ result.covariance @ direction),
+                                                              rel=1e-6)
