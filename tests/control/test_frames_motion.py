@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.jog_planning import JOG_HORIZON_S
 from hexactl.control.planning import (
     OUTSIDE_SOFT_LIMITS,
     ActiveGeometry,
@@ -286,3 +287,24 @@ def test_one_pose_is_allowed_exactly_when_no_path_violation_is_found_there(geome
     violations = path_violations(context, np.array([pose]), 0)
     assume(all(abs(v.value - v.limit) > 1e-6 for v in violations))  # on a bound, the two paths' rounding may differ
     assert pose_allowed(context, pose) == (not violations), [v.message for v in violations]
+
+
+@pytest.mark.parametrize("frame", [Frame.WORK, Frame.TOOL])
+def test_relative_moves_and_jogs_turn_by_what_was_asked_across_180_degrees(rig, frame):
+    """A work frame turned 170° about z: the tool's yaw in it starts at -170°, and a turn
+    of -15° takes it to -185°, which read back is +175°. The next relative turn and a jog
+    go on from there by what they ask, not the long way round through the hardware's
+    limits (a base read back into (-180°, 180°] made +5° a turn of 365°, refused)."""
+    assert rig.controller.set_frames(OperatorFrames(work=(0, 0, 0, 0, 0, 170))).ok
+    rig.enabled()
+    assert rig.controller.move([0, 0, 0, 0, 0, -15], frame=frame, relative=True).ok
+    rig.settle()
+    assert rig.controller.telemetry().pose_command[5] == pytest.approx(-15, abs=1e-9)
+    turned = rig.controller.move([0, 0, 0, 0, 0, 5], frame=frame, relative=True)
+    assert turned.ok, turned.message
+    rig.settle()
+    assert rig.controller.telemetry().pose_command[5] == pytest.approx(-10, abs=1e-9)
+    jogged = rig.controller.jog([0, 0, 0, 0, 0, -2], frame)
+    assert jogged.ok, jogged.message
+    assert jogged.details["goal"][5] == pytest.approx(-10 - 2 * JOG_HORIZON_S, abs=1e-9)  # no limit that near
+    rig.assert_setpoints_safe()
