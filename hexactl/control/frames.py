@@ -126,9 +126,11 @@ def requested_goal(pose_mm_deg: Sequence[float], frame: Frame, relative: bool, t
 
 
 def short_way(start: Sequence[float], goal: ToolInWorkMmRad) -> ToolInWorkMmRad:
-    """``goal`` (mm, rad) with each angle more than half a turn from ``start``'s moved by
-    whole turns to within it: the same pose, reached turning the short way round. Angles
-    read back from a rotation lie in (-180°, 180°], and a motion in the work frame need
-    not have left them there (a turn from -170° by -15° ends at -185°)."""
-    return ToolInWorkMmRad._make((*goal[:3], *(g if abs(g - s) <= pi else s + remainder(g - s, tau)
+    """``goal`` (mm, rad) with each angle in [-180°, 180°] that is more than half a turn
+    from ``start``'s moved by a whole turn to within it: the same pose, reached turning the
+    short way round. Such an angle names an orientation, as one is read back, and a motion
+    in the work frame need not have left its angles in that range (a turn from -170° by
+    -15° ends at -185°; with the work frame turned 180°, yaw 180° is where it reads -180°).
+    An angle beyond ±180° is taken as it is, and refused where out of reach."""
+    return ToolInWorkMmRad._make((*goal[:3], *(s + remainder(g - s, tau) if abs(g) <= pi < abs(g - s) else g
                                                for s, g in zip(start[3:], goal[3:]))))
