@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from enum import StrEnum
+from math import pi, remainder, tau
 from operator import add, sub
 
 import numpy as np
@@ -81,7 +82,10 @@ def relative_poses(frames: Frames | None, positions: NDArray, home_mm_rad: Seque
 def convert(position: Sequence[float], source: Frames | None, target: Frames | None,
             home_mm_rad: Sequence[float]) -> Coordinates:
     """A position in the coordinates of ``source`` in those of ``target`` (None: relative
-    to the zero posture ``home_mm_rad``); mm and rad."""
+    to the zero posture ``home_mm_rad``); mm and rad. In the same coordinates it is the
+    position itself, its angles where the motion left them (:func:`short_way`)."""
+    if source == target:
+        return (RelativeMmRad if target is None else ToolInWorkMmRad)._make(map(float, position))
     absolute = source.platform_pose(position) if source is not None else tuple(map(add, home_mm_rad, position))
     if target is None:
         return tuple.__new__(RelativeMmRad, map(sub, absolute, home_mm_rad))
@@ -118,4 +122,15 @@ def requested_goal(pose_mm_deg: Sequence[float], frame: Frame, relative: bool, t
     if frame is Frame.WORK:
         return ToolInWorkMmDeg._make(map(add, base.in_degrees(), pose))
     moved = compose(transform_of(base), transform_of(ToolInWorkMmDeg._make(pose).in_radians()))
-    return ToolInWorkMmRad._make(pose_of(moved)).in_degrees()
+    return short_way(base, ToolInWorkMmRad._make(pose_of(moved))).in_degrees()
+
+
+def short_way(start: Sequence[float], goal: ToolInWorkMmRad) -> ToolInWorkMmRad:
+    """``goal`` (mm, rad) with each angle in [-180°, 180°] that is more than half a turn
+    from ``start``'s moved by a whole turn to within it: the same pose, reached turning the
+    short way round. Such an angle names an orientation, as one is read back, and a motion
+    in the work frame need not have left its angles in that range (a turn from -170° by
+    -15° ends at -185°; with the work frame turned 180°, yaw 180° is where it reads -180°).
+    An angle beyond ±180° is taken as it is, and refused where out of reach."""
+    return ToolInWorkMmRad._make((*goal[:3], *(s + remainder(g - s, tau) if abs(g) <= pi < abs(g - s) else g
+                                               for s, g in zip(start[3:], goal[3:]))))

@@ -17,7 +17,7 @@ from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.validated_under import ValidatedUnder, changed_since_validation
-from hexactl.kinematics.axes import validate_pose_values
+from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
 
 
 class MoveCommands:
@@ -92,6 +92,11 @@ class MoveCommands:
         context = self._context(s, frames)
         if problem := validate_pose_values(pose) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, problem))
+        if relative and (beyond := [f"{axis} {turn:g}°" for axis, turn in zip(POSE_AXES[3:], pose[3:]) if abs(turn) > 180]):
+            # a goal in the work frame is reached the short way round (short_way): such a
+            # turn would go the other way, to the same orientation
+            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
+                                        f"got {', '.join(beyond)}: turn the other way round (360° less)"))
         target = s.goal if s.goal is not None else s.trajectory.position
         goal = requested_goal(pose, Frame(frame), bool(relative), target, s.frames, context.frames, s.active.home)
         if isinstance(goal, str):

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.control.config import ControllerConfig
-from hexactl.control.frames import Coordinates, convert, relative_poses
+from hexactl.control.frames import Coordinates, convert, relative_poses, short_way
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.trajectory import KinematicState, MotionLimits, preview
 from hexactl.kinematics.frames import Frames, tools_in_work
@@ -292,6 +292,8 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
                                             "frame: stop first, or move in its frame", details={"waypoint": number}))
             rebased = convert(start.position, start_frames, frames, home)
             start, start_frames = KinematicState.at_rest(rebased), frames
+        if frames is not None:
+            goal = short_way(start.position, goal)
         # The goal alone first: cheap, and no trajectory is previewed towards a goal
         # that is out of reach anyway (ruckig raises on absurd ones). The one-pose check
         # in plain floats screens it; the full assessment names what a refused goal breaks,

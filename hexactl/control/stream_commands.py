@@ -22,7 +22,7 @@ import numpy as np
 
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
-from hexactl.control.frames import Frame, convert
+from hexactl.control.frames import Frame, convert, short_way
 from hexactl.control.planning import PlanningContext, pose_allowed
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
@@ -128,6 +128,13 @@ class _OpenStream:
         self.sent_ns = received_ns
         return min(MAX_HORIZON_S, max(HORIZON_S, 2.0 * self.interval_s))
 
+    def near_last(self, pose_mm_deg: Sequence[float]) -> np.ndarray:
+        """A sample (mm, deg) in mm and rad; in the work frame with its angles in
+        [-180°, 180°] taken the short way round from the last target (:func:`short_way`):
+        a sender holding 180° where the tool reads -180° means no turn at all."""
+        requested = _mm_rad(pose_mm_deg)
+        return requested if self.frames is None else np.array(short_way(self.last, requested))
+
     def braking_s(self, velocity: np.ndarray) -> np.ndarray:
         """Per axis, how far braking from ``velocity`` goes, in seconds of it: jerk-limited
         braking covers at most v²/(2a) + v·a/(2j)."""
@@ -212,9 +219,9 @@ class StreamCommands:
         if ended is not None and ended.stream == stream.stream:
             self._open = None
             return TargetResult(False)
-        requested = _mm_rad(pose_mm_deg)
+        requested = stream.near_last(pose_mm_deg)
         if before is not None:
-            stream.requested, stream.requested_at_s = _mm_rad(before[0]), before[1]
+            stream.requested, stream.requested_at_s = stream.near_last(before[0]), before[1]
         horizon_s = stream.horizon(received_ns)
         velocity = self._velocity(stream, requested, sent_s)
         stream.requested, stream.requested_at_s = requested, sent_s

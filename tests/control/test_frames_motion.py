@@ -9,6 +9,8 @@ from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.jog_planning import JOG_HORIZON_S
+from hexactl.control.sequences import sequence_from_mapping
 from hexactl.control.planning import (
     OUTSIDE_SOFT_LIMITS,
     ActiveGeometry,
@@ -286,3 +288,60 @@ def test_one_pose_is_allowed_exactly_when_no_path_violation_is_found_there(geome
     violations = path_violations(context, np.array([pose]), 0)
     assume(all(abs(v.value - v.limit) > 1e-6 for v in violations))  # on a bound, the two paths' rounding may differ
     assert pose_allowed(context, pose) == (not violations), [v.message for v in violations]
+
+
+@pytest.mark.parametrize("frame", [Frame.WORK, Frame.TOOL])
+def test_relative_moves_and_jogs_turn_by_what_was_asked_across_180_degrees(rig, frame):
+    """A work frame turned 170° about z: the tool's yaw in it starts at -170°, and a turn
+    of -15° takes it to -185°, which read back is +175°. The next relative turn and a jog
+    go on from there by what they ask, not the long way round through the hardware's
+    limits (a base read back into (-180°, 180°] made +5° a turn of 365°, refused)."""
+    assert rig.controller.set_frames(OperatorFrames(work=(0, 0, 0, 0, 0, 170))).ok
+    rig.enabled()
+    assert rig.controller.move([0, 0, 0, 0, 0, -15], frame=frame, relative=True).ok
+    rig.settle()
+    assert rig.controller.telemetry().pose_command[5] == pytest.approx(-15, abs=1e-9)
+    turned = rig.controller.move([0, 0, 0, 0, 0, 5], frame=frame, relative=True)
+    assert turned.ok, turned.message
+    rig.settle()
+    assert rig.controller.telemetry().pose_command[5] == pytest.approx(-10, abs=1e-9)
+    jogged = rig.controller.jog([0, 0, 0, 0, 0, -2], frame)
+    assert jogged.ok, jogged.message
+    assert jogged.details["goal"][5] == pytest.approx(-10 - 2 * JOG_HORIZON_S, abs=1e-9)  # no limit that near
+    rig.assert_setpoints_safe()
+
+
+def test_an_absolute_pose_in_a_work_frame_turned_180_degrees_is_reached_the_short_way(rig):
+    """A work frame turned 180° about z (the part faces the other way): the tool's yaw in
+    it reads back -180° at the zero posture, and the operator types the 180° he set. The
+    same orientation, reached without turning at all, by a move and by a sequence; a
+    turn of a few degrees across ±180° is a few degrees (it was a 360° swing, refused)."""
+    assert rig.controller.set_frames(OperatorFrames(work=(0, 0, 0, 0, 0, 180))).ok
+    rig.enabled()
+    assert abs(rig.controller.telemetry().tool_pose_command[5]) == pytest.approx(180, abs=1e-9)
+    lifted = rig.controller.move([0, 0, 10, 0, 0, 180], frame=Frame.WORK)
+    assert lifted.ok, lifted.message
+    rig.settle()
+    assert rig.controller.telemetry().pose_command == pytest.approx((0, 0, 10, 0, 0, 0), abs=1e-9)
+    assert rig.controller.move([0, 0, 10, 0, 0, -178], frame=Frame.WORK).ok
+    rig.settle()
+    assert rig.controller.move([0, 0, 10, 0, 0, 178], frame=Frame.WORK).ok
+    rig.settle()
+    assert rig.controller.telemetry().pose_command == pytest.approx((0, 0, 10, 0, 0, -2), abs=1e-9)
+    square = {"name": "turned", "frame": "work", "waypoints": [{"pose": [20, 0, 10, 0, 0, 180]},
+                                                                {"pose": [20, 0, 10, 0, 0, -179]}]}
+    played = rig.controller.play(sequence_from_mapping(square))
+    assert played.ok, played.message
+    rig.settle()
+    assert rig.controller.telemetry().pose_command == pytest.approx((-20, 0, 10, 0, 0, 1), abs=1e-9)
+    rig.assert_setpoints_safe()
+
+
+def test_a_relative_turn_beyond_half_a_turn_is_refused_not_taken_the_other_way(rig):
+    """+300° is out of reach: refused, never turned into the -60° that ends at the same
+    orientation (a goal in the work frame is reached the short way round)."""
+    assert rig.controller.set_frames(OperatorFrames(work=(0, 0, 0, 0, 0, 180))).ok
+    rig.enabled()
+    for frame in Frame:
+        refused = rig.controller.move([0, 0, 0, 0, 0, 300], frame=frame, relative=True)
+        assert refused.error == "invalid_argument" and "at most 180° about each axis, got yaw 300°" in refused.message

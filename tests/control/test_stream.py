@@ -206,3 +206,15 @@ def test_a_target_in_reach_whose_way_leaves_the_workspace_stops_the_platform_on_
     assert np.allclose(travelled, way * (travelled[0] / way[0]), atol=0.2)  # on the way to the target
     assert not assess_pose(geometry, start + way * (travelled[0] / way[0] + 0.01)).ok  # and on its boundary
     rig.assert_setpoints_safe()
+
+
+def test_a_stream_in_a_work_frame_turned_180_degrees_holds_yaw_180_where_it_is(rig) -> None:
+    """The tool reads yaw -180° with the work frame turned 180°; a stream holding the 180°
+    its sender means, then crossing to -179°, turns the platform by what it asks (the way
+    from -180° to 180° went all round, and the platform swung to its yaw limit)."""
+    assert rig.controller.set_frames(OperatorFrames(work=(0, 0, 0, 0, 0, 180))).ok
+    _opened(rig, frame="work")
+    results = _stream(rig, [(0, 0, 0, 0, 0, 180)] * 200 + [(0, 0, 0, 0, 0, -179)] * 500)
+    assert not any(r.clamped for r in results)
+    assert rig.controller.snapshot.pose_command.in_degrees()[5] == pytest.approx(1, abs=1e-6)
+    rig.assert_setpoints_safe()
