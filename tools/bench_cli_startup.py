@@ -1,7 +1,7 @@
 """Benchmark how long ``hexactl`` commands take to start: whole-process wall time.
 
 Each command runs ``--runs`` times as a fresh ``python3 -m hexactl.adapters.cli.main``
-process: ``--help``, and ``status`` and ``move`` against an endpoint where nothing
+process: ``--help``, and ``status``, ``move`` and ``events`` against an endpoint where nothing
 listens with a 50 ms timeout (they fail fast: what is measured is the start-up plus that
 timeout), beside a bare ``python3 -c pass`` as the anchor. With several ``--tree``
 checkouts (e.g. a worktree of HEAD beside the working copy) the runs alternate between
@@ -32,9 +32,11 @@ COMMANDS: dict[str, list[str]] = {
     "hexactl --help": [*CLI, "--help"],
     "hexactl status": [*CLI, "status", *NO_SERVICE],
     "hexactl move": [*CLI, "move", "0,0,0,0,0,0", *NO_SERVICE],
+    "hexactl events": [*CLI, "events", *NO_SERVICE],
 }
-EXPECTED_STATUS = {"python3 -c pass": 0, "hexactl --help": 0, "hexactl status": 2, "hexactl move": 2}
-"""``status`` and ``move`` find no service: exit 2 (no answer); anything else is a broken run."""
+EXPECTED_STATUS = {"python3 -c pass": 0, "hexactl --help": 0, "hexactl status": 2, "hexactl move": 2,
+                   "hexactl events": 2}
+"""``status``, ``move`` and ``events`` find no service: exit 2 (no answer); anything else is a broken run."""
 
 
 def environment(tree: Path) -> dict[str, str]:

@@ -60,8 +60,9 @@ print(json.dumps({{"status": status,
     (["status", *NO_SERVICE], 2, ["zmq"]),
     (["move", "x=50,yaw=5", *NO_SERVICE], 2, ["zmq"]),
     (["enable", *NO_SERVICE], 2, ["zmq"]),
+    (["events", *NO_SERVICE], 2, ["zmq"]),
     (["monitor", "--once", "--telemetry", "tcp://127.0.0.1:1", "--timeout", "0.05"], 2, ["zmq"]),
-], ids=["parser", "help", "move-help", "status", "move", "enable", "monitor-once"])
+], ids=["parser", "help", "move-help", "status", "move", "enable", "events", "monitor-once"])
 def test_light_commands_load_no_heavy_module(argv: list[str] | None, status: int, allowed: list[str]) -> None:
     run = loaded_after(argv)
     assert run["status"] == status

@@ -20,6 +20,7 @@ from hexactl.adapters.api.client import HexactlClient
 from hexactl.application.safety_log import _ROUTINE_EVENTS
 from tests.reliability.support import enable
 from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_for
+from tests.web.test_validated_move import TAP, tap
 
 ANN = "ann at the bench"
 DASHBOARD = "dashboard, browser "
@@ -174,3 +175,40 @@ def test_warnings_are_what_the_services_log_warns_of(rig) -> None:
     assert {code for code, warning in shown if warning} == set(WARNINGS), shown
     assert all(code.startswith(_ROUTINE_EVENTS) for code in ROUTINE)
     assert not [code for code in WARNINGS if code.startswith(_ROUTINE_EVENTS)]
+
+
+@pytest.fixture(scope="module")
+def tapped(tmp_path_factory) -> Iterator[Rig]:
+    """A page whose telemetry the test can drop (:data:`~tests.web.test_validated_move.TAP`)."""
+    with page_on_a_service(tmp_path_factory.mktemp("events-tapped"), before_load=TAP) as rig:
+        yield rig
+
+
+def test_a_burst_the_page_did_not_receive_is_asked_for_and_listed_whole(tapped) -> None:
+    """Twenty stops while the page gets no telemetry (a record dropped on the way, as for
+    a page that reads too slowly): the next record carries the burst's last eight, and the
+    page asks the service for the events it skipped."""
+    rig = tapped
+
+    def body() -> None:
+        rig.at_rest_disabled()
+        with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
+            ann.call("stop")
+            mark = latest(rig, "stop", ANN)
+            wait_for(lambda: line_of(rig, mark), "the stop before the burst on the page", seen=lambda: lines(rig))
+            tap(rig, drop=True)
+            try:
+                for _ in range(20):
+                    ann.call("stop")
+                burst = ann.call("events", after=mark["seq"])["events"]
+            finally:
+                tap(rig)
+        assert sum(1 for event in burst if event["code"] == "stop") == 20, burst
+        wait_for(lambda: all(line_of(rig, event) for event in burst), "the whole burst on the page",
+                 seen=lambda: [line["code"] for line in lines(rig)][:30])
+        listed = rig.page("return window.hexactlDashboard.events()")
+        keys = [(e["t"], e["code"], e["message"], e["sender"]) for e in listed]
+        assert len(keys) == len(set(keys)), listed  # each event once
+        assert not any(e["code"] == "events_missed" for e in listed), listed
+
+    rig.scenario(body)

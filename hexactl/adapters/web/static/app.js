@@ -231,7 +231,7 @@ $('plot-export').addEventListener('click', () => {
   setTimeout(() => URL.revokeObjectURL(url), 10000);
 });
 plotTitles();
-const eventsPanel = setupEvents();
+const eventsPanel = setupEvents((after) => send('events', { after }));
 
 // ---------------- header and readouts ----------------
 const shown = {};

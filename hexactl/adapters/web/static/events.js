@@ -1,7 +1,10 @@
 // The Events panel: the control loop's recent events (telemetry's `events`, docs/api.md),
 // newest first, each with how long before the newest record it happened, its code, its
 // message and who sent the command behind it. The page keeps the last EVENTS_KEPT it has
-// seen, so an event stays listed after it has left the records' window of eight.
+// seen, so an event stays listed after it has left the records' window of eight. Events
+// are numbered (`seq`): when a record's first is more than one past the last the page
+// took (a burst of more than eight, or records the page did not get), it asks the
+// service for those after it (the `events` request), so that the burst is listed whole.
 //
 // Cheap at 50 records a second: a record whose newest event is the one seen last costs a
 // comparison; the list is built again only when an event is new, and the "ago" texts are
@@ -10,7 +13,7 @@
 
 const $ = (id) => document.getElementById(id);
 
-export const EVENTS_KEPT = 50;
+export const EVENTS_KEPT = 64;  // as many as the service keeps: a burst it sends is listed whole
 const AGO_EVERY_MS = 500;
 
 // The loop's daily work, as the service's log counts it (INFO, not WARNING:
@@ -42,10 +45,11 @@ export function agoText(seconds) {
 
 const finite = (v) => typeof v === 'number' && Number.isFinite(v);
 
-/** {t, code, message, sender} of a record's event, or null for one the page cannot show. */
+/** {number, t, code, message, sender} of a record's event, or null for one the page cannot show. */
 function clean(e) {
   if (!e || typeof e !== 'object' || !finite(e.t) || typeof e.code !== 'string') return null;
   return {
+    number: Number.isSafeInteger(e.seq) ? e.seq : null,
     t: e.t,
     code: e.code,
     message: typeof e.message === 'string' ? e.message : '',
@@ -58,8 +62,10 @@ const sameEvent = (a, b) => a.t === b.t && a.code === b.code && a.message === b.
 /**
  * The panel (#events). Returns hooks the app calls: onRecord(record) for every telemetry
  * record received, draw(now) from the draw loop; entries() what the panel lists.
+ * askAfter(number) sends the service's `events` request for the events numbered after
+ * `number` and resolves with its reply (ok or not).
  */
-export function setupEvents() {
+export function setupEvents(askAfter) {
   const list = $('events');
   const kept = [];          // newest first: {t, code, message, sender, warning, key, seq, run, li, ago}
   const keys = new Set();   // kept's keys: JSON of [t, code, message, sender]
@@ -67,13 +73,15 @@ export function setupEvents() {
   let recordT = null;       // the newest record's t (s, the service's clock)
   let run = 0;              // +1 each time the service's clock goes back: a new service, another clock
   let seq = 0;
+  let lastNumber = 0;       // the newest event number taken in from this run (0: none)
+  let asking = false;       // an `events` request for a gap is under way
   let dirty = false;
   let agoAt = -Infinity;    // performance.now() of the last "ago" update (only to limit their rate)
   let agoFor = null;        // the record t they were computed at
 
   function onRecord(r) {
     if (finite(r.t)) {
-      if (recordT !== null && r.t < recordT) run += 1;
+      if (recordT !== null && r.t < recordT) { run += 1; lastNumber = 0; }
       recordT = r.t;
     }
     const events = r.events;
@@ -81,9 +89,36 @@ export function setupEvents() {
     const last = clean(events[events.length - 1]);
     if (last === null || (newest !== null && sameEvent(last, newest))) return;
     newest = last;
+    const first = clean(events[0]);
+    if (first !== null && first.number !== null && lastNumber > 0 && first.number > lastNumber + 1) askFrom(lastNumber);
+    take(events);
+  }
+
+  /** The events numbered after `after` from the service: those the records skipped. */
+  async function askFrom(after) {
+    if (asking || !askAfter) return;
+    asking = true;
+    const asked = run;
+    try {
+      const reply = await askAfter(after);
+      if (!reply || reply.ok !== true || asked !== run) return;
+      const events = Array.isArray(reply.events) ? reply.events : [];
+      if (Number.isSafeInteger(reply.missed) && reply.missed > 0 && finite(events[0]?.t ?? reply.t)) {
+        // taken first: listed just below (before) the oldest event the service still had
+        take([{ t: events[0]?.t ?? reply.t, code: 'events_missed', sender: null,
+                message: `${reply.missed} events came and went before the page could ask (the service's log has them)` }]);
+      }
+      take(events);
+    } finally {
+      asking = false;
+    }
+  }
+
+  function take(events) {
     for (const raw of events) {
       const e = clean(raw);
       if (e === null) continue;
+      if (e.number !== null) lastNumber = Math.max(lastNumber, e.number);
       const key = JSON.stringify([e.t, e.code, e.message, e.sender]);
       if (keys.has(key)) continue;
       keys.add(key);
