@@ -118,6 +118,25 @@ def test_a_bad_vehicle_file_is_refused_naming_the_line_and_column(text: str, exp
     assert expected in str(refused.value)
 
 
+@pytest.mark.parametrize(("f_z", "mistake"), [(1.0, "in g"), (0.0, "without gravity"), (-9.81, "z down")])
+def test_a_vehicle_file_in_the_wrong_units_or_axes_is_refused_naming_f_z(f_z: float, mistake: str) -> None:
+    """It was taken: a file in g, or with gravity left out, or in z-down (aerospace) axes
+    planned a cue with a z jolt of about 1 g and the wrong tilts, and said nothing."""
+    text = HEADER + "\n" + "".join(f"{n / 100},0.1,0,{f_z},0,0,0\n" for n in range(20))
+    with pytest.raises(CueingFileError) as refused:
+        parse_vehicle_trajectory(text, "mine.csv")
+    message = str(refused.value)
+    assert message.startswith(f"mine.csv: column f_z: {f_z:g} m/s² (median over the file)")
+    assert "+9.81 m/s²" in message and "in g" in message and "without gravity" in message and "z down" in message
+
+
+def test_a_vehicle_file_whose_f_z_swings_about_one_g_is_taken() -> None:
+    """A flight: pulled up at 2.5 g and pushed over to 0.2 g, 1 g most of the time."""
+    values = [9.81] * 12 + [24.5] * 4 + [2.0] * 4
+    text = HEADER + "\n" + "".join(f"{n / 100},0,0,{f_z},0,0,0\n" for n, f_z in enumerate(values))
+    assert len(parse_vehicle_trajectory(text, "mine.csv")) == 20
+
+
 def test_times_rounded_in_the_text_are_uniform_and_blank_lines_are_skipped_keeping_line_numbers() -> None:
     vehicle = parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03) + "\n" + "0.04,0,0,9.81,0,0,0\n", "mine.csv")
     assert len(vehicle) == 5 and vehicle.period_s == pytest.approx(0.01)
