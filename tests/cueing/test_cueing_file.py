@@ -46,6 +46,7 @@ def test_a_key_left_out_keeps_its_default() -> None:
     ("[translational]\ngain = 0.5\n", "mine.toml: translational.gain: must be a list of numbers"),
     ("[tilt]\nlimit_deg = nan\n", "mine.toml: tilt.limit_deg: must be a finite number"),
     ("[workspace]\nlimiter_knee = 0.98\n", "mine.toml: workspace: limiter_knee 0.98 must be below limiter_ceiling 0.97"),
+    ("[workspace]\nmax_gain = 1e4\n", "mine.toml: workspace.max_gain: Input should be less than or equal to 100"),
     ("[wash]\ngain = 1\n", "mine.toml: wash: not a cueing parameter"),
     ("[tilt\n", "mine.toml: not valid TOML"),
 ])
