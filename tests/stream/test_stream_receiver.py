@@ -8,6 +8,7 @@ import socket
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from types import SimpleNamespace
 
 import pytest
 import zmq
@@ -15,6 +16,7 @@ import zmq
 from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.messages import StreamOpenRequest
 from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api import stream_receiver
 from hexactl.adapters.api.stream_receiver import StreamReceiver
 from hexactl.adapters.api.stream_wire import MalformedSample, decode, encode
 from hexactl.adapters.api.wire import ApiError, ErrorCode
@@ -211,3 +213,24 @@ def test_stream_open_is_refused_once_the_input_has_stopped(tmp_path) -> None:
     with pytest.raises(ApiError) as refused:
         handler(StreamOpenRequest(v=1, id=1, cmd="stream_open", source="simulator", timeout_ms=100))
     assert refused.value.code == ErrorCode.NO_STREAM_INPUT and "restart the service" in refused.value.message
+
+
+def test_the_rate_of_a_sender_faster_than_the_samples_kept_is_not_capped_at_their_number(monkeypatch) -> None:
+    """Found from outside: a 5 kHz sender showed rate_hz 2000, the number of arrival times
+    kept (KEPT_LATENCIES). The receiver is driven here on a clock of the test's own."""
+    now_ns = [10**9]
+    monkeypatch.setattr(stream_receiver, "time", SimpleNamespace(monotonic_ns=lambda: now_ns[0]))
+    progress = StreamProgress(1, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+    with zmq.Context() as context:
+        receiver = StreamReceiver(context, "tcp://127.0.0.1:*", None, RecordingController().stream_target, PERIOD_S,
+                                  lambda: progress)
+        try:
+            receiver._watch_loop()
+            for sequence in range(1, 5001):  # 5 kHz for a second
+                now_ns[0] += 200_000
+                receiver._taken_or_counted([encode(sequence, now_ns[0] / 1e9, [0.0] * 6)])
+            assert receiver.view()["rate_hz"] == 5000
+            now_ns[0] += 2 * 10**9  # quiet for two seconds
+            assert receiver.view()["rate_hz"] == 0
+        finally:
+            receiver.close()

@@ -131,8 +131,17 @@ class StreamReceiver(SocketThread):
         return {"running": self.running, "stream": self._stream, "received": c.received, "malformed": c.malformed,
                 "out_of_order": c.out_of_order, "no_stream": c.no_stream, "coalesced": c.coalesced,
                 "forwarded": c.forwarded, "clamped": c.clamped, "failed": c.failed, "last_problem": c.last_problem,
-                "rate_hz": sum(1 for t in list(self._arrived_ns) if now - t <= 1_000_000_000),
+                "rate_hz": self._rate_hz(now),
                 "loop_latency_ms": _percentiles(self._loop_latency_ns), "age_ms": _percentiles(self._age_ns)}
+
+    def _rate_hz(self, now_ns: int) -> int:
+        """Samples taken over the last second; when every arrival kept is that recent, more
+        came than are kept: the rate they arrived at."""
+        arrived = list(self._arrived_ns)
+        recent = sum(1 for t in arrived if now_ns - t <= 1_000_000_000)
+        if recent == len(arrived) == self._arrived_ns.maxlen and arrived[-1] > arrived[0]:
+            return round((len(arrived) - 1) * 1e9 / (arrived[-1] - arrived[0]))
+        return recent
 
     @property
     def running(self) -> bool:
