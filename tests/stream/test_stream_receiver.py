@@ -234,3 +234,16 @@ def test_the_rate_of_a_sender_faster_than_the_samples_kept_is_not_capped_at_thei
             assert receiver.view()["rate_hz"] == 0
         finally:
             receiver.close()
+
+
+def test_a_sender_that_restarts_its_count_is_told_why_its_samples_are_dropped() -> None:
+    """Found from outside: a simulator restarted mid-stream numbers its samples from 0 again;
+    every one was dropped as out of order, the stream ended in its timeout, and last_problem
+    said nothing: the operator saw a timeout while the simulator was sending."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        sent(push.send, encode(5000, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [5000], "sample 5000")
+        sent(push.send, encode(1, time.monotonic(), [1.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
+             "sample 1 dropped")
+        problem = receiver.counters.last_problem
+        assert "sample 1 is not above the last one taken (5000)" in problem and "a new stream" in problem

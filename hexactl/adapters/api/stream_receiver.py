@@ -225,6 +225,9 @@ class StreamReceiver(SocketThread):
             sample = Sample((self._last_sequence or 0) + 1, received_ns / 1e9, sample.pose)
         elif self._last_sequence is not None and sample.sequence <= self._last_sequence:
             c.out_of_order += 1
+            self._problem(f"sample {sample.sequence} is not above the last one taken ({self._last_sequence}): dropped "
+                          "as reordered or duplicated (a sender that restarted its count needs a new stream: "
+                          "stream_close, then stream_open; or a second sender is sending)")
             return
         else:
             self._age_ns.append(received_ns - round(sample.sent_s * 1e9))
