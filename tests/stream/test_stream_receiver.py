@@ -247,3 +247,35 @@ def test_a_sender_that_restarts_its_count_is_told_why_its_samples_are_dropped() 
              "sample 1 dropped")
         problem = receiver.counters.last_problem
         assert "sample 1 is not above the last one taken (5000)" in problem and "a new stream" in problem
+
+
+def test_a_flood_does_not_hold_up_the_targets_while_it_is_read(monkeypatch) -> None:
+    """Found from outside: under a UDP flood of a few thousand samples a second on a busy host
+    the thread read 1024 per wake, 100-250 ms, before it forwarded one: 6 targets a second
+    reached the loop and the stream ended in its timeout. Here the receiver is not started
+    and reads by hand, on a clock on which each look costs 100 µs, 500 samples waiting in
+    its port: targets go on, a period apart, while they are read."""
+    now_ns = [time.monotonic_ns()]
+
+    def slow_clock() -> int:
+        now_ns[0] += 100_000
+        return now_ns[0]
+
+    monkeypatch.setattr(stream_receiver, "time", SimpleNamespace(monotonic_ns=slow_clock))
+    controller = RecordingController()
+    progress = StreamProgress(1, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+    with zmq.Context() as context:
+        receiver = StreamReceiver(context, "tcp://127.0.0.1:*", ("127.0.0.1", 0), controller.stream_target, PERIOD_S,
+                                  lambda: progress)
+        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            host, port = receiver.endpoints["udp"].rsplit(":", 1)
+            for sequence in range(1, 501):  # on loopback each is in the port once sent
+                udp.sendto(encode(sequence, sequence * 1e-4, [0.0] * 6), (host, int(port)))
+            receiver._watch_loop()
+            receiver._read()
+            assert receiver.counters.received == 500
+            assert len(controller.targets) >= 5 and sequences(controller) == sorted(set(sequences(controller)))
+        finally:
+            udp.close()
+            receiver.close()

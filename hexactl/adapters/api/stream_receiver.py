@@ -40,7 +40,8 @@ POLL_MS = 100
 """How often the idle thread wakes to check for shutdown."""
 
 MAX_PER_WAKE = 1024
-"""Messages read per wake at most: a flood cannot keep the thread from forwarding."""
+"""Messages read per wake at most: a flood cannot keep the thread from looking at the
+loop's stream or from stopping (targets go on while it reads: :meth:`StreamReceiver._read`)."""
 
 KEPT_LATENCIES = 2000
 """Latencies kept for the percentiles (4 s at 500 Hz)."""
@@ -170,21 +171,29 @@ class StreamReceiver(SocketThread):
             except Exception as error:  # the controller's view, in this process: logged, and read again next wake
                 self._failed("reading the loop's stream failed", error)
             self._read()
-            now_ns = time.monotonic_ns()
-            if self._pending is not None and now_ns >= self._due_ns:
-                self._forward()
-                # The next is due a period after this one was due (the wake-up may have been
-                # late), or a period from now when the thread was idle or fell behind.
-                due_ns = self._due_ns + self._period_ns
-                self._due_ns = due_ns if due_ns > now_ns else now_ns + self._period_ns
+            self._forward_if_due()
+
+    def _forward_if_due(self) -> None:
+        if self._pending is None:
+            return
+        now_ns = time.monotonic_ns()
+        if now_ns >= self._due_ns:
+            self._forward()
+            # The next is due a period after this one was due (the wake-up may have been
+            # late), or a period from now when the thread was idle or fell behind.
+            due_ns = self._due_ns + self._period_ns
+            self._due_ns = due_ns if due_ns > now_ns else now_ns + self._period_ns
 
     def _read(self) -> None:
+        """Read what arrived, up to :data:`MAX_PER_WAKE` a socket; a target due meanwhile
+        goes on at once (reading a flood on a busy host can take longer than a stream's timeout)."""
         for _ in range(MAX_PER_WAKE):
             try:
                 frames = self._socket.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
                 break
             self._taken_or_counted(frames)
+            self._forward_if_due()
         if self._udp is None:
             return
         for _ in range(MAX_PER_WAKE):
@@ -196,6 +205,7 @@ class StreamReceiver(SocketThread):
                 self._problem(f"UDP receive failed: {error}")
                 break
             self._taken_or_counted([message])
+            self._forward_if_due()
 
     def _taken_or_counted(self, frames: list[bytes]) -> None:
         """Take the message of ``frames`` (a datagram is one), or count it as malformed,
