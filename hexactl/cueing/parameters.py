@@ -80,8 +80,9 @@ class WorkspaceUse(_Frozen):
 
     use_fraction: Number = Field(
         0.85, gt=0, le=1, description="the workspace-aware gain keeps every pose's use at most this, dimensionless")
-    max_gain: Positive = Field(
-        2.5, description="the largest workspace-aware gain on the onset (high-pass) channels, dimensionless")
+    max_gain: Number = Field(
+        2.5, gt=0, le=100, description="the largest workspace-aware gain on the onset (high-pass) channels, "
+        "dimensionless, at most 100")
     limiter_knee: Number = Field(
         0.75, gt=0, lt=1, description="the limiter leaves poses of a use up to this alone, dimensionless")
     limiter_ceiling: Number = Field(

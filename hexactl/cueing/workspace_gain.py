@@ -38,8 +38,9 @@ RAY_BISECTIONS = 17
 """Halvings of a ray's reach interval: the reach to 2⁻¹⁷ (8e-6) of the envelope's extent
 along it, a few µm or thousandths of a degree."""
 
-GAIN_BISECTIONS = 12
-"""Halvings of the gain interval [0, max_gain]: the gain to 2⁻¹² of max_gain."""
+GAIN_RESOLUTION = 1e-3
+"""The gain is found to this, whatever ``max_gain`` (a fixed number of halvings of
+[0, max_gain] would lose the gain of a large one)."""
 
 GAIN_CANDIDATES = 150
 """Samples a gain is first searched over (evenly spread, plus each axis's extremes);
@@ -87,7 +88,7 @@ def _envelope_scale(geometry: Geometry, poses: NDArray) -> NDArray[np.float64]:
 
 
 def gain_to_fill_workspace(geometry: Geometry, channels: WashoutChannels, workspace: WorkspaceUse) -> float:
-    """The largest gain g in [0, ``workspace.max_gain``] (to :data:`GAIN_BISECTIONS`) with
+    """The largest gain g in [0, ``workspace.max_gain``] (to :data:`GAIN_RESOLUTION`) with
     every pose ``channels.poses(g)`` using at most ``workspace.use_fraction`` of the
     workspace. 0 when the tilt alone uses more somewhere (then only the limiter fits the
     cue: lower ``tilt.limit_deg``)."""
@@ -124,7 +125,7 @@ def _largest_fitting_gain(fits: Callable[[float], bool], max_gain: float) -> flo
     if not fits(0.0):
         return 0.0
     low, high = 0.0, max_gain
-    for _ in range(GAIN_BISECTIONS):
+    while high - low > GAIN_RESOLUTION:
         middle = (low + high) / 2.0
         low, high = (middle, high) if fits(middle) else (low, middle)
     return low

@@ -244,6 +244,18 @@ def test_cue_with_nobody_answering_is_no_answer_not_a_traceback(tmp_path, capsys
     assert err.startswith(f"hexactl cue: no answer from ipc://{tmp_path}/nobody") and "Traceback" not in err
 
 
+@pytest.mark.parametrize("period_s", [0.5, 10.0], ids=["2 Hz", "t_s in ms"])
+def test_cue_refuses_a_vehicle_file_sampled_too_slowly_to_stream(period_s: float, tmp_path, capsys) -> None:
+    """A 0.5 s period was streamed stop and go (no velocity between samples 0.1 s apart or
+    more), a 10 s one (t_s written in ms) ended after the first pose in the stream's timeout."""
+    path = tmp_path / "slow.csv"
+    path.write_text("t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z\n"
+                    + "".join(f"{n * period_s:g},0,0,9.81,0,0,0\n" for n in range(5)), encoding="utf-8")
+    assert exits_with(["cue", str(path), "--api", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: sample period {period_s:g} s" in err and "at 10 Hz or more" in err and "no answer" not in err
+
+
 def test_cue_refused_prints_the_refusal_as_every_command_does(monkeypatch, capsys) -> None:
     """It printed `refused: latched: latched: fault is latched: reset first` on stdout."""
     from hexactl.adapters.api import client as client_module

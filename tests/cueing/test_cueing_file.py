@@ -46,6 +46,7 @@ def test_a_key_left_out_keeps_its_default() -> None:
     ("[translational]\ngain = 0.5\n", "mine.toml: translational.gain: must be a list of numbers"),
     ("[tilt]\nlimit_deg = nan\n", "mine.toml: tilt.limit_deg: must be a finite number"),
     ("[workspace]\nlimiter_knee = 0.98\n", "mine.toml: workspace: limiter_knee 0.98 must be below limiter_ceiling 0.97"),
+    ("[workspace]\nmax_gain = 1e4\n", "mine.toml: workspace.max_gain: Input should be less than or equal to 100"),
     ("[wash]\ngain = 1\n", "mine.toml: wash: not a cueing parameter"),
     ("[tilt\n", "mine.toml: not valid TOML"),
 ])
@@ -116,6 +117,25 @@ def test_a_bad_vehicle_file_is_refused_naming_the_line_and_column(text: str, exp
     with pytest.raises(CueingFileError) as refused:
         parse_vehicle_trajectory(text, "mine.csv")
     assert expected in str(refused.value)
+
+
+@pytest.mark.parametrize(("f_z", "mistake"), [(1.0, "in g"), (0.0, "without gravity"), (-9.81, "z down")])
+def test_a_vehicle_file_in_the_wrong_units_or_axes_is_refused_naming_f_z(f_z: float, mistake: str) -> None:
+    """It was taken: a file in g, or with gravity left out, or in z-down (aerospace) axes
+    planned a cue with a z jolt of about 1 g and the wrong tilts, and said nothing."""
+    text = HEADER + "\n" + "".join(f"{n / 100},0.1,0,{f_z},0,0,0\n" for n in range(20))
+    with pytest.raises(CueingFileError) as refused:
+        parse_vehicle_trajectory(text, "mine.csv")
+    message = str(refused.value)
+    assert message.startswith(f"mine.csv: column f_z: {f_z:g} m/s² (median over the file)")
+    assert "+9.81 m/s²" in message and "in g" in message and "without gravity" in message and "z down" in message
+
+
+def test_a_vehicle_file_whose_f_z_swings_about_one_g_is_taken() -> None:
+    """A flight: pulled up at 2.5 g and pushed over to 0.2 g, 1 g most of the time."""
+    values = [9.81] * 12 + [24.5] * 4 + [2.0] * 4
+    text = HEADER + "\n" + "".join(f"{n / 100},0,0,{f_z},0,0,0\n" for n, f_z in enumerate(values))
+    assert len(parse_vehicle_trajectory(text, "mine.csv")) == 20
 
 
 def test_times_rounded_in_the_text_are_uniform_and_blank_lines_are_skipped_keeping_line_numbers() -> None:

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hexactl.cueing.parameters import CueingParameters, WorkspaceUse
 from hexactl.cueing.washout import WashoutChannels, wash_out
 from hexactl.cueing.workspace_gain import (
-    GAIN_BISECTIONS,
+    GAIN_RESOLUTION,
     WorkspaceError,
     gain_to_fill_workspace,
     limit_to_workspace,
@@ -43,7 +43,7 @@ def test_the_gain_fills_the_workspace_to_the_use_fraction_along_a_straight_onset
     onset = np.zeros((50, 6))
     onset[:, 0] = np.linspace(0.0, 1000.0, 50)  # mm of x, beyond the 610 mm envelope
     gain = gain_to_fill_workspace(nominal, channels(onset), WORKSPACE)
-    resolution = WORKSPACE.max_gain / 2**GAIN_BISECTIONS
+    resolution = GAIN_RESOLUTION
     assert gain * 1000.0 == pytest.approx(WORKSPACE.use_fraction * 610.0, abs=resolution * 1000.0)
     assert gain * 1000.0 <= WORKSPACE.use_fraction * 610.0
 
@@ -62,8 +62,17 @@ def test_the_gain_on_a_shipped_manoeuvre_keeps_every_pose_within_the_use_fractio
     gain = gain_to_fill_workspace(nominal, washed, WORKSPACE)
     assert 0 < gain < WORKSPACE.max_gain
     assert reachable(nominal, washed.poses(gain) / WORKSPACE.use_fraction).all()
-    step = 2 * WORKSPACE.max_gain / 2**GAIN_BISECTIONS
+    step = 2 * GAIN_RESOLUTION
     assert not reachable(nominal, washed.poses(gain + step) / WORKSPACE.use_fraction).all()
+
+
+def test_a_large_max_gain_finds_the_same_gain(nominal, vehicles) -> None:
+    """The bisection halved [0, max_gain] 12 times: with max_gain 100 the gain came out 2 %
+    low, with 1e4 (meant as "no cap") 0, the onset channels off without a word."""
+    washed = wash_out(CueingParameters(), vehicles["lane_change"])
+    usual = gain_to_fill_workspace(nominal, washed, WORKSPACE)
+    uncapped = gain_to_fill_workspace(nominal, washed, WorkspaceUse(max_gain=100.0))
+    assert uncapped == pytest.approx(usual, abs=2 * GAIN_RESOLUTION)
 
 
 @settings(max_examples=200, deadline=None)

@@ -8,6 +8,7 @@ import socket
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from types import SimpleNamespace
 
 import pytest
 import zmq
@@ -15,6 +16,7 @@ import zmq
 from hexactl.adapters.api.commands import CommandHandler
 from hexactl.adapters.api.messages import StreamOpenRequest
 from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api import stream_receiver
 from hexactl.adapters.api.stream_receiver import StreamReceiver
 from hexactl.adapters.api.stream_wire import MalformedSample, decode, encode
 from hexactl.adapters.api.wire import ApiError, ErrorCode
@@ -211,3 +213,69 @@ def test_stream_open_is_refused_once_the_input_has_stopped(tmp_path) -> None:
     with pytest.raises(ApiError) as refused:
         handler(StreamOpenRequest(v=1, id=1, cmd="stream_open", source="simulator", timeout_ms=100))
     assert refused.value.code == ErrorCode.NO_STREAM_INPUT and "restart the service" in refused.value.message
+
+
+def test_the_rate_of_a_sender_faster_than_the_samples_kept_is_not_capped_at_their_number(monkeypatch) -> None:
+    """Found from outside: a 5 kHz sender showed rate_hz 2000, the number of arrival times
+    kept (KEPT_LATENCIES). The receiver is driven here on a clock of the test's own."""
+    now_ns = [10**9]
+    monkeypatch.setattr(stream_receiver, "time", SimpleNamespace(monotonic_ns=lambda: now_ns[0]))
+    progress = StreamProgress(1, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+    with zmq.Context() as context:
+        receiver = StreamReceiver(context, "tcp://127.0.0.1:*", None, RecordingController().stream_target, PERIOD_S,
+                                  lambda: progress)
+        try:
+            receiver._watch_loop()
+            for sequence in range(1, 5001):  # 5 kHz for a second
+                now_ns[0] += 200_000
+                receiver._taken_or_counted([encode(sequence, now_ns[0] / 1e9, [0.0] * 6)])
+            assert receiver.view()["rate_hz"] == 5000
+            now_ns[0] += 2 * 10**9  # quiet for two seconds
+            assert receiver.view()["rate_hz"] == 0
+        finally:
+            receiver.close()
+
+
+def test_a_sender_that_restarts_its_count_is_told_why_its_samples_are_dropped() -> None:
+    """Found from outside: a simulator restarted mid-stream numbers its samples from 0 again;
+    every one was dropped as out of order, the stream ended in its timeout, and last_problem
+    said nothing: the operator saw a timeout while the simulator was sending."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        sent(push.send, encode(5000, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [5000], "sample 5000")
+        sent(push.send, encode(1, time.monotonic(), [1.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
+             "sample 1 dropped")
+        problem = receiver.counters.last_problem
+        assert "sample 1 is not above the last one taken (5000)" in problem and "a new stream" in problem
+
+
+def test_a_flood_does_not_hold_up_the_targets_while_it_is_read(monkeypatch) -> None:
+    """Found from outside: under a UDP flood of a few thousand samples a second on a busy host
+    the thread read 1024 per wake, 100-250 ms, before it forwarded one: 6 targets a second
+    reached the loop and the stream ended in its timeout. Here the receiver is not started
+    and reads by hand, on a clock on which each look costs 100 µs, 500 samples waiting in
+    its port: targets go on, a period apart, while they are read."""
+    now_ns = [time.monotonic_ns()]
+
+    def slow_clock() -> int:
+        now_ns[0] += 100_000
+        return now_ns[0]
+
+    monkeypatch.setattr(stream_receiver, "time", SimpleNamespace(monotonic_ns=slow_clock))
+    controller = RecordingController()
+    progress = StreamProgress(1, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+    with zmq.Context() as context:
+        receiver = StreamReceiver(context, "tcp://127.0.0.1:*", ("127.0.0.1", 0), controller.stream_target, PERIOD_S,
+                                  lambda: progress)
+        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            host, port = receiver.endpoints["udp"].rsplit(":", 1)
+            for sequence in range(1, 501):  # on loopback each is in the port once sent
+                udp.sendto(encode(sequence, sequence * 1e-4, [0.0] * 6), (host, int(port)))
+            receiver._watch_loop()
+            receiver._read()
+            assert receiver.counters.received == 500
+            assert len(controller.targets) >= 5 and sequences(controller) == sorted(set(sequences(controller)))
+        finally:
+            udp.close()
+            receiver.close()

@@ -40,7 +40,8 @@ POLL_MS = 100
 """How often the idle thread wakes to check for shutdown."""
 
 MAX_PER_WAKE = 1024
-"""Messages read per wake at most: a flood cannot keep the thread from forwarding."""
+"""Messages read per wake at most: a flood cannot keep the thread from looking at the
+loop's stream or from stopping (targets go on while it reads: :meth:`StreamReceiver._read`)."""
 
 KEPT_LATENCIES = 2000
 """Latencies kept for the percentiles (4 s at 500 Hz)."""
@@ -131,8 +132,17 @@ class StreamReceiver(SocketThread):
         return {"running": self.running, "stream": self._stream, "received": c.received, "malformed": c.malformed,
                 "out_of_order": c.out_of_order, "no_stream": c.no_stream, "coalesced": c.coalesced,
                 "forwarded": c.forwarded, "clamped": c.clamped, "failed": c.failed, "last_problem": c.last_problem,
-                "rate_hz": sum(1 for t in list(self._arrived_ns) if now - t <= 1_000_000_000),
+                "rate_hz": self._rate_hz(now),
                 "loop_latency_ms": _percentiles(self._loop_latency_ns), "age_ms": _percentiles(self._age_ns)}
+
+    def _rate_hz(self, now_ns: int) -> int:
+        """Samples taken over the last second; when every arrival kept is that recent, more
+        came than are kept: the rate they arrived at."""
+        arrived = list(self._arrived_ns)
+        recent = sum(1 for t in arrived if now_ns - t <= 1_000_000_000)
+        if recent == len(arrived) == self._arrived_ns.maxlen and arrived[-1] > arrived[0]:
+            return round((len(arrived) - 1) * 1e9 / (arrived[-1] - arrived[0]))
+        return recent
 
     @property
     def running(self) -> bool:
@@ -161,21 +171,29 @@ class StreamReceiver(SocketThread):
             except Exception as error:  # the controller's view, in this process: logged, and read again next wake
                 self._failed("reading the loop's stream failed", error)
             self._read()
-            now_ns = time.monotonic_ns()
-            if self._pending is not None and now_ns >= self._due_ns:
-                self._forward()
-                # The next is due a period after this one was due (the wake-up may have been
-                # late), or a period from now when the thread was idle or fell behind.
-                due_ns = self._due_ns + self._period_ns
-                self._due_ns = due_ns if due_ns > now_ns else now_ns + self._period_ns
+            self._forward_if_due()
+
+    def _forward_if_due(self) -> None:
+        if self._pending is None:
+            return
+        now_ns = time.monotonic_ns()
+        if now_ns >= self._due_ns:
+            self._forward()
+            # The next is due a period after this one was due (the wake-up may have been
+            # late), or a period from now when the thread was idle or fell behind.
+            due_ns = self._due_ns + self._period_ns
+            self._due_ns = due_ns if due_ns > now_ns else now_ns + self._period_ns
 
     def _read(self) -> None:
+        """Read what arrived, up to :data:`MAX_PER_WAKE` a socket; a target due meanwhile
+        goes on at once (reading a flood on a busy host can take longer than a stream's timeout)."""
         for _ in range(MAX_PER_WAKE):
             try:
                 frames = self._socket.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
                 break
             self._taken_or_counted(frames)
+            self._forward_if_due()
         if self._udp is None:
             return
         for _ in range(MAX_PER_WAKE):
@@ -187,6 +205,7 @@ class StreamReceiver(SocketThread):
                 self._problem(f"UDP receive failed: {error}")
                 break
             self._taken_or_counted([message])
+            self._forward_if_due()
 
     def _taken_or_counted(self, frames: list[bytes]) -> None:
         """Take the message of ``frames`` (a datagram is one), or count it as malformed,
@@ -216,6 +235,9 @@ class StreamReceiver(SocketThread):
             sample = Sample((self._last_sequence or 0) + 1, received_ns / 1e9, sample.pose)
         elif self._last_sequence is not None and sample.sequence <= self._last_sequence:
             c.out_of_order += 1
+            self._problem(f"sample {sample.sequence} is not above the last one taken ({self._last_sequence}): dropped "
+                          "as reordered or duplicated (a sender that restarted its count needs a new stream: "
+                          "stream_close, then stream_open; or a second sender is sending)")
             return
         else:
             self._age_ns.append(received_ns - round(sample.sent_s * 1e9))

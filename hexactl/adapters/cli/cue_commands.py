@@ -56,6 +56,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 def run_cue(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
     from hexactl.adapters.files.cueing_file import CueingFileError, load_cueing_parameters, load_vehicle_trajectory
+    from hexactl.control.stream_commands import MAX_SAMPLE_GAP_S
     from hexactl.cueing.parameters import CueingParameters
 
     try:
@@ -63,6 +64,10 @@ def run_cue(arguments: argparse.Namespace) -> int:
         parameters = load_cueing_parameters(arguments.parameters) if arguments.parameters else CueingParameters()
     except CueingFileError as error:
         raise CliError(str(error)) from None
+    if vehicle.period_s > MAX_SAMPLE_GAP_S:  # each pose would be a stop: the stream has no velocity between them
+        raise CliError(f"{arguments.file}: sample period {vehicle.period_s:g} s: hexactl cue streams one pose per "
+                       f"sample, and a stream is followed smoothly only at {1 / MAX_SAMPLE_GAP_S:g} Hz or more "
+                       f"({MAX_SAMPLE_GAP_S:g} s apart at most): resample the trajectory (is t_s in seconds?)")
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     assert isinstance(client, HexactlClient)
     try:

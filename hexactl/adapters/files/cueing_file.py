@@ -31,13 +31,18 @@ from pydantic import ValidationError
 from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
 from hexactl.adapters.files.text import read_text
 from hexactl.cueing.parameters import CueingParameters
-from hexactl.cueing.washout import VehicleTrajectory
+from hexactl.cueing.washout import GRAVITY_M_S2, VehicleTrajectory
 
 VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
 
 PERIOD_TOLERANCE = 1e-3
 """How far, as a fraction of the sample period, a time step may differ from the first:
 the text's rounding (times written to 0.01 s), not a change of rate."""
+
+F_Z_RANGE_G = (0.5, 1.5)
+"""Where the median of ``f_z`` lies, in g: a car or an aircraft spends most of its time
+near 1 g. A median near 1, 0 or −9.81 m/s² is a file in g, an acceleration without
+gravity, or z-down (aerospace) axes, and the washout would cue a jolt of about 1 g."""
 
 
 class CueingFileError(ValueError):
@@ -108,6 +113,7 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
     if len(values) < 2:
         raise CueingFileError(f"{source}: {len(values)} samples: a vehicle trajectory needs at least two lines of values")
     table = np.array(values)
+    _check_gravity(table[:, 3], source)
     return VehicleTrajectory(period_s=_uniform_period(table[:, 0], lines, source),
                              specific_force=table[:, 1:4], angular_rate=table[:, 4:7])
 
@@ -140,6 +146,17 @@ def _number(row: list[str], index: int, column: str, line: int, source: str) -> 
         shown = f"'{cell}'" if cell else "nothing"
         raise CueingFileError(f"{source}: line {line}, column {column}: {shown} is not a finite number")
     return value
+
+
+def _check_gravity(f_z: np.ndarray, source: str) -> None:
+    median = float(np.median(f_z))
+    low, high = (bound * GRAVITY_M_S2 for bound in F_Z_RANGE_G)
+    if not low <= median <= high:
+        raise CueingFileError(
+            f"{source}: column f_z: {median:g} m/s² (median over the file), where an accelerometer in a vehicle at rest "
+            f"reads +{GRAVITY_M_S2:g} m/s²: the specific force is in m/s², gravity included, z up (a file in g: "
+            f"multiply f_* by {GRAVITY_M_S2:g}; an acceleration without gravity: add {GRAVITY_M_S2:g} to f_z; "
+            "z down, aerospace axes: negate f_y, f_z, omega_y and omega_z)")
 
 
 def _uniform_period(times: np.ndarray, lines: list[int], source: str) -> float:
