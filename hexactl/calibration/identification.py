@@ -102,6 +102,9 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
                            f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}): leglock fits its locked legs consistently but "
                            f"predicts a worse accuracy ({_accuracy(leglock)} against full's {_accuracy(full)}, full's "
                            f"uncertainty scaled up by its excess χ²){extras_note}")
+    if not full.ok:  # nothing fitted: no residuals to speak of (χ²/dof is NaN)
+        return replace(full, reason=f"auto tried full, which identified nothing "
+                       f"({full.status.name.lower().replace('_', ' ')}), and leglock offers nothing better for these data")
     return replace(full, reason=f"auto chose full, although its residuals do not match the noise model "
                    f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}) and leglock offers nothing better for these data{extras_note}")
 

@@ -103,6 +103,15 @@ def test_too_few_postures_for_full(nominal, leglock_campaign):
     assert result.status is IdentificationStatus.INSUFFICIENT_DATA
 
 
+
+def test_auto_on_too_few_postures_says_so_not_that_residuals_misfit(nominal, leglock_campaign):
+    """Nothing was fitted, so there are no residuals to disagree with the noise model (the
+    reason once read "its residuals do not match the noise model (χ²/dof nan)")."""
+    result = identify(leglock_campaign.data.select(np.arange(len(leglock_campaign.data)) < 5), nominal)
+    assert result.status is IdentificationStatus.INSUFFICIENT_DATA
+    assert "insufficient data" in result.reason
+    assert "noise model" not in result.reason and "nan" not in result.reason
+
 def test_a_bad_posture_is_excluded_or_with_exclusion_off_flagged(nominal, leglock_campaign):
     """The whole target set of one posture shifted (distances still fine). Two of its readings
     explain that as well as its three points do (a leg's motion moves every point), with fewer

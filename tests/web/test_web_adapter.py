@@ -25,6 +25,12 @@ def test_an_address_reachable_from_the_network_is_refused_with_the_remedy(text) 
         HttpAddress.parse(text)
 
 
+def test_the_tunnel_offered_is_to_the_port_asked_for() -> None:
+    """Started again on loopback at that port, the dashboard is where the tunnel leads."""
+    with pytest.raises(DashboardError, match=r"--http 127\.0\.0\.1:9000.*ssh -L 9000:127\.0\.0\.1:9000 THIS_HOST"):
+        HttpAddress.parse("0.0.0.0:9000")
+
+
 @pytest.mark.parametrize("text", ["8080", "127.0.0.1", "127.0.0.1:http", "127.0.0.1:70000", ":8080"])
 def test_a_malformed_address_names_the_form(text) -> None:
     with pytest.raises(DashboardError, match="HOST:PORT"):

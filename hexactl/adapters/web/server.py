@@ -40,9 +40,11 @@ class HttpAddress:
         if not separator or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
             raise DashboardError(f"--http {text!r}: give HOST:PORT, e.g. 127.0.0.1:8080")
         if not _is_loopback(host):
+            port = int(port_text) or 8080  # port 0 (any free one) cannot be tunnelled to in advance
             raise DashboardError(
                 f"--http {text}: the dashboard drives the platform, so it listens on this machine only (127.0.0.1, ::1 "
-                f"or localhost); from another machine, tunnel to it: ssh -L 8080:127.0.0.1:8080 THIS_HOST")
+                f"or localhost): serve it with --http 127.0.0.1:{port} and, from another machine, tunnel to it: "
+                f"ssh -L {port}:127.0.0.1:{port} THIS_HOST")
         return cls(host, int(port_text))
 
 
