@@ -51,10 +51,9 @@ from hexactl.adapters.api.security import (
     CurveServerKeys,
     SecurityError,
     check_endpoints,
-    is_local_endpoint,
     load_server_keys,
 )
-from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
+from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, is_local_endpoint
 from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, check_telemetry_rate
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig

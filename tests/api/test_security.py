@@ -16,8 +16,8 @@ from hexactl.adapters.api.security import (
     SecurityError,
     check_endpoints,
     create_keys,
-    is_local_endpoint,
 )
+from hexactl.adapters.api.protocol import is_local_endpoint
 from hexactl.adapters.api.server import ApiServer
 
 
@@ -83,7 +83,7 @@ def test_curve_end_to_end(tmp_path) -> None:
             assert client.call("status")["message"] == "I say I am bob (127.0.0.1, key alice)"
         refused = CurveClientKeys(keys["server_public"], stranger["client_secret"])
         with HexactlClient(server.endpoint, timeout_s=0.5, curve=refused) as client:
-            with pytest.raises(ServiceUnavailable):
+            with pytest.raises(ServiceUnavailable, match="does not know this client's key.*check both keys"):
                 client.call("status")
         with context.socket(zmq.DEALER) as plain:  # no CURVE at all: nothing gets through
             plain.linger = 0
@@ -115,3 +115,15 @@ def test_create_keys_on_a_full_disk_leaves_no_half_pair(tmp_path, monkeypatch) -
     monkeypatch.undo()
     keys = create_keys(tmp_path / "keys")
     assert keys["server_secret"].is_file() and (keys["clients_dir"] / "client.key").is_file()
+
+
+def test_no_answer_from_beyond_localhost_without_keys_names_curve() -> None:
+    """Found from outside: a service beyond localhost drops a client without CURVE keys
+    without a word, and the client asked only whether the service was running."""
+    with HexactlClient("tcp://192.0.2.1:5555", timeout_s=0.05) as client:  # TEST-NET-1: nobody answers
+        with pytest.raises(ServiceUnavailable, match="beyond localhost answers only clients with CURVE keys"):
+            client.call("status")
+    with HexactlClient("tcp://127.0.0.1:1", timeout_s=0.05) as client:
+        with pytest.raises(ServiceUnavailable) as local:
+            client.call("status")
+    assert str(local.value).endswith("is `hexactl serve` running there?")

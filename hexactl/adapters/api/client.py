@@ -30,6 +30,7 @@ from hexactl.adapters.api.protocol import (
     PROTOCOL_VERSION,
     TOPIC,
     default_client_name,
+    is_local_endpoint,
 )
 
 if TYPE_CHECKING:  # CURVE's modules load only for a client that uses it (see ZmqConnection)
@@ -76,6 +77,20 @@ class ZmqConnection:
 
     def close(self) -> None:
         self.socket.close()
+
+    def _unanswered(self, what: str, seconds: float) -> ServiceUnavailable:
+        """No ``what`` (an answer, telemetry) within ``seconds``, with its likely causes:
+        a service that refuses a CURVE handshake drops it without a word."""
+        if self.curve is not None:
+            hint = ("; with CURVE, a service that does not know this client's key, or whose public key is not the "
+                    "one given as the server's, stays silent: check both keys")
+        elif not is_local_endpoint(self.endpoint):
+            hint = ("; a service beyond localhost answers only clients with CURVE keys (hexactl: --curve-server and "
+                    "--curve-client, or the client file's curve_server and curve_client)")
+        else:
+            hint = ""
+        return ServiceUnavailable(f"no {what} from {self.endpoint} within {seconds:g} s: is `hexactl serve` running "
+                                  f"there?{hint}")
 
     def __enter__(self) -> Self:
         return self
@@ -137,9 +152,7 @@ class HexactlClient(ZmqConnection):
         except TypeError as error:
             raise ValueError(f"{cmd}: a field is not a JSON value ({error})") from None
         deadline = time.monotonic() + self.timeout_s
-        unavailable = ServiceUnavailable(
-            f"no answer from {self.endpoint} within {self.timeout_s:g} s: is `hexactl serve` running there?"
-        )
+        unavailable = self._unanswered("answer", self.timeout_s)
         self.socket.sndtimeo = max(1, round(self.timeout_s * 1000))
         try:
             self.socket.send(message.encode())
@@ -189,8 +202,6 @@ class TelemetrySubscriber(ZmqConnection):
     def receive(self, timeout_s: float = DEFAULT_TIMEOUT_S) -> dict[str, Any]:
         """The next record; :class:`ServiceUnavailable` if none arrives within ``timeout_s``."""
         if not self.socket.poll(timeout_s * 1000.0):
-            raise ServiceUnavailable(
-                f"no telemetry from {self.endpoint} within {timeout_s:g} s: is `hexactl serve` running there?"
-            )
+            raise self._unanswered("telemetry", timeout_s)
         return json.loads(self.socket.recv()[len(TOPIC) :])
 

@@ -66,3 +66,27 @@ def check_telemetry_rate(rate_hz: float) -> float:
         raise ValueError(f"telemetry rate {rate_hz:g} Hz outside (0, {MAX_TELEMETRY_RATE_HZ:g}]: "
                          f"choose a rate in that range, e.g. {DEFAULT_TELEMETRY_RATE_HZ:g}")
     return rate_hz
+
+
+_LOCAL_HOSTS = frozenset({"localhost", "lo"})
+
+
+def is_local_endpoint(endpoint: str) -> bool:
+    """True for ``inproc://``, ``ipc://`` and TCP on a loopback address or ``localhost``."""
+    scheme, _, address = endpoint.partition("://")
+    if scheme in ("inproc", "ipc"):
+        return True
+    if scheme != "tcp":
+        return False
+    host = address.rsplit(":", 1)[0]
+    if ";" in host:  # tcp://SOURCE;DESTINATION is a connect form: judge where it binds
+        host = host.split(";", 1)[0]
+    host = host.strip("[]")
+    if host in _LOCAL_HOSTS:
+        return True
+    import ipaddress  # only for a host that is no name: not for every command's start-up
+
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # "*", an interface name or a host name: may be reachable from elsewhere
+        return False

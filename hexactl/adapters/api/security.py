@@ -10,7 +10,6 @@ allowed in (ZeroMQ certificate files, made by :func:`create_keys`).
 from __future__ import annotations
 
 import functools
-import ipaddress
 import os
 import shutil
 import tempfile
@@ -21,8 +20,7 @@ import zmq
 import zmq.auth
 from zmq.utils import z85
 
-_LOCAL_HOSTS = frozenset({"localhost", "lo"})
-
+from hexactl.adapters.api.protocol import is_local_endpoint
 
 class SecurityError(Exception):
     """The endpoints and keys given are not a safe configuration; the message says why."""
@@ -44,25 +42,6 @@ class CurveClientKeys:
 
     server_key_file: Path
     secret_key_file: Path
-
-
-def is_local_endpoint(endpoint: str) -> bool:
-    """True for ``inproc://``, ``ipc://`` and TCP on a loopback address or ``localhost``."""
-    scheme, _, address = endpoint.partition("://")
-    if scheme in ("inproc", "ipc"):
-        return True
-    if scheme != "tcp":
-        return False
-    host = address.rsplit(":", 1)[0]
-    if ";" in host:  # tcp://SOURCE;DESTINATION is a connect form: judge where it binds
-        host = host.split(";", 1)[0]
-    host = host.strip("[]")
-    if host in _LOCAL_HOSTS:
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:  # "*", an interface name or a host name: may be reachable from elsewhere
-        return False
 
 
 def check_endpoints(endpoints: list[str], keys: CurveServerKeys | None) -> None:
