@@ -6,6 +6,7 @@ that goes quiet ends braking; ``estop`` ends it."""
 from __future__ import annotations
 
 import math
+import re
 import socket
 import time
 from pathlib import Path
@@ -154,5 +155,30 @@ def test_hexactl_cue_streams_a_vehicle_file_into_the_service(served, client, tmp
         assert record["last_stream"]["reason"] == "closed by the client" and record["last_stream"]["targets"] > 100
         assert record["stream_input"]["malformed"] == 0 and record["loop"]["guard_clamps"] == 0
         assert record["pose_command"] != [0.0] * 6
+
+    tolerating_stalls(client, scenario)
+
+
+def test_hexactl_cue_moves_to_its_start_pose_before_it_streams(served, client, tmp_path, capsys) -> None:
+    """Found from outside: from a pose away from the cue's first, the stream took the
+    platform there at the stream's limits, a jolt the occupant feels as a cue."""
+    from hexactl.adapters.cli.main import main
+
+    braking = Path(__file__).resolve().parents[2] / "config" / "vehicles" / "braking.csv"
+    lines = braking.read_text().splitlines()
+    short = tmp_path / "braking-1s.csv"
+    short.write_text("\n".join(lines[:101]) + "\n")  # 1 s at 100 Hz, from rest
+
+    def scenario() -> None:
+        mark = client.call("events")["last"]
+        client.call("move", pose=[0, 0, 40, 0, 3, 0])
+        wait_for(lambda: status(client)["motion"] == "holding", "the platform at rest away from the cue's start")
+        assert main(["cue", str(short), "--api", served.api, "--timeout", str(WAIT_S)]) == 0
+        out = capsys.readouterr().out
+        assert re.search(r"moving to the cue's start pose first: x +0\.000 mm", out), out
+        wait_for(lambda: status(client)["stream"] is None, "the stream's end")
+        codes = [event["code"] for event in client.call("events", after=mark)["events"]]
+        assert [code for code in codes if code in ("move", "stream_opened")][:3] == ["move", "move", "stream_opened"], \
+            codes  # this test's move, the cue's to its start, then its stream
 
     tolerating_stalls(client, scenario)

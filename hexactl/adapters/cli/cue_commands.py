@@ -20,9 +20,13 @@ from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_OK,
     EXIT_REFUSED,
+    GOAL_TOLERANCE,
     client_parser,
     format_error_reply,
+    newest_event_t,
+    wait_until_at_rest,
 )
+from hexactl.adapters.cli.telemetry_text import pose_text
 
 if TYPE_CHECKING:  # loaded by the command only
     from hexactl.adapters.api.client import HexactlClient
@@ -42,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "cue", parents=[client_parser()], help="replay a vehicle's motion into a running service as motion cues",
         description="turn a vehicle trajectory (specific force and angular rate, docs/cueing.md) into platform "
         "poses with the washout filter, on the service's active geometry, and stream them to it in real time "
-        "(docs/stream.md); the platform must be enabled and at rest")
+        "(docs/stream.md); the platform must be enabled and at rest, and is moved to the cue's start pose first")
     cue.add_argument("file", type=Path, help="the vehicle trajectory, CSV: t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z, "
                      "or a shipped one by name: braking, lane_change")
     cue.add_argument("--parameters", type=Path, metavar="TOML", help="the washout's parameters (default: "
@@ -100,6 +104,8 @@ def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingPa
               f"specific force RMS error {plan.rms_error:.3f} m/s² (planned)")
         if arguments.plan_only:
             return EXIT_OK
+        if (moved := _to_start(client, list(plan.poses[0]))) != EXIT_OK:
+            return moved
         with PoseStream(client, CUE_SOURCE, timeout_ms=CUE_TIMEOUT_MS) as stream:
             dropped = stream.send_paced(plan.poses, plan.period_s)
             record = client.call("status")["status"]
@@ -111,3 +117,15 @@ def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingPa
             print(f"the stream ended early: {ended['reason']}")
             return EXIT_REFUSED
     return EXIT_OK
+
+
+def _to_start(client: HexactlClient, start: list[float]) -> int:
+    """Move to the cue's first pose (mm, deg) unless the platform is on it, and wait there.
+    A stream would take it there at the stream's limits: a cue of its own for whoever is
+    aboard; a move goes at its planned pace, validated as every move is."""
+    at = client.call("status")["status"]["pose_command"]
+    if max(abs(a - b) for a, b in zip(at, start)) <= GOAL_TOLERANCE:
+        return EXIT_OK
+    print(f"moving to the cue's start pose first: {pose_text(start)}", flush=True)
+    since = newest_event_t(client)
+    return wait_until_at_rest(client, "move", client.call("move", pose=start), since)
