@@ -184,8 +184,14 @@ class PlatformDriver:
         """Send a calibration's text; returns the settled record once it is ramped in."""
         return self._settled_after("load_calibration", toml=toml)
 
-    def rollback_calibration(self) -> Record:
-        return self._settled_after("rollback_calibration")
+    def return_to_calibration(self, calibration_id: str, toml: str) -> Record:
+        """Make calibration ``calibration_id`` (``toml``: its text) active again after a
+        load: by rolling the load back or, where that does not lead to it, by loading it
+        (the service restarted since, with an undo history that starts empty; or another
+        client loaded one since). Returns the settled record."""
+        self._call("rollback_calibration", harmless=("no_previous_calibration",))
+        record = self.wait_settled(0.0)
+        return record if record["calibration_id"] == calibration_id else self.load_calibration(toml)
 
     def wait_settled(self, duration_s: float, *, settle: bool = True) -> Record:
         """Wait (at most ``duration_s`` + the criteria's timeout) until the platform holds
@@ -242,13 +248,16 @@ class PlatformDriver:
         with contextlib.suppress(ServiceUnavailable):
             self.client.request("progress", **progress)
 
-    def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+    def _call(self, cmd: str, harmless: tuple[str, ...] = (), **fields: Any) -> dict[str, Any]:
+        """Carry out ``cmd``; a refusal ends the campaign unless its code is ``harmless`` ({} then)."""
         attempts = 1
         while True:
             try:
                 return self.client.call(cmd, **fields)
             except CommandError as error:
                 self._latched(error)
+                if error.code in harmless:
+                    return {}
                 if error.code != "expired":
                     raise CampaignError(f"the controller refused {cmd}: {error}") from None
                 if attempts == MOVE_ATTEMPTS:

@@ -56,6 +56,7 @@ from hexactl.application.campaign.store import (
 )
 from hexactl.adapters.files.geometry_file import (
     geometry_id,
+    geometry_to_toml,
     load_geometry,
     parse_geometry,
     save_geometry,
@@ -415,8 +416,9 @@ def _conclude(driver: PlatformDriver, store: CampaignStore, better: bool, apply:
                      f"{store.path(CALIBRATION_FILE)}")
         return
     driver.prepare()
-    if driver.status()["calibration_id"] == geometry_id(store.geometry):
+    planned = geometry_id(store.geometry)
+    if driver.status()["calibration_id"] == planned:
         return  # rolled back already (a fault came after it)
-    driver.rollback_calibration()
+    driver.return_to_calibration(planned, geometry_to_toml(store.geometry))
     why = "it did not improve the accuracy" if apply else "--apply keeps it"
     progress.say(f"rolled back to the geometry the campaign started on ({why})")
