@@ -168,10 +168,14 @@ class PlatformDriver:
         way the measurement is not kept, and a resumed campaign takes it again."""
         record = self.status()
         moved = _moved(settled, record) if _heard(record) else float("inf")
-        if record["state"] != "enabled" or record["motion"] != "holding" or moved > self.settle.still_tolerance_mm:
+        swapped = record["calibration_id"] != settled["calibration_id"]  # a ramp smaller than the tolerance, too
+        if (record["state"] != "enabled" or record["motion"] != "holding" or moved > self.settle.still_tolerance_mm
+                or swapped):
             raise CampaignError(f"the platform did not hold still while it was measured ({record['state']}, "
-                                f"{record['motion']}, legs moved by up to {moved:.4f} mm): is another client driving "
-                                "it? The measurement was not kept; run the same command again to measure it again")
+                                f"{record['motion']}, legs moved by up to {moved:.4f} mm"
+                                + (f", calibration {settled['calibration_id']} → {record['calibration_id']}" if swapped else "")
+                                + "): is another client driving it? The measurement was not kept; run the same command "
+                                "again to measure it again")
 
     def lock(self, leg: int) -> Record:
         """Lock ``leg`` (1–6) where it is; returns the record with the lock in place."""
