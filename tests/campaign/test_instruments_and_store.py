@@ -10,10 +10,12 @@ import pytest
 
 from hexactl.application.campaign import instruments
 from hexactl.application.campaign.driver import CampaignError
+from hexactl.adapters.api.client import CommandError
 from hexactl.application.campaign.instruments import (
     CsvInstrument,
     InstrumentError,
     PromptInstrument,
+    ServiceInstrument,
     open_instrument,
 )
 from hexactl.application.campaign.store import (
@@ -121,6 +123,27 @@ def test_prompt_asks_again_for_a_typo_and_for_a_missighted_target(nominal) -> No
     assert "'1 2' is not three numbers" in said[1]
     assert "distance p1-p3" in said[2] and "measure again" in said[2]
     assert "'a b c' is not three numbers" in said[3]
+
+
+class Refusing:
+    """A service whose ``measure`` is refused ``code``."""
+
+    def __init__(self, code: str, message: str) -> None:
+        self.code, self.message = code, message
+
+    def call(self, cmd: str, **fields: object) -> dict:
+        raise CommandError(self.code, self.message)
+
+
+@pytest.mark.parametrize(("code", "message", "said"), [
+    ("no_instrument", "this service has no measuring instrument", r"\(use --instrument csv:FILE or prompt with real "
+                                                                   r"actuators\)$"),
+    ("measurement_failed", "the simulated instrument did not answer within 2 s",
+     r"did not answer within 2 s: nothing was measured at posture 3; run the same command again to resume$"),
+])
+def test_the_services_instrument_says_what_to_do_when_it_cannot_measure(code, message, said) -> None:
+    with pytest.raises(InstrumentError, match=said):
+        ServiceInstrument(Refusing(code, message)).measure(2, "posture 3")  # type: ignore[arg-type]
 
 
 def test_instrument_specs(nominal, tmp_path) -> None:

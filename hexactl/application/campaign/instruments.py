@@ -63,7 +63,10 @@ class ServiceInstrument:
         try:
             return np.array(self.client.call("measure")["points"], dtype=float)
         except CommandError as error:
-            raise InstrumentError(f"measure: {error} (use --instrument csv:FILE or prompt with real actuators)") from None
+            if error.code == "no_instrument":
+                raise InstrumentError(f"measure: {error} (use --instrument csv:FILE or prompt with real actuators)") from None
+            raise InstrumentError(f"measure: {error}: nothing was measured at {label}; run the same command again to "
+                                  "resume") from None
 
 
 class CsvInstrument:
