@@ -8,6 +8,7 @@ import pytest
 
 import hexactl.application.campaign.runner as runner
 import hexactl.application.demo as demo
+from hexactl.adapters.api.client import ServiceUnavailable
 from hexactl.application.campaign.driver import CampaignError
 from hexactl.adapters.cli.main import main
 from tests.api.support import start_service
@@ -49,3 +50,18 @@ def test_a_stopped_campaign_says_why_and_brakes_on_ctrl_c(reason, status, said, 
         fake.close()
     assert capsys.readouterr().err.strip() == f"hexactl campaign: {said or RESUME.format(out)}"
     assert (("stop", ()) in fake.controller.calls) is braked
+
+
+def test_a_campaign_whose_service_stops_answering_says_how_to_resume(nominal, monkeypatch, tmp_path, capsys) -> None:
+    monkeypatch.setattr(runner, "run_campaign", stopping(ServiceUnavailable("no answer from tcp://127.0.0.1:1 within 5 s: "
+                                                                           "is `hexactl serve` running there?")))
+    (tmp_path / "data").mkdir()
+    fake = start_service(nominal, tmp_path / "data")
+    out = tmp_path / "campaign"
+    try:
+        assert main(["campaign", "--out", str(out), "--api", fake.api]) == 2
+    finally:
+        fake.close()
+    assert capsys.readouterr().err.strip() == (
+        "hexactl campaign: no answer from tcp://127.0.0.1:1 within 5 s: is `hexactl serve` running there? What was "
+        f"measured is saved in {out}: run the same command again once the service answers to resume")

@@ -131,13 +131,15 @@ class LateVerdicts:
 
     def __init__(self, late: int, code: str = "loop_timeout") -> None:
         self.late, self.code, self.moves, self.others, self.polls = late, code, 0, 0, 0
+        self.pose = [0.0] * 6
 
     def call(self, cmd: str, **fields: object) -> dict:
         if cmd == "move":
             self.moves += 1
             if self.moves <= self.late:
                 raise CommandError(self.code, "the loop gave no verdict in time; the command may still be carried out")
-            return {"duration": 0.0}
+            self.pose = list(fields["pose"])  # type: ignore[call-overload]
+            return {"duration": 0.0, "goal": self.pose}
         if cmd == "leg_lock":
             self.others += 1
             if self.others <= self.late:
@@ -145,7 +147,7 @@ class LateVerdicts:
             return {}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
-                  "t": 0.1 * self.polls, "faults": []}
+                  "t": 0.1 * self.polls, "faults": [], "pose_command": self.pose, "events": []}
         return {"status": record}
 
 

@@ -10,10 +10,12 @@ import pytest
 
 from hexactl.application.campaign import instruments
 from hexactl.application.campaign.driver import CampaignError
+from hexactl.adapters.api.client import CommandError
 from hexactl.application.campaign.instruments import (
     CsvInstrument,
     InstrumentError,
     PromptInstrument,
+    ServiceInstrument,
     open_instrument,
 )
 from hexactl.application.campaign.store import (
@@ -41,13 +43,39 @@ def points_at(geometry, relative) -> np.ndarray:
 # -- instruments ---------------------------------------------------------------------
 
 
+def tracker_rows(geometry, heights) -> str:
+    """Rows of a tracker's export: the feature points at z = each of ``heights``, and a column of its own."""
+    return "".join(",".join(str(v) for v in points_at(geometry, [0, 0, z, 0, 0, 0]).ravel()) + ",ann\n" for z in heights)
+
+
+TRACKER_HEADER = "# laser tracker export\np1_x,p1_y,p1_z,p2_x,p2_y,p2_z,p3_x,p3_y,p3_z,operator\n"
+
+
 def test_instrument_file_rows_are_the_measurements_in_order(nominal, tmp_path) -> None:
     path = tmp_path / "tracker.csv"
-    path.write_text("# laser tracker export\np1_x,p1_y,p1_z,p2_x,p2_y,p2_z,p3_x,p3_y,p3_z,operator\n"
-                    + "".join(",".join(str(v) for v in points_at(nominal, [0, 0, k, 0, 0, 0]).ravel()) + ",ann\n"
-                              for k in range(3)))
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(2)))  # a resumed campaign's two measurements
     instrument = CsvInstrument(path, 3)
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(3)))  # the tracker measures the third
     np.testing.assert_allclose(instrument.measure(2, "third"), points_at(nominal, [0, 0, 2, 0, 0, 0]))
+
+
+def test_a_row_measured_for_a_measurement_not_kept_is_never_taken_for_another(nominal, tmp_path, monkeypatch) -> None:
+    path = tmp_path / "tracker.csv"
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(3)))  # the third: a measurement a fault interrupted
+    with pytest.raises(InstrumentError, match=rf"rows 3-3 \(lines 5-5\) were there before the platform reached "
+                                              rf"posture 1: the campaign kept 2 .*delete them from {path}"):
+        CsvInstrument(path, 3).measure(2, "posture 1")  # resumed: the posture is measured again, not that row taken
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(2)))
+    instrument = CsvInstrument(path, 3)
+    monkeypatch.setattr(instruments.time, "sleep",
+                        lambda seconds: path.write_text(TRACKER_HEADER + tracker_rows(nominal, [0, 1, 20])))
+    np.testing.assert_allclose(instrument.measure(2, "posture 1"), points_at(nominal, [0, 0, 20, 0, 0, 0]))
+    with pytest.raises(InstrumentError, match="rows 3-3 .* were there before the platform reached posture 1"):
+        instrument.measure(2, "posture 1")  # not kept (a fault), measured again in the same run: not that row again
+    monkeypatch.setattr(instruments.time, "sleep",
+                        lambda seconds: path.write_text(TRACKER_HEADER + tracker_rows(nominal, [0, 1, 30])))
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(2)))  # the operator deletes it, then measures
+    np.testing.assert_allclose(instrument.measure(2, "posture 1"), points_at(nominal, [0, 0, 30, 0, 0, 0]))
 
 
 def test_a_bad_instrument_file_is_refused_naming_every_bad_line(tmp_path) -> None:
@@ -95,6 +123,27 @@ def test_prompt_asks_again_for_a_typo_and_for_a_missighted_target(nominal) -> No
     assert "'1 2' is not three numbers" in said[1]
     assert "distance p1-p3" in said[2] and "measure again" in said[2]
     assert "'a b c' is not three numbers" in said[3]
+
+
+class Refusing:
+    """A service whose ``measure`` is refused ``code``."""
+
+    def __init__(self, code: str, message: str) -> None:
+        self.code, self.message = code, message
+
+    def call(self, cmd: str, **fields: object) -> dict:
+        raise CommandError(self.code, self.message)
+
+
+@pytest.mark.parametrize(("code", "message", "said"), [
+    ("no_instrument", "this service has no measuring instrument", r"\(use --instrument csv:FILE or prompt with real "
+                                                                   r"actuators\)$"),
+    ("measurement_failed", "the simulated instrument did not answer within 2 s",
+     r"did not answer within 2 s: nothing was measured at posture 3; run the same command again to resume$"),
+])
+def test_the_services_instrument_says_what_to_do_when_it_cannot_measure(code, message, said) -> None:
+    with pytest.raises(InstrumentError, match=said):
+        ServiceInstrument(Refusing(code, message)).measure(2, "posture 3")  # type: ignore[arg-type]
 
 
 def test_instrument_specs(nominal, tmp_path) -> None:

@@ -404,7 +404,8 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
             raise CliError(str(error)) from None
         except ServiceUnavailable as error:
             progress.finish()
-            print(f"hexactl campaign: {error}", file=sys.stderr)
+            print(f"hexactl campaign: {error} What was measured is saved in {arguments.out}: run the same command "
+                  "again once the service answers to resume", file=sys.stderr)
             return 2
         except (CampaignError, KeyboardInterrupt) as stopped_by:
             return campaign_stopped("campaign", stopped_by, arguments.out, progress, on_interrupt=lambda: _stop(client))

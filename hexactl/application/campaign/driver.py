@@ -26,10 +26,19 @@ MOVE_ATTEMPTS = 3
 """How many times :meth:`PlatformDriver.move` sends a move that the API answered with
 ``loop_timeout`` (the loop's verdict came too late for it, on a loaded host): the move may
 or may not have run, so the driver waits for rest and sends it again (a move to where the
-platform already is ends at once). Any command refused ``expired`` (its deadline passed
-in the loop's queue, on a loaded host: not carried out) is sent again as often."""
+platform already is ends at once); likewise a move the service braked short of its goal
+by itself when its API fell silent (``command_link_silent``, a loaded host). Any command
+refused ``expired`` (its deadline passed in the loop's queue, on a loaded host: not
+carried out) is sent again as often."""
 
 _LATE = ("loop_timeout", "expired")
+
+GOAL_TOLERANCE = 5e-4
+"""mm or deg: a move at rest farther than this from its planned goal on any axis stopped
+short of it (one that ran its course rests on it to 1e-9, leg-lock moves included)."""
+
+_SILENT_API = ("command_link_silent", "command_link_heard")
+"""The events of the service's own brake when its API fell silent, which no one sent."""
 
 FAULT_CLEAR_S = 2.0
 """How long enabling waits for actuators that report a fault to clear it (they do after
@@ -119,20 +128,36 @@ class PlatformDriver:
         """Move to ``pose`` (relative mm/deg) and wait until the move has ended and, with
         ``settle``, the legs are steady (sent again after a ``loop_timeout``, see
         :data:`MOVE_ATTEMPTS`). Raises :class:`CommandError` if the controller refuses the
-        move (e.g. ``path_violation``) and :class:`CampaignError` on a fault or when no
-        attempt got a verdict."""
+        move (e.g. ``path_violation``) and :class:`CampaignError` on a fault, when no
+        attempt got a verdict, or when someone cut the move short of its goal."""
         for _ in range(MOVE_ATTEMPTS):
+            events = self.status()["events"]
+            since = events[-1]["seq"] if events else 0
             try:
                 reply = self.client.call("move", pose=[float(value) for value in pose])
-                return self.wait_settled(float(reply["duration"]), settle=settle)
+                record = self.wait_settled(float(reply["duration"]), settle=settle)
             except CommandError as error:
                 self._latched(error)
                 if error.code not in _LATE:
                     raise
-            self.wait_settled(0.0, settle=False)
+                self.wait_settled(0.0, settle=False)
+                continue
+            if max(abs(at - aim) for at, aim in zip(record["pose_command"], reply["goal"])) <= GOAL_TOLERANCE:
+                return record
+            # Stopped short: measured here, the posture or waypoint would not be the planned one.
+            after = [event for event in record["events"] if event["seq"] > since]
+            ours = next((n for n, event in enumerate(after) if event["code"] == "move"), len(after))
+            cause = after[ours + 1:]
+            if not cause or any(event["code"] not in _SILENT_API for event in cause):
+                told = "; ".join(f"{event['code']}: {event['message']}"
+                                 + (f", sent by {event['sender']}" if event["sender"] else "") for event in cause)
+                raise CampaignError(f"the move to {list(pose)} stopped short of its goal, at {record['pose_command']} "
+                                    f"({told or 'the service recorded no cause'}): is another client driving the "
+                                    "platform? Nothing was measured there; run the same command again to resume")
         raise CampaignError(f"the controller's API gave no verdict on the move to {list(pose)} in time, "
-                            f"{MOVE_ATTEMPTS} times (loop_timeout or expired): the host is too loaded for it; stop "
-                            "other work on it or raise --timeout, then run the same command again to resume")
+                            f"{MOVE_ATTEMPTS} times (loop_timeout or expired), or the service braked it when its API "
+                            "fell silent (command_link_silent): the host is too loaded for it; stop other work on it or "
+                            "raise --timeout, then run the same command again to resume")
 
     def confirm_still(self, settled: Record) -> None:
         """Check, once a measurement of the platform settled at ``settled`` (a
@@ -143,10 +168,14 @@ class PlatformDriver:
         way the measurement is not kept, and a resumed campaign takes it again."""
         record = self.status()
         moved = _moved(settled, record) if _heard(record) else float("inf")
-        if record["state"] != "enabled" or record["motion"] != "holding" or moved > self.settle.still_tolerance_mm:
+        swapped = record["calibration_id"] != settled["calibration_id"]  # a ramp smaller than the tolerance, too
+        if (record["state"] != "enabled" or record["motion"] != "holding" or moved > self.settle.still_tolerance_mm
+                or swapped):
             raise CampaignError(f"the platform did not hold still while it was measured ({record['state']}, "
-                                f"{record['motion']}, legs moved by up to {moved:.4f} mm): is another client driving "
-                                "it? The measurement was not kept; run the same command again to measure it again")
+                                f"{record['motion']}, legs moved by up to {moved:.4f} mm"
+                                + (f", calibration {settled['calibration_id']} → {record['calibration_id']}" if swapped else "")
+                                + "): is another client driving it? The measurement was not kept; run the same command "
+                                "again to measure it again")
 
     def lock(self, leg: int) -> Record:
         """Lock ``leg`` (1–6) where it is; returns the record with the lock in place."""
@@ -159,8 +188,14 @@ class PlatformDriver:
         """Send a calibration's text; returns the settled record once it is ramped in."""
         return self._settled_after("load_calibration", toml=toml)
 
-    def rollback_calibration(self) -> Record:
-        return self._settled_after("rollback_calibration")
+    def return_to_calibration(self, calibration_id: str, toml: str) -> Record:
+        """Make calibration ``calibration_id`` (``toml``: its text) active again after a
+        load: by rolling the load back or, where that does not lead to it, by loading it
+        (the service restarted since, with an undo history that starts empty; or another
+        client loaded one since). Returns the settled record."""
+        self._call("rollback_calibration", harmless=("no_previous_calibration",))
+        record = self.wait_settled(0.0)
+        return record if record["calibration_id"] == calibration_id else self.load_calibration(toml)
 
     def wait_settled(self, duration_s: float, *, settle: bool = True) -> Record:
         """Wait (at most ``duration_s`` + the criteria's timeout) until the platform holds
@@ -217,13 +252,16 @@ class PlatformDriver:
         with contextlib.suppress(ServiceUnavailable):
             self.client.request("progress", **progress)
 
-    def _call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+    def _call(self, cmd: str, harmless: tuple[str, ...] = (), **fields: Any) -> dict[str, Any]:
+        """Carry out ``cmd``; a refusal ends the campaign unless its code is ``harmless`` ({} then)."""
         attempts = 1
         while True:
             try:
                 return self.client.call(cmd, **fields)
             except CommandError as error:
                 self._latched(error)
+                if error.code in harmless:
+                    return {}
                 if error.code != "expired":
                     raise CampaignError(f"the controller refused {cmd}: {error}") from None
                 if attempts == MOVE_ATTEMPTS:

@@ -63,21 +63,29 @@ class ServiceInstrument:
         try:
             return np.array(self.client.call("measure")["points"], dtype=float)
         except CommandError as error:
-            raise InstrumentError(f"measure: {error} (use --instrument csv:FILE or prompt with real actuators)") from None
+            if error.code == "no_instrument":
+                raise InstrumentError(f"measure: {error} (use --instrument csv:FILE or prompt with real actuators)") from None
+            raise InstrumentError(f"measure: {error}: nothing was measured at {label}; run the same command again to "
+                                  "resume") from None
 
 
 class CsvInstrument:
     """Row ``index`` of the instrument file ``path`` (comments and blank lines do not
     count). The file is checked whole when opened and again whenever it is read: a bad
     row refuses it, naming every bad line. ``say`` tells the operator when the campaign
-    waits for a row."""
+    waits for a row.
+
+    A row is a new measurement only if it was not there when the file was opened (before
+    anything moved) nor read already: a row the campaign read and did not keep (a fault
+    or a move interrupted that measurement) is refused, not taken again for the posture
+    measured again."""
 
     def __init__(self, path: Path, feature_point_count: int, say: Callable[[str], None] = print) -> None:
         self.path = Path(path)
         self.description = f"the instrument file {self.path}"
         self._feature_point_count = feature_point_count
         self._say = say
-        self._rows()
+        self._taken = len(self._rows().lines)  # rows no later measurement may be: there before, or read already
 
     def _rows(self) -> PointRows:
         text = read_text(self.path, InstrumentError)
@@ -93,7 +101,16 @@ class CsvInstrument:
         waiting = False
         while True:
             rows = self._rows()
+            self._taken = min(self._taken, len(rows.lines))  # rows deleted since: the rows that take their place are new
+            if index < self._taken:
+                raise InstrumentError(
+                    f"{self.path}: rows {index + 1}-{len(rows.lines)} (lines {rows.lines[index]}-{rows.lines[-1]}) were "
+                    f"there before the platform reached {label}: the campaign kept {index} measurements, so these were "
+                    "measured for postures or waypoints it did not keep (a fault, a stop or an interruption came "
+                    f"first) or for another campaign; delete them from {self.path} and run the same command again: it "
+                    f"waits for row {index + 1} and measures it anew")
             if index < len(rows.lines):
+                self._taken = index + 1
                 return np.array(rows.points_mm[index])
             if not waiting:
                 self._say(f"waiting for row {index + 1} of {self.path} ({label}): measure now")

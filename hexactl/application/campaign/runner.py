@@ -56,6 +56,7 @@ from hexactl.application.campaign.store import (
 )
 from hexactl.adapters.files.geometry_file import (
     geometry_id,
+    geometry_to_toml,
     load_geometry,
     parse_geometry,
     save_geometry,
@@ -151,7 +152,7 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
         driver.prepare()
         if store.validation_steps_left("before") or store.postures_measured < len(store.postures):
             driver.require_calibration(planned_id, _planned(geometry))
-        _validate(driver, store, instrument, "before", progress)
+        _validate(driver, store, instrument, "before", planned_id, progress)
         _measure_postures(driver, store, instrument, progress)
 
     step(measure_on_the_planned_geometry)
@@ -164,7 +165,7 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
             driver.require_calibration(planned_id, _planned(geometry))
             progress.say("loading the calibration into the controller")
             driver.load_calibration(text)
-        _validate(driver, store, instrument, "after", progress)
+        _validate(driver, store, instrument, "after", calibrated_id, progress)
         driver.move(ZERO_POSE)
 
     step(measure_with_the_calibration)
@@ -236,9 +237,10 @@ def _announce(store: CampaignStore, instrument: Instrument, progress: Progress) 
     progress.say(f"measuring with {instrument.description}")
 
 
-def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, phase: str,
+def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, phase: str, calibration_id: str,
               progress: Progress) -> None:
-    """Measure the rest of ``phase``'s test-motion waypoints."""
+    """Measure the rest of ``phase``'s test-motion waypoints, each with calibration
+    ``calibration_id`` active (another client may load or roll back one meanwhile)."""
     steps = store.validation_steps_left(phase)
     if steps:
         total = len(VALIDATION_STEPS[phase])
@@ -249,6 +251,12 @@ def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrume
             except CommandError as error:
                 raise CampaignError(f"the controller refused the test-motion move to {list(step.pose)}: {error}") from None
             label = f"{step.motion.name} {step.waypoint}/{len(step.motion.waypoints)}"
+            if settled["calibration_id"] != calibration_id:
+                raise CampaignError(f"the controller runs calibration {settled['calibration_id']}, not {calibration_id}, "
+                                    f"which the test motions {phase} calibration are measured with: another client "
+                                    "loaded or rolled back a calibration meanwhile. Nothing was measured at "
+                                    f"{label}; make {calibration_id} active again (hexactl rollback-calibration), then "
+                                    "run the same command again to resume")
             points = instrument.measure(store.measurements_taken, f"{phase} calibration, {label}")
             driver.confirm_still(settled)
             store.add_validation(step, points)
@@ -415,8 +423,9 @@ def _conclude(driver: PlatformDriver, store: CampaignStore, better: bool, apply:
                      f"{store.path(CALIBRATION_FILE)}")
         return
     driver.prepare()
-    if driver.status()["calibration_id"] == geometry_id(store.geometry):
+    planned = geometry_id(store.geometry)
+    if driver.status()["calibration_id"] == planned:
         return  # rolled back already (a fault came after it)
-    driver.rollback_calibration()
+    driver.return_to_calibration(planned, geometry_to_toml(store.geometry))
     why = "it did not improve the accuracy" if apply else "--apply keeps it"
     progress.say(f"rolled back to the geometry the campaign started on ({why})")

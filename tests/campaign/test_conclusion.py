@@ -1,0 +1,62 @@
+"""A campaign that does not keep its calibration (no ``--apply``, or no improvement)
+returns the controller to the geometry it was planned on, even when the service was
+restarted after the calibration was loaded (its undo history then starts empty, and
+rolling back was refused ``no_previous_calibration``: the campaign could not finish, run
+again or not, and left the calibration in force and kept for the next restart)."""
+
+from __future__ import annotations
+
+import io
+from types import SimpleNamespace
+
+import pytest
+
+from hexactl.adapters.api.client import CommandError
+from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
+from hexactl.application.campaign.driver import PlatformDriver
+from hexactl.application.campaign.progress import Progress
+from hexactl.application.campaign.runner import _conclude
+
+CALIBRATED = "d64930c558dd5cfe"
+
+
+class Calibrations:
+    """A controller at rest with its calibration undo history: ``history`` before the
+    active one, as the service keeps it (empty after a restart)."""
+
+    def __init__(self, history: list[str], active: str) -> None:
+        self.history, self.active, self.sent, self.polls = history, active, [], 0
+
+    def call(self, cmd: str, **fields: object) -> dict:
+        if cmd == "rollback_calibration":
+            self.sent.append(cmd)
+            if not self.history:
+                raise CommandError("no_previous_calibration", f"there is no earlier calibration to roll back to "
+                                   f"({self.active} is the first since start-up)")
+            self.active = self.history.pop()
+            return {}
+        if cmd == "load_calibration":
+            self.sent.append(cmd)
+            self.history.append(self.active)
+            self.active = geometry_id(parse_geometry(str(fields["toml"]), "request"))
+            return {}
+        self.polls += 1
+        record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
+                  "t": 0.1 * self.polls, "faults": [], "locked_leg": None, "calibration_id": self.active}
+        return {"status": record}
+
+
+@pytest.mark.parametrize(("history", "sent"), [
+    (["nominal"], ["rollback_calibration"]),  # the load undone: the history as it was before
+    ([], ["rollback_calibration", "load_calibration"]),  # the service restarted since the load
+    (["nominal", CALIBRATED], ["rollback_calibration", "load_calibration"]),  # another client loaded one since
+])
+def test_a_calibration_not_kept_leaves_the_planned_geometry_active(nominal, history, sent) -> None:
+    planned = geometry_id(nominal)
+    history = [planned if entry == "nominal" else entry for entry in history]
+    controller = Calibrations(history, "0123456789abcdef" if len(history) == 2 else CALIBRATED)
+    out = io.StringIO()
+    _conclude(PlatformDriver(controller), SimpleNamespace(geometry=nominal), better=True, apply=False,  # type: ignore[arg-type]
+              progress=Progress(out, io.StringIO()))
+    assert controller.active == planned and controller.sent == sent
+    assert "rolled back to the geometry the campaign started on (--apply keeps it)" in out.getvalue()
