@@ -50,6 +50,12 @@ def default_client_name() -> str:
 TOPIC = b"telemetry "
 """The prefix of every telemetry message (a single frame: ``telemetry <json>``)."""
 
+GOAL_TOLERANCE = 5e-4
+"""mm or deg: two poses closer than this on every axis (what shows in 3 decimals) are the
+same to an operator: a goal farther from the requested pose was projected by the service
+(leg-lock), and a motion at rest farther from its goal stopped short of it (one that ran
+its course rests on it to 1e-9, leg-lock moves included)."""
+
 DEFAULT_TIMEOUT_S = 5.0
 """How long a client waits for a reply or a telemetry record unless told otherwise."""
 

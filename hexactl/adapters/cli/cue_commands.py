@@ -15,12 +15,12 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hexactl.adapters.api.protocol import GOAL_TOLERANCE
 from hexactl.adapters.cli.common import CliError, connect
 from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_OK,
     EXIT_REFUSED,
-    GOAL_TOLERANCE,
     client_parser,
     format_error_reply,
     newest_event_t,

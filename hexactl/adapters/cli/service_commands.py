@@ -16,7 +16,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ
+from hexactl.adapters.api.protocol import (
+    DEFAULT_API_ENDPOINT,
+    DEFAULT_TELEMETRY_ENDPOINT,
+    DEFAULT_TELEMETRY_RATE_HZ,
+    GOAL_TOLERANCE,
+)
 from hexactl.adapters.cli.common import (
     CliError,
     bind_endpoint,
@@ -310,12 +315,6 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
             print("hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop", file=sys.stderr)
         return EXIT_NO_ANSWER
 
-
-GOAL_TOLERANCE = 5e-4
-"""mm or deg: two poses closer than this on every axis (what shows in 3 decimals) are the
-same to an operator: a goal farther from the requested pose is printed (the service
-projected it, leg-lock), and a motion at rest farther from its goal stopped short of it
-(one that ran its course rests on it to 1e-12)."""
 
 WAIT_POLL_S = 0.1
 WAIT_SLACK_S = 30.0

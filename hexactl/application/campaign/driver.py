@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
+from hexactl.adapters.api.protocol import GOAL_TOLERANCE
 
 Record = dict[str, Any]
 """A status record (``status`` reply's ``status``)."""
@@ -32,10 +33,6 @@ refused ``expired`` (its deadline passed in the loop's queue, on a loaded host: 
 carried out) is sent again as often."""
 
 _LATE = ("loop_timeout", "expired")
-
-GOAL_TOLERANCE = 5e-4
-"""mm or deg: a move at rest farther than this from its planned goal on any axis stopped
-short of it (one that ran its course rests on it to 1e-9, leg-lock moves included)."""
 
 _SILENT_API = ("command_link_silent", "command_link_heard")
 """The events of the service's own brake when its API fell silent, which no one sent."""
