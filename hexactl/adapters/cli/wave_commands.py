@@ -12,7 +12,7 @@ import json
 import sys
 from typing import Any
 
-from hexactl.adapters.cli.common import CliError, connect, positive_float
+from hexactl.adapters.cli.common import CliError, connect, positive_float, positive_int
 from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_OK,
@@ -63,17 +63,6 @@ def axis_argument(text: str) -> tuple[str, dict[str, float]]:
         raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are numbers") from None
     fields = {"amplitude": values[0], **({"phase_deg": values[1]} if len(values) == 2 else {})}
     return parts[0], fields
-
-
-def positive_int(text: str) -> int:
-    """An argparse ``type``: a whole number ≥ 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
-    return value
 
 
 def wave_fields(arguments: argparse.Namespace) -> dict[str, Any]:
