@@ -403,13 +403,16 @@ def positive_float(text: str) -> float:
     return value
 
 
-def positive_int(text: str) -> int:
-    """An argparse ``type``: a whole number from 1."""
+def _whole_number(text: str) -> int:
     try:
-        value = int(text)
+        return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
+
+
+def positive_int(text: str) -> int:
+    """An argparse ``type``: a whole number from 1."""
+    if (value := _whole_number(text)) < 1:
         raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
     return value
 
@@ -426,11 +429,7 @@ def fifo_priority(lowest: int) -> Callable[[str], int]:
     """An argparse ``type``: a SCHED_FIFO priority from ``lowest`` to 99."""
 
     def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-        if not lowest <= value <= 99:
+        if not lowest <= (value := _whole_number(text)) <= 99:
             raise argparse.ArgumentTypeError(f"{value} is not a SCHED_FIFO priority from {lowest} to 99")
         return value
 
