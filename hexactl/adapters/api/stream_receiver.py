@@ -180,9 +180,11 @@ class StreamReceiver(SocketThread):
         if now_ns >= self._due_ns:
             self._forward()
             # The next is due a period after this one was due (the wake-up may have been
-            # late), or a period from now when the thread was idle or fell behind.
+            # late), or, when the thread was idle or fell behind, a period after this
+            # hand-over: timed once it is done, so the next never comes sooner (a hand-over
+            # held up a while, then the next right on time, were less than a period apart).
             due_ns = self._due_ns + self._period_ns
-            self._due_ns = due_ns if due_ns > now_ns else now_ns + self._period_ns
+            self._due_ns = due_ns if due_ns > now_ns else time.monotonic_ns() + self._period_ns
 
     def _read(self) -> None:
         """Read what arrived, up to :data:`MAX_PER_WAKE` a socket; a target due meanwhile
