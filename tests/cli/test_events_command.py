@@ -41,16 +41,22 @@ def ann(served: Served) -> Iterator[HexactlClient]:
 
 def test_events_prints_the_latest_with_their_senders_and_exits(served, ann, capsys) -> None:
     ann.call("stop")
-    wait_for(lambda: any(event["code"] == "stop" and event["sender"] == f"{ANN} (127.0.0.1)"
-                         for event in ann.call("status")["status"]["events"]), "the stop's event")
+    stopped = time.time()  # the stop's event happened before this, on this host's clock
+    ours = wait_for(lambda: next((event for event in reversed(ann.call("status")["status"]["events"])
+                                  if event["code"] == "stop" and event["sender"] == f"{ANN} (127.0.0.1)"), None),
+                    "the stop's event")
+    # a second on the service's clock since: a line stamped when printed, not when it happened, is that late
+    wait_for(lambda: ann.call("status")["status"]["t"] - ours["t"] >= 1.0, "a second since the stop")
     capsys.readouterr()
     started = time.time()
     assert main(["events", "--api", served.api, "--json"]) == 0
+    reply_delay_bound = time.time() - started
     printed = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert 1 <= len(printed) <= 20 and [event["seq"] for event in printed] == list(range(printed[0]["seq"], printed[-1]["seq"] + 1))
     stop = [event for event in printed if event["code"] == "stop"][-1]
     assert stop["sender"] == f"{ANN} (127.0.0.1)" and stop["message"] == "any motion under way brakes to rest"
-    assert stop["at"] <= started + 1.0  # this host's clock, when it happened: before the command ran
+    # this host's clock when it happened: at most the reply's delay (bounded by the command's run) after it
+    assert stop["at"] <= stopped + reply_delay_bound + 0.001, (stop, stopped, reply_delay_bound)  # at: to 1 ms
 
     assert main(["events", "--api", served.api]) == 0
     text = [line for line in capsys.readouterr().out.splitlines() if line.split()[1:2] == ["stop"]][-1]
