@@ -37,6 +37,8 @@ class Platform:
                 self._event(*event)
             self.pose = [value / 2 for value in goal] if cut else goal
             return {"duration": 0.0, "goal": goal}
+        if cmd == "events":
+            return {"events": [event for event in self.events if event["seq"] > fields.get("after", 0)]}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
                   "t": 0.1 * self.polls, "faults": [], "pose_command": self.pose, "events": self.events[-8:]}
@@ -50,6 +52,7 @@ GOAL = [100.0, 0.0, 0.0, 0.0, 5.0, 0.0]
     (STOPPED, r"stop: any motion under way brakes to rest, sent by dashboard, browser 10\.0\.0\.7"),
     (REPLACED, r"move: 4\.1 s as planned, sent by hexactl ann@bench-2"),
     (SILENT + STOPPED, r"command_link_silent: .*; stop: .*sent by dashboard"),
+    (STOPPED * 9, r"stop: any motion under way brakes to rest, sent by dashboard"),  # more than a record carries
 ])
 def test_a_move_someone_cut_short_ends_the_campaign_naming_who(cut, said) -> None:
     platform = Platform(cut)

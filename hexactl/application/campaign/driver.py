@@ -142,7 +142,7 @@ class PlatformDriver:
             if max(abs(at - aim) for at, aim in zip(record["pose_command"], reply["goal"])) <= GOAL_TOLERANCE:
                 return record
             # Stopped short: measured here, the posture or waypoint would not be the planned one.
-            after = [event for event in record["events"] if event["seq"] > since]
+            after = self.client.call("events", after=since)["events"]  # all of them: a record carries the last 8
             ours = next((n for n, event in enumerate(after) if event["code"] == "move"), len(after))
             cause = after[ours + 1:]
             if not cause or any(event["code"] not in _SILENT_API for event in cause):
