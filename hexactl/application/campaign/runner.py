@@ -255,8 +255,8 @@ def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrume
                 raise CampaignError(f"the controller runs calibration {settled['calibration_id']}, not {calibration_id}, "
                                     f"which the test motions {phase} calibration are measured with: another client "
                                     "loaded or rolled back a calibration meanwhile. Nothing was measured at "
-                                    f"{label}; make {calibration_id} active again (hexactl rollback-calibration), then "
-                                    "run the same command again to resume")
+                                    f"{label}; make {calibration_id} active again (hexactl rollback-calibration, or "
+                                    "hexactl load-calibration of its file), then run the same command again to resume")
             points = instrument.measure(store.measurements_taken, f"{phase} calibration, {label}")
             driver.confirm_still(settled)
             store.add_validation(step, points)
