@@ -385,7 +385,7 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
     from hexactl.application.campaign.driver import CampaignError
     from hexactl.application.campaign.instruments import InstrumentError, open_instrument
     from hexactl.application.campaign.progress import Progress
-    from hexactl.application.campaign.runner import CampaignSettings, run_campaign
+    from hexactl.application.campaign.runner import CampaignSettings, calibration_left_in_force, run_campaign
     from hexactl.application.campaign.store import DirectoryError
     from hexactl.calibration.campaign import CampaignDesign
 
@@ -408,7 +408,12 @@ def run_campaign_command(arguments: argparse.Namespace) -> int:
                   "again once the service answers to resume", file=sys.stderr)
             return 2
         except (CampaignError, KeyboardInterrupt) as stopped_by:
-            return campaign_stopped("campaign", stopped_by, arguments.out, progress, on_interrupt=lambda: _stop(client))
+            if isinstance(stopped_by, KeyboardInterrupt):
+                _stop(client)
+            status = campaign_stopped("campaign", stopped_by, arguments.out, progress)
+            if left := calibration_left_in_force(client, arguments.out):
+                print(f"hexactl campaign: {left}", file=sys.stderr)
+            return status
     return 0 if outcome.improved else 1
 
 

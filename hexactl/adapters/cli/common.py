@@ -298,16 +298,13 @@ def check_campaign_arguments(arguments: argparse.Namespace) -> None:
         raise CliError(f"--envelope {arguments.envelope}: a fraction in (0, 1]")
 
 
-def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt, directory: Path, progress: Progress,
-                     on_interrupt: Callable[[], None] | None = None) -> int:
+def campaign_stopped(command: str, stopped_by: CampaignError | KeyboardInterrupt, directory: Path, progress: Progress) -> int:
     """The exit status of ``hexactl COMMAND`` driving a campaign in ``directory`` when
     ``stopped_by`` ended it: the progress line finished, then the reason on stderr. A
     :class:`~hexactl.application.campaign.driver.CampaignError` (it cannot go on): 1. Ctrl-C:
-    ``on_interrupt`` runs, then how to resume (everything measured is saved): 130."""
+    how to resume (everything measured is saved): 130."""
     progress.finish()
     if isinstance(stopped_by, KeyboardInterrupt):
-        if on_interrupt is not None:
-            on_interrupt()
         print(f"hexactl {command}: interrupted; what was measured is saved in {directory}: run the same command to "
               "resume", file=sys.stderr)
         return 130

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hexactl.adapters.api.client import CommandError, HexactlClient
+from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
 from hexactl.application.campaign.driver import (
     ZERO_POSE,
     CampaignError,
@@ -219,6 +219,26 @@ class _Resetting:
                 self.progress.say(f"{fault.summary}; resetting it and resuming (fault {self.resets}; {self._streak} "
                                   f"in a row of at most {self.in_a_row} without a new measurement)")
                 self.driver.reset()
+
+
+def calibration_left_in_force(client: HexactlClient, directory: Path) -> str | None:
+    """What to tell the operator of a campaign in ``directory`` that stopped, if the
+    controller behind ``client`` runs the campaign's calibration (loaded for the test
+    motions after calibration): it stays in force, and the service keeps it for its next
+    start, until the campaign resumes and concludes or someone else swaps it. None if it
+    does not (or cannot be asked)."""
+    path = directory / CALIBRATION_FILE
+    try:
+        calibration_id = geometry_id(load_geometry(path))
+        active = client.call("status")["status"]["calibration_id"]
+    except (GeometryError, CommandError, ServiceUnavailable):  # none written yet, or no answer: nothing to tell
+        return None
+    if active != calibration_id:
+        return None
+    return (f"the controller still runs the campaign's calibration {calibration_id} ({path}), loaded for the test "
+            "motions after calibration, and keeps it for its next start: running the same command again resumes "
+            "and, at the end, rolls it back unless --apply keeps it; to go back now: hexactl rollback-calibration "
+            "(after a restart of the service: hexactl load-calibration of the geometry the campaign was planned on)")
 
 
 def _planned(geometry: Geometry) -> str:
