@@ -16,6 +16,7 @@ import uvicorn
 
 from hexactl.adapters.web.app import create_app
 from hexactl.adapters.web.bridge import ServiceBridge, ServiceEndpoints
+from hexactl.adapters.web.connections import GuardedH11Protocol
 
 LOOPBACK_NAMES = ("localhost",)
 
@@ -98,8 +99,8 @@ def run_dashboard(address: HttpAddress, endpoints: ServiceEndpoints, log_level: 
     # No permessage-deflate (browsers offer it): its compressor is per connection, so each
     # telemetry record would be compressed once per page, not sent as the one text every
     # page shares; on this loopback-only server it saves nothing worth that CPU.
-    config = uvicorn.Config(app, log_level=log_level, access_log=False, ws_max_size=1 << 20, lifespan="on",
-                            ws_per_message_deflate=False)
+    config = uvicorn.Config(app, http=GuardedH11Protocol, log_level=log_level, access_log=False, ws_max_size=1 << 20,
+                            lifespan="on", ws_per_message_deflate=False)
     uvicorn.Server(config).run(sockets=[listener])
     return 0
 
