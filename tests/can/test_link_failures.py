@@ -255,6 +255,16 @@ def test_enable_needs_a_heartbeat_with_this_protocol_version(link, bus, version)
     assert "ENABLE refused for leg 1" in link.link_health().detail
 
 
+def test_health_names_a_leg_speaking_another_protocol_version(link, bus):
+    greet(bus, link)
+    bus.push(*codec.encode_heartbeat(4, WireState.DISABLED, 1, codec.PROTOCOL_VERSION + 1))
+    feedback = link.read_feedback()
+    assert feedback.actuators[3].heartbeat_age_s == math.inf  # the loop must not count it present ...
+    health = link.link_health()  # ... and is told why, though its frames arrive
+    assert health.bus_state is BusState.ACTIVE and link.silent_legs() == ()
+    assert health.detail == "leg 4 speaks protocol version 2, this controller 1: it is never enabled"
+
+
 def test_bad_leg_is_refused(link, bus):
     assert link.send_command(7, ActuatorCommand.DISABLE) is False
     assert bus.sent == []
