@@ -10,11 +10,11 @@ out (the state may have moved). Each check returns a :data:`Refusal`.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from math import isnan
+from math import isinf, isnan
 from typing import Protocol
 
 from hexactl.control.commands import SwapGeometry
-from hexactl.control.hardware import ActuatorState, FeedbackSnapshot, fault_text
+from hexactl.control.hardware import ActuatorState, BusState, FeedbackSnapshot, LinkHealth, fault_text
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.results import ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequenceProgress
@@ -36,6 +36,8 @@ class CoreView(Protocol):
     def sequence(self) -> SequenceProgress | None: ...
     @property
     def feedback(self) -> FeedbackSnapshot | None: ...
+    @property
+    def link(self) -> LinkHealth | None: ...
     @property
     def pose_measured(self) -> tuple[float, ...] | None: ...
     @property
@@ -99,7 +101,8 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
     low, high = view.active.stroke
     for leg, actuator in enumerate(view.feedback.actuators, start=1):
         if not actuator.heartbeat_age_s <= heartbeat_timeout_s:
-            return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s"
+            age = "yet" if isinf(actuator.heartbeat_age_s) else f"for {actuator.heartbeat_age_s:.3f} s"
+            return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no report {age}{_link_note(view.link)}"
         if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
             cleared_soon = (" (after a reset an actuator leaves ESTOP once it has seen no E-stop for a moment: "
                             "enable again shortly)" if actuator.state is ActuatorState.ESTOP else "")
@@ -112,6 +115,15 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
     if view.pose_measured is None:
         return ErrorCode.POSE_UNKNOWN, "forward kinematics of the feedback failed: the platform's pose is unknown"
     return None
+
+
+def _link_note(link: LinkHealth | None) -> str:
+    """What the link says beside a silent leg: often the cause (an interface down, a bus
+    off or error-passive, an actuator speaking another protocol), which only it knows."""
+    notes = [] if link is None or link.bus_state is BusState.ACTIVE else [f"bus {link.bus_state.value}"]
+    if link is not None and link.detail:
+        notes.append(link.detail)
+    return f" (link: {'; '.join(notes)})" if notes else ""
 
 
 def check_disable(view: CoreView) -> Refusal:

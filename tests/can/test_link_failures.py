@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import math
+import os
 import threading
 from collections import deque
 
@@ -16,7 +17,8 @@ from firmware_proto import codec
 from firmware_proto.codec import ActuatorState as WireState
 from firmware_proto.codec import CommandCode, EStopReason, Fault, LoopRate
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
-from hexactl.adapters.can.transport import BusSpec, BusSpecError, parse_bus_spec
+from hexactl.adapters.can import transport
+from hexactl.adapters.can.transport import BusSpec, BusSpecError, open_bus, parse_bus_spec
 from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, BusState
 from tests.firmware_proto.frames import dbc_fault_names
 
@@ -113,6 +115,22 @@ def test_bus_specs(spec, parsed):
 def test_bad_bus_specs(spec):
     with pytest.raises(BusSpecError, match="socketcan:CHANNEL"):
         parse_bus_spec(spec)
+
+
+@pytest.mark.parametrize(("spec", "code", "says"), [
+    ("socketcan:can0", errno.ENODEV, "bring it up with: ip link set can0 type can bitrate 1000000 && ip link set can0 up"),
+    ("socketcan:vcan0", errno.ENODEV, "bring it up with: ip link add dev vcan0 type vcan && ip link set vcan0 up"),
+    ("socketcan:can0", errno.EAFNOSUPPORT, "this kernel has no SocketCAN: load it with modprobe can_raw"),
+    ("socketcan:can0", errno.EPERM, "Operation not permitted"),  # no usual cause to name: as the OS says
+])
+def test_a_socketcan_bus_that_cannot_open_says_what_to_do(monkeypatch, spec, code, says):
+    def refuse(channel, **options):  # as python-can's SocketcanBus: the OS error from socket() or bind()
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(transport, "LeanSocketcanBus", refuse)
+    with pytest.raises(OSError) as refused:
+        open_bus(spec)
+    assert refused.value.errno == code and says in str(refused.value)
 
 
 # -- set-points -----------------------------------------------------------------------------
@@ -253,6 +271,16 @@ def test_enable_needs_a_heartbeat_with_this_protocol_version(link, bus, version)
     assert link.send_command(1, ActuatorCommand.ENABLE) is False
     assert without_syncs(bus.sent) == [] and link.link_health().send_failures == 1
     assert "ENABLE refused for leg 1" in link.link_health().detail
+
+
+def test_health_names_a_leg_speaking_another_protocol_version(link, bus):
+    greet(bus, link)
+    bus.push(*codec.encode_heartbeat(4, WireState.DISABLED, 1, codec.PROTOCOL_VERSION + 1))
+    feedback = link.read_feedback()
+    assert feedback.actuators[3].heartbeat_age_s == math.inf  # the loop must not count it present ...
+    health = link.link_health()  # ... and is told why, though its frames arrive
+    assert health.bus_state is BusState.ACTIVE and link.silent_legs() == ()
+    assert health.detail == "leg 4 speaks protocol version 2, this controller 1: it is never enabled"
 
 
 def test_bad_leg_is_refused(link, bus):

@@ -202,6 +202,20 @@ def test_enable_refusals(make_rig, geometry):
     assert rig.controller.reset().error == "not_latched"
 
 
+def test_enable_refused_for_a_silent_leg_says_what_the_link_knows(rig):
+    # Bringing up a bus (interface down, wrong bit rate, actuators unpowered): the legs fall
+    # silent because of the bus, which only the link can say.
+    rig.actuators.silence(1)
+    rig.actuators.bus_state = BusState.PASSIVE
+    rig.run(100)
+    refused = rig.controller.enable()
+    assert refused.error == "heartbeat_missing"
+    assert refused.message.startswith("leg 1: no report for ") and refused.message.endswith(" s (link: bus passive)")
+    rig.actuators.bus_state = BusState.ACTIVE
+    rig.run()
+    assert rig.controller.enable().message.endswith(" s")  # a healthy link has nothing to add
+
+
 def test_enable_refused_by_the_loop_when_the_state_changed_meanwhile(rig):
     assert rig.controller.enable().ok  # checked against the last snapshot …
     rig.actuators.silence(2)

@@ -369,13 +369,19 @@ class CanActuatorLink:
         return FeedbackSnapshot(tuple(self._feedback(node, now) for node in self._nodes), now)
 
     def link_health(self) -> LinkHealth:
-        """Bus state, send failures and a note naming the last error and any silent legs."""
-        silent = self.silent_legs()
-        detail = self._detail
-        if silent:
-            legs = ", ".join(str(leg) for leg in silent)
-            detail = f"silent legs: {legs}" + (f"; {detail}" if detail else "")
-        return LinkHealth(self._bus_state, self._send_failures, detail)
+        """Bus state, send failures and a note naming any silent legs, any speaking another
+        protocol version, and the last error."""
+        notes = []
+        if silent := self.silent_legs():
+            notes.append("silent legs: " + ", ".join(str(leg) for leg in silent))
+        for leg, node in zip(NODE_IDS, self._nodes):
+            # Heard, yet reported absent to the loop (heartbeat_age_s inf): say why.
+            if node.protocol_version not in (None, PROTOCOL_VERSION):
+                notes.append(f"leg {leg} speaks protocol version {node.protocol_version}, this controller "
+                             f"{PROTOCOL_VERSION}: it is never enabled")
+        if self._detail:
+            notes.append(self._detail)
+        return LinkHealth(self._bus_state, self._send_failures, "; ".join(notes))
 
     # -- diagnostics -------------------------------------------------------------------
 

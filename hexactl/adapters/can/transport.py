@@ -82,7 +82,8 @@ def open_bus(spec: str | BusSpec, **options: Any) -> can.BusABC:
     :raises BusSpecError: for a malformed spec
     :raises can.CanError: if python-can cannot open it (e.g. ``can.CanInitializationError``
         for a missing SocketCAN interface)
-    :raises OSError: for operating-system errors python-can passes through
+    :raises OSError: for operating-system errors python-can passes through (for a missing
+        SocketCAN interface or a kernel without SocketCAN, saying how to bring it up)
     :raises TypeError: for an option a ``memory:`` bus does not take (``rx_queue_size``,
         ``can_filters``)
     """
@@ -95,8 +96,25 @@ def open_bus(spec: str | BusSpec, **options: Any) -> can.BusABC:
         # would also merge in python-can's configuration files and CAN_* environment variables.
         return MemoryBus(parsed.channel, **options)
     if parsed.interface == "socketcan":
-        return LeanSocketcanBus(parsed.channel, **options)
+        try:
+            return LeanSocketcanBus(parsed.channel, **options)
+        except OSError as error:
+            raise _socketcan_open_error(parsed.channel, error) from error
     return can.Bus(interface=parsed.interface, channel=parsed.channel, **options)
+
+
+def _socketcan_open_error(channel: str, error: OSError) -> OSError:
+    """``error`` from opening a SocketCAN bus, with what to do when the cause is the usual one."""
+    if error.errno == errno.ENODEV:
+        create = (f"ip link add dev {channel} type vcan" if channel.startswith("vcan")
+                  else f"ip link set {channel} type can bitrate 1000000")  # the protocol's bit rate
+        hint = (f"there is no CAN interface {channel!r} (ip -details link show lists them); "
+                f"bring it up with: {create} && ip link set {channel} up")
+    elif error.errno == errno.EAFNOSUPPORT:
+        hint = "this kernel has no SocketCAN: load it with modprobe can_raw (and your adapter's driver)"
+    else:
+        return error
+    return OSError(error.errno, f"{error.strerror}: {hint}")
 
 
 # SocketCAN error-frame bits (linux/can/error.h): the identifier says the error class,

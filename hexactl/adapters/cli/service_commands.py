@@ -155,7 +155,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the one kept from "
                        "the last run (--keep-calibration) or, if none, the --config geometry")
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
-                       help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates)")
+                       help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates; with --can, "
+                            "1000 Hz overloads classic CAN, the only profile the link speaks: docs/can.md)")
     realtime = serve.add_mutually_exclusive_group()
     realtime.add_argument("--fifo", type=fifo_priority(2), default=DEFAULT_FIFO_PRIORITY, metavar="PRIO",
                           help=f"SCHED_FIFO priority 2-99 of the loop (default {DEFAULT_FIFO_PRIORITY}: real-time is the "
