@@ -43,8 +43,8 @@ def acceptance_refusal(geometry: Geometry, what: str, nominal: Geometry) -> Comm
 def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig) -> CommandResult | float:
     """The refusal if swapping ``new`` in now would leave the limits: along the set-point
     ramp to it, at the commanded pose, along the running move and the rest of the playing
-    sequence, or by a set-point change larger than ``calibration_max_change_mm`` while not
-    disabled; else that change, mm."""
+    sequence, or by a set-point change larger than ``calibration_max_change_mm`` while
+    enabled (only then is it ramped in); else that change, mm."""
     if refusal := _ramp_refusal(s, new):
         return refusal
     path = [s.pose_command] + ([s.goal] if s.goal is not None else [])
@@ -57,7 +57,7 @@ def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig)
                                      f"calibration {new.calibration_id} refused: {violations[0].message}",
                                      violations=[asdict(v) for v in violations])
     change = max(abs(a - b) for a, b in zip(new.setpoints_at(s.pose_command), s.setpoints))
-    if s.state is not ControlState.DISABLED and change > config.calibration_max_change_mm:
+    if s.state is ControlState.ENABLED and change > config.calibration_max_change_mm:
         return CommandResult.failure(ErrorCode.CALIBRATION_CHANGE_TOO_LARGE,
                                      f"calibration {new.calibration_id} would move a leg by {change:.2f} mm "
                                      f"(limit {config.calibration_max_change_mm:g} mm), too far to ramp in while "

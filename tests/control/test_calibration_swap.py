@@ -1,5 +1,7 @@
 """Live calibration swap: validated, swapped at a cycle boundary, ramped, rolled back."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -323,3 +325,36 @@ def test_validate_calibration_refuses_what_a_load_would_refuse(rig, geometry):
     checked = rig.controller.validate_calibration(other_limits, "cal-2")
     loaded = rig.controller.load_calibration(other_limits, "cal-2")
     assert not checked.ok and (checked.error, checked.message) == (loaded.error, loaded.message)
+
+
+@pytest.mark.parametrize("latch", ["estop", "disable"])
+def test_a_swap_while_not_enabled_says_that_nothing_ramps_and_changes_no_setpoint(rig, calibrated, latch):
+    # Found from outside: after an E-stop, `hexactl rollback-calibration` answered "set-points
+    # change by up to 3.000 mm" though the loop held them where they were; a 30 mm load was
+    # refused "too far to ramp in while enabled: ... stop and disable first", which an E-stop
+    # cannot do. Only an enabled controller ramps; otherwise the reply says what happens.
+    rig.enabled()
+    assert rig.controller.load_calibration(calibrated, "cal-1").ok
+    rig.run(2)
+    rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
+    assert getattr(rig.controller, latch)().ok
+    rig.run(2)
+    held, sent = rig.controller.snapshot.setpoints, len(rig.sent)
+    for checked in (rig.controller.validate_calibration(rig.geometry, "nominal"), rig.controller.rollback_calibration()):
+        assert checked.ok and checked.details["change_mm"] == 0.0, checked.message
+        state = rig.controller.snapshot.state.value
+        assert f"nothing is ramped: the controller is {state}" in checked.message
+        assert re.search(r"legs up to [34]\.\d{3} mm from where", checked.message)  # what it differs by, for people
+    rig.run(3)
+    assert rig.controller.telemetry().calibration_id == "nominal"
+    assert rig.controller.snapshot.setpoints == held and len(rig.sent) == sent  # none sent, none changed
+    shifted = _variant(calibrated, zero_lengths=[z - 30.0 for z in calibrated.zero_lengths])
+    assert rig.controller.load_calibration(shifted, "shifted").ok
+    rig.run(2)
+    if latch == "estop":
+        assert rig.controller.reset().ok
+        rig.run_until(lambda: all(a.state.name == "DISABLED" for a in rig.controller.snapshot.feedback.actuators))
+    rig.enabled()
+    rig.run(50)
+    assert rig.controller.telemetry().calibration_id == "shifted" and not rig.controller.snapshot.ramp_active
+    rig.assert_setpoints_safe()  # enabled where the legs are: no step
