@@ -358,3 +358,27 @@ def test_a_swap_while_not_enabled_says_that_nothing_ramps_and_changes_no_setpoin
     rig.run(50)
     assert rig.controller.telemetry().calibration_id == "shifted" and not rig.controller.snapshot.ramp_active
     rig.assert_setpoints_safe()  # enabled where the legs are: no step
+
+
+def test_a_swap_checks_a_work_frame_sequence_at_the_platform_poses_it_will_take(make_rig, geometry):
+    # Found from outside: with a tool 300 mm above the platform, a calibration loaded while a
+    # work-frame sequence dwelt was refused "z 300 mm outside the pose envelope": the rest
+    # of the sequence (the tool's poses in the work frame) was checked as platform poses.
+    from hexactl.control.frames import OperatorFrames
+    from hexactl.control.sequences import sequence_from_mapping
+
+    rig, geometry = _accepting_large_changes(make_rig, geometry)
+    assert rig.controller.set_frames(OperatorFrames(tool=(0, 0, 300, 0, 0, 0))).ok
+    rig.enabled()
+    pivot = sequence_from_mapping({"name": "pivot", "frame": "work", "waypoint": [
+        {"pose": [0, 0, 310, 0, 0, 0], "dwell": 1.0}, {"pose": [0, 0, 300, 0, 0, 60]}]})
+    assert rig.controller.play(pivot).ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")  # at z = 10 mm
+    # 100 mm shorter legs: fine here and along the ramp, but yaw = 60° needs readings up to 872 mm (beyond 850).
+    refused = rig.controller.load_calibration(_with_zero_offset(geometry, -100.0), "short legs")
+    assert not refused.ok and refused.error == "invalid_geometry", refused.message
+    assert {v["kind"] for v in refused.details["violations"]} == {"stroke_high"}
+    small = _with_zero_offset(geometry, 2.0)
+    assert (loaded := rig.controller.load_calibration(small, "small")).ok, loaded.message
+    rig.settle()
+    rig.assert_setpoints_safe()
