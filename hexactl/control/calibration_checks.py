@@ -9,9 +9,11 @@ from dataclasses import asdict
 from math import isfinite
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.core import ControlState, CoreSnapshot
+from hexactl.control.frames import convert, relative_poses
 from hexactl.control.planning import ActiveGeometry, assess_path, piecewise_line
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.kinematics.geometry import Geometry, limits_differences
@@ -43,21 +45,18 @@ def acceptance_refusal(geometry: Geometry, what: str, nominal: Geometry) -> Comm
 def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig) -> CommandResult | float:
     """The refusal if swapping ``new`` in now would leave the limits: along the set-point
     ramp to it, at the commanded pose, along the running move and the rest of the playing
-    sequence, or by a set-point change larger than ``calibration_max_change_mm`` while not
-    disabled; else that change, mm."""
+    sequence, or by a set-point change larger than ``calibration_max_change_mm`` while
+    enabled (only then is it ramped in); else that change, mm."""
     if refusal := _ramp_refusal(s, new):
         return refusal
-    path = [s.pose_command] + ([s.goal] if s.goal is not None else [])
-    if s.sequence is not None:
-        path += [segment.goal for segment in s.sequence.remaining]
-    violations = assess_path(new.geometry, piecewise_line(path, config.path_step_mm, config.path_step_deg),
-                             0, config.path_step_mm, config.path_step_deg)
+    violations = assess_path(new.geometry, _remaining_path(s, new, config), 0, config.path_step_mm,
+                             config.path_step_deg)
     if violations:
         return CommandResult.failure(ErrorCode.INVALID_GEOMETRY,
                                      f"calibration {new.calibration_id} refused: {violations[0].message}",
                                      violations=[asdict(v) for v in violations])
     change = max(abs(a - b) for a, b in zip(new.setpoints_at(s.pose_command), s.setpoints))
-    if s.state is not ControlState.DISABLED and change > config.calibration_max_change_mm:
+    if s.state is ControlState.ENABLED and change > config.calibration_max_change_mm:
         return CommandResult.failure(ErrorCode.CALIBRATION_CHANGE_TOO_LARGE,
                                      f"calibration {new.calibration_id} would move a leg by {change:.2f} mm "
                                      f"(limit {config.calibration_max_change_mm:g} mm), too far to ramp in while "
@@ -65,6 +64,25 @@ def swap_refusal(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig)
                                      "nothing is ramped: the next enable holds where it puts the measured legs)",
                                      change_mm=change)
     return change
+
+
+def _remaining_path(s: CoreSnapshot, new: ActiveGeometry, config: ControllerConfig) -> NDArray:
+    """The poses (relative to ``new``'s zero posture, mm/rad) the platform will take from the
+    commanded pose through the running move's goal and the rest of the playing sequence: a
+    straight line to each goal in its own coordinates (the tool's pose in the work frame of
+    its frames, or relative), as the loop runs it once ``new`` is in force."""
+    step_mm, step_deg = config.path_step_mm, config.path_step_deg
+    frames = s.frames
+    position = convert(s.pose_command, None, frames, s.active.home)  # where it is commanded now
+    pieces = [relative_poses(frames, np.array([position]), new.home)]
+    goals = [(s.goal, frames)] if s.goal is not None else []
+    if s.sequence is not None:
+        goals += [(segment.goal, segment.frames) for segment in s.sequence.remaining]
+    for goal, goal_frames in goals:
+        line = piecewise_line([convert(position, frames, goal_frames, new.home), goal], step_mm, step_deg)[1:]
+        pieces.append(relative_poses(goal_frames, line, new.home))
+        position, frames = goal, goal_frames
+    return np.concatenate(pieces)
 
 
 def _ramp_refusal(s: CoreSnapshot, new: ActiveGeometry) -> CommandResult | None:

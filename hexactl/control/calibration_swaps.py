@@ -12,7 +12,7 @@ from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
 from hexactl.control.planning import ActiveGeometry
 from hexactl.control.results import CommandResult, ErrorCode
-from hexactl.control.snapshot import CoreSnapshot
+from hexactl.control.snapshot import ControlState, CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.kinematics.geometry import Geometry
 
@@ -50,11 +50,14 @@ class CalibrationSwaps:
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, "validate_calibration takes a validated Geometry")
         if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self._nominal):
             return refusal
-        checked = self._check(ActiveGeometry.of(geometry, calibration_id, source))
+        s, new = self._snapshot(), ActiveGeometry.of(geometry, calibration_id, source)
+        checked = self._check(new)
         if isinstance(checked, CommandResult):
             return checked
-        return CommandResult.success(f"calibration {calibration_id} would change the set-points by at most "
-                                     f"{checked:.3f} mm", calibration_id=calibration_id, change_mm=checked)
+        said, change = _effect(s, new, checked)
+        return CommandResult.success(f"calibration {calibration_id} would " + (f"be accepted; {said}" if said else
+                                     f"change the set-points by at most {change:.3f} mm"),
+                                     calibration_id=calibration_id, change_mm=change)
 
     def rollback(self) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.rollback_calibration`."""
@@ -73,8 +76,10 @@ class CalibrationSwaps:
         if isinstance(checked, CommandResult):
             return checked
         replaced = {"rolled_back_from": s.active.calibration_id} if rollback else {}
-        return self._submitter.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback), message,
-                                      calibration_id=new.calibration_id, change_mm=checked, **replaced)
+        said, change = _effect(s, new, checked)
+        return self._submitter.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback),
+                                      message + (f"; {said}" if said else ""),
+                                      calibration_id=new.calibration_id, change_mm=change, **replaced)
 
     def _check(self, new: ActiveGeometry) -> float | CommandResult:
         """The largest set-point change swapping in ``new`` makes now, mm
@@ -83,3 +88,17 @@ class CalibrationSwaps:
         if refusal := preconditions.check_swap(s, new):
             return CommandResult.failure(*refusal)
         return swap_refusal(s, new, self._config)
+
+
+def _effect(s: CoreSnapshot, new: ActiveGeometry, change: float) -> tuple[str, float]:
+    """What swapping ``new`` in at ``s`` does to the set-points, for the reply: ("",
+    ``change``) when enabled (ramped in); else what happens instead, and 0.0. Not enabled,
+    the loop sends no set-points or holds those sent (FAULT), and a swap ramps nothing (the
+    plan's epoch makes the loop refuse it if the state changes before it gets there)."""
+    if s.state is ControlState.ENABLED:
+        return "", change
+    pose = s.pose_command
+    differs = max(abs(a - b) for a, b in zip(new.setpoints_at(pose), s.active.setpoints_at(pose)))
+    return (f"nothing is ramped: the controller is {s.state.value}, so no set-point changes (at this pose the new "
+            f"calibration puts the legs up to {differs:.3f} mm from where the active one does); the poses shown are "
+            "by it from now on, and enabling holds the platform where it is"), 0.0

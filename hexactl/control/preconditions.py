@@ -226,6 +226,9 @@ def check_swap(view: CoreView, new: ActiveGeometry) -> Refusal:
     if refusal := _no_wave(view) or _no_stream(view):
         return refusal
     if view.lock is not None:
+        if view.state in (ControlState.FAULT, ControlState.ESTOP):  # latched, unlock is refused
+            return ErrorCode.LEG_LOCKED, (f"leg {view.lock.leg} is locked and {view.state.value} is latched: reset "
+                                          "(which ends the lock) before changing the calibration")
         return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is locked: unlock before changing the calibration"
     return None
 

@@ -323,3 +323,60 @@ def test_validate_calibration_refuses_what_a_load_would_refuse(rig, geometry):
     checked = rig.controller.validate_calibration(other_limits, "cal-2")
     loaded = rig.controller.load_calibration(other_limits, "cal-2")
     assert not checked.ok and (checked.error, checked.message) == (loaded.error, loaded.message)
+
+
+@pytest.mark.parametrize("latch", ["estop", "disable"])
+def test_a_swap_while_not_enabled_says_that_nothing_ramps_and_changes_no_setpoint(rig, calibrated, latch):
+    # Found from outside: after an E-stop, `hexactl rollback-calibration` answered "set-points
+    # change by up to 3.000 mm" though the loop held them where they were; a 30 mm load was
+    # refused "too far to ramp in while enabled: ... stop and disable first", which an E-stop
+    # cannot do. Only an enabled controller ramps; otherwise the reply says what happens.
+    rig.enabled()
+    assert rig.controller.load_calibration(calibrated, "cal-1").ok
+    rig.run(2)
+    rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
+    assert getattr(rig.controller, latch)().ok
+    rig.run(2)
+    held, sent = rig.controller.snapshot.setpoints, len(rig.sent)
+    for checked in (rig.controller.validate_calibration(rig.geometry, "nominal"), rig.controller.rollback_calibration()):
+        assert checked.ok and checked.details["change_mm"] == 0.0, checked.message
+        state = rig.controller.snapshot.state.value
+        assert f"nothing is ramped: the controller is {state}" in checked.message
+        assert "legs up to 4.000 mm from where the active one does" in checked.message  # for people
+    rig.run(3)
+    assert rig.controller.telemetry().calibration_id == "nominal"
+    assert rig.controller.snapshot.setpoints == held and len(rig.sent) == sent  # none sent, none changed
+    shifted = _variant(calibrated, zero_lengths=[z - 30.0 for z in calibrated.zero_lengths])
+    assert rig.controller.load_calibration(shifted, "shifted").ok
+    rig.run(2)
+    if latch == "estop":
+        assert rig.controller.reset().ok
+        rig.run_until(lambda: all(a.state.name == "DISABLED" for a in rig.controller.snapshot.feedback.actuators))
+    rig.enabled()
+    rig.run(50)
+    assert rig.controller.telemetry().calibration_id == "shifted" and not rig.controller.snapshot.ramp_active
+    rig.assert_setpoints_safe()  # enabled where the legs are: no step
+
+
+def test_a_swap_checks_a_work_frame_sequence_at_the_platform_poses_it_will_take(make_rig, geometry):
+    # Found from outside: with a tool 300 mm above the platform, a calibration loaded while a
+    # work-frame sequence dwelt was refused "z 300 mm outside the pose envelope": the rest
+    # of the sequence (the tool's poses in the work frame) was checked as platform poses.
+    from hexactl.control.frames import OperatorFrames
+    from hexactl.control.sequences import sequence_from_mapping
+
+    rig, geometry = _accepting_large_changes(make_rig, geometry)
+    assert rig.controller.set_frames(OperatorFrames(tool=(0, 0, 300, 0, 0, 0))).ok
+    rig.enabled()
+    pivot = sequence_from_mapping({"name": "pivot", "frame": "work", "waypoint": [
+        {"pose": [0, 0, 310, 0, 0, 0], "dwell": 1.0}, {"pose": [0, 0, 300, 0, 0, 60]}]})
+    assert rig.controller.play(pivot).ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "dwelling")  # at z = 10 mm
+    # 100 mm shorter legs: fine here and along the ramp, but yaw = 60° needs readings up to 872 mm (beyond 850).
+    refused = rig.controller.load_calibration(_with_zero_offset(geometry, -100.0), "short legs")
+    assert not refused.ok and refused.error == "invalid_geometry", refused.message
+    assert {v["kind"] for v in refused.details["violations"]} == {"stroke_high"}
+    small = _with_zero_offset(geometry, 2.0)
+    assert (loaded := rig.controller.load_calibration(small, "small")).ok, loaded.message
+    rig.settle()
+    rig.assert_setpoints_safe()

@@ -95,6 +95,25 @@ def test_disable_and_reset_say_that_they_end_the_lock(rig):
     assert rig.controller.reset().message == "reset to disabled"  # no lock: nothing more to say
 
 
+def test_a_calibration_change_while_locked_and_latched_says_to_reset(rig, geometry):
+    # Found from outside: locked, then E-stopped, `load-calibration` said "unlock before
+    # changing the calibration", and `unlock` answered "estop is latched: reset first".
+    rig.enabled()
+    _locked(rig, 4)
+    assert rig.controller.estop().ok
+    rig.run(3)
+    assert rig.controller.telemetry().locked_leg == 4  # the drive stays braked until the reset
+    zero = list(geometry.zero_lengths)
+    zero[0] += 2.0
+    calibrated = geometry.model_copy(update={"zero_lengths": tuple(zero)})
+    refused = rig.controller.load_calibration(calibrated, "cal-1")
+    assert refused.error == "leg_locked"
+    assert refused.message == "leg 4 is locked and estop is latched: reset (which ends the lock) before changing the calibration"
+    assert rig.controller.reset().ok
+    rig.run(3)
+    assert rig.controller.load_calibration(calibrated, "cal-1").ok
+
+
 def test_lock_preconditions(rig):
     assert rig.controller.leg_lock(1).error == "not_enabled"
     rig.enabled()

@@ -840,13 +840,15 @@ class PlayReply(OkReply):
 
 class CalibrationReply(OkReply):
     calibration_id: str = Field(description="content hash of the calibration being ramped in")
-    change_mm: float = Field(description="the largest set-point change the swap makes at the current pose, mm")
+    change_mm: float = Field(description="the largest set-point change the swap makes at the current pose, mm (0 when "
+                             "not enabled: nothing is ramped)")
 
 
 class ValidateCalibrationReply(OkReply):
     valid: bool = Field(description="whether load_calibration would accept it now")
     calibration_id: str | None = Field(description="its content hash, when valid")
-    change_mm: float | None = Field(description="the largest set-point change the load would make now, mm, when valid")
+    change_mm: float | None = Field(description="the largest set-point change the load would make now, mm, when valid "
+                                    "(0 when not enabled: nothing is ramped)")
     refusal: ErrorBody | None = Field(description="what load_calibration would answer, when not valid")
 
 

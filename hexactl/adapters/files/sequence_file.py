@@ -37,6 +37,8 @@ import tomllib
 from collections.abc import Sequence
 from pathlib import PurePath
 
+from pydantic import ValidationError
+
 from hexactl.adapters.files.measurements import MeasurementFileError, parse_plan
 from hexactl.control.planning import waypoint_count_problem
 from hexactl.control.sequences import (
@@ -48,6 +50,7 @@ from hexactl.control.sequences import (
     sequence_from_mapping,
 )
 from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.geometry import describe_validation_error
 
 
 def sequence_from_toml(text: str, source: str = "sequence") -> MotionSequence:
@@ -73,11 +76,19 @@ def sequence_from_plan(text: str, source: str) -> MotionSequence:
         raise SequenceError(f"{source}: a header but no postures: a plan to play needs at least one row")
     if problem := waypoint_count_problem(len(plan.poses)):
         raise SequenceError(f"{source}: {problem}")
+    waypoints, problems = [], []
+    for pose, line in zip(plan.poses, plan.lines):
+        try:
+            waypoints.append(SequenceWaypoint(pose=pose, dwell=BUILTIN_DWELL_S))
+        except ValidationError as error:  # a pose beyond any platform's reach
+            problems.append(describe_validation_error(error, f"{source}: line {line}"))
+    if problems:
+        raise SequenceError("\n".join(problems))
     legs = sorted(set(plan.legs) - {0})
     locked = f", planned with leg {', '.join(map(str, legs))} locked" if legs else ""
     return MotionSequence(name=PurePath(source).stem or source,
                           description=f"{len(plan.poses)} postures of the plan {source}{locked}",
-                          waypoints=tuple(SequenceWaypoint(pose=pose, dwell=BUILTIN_DWELL_S) for pose in plan.poses))
+                          waypoints=tuple(waypoints))
 
 
 def dwell_header() -> list[str]:
