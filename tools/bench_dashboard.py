@@ -39,6 +39,14 @@ E-stop as above; the table adds the dashboard's resident memory before and at it
 
     python3 tools/bench_dashboard.py --flood 300000
 
+``--silent N`` measures connections that send nothing: a child process opens N TCP
+connections to the dashboard and sends no request on them (a stuck script, a tunnel whose
+far end vanished, a local process doing it on purpose). Meanwhile ``--estops`` fresh pages
+time their E-stop as above; the table adds the dashboard's open file descriptors once
+the N are open and at the end, and how many of the N it had closed.
+
+    python3 tools/bench_dashboard.py --silent 5000
+
 For each N, a child process opens N WebSockets on ``/ws`` and keeps them as a browser tab
 left open would: it offers permessage-deflate as browsers do, reads every message (and
 throws it away) and answers the server's pings; with ``--stalled`` it reads nothing (a
@@ -56,6 +64,7 @@ import json
 import multiprocessing
 import os
 import random
+import resource
 import selectors
 import socket
 import statistics
@@ -347,6 +356,81 @@ def api_round_trips(client: HexactlClient, count: int) -> tuple[list[float], int
     return times, errors
 
 
+CONNECT_S = 5.0
+"""How long a silent connection may take to open; past it the dashboard is taken as full."""
+
+
+def hold_silent(url: str, count: int, ready: Any, stop: Any, still_open: Any) -> None:
+    """In a child process: ``count`` connections to ``url`` that send nothing, held until
+    ``stop`` is set; ``ready`` set once all are open, ``still_open`` the number the
+    dashboard had not closed by then."""
+    address = urlsplit(url)
+    resource.setrlimit(resource.RLIMIT_NOFILE, (resource.getrlimit(resource.RLIMIT_NOFILE)[1],) * 2)
+    held = []
+    for _ in range(count):
+        try:
+            sock = socket.create_connection((address.hostname or "127.0.0.1", address.port or 80), timeout=CONNECT_S)
+        except OSError as error:  # the dashboard takes no more (its descriptors ran out): hold what is open
+            print(f"{len(held)} of {count} silent connections opened: {error!r}", file=sys.stderr)
+            break
+        sock.setblocking(False)  # so that _closed peeks without waiting
+        held.append(sock)
+    ready.set()
+    stop.wait()
+    still_open.value = sum(1 for sock in held if not _closed(sock))
+
+
+def descriptors(pid: int) -> int:
+    """How many file descriptors process ``pid`` has open."""
+    return len(os.listdir(f"/proc/{pid}/fd"))
+
+
+def estop_beside_silent_connections(args: argparse.Namespace) -> int:
+    """A new page's E-stop round trip while ``--silent`` N connections send nothing."""
+    context = multiprocessing.get_context("spawn")
+    ready, stop, still_open = context.Event(), context.Event(), context.Value("i", -1)
+    with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
+        with serve(Path(directory), "--rate", str(RATE_HZ), api=args.api, telemetry=args.telemetry) as served, \
+                dashboard(served.api, served.telemetry, "--http", args.http, "--log-level", "warning") as board:
+            pid = board.process.pid
+            before = descriptors(pid)
+            holder = context.Process(target=hold_silent, args=(board.url, args.silent, ready, stop, still_open),
+                                     daemon=True)
+            holder.start()
+            try:
+                if not ready.wait(OPEN_WAIT_S):
+                    raise SystemExit(f"{args.silent} connections did not open in {OPEN_WAIT_S:g} s")
+                opened = descriptors(pid)
+                times, errors, unanswered = [], 0, 0
+                for _ in range(args.estops):
+                    try:
+                        timed, failed = estop_round_trips(board.url, 1)
+                    except (OSError, TimeoutError) as error:  # not even connected: the descriptors ran out
+                        print(f"estop: {error!r}", file=sys.stderr)
+                        unanswered += 1
+                        continue
+                    times, errors = times + timed, errors + failed
+                after = descriptors(pid)
+            finally:
+                stop.set()
+                holder.join(WAIT_S)
+                if holder.is_alive():
+                    holder.kill()
+    ms = [t * 1000.0 for t in times] or [float("nan")]
+    figures = {"silent": args.silent, "still_open": still_open.value, "descriptors_before": before,
+               "descriptors_opened": opened, "descriptors_after": after, "errors": errors, "unanswered": unanswered,
+               "round_trips_ms": ms, "p50_ms": statistics.median(ms), "p95_ms": percentile(ms, 95.0), "max_ms": max(ms)}
+    print(f"E-stop round trip, {args.estops} from fresh pages, beside {args.silent} connections that send nothing:\n")
+    print("| silent connections (still open at the end) | dashboard descriptors: before, once opened, at the end | "
+          "p50 ms | p95 ms | max ms | error replies | pages that could not connect |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print(f"| {args.silent} ({still_open.value}) | {before}, {opened}, {after} | {figures['p50_ms']:.1f} | "
+          f"{figures['p95_ms']:.1f} | {figures['max_ms']:.1f} | {errors} | {unanswered} |")
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2))
+    return 0
+
+
 def estop_under_idle_pages(args: argparse.Namespace) -> int:
     """The table of a new page's E-stop round trip for each ``--idle-pages`` N, row by row."""
     kind = "stalled (never read)" if args.stalled else "idle (reading)"
@@ -377,7 +461,7 @@ def estop_under_idle_pages(args: argparse.Namespace) -> int:
 
 
 FLOOD_HEAD_START_S = 2.0
-"""How long the flood runs before the first timed E-stop."""
+"""How long the flood runs, once its first E-stop is sent, before the first timed one."""
 
 
 def estop_under_a_flood(args: argparse.Namespace) -> int:
@@ -393,6 +477,8 @@ def estop_under_a_flood(args: argparse.Namespace) -> int:
             flooder.start()
             try:
                 load_start, cpu_start, started = load_average(), cpu_seconds(pid), time.monotonic()
+                # From its first E-stop, not from its start: a loaded host takes seconds to start a process.
+                wait_for(lambda: sent.value > 0, "the flood's first E-stop")
                 time.sleep(FLOOD_HEAD_START_S)
                 times = []
                 for _ in range(args.estops):
@@ -429,16 +515,23 @@ def main() -> int:
     parser.add_argument("--stalled", action="store_true", help="with --idle-pages: the pages never read")
     parser.add_argument("--flood", type=int, metavar="N", help="instead: a new page's E-stop round trip while another "
                         "page sends N E-stops and reads no reply")
-    parser.add_argument("--estops", type=int, default=30, help="with --idle-pages or --flood: E-stops per phase "
-                        "(default 30)")
-    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages or --flood: the service's API endpoint")
-    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages or --flood: its telemetry endpoint")
-    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages or --flood: the dashboard's address")
+    parser.add_argument("--silent", type=int, metavar="N", help="instead: a new page's E-stop round trip beside N "
+                        "connections that send nothing")
+    parser.add_argument("--estops", type=int, default=30, help="with --idle-pages, --flood or --silent: E-stops per "
+                        "phase (default 30)")
+    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages, --flood or --silent: the service's API "
+                        "endpoint")
+    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages, --flood or --silent: its telemetry "
+                        "endpoint")
+    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages, --flood or --silent: the "
+                        "dashboard's address")
     args = parser.parse_args()
     if args.idle_pages is not None:
         return estop_under_idle_pages(args)
     if args.flood is not None:
         return estop_under_a_flood(args)
+    if args.silent is not None:
+        return estop_beside_silent_connections(args)
     cyclictest_path = ensure_executables({"cyclictest": "rt-tests"}, lambda line: print(line, file=sys.stderr))["cyclictest"]
     with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
         workdir = Path(directory)
