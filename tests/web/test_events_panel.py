@@ -20,7 +20,7 @@ from hexactl.adapters.api.client import HexactlClient
 from hexactl.application.safety_log import _ROUTINE_EVENTS
 from tests.reliability.support import enable
 from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_for
-from tests.web.test_validated_move import TAP, tap
+from tests.web.test_validated_move import TAP, sent, tap
 
 ANN = "ann at the bench"
 DASHBOARD = "dashboard, browser "
@@ -210,5 +210,44 @@ def test_a_burst_the_page_did_not_receive_is_asked_for_and_listed_whole(tapped) 
         keys = [(e["t"], e["code"], e["message"], e["sender"]) for e in listed]
         assert len(keys) == len(set(keys)), listed  # each event once
         assert not any(e["code"] == "events_missed" for e in listed), listed
+
+    rig.scenario(body)
+
+
+def test_a_burst_while_the_page_asks_for_another_is_asked_for_next(tapped) -> None:
+    """Two bursts the page did not receive, the second while its request for the first is
+    unanswered: once that is answered the page asks again, for the second. Before, a gap
+    that opened while the page asked was forgotten, and of the second burst the page
+    listed only the eight the next record carried."""
+    rig = tapped
+
+    def burst(ann: HexactlClient, after: int) -> list[dict]:
+        tap(rig, drop=True)
+        try:
+            for _ in range(20):
+                ann.call("stop")
+            return ann.call("events", after=after)["events"]
+        finally:
+            tap(rig)
+
+    def body() -> None:
+        rig.at_rest_disabled()
+        with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
+            ann.call("stop")
+            mark = latest(rig, "stop", ANN)
+            wait_for(lambda: line_of(rig, mark), "the stop before the bursts on the page", seen=lambda: lines(rig))
+            asked = sent(rig, "events")
+            rig.page("window.hexactlTestTap.holdEventsReplies = true")
+            try:
+                first = burst(ann, mark["seq"])
+                wait_for(lambda: sent(rig, "events") > asked, "the page's request for the first burst")
+                second = burst(ann, first[-1]["seq"])
+                wait_for(lambda: line_of(rig, second[-1]), "the record after the second burst on the page")
+            finally:
+                rig.page("window.hexactlTestTap.releaseReplies()")
+        stops = [event for event in first + second if event["code"] == "stop"]
+        assert len(stops) == 40, first + second
+        wait_for(lambda: all(line_of(rig, event) for event in first + second), "both bursts whole on the page",
+                 seen=lambda: [line["code"] for line in lines(rig)][:50])
 
     rig.scenario(body)

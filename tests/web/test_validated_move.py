@@ -27,7 +27,9 @@ from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_fo
 TAP = """
 (() => {
   const Native = window.WebSocket;
-  const tap = { dropTelemetry: false, heldFrames: null, sent: [], lastTelemetryAt: null, losses: 0 };
+  const tap = { dropTelemetry: false, heldFrames: null, sent: [], lastTelemetryAt: null, losses: 0,
+                holdEventsReplies: false, eventsIds: new Set(), heldReplies: [] };
+  tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
   window.hexactlTestTap = tap;
   window.WebSocket = class extends Native {
     constructor(...args) {
@@ -38,6 +40,10 @@ TAP = """
       if (type !== 'message') return super.addEventListener(type, listener, options);
       return super.addEventListener(type, (event) => {
         const message = JSON.parse(event.data);
+        if (message.type === 'reply' && tap.holdEventsReplies && tap.eventsIds.has(message.id)) {
+          tap.heldReplies.push(() => listener(event));
+          return;
+        }
         if (message.type === 'link' && message.connected !== true) tap.losses += 1;
         if (message.type !== 'telemetry') { listener(event); return; }
         const now = performance.now();
@@ -50,15 +56,18 @@ TAP = """
       }, options);
     }
     send(data) {
-      tap.sent.push(JSON.parse(data).cmd);
+      const command = JSON.parse(data);
+      tap.sent.push(command.cmd);
+      if (command.cmd === 'events') tap.eventsIds.add(command.id);
       return super.send(data);
     }
   };
 })();
 """.replace("LOSS_GAP_MS", "1500")
 """Wraps the page's WebSocket: ``hexactlTestTap.dropTelemetry`` drops every telemetry
-record, ``heldFrames`` (not null) replaces each record's frames by it, ``sent`` lists the
-``cmd`` of every message the page sends, and ``losses`` counts the times the page may
+record, ``heldFrames`` (not null) replaces each record's frames by it, ``holdEventsReplies``
+holds the replies to the page's ``events`` requests until ``releaseReplies()``, ``sent``
+lists the ``cmd`` of every message the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
 service's link down, or records further apart than 1.5 s (the page calls 2 s stale), as
 when a busy host holds up the browser or the dashboard."""

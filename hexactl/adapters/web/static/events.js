@@ -75,13 +75,14 @@ export function setupEvents(askAfter) {
   let seq = 0;
   let lastNumber = 0;       // the newest event number taken in from this run (0: none)
   let asking = false;       // an `events` request for a gap is under way
+  let askNext = null;       // the number after which a gap opened while it was: asked for once it is answered
   let dirty = false;
   let agoAt = -Infinity;    // performance.now() of the last "ago" update (only to limit their rate)
   let agoFor = null;        // the record t they were computed at
 
   function onRecord(r) {
     if (finite(r.t)) {
-      if (recordT !== null && r.t < recordT) { run += 1; lastNumber = 0; }
+      if (recordT !== null && r.t < recordT) { run += 1; lastNumber = 0; askNext = null; }
       recordT = r.t;
     }
     const events = r.events;
@@ -94,9 +95,15 @@ export function setupEvents(askAfter) {
     take(events);
   }
 
-  /** The events numbered after `after` from the service: those the records skipped. */
+  /** The events numbered after `after` from the service: those the records skipped. A gap
+   * that opens while a request is under way is asked for once it is answered (from the
+   * earliest such gap: the reply has every event after it that the service still keeps). */
   async function askFrom(after) {
-    if (asking || !askAfter) return;
+    if (!askAfter) return;
+    if (asking) {
+      askNext = askNext === null ? after : Math.min(askNext, after);
+      return;
+    }
     asking = true;
     const asked = run;
     try {
@@ -111,6 +118,11 @@ export function setupEvents(askAfter) {
       take(events);
     } finally {
       asking = false;
+      if (askNext !== null) {
+        const next = askNext;
+        askNext = null;
+        askFrom(next);
+      }
     }
   }
 
