@@ -420,14 +420,25 @@ def estop_beside_silent_connections(args: argparse.Namespace) -> int:
     figures = {"silent": args.silent, "still_open": still_open.value, "descriptors_before": before,
                "descriptors_opened": opened, "descriptors_after": after, "errors": errors, "unanswered": unanswered,
                "round_trips_ms": ms, "p50_ms": statistics.median(ms), "p95_ms": percentile(ms, 95.0), "max_ms": max(ms)}
-    print(f"E-stop round trip, {args.estops} from fresh pages, beside {args.silent} connections that send nothing:\n")
-    print("| silent connections (still open at the end) | dashboard descriptors: before, once opened, at the end | "
-          "p50 ms | p95 ms | max ms | error replies | pages that could not connect |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    print(f"| {args.silent} ({still_open.value}) | {before}, {opened}, {after} | {figures['p50_ms']:.1f} | "
-          f"{figures['p95_ms']:.1f} | {figures['max_ms']:.1f} | {errors} | {unanswered} |")
-    if args.json:
-        args.json.write_text(json.dumps(figures, indent=2))
+    return one_row_table(f"E-stop round trip, {args.estops} from fresh pages, beside {args.silent} connections that "
+                         "send nothing:",
+                         ["silent connections (still open at the end)",
+                          "dashboard descriptors: before, once opened, at the end", "p50 ms", "p95 ms", "max ms",
+                          "error replies", "pages that could not connect"],
+                         [f"{args.silent} ({still_open.value})", f"{before}, {opened}, {after}",
+                          f"{figures['p50_ms']:.1f}", f"{figures['p95_ms']:.1f}", f"{figures['max_ms']:.1f}", f"{errors}",
+                          f"{unanswered}"], figures, args.json)
+
+
+def one_row_table(title: str, columns: list[str], row: list[str], figures: dict[str, Any], json_path: Path | None) -> int:
+    """Print ``title`` and a Markdown table of one ``row``; write ``figures`` to ``json_path``
+    if given. The tool's exit status, 0."""
+    print(f"{title}\n")
+    print("| " + " | ".join(columns) + " |")
+    print("|" + " --- |" * len(columns))
+    print("| " + " | ".join(row) + " |")
+    if json_path:
+        json_path.write_text(json.dumps(figures, indent=2))
     return 0
 
 
@@ -493,16 +504,13 @@ def estop_under_a_flood(args: argparse.Namespace) -> int:
     figures = {"flood": args.flood, "sent_by_the_end": sent.value, "round_trips_ms": ms, "p50_ms": statistics.median(ms),
                "p95_ms": percentile(ms, 95.0), "max_ms": max(ms), "rss_start_mb": rss_start, "rss_peak_mb": peak,
                "dashboard_cpu": cpu, "load_start": load_start, "load_end": load_end}
-    print(f"E-stop round trip, {args.estops} from fresh pages, while one page floods {args.flood} E-stops and reads "
-          "no reply:\n")
-    print("| flood sent by the end | p50 ms | p95 ms | max ms | dashboard memory, start → peak | dashboard CPU | "
-          "load average (1 min) start → end |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    print(f"| {sent.value} of {args.flood} | {figures['p50_ms']:.1f} | {figures['p95_ms']:.1f} | {figures['max_ms']:.1f} | "
-          f"{rss_start:.0f} → {peak:.0f} MB | {cpu * 100:.0f} % | {load_start[0]:.2f} → {load_end[0]:.2f} |")
-    if args.json:
-        args.json.write_text(json.dumps(figures, indent=2))
-    return 0
+    return one_row_table(f"E-stop round trip, {args.estops} from fresh pages, while one page floods {args.flood} "
+                         "E-stops and reads no reply:",
+                         ["flood sent by the end", "p50 ms", "p95 ms", "max ms", "dashboard memory, start → peak",
+                          "dashboard CPU", "load average (1 min) start → end"],
+                         [f"{sent.value} of {args.flood}", f"{figures['p50_ms']:.1f}", f"{figures['p95_ms']:.1f}",
+                          f"{figures['max_ms']:.1f}", f"{rss_start:.0f} → {peak:.0f} MB", f"{cpu * 100:.0f} %",
+                          f"{load_start[0]:.2f} → {load_end[0]:.2f}"], figures, args.json)
 
 
 def main() -> int:

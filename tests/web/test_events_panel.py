@@ -184,6 +184,25 @@ def tapped(tmp_path_factory) -> Iterator[Rig]:
         yield rig
 
 
+def listed_stop(rig: Rig, ann: HexactlClient) -> dict:
+    """A stop by ``ann``, once the page lists it: the service's event."""
+    ann.call("stop")
+    mark = latest(rig, "stop", ANN)
+    wait_for(lambda: line_of(rig, mark), "the stop before the burst on the page", seen=lambda: lines(rig))
+    return mark
+
+
+def burst(rig: Rig, ann: HexactlClient, after: int) -> list[dict]:
+    """Twenty stops by ``ann`` while the page gets no telemetry; the service's events numbered after ``after``."""
+    tap(rig, drop=True)
+    try:
+        for _ in range(20):
+            ann.call("stop")
+        return ann.call("events", after=after)["events"]
+    finally:
+        tap(rig)
+
+
 def test_a_burst_the_page_did_not_receive_is_asked_for_and_listed_whole(tapped) -> None:
     """Twenty stops while the page gets no telemetry (a record dropped on the way, as for
     a page that reads too slowly): the next record carries the burst's last eight, and the
@@ -193,18 +212,9 @@ def test_a_burst_the_page_did_not_receive_is_asked_for_and_listed_whole(tapped) 
     def body() -> None:
         rig.at_rest_disabled()
         with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
-            ann.call("stop")
-            mark = latest(rig, "stop", ANN)
-            wait_for(lambda: line_of(rig, mark), "the stop before the burst on the page", seen=lambda: lines(rig))
-            tap(rig, drop=True)
-            try:
-                for _ in range(20):
-                    ann.call("stop")
-                burst = ann.call("events", after=mark["seq"])["events"]
-            finally:
-                tap(rig)
-        assert sum(1 for event in burst if event["code"] == "stop") == 20, burst
-        wait_for(lambda: all(line_of(rig, event) for event in burst), "the whole burst on the page",
+            stopped = burst(rig, ann, listed_stop(rig, ann)["seq"])
+        assert sum(1 for event in stopped if event["code"] == "stop") == 20, stopped
+        wait_for(lambda: all(line_of(rig, event) for event in stopped), "the whole burst on the page",
                  seen=lambda: [line["code"] for line in lines(rig)][:30])
         listed = rig.page("return window.hexactlDashboard.events()")
         keys = [(e["t"], e["code"], e["message"], e["sender"]) for e in listed]
@@ -221,27 +231,16 @@ def test_a_burst_while_the_page_asks_for_another_is_asked_for_next(tapped) -> No
     listed only the eight the next record carried."""
     rig = tapped
 
-    def burst(ann: HexactlClient, after: int) -> list[dict]:
-        tap(rig, drop=True)
-        try:
-            for _ in range(20):
-                ann.call("stop")
-            return ann.call("events", after=after)["events"]
-        finally:
-            tap(rig)
-
     def body() -> None:
         rig.at_rest_disabled()
         with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
-            ann.call("stop")
-            mark = latest(rig, "stop", ANN)
-            wait_for(lambda: line_of(rig, mark), "the stop before the bursts on the page", seen=lambda: lines(rig))
+            mark = listed_stop(rig, ann)
             asked = sent(rig, "events")
             rig.page("window.hexactlTestTap.holdEventsReplies = true")
             try:
-                first = burst(ann, mark["seq"])
+                first = burst(rig, ann, mark["seq"])
                 wait_for(lambda: sent(rig, "events") > asked, "the page's request for the first burst")
-                second = burst(ann, first[-1]["seq"])
+                second = burst(rig, ann, first[-1]["seq"])
                 wait_for(lambda: line_of(rig, second[-1]), "the record after the second burst on the page")
             finally:
                 rig.page("window.hexactlTestTap.releaseReplies()")
