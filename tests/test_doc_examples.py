@@ -3,11 +3,15 @@ one gets a file that parses, not a refusal (docs/calibration.md, docs/api.md).""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from hexactl.adapters.api.messages import REPLY_MODELS, ErrorReply, OkReply
+from hexactl.adapters.api.wire import decode_request
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.adapters.files.instrument_file import parse_instrument
 from hexactl.adapters.files.measurements import parse_measurements
@@ -41,3 +45,40 @@ def test_the_sequence_file_example_parses() -> None:
     [example] = [block for block in fenced_blocks("api.md", "toml") if "[[waypoint]]" in block]
     sequence = sequence_from_toml(example, "api.md")
     assert sequence.name == "z_steps" and len(sequence.waypoints) == 2
+
+
+def json_examples(document: str) -> list[dict]:
+    """The JSON objects the ```json blocks of ``docs/DOCUMENT`` show, one a line (a line
+    that does not start with ``{`` goes on the one before), in order; abridged ones (with
+    "…") and the generated schema left out."""
+    examples = []
+    for block in fenced_blocks(document, "json"):
+        if '"$schema"' in block:
+            continue
+        lines: list[str] = []
+        for line in block.splitlines():
+            if line.startswith("{") or not lines:
+                lines.append(line)
+            else:
+                lines[-1] += "\n" + line
+        examples += [json.loads(line) for line in lines if "…" not in line]
+    return examples
+
+
+@pytest.mark.parametrize("document", ["api.md", "stream.md"])
+def test_the_api_examples_are_requests_the_service_takes_and_replies_it_sends(document: str) -> None:
+    """Found from outside: stream.md's stream_open reply lacked the envelope every reply
+    has, and api.md's jog release the fields its reply carries as null; an integrator
+    writes a parser from these."""
+    commands: dict[object, str] = {}  # the command of the latest request with each id: its reply follows it
+    examples = json_examples(document)
+    assert examples
+    for example in examples:
+        text = json.dumps(example)
+        if "cmd" in example:
+            decode_request(text.encode())
+            commands[example["id"]] = example["cmd"]
+        elif example["ok"]:
+            REPLY_MODELS.get(commands[example["id"]], OkReply).model_validate_json(text)
+        else:
+            ErrorReply.model_validate_json(text)

@@ -109,6 +109,16 @@ def test_req_envelope_is_kept_for_dealer_that_mimics_req(shared_service) -> None
     assert frames[0] == b"" and json.loads(frames[1])["id"] == "after"
 
 
+@pytest.mark.parametrize("version", ["1.0", '"1"', "true"])
+def test_a_version_of_another_json_type_says_to_send_the_integer(version) -> None:
+    """Found from outside: ``"v": 1.0`` (a client whose JSON writes doubles) was answered
+    "protocol version 1.0 is not supported" beside ``supported: [1]``."""
+    with pytest.raises(ApiError) as refused:
+        decode_request(f'{{"v": {version}, "id": 3, "cmd": "status"}}'.encode())
+    assert refused.value.code == "unsupported_version" and refused.value.details == {"supported": [1]}
+    assert refused.value.message.endswith("v is the JSON integer 1 (no decimal point, no quotes)")
+
+
 def test_handler_bug_becomes_internal_error() -> None:
     def broken(request, deadline_ns, sender):
         raise KeyError("boom")

@@ -106,9 +106,11 @@ def decode_request(body: bytes) -> Request:
     if "v" not in document:
         raise ApiError(ErrorCode.INVALID_REQUEST, f"missing v (the protocol version, {PROTOCOL_VERSION})", request_id=request_id)
     if type(version) is not int or version != PROTOCOL_VERSION:  # type(): true is not 1
+        # A JSON library that writes every number as a double sends 1.0: say what to send.
+        form = "" if type(version) is int else f": v is the JSON integer {PROTOCOL_VERSION} (no decimal point, no quotes)"
         raise ApiError(
             ErrorCode.UNSUPPORTED_VERSION,
-            f"protocol version {json.dumps(version)} is not supported",
+            f"protocol version {json.dumps(version)} is not supported{form}",
             {"supported": [PROTOCOL_VERSION]},
             request_id,
         )

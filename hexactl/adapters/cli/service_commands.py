@@ -187,7 +187,7 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
                        help=f"also serve the browser dashboard (hexactl dashboard) there (default {DEFAULT_HTTP}), in "
                        "a process of its own, stopped with the service")
     serve.add_argument("--stream", type=bind_endpoint, metavar="ENDPOINT", help="the pose stream's ZeroMQ socket (default: the API's "
-                       "host, a free port; stream_open's reply and status tell clients where)")
+                       "host, a free port; stream_open's reply tells clients where)")
     serve.add_argument("--stream-udp", metavar="HOST:PORT", help="also take the pose stream's samples as UDP "
                        "datagrams there, for motion-simulator software (docs/stream.md). UDP has no authentication: "
                        "beyond loopback, whoever reaches the port steers the platform while a stream is open")
