@@ -12,7 +12,8 @@ its speed: :func:`~hexactl.control.stream_commands.stream_velocity_limits`). Not
 sample by sample.
 
 Its timeout is the stream's deadman: once a cycle finds no target for longer than the
-stream's timeout (the client stopped, lost its network or stalled), the trajectory
+stream's timeout (the client stopped, lost its network or stalled; for the first target,
+:data:`FIRST_TARGET_WAIT_NS` at least), the trajectory
 brakes to rest along its path (under the stream's acceleration and jerk, as its
 receiver's reachability check assumed) and the stream ends with that reason. ``stop`` ends it the
 same way; a fault, an E-stop or ``disable`` end it at once.
@@ -38,6 +39,13 @@ less than this (ruckig's minimum duration; longer when targets come less often:
 velocity, has no distance to reach that velocity in and backs up first; one that aims at
 rest on it lags by its braking distance (v²/2a + v·a/2j). Shorter follows closer and
 reacts harder to a noisy stream."""
+
+
+FIRST_TARGET_WAIT_NS = 1_000_000_000
+"""How long a stream waits for its first target at least, whatever its timeout: until it
+comes the platform holds at rest, so waiting costs nothing in safety, and a sender often
+connects its socket (a CURVE handshake, on a loaded host) only once ``stream_open`` has
+answered, which took longer than a 100 ms timeout and ended streams before they began."""
 
 
 class StreamPhase(StrEnum):
@@ -132,13 +140,20 @@ class StreamFollower:
             self.progress = None
 
     def before_step(self, now_ns: int) -> None:
-        """Brake if no target came within the timeout by ``now_ns``."""
+        """Brake if no target came within the timeout by ``now_ns`` (the first target:
+        within :data:`FIRST_TARGET_WAIT_NS`, if longer)."""
         progress = self.progress
-        if progress is not None and progress.phase is StreamPhase.FOLLOWING and \
-                now_ns - progress.last_target_ns > progress.timeout_ns:
-            self._trajectory.halt(self._limits)
-            self.brake(f"timeout: no target for {(now_ns - progress.last_target_ns) / 1e6:.0f} ms "
-                       f"(the stream's timeout is {progress.timeout_ns / 1e6:g} ms)")
+        if progress is None or progress.phase is not StreamPhase.FOLLOWING:
+            return
+        quiet_ns = now_ns - progress.last_target_ns
+        if progress.targets:
+            if quiet_ns > progress.timeout_ns:
+                self._trajectory.halt(self._limits)
+                self.brake(f"timeout: no target for {quiet_ns / 1e6:.0f} ms (the stream's timeout is "
+                           f"{progress.timeout_ns / 1e6:g} ms)")
+        elif quiet_ns > max(progress.timeout_ns, FIRST_TARGET_WAIT_NS):
+            self.brake(f"timeout: no first target within {quiet_ns / 1e6:.0f} ms of stream_open (a stream waits "
+                       f"{max(progress.timeout_ns, FIRST_TARGET_WAIT_NS) / 1e6:g} ms for its first)")
 
     def after_step(self) -> None:
         """After this cycle's trajectory update: end once braked to rest."""

@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexactl.control.frames import OperatorFrames
+from hexactl.control.stream import FIRST_TARGET_WAIT_NS
 from hexactl.control.stream_commands import leg_rates, stream_velocity_limits
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_pose
@@ -92,6 +93,33 @@ def test_a_quiet_stream_brakes_to_rest_within_its_timeout_and_the_braking_time(r
     assert 0 < braking_s < 0.5, braking_s
     assert rig.clock.now_ns - last_target_ns > 0.1e9
     assert s.clamped_cycles == 0
+
+
+def test_the_first_target_is_waited_for_longer_than_the_timeout(rig) -> None:
+    """Until its first target the platform holds at rest, so a stream waits for it
+    FIRST_TARGET_WAIT_NS at least: a sender that connects its socket once stream_open has
+    answered (a CURVE handshake on a loaded host) lost its stream to a 100 ms timeout."""
+    _opened(rig, timeout_s=0.1)
+    opened_ns = rig.clock.now_ns
+    rig.run(round(0.5e9 / rig.period_ns))  # five timeouts long, and still waiting
+    assert rig.controller.snapshot.stream is not None
+    _stream(rig, [(0.1 * n, 0, 0, 0, 0, 0) for n in range(50)])
+    assert rig.controller.snapshot.stream.targets == 50
+    last_target_ns = rig.clock.now_ns
+    rig.run_until(lambda: rig.controller.snapshot.stream is None, limit=2000)
+    reason = rig.controller.snapshot.last_stream.reason
+    assert reason.startswith("timeout: no target for ")  # once targets came, the stream's own timeout
+    assert last_target_ns - opened_ns > 0.5e9
+
+
+def test_a_stream_whose_first_target_never_comes_ends_once_waited_for(rig) -> None:
+    _opened(rig, timeout_s=0.1)
+    opened_ns = rig.clock.now_ns
+    rig.run_until(lambda: rig.controller.snapshot.stream is None, limit=2000)
+    s = rig.controller.snapshot
+    assert s.last_stream.reason.startswith("timeout: no first target within ") and "1000 ms" in s.last_stream.reason
+    assert rig.clock.now_ns - opened_ns > FIRST_TARGET_WAIT_NS
+    assert s.motion.value == "holding" and s.state.value == "enabled"
 
 
 def test_stop_ends_the_stream_braking_and_later_targets_are_ignored(rig) -> None:
