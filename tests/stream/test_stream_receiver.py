@@ -279,3 +279,47 @@ def test_a_flood_does_not_hold_up_the_targets_while_it_is_read(monkeypatch) -> N
         finally:
             udp.close()
             receiver.close()
+
+
+def udp_socket(receiver: StreamReceiver) -> socket.socket:
+    """Another sender: a UDP socket of its own (another port) connected to the receiver."""
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    host, port = receiver.endpoints["udp"].rsplit(":", 1)
+    other.connect((host, int(port)))
+    return other
+
+
+def test_a_second_udp_sender_is_not_followed() -> None:
+    """Found from outside: two programs sending unnumbered lines to the stream's port (a
+    second simulator started by mistake) swung the platform between their poses, and
+    nothing said why. Once the second has sent SENDER_DATAGRAMS lines too, only the first
+    is followed; the other's lines are counted and dropped, and last_problem names both."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, _, first), udp_socket(receiver) as second:
+        taken = lambda count: lambda: len(controller.targets) == count  # noqa: E731
+        for number in range(stream_receiver.SENDER_DATAGRAMS):
+            sent(first.send, f"{number} 0 0 0 0 0\n".encode(), taken(2 * number + 1), "the first sender's line")
+            if number < stream_receiver.SENDER_DATAGRAMS - 1:
+                sent(second.send, f"{50 + number} 0 0 0 0 0\n".encode(), taken(2 * number + 2),
+                     "the second sender's line, before it counts as a sender")
+        followed = len(controller.targets)
+        sent(second.send, b"60 0 0 0 0 0\n", lambda: receiver.counters.other_sender == 1, "the second sender dropped")
+        sent(first.send, b"7 0 0 0 0 0\n", taken(followed + 1), "the first sender followed on")
+        sent(second.send, b"61 0 0 0 0 0\n", lambda: receiver.counters.other_sender == 2, "the second sender dropped")
+        assert len(controller.targets) == followed + 1
+        problem = receiver.counters.last_problem
+        own, other = (f"127.0.0.1:{s.getsockname()[1]}" for s in (first, second))
+        assert problem.startswith(f"UDP samples from {other} dropped: {own} sends to this stream too"), problem
+        assert receiver.view()["other_sender"] == 2
+
+
+def test_a_sender_with_a_new_port_for_every_datagram_is_followed_whole() -> None:
+    """Software that opens a socket per datagram sends each from another port: never two
+    senders taking turns, so nothing of it is dropped."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, _, _udp):
+        for number in range(1, 4 * stream_receiver.SENDER_DATAGRAMS):
+            with udp_socket(receiver) as once:
+                sent(once.send, f"{number} 0 0 0 0 0\n".encode(), lambda n=number: len(controller.targets) == n,
+                     f"line {number}")
+        assert receiver.counters.other_sender == 0 and len(controller.targets) == 4 * stream_receiver.SENDER_DATAGRAMS - 1

@@ -48,6 +48,12 @@ KEPT_LATENCIES = 2000
 
 UDP_BUFFER_BYTES = 1 << 20
 
+SENDER_DATAGRAMS = 3
+"""Datagrams a UDP sender sends to a stream before it counts as one of its senders."""
+
+RECENT_SENDERS = 64
+"""UDP senders whose datagrams are counted, the most recent; older ones are forgotten."""
+
 LOG_INTERVAL_S = 1.0
 """A new problem with the input is logged at most this often (all are counted)."""
 
@@ -64,6 +70,7 @@ class StreamCounters:
         self.received = 0  # messages read, well formed or not
         self.malformed = 0
         self.out_of_order = 0  # a sequence not above the last one taken: reordered or duplicated
+        self.other_sender = 0  # UDP from a second sender taking turns with the stream's: dropped
         self.no_stream = 0  # well formed, but no stream open
         self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
         self.forwarded = 0
@@ -104,6 +111,9 @@ class StreamReceiver(SocketThread):
         self.counters = StreamCounters()
         self._stream: int | None = None  # the loop's stream the counters are for
         self._last_sequence: int | None = None
+        self._udp_counts: collections.OrderedDict[Any, int] = collections.OrderedDict()  # this stream's recent senders
+        self._udp_sender: Any = None  # the first to send SENDER_DATAGRAMS: the one followed once another has too
+        self._two_senders = False
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
         self._last: Sample | None = None  # the newest sample taken
         self._due_ns = 0  # when the next sample may go to ``target``
@@ -130,7 +140,8 @@ class StreamReceiver(SocketThread):
         now = time.monotonic_ns()
         c = self.counters
         return {"running": self.running, "stream": self._stream, "received": c.received, "malformed": c.malformed,
-                "out_of_order": c.out_of_order, "no_stream": c.no_stream, "coalesced": c.coalesced,
+                "out_of_order": c.out_of_order, "other_sender": c.other_sender, "no_stream": c.no_stream,
+                "coalesced": c.coalesced,
                 "forwarded": c.forwarded, "clamped": c.clamped, "failed": c.failed, "last_problem": c.last_problem,
                 "rate_hz": self._rate_hz(now),
                 "loop_latency_ms": _percentiles(self._loop_latency_ns), "age_ms": _percentiles(self._age_ns)}
@@ -200,14 +211,46 @@ class StreamReceiver(SocketThread):
             return
         for _ in range(MAX_PER_WAKE):
             try:
-                message = self._udp.recv(2048)
+                message, sender = self._udp.recvfrom(2048)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
                 self._problem(f"UDP receive failed: {error}")
                 break
-            self._taken_or_counted([message])
+            if self._from_the_streams_sender(sender):
+                self._taken_or_counted([message])
             self._forward_if_due()
+
+    def _from_the_streams_sender(self, sender: Any) -> bool:
+        """Whether a datagram from ``sender`` (host, port) is the open stream's. Two senders
+        (a second program sending to the same port) would steer the platform between their
+        poses: once a second sender has sent :data:`SENDER_DATAGRAMS` datagrams too, only
+        the first to have done so is followed, and the other's datagrams are counted
+        ``other_sender`` and dropped. A sender that opens a socket per datagram sends each
+        from a new port (the kernel's pick among thousands), so none of its ports comes
+        back that often among the :data:`RECENT_SENDERS` last: nothing of it is dropped.
+        Without a stream open, nothing is dropped here (they are counted ``no_stream``)."""
+        if self._stream is None:
+            return True
+        if not self._two_senders:
+            counts = self._udp_counts
+            counts[sender] = counts.pop(sender, 0) + 1
+            if len(counts) > RECENT_SENDERS:
+                counts.popitem(last=False)
+            if counts[sender] < SENDER_DATAGRAMS or sender == self._udp_sender:
+                return True
+            if self._udp_sender is None:
+                self._udp_sender = sender
+                return True
+            self._two_senders = True
+        if sender == self._udp_sender:
+            return True
+        self.counters.received += 1
+        self.counters.other_sender += 1
+        self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} sends to this stream "
+                      "too, and the platform would swing between their poses; stop one of them, or close the stream "
+                      "(stream_close) and open one for the other")
+        return False
 
     def _taken_or_counted(self, frames: list[bytes]) -> None:
         """Take the message of ``frames`` (a datagram is one), or count it as malformed,
@@ -260,6 +303,8 @@ class StreamReceiver(SocketThread):
             if stream is not None:
                 self.counters = StreamCounters()
                 self._last_sequence = None
+                self._udp_counts.clear()
+                self._udp_sender, self._two_senders = None, False
                 self._last = None
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()
@@ -310,3 +355,8 @@ def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
         return None
     pick = lambda q: values[min(len(values) - 1, int(q * len(values)))] / 1e6  # noqa: E731
     return {"p50": pick(0.5), "p99": pick(0.99), "max": values[-1] / 1e6, "count": len(values)}
+
+
+def _address(sender: Any) -> str:
+    host, port = sender[:2]
+    return f"{host}:{port}"

@@ -297,7 +297,7 @@ function streamSummary(r) {
     const parts = [`stream ${s.stream} from ${s.source} (${s.frame}) ${s.phase}: ${s.targets} targets`];
     if (input && input.stream === s.stream) {
       parts.push(`${input.rate_hz} Hz`);
-      parts.push(`dropped ${(input.malformed ?? 0) + (input.out_of_order ?? 0)}`);
+      parts.push(`dropped ${(input.malformed ?? 0) + (input.out_of_order ?? 0) + (input.other_sender ?? 0)}`);
       parts.push(`clamped ${input.clamped ?? 0}`);
       if (input.failed) parts.push(`failed ${input.failed}`);
       if (input.loop_latency_ms) parts.push(`latency p50 ${fmt(input.loop_latency_ms.p50, 1)} ms`);
