@@ -57,7 +57,6 @@ class TelemetryPublisher(SocketThread):
         self._record = record
         self._period_s = 1.0 / check_telemetry_rate(rate_hz)
         self._failures = 0
-        self.published = 0
         super().__init__(context, zmq.PUB, endpoint, name="hexactl-telemetry",
                          options={zmq.SNDHWM: _SEND_HIGH_WATER_MARK}, curve=curve)
 
@@ -82,6 +81,5 @@ class TelemetryPublisher(SocketThread):
             return
         try:
             self._socket.send(message, zmq.NOBLOCK)
-            self.published += 1
         except zmq.ZMQError as error:  # PUB drops rather than blocks; this is a closed context
             log.warning("telemetry not sent: %s", error)
