@@ -133,7 +133,7 @@ class LockedLeg:
                            and isfinite(characteristic_length_mm) and characteristic_length_mm > 0)
         except (TypeError, ValueError):
             self._valid = False
-        self._row = legs._rows[leg - 1][:6] if self._valid else None  # P_N, B_N
+        self._row = legs.rows[leg - 1][:6] if self._valid else None  # P_N, B_N
         self._length_mm = length_mm
         self._characteristic_length_mm = characteristic_length_mm
         # W⁻¹ on angles
