@@ -32,7 +32,7 @@ loop uses it.
 
 Plain-float Python on purpose, like :func:`hexactl.kinematics.inverse.leg_lengths`: it
 needs one leg's row only and runs every cycle in leg-lock mode, where numpy's call
-overhead on 3-vectors would dominate (5 µs here).
+overhead on 3-vectors would dominate (BENCHMARKS.md, Kinematics, has the IK's figures).
 
 Shared by the controller's leg-lock mode (hexactl.control) and leg-lock posture planning
 (hexactl.calibration).
