@@ -129,7 +129,6 @@ EXIT_TIMEOUT = 124
 
 REPO = Path(__file__).resolve().parent.parent
 MARK = "@@UML_VCAN@@"
-UML_BIN = "linux.uml"
 UML_MODULES_ROOT = Path("/usr/lib/uml/modules")
 # Modules we want loaded; dependencies come from modules.dep.
 WANTED_MODULES = ["can-raw", "vcan"]

@@ -101,7 +101,7 @@ class ControllerConfig(_Frozen):
         default=100.0, gt=0,
         description="while ENABLED, forward kinematics of the feedback (the measured pose) runs at about this rate "
         "(every round(loop rate / this) cycles) and at every dwell it records; in the other states, every cycle. "
-        "It is the costliest step of a cycle (≈ 40 µs) and feeds telemetry and records only",
+        "It is the costliest step of a cycle (BENCHMARKS.md, Kinematics) and feeds telemetry and records only",
     )
     fk_tolerance_mm: Number = Field(default=1e-6, gt=0, description="forward kinematics of the feedback: tolerance")
     fk_max_iterations: WholeNumber = Field(default=10, ge=1, description="forward kinematics of the feedback: iteration cap")

@@ -57,10 +57,9 @@ class Controller:
     :class:`~hexactl.control.local_controller.LocalController`).
 
     ``nominal``: the platform's design geometry. Its ``[limits]`` are the actuators' and
-    platform's (:attr:`hardware_limits`): a calibration is refused unless its own equal
-    them, so no calibration file can widen what is enforced, and unless each of its
-    parameters lies within the plausibility bounds of the nominal one
-    (:mod:`hexactl.kinematics.plausibility`). ``ticket_start``: the first ticket number;
+    platform's: a calibration is refused unless its own equal them, so no calibration
+    file can widen what is enforced, and unless each of its parameters lies within the
+    plausibility bounds of the nominal one (:mod:`hexactl.kinematics.plausibility`). ``ticket_start``: the first ticket number;
     facades sharing one loop take disjoint ranges (outcomes are found by ticket).
     """
 
@@ -69,7 +68,6 @@ class Controller:
         self.config = config
         self.frames = FrameCommands(frames or OperatorFrames(), lambda: self.snapshot)
         self.nominal = nominal
-        self.hardware_limits = nominal.limits
         self._host = host
         self._commands = CommandSubmitter(host, config, ticket_start)
         self._jogs = JogCommands(lambda: self.snapshot, self._context, self._commands, config.jog_deadman_s)

@@ -66,7 +66,7 @@ class LocalController(Controller):
         :meth:`~hexactl.control.loop.ControlLoop.start`); returns what the real-time set-up obtained."""
         # Plan one small move, and discard it, before the thread freezes the heap: the
         # first plan creates lazily initialised module state (numpy, ruckig, pydantic)
-        # that would otherwise fill the loop's first young collection (0.5 ms, measured).
+        # that would otherwise fill, and lengthen, the loop's first young collection.
         s = self.snapshot
         plan_path(self._context(s), KinematicState.at_rest(RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
                   [Waypoint(RelativeMmDeg(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))])

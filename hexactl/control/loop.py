@@ -122,7 +122,7 @@ class ControlLoop:
         exchange = self._exchange
         deferred = 0
         # ``now`` is always the clock's latest reading, never read twice: where the clock has
-        # no vDSO each reading is a system call (user-mode Linux: about 0.1 ms).
+        # no vDSO each reading is a system call (user-mode Linux: BENCHMARKS.md has its cost).
         now = clock()
         deadline = now + period
         next_gc = deadline + gc_every_ns

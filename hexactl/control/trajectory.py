@@ -154,8 +154,8 @@ class PoseTrajectory:
     """The loop's online trajectory generator in pose space: relative mm/rad, or the
     tool's pose in the work frame of :attr:`frames` (:meth:`rebase`).
 
-    Not thread-safe: owned by the loop. ``update`` costs about a microsecond while
-    following a plan and a few tens when a new target forces a recalculation.
+    Not thread-safe: owned by the loop. ``update`` is cheap while following a plan and
+    many times dearer when a new target forces a recalculation.
     """
 
     def __init__(self, limits: MotionLimits, period_s: float) -> None:
@@ -192,8 +192,8 @@ class PoseTrajectory:
 
     @property
     def remaining_s(self) -> float:
-        """Time left on the plan the last update followed, s. About 0.4 µs: read it when
-        :attr:`replanned`, not every cycle."""
+        """Time left on the plan the last update followed, s. It asks ruckig's trajectory
+        object: read it when :attr:`replanned`, not every cycle."""
         output = self._output
         return output.trajectory.duration - output.time
 

@@ -41,8 +41,9 @@ class LegModel:
     zero_lengths_mm: NDArray[np.float64]
     sensor_scale_errors: NDArray[np.float64] = field(default_factory=lambda: np.zeros(LEG_COUNT))
     sensor_gains: NDArray[np.float64] = field(init=False, repr=False)  # 1 + e
-    # Per-leg (px, py, pz, bx, by, bz, zero, gain) as plain floats for the scalar path.
-    _rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False)
+    # Per-leg (px, py, pz, bx, by, bz, zero, gain) as plain floats for the scalar path
+    # (inverse.py and leg_lock.py, every cycle).
+    rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         for name, shape in (
@@ -63,7 +64,7 @@ class LegModel:
             tuple(float(v) for v in (*p, *b, z, g))
             for p, b, z, g in zip(self.platform_joints_mm, self.base_joints_mm, self.zero_lengths_mm, gains)
         )
-        object.__setattr__(self, "_rows", rows)
+        object.__setattr__(self, "rows", rows)
 
 
 def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
@@ -71,7 +72,7 @@ def leg_lengths(model: LegModel, pose: Sequence[float]) -> list[float]:
     x, y, z, roll, pitch, yaw = pose
     r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
     lengths = []
-    for px, py, pz, bx, by, bz, _, _ in model._rows:
+    for px, py, pz, bx, by, bz, _, _ in model.rows:
         dx = r11 * px + r12 * py + r13 * pz + x - bx
         dy = r21 * px + r22 * py + r23 * pz + y - by
         dz = r31 * px + r32 * py + r33 * pz + z - bz
@@ -87,14 +88,14 @@ def sensor_setpoints(model: LegModel, pose: Sequence[float]) -> list[float]:
 def reading_of_leg_length(model: LegModel, leg_index: int, length: float) -> float:
     """Leg ``leg_index``'s (0-based) sensor reading, mm, at joint-to-joint ``length``, mm:
     (length − zero) / gain, the scalar copy of :func:`readings_from_lengths`."""
-    row = model._rows[leg_index]
+    row = model.rows[leg_index]
     return (length - row[6]) / row[7]
 
 
 def leg_length_of_reading(model: LegModel, leg_index: int, reading: float) -> float:
     """Leg ``leg_index``'s (0-based) length, mm, at sensor ``reading``, mm: the scalar copy
     of :func:`lengths_from_readings` for the loop (leg-lock tracking, every cycle)."""
-    row = model._rows[leg_index]
+    row = model.rows[leg_index]
     return row[6] + row[7] * reading
 
 
@@ -150,7 +151,7 @@ def leg_jacobian_rows(model: LegModel, pose: Sequence[float]) -> tuple[list[list
     r11, r12, r13, r21, r22, r23, r31, r32, r33 = rotation_elements(roll, pitch, yaw)
     rows = []
     lengths = []
-    for px, py, pz, bx, by, bz, _, _ in model._rows:
+    for px, py, pz, bx, by, bz, _, _ in model.rows:
         qx = r11 * px + r12 * py + r13 * pz
         qy = r21 * px + r22 * py + r23 * pz
         qz = r31 * px + r32 * py + r33 * pz

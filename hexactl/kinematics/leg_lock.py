@@ -32,7 +32,7 @@ loop uses it.
 
 Plain-float Python on purpose, like :func:`hexactl.kinematics.inverse.leg_lengths`: it
 needs one leg's row only and runs every cycle in leg-lock mode, where numpy's call
-overhead on 3-vectors would dominate (5 µs here).
+overhead on 3-vectors would dominate (BENCHMARKS.md, Kinematics, has the IK's figures).
 
 Shared by the controller's leg-lock mode (hexactl.control) and leg-lock posture planning
 (hexactl.calibration).
@@ -133,7 +133,7 @@ class LockedLeg:
                            and isfinite(characteristic_length_mm) and characteristic_length_mm > 0)
         except (TypeError, ValueError):
             self._valid = False
-        self._row = legs._rows[leg - 1][:6] if self._valid else None  # P_N, B_N
+        self._row = legs.rows[leg - 1][:6] if self._valid else None  # P_N, B_N
         self._length_mm = length_mm
         self._characteristic_length_mm = characteristic_length_mm
         # W⁻¹ on angles

@@ -97,15 +97,13 @@ and one client must not fill the whole queue."""
 
 MAX_QUEUED = 256
 """Requests waiting for one worker from all clients together. Planning a move or validating a pose takes
-about 20 ms (measured), so a full queue is some 5 s of work: what waits longer would
-outlive the client library's default 5 s timeout, so it is refused ``busy`` at once
-instead."""
+tens of milliseconds, so a full queue is seconds of work: what waits longer would outlive
+the client library's default 5 s timeout, so it is refused ``busy`` at once instead."""
 
 DEFAULT_HANDLER_TIMEOUT_S = 120.0
 """The watchdog's default bound on one request's handling, s. The slowest legitimate
-request stays below it: validating a 1000-waypoint sequence took 67 s on the 2-core test
-machine at load 12 (measured; planning is bounded by
-:data:`~hexactl.control.planning.MAX_MOTION_S`, not faster). Stops never wait for the
+request stays below it: a plan gives up at
+:data:`~hexactl.control.planning.PLANNING_BUDGET_S`, half of it. Stops never wait for the
 worker, so a slow request holds up only other slow requests, never the platform's safety."""
 
 WORKER_JOIN_S = 2.0
