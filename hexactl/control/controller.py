@@ -59,8 +59,9 @@ class Controller:
     ``nominal``: the platform's design geometry. Its ``[limits]`` are the actuators' and
     platform's: a calibration is refused unless its own equal them, so no calibration
     file can widen what is enforced, and unless each of its parameters lies within the
-    plausibility bounds of the nominal one (:mod:`hexactl.kinematics.plausibility`). ``ticket_start``: the first ticket number;
-    facades sharing one loop take disjoint ranges (outcomes are found by ticket).
+    plausibility bounds of the nominal one (:mod:`hexactl.kinematics.plausibility`).
+    ``ticket_start``: the first ticket number; facades sharing one loop take disjoint
+    ranges (outcomes are found by ticket).
     """
 
     def __init__(self, host: LoopHost, *, config: ControllerConfig, nominal: Geometry,
