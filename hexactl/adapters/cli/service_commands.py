@@ -148,7 +148,7 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
         "actuators on an in-process CAN bus drive a simulated platform. Real-time by default: the loop under "
         f"SCHED_FIFO {DEFAULT_FIFO_PRIORITY} and the memory locked, when the process may (root, CAP_SYS_NICE or "
         "RLIMIT_RTPRIO; CAP_IPC_LOCK or an unlimited RLIMIT_MEMLOCK), else normal scheduling with the reason "
-        "logged; the log and status say what it got. SIGINT/SIGTERM brake the platform to rest, disable the "
+        "logged; the log and status say what it got. SIGINT/SIGTERM/SIGHUP brake the platform to rest, disable the "
         "actuators and stop, within 10 s."
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
