@@ -64,6 +64,7 @@ from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.kept_calibration import DEFAULT_FILE as DEFAULT_KEPT_CALIBRATION_FILE
 from hexactl.adapters.files.kept_calibration import KeptCalibration, restore_calibration
 from hexactl.adapters.files.config_path import default_config_path
+from hexactl.adapters.files.service_lock import HeldByAnother, hold
 from hexactl.application.dashboard import DashboardProcess
 from hexactl.application.loop_link import LoopExchange
 from hexactl.application.simulator import InstrumentPort, Simulator
@@ -254,8 +255,8 @@ class Service:
         once the API process serves (clients may enable the actuators from then on):
         :func:`run_service` stops ending the process at once on a signal then.
 
-        :raises ServiceError: for a refused geometry or key file, a bus that cannot be
-            opened or an endpoint that cannot be bound
+        :raises ServiceError: for a refused geometry or key file, kept files another
+            service holds, a bus that cannot be opened or an endpoint that cannot be bound
         :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
             without CURVE keys
         """
@@ -275,13 +276,19 @@ class Service:
         nominal = _load(config_path)
         data_dirs = data_directories(config.data_dirs, config_path)
         frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
-        frames = _restored_frames(frames_path)
-        log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
         kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
-        active, source, refused = _start_calibration(config.calibration_path, kept_path, nominal, config_path)
-        calibration_id = geometry_id(active)
 
-        with ExitStack() as closers:  # unwound in reverse: API, bring to rest, telemetry, loop, link, simulator
+        # Unwound in reverse: API, bring to rest, telemetry, loop, link, simulator, the kept files.
+        with ExitStack() as closers:
+            for path, what in ((kept_path, "the calibration in force"), (frames_path, "the operator's frames")):
+                try:  # before they are read, and before the actuators open
+                    closers.callback(hold(path, what).release)
+                except HeldByAnother as error:
+                    raise ServiceError(str(error)) from None
+            frames = _restored_frames(frames_path)
+            log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
+            active, source, refused = _start_calibration(config.calibration_path, kept_path, nominal, config_path)
+            calibration_id = geometry_id(active)
             simulator = None
             if config.can is None:
                 simulator = Simulator(nominal, config.simulator_seed, config.point_sigma_mm)
