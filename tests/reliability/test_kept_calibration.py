@@ -7,6 +7,7 @@ reported once, and kept once it can be."""
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 from collections.abc import Callable
@@ -277,3 +278,18 @@ def test_a_calibration_that_cannot_be_kept_is_reported_once_and_kept_once_it_can
     assert _logged(caplog)[1:] == [(logging.INFO, f"calibration {geometry_id(CALIBRATED)}: kept for a restart in {kept}")]
     assert handler(LOAD)["message"].endswith(f"; kept for a restart in {kept}")
 
+
+def test_the_nominal_geometry_on_a_read_only_file_system_keeps_nothing_without_a_warning(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A service started in a read-only working directory on the nominal geometry warned
+    "calibration … NOT kept for a restart": removing the kept file that is not there failed."""
+    kept = KeptCalibration(tmp_path / "active_calibration.toml", geometry_id(NOMINAL))
+
+    def read_only(path: object, *arguments: object, **options: object) -> None:
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
+
+    monkeypatch.setattr(os, "unlink", read_only)
+    assert kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal").startswith("the nominal geometry is in force")
+    kept.path.write_text(geometry_to_toml(CALIBRATED))  # one kept before: that it stays is worth a warning
+    with pytest.raises(OSError):
+        kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal")
