@@ -45,7 +45,8 @@ def hold(kept: Path, what: str) -> Hold:
         descriptor = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except OSError as error:
         # Where no lock can be made nothing can be kept either (that is said when it fails).
-        log.warning("%s: cannot make sure no other service keeps %s there (%s)", kept, what, error.strerror)
+        log.warning("%s: not held for this service (cannot make %s: %s): another service started on it would not be "
+                    "refused", kept, lock, error.strerror)
         return Hold(None)
     try:
         fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
