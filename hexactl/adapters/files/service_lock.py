@@ -40,6 +40,8 @@ def hold(kept: Path, what: str) -> Hold:
 
     :raises HeldByAnother: naming ``kept``, ``what``, the holder's process id and what to do
     """
+    if kept.is_dir():  # no file to keep there: reading it refuses the start, naming it
+        return Hold(None)
     lock = kept.with_name(f".{kept.name}.lock")
     try:
         descriptor = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
