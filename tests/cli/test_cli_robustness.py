@@ -194,6 +194,22 @@ def test_a_data_directory_that_is_a_file_is_called_a_file(tmp_path, capsys) -> N
     assert f"--data-dir {a_file}: is a file, not a directory" in error and "no such directory" not in error, error
 
 
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize("option", ["--config", "--calibration", "--frames", "--keep-calibration", "--data-dir"])
+def test_an_empty_path_is_refused_naming_the_option(option, capsys) -> None:
+    """``--config "$PLATFORM"`` with the variable unset: ``--config ''`` served the default
+    geometry (another machine's limits), ``--calibration ''`` none, ``--keep-calibration ''``
+    and ``--frames ''`` the working directory, ``--data-dir ''`` the working directory."""
+    assert exits_with(["serve", option, ""]) == 2
+    error = capsys.readouterr().err
+    assert f"argument {option}: an empty path: name a file or folder (an unset shell variable?)" in error, error
+
+
+def test_an_empty_config_is_refused_by_every_command_that_reads_one(capsys) -> None:
+    assert exits_with(["check", "--config", "", "0,0,0,0,0,0"]) == 2
+    assert "argument --config: an empty path" in capsys.readouterr().err
+
+
 # -- where a command writes -----------------------------------------------------------
 
 
