@@ -45,6 +45,7 @@ from types import FrameType
 from typing import NoReturn
 
 import can
+import zmq
 
 from firmware_proto.codec import LoopRate
 from hexactl.adapters.api.security import (
@@ -54,6 +55,7 @@ from hexactl.adapters.api.security import (
     load_server_keys,
 )
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, is_local_endpoint
+from hexactl.adapters.api.socket_thread import check_bindable
 from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, check_telemetry_rate
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
@@ -272,6 +274,12 @@ class Service:
                 load_server_keys(config.curve)
             except (SecurityError, OSError, ValueError) as error:
                 raise ServiceError(f"CURVE keys: {error}") from None
+        for endpoint in (config.api_endpoint, config.telemetry_endpoint, config.stream_endpoint):
+            try:  # here, before the actuators open; the API process binds them for good
+                if endpoint is not None:
+                    check_bindable(endpoint)
+            except zmq.ZMQError as error:
+                raise ServiceError(f"cannot serve: {error}") from None  # as the API process says it
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
         data_dirs = data_directories(config.data_dirs, config_path)

@@ -78,6 +78,23 @@ class SocketThread(ABC):
         """The thread's work, until ``self._stopping`` is set."""
 
 
+def check_bindable(endpoint: str) -> None:
+    """Whether a :class:`SocketThread` could bind ``endpoint`` now: bound and closed at once,
+    for a process that must know before it starts anything else (``hexactl serve`` before
+    it opens the actuators).
+
+    :raises zmq.ZMQError: as :class:`SocketThread` would
+    """
+    context = zmq.Context()
+    try:
+        with context.socket(zmq.PUB) as probe:
+            probe.linger = 0
+            _refuse_to_replace(endpoint)
+            probe.bind(endpoint)
+    finally:
+        context.term()
+
+
 def _refuse_to_replace(endpoint: str) -> None:
     """ZeroMQ binds ``ipc://PATH`` by first removing whatever is at PATH: another process's
     listening socket (a second service would take over the first one's clients, and their
