@@ -145,10 +145,10 @@ class ApiProcess:
 def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, instrument_line: Connection | None,
               control: Connection) -> None:
     """The child's life (see the module's docstring)."""
-    # Ctrl-C at a terminal and a service manager's SIGTERM reach the whole process group:
-    # the service handles them and stops this process in order (telemetry until at rest).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    # Ctrl-C at a terminal, its hangup and a service manager's SIGTERM reach the whole process
+    # group: the service handles them and stops this process in order (telemetry until at rest).
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(number, signal.SIG_IGN)
     logging.basicConfig(level=settings.log_level, format=LOG_FORMAT)
     sys.setswitchinterval(API_SWITCH_INTERVAL_S)
     with ExitStack() as closers:

@@ -10,7 +10,7 @@ serialises, so none of it competes with the loop for the GIL
 (:mod:`hexactl.application.loop_link` says why and what crosses). The caller's thread only
 starts and stops them.
 
-Shutdown (SIGINT/SIGTERM, or :meth:`Service.close`): the API stops taking commands, a
+Shutdown (SIGINT/SIGTERM/SIGHUP, or :meth:`Service.close`): the API stops taking commands, a
 moving platform brakes to rest, the actuators are disabled (an E-stop if they will not
 be), then telemetry, the loop, the link and the simulator stop. If the API process dies,
 :func:`run_service` does the same and exits with status 1. Every step is bounded (an API
@@ -45,6 +45,7 @@ from types import FrameType
 from typing import NoReturn
 
 import can
+import zmq
 
 from firmware_proto.codec import LoopRate
 from hexactl.adapters.api.security import (
@@ -54,6 +55,7 @@ from hexactl.adapters.api.security import (
     load_server_keys,
 )
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, is_local_endpoint
+from hexactl.adapters.api.socket_thread import check_bindable
 from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, check_telemetry_rate
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
@@ -64,6 +66,7 @@ from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.kept_calibration import DEFAULT_FILE as DEFAULT_KEPT_CALIBRATION_FILE
 from hexactl.adapters.files.kept_calibration import KeptCalibration, restore_calibration
 from hexactl.adapters.files.config_path import default_config_path
+from hexactl.adapters.files.service_lock import HeldByAnother, hold
 from hexactl.application.dashboard import DashboardProcess
 from hexactl.application.loop_link import LoopExchange
 from hexactl.application.simulator import InstrumentPort, Simulator
@@ -254,8 +257,8 @@ class Service:
         once the API process serves (clients may enable the actuators from then on):
         :func:`run_service` stops ending the process at once on a signal then.
 
-        :raises ServiceError: for a refused geometry or key file, a bus that cannot be
-            opened or an endpoint that cannot be bound
+        :raises ServiceError: for a refused geometry or key file, kept files another
+            service holds, a bus that cannot be opened or an endpoint that cannot be bound
         :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
             without CURVE keys
         """
@@ -271,17 +274,29 @@ class Service:
                 load_server_keys(config.curve)
             except (SecurityError, OSError, ValueError) as error:
                 raise ServiceError(f"CURVE keys: {error}") from None
+        for endpoint in (config.api_endpoint, config.telemetry_endpoint, config.stream_endpoint):
+            try:  # here, before the actuators open; the API process binds them for good
+                if endpoint is not None:
+                    check_bindable(endpoint)
+            except zmq.ZMQError as error:
+                raise ServiceError(f"cannot serve: {error}") from None  # as the API process says it
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
         data_dirs = data_directories(config.data_dirs, config_path)
         frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
-        frames = _restored_frames(frames_path)
-        log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
         kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
-        active, source, refused = _start_calibration(config.calibration_path, kept_path, nominal, config_path)
-        calibration_id = geometry_id(active)
 
-        with ExitStack() as closers:  # unwound in reverse: API, bring to rest, telemetry, loop, link, simulator
+        # Unwound in reverse: API, bring to rest, telemetry, loop, link, simulator, the kept files.
+        with ExitStack() as closers:
+            for path, what in ((kept_path, "the calibration in force"), (frames_path, "the operator's frames")):
+                try:  # before they are read, and before the actuators open
+                    closers.callback(hold(path, what).release)
+                except HeldByAnother as error:
+                    raise ServiceError(str(error)) from None
+            frames = _restored_frames(frames_path)
+            log.info("nominal geometry %r (%s) from %s", nominal.name, geometry_id(nominal), config_path)
+            active, source, refused = _start_calibration(config.calibration_path, kept_path, nominal, config_path)
+            calibration_id = geometry_id(active)
             simulator = None
             if config.can is None:
                 simulator = Simulator(nominal, config.simulator_seed, config.point_sigma_mm)
@@ -378,8 +393,9 @@ class ServiceProcess:
     actuators disabled. For a client in this process whose own work (numpy, matplotlib)
     must not hold up the control loop through the GIL: ``hexactl demo``, tests.
 
-    The child ignores SIGINT: Ctrl-C at the terminal interrupts the client, which then
-    decides when the service stops. Like ``hexactl serve`` it watches its API process
+    The child ignores SIGINT and SIGHUP: Ctrl-C at the terminal interrupts the client, which
+    then decides when the service stops, and a hangup that ends the client closes its pipe,
+    which stops the service in order. Like ``hexactl serve`` it watches its API process
     (:class:`ServiceWatch`): if that dies, it brings the platform to rest, disables the
     actuators and ends (:attr:`exitcode` 1).
 
@@ -420,7 +436,8 @@ class ServiceProcess:
 def _serve(config: ServiceConfig, connection: Connection) -> None:
     """The child's life: start, say where, serve until told to stop (or orphaned, or the API
     process fails: then exit status 1), close."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for number in (signal.SIGINT, signal.SIGHUP):  # the parent decides (the class's docstring)
+        signal.signal(number, signal.SIG_IGN)
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     try:
         service = Service.start(config)
@@ -443,15 +460,21 @@ def _serve(config: ServiceConfig, connection: Connection) -> None:
         sys.exit(1)
 
 
+KEPT_IF_IGNORED = (signal.SIGINT, signal.SIGHUP)
+"""The shutdown signals a service leaves ignored when its parent ignores them (``nohup``,
+``&`` in a script); SIGTERM always ends it."""
+
+
 def run_service(config: ServiceConfig) -> NoReturn:
-    """``hexactl serve``: log to stderr, run until SIGINT or SIGTERM, shut down cleanly and
-    end the process: status 0, or 1 if the API process died or its command stream ended or
-    broke (the platform is then brought to rest as at a stop); the link's dropped
-    non-commands are logged.
+    """``hexactl serve``: log to stderr, run until SIGINT, SIGTERM or SIGHUP (its terminal or
+    SSH session is gone: no reason to leave a platform moving with no controller), shut
+    down cleanly and end the process: status 0, or 1 if the API process died or its
+    command stream ended or broke (the platform is then brought to rest as at a stop); the
+    link's dropped non-commands are logged.
 
     A signal during the start, before the API process serves, ends the process at once
-    (:func:`_end_start_up`: nothing can have been enabled yet). SIGINT inherited as
-    ignored (``hexactl serve … &`` from a script, ``nohup``) stays ignored, as the parent
+    (:func:`_end_start_up`: nothing can have been enabled yet). SIGINT or SIGHUP inherited
+    as ignored (``hexactl serve … &`` from a script, ``nohup``) stays ignored, as the parent
     wished; SIGTERM always ends the service.
 
     :raises ServiceError: if the service does not start (see :meth:`Service.start`)
@@ -459,7 +482,7 @@ def run_service(config: ServiceConfig) -> NoReturn:
     logging.basicConfig(level=config.log_level, format=LOG_FORMAT)
     status = 0
     numbers = [number for number in ShutdownSignals.SIGNALS
-               if number != signal.SIGINT or signal.getsignal(number) is not signal.SIG_IGN]
+               if number not in KEPT_IF_IGNORED or signal.getsignal(number) is not signal.SIG_IGN]
     with ShutdownSignals(numbers, on_start_up=_end_start_up) as signals:
         service = Service.start(config, serving=signals.serving)
         signals.serving()
@@ -529,21 +552,22 @@ def _end_start_up(received: signal.Signals) -> NoReturn:
     however long the start would still take (an API process starting on a loaded host: a
     minute and more), with one line and no traceback: the child processes killed (the
     dashboard's ends by itself), status 130 for SIGINT (as the command line's Ctrl-C),
-    death by SIGTERM for SIGTERM (143 to a shell; what it did before the handler was set).
+    death by the signal for SIGTERM and SIGHUP (143 and 129 to a shell; what it did before
+    the handler was set).
 
     Runs in the signal handler: no lock, no logging (the interrupted main thread may hold
     the log's)."""
     os.write(sys.stderr.fileno(), f"hexactl serve: {received.name} during start-up: stopped before serving\n".encode())
     for child in multiprocessing.active_children():
         child.kill()
-    if received == signal.SIGTERM:
+    if received != signal.SIGINT:
         signal.signal(received, signal.SIG_DFL)
         os.kill(os.getpid(), received)
     os._exit(128 + received)
 
 
 class ShutdownSignals:
-    """SIGINT and SIGTERM for a main thread that watches the service: inside the ``with``,
+    """SIGINT, SIGTERM and SIGHUP for a main thread that watches the service: inside the ``with``,
     :meth:`wait` returns the first one received.
 
     The handler only appends to a list and the wake-up file descriptor (written by the
@@ -558,7 +582,7 @@ class ShutdownSignals:
     process).
     """
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
     def __init__(self, numbers: Collection[signal.Signals] = SIGNALS,
                  on_start_up: Callable[[signal.Signals], object] | None = None) -> None:

@@ -158,6 +158,20 @@ def test_endpoint_in_use_is_refused_and_everything_closes(running) -> None:
         Service.start(ServiceConfig(api_endpoint=running.api_endpoint, telemetry_endpoint="tcp://127.0.0.1:*"))
 
 
+@pytest.mark.parametrize("taken", ["api", "telemetry"])
+def test_endpoint_in_use_is_refused_before_the_actuators_open(taken, running, monkeypatch) -> None:
+    """A second service on a running one's ports used to open the actuators' bus and run
+    its loop (sending on the bus beside the first) until its API process failed to bind."""
+    def opened(*arguments: object, **options: object) -> None:
+        pytest.fail("the actuators were opened")
+
+    monkeypatch.setattr("hexactl.application.service.Simulator", opened)
+    endpoints = {"api_endpoint": "tcp://127.0.0.1:*", "telemetry_endpoint": "tcp://127.0.0.1:*",
+                 f"{taken}_endpoint": getattr(running, f"{taken}_endpoint")}
+    with pytest.raises(ServiceError, match=rf"cannot serve: .*{re.escape(endpoints[f'{taken}_endpoint'])}"):
+        Service.start(ServiceConfig(**endpoints))
+
+
 def test_bad_geometry_is_refused(tmp_path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text("zero_lengths = [1]\n")

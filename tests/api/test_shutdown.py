@@ -79,3 +79,22 @@ def test_the_service_says_what_real_time_set_up_it_got_and_no_realtime_opts_out(
             scheduling = f"SCHED_FIFO {priority}" if priority else "normal scheduling"
             assert f"real-time: {scheduling}, memory {'locked' if locked else 'not locked'}" in served.log
         assert "nothing to brake" in served.log and "actuators disabled" not in served.log  # never enabled
+
+
+def test_a_hangup_brakes_and_disables_as_sigterm_does(tmp_path: Path) -> None:
+    """The terminal or SSH session of a foreground ``hexactl serve`` goes: SIGHUP reaches
+    its whole process group. It used to kill the service and its API process on the spot,
+    mid-motion, leaving each actuator to stop on its own watchdog."""
+    with serve(tmp_path) as served:
+        with HexactlClient(served.api, timeout_s=10) as client:
+            enable_and_move(client)
+        [api_process] = spawned_children(served.process.pid)
+        os.kill(api_process, signal.SIGHUP)  # the group's members, the API process first: the worst order
+        os.kill(served.process.pid, signal.SIGHUP)
+        status = served.wait(HANG_S)
+    log = served.log
+    assert status == 0 and "SIGHUP: shutting down" in log, log
+    assert "the API process died" not in log, log
+    if not re.search(r"fault at x [-0-9.]+ mm, .* deg \(measured\): nothing to brake", log):  # as above
+        assert re.search(r"platform (at rest|still moving) at x [-0-9.]+ mm, .* yaw [-0-9.]+ deg", log), log
+        assert "actuators disabled" in log, log

@@ -5,6 +5,7 @@ endpoint refused with nothing left open, one thread from ``start`` to ``close``,
 
 from __future__ import annotations
 
+import socket
 import threading
 from collections.abc import Callable
 
@@ -87,4 +88,39 @@ def test_the_api_socket_thread_wakes_the_loop_links_heartbeat_while_a_handler_wo
     finally:
         release.set()
         server.close()
+    assert terminated(context)
+
+
+@pytest.mark.parametrize("make", MAKERS.values(), ids=MAKERS)
+def test_an_ipc_endpoint_another_process_serves_is_refused_a_stale_one_taken(make, tmp_path) -> None:
+    """ZeroMQ binds ipc://PATH by removing whatever is at PATH: a second service on the
+    path of a running one took it over silently, and the first's clients, E-stop included,
+    reached the second; a file of the operator's there was deleted."""
+    path = tmp_path / "api.ipc"
+    endpoint = f"ipc://{path}"
+    other = zmq.Context()
+    serving = other.socket(zmq.REP)
+    serving.bind(endpoint)  # as another process's service would: a listening socket
+    context = zmq.Context()
+    try:
+        with pytest.raises(zmq.ZMQError, match=f"{endpoint}: another process serves there"):
+            make(context, endpoint)
+        with zmq.Context() as client_context, client_context.socket(zmq.REQ) as client:
+            client.linger = 0
+            client.connect(endpoint)  # still the first one's
+            client.send(b"ping")
+            assert serving.poll(WAIT_S * 1000) and serving.recv() == b"ping"
+    finally:
+        serving.close(linger=0)
+        other.term()
+    kept = tmp_path / "kept.toml"
+    kept.write_text("name = 'calibration'\n")
+    with pytest.raises(zmq.ZMQError, match=f"ipc://{kept}: .* not a socket"):
+        make(context, f"ipc://{kept}")
+    assert kept.read_text() == "name = 'calibration'\n"
+    stale = tmp_path / "stale.ipc"  # left by a service that was killed: a socket file nothing listens on
+    with socket.socket(socket.AF_UNIX) as gone:
+        gone.bind(str(stale))
+    served = make(context, f"ipc://{stale}")
+    served.close()
     assert terminated(context)

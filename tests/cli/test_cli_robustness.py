@@ -194,6 +194,22 @@ def test_a_data_directory_that_is_a_file_is_called_a_file(tmp_path, capsys) -> N
     assert f"--data-dir {a_file}: is a file, not a directory" in error and "no such directory" not in error, error
 
 
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize("option", ["--config", "--calibration", "--frames", "--keep-calibration", "--data-dir"])
+def test_an_empty_path_is_refused_naming_the_option(option, capsys) -> None:
+    """``--config "$PLATFORM"`` with the variable unset: ``--config ''`` served the default
+    geometry (another machine's limits), ``--calibration ''`` none, ``--keep-calibration ''``
+    and ``--frames ''`` the working directory, ``--data-dir ''`` the working directory."""
+    assert exits_with(["serve", option, ""]) == 2
+    error = capsys.readouterr().err
+    assert f"argument {option}: an empty path: name a file or folder (an unset shell variable?)" in error, error
+
+
+def test_an_empty_config_is_refused_by_every_command_that_reads_one(capsys) -> None:
+    assert exits_with(["check", "--config", "", "0,0,0,0,0,0"]) == 2
+    assert "argument --config: an empty path" in capsys.readouterr().err
+
+
 # -- where a command writes -----------------------------------------------------------
 
 
@@ -337,14 +353,15 @@ SERVE = ["serve", "--no-realtime", "--api", "tcp://127.0.0.1:*", "--telemetry", 
 
 
 class Launched:
-    """``hexactl ARGUMENTS`` via :data:`LAUNCH` in ``directory``, SIGINT ``sigint`` (its
-    disposition at exec), its stderr collected."""
+    """``hexactl ARGUMENTS`` via :data:`LAUNCH` in ``directory``, SIGINT ``sigint`` and
+    SIGHUP ``sighup`` (their dispositions at exec), its stderr collected."""
 
-    def __init__(self, arguments: list[str], directory: Path, sigint: signal.Handlers) -> None:
+    def __init__(self, arguments: list[str], directory: Path, sigint: signal.Handlers,
+                 sighup: signal.Handlers = signal.SIG_DFL) -> None:
         self.process = subprocess.Popen(
             [sys.executable, "-c", LAUNCH, *arguments], cwd=directory, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             text=True, env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"},
-            preexec_fn=lambda: signal.signal(signal.SIGINT, sigint))
+            preexec_fn=lambda: (signal.signal(signal.SIGINT, sigint), signal.signal(signal.SIGHUP, sighup)))
         assert self.process.stdout is not None and self.process.stdout.readline() == "started\n"
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -382,7 +399,7 @@ be one of these: the verdict does not depend on which)."""
 
 
 @pytest.mark.parametrize("delay_s", DELAYS_S)
-@pytest.mark.parametrize("sent", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sent", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"])
 def test_serve_ends_quietly_on_a_signal_whenever_it_lands(sent, delay_s, tmp_path) -> None:
     launched = Launched(SERVE, tmp_path, signal.SIG_DFL)
     time.sleep(delay_s)
@@ -392,10 +409,10 @@ def test_serve_ends_quietly_on_a_signal_whenever_it_lands(sent, delay_s, tmp_pat
     if f"{sent.name}: shutting down" in log:  # it served: the clean stop
         assert status == 0, log
         return
-    # Before it served: one line of ours (none for SIGTERM while it loads), the status of a signal.
-    assert status == (130 if sent == signal.SIGINT else -signal.SIGTERM), log
+    # Before it served: one line of ours (none for SIGTERM, SIGHUP while it loads), the status of a signal.
+    assert status == (130 if sent == signal.SIGINT else -sent), log
     ours = [line for line in log.splitlines() if line.startswith("hexactl")]
-    assert ours in ([], [f"hexactl serve: {sent.name} during start-up: stopped before serving"]) if sent == signal.SIGTERM \
+    assert ours in ([], [f"hexactl serve: {sent.name} during start-up: stopped before serving"]) if sent != signal.SIGINT \
         else ours in (["hexactl serve: interrupted"], ["hexactl serve: SIGINT during start-up: stopped before serving"]), log
 
 
@@ -419,3 +436,12 @@ def test_serve_with_sigint_ignored_keeps_ignoring_it_and_sigterm_stops_it(tmp_pa
     launched.process.send_signal(signal.SIGTERM)
     status, log = launched.ended()
     assert status == 0 and "SIGTERM: shutting down" in log and "SIGINT" not in log, log
+
+
+def test_serve_under_nohup_keeps_ignoring_sighup(tmp_path) -> None:
+    launched = Launched(SERVE, tmp_path, signal.SIG_DFL, sighup=signal.SIG_IGN)
+    launched.wait_for("API on ")
+    launched.process.send_signal(signal.SIGHUP)  # taken before the SIGTERM after it, had it not been ignored
+    launched.process.send_signal(signal.SIGTERM)
+    status, log = launched.ended()
+    assert status == 0 and "SIGTERM: shutting down" in log and "SIGHUP" not in log, log

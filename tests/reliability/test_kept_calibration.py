@@ -7,7 +7,9 @@ reported once, and kept once it can be."""
 
 from __future__ import annotations
 
+import errno
 import logging
+import os
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -111,6 +113,30 @@ def test_calibration_at_start_is_kept_and_a_kept_file_that_cannot_be_used_refuse
     again = _service(kept, tmp_path, calibration=calibration)  # --calibration chooses, and is kept
     again.close()
     assert load_geometry(kept) == CALIBRATED
+
+
+def test_a_second_service_on_the_same_kept_files_is_refused_before_it_changes_them(tmp_path: Path) -> None:
+    """A second ``hexactl serve`` started in the same working directory (other ports, or the
+    same by mistake) used to take over the files the first keeps for its restart: it kept
+    its own calibration there, or removed the first one's, and the first restarted on the
+    wrong calibration."""
+    calibration = tmp_path / "cal.toml"
+    calibration.write_text(geometry_to_toml(CALIBRATED))
+    kept = tmp_path / "active_calibration.toml"
+    kept.with_name(".active_calibration.toml.lock").write_text("999999\n")  # left by a process long gone: no matter
+    first = _service(kept, tmp_path, calibration=calibration)
+    try:
+        kept_text = kept.read_text()
+        with pytest.raises(ServiceError, match=rf"{kept}: another hexactl serve \(process {os.getpid()}\) keeps the "
+                                               r"calibration in force there for its restart: stop that service first"):
+            _service(kept, tmp_path)
+        with pytest.raises(ServiceError, match=r"frames.toml: another hexactl serve .* keeps the operator's frames"):
+            _service(tmp_path / "elsewhere.toml", tmp_path)  # the same ./frames.toml
+        assert kept.read_text() == kept_text
+        assert not (tmp_path / "elsewhere.toml").exists()
+    finally:
+        first.close()
+    _service(kept, tmp_path).close()  # once the first has stopped
 
 
 def test_a_calibration_changed_by_another_client_of_the_loop_is_kept_all_the_same(tmp_path: Path) -> None:
@@ -251,3 +277,19 @@ def test_a_calibration_that_cannot_be_kept_is_reported_once_and_kept_once_it_can
     assert load_geometry(kept) == CALIBRATED
     assert _logged(caplog)[1:] == [(logging.INFO, f"calibration {geometry_id(CALIBRATED)}: kept for a restart in {kept}")]
     assert handler(LOAD)["message"].endswith(f"; kept for a restart in {kept}")
+
+
+def test_the_nominal_geometry_on_a_read_only_file_system_keeps_nothing_without_a_warning(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A service started in a read-only working directory on the nominal geometry warned
+    "calibration … NOT kept for a restart": removing the kept file that is not there failed."""
+    kept = KeptCalibration(tmp_path / "active_calibration.toml", geometry_id(NOMINAL))
+
+    def read_only(path: object, *arguments: object, **options: object) -> None:
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
+
+    monkeypatch.setattr(os, "unlink", read_only)
+    assert kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal").startswith("the nominal geometry is in force")
+    kept.path.write_text(geometry_to_toml(CALIBRATED))  # one kept before: that it stays is worth a warning
+    with pytest.raises(OSError):
+        kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal")

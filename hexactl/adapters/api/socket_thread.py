@@ -9,6 +9,10 @@ belongs to that thread: ZeroMQ sockets are not thread-safe.
 
 from __future__ import annotations
 
+import errno
+import os
+import socket
+import stat
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -26,7 +30,8 @@ class SocketThread(ABC):
     Subclasses implement :meth:`_run`: it owns ``self._socket`` and returns soon after
     ``self._stopping`` is set, which bounds how long :meth:`close` waits.
 
-    :raises zmq.ZMQError: the endpoint is malformed or in use (the socket is closed)
+    :raises zmq.ZMQError: the endpoint is malformed or in use, or an ``ipc://`` path
+        holds what is not a stale socket (the socket is closed)
     """
 
     def __init__(
@@ -47,6 +52,7 @@ class SocketThread(ABC):
                 self._socket.setsockopt(option, value)
             if curve is not None:
                 curve.secure(self._socket)
+            _refuse_to_replace(endpoint)
             self._socket.bind(endpoint)
         except BaseException:
             self._socket.close()
@@ -70,3 +76,52 @@ class SocketThread(ABC):
     @abstractmethod
     def _run(self) -> None:
         """The thread's work, until ``self._stopping`` is set."""
+
+
+def check_bindable(endpoint: str) -> None:
+    """Whether a :class:`SocketThread` could bind ``endpoint`` now: bound and closed at once,
+    for a process that must know before it starts anything else (``hexactl serve`` before
+    it opens the actuators).
+
+    :raises zmq.ZMQError: as :class:`SocketThread` would
+    """
+    context = zmq.Context()
+    try:
+        with context.socket(zmq.PUB) as probe:
+            probe.linger = 0
+            _refuse_to_replace(endpoint)
+            probe.bind(endpoint)
+    finally:
+        context.term()
+
+
+def _refuse_to_replace(endpoint: str) -> None:
+    """ZeroMQ binds ``ipc://PATH`` by first removing whatever is at PATH: another process's
+    listening socket (a second service would take over the first one's clients, and their
+    E-stop with them) or any file. Only a socket nothing listens on any more (left by a
+    killed service) may go.
+
+    :raises zmq.ZMQError: EADDRINUSE, naming the endpoint and what is there
+    """
+    path = endpoint.removeprefix("ipc://")
+    if path == endpoint or path.startswith("@"):  # not ipc, or Linux's abstract names: no file to remove
+        return
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:  # nothing there (or nothing this process may see): ZeroMQ's bind says what is wrong
+        return
+    if not stat.S_ISSOCK(mode):
+        raise zmq.ZMQError(errno.EADDRINUSE, f"{endpoint}: {path} exists and is not a socket; binding would replace "
+                                             "it: name another path")
+    with socket.socket(socket.AF_UNIX) as probe:
+        probe.setblocking(False)
+        try:
+            probe.connect(path)
+        except (ConnectionRefusedError, FileNotFoundError):
+            return  # stale
+        except BlockingIOError:
+            pass  # a listener whose queue is full: in use all the same
+        except OSError:
+            return  # not ours to judge: ZeroMQ's bind says what is wrong
+    raise zmq.ZMQError(errno.EADDRINUSE, f"{endpoint}: another process serves there (another hexactl serve?): "
+                                         "stop it first, or name another path")

@@ -125,10 +125,20 @@ class VersionAction(argparse.Action):
         parser.exit()
 
 
+def named_path(text: str) -> Path:
+    """A file or folder named on the command line. Empty is refused: ``--config "$FILE"``
+    with the variable unset would otherwise mean the default geometry (another machine's
+    limits) or, as a path, the working directory."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path: name a file or folder (an unset shell variable?)")
+    return Path(text)
+
+
 def common_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--config",
+        type=named_path,
         metavar="FILE",
         help=f"geometry or calibration TOML (default: ${CONFIG_ENVIRONMENT_VARIABLE}, else config/platform.toml)",
     )

@@ -32,6 +32,7 @@ from hexactl.adapters.cli.common import (
     connection_parser,
     fifo_priority,
     fraction,
+    named_path,
     pose_argument,
     positive_float,
     telemetry_rate,
@@ -148,11 +149,11 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
         "actuators on an in-process CAN bus drive a simulated platform. Real-time by default: the loop under "
         f"SCHED_FIFO {DEFAULT_FIFO_PRIORITY} and the memory locked, when the process may (root, CAP_SYS_NICE or "
         "RLIMIT_RTPRIO; CAP_IPC_LOCK or an unlimited RLIMIT_MEMLOCK), else normal scheduling with the reason "
-        "logged; the log and status say what it got. SIGINT/SIGTERM brake the platform to rest, disable the "
+        "logged; the log and status say what it got. SIGINT/SIGTERM/SIGHUP brake the platform to rest, disable the "
         "actuators and stop, within 10 s."
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
-    serve.add_argument("--calibration", metavar="FILE", help="start with this calibration instead of the one kept from "
+    serve.add_argument("--calibration", type=named_path, metavar="FILE", help="start with this calibration instead of the one kept from "
                        "the last run (--keep-calibration) or, if none, the --config geometry")
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates; with --can, "
@@ -171,13 +172,13 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--telemetry", type=bind_endpoint, default=DEFAULT_TELEMETRY_ENDPOINT, metavar="ENDPOINT", help=f"telemetry endpoint (default {DEFAULT_TELEMETRY_ENDPOINT})")
     serve.add_argument("--telemetry-rate", type=telemetry_rate, default=DEFAULT_TELEMETRY_RATE_HZ, metavar="HZ", help=f"telemetry records per second (default {DEFAULT_TELEMETRY_RATE_HZ:g})")
     serve.add_argument(
-        "--data-dir", action="append", type=Path, metavar="DIR",
+        "--data-dir", action="append", type=named_path, metavar="DIR",
         help="directory requests may read calibration and sequence files from and write recordings to "
         "(repeatable; default: ./recordings, ./calibrations, ./sequences and the config file's directory)",
     )
-    serve.add_argument("--frames", type=Path, metavar="FILE", help="where the operator's frames and soft limits are "
+    serve.add_argument("--frames", type=named_path, metavar="FILE", help="where the operator's frames and soft limits are "
                        "kept across restarts (default ./frames.toml; read at start, written when they change)")
-    serve.add_argument("--keep-calibration", type=Path, metavar="FILE",
+    serve.add_argument("--keep-calibration", type=named_path, metavar="FILE",
                        help="where the calibration in force is kept across restarts (default ./active_calibration.toml;"
                        " restored at start without --calibration; follows the calibration the loop has in force, even "
                        "after a loop_timeout: written when it changes, removed when the nominal geometry is back)")
@@ -412,8 +413,8 @@ def run_serve(arguments: argparse.Namespace) -> int:
                            "directory: give a directory")
     curve = CurveServerKeys(arguments.curve_secret, arguments.curve_clients) if arguments.curve_secret else None
     config = ServiceConfig(
-        config_path=Path(arguments.config) if arguments.config else None,
-        calibration_path=Path(arguments.calibration) if arguments.calibration else None,
+        config_path=arguments.config,
+        calibration_path=arguments.calibration,
         can=arguments.can,
         rate_hz=arguments.rate,
         api_endpoint=arguments.api,

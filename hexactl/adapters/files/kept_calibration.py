@@ -142,7 +142,11 @@ def forget_calibration(path: str | os.PathLike[str]) -> None:
 
     :raises OSError: if the file is there and cannot be removed
     """
-    Path(path).unlink(missing_ok=True)
+    try:
+        Path(path).unlink(missing_ok=True)
+    except OSError:
+        if os.path.lexists(path):  # a read-only file system refuses to remove even what is not there
+            raise
 
 
 def restore_calibration(path: str | os.PathLike[str]) -> tuple[Geometry, str]:
