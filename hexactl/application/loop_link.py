@@ -311,6 +311,7 @@ class RemoteLoop:
             if not reports.poll(first_report_timeout_s):
                 raise ConnectionError(f"no report from the control loop within {first_report_timeout_s:g} s")
             self._latest: LoopReport = self._received(reports.recv_bytes())
+            self._received_at = time.monotonic()
         except (EOFError, OSError) as error:
             raise ConnectionError(f"the control loop's link is closed: {error!r}") from None
         self._receiver = threading.Thread(target=self._receive, name="hexactl-loop-link", daemon=True)
@@ -322,9 +323,12 @@ class RemoteLoop:
 
     def report(self, stats_max_age_s: float) -> LoopReport:
         """The latest report (its percentiles are at most :data:`STATS_MAX_AGE_S` old
-        whatever ``stats_max_age_s`` asks); once the link is gone, the loop is reported
-        not running and failed."""
+        whatever ``stats_max_age_s`` asks), with how long ago it arrived
+        (``stats.report_age_s``: a loop whose process is stopped or hung sends none, and its
+        last report would otherwise read as current); once the link is gone, the loop is
+        reported not running and failed."""
         report = self._latest
+        report = replace(report, stats=replace(report.stats, report_age_s=time.monotonic() - self._received_at))
         if self._gone is not None:
             return replace(report, running=False, failure=report.failure or self._gone)
         return report
@@ -378,6 +382,7 @@ class RemoteLoop:
                 self._gone = "the control loop's process closed the link"
                 return
             self._latest = self._received(data)
+            self._received_at = time.monotonic()
 
     def _received(self, data: bytes) -> LoopReport:
         """The report in ``data``, its recorder rows moved to :meth:`take_recorded`'s queue."""

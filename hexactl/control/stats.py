@@ -41,6 +41,8 @@ class LoopStats:
     ``guard_clamps``: cycles in which the set-point guard had to change a set-point (a
     plan was wrong: should stay 0); ``fk_failures``: cycles whose feedback had no
     forward-kinematics solution. The controller fills these two from the cycle's state.
+    ``report_age_s``: how old the report carrying these was when read, s: 0 in the loop's
+    own process; read in another, the time since the loop's last report arrived there.
     """
 
     rate_hz: float
@@ -54,6 +56,7 @@ class LoopStats:
     exchange_max_us: float = 0.0
     guard_clamps: int = 0
     fk_failures: int = 0
+    report_age_s: float = 0.0
 
 
 class CycleStats:

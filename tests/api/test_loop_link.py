@@ -264,3 +264,16 @@ def test_a_heartbeat_never_waits_for_a_full_pipe(link: Link) -> None:
     beat.start()
     beat.join(10.0)  # only a bound on a hang
     assert not beat.is_alive(), "the heartbeat waits for room in the pipe"
+
+
+def test_a_report_says_how_long_ago_the_loop_sent_it(link: Link) -> None:
+    """A loop whose process is stopped or hung sends no report, and the API's status and
+    telemetry answered from its last as if current: now each says how long ago it came
+    (``loop.report_age_s``), and a report that comes makes it fresh again."""
+    link.cycle()
+    silent = lambda: link.remote.report(0.25).stats.report_age_s > 0.5  # noqa: E731 - nothing sent meanwhile
+    wait_for(silent, "the last report to grow old")
+    last = link.remote.snapshot.cycle
+    assert link.controller.telemetry().loop.report_age_s > 0.5  # what status and telemetry carry
+    link.cycle_until_reported(lambda s: s.cycle > last)
+    assert link.remote.report(0.25).stats.report_age_s < 0.5

@@ -6,6 +6,7 @@ Through a real terminal: tests/cli/test_monitor_tmux.py."""
 from __future__ import annotations
 
 import io
+import re
 import json
 import os
 import subprocess
@@ -290,3 +291,16 @@ def test_leaving_says_so_only_while_the_platform_moves(change: dict[str, Any], s
         assert err == ""
     else:
         assert err == f"hexactl monitor: left while the platform moves {said}; it goes on: `hexactl stop` stops it\n"
+
+
+def test_a_record_from_a_silent_loop_says_so_first_in_status_and_the_view() -> None:
+    """A loop whose process is stopped or hung sends nothing; the API answers from its last
+    report, which status and the view showed as current."""
+    from hexactl.adapters.cli.telemetry_text import format_telemetry
+
+    silent = {**RECORD, "loop": {**RECORD["loop"], "report_age_s": 12.34}}
+    first = format_telemetry(silent).splitlines()[0]
+    assert first.startswith("NO LOOP REPORT for 12.3 s: the control loop's process is stopped or hung"), first
+    assert re.search(r"NO LOOP REPORT +for 12\.3 s: the control loop's process", rendered(silent))
+    for current in (RECORD, {**RECORD, "loop": {**RECORD["loop"], "report_age_s": 0.01}}):
+        assert "NO LOOP REPORT" not in format_telemetry(current) and "NO LOOP REPORT" not in rendered(current)

@@ -117,14 +117,14 @@ def showing_enabled_and_moving(driver, client: HexactlClient) -> dict:  # noqa: 
     return page
 
 
-def assert_no_live_data_shown(page: dict, lost: str) -> None:
-    """Nothing shown as current: UNKNOWN in grey, the age, the banner naming what was lost
+def assert_no_live_data_shown(page: dict, lost: str, age: str = r"no data for \d+ s") -> None:
+    """Nothing shown as current: UNKNOWN in grey, the ``age``, the banner naming what was lost
     and the hardware E-stop, the overlay's goal and time to go gone, the rest greyed."""
     assert page["state"] == "UNKNOWN" and page["motion"] == "UNKNOWN", page
     assert "pill-unknown" in page["state_class"] and "st-enabled" not in page["state_class"], page
     assert "mo-moving" not in page["motion_class"], page
     assert page["state_background"] != GREEN_BACKGROUND, page
-    assert page["age_shown"] and re.fullmatch(r"no data for \d+ s", page["age"]), page
+    assert page["age_shown"] and re.fullmatch(age, page["age"]), page
     assert page["banner_shown"] and "NO LIVE DATA" in page["banner"] and "HARDWARE E-STOP" in page["banner"], page
     assert lost in page["banner"], page
     assert page["hud"].startswith("NO LIVE DATA") and " in " not in page["hud"].split("\n", 1)[1], page
@@ -187,6 +187,25 @@ def test_a_killed_service_shows_state_unknown_and_the_banner_until_telemetry_ret
             assert not page["banner_shown"] and not page["stale"] and not page["age_shown"], page
             assert "pill-unknown" not in page["state_class"] and page["loop"] != "no data", page
             assert not page["hud"].startswith("NO LIVE DATA"), page
+
+
+def test_a_stopped_control_loop_shows_state_unknown_though_telemetry_still_comes(tmp_path) -> None:
+    """The loop's process stopped (SIGSTOP; hung alike) while the API's runs on: telemetry
+    kept coming, every record the loop's last report, and the page showed it as current,
+    moving. Now the record says how old the report is, and past a second the page shows
+    nothing as current, naming the loop, until the loop reports again."""
+    with page_of_a_dashboard() as (driver, board, api, telemetry):
+        with service_shown(tmp_path, driver, board, api, telemetry) as (served, client):
+            showing_enabled_and_moving(driver, client)
+            served.process.send_signal(signal.SIGSTOP)  # the loop's process; the API's is its child
+            try:
+                page = page_when(driver, lambda p: p["loss"] == "loop" and p["banner_shown"], "the banner")
+                assert_no_live_data_shown(page, "control loop has sent nothing", age=r"no loop report for \d+ s")
+            finally:
+                served.process.send_signal(signal.SIGCONT)
+            page = page_when(driver, lambda p: p["loss"] is None and p["state"] != "UNKNOWN",
+                             "live data again once the loop reports")
+            assert not page["banner_shown"] and not page["stale"] and not page["age_shown"], page
 
 
 def test_the_dashboard_server_gone_shows_state_unknown_the_banner_and_an_estop_not_sent(tmp_path) -> None:

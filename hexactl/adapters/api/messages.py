@@ -524,6 +524,9 @@ class LoopTelemetry(_Message):
     )
     guard_clamps: int = Field(description="cycles in which the set-point guard changed a set-point (should stay 0)")
     fk_failures: int = Field(description="cycles whose feedback had no forward-kinematics solution")
+    report_age_s: float = Field(description="how long ago the loop's process sent what this record says, s: its "
+                                "reports come every 10 ms at most; beyond 1 s (REPORT_SILENT_S) the loop's process is "
+                                "stopped or hung, and the record is that old")
 
 
 class RealtimeTelemetry(_Message):

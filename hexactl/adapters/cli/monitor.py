@@ -42,6 +42,7 @@ from hexactl.adapters.cli.telemetry_text import (
     recording_text,
     remaining_text,
     sequence_text,
+    silent_loop_lines,
     wave_text,
 )
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
@@ -337,6 +338,7 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
     facts.add_column(style="bold")
     facts.add_column()
     for label, value in (
+        *((label, Text(text, style="bold red")) for label, text in silent_loop_lines(loop)),
         *frames_lines({"frames": record.get("frames")}),
         # Not a row of the table above: a named fault word is wider than a column (an
         # E-stop's wrapped into three lines and pushed the key's result off a 40-line screen).

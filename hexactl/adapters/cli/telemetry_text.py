@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from hexactl.adapters.api.protocol import REPORT_SILENT_S
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 
@@ -16,6 +17,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
     """A telemetry record as an aligned block of text (poses in mm and deg, legs in mm)."""
     loop = record["loop"]
     lines = [
+        *silent_loop_lines(loop),
         ("state", f"{record['state']}, {record['motion']}"),
         ("pose command", pose_text(record.get("pose_command"))),
         ("pose measured", pose_text(record.get("pose_measured"))),
@@ -39,6 +41,16 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("real-time", realtime_text(record.get("realtime"))),
     ]
     return "\n".join(f"{label:<15}{value}" for label, value in lines)
+
+
+def silent_loop_lines(loop: dict[str, Any]) -> list[tuple[str, str]]:
+    """A first row saying the record is old when the loop's process has sent nothing for
+    over :data:`REPORT_SILENT_S` (a service older than this field: none)."""
+    age = loop.get("report_age_s") or 0.0
+    if age <= REPORT_SILENT_S:
+        return []
+    return [("NO LOOP REPORT", f"for {age:.1f} s: the control loop's process is stopped or hung (its actuators stop "
+                               "on their watchdogs); what follows is its last report")]
 
 
 def pose_text(pose: list[float] | None) -> str:

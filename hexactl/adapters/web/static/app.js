@@ -11,6 +11,7 @@ const RECONNECT_MS = 1000;
 const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
 const STALE_MS = 2000;        // no telemetry for longer: nothing on the page is shown as current
+const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (protocol.py's REPORT_SILENT_S)
 const TICK_MS = 250;          // the staleness check and the "no data for N s" count
 const pageStartedAt = performance.now();
 
@@ -149,6 +150,7 @@ const LOSS_SHORT = {
   server: 'the page has no connection to the dashboard server',
   service: 'the dashboard server has no telemetry from the hexactl service',
   telemetry: 'no telemetry has reached the page',
+  loop: "the service's control loop has sent nothing",
   starting: 'no telemetry has reached the page yet',
 };
 
@@ -517,17 +519,21 @@ function connect() {
  * What the page has lost, or null while its telemetry is live:
  * 'server' (the WebSocket to the dashboard server is closed), 'service' (the dashboard server
  * says it has no telemetry from the service), 'telemetry' (none reached the page for STALE_MS),
- * 'starting' (none yet since the page opened; shown as lost after STALE_MS).
+ * 'starting' (none yet since the page opened; shown as lost after STALE_MS), 'loop' (telemetry
+ * comes, but the service's control loop has sent nothing for REPORT_SILENT_S: its last state).
  */
 function dataLoss(now) {
   const fresh = state.record !== null && now - state.lastTelemetryAt <= STALE_MS;
-  if (state.wsOpen && state.link?.connected !== false && fresh) return null;
+  if (state.wsOpen && state.link?.connected !== false && fresh) {
+    return state.record.loop?.report_age_s > REPORT_SILENT_S ? 'loop' : null;
+  }
   if (!state.wsOpen) return state.record === null && now - pageStartedAt <= STALE_MS ? 'starting' : 'server';
   if (state.link && !state.link.connected) return 'service';
   return state.record === null && now - pageStartedAt <= STALE_MS ? 'starting' : 'telemetry';
 }
 
-function noDataFor(now) {
+function noDataFor(now, loss) {
+  if (loss === 'loop') return `no loop report for ${Math.floor(state.record.loop.report_age_s)} s`;
   const since = state.record !== null ? state.lastTelemetryAt : pageStartedAt;
   return `no data for ${Math.max(0, Math.floor((now - since) / 1000))} s`;
 }
@@ -537,11 +543,13 @@ const LOSS_TEXT = {
   server: 'The page has lost the dashboard server: nothing on it is current, and no button of it, E-STOP included, can reach the service.',
   service: "The dashboard server has no telemetry from the hexactl service: the service may have stopped, or its telemetry stalled. The page's E-STOP is still sent, but may not be carried out.",
   telemetry: "No telemetry from the hexactl service has reached the page: the service, or the dashboard's link to it, may have stopped. The page's E-STOP is still sent, but may not be carried out.",
+  loop: "The hexactl service's control loop has sent nothing for over 1 s: its process is stopped or hung, and what the page shows is its last state. The actuators stop on their own watchdogs; the page's E-STOP is still sent, but cannot be carried out until the loop runs.",
 };
 const LOSS_TODO = {
   server: 'If the platform may be moving, use the HARDWARE E-STOP. The page reconnects by itself every 1 s.',
   service: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when telemetry returns.',
   telemetry: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when telemetry returns.',
+  loop: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when the loop reports.',
 };
 
 /** Live: the readouts as drawn. No live data: state and motion UNKNOWN, the banner, the rest greyed. */
@@ -573,7 +581,7 @@ function applyLiveness(now) {
     showEstopWarning(0, `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so the service may not be running.`);
   }
   if (!lost) return;
-  const age = noDataFor(now);
+  const age = noDataFor(now, loss);
   const r = state.record;
   for (const [id, key] of [['state', 'state'], ['motion', 'motion']]) {
     setText(id, 'UNKNOWN');
