@@ -190,6 +190,20 @@ def terminate(served: Served) -> Shutdown:
     return Shutdown(exit_status, seconds, tuple(endpoints_in_use(served.api, served.telemetry)))
 
 
+_UNSERVED: list[socket.socket] = []  # held for the process's life
+
+
+def unserved_endpoint() -> str:
+    """``tcp://127.0.0.1:PORT`` where nothing listens for as long as this process runs: a
+    port it keeps bound and never listens on, so a connection there is refused at once.
+    (A fixed port such as 1 is not that: a service started on it as root answered the
+    tests and tools that took it for nobody's.)"""
+    held = socket.socket()
+    held.bind(("127.0.0.1", 0))
+    _UNSERVED.append(held)
+    return f"tcp://127.0.0.1:{held.getsockname()[1]}"
+
+
 def free_port() -> int:
     """A TCP port on the loopback that nothing listens on now (the kernel's pick)."""
     with socket.socket() as probe:

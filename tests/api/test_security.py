@@ -19,6 +19,7 @@ from hexactl.adapters.api.security import (
 )
 from hexactl.adapters.api.protocol import is_local_endpoint
 from hexactl.adapters.api.server import ApiServer
+from tools.serving import unserved_endpoint
 
 
 @pytest.mark.parametrize(
@@ -123,7 +124,7 @@ def test_no_answer_from_beyond_localhost_without_keys_names_curve() -> None:
     with HexactlClient("tcp://192.0.2.1:5555", timeout_s=0.05) as client:  # TEST-NET-1: nobody answers
         with pytest.raises(ServiceUnavailable, match="beyond localhost answers only clients with CURVE keys"):
             client.call("status")
-    with HexactlClient("tcp://127.0.0.1:1", timeout_s=0.05) as client:
+    with HexactlClient(unserved_endpoint(), timeout_s=0.05) as client:
         with pytest.raises(ServiceUnavailable) as local:
             client.call("status")
     assert str(local.value).endswith("is `hexactl serve` running there?")

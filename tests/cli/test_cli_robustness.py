@@ -22,7 +22,9 @@ import pytest
 from hexactl.adapters.cli import service_commands
 from hexactl.adapters.cli.common import CliError, connect, endpoint_problem, parse_bounds_argument, parse_pose_argument
 from hexactl.adapters.cli.main import main
-from tools.serving import wait_until
+from tools.serving import unserved_endpoint, wait_until
+
+NOBODY = unserved_endpoint()
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -153,11 +155,11 @@ def test_other_endpoints_are_refused_with_the_form(endpoint, use) -> None:
 
 @pytest.mark.parametrize("argv", [
     ["check", "x=5,x=6"],
-    ["move", "x=5,yaw=1,x=6", "--api", "tcp://127.0.0.1:1", "--timeout", "0.05"],
-    ["jog", "x=1,x=2", "--for", "1", "--api", "tcp://127.0.0.1:1", "--timeout", "0.05"],
-    ["frames", "--work", "z=1,z=2", "--api", "tcp://127.0.0.1:1", "--timeout", "0.05"],
-    ["frames", "--soft-lower", "x=-5,x=-6", "--api", "tcp://127.0.0.1:1", "--timeout", "0.05"],
-    ["frames", "--soft-upper", "roll=1, roll=2", "--api", "tcp://127.0.0.1:1", "--timeout", "0.05"],
+    ["move", "x=5,yaw=1,x=6", "--api", NOBODY, "--timeout", "0.05"],
+    ["jog", "x=1,x=2", "--for", "1", "--api", NOBODY, "--timeout", "0.05"],
+    ["frames", "--work", "z=1,z=2", "--api", NOBODY, "--timeout", "0.05"],
+    ["frames", "--soft-lower", "x=-5,x=-6", "--api", NOBODY, "--timeout", "0.05"],
+    ["frames", "--soft-upper", "roll=1, roll=2", "--api", NOBODY, "--timeout", "0.05"],
 ], ids=lambda argv: " ".join(argv[:3]))
 def test_a_repeated_axis_is_refused_naming_it(argv, capsys) -> None:
     assert exits_with(argv) == 2
@@ -418,7 +420,7 @@ def test_serve_ends_quietly_on_a_signal_whenever_it_lands(sent, delay_s, tmp_pat
 
 @pytest.mark.parametrize("delay_s", (0.0, 0.3))
 def test_ctrl_c_in_a_client_command_whenever_it_lands_is_one_line_and_130(delay_s, tmp_path) -> None:
-    launched = Launched(["status", "--api", "tcp://127.0.0.1:1", "--timeout", "30"], tmp_path, signal.SIG_DFL)
+    launched = Launched(["status", "--api", NOBODY, "--timeout", "30"], tmp_path, signal.SIG_DFL)
     time.sleep(delay_s)
     launched.process.send_signal(signal.SIGINT)
     status, log = launched.ended()

@@ -23,6 +23,7 @@ from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from hexactl.kinematics.geometry import Geometry
 from tests.api.support import start_service
+from tools.serving import unserved_endpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 120.0  # only turns a hang into a failure
@@ -208,7 +209,7 @@ def test_the_api_endpoint_from_the_client_file(service, tmp_path, monkeypatch, c
     monkeypatch.setenv("HEXACTL_CLIENT_CONFIG", str(client_file))
     assert main(["status"]) == 0
     assert capsys.readouterr().out.startswith(f"service        {service.api} (from {client_file})\n")
-    monkeypatch.setenv("HEXACTL_API", "tcp://127.0.0.1:1")  # the flag wins over both
+    monkeypatch.setenv("HEXACTL_API", unserved_endpoint())  # the flag wins over both
     assert main(["status", "--api", service.api]) == 0
     assert capsys.readouterr().out.startswith(f"service        {service.api} (from --api)\n")
 
@@ -220,9 +221,10 @@ def test_the_telemetry_endpoint_from_the_environment(service, monkeypatch, capsy
 
 
 def test_the_campaign_takes_its_endpoint_from_the_environment_too(monkeypatch, tmp_path, capsys) -> None:
-    monkeypatch.setenv("HEXACTL_API", "tcp://127.0.0.1:1")  # nobody there: the error names where it asked
+    nobody = unserved_endpoint()
+    monkeypatch.setenv("HEXACTL_API", nobody)  # nobody there: the error names where it asked
     assert main(["campaign", "--out", str(tmp_path / "campaign"), "--timeout", "0.2"]) != 0
-    assert "tcp://127.0.0.1:1" in capsys.readouterr().err
+    assert nobody in capsys.readouterr().err
 
 
 def test_a_bad_client_file_is_named(service, tmp_path, monkeypatch, capsys) -> None:

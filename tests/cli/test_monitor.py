@@ -33,6 +33,7 @@ from hexactl.adapters.cli.monitor import (
     view,
 )
 from tests.api.support import start_service
+from tools.serving import unserved_endpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 60.0  # only turns a hang into a failure
@@ -272,8 +273,9 @@ def test_json_into_a_pipe_closed_early_ends_quietly(service) -> None:
 
 
 def test_no_telemetry_is_said_with_exit_status_2(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["monitor", "--once", "--telemetry", "tcp://127.0.0.1:1", "--timeout", "0.1"]) == 2
-    assert "no telemetry from tcp://127.0.0.1:1 within 0.1 s" in capsys.readouterr().err
+    nobody = unserved_endpoint()
+    assert main(["monitor", "--once", "--telemetry", nobody, "--timeout", "0.1"]) == 2
+    assert f"no telemetry from {nobody} within 0.1 s" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(("change", "said"), [

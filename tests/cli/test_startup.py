@@ -17,10 +17,12 @@ from pathlib import Path
 import pytest
 
 from hexactl.adapters.cli.common import DeferredParser
+from tools.serving import unserved_endpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 120.0  # only turns a hang into a failure
-NO_SERVICE = ["--api", "tcp://127.0.0.1:1", "--timeout", "0.05"]  # nothing listens there: fails fast, exit 2
+NOBODY = unserved_endpoint()
+NO_SERVICE = ["--api", NOBODY, "--timeout", "0.05"]  # nothing listens there: fails fast, exit 2
 
 HEAVY = (
     "numpy", "scipy", "matplotlib", "pydantic", "pydantic_core", "can", "asyncio", "zmq",
@@ -61,7 +63,7 @@ print(json.dumps({{"status": status,
     (["move", "x=50,yaw=5", *NO_SERVICE], 2, ["zmq"]),
     (["enable", *NO_SERVICE], 2, ["zmq"]),
     (["events", *NO_SERVICE], 2, ["zmq"]),
-    (["monitor", "--once", "--telemetry", "tcp://127.0.0.1:1", "--timeout", "0.05"], 2, ["zmq"]),
+    (["monitor", "--once", "--telemetry", NOBODY, "--timeout", "0.05"], 2, ["zmq"]),
 ], ids=["parser", "help", "move-help", "status", "move", "enable", "events", "monitor-once"])
 def test_light_commands_load_no_heavy_module(argv: list[str] | None, status: int, allowed: list[str]) -> None:
     run = loaded_after(argv)
