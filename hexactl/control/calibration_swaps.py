@@ -63,8 +63,11 @@ class CalibrationSwaps:
         """See :meth:`hexactl.control.controller.Controller.rollback_calibration`."""
         s = self._snapshot()
         if s.previous is None:
+            # After a restart on a kept calibration the nominal geometry is in no history: say how to get back to it.
+            back = ("" if s.active.geometry == self._nominal else "; to go back to the nominal geometry, load its "
+                    "file (hexactl load-calibration FILE: the service's --config)")
             return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no earlier calibration to roll "
-                                         f"back to ({s.active.calibration_id} is the first since start-up)")
+                                         f"back to ({s.active.calibration_id} is the first since start-up){back}")
         return self._swap(s.previous, f"rolled back from calibration {s.active.calibration_id} to "
                           f"{s.previous.calibration_id}", rollback=True)
 

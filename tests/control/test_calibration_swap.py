@@ -73,7 +73,7 @@ def test_rollback_ramps_back_to_the_previous_calibration(rig, calibrated):
     rig.run(3)
     original = rig.sent[-1].copy()
     refused = rig.controller.rollback_calibration()
-    assert refused.error == "no_previous_calibration" and "nominal is the first since start-up" in refused.message
+    assert refused.message == "there is no earlier calibration to roll back to (nominal is the first since start-up)"
     assert rig.controller.load_calibration(calibrated, "cal-1").ok
     rig.run(2)
     rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
@@ -118,6 +118,9 @@ def test_rollbacks_walk_back_through_every_load_in_order(rig, geometry):
     # The most recent KEPT_CALIBRATIONS, newest first; the oldest ones (nominal, cal-1) forgotten.
     assert walked == [f"cal-{n}" for n in range(loads - 1, loads - 1 - KEPT_CALIBRATIONS, -1)]
     assert result.error == "no_previous_calibration"
+    # The nominal geometry is in no history now (as after a restart on a kept calibration): how to get back to it.
+    assert result.message.endswith("; to go back to the nominal geometry, load its file (hexactl load-calibration "
+                                   "FILE: the service's --config)"), result.message
 
 
 def test_a_rollback_overtaken_by_a_load_is_refused_as_stale(rig, calibrated, geometry):
