@@ -184,6 +184,8 @@ def test_serve_process_logs_and_shuts_down_on_sigterm(tmp_path: Path, capsys) ->
 
     with serve(tmp_path) as served:
         assert main(["status", "--api", served.api, "--timeout", str(WAIT_S)]) == 0
+        printed = capsys.readouterr().out  # where the calibration in force came from, beside its id
+        assert re.search(r"^calibration +[0-9a-f]{16} \(from \S+\.toml\)$", printed, re.M), printed
         with HexactlClient(served.api, timeout_s=WAIT_S) as client:
             recover(client)
         assert main(["monitor", "--once", "--telemetry", served.telemetry, "--timeout", str(WAIT_S)]) == 0

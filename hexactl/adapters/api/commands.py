@@ -136,7 +136,8 @@ class CommandHandler:
         controller = self.controller
         match request:
             case StatusRequest():
-                return {"status": self.record(), "predicted_accuracy": controller.predicted_accuracy()}
+                return {"status": self.record(), "calibration_source": controller.active_geometry().source,
+                        "predicted_accuracy": controller.predicted_accuracy()}
             case EnableRequest():
                 return _checked(controller.enable(deadline_ns=deadline_ns))
             case DisableRequest():

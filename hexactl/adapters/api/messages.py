@@ -778,6 +778,8 @@ class OkReply(_Message):
 
 class StatusReply(OkReply):
     status: Telemetry
+    calibration_source: str = Field(description="where the calibration in force (status.calibration_id) was read "
+                                    "from: a file, or request (SOURCE) for one a client sent as text")
     predicted_accuracy: PredictedAccuracy | None = Field(
         default=None, description="at the commanded pose now; null without a calibration covariance")
 

@@ -445,7 +445,8 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     service said, and the reply's figures; for a move, the goal run to when it differs
     from the requested pose (``fields``, the request's)."""
     if cmd == "status":
-        return format_telemetry(reply["status"]) + "\n" + accuracy_line(reply.get("predicted_accuracy"))
+        return (format_telemetry(reply["status"], reply.get("calibration_source")) + "\n"
+                + accuracy_line(reply.get("predicted_accuracy")))
     if "frames" in reply:
         return "\n".join([f"ok: {reply.get('message') or 'frames'}"] + [f"{label:<15}{text}" for label, text in
                                                                        frames_lines({"frames": reply["frames"]})])

@@ -13,8 +13,9 @@ from hexactl.adapters.api.protocol import REPORT_SILENT_S
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 
-def format_telemetry(record: dict[str, Any]) -> str:
-    """A telemetry record as an aligned block of text (poses in mm and deg, legs in mm)."""
+def format_telemetry(record: dict[str, Any], calibration_source: str | None = None) -> str:
+    """A telemetry record as an aligned block of text (poses in mm and deg, legs in mm);
+    with ``calibration_source`` (the status reply's), where the calibration came from."""
     loop = record["loop"]
     lines = [
         *silent_loop_lines(loop),
@@ -28,7 +29,7 @@ def format_telemetry(record: dict[str, Any]) -> str:
         ("legs", leg_states_text(record.get("legs"))),
         *frames_lines(record),
         ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
-        ("calibration", record["calibration_id"]),
+        ("calibration", record["calibration_id"] + (f" (from {calibration_source})" if calibration_source else "")),
         ("sequence", sequence_text(record.get("sequence"))),
         ("jog", jog_text(record.get("jog"))),
         ("wave", wave_text(record.get("wave"))),
