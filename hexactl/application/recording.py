@@ -266,8 +266,8 @@ class Recordings:
                 (t_ns - current.first_t_ns) / 1e9, cycle, _shown(pose_command, frames, active, pose_frames),
                 _shown(measured, frames, active, pose_frames), setpoints,
                 feedback.positions_mm if feedback is not None else None, lateness_ns, compute_ns))
+        current.file.append(cycles)  # all or, raising, none: rows_written is what the file holds
         current.received += len(rows)
-        current.file.append(cycles)
 
     def _measured(self, current: _Open, active: ActiveGeometry | None, pose_command: Sequence[float],
                   feedback: Any) -> tuple[float, ...] | None:

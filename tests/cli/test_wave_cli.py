@@ -26,6 +26,8 @@ def test_the_arguments_make_the_request() -> None:
 @pytest.mark.parametrize("text, fragment", [
     ("w:1", "AXIS one of x, y, z, roll, pitch, yaw"), ("z", "AXIS:AMPLITUDE[:PHASE]"), ("z:1:2:3", "AXIS:AMPLITUDE"),
     ("z:two", "the amplitude and the phase are numbers"),
+    # not a traceback from the client's JSON encoder, as "z:nan" gave
+    ("z:nan", "finite numbers"), ("roll:1:inf", "finite numbers"), ("z:-infinity", "finite numbers"),
 ])
 def test_a_bad_axis_says_what_to_give(text, fragment) -> None:
     with pytest.raises(argparse.ArgumentTypeError, match=fragment.replace("[", r"\[").replace("]", r"\]")):

@@ -4,6 +4,8 @@ lost rows, state) and the writer's file (columns, units, side file, measured pos
 from __future__ import annotations
 
 import csv
+import errno
+import io
 import json
 import os
 from pathlib import Path
@@ -183,21 +185,40 @@ def test_close_finishes_a_recording_under_way_as_shutdown(rig, recordings, tmp_p
     assert side["ended"] == "shutdown" and side["rows_written"] == 25 and side["cycles_missing"] == 0
 
 
+class _FillingDisk(io.FileIO):
+    """A file on a disk with room for ``room`` bytes: a write takes what fits, then fails ENOSPC."""
+
+    room = 0
+
+    def write(self, data) -> int:
+        fits = self.room - self.seek(0, os.SEEK_END)
+        if fits <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return super().write(bytes(data)[:fits])
+
+
 def test_a_full_disk_ends_the_recording_saying_so_and_the_next_one_is_written(rig, recordings, tmp_path,
                                                                                 monkeypatch):
     """A write that failed (ENOSPC) used to end the writer's thread with a traceback: the
     recording never finished (`record --wait`: "not written 30 s after it should have
-    ended"), and every later one was refused busy or lost until the service restarted."""
-    def full_disk(descriptor, *arguments, **options):  # /dev/full: every write fails with ENOSPC
-        os.close(descriptor)
-        return open("/dev/full", *arguments, **options)
-
+    ended"), and every later one was refused busy or lost until the service restarted.
+    Then the file ended in a row cut short (which `hexactl plot` refused as garbled) and
+    rows_written counted the rows of the batch that failed: the side file promised rows the
+    CSV did not hold."""
     with monkeypatch.context() as patched:
-        patched.setattr(os, "fdopen", full_disk)
+        patched.setattr(os, "fdopen", lambda descriptor, *arguments, **options: _FillingDisk(descriptor, "wb"))
+        _FillingDisk.room = 10**6
         recordings.start("full", duration_s=10.0)
+    partial = tmp_path / "full.csv.partial"
+    rig.run(5)
+    recordings.poll()
+    _FillingDisk.room = partial.stat().st_size + 1000  # room for part of the next batch of rows
     rig.run(25)
     recordings.poll()
     side = recordings.last
+    lines = partial.read_text().split("\n")
+    assert lines[-1] == "", "the file ends on a whole row"
+    assert len(lines) - 2 == side["rows_written"] == 5, "rows_written is what the file holds"
     assert side["ended"] == "write_failed" and side["csv"] == str(tmp_path / "full.csv.partial")
     assert side["write_error"].startswith(f"{tmp_path / 'full.csv.partial'}: No space left on device")
     assert recordings.state()["state"] == "done" and not (tmp_path / "full.csv").exists()
@@ -206,3 +227,14 @@ def test_a_full_disk_ends_the_recording_saying_so_and_the_next_one_is_written(ri
     recordings.start("next", duration_s=0.05)
     side = _finish(rig, recordings)
     assert side["ended"] == "duration" and "write_error" not in side and (tmp_path / "next.csv").exists()
+
+
+def test_a_recording_on_a_full_disk_is_refused_saying_so(recordings, tmp_path, monkeypatch):
+    def full_disk(descriptor, *arguments, **options):  # /dev/full: every write fails with ENOSPC
+        os.close(descriptor)
+        return open("/dev/full", *arguments, **options)
+
+    monkeypatch.setattr(os, "fdopen", full_disk)
+    with pytest.raises(ApiError, match="full.csv.partial: cannot write it .No space left on device.: free some space"):
+        recordings.start("full", duration_s=1.0)
+    assert not (tmp_path / "full.csv.partial").exists() and recordings.state()["state"] == "idle"

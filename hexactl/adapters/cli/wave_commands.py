@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from math import isfinite
 from typing import Any
 
 from hexactl.adapters.cli.common import CliError, connect, positive_float, positive_int
@@ -61,6 +62,8 @@ def axis_argument(text: str) -> tuple[str, dict[str, float]]:
         values = [float(part) for part in parts[1:]]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are numbers") from None
+    if not all(isfinite(value) for value in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are finite numbers")
     fields = {"amplitude": values[0], **({"phase_deg": values[1]} if len(values) == 2 else {})}
     return parts[0], fields
 

@@ -10,7 +10,9 @@ lists the columns with their units.
 A recording is written to ``NAME.csv.partial``, created new (never over a file, no
 symbolic link followed) in a directory held open by descriptor, so a directory renamed
 meanwhile does not redirect it; :meth:`RecordingFile.finish` moves it to ``NAME.csv``
-with a hard link, which fails rather than replace a file made meanwhile.
+with a hard link, which fails rather than replace a file made meanwhile. Rows are written
+unbuffered, a batch at a time; a batch that cannot be written whole (a full disk) is cut
+off again, so the file always ends on a whole row.
 """
 
 from __future__ import annotations
@@ -89,6 +91,7 @@ class RecordingFile:
         self._partial = f"{name}.csv.partial"
         self._signals = tuple(signals)
         self._handle = handle
+        self._size = 0  # bytes written whole: where a batch that failed is cut off
 
     @classmethod
     def create(cls, directory: Path, name: str, signals: Sequence[str]) -> RecordingFile:
@@ -106,7 +109,7 @@ class RecordingFile:
                     raise RecordingFileError("file_exists", f"{directory / existing} exists; a recording never "
                                              "overwrites a file: choose another name or remove that file")
             handle = os.fdopen(os.open(f"{name}.csv.partial", os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
-                                       | os.O_CLOEXEC, 0o666, dir_fd=descriptor), "w", encoding="utf-8", newline="")
+                                       | os.O_APPEND | os.O_CLOEXEC, 0o666, dir_fd=descriptor), "wb", buffering=0)
         except RecordingFileError:
             os.close(descriptor)
             raise
@@ -114,11 +117,17 @@ class RecordingFile:
             os.close(descriptor)
             raise RecordingFileError("file_not_found", f"{directory / name}.csv.partial: cannot create it "
                                      f"({error.strerror})") from None
-        handle.write(",".join(column for column, _ in columns(signals)) + "\n")
-        return cls(directory, descriptor, name, signals, handle)
+        file = cls(directory, descriptor, name, signals, handle)
+        try:
+            file._write(",".join(column for column, _ in columns(signals)) + "\n")
+        except OSError as error:
+            file.discard()
+            raise RecordingFileError("file_not_found", f"{directory / name}.csv.partial: cannot write it "
+                                     f"({error.strerror}): free some space in {directory}") from None
+        return file
 
     def append(self, rows: Sequence[RecordedCycle]) -> None:
-        """Write ``rows`` and flush them."""
+        """Write ``rows``, all or (OSError) none."""
         signals = self._signals
         lines = []
         for row in rows:
@@ -137,8 +146,22 @@ class RecordingFile:
                 cells.append(f"{row.compute_ns / 1e3:.1f}")
             lines.append(",".join(cells))
         if lines:
-            self._handle.write("\n".join(lines) + "\n")
-            self._handle.flush()
+            self._write("\n".join(lines) + "\n")
+
+    def _write(self, text: str) -> None:
+        """Write ``text`` whole or, cutting off what got written, raise the OSError."""
+        encoded = text.encode("utf-8")
+        data = memoryview(encoded)
+        try:
+            while data:  # an unbuffered write may take part of it
+                data = data[self._handle.write(data):]
+        except OSError:
+            try:  # a row cut short would be read as a (wrong) number, or refuse the file
+                self._handle.truncate(self._size)
+            except OSError:
+                pass
+            raise
+        self._size += len(encoded)
 
     def discard(self) -> None:
         """Close and remove the partial file (a recording the loop refused)."""
@@ -158,13 +181,12 @@ class RecordingFile:
         it keeps its partial name and the side file says why (``write_error``)."""
         handle, descriptor = self._handle, self._descriptor
         try:
-            handle.flush()
             os.fsync(handle.fileno())
         except OSError as error:
             write_error = write_error or error
         try:
             handle.close()
-        except OSError:  # what the flush could not write: write_error says so
+        except OSError:  # unbuffered: nothing left to write; the fsync said whether it all got there
             pass
         path = self.path
         failed = {}
