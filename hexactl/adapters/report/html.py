@@ -23,13 +23,17 @@ from hexactl.adapters.files.atomic import write_atomic
 from hexactl.calibration.data import RowProblem
 from hexactl.calibration.parameters import StructuralParameters, parameter_names
 from hexactl.calibration.results import IdentificationResult
-from hexactl.calibration.test_motions import PAPER_TABLE_1
+from hexactl.calibration.test_motions import PAPER_TABLE_1, PAPER_TEST_MOTIONS
 from hexactl.calibration.uncertainty import PredictedAccuracy
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 REPORT_PAGE = "index.html"
+
+_FIGURES = ("residuals.png", "parameters.png", "observability.png", "accuracy_map.png",
+            *(f"{motion.name}.png" for motion in PAPER_TEST_MOTIONS if motion.axis is not None))
+"""Every figure a report may write beside its page."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,7 +63,8 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
     """Write the page and its PNGs into ``directory``; returns the page's path.
 
     Refuses (``FileExistsError``) a directory that already holds a report unless
-    ``overwrite``. Every file is written atomically.
+    ``overwrite``; overwriting removes the figures of the report before that this one
+    has not (its validation plots, say). Every file is written atomically.
     """
     # Imported here: matplotlib takes about half a second to import, and the modules that
     # only need REPORT_PAGE (the service's, the CLI's) must not pay for it.
@@ -83,6 +88,8 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
                 figures[f"{before.motion.name}.png"] = plots.motion_figure(before, after)
     for name, png in figures.items():
         write_atomic(folder / name, png, overwrite=True)
+    for name in set(_FIGURES) - figures.keys():  # left there, they would pass for this calibration's
+        (folder / name).unlink(missing_ok=True)
     page = _page(report, figures, nominal_vector, true_vector)
     return write_atomic(folder / REPORT_PAGE, page.encode("utf-8"), overwrite=True)
 
