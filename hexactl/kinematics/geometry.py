@@ -135,6 +135,14 @@ class CalibrationInfo(_Strict):
             raise ValueError("must be symmetric (a covariance): the file was edited or damaged; calibrate again")
         if np.min(np.diag(matrix)) < 0.0:
             raise ValueError("has a negative variance on its diagonal: the file was edited or damaged; calibrate again")
+        # A negative variance along some combination of parameters makes the predicted error
+        # there zero (or too small) and lets a move's tolerance pass; rounding of an identified
+        # covariance leaves eigenvalues of about -1e-16 of the largest, far inside this bound.
+        eigenvalues = np.linalg.eigvalsh(matrix)
+        if eigenvalues[0] < -1e-9 * max(eigenvalues[-1], 0.0):
+            raise ValueError(f"is not positive semi-definite (eigenvalue {eigenvalues[0]:.3g} mm²: a negative variance "
+                             "of a parameter combination, which no covariance has): the file was edited or damaged; "
+                             "calibrate again")
         return rows
 
 

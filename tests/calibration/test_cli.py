@@ -84,6 +84,14 @@ def test_report_with_simulated_validation(tmp_path, data_file, true_platform):
     assert "Validation" in page and "paper: after calibration" in page and "data:image/png;base64," in page
     assert "Predicted accuracy over the workspace" in page
 
+    # Again into the same folder without --true: the first calibration's validation plots
+    # are not left beside a report that has none, passing for this calibration's.
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml"),
+                 "--report", str(report), "--force"]) == 0
+    assert "Validation" not in (report / "index.html").read_text(encoding="utf-8")
+    assert sorted(path.name for path in report.iterdir()) == ["accuracy_map.png", "index.html", "observability.png",
+                                                               "parameters.png", "residuals.png"]
+
 
 def test_bad_rows_are_refused_by_line_or_skipped_on_request(tmp_path, leglock_campaign, capsys):
     lines = format_measurements(leglock_campaign.data).splitlines()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 
 import numpy as np
 import pytest
@@ -91,6 +92,25 @@ def test_a_recalibration_starts_from_the_gains_it_is_given(nominal, gained):
     assert np.allclose(refined.zero_lengths, direct.zero_lengths, atol=1e-4)
     std = np.array(refined.calibration.sensor_scale_errors_std)
     assert np.all(np.abs(np.array(refined.sensor_scale_errors) - np.array(gained.sensor_scale_errors)) < 4 * std)
+
+
+def test_the_report_compares_identified_gains_with_the_nominals_and_the_true_ones(nominal, gained, tmp_path):
+    """A recalibration from a file with gains: the report's nominal column holds that file's
+    gains (it read 0, and the deviation was the whole gain), and with the truth known each
+    gain's true error is given, as for every other parameter."""
+    from hexactl.adapters.report.html import CalibrationReport, write_report
+
+    first = _calibrated(nominal, identify(run_offline_campaign(nominal, gained, SMALL).data, nominal))
+    result = identify(run_offline_campaign(first, gained, SMALL).data, first,
+                      IdentificationOptions(method=Method.FULL, estimate_scales=True))
+    page = write_report(tmp_path, CalibrationReport("data.csv", "now", first, result, true=gained)).read_text("utf-8")
+    for leg in range(6):
+        cells = re.search(rf"<th class='l'>scale{leg + 1}</th>((?:<td>[^<]*</td>)+)</tr>", page).group(1)
+        nominal_gain, identified, deviation, _, true_error, _ = map(float, re.findall(r"<td>([^<]*)</td>", cells))
+        assert nominal_gain == pytest.approx(1000 * first.sensor_scale_errors[leg], abs=1e-3)
+        assert deviation == pytest.approx(identified - nominal_gain, abs=2e-3)
+        assert true_error == pytest.approx(1000 * (gained.sensor_scale_errors[leg] - result.parameters.scale_errors[leg]),
+                                           abs=1e-3)
 
 
 def test_the_simulated_platform_with_gains_moves_by_its_true_sensor_model(nominal, gained):

@@ -87,6 +87,13 @@ def _set(path, value):
         (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60,
                                 "residual_rms_mm": 0.02, "zero_lengths_std_mm": [0.01, 0.01, -0.01, 0.01, 0.01, 0.01]}),
          r"calibration.zero_lengths_std_mm: a standard deviation cannot be negative, got -0.01: the file was edited"),
+        # symmetric with positive variances, yet a combination's variance is negative: the
+        # controller would predict no error there, and any tolerance would pass
+        (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60,
+                                "residual_rms_mm": 0.02,
+                                "parameter_covariance": [[1.0 if i == j else 2.0 if {i, j} == {0, 1} else 0.0
+                                                          for j in range(42)] for i in range(42)]}),
+         r"calibration.parameter_covariance: is not positive semi-definite \(eigenvalue -1 mm²"),
         (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60.0,
                                 "residual_rms_mm": 0.02}), r"calibration.postures: must be a whole number, not 60.0"),
     ],

@@ -14,7 +14,7 @@ import base64
 import html
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,13 +23,17 @@ from hexactl.adapters.files.atomic import write_atomic
 from hexactl.calibration.data import RowProblem
 from hexactl.calibration.parameters import StructuralParameters, parameter_names
 from hexactl.calibration.results import IdentificationResult
-from hexactl.calibration.test_motions import PAPER_TABLE_1
+from hexactl.calibration.test_motions import PAPER_TABLE_1, PAPER_TEST_MOTIONS
 from hexactl.calibration.uncertainty import PredictedAccuracy
 from hexactl.calibration.validation import MotionResult, summarise_validation
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 REPORT_PAGE = "index.html"
+
+_FIGURES = ("residuals.png", "parameters.png", "observability.png", "accuracy_map.png",
+            *(f"{motion.name}.png" for motion in PAPER_TEST_MOTIONS if motion.axis is not None))
+"""Every figure a report may write beside its page."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,7 +63,8 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
     """Write the page and its PNGs into ``directory``; returns the page's path.
 
     Refuses (``FileExistsError``) a directory that already holds a report unless
-    ``overwrite``. Every file is written atomically.
+    ``overwrite``; overwriting removes the figures of the report before that this one
+    has not (its validation plots, say). Every file is written atomically.
     """
     # Imported here: matplotlib takes about half a second to import, and the modules that
     # only need REPORT_PAGE (the service's, the CLI's) must not pay for it.
@@ -68,8 +73,9 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
     folder = Path(directory)
     if (folder / REPORT_PAGE).exists() and not overwrite:
         raise FileExistsError(f"{folder} already holds a report; refusing to overwrite it (use --force)")
-    nominal_vector = StructuralParameters.from_geometry(report.nominal).to_vector()
-    true_vector = None if report.true is None else StructuralParameters.from_geometry(report.true).to_vector()
+    with_scales = report.result.parameters.has_scales
+    nominal_vector = _parameter_vector(report.nominal, with_scales)
+    true_vector = None if report.true is None else _parameter_vector(report.true, with_scales)
     figures = {
         "residuals.png": plots.residuals_figure(report.result),
         "parameters.png": plots.parameters_figure(report.result, nominal_vector, true_vector),
@@ -83,8 +89,19 @@ def write_report(directory: str | os.PathLike[str], report: CalibrationReport, *
                 figures[f"{before.motion.name}.png"] = plots.motion_figure(before, after)
     for name, png in figures.items():
         write_atomic(folder / name, png, overwrite=True)
+    for name in set(_FIGURES) - figures.keys():  # left there, they would pass for this calibration's
+        (folder / name).unlink(missing_ok=True)
     page = _page(report, figures, nominal_vector, true_vector)
     return write_atomic(folder / REPORT_PAGE, page.encode("utf-8"), overwrite=True)
+
+
+def _parameter_vector(geometry: Geometry, with_scales: bool) -> np.ndarray:
+    """``geometry``'s parameters, with its sensor gains when the result has gains to compare
+    them with (a recalibration's nominal, a simulation's truth, carry theirs)."""
+    parameters = StructuralParameters.from_geometry(geometry)
+    if with_scales:
+        parameters = replace(parameters, scale_errors=np.array(geometry.sensor_scale_errors))
+    return parameters.to_vector()
 
 
 def _page(report: CalibrationReport, figures: dict[str, bytes], nominal_vector: np.ndarray,
@@ -179,9 +196,9 @@ def _parameter_table(result: IdentificationResult, nominal_vector: np.ndarray, t
     extra = "<th>true − identified</th><th>error / σ</th>" if true_vector is not None else ""
     rows = []
     for k, name in enumerate(names):
-        nominal = nominal_vector[k] if k < len(nominal_vector) else 0.0
+        nominal = nominal_vector[k]
         cells = f"<td>{nominal:.3f}</td><td>{estimate[k]:.3f}</td><td>{estimate[k] - nominal:+.3f}</td><td>{std[k]:.3f}</td>"
-        if true_vector is not None and k < len(true_vector):
+        if true_vector is not None:
             error = true_vector[k] - estimate[k]
             cells += f"<td>{error:+.3f}</td><td>{error / std[k] if std[k] > 0 else float('nan'):+.2f}</td>"
         rows.append(f"<tr><th class='l'>{name}</th>{cells}</tr>")

@@ -59,8 +59,10 @@ def residuals_figure(result: IdentificationResult) -> bytes:
 
 def parameters_figure(result: IdentificationResult, nominal_vector: np.ndarray, true_vector: np.ndarray | None) -> bytes:
     """Deviation of every parameter from the nominal with ±2σ bars (and the truth when known)."""
-    estimate = result.parameters.to_vector()[: 6 * PARAMETERS_PER_LEG]
-    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))[: 6 * PARAMETERS_PER_LEG]
+    geometric = slice(0, 6 * PARAMETERS_PER_LEG)  # the gains, in another unit, are in the table only
+    estimate, nominal_vector = result.parameters.to_vector()[geometric], nominal_vector[geometric]
+    true_vector = None if true_vector is None else true_vector[geometric]
+    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))[geometric]
     deviation = estimate - nominal_vector
     figure = Figure(figsize=(10, 7))
     axes = figure.subplots(3, 1)
