@@ -167,6 +167,8 @@ class PoseTrajectory:
         self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
         self._active = False
         self._passing = False  # heading for a goal to pass at a velocity (a stream's)
+        self._to_goal = False  # a move to :attr:`goal`, arriving at rest there (move_to)
+        self._stopping = False  # halted, on the move's own stop at its goal (see halt)
         self.frames: Frames | None = None
         self._coordinates: type[RelativeMmRad | ToolInWorkMmRad] = RelativeMmRad
         self.goal: RelativeMmRad | ToolInWorkMmRad | None = None
@@ -178,7 +180,7 @@ class PoseTrajectory:
 
     @property
     def halting(self) -> bool:
-        return self._active and self.goal is None
+        return self._active and (self.goal is None or self._stopping)
 
     @property
     def position(self) -> RelativeMmRad | ToolInWorkMmRad:
@@ -218,6 +220,7 @@ class PoseTrajectory:
         self.goal = self._coordinates._make(pose)
         self._active = False
         self._passing = False
+        self._to_goal = self._stopping = False
 
     def rebase(self, pose: RelativeMmRad | ToolInWorkMmRad, frames: Frames | None) -> None:
         """At rest at ``pose`` in new coordinates: relative mm/rad (``frames`` None) or the
@@ -236,6 +239,7 @@ class PoseTrajectory:
         parameters.current_acceleration = list(state.acceleration)
         self.goal = goal
         self._active = True
+        self._to_goal = False
 
     def move_to(self, goal: RelativeMmRad | ToolInWorkMmRad, time_scale: float = 1.0,
                 velocity_scale: float = 1.0) -> bool:
@@ -253,6 +257,7 @@ class PoseTrajectory:
         self.goal = self._coordinates._make(goal)
         self._active = True
         self._passing = False
+        self._to_goal, self._stopping = True, False
         return True
 
     def follow(self, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, limits: MotionLimits,
@@ -273,14 +278,26 @@ class PoseTrajectory:
         parameters.minimum_duration = horizon_s if self._passing else None
         self.goal = self._coordinates._make(goal)
         self._active = True
+        self._to_goal = False
 
     def halt(self, limits: MotionLimits | None = None) -> None:
         """Brake smoothly to rest (acceleration and jerk limited, by ``limits``, default
-        the motion's) wherever that ends."""
-        if self._active:
-            configure_input(self._input, limits or self.limits, None)
-            self.goal = None
-            self._passing = False
+        the motion's) wherever that ends; but never beyond the goal of a move under way.
+
+        Why: the halt's duration is rounded up to the loop's time grid, and a brake
+        stretched by up to a cycle can travel farther than the move's own stop: released
+        in its deceleration, a jog onto a soft limit came to rest 0.011 mm past it. The
+        move's remaining path was validated (every limit holds on it) and ends at rest on
+        its goal, so when braking would carry an axis beyond it, the move goes on instead
+        (:attr:`halting` all the same): that stop is the shorter one."""
+        if not self._active or self._stopping:
+            return
+        if self._to_goal and _beyond_goal(self.state(), self.goal, limits or self.limits, self.period_s):
+            self._stopping = True
+            return
+        configure_input(self._input, limits or self.limits, None)
+        self.goal = None
+        self._passing = self._to_goal = False
 
     def update(self) -> StepResult:
         """Advance one period; the new position is :attr:`position`."""
@@ -311,17 +328,31 @@ class PoseTrajectory:
         return StepResult.WORKING
 
 
+def _beyond_goal(start: KinematicState, goal: RelativeMmRad | ToolInWorkMmRad | None, limits: MotionLimits,
+                 period_s: float) -> bool:
+    """Whether a halt from ``start`` under ``limits`` comes to rest farther from
+    ``start`` than ``goal`` on some axis (True if ruckig refuses it: the move, not an
+    unknown brake)."""
+    if goal is None:
+        return False
+    braking = preview(limits, period_s, start, None)
+    if braking is None:
+        return True
+    rest = braking.at_time(braking.duration)[0]
+    return any(abs(r - p) > abs(g - p) for r, p, g in zip(rest, start.position, goal))
+
+
 def preview(
     limits: MotionLimits,
     period_s: float,
     start: KinematicState,
-    goal: RelativeMmRad,
+    goal: RelativeMmRad | None,
     time_scale: float = 1.0,
     velocity_scale: float = 1.0,
 ) -> Trajectory | None:
-    """The trajectory :class:`PoseTrajectory` would run from ``start`` to ``goal``; None if
-    ruckig refuses it."""
-    if not all(isfinite(v) for part in (*start, goal) for v in part):
+    """The trajectory :class:`PoseTrajectory` would run from ``start`` to ``goal`` (None:
+    its halt); None if ruckig refuses it."""
+    if not all(isfinite(v) for part in (*start, *([goal] if goal is not None else [])) for v in part):
         return None
     parameters = InputParameter(DOFS)
     parameters.current_position, parameters.current_velocity, parameters.current_acceleration = (

@@ -182,3 +182,35 @@ def test_a_jog_renewed_past_its_horizon_goes_on_without_slowing(rig) -> None:
     velocity = np.diff(positions) * 500
     assert np.all(velocity[500:] == pytest.approx(5.0, rel=1e-6))  # past the ramp-up: never slower
     assert positions[-1] > 2.0 * JOG_HORIZON_S * 5.0
+
+
+X_WITHIN_5 = OperatorFrames(soft_limits=SoftLimits(lower=(-5, None, None, None, None, None),
+                                                   upper=(5, None, None, None, None, None)))
+
+
+def _released_at(make_rig, cycle: int, frame: Frame = Frame.ZERO) -> np.ndarray:
+    """A jog at -20 mm/s x towards the -5 soft limit, renewed, released ``cycle`` cycles in:
+    every commanded x (mm) until at rest."""
+    rig = make_rig()
+    assert rig.controller.set_frames(X_WITHIN_5).ok
+    rig.enabled()
+    xs = []
+    for n in range(cycle + 300):
+        if n == cycle:
+            assert rig.controller.jog([0] * 6, frame).ok
+        elif n < cycle and n % RENEW_CYCLES == 0:
+            assert rig.controller.jog([-20, 0, 0, 0, 0, 0], frame).ok
+        rig.run()
+        xs.append(rig.controller.snapshot.pose_command[0])
+    assert rig.controller.snapshot.jog is None and rig.controller.snapshot.motion.value == "holding"
+    return np.array(xs)
+
+
+def test_a_jog_released_while_it_decelerates_onto_a_soft_limit_never_passes_it(make_rig) -> None:
+    """A release (or a lapse) in the deceleration onto the limit brakes from there; a halt
+    on the loop's time grid can take a cycle longer than the plan's stop, and went on to
+    -5.011 mm from some release cycles (an outside review): a jog's brake never ends beyond
+    where its plan ends. Released at every cycle from cruise to rest on the limit."""
+    for cycle in range(118, 220):  # decelerating from cycle 124, at rest on the limit (-5 + 2 nm) from 214
+        xs = _released_at(make_rig, cycle)
+        assert xs.min() >= -5.0, (cycle, xs.min())

@@ -134,3 +134,25 @@ def test_rest_to_rest_moves_by_ruckigs_degenerate_distance_are_planned_and_run(s
     trajectory.move_to(goal, time_scale)
     assert trajectory.update() is StepResult.WORKING  # the loop calculates here, then only samples
     assert trajectory.state()[0] == pytest.approx(planned.at_time(PERIOD)[0], abs=1e-12)
+
+
+@pytest.mark.parametrize("goal", [(-10, 0, 0, 0, 0, 0), (-10, 0, 4, 0, 0, 0)])
+def test_a_halt_never_ends_beyond_the_goal_of_the_move_it_interrupts(goal) -> None:
+    """Halted at every cycle of a slow move: the brake, whose duration the time grid
+    rounds up, can travel farther than the move's own stop; then the move goes on to its
+    goal (and the trajectory says it is halting)."""
+    gave_way = 0
+    for cycle in range(1, 800):
+        trajectory = PoseTrajectory(MotionLimits(), 0.002)
+        trajectory.move_to(RelativeMmRad(*goal), velocity_scale=0.1)
+        if any(trajectory.update() is not StepResult.WORKING for _ in range(cycle)):
+            break
+        start = np.array(trajectory.position)
+        trajectory.halt()
+        gave_way += trajectory.goal is not None
+        assert trajectory.halting
+        while trajectory.update() is StepResult.WORKING:
+            pass
+        travel, room = np.abs(np.array(trajectory.position) - start), np.abs(np.array(goal) - start)
+        assert np.all(travel <= room), cycle
+    assert gave_way  # the case arose
