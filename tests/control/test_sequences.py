@@ -209,3 +209,26 @@ def _assert_finished_on(rig, poses):
     assert report.status == "finished"
     assert np.array([record.pose_command for record in report.records]) == pytest.approx(np.array(poses), abs=1e-9)
     rig.assert_setpoints_safe()
+
+
+@pytest.mark.parametrize("cycles_before_the_end", [1, 2, 3, 5, 8, 13, 21, 34, 55, 89])
+def test_a_pause_in_a_moves_deceleration_resumes_and_finishes_on_the_path(make_rig, cycles_before_the_end):
+    """A pause is a halt: in a segment's deceleration it may run on to the segment's goal
+    (a halt never ends beyond the goal of the move under way), and resume then has nothing
+    left of that move: the sequence goes on and finishes as planned."""
+    rig = make_rig()
+    rig.enabled()
+    assert rig.controller.play("compound").ok
+    rig.run_until(lambda: (t := rig.controller.telemetry()).sequence.index == 2 and t.remaining_s is not None)
+    rig.run_until(lambda: rig.controller.telemetry().remaining_s <= cycles_before_the_end * rig.period_ns / 1e9)
+    assert rig.controller.pause().ok
+    rig.run_until(lambda: rig.controller.telemetry().sequence.phase == "paused")
+    paused = rig.controller.telemetry().pose_command
+    assert paused == pytest.approx([paused[0] * v / 100 for v in (100, 100, 100, 5, 5, 5)], rel=1e-6)  # on the line
+    assert all(p <= g + 1e-9 for p, g in zip(paused, (100, 100, 100, 5, 5, 5)))  # never past the goal
+    assert rig.controller.resume().ok
+    rig.settle()
+    report = rig.controller.sequence_records()
+    assert report.status == "finished" and len(report.records) == 2
+    assert report.records[1].pose_command == pytest.approx((100, 100, 100, 5, 5, 5), abs=1e-9)
+    rig.assert_setpoints_safe()
