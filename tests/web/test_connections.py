@@ -91,27 +91,46 @@ def test_a_connection_that_sends_nothing_is_closed() -> None:
         assert silent.recv(1) == b""  # closed; without the deadline, recv times out (HANG_S)
 
 
+HEAD = b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+PADDED = HEAD + b"X-Padding: a\r\n" * 10_000
+
+
+def trickled_until_closed(connection: socket.socket, head: bytes) -> None:
+    """Send ``head`` a few bytes at a time, each well within the deadline, until the server
+    closes ``connection``; fails if it never does."""
+    deadline = time.monotonic() + HANG_S  # bounds a hang only
+    for start in range(0, len(head), 8):
+        assert time.monotonic() < deadline, "the trickling connection was never closed"
+        try:
+            connection.sendall(head[start:start + 8])
+        except (BrokenPipeError, ConnectionResetError):
+            return
+        if closed_by_the_server(connection):
+            return
+        time.sleep(SHORT_S / 10)
+    pytest.fail("the whole padded head was sent without the connection being closed")
+
+
 def test_a_trickled_request_head_is_closed_though_bytes_keep_coming() -> None:
-    head = b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n" + b"X-Padding: a\r\n" * 10_000
     with served(ShortDeadline) as port, opened(port) as trickling:
-        deadline = time.monotonic() + HANG_S  # bounds a hang only
-        for start in range(0, len(head), 8):
-            assert time.monotonic() < deadline, "the trickling connection was never closed"
-            try:
-                trickling.sendall(head[start:start + 8])
-            except (BrokenPipeError, ConnectionResetError):
-                break
-            if closed_by_the_server(trickling):
-                break
-            time.sleep(SHORT_S / 10)  # a trickle: a few bytes at a time, each well within the deadline
-        else:
-            pytest.fail("the whole padded head was sent without the connection being closed")
+        trickled_until_closed(trickling, PADDED)
+
+
+def test_after_a_reply_the_next_head_has_its_deadline_too() -> None:
+    """A kept-alive connection answered once, then trickling its next request: uvicorn's own
+    keep-alive timer stops at the first byte of it, so only the deadline ends it."""
+    with served(ShortDeadline) as port, opened(port) as client:
+        client.sendall(HEAD + b"\r\n")
+        answer = b""
+        while not answer.endswith(b"hello"):
+            answer += client.recv(4096)
+        trickled_until_closed(client, PADDED)
 
 
 def test_answered_requests_and_an_open_websocket_are_not_closed() -> None:
     with served(ShortDeadline) as port, connect(f"ws://127.0.0.1:{port}/ws", open_timeout=HANG_S) as page:
         with opened(port) as client:
-            client.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            client.sendall(HEAD + b"\r\n")
             answer = b""
             while not answer.endswith(b"hello"):
                 answer += client.recv(4096)
