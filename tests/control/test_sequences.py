@@ -115,13 +115,18 @@ def test_pause_mid_move_resume_and_finish_on_the_path(rig):
     # Paused on the straight line towards (100, 100, 100, 5, 5, 5): all axes in proportion.
     assert paused == pytest.approx([paused[0] * v / 100 for v in (100, 100, 100, 5, 5, 5)], rel=1e-6)
     assert rig.controller.pause().error == "already_paused"
+    resumed_to_the_end(rig)
+    assert rig.controller.telemetry().loop.guard_clamps == 0
+
+
+def resumed_to_the_end(rig) -> None:
+    """Resume the paused ``compound``: it finishes on its last waypoint, every set-point safe."""
     assert rig.controller.resume().ok
     rig.settle()
     report = rig.controller.sequence_records()
     assert report.status == "finished" and len(report.records) == 2
     assert report.records[1].pose_command == pytest.approx((100, 100, 100, 5, 5, 5), abs=1e-9)
     rig.assert_setpoints_safe()
-    assert rig.controller.telemetry().loop.guard_clamps == 0
 
 
 def test_pause_during_a_dwell_freezes_its_clock(rig):
@@ -226,9 +231,4 @@ def test_a_pause_in_a_moves_deceleration_resumes_and_finishes_on_the_path(make_r
     paused = rig.controller.telemetry().pose_command
     assert paused == pytest.approx([paused[0] * v / 100 for v in (100, 100, 100, 5, 5, 5)], rel=1e-6)  # on the line
     assert all(p <= g + 1e-9 for p, g in zip(paused, (100, 100, 100, 5, 5, 5)))  # never past the goal
-    assert rig.controller.resume().ok
-    rig.settle()
-    report = rig.controller.sequence_records()
-    assert report.status == "finished" and len(report.records) == 2
-    assert report.records[1].pose_command == pytest.approx((100, 100, 100, 5, 5, 5), abs=1e-9)
-    rig.assert_setpoints_safe()
+    resumed_to_the_end(rig)
