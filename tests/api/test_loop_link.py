@@ -275,5 +275,8 @@ def test_a_report_says_how_long_ago_the_loop_sent_it(link: Link) -> None:
     wait_for(silent, "the last report to grow old")
     last = link.remote.snapshot.cycle
     assert link.controller.telemetry().loop.report_age_s > 0.5  # what status and telemetry carry
+    since = time.monotonic()
     link.cycle_until_reported(lambda s: s.cycle > last)
-    assert link.remote.report(0.25).stats.report_age_s < 0.5
+    # The report read now arrived after `since`: its age is bounded by the time since then,
+    # however long this host held the test up (a fixed bound would measure the host).
+    assert link.remote.report(0.25).stats.report_age_s <= time.monotonic() - since
