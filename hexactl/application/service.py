@@ -54,9 +54,14 @@ from hexactl.adapters.api.security import (
     check_endpoints,
     load_server_keys,
 )
-from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, is_local_endpoint
+from hexactl.adapters.api.protocol import (
+    DEFAULT_API_ENDPOINT,
+    DEFAULT_TELEMETRY_ENDPOINT,
+    DEFAULT_TELEMETRY_RATE_HZ,
+    check_telemetry_rate,
+    is_local_endpoint,
+)
 from hexactl.adapters.api.socket_thread import check_bindable
-from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT, DEFAULT_TELEMETRY_RATE_HZ, check_telemetry_rate
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError

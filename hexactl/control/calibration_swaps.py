@@ -51,7 +51,7 @@ class CalibrationSwaps:
         if refusal := acceptance_refusal(geometry, f"calibration {calibration_id}", self._nominal):
             return refusal
         s, new = self._snapshot(), ActiveGeometry.of(geometry, calibration_id, source)
-        checked = self._check(new)
+        checked = self._check(s, new)
         if isinstance(checked, CommandResult):
             return checked
         said, change = _effect(s, new, checked)
@@ -75,7 +75,7 @@ class CalibrationSwaps:
         """Check ``new``, then hand it over (with ``rollback``: the last of the history,
         which the loop drops)."""
         s = self._snapshot()
-        checked = self._check(new)
+        checked = self._check(s, new)
         if isinstance(checked, CommandResult):
             return checked
         replaced = {"rolled_back_from": s.active.calibration_id} if rollback else {}
@@ -84,10 +84,10 @@ class CalibrationSwaps:
                                       message + (f"; {said}" if said else ""),
                                       calibration_id=new.calibration_id, change_mm=change, **replaced)
 
-    def _check(self, new: ActiveGeometry) -> float | CommandResult:
-        """The largest set-point change swapping in ``new`` makes now, mm
-        (:func:`~hexactl.control.calibration_checks.swap_refusal`), or the refusal."""
-        s = self._snapshot()
+    def _check(self, s: CoreSnapshot, new: ActiveGeometry) -> float | CommandResult:
+        """The largest set-point change swapping in ``new`` makes at ``s``, mm
+        (:func:`~hexactl.control.calibration_checks.swap_refusal`), or the refusal. The
+        snapshot whose epoch the swap carries: what was checked is what the loop verifies."""
         if refusal := preconditions.check_swap(s, new):
             return CommandResult.failure(*refusal)
         return swap_refusal(s, new, self._config)

@@ -22,6 +22,7 @@ from zmq.utils import z85
 
 from hexactl.adapters.api.protocol import is_local_endpoint
 
+
 class SecurityError(Exception):
     """The endpoints and keys given are not a safe configuration; the message says why."""
 

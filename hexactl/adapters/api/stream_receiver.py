@@ -70,7 +70,7 @@ class StreamCounters:
         self.received = 0  # messages read, well formed or not
         self.malformed = 0
         self.out_of_order = 0  # a sequence not above the last one taken: reordered or duplicated
-        self.other_sender = 0  # UDP from a second sender taking turns with the stream's: dropped
+        self.other_sender = 0  # UDP from a second sender to the stream: dropped
         self.no_stream = 0  # well formed, but no stream open
         self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
         self.forwarded = 0
@@ -230,21 +230,19 @@ class StreamReceiver(SocketThread):
         from a new port (the kernel's pick among thousands), so none of its ports comes
         back that often among the :data:`RECENT_SENDERS` last: nothing of it is dropped.
         Without a stream open, nothing is dropped here (they are counted ``no_stream``)."""
-        if self._stream is None:
+        if self._stream is None or sender == self._udp_sender:
             return True
         if not self._two_senders:
             counts = self._udp_counts
             counts[sender] = counts.pop(sender, 0) + 1
             if len(counts) > RECENT_SENDERS:
                 counts.popitem(last=False)
-            if counts[sender] < SENDER_DATAGRAMS or sender == self._udp_sender:
+            if counts[sender] < SENDER_DATAGRAMS:
                 return True
             if self._udp_sender is None:
                 self._udp_sender = sender
                 return True
             self._two_senders = True
-        if sender == self._udp_sender:
-            return True
         self.counters.received += 1
         self.counters.other_sender += 1
         self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} sends to this stream "

@@ -153,8 +153,8 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
         "actuators and stop, within 10 s."
     )
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
-    serve.add_argument("--calibration", type=named_path, metavar="FILE", help="start with this calibration instead of the one kept from "
-                       "the last run (--keep-calibration) or, if none, the --config geometry")
+    serve.add_argument("--calibration", type=named_path, metavar="FILE", help="start with this calibration instead of "
+                       "the one kept from the last run (--keep-calibration) or, if none, the --config geometry")
     serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates; with --can, "
                             "1000 Hz overloads classic CAN, the only profile the link speaks: docs/can.md)")
