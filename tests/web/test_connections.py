@@ -28,7 +28,7 @@ from websockets.sync.client import connect
 from hexactl.adapters.web import server as dashboard_server
 from hexactl.adapters.web.connections import GuardedH11Protocol
 from tools.browser import dashboard
-from tools.serving import HANG_S, free_port
+from tools.serving import HANG_S, free_port, wait_until
 
 SHORT_S = 0.3
 
@@ -61,10 +61,8 @@ def served(protocol: type[GuardedH11Protocol]) -> Iterator[int]:
     server = uvicorn.Server(uvicorn.Config(app, http=protocol, lifespan="off", log_level="warning"))
     thread = threading.Thread(target=server.run, kwargs={"sockets": [listener]}, daemon=True)
     thread.start()
-    deadline = time.monotonic() + HANG_S  # bounds a hang only
-    while not server.started:
-        assert time.monotonic() < deadline and thread.is_alive(), "uvicorn did not start"
-        time.sleep(0.01)
+    wait_until(lambda: server.started or not thread.is_alive(), "uvicorn to start", HANG_S)
+    assert server.started, "uvicorn ended before it started"
     try:
         yield listener.getsockname()[1]
     finally:
