@@ -35,7 +35,10 @@ unpickle to a command is counted and dropped.
 
 API side, :class:`RemoteLoop`: a :class:`~hexactl.control.host.LoopHost` whose snapshot
 is the latest report a receiver thread has read, and whose ``submit`` writes to the
-command pipe. When the loop's process ends, the host reports the loop as failed.
+command pipe, never waiting either: what the pipe has no room for waits in the process
+and is written on as the loop's reports come (a loop that stopped reading, its process
+stopped or hung, would otherwise hold up the thread that answers ``estop``). When the
+loop's process ends, the host reports the loop as failed.
 
 Both ends are this program's own processes (spawned by the service, pipes inherited),
 so pickle is the right encoding: nothing else can write to these pipes.
@@ -46,7 +49,6 @@ from __future__ import annotations
 import logging
 import os
 import pickle
-import select
 import struct
 import threading
 import time
@@ -134,37 +136,46 @@ class _FrameReader:
 
 
 class _FrameWriter:
-    """Non-blocking writes of length-prefixed frames to a pipe's write end. A frame the
-    pipe has no room for is finished on later calls; a new one is refused meanwhile."""
+    """Non-blocking writes of length-prefixed frames to a pipe's write end. Frames the pipe
+    has no room for wait, in order, to be finished by later calls (a writer that would
+    rather drop checks :meth:`flush` before it offers)."""
 
     def __init__(self, fd: int) -> None:
         os.set_blocking(fd, False)
         self._fd = fd
-        self._pending = memoryview(b"")
+        self._pending: deque[memoryview] = deque()
         self.closed = False
-        """True once the reader's end is closed."""
+        """True once the reader's end is closed (or :meth:`close` was called)."""
 
     def offer(self, payload: bytes) -> bool:
-        """Write ``payload`` as one frame, or as much as fits; False (nothing taken) if an
-        earlier frame is still unfinished or the reader is gone."""
-        if not self.flush():
+        """Write ``payload`` as one frame, as much of it as fits behind what waits; the
+        rest waits. False if the reader is gone (nothing taken)."""
+        if self.closed:
             return False
-        self._pending = memoryview(_HEADER.pack(len(payload)) + payload)
+        self._pending.append(memoryview(_HEADER.pack(len(payload)) + payload))
         self.flush()
         return not self.closed
 
     def flush(self) -> bool:
-        """Write what is pending; True when nothing is."""
-        while self._pending and not self.closed:
+        """Write what waits, as far as the pipe takes it; True when nothing waits."""
+        pending = self._pending
+        while pending and not self.closed:
             try:
-                written = os.write(self._fd, self._pending)
+                written = os.write(self._fd, pending[0])
             except BlockingIOError:
                 return False
             except OSError:  # EPIPE: the reader is gone
-                self.closed = True
+                self.close()
                 break
-            self._pending = self._pending[written:]
-        return not self._pending and not self.closed
+            pending[0] = pending[0][written:]
+            if not pending[0]:
+                pending.popleft()
+        return not pending and not self.closed
+
+    def close(self) -> None:
+        """Write nothing more (before the descriptor is closed: its number may be reused)."""
+        self.closed = True
+        self._pending.clear()
 
 
 class LoopExchange:
@@ -272,6 +283,7 @@ class LoopExchange:
 
     def close(self) -> None:
         """Close both ends (after the loop has stopped)."""
+        self._writer.close()
         self._commands.close()
         self._reports.close()
 
@@ -300,10 +312,11 @@ class RemoteLoop:
 
     def __init__(self, commands: Connection, reports: Connection, first_report_timeout_s: float = 10.0,
                  observe: Callable[[CoreSnapshot], None] | None = None) -> None:
-        self._commands = commands
+        self._commands = commands  # kept open: the writer uses its descriptor
+        self._writer = _FrameWriter(commands.fileno())
         self._observe = observe
         self._reports = reports
-        self._send_lock = threading.Lock()
+        self._send_lock = threading.Lock()  # held only around non-blocking writes
         self._sent_at = -HEARTBEAT_INTERVAL_S  # monotonic s: the last frame sent
         self._gone: str | None = None
         self._recorded: deque[Row] = deque()
@@ -334,27 +347,31 @@ class RemoteLoop:
         return report
 
     def submit(self, command: cmd.Command) -> None:
+        """Write ``command`` to the pipe, as much as it takes now; the rest waits for the
+        loop to read (finished as its reports come, by the receiver thread). Never waits
+        for the loop: a loop that stopped reading must not hold up this process, whose
+        socket thread answers ``estop`` and ``status``. A command the next one replaces
+        (:attr:`~hexactl.control.commands.Command.superseded`: a stream's target) is dropped
+        rather than kept waiting, so that a stream to a stopped loop does not pile up here."""
         data = pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)
-        try:
-            with self._send_lock:  # one message at a time on the pipe
-                self._commands.send_bytes(data)
-                self._sent_at = time.monotonic()
-        except (OSError, ValueError) as error:
-            self._gone = self._gone or f"the control loop's link is closed: {error!r}"
+        with self._send_lock:
+            if command.superseded and not self._writer.flush():
+                return
+            if not self._writer.offer(data):
+                self._gone = self._gone or "the control loop's link is closed"
+            self._sent_at = time.monotonic()
 
     def heartbeat(self) -> None:
         """Tell the loop this process runs (an empty frame), unless something was sent
         within :data:`HEARTBEAT_INTERVAL_S` (that told it already). Never waits: skipped
-        while another thread sends, or while the pipe is full (a loop that does not read
-        is not listening for heartbeats either)."""
+        while another thread sends, or while commands wait for room in the pipe (a loop
+        that does not read is not listening for heartbeats either)."""
         if time.monotonic() - self._sent_at < HEARTBEAT_INTERVAL_S or not self._send_lock.acquire(blocking=False):
             return
         try:
-            if select.select([], [self._commands], [], 0)[1]:  # room in the pipe: a 4-byte write cannot block
-                self._commands.send_bytes(b"")
+            if self._writer.flush():
+                self._writer.offer(b"")
                 self._sent_at = time.monotonic()
-        except (OSError, ValueError) as error:
-            self._gone = self._gone or f"the control loop's link is closed: {error!r}"
         finally:
             self._send_lock.release()
 
@@ -370,8 +387,10 @@ class RemoteLoop:
 
     def close(self) -> None:
         """Close the command pipe: the loop side sees its end, then closes the report pipe,
-        which ends the receiver."""
-        self._commands.close()
+        which ends the receiver. Commands still waiting for room in the pipe are dropped."""
+        with self._send_lock:
+            self._writer.close()
+            self._commands.close()
 
     def _receive(self) -> None:
         reports = self._reports
@@ -383,6 +402,16 @@ class RemoteLoop:
                 return
             self._latest = self._received(data)
             self._received_at = time.monotonic()
+            self._finish_commands()
+
+    def _finish_commands(self) -> None:
+        """Write on what waits of the commands: a report says the loop ran, so it has read
+        (the loop takes commands, then reports, in the same slack)."""
+        if self._send_lock.acquire(blocking=False):  # else the holder flushes
+            try:
+                self._writer.flush()
+            finally:
+                self._send_lock.release()
 
     def _received(self, data: bytes) -> LoopReport:
         """The report in ``data``, its recorder rows moved to :meth:`take_recorded`'s queue."""

@@ -40,6 +40,12 @@ class Command:
     answered: ClassVar[bool] = True
     """The loop publishes an :class:`Outcome` for it (a stream's targets: no, they would
     push every other command's verdict out of the kept ones)."""
+    brakes: ClassVar[bool] = False
+    """It only brings the platform to rest: sent even to a loop that has stopped reporting,
+    to be carried out if it runs again (any other command is not sent to it)."""
+    superseded: ClassVar[bool] = False
+    """The next one of its kind replaces it (a stream's targets): a link that cannot pass it
+    on at once may drop it rather than keep it waiting."""
 
     def event(self) -> tuple[str, str] | None:
         """The event (code, message) the loop records once it has carried this out, when
@@ -62,13 +68,15 @@ class Disable(Command):
 
 @dataclass(frozen=True, slots=True)
 class Stop(Command):
+    brakes = True
+
     def event(self) -> tuple[str, str]:
         return "stop", "any motion under way brakes to rest"
 
 
 @dataclass(frozen=True, slots=True)
 class EStop(Command):
-    pass
+    brakes = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +135,8 @@ class Resume(Command):
 
 @dataclass(frozen=True, slots=True)
 class Abort(Command):
+    brakes = True
+
     def event(self) -> tuple[str, str]:
         return "abort", "the sequence ends, braking to rest"
 
@@ -218,6 +228,7 @@ class StreamTarget(Command):
     sequence: int
     received_ns: int
     answered: ClassVar[bool] = False
+    superseded: ClassVar[bool] = True
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,6 +6,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+REPORT_SILENT_S = 1.0
+"""s: a loop whose latest report is older than this
+(:attr:`~hexactl.control.stats.LoopStats.report_age_s`) has stopped reporting, its process
+stopped or hung (a running loop reports every 10 ms at most): displays say so rather than
+show its last state as current, and commands other than a stop are not sent to it
+(:attr:`ErrorCode.LOOP_SILENT`). Standard library only here: the CLI reads it."""
+
+
 
 class ErrorCode(StrEnum):
     """Why a command was refused. The API sends the value as is."""
@@ -37,6 +45,7 @@ class ErrorCode(StrEnum):
     SEND_FAILED = "send_failed"  # the link refused a frame (E-stop, ENABLE)
     LOOP_FAILED = "loop_failed"  # the loop thread died: see status
     LOOP_TIMEOUT = "loop_timeout"  # the loop gave no verdict in time (the command may still run)
+    LOOP_SILENT = "loop_silent"  # the loop has not reported for REPORT_SILENT_S: not sent (a stop: queued)
     NOT_RECORDING = "not_recording"  # record_stop with no recording under way
     NO_STREAM = "no_stream"  # stream_close with no stream open
     JOG_ENDED = "jog_ended"  # a jog renewal for a jog that is no longer under way: send jog again

@@ -13,9 +13,13 @@ from hexactl.control import commands as cmd
 from hexactl.control.config import ControllerConfig
 from hexactl.control.host import LoopHost
 from hexactl.control.preconditions import Refusal
-from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.results import REPORT_SILENT_S, CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.telemetry import PERCENTILES_MAX_AGE_S
+
+SILENCE_RECHECK_S = 0.1
+"""s: how long a command to a loop that seems silent waits for a report to show up before
+it is refused ``loop_silent`` (:meth:`CommandSubmitter._silent_s`)."""
 
 # A context variable rather than a parameter: who sent a request is the request's context,
 # like a log's, and no business of the thirty controller methods between it and the loop.
@@ -66,12 +70,17 @@ class CommandSubmitter:
         """Queue the command ``factory`` builds for its ticket; with the loop running by
         itself, wait for its verdict (``message`` and ``details`` join an accepted one).
         With ``deadline_ns`` (monotonic) the loop refuses it as ``expired`` once that has
-        passed. It carries the sender of :func:`commands_from`. ``loop_failed`` if the loop died; ``loop_timeout`` if no verdict came in time."""
+        passed. It carries the sender of :func:`commands_from`. ``loop_failed`` if the loop died;
+        ``loop_silent`` if it has not reported for :data:`REPORT_SILENT_S`
+        (:meth:`_to_silent_loop`); ``loop_timeout`` if no verdict came in time."""
         report = self._host.report(PERCENTILES_MAX_AGE_S)  # only its liveness is read
         if report.failure is not None:
             return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {report.failure}")
         ticket = next(self._tickets)
-        self._host.submit(replace(factory(ticket), deadline_ns=deadline_ns, sender=_SENDER.get()))
+        command = replace(factory(ticket), deadline_ns=deadline_ns, sender=_SENDER.get())
+        if report.stats.report_age_s > REPORT_SILENT_S and (silent_s := self._silent_s()) is not None:
+            return self._to_silent_loop(command, silent_s)
+        self._host.submit(command)
         if not report.running:
             return CommandResult.success(message, ticket=ticket, pending=True, **details)
         deadline = time.monotonic() + self._config.command_timeout_s
@@ -83,3 +92,29 @@ class CommandSubmitter:
             time.sleep(self._config.loop.period_s / 2)
         return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
                                      "be carried out", ticket=ticket)
+
+    def _silent_s(self) -> float | None:
+        """How long the loop has sent no report, asked again while this thread lets the
+        others run for :data:`SILENCE_RECHECK_S` (None: a report came meanwhile). If the
+        host held up this process rather than the loop's, its reports wait to be read by a
+        thread of this one, which needs a turn."""
+        deadline = time.monotonic() + SILENCE_RECHECK_S
+        while True:
+            time.sleep(self._config.loop.period_s / 2)
+            if (age_s := self._host.report(PERCENTILES_MAX_AGE_S).stats.report_age_s) <= REPORT_SILENT_S:
+                return None
+            if time.monotonic() >= deadline:
+                return age_s
+
+    def _to_silent_loop(self, command: cmd.Command, silent_s: float) -> CommandResult:
+        """``loop_silent`` for ``command`` to a loop that has sent no report for ``silent_s``:
+        its process is stopped or hung, and no verdict would come. A command that only
+        brakes (:attr:`~hexactl.control.commands.Command.brakes`) is queued all the same, for
+        if it runs again; any other is not sent (it would run whenever the loop does)."""
+        silence = (f"the control loop has sent no report for {silent_s:.1f} s (its process is stopped or hung); "
+                   "actuators that receive no set-points stop on their own watchdogs")
+        if not command.brakes:
+            return CommandResult.failure(ErrorCode.LOOP_SILENT, f"not sent: {silence}; see status")
+        self._host.submit(command)
+        return CommandResult.failure(ErrorCode.LOOP_SILENT, f"queued, to be carried out if the loop runs again: "
+                                     f"{silence}", ticket=command.ticket)

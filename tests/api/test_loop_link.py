@@ -5,6 +5,7 @@ seen by the other."""
 
 from __future__ import annotations
 
+import fcntl
 import multiprocessing
 import os
 import pickle
@@ -17,11 +18,13 @@ from dataclasses import dataclass
 import pytest
 
 from hexactl.application import loop_link
+from hexactl.control import commands as cmd
 from hexactl.application.loop_link import REPORT_INTERVAL_S, LoopExchange, RemoteLoop, _FrameReader, _FrameWriter
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
 from hexactl.control.host import LoopThread
 from hexactl.control.planning import ActiveGeometry
+from hexactl.kinematics.axes import RelativeMmRad
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import sensor_setpoints
 from hexactl.kinematics.pose import absolute_from_relative
@@ -162,20 +165,20 @@ def test_the_loop_side_sees_the_api_end(link: Link) -> None:
 
 
 def test_frames_arrive_whole_whatever_the_pipe_does() -> None:
-    """The loop's non-blocking pipe ends: a frame cut by the pipe is finished later, never
-    read half; a frame bigger than the pipe goes through in pieces; the reader of a full
-    pipe is refused a new frame instead of waiting; the writer's close is seen."""
+    """The non-blocking pipe ends: a frame cut by the pipe is finished later, never read
+    half; a frame bigger than the pipe goes through in pieces; frames offered meanwhile
+    wait their turn instead of waiting for room; the writer's close is seen."""
     pipes = multiprocessing.get_context("spawn")
     reading, writing = pipes.Pipe(duplex=False)
     reader, writer = _FrameReader(reading.fileno()), _FrameWriter(writing.fileno())
     big = bytes(range(256)) * 2048  # 512 KiB: larger than a pipe's buffer
     assert writer.offer(b"first") and writer.offer(big) is True
-    assert writer.offer(b"refused") is False  # the big one is not all written yet
+    assert writer.offer(b"behind") is True and writer.flush() is False  # the big one is not all written yet
     received: list[bytes] = []
-    while len(received) < 2:
+    while len(received) < 3:
         received += reader.frames(8)
         writer.flush()
-    assert received == [b"first", big]
+    assert received == [b"first", big, b"behind"]
     assert writer.offer(b"third") and reader.frames(8) == [b"third"]
     assert reader.frames(8) == [] and not reader.closed
     writing.close()
@@ -246,24 +249,61 @@ def test_a_silent_api_has_the_loop_brake_and_heartbeats_keep_it_going(nominal: G
         next(links, None)
 
 
-def test_a_heartbeat_never_waits_for_a_full_pipe(link: Link) -> None:
-    """The API's socket thread sends it: were it to wait for a loop that does not read,
-    it would carry out no ``estop`` either. Nothing is read here: the pipe fills."""
-    sender = link.remote._commands
-    filler = b"x" * 4096
-    os.set_blocking(sender.fileno(), False)
-    try:
-        while True:
-            sender.send_bytes(filler)
-    except BlockingIOError:
-        pass
-    finally:
-        os.set_blocking(sender.fileno(), True)
-    time.sleep(2 * loop_link.HEARTBEAT_INTERVAL_S)
-    beat = threading.Thread(target=link.remote.heartbeat, daemon=True)
-    beat.start()
-    beat.join(10.0)  # only a bound on a hang
-    assert not beat.is_alive(), "the heartbeat waits for room in the pipe"
+def test_no_send_waits_for_a_loop_that_does_not_read(link: Link) -> None:
+    """The API's socket thread answers ``estop`` and ``status``: were a command or a
+    heartbeat to wait for room in the pipe of a loop that has stopped reading (its process
+    stopped or hung), every request after it would go unanswered (they did: after about
+    200 moves to a SIGSTOPped loop, until the API's watchdog ended the service). Nothing is
+    read here until the end: the pipe fills; then every command arrives whole, in order."""
+    fcntl.fcntl(link.remote._commands.fileno(), fcntl.F_SETPIPE_SZ, 4096)  # the least: fills sooner
+    stops = [cmd.Stop(ticket) for ticket in range(1_000_000, 1_000_200)]  # about 13 KiB
+
+    def send() -> None:
+        for stop in stops:
+            link.remote.submit(stop)
+        time.sleep(loop_link.HEARTBEAT_INTERVAL_S)
+        link.remote.heartbeat()
+        sent.append(link.controller.estop())
+
+    sent: list = []
+    sending = threading.Thread(target=send, daemon=True)
+    sending.start()
+    sending.join(10.0)  # only a bound on a hang
+    assert not sending.is_alive(), "a send waits for room in the pipe"
+    [estop] = sent
+    assert estop.ok and estop.details["pending"]  # queued behind the stops: the loop is stepped by hand
+    judged: dict[int, None] = {}  # tickets in the order of the loop's verdicts (8 commands an exchange at most)
+
+    def estop_judged(_) -> bool:
+        judged.update(dict.fromkeys(outcome.ticket for outcome in link.thread.snapshot.outcomes))
+        return estop.details["ticket"] in judged
+
+    link.cycle_until_reported(estop_judged)
+    assert list(judged) == [stop.ticket for stop in stops] + [estop.details["ticket"]]
+    assert link.thread.snapshot.state.value == "estop" and link.exchange.rejected == 0
+
+
+def test_a_stream_target_is_dropped_rather_than_kept_waiting(link: Link) -> None:
+    """A stream's targets come at up to 1 kHz, each replacing the one before: kept waiting
+    for a loop that does not read, they would pile up in the API process (and reach the
+    loop, when it reads again, long stale). One the pipe cannot take at once is dropped."""
+    fcntl.fcntl(link.remote._commands.fileno(), fcntl.F_SETPIPE_SZ, 4096)
+    zero = RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def target(sequence: int) -> cmd.StreamTarget:
+        return cmd.StreamTarget(0, 1, zero, tuple(zero), tuple(zero), 0.01, sequence, time.monotonic_ns())
+
+    taken: list[cmd.Command] = []  # what the loop's end hands the loop
+    hand_over = link.thread.submit
+    link.thread.submit = lambda command: (taken.append(command), hand_over(command))  # type: ignore[method-assign]
+    link.remote.submit(cmd.Stop(1, sender="x" * 8192))  # more than the pipe takes: the rest waits
+    link.remote.submit(target(1))
+    link.remote.submit(cmd.Stop(2))  # queued behind the first: a command that is not replaced is kept
+    link.cycle_until_reported(lambda _: any(outcome.ticket == 2 for outcome in link.thread.snapshot.outcomes))
+    link.remote.submit(target(2))  # room now
+    link.exchange()
+    assert [(type(c).__name__, c.ticket, getattr(c, "sequence", None)) for c in taken] == [
+        ("Stop", 1, None), ("Stop", 2, None), ("StreamTarget", 0, 2)]
 
 
 def test_a_report_says_how_long_ago_the_loop_sent_it(link: Link) -> None:

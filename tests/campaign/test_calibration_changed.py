@@ -38,6 +38,7 @@ class Controller:
             return {"duration": 0.0, "goal": self.pose}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
+                  "loop": {"report_age_s": 0.002},
                   "t": 0.1 * self.polls, "faults": [], "pose_command": self.pose, "events": [],
                   "calibration_id": self.calibration_id}
         return {"status": record}

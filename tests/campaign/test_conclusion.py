@@ -42,6 +42,7 @@ class Calibrations:
             return {}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
+                  "loop": {"report_age_s": 0.002},
                   "t": 0.1 * self.polls, "faults": [], "locked_leg": None, "calibration_id": self.active}
         return {"status": record}
 

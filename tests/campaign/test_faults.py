@@ -129,13 +129,18 @@ class LateVerdicts:
     command) to the first ``late`` moves or other commands (a loaded host), then carries
     them out; the platform is at rest throughout."""
 
-    def __init__(self, late: int, code: str = "loop_timeout") -> None:
+    def __init__(self, late: int, code: str = "loop_timeout", silent_polls: int = 0) -> None:
         self.late, self.code, self.moves, self.others, self.polls = late, code, 0, 0, 0
         self.pose = [0.0] * 6
+        self.silent_polls = silent_polls
+        """Status records, from the first, that are a held-up loop's last report."""
+        self.moved_after: list[int] = []
+        """The status records read before each move."""
 
     def call(self, cmd: str, **fields: object) -> dict:
         if cmd == "move":
             self.moves += 1
+            self.moved_after.append(self.polls)
             if self.moves <= self.late:
                 raise CommandError(self.code, "the loop gave no verdict in time; the command may still be carried out")
             self.pose = list(fields["pose"])  # type: ignore[call-overload]
@@ -147,6 +152,7 @@ class LateVerdicts:
             return {}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
+                  "loop": {"report_age_s": 3.0 if self.polls <= self.silent_polls else 0.002},
                   "t": 0.1 * self.polls, "faults": [], "pose_command": self.pose, "events": []}
         return {"status": record}
 
@@ -159,6 +165,14 @@ def test_a_move_without_a_verdict_is_sent_again_a_few_times_then_stops_the_campa
     with pytest.raises(CampaignError, match="no verdict on the move .* in time, 3 times"):
         PlatformDriver(hopeless).move([1.0, 0, 0, 0, 0, 0])  # type: ignore[arg-type]
     assert hopeless.moves == MOVE_ATTEMPTS
+
+
+def test_a_move_to_a_loop_held_up_past_a_second_is_sent_again_once_it_reports() -> None:
+    """``loop_silent``: not sent, and the status records are the held-up loop's last
+    report (at rest, here): the move is sent again only once the loop reports again."""
+    client = LateVerdicts(late=1, code="loop_silent", silent_polls=4)
+    assert PlatformDriver(client).move([1.0, 0, 0, 0, 0, 0], settle=False)["pose_command"][0] == 1.0  # type: ignore[arg-type]
+    assert client.moves == 2 and client.moved_after[1] > client.silent_polls
 
 
 def test_a_command_that_expired_unrun_is_sent_again_then_names_the_timeout() -> None:

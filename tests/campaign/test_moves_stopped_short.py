@@ -41,6 +41,7 @@ class Platform:
             return {"events": [event for event in self.events if event["seq"] > fields.get("after", 0)]}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
+                  "loop": {"report_age_s": 0.002},
                   "t": 0.1 * self.polls, "faults": [], "pose_command": self.pose, "events": self.events[-8:]}
         return {"status": record}
 

@@ -32,6 +32,11 @@ HEAVY = (
 """Modules (and their submodules) none of the light commands may load: ``zmq`` only the
 commands that talk to the service, ``zmq.auth`` (in ``security``) only with CURVE keys."""
 
+LIGHT = ("hexactl.control", "hexactl.control.results")
+"""Of those, modules that import the standard library only, which the CLI reads (the
+control loop's :data:`~hexactl.control.results.REPORT_SILENT_S`); were one of them to
+import a heavy module, the check would see that one."""
+
 
 def loaded_after(argv: list[str] | None) -> dict[str, object]:
     """In a fresh interpreter on this tree: build ``hexactl``'s parser (``argv`` None) or
@@ -47,7 +52,8 @@ with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.St
         status = exit.code
 heavy = {HEAVY!r}
 print(json.dumps({{"status": status,
-                   "heavy": sorted(m for m in sys.modules if any(m == h or m.startswith(h + ".") for h in heavy))}}))
+                   "heavy": sorted(m for m in sys.modules if any(m == h or m.startswith(h + ".") for h in heavy)
+                                   and m not in {LIGHT!r})}}))
 """
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S,
                             env={**os.environ, "PYTHONPATH": str(ROOT)})

@@ -50,11 +50,6 @@ def default_client_name() -> str:
 TOPIC = b"telemetry "
 """The prefix of every telemetry message (a single frame: ``telemetry <json>``)."""
 
-REPORT_SILENT_S = 1.0
-"""s: a record whose ``loop.report_age_s`` is over this is from a control loop whose process
-has sent nothing since (stopped or hung; it reports every 10 ms at most): displays say so
-rather than show it as current."""
-
 GOAL_TOLERANCE = 5e-4
 """mm or deg: two poses closer than this on every axis (what shows in 3 decimals) are the
 same to an operator: a goal farther from the requested pose was projected by the service

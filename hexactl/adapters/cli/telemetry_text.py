@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from hexactl.adapters.api.protocol import REPORT_SILENT_S
+from hexactl.control.results import REPORT_SILENT_S
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 

@@ -17,6 +17,7 @@ from typing import Any
 
 from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
 from hexactl.adapters.api.protocol import GOAL_TOLERANCE
+from hexactl.control.results import REPORT_SILENT_S
 
 Record = dict[str, Any]
 """A status record (``status`` reply's ``status``)."""
@@ -27,12 +28,13 @@ MOVE_ATTEMPTS = 3
 """How many times :meth:`PlatformDriver.move` sends a move that the API answered with
 ``loop_timeout`` (the loop's verdict came too late for it, on a loaded host): the move may
 or may not have run, so the driver waits for rest and sends it again (a move to where the
-platform already is ends at once); likewise a move the service braked short of its goal
+platform already is ends at once), or ``loop_silent`` (the loop's process was held up past
+a second: not sent), once the loop reports again; likewise a move the service braked short of its goal
 by itself when its API fell silent (``command_link_silent``, a loaded host). Any command
 refused ``expired`` (its deadline passed in the loop's queue, on a loaded host: not
 carried out) is sent again as often."""
 
-_LATE = ("loop_timeout", "expired")
+_LATE = ("loop_timeout", "loop_silent", "expired")
 
 _SILENT_API = ("command_link_silent", "command_link_heard")
 """The events of the service's own brake when its API fell silent, which no one sent."""
@@ -203,7 +205,7 @@ class PlatformDriver:
         reference: Record | None = None
         while True:
             record = self.status()
-            if record["motion"] == "holding" and record["sequence"] is None and _heard(record):
+            if record["motion"] == "holding" and record["sequence"] is None and _heard(record) and _current(record):
                 if not settle:
                     return record
                 if reference is None or _moved(reference, record) > criteria.tolerance_mm:
@@ -221,7 +223,8 @@ class PlatformDriver:
         """Enable, waiting for actuators that are still booting (``heartbeat_missing``) or
         clearing a fault after a reset (``actuator_fault``, for :data:`FAULT_CLEAR_S`), and
         asking again after a verdict that came too late for the API (``loop_timeout``: if
-        the first was carried out, the next answers ``already_enabled``)."""
+        the first was carried out, the next answers ``already_enabled``) or a loop held up
+        past a second (``loop_silent``: not sent)."""
         start = time.monotonic()
         while True:
             try:
@@ -233,7 +236,8 @@ class PlatformDriver:
                     return
                 if error.code == "actuator_fault" and waited > FAULT_CLEAR_S:
                     raise ControllerFault(f"an actuator is in fault ({error.message})", True) from None
-                if error.code not in ("heartbeat_missing", "actuator_fault", "loop_timeout") or waited > self.settle.timeout_s:
+                if error.code not in ("heartbeat_missing", "actuator_fault", "loop_timeout", "loop_silent") \
+                        or waited > self.settle.timeout_s:
                     raise CampaignError(f"cannot enable the actuators: {error}") from None
             time.sleep(0.05)
 
@@ -275,6 +279,13 @@ class PlatformDriver:
 def _heard(record: Record) -> bool:
     feedback = record["leg_feedback"]
     return feedback is not None and all(value is not None for value in feedback)
+
+
+def _current(record: Record) -> bool:
+    """Whether the record is the loop's present state: it has reported within
+    :data:`~hexactl.control.results.REPORT_SILENT_S` (else the last report of a loop
+    held up or stopped)."""
+    return record["loop"]["report_age_s"] <= REPORT_SILENT_S
 
 
 def _moved(a: Record, b: Record) -> float:

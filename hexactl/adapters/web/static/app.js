@@ -11,7 +11,7 @@ const RECONNECT_MS = 1000;
 const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
 const STALE_MS = 2000;        // no telemetry for longer: nothing on the page is shown as current
-const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (protocol.py's REPORT_SILENT_S)
+const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S)
 const TICK_MS = 250;          // the staleness check and the "no data for N s" count
 const pageStartedAt = performance.now();
 
