@@ -193,7 +193,9 @@ def test_a_stopped_control_loop_shows_state_unknown_though_telemetry_still_comes
     """The loop's process stopped (SIGSTOP; hung alike) while the API's runs on: telemetry
     kept coming, every record the loop's last report, and the page showed it as current,
     moving. Now the record says how old the report is, and past a second the page shows
-    nothing as current, naming the loop, until the loop reports again."""
+    nothing as current, naming the loop, until the loop reports again. An E-stop pressed
+    meanwhile is answered at once, queued for the loop (``loop_silent``): the page warns
+    it is not confirmed."""
     with page_of_a_dashboard() as (driver, board, api, telemetry):
         with service_shown(tmp_path, driver, board, api, telemetry) as (served, client):
             showing_enabled_and_moving(driver, client)
@@ -201,6 +203,12 @@ def test_a_stopped_control_loop_shows_state_unknown_though_telemetry_still_comes
             try:
                 page = page_when(driver, lambda p: p["loss"] == "loop" and p["banner_shown"], "the banner")
                 assert_no_live_data_shown(page, "control loop has sent nothing", age=r"no loop report for \d+ s")
+                press = press_escape(driver)
+                replied = wait_for(lambda: [e for e in estop_events(driver, press) if e["what"].startswith("reply")],
+                                   "the E-stop's reply", seen=lambda: estop_events(driver, press))
+                assert [(e["what"], e["detail"]) for e in replied] == [("reply-failed", "loop_silent")], replied
+                page = shown(driver)
+                assert page["warning_shown"] and "queued, to be carried out if the loop runs again" in page["warning"], page
             finally:
                 served.process.send_signal(signal.SIGCONT)
             page = page_when(driver, lambda p: p["loss"] is None and p["state"] != "UNKNOWN",
