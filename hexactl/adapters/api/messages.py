@@ -151,9 +151,11 @@ class PredictedAccuracy(BaseModel):
     platform's origin without a tool frame), from the active calibration's parameter
     covariance."""
 
-    position_mm: float = Field(description="RMS position error, √(σx² + σy² + σz²), mm")
+    position_mm: float = Field(description="position error as a radius (RMS distance), √(σx² + σy² + σz²), mm: "
+                               "not a per-axis σ (the calibration report's per-axis RMS is about 1/√3 of it)")
     position_axes_mm: tuple[float, float, float] = Field(description="σ along the zero frame's x, y, z, mm")
-    orientation_deg: float = Field(description="RMS orientation error, deg")
+    orientation_deg: float = Field(description="orientation error as an angle (RMS rotation), √(σωx² + σωy² + "
+                                   "σωz²) of the small rotation vector, deg")
     tool_point_mm: tuple[float, float, float] = Field(description="the point, in the platform's frame, mm")
 
 
