@@ -288,7 +288,8 @@ class Recordings:
 
     def _create(self, request: RecordingRequest, rows: int, rate: float) -> _Open:
         """The recording's file, new in the first data directory; :class:`ApiError`
-        ``file_exists`` naming the file in the way, ``file_not_found`` for the directory."""
+        ``file_exists`` naming the file in the way, ``file_not_found`` for the directory,
+        ``write_failed`` for a file that cannot be created or written."""
         try:
             file = RecordingFile.create(self._directory, request.name, request.signals)
         except RecordingFileError as error:

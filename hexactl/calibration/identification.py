@@ -167,7 +167,7 @@ def _no_worse(candidate: IdentificationResult, reference: IdentificationResult) 
 
 
 def _accuracy(result: IdentificationResult) -> str:
-    return f"{result.predicted.rms_position_mm:.3g} mm, {result.predicted.rms_orientation_deg:.3g}° RMS"
+    return f"{result.predicted.rms_position_mm:.3g} mm, {result.predicted.rms_orientation_deg:.3g}° RMS per axis"
 
 
 def calibration_info(result: IdentificationResult, created: str, input_sha256: str, nominal_name: str) -> CalibrationInfo:

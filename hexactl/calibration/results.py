@@ -264,7 +264,7 @@ def assemble_result(
     ):
         status = IdentificationStatus.WEAKLY_DETERMINED
         notes.append(f"weakly determined: the parameter uncertainty alone leaves the test motions' poses uncertain "
-                     f"by {predicted.rms_position_mm:.3g} mm and {predicted.rms_orientation_deg:.3g}° RMS (limits "
+                     f"by {predicted.rms_position_mm:.3g} mm and {predicted.rms_orientation_deg:.3g}° RMS per axis (limits "
                      f"{options.max_predicted_position_mm:g} mm, {options.max_predicted_orientation_deg:g}°); the worst "
                      f"combination {observability.worst_direction_terms(with_scales)} is known to "
                      f"±{observability.worst_std_mm:.3g} mm: add or spread postures")

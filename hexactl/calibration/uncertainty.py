@@ -168,10 +168,15 @@ def pose_error_sensitivity(legs: LegModel, pose: Sequence[float], with_scales: b
 
 @dataclass(frozen=True, slots=True)
 class PredictedAccuracy:
-    """Pose error expected from a parameter covariance over a set of test motions.
+    """Pose error expected from a parameter covariance over a set of test motions, per axis.
 
-    ``rms_*`` over all waypoints and axes; ``expected_max_*`` the mean over parameter draws
-    of the largest |error| of any waypoint and axis (the statistic the validation reports).
+    ``rms_position_mm``: the RMS over all waypoints and the axes x, y, z of each axis's σ
+    (``rms_orientation_deg`` likewise over roll, pitch, yaw). A per-axis figure, not the
+    radius √(σx² + σy² + σz²) that :class:`PointAccuracy` (the controller's
+    ``predicted_accuracy.position_mm``) gives: √3 · ``rms_position_mm`` is that radius at
+    the platform's origin, RMS over the waypoints. ``expected_max_*`` the mean over
+    parameter draws of the largest |error| of any waypoint and single axis (the statistic
+    the validation reports).
     """
 
     rms_position_mm: float
@@ -221,8 +226,9 @@ def predict_accuracy(
 class PointAccuracy:
     """The predicted 1σ error of a point on the platform (the tool point, say), commanded
     to a pose by a controller with uncertain parameters: ``position_mm`` the RMS radius
-    √trace Σ, ``position_axes_mm`` σ along the fixed frame's x, y, z, and ``orientation_deg``
-    the platform's RMS rotation error √trace Σ_ω."""
+    √trace Σ (not a per-axis σ: √3 times it when the three are equal), ``position_axes_mm``
+    σ along the fixed frame's x, y, z, and ``orientation_deg`` the platform's RMS rotation
+    angle √trace Σ_ω (of the small rotation vector, not of roll, pitch, yaw one by one)."""
 
     position_mm: float
     position_axes_mm: tuple[float, float, float]

@@ -140,9 +140,12 @@ class CalibrationInfo(_Strict):
         # covariance leaves eigenvalues of about -1e-16 of the largest, far inside this bound.
         eigenvalues = np.linalg.eigvalsh(matrix)
         if eigenvalues[0] < -1e-9 * max(eigenvalues[-1], 0.0):
-            raise ValueError(f"is not positive semi-definite (eigenvalue {eigenvalues[0]:.3g} mm²: a negative variance "
-                             "of a parameter combination, which no covariance has): the file was edited or damaged; "
-                             "calibrate again")
+            # With the scale errors (mm per metre of reading) an eigenvector mixes them with
+            # lengths: its eigenvalue then has no one unit.
+            unit = " mm²" if size == COVARIANCE_SIZES[0] else ", in the parameters' mixed units (mm, mm per metre)"
+            raise ValueError(f"is not positive semi-definite (eigenvalue {eigenvalues[0]:.3g}{unit}: a negative "
+                             "variance of a parameter combination, which no covariance has): the file was edited or "
+                             "damaged; calibrate again")
         return rows
 
 

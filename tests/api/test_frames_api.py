@@ -4,6 +4,7 @@ leaves the frames in force unchanged (issue 12)."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 from types import SimpleNamespace
@@ -77,10 +78,32 @@ def test_a_failed_save_keeps_the_frames_in_force(nominal: Geometry, tmp_path: Pa
     unwritable = start_service(nominal, tmp_path, frames_file=tmp_path / "a file" / "frames.toml")
     try:
         reply = send(unwritable, "set_frames", tool=[0, 0, 300, 0, 0, 0])
-        assert reply["error"]["code"] == "file_not_found" and "the ones before stay in force" in reply["error"]["message"]
+        assert reply["error"]["code"] == "write_failed" and "not in force: the ones before are" in reply["error"]["message"]
         assert unwritable.controller.frames.tool == (0,) * 6
     finally:
         unwritable.close()
+
+
+def test_frames_on_a_full_disk_are_refused_saying_so_and_the_file_is_kept(framed, tmp_path: Path, monkeypatch,
+                                                                           capsys) -> None:
+    send(framed, "set_frames", tool=[0, 0, 100, 0, 0, 0])
+    saved = (tmp_path / "frames.toml").read_bytes()
+
+    def full_disk(descriptor, *arguments, **options):  # /dev/full: every write fails with ENOSPC
+        os.close(descriptor)
+        return open("/dev/full", *arguments, **options)
+
+    monkeypatch.setattr(os, "fdopen", full_disk)
+    reply = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    assert reply["error"]["code"] == "write_failed", reply  # was file_not_found: no file was missing
+    assert reply["error"]["message"] == (f"{tmp_path / 'frames.toml'}: the frames could not be saved: No space left on "
+                                         "device; free some space there; they are not in force: the ones before are, "
+                                         "and stay in the file; set them again once it can be written")
+    assert framed.controller.frames.tool == (0, 0, 100, 0, 0, 0)
+    assert main(["frames", "--tool", "z=300", "--api", framed.api]) == 1
+    assert "check the name" not in capsys.readouterr().err  # file_not_found's hint, which misled
+    monkeypatch.undo()
+    assert (tmp_path / "frames.toml").read_bytes() == saved and sorted(tmp_path.glob(".frames.toml.*")) == []
 
 
 def test_the_command_line_sets_shows_and_moves_in_frames(framed, capsys) -> None:

@@ -119,6 +119,23 @@ def test_a_version_of_another_json_type_says_to_send_the_integer(version) -> Non
     assert refused.value.message.endswith("v is the JSON integer 1 (no decimal point, no quotes)")
 
 
+@pytest.mark.parametrize("command, field, value, rule", [
+    ("record", "name", "../run", "a recording's name is 1 to 100 letters, digits, '.', '_' or '-'"),
+    ("record", "name", "r" * 101, "1 to 100"),
+    ("record", "name", "run\n", "starting with a letter or digit"),
+    ("stream_open", "source", "caf\u00e9", "printable ASCII"),
+])
+def test_a_text_refused_by_its_pattern_says_what_it_may_contain(command, field, value, rule) -> None:
+    """Found from outside: ``record`` with ``name: "../run"`` was answered pydantic's "String
+    should match pattern '^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$'"."""
+    request = {"v": 1, "id": 1, "cmd": command, field: value, **({"duration_s": 1.0} if command == "record" else {})}
+    with pytest.raises(ApiError) as refused:
+        decode_request(json.dumps(request).encode())
+    assert refused.value.code == "invalid_request" and rule in refused.value.message
+    assert refused.value.message.startswith(f"{command}: {field}: {value[:120]!r} is not allowed: ")
+    assert "pattern" not in refused.value.message and refused.value.details[0]["field"] == field
+
+
 def test_handler_bug_becomes_internal_error() -> None:
     def broken(request, deadline_ns, sender):
         raise KeyError("boom")

@@ -83,6 +83,9 @@ def test_report_with_simulated_validation(tmp_path, data_file, true_platform):
         assert (report / name).read_bytes().startswith(b"\x89PNG")
     assert "Validation" in page and "paper: after calibration" in page and "data:image/png;base64," in page
     assert "Predicted accuracy over the workspace" in page
+    # per axis, and the radius the controller reports beside it: not one read as the other
+    assert "predicted pose uncertainty on the test motions, per axis" in page
+    assert "as a radius √(σx² + σy² + σz²), what status" in page and "predicted_accuracy.position_mm gives" in page
 
     # Again into the same folder without --true: the first calibration's validation plots
     # are not left beside a report that has none, passing for this calibration's.

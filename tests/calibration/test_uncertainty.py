@@ -11,6 +11,7 @@ from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS, X_SWEEP
 from hexactl.calibration.uncertainty import (
     analyse_information,
     fisher_information,
+    point_accuracy,
     pose_error_sensitivity,
     predict_accuracy,
 )
@@ -58,3 +59,14 @@ def test_predicted_accuracy_scales_with_the_covariance(nominal, true_platform):
     assert np.isclose(large.rms_position_mm, 2 * small.rms_position_mm)
     assert np.isclose(large.expected_max_orientation_deg, 2 * small.expected_max_orientation_deg)
     assert small.expected_max_position_mm > small.rms_position_mm > 0
+
+
+def test_the_reports_per_axis_figure_is_the_controllers_radius_over_root_three(nominal, true_platform):
+    """The report's predicted pose uncertainty is per axis; status's predicted_accuracy.position_mm
+    is a radius. The report states the radius as √3 times its figure: this pins that."""
+    covariance = np.diag(np.linspace(0.001, 0.02, 42))
+    predicted = predict_accuracy(true_platform.legs, covariance, PAPER_TEST_MOTIONS, nominal.home, samples=10)
+    poses = absolute_from_relative(nominal.home, np.array([pose for motion in PAPER_TEST_MOTIONS
+                                                            for pose in motion.waypoints]))
+    radii = np.array([point_accuracy(true_platform.legs, covariance, pose).position_mm for pose in poses])
+    assert np.isclose(np.sqrt(3.0) * predicted.rms_position_mm, np.sqrt(np.mean(radii**2)), rtol=1e-9)

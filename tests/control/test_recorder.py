@@ -235,6 +235,7 @@ def test_a_recording_on_a_full_disk_is_refused_saying_so(recordings, tmp_path, m
         return open("/dev/full", *arguments, **options)
 
     monkeypatch.setattr(os, "fdopen", full_disk)
-    with pytest.raises(ApiError, match="full.csv.partial: cannot write it .No space left on device.: free some space"):
+    with pytest.raises(ApiError, match="full.csv.partial: cannot write it: No space left on device; free some space") as refused:
         recordings.start("full", duration_s=1.0)
+    assert refused.value.code == "write_failed"
     assert not (tmp_path / "full.csv.partial").exists() and recordings.state()["state"] == "idle"

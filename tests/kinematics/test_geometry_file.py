@@ -94,6 +94,13 @@ def _set(path, value):
                                 "parameter_covariance": [[1.0 if i == j else 2.0 if {i, j} == {0, 1} else 0.0
                                                           for j in range(42)] for i in range(42)]}),
          r"calibration.parameter_covariance: is not positive semi-definite \(eigenvalue -1 mm²"),
+        # with the scale errors the units mix: the eigenvalue is not in mm²
+        (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60,
+                                "residual_rms_mm": 0.02,
+                                "parameter_covariance": [[1.0 if i == j else 2.0 if {i, j} == {0, 47} else 0.0
+                                                          for j in range(48)] for i in range(48)]}),
+         r"calibration.parameter_covariance: is not positive semi-definite \(eigenvalue -1, in the parameters' mixed "
+         r"units \(mm, mm per metre\): a negative variance"),
         (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60.0,
                                 "residual_rms_mm": 0.02}), r"calibration.postures: must be a whole number, not 60.0"),
     ],

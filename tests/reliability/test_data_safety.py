@@ -203,7 +203,7 @@ def test_a_recording_whose_rename_fails_is_not_left_behind(client, service, data
     with pytest.raises(ApiError) as refused:
         handler(save)
     monkeypatch.undo()
-    assert refused.value.code == "file_not_found" and "No space left" in refused.value.message
+    assert refused.value.code == "write_failed" and "No space left" in refused.value.message
     assert sorted(path.name for path in data_dir.iterdir()) == before
     assert handler(save)["records"] == 1  # and it is written once it can be
     assert client.call("save_recording", path="run2.csv")["records"] == 1  # so is the API process's

@@ -60,6 +60,7 @@ from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.port import ControllerPort, RecorderPort, StreamInput
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
+from hexactl.adapters.files.atomic import write_problem
 from hexactl.adapters.files.frames_file import save_frames
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
 from hexactl.adapters.files.kept_calibration import CalibrationKeeper
@@ -281,8 +282,9 @@ class CommandHandler:
                 save_frames(frames, self.frames_file)
             except OSError as error:
                 self.controller.set_frames(before)
-                raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{self.frames_file}: the frames could not be saved ({error}); "
-                               "the ones before stay in force: free the disk or fix the permissions, then again") from None
+                raise ApiError(ErrorCode.WRITE_FAILED, f"{self.frames_file}: the frames could not be saved: "
+                               f"{write_problem(error)}; they are not in force: the ones before are, and stay in the "
+                               "file; set them again once it can be written") from None
         return {"message": message or result.message, "frames": jsonable(frames)}
 
     def _kept(self, fields: dict[str, Any]) -> dict[str, Any]:

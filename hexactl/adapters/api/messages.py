@@ -12,9 +12,10 @@ can check what is sent.
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Any, Literal, Union, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.core import KEPT_EVENTS
@@ -44,6 +45,24 @@ MAX_READ_BYTES = 1024 * 1024
 
 MAX_FILES_LISTED = 1000
 """The most files ``files`` lists."""
+
+
+def _text_matching(pattern: str, rule: str) -> Any:
+    """A string type that must match ``pattern`` (in the schema), refused saying ``rule``,
+    what the text may contain: pydantic's own refusal quotes the regular expression."""
+    compiled = re.compile(pattern)
+
+    def check(text: str) -> str:
+        if compiled.fullmatch(text) is None:
+            raise ValueError(f"{text[:120]!r} is not allowed: {rule}")
+        return text
+
+    return Annotated[str, AfterValidator(check), Field(json_schema_extra={"pattern": pattern})]
+
+
+RecordingName = _text_matching(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$", "a recording's name is 1 to 100 letters, digits, "
+                               "'.', '_' or '-', starting with a letter or digit (no directory; .csv and .json are added)")
+StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
 
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
@@ -132,9 +151,11 @@ class PredictedAccuracy(BaseModel):
     platform's origin without a tool frame), from the active calibration's parameter
     covariance."""
 
-    position_mm: float = Field(description="RMS position error, √(σx² + σy² + σz²), mm")
+    position_mm: float = Field(description="position error as a radius (RMS distance), √(σx² + σy² + σz²), mm: "
+                               "not a per-axis σ (the calibration report's per-axis RMS is about 1/√3 of it)")
     position_axes_mm: tuple[float, float, float] = Field(description="σ along the zero frame's x, y, z, mm")
-    orientation_deg: float = Field(description="RMS orientation error, deg")
+    orientation_deg: float = Field(description="orientation error as an angle (RMS rotation), √(σωx² + σωy² + "
+                                   "σωz²) of the small rotation vector, deg")
     tool_point_mm: tuple[float, float, float] = Field(description="the point, in the platform's frame, mm")
 
 
@@ -395,8 +416,7 @@ class RecordRequest(_Request):
     which saves a sequence's dwell records)."""
 
     cmd: Literal["record"]
-    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$", description="the files' name without "
-                      "extension: a bare file name, no directory")
+    name: RecordingName = Field(description="the files' name without extension: a bare file name, no directory")
     signals: list[RecordSignal] = Field(
         default=["pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute"], min_length=1,
         description="what to record (default: all): pose_command and pose_measured (mm, deg, in frame), setpoints "
@@ -430,8 +450,8 @@ class StreamOpenRequest(_Request):
     ``stream_close``, ``stop`` and ``estop`` end it (docs/stream.md)."""
 
     cmd: Literal["stream_open"]
-    source: str = Field(min_length=1, max_length=64, pattern=r"^[\x20-\x7e]+$",
-                        description="who sends the stream, for people (printable ASCII)")
+    source: StreamSource = Field(min_length=1, max_length=64,
+                                 description="who sends the stream, for people (printable ASCII)")
     frame: Literal["zero", "work"] = Field(default="zero", description="the targets' frame: zero (relative to the "
                                            "zero posture) or work (the tool's pose in the work frame)")
     timeout_ms: float = Field(default=100.0, ge=5.0, le=10_000.0,

@@ -22,7 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path, PurePath
 
 from hexactl.adapters.api.wire import ApiError, ErrorCode
-from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.atomic import write_atomic, write_problem
 from hexactl.adapters.files.recording_file import LEADING_COLUMNS
 from hexactl.adapters.files.text import TextFileError, decode_text
 from hexactl.kinematics.axes import POSE_AXES
@@ -156,7 +156,7 @@ class DataDirectories:
         """Write ``data`` to a new file ``text`` names (relative to the first data directory,
         or absolute) atomically; its real path. :class:`ApiError` ``forbidden_path`` unless
         its directory is inside a data directory, ``file_not_found`` if that directory does
-        not exist or the file cannot be written, ``file_exists`` if the file exists."""
+        not exist, ``write_failed`` if the file cannot be written, ``file_exists`` if the file exists."""
         self._check_text(text)
         path = Path(text) if Path(text).is_absolute() else self.directories[0] / text
         if path.name in ("", ".", ".."):
@@ -180,7 +180,7 @@ class DataDirectories:
         except FileExistsError:
             raise ApiError(ErrorCode.FILE_EXISTS, f"{text}: exists; a saved file is never overwritten: choose another name") from None
         except OSError as error:
-            raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot write: {error.strerror}") from None
+            raise ApiError(ErrorCode.WRITE_FAILED, f"{text}: cannot write: {write_problem(error)}") from None
         finally:
             os.close(descriptor)
         return real_parent / path.name

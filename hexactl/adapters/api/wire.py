@@ -42,7 +42,8 @@ class ErrorCode(StrEnum):
     UNSUPPORTED_VERSION = "unsupported_version"
     TOO_LARGE = "too_large"
     FORBIDDEN_PATH = "forbidden_path"  # a file outside the data directories
-    FILE_NOT_FOUND = "file_not_found"  # or a file that cannot be read or written
+    FILE_NOT_FOUND = "file_not_found"  # or a file that cannot be read
+    WRITE_FAILED = "write_failed"  # a file could not be written (a full disk, permissions): the message says why
     FILE_EXISTS = "file_exists"  # save_recording never overwrites
     INVALID_CALIBRATION = "invalid_calibration"  # the calibration text or file is refused
     INVALID_SEQUENCE = "invalid_sequence"  # the sequence file is refused

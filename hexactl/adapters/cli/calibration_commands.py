@@ -262,7 +262,7 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     print(f"observability: condition number {o.condition_number:.3g}, smallest singular value "
           f"{o.singular_values[-1]:.3g} /mm (worst combination ±{o.worst_std_mm:.3g} mm)")
     print(f"predicted pose uncertainty on the paper's test motions: {p.rms_position_mm:.4f} mm, "
-          f"{p.rms_orientation_deg:.5f}° RMS (1σ)")
+          f"{p.rms_orientation_deg:.5f}° RMS per axis (1σ)")
     deviation = result.parameters.to_vector() - StructuralParameters.from_geometry(nominal, result.parameters.has_scales).to_vector()
     std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
     print("deviation from nominal ± σ, mm:")

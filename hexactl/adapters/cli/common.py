@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, check_telemetry_rate
+from hexactl.adapters.files.atomic import write_problem
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
 
@@ -274,13 +275,7 @@ def write_failed(path: str | os.PathLike[str], error: OSError) -> CliError:
     hexactl's own (a file it refuses to replace: it says to use --force) is passed on."""
     if error.strerror is None:
         return CliError(str(error))
-    if error.errno in (errno.ENOSPC, errno.EDQUOT):
-        advice = "free some space there"
-    elif error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        advice = "write where you have permission (and the file system is not read-only)"
-    else:
-        advice = "check the folder and the disk"
-    return CliError(f"cannot write {path}: {error.strerror}; {advice}, or choose another place")
+    return CliError(f"cannot write {path}: {write_problem(error)}, or choose another place")
 
 
 def config_input(arguments: argparse.Namespace) -> Path:

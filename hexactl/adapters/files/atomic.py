@@ -8,6 +8,7 @@ it; a later write to the same target does, once it is stale
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import secrets
@@ -67,6 +68,18 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     finally:
         os.close(directory)
     return target
+
+
+def write_problem(error: OSError) -> str:
+    """Why ``error`` stopped a write and what to do, for people (a full disk's ``[Errno 28]``
+    says neither). The one rule for every file hexactl writes."""
+    if error.errno in (errno.ENOSPC, errno.EDQUOT):
+        advice = "free some space there"
+    elif error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        advice = "write where you have permission (and the file system is not read-only)"
+    else:
+        advice = "check the folder and the disk"
+    return f"{error.strerror or error}; {advice}"
 
 
 def remove_stale_temporaries(target: str | os.PathLike[str]) -> list[Path]:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.atomic import write_atomic, write_problem
 from hexactl.kinematics.axes import POSE_AXES
 
 SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
@@ -72,7 +72,8 @@ class RecordedCycle:
 
 class RecordingFileError(Exception):
     """A recording's file cannot be made: ``code`` is ``file_exists`` (a file of that name
-    is in the way) or ``file_not_found`` (the directory cannot be opened or written)."""
+    is in the way), ``file_not_found`` (the directory cannot be opened) or ``write_failed``
+    (the file cannot be created or written: a full disk, permissions)."""
 
     def __init__(self, code: str, message: str) -> None:
         super().__init__(message)
@@ -115,15 +116,15 @@ class RecordingFile:
             raise
         except OSError as error:
             os.close(descriptor)
-            raise RecordingFileError("file_not_found", f"{directory / name}.csv.partial: cannot create it "
-                                     f"({error.strerror})") from None
+            raise RecordingFileError("write_failed", f"{directory / name}.csv.partial: cannot create it: "
+                                     f"{write_problem(error)}") from None
         file = cls(directory, descriptor, name, signals, handle)
         try:
             file._write(",".join(column for column, _ in columns(signals)) + "\n")
         except OSError as error:
             file.discard()
-            raise RecordingFileError("file_not_found", f"{directory / name}.csv.partial: cannot write it "
-                                     f"({error.strerror}): free some space in {directory}") from None
+            raise RecordingFileError("write_failed", f"{directory / name}.csv.partial: cannot write it: "
+                                     f"{write_problem(error)}") from None
         return file
 
     def append(self, rows: Sequence[RecordedCycle]) -> None:

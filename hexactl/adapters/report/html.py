@@ -122,8 +122,9 @@ def _page(report: CalibrationReport, figures: dict[str, bytes], nominal_vector: 
     if "accuracy_map.png" in figures:
         sections += ["<h2>Predicted accuracy over the workspace</h2>",
                      "<p>The 1σ position error of the platform's origin that the parameters' covariance predicts, "
-                     "pose by pose (the controller reports it at the tool point for every move: "
-                     "<code>validate_pose</code>, <code>status</code>).</p>", _img(figures["accuracy_map.png"])]
+                     "pose by pose, as a radius √(σx² + σy² + σz²) (the controller reports it at the tool point for "
+                     "every move: <code>predicted_accuracy.position_mm</code> of <code>validate_pose</code> and "
+                     "<code>status</code>).</p>", _img(figures["accuracy_map.png"])]
     style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
              "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
              "th{background:#f2f2f2}td.l,th.l{text-align:left}.warn{background:#fff4e5;padding:.5em 1em}"
@@ -141,9 +142,12 @@ def _summary(result: IdentificationResult) -> str:
         ("fit residual RMS", f"{result.residual_rms_mm:.4f} mm (noise model expects {result.expected_rms_mm:.4f} mm)"),
         ("χ² / degrees of freedom", f"{result.consistency} (≈ 1 when the residuals match the noise model)"),
         ("iterations", str(result.iterations)),
-        ("predicted pose uncertainty on the test motions",
-         f"{predicted.rms_position_mm:.4f} mm, {predicted.rms_orientation_deg:.5f}° RMS (1σ); expected largest "
-         f"{predicted.expected_max_position_mm:.4f} mm, {predicted.expected_max_orientation_deg:.5f}°"),
+        ("predicted pose uncertainty on the test motions, per axis",
+         f"{predicted.rms_position_mm:.4f} mm per position axis (x, y, z), {predicted.rms_orientation_deg:.5f}° per "
+         f"angle (roll, pitch, yaw), RMS (1σ); as a radius √(σx² + σy² + σz²), what status's "
+         f"predicted_accuracy.position_mm gives at the platform's origin: {np.sqrt(3.0) * predicted.rms_position_mm:.4f} mm "
+         f"RMS; expected largest on one axis {predicted.expected_max_position_mm:.4f} mm, "
+         f"{predicted.expected_max_orientation_deg:.5f}°"),
     ]
     return "<h2>Summary</h2><table>" + "".join(f"<tr><th class='l'>{_e(k)}</th><td class='l'>{_e(v)}</td></tr>" for k, v in rows) + "</table>"
 

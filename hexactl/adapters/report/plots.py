@@ -152,7 +152,7 @@ def accuracy_map_figure(result: IdentificationResult, nominal: Geometry) -> byte
         for n in np.flatnonzero(reachable):
             sigma[n] = point_accuracy(legs, result.covariance, absolute_from_relative(nominal.home, grid[n])).position_mm
         image = panel.pcolormesh(a, b, sigma.reshape(len(a), len(b)).T, shading="nearest", cmap="viridis")
-        figure.colorbar(image, ax=panel, label="predicted position error, mm (1σ)")
+        figure.colorbar(image, ax=panel, label="predicted position error, radius √(σx²+σy²+σz²), mm (1σ)")
         panel.set_xlabel(f"{POSE_AXES[first]} ({POSE_UNITS[first]})")
         panel.set_ylabel(f"{POSE_AXES[second]} ({POSE_UNITS[second]})")
         panel.set_title(f"{POSE_AXES[first]}–{POSE_AXES[second]}, other axes at the zero posture")

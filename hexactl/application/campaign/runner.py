@@ -370,7 +370,7 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
     predicted = result.predicted
     progress.say(f"fit residual RMS {result.residual_rms_mm:.4f} mm (noise model {result.expected_rms_mm:.4f} mm), "
                  f"{result.consistency}; predicted pose uncertainty {predicted.rms_position_mm:.4f} mm, "
-                 f"{predicted.rms_orientation_deg:.5f}° RMS")
+                 f"{predicted.rms_orientation_deg:.5f}° RMS per axis")
     for sentence in extra_estimates(result):
         progress.say(f"also estimated: {sentence}")
     for warning in result.warnings:
