@@ -303,6 +303,7 @@ def test_a_record_from_a_silent_loop_says_so_first_in_status_and_the_view() -> N
     silent = {**RECORD, "loop": {**RECORD["loop"], "report_age_s": 12.34}}
     first = format_telemetry(silent).splitlines()[0]
     assert first.startswith("NO LOOP REPORT for 12.3 s: the control loop's process is stopped or hung"), first
+    assert "it is sent no command but stop, abort and estop" in first, first  # what the API does meanwhile (loop_silent)
     assert re.search(r"NO LOOP REPORT +for 12\.3 s: the control loop's process", rendered(silent))
     for current in (RECORD, {**RECORD, "loop": {**RECORD["loop"], "report_age_s": 0.01}}):
         assert "NO LOOP REPORT" not in format_telemetry(current) and "NO LOOP REPORT" not in rendered(current)

@@ -51,7 +51,8 @@ def silent_loop_lines(loop: dict[str, Any]) -> list[tuple[str, str]]:
     if age <= REPORT_SILENT_S:
         return []
     return [("NO LOOP REPORT", f"for {age:.1f} s: the control loop's process is stopped or hung (its actuators stop "
-                               "on their watchdogs); what follows is its last report")]
+                               "on their watchdogs; it is sent no command but stop, abort and estop, which wait for it); "
+                               "what follows is its last report")]
 
 
 def pose_text(pose: list[float] | None) -> str:
