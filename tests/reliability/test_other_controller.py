@@ -8,6 +8,7 @@ window, ``reset`` and ``enable`` work again. Two controllers and six firmwares o
 from __future__ import annotations
 
 import itertools
+import math
 
 import pytest
 
@@ -80,16 +81,16 @@ def bench(nominal: Geometry):
     bench.close()
 
 
-def heard(controller: LocalController) -> bool:
+def reporting(controller: LocalController) -> bool:
     """The actuators have reported (heartbeat and feedback): enable has what it needs."""
     feedback = controller.snapshot.feedback
-    return feedback is not None and all(a.heartbeat_age_s < 0.2 and a.position_mm == a.position_mm
+    return feedback is not None and all(a.heartbeat_age_s < 0.2 and not math.isnan(a.position_mm)
                                         for a in feedback.actuators)
 
 
 def test_enable_is_refused_while_another_controller_runs_on_the_bus(bench: Bench) -> None:
     first, second = bench.controller(), bench.controller()  # two hexactl serve: each sends its SYNC every cycle
-    bench.run_until(lambda: heard(first) and heard(second), seconds=1.0)
+    bench.run_until(lambda: reporting(first) and reporting(second), seconds=1.0)
     for controller in (first, second):
         refused = controller.enable()
         assert refused.error == "other_controller", refused
@@ -103,7 +104,7 @@ def test_enable_is_refused_while_another_controller_runs_on_the_bus(bench: Bench
 
 def test_another_controller_starting_faults_the_enabled_one_its_estop_works_and_it_recovers(bench: Bench) -> None:
     first = bench.controller()
-    bench.run_until(lambda: heard(first), seconds=1.0)
+    bench.run_until(lambda: reporting(first), seconds=1.0)
     assert first.telemetry().other_controller is None
     assert first.enable().ok
     bench.run_until(lambda: first.snapshot.state.value == "enabled"
