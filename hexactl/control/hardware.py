@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Flag, IntEnum, StrEnum
+from math import inf
 from typing import Protocol, runtime_checkable
 
 ACTUATOR_COUNT = 6
@@ -142,11 +143,19 @@ class FeedbackSnapshot:
 @dataclass(frozen=True, slots=True)
 class LinkHealth:
     """``send_failures``: failed sends (set-points, commands, E-stops) since the link
-    was opened; ``detail``: a human-readable note (driver error text), may be empty."""
+    was opened; ``detail``: a human-readable note (driver error text), may be empty.
+
+    ``other_controller_age_s``: time since the link last heard a frame that only a
+    controller sends, from another sender (another controller drives the same actuators),
+    s; ``inf``: none heard since the link was opened. ``other_controller_frame``: that
+    frame's kind in the protocol's words, for people (``SYNC``, ``CMD_3 ENABLE``). An
+    E-stop is not counted: a safety PLC or an E-stop node may send it."""
 
     bus_state: BusState
     send_failures: int
     detail: str = ""
+    other_controller_age_s: float = inf
+    other_controller_frame: str = ""
 
 
 @runtime_checkable

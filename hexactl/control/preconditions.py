@@ -16,10 +16,11 @@ from typing import Protocol
 from hexactl.control.commands import SwapGeometry
 from hexactl.control.hardware import ActuatorState, BusState, FeedbackSnapshot, LinkHealth, fault_text
 from hexactl.control.planning import ActiveGeometry, LegLock
-from hexactl.control.results import ErrorCode
+from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S, ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequenceProgress
 from hexactl.control.snapshot import ControlState, MotionState
 from hexactl.control.stream import StreamPhase, StreamProgress
+from hexactl.control.supervisor import STOP_OTHER_CONTROLLER, other_controller_heard
 from hexactl.control.wave_player import WaveProgress
 
 Refusal = tuple[ErrorCode, str] | None  # (code, message) or None when allowed
@@ -98,6 +99,10 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
         return ErrorCode.LATCHED, f"{view.state.value} is latched: reset first"
     if view.feedback is None:
         return ErrorCode.HEARTBEAT_MISSING, "no feedback from the actuators yet"
+    if heard := other_controller_heard(view.link):
+        return ErrorCode.OTHER_CONTROLLER, (f"{heard}: two controllers would drive the same actuators; "
+                                            f"{STOP_OTHER_CONTROLLER}, then enable once none has been heard for "
+                                            f"{OTHER_CONTROLLER_WINDOW_S:g} s")
     low, high = view.active.stroke
     for leg, actuator in enumerate(view.feedback.actuators, start=1):
         if not actuator.heartbeat_age_s <= heartbeat_timeout_s:

@@ -13,6 +13,15 @@ stopped or hung (a running loop reports every 10 ms at most): displays say so ra
 show its last state as current, and commands other than a stop are not sent to it
 (:attr:`ErrorCode.LOOP_SILENT`). Standard library only here: the CLI reads it."""
 
+OTHER_CONTROLLER_WINDOW_S = 1.0
+"""s: another controller heard on the bus this recently
+(:attr:`~hexactl.control.hardware.LinkHealth.other_controller_age_s`) refuses ``enable``
+(:attr:`ErrorCode.OTHER_CONTROLLER`) and, while enabled, latches FAULT. A controller that
+runs is heard every few ms (it sends SYNC every loop cycle, in every state): a second is
+long against that, keeps a tool's lone command from passing unnoticed, and once the other
+is stopped the operator waits no longer than that. Standard library only here: the CLI
+reads it."""
+
 
 
 class ErrorCode(StrEnum):
@@ -52,6 +61,7 @@ class ErrorCode(StrEnum):
     EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
     ACCURACY_INSUFFICIENT = "accuracy_insufficient"  # the predicted error at the tool point exceeds the move's tolerance
     CHANGED_SINCE_VALIDATION = "changed_since_validation"  # a move's frames or calibration changed since it was validated
+    OTHER_CONTROLLER = "other_controller"  # enable: another controller drives the same actuators (its frames heard)
 
 
 @dataclass(frozen=True, slots=True)

@@ -7,7 +7,9 @@ it was told to reach (after ``state_timeout_s`` to get there), not applying the
 set-points (more than ``setpoint_lag_s`` behind), or farther than ``following_error_mm``
 from the set-point it applied for ``following_error_s`` (jammed, overloaded, slipping:
 compared with the set-point of the counter it reports, so a late frame adds nothing);
-the link failed; too many set-point sends failed in a row. In any state, an actuator reporting E-stop is the hardware
+the link failed; too many set-point sends failed in a row; another controller heard on
+the bus (:func:`other_controller_heard`: the actuators would follow whichever of the two
+commanded last). In any state, an actuator reporting E-stop is the hardware
 chain's E-stop (:meth:`Supervisor.estop_reported`), except in the grace time a reset
 gives the actuators to leave it.
 
@@ -33,6 +35,11 @@ from hexactl.control.hardware import (
     LinkHealth,
     fault_text,
 )
+from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S
+
+STOP_OTHER_CONTROLLER = ("stop it (another hexactl serve, a vendor tool: `candump` on the CAN interface shows its "
+                         "frames)")
+"""What the operator does about another controller, in the enable refusal and the fault."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +49,14 @@ class Fault:
     code: str
     message: str
     leg: int | None = None
+
+
+def other_controller_heard(link: LinkHealth | None) -> str | None:
+    """``another controller's SYNC was heard 0.002 s ago`` when the link heard one within
+    :data:`~hexactl.control.results.OTHER_CONTROLLER_WINDOW_S`, else None."""
+    if link is None or not link.other_controller_age_s <= OTHER_CONTROLLER_WINDOW_S:
+        return None
+    return f"another controller's {link.other_controller_frame} was heard {link.other_controller_age_s:.3f} s ago"
 
 
 class Supervisor:
@@ -101,6 +116,9 @@ class Supervisor:
             faults.append(Fault("link_failed", f"bus {link.bus_state.value}" + (f": {link.detail}" if link.detail else "")))
         if self._send_failures >= self._max_send_failures:
             faults.append(Fault("send_failed", f"{self._send_failures} set-point sends failed in a row"))
+        if heard := other_controller_heard(link):
+            faults.append(Fault("other_controller", f"{heard}: it drives these actuators too, which follow whichever "
+                                f"commanded last; {STOP_OTHER_CONTROLLER}, then reset and enable"))
         return faults
 
     def _following(self, leg: int, actuator: ActuatorFeedback, now_ns: int) -> Fault | None:

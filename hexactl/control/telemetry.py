@@ -101,6 +101,17 @@ class LegStatus:
 
 
 @dataclass(frozen=True, slots=True)
+class OtherController:
+    """Another controller heard on the bus, driving the same actuators: ``frame`` the kind
+    of its last frame heard in the protocol's words (``SYNC``, ``CMD_3 ENABLE``), ``age_s``
+    how long ago, s; within :data:`~hexactl.control.results.OTHER_CONTROLLER_WINDOW_S`
+    ``enable`` is refused."""
+
+    frame: str
+    age_s: float
+
+
+@dataclass(frozen=True, slots=True)
 class EventTelemetry:
     """One of the loop's events: ``seq`` its number (one more than the one before), at
     ``t`` (s, the clock of :attr:`Telemetry.t`), ``code`` (snake_case) and ``message``
@@ -152,6 +163,7 @@ class Telemetry:
     last_stream: StreamReport | None = None  # how the last pose stream ended; None: none since the start
     legs: tuple[LegStatus, ...] | None = None  # None before the first read
     events: tuple[EventTelemetry, ...] = ()  # the loop's latest (TELEMETRY_EVENTS), oldest first
+    other_controller: OtherController | None = None  # None: none heard since the loop started
 
 
 def leg_statuses(s: CoreSnapshot) -> tuple[LegStatus, ...] | None:
@@ -163,9 +175,17 @@ def leg_statuses(s: CoreSnapshot) -> tuple[LegStatus, ...] | None:
                  for a in s.feedback.actuators)
 
 
+def other_controller(s: CoreSnapshot) -> OtherController | None:
+    """The last other controller the link heard (None: none since the loop started)."""
+    link = s.link
+    if link is None or not isfinite(link.other_controller_age_s):
+        return None
+    return OtherController(link.other_controller_frame, link.other_controller_age_s)
+
+
 def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
     """``status``: state, calibration, sequence, faults, the last ten events, the loop's
-    health and the operator's ``frames``."""
+    health, the operator's ``frames`` and another controller heard on the bus."""
     s = report.snapshot
     return CommandResult.success(
         s.state.value,
@@ -191,6 +211,7 @@ def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
         wave=asdict(s.wave) if s.wave else None,
         stream=asdict(stream) if (stream := stream_telemetry(s)) else None,
         last_stream=asdict(s.last_stream) if s.last_stream else None,
+        other_controller=asdict(other) if (other := other_controller(s)) else None,
     )
 
 
@@ -231,6 +252,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         last_stream=s.last_stream,
         legs=leg_statuses(s),
         events=tuple(event_telemetry(e) for e in s.events[-TELEMETRY_EVENTS:]),
+        other_controller=other_controller(s),
     )
 
 

@@ -354,6 +354,28 @@ def test_bad_frames_are_counted_not_raised(link, bus):
     assert all(math.isnan(a.position_mm) for a in snapshot.actuators)
 
 
+@pytest.mark.parametrize(("frame", "name"), [
+    (codec.encode_sync(7), "SYNC"),
+    (codec.encode_setpoints(7, [0] * 6)[1], "SETPOINT_34"),
+    (codec.encode_command(3, CommandCode.ENABLE, 9, LoopRate.HZ_500, 5), "CMD_3 ENABLE"),
+])
+def test_another_controllers_frame_is_named_with_when_it_was_heard(link, bus, clock, frame, name):
+    assert link.link_health().other_controller_age_s == math.inf  # none heard yet
+    clock.t_ns = 1_000_000_000
+    bus.push(*frame)
+    link.read_feedback()
+    clock.t_ns += 250_000_000
+    health = link.link_health()
+    assert (health.other_controller_frame, health.other_controller_age_s) == (name, pytest.approx(0.25))
+
+
+def test_an_estop_from_elsewhere_is_no_other_controller(link, bus):
+    bus.push(*codec.encode_estop(EStopReason.SAFETY_CHAIN))  # a safety PLC or an E-stop node may send it
+    link.read_feedback()
+    assert link.stats().foreign_frames == 1
+    assert (link.link_health().other_controller_age_s, link.link_health().other_controller_frame) == (math.inf, "")
+
+
 def test_receive_error_marks_the_bus_down(link, bus):
     bus.recv_error = can.CanOperationError("Network is down", errno.ENETDOWN)
     link.read_feedback()

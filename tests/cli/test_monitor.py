@@ -307,3 +307,15 @@ def test_a_record_from_a_silent_loop_says_so_first_in_status_and_the_view() -> N
     assert re.search(r"NO LOOP REPORT +for 12\.3 s: the control loop's process", rendered(silent))
     for current in (RECORD, {**RECORD, "loop": {**RECORD["loop"], "report_age_s": 0.01}}):
         assert "NO LOOP REPORT" not in format_telemetry(current) and "NO LOOP REPORT" not in rendered(current)
+
+
+def test_another_controller_on_the_bus_is_said_in_status_and_the_view() -> None:
+    from hexactl.adapters.cli.telemetry_text import format_telemetry
+
+    recent = {**RECORD, "other_controller": {"frame": "SYNC", "age_s": 0.0021}}
+    assert ("OTHER CTRL     SYNC heard 0.002 s ago: another controller drives these actuators; enable is refused "
+            "until it stops") in format_telemetry(recent)
+    assert re.search(r"OTHER CTRL +SYNC heard 0\.002 s ago", rendered(recent))
+    gone = {**RECORD, "other_controller": {"frame": "CMD_3 ENABLE", "age_s": 42.0}}
+    assert "other ctrl     CMD_3 ENABLE last heard 42.0 s ago" in format_telemetry(gone)
+    assert "ctrl" not in format_telemetry(RECORD).lower() and "CTRL" not in rendered(RECORD)

@@ -21,6 +21,7 @@ from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
+from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S
 from hexactl.control.sequences import Paced, SequenceWaypoint
 from hexactl.control.telemetry import TELEMETRY_EVENTS
 from hexactl.control.validated_under import ValidatedUnder
@@ -588,6 +589,16 @@ class LegStatus(_Message):
     report_age_s: float | None = Field(ge=0, description="time since its last report, s; null: never heard from")
 
 
+class OtherController(_Message):
+    """Another controller heard on the CAN bus, driving the same actuators."""
+
+    frame: str = Field(description="the kind of its last frame heard, as firmware_proto/PROTOCOL.md names it: "
+                       "SETPOINT_12, SETPOINT_34, SETPOINT_56, SETPOINT_ALL_FD, SYNC or CMD_n and the command "
+                       "(CMD_3 ENABLE); an E-stop frame is not counted (a safety PLC or an E-stop node may send one)")
+    age_s: float = Field(ge=0, description=f"how long ago, s; within {OTHER_CONTROLLER_WINDOW_S:g} s enable is refused "
+                         "(other_controller) and, enabled, FAULT other_controller is latched")
+
+
 class RecorderTelemetry(_Message):
     """The data recorder as the loop sees it (the file: ``record_status``)."""
 
@@ -767,6 +778,9 @@ class Telemetry(_Message):
     events: list[LoopEvent] = Field(default_factory=list, max_length=TELEMETRY_EVENTS,
                                     description="the loop's latest events, oldest first (a burst of more: the events request "
                                     "has them)")
+    other_controller: OtherController | None = Field(
+        default=None, description="another controller last heard on the bus (another hexactl serve or a vendor tool "
+        "on the same actuators); null: none since the service started")
 
 
 # -- replies -------------------------------------------------------------------------

@@ -21,8 +21,9 @@ keeps running. Its counter follows the last one sent, so it never completes a ha
 Receiving happens in :meth:`CanActuatorLink.read_feedback`: it drains at most
 ``max_frames_per_read`` frames with ``recv(timeout=0)``, decodes FEEDBACK, HEARTBEAT, EMCY and
 CMD_ACK into per-actuator state (position and velocity are NaN until an actuator's first
-FEEDBACK) and counts every frame the codec rejects (bad DLC, CRC or
-value, unknown id) instead of raising.
+FEEDBACK), counts every frame the codec rejects (bad DLC, CRC or
+value, unknown id) instead of raising, and notes when another controller's frame (set-points,
+SYNC, a command; not an E-stop) was last heard, for :meth:`CanActuatorLink.link_health`.
 """
 
 from __future__ import annotations
@@ -46,12 +47,16 @@ from firmware_proto.codec import (
     CommandCode,
     CommandResult,
     Emergency,
+    EStop,
     EStopReason,
     Fault,
     Feedback,
     FrameError,
     Heartbeat,
     LoopRate,
+    SetpointFrame,
+    SetpointsFd,
+    Sync,
     decode,
     encode_command,
     encode_estop,
@@ -103,6 +108,11 @@ FAULT_NAMES = FaultNames(Fault)
 _ENGAGED = (WireState.ENABLED, WireState.LOCKED)
 _LOOP_RATES = (LoopRate.HZ_250, LoopRate.HZ_500, LoopRate.HZ_1000)
 
+# Another controller's frames as LinkHealth.other_controller_frame names them; made once, so
+# that a controller streaming beside this one costs a look-up per frame, not a string.
+_SETPOINT_NAMES = {first: f"SETPOINT_{first}{first + 1}" for first in (1, 3, 5)}
+_COMMAND_NAMES = {(node, code): f"CMD_{node} {code.name}" for node in NODE_IDS for code in CommandCode}
+
 
 @dataclass(frozen=True, slots=True)
 class LinkConfig:
@@ -146,7 +156,9 @@ class LinkStats:
     :ivar frames_received: frames taken from the bus
     :ivar undecodable_frames: frames the codec rejected (bad DLC, CRC, value or unknown id)
         and frames that are not classic 11-bit data frames
-    :ivar foreign_frames: valid protocol frames that actuators do not send (another controller's)
+    :ivar foreign_frames: valid protocol frames that actuators do not send (another controller's,
+        an E-stop from a safety PLC or an E-stop node; :class:`LinkHealth` says when another
+        controller's was last heard)
     :ivar refused_setpoints: :meth:`CanActuatorLink.send_setpoints` calls refused before
         sending (non-finite or unencodable values); also counted as send failures
     :ivar send_failures: as in :class:`LinkHealth`
@@ -259,6 +271,8 @@ class CanActuatorLink:
         self._frames_received = 0
         self._undecodable = 0
         self._foreign = 0
+        self._other_ns: int | None = None  # when another controller's frame was last heard
+        self._other_frame = ""
         self._command_timeouts = 0
         self._first_counter: int | None = None
         self._last_counter: int | None = None
@@ -381,7 +395,9 @@ class CanActuatorLink:
                              f"{PROTOCOL_VERSION}: it is never enabled")
         if self._detail:
             notes.append(self._detail)
-        return LinkHealth(self._bus_state, self._send_failures, "; ".join(notes))
+        other_ns = self._other_ns
+        other_age_s = inf if other_ns is None else (self._clock_ns() - other_ns) * 1e-9
+        return LinkHealth(self._bus_state, self._send_failures, "; ".join(notes), other_age_s, self._other_frame)
 
     # -- diagnostics -------------------------------------------------------------------
 
@@ -549,6 +565,18 @@ class CanActuatorLink:
                 )
         else:
             self._foreign += 1
+            # Another controller drives the actuators too (this link does not hear its own
+            # frames). An E-stop is no sign of one: a safety PLC or an E-stop node may send it.
+            if kind is not EStop:
+                self._other_ns = now
+                if kind is Sync:
+                    self._other_frame = "SYNC"
+                elif kind is SetpointFrame:
+                    self._other_frame = _SETPOINT_NAMES[decoded.first_node]
+                elif kind is SetpointsFd:
+                    self._other_frame = "SETPOINT_ALL_FD"
+                else:
+                    self._other_frame = _COMMAND_NAMES[decoded.node, decoded.command]
             return
         node.heard_ns = now
         if node.wire_state in _ENGAGED:

@@ -37,6 +37,7 @@ from hexactl.adapters.cli.telemetry_text import (
     jog_text,
     leg_states_text,
     loop_text,
+    other_controller_lines,
     percentiles_text,
     realtime_text,
     recording_text,
@@ -343,6 +344,8 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         # Not a row of the table above: a named fault word is wider than a column (an
         # E-stop's wrapped into three lines and pushed the key's result off a 40-line screen).
         ("legs", leg_states_text(record.get("legs"))),
+        *((label, Text(text, style="bold red", no_wrap=True, overflow="ellipsis"))
+          for label, text in other_controller_lines(record.get("other_controller"))),
         ("locked leg", f"L{locked}" if locked else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),

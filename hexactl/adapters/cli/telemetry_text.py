@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from hexactl.control.results import REPORT_SILENT_S
+from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S, REPORT_SILENT_S
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 
@@ -27,6 +27,7 @@ def format_telemetry(record: dict[str, Any], calibration_source: str | None = No
         ("leg set-points", legs_text(record.get("leg_setpoints"))),
         ("leg feedback", legs_text(record.get("leg_feedback"))),
         ("legs", leg_states_text(record.get("legs"))),
+        *other_controller_lines(record.get("other_controller")),
         *frames_lines(record),
         ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
         ("calibration", record["calibration_id"] + (f" (from {calibration_source})" if calibration_source else "")),
@@ -53,6 +54,17 @@ def silent_loop_lines(loop: dict[str, Any]) -> list[tuple[str, str]]:
     return [("NO LOOP REPORT", f"for {age:.1f} s: the control loop's process is stopped or hung (its actuators stop "
                                "on their watchdogs; it is sent no command but stop, abort and estop, which wait for it); "
                                "what follows is its last report")]
+
+
+def other_controller_lines(heard: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """A row naming another controller heard on the bus, once one has been (a service older
+    than this field: none)."""
+    if heard is None:
+        return []
+    if heard["age_s"] > OTHER_CONTROLLER_WINDOW_S:
+        return [("other ctrl", f"{heard['frame']} last heard {heard['age_s']:.1f} s ago")]
+    return [("OTHER CTRL", f"{heard['frame']} heard {heard['age_s']:.3f} s ago: another controller drives these "
+                           "actuators; enable is refused until it stops (candump on the CAN interface shows it)")]
 
 
 def pose_text(pose: list[float] | None) -> str:
