@@ -55,7 +55,7 @@ from hexactl.control.sequence_player import SequenceProgress, dwell_record
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.stream import StreamProgress
-from hexactl.control.supervisor import Fault, Supervisor
+from hexactl.control.supervisor import ESTOP_FAULTS, Fault, Supervisor
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
 
@@ -162,6 +162,9 @@ class ControlCore:
         if self.state is ControlState.ENABLED:
             if faults := supervisor.faults(feedback, self.link, self._counter - 1, now_ns):
                 self._enter_fault(tuple(faults))
+                if stopping := [fault.code for fault in faults if fault.code in ESTOP_FAULTS]:
+                    self._enter_estop(f"{', '.join(stopping)}: holding cannot stop actuators that another "
+                                      "controller drives too")
             elif fault := self._motion.update(self.active, now_ns):
                 self._enter_fault((fault,))
         elif self.state is ControlState.DISABLED and self._measurement.pose is not None:

@@ -9,7 +9,7 @@ from the set-point it applied for ``following_error_s`` (jammed, overloaded, sli
 compared with the set-point of the counter it reports, so a late frame adds nothing);
 the link failed; too many set-point sends failed in a row; another controller heard on
 the bus (:func:`other_controller_heard`: the actuators would follow whichever of the two
-commanded last). In any state, an actuator reporting E-stop is the hardware
+commanded last, so the core E-stops them: :data:`ESTOP_FAULTS`). In any state, an actuator reporting E-stop is the hardware
 chain's E-stop (:meth:`Supervisor.estop_reported`), except in the grace time a reset
 gives the actuators to leave it.
 
@@ -40,6 +40,11 @@ from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S
 STOP_OTHER_CONTROLLER = ("stop it (another hexactl serve, a vendor tool: `candump` on the CAN interface shows its "
                          "frames)")
 """What the operator does about another controller, in the enable refusal and the fault."""
+
+ESTOP_FAULTS = frozenset({"other_controller"})
+"""Faults whose FAULT hold cannot hold the platform: the actuators also follow another
+controller's set-points, jerking between the two. The core sends the E-stop, which stops
+them whoever commands (and the other controller, if it is hexactl, latches it too)."""
 
 
 @dataclass(frozen=True, slots=True)

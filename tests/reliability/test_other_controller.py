@@ -1,7 +1,7 @@
 """Another controller on the same CAN bus (a second ``hexactl serve`` started by mistake, a
 vendor tool): the actuators would follow whichever of the two commanded last. ``enable`` is
 refused while one has been heard within the window, an enabled controller that hears one
-latches FAULT (and its E-stop still works), and once the other has been silent for the
+latches FAULT and E-stops the actuators (holding would not hold them), and once the other has been silent for the
 window, ``reset`` and ``enable`` work again. Two controllers and six firmwares on one
 ``memory:`` bus, stepped in simulated time: deterministic, no threads."""
 
@@ -112,15 +112,18 @@ def test_another_controller_starting_faults_the_enabled_one_its_estop_works_and_
 
     second = bench.controller()  # started by mistake: it sends its SYNC from its first cycle on
     bench.run(2)
-    assert first.snapshot.state.value == "fault"
-    (fault,) = first.snapshot.faults
+    # Held set-points would not hold actuators that another controller drives too: E-stopped.
+    assert first.snapshot.state.value == "estop"
+    fault, estop = first.snapshot.faults
     assert fault.code == "other_controller"
     assert fault.message.startswith("another controller's SYNC was heard") and "reset and enable" in fault.message
-    assert second.enable().error == "other_controller"  # the second hears the first's set-points
-
-    assert first.estop().ok  # nothing holds up the E-stop
-    bench.run_until(lambda: first.snapshot.state.value == "estop"
-                    and all(a.state is ActuatorState.ESTOP for a in first.snapshot.feedback.actuators), seconds=0.1)
+    assert estop.code == "estop" and estop.message.startswith("other_controller: holding cannot stop"), estop
+    bench.run_until(lambda: all(a.state is ActuatorState.ESTOP for a in first.snapshot.feedback.actuators)
+                    and second.snapshot.state.value == "estop", seconds=0.1)
+    # The second sees the actuators report the E-stop, as a hardware chain's: latched there too.
+    assert second.snapshot.faults[0].message == "an actuator reports E-stop (hardware chain)"
+    assert second.enable().error == "latched"
+    assert first.estop().ok  # nothing holds up an E-stop the operator sends too
 
     bench.stop(second)
     assert first.reset().ok

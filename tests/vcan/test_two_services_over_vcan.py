@@ -1,8 +1,8 @@
 """Two ``hexactl serve --can socketcan:vcan0`` on one bus, as a second one started by mistake
 from another shell would be, beside ``hexactl sim-actuators``: the enabled one latches FAULT
-``other_controller`` as the second starts, the second's ``enable`` is refused
-``other_controller``, the first's E-stop works; once the second has ended and 1 s has passed,
-``reset`` and ``enable`` work again. Real SocketCAN, where each process's socket hears the
+``other_controller`` as the second starts and E-stops the actuators, which the second sees
+reported and latches too, so its ``enable`` is refused; the first's own E-stop works; once
+the second has ended and 1 s has passed, ``reset`` and ``enable`` work again. Real SocketCAN, where each process's socket hears the
 other's frames and not its own. Collected only where vcan0 exists (tests/conftest.py);
 elsewhere tests/test_vcan_in_uml.py runs it inside user-mode Linux, with the guest's settings
 of tests/vcan/test_service_over_vcan.py."""
@@ -40,11 +40,13 @@ def test_a_second_service_on_the_bus_is_refused_and_faults_the_first(tmp_path: P
         with running_service(tmp_path / "second") as second_served, \
                 HexactlClient(second_served.api, timeout_s=WAIT_S) as second:
             faulted = wait_status(first, lambda r: r["state"] != "enabled", "the first to hear the second")
-            assert [fault["code"] for fault in faulted["faults"]] == ["other_controller"], faulted["faults"]
+            assert faulted["state"] == "estop", faulted
+            assert [fault["code"] for fault in faulted["faults"]] == ["other_controller", "estop"], faulted["faults"]
             assert "another controller's" in faulted["faults"][0]["message"]
+            wait_status(second, lambda r: r["state"] == "estop", "the second to latch the actuators' E-stop")
             with pytest.raises(CommandError) as refused:
                 second.call("enable")
-            assert refused.value.code == "other_controller", refused.value
+            assert refused.value.code == "latched", refused.value
             assert status(second)["other_controller"]["age_s"] < OTHER_CONTROLLER_WINDOW_S
             first.call("estop")
             wait_status(first, lambda r: r["state"] == "estop" and all(leg["state"] == "estop" for leg in r["legs"]),

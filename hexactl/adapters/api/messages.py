@@ -596,7 +596,7 @@ class OtherController(_Message):
                        "SETPOINT_12, SETPOINT_34, SETPOINT_56, SETPOINT_ALL_FD, SYNC or CMD_n and the command "
                        "(CMD_3 ENABLE); an E-stop frame is not counted (a safety PLC or an E-stop node may send one)")
     age_s: float = Field(ge=0, description=f"how long ago, s; within {OTHER_CONTROLLER_WINDOW_S:g} s enable is refused "
-                         "(other_controller) and, enabled, FAULT other_controller is latched")
+                         "(other_controller) and, enabled, FAULT other_controller is latched and the E-stop sent")
 
 
 class RecorderTelemetry(_Message):
