@@ -29,6 +29,10 @@ Bound = Number | None
 Bounds = tuple[Bound, Bound, Bound, Bound, Bound, Bound]
 NO_BOUNDS: Bounds = (None,) * 6
 
+_ANGLE_READ_RANGE = (float("inf"),) * 3 + (180.0, 90.0, 180.0)
+"""Per axis, how far from 0 the tool's pose in the work frame reads (deg): roll and yaw in
+[-180, 180], pitch in [-90, 90]; no bound on x, y, z."""
+
 
 class SoftLimits(BaseModel):
     """``lower``/``upper``: per axis of the tool's pose in the work frame, mm and deg
@@ -36,7 +40,8 @@ class SoftLimits(BaseModel):
     the tilt (None: none).
 
     :raises pydantic.ValidationError: a bound not finite, ``lower`` not below ``upper``
-        on every axis, or a tilt bound outside (0, 90] degrees
+        on every axis, an angle's bound beyond where it reads (a window across ±180°), or a
+        tilt bound outside (0, 90] degrees
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -56,6 +61,18 @@ class SoftLimits(BaseModel):
 
     @model_validator(mode="after")
     def _ordered(self) -> SoftLimits:
+        # An angle is compared as read, roll and yaw in [-180, 180], pitch in [-90, 90]: a
+        # window across ±180° ([170, -170], [175, 185]) would be misread, so it is refused.
+        across = [f"{axis} [{_text(low)}, {_text(high)}]"
+                  for axis, low, high, reach in zip(POSE_AXES, self.lower, self.upper, _ANGLE_READ_RANGE)
+                  if any(bound is not None and abs(bound) > reach for bound in (low, high))
+                  or (reach == 180.0 and low is not None and high is not None and low > high)]
+        if across:
+            raise ValueError(
+                f"{', '.join(across)} deg: an angle's soft limits lie within [-180, 180] deg (pitch [-90, 90]), "
+                "where it is read, lower below upper; a window across ±180 deg is not supported: to bound an angle "
+                "around 180 deg, turn the work or tool frame by 180 deg about that axis so that the window no longer "
+                "crosses ±180 deg")
         crossed = [f"{axis} [{low:g}, {high:g}]" for axis, low, high in zip(POSE_AXES, self.lower, self.upper)
                    if low is not None and high is not None and not low < high]
         if crossed:
@@ -106,6 +123,10 @@ def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:
     (:meth:`SoftLimits.allow` has its plain-float copy)."""
     roll, pitch = np.radians(poses_mm_deg[:, 3]), np.radians(poses_mm_deg[:, 4])
     return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
+
+
+def _text(bound: Bound) -> str:
+    return "null" if bound is None else f"{bound:g}"
 
 
 NO_SOFT_LIMITS = SoftLimits()

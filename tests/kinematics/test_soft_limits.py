@@ -44,6 +44,38 @@ def test_malformed_soft_limits_are_refused_naming_the_problem(bad, fragment):
         SoftLimits(**bad)
 
 
+def _on(axis, lower, upper):
+    index = ("roll", "pitch", "yaw").index(axis) + 3
+    return SoftLimits(lower=tuple(lower if n == index else None for n in range(6)),
+                      upper=tuple(upper if n == index else None for n in range(6)))
+
+
+@pytest.mark.parametrize("axis, lower, upper", [
+    ("yaw", 170, -170),   # "anywhere but the back", as an operator writes it
+    ("yaw", 175, 185),    # the same window written upwards: read as [175, 180], refusing -179
+    ("yaw", -190, -170),  # and downwards: read as [-180, -170], refusing 179
+    ("roll", 179, -179),
+    ("roll", None, 181),
+    ("pitch", -95, None),  # pitch reads in [-90, 90]
+])
+def test_a_window_across_180_degrees_is_refused_naming_the_axis_and_the_way_round(axis, lower, upper):
+    # Angles are compared as read, in [-180, 180]: such a window was taken as another one
+    # ([175, 185] allowed 179 and refused -179, 2 deg from it) or refused as unordered.
+    with pytest.raises(ValidationError) as refused:
+        _on(axis, lower, upper)
+    message = str(refused.value)
+    assert f"{axis} [{'null' if lower is None else lower}, {'null' if upper is None else upper}] deg" in message
+    assert "a window across ±180 deg is not supported" in message
+    assert "turn the work or tool frame by 180 deg about that axis" in message
+
+
+def test_angle_windows_up_to_180_degrees_are_taken_as_they_read():
+    assert _on("yaw", -180, 180).violations([[0] * 5 + [180], [0] * 5 + [-180]]) == [[], []]
+    (inside, outside) = _on("yaw", 170, 180).violations([[0] * 5 + [175], [0] * 5 + [-175]])
+    assert inside == [] and outside[0].message == "yaw -175.000 deg below the soft limit 170 deg"
+    assert _on("pitch", -90, 90).violations([[0] * 4 + [90, 0]]) == [[]]
+
+
 @given(st.lists(poses, min_size=1, max_size=20), poses, poses)
 @example([(0.0,) * 5 + (-8.330176226831006e-35,), (0.0,) * 5 + (-2e-9,)], (0.0,) * 5 + (1.0,), (0.0,) * 5 + (0.001,))
 def test_a_pose_passes_exactly_when_every_axis_is_within_its_bounds(samples, a, b):
