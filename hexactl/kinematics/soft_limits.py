@@ -33,6 +33,12 @@ _ANGLE_READ_RANGE = (float("inf"),) * 3 + (180.0, 90.0, 180.0)
 """Per axis, how far from 0 the tool's pose in the work frame reads (deg): roll and yaw in
 [-180, 180], pitch in [-90, 90]; no bound on x, y, z."""
 
+_TURNING_AXES = (3, 5)
+"""Roll and yaw: they read ±180° for one orientation."""
+
+_HALF_TURN_READ = 180.0 - POSE_BOUND_ROUNDING
+"""An angle read this far from 0 or farther is at ±180°."""
+
 
 class SoftLimits(BaseModel):
     """``lower``/``upper``: per axis of the tool's pose in the work frame, mm and deg
@@ -83,16 +89,20 @@ class SoftLimits(BaseModel):
         """For each of the (N, 6) poses of the tool in the work frame (mm, deg), the soft
         limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``); a pose
         within :data:`~hexactl.kinematics.workspace.POSE_BOUND_ROUNDING` of a bound is on it."""
-        poses = np.asarray(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
+        poses = np.array(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
+        for axis in _TURNING_AXES:
+            if (edge := self._edge(axis)) is not None:
+                poses[np.abs(poses[:, axis]) >= _HALF_TURN_READ, axis] = edge
         found: list[list[Violation]] = [[] for _ in range(len(poses))]
         for bounds, side, broken, open_end, rounding in ((self.lower, "below", np.less, -np.inf, -POSE_BOUND_ROUNDING),
                                                          (self.upper, "above", np.greater, np.inf, POSE_BOUND_ROUNDING)):
             limits = np.array([open_end if bound is None else bound + rounding for bound in bounds])
             for n, axis in zip(*np.nonzero(broken(poses, limits))):
-                value, limit, unit = float(poses[n, axis]), bounds[axis], POSE_UNITS[axis]
+                value, limit, past = self._way_round(axis, float(poses[n, axis]), side)
                 found[n].append(Violation(
                     ViolationKind.SOFT_LIMIT, value, limit,
-                    f"{POSE_AXES[axis]} {value:.3f} {unit} {side} the soft limit {limit:g} {unit}", axis=POSE_AXES[axis]))
+                    f"{POSE_AXES[axis]} {value:.3f} {POSE_UNITS[axis]} {past} the soft limit {limit:g} {POSE_UNITS[axis]}",
+                    axis=POSE_AXES[axis]))
         if self.max_tilt_deg is not None:
             for n, tilt in enumerate(tilt_deg(poses)):
                 if self._beyond_tilt(tilt):
@@ -104,7 +114,9 @@ class SoftLimits(BaseModel):
         """Whether one pose of the tool in the work frame (mm, deg) breaks none of these
         limits: :meth:`violations` finds none. Plain floats for a stream's per-target check
         (:func:`~hexactl.kinematics.workspace.pose_within_limits` says why)."""
-        for value, low, high in zip(tool_in_work_mm_deg, self.lower, self.upper):
+        for axis, value, low, high in zip(range(6), tool_in_work_mm_deg, self.lower, self.upper):
+            if axis in _TURNING_AXES and abs(value) >= _HALF_TURN_READ and (edge := self._edge(axis)) is not None:
+                value = edge
             if (low is not None and value < low - POSE_BOUND_ROUNDING) or \
                     (high is not None and value > high + POSE_BOUND_ROUNDING):
                 return False
@@ -112,6 +124,28 @@ class SoftLimits(BaseModel):
             return True
         roll, pitch = radians(tool_in_work_mm_deg[3]), radians(tool_in_work_mm_deg[4])
         return not self._beyond_tilt(degrees(acos(max(-1.0, min(1.0, cos(roll) * cos(pitch))))))
+
+    def _way_round(self, axis: int, value: float, side: str) -> tuple[float, float, str]:
+        """A ``value`` read ``side`` ("below", "above") its bounds on ``axis``, against the
+        bound it is nearer: for roll or yaw turned past 180° out of a window up to it, the
+        upper one (read -179 from [170, 180]: 181 above 180, not -179 below 170). As
+        (value, bound, side)."""
+        low, high = self.lower[axis], self.upper[axis]
+        if axis in _TURNING_AXES and low is not None and high is not None:
+            if side == "below" and value + 360.0 - high < low - value:
+                return value + 360.0, high, "above"
+            if side == "above" and low - (value - 360.0) < value - high:
+                return value - 360.0, low, "below"
+        return value, low if side == "below" else high, side
+
+    def _edge(self, axis: int) -> float | None:
+        """How a reading of ±180° on roll or yaw (``axis``) is bounded: one orientation,
+        read 180 or -180 as rounding goes, so 180 if that is within the bounds, else -180
+        if that is, else None (outside either way, as read)."""
+        low, high = self.lower[axis], self.upper[axis]
+        if high is None or high >= _HALF_TURN_READ:
+            return 180.0
+        return -180.0 if low is None or low <= -_HALF_TURN_READ else None
 
     def _beyond_tilt(self, tilt: float) -> bool:
         return self.max_tilt_deg is not None and tilt > self.max_tilt_deg + POSE_BOUND_ROUNDING

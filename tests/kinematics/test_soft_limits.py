@@ -69,11 +69,32 @@ def test_a_window_across_180_degrees_is_refused_naming_the_axis_and_the_way_roun
     assert "turn the work or tool frame by 180 deg about that axis" in message
 
 
-def test_angle_windows_up_to_180_degrees_are_taken_as_they_read():
+def test_angle_windows_up_to_180_degrees_name_the_bound_turned_past():
+    # -175 read from [170, 180] is 5 deg past 180: it was "-175 below the soft limit 170",
+    # and a jog towards 180 said it was heading for the limit at 170.
     assert _on("yaw", -180, 180).violations([[0] * 5 + [180], [0] * 5 + [-180]]) == [[], []]
-    (inside, outside) = _on("yaw", 170, 180).violations([[0] * 5 + [175], [0] * 5 + [-175]])
-    assert inside == [] and outside[0].message == "yaw -175.000 deg below the soft limit 170 deg"
+    (inside, past_180, below) = _on("yaw", 170, 180).violations([[0] * 5 + [175], [0] * 5 + [-175], [0] * 5 + [160]])
+    assert inside == [] and (past_180[0].value, past_180[0].limit) == (185.0, 180)
+    assert past_180[0].message == "yaw 185.000 deg above the soft limit 180 deg"
+    assert below[0].message == "yaw 160.000 deg below the soft limit 170 deg"
+    (past_minus_180,) = _on("roll", -180, -170).violations([[0] * 3 + [178, 0, 0]])
+    assert past_minus_180[0].message == "roll -182.000 deg below the soft limit -180 deg"
     assert _on("pitch", -90, 90).violations([[0] * 4 + [90, 0]]) == [[]]
+
+
+@pytest.mark.parametrize("axis", ["roll", "yaw"])
+def test_an_angle_read_at_minus_180_is_the_180_a_window_up_to_180_holds(axis):
+    # One orientation reads 180 or -180 as rounding goes (a tool frame at yaw -180 reads
+    # -180 at the zero posture): it was refused as below 170, the tool in its window.
+    index = ("roll", "pitch", "yaw").index(axis) + 3
+    at = [[0.0] * 6, [0.0] * 6]
+    at[0][index], at[1][index] = -180.0, 180.0
+    for limits in (_on(axis, 170, 180), _on(axis, -180, -170), _on(axis, 170, None), _on(axis, None, -170)):
+        assert limits.violations(at) == [[], []]
+        assert limits.allow(at[0]) and limits.allow(at[1])
+    (beyond,) = _on(axis, -10, 10).violations(at[:1])
+    assert beyond[0].message == f"{axis} -180.000 deg below the soft limit -10 deg"
+    assert not _on(axis, -10, 10).allow(at[1])
 
 
 @given(st.lists(poses, min_size=1, max_size=20), poses, poses)
