@@ -29,12 +29,8 @@ Bound = Number | None
 Bounds = tuple[Bound, Bound, Bound, Bound, Bound, Bound]
 NO_BOUNDS: Bounds = (None,) * 6
 
-_ANGLE_READ_RANGE = (float("inf"),) * 3 + (180.0, 90.0, 180.0)
-"""Per axis, how far from 0 the tool's pose in the work frame reads (deg): roll and yaw in
-[-180, 180], pitch in [-90, 90]; no bound on x, y, z."""
-
 _TURNING_AXES = (3, 5)
-"""Roll and yaw: they read ±180° for one orientation."""
+"""Roll and yaw: they read in [-180°, 180°], ±180° for one orientation (pitch in [-90°, 90°])."""
 
 _HALF_TURN_READ = 180.0 - POSE_BOUND_ROUNDING
 """An angle read this far from 0 or farther is at ±180°."""
@@ -67,18 +63,9 @@ class SoftLimits(BaseModel):
 
     @model_validator(mode="after")
     def _ordered(self) -> SoftLimits:
-        # An angle is compared as read, roll and yaw in [-180, 180], pitch in [-90, 90]: a
-        # window across ±180° ([170, -170], [175, 185]) would be misread, so it is refused.
-        across = [f"{axis} [{_text(low)}, {_text(high)}]"
-                  for axis, low, high, reach in zip(POSE_AXES, self.lower, self.upper, _ANGLE_READ_RANGE)
-                  if any(bound is not None and abs(bound) > reach for bound in (low, high))
-                  or (reach == 180.0 and low is not None and high is not None and low > high)]
-        if across:
-            raise ValueError(
-                f"{', '.join(across)} deg: an angle's soft limits lie within [-180, 180] deg (pitch [-90, 90]), "
-                "where it is read, lower below upper; a window across ±180 deg is not supported: to bound an angle "
-                "around 180 deg, turn the work or tool frame by 180 deg about that axis so that the window no longer "
-                "crosses ±180 deg")
+        if across := [problem for axis, low, high in zip(range(6), self.lower, self.upper)
+                      if (problem := _angle_window_problem(axis, low, high))]:
+            raise ValueError("; ".join(across))
         crossed = [f"{axis} [{low:g}, {high:g}]" for axis, low, high in zip(POSE_AXES, self.lower, self.upper)
                    if low is not None and high is not None and not low < high]
         if crossed:
@@ -157,6 +144,27 @@ def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:
     (:meth:`SoftLimits.allow` has its plain-float copy)."""
     roll, pitch = np.radians(poses_mm_deg[:, 3]), np.radians(poses_mm_deg[:, 4])
     return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
+
+
+def _angle_window_problem(axis: int, low: Bound, high: Bound) -> str | None:
+    """What is wrong with the bounds of ``axis`` if it is an angle and they reach beyond
+    where it reads, or cross ±180°; None if nothing. An angle is compared as read, so such
+    a window ([170, -170], [175, 185]) would be misread: refused, saying how to write it."""
+    name, beyond = POSE_AXES[axis], max(abs(bound) for bound in (low, high, 0.0) if bound is not None)
+    window = f"{name} [{_text(low)}, {_text(high)}] deg"
+    if name == "pitch" and beyond > 90.0:
+        return f"{window}: pitch reads in [-90, 90] deg: give bounds within it"
+    if axis not in _TURNING_AXES:
+        return None
+    turned = f"turn the work or tool frame by 180 deg about the {name} axis so that the window no longer crosses ±180 deg"
+    if low is not None and high is not None and high < low and beyond <= 180.0:
+        return (f"{window} crosses ±180 deg, which soft limits do not support ({name} reads in [-180, 180] deg): "
+                f"to keep {name} out of it, give [{high:g}, {low:g}]; to keep it within it, {turned} "
+                f"(it then reads [{low - 180:g}, {high + 180:g}])")
+    if beyond > 180.0:
+        return (f"{window}: {name} reads in [-180, 180] deg, so a bound beyond is never reached and a window across "
+                f"±180 deg is not supported: give bounds within [-180, 180] or, to keep {name} around 180 deg, {turned}")
+    return None
 
 
 def _text(bound: Bound) -> str:
