@@ -66,6 +66,8 @@ def test_set_frames_merges_saves_and_clears(framed, tmp_path: Path) -> None:
     ({"soft_limits": {"max_tilt_deg": 95}}, "max_tilt_deg"),
     ({"soft_limits": {"lower": [1, 2, 3, 4, 5, 6], "upper": [0, 2, 3, 4, 5, 6]}}, "below its upper bound"),
     ({"pivot": [0, 0, 300]}, "pivot"),
+    ({"soft_limits": {"lower": [None] * 5 + [170], "upper": [None] * 5 + [-170]}},
+     "soft_limits: yaw [170, -170] deg crosses ±180 deg, which soft limits do not support"),
 ])
 def test_bad_frames_are_refused_naming_the_problem_and_change_nothing(framed, fields, fragment) -> None:
     reply = send(framed, "set_frames", **fields)
