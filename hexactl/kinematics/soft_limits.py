@@ -29,6 +29,12 @@ Bound = Number | None
 Bounds = tuple[Bound, Bound, Bound, Bound, Bound, Bound]
 NO_BOUNDS: Bounds = (None,) * 6
 
+_TURNING_AXES = (3, 5)
+"""Roll and yaw: they read in [-180°, 180°], ±180° for one orientation (pitch in [-90°, 90°])."""
+
+_HALF_TURN_READ = 180.0 - POSE_BOUND_ROUNDING
+"""An angle read this far from 0 or farther is at ±180°."""
+
 
 class SoftLimits(BaseModel):
     """``lower``/``upper``: per axis of the tool's pose in the work frame, mm and deg
@@ -36,7 +42,8 @@ class SoftLimits(BaseModel):
     the tilt (None: none).
 
     :raises pydantic.ValidationError: a bound not finite, ``lower`` not below ``upper``
-        on every axis, or a tilt bound outside (0, 90] degrees
+        on every axis, an angle's bound beyond where it reads (a window across ±180°), or a
+        tilt bound outside (0, 90] degrees
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -56,6 +63,9 @@ class SoftLimits(BaseModel):
 
     @model_validator(mode="after")
     def _ordered(self) -> SoftLimits:
+        if across := [problem for axis, low, high in zip(range(6), self.lower, self.upper)
+                      if (problem := _angle_window_problem(axis, low, high))]:
+            raise ValueError("; ".join(across))
         crossed = [f"{axis} [{low:g}, {high:g}]" for axis, low, high in zip(POSE_AXES, self.lower, self.upper)
                    if low is not None and high is not None and not low < high]
         if crossed:
@@ -66,16 +76,20 @@ class SoftLimits(BaseModel):
         """For each of the (N, 6) poses of the tool in the work frame (mm, deg), the soft
         limits it breaks (kinds ``soft_limit``, naming the axis, and ``soft_tilt``); a pose
         within :data:`~hexactl.kinematics.workspace.POSE_BOUND_ROUNDING` of a bound is on it."""
-        poses = np.asarray(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
+        poses = np.array(tool_in_work_mm_deg, dtype=float).reshape(-1, 6)
+        for axis in _TURNING_AXES:
+            if (edge := self._edge(axis)) is not None:
+                poses[np.abs(poses[:, axis]) >= _HALF_TURN_READ, axis] = edge
         found: list[list[Violation]] = [[] for _ in range(len(poses))]
         for bounds, side, broken, open_end, rounding in ((self.lower, "below", np.less, -np.inf, -POSE_BOUND_ROUNDING),
                                                          (self.upper, "above", np.greater, np.inf, POSE_BOUND_ROUNDING)):
             limits = np.array([open_end if bound is None else bound + rounding for bound in bounds])
             for n, axis in zip(*np.nonzero(broken(poses, limits))):
-                value, limit, unit = float(poses[n, axis]), bounds[axis], POSE_UNITS[axis]
+                value, limit, past = self._way_round(axis, float(poses[n, axis]), side)
                 found[n].append(Violation(
                     ViolationKind.SOFT_LIMIT, value, limit,
-                    f"{POSE_AXES[axis]} {value:.3f} {unit} {side} the soft limit {limit:g} {unit}", axis=POSE_AXES[axis]))
+                    f"{POSE_AXES[axis]} {value:.3f} {POSE_UNITS[axis]} {past} the soft limit {limit:g} {POSE_UNITS[axis]}",
+                    axis=POSE_AXES[axis]))
         if self.max_tilt_deg is not None:
             for n, tilt in enumerate(tilt_deg(poses)):
                 if self._beyond_tilt(tilt):
@@ -87,7 +101,9 @@ class SoftLimits(BaseModel):
         """Whether one pose of the tool in the work frame (mm, deg) breaks none of these
         limits: :meth:`violations` finds none. Plain floats for a stream's per-target check
         (:func:`~hexactl.kinematics.workspace.pose_within_limits` says why)."""
-        for value, low, high in zip(tool_in_work_mm_deg, self.lower, self.upper):
+        for axis, value, low, high in zip(range(6), tool_in_work_mm_deg, self.lower, self.upper):
+            if axis in _TURNING_AXES and abs(value) >= _HALF_TURN_READ and (edge := self._edge(axis)) is not None:
+                value = edge
             if (low is not None and value < low - POSE_BOUND_ROUNDING) or \
                     (high is not None and value > high + POSE_BOUND_ROUNDING):
                 return False
@@ -95,6 +111,28 @@ class SoftLimits(BaseModel):
             return True
         roll, pitch = radians(tool_in_work_mm_deg[3]), radians(tool_in_work_mm_deg[4])
         return not self._beyond_tilt(degrees(acos(max(-1.0, min(1.0, cos(roll) * cos(pitch))))))
+
+    def _way_round(self, axis: int, value: float, side: str) -> tuple[float, float, str]:
+        """A ``value`` read ``side`` ("below", "above") its bounds on ``axis``, against the
+        bound it is nearer: for roll or yaw turned past 180° out of a window up to it, the
+        upper one (read -179 from [170, 180]: 181 above 180, not -179 below 170). As
+        (value, bound, side)."""
+        low, high = self.lower[axis], self.upper[axis]
+        if axis in _TURNING_AXES and low is not None and high is not None:
+            if side == "below" and value + 360.0 - high < low - value:
+                return value + 360.0, high, "above"
+            if side == "above" and low - (value - 360.0) < value - high:
+                return value - 360.0, low, "below"
+        return value, low if side == "below" else high, side
+
+    def _edge(self, axis: int) -> float | None:
+        """How a reading of ±180° on roll or yaw (``axis``) is bounded: one orientation,
+        read 180 or -180 as rounding goes, so 180 if that is within the bounds, else -180
+        if that is, else None (outside either way, as read)."""
+        low, high = self.lower[axis], self.upper[axis]
+        if high is None or high >= _HALF_TURN_READ:
+            return 180.0
+        return -180.0 if low is None or low <= -_HALF_TURN_READ else None
 
     def _beyond_tilt(self, tilt: float) -> bool:
         return self.max_tilt_deg is not None and tilt > self.max_tilt_deg + POSE_BOUND_ROUNDING
@@ -106,6 +144,31 @@ def tilt_deg(poses_mm_deg: NDArray) -> NDArray[np.float64]:
     (:meth:`SoftLimits.allow` has its plain-float copy)."""
     roll, pitch = np.radians(poses_mm_deg[:, 3]), np.radians(poses_mm_deg[:, 4])
     return np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
+
+
+def _angle_window_problem(axis: int, low: Bound, high: Bound) -> str | None:
+    """What is wrong with the bounds of ``axis`` if it is an angle and they reach beyond
+    where it reads, or cross ±180°; None if nothing. An angle is compared as read, so such
+    a window ([170, -170], [175, 185]) would be misread: refused, saying how to write it."""
+    name, beyond = POSE_AXES[axis], max(abs(bound) for bound in (low, high, 0.0) if bound is not None)
+    window = f"{name} [{_text(low)}, {_text(high)}] deg"
+    if name == "pitch" and beyond > 90.0:
+        return f"{window}: pitch reads in [-90, 90] deg: give bounds within it"
+    if axis not in _TURNING_AXES:
+        return None
+    turned = f"turn the work or tool frame by 180 deg about the {name} axis so that the window no longer crosses ±180 deg"
+    if low is not None and high is not None and high < low and beyond <= 180.0:
+        return (f"{window} crosses ±180 deg, which soft limits do not support ({name} reads in [-180, 180] deg): "
+                f"to keep {name} out of it, give [{high:g}, {low:g}]; to keep it within it, {turned} "
+                f"(it then reads [{low - 180:g}, {high + 180:g}])")
+    if beyond > 180.0:
+        return (f"{window}: {name} reads in [-180, 180] deg, so a bound beyond is never reached and a window across "
+                f"±180 deg is not supported: give bounds within [-180, 180] or, to keep {name} around 180 deg, {turned}")
+    return None
+
+
+def _text(bound: Bound) -> str:
+    return "null" if bound is None else f"{bound:g}"
 
 
 NO_SOFT_LIMITS = SoftLimits()

@@ -66,6 +66,8 @@ def test_set_frames_merges_saves_and_clears(framed, tmp_path: Path) -> None:
     ({"soft_limits": {"max_tilt_deg": 95}}, "max_tilt_deg"),
     ({"soft_limits": {"lower": [1, 2, 3, 4, 5, 6], "upper": [0, 2, 3, 4, 5, 6]}}, "below its upper bound"),
     ({"pivot": [0, 0, 300]}, "pivot"),
+    ({"soft_limits": {"lower": [None] * 5 + [170], "upper": [None] * 5 + [-170]}},
+     "soft_limits: yaw [170, -170] deg crosses ±180 deg, which soft limits do not support"),
 ])
 def test_bad_frames_are_refused_naming_the_problem_and_change_nothing(framed, fields, fragment) -> None:
     reply = send(framed, "set_frames", **fields)
@@ -132,6 +134,10 @@ def test_the_command_line_knows_every_frame_the_controller_does() -> None:
     ("tool = [0, 0, 300, 0, 0, 0]\npivot = 1\n", "pivot"),
     ("", "empty (no work, tool or soft_limits)"),  # found from outside: it started the service with no soft limits
     ("# hexactl operator frames\n\n", "empty"),
+    # named as the operator wrote it, not by its place in a list the file does not show (it said upper[5])
+    ('[soft_limits.upper]\nyaw = "5"\n', 'soft_limits.upper.yaw: must be a number, not the string "5"'),
+    ("[soft_limits.lower]\nx = nan\n", "soft_limits.lower.x: must be a finite number"),
+    ("[soft_limits]\nlower = [1, 2, 3, 4, 5, nan]\n", "soft_limits.lower[5]: must be a finite number"),
 ])
 def test_a_frames_file_that_cannot_be_used_is_named_with_the_problem(tmp_path: Path, text, fragment) -> None:
     from hexactl.adapters.files.frames_file import FramesFileError

@@ -210,6 +210,26 @@ def test_a_platform_outside_restored_soft_limits_is_told_how_to_come_back(rig):
     assert rig.controller.move([0, 0, 0, 0, 0, 0]).ok
 
 
+def test_a_tool_mounted_backwards_is_held_in_a_yaw_window_up_to_180(rig):
+    """A tool frame at yaw -180 reads yaw -180 at the zero posture: soft limits yaw
+    [170, 180] were refused there (-180 below 170), the tool inside its window; turned past
+    180 it was said to be below 170, and a jog towards 180 to head for 170."""
+    backwards = OperatorFrames(tool=(0, 0, 300, 0, 0, -180), work=(0, 0, 300, 0, 0, 0),
+                               soft_limits=SoftLimits(lower=(None,) * 5 + (170,), upper=(None,) * 5 + (180,)))
+    assert rig.controller.set_frames(backwards).ok
+    rig.enabled()
+    assert rig.controller.move([0, 0, 0, 0, 0, -5], frame=Frame.WORK, relative=True).ok
+    rig.settle()
+    assert rig.controller.move([0, 0, 0, 0, 0, 5], frame=Frame.WORK, relative=True).ok
+    rig.settle()
+    beyond = rig.controller.validate_pose([0, 0, 0, 0, 0, 1], frame=Frame.WORK, relative=True)
+    assert beyond.error == "path_violation" and "yaw 181.000 deg above the soft limit 180 deg" in beyond.message
+    assert rig.controller.move([0, 0, 0, 0, 0, -5], frame=Frame.WORK, relative=True).ok
+    rig.settle()
+    jog = rig.controller.jog([0, 0, 0, 0, 0, 2], frame=Frame.WORK)  # it said: the soft limit on yaw at 170
+    assert jog.ok and jog.details["end"] == "the soft limit on yaw at 180"
+
+
 def test_a_goal_on_a_soft_limit_is_accepted_whatever_its_path_rounds_to(rig):
     """A goal on a soft bound, with a rotation on the way, was refused: its path's samples
     ended an ulp beyond the bound ("x 50.000 mm above the soft limit 50 mm"). A micrometre

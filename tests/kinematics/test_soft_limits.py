@@ -1,5 +1,7 @@
 """Soft limits: a box per axis and a tilt bound on the tool pose in the work frame."""
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import assume, example, given
@@ -42,6 +44,61 @@ def test_the_tilt_is_the_angle_of_the_tool_z_axis_whatever_the_yaw():
 def test_malformed_soft_limits_are_refused_naming_the_problem(bad, fragment):
     with pytest.raises(ValidationError, match=fragment):
         SoftLimits(**bad)
+
+
+def _on(axis, lower, upper):
+    index = ("roll", "pitch", "yaw").index(axis) + 3
+    return SoftLimits(lower=tuple(lower if n == index else None for n in range(6)),
+                      upper=tuple(upper if n == index else None for n in range(6)))
+
+
+@pytest.mark.parametrize("axis, lower, upper, fragment", [
+    # "anywhere but the back", or "only the back": either way round, it says how to write each
+    ("yaw", 170, -170, "yaw [170, -170] deg crosses ±180 deg, which soft limits do not support (yaw reads in "
+     "[-180, 180] deg): to keep yaw out of it, give [-170, 170]; to keep it within it, turn the work or tool frame by "
+     "180 deg about the yaw axis so that the window no longer crosses ±180 deg (it then reads [-10, 10])"),
+    ("roll", 179, -179, "roll [179, -179] deg crosses ±180 deg"),
+    # the same window written upwards was read as [175, 180], refusing -179; downwards as [-180, -170]
+    ("yaw", 175, 185, "yaw [175, 185] deg: yaw reads in [-180, 180] deg, so a bound beyond is never reached and a "
+     "window across ±180 deg is not supported: give bounds within [-180, 180] or, to keep yaw around 180 deg, turn the "
+     "work or tool frame by 180 deg about the yaw axis"),
+    ("yaw", -190, -170, "yaw [-190, -170] deg: yaw reads in [-180, 180] deg"),
+    ("roll", None, 181, "roll [null, 181] deg: roll reads in [-180, 180] deg"),
+    ("pitch", -95, None, "pitch [-95, null] deg: pitch reads in [-90, 90] deg: give bounds within it"),
+])
+def test_a_window_across_180_degrees_is_refused_naming_the_axis_and_how_to_write_it(axis, lower, upper, fragment):
+    # Angles are compared as read, in [-180, 180]: such a window was taken as another one
+    # ([175, 185] allowed 179 and refused -179, 2 deg from it) or refused as unordered.
+    with pytest.raises(ValidationError, match=re.escape(fragment)):
+        _on(axis, lower, upper)
+
+
+def test_angle_windows_up_to_180_degrees_name_the_bound_turned_past():
+    # -175 read from [170, 180] is 5 deg past 180: it was "-175 below the soft limit 170",
+    # and a jog towards 180 said it was heading for the limit at 170.
+    assert _on("yaw", -180, 180).violations([[0] * 5 + [180], [0] * 5 + [-180]]) == [[], []]
+    (inside, past_180, below) = _on("yaw", 170, 180).violations([[0] * 5 + [175], [0] * 5 + [-175], [0] * 5 + [160]])
+    assert inside == [] and (past_180[0].value, past_180[0].limit) == (185.0, 180)
+    assert past_180[0].message == "yaw 185.000 deg above the soft limit 180 deg"
+    assert below[0].message == "yaw 160.000 deg below the soft limit 170 deg"
+    (past_minus_180,) = _on("roll", -180, -170).violations([[0] * 3 + [178, 0, 0]])
+    assert past_minus_180[0].message == "roll -182.000 deg below the soft limit -180 deg"
+    assert _on("pitch", -90, 90).violations([[0] * 4 + [90, 0]]) == [[]]
+
+
+@pytest.mark.parametrize("axis", ["roll", "yaw"])
+def test_an_angle_read_at_minus_180_is_the_180_a_window_up_to_180_holds(axis):
+    # One orientation reads 180 or -180 as rounding goes (a tool frame at yaw -180 reads
+    # -180 at the zero posture): it was refused as below 170, the tool in its window.
+    index = ("roll", "pitch", "yaw").index(axis) + 3
+    at = [[0.0] * 6, [0.0] * 6]
+    at[0][index], at[1][index] = -180.0, 180.0
+    for limits in (_on(axis, 170, 180), _on(axis, -180, -170), _on(axis, 170, None), _on(axis, None, -170)):
+        assert limits.violations(at) == [[], []]
+        assert limits.allow(at[0]) and limits.allow(at[1])
+    (beyond,) = _on(axis, -10, 10).violations(at[:1])
+    assert beyond[0].message == f"{axis} -180.000 deg below the soft limit -10 deg"
+    assert not _on(axis, -10, 10).allow(at[1])
 
 
 @given(st.lists(poses, min_size=1, max_size=20), poses, poses)

@@ -173,6 +173,15 @@ def test_the_page_loads_with_no_console_error_and_draws_the_services_setpoints(r
     rig.scenario(scenario)
 
 
+def test_the_telemetry_poses_say_their_frame_and_units(rig) -> None:
+    """The pose table said x … yaw and command, measured, goal: not in which units, nor
+    that the first three are the platform's relative to the zero posture, as a move in
+    the zero frame takes them, and the last the tool's in the work frame."""
+    assert rig.shown("#pose-table caption").text == (
+        "mm and °; command, measured, goal: the platform relative to the zero posture (frame zero); tool: its pose "
+        "in the work frame")
+
+
 def test_enable_then_a_validated_move_moves_the_simulated_platform(rig) -> None:
     def scenario() -> None:
         rig.enabled_from_the_page()

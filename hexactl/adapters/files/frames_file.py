@@ -55,6 +55,7 @@ def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
         raise FramesFileError(f"{location}: empty (no work, tool or soft_limits): the file lost its content, and "
                               "with it perhaps the operator's soft limits")
     limits = data.get("soft_limits")
+    tables = []
     if isinstance(limits, dict):
         for side in ("lower", "upper"):
             if isinstance(bounds := limits.get(side), dict):
@@ -63,10 +64,15 @@ def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
                     raise FramesFileError(f"{location}: soft_limits.{side}: unknown axis {', '.join(unknown)}; the "
                                           f"axes are {', '.join(POSE_AXES)}")
                 limits[side] = [bounds.get(axis) for axis in POSE_AXES]
+                tables.append(side)
     try:
         return OperatorFrames.model_validate(data)
     except ValidationError as error:
-        raise FramesFileError(describe_validation_error(error, str(location))) from None
+        described = describe_validation_error(error, str(location))
+        for side in tables:  # named as written, [soft_limits.upper] yaw = …, not by its place in the list
+            for index, axis in enumerate(POSE_AXES):
+                described = described.replace(f": soft_limits.{side}[{index}]: ", f": soft_limits.{side}.{axis}: ")
+        raise FramesFileError(described) from None
 
 
 def frames_to_toml(frames: OperatorFrames) -> str:
