@@ -74,26 +74,46 @@ def test_threaded_runner_serves_a_link_in_the_same_process(nominal, truth):
     assert [firmware.position_um / 1000 for firmware in runner.firmwares] == pytest.approx(start, abs=0.001)
 
 
+WATCHDOG_CYCLES = 50
+ATTEMPTS = 3
+
+
 def test_a_stalled_runner_replays_queued_set_points_at_their_arrival_times(nominal, truth):
     """The runner's thread held up for 2.5 watchdog periods while the controller keeps
     sending: the firmwares must see the set-points when they arrived, not trip their
     watchdog as if the controller had stopped. (A 50-cycle watchdog, so that this test's
-    own sender may hiccup on a loaded machine.)"""
-    spec = "virtual:hexactl-stalled-runner"
+    own sender may hiccup on a loaded machine; an attempt in which it was itself held up
+    for a watchdog period says nothing of the runner and is made again.)"""
+    for attempt in range(1, ATTEMPTS + 1):
+        states, faults, longest_gap_s = _stalled_runner(nominal, truth, f"virtual:hexactl-stalled-runner-{attempt}")
+        if longest_gap_s < WATCHDOG_CYCLES / 500:
+            break
+        print(f"attempt {attempt}: this test's sender was held up {longest_gap_s:.3f} s, a watchdog period")
+    else:
+        pytest.fail(f"this test's sender was held up past the watchdog in each of {ATTEMPTS} attempts")
+    assert states == {ActuatorState.ENABLED}
+    assert faults == [0] * 6  # read while the set-points still came: after, the watchdog trips by design
+
+
+def _stalled_runner(nominal, truth, spec: str) -> tuple[set[ActuatorState], list[int], float]:
+    """One run: the actuators' states and fault words just after the stall, and the longest
+    gap between two of this test's set-point sends while enabled, s."""
     start = zero_posture_readings_mm(truth)
     runner = ActuatorBus(open_bus(spec), make_firmwares(start, actuator_params_for(nominal))).start()
     try:
-        with CanActuatorLink.open(spec, LinkConfig(watchdog_cycles=50)) as link:
+        with CanActuatorLink.open(spec, LinkConfig(watchdog_cycles=WATCHDOG_CYCLES)) as link:
             wait_for(link, lambda s: all(link.node_status(leg).protocol_version == 1 for leg in range(1, 7)),
                      "heartbeats")
             assert link.send_command(None, ActuatorCommand.ENABLE)
             counter = 0
+            sent_at: list[float] = []
 
             def send_cycles(seconds: float) -> None:
                 nonlocal counter
                 end = time.monotonic() + seconds
                 while time.monotonic() < end:
                     link.send_setpoints(counter, start)
+                    sent_at.append(time.monotonic())
                     counter += 1
                     time.sleep(0.002)
 
@@ -101,14 +121,16 @@ def test_a_stalled_runner_replays_queued_set_points_at_their_arrival_times(nomin
             while not all(a.state is ActuatorState.ENABLED for a in link.read_feedback().actuators):
                 assert time.monotonic() < end, "ENABLED"
                 send_cycles(0.01)
+            enabled = len(sent_at)
             with runner._lock:  # what a GIL or scheduler stall does to the runner's thread
                 send_cycles(0.25)
             send_cycles(0.05)
             states = {a.state for a in link.read_feedback().actuators}
+            faults = [int(firmware.faults) for firmware in runner.firmwares]
     finally:
         runner.close()
-    assert states == {ActuatorState.ENABLED}
-    assert all(firmware.faults == 0 for firmware in runner.firmwares)
+    times = sent_at[enabled - 1:]
+    return states, faults, max(b - a for a, b in zip(times, times[1:]))
 
 
 class BatchingBus(can.BusABC):
