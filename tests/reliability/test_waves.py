@@ -16,6 +16,11 @@ from hexactl.kinematics.axes import RelativeMmRad
 from tests.api.test_service import WAIT_S, status, wait_for
 from tests.reliability.support import RATE_HZ, recover, tolerating_loop_stalls
 
+ABORTED_CYCLES = 30
+"""The wave the abort test ends: three requests go between its steady phase and the abort,
+and a host that holds them up for seconds must not let the wave finish first (6 cycles,
+at 1 Hz, left about 4 s for them)."""
+
 WAVE = {"axes": {"z": {"amplitude": 2.0}, "roll": {"amplitude": 0.2, "phase_deg": 90}}, "frequency_hz": 1.0,
         "cycles": 3}
 
@@ -47,7 +52,7 @@ def test_a_wave_plays_every_phase_and_ends_at_rest_where_it_started(client: Hexa
 def test_abort_mid_wave_brakes_to_rest_and_a_pause_is_refused(client: HexactlClient, service) -> None:
     def scenario() -> None:
         recover(client)
-        client.call("wave", **{**WAVE, "cycles": 6})
+        client.call("wave", **{**WAVE, "cycles": ABORTED_CYCLES})  # long: the abort comes mid-wave on a busy host too
         wait_for(lambda: (status(client)["wave"] or {}).get("phase") == "steady", "the steady phase")
         with pytest.raises(CommandError) as paused:
             client.call("pause")
@@ -58,7 +63,7 @@ def test_abort_mid_wave_brakes_to_rest_and_a_pause_is_refused(client: HexactlCli
         client.call("abort")
         wait_for(lambda: status(client)["motion"] == "holding", "the halt")
         final = status(client)
-        assert final["wave"]["phase"] == "aborted" and final["wave"]["cycle"] < 6
+        assert final["wave"]["phase"] == "aborted" and final["wave"]["cycle"] < ABORTED_CYCLES
         assert final["loop"]["guard_clamps"] == 0
 
     tolerating_loop_stalls(scenario, lambda: service.controller, cleanup=lambda: recover(client))

@@ -28,11 +28,11 @@ MOVE_ATTEMPTS = 3
 """How many times :meth:`PlatformDriver.move` sends a move that the API answered with
 ``loop_timeout`` (the loop's verdict came too late for it, on a loaded host): the move may
 or may not have run, so the driver waits for rest and sends it again (a move to where the
-platform already is ends at once), or ``loop_silent`` (the loop's process was held up past
-a second: not sent), once the loop reports again; likewise a move the service braked short of its goal
-by itself when its API fell silent (``command_link_silent``, a loaded host). Any command
-refused ``expired`` (its deadline passed in the loop's queue, on a loaded host: not
-carried out) is sent again as often."""
+platform already is ends at once). Likewise a move answered ``loop_silent`` (the loop's
+process held up past a second: not sent), once the loop reports again, and a move the
+service braked short of its goal by itself when its API fell silent
+(``command_link_silent``, a loaded host). Any command refused ``expired`` (its deadline
+passed in the loop's queue, on a loaded host: not carried out) is sent again as often."""
 
 _LATE = ("loop_timeout", "loop_silent", "expired")
 
