@@ -291,9 +291,16 @@ class Service:
         frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
         kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
 
+        kept_files = ((kept_path, "the calibration in force", "--keep-calibration"),
+                      (frames_path, "the operator's frames", "--frames"))
+        for path, what, option in kept_files:
+            if not path.parent.is_dir():  # a mistyped directory: nothing could be kept there, nor read back
+                raise ServiceError(f"{option} {path}: no such directory {path.parent} to keep {what} in; create it, "
+                                   f"or correct {option}")
+
         # Unwound in reverse: API, bring to rest, telemetry, loop, link, simulator, the kept files.
         with ExitStack() as closers:
-            for path, what in ((kept_path, "the calibration in force"), (frames_path, "the operator's frames")):
+            for path, what, _ in kept_files:
                 try:  # before they are read, and before the actuators open
                     closers.callback(hold(path, what).release)
                 except HeldByAnother as error:
@@ -715,7 +722,7 @@ def _restored_frames(path: Path) -> OperatorFrames:
         start without the soft limits its operator set
     """
     if not path.exists():
-        log.info("no operator frames saved in %s: none set", path)
+        log.info("no operator frames saved in %s: none set, no soft limits", path)
         return OperatorFrames()
     try:
         frames = load_frames(path)
@@ -740,7 +747,7 @@ def _start_calibration(calibration_path: Path | None, kept_path: Path, nominal: 
     remedy = (f"\n{kept_path} keeps the calibration in force when the service last ran: give --calibration FILE, "
               "or remove the file to start on the nominal geometry")
     if not kept_path.exists():
-        log.info("no calibration: the nominal geometry is active")
+        log.info("no calibration kept in %s: the nominal geometry is active", kept_path)
         return nominal, str(config_path), ""
     try:
         active, source = restore_calibration(kept_path)

@@ -207,6 +207,27 @@ def test_an_empty_path_is_refused_naming_the_option(option, capsys) -> None:
     assert f"argument {option}: an empty path: name a file or folder (an unset shell variable?)" in error, error
 
 
+def test_a_named_kept_file_not_there_yet_is_said_at_the_start(tmp_path, monkeypatch, capsys) -> None:
+    """A mistyped ``--frames`` name started the service with no soft limits, said only in
+    an INFO line among the start's; a new file is legitimate (the first start), so it is
+    said, not refused. With ``--calibration`` the kept calibration is not read: nothing to say."""
+    from hexactl.application import service
+
+    monkeypatch.setattr(service, "run_service", lambda config: 0)
+    frames, kept, calibration = tmp_path / "frams.toml", tmp_path / "kept.toml", tmp_path / "cal.toml"
+    assert exits_with(["serve", "--frames", str(frames), "--keep-calibration", str(kept)]) == 0
+    error = capsys.readouterr().err
+    assert (f"hexactl serve: --frames {frames}: no such file yet: starting with no frames and no soft limits "
+            "(set_frames keeps them there); if you meant another file, stop the service and correct the name") in error
+    assert (f"hexactl serve: --keep-calibration {kept}: no such file yet: starting with the nominal geometry "
+            "(a calibration loaded is kept there)") in error
+    assert exits_with(["serve", "--keep-calibration", str(kept), "--calibration", str(calibration)]) == 0
+    assert "no such file yet" not in capsys.readouterr().err
+    frames.write_text("")
+    assert exits_with(["serve", "--frames", str(frames)]) == 0
+    assert "no such file yet" not in capsys.readouterr().err
+
+
 def test_an_empty_config_is_refused_by_every_command_that_reads_one(capsys) -> None:
     assert exits_with(["check", "--config", "", "0,0,0,0,0,0"]) == 2
     assert "argument --config: an empty path" in capsys.readouterr().err

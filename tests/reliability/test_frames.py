@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
-from hexactl.application.service import Service, ServiceConfig
+from hexactl.application.service import Service, ServiceConfig, ServiceError
 from tests.api.test_service import WAIT_S, status, wait_for
 from tests.reliability.support import LOCAL, recover, tolerating_loop_stalls
 
@@ -108,3 +108,25 @@ def test_frames_survive_a_restart_and_a_damaged_file_refuses_the_start(tmp_path:
     frames_path.write_text("tool = [0, 0, 300]\n")
     with pytest.raises(Exception, match=r"frames.toml: tool: .*six numbers.*\nfix the file, or remove it"):
         _service(frames_path, tmp_path)
+
+
+@pytest.mark.parametrize(("option", "field", "what"), [
+    ("--frames", "frames_path", "the operator's frames"),
+    ("--keep-calibration", "kept_calibration_path", "the calibration in force"),
+])
+def test_a_kept_file_in_a_directory_that_is_not_there_refuses_the_start(option: str, field: str, what: str,
+                                                                         tmp_path: Path) -> None:
+    """A mistyped directory started the service with no soft limits (or on the nominal
+    geometry), logged at INFO, and nothing set afterwards could be kept there."""
+    mistyped = tmp_path / "typo" / "kept.toml"
+    config = ServiceConfig(api_endpoint=LOCAL, telemetry_endpoint=LOCAL, data_dirs=(tmp_path,), log_level="WARNING",
+                           **{field: mistyped})
+    try:
+        started = Service.start(config)
+    except ServiceError as error:
+        assert str(error) == (f"{option} {mistyped}: no such directory {mistyped.parent} to keep {what} in; create "
+                              f"it, or correct {option}")
+    else:
+        started.close()
+        pytest.fail(f"the service started with {option} in a directory that is not there")
+    assert not mistyped.parent.exists()

@@ -411,6 +411,15 @@ def run_serve(arguments: argparse.Namespace) -> int:
         if directory.exists() and not directory.is_dir():
             raise CliError(f"--data-dir {directory}: {'is a file' if directory.is_file() else 'exists'}, not a "
                            "directory: give a directory")
+    restored = [("--frames", arguments.frames, "no frames and no soft limits (set_frames keeps them there)")]
+    if arguments.calibration is None:  # else the kept calibration is not read at start
+        restored.append(("--keep-calibration", arguments.keep_calibration,
+                         "the nominal geometry (a calibration loaded is kept there)"))
+    for option, named, what in restored:
+        if named is not None and named.parent.is_dir() and not named.exists():  # a missing directory refuses the start
+            # The first start with a new file is legitimate; a mistyped name must not pass unseen.
+            print(f"hexactl serve: {option} {named}: no such file yet: starting with {what}; if you meant another "
+                  "file, stop the service and correct the name", file=sys.stderr)
     curve = CurveServerKeys(arguments.curve_secret, arguments.curve_clients) if arguments.curve_secret else None
     config = ServiceConfig(
         config_path=arguments.config,
