@@ -85,11 +85,10 @@ class SoftLimits(BaseModel):
                                                          (self.upper, "above", np.greater, np.inf, POSE_BOUND_ROUNDING)):
             limits = np.array([open_end if bound is None else bound + rounding for bound in bounds])
             for n, axis in zip(*np.nonzero(broken(poses, limits))):
-                value, limit, past = self._way_round(axis, float(poses[n, axis]), side)
-                found[n].append(Violation(
-                    ViolationKind.SOFT_LIMIT, value, limit,
-                    f"{POSE_AXES[axis]} {value:.3f} {POSE_UNITS[axis]} {past} the soft limit {limit:g} {POSE_UNITS[axis]}",
-                    axis=POSE_AXES[axis]))
+                value, limit, passed = self._way_round(axis, float(poses[n, axis]), side)
+                found[n].append(Violation(ViolationKind.SOFT_LIMIT, value, limit,
+                                          f"{POSE_AXES[axis]} {value:.3f} {POSE_UNITS[axis]} {passed}",
+                                          axis=POSE_AXES[axis]))
         if self.max_tilt_deg is not None:
             for n, tilt in enumerate(tilt_deg(poses)):
                 if self._beyond_tilt(tilt):
@@ -115,15 +114,24 @@ class SoftLimits(BaseModel):
     def _way_round(self, axis: int, value: float, side: str) -> tuple[float, float, str]:
         """A ``value`` read ``side`` ("below", "above") its bounds on ``axis``, against the
         bound it is nearer: for roll or yaw turned past 180° out of a window up to it, the
-        upper one (read -179 from [170, 180]: 181 above 180, not -179 below 170). As
-        (value, bound, side)."""
+        upper one (read -179 from [170, 180]: 181 above 180, not -179 below 170). A window
+        open on one side ends there at ±180, where the angle reads to: read -179 from
+        [170, null] is 181 above 180 too. As (value, bound, what it passed)."""
         low, high = self.lower[axis], self.upper[axis]
-        if axis in _TURNING_AXES and low is not None and high is not None:
-            if side == "below" and value + 360.0 - high < low - value:
-                return value + 360.0, high, "above"
-            if side == "above" and low - (value - 360.0) < value - high:
-                return value - 360.0, low, "below"
-        return value, low if side == "below" else high, side
+        bound = low if side == "below" else high
+        if axis in _TURNING_AXES:
+            low_end, high_end = -180.0 if low is None else low, 180.0 if high is None else high
+            if side == "below" and value + 360.0 - high_end < low - value:
+                value, bound, side = value + 360.0, high_end, "above"
+            elif side == "above" and low_end - (value - 360.0) < value - high:
+                value, bound, side = value - 360.0, low_end, "below"
+        name, unit = POSE_AXES[axis], POSE_UNITS[axis]
+        if bound in (low, high):
+            return value, bound, f"{side} the soft limit {bound:g} {unit}"
+        up = side == "above"  # past the open side's end, not a bound the operator set
+        return value, bound, (f"{side} {bound:g} {unit}: {name} reads {'up' if up else 'down'} to {bound:g} {unit}, "
+                              f"so its soft window {'from' if up else 'up to'} {low if up else high:g} {unit} ends "
+                              "there")
 
     def _edge(self, axis: int) -> float | None:
         """How a reading of ±180° on roll or yaw (``axis``) is bounded: one orientation,
