@@ -364,6 +364,23 @@ def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
 
 
 
+def test_a_recording_downloads_by_its_name_and_nothing_else_does(rig) -> None:
+    """The page's download link: a recording as ``record`` named it, with ``.csv``; any other
+    name is refused before the service is asked (the name rule is the API's, in one place)."""
+    from urllib.error import HTTPError
+
+    rig.client.call("record", name="board.download", duration_s=0.2, signals=["setpoints"])
+    wait_for(lambda: rig.client.call("record_status")["state"] == "done", "the recording written")
+    with urlopen(f"{rig.board.url}recordings/board.download.csv", timeout=30) as answer:
+        assert answer.headers["Content-Disposition"] == 'attachment; filename="board.download.csv"'
+        assert answer.read() == (rig.directory / "recordings" / "board.download.csv").read_bytes()
+    for name in ("board.download.json", ".hidden.csv", "-rf.csv", "x" * 101 + ".csv", "a%20b.csv"):
+        with pytest.raises(HTTPError) as refused:
+            urlopen(f"{rig.board.url}recordings/{name}", timeout=30)
+        assert refused.value.code == 400, name
+        assert refused.value.read().decode().endswith(": not a recording's name (NAME.csv, as given to record)")
+
+
 def test_pages_are_sent_one_uncompressed_text_per_record(rig) -> None:
     """The cost of a record is one serialisation for all pages (found from outside: 400
     idle pages held a new page's E-stop back 0.6–0.9 s while the dashboard serialised and

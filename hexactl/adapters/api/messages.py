@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal, Union, get_args
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
 
-from hexactl.adapters.api.protocol import MAX_DEADLINE_MS
+from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, RECORDING_NAME_PATTERN
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
@@ -61,8 +61,8 @@ def _text_matching(pattern: str, rule: str) -> Any:
     return Annotated[str, AfterValidator(check), Field(json_schema_extra={"pattern": pattern})]
 
 
-RecordingName = _text_matching(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$", "a recording's name is 1 to 100 letters, digits, "
-                               "'.', '_' or '-', starting with a letter or digit (no directory; .csv and .json are added)")
+RecordingName = _text_matching(RECORDING_NAME_PATTERN, "a recording's name is 1 to 100 letters, digits, '.', '_' or "
+                               "'-', starting with a letter or digit (no directory; .csv and .json are added)")
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
 
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]

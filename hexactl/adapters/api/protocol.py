@@ -1,6 +1,6 @@
 """What the service and its clients agree on, without the models: the protocol version,
 the default endpoints, how a client names itself, the telemetry topic and rate, the bound
-on ``deadline_ms``, how long a client waits for an answer by default.
+on ``deadline_ms``, how long a client waits for an answer by default, a recording's name.
 
 Standard library only: a client (``hexactl status``, ``move``, …) imports this and not
 the pydantic models (:mod:`~hexactl.adapters.api.messages`), so that it starts fast.
@@ -30,6 +30,10 @@ names, and a service with any client."""
 
 MAX_CLIENT_NAME = 64
 """The most characters of a client's name the service keeps."""
+
+RECORDING_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$"
+"""A recording's name, as ``record`` takes it (``.csv`` and ``.json`` are added): here
+for the dashboard's download route too, which must not import the models."""
 
 
 def default_client_name() -> str:

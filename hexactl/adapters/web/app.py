@@ -33,6 +33,7 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
+from hexactl.adapters.api.protocol import RECORDING_NAME_PATTERN
 from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply
 
 MAX_MESSAGE_BYTES = 64 * 1024
@@ -44,9 +45,6 @@ MAX_COMMANDS_IN_FLIGHT = 16
 MAX_READ_AHEAD = 64
 """Commands one page may have waiting, ``estop``, ``stop`` and ``abort`` included (never
 answered ``busy``), before its next message is read only once one is answered."""
-
-RECORDING_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv$")
-"""A downloadable recording: the ``record`` command's name rule, with ``.csv``."""
 
 DOWNLOAD_CHUNK_BYTES = 1024 * 1024
 
@@ -66,7 +64,7 @@ def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlett
 
     async def download(request: Request) -> Response:
         name = request.path_params["name"]
-        if not RECORDING_NAME.fullmatch(name):
+        if not (name.endswith(".csv") and re.fullmatch(RECORDING_NAME_PATTERN, name.removesuffix(".csv"))):
             return PlainTextResponse(f"{name}: not a recording's name (NAME.csv, as given to record)", status_code=400)
         first = await bridge.command("read_file", {"path": name, "offset": 0, "length": DOWNLOAD_CHUNK_BYTES})
         if not first.get("ok"):
