@@ -12,6 +12,7 @@ const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
 const STALE_MS = 2000;        // no telemetry for longer: nothing on the page is shown as current
 const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S)
+const OTHER_CONTROLLER_WINDOW_S = 1.0;  // another controller heard this recently drives the actuators (control/results.py's)
 const TICK_MS = 250;          // the staleness check and the "no data for N s" count
 const pageStartedAt = performance.now();
 
@@ -277,6 +278,20 @@ function updateFaults(faults) {
   }
 }
 
+// Another controller heard on the bus (telemetry's other_controller): it drives these actuators too.
+function updateOtherController(heard) {
+  const valid = heard !== null && typeof heard === 'object' && typeof heard.age_s === 'number';
+  const el = $('other-controller');
+  el.hidden = !valid;
+  if (!valid) return;
+  const now = heard.age_s <= OTHER_CONTROLLER_WINDOW_S;
+  el.classList.toggle('now', now);
+  setText('other-controller', now
+    ? `ANOTHER CONTROLLER on the bus: ${heard.frame} heard ${fmt(heard.age_s, 2)} s ago. It drives these actuators too; `
+      + 'Enable is refused until it stops (candump on the CAN interface shows it).'
+    : `another controller last heard on the bus ${fmt(heard.age_s, 0)} s ago (${heard.frame})`);
+}
+
 const poseRows = $('pose-table').tBodies[0].rows;
 const legRows = $('leg-table').tBodies[0].rows;
 const cellCache = new Map();
@@ -320,6 +335,7 @@ function updateReadouts(r) {
   $('calibration-id').title = geomId && r.calibration_id && geomId !== r.calibration_id
     ? `the telemetry's calibration ${r.calibration_id} differs from the drawn geometry's ${geomId}` : (state.geometry?.name ?? '');
   updateFaults(r.faults);
+  updateOtherController(r.other_controller);
 
   const loop = r.loop && typeof r.loop === 'object' ? r.loop : null;
   setText('loop-summary', loop
