@@ -8,6 +8,7 @@ the zero posture inside the actuator stroke. Units: mm and degrees, as in the fi
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from functools import cached_property
 from itertools import combinations
 from typing import Annotated
@@ -278,13 +279,20 @@ def _numeric(text: str) -> bool:
     return True
 
 
-def describe_validation_error(error: ValidationError, source: str) -> str:
-    """One line per problem, ``source: key[index]: message``, for people rather than parsers."""
+def describe_validation_error(error: ValidationError, source: str,
+                              named_items: Mapping[str, Sequence[str]] | None = None) -> str:
+    """One line per problem, ``source: key[index]: message``, for people rather than parsers.
+    ``named_items``: for a list its file writes as a table (``soft_limits.upper`` → the axes),
+    the names of its items, so that one is named as written (``soft_limits.upper.yaw``)."""
     lines = []
     for problem in error.errors():
         location = ""
         for part in problem["loc"]:
-            location += f"[{part}]" if isinstance(part, int) else (f".{part}" if location else str(part))
+            if isinstance(part, int):
+                names = (named_items or {}).get(location, ())
+                location += f".{names[part]}" if part < len(names) else f"[{part}]"
+            else:
+                location += f".{part}" if location else str(part)
         message = problem["msg"].removeprefix("Value error, ")
         if problem["type"] == "finite_number":
             message = "must be a finite number (NaN and inf are refused)"

@@ -68,11 +68,9 @@ def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
     try:
         return OperatorFrames.model_validate(data)
     except ValidationError as error:
-        described = describe_validation_error(error, str(location))
-        for side in tables:  # named as written, [soft_limits.upper] yaw = …, not by its place in the list
-            for index, axis in enumerate(POSE_AXES):
-                described = described.replace(f": soft_limits.{side}[{index}]: ", f": soft_limits.{side}.{axis}: ")
-        raise FramesFileError(described) from None
+        # A bound is named as written, [soft_limits.upper] yaw = …, not by its place in the list.
+        raise FramesFileError(describe_validation_error(
+            error, str(location), {f"soft_limits.{side}": POSE_AXES for side in tables})) from None
 
 
 def frames_to_toml(frames: OperatorFrames) -> str:
