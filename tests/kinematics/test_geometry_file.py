@@ -84,6 +84,15 @@ def _set(path, value):
         (_set(["limits", "leg_velocity_mm_s"], "100"), r"limits.leg_velocity_mm_s: must be a number"),
         (_set(["limits", "stroke", 1], False), r"limits.stroke\[1\]: must be a number, not false"),
         (_set(["home", 0], "0"), r"home\[0\]: must be a number"),
+        # Limits the CAN frames cannot carry: the loop would plan and start a move, then fail
+        # to encode its set-points mid-motion (FAULT, legs stopped wherever they were).
+        (_set(["limits", "stroke"], [0.0, 850000.0]),  # µm written for mm
+         r"limits.stroke: \[0.0, 850000.0\] mm reaches beyond the set-points the actuators' CAN frames carry "
+         r"\(-8388.608 to 8388.607 mm, firmware_proto/PROTOCOL.md section 3\): it is in mm"),
+        (_set(["limits", "stroke"], [-9000.0, 850.0]), r"limits.stroke: \[-9000.0, 850.0\] mm reaches beyond"),
+        (_set(["limits", "leg_velocity_mm_s"], 24000.0),  # mm/min written for mm/s
+         r"limits.leg_velocity_mm_s: 24000 mm/s is beyond the speeds the actuators' feedback carries \(3276.7 mm/s, "
+         r"firmware_proto/PROTOCOL.md section 3\): it is in mm/s"),
         (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60,
                                 "residual_rms_mm": 0.02, "zero_lengths_std_mm": [0.01, 0.01, -0.01, 0.01, 0.01, 0.01]}),
          r"calibration.zero_lengths_std_mm: a standard deviation cannot be negative, got -0.01: the file was edited"),
