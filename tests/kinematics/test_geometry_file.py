@@ -72,6 +72,10 @@ def _set(path, value):
         (_set(["limits", "stroke"], [0.0, 100.0]), r"limits.stroke: leg 1 needs sensor reading .* outside the stroke"),
         (_set(["limits", "stroke"], [500.0, 100.0]), r"stroke: min 500.0 must be below max 100.0"),
         (_set(["limits", "pose_min", 0], 10.0), r"x range \[10.0, 610.0\] must contain the zero posture"),
+        # a threshold below the zero posture's own conditioning refuses every move, the way home too
+        (_set(["limits", "max_jacobian_condition"], 5.0),
+         r"limits.max_jacobian_condition: the zero posture's Jacobian condition is 7.6, above this limit of 5: every "
+         r"pose near it would be refused as near-singular"),
         (_set(["zero_lengths", 0], -5.0), r"zero_lengths: leg 1 has non-positive zero length"),
         (_set(["measurement", "feature_points"], [[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]]), r"collinear"),
         (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: Extra inputs are not permitted"),
