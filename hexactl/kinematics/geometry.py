@@ -193,8 +193,10 @@ class Geometry(_Strict):
         for key in ("base_joints", "platform_joints"):
             joints = getattr(self, key)
             for i, j in combinations(range(6), 2):
-                if np.linalg.norm(np.subtract(joints[i], joints[j])) < MIN_JOINT_SEPARATION_MM:
-                    raise ValueError(f"{key}: joints {i + 1} and {j + 1} coincide")
+                if (distance := np.linalg.norm(np.subtract(joints[i], joints[j]))) < MIN_JOINT_SEPARATION_MM:
+                    raise ValueError(f"{key}: joints {i + 1} and {j + 1} coincide ({distance:.3f} mm apart, less than "
+                                     f"{MIN_JOINT_SEPARATION_MM:g} mm): two legs on one joint is a typing error; "
+                                     "coordinates are in mm, not metres")
         for i, length in enumerate(self.zero_lengths):
             if length <= 0:
                 raise ValueError(f"zero_lengths: leg {i + 1} has non-positive zero length {length}")

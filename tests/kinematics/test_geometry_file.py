@@ -69,6 +69,10 @@ def _set(path, value):
         (_set(["zero_lengths", 3], float("nan")), r"zero_lengths\[3\]: must be a finite number"),
         (_set(["home", 2], float("inf")), r"home\[2\]: must be a finite number"),
         (_set(["base_joints", 1], [1448.889, -388.229, 0.0]), r"base_joints: joints 1 and 2 coincide"),
+        # every length in metres: the joints end up a fraction of a "mm" apart
+        (lambda d: d.update({key: [[v / 1000.0 for v in joint] for joint in d[key]]
+                             for key in ("base_joints", "platform_joints")}),
+         r"base_joints: joints 1 and 2 coincide \(0.776 mm apart, less than 1 mm\): .* in mm, not metres"),
         (_set(["limits", "stroke"], [0.0, 100.0]), r"limits.stroke: leg 1 needs sensor reading .* outside the stroke"),
         (_set(["limits", "stroke"], [500.0, 100.0]), r"stroke: min 500.0 must be below max 100.0"),
         (_set(["limits", "pose_min", 0], 10.0), r"x range \[10.0, 610.0\] must contain the zero posture"),
