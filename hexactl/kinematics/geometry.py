@@ -209,9 +209,11 @@ class Geometry(_Strict):
         low, high = self.limits.stroke
         for i, reading in enumerate(self.zero_readings_mm()):
             if not low <= reading <= high:
+                shown = f"{reading:.3f}" if abs(reading) < 1e6 else f"{reading:.3g}"  # not 300 digits of a typo's 1e300
                 raise ValueError(
-                    f"limits.stroke: leg {i + 1} needs sensor reading {reading:.3f} mm in the zero "
-                    f"posture, outside the stroke [{low}, {high}]"
+                    f"limits.stroke: leg {i + 1} needs sensor reading {shown} mm in the zero posture, outside the "
+                    f"stroke [{low}, {high}]: check the stroke, and zero_lengths[{i}], base_joints[{i}], "
+                    f"platform_joints[{i}] and home (mm, deg)"
                 )
         jacobian, _ = twist_jacobian(self.legs, self.home.in_radians())
         condition = float(scaled_conditions(jacobian[None], self.characteristic_length_mm)[0])

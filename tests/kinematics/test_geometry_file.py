@@ -74,6 +74,11 @@ def _set(path, value):
                              for key in ("base_joints", "platform_joints")}),
          r"base_joints: joints 1 and 2 coincide \(0.776 mm apart, less than 1 mm\): .* in mm, not metres"),
         (_set(["limits", "stroke"], [0.0, 100.0]), r"limits.stroke: leg 1 needs sensor reading .* outside the stroke"),
+        # the stroke is named, but a typo in the leg's own values is as likely: both are said
+        (_set(["zero_lengths", 2], 17500.0),
+         r"limits.stroke: leg 3 needs sensor reading -15390.023 mm in the zero posture, outside the stroke \[0.0, 850.0\]: "
+         r"check the stroke, and zero_lengths\[2\], base_joints\[2\], platform_joints\[2\] and home \(mm, deg\)$"),
+        (_set(["zero_lengths", 0], 1e300), r"leg 1 needs sensor reading -1e\+300 mm in the zero posture"),
         (_set(["limits", "stroke"], [500.0, 100.0]), r"stroke: min 500.0 must be below max 100.0"),
         (_set(["limits", "pose_min", 0], 10.0), r"x range \[10.0, 610.0\] must contain the zero posture"),
         # a threshold below the zero posture's own conditioning refuses every move, the way home too
