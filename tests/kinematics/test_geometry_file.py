@@ -97,12 +97,15 @@ def _set(path, value):
         (_set(["limits", "leg_velocity_mm_s"], "100"), r"limits.leg_velocity_mm_s: must be a number"),
         (_set(["limits", "stroke", 1], False), r"limits.stroke\[1\]: must be a number, not false"),
         (_set(["home", 0], "0"), r"home\[0\]: must be a number"),
-        # Limits the CAN frames cannot carry: the loop would plan and start a move, then fail
-        # to encode its set-points mid-motion (FAULT, legs stopped wherever they were).
-        (_set(["limits", "stroke"], [0.0, 850000.0]),  # µm written for mm
-         r"limits.stroke: \[0.0, 850000.0\] mm reaches beyond the set-points the actuators' CAN frames carry "
-         r"\(-8388.608 to 8388.607 mm, firmware_proto/PROTOCOL.md section 3\): it is in mm"),
-        (_set(["limits", "stroke"], [-9000.0, 850.0]), r"limits.stroke: \[-9000.0, 850.0\] mm reaches beyond"),
+        # Limits the actuators cannot follow: the loop would plan and start a move, then have
+        # its set-points refused mid-motion (the actuator's fault, or the CAN frames cannot
+        # carry them: FAULT, legs stopped wherever they were).
+        (_set(["limits", "stroke"], [0.0, 1500.0]),
+         r"limits.stroke: \[0.0, 1500.0\] mm reaches beyond the actuators' stroke, 0 to 1300 mm "
+         r"\(firmware_proto/PROTOCOL.md sections 1 and 4\): they would refuse the set-points beyond it mid-motion; "
+         r"it is in mm \(not µm\): give the actuators' soft limits"),
+        (_set(["limits", "stroke"], [0.0, 850000.0]), r"limits.stroke: \[0.0, 850000.0\] mm reaches beyond"),  # µm
+        (_set(["limits", "stroke"], [-100.0, 850.0]), r"limits.stroke: \[-100.0, 850.0\] mm reaches beyond"),
         (_set(["limits", "leg_velocity_mm_s"], 24000.0),  # mm/min written for mm/s
          r"limits.leg_velocity_mm_s: 24000 mm/s is beyond the speeds the actuators' feedback carries \(3276.7 mm/s, "
          r"firmware_proto/PROTOCOL.md section 3\): it is in mm/s"),

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import tomli_w
 
-from firmware_proto.codec import SETPOINT_MAX_UM, SETPOINT_MIN_UM, VELOCITY_MAX_UM_S
+from firmware_proto.codec import STROKE_MAX_UM, STROKE_MIN_UM, VELOCITY_MAX_UM_S
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.text import read_text
 from hexactl.kinematics.geometry import Geometry, GeometryError, Limits, geometry_from_mapping
@@ -29,25 +29,27 @@ def parse_geometry(text: str, source: str) -> Geometry:
     except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise GeometryError(f"{source}: not valid TOML: {error}") from None
     geometry = geometry_from_mapping(data, source)
-    if problems := _wire_problems(geometry.limits):
+    if problems := _actuator_problems(geometry.limits):
         raise GeometryError("\n".join(f"{source}: {problem}" for problem in problems))
     return geometry
 
 
-def _wire_problems(limits: Limits) -> list[str]:
-    """The ``[limits]`` the actuators' CAN frames cannot carry, one sentence each naming the key.
+def _actuator_problems(limits: Limits) -> list[str]:
+    """The ``[limits]`` the actuators cannot follow, one sentence each naming the key.
 
     Checked here, where every geometry and calibration file is read (the kinematics know
-    no wire): with a stroke beyond the set-point field the loop plans a move, starts it
-    and then cannot encode its set-points mid-motion (FAULT, every leg held where it was).
+    no wire): with a stroke beyond the actuators' (or beyond what the CAN set-point field
+    carries, far wider) the loop plans a move, starts it and then has its set-points
+    refused mid-motion (FAULT, every leg held where it was).
     """
     problems = []
     low, high = limits.stroke
-    if not SETPOINT_MIN_UM <= low * _UM_PER_MM <= high * _UM_PER_MM <= SETPOINT_MAX_UM:
+    if not STROKE_MIN_UM <= low * _UM_PER_MM <= high * _UM_PER_MM <= STROKE_MAX_UM:
         problems.append(
-            f"limits.stroke: {list(limits.stroke)} mm reaches beyond the set-points the actuators' CAN frames carry "
-            f"({SETPOINT_MIN_UM / _UM_PER_MM:.3f} to {SETPOINT_MAX_UM / _UM_PER_MM:.3f} mm, firmware_proto/PROTOCOL.md "
-            "section 3): it is in mm (not µm); give the actuators' real sensor range")
+            f"limits.stroke: {list(limits.stroke)} mm reaches beyond the actuators' stroke, "
+            f"{STROKE_MIN_UM / _UM_PER_MM:g} to {STROKE_MAX_UM / _UM_PER_MM:g} mm (firmware_proto/PROTOCOL.md sections "
+            "1 and 4): they would refuse the set-points beyond it mid-motion; it is in mm (not µm): give the actuators' "
+            "soft limits")
     if limits.leg_velocity_mm_s * _UM_PER_MM > VELOCITY_MAX_UM_S:
         problems.append(
             f"limits.leg_velocity_mm_s: {limits.leg_velocity_mm_s:g} mm/s is beyond the speeds the actuators' feedback "
