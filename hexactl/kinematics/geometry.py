@@ -3,7 +3,7 @@
 A :class:`Geometry` is what a geometry or calibration TOML file holds (see
 config/platform.toml for the annotated nominal one). It is frozen and fully validated on
 construction: every number finite, shapes right, joints distinct, limits consistent and
-the zero posture inside the actuator stroke. Units: mm and degrees, as in the file.
+the zero posture inside the actuator stroke and not near-singular. Units: mm and degrees, as in the file.
 """
 
 from __future__ import annotations
@@ -194,8 +194,10 @@ class Geometry(_Strict):
         for key in ("base_joints", "platform_joints"):
             joints = getattr(self, key)
             for i, j in combinations(range(6), 2):
-                if np.linalg.norm(np.subtract(joints[i], joints[j])) < MIN_JOINT_SEPARATION_MM:
-                    raise ValueError(f"{key}: joints {i + 1} and {j + 1} coincide")
+                if (distance := np.linalg.norm(np.subtract(joints[i], joints[j]))) < MIN_JOINT_SEPARATION_MM:
+                    raise ValueError(f"{key}: joints {i + 1} and {j + 1} coincide ({distance:.3f} mm apart, less than "
+                                     f"{MIN_JOINT_SEPARATION_MM:g} mm): two legs on one joint is a typing error; "
+                                     "coordinates are in mm, not metres")
         for i, length in enumerate(self.zero_lengths):
             if length <= 0:
                 raise ValueError(f"zero_lengths: leg {i + 1} has non-positive zero length {length}")
@@ -208,13 +210,23 @@ class Geometry(_Strict):
         low, high = self.limits.stroke
         for i, reading in enumerate(self.zero_readings_mm()):
             if not low <= reading <= high:
+                shown = f"{reading:.3f}" if abs(reading) < 1e6 else f"{reading:.3g}"  # not 300 digits of a typo's 1e300
                 raise ValueError(
-                    f"limits.stroke: leg {i + 1} needs sensor reading {reading:.3f} mm in the zero "
-                    f"posture, outside the stroke [{low}, {high}]"
+                    f"limits.stroke: leg {i + 1} needs sensor reading {shown} mm in the zero posture, outside the "
+                    f"stroke [{low}, {high}]: check the stroke, and zero_lengths[{i}], base_joints[{i}], "
+                    f"platform_joints[{i}] and home (mm, deg)"
                 )
         jacobian, _ = twist_jacobian(self.legs, self.home.in_radians())
-        if np.linalg.matrix_rank(jacobian) < 6:
+        condition = float(scaled_conditions(jacobian[None], self.characteristic_length_mm)[0])
+        if condition == np.inf:
             raise ValueError("the zero posture is singular: the joints do not form a working hexapod")
+        if condition > self.limits.max_jacobian_condition:
+            raise ValueError(
+                f"limits.max_jacobian_condition: the zero posture's Jacobian condition is {condition:.1f}, above this "
+                f"limit of {self.limits.max_jacobian_condition:g}: every pose near it would be refused as near-singular, "
+                f"the way back to it too; it is an upper bound (config/platform.toml has 60): raise it above "
+                f"{condition:.1f}, or check the joints"
+            )
         return self
 
     @cached_property
@@ -233,6 +245,16 @@ class Geometry(_Strict):
     def characteristic_length_mm(self) -> float:
         """Mean platform-joint radius: scales rotations to lengths in conditioning figures."""
         return float(np.mean(np.linalg.norm(np.array(self.platform_joints), axis=1)))
+
+
+def scaled_conditions(jacobians: np.ndarray, characteristic_length_mm: float) -> np.ndarray:
+    """Condition numbers of (N, 6, 6) twist Jacobians with their rotation columns (mm/rad)
+    divided by ``characteristic_length_mm``, so that both halves are dimensionless → (N,),
+    ``inf`` where singular: what ``[limits] max_jacobian_condition`` bounds."""
+    scaled = jacobians * np.array([1.0, 1.0, 1.0] + [1.0 / characteristic_length_mm] * 3)
+    singular = np.linalg.svd(scaled, compute_uv=False)
+    largest, smallest = singular[:, 0], singular[:, -1]
+    return np.divide(largest, smallest, out=np.full(len(singular), np.inf), where=smallest > 0)
 
 
 def limits_differences(limits: Limits, reference: Limits) -> list[str]:

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.kinematics.forward import forward_kinematics
-from hexactl.kinematics.geometry import Geometry, Limits
+from hexactl.kinematics.geometry import Geometry, Limits, scaled_conditions
 from hexactl.kinematics.inverse import (
     leg_jacobian_rows,
     leg_jacobians_batch,
@@ -280,10 +280,7 @@ def _condition(geometry: Geometry, jacobian_rows: Sequence[Sequence[float]]) -> 
 
 def _conditions(geometry: Geometry, jacobians: NDArray) -> NDArray:
     """:func:`jacobian_condition` of (N, 6, 6) twist Jacobians → (N,): one batched SVD."""
-    scaled = jacobians * np.array([1.0, 1.0, 1.0] + [1.0 / geometry.characteristic_length_mm] * 3)
-    singular = np.linalg.svd(scaled, compute_uv=False)
-    largest, smallest = singular[:, 0], singular[:, -1]
-    return np.divide(largest, smallest, out=np.full(len(singular), np.inf), where=smallest > 0)
+    return scaled_conditions(jacobians, geometry.characteristic_length_mm)
 
 
 def _angle_between_deg(a: Sequence[float], b: Sequence[float]) -> float:

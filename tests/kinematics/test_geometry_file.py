@@ -69,9 +69,22 @@ def _set(path, value):
         (_set(["zero_lengths", 3], float("nan")), r"zero_lengths\[3\]: must be a finite number"),
         (_set(["home", 2], float("inf")), r"home\[2\]: must be a finite number"),
         (_set(["base_joints", 1], [1448.889, -388.229, 0.0]), r"base_joints: joints 1 and 2 coincide"),
+        # every length in metres: the joints end up a fraction of a "mm" apart
+        (lambda d: d.update({key: [[v / 1000.0 for v in joint] for joint in d[key]]
+                             for key in ("base_joints", "platform_joints")}),
+         r"base_joints: joints 1 and 2 coincide \(0.776 mm apart, less than 1 mm\): .* in mm, not metres"),
         (_set(["limits", "stroke"], [0.0, 100.0]), r"limits.stroke: leg 1 needs sensor reading .* outside the stroke"),
+        # the stroke is named, but a typo in the leg's own values is as likely: both are said
+        (_set(["zero_lengths", 2], 17500.0),
+         r"limits.stroke: leg 3 needs sensor reading -15390.023 mm in the zero posture, outside the stroke \[0.0, 850.0\]: "
+         r"check the stroke, and zero_lengths\[2\], base_joints\[2\], platform_joints\[2\] and home \(mm, deg\)$"),
+        (_set(["zero_lengths", 0], 1e300), r"leg 1 needs sensor reading -1e\+300 mm in the zero posture"),
         (_set(["limits", "stroke"], [500.0, 100.0]), r"stroke: min 500.0 must be below max 100.0"),
         (_set(["limits", "pose_min", 0], 10.0), r"x range \[10.0, 610.0\] must contain the zero posture"),
+        # a threshold below the zero posture's own conditioning refuses every move, the way home too
+        (_set(["limits", "max_jacobian_condition"], 5.0),
+         r"limits.max_jacobian_condition: the zero posture's Jacobian condition is 7.6, above this limit of 5: every "
+         r"pose near it would be refused as near-singular"),
         (_set(["zero_lengths", 0], -5.0), r"zero_lengths: leg 1 has non-positive zero length"),
         (_set(["measurement", "feature_points"], [[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]]), r"collinear"),
         (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: Extra inputs are not permitted"),
@@ -84,6 +97,18 @@ def _set(path, value):
         (_set(["limits", "leg_velocity_mm_s"], "100"), r"limits.leg_velocity_mm_s: must be a number"),
         (_set(["limits", "stroke", 1], False), r"limits.stroke\[1\]: must be a number, not false"),
         (_set(["home", 0], "0"), r"home\[0\]: must be a number"),
+        # Limits the actuators cannot follow: the loop would plan and start a move, then have
+        # its set-points refused mid-motion (the actuator's fault, or the CAN frames cannot
+        # carry them: FAULT, legs stopped wherever they were).
+        (_set(["limits", "stroke"], [0.0, 1500.0]),
+         r"limits.stroke: \[0.0, 1500.0\] mm reaches beyond the actuators' stroke, 0 to 1300 mm "
+         r"\(firmware_proto/PROTOCOL.md sections 1 and 4\): they would refuse the set-points beyond it mid-motion; "
+         r"it is in mm \(not µm\): give the actuators' soft limits"),
+        (_set(["limits", "stroke"], [0.0, 850000.0]), r"limits.stroke: \[0.0, 850000.0\] mm reaches beyond"),  # µm
+        (_set(["limits", "stroke"], [-100.0, 850.0]), r"limits.stroke: \[-100.0, 850.0\] mm reaches beyond"),
+        (_set(["limits", "leg_velocity_mm_s"], 24000.0),  # mm/min written for mm/s
+         r"limits.leg_velocity_mm_s: 24000 mm/s is beyond the speeds the actuators' feedback carries \(3276.7 mm/s, "
+         r"firmware_proto/PROTOCOL.md section 3\): it is in mm/s"),
         (_set(["calibration"], {"method": "full", "created": "2026-11-26", "input_sha256": "0", "postures": 60,
                                 "residual_rms_mm": 0.02, "zero_lengths_std_mm": [0.01, 0.01, -0.01, 0.01, 0.01, 0.01]}),
          r"calibration.zero_lengths_std_mm: a standard deviation cannot be negative, got -0.01: the file was edited"),

@@ -14,9 +14,12 @@ from pathlib import Path
 
 import tomli_w
 
+from firmware_proto.codec import STROKE_MAX_UM, STROKE_MIN_UM, VELOCITY_MAX_UM_S
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.text import read_text
-from hexactl.kinematics.geometry import Geometry, GeometryError, geometry_from_mapping
+from hexactl.kinematics.geometry import Geometry, GeometryError, Limits, geometry_from_mapping
+
+_UM_PER_MM = 1000.0
 
 
 def parse_geometry(text: str, source: str) -> Geometry:
@@ -25,7 +28,34 @@ def parse_geometry(text: str, source: str) -> Geometry:
         data = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise GeometryError(f"{source}: not valid TOML: {error}") from None
-    return geometry_from_mapping(data, source)
+    geometry = geometry_from_mapping(data, source)
+    if problems := _actuator_problems(geometry.limits):
+        raise GeometryError("\n".join(f"{source}: {problem}" for problem in problems))
+    return geometry
+
+
+def _actuator_problems(limits: Limits) -> list[str]:
+    """The ``[limits]`` the actuators cannot follow, one sentence each naming the key.
+
+    Checked here, where every geometry and calibration file is read (the kinematics know
+    no wire): with a stroke beyond the actuators' (or beyond what the CAN set-point field
+    carries, far wider) the loop plans a move, starts it and then has its set-points
+    refused mid-motion (FAULT, every leg held where it was).
+    """
+    problems = []
+    low, high = limits.stroke
+    if not STROKE_MIN_UM <= low * _UM_PER_MM <= high * _UM_PER_MM <= STROKE_MAX_UM:
+        problems.append(
+            f"limits.stroke: {list(limits.stroke)} mm reaches beyond the actuators' stroke, "
+            f"{STROKE_MIN_UM / _UM_PER_MM:g} to {STROKE_MAX_UM / _UM_PER_MM:g} mm (firmware_proto/PROTOCOL.md sections "
+            "1 and 4): they would refuse the set-points beyond it mid-motion; it is in mm (not µm): give the actuators' "
+            "soft limits")
+    if limits.leg_velocity_mm_s * _UM_PER_MM > VELOCITY_MAX_UM_S:
+        problems.append(
+            f"limits.leg_velocity_mm_s: {limits.leg_velocity_mm_s:g} mm/s is beyond the speeds the actuators' feedback "
+            f"carries ({VELOCITY_MAX_UM_S / _UM_PER_MM:g} mm/s, firmware_proto/PROTOCOL.md section 3): it is in mm/s "
+            "(not mm/min); give the actuators' real speed limit")
+    return problems
 
 
 def load_geometry(path: str | os.PathLike[str]) -> Geometry:
