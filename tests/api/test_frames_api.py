@@ -124,6 +124,31 @@ def test_the_command_line_sets_shows_and_moves_in_frames(framed, capsys) -> None
     assert main(["frames", "--clear", *api]) == 0 and "frames         none" in capsys.readouterr().out
 
 
+def test_the_command_line_changes_only_the_soft_limits_it_names(framed, capsys) -> None:
+    """``frames --max-tilt 12`` set a tilt bound and removed the x, y, z bounds (the API
+    replaces the soft limits whole, and the command line sent only what it was given): an
+    operator adding one limit lost the others."""
+    api = ["--api", framed.api]
+
+    def soft() -> tuple:
+        limits = framed.controller.frames.soft_limits
+        return limits.lower, limits.upper, limits.max_tilt_deg
+
+    assert main(["frames", "--soft-lower", "x=-50,z=-10", "--soft-upper", "x=50", *api]) == 0
+    assert main(["frames", "--max-tilt", "12", *api]) == 0
+    assert soft() == ((-50, None, -10, None, None, None), (50, None, None, None, None, None), 12)
+    assert "soft limits    x -50..50 mm, z ≥ -10 mm, tilt ≤ 12 deg" in capsys.readouterr().out
+    assert main(["frames", "--soft-lower", "x=-40,z=none", "--tool", "z=300", *api]) == 0
+    assert soft() == ((-40, None, None, None, None, None), (50, None, None, None, None, None), 12)
+    assert framed.controller.frames.tool == (0, 0, 300, 0, 0, 0)
+    assert main(["frames", "--max-tilt", "none", "--soft-upper", "yaw=5", *api]) == 0
+    assert soft() == ((-40, None, None, None, None, None), (50, None, None, None, None, 5), None)
+    assert "soft limits    x -40..50 mm, yaw ≤ 5 deg" in capsys.readouterr().out
+    assert main(["frames", "--soft-upper", "x=-45", *api]) == 1  # below its lower bound: the service says so
+    assert "each lower bound must be below its upper bound: x [-40, -45]" in capsys.readouterr().err
+    assert soft() == ((-40, None, None, None, None, None), (50, None, None, None, None, 5), None)
+
+
 def test_the_command_line_knows_every_frame_the_controller_does() -> None:
     assert FRAMES == tuple(frame.value for frame in Frame)
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from hexactl.adapters.cli import service_commands
-from hexactl.adapters.cli.common import CliError, connect, endpoint_problem, parse_bounds_argument, parse_pose_argument
+from hexactl.adapters.cli.common import CliError, connect, endpoint_problem, parse_bound_changes, parse_pose_argument
 from hexactl.adapters.cli.main import main
 from tools.serving import unserved_endpoint, wait_until
 
@@ -179,9 +179,12 @@ def test_the_forms_still_parse() -> None:
     assert parse_pose_argument("x=5,yaw=-2") == [5.0, 0.0, 0.0, 0.0, 0.0, -2.0]
     assert parse_pose_argument("1,2,3,4,5,6") == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
     assert parse_pose_argument("x=1,y=2", "velocity") == [1.0, 2.0, 0.0, 0.0, 0.0, 0.0]
-    assert parse_bounds_argument("x=-50,z=-10") == [-50.0, None, -10.0, None, None, None]
+    assert parse_bound_changes("x=-50,z=-10") == {"x": -50.0, "z": -10.0}
+    assert parse_bound_changes("x=-50, yaw=None") == {"x": -50.0, "yaw": None}  # none: that bound removed
     with pytest.raises(CliError, match="'5' is not axis=value"):
-        parse_bounds_argument("x=5,5")  # bounds are pairs only
+        parse_bound_changes("x=5,5")  # bounds are pairs only
+    with pytest.raises(CliError, match="every value must be a finite number, or none to remove that bound"):
+        parse_bound_changes("x=inf")
 
 
 # -- serve's messages ----------------------------------------------------------------

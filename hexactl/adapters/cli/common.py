@@ -346,17 +346,30 @@ def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
     return pose
 
 
-def parse_bounds_argument(text: str) -> list[float | None]:
-    """Soft bounds typed on the command line: ``axis=value`` pairs (mm, deg), the axes not
-    named unbounded, each axis once: ``x=-50,z=-10``."""
-    bounds = _keyed_values("bounds", text, [part for part in text.split(",") if part.strip()], None)
-    if any(bound is not None and not isfinite(bound) for bound in bounds):
-        raise CliError(f"bounds {text!r}: every value must be a finite number")
-    return bounds
+NO_BOUND = "none"
+"""Typed for a soft bound (``x=none``, ``--max-tilt none``): remove it."""
+
+_UNNAMED = object()
 
 
-def _keyed_values(what: str, text: str, parts: list[str], missing: float | None) -> list[float | None]:
-    values: list[float | None] = [missing] * 6
+def parse_bound_changes(text: str) -> dict[str, float | None]:
+    """Soft bounds to change, typed on the command line: ``axis=value`` pairs (mm, deg), each
+    axis once, :data:`NO_BOUND` removing that axis's bound: ``x=-50,z=none``. The axes not
+    named are not in the result (they keep theirs)."""
+    values = _keyed_values("bounds", text, [part for part in text.split(",") if part.strip()], _UNNAMED,
+                           lambda value, context: None if value.lower() == NO_BOUND else _number(value, context))
+    changes = {axis: value for axis, value in zip(POSE_AXES, values) if value is not _UNNAMED}
+    if any(bound is not None and not isfinite(bound) for bound in changes.values()):
+        raise CliError(f"bounds {text!r}: every value must be a finite number, or {NO_BOUND} to remove that bound")
+    return changes
+
+
+def _keyed_values(what: str, text: str, parts: list[str], missing: Any,
+                  number: Callable[[str, str], Any] | None = None) -> list[Any]:
+    """The values of ``axis=value`` ``parts`` in axis order, ``missing`` for an axis not
+    named; ``number`` reads a value (default: a number)."""
+    number = number or _number
+    values: list[Any] = [missing] * 6
     given: dict[str, str] = {}
     for part in parts:
         match = _KEYED.match(part)
@@ -368,7 +381,7 @@ def _keyed_values(what: str, text: str, parts: list[str], missing: float | None)
             raise CliError(f"{what} {text!r}: axis {axis} is given twice ({given[axis]!r} and {part.strip()!r}): give "
                            "each axis once")
         given[axis] = part.strip()
-        values[POSE_AXES.index(axis)] = _number(match.group(2), text)
+        values[POSE_AXES.index(axis)] = number(match.group(2), text)
     return values
 
 
@@ -382,9 +395,15 @@ def velocity_argument(text: str) -> list[float]:
     return _argparse_type(lambda typed: parse_pose_argument(typed, "velocity"), text)
 
 
-def bounds_argument(text: str) -> list[float | None]:
-    """:func:`parse_bounds_argument` as an argparse ``type``."""
-    return _argparse_type(parse_bounds_argument, text)
+def bound_changes_argument(text: str) -> dict[str, float | None]:
+    """:func:`parse_bound_changes` as an argparse ``type``."""
+    return _argparse_type(parse_bound_changes, text)
+
+
+def tilt_bound_argument(text: str) -> float | str:
+    """An argparse ``type``: a positive finite tilt bound (deg; the service says how large
+    it may be), or :data:`NO_BOUND`."""
+    return NO_BOUND if text.strip().lower() == NO_BOUND else positive_float(text)
 
 
 def _argparse_type(parse: Callable[[str], Any], text: str) -> Any:

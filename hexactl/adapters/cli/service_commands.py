@@ -25,7 +25,8 @@ from hexactl.adapters.api.protocol import (
 from hexactl.adapters.cli.common import (
     CliError,
     bind_endpoint,
-    bounds_argument,
+    NO_BOUND,
+    bound_changes_argument,
     check_writable,
     client_endpoint,
     connect,
@@ -36,16 +37,22 @@ from hexactl.adapters.cli.common import (
     pose_argument,
     positive_float,
     telemetry_rate,
+    tilt_bound_argument,
     write_failed,
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
+from hexactl.kinematics.axes import POSE_AXES
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 FRAMES = ("zero", "work", "tool")
 """``move --frame``'s choices: the API's frames (docs/api.md)."""
 
-RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
+Fields = dict[str, Any] | Callable[[Any], dict[str, Any]]
+"""A command's fields, or how to make them from what the service says now (a client on
+the same connection, asked first)."""
+
+RequestBuilder = Callable[[argparse.Namespace], tuple[str, Fields]]
 """Arguments → (command, request fields)."""
 
 
@@ -86,13 +93,16 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     frames.add_argument("--work", type=pose_argument, metavar="POSE", help="the work frame in the zero frame (mm, deg)")
     frames.add_argument("--tool", type=pose_argument, metavar="POSE",
                         help="the tool frame in the platform's frame (mm, deg): its origin is the pivot point")
-    frames.add_argument("--soft-lower", type=bounds_argument, metavar="BOUNDS",
-                        help="lower soft bounds on the tool's pose in the work frame, axis=value pairs, e.g. x=-50,z=-10")
-    frames.add_argument("--soft-upper", type=bounds_argument, metavar="BOUNDS", help="upper soft bounds, likewise")
-    frames.add_argument("--max-tilt", type=positive_float, metavar="DEG", help="soft bound on the tool's tilt, deg")
+    frames.add_argument("--soft-lower", type=bound_changes_argument, metavar="BOUNDS",
+                        help=f"lower soft bounds on the tool's pose in the work frame, axis=value pairs, e.g. "
+                        f"x=-50,z=-10 ({NO_BOUND}: remove that bound)")
+    frames.add_argument("--soft-upper", type=bound_changes_argument, metavar="BOUNDS", help="upper soft bounds, likewise")
+    frames.add_argument("--max-tilt", type=tilt_bound_argument, metavar="DEG",
+                        help=f"soft bound on the tool's tilt, deg ({NO_BOUND}: remove it)")
     frames.add_argument("--clear", action="store_true", help="no frames and no soft limits")
-    frames.epilog = ("Without options: show them. The soft limits are set as a whole: --soft-lower, --soft-upper and "
-                     "--max-tilt replace all three (one not given: none). Saved by the service, restored on restart.")
+    frames.epilog = ("Without options: show them. Each option changes only what it names: --soft-lower x=-40 sets x's "
+                     f"lower bound and keeps every other soft limit; x={NO_BOUND} removes one. Saved by the service, "
+                     "restored on restart.")
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name, a sequence file or a plan", _play_request)
     play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound), a .toml "
@@ -237,16 +247,39 @@ def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
                     **tolerance}
 
 
-def _frames_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
-    soft = {"lower": arguments.soft_lower, "upper": arguments.soft_upper, "max_tilt_deg": arguments.max_tilt}
+def _frames_request(arguments: argparse.Namespace) -> tuple[str, Fields]:
     fields = {name: value for name, value in (("work", arguments.work), ("tool", arguments.tool)) if value is not None}
-    if any(value is not None for value in soft.values()):
-        fields["soft_limits"] = {name: value for name, value in soft.items() if value is not None}
+    changes_soft = any(value is not None for value in (arguments.soft_lower, arguments.soft_upper, arguments.max_tilt))
     if arguments.clear:
-        if fields:
+        if fields or changes_soft:
             raise CliError("--clear takes no other frame option: clear, then set")
         return "clear_frames", {}
-    return ("set_frames", fields) if fields else ("frames", {})
+    if not changes_soft:
+        return ("set_frames", fields) if fields else ("frames", {})
+
+    def with_soft_limits(client: Any) -> dict[str, Any]:
+        # The API replaces the soft limits whole; an operator changing one bound must not lose
+        # the others (a forgotten one would be a limit gone). Another client's change between
+        # this reading and the set is replaced; the reply prints what is in force.
+        return {**fields, "soft_limits": changed_soft_limits(client.call("frames")["frames"]["soft_limits"],
+                                                             arguments.soft_lower, arguments.soft_upper,
+                                                             arguments.max_tilt)}
+
+    return "set_frames", with_soft_limits
+
+
+def changed_soft_limits(now: dict[str, Any], lower: dict[str, float | None] | None,
+                        upper: dict[str, float | None] | None, max_tilt: float | str | None) -> dict[str, Any]:
+    """The soft limits ``now`` (as the API gives them) with the bounds the command line
+    names changed: ``lower``/``upper`` by axis (None: removed), ``max_tilt`` (:data:`NO_BOUND`:
+    removed; None: as it is)."""
+    changed = {"lower": list(now["lower"]), "upper": list(now["upper"]), "max_tilt_deg": now["max_tilt_deg"]}
+    for side, bounds in (("lower", lower), ("upper", upper)):
+        for axis, bound in (bounds or {}).items():
+            changed[side][POSE_AXES.index(axis)] = bound
+    if max_tilt is not None:
+        changed["max_tilt_deg"] = None if max_tilt == NO_BOUND else max_tilt
+    return changed
 
 
 def _leg_lock_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -289,7 +322,7 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
 # -- running -------------------------------------------------------------------------
 
 
-def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str, Any]) -> int:
+def run_client_command(arguments: argparse.Namespace, cmd: str, fields: Fields) -> int:
     """Send one command, print the reply; the exit status says ok / refused / no answer.
     With ``--wait``, then wait for the motion to end (:func:`wait_until_at_rest`)."""
     from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
@@ -299,6 +332,8 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
     try:
         with client:
             since = newest_event_t(client) if waits else None
+            if callable(fields):
+                fields = fields(client)
             reply = client.request(cmd, **fields)
             if arguments.json:
                 print(json.dumps(reply))
