@@ -37,8 +37,9 @@ API side, :class:`RemoteLoop`: a :class:`~hexactl.control.host.LoopHost` whose s
 is the latest report a receiver thread has read, and whose ``submit`` writes to the
 command pipe, never waiting either: what the pipe has no room for waits in the process
 and is written on as the loop's reports come (a loop that stopped reading, its process
-stopped or hung, would otherwise hold up the thread that answers ``estop``). When the
-loop's process ends, the host reports the loop as failed.
+stopped or hung, would otherwise hold up the thread that answers ``estop``); a stream's
+target is dropped instead, and while a few wait unread in the pipe. When the loop's
+process ends, the host reports the loop as failed.
 
 Both ends are this program's own processes (spawned by the service, pipes inherited),
 so pickle is the right encoding: nothing else can write to these pipes.
@@ -46,10 +47,13 @@ so pickle is the right encoding: nothing else can write to these pipes.
 
 from __future__ import annotations
 
+import array
+import fcntl
 import logging
 import os
 import pickle
 import struct
+import termios
 import threading
 import time
 from collections import deque
@@ -77,6 +81,12 @@ it needs to be heard): a twentieth of the default silence limit
 
 MAX_COMMANDS_PER_EXCHANGE = 8
 """Commands taken per exchange: bounds the loop's slack work when many arrive at once."""
+
+SUPERSEDED_UNREAD_BYTES = 1024
+"""A command the next one replaces (a stream's target, some 250 to 400 bytes) is dropped
+while this much waits unread in the command pipe: a loop held up that long would read them
+stale, and an E-stop sent meanwhile would wait behind them, :data:`MAX_COMMANDS_PER_EXCHANGE`
+a cycle, once it runs again. Less than an exchange's worth."""
 
 _READ_CHUNK_BYTES = 1 << 16
 _READ_PER_CALL_BYTES = 1 << 20  # bounds one exchange's reading; the rest waits in the pipe
@@ -171,6 +181,12 @@ class _FrameWriter:
             if not pending[0]:
                 pending.popleft()
         return not pending and not self.closed
+
+    def unread(self) -> int:
+        """Bytes written to the pipe that its reader has not taken yet (FIONREAD)."""
+        count = array.array("i", [0])
+        fcntl.ioctl(self._fd, termios.FIONREAD, count)
+        return count[0]
 
     def close(self) -> None:
         """Write nothing more (before the descriptor is closed: its number may be reused)."""
@@ -352,10 +368,11 @@ class RemoteLoop:
         for the loop: a loop that stopped reading must not hold up this process, whose
         socket thread answers ``estop`` and ``status``. A command the next one replaces
         (:attr:`~hexactl.control.commands.Command.superseded`: a stream's target) is dropped
-        rather than kept waiting, so that a stream to a stopped loop does not pile up here."""
+        rather than kept waiting, so that a stream to a stopped loop does not pile up here,
+        and while :data:`SUPERSEDED_UNREAD_BYTES` wait unread, nor in the pipe ahead of an E-stop."""
         data = pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)
         with self._send_lock:
-            if command.superseded and not self._writer.flush():
+            if command.superseded and (not self._writer.flush() or self._writer.unread() >= SUPERSEDED_UNREAD_BYTES):
                 return
             if not self._writer.offer(data):
                 self._gone = self._gone or "the control loop's link is closed"

@@ -55,7 +55,7 @@ from hexactl.control.sequence_player import SequenceProgress, dwell_record
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.stream import StreamProgress
-from hexactl.control.supervisor import ESTOP_FAULTS, Fault, Supervisor
+from hexactl.control.supervisor import ESTOP_FAULTS, Fault, Supervisor, other_controller_fault
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
 
@@ -162,11 +162,10 @@ class ControlCore:
         if self.state is ControlState.ENABLED:
             if faults := supervisor.faults(feedback, self.link, self._counter - 1, now_ns):
                 self._enter_fault(tuple(faults))
-                if stopping := [fault.code for fault in faults if fault.code in ESTOP_FAULTS]:
-                    self._enter_estop(f"{', '.join(stopping)}: holding cannot stop actuators that another "
-                                      "controller drives too")
             elif fault := self._motion.update(self.active, now_ns):
                 self._enter_fault((fault,))
+        elif self.state is ControlState.FAULT and (fault := other_controller_fault(self.link)):
+            self._enter_fault((fault,))  # FAULT holds: it sends set-points too
         elif self.state is ControlState.DISABLED and self._measurement.pose is not None:
             self._motion.follow(self._measurement.pose, feedback.positions_mm)
 
@@ -194,11 +193,16 @@ class ControlCore:
     # -- state changes -----------------------------------------------------------------
 
     def _enter_fault(self, faults: tuple[Fault, ...]) -> None:
+        """Latch FAULT for ``faults`` (beside those latched, in FAULT already); E-stop for
+        those holding cannot hold (:data:`~hexactl.control.supervisor.ESTOP_FAULTS`)."""
         self.state = ControlState.FAULT
-        self._faults = faults
+        self._faults += faults
         self._motion.freeze("fault")
         for fault in faults:
             self._event(fault.code, fault.message)
+        if stopping := [fault.code for fault in faults if fault.code in ESTOP_FAULTS]:
+            self._enter_estop(f"{', '.join(stopping)}: holding cannot stop actuators that another "
+                              "controller drives too")
 
     def _send_estop(self) -> None:
         self.hardware.send_estop()

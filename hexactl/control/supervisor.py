@@ -9,7 +9,8 @@ from the set-point it applied for ``following_error_s`` (jammed, overloaded, sli
 compared with the set-point of the counter it reports, so a late frame adds nothing);
 the link failed; too many set-point sends failed in a row; another controller heard on
 the bus (:func:`other_controller_heard`: the actuators would follow whichever of the two
-commanded last, so the core E-stops them: :data:`ESTOP_FAULTS`). In any state, an actuator reporting E-stop is the hardware
+commanded last, so the core E-stops them: :data:`ESTOP_FAULTS`; checked in FAULT too,
+which holds its set-points). In any state, an actuator reporting E-stop is the hardware
 chain's E-stop (:meth:`Supervisor.estop_reported`), except in the grace time a reset
 gives the actuators to leave it.
 
@@ -62,6 +63,15 @@ def other_controller_heard(link: LinkHealth | None) -> str | None:
     if link is None or not link.other_controller_age_s <= OTHER_CONTROLLER_WINDOW_S:
         return None
     return f"another controller's {link.other_controller_frame} was heard {link.other_controller_age_s:.3f} s ago"
+
+
+def other_controller_fault(link: LinkHealth | None) -> Fault | None:
+    """The fault of another controller heard on the bus (:func:`other_controller_heard`),
+    checked while ENABLED and while FAULT holds (both send set-points), else None."""
+    if heard := other_controller_heard(link):
+        return Fault("other_controller", f"{heard}: it drives these actuators too, which follow whichever "
+                     f"commanded last; {STOP_OTHER_CONTROLLER}, then reset and enable")
+    return None
 
 
 class Supervisor:
@@ -121,9 +131,8 @@ class Supervisor:
             faults.append(Fault("link_failed", f"bus {link.bus_state.value}" + (f": {link.detail}" if link.detail else "")))
         if self._send_failures >= self._max_send_failures:
             faults.append(Fault("send_failed", f"{self._send_failures} set-point sends failed in a row"))
-        if heard := other_controller_heard(link):
-            faults.append(Fault("other_controller", f"{heard}: it drives these actuators too, which follow whichever "
-                                f"commanded last; {STOP_OTHER_CONTROLLER}, then reset and enable"))
+        if fault := other_controller_fault(link):
+            faults.append(fault)
         return faults
 
     def _following(self, leg: int, actuator: ActuatorFeedback, now_ns: int) -> Fault | None:

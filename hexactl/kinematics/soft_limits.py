@@ -164,15 +164,28 @@ def _angle_window_problem(axis: int, low: Bound, high: Bound) -> str | None:
         return f"{window}: pitch reads in [-90, 90] deg: give bounds within it"
     if axis not in _TURNING_AXES:
         return None
-    turned = f"turn the work or tool frame by 180 deg about the {name} axis so that the window no longer crosses ±180 deg"
+    turned = _TURN_TOOL_FRAME[name]
     if low is not None and high is not None and high < low and beyond <= 180.0:
         return (f"{window} crosses ±180 deg, which soft limits do not support ({name} reads in [-180, 180] deg): "
-                f"to keep {name} out of it, give [{high:g}, {low:g}]; to keep it within it, {turned} "
-                f"(it then reads [{low - 180:g}, {high + 180:g}])")
+                f"to keep {name} out of it, give [{high:g}, {low:g}]; to keep it within it, {turned[0]}, so that "
+                f"the window no longer crosses ±180 deg: {name} then reads [{low - 180:g}, {high + 180:g}], "
+                f"{turned[1]}")
     if beyond > 180.0:
         return (f"{window}: {name} reads in [-180, 180] deg, so a bound beyond is never reached and a window across "
-                f"±180 deg is not supported: give bounds within [-180, 180] or, to keep {name} around 180 deg, {turned}")
+                f"±180 deg is not supported: give bounds within [-180, 180] or, to keep {name} around 180 deg, "
+                f"{turned[0]} ({name} then reads 180 deg less or more, {turned[1]})")
     return None
+
+
+# How to turn a roll or yaw window away from ±180°, and what else it changes. The tool frame
+# turned about its own axis (X·R) shifts that angle by 180° and leaves the position as it
+# reads; the work frame turned instead (R⁻¹·X) would also change the sign of x and y (yaw)
+# or of y, z, pitch and yaw (roll), which an operator would not expect.
+_TURN_TOOL_FRAME = {
+    "roll": ("add 180 deg to the tool frame's roll (a turn about its own x axis)", "the other axes as before"),
+    "yaw": ("turn the tool frame by 180 deg about its own z axis (with its roll and pitch 0: add 180 deg to its yaw)",
+            "roll and pitch with the opposite sign"),
+}
 
 
 def _text(bound: Bound) -> str:

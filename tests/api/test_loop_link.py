@@ -306,6 +306,26 @@ def test_a_stream_target_is_dropped_rather_than_kept_waiting(link: Link) -> None
         ("Stop", 1, None), ("Stop", 2, None), ("StreamTarget", 0, 2)]
 
 
+def test_a_stopped_loop_finds_its_estop_behind_no_more_than_an_exchange_of_stream_targets(link: Link) -> None:
+    """A stream sends a target every cycle. To a loop that had stopped reading, the pipe
+    (64 KiB) filled with about 250 of them before any was dropped, and an E-stop sent then
+    waited behind them all: once the loop ran again, 32 exchanges, 64 ms at 500 Hz, during
+    which it followed the stale targets (seen: 70 to 160 ms after a SIGCONT). A target is
+    now dropped while an exchange's worth waits unread, so the E-stop is in the next."""
+    zero = RelativeMmRad(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    taken: list[cmd.Command] = []
+    hand_over = link.thread.submit
+    link.thread.submit = lambda command: (taken.append(command), hand_over(command))  # type: ignore[method-assign]
+    for sequence in range(1000):
+        link.remote.submit(cmd.StreamTarget(0, 1, zero, tuple(zero), tuple(zero), 0.01, sequence, time.monotonic_ns(),
+                                            sender="hexactl cue root@vm (127.0.0.1)"))
+    estop = link.controller.estop()
+    link.cycle_until_reported(lambda _: any(o.ticket == estop.details["ticket"] for o in link.thread.snapshot.outcomes))
+    ahead = [c for c in taken if isinstance(c, cmd.StreamTarget)]
+    assert 0 < len(ahead) < loop_link.MAX_COMMANDS_PER_EXCHANGE, len(ahead)
+    assert [c.sequence for c in ahead] == list(range(len(ahead)))
+
+
 def test_a_report_says_how_long_ago_the_loop_sent_it(link: Link) -> None:
     """A loop whose process is stopped or hung sends no report, and the API's status and
     telemetry answered from its last as if current: now each says how long ago it came

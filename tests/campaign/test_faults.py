@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
-from hexactl.application.campaign.driver import MOVE_ATTEMPTS, CampaignError, ControllerFault, PlatformDriver
+from hexactl.application.campaign.driver import MOVE_ATTEMPTS, CampaignError, ControllerFault, PlatformDriver, SettleCriteria
 from hexactl.application.campaign.instruments import ServiceInstrument
 from hexactl.application.campaign.progress import Progress
 from hexactl.application.campaign.runner import CampaignSettings, _Resetting, run_campaign
@@ -173,6 +173,16 @@ def test_a_move_to_a_loop_held_up_past_a_second_is_sent_again_once_it_reports() 
     client = LateVerdicts(late=1, code="loop_silent", silent_polls=4)
     assert PlatformDriver(client).move([1.0, 0, 0, 0, 0, 0], settle=False)["pose_command"][0] == 1.0  # type: ignore[arg-type]
     assert client.moves == 2 and client.moved_after[1] > client.silent_polls
+
+
+def test_a_loop_that_stays_held_up_is_named_when_the_wait_for_it_ends() -> None:
+    # The last report says "holding": "did not settle (motion holding, ...)" left the
+    # operator looking at a platform at rest for what was wrong.
+    client = LateVerdicts(late=1, code="loop_silent", silent_polls=10**9)
+    with pytest.raises(CampaignError, match=r"did not settle .*: the control loop has sent no report for 3\.0 s "
+                                            r"\(its process is stopped or hung; see hexactl status\)"):
+        PlatformDriver(client, SettleCriteria(timeout_s=0.05)).move([1.0, 0, 0, 0, 0, 0])  # type: ignore[arg-type]
+    assert client.moves == 1
 
 
 def test_a_command_that_expired_unrun_is_sent_again_then_names_the_timeout() -> None:

@@ -8,6 +8,7 @@ from hypothesis import assume, example, given
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
+from hexactl.kinematics.frames import Frames, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits, tilt_deg
 from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, ViolationKind
 
@@ -55,13 +56,17 @@ def _on(axis, lower, upper):
 @pytest.mark.parametrize("axis, lower, upper, fragment", [
     # "anywhere but the back", or "only the back": either way round, it says how to write each
     ("yaw", 170, -170, "yaw [170, -170] deg crosses ±180 deg, which soft limits do not support (yaw reads in "
-     "[-180, 180] deg): to keep yaw out of it, give [-170, 170]; to keep it within it, turn the work or tool frame by "
-     "180 deg about the yaw axis so that the window no longer crosses ±180 deg (it then reads [-10, 10])"),
-    ("roll", 179, -179, "roll [179, -179] deg crosses ±180 deg"),
+     "[-180, 180] deg): to keep yaw out of it, give [-170, 170]; to keep it within it, turn the tool frame by 180 deg "
+     "about its own z axis (with its roll and pitch 0: add 180 deg to its yaw), so that the window no longer crosses "
+     "±180 deg: yaw then reads [-10, 10], roll and pitch with the opposite sign"),
+    ("roll", 179, -179, "roll [179, -179] deg crosses ±180 deg, which soft limits do not support (roll reads in "
+     "[-180, 180] deg): to keep roll out of it, give [-179, 179]; to keep it within it, add 180 deg to the tool "
+     "frame's roll (a turn about its own x axis), so that the window no longer crosses ±180 deg: roll then reads "
+     "[-1, 1], the other axes as before"),
     # the same window written upwards was read as [175, 180], refusing -179; downwards as [-180, -170]
     ("yaw", 175, 185, "yaw [175, 185] deg: yaw reads in [-180, 180] deg, so a bound beyond is never reached and a "
      "window across ±180 deg is not supported: give bounds within [-180, 180] or, to keep yaw around 180 deg, turn the "
-     "work or tool frame by 180 deg about the yaw axis"),
+     "tool frame by 180 deg about its own z axis"),
     ("yaw", -190, -170, "yaw [-190, -170] deg: yaw reads in [-180, 180] deg"),
     ("roll", None, 181, "roll [null, 181] deg: roll reads in [-180, 180] deg"),
     ("pitch", -95, None, "pitch [-95, null] deg: pitch reads in [-90, 90] deg: give bounds within it"),
@@ -71,6 +76,23 @@ def test_a_window_across_180_degrees_is_refused_naming_the_axis_and_how_to_write
     # ([175, 185] allowed 179 and refused -179, 2 deg from it) or refused as unordered.
     with pytest.raises(ValidationError, match=re.escape(fragment)):
         _on(axis, lower, upper)
+
+
+@pytest.mark.parametrize("axis, tool_frame, reads", [
+    # What the refusal above tells the operator to do, and what it says then reads. It said
+    # "turn the work or tool frame": the work frame turned about x makes the tool's z (and y,
+    # pitch, yaw) change sign, so that a work move up went down; about z, x and y.
+    ("roll", (0, 0, 0, 180, 0, 0), (30, -20, 40, 3 - 180, -4, 175)),
+    ("yaw", (0, 0, 0, 0, 0, 180), (30, -20, 40, -3, 4, 175 - 180)),
+])
+def test_the_frame_turn_a_refusal_advises_shifts_that_angle_as_it_says(axis, tool_frame, reads):
+    platform = Frames().platform_pose(_mm_rad((30, -20, 40, 3, -4, 175)))
+    turned = Frames(tool=transform_of(_mm_rad(tool_frame))).tool_in_work(platform)
+    assert np.allclose([*turned[:3], *np.degrees(turned[3:])], reads)
+
+
+def _mm_rad(pose_mm_deg):
+    return [*pose_mm_deg[:3], *np.radians(pose_mm_deg[3:])]
 
 
 def test_angle_windows_up_to_180_degrees_name_the_bound_turned_past():

@@ -134,3 +134,25 @@ def test_another_controller_starting_faults_the_enabled_one_its_estop_works_and_
     assert first.enable().ok
     bench.run(2)
     assert first.snapshot.state.value == "enabled" and first.snapshot.faults == ()
+
+
+def test_another_controller_starting_estops_a_controller_holding_in_fault(bench: Bench) -> None:
+    # A FAULT holds: it still sends the held set-points, which the actuators would follow by
+    # turns with the other controller's as much as an enabled loop's.
+    first = bench.controller()
+    bench.run_until(lambda: reporting(first), seconds=1.0)
+    assert first.enable().ok
+    bench.run_until(lambda: all(a.state is ActuatorState.ENABLED for a in first.snapshot.feedback.actuators),
+                    seconds=1.0)
+    bench.actuators.firmwares[5].inject.silent = True
+    bench.run_until(lambda: first.snapshot.state.value == "fault", seconds=1.0)
+    bench.actuators.firmwares[5].inject.silent = False
+    bench.run(5)
+    assert first.snapshot.state.value == "fault" and [f.code for f in first.snapshot.faults] == ["heartbeat_lost"]
+
+    second = bench.controller()
+    bench.run(2)
+    assert first.snapshot.state.value == "estop"
+    assert [f.code for f in first.snapshot.faults] == ["heartbeat_lost", "other_controller", "estop"]
+    bench.run_until(lambda: all(a.state is ActuatorState.ESTOP for a in first.snapshot.feedback.actuators)
+                    and second.snapshot.state.value == "estop", seconds=0.1)

@@ -215,8 +215,12 @@ class PlatformDriver:
             else:
                 reference = None
             if time.monotonic() > deadline:
+                # A held-up loop's last report may say "holding": the loop is what to look at.
+                why = "" if _current(record) else (f": the control loop has sent no report for "
+                                                   f"{record['loop']['report_age_s']:.1f} s (its process is stopped "
+                                                   "or hung; see hexactl status)")
                 raise CampaignError(f"the platform did not settle within {duration_s + criteria.timeout_s:.1f} s "
-                                    f"(motion {record['motion']}, legs {record['leg_feedback']})")
+                                    f"(motion {record['motion']}, legs {record['leg_feedback']}){why}")
             time.sleep(criteria.poll_s)
 
     def _enable(self) -> None:
