@@ -46,6 +46,7 @@ class CommandSubmitter:
         self._host = host
         self._config = config
         self._tickets = itertools.count(ticket_start)  # next() on a count is atomic in CPython
+        self._silent_on: CoreSnapshot | None = None  # the latest report when a silence was last confirmed
 
     def outcome(self, ticket: int) -> CommandResult | None:
         """The loop's verdict on command ``ticket`` (None if not carried out yet, or too
@@ -78,7 +79,8 @@ class CommandSubmitter:
             return CommandResult.failure(ErrorCode.LOOP_FAILED, f"the control loop died: {report.failure}")
         ticket = next(self._tickets)
         command = replace(factory(ticket), deadline_ns=deadline_ns, sender=_SENDER.get())
-        if report.stats.report_age_s > REPORT_SILENT_S and (silent_s := self._silent_s()) is not None:
+        if report.stats.report_age_s > REPORT_SILENT_S and (silent_s := self._silent_s(report.stats.report_age_s)) \
+                is not None:
             return self._to_silent_loop(command, silent_s)
         self._host.submit(command)
         if not report.running:
@@ -93,17 +95,22 @@ class CommandSubmitter:
         return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
                                      "be carried out", ticket=ticket)
 
-    def _silent_s(self) -> float | None:
-        """How long the loop has sent no report, asked again while this thread lets the
-        others run for :data:`SILENCE_RECHECK_S` (None: a report came meanwhile). If the
-        host held up this process rather than the loop's, its reports wait to be read by a
-        thread of this one, which needs a turn."""
+    def _silent_s(self, age_s: float) -> float | None:
+        """How long the loop has sent no report (``age_s`` when last seen), asked again while
+        this thread lets the others run for :data:`SILENCE_RECHECK_S` (None: a report came
+        meanwhile). If the host held up this process rather than the loop's, its reports wait
+        to be read by a thread of this one, which needs a turn. A silence confirmed with no
+        report since is not asked again: a client repeating ``stop`` to a stopped loop would
+        otherwise hold up, for each, the thread that answers every other client."""
+        if self._host.snapshot is self._silent_on:
+            return age_s
         deadline = time.monotonic() + SILENCE_RECHECK_S
         while True:
             time.sleep(self._config.loop.period_s / 2)
             if (age_s := self._host.report(PERCENTILES_MAX_AGE_S).stats.report_age_s) <= REPORT_SILENT_S:
                 return None
             if time.monotonic() >= deadline:
+                self._silent_on = self._host.snapshot
                 return age_s
 
     def _to_silent_loop(self, command: cmd.Command, silent_s: float) -> CommandResult:

@@ -25,12 +25,14 @@ class AgedHost:
     thread: LoopThread
     ages: list[float]
     submitted: list[cmd.Command] = field(default_factory=list)
+    reports: int = 0
 
     @property
     def snapshot(self):
         return self.thread.snapshot
 
     def report(self, stats_max_age_s: float) -> LoopReport:
+        self.reports += 1
         report = self.thread.report(stats_max_age_s)
         age = self.ages.pop(0) if len(self.ages) > 1 else self.ages[0]
         return replace(report, stats=replace(report.stats, report_age_s=age))
@@ -71,3 +73,17 @@ def test_a_loop_that_reports_is_sent_everything(rig, ages: list[float]) -> None:
     queued = controller.enable()
     assert queued.ok and queued.details["pending"], queued  # the loop is not running: no verdict awaited
     assert [type(command) for command in host.submitted] == [cmd.Enable]
+
+
+def test_a_silence_confirmed_is_not_waited_for_again_until_a_report_comes(rig) -> None:
+    """Each stop to a stopped loop waited SILENCE_RECHECK_S for a report, in the thread that
+    answers every client: one repeating stop held up the others' status for seconds."""
+    controller, host = facade(rig, [REPORT_SILENT_S + 4.0])
+    assert controller.stop().error == "loop_silent"
+    rechecked = host.reports
+    assert rechecked > 2  # the first one asked again, waiting
+    for _ in range(3):
+        assert controller.stop().error == "loop_silent"
+    assert host.reports == rechecked + 3  # one look each: no report came since the silence was confirmed
+    rig.run()  # a report: what comes next may be this process held up again
+    assert controller.stop().error == "loop_silent" and host.reports > rechecked + 5
