@@ -99,6 +99,8 @@ class _Open:
     first_t_ns: int | None = None
     first_cycle: int | None = None
     last_cycle: int | None = None
+    last_t_ns: int | None = None
+    longest_gap_ns: int | None = None
     calibration_id: str | None = None
     received: int = 0
     cycles_missing: int = 0
@@ -255,7 +257,9 @@ class Recordings:
                 current.first_t_ns, current.first_cycle, current.calibration_id = t_ns, cycle, calibration_id
             elif current.last_cycle is not None:
                 current.cycles_missing += max(0, (cycle - current.last_cycle) // current.request.divisor - 1)
-            current.last_cycle = cycle
+            if current.last_t_ns is not None:  # a loop held up skips cycles' deadlines, not their numbers
+                current.longest_gap_ns = max(current.longest_gap_ns or 0, t_ns - current.last_t_ns)
+            current.last_cycle, current.last_t_ns = cycle, t_ns
             active = self._geometries.get(calibration_id)
             frames = None
             if pose_frames and active is not None:
@@ -315,6 +319,7 @@ class Recordings:
             "started_monotonic_s": first_t_ns / 1e9 if first_t_ns is not None else None,
             "first_cycle": current.first_cycle, "rows_requested": current.rows_requested,
             "rows_written": current.received, "cycles_missing": current.cycles_missing,
+            "longest_row_gap_s": current.longest_gap_ns / 1e9 if current.longest_gap_ns is not None else None,
             "rows_lost": recorder.lost if recorder.recording == current.recording else 0, "faults_during": current.faults_seen,
             "ended": ended.value,
         }, write_error)

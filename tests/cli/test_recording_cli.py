@@ -74,6 +74,18 @@ def test_record_wait_exits_1_when_a_fault_came_during_the_recording(capsys) -> N
                             "not the one planned (the service's log says when)\n")
 
 
+def test_record_wait_notes_a_loop_held_up_during_the_recording(capsys) -> None:
+    from hexactl.adapters.cli.recording_commands import _report_written
+
+    side = {"csv": "/data/run.csv", "rows_written": 150, "ended": "duration", "cycles_missing": 0, "rate_hz": 10.0,
+            "longest_row_gap_s": 0.149}
+    assert _report_written(side, as_json=False) == 0 and "note" not in capsys.readouterr().out
+    assert _report_written({**side, "longest_row_gap_s": 3.1}, as_json=False) == 0  # the data are there
+    assert capsys.readouterr().out.splitlines()[-1] == ("note: rows up to 3.100 s apart, every 0.1 s planned: the "
+                                                        "control loop was held up (its cycles numbered on, late); t_s "
+                                                        "has each row's time")
+
+
 def test_record_wait_says_why_a_recording_could_not_be_written(capsys) -> None:
     from hexactl.adapters.cli.recording_commands import _report_written
 

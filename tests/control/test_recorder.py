@@ -135,6 +135,21 @@ def test_writer_writes_every_cycle_with_units_and_a_side_file(rig, recordings, t
     assert {"name": "t_s", "unit": "s"} in side["columns"]
 
 
+def test_a_loop_held_up_shows_in_the_side_files_longest_gap_not_in_cycles_missing(rig, recordings, tmp_path):
+    # A loop held up (a 3 s stall of its process) skips the cycles' deadlines, not their
+    # numbers: cycles_missing said 0, and only t_s showed the gap.
+    recordings.start("steady", duration_s=0.05)
+    assert _finish(rig, recordings)["longest_row_gap_s"] == pytest.approx(0.002)
+    recordings.start("held", duration_s=0.1)
+    rig.run(20)
+    rig.clock.advance(3_000_000_000)
+    side = _finish(rig, recordings)
+    assert side["cycles_missing"] == 0 and side["longest_row_gap_s"] == pytest.approx(3.002)
+    with open(tmp_path / "held.csv") as handle:
+        times = [float(row["t_s"]) for row in csv.DictReader(handle)]
+    assert max(b - a for a, b in zip(times, times[1:])) == pytest.approx(3.002)
+
+
 def test_writer_in_the_work_frame_writes_the_tools_pose(rig, recordings, tmp_path):
     rig.controller.set_frames(OperatorFrames(work=FramePoseMmDeg(10.0, 0, 0, 0, 0, 0),
                                              tool=FramePoseMmDeg(0, 0, 300.0, 0, 0, 0)))

@@ -961,6 +961,9 @@ class RecordingSideFile(_Message):
     rows_requested: int
     rows_written: int
     cycles_missing: int = Field(description="gaps in the cycle column (0 normally)")
+    longest_row_gap_s: float | None = Field(default=None, description="the longest time between two rows, s (the "
+                                            "rows' interval, 1/rate_hz, normally; a loop held up longer leaves a "
+                                            "gap in t_s, not in cycle); null with fewer than two rows")
     rows_lost: int = Field(description="rows the loop could not keep for want of room (0 normally)")
     faults_during: bool = Field(description="the controller was in FAULT or ESTOP during the recording")
     ended: Literal["duration", "stopped", "shutdown", "fault", "write_failed"] = Field(

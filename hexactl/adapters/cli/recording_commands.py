@@ -148,10 +148,20 @@ def _report_written(side: dict[str, Any], as_json: bool) -> int:
                         "planned (the service's log says when)")
     if not as_json:
         print(f"{side.get('csv')}: {side.get('rows_written', 0)} rows, ended: {side.get('ended')}")
+        if (gap := held_up_gap(side)) is not None:
+            print(f"note: rows up to {gap:.3f} s apart, every {1 / side['rate_hz']:g} s planned: the control loop was "
+                  "held up (its cycles numbered on, late); t_s has each row's time")
     if problems:
         print(f"hexactl record: {'; '.join(problems)}", file=sys.stderr)
         return EXIT_REFUSED
     return EXIT_OK
+
+
+def held_up_gap(side: dict[str, Any]) -> float | None:
+    """The side file's longest gap between rows, s, when it is over one and a half times the
+    rows' interval (a row came late by half an interval or more), else None."""
+    gap, rate = side.get("longest_row_gap_s"), side.get("rate_hz")
+    return gap if gap is not None and rate and gap > 1.5 / rate else None
 
 
 # -- plot ----------------------------------------------------------------------------
