@@ -364,6 +364,40 @@ def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
 
 
 
+def test_the_frames_panel_changes_only_the_soft_limits_filled_in(rig) -> None:
+    """The panel sent only the soft-limit inputs filled in, and set_frames replaces the soft
+    limits whole: a tilt bound typed alone removed the x, y, z bounds in force. An empty
+    input now keeps what is in force, as an empty frame input does; null and none remove."""
+    rig.at_rest_disabled()
+    rig.client.call("set_frames", soft_limits={"lower": [-50, None, None, None, None, None],
+                                               "upper": [50, None, 60, None, None, None]})
+
+    def applied(expected: dict) -> bool:
+        rig.click("#frames-apply")
+        soft = lambda: rig.client.call("frames")["frames"]["soft_limits"]  # noqa: E731
+        wait_for(lambda: soft() == expected, f"the service's soft limits {expected}",
+                 seen=lambda: (soft(), rig.element("#frames-result").text))
+        return True
+
+    try:
+        wait_for(lambda: rig.page("return window.hexactlDashboard.record.frames.soft_limits.lower[0]") == -50,
+                 "the page told of the soft limits")
+        for selector in ("#frame-work", "#frame-tool", "#soft-lower", "#soft-upper"):
+            rig.fill(selector, "")
+        rig.fill("#soft-max-tilt", "12")
+        assert applied({"lower": [-50, None, None, None, None, None], "upper": [50, None, 60, None, None, None],
+                        "max_tilt_deg": 12})
+        assert rig.element("#frames-result").text.startswith("frames set")
+        wait_for(lambda: rig.page("return window.hexactlDashboard.record.frames.soft_limits.max_tilt_deg") == 12,
+                 "the page told of the tilt bound")
+        rig.fill("#soft-max-tilt", "none")
+        rig.fill("#soft-upper", "null, null, null, null, null, 5")
+        assert applied({"lower": [-50, None, None, None, None, None], "upper": [None, None, None, None, None, 5],
+                        "max_tilt_deg": None})
+    finally:
+        rig.client.call("clear_frames")
+
+
 def test_a_recording_downloads_by_its_name_and_nothing_else_does(rig) -> None:
     """The page's download link: a recording as ``record`` named it, with ``.csv``; any other
     name is refused before the service is asked (the name rule is the API's, in one place)."""

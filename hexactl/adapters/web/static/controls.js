@@ -332,17 +332,22 @@ export function setupControls(ctx) {
       const tool = parseSix($('frame-tool').value, false, 'tool frame');
       const lower = parseSix($('soft-lower').value, true, 'soft lower bounds');
       const upper = parseSix($('soft-upper').value, true, 'soft upper bounds');
-      const tiltText = $('soft-max-tilt').value.trim();
-      if ($('soft-max-tilt').validity.badInput) throw new Error('max tilt: not a number');
-      const tilt = tiltText === '' ? null : Number(tiltText);
-      if (tilt !== null && !Number.isFinite(tilt)) throw new Error('max tilt: not a number');
+      const tiltText = $('soft-max-tilt').value.trim().toLowerCase();
+      // undefined: unchanged; null: no bound
+      const tilt = tiltText === '' ? undefined : (tiltText === 'none' || tiltText === 'null' ? null : Number(tiltText));
+      if (typeof tilt === 'number' && !Number.isFinite(tilt)) throw new Error(`max tilt: "${tiltText}" is not a number (none: no bound)`);
       if (work) fields.work = work;
       if (tool) fields.tool = tool;
-      if (lower || upper || tilt !== null) {
-        fields.soft_limits = {};
-        if (lower) fields.soft_limits.lower = lower;
-        if (upper) fields.soft_limits.upper = upper;
-        if (tilt !== null) fields.soft_limits.max_tilt_deg = tilt;
+      if (lower || upper || tilt !== undefined) {
+        // set_frames replaces the soft limits whole: an input left empty keeps what is in force,
+        // as an empty frame input does, so that setting the tilt does not remove the bounds.
+        const now = ctx.record()?.frames?.soft_limits ?? {};
+        const none = [null, null, null, null, null, null];
+        fields.soft_limits = {
+          lower: lower ?? now.lower ?? none,
+          upper: upper ?? now.upper ?? none,
+          max_tilt_deg: tilt === undefined ? now.max_tilt_deg ?? null : tilt,
+        };
       }
     } catch (e) {
       setResult(framesResult, 'refused', e.message);
