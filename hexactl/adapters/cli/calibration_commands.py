@@ -26,6 +26,7 @@ from hexactl.adapters.cli.common import (
     check_campaign_arguments,
     check_output,
     check_writable,
+    checked_number,
     client_endpoint,
     config_input,
     connect,
@@ -73,17 +74,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         description="Plan leg-lock (and free) postures on the --config geometry, run them on a simulated platform "
         "with seeded manufacturing errors, measure the feature points with a simulated instrument and write "
         "the measurement CSV (and the true geometry, to validate a calibration against).",
+        declare=_declare_simulate,
     )
-    simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
-    simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
-    simulate.add_argument("--per-leg", type=int, default=20, help="leg-lock postures per leg (default 20)")
-    simulate.add_argument("--free", type=int, default=0, help="free postures (default 0)")
-    simulate.add_argument("--seed", type=int, default=0, help="seed of errors, plans and noise (default 0)")
-    simulate.add_argument("--point-sigma", type=float, metavar="MM", help="instrument noise (default: the geometry's)")
-    simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
-    simulate.add_argument("--instrument", metavar="FILE", help="write the angles (and ranges) of the instrument this "
-                          "TOML file describes, with its noise, instead of points (docs/calibration.md)")
-    simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
     simulate.set_defaults(run=run_simulate)
 
     campaign = subparsers.add_parser(
@@ -102,9 +94,28 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     campaign.set_defaults(run=run_campaign_command)
 
 
+def _declare_simulate(simulate: argparse.ArgumentParser) -> None:
+    from hexactl.kinematics.geometry import noise_sigma_problem
+
+    simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
+    simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
+    simulate.add_argument("--per-leg", type=int, default=20, help="leg-lock postures per leg (default 20)")
+    simulate.add_argument("--free", type=int, default=0, help="free postures (default 0)")
+    simulate.add_argument("--seed", type=int, default=0, help="seed of errors, plans and noise (default 0)")
+    simulate.add_argument("--point-sigma", type=checked_number(noise_sigma_problem), metavar="MM",
+                          help="instrument noise (default: the geometry's)")
+    simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
+    simulate.add_argument("--instrument", metavar="FILE", help="write the angles (and ranges) of the instrument this "
+                          "TOML file describes, with its noise, instead of points (docs/calibration.md)")
+    simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
 def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
-    from hexactl.calibration.results import Method
+    from hexactl.calibration.results import Method, deviation_bound_problem
     from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM
+    from hexactl.kinematics.geometry import noise_sigma_problem
+
+    noise = checked_number(noise_sigma_problem)
 
     calibrate.add_argument("data", metavar="DATA.csv", help="measurement file (never modified)")
     calibrate.add_argument("-o", "--output", required=True, metavar="CAL.toml", help="calibration file to write")
@@ -117,11 +128,11 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
     calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
     calibrate.add_argument("--instrument", metavar="FILE", help="the instrument (TOML: theodolites or a laser tracker, "
                            "its stations and noise) whose own angles and ranges DATA holds (docs/calibration.md)")
-    calibrate.add_argument("--point-sigma", type=float, metavar="MM",
+    calibrate.add_argument("--point-sigma", type=noise, metavar="MM",
                            help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
-    calibrate.add_argument("--reading-sigma", type=float, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
+    calibrate.add_argument("--reading-sigma", type=noise, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
                            help=f"sensor reading noise, 1σ (default {DEFAULT_READING_SIGMA_MM} mm)")
-    calibrate.add_argument("--max-deviation", type=float, default=15.0, metavar="MM",
+    calibrate.add_argument("--max-deviation", type=checked_number(deviation_bound_problem), default=15.0, metavar="MM",
                            help="leglock/paper: bound on each parameter's deviation from nominal (default 15 mm)")
     calibrate.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy", "arctan"],
                            help="leglock: robust loss (default linear)")

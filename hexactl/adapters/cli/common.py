@@ -405,6 +405,22 @@ def positive_float(text: str) -> float:
     return value
 
 
+def checked_number(problem_of: Callable[[float], str | None]) -> Callable[[str], float]:
+    """An argparse ``type``: a number that ``problem_of``, the rule of the module that uses it
+    (e.g. :func:`~hexactl.kinematics.geometry.noise_sigma_problem`), finds nothing wrong with."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if problem := problem_of(value):
+            raise argparse.ArgumentTypeError(problem)
+        return value
+
+    return parse
+
+
 def _whole_number(text: str) -> int:
     try:
         return int(text)
