@@ -9,10 +9,14 @@ from __future__ import annotations
 import pytest
 
 from hexactl.calibration.results import IdentificationOptions
-from tests.cli.test_cli_robustness import exits_with
+from tests.cli.test_cli_robustness import NOBODY, exits_with, nothing_serves  # noqa: F401 - a fixture
 
 CALIBRATE = ["calibrate", "never-read.csv", "-o", "never-written.toml"]
 SIMULATE = ["simulate-campaign", "-o", "never-written.csv"]
+PLAN = ["plan-leglock", "--leg", "1", "--count", "10"]
+CAMPAIGN = ["campaign", "--out", "never-made", "--api", NOBODY]
+SIM_ACTUATORS = ["sim-actuators", "--can", "virtual:never-opened"]
+HUGE = "99999999999999999999999"
 
 REFUSED = [
     # A noise (1σ) outside a nanometre to a metre: the identification's weights 1/σ²
@@ -23,9 +27,24 @@ REFUSED = [
     # A bound on the deviation from nominal: a negative or NaN one was ignored, a tiny one
     # made leglock's bounds meet (scipy's ValueError).
     *[(CALIBRATE, "--max-deviation", value) for value in ("-5", "nan", "0", "1e-300", "inf")],
+    # A negative seed: numpy's ValueError traceback.
+    *[(command, "--seed", "-1") for command in (SIMULATE, PLAN, CAMPAIGN, ["demo"], SIM_ACTUATORS)],
+    *[(command, "--reset-faults", "-1") for command in (CAMPAIGN, ["demo"])],
+    # Candidates beyond memory: numpy's "Maximum allowed dimension exceeded" traceback.
+    *[(command, "--candidates", value) for command in (PLAN, CAMPAIGN) for value in ("0", HUGE)],
+    (PLAN, "--count", "0"), (SIMULATE, "--free", "-1"), (SIMULATE, "--per-leg", "-1"),
+    # Waits beyond an hour: OverflowError and a "not JSON compliant" ValueError.
+    *[(["status", "--api", NOBODY], "--timeout", value) for value in ("1e308", HUGE, "0", "nan")],
+    # A telemetry period that overflowed: the publisher died, the service served on without it.
+    *[(["serve", "--no-realtime"], "--telemetry-rate", value) for value in ("1e-300", "0.1", "nan")],
+    *[(SIM_ACTUATORS, "--tick-ms", value) for value in ("1e308", "0", "nan")],  # 1e308: a traceback
+    *[(SIM_ACTUATORS, option, value) for option in ("--drop-probability", "--corrupt-probability")
+      for value in ("5", "-1", "nan")],
+    *[(SIM_ACTUATORS, "--duration", value) for value in ("-1", "nan")],  # -1 stopped at once, nan never
 ]
 
 
+@pytest.mark.usefixtures("nothing_serves")
 @pytest.mark.parametrize(("command", "option", "value"), REFUSED)
 def test_a_meaningless_number_is_refused_naming_the_option(command: list[str], option: str, value: str,
                                                           capsys: pytest.CaptureFixture[str]) -> None:

@@ -32,6 +32,9 @@ from hexactl.adapters.cli.common import (
     connect,
     connection_parser,
     load_config,
+    non_negative_int,
+    positive_int,
+    whole_number_in,
     write_failed,
 )
 
@@ -99,9 +102,9 @@ def _declare_simulate(simulate: argparse.ArgumentParser) -> None:
 
     simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
     simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
-    simulate.add_argument("--per-leg", type=int, default=20, help="leg-lock postures per leg (default 20)")
-    simulate.add_argument("--free", type=int, default=0, help="free postures (default 0)")
-    simulate.add_argument("--seed", type=int, default=0, help="seed of errors, plans and noise (default 0)")
+    simulate.add_argument("--per-leg", type=non_negative_int, default=20, help="leg-lock postures per leg (default 20)")
+    simulate.add_argument("--free", type=non_negative_int, default=0, help="free postures (default 0)")
+    simulate.add_argument("--seed", type=non_negative_int, default=0, help="seed of errors, plans and noise (default 0)")
     simulate.add_argument("--point-sigma", type=checked_number(noise_sigma_problem), metavar="MM",
                           help="instrument noise (default: the geometry's)")
     simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
@@ -141,21 +144,22 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
 
 
 def _declare_plan(plan: argparse.ArgumentParser) -> None:
-    from hexactl.calibration.planning import DEFAULT_CANDIDATES
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES, MAX_CANDIDATES
 
     plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
-    plan.add_argument("--count", type=int, required=True, help="number of postures")
+    plan.add_argument("--count", type=positive_int, required=True, help="number of postures")
     lock = plan.add_mutually_exclusive_group()
     lock.add_argument("--length", type=float, metavar="MM", help="locked joint-to-joint length")
     lock.add_argument("--reading", type=float, metavar="MM", help="locked sensor reading")
-    plan.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help=f"random candidates (default {DEFAULT_CANDIDATES})")
-    plan.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    plan.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
+                      help=f"random candidates (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
+    plan.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
     plan.add_argument("-o", "--output", metavar="FILE", help="write the plan here (default: standard output)")
     plan.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
 def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
-    from hexactl.calibration.planning import DEFAULT_CANDIDATES
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES, MAX_CANDIDATES
 
     campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
     campaign.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, "
@@ -164,15 +168,15 @@ def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
                           help="sim: the service's simulated instrument (default); csv:FILE: a real instrument's file of "
                           "feature points p1_x … (row k = the k-th measurement, waited for); prompt: typed here")
     campaign.add_argument("--per-leg", type=int, default=20, metavar="N", help="leg-lock postures per leg (default 20)")
-    campaign.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES,
-                          help=f"random candidates per plan (default {DEFAULT_CANDIDATES})")
+    campaign.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
+                          help=f"random candidates per plan (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
     campaign.add_argument("--envelope", type=float, default=1.0, metavar="F",
                           help="plan within this fraction (0, 1] of the pose envelope: shorter moves, less information "
                           "(default 1)")
-    campaign.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
+    campaign.add_argument("--seed", type=non_negative_int, default=0, help="planning seed (default 0)")
     campaign.add_argument("--apply", action="store_true",
                           help="keep the calibration active afterwards, if it improved the accuracy (default: roll back)")
-    campaign.add_argument("--reset-faults", type=int, default=0, metavar="N",
+    campaign.add_argument("--reset-faults", type=non_negative_int, default=0, metavar="N",
                           help="simulation only: reset a latched fault (not an E-stop) and go on, unless it is the "
                           "N+1-th in a row with no measurement saved between them (default 0: stop at a fault, as a "
                           "real platform needs the operator). A measurement a fault interrupted is never kept")
@@ -355,6 +359,8 @@ def run_simulate(arguments: argparse.Namespace) -> int:
         check_output(path, arguments.force, config_input(arguments), arguments.instrument)
     if arguments.true_output and Path(arguments.true_output).resolve() == Path(arguments.output).resolve():
         raise CliError(f"--true-output {arguments.true_output} is the measurement file too: name two files")
+    if not arguments.per_leg and not arguments.free:
+        raise CliError("--per-leg 0 and --free 0: no posture to simulate; give either at least 1")
     nominal = load_config(arguments)
     if arguments.instrument and arguments.pose_form:
         raise CliError("--instrument and --pose-form exclude each other: an instrument's own observations are of points")
