@@ -41,6 +41,7 @@ REFUSED = [
     *[(SIM_ACTUATORS, option, value) for option in ("--drop-probability", "--corrupt-probability")
       for value in ("5", "-1", "nan")],
     *[(SIM_ACTUATORS, "--duration", value) for value in ("-1", "nan")],  # -1 stopped at once, nan never
+    *[(["jog", "x=1", "--api", NOBODY], "--for", value) for value in ("1e308", "0", "nan")],
 ]
 
 
@@ -51,6 +52,14 @@ def test_a_meaningless_number_is_refused_naming_the_option(command: list[str], o
     assert exits_with([*command, option, value]) == 2
     error = capsys.readouterr().err
     assert f"argument {option}: " in error and "Traceback" not in error
+
+
+@pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0"])
+def test_a_jog_at_no_velocity_is_refused_before_asking_the_service(velocity: str,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """All zeros release a jog in the API: the service's release reply broke the command (TypeError)."""
+    assert exits_with(["jog", velocity, "--for", "1", "--api", NOBODY]) == 2
+    assert "argument VELOCITY: " in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("setting", [{"point_sigma_mm": 1e-200}, {"reading_sigma_mm": 0.0},
