@@ -15,7 +15,8 @@ CALIBRATE = ["calibrate", "never-read.csv", "-o", "never-written.toml"]
 SIMULATE = ["simulate-campaign", "-o", "never-written.csv"]
 PLAN = ["plan-leglock", "--leg", "1", "--count", "10"]
 CAMPAIGN = ["campaign", "--out", "never-made", "--api", NOBODY]
-SIM_ACTUATORS = ["sim-actuators", "--can", "virtual:never-opened"]
+SIM_ACTUATORS = ["sim-actuators", "--can", "virtual:never-opened", "--duration", "0.1"]  # short, were one taken
+DEMO = ["demo", "--per-leg", "0"]  # refused after parsing, were the number taken: no demo runs
 HUGE = "99999999999999999999999"
 
 REFUSED = [
@@ -28,8 +29,8 @@ REFUSED = [
     # made leglock's bounds meet (scipy's ValueError).
     *[(CALIBRATE, "--max-deviation", value) for value in ("-5", "nan", "0", "1e-300", "inf")],
     # A negative seed: numpy's ValueError traceback.
-    *[(command, "--seed", "-1") for command in (SIMULATE, PLAN, CAMPAIGN, ["demo"], SIM_ACTUATORS)],
-    *[(command, "--reset-faults", "-1") for command in (CAMPAIGN, ["demo"])],
+    *[(command, "--seed", "-1") for command in (SIMULATE, PLAN, CAMPAIGN, DEMO, SIM_ACTUATORS)],
+    *[(command, "--reset-faults", "-1") for command in (CAMPAIGN, DEMO)],
     # Candidates beyond memory: numpy's "Maximum allowed dimension exceeded" traceback.
     *[(command, "--candidates", value) for command in (PLAN, CAMPAIGN) for value in ("0", HUGE)],
     (PLAN, "--count", "0"), (SIMULATE, "--free", "-1"), (SIMULATE, "--per-leg", "-1"),
@@ -46,12 +47,19 @@ REFUSED = [
 
 
 @pytest.mark.usefixtures("nothing_serves")
-@pytest.mark.parametrize(("command", "option", "value"), REFUSED)
+@pytest.mark.parametrize(("command", "option", "value"), REFUSED,
+                         ids=[f"{command[0]} {option} {value}" for command, option, value in REFUSED])
 def test_a_meaningless_number_is_refused_naming_the_option(command: list[str], option: str, value: str,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     assert exits_with([*command, option, value]) == 2
     error = capsys.readouterr().err
     assert f"argument {option}: " in error and "Traceback" not in error
+
+
+def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "points_mm must have shape None, got (0,)"."""
+    assert exits_with([*SIMULATE, "--per-leg", "0", "--free", "0"]) == 2
+    assert "--per-leg 0 and --free 0: no posture to simulate" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0"])
