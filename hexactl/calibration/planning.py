@@ -29,6 +29,9 @@ from hexactl.kinematics.workspace import PoseAssessment, assess_poses
 
 DEFAULT_CANDIDATES = 1500
 
+MAX_CANDIDATES = 100_000
+"""More would take gigabytes of memory (about 5 kB a candidate) for no information worth it."""
+
 
 @dataclass(frozen=True, slots=True)
 class PlanMargins:
@@ -116,10 +119,11 @@ def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
     """
     nan = float("nan")
     empty = np.zeros((0, 6))
-    if (not 0 <= request.leg <= LEG_COUNT or request.count < 1 or request.candidates < request.count
+    if (not 0 <= request.leg <= LEG_COUNT or request.count < 1 or not request.count <= request.candidates <= MAX_CANDIDATES
             or not 0 < request.envelope_fraction <= 1):
         return PosturePlan(PlanStatus.INVALID_REQUEST, request.leg, empty, empty, nan, nan, 0,
-            f"leg must be 0-{LEG_COUNT}, count ≥ 1, candidates ≥ count and the envelope fraction in (0, 1] "
+            f"leg must be 0-{LEG_COUNT}, count ≥ 1, candidates from count to {MAX_CANDIDATES} and the envelope "
+            "fraction in (0, 1] "
             f"(got leg {request.leg}, count {request.count}, candidates {request.candidates}, "
             f"envelope fraction {request.envelope_fraction})")
     home = np.array(geometry.home.in_radians())

@@ -21,6 +21,7 @@ from hexactl.calibration.uncertainty import (
     analyse_information,
     predict_accuracy,
 )
+from hexactl.kinematics.geometry import noise_sigma_problem
 
 
 class Method(StrEnum):
@@ -46,6 +47,17 @@ MIN_LOCKED_POSTURES = 8
 
 MIN_POSTURES = 8
 """For full: each leg has seven unknowns and every posture gives one equation per leg."""
+
+MIN_DEVIATION_BOUND_MM = 1e-3
+"""A bound on a parameter's deviation from the nominal tighter than a micrometre pins it there:
+nothing would be identified (and in floating point leglock's two bounds meet)."""
+
+
+def deviation_bound_problem(bound_mm: float) -> str | None:
+    """What is wrong with ``bound_mm`` as a bound on each parameter's deviation, mm; None if nothing."""
+    if not MIN_DEVIATION_BOUND_MM <= bound_mm < float("inf"):
+        return f"{bound_mm:g} is not a finite bound from {MIN_DEVIATION_BOUND_MM:g} mm on each parameter's deviation"
+    return None
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +98,18 @@ class IdentificationOptions:
     consistency_limit: float = 2.0
     outlier_probability: float = 1e-3
     exclusion_false_alarm: float = 0.01
+
+    def __post_init__(self) -> None:
+        """ValueError naming the setting whose noise or bound the identification cannot work with."""
+        noises = {"reading_sigma_mm": self.reading_sigma_mm, "point_sigma_mm": self.point_sigma_mm}
+        bounds = {"max_joint_deviation_mm": self.max_joint_deviation_mm,
+                  "max_zero_length_deviation_mm": self.max_zero_length_deviation_mm}
+        for name, value in noises.items():
+            if value is not None and (problem := noise_sigma_problem(value)):
+                raise ValueError(f"{name}: {problem}")
+        for name, value in bounds.items():
+            if problem := deviation_bound_problem(value):
+                raise ValueError(f"{name}: {problem}")
 
 
 @dataclass(frozen=True, slots=True, eq=False)

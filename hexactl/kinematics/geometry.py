@@ -26,6 +26,13 @@ MIN_JOINT_SEPARATION_MM = 1.0
 COVARIANCE_SIZES = (42, 48)
 """A parameter covariance covers the 42 structural parameters, and the six sensor scale errors when identified."""
 
+MIN_NOISE_SIGMA_MM = 1e-6
+"""The smallest noise (1σ) an instrument or a sensor may be given, mm: a nanometre, below any real
+one's. An identification weighs each residual by 1/σ²: far below it the weights overflow."""
+
+MAX_NOISE_SIGMA_MM = 1e3
+"""The largest, mm: a metre measures nothing of a platform (and far above, 1/σ² underflows)."""
+
 MAX_SENSOR_SCALE_ERROR = 0.01
 """A sensor gain error beyond 1 % is a unit or lead mistake, not a calibration (lead errors are ~1e-4)."""
 
@@ -69,18 +76,40 @@ class Limits(_Strict):
         return self
 
 
+def noise_sigma_problem(sigma_mm: float) -> str | None:
+    """What is wrong with ``sigma_mm`` as a noise, 1σ in mm (an instrument's, a sensor's); None if nothing."""
+    if not MIN_NOISE_SIGMA_MM <= sigma_mm <= MAX_NOISE_SIGMA_MM:
+        return (f"{sigma_mm:g} is not a noise (1σ) from {MIN_NOISE_SIGMA_MM:g} to {MAX_NOISE_SIGMA_MM:g} mm, a nanometre "
+                "to a metre: no instrument or sensor measures outside it (check the unit: mm)")
+    return None
+
+
 class Measurement(_Strict):
     """The external instrument's targets and noise."""
 
     feature_points: tuple[Vector3, ...] = Field(
         min_length=3, description="targets on the platform, moving frame, mm"
     )
-    point_sigma_mm: Number = Field(gt=0, description="instrument noise, 1 sigma per coordinate, mm")
+    point_sigma_mm: Number = Field(description="instrument noise, 1 sigma per coordinate, mm")
     feature_point_sigma_mm: Number = Field(
-        default=0.0, ge=0,
+        default=0.0,
         description="how well feature_points are known, 1 sigma per coordinate, mm (0: exactly); above 0 the "
                     "calibration identifies them too, with this prior",
     )
+
+    @field_validator("point_sigma_mm")
+    @classmethod
+    def _noise(cls, sigma: float) -> float:
+        if problem := noise_sigma_problem(sigma):
+            raise ValueError(problem)
+        return sigma
+
+    @field_validator("feature_point_sigma_mm")
+    @classmethod
+    def _prior(cls, sigma: float) -> float:
+        if sigma != 0.0 and (problem := noise_sigma_problem(sigma)):
+            raise ValueError(f"{problem}; or 0: known exactly")
+        return sigma
 
     @model_validator(mode="after")
     def _not_collinear(self) -> Measurement:

@@ -9,9 +9,9 @@ from hexactl.adapters.cli.main import main
 from hexactl.application.service import ServiceConfig
 
 
-@pytest.mark.parametrize("rate_hz", [0.0, -5.0, MAX_TELEMETRY_RATE_HZ * 2, float("nan")])
+@pytest.mark.parametrize("rate_hz", [0.0, -5.0, 1e-300, MAX_TELEMETRY_RATE_HZ * 2, float("nan")])
 def test_a_service_config_refuses_a_rate_the_publisher_cannot_keep(rate_hz: float) -> None:
-    with pytest.raises(ValueError, match=r"telemetry rate .* outside \(0, 1000\]: choose a rate"):
+    with pytest.raises(ValueError, match=r"telemetry rate .* outside \[0.2, 1000\]: choose a rate"):
         ServiceConfig(telemetry_rate_hz=rate_hz)
 
 
@@ -24,5 +24,5 @@ def test_serve_refuses_the_rate_as_an_argument_before_starting(capsys) -> None:
         main(["serve", "--telemetry-rate", "5000"])
     assert exit_.value.code == 2
     error = capsys.readouterr().err
-    assert "argument --telemetry-rate: telemetry rate 5000 Hz outside (0, 1000]" in error
+    assert "argument --telemetry-rate: telemetry rate 5000 Hz outside [0.2, 1000]" in error
     assert "control loop" not in error

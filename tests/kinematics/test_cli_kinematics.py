@@ -50,11 +50,21 @@ def test_fk_reports_non_convergence(capsys) -> None:
     assert json.loads(capsys.readouterr().out)["pose"] is None
 
 
+def test_fk_json_of_a_diverged_solve_is_standard_json(capsys) -> None:
+    """A reading far outside the stroke diverges with an infinite residual: printed as
+    ``Infinity``, which is no JSON (jq and most parsers refuse the whole reply)."""
+    assert main(["fk", "5000", "400", "400", "400", "400", "400", "--json"]) == 1
+    reply = json.loads(capsys.readouterr().out, parse_constant=lambda name: pytest.fail(f"{name} is not JSON"))
+    assert reply["status"] == "diverged" and reply["residual_mm"] is None
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
         (["ik", "1", "2", "3", "nan", "0", "0"], "roll: 'nan' is not a finite number"),
         (["ik", "1", "2", "three", "0", "0", "0"], "z: 'three' is not a number"),
+        # as check and move: 1e308 overflowed to leg lengths of inf, printed as JSON's non-standard Infinity
+        (["ik", "1e308", "0", "0", "0", "0", "0", "--json"], "pose x 1e+308 is beyond any platform's reach"),
         (["fk", "1", "2", "3", "4", "5", "inf"], "L6: 'inf' is not a finite number"),
         (["sim-actuators", "--can", "socketcan:vcan0", "--positions", "1,2"], "give 6 numbers (L1,L2,L3,L4,L5,L6), not 2"),
         (["check", "--config", "/nonexistent/platform.toml"], "/nonexistent/platform.toml: cannot read"),

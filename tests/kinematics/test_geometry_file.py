@@ -87,6 +87,11 @@ def _set(path, value):
          r"pose near it would be refused as near-singular"),
         (_set(["zero_lengths", 0], -5.0), r"zero_lengths: leg 1 has non-positive zero length"),
         (_set(["measurement", "feature_points"], [[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]]), r"collinear"),
+        # a noise far below a nanometre overflowed the identification's weights 1/σ² (a traceback)
+        (_set(["measurement", "point_sigma_mm"], 1e-200),
+         r"measurement.point_sigma_mm: 1e-200 is not a noise \(1σ\) from 1e-06 to 1000 mm, a nanometre to a metre"),
+        (_set(["measurement", "feature_point_sigma_mm"], 1e-200),
+         r"measurement.feature_point_sigma_mm: 1e-200 is not a noise .*; or 0: known exactly$"),
         (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: Extra inputs are not permitted"),
         (_set(["zero_lengths", 0], "long"), r'zero_lengths\[0\]: must be a number, not the string "long"$'),
         # numbers are numbers: a quoted one or a bool is a slip to refuse, not to read

@@ -66,14 +66,21 @@ DEFAULT_TIMEOUT_S = 5.0
 MAX_DEADLINE_MS = 3_600_000
 """The largest ``deadline_ms`` (an hour): a bound, so that a deadline is always a time."""
 
+MAX_TIMEOUT_S = MAX_DEADLINE_MS / 1000.0
+"""The longest a client waits: beyond, no request is carried out, and the wait overflowed."""
+
+MIN_TELEMETRY_RATE_HZ = 1.0 / DEFAULT_TIMEOUT_S
+"""Slower, a client waiting its default time for a record may get none (and at 1e-300 Hz the
+publisher's period overflowed, killing it)."""
+
 
 def check_telemetry_rate(rate_hz: float) -> float:
     """``rate_hz`` if it is a rate telemetry can be published at, records per second.
 
-    :raises ValueError: outside (0, :data:`MAX_TELEMETRY_RATE_HZ`], naming the range
+    :raises ValueError: outside [:data:`MIN_TELEMETRY_RATE_HZ`, :data:`MAX_TELEMETRY_RATE_HZ`], naming the range
     """
-    if not 0 < rate_hz <= MAX_TELEMETRY_RATE_HZ:
-        raise ValueError(f"telemetry rate {rate_hz:g} Hz outside (0, {MAX_TELEMETRY_RATE_HZ:g}]: "
+    if not MIN_TELEMETRY_RATE_HZ <= rate_hz <= MAX_TELEMETRY_RATE_HZ:
+        raise ValueError(f"telemetry rate {rate_hz:g} Hz outside [{MIN_TELEMETRY_RATE_HZ:g}, {MAX_TELEMETRY_RATE_HZ:g}]: "
                          f"choose a rate in that range, e.g. {DEFAULT_TELEMETRY_RATE_HZ:g}")
     return rate_hz
 

@@ -42,7 +42,7 @@ class TelemetryPublisher(SocketThread):
     exception from it is logged (first occurrence and then every thousandth) and that
     period is skipped.
 
-    :raises ValueError: ``rate_hz`` outside (0, :data:`~hexactl.adapters.api.protocol.MAX_TELEMETRY_RATE_HZ`]
+    :raises ValueError: ``rate_hz`` outside what :func:`~hexactl.adapters.api.protocol.check_telemetry_rate` takes
     :raises zmq.ZMQError: the endpoint is malformed or in use
     """
 

@@ -26,11 +26,15 @@ from hexactl.adapters.cli.common import (
     check_campaign_arguments,
     check_output,
     check_writable,
+    checked_number,
     client_endpoint,
     config_input,
     connect,
     connection_parser,
     load_config,
+    non_negative_int,
+    positive_int,
+    whole_number_in,
     write_failed,
 )
 
@@ -73,17 +77,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         description="Plan leg-lock (and free) postures on the --config geometry, run them on a simulated platform "
         "with seeded manufacturing errors, measure the feature points with a simulated instrument and write "
         "the measurement CSV (and the true geometry, to validate a calibration against).",
+        declare=_declare_simulate,
     )
-    simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
-    simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
-    simulate.add_argument("--per-leg", type=int, default=20, help="leg-lock postures per leg (default 20)")
-    simulate.add_argument("--free", type=int, default=0, help="free postures (default 0)")
-    simulate.add_argument("--seed", type=int, default=0, help="seed of errors, plans and noise (default 0)")
-    simulate.add_argument("--point-sigma", type=float, metavar="MM", help="instrument noise (default: the geometry's)")
-    simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
-    simulate.add_argument("--instrument", metavar="FILE", help="write the angles (and ranges) of the instrument this "
-                          "TOML file describes, with its noise, instead of points (docs/calibration.md)")
-    simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
     simulate.set_defaults(run=run_simulate)
 
     campaign = subparsers.add_parser(
@@ -102,9 +97,28 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     campaign.set_defaults(run=run_campaign_command)
 
 
+def _declare_simulate(simulate: argparse.ArgumentParser) -> None:
+    from hexactl.kinematics.geometry import noise_sigma_problem
+
+    simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
+    simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
+    simulate.add_argument("--per-leg", type=non_negative_int, default=20, help="leg-lock postures per leg (default 20)")
+    simulate.add_argument("--free", type=non_negative_int, default=0, help="free postures (default 0)")
+    simulate.add_argument("--seed", type=non_negative_int, default=0, help="seed of errors, plans and noise (default 0)")
+    simulate.add_argument("--point-sigma", type=checked_number(noise_sigma_problem), metavar="MM",
+                          help="instrument noise (default: the geometry's)")
+    simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
+    simulate.add_argument("--instrument", metavar="FILE", help="write the angles (and ranges) of the instrument this "
+                          "TOML file describes, with its noise, instead of points (docs/calibration.md)")
+    simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
 def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
-    from hexactl.calibration.results import Method
+    from hexactl.calibration.results import Method, deviation_bound_problem
     from hexactl.calibration.uncertainty import DEFAULT_READING_SIGMA_MM
+    from hexactl.kinematics.geometry import noise_sigma_problem
+
+    noise = checked_number(noise_sigma_problem)
 
     calibrate.add_argument("data", metavar="DATA.csv", help="measurement file (never modified)")
     calibrate.add_argument("-o", "--output", required=True, metavar="CAL.toml", help="calibration file to write")
@@ -117,11 +131,11 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
     calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
     calibrate.add_argument("--instrument", metavar="FILE", help="the instrument (TOML: theodolites or a laser tracker, "
                            "its stations and noise) whose own angles and ranges DATA holds (docs/calibration.md)")
-    calibrate.add_argument("--point-sigma", type=float, metavar="MM",
+    calibrate.add_argument("--point-sigma", type=noise, metavar="MM",
                            help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
-    calibrate.add_argument("--reading-sigma", type=float, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
+    calibrate.add_argument("--reading-sigma", type=noise, default=DEFAULT_READING_SIGMA_MM, metavar="MM",
                            help=f"sensor reading noise, 1σ (default {DEFAULT_READING_SIGMA_MM} mm)")
-    calibrate.add_argument("--max-deviation", type=float, default=15.0, metavar="MM",
+    calibrate.add_argument("--max-deviation", type=checked_number(deviation_bound_problem), default=15.0, metavar="MM",
                            help="leglock/paper: bound on each parameter's deviation from nominal (default 15 mm)")
     calibrate.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy", "arctan"],
                            help="leglock: robust loss (default linear)")
@@ -130,21 +144,22 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
 
 
 def _declare_plan(plan: argparse.ArgumentParser) -> None:
-    from hexactl.calibration.planning import DEFAULT_CANDIDATES
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES, MAX_CANDIDATES
 
     plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
-    plan.add_argument("--count", type=int, required=True, help="number of postures")
+    plan.add_argument("--count", type=positive_int, required=True, help="number of postures")
     lock = plan.add_mutually_exclusive_group()
     lock.add_argument("--length", type=float, metavar="MM", help="locked joint-to-joint length")
     lock.add_argument("--reading", type=float, metavar="MM", help="locked sensor reading")
-    plan.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help=f"random candidates (default {DEFAULT_CANDIDATES})")
-    plan.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    plan.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
+                      help=f"random candidates (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
+    plan.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
     plan.add_argument("-o", "--output", metavar="FILE", help="write the plan here (default: standard output)")
     plan.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
 def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
-    from hexactl.calibration.planning import DEFAULT_CANDIDATES
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES, MAX_CANDIDATES
 
     campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
     campaign.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, "
@@ -153,15 +168,15 @@ def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
                           help="sim: the service's simulated instrument (default); csv:FILE: a real instrument's file of "
                           "feature points p1_x … (row k = the k-th measurement, waited for); prompt: typed here")
     campaign.add_argument("--per-leg", type=int, default=20, metavar="N", help="leg-lock postures per leg (default 20)")
-    campaign.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES,
-                          help=f"random candidates per plan (default {DEFAULT_CANDIDATES})")
+    campaign.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
+                          help=f"random candidates per plan (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
     campaign.add_argument("--envelope", type=float, default=1.0, metavar="F",
                           help="plan within this fraction (0, 1] of the pose envelope: shorter moves, less information "
                           "(default 1)")
-    campaign.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
+    campaign.add_argument("--seed", type=non_negative_int, default=0, help="planning seed (default 0)")
     campaign.add_argument("--apply", action="store_true",
                           help="keep the calibration active afterwards, if it improved the accuracy (default: roll back)")
-    campaign.add_argument("--reset-faults", type=int, default=0, metavar="N",
+    campaign.add_argument("--reset-faults", type=non_negative_int, default=0, metavar="N",
                           help="simulation only: reset a latched fault (not an E-stop) and go on, unless it is the "
                           "N+1-th in a row with no measurement saved between them (default 0: stop at a fault, as a "
                           "real platform needs the operator). A measurement a fault interrupted is never kept")
@@ -344,6 +359,8 @@ def run_simulate(arguments: argparse.Namespace) -> int:
         check_output(path, arguments.force, config_input(arguments), arguments.instrument)
     if arguments.true_output and Path(arguments.true_output).resolve() == Path(arguments.output).resolve():
         raise CliError(f"--true-output {arguments.true_output} is the measurement file too: name two files")
+    if not arguments.per_leg and not arguments.free:
+        raise CliError("--per-leg 0 and --free 0: no posture to simulate; give either at least 1")
     nominal = load_config(arguments)
     if arguments.instrument and arguments.pose_form:
         raise CliError("--instrument and --pose-form exclude each other: an instrument's own observations are of points")

@@ -22,7 +22,7 @@ from math import isfinite
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
-from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, check_telemetry_rate
+from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S, check_telemetry_rate
 from hexactl.adapters.files.atomic import write_problem
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
@@ -149,10 +149,17 @@ def common_parser() -> argparse.ArgumentParser:
 def connection_parser() -> argparse.ArgumentParser:
     """The options of every client of the service: timeout and CURVE keys (see :func:`connect`)."""
     parser = argparse.ArgumentParser(add_help=False)
-    parser.add_argument("--timeout", type=positive_float, default=DEFAULT_TIMEOUT_S, metavar="S", help=f"seconds to wait for the service (default {DEFAULT_TIMEOUT_S:g})")
+    parser.add_argument("--timeout", type=checked_number(_timeout_problem), default=DEFAULT_TIMEOUT_S, metavar="S",
+                        help=f"seconds to wait for the service (default {DEFAULT_TIMEOUT_S:g}, at most {MAX_TIMEOUT_S:g})")
     parser.add_argument("--curve-server", type=Path, metavar="FILE", help="the service's CURVE public key (a service beyond localhost; default $HEXACTL_CURVE_SERVER, else the client file)")
     parser.add_argument("--curve-client", type=Path, metavar="FILE", help="this client's CURVE secret key (default $HEXACTL_CURVE_CLIENT, else the client file)")
     return parser
+
+
+def _timeout_problem(seconds: float) -> str | None:
+    if not 0 < seconds <= MAX_TIMEOUT_S:
+        return f"{seconds:g} is not a time from 0 to {MAX_TIMEOUT_S:g} s (an hour), as a client waits for the service"
+    return None
 
 
 def connect(kind: type[Connection], endpoint: str, arguments: argparse.Namespace, **options: Any) -> Connection:
@@ -424,6 +431,22 @@ def positive_float(text: str) -> float:
     return value
 
 
+def checked_number(problem_of: Callable[[float], str | None]) -> Callable[[str], float]:
+    """An argparse ``type``: a number that ``problem_of``, the rule of the module that uses it
+    (e.g. :func:`~hexactl.kinematics.geometry.noise_sigma_problem`), finds nothing wrong with."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if problem := problem_of(value):
+            raise argparse.ArgumentTypeError(problem)
+        return value
+
+    return parse
+
+
 def _whole_number(text: str) -> int:
     try:
         return int(text)
@@ -436,6 +459,24 @@ def positive_int(text: str) -> int:
     if (value := _whole_number(text)) < 1:
         raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
     return value
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse ``type``: a whole number from 0 (a seed, a count that may be none)."""
+    if (value := _whole_number(text)) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be 0 or more")
+    return value
+
+
+def whole_number_in(low: int, high: int) -> Callable[[str], int]:
+    """An argparse ``type``: a whole number from ``low`` to ``high``."""
+
+    def parse(text: str) -> int:
+        if not low <= _whole_number(text) <= high:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number from {low} to {high}")
+        return int(text)
+
+    return parse
 
 
 def telemetry_rate(text: str) -> float:

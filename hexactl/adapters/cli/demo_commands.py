@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hexactl.adapters.cli.common import CliError, campaign_stopped, check_campaign_arguments, check_writable
+from hexactl.adapters.cli.common import (CliError, campaign_stopped, check_campaign_arguments, check_writable,
+                                        non_negative_int)
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 
 DEFAULT_OUT = Path("demo-out")
@@ -39,7 +40,7 @@ def _declare_demo(demo: argparse.ArgumentParser) -> None:
 
     demo.add_argument("--out", type=Path, default=DEFAULT_OUT, metavar="DIR",
                       help=f"results directory (default ./{DEFAULT_OUT})")
-    demo.add_argument("--seed", type=int, default=0,
+    demo.add_argument("--seed", type=non_negative_int, default=0,
                       help="seed of the manufacturing errors, the instrument noise and the plan (default 0)")
     demo.add_argument("--per-leg", type=int, default=DEMO_POSTURES_PER_LEG, metavar="N",
                       help=f"leg-lock postures per leg (default {DEMO_POSTURES_PER_LEG}, to finish in under two minutes; "
@@ -50,7 +51,7 @@ def _declare_demo(demo: argparse.ArgumentParser) -> None:
     demo.add_argument("--force", action="store_true", help="replace the results of a finished demo in DIR")
     demo.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",
                       help=f"watch it in the browser dashboard, served there (default {DEFAULT_HTTP}) while the demo runs")
-    demo.add_argument("--reset-faults", type=int, default=DEMO_FAULTS_IN_A_ROW, metavar="N",
+    demo.add_argument("--reset-faults", type=non_negative_int, default=DEMO_FAULTS_IN_A_ROW, metavar="N",
                       help="reset a latched fault and go on, unless it is the N+1-th in a row with no measurement saved "
                       f"between them (default {DEMO_FAULTS_IN_A_ROW}): a loaded host can stall the simulated actuators "
                       "past their watchdog. A measurement a fault interrupted is never kept; the faults recovered "

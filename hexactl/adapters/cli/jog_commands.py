@@ -14,7 +14,7 @@ import sys
 import time
 from typing import Any
 
-from hexactl.adapters.cli.common import connect, positive_float, velocity_argument
+from hexactl.adapters.cli.common import checked_number, connect, velocity_argument
 from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_REFUSED,
@@ -32,13 +32,29 @@ RENEWALS_PER_DEADMAN = 4
 MAX_JOG_FOR_S = 600.0
 
 
+def _jog_velocity(text: str) -> list[float]:
+    """An argparse ``type``: a velocity to jog at. All zeros would release a jog (the API's
+    meaning), not start one: nothing to renew, and the command broke on the reply."""
+    velocity = velocity_argument(text)
+    if not any(velocity):
+        raise argparse.ArgumentTypeError(f"velocity {text!r} is zero on every axis: give a velocity to jog at, "
+                                         "e.g. z=5 (to brake to rest: hexactl stop)")
+    return velocity
+
+
+def _for_problem(seconds: float) -> str | None:
+    if not 0 < seconds <= MAX_JOG_FOR_S:
+        return f"{seconds:g} is not a time from 0 to {MAX_JOG_FOR_S:g} s: jog in shorter runs"
+    return None
+
+
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     description = ("jog the platform at a velocity for a while: it heads for the first limit ahead (hardware or "
                    "soft) and comes to rest on it; then it is released and brakes to rest")
     jog = subparsers.add_parser("jog", parents=[client_parser()], help=description, description=description)
-    jog.add_argument("velocity", metavar="VELOCITY", type=velocity_argument,
+    jog.add_argument("velocity", metavar="VELOCITY", type=_jog_velocity,
                      help="X,Y,Z,ROLL,PITCH,YAW in mm/s and deg/s, or axis=value pairs, e.g. z=5 or yaw=-1")
-    jog.add_argument("--for", dest="for_s", type=positive_float, required=True, metavar="S",
+    jog.add_argument("--for", dest="for_s", type=checked_number(_for_problem), required=True, metavar="S",
                      help=f"how long to jog, s (at most {MAX_JOG_FOR_S:g}); Ctrl-C releases it sooner")
     jog.add_argument("--frame", choices=FRAMES, default="zero",
                      help="zero: the platform's axes at the zero posture (default); work: the work frame's axes; "
@@ -51,10 +67,6 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 def run_jog(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
 
-    if arguments.for_s > MAX_JOG_FOR_S:
-        print(f"hexactl jog: --for {arguments.for_s:g} is beyond {MAX_JOG_FOR_S:g} s: jog in shorter runs",
-              file=sys.stderr)
-        return EXIT_NO_ANSWER
     fields = {"velocity": arguments.velocity, "frame": arguments.frame}
     client = connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)
     try:

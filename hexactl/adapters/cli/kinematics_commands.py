@@ -9,15 +9,17 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Sequence
+from math import isfinite
 from typing import TYPE_CHECKING
 
 from hexactl.adapters.cli.common import (
     LEG_LABELS,
+    CliError,
     load_config,
     parse_numbers,
     pose_argument,
 )
-from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS, validate_pose_values
 
 if TYPE_CHECKING:  # the kinematics (numpy) load in the functions that run the commands
     from hexactl.kinematics.geometry import Geometry
@@ -133,6 +135,8 @@ def run_ik(arguments: argparse.Namespace) -> int:
 
     geometry = load_config(arguments)
     pose = parse_numbers([getattr(arguments, axis.upper()) for axis in POSE_AXES], POSE_AXES)
+    if problem := validate_pose_values(pose):  # as check and move: 1e308 overflowed to lengths of inf
+        raise CliError(problem)
     lengths = leg_lengths(geometry.legs, absolute_from_relative(geometry.home, pose))
     setpoints = readings_from_lengths(geometry.legs, lengths).tolist()
     assessment = assess_poses(geometry, [pose])[0]
@@ -171,7 +175,8 @@ def run_fk(arguments: argparse.Namespace) -> int:
                         "leg lengths, so this one may be tens of mm from the platform's: do not rely on it")
     if arguments.json:
         print(json.dumps({"pose": pose if result.ok else None, "status": result.status.name.lower(),
-                          "iterations": result.iterations, "residual_mm": result.residual_mm,
+                          "iterations": result.iterations,
+                          "residual_mm": result.residual_mm if isfinite(result.residual_mm) else None,  # JSON has no inf
                           "jacobian_condition": condition, "near_singular": singular,
                           "warnings": warnings}, indent=2))
     elif result.ok:

@@ -9,7 +9,8 @@ import sys
 from types import FrameType
 from typing import TYPE_CHECKING
 
-from hexactl.adapters.cli.common import LEG_LABELS, CliError, fifo_priority, load_config, parse_numbers
+from hexactl.adapters.cli.common import (LEG_LABELS, CliError, checked_number, fifo_priority, load_config,
+                                        non_negative_int, parse_numbers, positive_float)
 
 if TYPE_CHECKING:  # the simulator and python-can load when the command runs, not for every command
     from hexactl.kinematics.geometry import Geometry
@@ -17,6 +18,19 @@ if TYPE_CHECKING:  # the simulator and python-can load when the command runs, no
 SIMULATOR_RECEIVE_BUFFER_BYTES = 8 << 20
 """The simulator's SocketCAN receive buffer: about 10 000 classic frames, over 5 s of a
 controller at 500 Hz (four frames a cycle)."""
+
+
+MAX_TICK_MS = 1000.0
+"""A coarser physics tick leaves the actuators silent for longer than any controller's
+watchdog; above it, the tick's timestamps overflowed."""
+
+
+def _tick_problem(tick_ms: float) -> str | None:
+    return None if 0 < tick_ms <= MAX_TICK_MS else f"{tick_ms:g} is not a tick from 0 to {MAX_TICK_MS:g} ms"
+
+
+def _probability_problem(probability: float) -> str | None:
+    return None if 0 <= probability <= 1 else f"{probability:g} is not a probability from 0 to 1"
 
 
 def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -32,15 +46,17 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "See docs/can.md.",
     )
     sim.add_argument("--can", required=True, metavar="SPEC", help="bus: socketcan:CHANNEL (e.g. socketcan:vcan0)")
-    sim.add_argument("--seed", type=int, default=0, help="seed of the true platform's manufacturing errors and "
+    sim.add_argument("--seed", type=non_negative_int, default=0, help="seed of the true platform's manufacturing errors and "
                      "of injected frame faults (default 0)")  # fmt: skip
     sim.add_argument("--true-geometry", metavar="FILE", help="geometry file of the true platform "
                      "(default: the --config geometry with seeded manufacturing errors)")  # fmt: skip
     sim.add_argument("--positions", metavar="L1,...,L6", help="start readings, mm")
-    sim.add_argument("--tick-ms", type=float, default=1.0, help="physics tick, ms (default 1)")
-    sim.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    sim.add_argument("--drop-probability", type=float, default=0.0, help="each received frame is lost with this probability")
-    sim.add_argument("--corrupt-probability", type=float, default=0.0,
+    sim.add_argument("--tick-ms", type=checked_number(_tick_problem), default=1.0,
+                     help=f"physics tick, ms (default 1, at most {MAX_TICK_MS:g})")
+    sim.add_argument("--duration", type=positive_float, metavar="S", help="stop after S seconds")
+    sim.add_argument("--drop-probability", type=checked_number(_probability_problem), default=0.0,
+                     help="each received frame is lost with this probability")
+    sim.add_argument("--corrupt-probability", type=checked_number(_probability_problem), default=0.0,
                      help="each received frame is corrupted (bad CRC) with this probability")  # fmt: skip
     sim.add_argument("--fifo", type=fifo_priority(1), metavar="PRIO",
                      help="SCHED_FIFO priority 1-99 of the simulator, set once it is ready (its start-up would "
@@ -75,8 +91,6 @@ def run_sim_actuators(arguments: argparse.Namespace) -> int:
         positions = parse_numbers(arguments.positions.split(","), LEG_LABELS)
     else:
         positions = zero_posture_readings_mm(truth)
-    if not arguments.tick_ms > 0:
-        raise CliError("--tick-ms must be positive")
     try:
         spec = parse_bus_spec(arguments.can)
         firmwares = make_firmwares(positions, actuator_params_for(nominal), seed=arguments.seed)

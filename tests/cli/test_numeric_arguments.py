@@ -1,0 +1,77 @@
+"""Numeric options swept with what a slip or a script may give them (-1, 0, nan, inf,
+1e308, 1e-300, a huge integer): each is meaningful and accepted, or refused at once by
+argparse (exit 2, ``argument --X: …`` naming the range). Found by an outside review:
+``calibrate --point-sigma 1e-200`` ended in numpy's traceback, ``--max-deviation -5``
+wrote a calibration, ``simulate-campaign --point-sigma nan`` a file of NaN noise."""
+
+from __future__ import annotations
+
+import pytest
+
+from hexactl.calibration.results import IdentificationOptions
+from tests.cli.test_cli_robustness import NOBODY, exits_with, nothing_serves  # noqa: F401 - a fixture
+
+CALIBRATE = ["calibrate", "never-read.csv", "-o", "never-written.toml"]
+SIMULATE = ["simulate-campaign", "-o", "never-written.csv"]
+PLAN = ["plan-leglock", "--leg", "1", "--count", "10"]
+CAMPAIGN = ["campaign", "--out", "never-made", "--api", NOBODY]
+SIM_ACTUATORS = ["sim-actuators", "--can", "virtual:never-opened", "--duration", "0.1"]  # short, were one taken
+DEMO = ["demo", "--per-leg", "0"]  # refused after parsing, were the number taken: no demo runs
+HUGE = "99999999999999999999999"
+
+REFUSED = [
+    # A noise (1σ) outside a nanometre to a metre: the identification's weights 1/σ²
+    # overflowed (LinAlgError, OverflowError) or a negative one was squared away unseen.
+    *[(CALIBRATE, "--point-sigma", value) for value in ("1e-200", "nan", "-1", "0", "inf", "1e308")],
+    *[(CALIBRATE, "--reading-sigma", value) for value in ("0", "-1", "1e-300", "1e308")],
+    *[(SIMULATE, "--point-sigma", value) for value in ("nan", "inf", "1e308", "1e-300", "-1")],
+    # A bound on the deviation from nominal: a negative or NaN one was ignored, a tiny one
+    # made leglock's bounds meet (scipy's ValueError).
+    *[(CALIBRATE, "--max-deviation", value) for value in ("-5", "nan", "0", "1e-300", "inf")],
+    # A negative seed: numpy's ValueError traceback.
+    *[(command, "--seed", "-1") for command in (SIMULATE, PLAN, CAMPAIGN, DEMO, SIM_ACTUATORS)],
+    *[(command, "--reset-faults", "-1") for command in (CAMPAIGN, DEMO)],
+    # Candidates beyond memory: numpy's "Maximum allowed dimension exceeded" traceback.
+    *[(command, "--candidates", value) for command in (PLAN, CAMPAIGN) for value in ("0", HUGE)],
+    (PLAN, "--count", "0"), (SIMULATE, "--free", "-1"), (SIMULATE, "--per-leg", "-1"),
+    # Waits beyond an hour: OverflowError and a "not JSON compliant" ValueError.
+    *[(["status", "--api", NOBODY], "--timeout", value) for value in ("1e308", HUGE, "0", "nan")],
+    # A telemetry period that overflowed: the publisher died, the service served on without it.
+    *[(["serve", "--no-realtime"], "--telemetry-rate", value) for value in ("1e-300", "0.1", "nan")],
+    *[(SIM_ACTUATORS, "--tick-ms", value) for value in ("1e308", "0", "nan")],  # 1e308: a traceback
+    *[(SIM_ACTUATORS, option, value) for option in ("--drop-probability", "--corrupt-probability")
+      for value in ("5", "-1", "nan")],
+    *[(SIM_ACTUATORS, "--duration", value) for value in ("-1", "nan")],  # -1 stopped at once, nan never
+    *[(["jog", "x=1", "--api", NOBODY], "--for", value) for value in ("1e308", "0", "nan")],
+]
+
+
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize(("command", "option", "value"), REFUSED,
+                         ids=[f"{command[0]} {option} {value}" for command, option, value in REFUSED])
+def test_a_meaningless_number_is_refused_naming_the_option(command: list[str], option: str, value: str,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    assert exits_with([*command, option, value]) == 2
+    error = capsys.readouterr().err
+    assert f"argument {option}: " in error and "Traceback" not in error
+
+
+def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "points_mm must have shape None, got (0,)"."""
+    assert exits_with([*SIMULATE, "--per-leg", "0", "--free", "0"]) == 2
+    assert "--per-leg 0 and --free 0: no posture to simulate" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0"])
+def test_a_jog_at_no_velocity_is_refused_before_asking_the_service(velocity: str,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """All zeros release a jog in the API: the service's release reply broke the command (TypeError)."""
+    assert exits_with(["jog", velocity, "--for", "1", "--api", NOBODY]) == 2
+    assert "argument VELOCITY: " in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("setting", [{"point_sigma_mm": 1e-200}, {"reading_sigma_mm": 0.0},
+                                     {"max_joint_deviation_mm": -5.0}, {"max_zero_length_deviation_mm": float("nan")}])
+def test_the_library_refuses_the_same_settings_naming_them(setting: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match=f"^{next(iter(setting))}: "):
+        IdentificationOptions(**setting)
