@@ -11,8 +11,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from hexactl.adapters.cli.main import main
-from hexactl.adapters.cli.service_commands import FRAMES
+from hexactl.adapters.cli.common import CliError
+from hexactl.adapters.cli.main import build_parser, main
+from hexactl.adapters.cli.service_commands import FRAMES, _frames_request
 from hexactl.adapters.files.frames_file import load_frames
 from hexactl.control.frames import Frame
 from hexactl.kinematics.geometry import Geometry
@@ -147,6 +148,21 @@ def test_the_command_line_changes_only_the_soft_limits_it_names(framed, capsys) 
     assert main(["frames", "--soft-upper", "x=-45", *api]) == 1  # below its lower bound: the service says so
     assert "each lower bound must be below its upper bound: x [-40, -45]" in capsys.readouterr().err
     assert soft() == ((-40, None, None, None, None, None), (50, None, None, None, None, 5), None)
+
+
+def test_soft_limits_not_read_change_nothing() -> None:
+    """The command line changes the soft limits it names in those it reads; a refused read
+    (``busy`` under a flood) sets nothing, and says so, rather than setting from nothing."""
+    class Refusing:
+        def request(self, cmd: str, **fields: object) -> dict:
+            return {"ok": False, "error": {"code": "busy", "message": "too many requests queued"}}
+
+    arguments = build_parser().parse_args(["frames", "--max-tilt", "12"])
+    cmd, fields = _frames_request(arguments)
+    assert cmd == "set_frames"
+    with pytest.raises(CliError, match=r"^nothing set: the soft limits in force could not be read \(error busy: too "
+                       r"many requests queued\)$"):
+        fields(Refusing())
 
 
 def test_the_command_line_knows_every_frame_the_controller_does() -> None:

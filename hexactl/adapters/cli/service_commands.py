@@ -261,9 +261,11 @@ def _frames_request(arguments: argparse.Namespace) -> tuple[str, Fields]:
         # The API replaces the soft limits whole; an operator changing one bound must not lose
         # the others (a forgotten one would be a limit gone). Another client's change between
         # this reading and the set is replaced; the reply prints what is in force.
-        return {**fields, "soft_limits": changed_soft_limits(client.call("frames")["frames"]["soft_limits"],
-                                                             arguments.soft_lower, arguments.soft_upper,
-                                                             arguments.max_tilt)}
+        now = client.request("frames")
+        if not now.get("ok"):
+            raise CliError(f"nothing set: the soft limits in force could not be read ({format_error_reply(now)})")
+        return {**fields, "soft_limits": changed_soft_limits(now["frames"]["soft_limits"], arguments.soft_lower,
+                                                             arguments.soft_upper, arguments.max_tilt)}
 
     return "set_frames", with_soft_limits
 
