@@ -341,12 +341,17 @@ export function setupControls(ctx) {
       if (lower || upper || tilt !== undefined) {
         // set_frames replaces the soft limits whole: an input left empty keeps what is in force,
         // as an empty frame input does, so that setting the tilt does not remove the bounds.
-        const now = ctx.record()?.frames?.soft_limits ?? {};
-        const none = [null, null, null, null, null, null];
+        const kept = !lower || !upper || tilt === undefined;
+        const stale = ctx.noLiveData();
+        const now = ctx.record()?.frames?.soft_limits;
+        if (kept && (stale || !now)) {
+          throw new Error(`the soft limits in force are not known (${stale ?? 'no record yet'}): an empty input would `
+            + 'not keep them; fill all three (null, none: no bound), or wait for live data');
+        }
         fields.soft_limits = {
-          lower: lower ?? now.lower ?? none,
-          upper: upper ?? now.upper ?? none,
-          max_tilt_deg: tilt === undefined ? now.max_tilt_deg ?? null : tilt,
+          lower: lower ?? now.lower,
+          upper: upper ?? now.upper,
+          max_tilt_deg: tilt === undefined ? now.max_tilt_deg : tilt,
         };
       }
     } catch (e) {
