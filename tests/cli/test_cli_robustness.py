@@ -338,6 +338,33 @@ def test_an_estop_nobody_answered_says_it_is_not_confirmed(tmp_path, capsys) -> 
     assert "no answer from" in err and err.endswith("hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop\n")
 
 
+def test_an_estop_refused_says_it_is_not_confirmed(monkeypatch, capsys) -> None:
+    """A stopped loop's service answers ``loop_silent``: the E-stop is only queued, not
+    latched; the command said so with exit 1 but not, as for no answer, to use the
+    hardware E-stop."""
+    from hexactl.adapters.api import client as client_module
+
+    class Service:
+        def __init__(self, endpoint: str, **options: object) -> None:
+            pass
+
+        def __enter__(self) -> Service:
+            return self
+
+        def __exit__(self, *exception: object) -> None:
+            pass
+
+        def request(self, cmd: str, **fields: object) -> dict:
+            assert cmd == "estop"
+            return {"ok": False, "error": {"code": "loop_silent", "message": "queued, to be carried out if the loop "
+                                                                            "runs again"}}
+
+    monkeypatch.setattr(client_module, "HexactlClient", Service)
+    assert exits_with(["estop"]) == 1
+    assert capsys.readouterr().err == ("error loop_silent: queued, to be carried out if the loop runs again\n"
+                                       "hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop\n")
+
+
 @pytest.mark.parametrize("command,goes_on", [(["move", "x=5"], True), (["play", "x_sweep"], True),
                                              (["status"], False), (["enable"], False)])
 def test_ctrl_c_in_a_command_that_starts_a_motion_says_the_motion_goes_on(command, goes_on, monkeypatch,
