@@ -279,12 +279,13 @@ class Service:
                 load_server_keys(config.curve)
             except (SecurityError, OSError, ValueError) as error:
                 raise ServiceError(f"CURVE keys: {error}") from None
-        for endpoint in (config.api_endpoint, config.telemetry_endpoint, config.stream_endpoint):
+        for option, endpoint in (("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
+                                 ("--stream", config.stream_endpoint)):
             try:  # here, before the actuators open; the API process binds them for good
                 if endpoint is not None:
                     check_bindable(endpoint)
-            except zmq.ZMQError as error:
-                raise ServiceError(f"cannot serve: {error}") from None  # as the API process says it
+            except zmq.ZMQError as error:  # it names the endpoint
+                raise ServiceError(f"{option}: cannot serve: {error}") from None
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
         data_dirs = data_directories(config.data_dirs, config_path)

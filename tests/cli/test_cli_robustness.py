@@ -298,6 +298,19 @@ def test_cue_refuses_a_vehicle_file_sampled_too_slowly_to_stream(period_s: float
     assert f"{path}: sample period {period_s:g} s" in err and "at 10 Hz or more" in err and "no answer" not in err
 
 
+class FakeClient:
+    """A stand-in for HexactlClient, monkeypatched in: a test's subclass answers."""
+
+    def __init__(self, endpoint: str, **options: object) -> None:
+        pass
+
+    def __enter__(self) -> FakeClient:
+        return self
+
+    def __exit__(self, *exception: object) -> None:
+        pass
+
+
 def test_cue_refused_prints_the_refusal_as_every_command_does(monkeypatch, capsys) -> None:
     """It printed `refused: latched: latched: fault is latched: reset first` on stdout."""
     from hexactl.adapters.api import client as client_module
@@ -306,16 +319,7 @@ def test_cue_refused_prints_the_refusal_as_every_command_does(monkeypatch, capsy
 
     geometry = load_geometry(ROOT / "config" / "platform.toml").model_dump(mode="json")
 
-    class Service:
-        def __init__(self, endpoint: str, **options: object) -> None:
-            pass
-
-        def __enter__(self) -> Service:
-            return self
-
-        def __exit__(self, *exception: object) -> None:
-            pass
-
+    class Service(FakeClient):
         def call(self, cmd: str, **fields: object) -> dict:
             if cmd == "status":  # on the cue's start pose: nothing to move first
                 return {"ok": True, "status": {"pose_command": [0.0] * 6}}
@@ -336,6 +340,24 @@ def test_an_estop_nobody_answered_says_it_is_not_confirmed(tmp_path, capsys) -> 
     assert exits_with(["estop", "--api", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2
     err = capsys.readouterr().err
     assert "no answer from" in err and err.endswith("hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop\n")
+
+
+def test_an_estop_refused_says_it_is_not_confirmed(monkeypatch, capsys) -> None:
+    """A stopped loop's service answers ``loop_silent``: the E-stop is only queued, not
+    latched; the command said so with exit 1 but not, as for no answer, to use the
+    hardware E-stop."""
+    from hexactl.adapters.api import client as client_module
+
+    class Service(FakeClient):
+        def request(self, cmd: str, **fields: object) -> dict:
+            assert cmd == "estop"
+            return {"ok": False, "error": {"code": "loop_silent", "message": "queued, to be carried out if the loop "
+                                                                            "runs again"}}
+
+    monkeypatch.setattr(client_module, "HexactlClient", Service)
+    assert exits_with(["estop"]) == 1
+    assert capsys.readouterr().err == ("error loop_silent: queued, to be carried out if the loop runs again\n"
+                                       "hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop\n")
 
 
 @pytest.mark.parametrize("command,goes_on", [(["move", "x=5"], True), (["play", "x_sweep"], True),

@@ -168,6 +168,19 @@ def test_a_refusal_an_unknown_key_and_no_answer_are_said() -> None:
     assert key_result(" ", silent, ServiceUnavailable) == "stop: no answer from tcp://x within 5 s"
 
 
+def test_an_estop_key_not_answered_ok_says_it_is_not_confirmed() -> None:
+    """A stopped loop's service answers an E-stop ``loop_silent`` (queued, not latched):
+    the status line said only that, not to reach for the hardware E-stop, as ``hexactl
+    estop`` and the dashboard do."""
+    queued = RecordingClient({"ok": False, "error": {"code": "loop_silent", "message": "queued, to be carried out "
+                                                     "if the loop runs again"}})
+    assert key_result("e", queued, ServiceUnavailable) == ("estop: error loop_silent: queued, to be carried out if the "
+                                                           "loop runs again; E-STOP NOT CONFIRMED: use the hardware E-stop")
+    silent = RecordingClient(ServiceUnavailable("no answer from tcp://x within 5 s"))
+    assert key_result(ESCAPE, silent, ServiceUnavailable) == ("estop: no answer from tcp://x within 5 s; "
+                                                              "E-STOP NOT CONFIRMED: use the hardware E-stop")
+
+
 def test_an_estop_key_does_not_wait_behind_a_command_the_service_is_slow_to_answer() -> None:
     """Space, then ``e``, while the service does not answer the stop: the E-stop goes out
     on a connection of its own and is answered; the stop's answer comes later."""

@@ -83,14 +83,21 @@ def check_bindable(endpoint: str) -> None:
     for a process that must know before it starts anything else (``hexactl serve`` before
     it opens the actuators).
 
-    :raises zmq.ZMQError: as :class:`SocketThread` would
+    :raises zmq.ZMQError: as :class:`SocketThread` would; in use (EADDRINUSE), saying what to do
     """
     context = zmq.Context()
     try:
         with context.socket(zmq.PUB) as probe:
             probe.linger = 0
             _refuse_to_replace(endpoint)
-            probe.bind(endpoint)
+            try:
+                probe.bind(endpoint)
+            except zmq.ZMQError as error:  # ZeroMQ's words name the port, not what to do
+                if error.errno != zmq.EADDRINUSE:
+                    raise
+                raise zmq.ZMQError(errno.EADDRINUSE, f"{endpoint}: another process serves there (another hexactl "
+                                                     "serve?): stop it first, or name another port (tcp://HOST:* "
+                                                     "takes a free one)") from None
     finally:
         context.term()
 

@@ -141,7 +141,8 @@ def common_parser() -> argparse.ArgumentParser:
         "--config",
         type=named_path,
         metavar="FILE",
-        help=f"geometry or calibration TOML (default: ${CONFIG_ENVIRONMENT_VARIABLE}, else config/platform.toml)",
+        help=f"geometry or calibration TOML (default: ${CONFIG_ENVIRONMENT_VARIABLE}, else ./config/platform.toml, "
+             "else the repository's config/platform.toml)",
     )
     return common
 

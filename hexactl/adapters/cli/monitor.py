@@ -270,17 +270,20 @@ class KeyThread(threading.Thread):
 def key_result(key: str, client: HexactlClient, unavailable: type[Exception]) -> str:
     """Send ``key``'s command (:data:`KEY_COMMANDS`) through ``client``: the status line
     saying what came of it (``unavailable``: the client's no-answer exception)."""
-    from hexactl.adapters.cli.service_commands import format_error_reply, format_ok_reply
+    from hexactl.adapters.cli.service_commands import ESTOP_NOT_CONFIRMED, format_error_reply, format_ok_reply
 
     command = KEY_COMMANDS.get(key)
     if command is None:
         return f"{key_name(key)}: not a key of the monitor ({LEGEND})"
+    unconfirmed = f"; {ESTOP_NOT_CONFIRMED}" if command == "estop" else ""
     try:
         reply = client.request(command)
     except unavailable as error:
-        return f"{command}: {error}"
-    said = format_ok_reply(command, reply) if reply.get("ok") else format_error_reply(reply).replace("\n", ";")
-    return f"{command}: {said}"
+        return f"{command}: {error}{unconfirmed}"
+    if reply.get("ok"):
+        return f"{command}: {format_ok_reply(command, reply)}"
+    said = format_error_reply(reply).replace("\n", ";")
+    return f"{command}: {said}{unconfirmed}"
 
 
 def key_name(key: str) -> str:

@@ -324,6 +324,10 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
 # -- running -------------------------------------------------------------------------
 
 
+ESTOP_NOT_CONFIRMED = "E-STOP NOT CONFIRMED: use the hardware E-stop"
+"""Said when an ``estop`` got no ok reply, unanswered or refused: nothing says it is latched."""
+
+
 def run_client_command(arguments: argparse.Namespace, cmd: str, fields: Fields) -> int:
     """Send one command, print the reply; the exit status says ok / refused / no answer.
     With ``--wait``, then wait for the motion to end (:func:`wait_until_at_rest`)."""
@@ -346,12 +350,14 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: Fields) 
             else:
                 print(format_error_reply(reply), file=sys.stderr)
             if not reply.get("ok"):
+                if cmd == "estop":  # refused (loop_silent: only queued, send_failed, …): not latched
+                    print(f"hexactl estop: {ESTOP_NOT_CONFIRMED}", file=sys.stderr)
                 return EXIT_REFUSED
             return wait_until_at_rest(client, cmd, reply, since) if waits else EXIT_OK
     except ServiceUnavailable as error:
         print(f"hexactl {arguments.command}: {error}", file=sys.stderr)
         if cmd == "estop":
-            print("hexactl estop: E-STOP NOT CONFIRMED: use the hardware E-stop", file=sys.stderr)
+            print(f"hexactl estop: {ESTOP_NOT_CONFIRMED}", file=sys.stderr)
         return EXIT_NO_ANSWER
 
 
