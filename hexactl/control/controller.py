@@ -19,6 +19,7 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -147,9 +148,20 @@ class Controller:
 
     def reset(self) -> CommandResult:
         """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED; a
-        leg lock ends, and the reply says so."""
-        return self._commands.submit_unless(preconditions.check_reset, cmd.Reset,
+        leg lock ends, and the reply says so. The reply waits, for the loop's grace after a
+        reset at most, until no actuator reports FAULT or ESTOP (they leave E-stop once they
+        have seen none for a moment), so that an enable right after it is not refused for
+        that; one that still does is named."""
+        done = self._commands.submit_unless(preconditions.check_reset, cmd.Reset,
                                             "reset to disabled" + self._lock_released())
+        if not done.ok or done.details.get("pending"):
+            return done
+        supervision = self.config.supervision
+        if still := self._commands.settled(lambda s: preconditions.actuator_faulted(s.feedback),
+                                           supervision.estop_clear_holdoff_s + supervision.state_timeout_s):
+            return replace(done, message=f"{done.message}; {still} still: its cause may remain (a hardware E-stop "
+                                         "pressed?), and enable is refused until it clears")
+        return done
 
     def _lock_released(self) -> str:
         """What disabling says of the leg lock it ends: the next enable drives all six legs."""

@@ -14,7 +14,7 @@ from math import isinf, isnan
 from typing import Protocol
 
 from hexactl.control.commands import SwapGeometry
-from hexactl.control.hardware import ActuatorState, BusState, FeedbackSnapshot, LinkHealth, fault_text
+from hexactl.control.hardware import ActuatorFeedback, ActuatorState, BusState, FeedbackSnapshot, LinkHealth, fault_text
 from hexactl.control.planning import ActiveGeometry, LegLock
 from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S, ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequenceProgress
@@ -108,17 +108,31 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
         if not actuator.heartbeat_age_s <= heartbeat_timeout_s:
             age = "yet" if isinf(actuator.heartbeat_age_s) else f"for {actuator.heartbeat_age_s:.3f} s"
             return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no report {age}{_link_note(view.link)}"
-        if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
+        if faulted := _faulted(leg, actuator):
             cleared_soon = (" (after a reset an actuator leaves ESTOP once it has seen no E-stop for a moment: "
                             "enable again shortly)" if actuator.state is ActuatorState.ESTOP else "")
-            return ErrorCode.ACTUATOR_FAULT, (f"leg {leg}: {actuator.state.name}, faults: "
-                                              f"{fault_text(actuator.fault_names, actuator.fault_bits)}{cleared_soon}")
+            return ErrorCode.ACTUATOR_FAULT, f"{faulted}{cleared_soon}"
         if isnan(actuator.position_mm):
             return ErrorCode.HEARTBEAT_MISSING, f"leg {leg}: no position reported yet"
         if not low <= actuator.position_mm <= high:
             return ErrorCode.OUTSIDE_STROKE, f"leg {leg} at {actuator.position_mm:.3f} mm, outside the stroke [{low:g}, {high:g}] mm"
     if view.pose_measured is None:
         return ErrorCode.POSE_UNKNOWN, "forward kinematics of the feedback failed: the platform's pose is unknown"
+    return None
+
+
+def actuator_faulted(feedback: FeedbackSnapshot | None) -> str | None:
+    """The first actuator reporting FAULT, ESTOP or fault bits (``leg N: ESTOP, faults: …``),
+    for which enable is refused; None if none does (or no feedback)."""
+    for leg, actuator in enumerate(feedback.actuators if feedback is not None else (), start=1):
+        if faulted := _faulted(leg, actuator):
+            return faulted
+    return None
+
+
+def _faulted(leg: int, actuator: ActuatorFeedback) -> str | None:
+    if actuator.state in (ActuatorState.FAULT, ActuatorState.ESTOP) or actuator.fault_bits:
+        return f"leg {leg}: {actuator.state.name}, faults: {fault_text(actuator.fault_names, actuator.fault_bits)}"
     return None
 
 

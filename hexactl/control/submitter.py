@@ -95,6 +95,14 @@ class CommandSubmitter:
         return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
                                      "be carried out", ticket=ticket)
 
+    def settled(self, problem: Callable[[CoreSnapshot], str | None], timeout_s: float) -> str | None:
+        """None once ``problem`` finds nothing in the loop's latest snapshot, asked every half
+        loop period; what it still finds after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while (found := problem(self._host.snapshot)) is not None and time.monotonic() < deadline:
+            time.sleep(self._config.loop.period_s / 2)
+        return found
+
     def _silent_s(self, age_s: float) -> float | None:
         """How long the loop has sent no report (``age_s`` when last seen), asked again while
         this thread lets the others run for :data:`SILENCE_RECHECK_S` (None: a report came
