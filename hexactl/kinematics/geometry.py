@@ -3,7 +3,8 @@
 A :class:`Geometry` is what a geometry or calibration TOML file holds (see
 config/platform.toml for the annotated nominal one). It is frozen and fully validated on
 construction: every number finite, shapes right, joints distinct, limits consistent and
-the zero posture inside the actuator stroke and not near-singular. Units: mm and degrees, as in the file.
+the zero posture inside the actuator stroke and not near-singular. Units: mm and degrees,
+as in the file.
 """
 
 from __future__ import annotations
