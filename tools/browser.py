@@ -33,6 +33,9 @@ CHROMIUM_FLAGS = (
 START_TIMEOUT_S = 120.0
 """How long ``hexactl dashboard`` may take to say where it serves (seconds when idle)."""
 
+SCRIPT_TIMEOUT_S = 120.0
+"""How long WebDriver lets a script in the page take before it gives up: a hang guard."""
+
 _SERVING = re.compile(r"dashboard on (?P<url>http://\S+/)")
 
 
@@ -56,7 +59,11 @@ def headless_chromium(width: int = 1600, height: int = 1000):  # -> selenium.web
     options.add_argument(f"--window-size={width},{height}")
     options.add_argument(f"--user-data-dir={tempfile.mkdtemp(prefix='hexactl-chromium-')}")
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(options=options, service=Service(paths["chromedriver"]))
+    driver = webdriver.Chrome(options=options, service=Service(paths["chromedriver"]))
+    # A hang guard, not a measure: on a host loaded with other work the page's main thread
+    # (three.js in software) was seen not to run a one-line script within WebDriver's 30 s.
+    driver.set_script_timeout(SCRIPT_TIMEOUT_S)
+    return driver
 
 
 @dataclass

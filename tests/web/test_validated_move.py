@@ -259,7 +259,9 @@ def test_a_held_jog_stops_being_renewed_when_only_the_pages_telemetry_is_stale(r
 def test_soft_limits_left_empty_are_not_set_from_stale_data(rig) -> None:
     """An empty soft-limit input keeps what is in force, taken from the page's latest record:
     with no live data that record may be stale, so Apply sets nothing and says why."""
-    rig.client.call("set_frames", soft_limits={"lower": [-50, None, None, None, None, None]})
+    rig.client.call("clear_frames")
+    lower = [round(rig.status()["pose_command"][0]) - 50, None, None, None, None, None]  # the platform inside it
+    rig.client.call("set_frames", soft_limits={"lower": lower})
     try:
         tap(rig, drop=True)
         wait_for(lambda: rig.page("return window.hexactlDashboard.dataLoss") == "telemetry", "the page's data stale")
@@ -273,8 +275,8 @@ def test_soft_limits_left_empty_are_not_set_from_stale_data(rig) -> None:
         assert result.startswith("the soft limits in force are not known (no telemetry has reached the page)"), result
         assert "refused" in rig.element("#frames-result").get_attribute("class").split()
         assert sent(rig, "set_frames") == sets
-        assert rig.client.call("frames")["frames"]["soft_limits"] == {
-            "lower": [-50, None, None, None, None, None], "upper": [None] * 6, "max_tilt_deg": None}
+        assert rig.client.call("frames")["frames"]["soft_limits"] == {"lower": lower, "upper": [None] * 6,
+                                                                       "max_tilt_deg": None}
     finally:
         tap(rig)
         rig.client.call("clear_frames")
