@@ -51,6 +51,12 @@ from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS
 
 
+def _lock_released(snapshot: CoreSnapshot) -> str:
+    """What disabling says of the leg lock it ends: the next enable drives all six legs."""
+    lock = snapshot.lock
+    return f"; leg {lock.leg} is no longer locked: the next enable drives all six legs" if lock is not None else ""
+
+
 class Controller:
     """The facade of the control core: one method per command, over a
     :class:`~hexactl.control.host.LoopHost` (a loop in another process; for the loop in a
@@ -122,14 +128,16 @@ class Controller:
 
     def disable(self) -> CommandResult:
         """Disable the actuators (at rest only: stop first); a leg lock ends, and the reply says so."""
-        return self._commands.submit_unless(preconditions.check_disable, cmd.Disable, "disabled" + self._lock_released())
+        return self._commands.submit_unless(preconditions.check_disable, cmd.Disable,
+                                            "disabled" + _lock_released(self.snapshot))
 
     def stop(self) -> CommandResult:
         """Brake smoothly to rest where the motion happens to end; aborts a sequence.
         Never refused: at rest, or disabled, it says there was nothing to stop."""
         s = self.snapshot
         if s.state is not ControlState.ENABLED:
-            message = f"nothing to stop: the controller is {s.state.value}"
+            message = "nothing to stop: the controller is " + (
+                "disabled" if s.state is ControlState.DISABLED else f"in {s.state.name} (reset it to go on)")
         elif s.motion is MotionState.HOLDING and s.sequence is None:
             message = "nothing to stop: the platform is at rest"
         else:
@@ -153,7 +161,7 @@ class Controller:
         have seen none for a moment), so that an enable right after it is not refused for
         that; one that still does is named."""
         done = self._commands.submit_unless(preconditions.check_reset, cmd.Reset,
-                                            "reset to disabled" + self._lock_released())
+                                            "reset to disabled" + _lock_released(self.snapshot))
         if not done.ok or done.details.get("pending"):
             return done
         supervision = self.config.supervision
@@ -162,11 +170,6 @@ class Controller:
             return replace(done, message=f"{done.message}; {still} still: its cause may remain (a hardware E-stop "
                                          "pressed?), and enable is refused until it clears")
         return done
-
-    def _lock_released(self) -> str:
-        """What disabling says of the leg lock it ends: the next enable drives all six legs."""
-        lock = self.snapshot.lock
-        return f"; leg {lock.leg} is no longer locked: the next enable drives all six legs" if lock is not None else ""
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
                       frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,

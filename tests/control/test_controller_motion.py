@@ -189,6 +189,10 @@ def test_stop_with_nothing_to_stop_says_so_and_is_not_refused(rig):
     rig.enabled()
     at_rest = rig.controller.stop()
     assert at_rest.ok and at_rest.message == "nothing to stop: the platform is at rest"
+    assert rig.controller.estop().ok
+    rig.run()
+    latched = rig.controller.stop()  # it said "the controller is estop"
+    assert latched.ok and latched.message == "nothing to stop: the controller is in ESTOP (reset it to go on)"
 
 
 def test_a_plan_made_before_the_target_changed_is_refused_as_stale(rig):
