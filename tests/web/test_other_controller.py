@@ -6,8 +6,8 @@ another controller had been heard a while ago.
 A real headless Chromium against a real ``hexactl serve``. The built-in simulator's bus
 lives inside the service's loop process, where no second controller can reach; the
 field is therefore added to the service's records in the page itself, before its
-scripts see them (:data:`INJECT`), in the shape the API's model gives it (validated
-here). Everything else the page shows is the service's.
+scripts see them (:data:`~tests.web.test_validated_move.TAP`'s ``recordFields``), in the
+shape the API's model gives it (validated here). Everything else the page shows is the service's.
 """
 
 from __future__ import annotations
@@ -19,24 +19,7 @@ import pytest
 
 from hexactl.adapters.api.messages import OtherController
 from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_for
-
-INJECT = """
-(() => {
-  const Native = window.WebSocket;
-  window.hexactlTestOther = null;  // telemetry's other_controller, as the test sets it
-  window.WebSocket = class extends Native {
-    addEventListener(type, listener, options) {
-      if (type !== 'message') return super.addEventListener(type, listener, options);
-      return super.addEventListener(type, (event) => {
-        const message = JSON.parse(event.data);
-        if (message.type !== 'telemetry' || window.hexactlTestOther === null) { listener(event); return; }
-        message.record.other_controller = window.hexactlTestOther;
-        listener(new MessageEvent('message', { data: JSON.stringify(message) }));
-      }, options);
-    }
-  };
-})();
-"""
+from tests.web.test_validated_move import TAP
 
 SHOWN = """
 const el = document.getElementById('other-controller');
@@ -47,13 +30,14 @@ return {hidden: el.hidden, text: el.textContent, now: el.classList.contains('now
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory) -> Iterator[Rig]:
-    with page_on_a_service(tmp_path_factory.mktemp("other-controller"), before_load=INJECT) as rig:
+    with page_on_a_service(tmp_path_factory.mktemp("other-controller"), before_load=TAP) as rig:
         yield rig
 
 
 def heard(rig: Rig, other: OtherController | None) -> None:
     """From now on the page's records say ``other`` was heard (None: as the service sends them)."""
-    rig.page(f"window.hexactlTestOther = {json.dumps(other.model_dump() if other else None)};")
+    fields = {"other_controller": other.model_dump()} if other else None
+    rig.page(f"window.hexactlTestTap.recordFields = {json.dumps(fields)};")
 
 
 def shown(rig: Rig) -> dict:

@@ -27,7 +27,7 @@ from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_fo
 TAP = """
 (() => {
   const Native = window.WebSocket;
-  const tap = { dropTelemetry: false, heldFrames: null, sent: [], lastTelemetryAt: null, losses: 0,
+  const tap = { dropTelemetry: false, recordFields: null, sent: [], lastTelemetryAt: null, losses: 0,
                 holdEventsReplies: false, eventsIds: new Set(), heldReplies: [] };
   tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
   window.hexactlTestTap = tap;
@@ -50,8 +50,8 @@ TAP = """
         if (tap.dropTelemetry) { tap.lastTelemetryAt = null; return; }
         if (tap.lastTelemetryAt !== null && now - tap.lastTelemetryAt > LOSS_GAP_MS) tap.losses += 1;
         tap.lastTelemetryAt = now;
-        if (tap.heldFrames === null) { listener(event); return; }
-        message.record.frames = tap.heldFrames;
+        if (tap.recordFields === null) { listener(event); return; }
+        Object.assign(message.record, tap.recordFields);
         listener(new MessageEvent('message', { data: JSON.stringify(message) }));
       }, options);
     }
@@ -65,7 +65,8 @@ TAP = """
 })();
 """.replace("LOSS_GAP_MS", "1500")
 """Wraps the page's WebSocket: ``hexactlTestTap.dropTelemetry`` drops every telemetry
-record, ``heldFrames`` (not null) replaces each record's frames by it, ``holdEventsReplies``
+record, ``recordFields`` (not null) replaces those fields of each record (the frames held,
+a field the service cannot be made to send), ``holdEventsReplies``
 holds the replies to the page's ``events`` requests until ``releaseReplies()``, ``sent``
 lists the ``cmd`` of every message the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
@@ -88,7 +89,7 @@ def rig(tmp_path_factory) -> Iterator[Rig]:
 def tap(rig: Rig, *, drop: bool = False, hold_frames: bool = False) -> None:
     """What the page's tap does from now on (both off: the page sees everything)."""
     rig.page(f"const t = window.hexactlTestTap; t.dropTelemetry = {str(drop).lower()}; "
-             f"t.heldFrames = {'window.hexactlDashboard.record.frames' if hold_frames else 'null'};")
+             f"t.recordFields = {'{frames: window.hexactlDashboard.record.frames}' if hold_frames else 'null'};")
 
 
 def sent(rig: Rig, cmd: str) -> int:
