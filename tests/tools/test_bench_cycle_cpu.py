@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import cProfile
+import dataclasses
+import importlib.util
 import re
 import subprocess
 import sys
@@ -37,3 +40,28 @@ def test_calls_per_cycle_are_counted_and_the_same_every_time():
 def test_bad_arguments_are_refused():
     result = subprocess.run([sys.executable, str(TOOL), "--rounds", "0"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "--rounds and --cycles must be at least 1" in result.stderr
+
+
+def test_calls_of_code_that_shares_a_name_are_each_counted():
+    """Two dataclasses' generated ``__init__`` share the name ("<string>", 2, "__init__"), under
+    which ``pstats`` keeps one: the count would then depend on which, by memory layout."""
+    spec = importlib.util.spec_from_file_location("bench_cycle_cpu", TOOL)
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+
+    @dataclasses.dataclass
+    class Once:
+        value: int
+
+    @dataclasses.dataclass
+    class Thrice:
+        value: int
+
+    def build() -> None:
+        Once(1)
+        for value in range(3):
+            Thrice(value)
+
+    profile = cProfile.Profile()
+    profile.runcall(build)
+    assert tool.calls_profiled(profile) == 1 + 1 + 3 + 1  # build, the four __init__, the profiler's disable
