@@ -23,7 +23,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from hexactl.control.frames import Coordinates, Frame
-from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.axes import POSE_AXES, AxisName
 from hexactl.kinematics.frames import compose, pose_of, transform_of
 
 MAX_FREQUENCY_HZ = 50.0
@@ -32,8 +32,6 @@ MAX_CYCLES = 1_000_000
 """A bound that keeps the count a number; the duration is capped by planning (MAX_MOTION_S)."""
 MAX_AMPLITUDE_MM = 1000.0
 MAX_AMPLITUDE_DEG = 90.0
-
-AxisName = Literal["x", "y", "z", "roll", "pitch", "yaw"]
 
 
 class WaveAxis(BaseModel):

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from math import degrees, isfinite, radians
-from typing import Any, NamedTuple, TypeAlias
+from typing import Any, Literal, NamedTuple, TypeAlias
 
 POSE_AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
 """Axis names in pose order; the first three in mm, the last three in degrees at the edges."""
 
 POSE_UNITS: tuple[str, ...] = ("mm", "mm", "mm", "deg", "deg", "deg")
+
+AxisName = Literal["x", "y", "z", "roll", "pitch", "yaw"]
+"""One of :data:`POSE_AXES`, where a message or a file names an axis."""
 
 PerAxis: TypeAlias = tuple[float, float, float, float, float, float]
 """One value per pose axis, in that axis's units (a limit, a velocity): not a pose."""

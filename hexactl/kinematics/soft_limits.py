@@ -9,14 +9,14 @@ narrow what is allowed and never widen it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from math import acos, cos, degrees, radians
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS, AxisName
 from hexactl.kinematics.numbers import Number
 from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, Violation, ViolationKind
 
@@ -194,3 +194,31 @@ def _text(bound: Bound) -> str:
 
 NO_SOFT_LIMITS = SoftLimits()
 """No bound at all: what an operator who set none has."""
+
+
+class SoftLimitChanges(BaseModel):
+    """Some soft limits to change, every other one kept: ``lower``/``upper`` by axis name
+    (mm, deg; None: no bound on that side any more), ``max_tilt_deg`` when given (None: no
+    tilt bound any more). ``SoftLimitChanges(lower={"x": -40})`` changes x's lower bound
+    alone. Changed under the rules of :class:`SoftLimits` (:meth:`applied_to`)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    lower: Mapping[AxisName, Bound] = Field(default_factory=dict, description="lower bounds to change, by axis "
+                                            "(x, y, z mm; roll, pitch, yaw deg); null: none on that side any more")
+    upper: Mapping[AxisName, Bound] = Field(default_factory=dict, description="upper bounds to change, likewise")
+    max_tilt_deg: Number | None = Field(default=None, gt=0.0, le=MAX_TILT_DEG, description="the tilt bound, deg, "
+                                       "if given (null: none any more); not given: kept")
+
+    def applied_to(self, limits: SoftLimits) -> SoftLimits:
+        """``limits`` with these changes.
+
+        :raises pydantic.ValidationError: the soft limits that result break a rule of
+            :class:`SoftLimits` (a lower bound set above the upper one kept, say)
+        """
+        lower, upper = list(limits.lower), list(limits.upper)
+        for bounds, changes in ((lower, self.lower), (upper, self.upper)):
+            for axis, bound in changes.items():
+                bounds[POSE_AXES.index(axis)] = bound
+        tilt = self.max_tilt_deg if "max_tilt_deg" in self.model_fields_set else limits.max_tilt_deg
+        return SoftLimits(lower=tuple(lower), upper=tuple(upper), max_tilt_deg=tilt)

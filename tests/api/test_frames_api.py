@@ -11,7 +11,6 @@ from types import SimpleNamespace
 
 import pytest
 
-from hexactl.adapters.cli.common import CliError
 from hexactl.adapters.cli.main import build_parser, main
 from hexactl.adapters.cli.service_commands import FRAMES, _frames_request
 from hexactl.adapters.files.frames_file import load_frames
@@ -150,19 +149,53 @@ def test_the_command_line_changes_only_the_soft_limits_it_names(framed, capsys) 
     assert soft() == ((-40, None, None, None, None, None), (50, None, None, None, None, 5), None)
 
 
-def test_soft_limits_not_read_change_nothing() -> None:
-    """The command line changes the soft limits it names in those it reads; a refused read
-    (``busy`` under a flood) sets nothing, and says so, rather than setting from nothing."""
-    class Refusing:
-        def request(self, cmd: str, **fields: object) -> dict:
-            return {"ok": False, "error": {"code": "busy", "message": "too many requests queued"}}
+def test_the_command_line_sends_only_the_soft_limits_it_names() -> None:
+    """It used to read the soft limits in force, change them and set them whole: another
+    client's change between the two was lost, and a refused read set nothing. The service
+    now changes them against those in force when it takes the request."""
+    arguments = build_parser().parse_args(["frames", "--soft-lower", "x=-40,z=none", "--max-tilt", "none",
+                                           "--tool", "z=300"])
+    assert _frames_request(arguments) == ("set_frames", {
+        "tool": [0, 0, 300, 0, 0, 0], "soft_limit_changes": {"lower": {"x": -40, "z": None}, "max_tilt_deg": None}})
 
-    arguments = build_parser().parse_args(["frames", "--max-tilt", "12"])
-    cmd, fields = _frames_request(arguments)
-    assert cmd == "set_frames"
-    with pytest.raises(CliError, match=r"^nothing set: the soft limits in force could not be read \(error busy: too "
-                       r"many requests queued\)$"):
-        fields(Refusing())
+
+def test_set_frames_changes_the_soft_limits_it_is_given_and_keeps_the_others(framed, tmp_path: Path) -> None:
+    soft = {"lower": [-50, None, -10, None, None, None], "upper": [50, None, None, None, None, None],
+            "max_tilt_deg": None}
+    send(framed, "set_frames", soft_limits=soft)
+    tilt = send(framed, "set_frames", soft_limit_changes={"max_tilt_deg": 12})
+    assert tilt["frames"]["soft_limits"] == {**soft, "max_tilt_deg": 12}
+    changed = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0],
+                   soft_limit_changes={"lower": {"x": -40, "z": None}, "upper": {"yaw": 5}})
+    assert changed["frames"]["soft_limits"] == {"lower": [-40, None, None, None, None, None],
+                                                "upper": [50, None, None, None, None, 5], "max_tilt_deg": 12}
+    assert changed["frames"]["tool"] == [0, 0, 300, 0, 0, 0]
+    assert load_frames(tmp_path / "frames.toml") == framed.controller.frames
+    untilted = send(framed, "set_frames", soft_limit_changes={"max_tilt_deg": None})
+    assert untilted["frames"]["soft_limits"]["max_tilt_deg"] is None
+    assert untilted["frames"]["soft_limits"]["lower"] == changed["frames"]["soft_limits"]["lower"]
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"upper": {"x": -60}}, "each lower bound must be below its upper bound: x [-50, -60]"),
+    ({"lower": {"tilt": 3}}, "soft_limit_changes.lower.tilt"),
+    ({"lower": {"x": "3"}}, "soft_limit_changes.lower.x"),
+    ({"max_tilt_deg": 95}, "soft_limit_changes.max_tilt_deg: Input should be less than or equal to 90"),
+    ({"upper": [50, None, None, None, None, None]}, "soft_limit_changes.upper"),
+])
+def test_soft_limit_changes_that_break_a_rule_are_refused_and_change_nothing(framed, changes, fragment) -> None:
+    send(framed, "set_frames", soft_limits={"lower": [-50] + [None] * 5, "upper": [None] * 6})
+    before = framed.controller.frames
+    reply = send(framed, "set_frames", soft_limit_changes=changes)
+    assert reply["error"]["code"] == "invalid_request" and fragment in reply["error"]["message"], reply
+    assert framed.controller.frames == before
+
+
+def test_soft_limits_are_replaced_or_changed_not_both(framed) -> None:
+    reply = send(framed, "set_frames", soft_limits={"max_tilt_deg": 10}, soft_limit_changes={"max_tilt_deg": 12})
+    assert reply["error"]["code"] == "invalid_request", reply
+    assert "soft_limits replaces all of them and soft_limit_changes some: give one, not both" in reply["error"]["message"]
+    assert framed.controller.calls == []
 
 
 def test_the_command_line_knows_every_frame_the_controller_does() -> None:

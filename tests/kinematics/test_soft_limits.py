@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from hexactl.kinematics.frames import Frames, transform_of
-from hexactl.kinematics.soft_limits import SoftLimits, tilt_deg
+from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.soft_limits import SoftLimitChanges, SoftLimits, tilt_deg
 from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, ViolationKind
 
 poses = st.tuples(*[st.floats(-500.0, 500.0)] * 3, *[st.floats(-40.0, 40.0)] * 3)
@@ -158,3 +159,28 @@ def test_allow_says_what_violations_say(pose, a, b, tilt, open_ends):
     limits = SoftLimits(lower=tuple(low for low, _ in bounds), upper=tuple(high for _, high in bounds), max_tilt_deg=tilt)
     assume(tilt is None or abs(tilt_deg(np.array([pose]))[0] - tilt) > 1e-9)  # the two paths round differently
     assert limits.allow(pose) == (limits.violations([pose]) == [[]])
+
+
+_lower = st.one_of(st.none(), st.floats(-80.0, -1.0))
+_upper = st.one_of(st.none(), st.floats(1.0, 80.0))  # above every lower bound: any change keeps them ordered
+_tilt = st.one_of(st.none(), st.floats(1.0, 90.0))
+
+
+@given(lower=st.tuples(*[_lower] * 6), upper=st.tuples(*[_upper] * 6), tilt=_tilt,
+       lower_changes=st.dictionaries(st.sampled_from(POSE_AXES), _lower),
+       upper_changes=st.dictionaries(st.sampled_from(POSE_AXES), _upper),
+       tilt_change=st.one_of(st.just({}), st.fixed_dictionaries({"max_tilt_deg": _tilt})))
+def test_changes_set_the_bounds_they_name_and_keep_every_other(lower, upper, tilt, lower_changes, upper_changes,
+                                                              tilt_change):
+    limits = SoftLimits(lower=lower, upper=upper, max_tilt_deg=tilt)
+    changed = SoftLimitChanges(lower=lower_changes, upper=upper_changes, **tilt_change).applied_to(limits)
+    for before, after, changes in ((limits.lower, changed.lower, lower_changes),
+                                   (limits.upper, changed.upper, upper_changes)):
+        assert after == tuple(changes.get(axis, bound) for axis, bound in zip(POSE_AXES, before))
+    assert changed.max_tilt_deg == tilt_change.get("max_tilt_deg", tilt)
+
+
+def test_no_change_keeps_the_soft_limits_and_a_null_tilt_removes_its_bound():
+    limits = SoftLimits(lower=(-10,) + (None,) * 5, max_tilt_deg=5)
+    assert SoftLimitChanges().applied_to(limits) == limits
+    assert SoftLimitChanges.model_validate({"max_tilt_deg": None}).applied_to(limits) == SoftLimits(lower=limits.lower)

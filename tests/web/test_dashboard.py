@@ -367,8 +367,8 @@ def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
 
 
 def test_the_frames_panel_changes_only_the_soft_limits_filled_in(rig) -> None:
-    """The panel sent only the soft-limit inputs filled in, and set_frames replaces the soft
-    limits whole: a tilt bound typed alone removed the x, y, z bounds in force. An empty
+    """The panel sent only the soft-limit inputs filled in as soft_limits, which set_frames
+    takes whole: a tilt bound typed alone removed the x, y, z bounds in force. An empty
     input now keeps what is in force, as an empty frame input does; null and none remove."""
     rig.at_rest_disabled()
     x, _, z = rig.status()["pose_command"][:3]  # wherever the tests before left the platform, inside the bounds

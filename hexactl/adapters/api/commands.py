@@ -265,6 +265,8 @@ class CommandHandler:
         current = self.controller.operator_frames()
         given = {name: getattr(request, name) for name in ("work", "tool", "soft_limits") if getattr(request, name) is not None}
         try:
+            if request.soft_limit_changes is not None:
+                given["soft_limits"] = request.soft_limit_changes.applied_to(current.soft_limits)
             frames = OperatorFrames.model_validate({**dict(current), **given})
         except ValidationError as error:
             raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames")) from None

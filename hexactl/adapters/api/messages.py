@@ -27,7 +27,7 @@ from hexactl.control.telemetry import TELEMETRY_EVENTS
 from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.axes import FramePoseMmDeg, RelativeMmDeg, ToolInWorkMmDeg
-from hexactl.kinematics.soft_limits import SoftLimits
+from hexactl.kinematics.soft_limits import SoftLimitChanges, SoftLimits
 
 LegValues = Annotated[list[float], Field(min_length=6, max_length=6, description="legs 1–6, sensor mm")]
 LegReadings = Annotated[
@@ -177,9 +177,12 @@ class ValidatePoseRequest(_PoseInFrame):
 
 class SetFramesRequest(_Request):
     """Set the operator's work frame, tool frame (its origin is the pivot point) and soft
-    limits; what is not given stays as it is. Saved, and restored when the service
-    restarts. At rest only (``busy`` while a motion, a sequence, paused too, a wave or a
-    stream is under way: a motion keeps the frames it was planned in). Refused
+    limits; what is not given stays as it is. The soft limits are replaced whole
+    (``soft_limits``) or changed bound by bound, the others kept (``soft_limit_changes``:
+    ``{"lower": {"x": -40}}``, ``{"max_tilt_deg": null}`` removes the tilt bound), against
+    those in force when the service takes the request. Saved, and restored when the
+    service restarts. At rest only (``busy`` while a motion, a sequence, paused too, a wave
+    or a stream is under way: a motion keeps the frames it was planned in). Refused
     (``outside_soft_limits``) when the pose being commanded breaks the new soft limits."""
 
     cmd: Literal["set_frames"]
@@ -187,6 +190,14 @@ class SetFramesRequest(_Request):
     tool: FramePoseMmDeg | None = Field(default=None, description="the tool frame in the platform's frame, mm and deg")
     soft_limits: SoftLimits | None = Field(default=None, description="bounds on the tool's pose in the work frame "
                                            "(replaces all of them)")
+    soft_limit_changes: SoftLimitChanges | None = Field(default=None, description="bounds to change, by name; the "
+                                                        "others kept")
+
+    @model_validator(mode="after")
+    def _one_way_to_set_soft_limits(self) -> SetFramesRequest:
+        if self.soft_limits is not None and self.soft_limit_changes is not None:
+            raise ValueError("soft_limits replaces all of them and soft_limit_changes some: give one, not both")
+        return self
 
 
 class ClearFramesRequest(_Request):

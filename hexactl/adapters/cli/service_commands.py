@@ -42,17 +42,12 @@ from hexactl.adapters.cli.common import (
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
-from hexactl.kinematics.axes import POSE_AXES
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 FRAMES = ("zero", "work", "tool")
 """``move --frame``'s choices: the API's frames (docs/api.md)."""
 
-Fields = dict[str, Any] | Callable[[Any], dict[str, Any]]
-"""A command's fields, or how to make them from what the service says now (a client on
-the same connection, asked first)."""
-
-RequestBuilder = Callable[[argparse.Namespace], tuple[str, Fields]]
+RequestBuilder = Callable[[argparse.Namespace], tuple[str, dict[str, Any]]]
 """Arguments → (command, request fields)."""
 
 
@@ -247,41 +242,20 @@ def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
                     **tolerance}
 
 
-def _frames_request(arguments: argparse.Namespace) -> tuple[str, Fields]:
-    fields = {name: value for name, value in (("work", arguments.work), ("tool", arguments.tool)) if value is not None}
-    changes_soft = any(value is not None for value in (arguments.soft_lower, arguments.soft_upper, arguments.max_tilt))
+def _frames_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    fields: dict[str, Any] = {name: value for name, value in (("work", arguments.work), ("tool", arguments.tool))
+                              if value is not None}
+    changes = {side: bounds for side, bounds in (("lower", arguments.soft_lower), ("upper", arguments.soft_upper))
+               if bounds is not None}
+    if arguments.max_tilt is not None:
+        changes["max_tilt_deg"] = None if arguments.max_tilt == NO_BOUND else arguments.max_tilt
     if arguments.clear:
-        if fields or changes_soft:
+        if fields or changes:
             raise CliError("--clear takes no other frame option: clear, then set")
         return "clear_frames", {}
-    if not changes_soft:
-        return ("set_frames", fields) if fields else ("frames", {})
-
-    def with_soft_limits(client: Any) -> dict[str, Any]:
-        # The API replaces the soft limits whole; an operator changing one bound must not lose
-        # the others (a forgotten one would be a limit gone). Another client's change between
-        # this reading and the set is replaced; the reply prints what is in force.
-        now = client.request("frames")
-        if not now.get("ok"):
-            raise CliError(f"nothing set: the soft limits in force could not be read ({format_error_reply(now)})")
-        return {**fields, "soft_limits": changed_soft_limits(now["frames"]["soft_limits"], arguments.soft_lower,
-                                                             arguments.soft_upper, arguments.max_tilt)}
-
-    return "set_frames", with_soft_limits
-
-
-def changed_soft_limits(now: dict[str, Any], lower: dict[str, float | None] | None,
-                        upper: dict[str, float | None] | None, max_tilt: float | str | None) -> dict[str, Any]:
-    """The soft limits ``now`` (as the API gives them) with the bounds the command line
-    names changed: ``lower``/``upper`` by axis (None: removed), ``max_tilt`` (:data:`NO_BOUND`:
-    removed; None: as it is)."""
-    changed = {"lower": list(now["lower"]), "upper": list(now["upper"]), "max_tilt_deg": now["max_tilt_deg"]}
-    for side, bounds in (("lower", lower), ("upper", upper)):
-        for axis, bound in (bounds or {}).items():
-            changed[side][POSE_AXES.index(axis)] = bound
-    if max_tilt is not None:
-        changed["max_tilt_deg"] = None if max_tilt == NO_BOUND else max_tilt
-    return changed
+    if changes:
+        fields["soft_limit_changes"] = changes  # the service changes them against those in force, the others kept
+    return ("set_frames", fields) if fields else ("frames", {})
 
 
 def _leg_lock_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -328,7 +302,7 @@ ESTOP_NOT_CONFIRMED = "E-STOP NOT CONFIRMED: use the hardware E-stop"
 """Said when an ``estop`` got no ok reply, unanswered or refused: nothing says it is latched."""
 
 
-def run_client_command(arguments: argparse.Namespace, cmd: str, fields: Fields) -> int:
+def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str, Any]) -> int:
     """Send one command, print the reply; the exit status says ok / refused / no answer.
     With ``--wait``, then wait for the motion to end (:func:`wait_until_at_rest`)."""
     from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable  # zmq: not for --help
@@ -338,8 +312,6 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: Fields) 
     try:
         with client:
             since = newest_event_t(client) if waits else None
-            if callable(fields):
-                fields = fields(client)
             reply = client.request(cmd, **fields)
             if arguments.json:
                 print(json.dumps(reply))

@@ -338,22 +338,14 @@ export function setupControls(ctx) {
       if (typeof tilt === 'number' && !Number.isFinite(tilt)) throw new Error(`max tilt: "${tiltText}" is not a number (none: no bound)`);
       if (work) fields.work = work;
       if (tool) fields.tool = tool;
-      if (lower || upper || tilt !== undefined) {
-        // set_frames replaces the soft limits whole: an input left empty keeps what is in force,
-        // as an empty frame input does, so that setting the tilt does not remove the bounds.
-        const kept = !lower || !upper || tilt === undefined;
-        const stale = ctx.noLiveData();
-        const now = ctx.record()?.frames?.soft_limits;
-        if (kept && (stale || !now)) {
-          throw new Error(`the soft limits in force are not known (${stale ?? 'no record yet'}): an empty input would `
-            + 'not keep them; fill all three (null, none: no bound), or wait for live data');
-        }
-        fields.soft_limits = {
-          lower: lower ?? now.lower,
-          upper: upper ?? now.upper,
-          max_tilt_deg: tilt === undefined ? now.max_tilt_deg : tilt,
-        };
-      }
+      // Only what is filled in changes; the service keeps every other soft limit in force
+      // (soft_limit_changes), whatever this page last heard.
+      const changes = {};
+      const byAxis = (six) => Object.fromEntries(AXES.map((axis, i) => [axis, six[i]]));
+      if (lower) changes.lower = byAxis(lower);
+      if (upper) changes.upper = byAxis(upper);
+      if (tilt !== undefined) changes.max_tilt_deg = tilt;
+      if (Object.keys(changes).length) fields.soft_limit_changes = changes;
     } catch (e) {
       setResult(framesResult, 'refused', e.message);
       return;
