@@ -25,6 +25,14 @@ settings.load_profile("hexactl")
 HAS_VCAN0 = os.path.exists("/sys/class/net/vcan0")
 IN_UML = os.environ.get("HEXACTL_IN_UML") == "1"
 
+MACHINE_SETTINGS = ("HEXACTL_CONFIG", "HEXACTL_API", "HEXACTL_TELEMETRY", "HEXACTL_CURVE_SERVER",
+                    "HEXACTL_CURVE_CLIENT", "HEXACTL_CLIENT_CONFIG")
+"""What an operator's shell gives the hexactl commands (README, "Command line"): the tests'
+geometry, services and clients are their own whatever the machine running them has set.
+Removed here, before test modules load the geometry and fixtures start processes."""
+for _setting in MACHINE_SETTINGS:
+    os.environ.pop(_setting, None)
+
 
 @pytest.fixture(autouse=True, scope="session")
 def _session_working_directory(tmp_path_factory):
@@ -34,6 +42,15 @@ def _session_working_directory(tmp_path_factory):
     os.chdir(tmp_path_factory.mktemp("session-cwd"))
     yield
     os.chdir(before)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _no_client_file_of_the_machine(tmp_path_factory):
+    """The client file is read from $XDG_CONFIG_HOME (else ~/.config): an empty one of the
+    session's, not the operator's (cli/endpoints.py)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("XDG_CONFIG_HOME", str(tmp_path_factory.mktemp("xdg-config")))
+        yield
 
 
 @pytest.fixture(autouse=True, scope="module")

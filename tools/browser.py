@@ -9,6 +9,7 @@ user-mode Linux.
 from __future__ import annotations
 
 import re
+import shutil
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -47,7 +48,7 @@ def ensure_chromium() -> dict[str, str]:
 
 def headless_chromium(width: int = 1600, height: int = 1000):  # -> selenium.webdriver.Chrome
     """A new headless Chromium with its console log kept (``driver.get_log("browser")``)
-    and a fresh profile; quit it when done."""
+    and a fresh profile of its own, removed by ``driver.quit()``; quit it when done."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -57,9 +58,24 @@ def headless_chromium(width: int = 1600, height: int = 1000):  # -> selenium.web
     for flag in CHROMIUM_FLAGS:
         options.add_argument(flag)
     options.add_argument(f"--window-size={width},{height}")
-    options.add_argument(f"--user-data-dir={tempfile.mkdtemp(prefix='hexactl-chromium-')}")
+    # Several MB each: left behind, every test run on a shared machine added hundreds to /tmp.
+    profile = tempfile.mkdtemp(prefix="hexactl-chromium-")
+    options.add_argument(f"--user-data-dir={profile}")
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(options=options, service=Service(paths["chromedriver"]))
+    try:
+        driver = webdriver.Chrome(options=options, service=Service(paths["chromedriver"]))
+    except BaseException:
+        shutil.rmtree(profile, ignore_errors=True)
+        raise
+    quit_browser = driver.quit
+
+    def quit_and_remove_the_profile() -> None:
+        try:
+            quit_browser()  # chromedriver ends Chromium before it answers
+        finally:
+            shutil.rmtree(profile, ignore_errors=True)
+
+    driver.quit = quit_and_remove_the_profile
     # A hang guard, not a measure: on a host loaded with other work the page's main thread
     # (three.js in software) was seen not to run a one-line script within WebDriver's 30 s.
     driver.set_script_timeout(SCRIPT_TIMEOUT_S)

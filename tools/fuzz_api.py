@@ -96,7 +96,6 @@ from hexactl.control.results import ErrorCode as ControlCode  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
 
-PWNED = "/tmp/hexactl-fuzz-pwned"  # what a calibration text asks a shell to create; it must never appear
 REPLY_TIMEOUT_S = DEFAULT_HANDLER_TIMEOUT_S + 30.0
 """The API answers every request or, once its worker has spent DEFAULT_HANDLER_TIMEOUT_S in
 one, ends itself: a reply missing after that bound (plus a margin) is a broken promise,
@@ -436,6 +435,9 @@ def prepare_files(root: Path, geometry: Geometry) -> dict[str, Any]:
     files, and hostile paths out of it (``root/outside`` holds a valid calibration, so
     that reading it would show as an accepted one)."""
     data, outside = root / "data", root / "outside"
+    # What a calibration text asks a shell to create; it must never appear. In this run's own
+    # directory: a fixed /tmp name left by one run, or made by another, was every run's finding.
+    pwned = root / "pwned"
     data.mkdir()
     outside.mkdir()
     good_texts = calibration_variants(geometry, seed=1, count=4)
@@ -466,11 +468,11 @@ def prepare_files(root: Path, geometry: Geometry) -> dict[str, Any]:
     ]
     hostile_texts = [
         nested, "[[a]]\n" * 5000, "zero_lengths = [nan, 1, 2, 3, 4, 5]\n", "include = '/etc/passwd'\n",
-        good_texts[2].replace('name = "', f'name = "$(touch {PWNED}) ') + "\n[extra]\ncode = '__import__(\"os\")'\n",
+        good_texts[2].replace('name = "', f'name = "$(touch \'{pwned}\') ') + "\n[extra]\ncode = '__import__(\"os\")'\n",
         "\0\0\0", "a = 1\na = 2\n", 'x = """' + "y" * 1000,
     ]
     return {
-        "data": data, "outside": outside,
+        "data": data, "outside": outside, "pwned": pwned,
         "calibration_good": "cal_good.toml", "calibration_bad": "cal_bad.toml",
         "calibration_texts": good_texts[2:] + ["not toml"],
         "sequence_good": "seq_good.toml", "sequence_bad": "seq_bad.toml",
@@ -615,7 +617,7 @@ def fuzz(count: int, seed_value: int, rate_hz: int = 500, scheduling: Scheduling
                 "slowest_reply_s": round(fuzzer.slowest[0], 3),
                 "slowest_category": fuzzer.slowest[1],
                 "still_serving": serving,
-                "code_executed": Path(PWNED).exists(),
+                "code_executed": files["pwned"].exists(),
                 "files_escaped": escaped,
                 "recoveries": dict(harness.recoveries),
                 "recovery_reasons": dict(harness.recovery_reasons.most_common()),

@@ -27,7 +27,6 @@ from tools.serving import unserved_endpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 120.0  # only turns a hang into a failure
-ENDPOINT_VARIABLES = ("HEXACTL_API", "HEXACTL_TELEMETRY", "HEXACTL_CURVE_SERVER", "HEXACTL_CURVE_CLIENT")
 
 
 @pytest.fixture(scope="module")
@@ -36,12 +35,9 @@ def nominal() -> Geometry:
 
 
 @pytest.fixture
-def service(nominal: Geometry, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[SimpleNamespace]:
-    """A fake controller's service whose data directory is ``tmp_path/data``; no endpoint
-    setting from the environment or a client file of the machine running the tests."""
-    for variable in ENDPOINT_VARIABLES:
-        monkeypatch.delenv(variable, raising=False)
-    monkeypatch.setenv("HEXACTL_CLIENT_CONFIG", str(tmp_path / "no-client.toml"))
+def service(nominal: Geometry, tmp_path: Path) -> Iterator[SimpleNamespace]:
+    """A fake controller's service whose data directory is ``tmp_path/data`` (the endpoint
+    settings of the machine running the tests are none: tests/conftest.py)."""
     (tmp_path / "data").mkdir()
     running = start_service(nominal, tmp_path / "data")
     yield running

@@ -27,3 +27,15 @@ def test_500_hostile_requests(tmp_path) -> None:
     assert sum(result["by_category"].get("valid", {}).values()) > 0 and result["by_outcome"].get("ok", 0) > 0
     assert completed.returncode == 0, completed.stdout + completed.stderr
     assert "replies missing: 0" in completed.stdout
+
+
+def test_the_code_canary_is_the_runs_own(tmp_path) -> None:
+    """A calibration text asks a shell to create a file: one in the run's own directory, not
+    a fixed /tmp name that one run left (or another made) for every later run to report."""
+    from hexactl.adapters.files.config_path import default_config_path
+    from hexactl.adapters.files.geometry_file import load_geometry
+    from tools.fuzz_api import prepare_files
+
+    files = prepare_files(tmp_path, load_geometry(default_config_path()))
+    assert files["pwned"].parent == tmp_path and not files["pwned"].exists()
+    assert any(f"$(touch '{files['pwned']}')" in text for text in files["hostile_texts"])
