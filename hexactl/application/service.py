@@ -267,8 +267,11 @@ class Service:
         :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
             without CURVE keys
         """
-        check_endpoints([config.api_endpoint, config.telemetry_endpoint], config.curve)  # refused before any word of CURVE
-        for endpoint in (config.api_endpoint, config.telemetry_endpoint):
+        # The stream's ZeroMQ socket steers the platform as the API does (UDP is warned of below).
+        zmq_endpoints = [config.api_endpoint, config.telemetry_endpoint,
+                         *([config.stream_endpoint] if config.stream_endpoint else [])]
+        check_endpoints(zmq_endpoints, config.curve)  # refused before any word of CURVE
+        for endpoint in zmq_endpoints:
             if not is_local_endpoint(endpoint):
                 log.warning("%s is reachable from the network: CURVE keys given, only their clients get in", endpoint)
         if config.dashboard_http and config.curve:

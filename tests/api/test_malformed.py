@@ -124,16 +124,25 @@ def test_a_version_of_another_json_type_says_to_send_the_integer(version) -> Non
     ("record", "name", "r" * 101, "1 to 100"),
     ("record", "name", "run\n", "starting with a letter or digit"),
     ("stream_open", "source", "caf\u00e9", "printable ASCII"),
+    # Found from outside: a source with a line end forged lines in the service's log (calibration_swapped).
+    ("load_calibration", "source", "cal\n2026-11-27 15:00:00,000 WARNING hexactl.safety: loop estop", "one line"),
+    ("load_calibration", "source", "cal\u2028forged", "one line"),
 ])
 def test_a_text_refused_by_its_pattern_says_what_it_may_contain(command, field, value, rule) -> None:
     """Found from outside: ``record`` with ``name: "../run"`` was answered pydantic's "String
     should match pattern '^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$'"."""
-    request = {"v": 1, "id": 1, "cmd": command, field: value, **({"duration_s": 1.0} if command == "record" else {})}
+    extra = {"record": {"duration_s": 1.0}, "load_calibration": {"toml": ""}}.get(command, {})
+    request = {"v": 1, "id": 1, "cmd": command, field: value, **extra}
     with pytest.raises(ApiError) as refused:
         decode_request(json.dumps(request).encode())
     assert refused.value.code == "invalid_request" and rule in refused.value.message
     assert refused.value.message.startswith(f"{command}: {field}: {value[:120]!r} is not allowed: ")
     assert "pattern" not in refused.value.message and refused.value.details[0]["field"] == field
+
+
+def test_a_calibrations_source_may_be_any_one_line_path() -> None:
+    request = {"v": 1, "id": 1, "cmd": "load_calibration", "toml": "", "source": "/home/jos\u00e9/cal 2.toml"}
+    assert decode_request(json.dumps(request).encode()).source == "/home/jos\u00e9/cal 2.toml"
 
 
 def test_handler_bug_becomes_internal_error() -> None:

@@ -8,7 +8,7 @@ import json
 import pytest
 import zmq
 
-from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber, ZmqConnection
 from hexactl.adapters.api.security import (
     CurveClientKeys,
     CurveServer,
@@ -19,6 +19,12 @@ from hexactl.adapters.api.security import (
 )
 from hexactl.adapters.api.protocol import is_local_endpoint
 from hexactl.adapters.api.server import ApiServer
+from hexactl.adapters.api.stream_receiver import StreamReceiver
+from hexactl.adapters.api.stream_wire import encode
+from hexactl.adapters.api.telemetry import TelemetryPublisher
+from hexactl.control.stream import StreamPhase, StreamProgress
+from hexactl.control.stream_commands import TargetResult
+from tests.reliability.support import wait_for
 from tools.serving import unserved_endpoint
 
 
@@ -97,6 +103,35 @@ def test_curve_end_to_end(tmp_path) -> None:
             assert plain.poll(500) == 0
     finally:
         server.close()
+        curve.close()
+        context.term()
+
+
+def test_curve_telemetry_and_pose_stream_get_through_their_message_bounds(tmp_path) -> None:
+    """The telemetry and stream sockets close a connection whose message exceeds their
+    bound (MAXMSGSIZE); the CURVE handshake's messages, the largest a subscriber or a
+    stream's sender sends, still fit."""
+    keys = create_keys(tmp_path / "keys", "alice")
+    allowed = CurveClientKeys(keys["server_public"], keys["client_secret"])
+    context = zmq.Context()
+    curve = CurveServer(context, CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
+    publisher = TelemetryPublisher(context, "tcp://127.0.0.1:*", lambda: {"state": "disabled"}, 100.0, curve)
+    targets: list[int] = []
+    progress = StreamProgress(1, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+    receiver = StreamReceiver(context, "tcp://127.0.0.1:*", None,
+                              lambda pose, sequence, *_: targets.append(sequence) or TargetResult(True), 0.01,
+                              lambda: progress, curve)
+    publisher.start()
+    receiver.start()
+    try:
+        with TelemetrySubscriber(publisher.endpoint, curve=allowed) as telemetry:
+            assert telemetry.receive(timeout_s=30.0) == {"state": "disabled"}
+        with ZmqConnection(zmq.PUSH, receiver.endpoint, allowed, {}) as push:
+            push.socket.send(encode(1, 0.0, [0.0] * 6))
+            wait_for(lambda: targets == [1], "the sample through CURVE")
+    finally:
+        receiver.close()
+        publisher.close()
         curve.close()
         context.term()
 

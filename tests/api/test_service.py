@@ -111,6 +111,14 @@ def test_non_loopback_bind_without_curve_is_refused_before_anything_starts() -> 
         Service.start(ServiceConfig(api_endpoint="tcp://0.0.0.0:*", telemetry_endpoint="tcp://127.0.0.1:*"))
 
 
+def test_a_network_stream_socket_without_curve_is_refused_too() -> None:
+    """Found from outside: ``--stream tcp://*:5557`` beside a loopback API started without a
+    word, and anyone on the network could steer the platform while a stream was open."""
+    with pytest.raises(SecurityError, match=r"refusing to bind tcp://\*:\* without CURVE"):
+        Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                    stream_endpoint="tcp://*:*"))
+
+
 def test_serve_command_refuses_a_network_bind_without_keys(capsys) -> None:
     assert main(["serve", "--api", "tcp://*:5555"]) == 2
     assert "refusing to bind tcp://*:5555 without CURVE" in capsys.readouterr().err

@@ -9,8 +9,9 @@ import zmq
 
 from hexactl.adapters.api.client import TelemetrySubscriber
 from hexactl.adapters.api.messages import Telemetry
-from hexactl.adapters.api.telemetry import telemetry_message
+from hexactl.adapters.api.telemetry import MAX_SUBSCRIPTION_BYTES, telemetry_message
 from hexactl.adapters.api.protocol import TOPIC
+from tests.reliability.support import wait_for
 
 
 def test_records_are_single_frames_that_parse_into_the_model(service) -> None:
@@ -49,3 +50,26 @@ def test_non_finite_values_are_never_published() -> None:
 
 def test_message_layout() -> None:
     assert json.loads(telemetry_message({"t": 1.0})[len(TOPIC):]) == {"t": 1.0}
+
+
+def test_a_subscription_far_longer_than_the_topic_cuts_its_subscriber_off(service) -> None:
+    """Found from outside: the telemetry socket took subscriptions of any length, each held
+    in ZeroMQ's subscription tree; one of 300 MB grew the API's process past 4 GB within
+    seconds, and its shutdown had to kill it. A subscription longer than
+    MAX_SUBSCRIPTION_BYTES now closes its subscriber's connection unread; records still
+    reach every other subscriber."""
+    context = zmq.Context.instance()
+    with context.socket(zmq.SUB) as socket:
+        socket.linger = 0
+        cut_off = socket.get_monitor_socket(zmq.EVENT_DISCONNECTED)
+        try:
+            socket.setsockopt(zmq.SUBSCRIBE, TOPIC + b"x" * MAX_SUBSCRIPTION_BYTES)
+            socket.setsockopt(zmq.SUBSCRIBE, TOPIC)
+            socket.connect(service.telemetry)
+            wait_for(lambda: cut_off.poll(0) or socket.poll(0), "the subscriber cut off, or a record")
+            assert cut_off.poll(0), "a record came: the subscription was taken"
+        finally:
+            socket.disable_monitor()
+            cut_off.close()
+    with TelemetrySubscriber(service.telemetry) as telemetry:
+        assert telemetry.receive()["state"]

@@ -180,6 +180,45 @@ def test_a_concurrent_writers_temporary_is_never_removed(tmp_path, monkeypatch) 
     assert target.read_bytes() == b"new"
 
 
+@pytest.mark.parametrize("in_the_way", ["file", "symlink"])
+def test_a_file_made_while_a_new_one_is_written_is_never_replaced(tmp_path, monkeypatch, in_the_way) -> None:
+    """A write that must not overwrite looked for the file first and renamed over it at
+    the end: a recording finished meanwhile under the name a save_recording was writing
+    (or another process's save) was replaced, lost. Now the file in the way, or a
+    symlink put there, refuses the write whatever came between."""
+    target, outside = tmp_path / "run.csv", tmp_path / "outside.csv"
+    sync = os.fsync
+
+    def meanwhile(descriptor: int) -> None:  # the file's fsync, before it takes the name
+        if not os.path.lexists(target):
+            if in_the_way == "file":
+                target.write_bytes(b"an hour of recording\n")
+            else:
+                target.symlink_to(outside)
+        sync(descriptor)
+
+    monkeypatch.setattr(os, "fsync", meanwhile)
+    with pytest.raises(FileExistsError):
+        write_atomic(target, b"dwell records\n", overwrite=False)
+    if in_the_way == "file":
+        assert target.read_bytes() == b"an hour of recording\n"
+    else:
+        assert target.is_symlink() and not outside.exists()
+    assert list(tmp_path.glob(".run.csv.*.tmp")) == []
+
+
+def test_a_new_file_is_written_where_hard_links_are_not_to_be_had(tmp_path, monkeypatch) -> None:
+    """A FAT stick has no hard links: the new file takes its name by a rename there."""
+    def no_links(*args: object) -> None:
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    assert write_atomic(tmp_path / "cal.toml", b"new", overwrite=False).read_bytes() == b"new"
+    with pytest.raises(FileExistsError):
+        write_atomic(tmp_path / "cal.toml", b"newer", overwrite=False)
+    assert [path.name for path in tmp_path.iterdir()] == ["cal.toml"]
+
+
 def play_short(client: HexactlClient, service: Service) -> None:
     """Play a one-waypoint sequence to its end (something to record)."""
 
@@ -200,6 +239,7 @@ def test_a_recording_whose_rename_fails_is_not_left_behind(client, service, data
     save = SaveRecordingRequest(v=1, id=1, cmd="save_recording", path="run.csv")
     before = sorted(path.name for path in data_dir.iterdir())
     monkeypatch.setattr(os, "replace", _fail)
+    monkeypatch.setattr(os, "link", _fail)  # a new file takes its name by a link
     with pytest.raises(ApiError) as refused:
         handler(save)
     monkeypatch.undo()

@@ -185,6 +185,33 @@ def test_a_message_of_several_frames_is_not_a_sample() -> None:
         assert "one frame, this one has 2" in receiver.counters.last_problem
 
 
+def test_a_message_far_larger_than_any_sample_is_not_read_and_its_sender_is_cut_off() -> None:
+    """Found from outside: the stream socket read messages of any size, each whole into
+    memory, for the receiver to refuse; three of 600 MB took the API's process to 2.4 GB
+    and kept its E-stop path silent for 2.8 s, and larger ones would exhaust the memory.
+    A message beyond MAX_MESSAGE_BYTES now closes its sender's connection unread; one up to
+    it is still read and refused with its reason."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, _), zmq.Context() as context:
+        sent(push.send, b"x" * stream_receiver.MAX_MESSAGE_BYTES, lambda: receiver.counters.malformed == 1,
+             "a message up to the bound read and refused")
+        flooding = context.socket(zmq.PUSH)
+        flooding.linger = 0
+        cut_off = flooding.get_monitor_socket(zmq.EVENT_DISCONNECTED)
+        flooding.connect(receiver.endpoint)
+        try:
+            flooding.send(bytes(stream_receiver.MAX_MESSAGE_BYTES + 1))
+            wait_for(lambda: receiver.counters.malformed > 1 or cut_off.poll(0),
+                     "the sender cut off, or its message read")
+            assert receiver.counters.malformed == 1 and receiver.counters.received == 1
+        finally:
+            flooding.disable_monitor()
+            cut_off.close()
+            flooding.close()
+        sent(push.send, encode(1, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [1],
+             "another sender's sample to go on")
+
+
 def test_a_six_number_line_is_the_newest_and_does_not_let_an_old_sample_back_in() -> None:
     """Found from outside: a 6-number line was numbered by arrival (1, 2, …), which let a
     binary sample older than the last one taken in again after it."""

@@ -365,6 +365,58 @@ def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
     assert asyncio.run(from_elsewhere()) == "403"
 
 
+@contextmanager
+def another_site(html: str) -> Iterator[str]:
+    """A web site of another origin (another port) serving ``html`` at its root: its URL."""
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+    from threading import Thread
+
+    class Page(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:  # noqa: N802 - http.server's name
+            body = html.encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html; charset=utf-8")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    with ThreadingHTTPServer(("127.0.0.1", 0), Page) as server:
+        Thread(target=server.serve_forever, daemon=True).start()
+        try:
+            yield f"http://127.0.0.1:{server.server_address[1]}/"
+        finally:
+            server.shutdown()
+
+
+def test_another_site_cannot_show_the_page_in_a_frame(rig) -> None:
+    """Another site open in the operator's browser showed the dashboard, live and connected,
+    in a frame of its own page: under a decoy, the operator's clicks pressed its Enable, Go or
+    jog buttons (clickjacking), its Host and Origin being the dashboard's own. Every response
+    now forbids being framed; the page served as /static/index.html too."""
+    from selenium.webdriver.common.by import By
+
+    page = rig.driver.current_window_handle
+    frame = f'<iframe id="decoy" src="{rig.board.url}" onload="window.frameLoaded = true"></iframe>'
+    with another_site(frame) as url:
+        rig.driver.switch_to.new_window("tab")
+        try:
+            rig.driver.get(url)
+            wait_for(lambda: rig.page("return window.frameLoaded === true"), "the frame loaded (or refused)")
+            rig.driver.switch_to.frame(rig.driver.find_element(By.ID, "decoy"))
+            assert rig.driver.find_elements(By.CSS_SELECTOR, "#estop") == []
+        finally:
+            rig.driver.close()
+            rig.driver.switch_to.window(page)
+    for path in ("", "static/index.html"):
+        with urlopen(f"{rig.board.url}{path}", timeout=30) as answer:
+            assert answer.headers["X-Frame-Options"] == "DENY", path
+            assert answer.headers["Content-Security-Policy"] == "frame-ancestors 'none'", path
+            assert answer.headers["X-Content-Type-Options"] == "nosniff", path
+
+
 
 def test_the_frames_panel_changes_only_the_soft_limits_filled_in(rig) -> None:
     """The panel sent only the soft-limit inputs filled in as soft_limits, which set_frames

@@ -64,6 +64,9 @@ def _text_matching(pattern: str, rule: str) -> Any:
 RecordingName = _text_matching(RECORDING_NAME_PATTERN, "a recording's name is 1 to 100 letters, digits, '.', '_' or "
                                "'-', starting with a letter or digit (no directory; .csv and .json are added)")
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
+OneLine = _text_matching(r"^[^\x00-\x1f\x7f-\x9f\u2028\u2029]+$",
+                         "one line of text, without control characters (no line end, no tab)")
+"""Text the service's log writes (a line end in it would forge the lines after it)."""
 
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
@@ -314,8 +317,8 @@ class LoadCalibrationRequest(_Request):
     cmd: Literal["load_calibration"]
     path: FilePath | None = None
     toml: str | None = None
-    source: str | None = Field(None, min_length=1, max_length=4096, description="with toml: the sender's name for "
-                               "the text, e.g. the file it read (default: request)")
+    source: OneLine | None = Field(None, max_length=4096, description="with toml: the sender's name for the text, "
+                                   "e.g. the file it read (default: request)")
 
     @model_validator(mode="after")
     def _exactly_one_source(self) -> LoadCalibrationRequest:

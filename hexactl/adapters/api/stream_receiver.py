@@ -32,7 +32,7 @@ import zmq
 
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
-from hexactl.adapters.api.stream_wire import MalformedSample, Sample, decode
+from hexactl.adapters.api.stream_wire import MAX_TEXT_BYTES, MalformedSample, Sample, decode
 from hexactl.control.stream import StreamProgress
 from hexactl.control.stream_commands import TargetResult
 
@@ -47,6 +47,12 @@ KEPT_LATENCIES = 2000
 """Latencies kept for the percentiles (4 s at 500 Hz)."""
 
 UDP_BUFFER_BYTES = 1 << 20
+
+MAX_MESSAGE_BYTES = 8 * MAX_TEXT_BYTES
+"""``zmq.MAXMSGSIZE`` of the stream socket: ZeroMQ closes the connection of a sender whose
+message is larger, unread (read whole into memory first, a message of gigabytes exhausted
+the API's process); so the receive queue holds at most RCVHWM times this. Up to it a
+message is read and refused with its reason."""
 
 SENDER_DATAGRAMS = 3
 """Datagrams a UDP sender sends to a stream before it counts as one of its senders."""
@@ -92,7 +98,7 @@ class StreamReceiver(SocketThread):
                  period_s: float, progress: Callable[[], StreamProgress | None],
                  curve: CurveServer | None = None) -> None:
         super().__init__(context, zmq.PULL, endpoint, name="hexactl-stream", curve=curve,
-                         options={zmq.RCVHWM: 10_000})
+                         options={zmq.RCVHWM: 10_000, zmq.MAXMSGSIZE: MAX_MESSAGE_BYTES})
         self._udp: socket.socket | None = None
         if udp is not None:
             try:

@@ -25,6 +25,13 @@ from hexactl.adapters.api.wire import encode
 
 _SEND_HIGH_WATER_MARK = 100  # records queued per slow subscriber before PUB drops them
 
+MAX_SUBSCRIPTION_BYTES = 1024
+"""``zmq.MAXMSGSIZE`` of the telemetry socket, whose only incoming messages are
+subscriptions (a flag byte and a topic; hexactl's subscribers send ``telemetry ``) and
+the handshake's (CURVE's INITIATE is some 300 bytes): ZeroMQ closes the connection of a
+subscriber that sends a longer one, unread. ZeroMQ held each subscription in memory, grown
+many times over (one of 300 MB took the API's process past 4 GB)."""
+
 log = logging.getLogger(__name__)
 
 
@@ -58,7 +65,8 @@ class TelemetryPublisher(SocketThread):
         self._period_s = 1.0 / check_telemetry_rate(rate_hz)
         self._failures = 0
         super().__init__(context, zmq.PUB, endpoint, name="hexactl-telemetry",
-                         options={zmq.SNDHWM: _SEND_HIGH_WATER_MARK}, curve=curve)
+                         options={zmq.SNDHWM: _SEND_HIGH_WATER_MARK, zmq.MAXMSGSIZE: MAX_SUBSCRIPTION_BYTES},
+                         curve=curve)
 
     def _run(self) -> None:
         deadline = time.monotonic()

@@ -55,7 +55,10 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
                 handle.write(data)
                 handle.flush()
                 os.fsync(handle.fileno())
-            os.replace(temporary, target)
+            if overwrite:
+                os.replace(temporary, target)
+            else:
+                _take_new_name(temporary, target)
         except BaseException:
             temporary.unlink(missing_ok=True)
             raise
@@ -68,6 +71,25 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     finally:
         os.close(directory)
     return target
+
+
+def _take_new_name(temporary: Path, target: Path) -> None:
+    """Give ``temporary`` the name ``target`` unless something has it: a hard link fails
+    on any name in the way (``FileExistsError``), however it got there since the check
+    before writing, where a rename would replace it. On a file system without hard links
+    (FAT) that check is all there is."""
+    try:
+        os.link(temporary, target)
+    except FileExistsError:
+        raise
+    except OSError as error:
+        if error.errno not in (errno.EPERM, errno.EOPNOTSUPP):
+            raise
+        if os.path.lexists(target):
+            raise FileExistsError(f"{target} exists; refusing to overwrite it (use --force)") from None
+        os.replace(temporary, target)
+        return
+    temporary.unlink()
 
 
 def write_problem(error: OSError) -> str:

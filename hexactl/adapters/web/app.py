@@ -9,9 +9,10 @@ from the internet. Commands arrive on the WebSocket as ``{"type": "command", "id
 "cmd": NAME, …fields}`` and go to the API unchanged; the reply comes back as
 ``{"type": "reply", "id": N, "reply": …}``.
 
-Loopback only, and a request whose ``Host`` or WebSocket ``Origin`` is not this server's
-is refused: another web site open in the operator's browser cannot drive the platform
-through it (DNS rebinding, cross-site WebSockets).
+Loopback only, a request whose ``Host`` or WebSocket ``Origin`` is not this server's is
+refused, and no response may be shown in another page's frame: another web site open in
+the operator's browser cannot drive the platform through it (DNS rebinding, cross-site
+WebSockets, clickjacking).
 """
 
 from __future__ import annotations
@@ -102,7 +103,33 @@ def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlett
         WebSocketRoute("/ws", socket),
         Mount("/static", StaticFiles(directory=static_directory()), name="static"),
     ], lifespan=lifespan)
-    return _HostCheck(app, allowed_hosts)
+    return _NotFramed(_HostCheck(app, allowed_hosts))
+
+
+NOT_FRAMED_HEADERS = ((b"x-frame-options", b"DENY"), (b"content-security-policy", b"frame-ancestors 'none'"),
+                      (b"x-content-type-options", b"nosniff"))
+
+
+class _NotFramed:
+    """Every HTTP response forbids its showing in a frame: another site open in the
+    operator's browser could show the page, live, in its own under a decoy and have the
+    operator's clicks press its buttons (clickjacking: the framed page's Host and Origin
+    are the dashboard's own). And no content sniffing: each response is what its type says."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_not_framed(message: dict[str, Any]) -> None:
+            if message["type"] == "http.response.start":
+                message = {**message, "headers": [*message.get("headers", ()), *NOT_FRAMED_HEADERS]}
+            await send(message)
+
+        await self.app(scope, receive, send_not_framed)
 
 
 class _HostCheck:
