@@ -270,3 +270,29 @@ def test_read_file_from_any_offset_beyond_the_end_is_the_end(service, offset) ->
     reply = call(service, "read_file", path="small.csv", offset=offset)
     assert reply["ok"], reply
     assert (reply["data_b64"], reply["size"], reply["eof"], reply["offset"]) == ("", 8, True, offset)
+
+
+def test_hidden_files_and_secret_keys_are_never_read_written_or_listed(tmp_path) -> None:
+    """The configuration's directory is a data directory, everything below it too: with
+    ``--config ~/platform.toml`` any loopback client or dashboard page read ``~/.ssh`` and
+    the CURVE keys kept beside the configuration (an outside review)."""
+    home = tmp_path / "home"
+    (home / ".ssh").mkdir(parents=True)
+    (home / ".ssh" / "id_ed25519").write_text("secret")
+    (home / ".netrc").write_text("secret")
+    (home / "keys").mkdir()
+    (home / "keys" / "server.key_secret").write_text("secret")
+    (home / "keys" / "server.key").write_text("public")
+    (home / "cal.toml").write_text("a = 1\n")
+    (home / "link.toml").symlink_to(home / ".netrc")
+    directories = DataDirectories([home])
+    for text in (".ssh/id_ed25519", ".netrc", "keys/server.key_secret", str(home / ".netrc"), "keys/../.netrc",
+                 "link.toml"):
+        for attempt in (lambda: read(directories, text), lambda: directories.read_chunk(text, 0, 100)):
+            refused = refusal(attempt)
+            assert refused.code == ErrorCode.FORBIDDEN_PATH and "never read or written by requests" in refused.message, text
+    assert read(directories, "cal.toml") == "a = 1\n" and directories.read_chunk("keys/server.key", 0, 100)[1] == b"public"
+    for text in (".bashrc", ".ssh/authorized_keys", "keys/x.key_secret"):
+        assert refusal(directories.write_new, text, b"x").code == ErrorCode.FORBIDDEN_PATH, text
+    assert not (home / ".bashrc").exists() and not (home / ".ssh" / "authorized_keys").exists()
+    assert [entry["name"] for entry in directories.files(limit=100)] == ["cal.toml"]  # link.toml: a symlink

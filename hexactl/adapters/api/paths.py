@@ -35,6 +35,9 @@ _FILE_FLAGS = os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_NOCTTY | os.O_C
 _READ_CHUNK_BYTES = 64 * 1024
 _CSV_HEAD_BYTES = 64 * 1024  # a plan's comments and header fit many times over
 
+SECRET_KEY_SUFFIX = ".key_secret"
+"""A CURVE secret key's file (``hexactl keys``): never served, wherever it lies."""
+
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
           (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
 
@@ -90,6 +93,8 @@ class DataDirectories:
             for entry in entries:
                 if len(found) >= limit:
                     return found
+                if _private(entry.name):
+                    continue
                 try:
                     if not entry.is_file(follow_symlinks=False):
                         continue
@@ -161,6 +166,8 @@ class DataDirectories:
         path = Path(text) if Path(text).is_absolute() else self.directories[0] / text
         if path.name in ("", ".", ".."):
             raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: not a file name")
+        if _private(path.name):
+            raise _private_refusal(text)
         try:
             parent = path.parent.resolve()
         except (OSError, RuntimeError):
@@ -196,8 +203,11 @@ class DataDirectories:
         except OSError as error:
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: cannot tell where the opened file lies "
                            f"(/proc/self/fd: {error.strerror}); mount /proc") from None
-        if self._containing(real) is None:
+        directory = self._containing(real)
+        if directory is None:
             raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
+        if any(_private(part) for part in real.relative_to(directory).parts):
+            raise _private_refusal(text)
         return real
 
     def _listing(self) -> dict[str, list[str]]:
@@ -210,6 +220,18 @@ class DataDirectories:
         if text.rsplit("/", 1)[-1] in ("", "."):  # pathlib would drop it and name the file before it
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: ends as a directory's name does ('/' or '/.'); "
                            "name a file")
+
+
+def _private(name: str) -> bool:
+    """Whether a file or directory of this name is never served or written: hidden (a
+    data directory may be an operator's home, the configuration's: ``.ssh``, ``.netrc``)
+    or a secret key (the keys kept beside the configuration)."""
+    return name.startswith(".") or name.endswith(SECRET_KEY_SUFFIX)
+
+
+def _private_refusal(text: str) -> ApiError:
+    return ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: hidden files and directories (names starting with '.') and "
+                    f"secret keys (*{SECRET_KEY_SUFFIX}) are never read or written by requests; name another file")
 
 
 def _open_directory_beneath(directory: Path, relative: PurePath) -> int:
