@@ -18,6 +18,8 @@ CAMPAIGN = ["campaign", "--out", "never-made", "--api", NOBODY]
 SIM_ACTUATORS = ["sim-actuators", "--can", "virtual:never-opened", "--duration", "0.1"]  # short, were one taken
 DEMO = ["demo", "--per-leg", "0"]  # refused after parsing, were the number taken: no demo runs
 HUGE = "99999999999999999999999"
+WAVE = ["wave", "--axis", "z:1", "--frequency", "1", "--cycles", "3", "--api", NOBODY]  # each case adds one option
+RECORD = ["record", "run", "--duration", "1", "--api", NOBODY]
 
 REFUSED = [
     # A noise (1σ) outside a nanometre to a metre: the identification's weights 1/σ²
@@ -43,6 +45,14 @@ REFUSED = [
       for value in ("5", "-1", "nan")],
     *[(SIM_ACTUATORS, "--duration", value) for value in ("-1", "nan")],  # -1 stopped at once, nan never
     *[(["jog", "x=1", "--api", NOBODY], "--for", value) for value in ("1e308", "0", "nan")],
+    # Beyond the bound the service states (1e308, 601, 51, …): refused only after connecting
+    # (exit 1), naming the request's field (duration, frequency_hz, divisor), not the option.
+    *[(["move", "x=1", "--api", NOBODY], "--duration", value) for value in ("1e308", "601", "nan")],
+    *[(WAVE, "--frequency", value) for value in ("nan", "inf", "0", "-1", "1e308", "51")],
+    *[(WAVE, "--cycles", value) for value in ("0", "1000001", HUGE)],
+    *[(WAVE, "--axis", value) for value in ("z:1001", "roll:91", "yaw:1:361")],
+    *[(RECORD, "--divisor", value) for value in ("0", "-1", "1e30", "10001", HUGE)],
+    *[(RECORD, "--duration", value) for value in ("3601", "1e308", "nan")],
 ]
 
 

@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal, Union, get_args
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
 
-from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, RECORDING_NAME_PATTERN
+from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, MAX_RECORDING_DIVISOR, MAX_RECORDING_S, RECORDING_NAME_PATTERN
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
@@ -424,8 +424,9 @@ class RecordRequest(_Request):
         "and feedback (legs, sensor mm), lateness and compute (the loop's, µs)")
     frame: Literal["zero", "work"] = Field(default="zero", description="the poses' frame: zero (relative to the zero "
                                            "posture) or work (the tool's pose in the work frame at the start)")
-    divisor: int = Field(default=1, ge=1, le=10_000, description="record every divisor-th cycle (1: every cycle)")
-    duration_s: float = Field(gt=0, le=3600, description="how long to record, s (at most an hour)")
+    divisor: int = Field(default=1, ge=1, le=MAX_RECORDING_DIVISOR,
+                         description="record every divisor-th cycle (1: every cycle)")
+    duration_s: float = Field(gt=0, le=MAX_RECORDING_S, description="how long to record, s (at most an hour)")
     start: Literal["now", "next_motion"] = Field(default="now", description="now, or armed until the next move, "
                                                  "sequence or other motion starts")
 
