@@ -53,6 +53,8 @@ REFUSED = [
     *[(WAVE, "--axis", value) for value in ("z:1001", "roll:91", "yaw:1:361")],
     *[(RECORD, "--divisor", value) for value in ("0", "-1", "1e30", "10001", HUGE)],
     *[(RECORD, "--duration", value) for value in ("3601", "1e308", "nan")],
+    # A locked length or reading of nan was taken, and said to be outside the stroke.
+    *[(PLAN, option, value) for option in ("--length", "--reading") for value in ("nan", "inf", "-inf")],
 ]
 
 
@@ -64,6 +66,14 @@ def test_a_meaningless_number_is_refused_naming_the_option(command: list[str], o
     assert exits_with([*command, option, value]) == 2
     error = capsys.readouterr().err
     assert f"argument {option}: " in error and "Traceback" not in error
+
+
+@pytest.mark.parametrize("length", ["1e308", "-1e308", "1e30"])
+def test_a_huge_locked_length_is_refused_in_a_line(length: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """The reading it gives was printed to three decimals: 300 digits for 1e308."""
+    assert exits_with([*PLAN, "--length", length]) == 2
+    error = capsys.readouterr().err
+    assert f"(a reading of {float(length):.6g} mm): leg 1 cannot be locked there" in error and len(error) < 200
 
 
 def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:

@@ -432,6 +432,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def finite_float(text: str) -> float:
+    """An argparse ``type``: a finite number (whose range the command checks once it knows it)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
 def positive_up_to(high: float, unit: str) -> Callable[[str], float]:
     """An argparse ``type``: a number in (0, ``high``] ``unit``, ``high`` the bound the
     service or a model states (taken from there)."""
