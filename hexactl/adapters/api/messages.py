@@ -695,6 +695,9 @@ class StreamInputTelemetry(_Message):
     forwarded: int = Field(ge=0, description="handed to the loop")
     clamped: int = Field(ge=0, description="of those, out of reach (or their way from the last one) and replaced by "
                          "the last reachable pose on the way")
+    loop_behind: int = Field(ge=0, description="dropped on the way to the loop, which was behind reading its commands "
+                             "(they waited unread in its pipe: it would have read the target stale, and an E-stop "
+                             "behind it); the next target replaces it. Not counted in forwarded")
     failed: int = Field(ge=0, description="could not be handed to the loop (an error, in the service's log)")
     last_problem: str = Field(description="the last problem with a message (malformed, or an error taking it), or "
                               "empty")
