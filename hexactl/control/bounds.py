@@ -1,5 +1,5 @@
 """The bounds the controller puts on a motion's numbers (a move's duration, a wave's
-frequency, cycles, amplitudes and phase), stated once: the planner and the models check
+frequency, cycles, amplitudes and phase, a jog's velocity), stated once: the planner and the models check
 them, and the CLI refuses an option beyond them before it asks. Standard library only
 here: the CLI reads it."""
 
@@ -18,6 +18,8 @@ MAX_AMPLITUDE_MM = 1000.0
 MAX_AMPLITUDE_DEG = 90.0
 MAX_PHASE_DEG = 360.0
 """A wave axis's phase at the start is within ±this, deg."""
+MAX_JOG_VELOCITY = 1e4
+"""Bigger jog velocity components (mm/s, deg/s) are typing errors; the motion limits cap the rest."""
 
 
 def amplitude_problem(axis: str, amplitude: float) -> str | None:
@@ -26,4 +28,11 @@ def amplitude_problem(axis: str, amplitude: float) -> str | None:
     bound, unit = (MAX_AMPLITUDE_MM, "mm") if axis in ("x", "y", "z") else (MAX_AMPLITUDE_DEG, "deg")
     if not abs(amplitude) <= bound:
         return f"{axis} amplitude {amplitude:g} {unit} is beyond ±{bound:g} {unit}"
+    return None
+
+
+def jog_velocity_problem(value: float) -> str | None:
+    """What is wrong with a jog velocity's component ``value`` (mm/s or deg/s), or None."""
+    if abs(value) > MAX_JOG_VELOCITY:
+        return f"a jog velocity component of {value:g} is beyond {MAX_JOG_VELOCITY:g} (mm/s or deg/s): a typing error?"
     return None

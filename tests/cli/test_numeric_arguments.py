@@ -82,10 +82,11 @@ def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFix
     assert "--per-leg 0 and --free 0: no posture to simulate" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0"])
+@pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0", "x=99999", "0,0,0,0,0,-1e5"])
 def test_a_jog_at_no_velocity_is_refused_before_asking_the_service(velocity: str,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    """All zeros release a jog in the API: the service's release reply broke the command (TypeError)."""
+    """All zeros release a jog in the API: the service's release reply broke the command (TypeError).
+    A component beyond the service's bound was refused only by it, after connecting (exit 1)."""
     assert exits_with(["jog", velocity, "--for", "1", "--api", NOBODY]) == 2
     assert "argument VELOCITY: " in capsys.readouterr().err
 
