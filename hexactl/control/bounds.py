@@ -31,6 +31,14 @@ def amplitude_problem(axis: str, amplitude: float) -> str | None:
     return None
 
 
+
+def ramp_problem(ramp_cycles: float, cycles: int) -> str | None:
+    """What is wrong with a wave of ``cycles`` periods ramped in, and again out, over
+    ``ramp_cycles`` periods each (its ramp first, as in its message), or None."""
+    if 2 * ramp_cycles > cycles:
+        return f"{ramp_cycles:g} ramps in and again out: at most half of cycles ({cycles}); lower it or add cycles"
+    return None
+
 def jog_velocity_problem(value: float) -> str | None:
     """What is wrong with a jog velocity's component ``value`` (mm/s or deg/s), or None."""
     if abs(value) > MAX_JOG_VELOCITY:

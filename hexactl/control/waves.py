@@ -22,7 +22,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from hexactl.control.bounds import MAX_CYCLES, MAX_FREQUENCY_HZ, MAX_PHASE_DEG, amplitude_problem
+from hexactl.control.bounds import MAX_CYCLES, MAX_FREQUENCY_HZ, MAX_PHASE_DEG, amplitude_problem, ramp_problem
 from hexactl.control.frames import Coordinates, Frame
 from hexactl.kinematics.axes import POSE_AXES
 from hexactl.kinematics.frames import compose, pose_of, transform_of
@@ -67,9 +67,8 @@ class WaveSpec(BaseModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> WaveSpec:
-        if 2 * self.ramp_cycles > self.cycles:
-            raise ValueError(f"ramp_cycles {self.ramp_cycles:g} ramps in and again out: at most half of cycles "
-                             f"({self.cycles}); lower it or add cycles")
+        if problem := ramp_problem(self.ramp_cycles, self.cycles):
+            raise ValueError(f"ramp_cycles {problem}")
         for name, axis in self.axes.items():
             if problem := amplitude_problem(name, axis.amplitude):
                 raise ValueError(problem)

@@ -76,6 +76,12 @@ def test_a_huge_locked_length_is_refused_in_a_line(length: str, capsys: pytest.C
     assert f"(a reading of {float(length):.6g} mm): leg 1 cannot be locked there" in error and len(error) < 200
 
 
+def test_a_wave_ramp_beyond_half_its_cycles_is_refused_naming_the_option(capsys: pytest.CaptureFixture[str]) -> None:
+    """The service refused it (exit 1) naming its request's ramp_cycles."""
+    assert exits_with([*WAVE, "--ramp", "2"]) == 2
+    assert "--ramp 2 ramps in and again out: at most half of cycles (3)" in capsys.readouterr().err
+
+
 def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     """It said "points_mm must have shape None, got (0,)"."""
     assert exits_with([*SIMULATE, "--per-leg", "0", "--free", "0"]) == 2

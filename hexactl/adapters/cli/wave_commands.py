@@ -24,7 +24,7 @@ from hexactl.adapters.cli.service_commands import (
     newest_event_t,
     wait_until_at_rest,
 )
-from hexactl.control.bounds import MAX_CYCLES, MAX_FREQUENCY_HZ, MAX_PHASE_DEG, amplitude_problem
+from hexactl.control.bounds import MAX_CYCLES, MAX_FREQUENCY_HZ, MAX_PHASE_DEG, amplitude_problem, ramp_problem
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 
@@ -82,6 +82,8 @@ def wave_fields(arguments: argparse.Namespace) -> dict[str, Any]:
         if name in axes:
             raise CliError(f"--axis {name} is given twice: one --axis per axis")
         axes[name] = fields
+    if arguments.ramp is not None and (problem := ramp_problem(arguments.ramp, arguments.cycles)):
+        raise CliError(f"--ramp {problem}")
     ramp = {"ramp_cycles": arguments.ramp} if arguments.ramp is not None else {}
     frame = {"frame": arguments.frame} if arguments.frame != "zero" else {}
     return {"axes": axes, "frequency_hz": arguments.frequency, "cycles": arguments.cycles, **ramp, **frame}
