@@ -362,21 +362,24 @@ class RemoteLoop:
             return replace(report, running=False, failure=report.failure or self._gone)
         return report
 
-    def submit(self, command: cmd.Command) -> None:
+    def submit(self, command: cmd.Command) -> bool:
         """Write ``command`` to the pipe, as much as it takes now; the rest waits for the
         loop to read (finished as its reports come, by the receiver thread). Never waits
         for the loop: a loop that stopped reading must not hold up this process, whose
         socket thread answers ``estop`` and ``status``. A command the next one replaces
         (:attr:`~hexactl.control.commands.Command.superseded`: a stream's target) is dropped
         rather than kept waiting, so that a stream to a stopped loop does not pile up here,
-        and while :data:`SUPERSEDED_UNREAD_BYTES` wait unread, nor in the pipe ahead of an E-stop."""
+        and while :data:`SUPERSEDED_UNREAD_BYTES` wait unread, nor in the pipe ahead of an E-stop.
+        False when it was dropped, or the link is closed."""
         data = pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)
         with self._send_lock:
             if command.superseded and (not self._writer.flush() or self._writer.unread() >= SUPERSEDED_UNREAD_BYTES):
-                return
-            if not self._writer.offer(data):
+                return False
+            taken = self._writer.offer(data)
+            if not taken:
                 self._gone = self._gone or "the control loop's link is closed"
             self._sent_at = time.monotonic()
+            return taken
 
     def heartbeat(self) -> None:
         """Tell the loop this process runs (an empty frame), unless something was sent

@@ -32,6 +32,7 @@ from enum import StrEnum
 from typing import Any
 
 from hexactl.adapters.api.paths import DataDirectories
+from hexactl.adapters.api.protocol import MAX_RECORDING_S
 from hexactl.adapters.api.wire import ApiError, ErrorCode
 from hexactl.adapters.files.recording_file import SIGNALS, RecordedCycle, RecordingFile, RecordingFileError
 from hexactl.control.controller import Controller
@@ -42,9 +43,6 @@ from hexactl.control.snapshot import ControlState
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import lengths_from_readings
-
-MAX_DURATION_S = 3600.0
-"""The longest recording: an hour is 1.8 million rows (about 0.5 GB) at 500 Hz."""
 
 POLL_INTERVAL_S = 0.05
 """How often the writer's thread takes the rows that arrived."""
@@ -349,6 +347,6 @@ def _request_problem(request: RecordingRequest) -> str | None:
         return f"signals {', '.join(repeated)} named more than once: name each signal once"
     if isinstance(request.divisor, bool) or not isinstance(request.divisor, int) or request.divisor < 1:
         return f"divisor {request.divisor!r}: a whole number ≥ 1 (1: every cycle)"
-    if not (0 < request.duration_s <= MAX_DURATION_S):
-        return f"duration_s {request.duration_s!r}: more than 0 and at most {MAX_DURATION_S:g} s"
+    if not (0 < request.duration_s <= MAX_RECORDING_S):
+        return f"duration_s {request.duration_s!r}: more than 0 and at most {MAX_RECORDING_S:g} s"
     return None

@@ -14,7 +14,9 @@ residuals, each divided by its noise standard deviation:
 - with feature points as parameters, their prior p_k − p_k⁰ (σ = feature_point_sigma_mm).
 
 The result's covariance is the structural parameters' marginal (the nuisance block's
-Schur complement), so their uncertainty carries that of the drift and the feature points.
+Schur complement), so their uncertainty carries that of the drift and the feature points;
+where the residuals exceed the noise model, the feature points' and the readings' shares of
+it are scaled up each by its own excess (:func:`_noise_scaled_covariance`).
 
 Minimising their sum of squares is the maximum-likelihood estimate for Gaussian noise and
 reaches the Cramér–Rao bound. The fixed frame is the instrument's and the moving frame the
@@ -265,6 +267,8 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
             sigma if covariance is None else float(np.sqrt(np.mean(np.trace(covariance, axis1=2, axis2=3)) / 3.0))),
         iterations=fit.iterations, converged=fit.converged, options=options, home_mm_deg=nominal.home,
         warnings=warnings, excluded=_excluded_observations(problem, fit.linear, pose_form, data),
+        covariance=_noise_scaled_covariance(problem, fit, pose_form, full_information,
+                                            current.cost / dof if dof > 0 else float("nan")),
     )
     extras_std = _extras_std(full_information, problem.structural_size)
     return replace(
@@ -272,6 +276,47 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
         offset_drift_mm=None if drift is None else Estimate(drift, extras_std[:LEG_COUNT]),
         feature_points_mm=None if targets is None else Estimate(targets, extras_std[-targets.size:].reshape(-1, 3)),
     )
+
+
+def _noise_scaled_covariance(problem: _Problem, fit: _Fit, pose_form: bool, information: NDArray,
+                             chi2_per_dof: float) -> NDArray[np.float64]:
+    """The structural parameters' covariance with each observation group's excess noise in
+    it: of S⁻¹·(F_p·S_p + F_r·S_r + S_t)·S⁻¹, S = S_p + S_r + S_t the reduced normal matrix
+    (``information``) split into the feature points', the readings' and the feature points'
+    prior's shares, F_p and F_r the points' and the readings' χ² over their degrees of
+    freedom (at least 1; a group with none tested, as the feature points when they are
+    parameters, takes ``chi2_per_dof``). One factor for all, χ²/dof, was wrong by orders of
+    magnitude when one group's noise figure was: a point noise given as 1e-6 mm against the
+    data's 0.25 mm put every σ in metres, the readings' share included."""
+    linear = fit.linear
+    statistics, dof = _standardised_residuals(problem, linear, pose_form)
+    used = problem.observation_weights(pose_form) > 0.0
+    factors = []
+    for group in (slice(None, -LEG_COUNT), slice(-LEG_COUNT, None)):
+        tested = int(np.sum(np.where(used[:, group], dof[:, group], 0)))
+        excess = float(np.sum(np.where(used[:, group], statistics[:, group], 0.0))) / tested if tested else chi2_per_dof
+        factors.append(excess if excess > 1.0 else 1.0)  # NaN (no degrees of freedom): 1
+    pose_inverse = _reduced_normal(linear, 0.0)[2]
+    spread = pose_inverse @ linear.coupling  # U⁻¹·W: how each posture's pose follows the parameters
+    # Each observation's sensitivity to the parameters once its pose follows them, c = b − a·U⁻¹·W.
+    point_jacobian = linear.point_jacobian * problem.point_weights[:, :, None, None]
+    points = -np.einsum("nkri,nip->nkrp", point_jacobian, spread)
+    _, _, targets = problem.split(fit.theta)
+    if targets is not None:
+        first = len(fit.theta) - targets.size
+        target_jacobians = problem.whiten(np.repeat(fit.rotations[:, None], len(targets), axis=1)) \
+            * problem.point_weights[:, :, None, None]
+        for k in range(len(targets)):
+            points[:, k, :, first + 3 * k : first + 3 * k + 3] += target_jacobians[:, k]
+    readings = (linear.leg_parameter_jacobian - np.einsum("nli,nip->nlp", linear.leg_pose_jacobian, spread)) \
+        * problem.reading_weights[:, :, None]
+    point_share = np.einsum("nkrp,nkrq->pq", points, points)
+    reading_share = np.einsum("nlp,nlq->pq", readings, readings)
+    inverse = analyse_information(information)[0]  # S⁻¹ on what the data determine
+    covariance = inverse @ (information + (factors[0] - 1.0) * point_share
+                            + (factors[1] - 1.0) * reading_share) @ inverse
+    size = problem.structural_size
+    return 0.5 * (covariance[:size, :size] + covariance[:size, :size].T)  # symmetric to the last bit, as files check
 
 
 TARGET_TEST_FALSE_ALARM = 1e-3

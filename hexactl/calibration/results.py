@@ -251,15 +251,21 @@ def assemble_result(
     home_mm_deg: tuple[float, ...],
     warnings: tuple[str, ...] = (),
     excluded: tuple[ExcludedObservation, ...] = (),
+    covariance: NDArray | None = None,
 ) -> IdentificationResult:
     """Covariance, observability, χ² test, predicted accuracy and status from a method's
-    raw outcome; ``home_mm_deg`` is the zero posture the test motions are relative to."""
+    raw outcome; ``home_mm_deg`` is the zero posture the test motions are relative to.
+    ``covariance``: the parameters' with the residuals' excess noise in it (full's, per
+    observation group); None: ``information``'s inverse, scaled up by χ²/dof above 1."""
     # Without redundant observations the residuals are zero by construction: no test.
     chi2_per_dof = chi2_total / degrees_of_freedom if degrees_of_freedom > 0 else float("nan")
-    covariance, observability = analyse_information(information)  # what the postures determine: the noise model's
-    if chi2_per_dof > 1.0:  # the noise is larger than its model says: every σ scaled up alike
-        covariance = covariance * chi2_per_dof
-        observability = replace(observability, worst_std_mm=observability.worst_std_mm * np.sqrt(chi2_per_dof))
+    modelled, observability = analyse_information(information)  # what the postures determine: the noise model's
+    excess = chi2_per_dof if chi2_per_dof > 1.0 else 1.0  # the noise is larger than its model says
+    if covariance is None:  # every σ scaled up alike
+        covariance = modelled * excess
+    direction = observability.worst_direction
+    observability = replace(observability, worst_std_mm=float(np.sqrt(direction @ covariance @ direction))
+                            if observability.full_rank else observability.worst_std_mm * np.sqrt(excess))
     notes = list(warnings)
     if chi2_per_dof > options.consistency_limit:
         notes.append(

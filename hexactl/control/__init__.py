@@ -27,5 +27,6 @@ ros2_control's split, in modules:
 - Pure pieces: :mod:`~hexactl.control.trajectory` (ruckig in pose space),
   leg-lock projection from :mod:`hexactl.kinematics.leg_lock`,
   :mod:`~hexactl.control.guard` (stroke and velocity limit of every set-point),
-  :mod:`~hexactl.control.sequences` (the validated model, built-ins, dwell records).
+  :mod:`~hexactl.control.sequences` (the validated model, built-ins, dwell records),
+  :mod:`~hexactl.control.bounds` (a motion's numbers' bounds, which the CLI reads too).
 """

@@ -58,8 +58,10 @@ class LoopHost(Protocol):
         """The loop's latest state; percentiles recomputed if older than ``stats_max_age_s``."""
         ...
 
-    def submit(self, command: cmd.Command) -> None:
-        """Queue ``command`` for the loop's next cycles."""
+    def submit(self, command: cmd.Command) -> bool:
+        """Queue ``command`` for the loop's next cycles; False if it was dropped instead
+        (only a command the next one replaces, :attr:`~hexactl.control.commands.Command.superseded`,
+        or a link to the loop that is gone)."""
         ...
 
     def estop_now(self) -> bool | None:
@@ -100,9 +102,10 @@ class LoopThread:
         return LoopReport(self.snapshot, self.loop.stats.summary(stats_max_age_s), self.loop.realtime,
                           self.loop.running, repr(failure) if failure is not None else None)
 
-    def submit(self, command: cmd.Command) -> None:
+    def submit(self, command: cmd.Command) -> bool:
         # deque.append is atomic in CPython: no lock the loop could wait on.
         self.core.inbox.append(command)
+        return True
 
     def estop_now(self) -> bool:
         return self.hardware.send_estop()

@@ -8,6 +8,7 @@ from math import isfinite
 
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
+from hexactl.control.bounds import jog_velocity_problem
 from hexactl.control.frames import Frame, convert
 from hexactl.control.jog import JogPhase
 from hexactl.control.jog_planning import JOG_EXTEND_S, plan_jog
@@ -16,10 +17,6 @@ from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import ControlState, CoreSnapshot, MotionState
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.telemetry import motion_remaining_s
-
-MAX_JOG_VELOCITY = 1e4
-"""Bigger components (mm/s, deg/s) are typing errors; the motion limits cap the rest."""
-
 
 class JogCommands:
     """Jogs of one facade: ``snapshot()`` the loop's latest, ``context(snapshot)`` what a plan
@@ -76,8 +73,8 @@ def _velocity_problem(velocity: object) -> str | None:
     for value in values:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not isfinite(value):
             return f"a jog velocity's components are finite numbers, got {value!r}"
-        if abs(value) > MAX_JOG_VELOCITY:
-            return f"a jog velocity component of {value:g} is beyond {MAX_JOG_VELOCITY:g} (mm/s or deg/s): a typing error?"
+        if problem := jog_velocity_problem(value):
+            return problem
     return None
 
 

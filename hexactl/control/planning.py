@@ -38,6 +38,7 @@ from operator import add, sub
 import numpy as np
 from numpy.typing import NDArray
 
+from hexactl.control.bounds import MAX_MOTION_S
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Coordinates, convert, relative_poses, short_way
 from hexactl.control.results import CommandResult, ErrorCode
@@ -57,12 +58,6 @@ from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import Violation, check_poses, pose_within_limits
 
-
-MAX_MOTION_S = 600.0
-"""The longest motion one plan may hold, s: a move, or a sequence's moves together (dwells
-not counted). Planning samples every loop period, so its work grows with the motion's
-length and its path's (BENCHMARKS.md, "Planning long motion"; :data:`PLANNING_BUDGET_S`
-bounds it at load); no posture of a calibration campaign takes a tenth of it."""
 
 MAX_WAYPOINTS = 500
 """The most waypoints one plan (a sequence) may hold, counted before any planning

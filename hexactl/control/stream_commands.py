@@ -145,11 +145,14 @@ class _OpenStream:
 @dataclass(frozen=True, slots=True)
 class TargetResult:
     """What became of a target: ``sent`` False when no stream is open; ``clamped`` True
-    when it was out of reach and replaced; ``goal`` what the loop got, mm/deg."""
+    when it was out of reach and replaced; ``goal`` what the loop got, mm/deg;
+    ``dropped`` True when it was sent but dropped on the way, the loop being behind
+    (:meth:`~hexactl.control.host.LoopHost.submit`): the next target replaces it."""
 
     sent: bool
     clamped: bool = False
     goal: RelativeMmDeg | ToolInWorkMmDeg | None = None
+    dropped: bool = False
 
 
 class StreamCommands:
@@ -159,7 +162,7 @@ class StreamCommands:
     thread at a time (the stream's receiver)."""
 
     def __init__(self, snapshot: Callable[[], CoreSnapshot], context: Callable[[CoreSnapshot], PlanningContext],
-                 submitter: CommandSubmitter, host_submit: Callable[[cmd.Command], None], limits: MotionLimits) -> None:
+                 submitter: CommandSubmitter, host_submit: Callable[[cmd.Command], bool], limits: MotionLimits) -> None:
         self._limits = limits
         self._snapshot = snapshot
         self._context = context
@@ -234,7 +237,6 @@ class StreamCommands:
                                       and self._ok(stream, goal + velocity * stream.braking_s(velocity))):
             velocity = np.zeros(6)
             goal, clamped = self._reachable(stream, requested)
-        stream.last = goal
         max_velocity = stream_velocity_limits(stream.context, stream.frames, goal, velocity, stream.limits[0])
         # Faster than the legs allow along its way: passed slower, its direction kept.
         moving = velocity != 0.0
@@ -242,10 +244,12 @@ class StreamCommands:
             velocity = velocity * min(1.0, float(np.min(max_velocity[moving] / np.abs(velocity[moving]))))
         coordinates = RelativeMmRad if stream.frames is None else ToolInWorkMmRad
         target = coordinates._make(float(v) for v in goal)
-        self._host_submit(cmd.StreamTarget(0, stream.stream, target, tuple(float(v) for v in velocity),  # type: ignore[arg-type]
-                                           tuple(float(v) for v in max_velocity), horizon_s, sequence,  # type: ignore[arg-type]
-                                           received_ns))
-        return TargetResult(True, clamped, target.in_degrees())
+        taken = self._host_submit(cmd.StreamTarget(0, stream.stream, target, tuple(float(v) for v in velocity),  # type: ignore[arg-type]
+                                                   tuple(float(v) for v in max_velocity), horizon_s, sequence,  # type: ignore[arg-type]
+                                                   received_ns))
+        if taken:  # a target dropped on the way is not the loop's: the next one's way runs from the last it got
+            stream.last = goal
+        return TargetResult(True, clamped, target.in_degrees(), dropped=not taken)
 
     @staticmethod
     def _velocity(stream: _OpenStream, requested: np.ndarray, sent_s: float) -> np.ndarray:

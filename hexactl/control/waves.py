@@ -22,16 +22,10 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from hexactl.control.bounds import MAX_CYCLES, MAX_FREQUENCY_HZ, MAX_PHASE_DEG, amplitude_problem, ramp_problem
 from hexactl.control.frames import Coordinates, Frame
 from hexactl.kinematics.axes import POSE_AXES, AxisName
 from hexactl.kinematics.frames import compose, pose_of, transform_of
-
-MAX_FREQUENCY_HZ = 50.0
-"""The fastest wave: ten loop cycles a period at the default 500 Hz."""
-MAX_CYCLES = 1_000_000
-"""A bound that keeps the count a number; the duration is capped by planning (MAX_MOTION_S)."""
-MAX_AMPLITUDE_MM = 1000.0
-MAX_AMPLITUDE_DEG = 90.0
 
 
 class WaveAxis(BaseModel):
@@ -43,7 +37,7 @@ class WaveAxis(BaseModel):
 
     amplitude: float = Field(description="peak displacement from the start pose: mm for x, y, z; deg for roll, "
                              "pitch, yaw")
-    phase_deg: float = Field(default=0.0, ge=-360.0, le=360.0, description="phase at the start, deg")
+    phase_deg: float = Field(default=0.0, ge=-MAX_PHASE_DEG, le=MAX_PHASE_DEG, description="phase at the start, deg")
 
 
 class WaveSpec(BaseModel):
@@ -71,13 +65,11 @@ class WaveSpec(BaseModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> WaveSpec:
-        if 2 * self.ramp_cycles > self.cycles:
-            raise ValueError(f"ramp_cycles {self.ramp_cycles:g} ramps in and again out: at most half of cycles "
-                             f"({self.cycles}); lower it or add cycles")
+        if problem := ramp_problem(self.ramp_cycles, self.cycles):
+            raise ValueError(f"ramp_cycles {problem}")
         for name, axis in self.axes.items():
-            bound, unit = (MAX_AMPLITUDE_MM, "mm") if name in ("x", "y", "z") else (MAX_AMPLITUDE_DEG, "deg")
-            if not abs(axis.amplitude) <= bound:
-                raise ValueError(f"{name} amplitude {axis.amplitude:g} {unit} is beyond ±{bound:g} {unit}")
+            if problem := amplitude_problem(name, axis.amplitude):
+                raise ValueError(problem)
         return self
 
     @property

@@ -58,7 +58,8 @@ class FakeStreamInput:
 
     def view(self) -> dict[str, Any]:
         return {"running": self.running, "stream": None, "received": 0, "malformed": 0, "out_of_order": 0,
-                "other_sender": 0, "no_stream": 0, "coalesced": 0, "forwarded": 0, "clamped": 0, "failed": 0, "last_problem": "",
+                "other_sender": 0, "no_stream": 0, "coalesced": 0, "forwarded": 0, "clamped": 0, "loop_behind": 0, "failed": 0,
+                "last_problem": "",
                 "rate_hz": 0, "loop_latency_ms": None, "age_ms": None}
 
 

@@ -340,3 +340,19 @@ def test_a_report_says_how_long_ago_the_loop_sent_it(link: Link) -> None:
     # The report read now arrived after `since`: its age is bounded by the time since then,
     # however long this host held the test up (a fixed bound would measure the host).
     assert link.remote.report(0.25).stats.report_age_s <= time.monotonic() - since
+
+
+def test_a_stream_target_dropped_on_the_way_is_said_to_be(link: Link) -> None:
+    """Targets to a loop that does not read are dropped once a few wait unread in the pipe;
+    the stream's receiver counted them ``forwarded`` all the same. Now the facade says which
+    were dropped on the way, and the next target's way runs from the last the loop got."""
+    enabled = link.controller.enable()
+    link.cycle_until_reported(lambda s: any(o.ticket == enabled.details["ticket"] for o in s.outcomes))
+    opened = link.controller.stream_open("test", timeout_s=10.0)
+    assert opened.ok, opened.message
+    link.cycle_until_reported(lambda s: s.stream is not None)
+    results = [link.controller.stream_target([0.01 * n, 0, 0, 0, 0, 0], n, 1.0 + 0.002 * n, time.monotonic_ns())
+               for n in range(1, 41)]  # the loop reads none of them meanwhile
+    dropped = [n for n, result in enumerate(results, 1) if result.dropped]
+    assert all(result.sent for result in results) and dropped and dropped == list(range(dropped[0], 41)), dropped
+    assert link.controller._streams._open.last[0] == pytest.approx(results[dropped[0] - 2].goal[0])

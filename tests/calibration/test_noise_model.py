@@ -46,3 +46,21 @@ def test_the_worst_combinations_sigma_is_scaled_as_the_covariance_when_the_noise
     direction = result.observability.worst_direction
     assert result.observability.worst_std_mm == pytest.approx(np.sqrt(direction @ result.covariance @ direction),
                                                               rel=1e-6)
+
+
+@pytest.mark.parametrize("point_sigma_mm", [1e-6, 1e-3])
+def test_a_point_noise_given_far_too_small_leaves_the_uncertainty_near_the_datas(
+        nominal, leglock_campaign, point_sigma_mm: float) -> None:
+    """Found in review: `calibrate --point-sigma 1e-6` (the floor) on data with 0.25 mm of
+    point noise wrote a calibration whose σ were in metres: every σ was scaled up by the one
+    factor √(χ²/dof), 1.9e5, the readings' share of the information (their noise figure
+    right) too. Now each group's share is scaled by its own excess: the uncertainty stays
+    near what the right figure gives (the estimate, weighted wrongly, is somewhat worse)."""
+    full = IdentificationOptions(method=Method.FULL)
+    honest = identify(leglock_campaign.data, nominal, full)
+    understated = nominal.model_copy(update={"measurement": nominal.measurement.model_copy(
+        update={"point_sigma_mm": point_sigma_mm})})
+    result = identify(leglock_campaign.data, understated, full)
+    assert result.chi2_per_dof > 1e4
+    assert result.predicted.rms_position_mm < 10 * honest.predicted.rms_position_mm, \
+        (result.predicted.rms_position_mm, honest.predicted.rms_position_mm)

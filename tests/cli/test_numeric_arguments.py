@@ -18,6 +18,8 @@ CAMPAIGN = ["campaign", "--out", "never-made", "--api", NOBODY]
 SIM_ACTUATORS = ["sim-actuators", "--can", "virtual:never-opened", "--duration", "0.1"]  # short, were one taken
 DEMO = ["demo", "--per-leg", "0"]  # refused after parsing, were the number taken: no demo runs
 HUGE = "99999999999999999999999"
+WAVE = ["wave", "--axis", "z:1", "--frequency", "1", "--cycles", "3", "--api", NOBODY]  # each case adds one option
+RECORD = ["record", "run", "--duration", "1", "--api", NOBODY]
 
 REFUSED = [
     # A noise (1σ) outside a nanometre to a metre: the identification's weights 1/σ²
@@ -43,6 +45,16 @@ REFUSED = [
       for value in ("5", "-1", "nan")],
     *[(SIM_ACTUATORS, "--duration", value) for value in ("-1", "nan")],  # -1 stopped at once, nan never
     *[(["jog", "x=1", "--api", NOBODY], "--for", value) for value in ("1e308", "0", "nan")],
+    # Beyond the bound the service states (1e308, 601, 51, …): refused only after connecting
+    # (exit 1), naming the request's field (duration, frequency_hz, divisor), not the option.
+    *[(["move", "x=1", "--api", NOBODY], "--duration", value) for value in ("1e308", "601", "nan")],
+    *[(WAVE, "--frequency", value) for value in ("nan", "inf", "0", "-1", "1e308", "51")],
+    *[(WAVE, "--cycles", value) for value in ("0", "1000001", HUGE)],
+    *[(WAVE, "--axis", value) for value in ("z:1001", "roll:91", "yaw:1:361")],
+    *[(RECORD, "--divisor", value) for value in ("0", "-1", "1e30", "10001", HUGE)],
+    *[(RECORD, "--duration", value) for value in ("3601", "1e308", "nan")],
+    # A locked length or reading of nan was taken, and said to be outside the stroke.
+    *[(PLAN, option, value) for option in ("--length", "--reading") for value in ("nan", "inf", "-inf")],
 ]
 
 
@@ -56,16 +68,31 @@ def test_a_meaningless_number_is_refused_naming_the_option(command: list[str], o
     assert f"argument {option}: " in error and "Traceback" not in error
 
 
+@pytest.mark.parametrize("length", ["1e308", "-1e308", "1e30"])
+def test_a_huge_locked_length_is_refused_in_a_line(length: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """The reading it gives was printed to three decimals: 300 digits for 1e308."""
+    assert exits_with([*PLAN, "--length", length]) == 2
+    error = capsys.readouterr().err
+    assert f"(a reading of {float(length):.6g} mm): leg 1 cannot be locked there" in error and len(error) < 200
+
+
+def test_a_wave_ramp_beyond_half_its_cycles_is_refused_naming_the_option(capsys: pytest.CaptureFixture[str]) -> None:
+    """The service refused it (exit 1) naming its request's ramp_cycles."""
+    assert exits_with([*WAVE, "--ramp", "2"]) == 2
+    assert "--ramp 2 ramps in and again out: at most half of cycles (3)" in capsys.readouterr().err
+
+
 def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     """It said "points_mm must have shape None, got (0,)"."""
     assert exits_with([*SIMULATE, "--per-leg", "0", "--free", "0"]) == 2
     assert "--per-leg 0 and --free 0: no posture to simulate" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0"])
+@pytest.mark.parametrize("velocity", ["x=0", "0,0,0,0,0,0", "-0,0,0,0,0,0", "x=99999", "0,0,0,0,0,-1e5"])
 def test_a_jog_at_no_velocity_is_refused_before_asking_the_service(velocity: str,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    """All zeros release a jog in the API: the service's release reply broke the command (TypeError)."""
+    """All zeros release a jog in the API: the service's release reply broke the command (TypeError).
+    A component beyond the service's bound was refused only by it, after connecting (exit 1)."""
     assert exits_with(["jog", velocity, "--for", "1", "--api", NOBODY]) == 2
     assert "argument VELOCITY: " in capsys.readouterr().err
 

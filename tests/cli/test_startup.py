@@ -32,7 +32,7 @@ HEAVY = (
 """Modules (and their submodules) none of the light commands may load: ``zmq`` only the
 commands that talk to the service, ``zmq.auth`` (in ``security``) only with CURVE keys."""
 
-LIGHT = ("hexactl.control", "hexactl.control.results")
+LIGHT = ("hexactl.control", "hexactl.control.results", "hexactl.control.bounds")
 """Of those, modules that import the standard library only, which the CLI reads (the
 control loop's :data:`~hexactl.control.results.REPORT_SILENT_S`); were one of them to
 import a heavy module, the check would see that one."""

@@ -350,3 +350,23 @@ def test_a_sender_with_a_new_port_for_every_datagram_is_followed_whole() -> None
                 sent(once.send, f"{number} 0 0 0 0 0\n".encode(), lambda n=number: len(controller.targets) == n,
                      f"line {number}")
         assert receiver.counters.other_sender == 0 and len(controller.targets) == 4 * stream_receiver.SENDER_DATAGRAMS - 1
+
+
+class BehindController(RecordingController):
+    """Says each target was dropped on the way to the loop, the loop being behind."""
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+                      before: tuple[Sequence[float], float] | None) -> TargetResult:
+        super().stream_target(pose, sequence, sent_s, received_ns, before)
+        return TargetResult(True, clamped=True, dropped=True)
+
+
+def test_a_target_dropped_on_the_way_to_the_loop_is_not_counted_forwarded() -> None:
+    """The link drops a stream's target while commands wait unread for the loop; the
+    receiver counted it forwarded (and clamped), and ``hexactl cue`` printed that count."""
+    controller = BehindController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        sent(push.send, encode(1, time.monotonic(), [0.0] * 6), lambda: receiver.counters.loop_behind == 1,
+             "the target dropped on the way counted")
+        view = receiver.view()
+        assert view["forwarded"] == 0 and view["clamped"] == 0 and view["loop_behind"] == 1

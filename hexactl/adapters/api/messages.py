@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal, Union, get_args
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
 
-from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, RECORDING_NAME_PATTERN
+from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, MAX_RECORDING_DIVISOR, MAX_RECORDING_S, RECORDING_NAME_PATTERN
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
@@ -438,8 +438,9 @@ class RecordRequest(_Request):
         "and feedback (legs, sensor mm), lateness and compute (the loop's, µs)")
     frame: Literal["zero", "work"] = Field(default="zero", description="the poses' frame: zero (relative to the zero "
                                            "posture) or work (the tool's pose in the work frame at the start)")
-    divisor: int = Field(default=1, ge=1, le=10_000, description="record every divisor-th cycle (1: every cycle)")
-    duration_s: float = Field(gt=0, le=3600, description="how long to record, s (at most an hour)")
+    divisor: int = Field(default=1, ge=1, le=MAX_RECORDING_DIVISOR,
+                         description="record every divisor-th cycle (1: every cycle)")
+    duration_s: float = Field(gt=0, le=MAX_RECORDING_S, description="how long to record, s (at most an hour)")
     start: Literal["now", "next_motion"] = Field(default="now", description="now, or armed until the next move, "
                                                  "sequence or other motion starts")
 
@@ -708,6 +709,9 @@ class StreamInputTelemetry(_Message):
     forwarded: int = Field(ge=0, description="handed to the loop")
     clamped: int = Field(ge=0, description="of those, out of reach (or their way from the last one) and replaced by "
                          "the last reachable pose on the way")
+    loop_behind: int = Field(ge=0, description="dropped on the way to the loop, which was behind reading its commands "
+                             "(they waited unread in its pipe: it would have read the target stale, and an E-stop "
+                             "behind it); the next target replaces it. Not counted in forwarded")
     failed: int = Field(ge=0, description="could not be handed to the loop (an error, in the service's log)")
     last_problem: str = Field(description="the last problem with a message (malformed, or an error taking it), or "
                               "empty")

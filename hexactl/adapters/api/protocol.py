@@ -35,6 +35,12 @@ RECORDING_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$"
 """A recording's name, as ``record`` takes it (``.csv`` and ``.json`` are added): here
 for the dashboard's download route too, which must not import the models."""
 
+MAX_RECORDING_S = 3600
+"""The longest recording, s: an hour is 1.8 million rows (about 0.5 GB) at 500 Hz."""
+
+MAX_RECORDING_DIVISOR = 10_000
+"""The largest ``divisor`` of a recording (every divisor-th cycle recorded)."""
+
 
 def default_client_name() -> str:
     """``PROGRAM USER@HOST`` (``hexactl alice@bench-2``): who this process is, for people;

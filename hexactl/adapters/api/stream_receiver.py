@@ -79,7 +79,8 @@ class StreamCounters:
         self.other_sender = 0  # UDP from a second sender to the stream: dropped
         self.no_stream = 0  # well formed, but no stream open
         self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
-        self.forwarded = 0
+        self.forwarded = 0  # reached the loop's pipe (or inbox)
+        self.loop_behind = 0  # dropped on the way: the loop was behind reading its commands (the next replaces it)
         self.clamped = 0  # out of reach, replaced by the nearest reachable pose on the way
         self.failed = 0  # could not be handed to the controller (an error, logged)
         self.last_problem = ""
@@ -147,8 +148,8 @@ class StreamReceiver(SocketThread):
         c = self.counters
         return {"running": self.running, "stream": self._stream, "received": c.received, "malformed": c.malformed,
                 "out_of_order": c.out_of_order, "other_sender": c.other_sender, "no_stream": c.no_stream,
-                "coalesced": c.coalesced,
-                "forwarded": c.forwarded, "clamped": c.clamped, "failed": c.failed, "last_problem": c.last_problem,
+                "coalesced": c.coalesced, "forwarded": c.forwarded, "clamped": c.clamped, "loop_behind": c.loop_behind,
+                "failed": c.failed, "last_problem": c.last_problem,
                 "rate_hz": self._rate_hz(now),
                 "loop_latency_ms": _percentiles(self._loop_latency_ns), "age_ms": _percentiles(self._age_ns)}
 
@@ -330,7 +331,9 @@ class StreamReceiver(SocketThread):
             self.counters.failed += 1
             self._failed(f"target {sample.sequence} could not be handed to the loop", error)
             return
-        if result.sent:
+        if result.dropped:
+            self.counters.loop_behind += 1
+        elif result.sent:
             self.counters.forwarded += 1
             self.counters.clamped += result.clamped
         else:

@@ -31,6 +31,7 @@ from hexactl.adapters.cli.common import (
     config_input,
     connect,
     connection_parser,
+    finite_float,
     load_config,
     non_negative_int,
     positive_int,
@@ -149,8 +150,8 @@ def _declare_plan(plan: argparse.ArgumentParser) -> None:
     plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
     plan.add_argument("--count", type=positive_int, required=True, help="number of postures")
     lock = plan.add_mutually_exclusive_group()
-    lock.add_argument("--length", type=float, metavar="MM", help="locked joint-to-joint length")
-    lock.add_argument("--reading", type=float, metavar="MM", help="locked sensor reading")
+    lock.add_argument("--length", type=finite_float, metavar="MM", help="locked joint-to-joint length")
+    lock.add_argument("--reading", type=finite_float, metavar="MM", help="locked sensor reading")
     plan.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
                       help=f"random candidates (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
     plan.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
@@ -317,7 +318,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
         low, high = geometry.limits.stroke
         if not low <= reading <= high:
             given = (f"--reading {arguments.reading:g}" if arguments.reading is not None
-                     else f"--length {arguments.length:g} (a reading of {reading:.3f} mm)")
+                     else f"--length {arguments.length:g} (a reading of {reading:.6g} mm)")
             raise CliError(f"{given}: leg {arguments.leg} cannot be locked there: outside its stroke "
                            f"[{low:g}, {high:g}] mm")
     plan = plan_postures(geometry, PlanRequest(arguments.leg, arguments.count, length, arguments.candidates, arguments.seed))

@@ -432,6 +432,33 @@ def positive_float(text: str) -> float:
     return value
 
 
+def finite_float(text: str) -> float:
+    """An argparse ``type``: a finite number (whose range the command checks once it knows it)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def positive_up_to(high: float, unit: str) -> Callable[[str], float]:
+    """An argparse ``type``: a number in (0, ``high``] ``unit``, ``high`` the bound the
+    service or a model states (taken from there)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not 0 < value <= high:
+            raise argparse.ArgumentTypeError(f"{text!r} must be more than 0 and at most {high:g} {unit}")
+        return value
+
+    return parse
+
+
 def checked_number(problem_of: Callable[[float], str | None]) -> Callable[[str], float]:
     """An argparse ``type``: a number that ``problem_of``, the rule of the module that uses it
     (e.g. :func:`~hexactl.kinematics.geometry.noise_sigma_problem`), finds nothing wrong with."""

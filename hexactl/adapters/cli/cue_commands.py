@@ -112,7 +112,8 @@ def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingPa
         received = record.get("stream_input") or {}
         ended = record.get("last_stream") if record.get("stream") is None else None
         print(f"streamed {len(plan.poses) - dropped} poses ({dropped} dropped here); the service forwarded "
-              f"{received.get('forwarded', 0)}, replaced {received.get('clamped', 0)} out of reach")
+              f"{received.get('forwarded', 0)} to the loop (dropped {received.get('loop_behind', 0)} on the way, the "
+              f"loop behind), replaced {received.get('clamped', 0)} out of reach")
         if ended is not None:
             print(f"the stream ended early: {ended['reason']}")
             return EXIT_REFUSED

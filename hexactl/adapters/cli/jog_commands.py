@@ -25,6 +25,7 @@ from hexactl.adapters.cli.service_commands import (
     wait_until_at_rest,
 )
 from hexactl.adapters.cli.telemetry_text import pose_text
+from hexactl.control.bounds import jog_velocity_problem
 
 RENEWALS_PER_DEADMAN = 4
 """Renewals per deadman interval: three may be late before the platform brakes."""
@@ -39,6 +40,8 @@ def _jog_velocity(text: str) -> list[float]:
     if not any(velocity):
         raise argparse.ArgumentTypeError(f"velocity {text!r} is zero on every axis: give a velocity to jog at, "
                                          "e.g. z=5 (to brake to rest: hexactl stop)")
+    if problem := next(filter(None, map(jog_velocity_problem, velocity)), None):
+        raise argparse.ArgumentTypeError(f"velocity {text!r}: {problem}")
     return velocity
 
 

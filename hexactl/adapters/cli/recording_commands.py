@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hexactl.adapters.cli.common import CliError, check_writable, connect, positive_float
+from hexactl.adapters.api.protocol import MAX_RECORDING_DIVISOR, MAX_RECORDING_S
+from hexactl.adapters.cli.common import CliError, check_writable, connect, positive_up_to, whole_number_in
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
@@ -43,11 +44,13 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         description="Record the control loop's signals, cycle by cycle, to NAME.csv (and NAME.json, the "
         "configuration) in the service's first data directory.")
     record.add_argument("name", metavar="NAME", nargs="?", help="the files' name, without extension or directory")
-    record.add_argument("--duration", type=positive_float, metavar="S", help="how long to record, s (at most 3600)")
+    record.add_argument("--duration", type=positive_up_to(MAX_RECORDING_S, "s"), metavar="S",
+                        help=f"how long to record, s (at most {MAX_RECORDING_S:g})")
     record.add_argument("--signals", type=_signals, metavar="A,B", help=f"what to record (default all): {','.join(SIGNALS)}")
     record.add_argument("--frame", choices=("zero", "work"), default="zero",
                         help="the poses: relative to the zero posture (default), or the tool's pose in the work frame")
-    record.add_argument("--divisor", type=int, default=1, metavar="N", help="every N-th cycle (default 1: every cycle)")
+    record.add_argument("--divisor", type=whole_number_in(1, MAX_RECORDING_DIVISOR), default=1, metavar="N",
+                        help=f"every N-th cycle (default 1: every cycle; at most {MAX_RECORDING_DIVISOR})")
     record.add_argument("--on-motion", action="store_true", help="start with the next motion instead of now")
     record.add_argument("--wait", action="store_true", help="return when the file is written, printing its path "
                         "(exit 1, saying why, if the recording ended badly)")
@@ -75,8 +78,6 @@ def record_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
         return "record_stop", {}
     if not arguments.name or arguments.duration is None:
         raise CliError("give NAME and --duration S (or --stop)")
-    if arguments.divisor < 1:
-        raise CliError(f"--divisor {arguments.divisor}: a whole number ≥ 1")
     name = arguments.name[:-4] if arguments.name.endswith(".csv") else arguments.name
     fields: dict[str, Any] = {"name": name, "duration_s": arguments.duration, "frame": arguments.frame,
                               "divisor": arguments.divisor, "start": "next_motion" if arguments.on_motion else "now"}

@@ -36,12 +36,14 @@ from hexactl.adapters.cli.common import (
     named_path,
     pose_argument,
     positive_float,
+    positive_up_to,
     telemetry_rate,
     tilt_bound_argument,
     write_failed,
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
+from hexactl.control.bounds import MAX_MOTION_S
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 FRAMES = ("zero", "work", "tool")
@@ -70,7 +72,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                    _move_request)
     move.add_argument("pose", metavar="POSE", type=pose_argument, help="X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs, e.g. z=50,yaw=5")
     pace = move.add_mutually_exclusive_group()
-    pace.add_argument("--duration", type=positive_float, metavar="S", help="minimum duration of the move, s")
+    pace.add_argument("--duration", type=positive_up_to(MAX_MOTION_S, "s"), metavar="S",
+                      help=f"minimum duration of the move, s (at most {MAX_MOTION_S:g})")
     pace.add_argument("--speed", type=fraction, metavar="F", help="fraction (0, 1] of the velocity limits")
     move.add_argument("--frame", choices=FRAMES, default="zero",
                       help="zero: the platform relative to the zero posture (default); work: the tool's pose in the "

@@ -13,7 +13,7 @@ import sys
 from math import isfinite
 from typing import Any
 
-from hexactl.adapters.cli.common import CliError, connect, positive_float, positive_int
+from hexactl.adapters.cli.common import CliError, connect, positive_float, positive_up_to, whole_number_in
 from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_OK,
@@ -24,6 +24,7 @@ from hexactl.adapters.cli.service_commands import (
     newest_event_t,
     wait_until_at_rest,
 )
+from hexactl.control.bounds import MAX_CYCLES, MAX_FREQUENCY_HZ, MAX_PHASE_DEG, amplitude_problem, ramp_problem
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 
 
@@ -35,8 +36,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     wave.add_argument("--axis", action="append", required=True, type=axis_argument, metavar="AXIS:AMPLITUDE[:PHASE]",
                       help="an oscillating axis (x, y, z in mm; roll, pitch, yaw in deg) with its amplitude and phase "
                       "(deg, default 0), e.g. z:2 or roll:0.5:90; repeat for more axes")
-    wave.add_argument("--frequency", type=positive_float, required=True, metavar="HZ", help="periods per second")
-    wave.add_argument("--cycles", type=positive_int, required=True, metavar="N", help="periods, the ramps included")
+    wave.add_argument("--frequency", type=positive_up_to(MAX_FREQUENCY_HZ, "Hz"), required=True, metavar="HZ",
+                      help=f"periods per second (at most {MAX_FREQUENCY_HZ:g})")
+    wave.add_argument("--cycles", type=whole_number_in(1, MAX_CYCLES), required=True, metavar="N",
+                      help="periods, the ramps included")
     wave.add_argument("--ramp", type=positive_float, metavar="CYCLES", help="periods to ramp in, and again to ramp "
                       "out (default 1; at most half of --cycles)")
     wave.add_argument("--frame", choices=FRAMES, default="zero", help="zero: the axes of the pose relative to the zero "
@@ -64,6 +67,10 @@ def axis_argument(text: str) -> tuple[str, dict[str, float]]:
         raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are numbers") from None
     if not all(isfinite(value) for value in values):
         raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are finite numbers")
+    if problem := amplitude_problem(parts[0], values[0]):
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}")
+    if len(values) == 2 and not abs(values[1]) <= MAX_PHASE_DEG:
+        raise argparse.ArgumentTypeError(f"{text!r}: the phase is at most ±{MAX_PHASE_DEG:g} deg")
     fields = {"amplitude": values[0], **({"phase_deg": values[1]} if len(values) == 2 else {})}
     return parts[0], fields
 
@@ -75,6 +82,8 @@ def wave_fields(arguments: argparse.Namespace) -> dict[str, Any]:
         if name in axes:
             raise CliError(f"--axis {name} is given twice: one --axis per axis")
         axes[name] = fields
+    if arguments.ramp is not None and (problem := ramp_problem(arguments.ramp, arguments.cycles)):
+        raise CliError(f"--ramp {problem}")
     ramp = {"ramp_cycles": arguments.ramp} if arguments.ramp is not None else {}
     frame = {"frame": arguments.frame} if arguments.frame != "zero" else {}
     return {"axes": axes, "frequency_hz": arguments.frequency, "cycles": arguments.cycles, **ramp, **frame}
