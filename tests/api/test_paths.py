@@ -296,3 +296,9 @@ def test_hidden_files_and_secret_keys_are_never_read_written_or_listed(tmp_path)
         assert refusal(directories.write_new, text, b"x").code == ErrorCode.FORBIDDEN_PATH, text
     assert not (home / ".bashrc").exists() and not (home / ".ssh" / "authorized_keys").exists()
     assert [entry["name"] for entry in directories.files(limit=100)] == ["cal.toml"]  # link.toml: a symlink
+
+
+def test_a_name_too_long_to_write_says_to_shorten_it(data) -> None:
+    """It said "File name too long; check the folder and the disk" (the security review)."""
+    refused = refusal(DataDirectories([data / "data"]).write_new, "r" * 240 + ".csv", b"x")
+    assert refused.code == ErrorCode.WRITE_FAILED and "give a shorter name" in refused.message, refused.message

@@ -99,6 +99,8 @@ def write_problem(error: OSError) -> str:
         advice = "free some space there"
     elif error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
         advice = "write where you have permission (and the file system is not read-only)"
+    elif error.errno == errno.ENAMETOOLONG:
+        advice = "give a shorter name (at most about 220 bytes: its temporary adds some 30 to it)"
     else:
         advice = "check the folder and the disk"
     return f"{error.strerror or error}; {advice}"
