@@ -19,6 +19,10 @@ POSE_UNITS: tuple[str, ...] = ("mm", "mm", "mm", "deg", "deg", "deg")
 AxisName = Literal["x", "y", "z", "roll", "pitch", "yaw"]
 """One of :data:`POSE_AXES`, where a message or a file names an axis."""
 
+MAX_TILT_DEG = 90.0
+"""The largest bound on a tool's tilt (the angle between its z axis and the work frame's,
+:mod:`hexactl.kinematics.soft_limits`): beyond it the tool's z axis points down."""
+
 PerAxis: TypeAlias = tuple[float, float, float, float, float, float]
 """One value per pose axis, in that axis's units (a limit, a velocity): not a pose."""
 

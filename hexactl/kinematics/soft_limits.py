@@ -16,12 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS, AxisName
+from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, POSE_UNITS, AxisName
 from hexactl.kinematics.numbers import Number
 from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, Violation, ViolationKind
-
-MAX_TILT_DEG = 90.0
-"""The largest tilt bound: beyond it the tool's z axis points down."""
 
 Bound = Number | None
 """One axis's soft bound in its unit (mm or deg); None: none on that side."""

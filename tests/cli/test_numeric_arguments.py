@@ -53,6 +53,7 @@ REFUSED = [
     *[(WAVE, "--axis", value) for value in ("z:1001", "roll:91", "yaw:1:361")],
     *[(RECORD, "--divisor", value) for value in ("0", "-1", "1e30", "10001", HUGE)],
     *[(RECORD, "--duration", value) for value in ("3601", "1e308", "nan")],
+    *[(["frames", "--api", NOBODY], "--max-tilt", value) for value in ("90.5", "1e308", "0", "nan")],
     # A locked length or reading of nan was taken, and said to be outside the stroke.
     *[(PLAN, option, value) for option in ("--length", "--reading") for value in ("nan", "inf", "-inf")],
 ]

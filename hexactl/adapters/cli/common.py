@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S, check_telemetry_rate
 from hexactl.adapters.files.atomic import write_problem
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
-from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
+from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, validate_pose_values
 
 if TYPE_CHECKING:  # loaded only by the commands that use them
     from hexactl.adapters.api.client import HexactlClient, TelemetrySubscriber
@@ -409,9 +409,9 @@ def bound_changes_argument(text: str) -> dict[str, float | None]:
 
 
 def tilt_bound_argument(text: str) -> float | str:
-    """An argparse ``type``: a positive finite tilt bound (deg; the service says how large
-    it may be), or :data:`NO_BOUND`."""
-    return NO_BOUND if text.strip().lower() == NO_BOUND else positive_float(text)
+    """An argparse ``type``: a tilt bound in (0, :data:`~hexactl.kinematics.axes.MAX_TILT_DEG`]
+    deg, or :data:`NO_BOUND`."""
+    return NO_BOUND if text.strip().lower() == NO_BOUND else positive_up_to(MAX_TILT_DEG, "deg")(text)
 
 
 def _argparse_type(parse: Callable[[str], Any], text: str) -> Any:

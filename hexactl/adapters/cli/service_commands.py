@@ -44,6 +44,7 @@ from hexactl.adapters.cli.common import (
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
 from hexactl.control.bounds import MAX_MOTION_S
+from hexactl.kinematics.axes import MAX_TILT_DEG
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 FRAMES = ("zero", "work", "tool")
@@ -96,7 +97,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                         f"x=-50,z=-10 ({NO_BOUND}: remove that bound)")
     frames.add_argument("--soft-upper", type=bound_changes_argument, metavar="BOUNDS", help="upper soft bounds, likewise")
     frames.add_argument("--max-tilt", type=tilt_bound_argument, metavar="DEG",
-                        help=f"soft bound on the tool's tilt, deg ({NO_BOUND}: remove it)")
+                        help=f"soft bound on the tool's tilt, deg (at most {MAX_TILT_DEG:g}; {NO_BOUND}: remove it)")
     frames.add_argument("--clear", action="store_true", help="no frames and no soft limits")
     frames.epilog = ("Without options: show them. Each option changes only what it names: --soft-lower x=-40 sets x's "
                      f"lower bound and keeps every other soft limit; x={NO_BOUND} removes one. Saved by the service, "
