@@ -421,12 +421,17 @@ def _argparse_type(parse: Callable[[str], Any], text: str) -> Any:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def positive_float(text: str) -> float:
-    """An argparse ``type``: a positive finite number."""
+def _float_argument(text: str) -> float:
+    """``text`` as a float, for an argparse ``type``; ArgumentTypeError if it is none."""
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def positive_float(text: str) -> float:
+    """An argparse ``type``: a positive finite number."""
+    value = _float_argument(text)
     if not 0 < value < float("inf"):
         raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
     return value
@@ -434,10 +439,7 @@ def positive_float(text: str) -> float:
 
 def finite_float(text: str) -> float:
     """An argparse ``type``: a finite number (whose range the command checks once it knows it)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    value = _float_argument(text)
     if not isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
     return value
@@ -448,10 +450,7 @@ def positive_up_to(high: float, unit: str) -> Callable[[str], float]:
     service or a model states (taken from there)."""
 
     def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        value = _float_argument(text)
         if not 0 < value <= high:
             raise argparse.ArgumentTypeError(f"{text!r} must be more than 0 and at most {high:g} {unit}")
         return value
@@ -464,10 +463,7 @@ def checked_number(problem_of: Callable[[float], str | None]) -> Callable[[str],
     (e.g. :func:`~hexactl.kinematics.geometry.noise_sigma_problem`), finds nothing wrong with."""
 
     def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        value = _float_argument(text)
         if problem := problem_of(value):
             raise argparse.ArgumentTypeError(problem)
         return value
@@ -528,10 +524,7 @@ def fifo_priority(lowest: int) -> Callable[[str], int]:
 
 def fraction(text: str) -> float:
     """An argparse ``type``: a number in (0, 1] (``move --speed``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    value = _float_argument(text)
     if not 0 < value <= 1:
         raise argparse.ArgumentTypeError(f"{text!r} must be a fraction in (0, 1] of the velocity limits, e.g. 0.5")
     return value
