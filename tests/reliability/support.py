@@ -153,16 +153,43 @@ def stalled(client: HexactlClient) -> bool:
     return bool(faults) and all(map(is_stall, faults))
 
 
+SILENCE_BRAKE = "command_link_silent"
+"""The event of the service's own brake when its API process fell silent (starved of CPU on
+a loaded host): the motion under way stops short of its goal and the platform holds,
+enabled, with no fault latched."""
+
+
+def last_event(record: dict) -> int:
+    """The number of the latest of the loop's events in a status record (0 before any)."""
+    return record["events"][-1]["seq"] if record["events"] else 0
+
+
+def silence_braked(record: dict, after: int) -> bool:
+    """Whether a status record's events say the service braked on its API's silence after
+    event number ``after`` (a record carries the latest few: enough between two polls)."""
+    return any(event["code"] == SILENCE_BRAKE and event["seq"] > after for event in record["events"])
+
+
+def braked_since(client: HexactlClient, after: int) -> bool:
+    """Whether the service braked on its API's silence after event number ``after``,
+    from all the events it keeps."""
+    return any(event["code"] == SILENCE_BRAKE for event in client.call("events", after=after)["events"])
+
+
 def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], cleanup: Callable[[], None] = lambda: None) -> None:
     """Run ``scenario``; again from enabled and at rest (``cleanup()`` first) if it failed
-    with only a stall's faults latched, :data:`ATTEMPTS` in all."""
+    with only a stall's faults latched, or after the service braked on its API's silence
+    (:data:`SILENCE_BRAKE`), :data:`ATTEMPTS` in all."""
     for attempt in range(1, ATTEMPTS + 1):
+        since = last_event(status(client))
         try:
             scenario()
             return
         except (AssertionError, CommandError) as error:  # a stall latched between two steps refuses the next one
-            print(f"attempt {attempt} failed: {error!r:.300}; latched: {status(client)['faults']}")
-            if attempt == ATTEMPTS or not stalled(client):
+            braked = braked_since(client, since)
+            print(f"attempt {attempt} failed: {error!r:.300}; latched: {status(client)['faults']}"
+                  + ("; the service braked when its API fell silent" if braked else ""))
+            if attempt == ATTEMPTS or not (stalled(client) or braked):
                 raise
             cleanup()
             recover(client)

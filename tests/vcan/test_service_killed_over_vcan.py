@@ -21,7 +21,8 @@ anything else starts, gets a receive buffer for the whole test's traffic
 (:data:`CAPTURE_BYTES`), and the monitor and :class:`FrameWatch` read it once everything
 has stopped, with the frames' kernel timestamps. What needs seeing during the test, the
 service's status says. A starved guest can also hold the service's loop past the
-actuators' watchdog before the kill or on the way home: such a move is tried again
+actuators' watchdog before the kill or on the way home, or hold up its API process until
+the service brakes the move on its silence: such a move is tried again
 (:func:`move_through_stalls`), and a kill that came after a stall had stopped the move is
 done again (:func:`kill_mid_motion`). Nothing here asserts timing: the waits are generous bounds
 that turn a hang into a failure.
@@ -46,7 +47,7 @@ from hexactl.adapters.can.bus_monitor import BusMonitor
 from hexactl.adapters.can.transport import open_bus
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.adapters.files.config_path import default_config_path
-from tests.reliability.support import ATTEMPTS, STALL_FAULTS, enable
+from tests.reliability.support import ATTEMPTS, STALL_FAULTS, enable, last_event, silence_braked
 from tests.vcan.test_service_over_vcan import (
     POSE_ABS,
     RATE_HZ,
@@ -210,20 +211,23 @@ def stalled(faults: list[dict]) -> bool:
 def move_through_stalls(client: HexactlClient, goal: list[float], reached: Callable[[dict], bool], what: str) -> dict:
     """Enable (unless enabled), move to ``goal`` over :data:`MOVE_S`, wait until
     ``reached`` takes a status record; that record. A move a stall of the starved guest
-    stopped (:func:`stalled`) is tried again, :data:`ATTEMPTS` in all; any other fault fails."""
+    stopped (:func:`stalled`), or that the service braked when the starved guest held up
+    its API process (:func:`~tests.reliability.support.silence_braked`), is tried again,
+    :data:`ATTEMPTS` in all; any other fault fails."""
     attempt = 1
     while True:
-        enabled_at_rest(client)  # after a stall, it resets the fault
+        since = last_event(enabled_at_rest(client))  # after a stall, it resets the fault
         try:
             client.call("move", pose=goal, duration=MOVE_S)
         except CommandError as error:  # a stall latched between the two: the move is refused
             if error.code != "latched":
                 raise
-        record = wait_status(client, lambda r: reached(r) or r["state"] != "enabled", what)
-        if record["state"] == "enabled":
+        record = wait_status(client, lambda r: reached(r) or r["state"] != "enabled" or silence_braked(r, since), what)
+        if record["state"] == "enabled" and reached(record):
             return record
-        assert attempt < ATTEMPTS and stalled(record["faults"]), record["faults"]
-        print(f"{what}: attempt {attempt} stopped by a stall of the guest, {record['faults']}")
+        by_stall = stalled(record["faults"]) if record["faults"] else silence_braked(record, since)
+        assert attempt < ATTEMPTS and by_stall, (record["state"], record["faults"], record["events"])
+        print(f"{what}: attempt {attempt} stopped by a stall of the guest: {record['faults'] or [e['code'] for e in record['events'] if e['seq'] > since]}")
         attempt += 1
 
 

@@ -1,0 +1,68 @@
+"""The test suite's own tolerance of a loaded host (:func:`tests.reliability.support.tolerating_stalls`):
+a scenario whose move the service braked because its API process fell silent (the
+process held up, as a starved host does, here by SIGSTOP) runs again, and passes; a
+scenario that fails without any stall fails at once.
+
+A real ``hexactl serve`` in a process of its own, as tests/api/test_frozen_api.py runs it.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pytest
+
+from hexactl.adapters.api.client import HexactlClient
+from tests.reliability.support import braked_since, last_event, recover, tolerating_stalls
+from tools.serving import HANG_S, Served, serve, spawned_children, wait_until
+
+GOAL = [0.0, 0.0, 20.0, 0.0, 0.0, 0.0]
+
+
+def status(client: HexactlClient) -> dict:
+    return client.call("status")["status"]
+
+
+def at_rest(client: HexactlClient) -> dict:
+    return wait_until(lambda: (record := status(client))["motion"] == "holding" and record, "the platform at rest",
+                      HANG_S, seen=lambda: status(client))
+
+
+def freeze_api(served: Served) -> None:
+    """Hold the service's API process up until the service has braked on its silence."""
+    [api_process] = spawned_children(served.process.pid)
+    os.kill(api_process, signal.SIGSTOP)
+    try:
+        wait_until(lambda: "nothing from the API process for" in served.log, "the service to see the silence",
+                   HANG_S, seen=lambda: served.log)
+    finally:
+        os.kill(api_process, signal.SIGCONT)
+
+
+def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_not(tmp_path: Path) -> None:
+    with serve(tmp_path) as served, HexactlClient(served.api, timeout_s=10) as client:
+        recover(client)
+        attempts = []
+
+        def braked_then_moves() -> None:
+            attempts.append(last_event(status(client)))
+            client.call("move", pose=GOAL, duration=30.0 if len(attempts) == 1 else 1.0)
+            if len(attempts) == 1:
+                wait_until(lambda: status(client)["motion"] == "moving", "the move under way", HANG_S)
+                freeze_api(served)
+            assert at_rest(client)["pose_command"] == pytest.approx(GOAL, abs=1e-6)
+
+        tolerating_stalls(client, braked_then_moves)
+        assert len(attempts) == 2 and braked_since(client, attempts[0]) and not braked_since(client, attempts[1])
+
+        failures = []
+
+        def fails() -> None:
+            failures.append(1)
+            raise AssertionError("a scenario's own failure")
+
+        with pytest.raises(AssertionError, match="own failure"):
+            tolerating_stalls(client, fails)
+        assert failures == [1]
