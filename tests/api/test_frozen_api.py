@@ -9,14 +9,12 @@ The real command in a process of its own, on random loopback ports read from its
 
 from __future__ import annotations
 
-import os
-import signal
 from pathlib import Path
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.control.config import SupervisionConfig
-from tests.reliability.support import is_stall
-from tools.serving import HANG_S, serve, spawned_children, terminate, wait_until
+from tests.reliability.support import hold_up_api, is_stall
+from tools.serving import HANG_S, serve, terminate, wait_until
 
 GOAL_X_MM = 150.0
 MOVE_S = 30.0  # slow: still far from its goal when the loop brakes
@@ -36,13 +34,7 @@ def test_a_frozen_api_process_has_the_loop_brake_a_move_on_its_own(tmp_path: Pat
                 assert error.code == "loop_timeout", error
             wait_until(lambda: status(client)["motion"] == "moving", "the move under way", HANG_S,
                        seen=lambda: status(client))
-            [api_process] = spawned_children(served.process.pid)
-            os.kill(api_process, signal.SIGSTOP)
-            try:
-                wait_until(lambda: "nothing from the API process for" in served.log, "the service to see the silence",
-                           HANG_S, seen=lambda: served.log)
-            finally:
-                os.kill(api_process, signal.SIGCONT)
+            hold_up_api(served)
             wait_until(lambda: status(client)["motion"] == "holding", "the platform at rest", HANG_S,
                        seen=lambda: status(client))
             record = status(client)

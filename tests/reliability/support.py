@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
@@ -14,7 +16,7 @@ from hexactl.application.service import Service
 from hexactl.control.local_controller import LocalController
 from hexactl.sim.actuator_firmware import ActuatorFirmware
 from tests.api.test_service import status, wait_for
-from tools.serving import Served
+from tools.serving import HANG_S, Served, spawned_children, wait_until
 
 LOCAL = "tcp://127.0.0.1:*"
 RATE_HZ = 500
@@ -193,3 +195,15 @@ def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], clean
                 raise
             cleanup()
             recover(client)
+
+
+def hold_up_api(served: Served) -> None:
+    """Hold the API process of ``served`` (a ``hexactl serve``) up, as a starved host
+    does, here by SIGSTOP, until the service's log says it has noticed the silence."""
+    [api_process] = spawned_children(served.process.pid)
+    os.kill(api_process, signal.SIGSTOP)
+    try:
+        wait_until(lambda: "nothing from the API process for" in served.log, "the service to see the silence",
+                   HANG_S, seen=lambda: served.log)
+    finally:
+        os.kill(api_process, signal.SIGCONT)

@@ -8,15 +8,13 @@ A real ``hexactl serve`` in a process of its own, as tests/api/test_frozen_api.p
 
 from __future__ import annotations
 
-import os
-import signal
 from pathlib import Path
 
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
-from tests.reliability.support import braked_since, last_event, recover, tolerating_stalls
-from tools.serving import HANG_S, Served, serve, spawned_children, wait_until
+from tests.reliability.support import braked_since, hold_up_api, last_event, recover, tolerating_stalls
+from tools.serving import HANG_S, serve, wait_until
 
 GOAL = [0.0, 0.0, 20.0, 0.0, 0.0, 0.0]
 
@@ -30,17 +28,6 @@ def at_rest(client: HexactlClient) -> dict:
                       HANG_S, seen=lambda: status(client))
 
 
-def freeze_api(served: Served) -> None:
-    """Hold the service's API process up until the service has braked on its silence."""
-    [api_process] = spawned_children(served.process.pid)
-    os.kill(api_process, signal.SIGSTOP)
-    try:
-        wait_until(lambda: "nothing from the API process for" in served.log, "the service to see the silence",
-                   HANG_S, seen=lambda: served.log)
-    finally:
-        os.kill(api_process, signal.SIGCONT)
-
-
 def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_not(tmp_path: Path) -> None:
     with serve(tmp_path) as served, HexactlClient(served.api, timeout_s=10) as client:
         recover(client)
@@ -51,7 +38,7 @@ def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_
             client.call("move", pose=GOAL, duration=30.0 if len(attempts) == 1 else 1.0)
             if len(attempts) == 1:
                 wait_until(lambda: status(client)["motion"] == "moving", "the move under way", HANG_S)
-                freeze_api(served)
+                hold_up_api(served)
             assert at_rest(client)["pose_command"] == pytest.approx(GOAL, abs=1e-6)
 
         tolerating_stalls(client, braked_then_moves)
