@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
@@ -184,12 +185,16 @@ def tapped(tmp_path_factory) -> Iterator[Rig]:
         yield rig
 
 
-def listed_stop(rig: Rig, ann: HexactlClient) -> dict:
-    """A stop by ``ann``, once the page lists it: the service's event."""
-    ann.call("stop")
-    mark = latest(rig, "stop", ANN)
-    wait_for(lambda: line_of(rig, mark), "the stop before the burst on the page", seen=lambda: lines(rig))
-    return mark
+@contextmanager
+def ann_after_a_listed_stop(rig: Rig) -> Iterator[tuple[HexactlClient, dict]]:
+    """From at rest and disabled, ``ann``'s client, and her stop once the page lists it
+    (the service's event): where a burst begins."""
+    rig.at_rest_disabled()
+    with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
+        ann.call("stop")
+        mark = latest(rig, "stop", ANN)
+        wait_for(lambda: line_of(rig, mark), "the stop before the burst on the page", seen=lambda: lines(rig))
+        yield ann, mark
 
 
 def burst(rig: Rig, ann: HexactlClient, after: int) -> list[dict]:
@@ -210,9 +215,8 @@ def test_a_burst_the_page_did_not_receive_is_asked_for_and_listed_whole(tapped) 
     rig = tapped
 
     def body() -> None:
-        rig.at_rest_disabled()
-        with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
-            stopped = burst(rig, ann, listed_stop(rig, ann)["seq"])
+        with ann_after_a_listed_stop(rig) as (ann, mark):
+            stopped = burst(rig, ann, mark["seq"])
         assert sum(1 for event in stopped if event["code"] == "stop") == 20, stopped
         wait_for(lambda: all(line_of(rig, event) for event in stopped), "the whole burst on the page",
                  seen=lambda: [line["code"] for line in lines(rig)][:30])
@@ -232,9 +236,7 @@ def test_a_burst_while_the_page_asks_for_another_is_asked_for_next(tapped) -> No
     rig = tapped
 
     def body() -> None:
-        rig.at_rest_disabled()
-        with HexactlClient(rig.served.api, timeout_s=30.0, name=ANN) as ann:
-            mark = listed_stop(rig, ann)
+        with ann_after_a_listed_stop(rig) as (ann, mark):
             asked = sent(rig, "events")
             rig.page("window.hexactlTestTap.holdEventsReplies = true")
             try:
@@ -248,5 +250,54 @@ def test_a_burst_while_the_page_asks_for_another_is_asked_for_next(tapped) -> No
         assert len(stops) == 40, first + second
         wait_for(lambda: all(line_of(rig, event) for event in first + second), "both bursts whole on the page",
                  seen=lambda: [line["code"] for line in lines(rig)][:50])
+
+    rig.scenario(body)
+
+
+def failing_asks(rig: Rig, count: int) -> None:
+    """The page's next ``count`` ``events`` requests answered with a failure (as a busy
+    service's ``loop_silent``, or the page's own time-out)."""
+    rig.page(f"window.hexactlTestTap.failEventsReplies = {count}")
+
+
+def test_a_burst_whose_request_failed_is_asked_for_again_and_listed_whole(tapped) -> None:
+    """The page's request for a burst fails (on a busy host its reply can come after the
+    page's time-out): the page asks again with a later record. Before, the gap was
+    forgotten, and of the burst the page listed only the eight the next record carried."""
+    rig = tapped
+
+    def body() -> None:
+        with ann_after_a_listed_stop(rig) as (ann, mark):
+            asked = sent(rig, "events")
+            failing_asks(rig, 1)
+            try:
+                stopped = burst(rig, ann, mark["seq"])
+                wait_for(lambda: all(line_of(rig, event) for event in stopped), "the whole burst on the page",
+                         seen=lambda: [line["code"] for line in lines(rig)][:30])
+            finally:
+                failing_asks(rig, 0)
+        assert sent(rig, "events") >= asked + 2  # the failed request and the one after it
+        assert not any(line["code"] == "events_missed" for line in lines(rig)), lines(rig)
+
+    rig.scenario(body)
+
+
+def test_a_burst_the_page_cannot_get_is_said_to_be_missing(tapped) -> None:
+    """Every request for a burst fails: after the page's last try, a warning line says
+    which events it could not get and why, rather than leaving the gap unsaid."""
+    rig = tapped
+
+    def body() -> None:
+        with ann_after_a_listed_stop(rig) as (ann, mark):
+            failing_asks(rig, 3)
+            try:
+                burst(rig, ann, mark["seq"])
+                said = wait_for(lambda: next((line for line in lines(rig) if line["code"] == "events_missed"
+                                              and f"after number {mark['seq']} " in line["text"]), None),
+                                "the page saying the burst is missing", seen=lambda: lines(rig)[:10])
+            finally:
+                failing_asks(rig, 0)
+        assert said["warning"], said
+        assert "could not be fetched (loop_silent, 3 times): the service's log has them" in said["text"], said
 
     rig.scenario(body)

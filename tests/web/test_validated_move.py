@@ -28,7 +28,7 @@ TAP = """
 (() => {
   const Native = window.WebSocket;
   const tap = { dropTelemetry: false, recordFields: null, sent: [], lastTelemetryAt: null, losses: 0,
-                holdEventsReplies: false, eventsIds: new Set(), heldReplies: [] };
+                holdEventsReplies: false, failEventsReplies: 0, eventsIds: new Set(), heldReplies: [] };
   tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
   window.hexactlTestTap = tap;
   window.WebSocket = class extends Native {
@@ -40,6 +40,12 @@ TAP = """
       if (type !== 'message') return super.addEventListener(type, listener, options);
       return super.addEventListener(type, (event) => {
         const message = JSON.parse(event.data);
+        if (message.type === 'reply' && tap.failEventsReplies > 0 && tap.eventsIds.has(message.id)) {
+          tap.failEventsReplies -= 1;
+          message.reply = { ok: false, error: { code: 'loop_silent', message: 'failed by the test tap' } };
+          listener(new MessageEvent('message', { data: JSON.stringify(message) }));
+          return;
+        }
         if (message.type === 'reply' && tap.holdEventsReplies && tap.eventsIds.has(message.id)) {
           tap.heldReplies.push(() => listener(event));
           return;
@@ -67,7 +73,8 @@ TAP = """
 """Wraps the page's WebSocket: ``hexactlTestTap.dropTelemetry`` drops every telemetry
 record, ``recordFields`` (not null) replaces those fields of each record (the frames held,
 a field the service cannot be made to send), ``holdEventsReplies``
-holds the replies to the page's ``events`` requests until ``releaseReplies()``, ``sent``
+holds the replies to the page's ``events`` requests until ``releaseReplies()``,
+``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``), ``sent``
 lists the ``cmd`` of every message the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
 service's link down, or records further apart than 1.5 s (the page calls 2 s stale), as

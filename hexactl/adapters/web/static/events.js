@@ -15,6 +15,8 @@ const $ = (id) => document.getElementById(id);
 
 export const EVENTS_KEPT = 64;  // as many as the service keeps: a burst it sends is listed whole
 const AGO_EVERY_MS = 500;
+const ASK_AGAIN_MS = 1000;  // a gap whose request failed is asked for again with a record at least this much later
+const ASK_TRIES = 3;        // then the page says it could not get them
 
 // The loop's daily work, as the service's log counts it (INFO, not WARNING:
 // hexactl/application/safety_log.py, _ROUTINE_EVENTS): these codes, and those starting
@@ -76,14 +78,22 @@ export function setupEvents(askAfter) {
   let lastNumber = 0;       // the newest event number taken in from this run (0: none)
   let asking = false;       // an `events` request for a gap is under way
   let askNext = null;       // the number after which a gap opened while it was: asked for once it is answered
+  let askAgain = null;      // the number after which a gap's request failed (no reply in time, the service busy)
+  let askAgainAt = 0;       // performance.now() from which a record asks for it again
+  let failedAsks = 0;       // requests that failed in a row
   let dirty = false;
   let agoAt = -Infinity;    // performance.now() of the last "ago" update (only to limit their rate)
   let agoFor = null;        // the record t they were computed at
 
   function onRecord(r) {
     if (finite(r.t)) {
-      if (recordT !== null && r.t < recordT) { run += 1; lastNumber = 0; askNext = null; }
+      if (recordT !== null && r.t < recordT) { run += 1; lastNumber = 0; askNext = null; askAgain = null; failedAsks = 0; }
       recordT = r.t;
+    }
+    if (askAgain !== null && !asking && performance.now() >= askAgainAt) {
+      const again = askAgain;
+      askAgain = null;
+      askFrom(again);
     }
     const events = r.events;
     if (!Array.isArray(events) || events.length === 0) return;
@@ -97,7 +107,11 @@ export function setupEvents(askAfter) {
 
   /** The events numbered after `after` from the service: those the records skipped. A gap
    * that opens while a request is under way is asked for once it is answered (from the
-   * earliest such gap: the reply has every event after it that the service still keeps). */
+   * earliest such gap: the reply has every event after it that the service still keeps).
+   * A request that fails (no reply within the page's time-out on a busy host, the link
+   * down) is asked again, merged with any gap that opened meanwhile, with a later record;
+   * after ASK_TRIES failures in a row a warning line says which events the page could not
+   * get, and why. */
   async function askFrom(after) {
     if (!askAfter) return;
     if (asking) {
@@ -108,7 +122,23 @@ export function setupEvents(askAfter) {
     const asked = run;
     try {
       const reply = await askAfter(after);
-      if (!reply || reply.ok !== true || asked !== run) return;
+      if (asked !== run) return;
+      if (!reply || reply.ok !== true) {
+        const from = Math.min(askNext ?? after, after);
+        askNext = null;
+        failedAsks += 1;
+        if (failedAsks < ASK_TRIES) {
+          askAgain = Math.min(askAgain ?? from, from);
+          askAgainAt = performance.now() + ASK_AGAIN_MS;
+        } else {
+          failedAsks = 0;
+          take([{ t: recordT ?? 0, code: 'events_missed', sender: null,
+                  message: `the events after number ${from} could not be fetched (${reply?.error?.code ?? 'no reply'}, `
+                           + `${ASK_TRIES} times): the service's log has them` }]);
+        }
+        return;
+      }
+      failedAsks = 0;
       const events = Array.isArray(reply.events) ? reply.events : [];
       if (Number.isSafeInteger(reply.missed) && reply.missed > 0 && finite(events[0]?.t ?? reply.t)) {
         // taken first: listed just below (before) the oldest event the service still had
