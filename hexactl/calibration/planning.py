@@ -110,6 +110,23 @@ class PosturePlan:
         return self.status is PlanStatus.OK
 
 
+def _request_problems(request: PlanRequest) -> list[str]:
+    """What is wrong with ``request``, each with what to give instead (empty: nothing)."""
+    problems = []
+    if not 0 <= request.leg <= LEG_COUNT:
+        problems.append(f"leg {request.leg} is not a leg: give 1 to {LEG_COUNT}, or 0 for free postures")
+    if request.count < 1:
+        problems.append(f"count {request.count}: plan at least 1 posture")
+    elif request.candidates < request.count:
+        problems.append(f"{request.candidates} candidates cannot give {request.count} postures: give at least "
+                        f"{request.count} candidates (more give a better-conditioned plan)")
+    if request.candidates > MAX_CANDIDATES:
+        problems.append(f"{request.candidates} candidates: give at most {MAX_CANDIDATES}")
+    if not 0 < request.envelope_fraction <= 1:
+        problems.append(f"envelope fraction {request.envelope_fraction} is not in (0, 1]")
+    return problems
+
+
 def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
     """Plan ``request.count`` leg-lock (or free) postures on ``geometry``; see the module docstring.
 
@@ -119,13 +136,8 @@ def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
     """
     nan = float("nan")
     empty = np.zeros((0, 6))
-    if (not 0 <= request.leg <= LEG_COUNT or request.count < 1 or not request.count <= request.candidates <= MAX_CANDIDATES
-            or not 0 < request.envelope_fraction <= 1):
-        return PosturePlan(PlanStatus.INVALID_REQUEST, request.leg, empty, empty, nan, nan, 0,
-            f"leg must be 0-{LEG_COUNT}, count ≥ 1, candidates from count to {MAX_CANDIDATES} and the envelope "
-            "fraction in (0, 1] "
-            f"(got leg {request.leg}, count {request.count}, candidates {request.candidates}, "
-            f"envelope fraction {request.envelope_fraction})")
+    if problems := _request_problems(request):
+        return PosturePlan(PlanStatus.INVALID_REQUEST, request.leg, empty, empty, nan, nan, 0, "; ".join(problems))
     home = np.array(geometry.home.in_radians())
     locked_length = nan
     if request.leg:

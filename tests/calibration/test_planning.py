@@ -41,6 +41,10 @@ def test_free_plan_and_bad_requests(nominal):
     assert free.ok and free.poses_relative.shape == (10, 6) and np.isnan(free.locked_length_mm)
     assert plan_postures(nominal, PlanRequest(leg=7, count=10)).status is PlanStatus.INVALID_REQUEST
     assert plan_postures(nominal, PlanRequest(leg=1, count=0)).status is PlanStatus.INVALID_REQUEST
+    too_few = plan_postures(nominal, PlanRequest(leg=1, count=50, candidates=40))
+    assert too_few.status is PlanStatus.INVALID_REQUEST
+    assert too_few.message == ("40 candidates cannot give 50 postures: give at least 50 candidates "
+                               "(more give a better-conditioned plan)")  # that one problem, and what to do
     # a candidate array beyond memory: numpy's "Maximum allowed dimension exceeded" traceback
     assert plan_postures(nominal, PlanRequest(leg=1, count=10, candidates=10**23)).status is PlanStatus.INVALID_REQUEST
     impossible = plan_postures(nominal, PlanRequest(leg=1, count=10, candidates=50, locked_length_mm=10_000.0))
