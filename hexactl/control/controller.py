@@ -19,13 +19,8 @@ zero posture, mm and degrees; leg set-points and feedback are actuator sensor mm
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
 
-import numpy as np
-
-from hexactl.control import commands as cmd
-from hexactl.control import preconditions
 from hexactl.control.calibration_swaps import CalibrationSwaps
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frame_commands import FrameCommands
@@ -35,10 +30,11 @@ from hexactl.control.move_commands import MoveCommands
 from hexactl.control.recording_commands import RecordingCommands
 from hexactl.control.recorder import Row
 from hexactl.control.sequence_player import SequenceReport
-from hexactl.control.snapshot import ControlState, CoreSnapshot, MotionState
+from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.host import LoopHost
 from hexactl.control.planning import ActiveGeometry, PlanningContext
-from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.results import CommandResult
+from hexactl.control.state_commands import StateCommands
 from hexactl.control.stream_commands import StreamCommands, TargetResult
 from hexactl.control.sequence_commands import SequenceCommands
 from hexactl.control.submitter import CommandSubmitter
@@ -49,12 +45,6 @@ from hexactl.control.wave_commands import WaveCommands
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS
-
-
-def _lock_released(snapshot: CoreSnapshot) -> str:
-    """What disabling says of the leg lock it ends: the next enable drives all six legs."""
-    lock = snapshot.lock
-    return f"; leg {lock.leg} is no longer locked: the next enable drives all six legs" if lock is not None else ""
 
 
 class Controller:
@@ -86,6 +76,7 @@ class Controller:
         self._moves = MoveCommands(lambda: self.snapshot, lambda: self.frames.current, self._context, self._commands)
         self._sequences = SequenceCommands(lambda: self.snapshot, self._context, self._commands)
         self._calibrations = CalibrationSwaps(lambda: self.snapshot, self._commands, config, nominal)
+        self._states = StateCommands(host, lambda: self.snapshot, self._commands, config.supervision)
 
     @property
     def snapshot(self) -> CoreSnapshot:
@@ -121,38 +112,21 @@ class Controller:
 
     def enable(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Energise the actuators and hold the pose they are at."""
-        s = self.snapshot
-        if refusal := preconditions.check_enable(s, self.config.supervision.heartbeat_timeout_s):
-            return CommandResult.failure(*refusal)
-        return self._commands.submit(cmd.Enable, "enabled", deadline_ns=deadline_ns)
+        return self._states.enable(deadline_ns)
 
     def disable(self) -> CommandResult:
         """Disable the actuators (at rest only: stop first); a leg lock ends, and the reply says so."""
-        return self._commands.submit_unless(preconditions.check_disable, cmd.Disable,
-                                            "disabled" + _lock_released(self.snapshot))
+        return self._states.disable()
 
     def stop(self) -> CommandResult:
         """Brake smoothly to rest where the motion happens to end; aborts a sequence.
         Never refused: at rest, or disabled, it says there was nothing to stop."""
-        s = self.snapshot
-        if s.state is not ControlState.ENABLED:
-            message = "nothing to stop: the controller is " + (
-                "disabled" if s.state is ControlState.DISABLED else f"in {s.state.name} (reset it to go on)")
-        elif s.motion is MotionState.HOLDING and s.sequence is None:
-            message = "nothing to stop: the platform is at rest"
-        else:
-            message = "stopping"
-        return self._commands.submit(cmd.Stop, message)
+        return self._states.stop()
 
     def estop(self) -> CommandResult:
         """Emergency stop, latched until reset. Sent from this thread at once where the
         actuators are reachable from here, and by the loop, which latches and repeats it."""
-        sent = self._host.estop_now()
-        result = self._commands.submit(cmd.EStop, "E-stop latched")
-        if sent is False:
-            return CommandResult.failure(ErrorCode.SEND_FAILED, "the E-stop frame could not be sent; the loop "
-                                         "latched ESTOP and keeps repeating it", **result.details)
-        return result
+        return self._states.estop()
 
     def reset(self) -> CommandResult:
         """Clear a latched FAULT or ESTOP: DISABLE and CLEAR_FAULT to all, state DISABLED; a
@@ -160,16 +134,7 @@ class Controller:
         reset at most, until no actuator reports FAULT or ESTOP (they leave E-stop once they
         have seen none for a moment), so that an enable right after it is not refused for
         that; one that still does is named."""
-        done = self._commands.submit_unless(preconditions.check_reset, cmd.Reset,
-                                            "reset to disabled" + _lock_released(self.snapshot))
-        if not done.ok or done.details.get("pending"):
-            return done
-        supervision = self.config.supervision
-        if still := self._commands.settled(lambda s: preconditions.actuator_faulted(s.feedback),
-                                           supervision.estop_clear_holdoff_s + supervision.state_timeout_s):
-            return replace(done, message=f"{done.message}; {still} still: its cause may remain (a hardware E-stop "
-                                         "pressed?), and enable is refused until it clears")
-        return done
+        return self._states.reset()
 
     def validate_pose(self, pose: Sequence[float], duration: float | None = None, speed: float | None = None,
                       frame: Frame = Frame.ZERO, relative: bool = False, tolerance_mm: float | None = None,
@@ -215,15 +180,11 @@ class Controller:
 
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""
-        if isinstance(leg, bool) or not isinstance(leg, (int, np.integer)) or not 1 <= leg <= 6:
-            return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, f"leg is a number from 1 to 6, got {leg!r}")
-        return self._commands.submit_unless(preconditions.check_lock, lambda t: cmd.LockLeg(t, int(leg)),
-                                            f"leg {leg} locked", deadline_ns=deadline_ns)
+        return self._states.leg_lock(leg, deadline_ns)
 
     def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult:
         """Release the locked leg; the pose being held becomes the target (no step)."""
-        return self._commands.submit_unless(preconditions.check_unlock, cmd.UnlockLeg, "unlocked",
-                                            deadline_ns=deadline_ns)
+        return self._states.leg_unlock(deadline_ns)
 
     def validate_sequence(self, sequence: MotionSequence | str) -> CommandResult:
         """Would :meth:`play` accept this sequence (or built-in name) from here? Plans and
