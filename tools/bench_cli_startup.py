@@ -69,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--importtime", type=int, default=0, metavar="N", help="also list the N slowest imports")
     arguments = parser.parse_args(argv)
     trees = [tree.resolve() for tree in arguments.tree or [Path(__file__).resolve().parent.parent]]
+    for tree in trees:
+        if not (tree / "hexactl" / "__init__.py").is_file():  # else an installed hexactl would be measured instead
+            parser.error(f"{tree}: no hexactl package there: give the root of a checkout (e.g. made by git worktree add)")
 
     times: dict[tuple[Path, str], list[float]] = {(tree, name): [] for tree in trees for name in COMMANDS}
     for _ in range(arguments.runs):

@@ -13,6 +13,10 @@ import timeit
 from pathlib import Path
 
 ROOT = Path(sys.argv[1]).resolve() if len(sys.argv) > 1 else Path(__file__).resolve().parents[1]
+if not (ROOT / "hexactl" / "__init__.py").is_file():  # else an installed hexactl would be measured instead
+    print(f"{sys.argv[1]}: no hexactl package there: give the root of a checkout (e.g. made by git worktree add)\n"
+          "usage: python3 tools/bench_leg_lock_projection.py [CHECKOUT]", file=sys.stderr)
+    sys.exit(2)
 sys.path.insert(0, str(ROOT))
 
 from hexactl.adapters.files.config_path import default_config_path  # noqa: E402

@@ -48,6 +48,9 @@ def main() -> None:
         print(f"{measure(arguments.calls, arguments.repeats):.2f} µs per faults()")
         return
     for tree in arguments.tree:
+        if not (tree / "hexactl" / "__init__.py").is_file():  # else an installed hexactl would be measured instead
+            parser.error(f"{tree}: no hexactl package there: give the root of a checkout (e.g. made by git worktree add)")
+    for tree in arguments.tree:
         code = (f"import sys; sys.path.insert(0, {str(tree.resolve())!r}); sys.path.insert(1, {str(Path(__file__).parent)!r}); "
                 f"import bench_supervisor; print(f'{{bench_supervisor.measure({arguments.calls}, {arguments.repeats}):.2f}}')")
         result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

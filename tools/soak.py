@@ -242,23 +242,25 @@ OUTSIDE_FILE = "outside.toml"
 """A valid calibration beside (not in) the data directory, for :func:`bad_calibrations`."""
 
 
-def bad_calibrations(geometry: Geometry) -> list[tuple[dict[str, str], str]]:
+def bad_calibrations(geometry: Geometry) -> list[tuple[dict[str, str], tuple[str, ...]]]:
     """``load_calibration`` requests the service must refuse: (request fields, the error
-    code it must give). Texts broken in five ways, a change too large to ramp (a zero
-    length 40 mm off), a path out of the data directory (to :data:`OUTSIDE_FILE`, which
-    should exist beside it) and one to no file."""
+    codes it may give). Texts broken in five ways, a change too large to ramp (a zero
+    length 40 mm off: ``invalid_geometry`` instead where the platform is near the limits,
+    since the ramp to it would leave them, which is checked first), a path out of the data
+    directory (to :data:`OUTSIDE_FILE`, which should exist beside it) and one to no file."""
     text = geometry_to_toml(geometry)
     zero = geometry.zero_lengths
     far = geometry.model_copy(update={"name": "40 mm off", "zero_lengths": (zero[0] + 40.0, *zero[1:])})
     return [
-        ({"toml": text[: len(text) // 2]}, "invalid_calibration"),  # cut short
-        ({"toml": text.replace(f"zero_lengths = [{zero[0]!r}", "zero_lengths = [nan", 1)}, "invalid_calibration"),
-        ({"toml": "\n".join(line for line in text.splitlines() if not line.startswith("home"))}, "invalid_calibration"),
-        ({"toml": text + "\nsurprise = 1\n"}, "invalid_calibration"),
-        ({"toml": text.replace("stroke = [0.0, 850.0]", "stroke = [0.0, 100.0]")}, "invalid_calibration"),
-        ({"toml": geometry_to_toml(far)}, "calibration_change_too_large"),
-        ({"path": f"../{OUTSIDE_FILE}"}, "forbidden_path"),
-        ({"path": "missing.toml"}, "file_not_found"),
+        ({"toml": text[: len(text) // 2]}, ("invalid_calibration",)),  # cut short
+        ({"toml": text.replace(f"zero_lengths = [{zero[0]!r}", "zero_lengths = [nan", 1)}, ("invalid_calibration",)),
+        ({"toml": "\n".join(line for line in text.splitlines() if not line.startswith("home"))},
+         ("invalid_calibration",)),
+        ({"toml": text + "\nsurprise = 1\n"}, ("invalid_calibration",)),
+        ({"toml": text.replace("stroke = [0.0, 850.0]", "stroke = [0.0, 100.0]")}, ("invalid_calibration",)),
+        ({"toml": geometry_to_toml(far)}, ("calibration_change_too_large", "invalid_geometry")),
+        ({"path": f"../{OUTSIDE_FILE}"}, ("forbidden_path",)),
+        ({"path": "missing.toml"}, ("file_not_found",)),
     ]
 
 
@@ -309,17 +311,18 @@ class CalibrationSwaps:
     a bad request, a rollback, a bad request, … The good ones count in :attr:`swaps` when
     applied; a bad one must be refused with its code, else it counts in :attr:`bad_wrong`."""
 
-    def __init__(self, client: HexactlClient, variants: list[str], bad: list[tuple[dict[str, str], str]]) -> None:
+    def __init__(self, client: HexactlClient, variants: list[str],
+                 bad: list[tuple[dict[str, str], tuple[str, ...]]]) -> None:
         self.client, self.variants, self.bad = client, variants, bad
         self.swaps = self.bad_sent = self.bad_wrong = 0
         self._loaded = self._bad_turn = False
 
     def swap(self, outcomes: Counter[str]) -> None:
         if self._bad_turn:
-            fields, code = self.bad[self.bad_sent % len(self.bad)]
+            fields, codes = self.bad[self.bad_sent % len(self.bad)]
             reply = record(outcomes, self.client, "load_calibration", **fields)
             self.bad_sent += 1
-            self.bad_wrong += bool(reply and (reply["ok"] or reply["error"]["code"] != code))
+            self.bad_wrong += bool(reply and (reply["ok"] or reply["error"]["code"] not in codes))
         else:
             if self._loaded:
                 reply = record(outcomes, self.client, "rollback_calibration")

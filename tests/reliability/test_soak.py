@@ -8,7 +8,12 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
+
+from hexactl.adapters.files.config_path import default_config_path
+from hexactl.adapters.files.geometry_file import geometry_to_toml, load_geometry
+from tools.soak import CalibrationSwaps, bad_calibrations
 
 TOOL = Path(__file__).resolve().parents[2] / "tools" / "soak.py"
 
@@ -25,3 +30,23 @@ def test_20_second_soak(tmp_path) -> None:
     assert result["bad_calibrations_sent"] >= 2 and result["bad_calibrations_not_refused_as_expected"] == 0
     assert result["requests"].get("status:ok", 0) > 0 and result["telemetry_records"] > 0
     assert result["loop"]["cycles"] > 0 and result["loop"]["guard_clamps"] == 0
+
+
+class RampRefusal:
+    """A service refusing every ``load_calibration`` as the ramp check does near the
+    envelope's edge."""
+
+    def request(self, cmd: str, **fields: str) -> dict:
+        return {"ok": False, "error": {"code": "invalid_geometry", "message": "at ramp fraction 0.50 …"}}
+
+
+def test_a_far_calibration_refused_by_its_ramp_counts_as_refused() -> None:
+    # While the X sweep plays near x = ±600 mm, the ramp to a zero length 40 mm off leaves
+    # the envelope, which the service checks before the change's size: the refusal is then
+    # invalid_geometry, and a soak with frequent swaps used to fail on it.
+    nominal = load_geometry(default_config_path())
+    far = [entry for entry in bad_calibrations(nominal) if 'name = "40 mm off"' in entry[0].get("toml", "")]
+    swapper = CalibrationSwaps(RampRefusal(), [geometry_to_toml(nominal)], far)
+    swapper.swap(Counter())  # the good variant's turn
+    swapper.swap(Counter())  # the far one's
+    assert (swapper.bad_sent, swapper.bad_wrong) == (1, 0)
