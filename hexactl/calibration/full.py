@@ -52,6 +52,7 @@ chart's singularities never enter the iteration. Cost: O(N·p²) per iteration.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -189,11 +190,14 @@ class _Fit:
     converged: bool
 
 
-def identify_full(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
+def identify_full(data: MeasurementData, nominal: Geometry, options: IdentificationOptions, *,
+                  left_out: Collection[ObservationKey] | None = None) -> IdentificationResult:
     """Maximum-likelihood identification from all postures (see the module docstring).
 
     Starts from ``nominal`` and the poses fitted to each posture's points. Returns status
-    INSUFFICIENT_DATA with fewer than :data:`MIN_POSTURES` postures.
+    INSUFFICIENT_DATA with fewer than :data:`MIN_POSTURES` postures. ``left_out``: the
+    observations to leave out (:func:`observation_key` of an excluded one), and no others,
+    instead of the search for gross errors: to compare two models on the same observations.
     """
     start = StructuralParameters.from_geometry(nominal, options.estimate_scales)
     reason = "full: all structural parameters at once from every posture's measured pose and all six readings (maximum likelihood)"
@@ -222,8 +226,12 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
                        target_sigma, whitening)
     theta = np.concatenate((start.to_vector(), np.zeros(LEG_COUNT if times is not None else 0),
                             model.ravel() if target_sigma > 0.0 else np.zeros(0)))
+    if left_out is not None:
+        problem = problem.with_observation_weights(_weights_without(problem, pose_form, left_out), pose_form)
     fit = _fit(problem, theta, np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
-    fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, pose_form, options)
+    exclusion_notes: tuple[str, ...] = ()
+    if left_out is None:
+        fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, pose_form, options)
     current, theta = fit.linear, fit.theta
 
     full_information = _reduced_normal(current, 0.0)[0]
@@ -391,6 +399,23 @@ def _fit(problem: _Problem, theta: NDArray, rotations: NDArray, translations: ND
         if damping > 1e12:  # no downhill step though the gradient is not negligible
             break
     return _Fit(theta, rotations, translations, current, iteration, converged)
+
+
+ObservationKey = tuple[int, int, int]
+"""An observation by its row in the data, feature point and leg, as in :class:`ExcludedObservation`."""
+
+
+def observation_key(observation: ExcludedObservation) -> ObservationKey:
+    return observation.row, observation.point, observation.leg
+
+
+def _weights_without(problem: _Problem, pose_form: bool, left_out: Collection[ObservationKey]) -> NDArray[np.float64]:
+    """:meth:`_Problem.observation_weights` with the ``left_out`` observations at 0."""
+    weights = problem.observation_weights(pose_form).copy()
+    first_reading = weights.shape[1] - LEG_COUNT
+    for row, point, leg in left_out:
+        weights[row, first_reading + leg - 1 if leg else max(point - 1, 0)] = 0.0
+    return weights
 
 
 def _exclude_gross_errors(problem: _Problem, fit: _Fit, pose_form: bool,

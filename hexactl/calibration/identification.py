@@ -21,7 +21,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from hexactl.calibration.data import MeasurementData, RowProblem
-from hexactl.calibration.full import identify_full
+from hexactl.calibration.full import identify_full, observation_key
 from hexactl.calibration.leglock import identify_leglock, too_few_locked
 from hexactl.calibration.paper import identify_paper
 from hexactl.calibration.parameters import calibrated_geometry
@@ -120,13 +120,23 @@ def _significant_extra(data: MeasurementData, nominal: Geometry, options: Identi
     (χ², 6 dof) at :data:`EXTRA_TEST_FALSE_ALARM`, with the χ² drop divided by the richer
     fit's χ²/dof where that exceeds 1: a misfit of another kind (a sliding sensor) lowers χ²
     with any added freedom, and must not pass for a gain or a drift (as the covariance is
-    scaled up by the same factor)."""
+    scaled up by the same factor). The two fits are compared on the same observations:
+    where their searches for gross errors excluded different ones, both are fitted again
+    without any either excluded (else a mis-sighting one of them left out would count as the
+    extra's drop in χ²)."""
     if getattr(options, option) or not full.ok:
         return None
-    richer = identify_full(data, nominal, replace(options, **{option: True}))
+    richer_options = replace(options, **{option: True})
+    richer = identify_full(data, nominal, richer_options)
+    simpler, compared = full, richer
+    full_left_out, richer_left_out = ({observation_key(e) for e in fit.excluded} for fit in (full, richer))
+    if richer.ok and full_left_out != richer_left_out:
+        left_out = full_left_out | richer_left_out
+        simpler = identify_full(data, nominal, options, left_out=left_out)
+        compared = identify_full(data, nominal, richer_options, left_out=left_out)
     threshold = float(chi2.isf(EXTRA_TEST_FALSE_ALARM, LEG_COUNT))
-    drop = (full.chi2 - richer.chi2) / max(1.0, richer.chi2_per_dof)
-    return (richer, drop, threshold) if richer.ok and drop > threshold else None  # also None for NaN
+    drop = (simpler.chi2 - compared.chi2) / max(1.0, compared.chi2_per_dof)
+    return (richer, drop, threshold) if richer.ok and compared.ok and drop > threshold else None  # also None for NaN
 
 
 def _full_with_significant_extras(data: MeasurementData, nominal: Geometry,
