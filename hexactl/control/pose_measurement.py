@@ -1,9 +1,10 @@
 """The platform's measured pose: forward kinematics of the actuators' feedback.
 
 :class:`PoseMeasurement` solves FK warm-started from its last solution (from the
-commanded pose when it has none), so that one or two iterations usually do. The core
-measures every cycle while not ENABLED and every ``every_cycles`` cycles while ENABLED
-(``fk_rate_hz``), plus at each dwell's record.
+commanded pose when it has none), so that one or two iterations usually do; when that
+fails, once more from the zero posture. The core measures every cycle while not ENABLED
+and every ``every_cycles`` cycles while ENABLED (``fk_rate_hz``), plus at each dwell's
+record.
 
 Poses: ``pose`` relative to the active geometry's zero posture, mm and rad (None when
 FK failed or never ran). Owned by the loop thread: not thread-safe.
@@ -44,6 +45,12 @@ class PoseMeasurement:
         lengths = lengths_from_readings(active.geometry.legs, feedback.positions_mm).tolist()
         guess = self._absolute or active.absolute_from_relative_mm_rad(commanded)
         result = forward_kinematics(active.geometry.legs, lengths, guess, self._tolerance_mm, self._max_iterations)
+        if not result.ok and guess != active.home:
+            # A start far from the legs (a wild reading's solution, which the commanded pose
+            # follows while disabled) may never converge again; from the zero posture it does
+            # across the workspace.
+            result = forward_kinematics(active.geometry.legs, lengths, active.home, self._tolerance_mm,
+                                        self._max_iterations)
         if result.ok:
             self._absolute = result.pose
             self.pose = active.relative_from_absolute_mm_rad(result.pose)

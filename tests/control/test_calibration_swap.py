@@ -56,6 +56,19 @@ def test_swap_ramps_the_setpoints_within_the_calibration_share_of_the_velocity(r
     assert rig.controller.telemetry().loop.guard_clamps == 0
 
 
+def test_a_wave_a_stream_and_a_leg_lock_wait_for_the_ramp(rig, calibrated):
+    # Each is planned on the active geometry's set-points, which the ramp is still changing.
+    from hexactl.control.waves import WaveSpec
+
+    rig.enabled()
+    assert rig.controller.load_calibration(calibrated, "cal-1").ok
+    rig.run(2)
+    assert rig.controller.snapshot.ramp_active
+    for refused in (rig.controller.wave(WaveSpec(frequency_hz=1.0, cycles=2, axes={"z": {"amplitude": 1.0}})),
+                    rig.controller.stream_open("ramp"), rig.controller.leg_lock(1)):
+        assert (refused.error, refused.message) == ("busy", "a calibration change is still ramping in")
+
+
 def test_swap_while_moving_stays_within_the_velocity_limit(rig, calibrated):
     rig.enabled()
     assert rig.controller.move([0, 0, 200, 0, 0, 0]).ok  # legs at near their planned top speed

@@ -185,9 +185,10 @@ def test_enable_refusals(make_rig, geometry):
     rig.actuators.states[3] = rig.actuators.states[0]
     rig.actuators.fault_bits[3] = 0
     original = rig.actuators.positions[0]
-    rig.actuators.positions[0] = geometry.limits.stroke[1] + 5.0
-    rig.run()
-    assert rig.controller.enable().error == "outside_stroke"
+    for outside in (geometry.limits.stroke[1] + 5.0, geometry.limits.stroke[0] - 5.0):
+        rig.actuators.positions[0] = outside
+        rig.run()
+        assert rig.controller.enable().error == "outside_stroke"
     rig.actuators.positions[0] = geometry.limits.stroke[1]  # in the stroke, but no pose has these lengths
     rig.run()
     assert rig.controller.enable().error == "pose_unknown"

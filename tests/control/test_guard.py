@@ -34,3 +34,16 @@ def test_nan_holds_and_out_of_stroke_heads_for_the_limit():
     out, mask = guard_setpoints([-5.0, 900.0, float("nan"), 10.0, 10.0, 20.0], previous, STROKE, STEP)
     assert out == [0.0, 850.0, 10.0, 10.0, 10.0, 10.8]
     assert mask == 0b100111
+
+
+def test_values_on_the_limits_pass_untouched_and_uncounted():
+    # On the stroke's ends, and exactly one step up or down (binary-exact numbers): allowed.
+    previous = [0.5, 849.5, 10.0, 10.0, 10.0, 10.0]
+    desired = [0.0, 850.0, 10.5, 9.5, 10.0, 10.0]
+    assert guard_setpoints(desired, previous, STROKE, 0.5) == (desired, 0)
+
+
+def test_a_jump_either_way_moves_one_full_step_towards_it():
+    out, mask = guard_setpoints([20.0, 0.0, 10.0, 10.0, 10.0, 10.0], [10.0] * 6, STROKE, 0.5)
+    assert out == [10.5, 9.5, 10.0, 10.0, 10.0, 10.0]
+    assert mask == 0b11

@@ -11,6 +11,7 @@ from hexactl.kinematics.axes import RelativeMmRad
 from hexactl.kinematics.inverse import leg_lengths
 from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.pose import absolute_from_relative, pose_mm_deg_to_mm_rad
+from tests.kinematics.calibrations import measured
 
 
 def _project(geometry, pose, leg, length, **options):
@@ -33,19 +34,25 @@ def _distance(geometry, a, b):
 offsets = st.tuples(*[st.floats(-40, 40)] * 3, *[st.floats(-3, 3)] * 3)
 
 
+@pytest.fixture(scope="module", params=["nominal", "measured"])
+def platform(request, geometry):
+    """The nominal platform, then a measured one (its joints not all at z = 0)."""
+    return geometry if request.param == "nominal" else measured(geometry)
+
+
 @settings(max_examples=60, deadline=None)
 @given(offsets, st.integers(1, 6), st.floats(-30.0, 30.0))
-def test_projection_is_the_closest_pose_on_the_constraint(geometry, offset, leg, change):
-    home = absolute_from_relative(geometry.home, [0.0] * 6)
-    length = leg_lengths(geometry.legs, home)[leg - 1] + change
-    pose = absolute_from_relative(geometry.home, offset)
-    result = _project(geometry, pose, leg, length)
+def test_projection_is_the_closest_pose_on_the_constraint(platform, offset, leg, change):
+    home = absolute_from_relative(platform.home, [0.0] * 6)
+    length = leg_lengths(platform.legs, home)[leg - 1] + change
+    pose = absolute_from_relative(platform.home, offset)
+    result = _project(platform, pose, leg, length)
     assert result.ok
-    assert abs(leg_lengths(geometry.legs, result.pose)[leg - 1] - length) < 1e-8
+    assert abs(leg_lengths(platform.legs, result.pose)[leg - 1] - length) < 1e-8
     # Optimality: the weighted step W·(x − x₀) is parallel to the constraint's gradient.
-    c = geometry.characteristic_length_mm
+    c = platform.characteristic_length_mm
     weighted_step = (np.array(result.pose) - pose) * [1, 1, 1, c * c, c * c, c * c]
-    gradient = _gradient(geometry, np.array(result.pose), leg)
+    gradient = _gradient(platform, np.array(result.pose), leg)
     across = weighted_step - gradient * (weighted_step @ gradient) / (gradient @ gradient)
     assert np.linalg.norm(across) <= 1e-5 * max(1.0, np.linalg.norm(weighted_step))
     metric = np.sqrt(np.sum((np.array(result.pose) - pose) ** 2 * [1, 1, 1, c * c, c * c, c * c]))

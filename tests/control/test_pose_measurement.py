@@ -47,3 +47,21 @@ def test_a_failure_is_counted_and_forgets_the_pose(active):
     # and it starts again from the commanded pose, not from the lost solution
     measurement.measure(3, feedback_at(active, legs), active, POSE)
     assert measurement.pose == pytest.approx(POSE, abs=1e-6)
+
+
+def test_from_a_start_far_off_it_starts_again_from_the_zero_posture(active):
+    # Leg 1 read 5 mm below its stroke (a glitch) has a pose far out, which the commanded
+    # pose follows while disabled; from there FK of the legs back at the zero posture does
+    # not converge. It was stuck: pose unknown for good, enable refused until a restart.
+    measurement = PoseMeasurement(1, 1e-6, 10)
+    legs = sensor_setpoints(active.geometry.legs, active.absolute_from_relative_mm_rad((0.0,) * 6))
+    measurement.measure(1, feedback_at(active, [active.stroke[0] - 5.0, *legs[1:]]), active, (0.0,) * 6)
+    far = measurement.pose
+    assert far is not None and max(abs(v) for v in far[:3]) > 100.0
+    measurement.measure(2, feedback_at(active, legs), active, far)  # from its last solution
+    assert measurement.pose == pytest.approx((0.0,) * 6, abs=1e-6)
+    measurement.measure(3, feedback_at(active, [active.stroke[0] - 5.0, *legs[1:]]), active, (0.0,) * 6)
+    measurement.measure(4, feedback_at(active, [float("nan")] * 6), active, far)
+    measurement.measure(5, feedback_at(active, legs), active, far)  # from the commanded pose
+    assert measurement.pose == pytest.approx((0.0,) * 6, abs=1e-6)
+    assert measurement.failures == 1  # the NaNs; a start it had to leave is no failure

@@ -48,6 +48,15 @@ def test_the_guard_limits_a_jump_and_the_first_clamp_is_logged_once(rig):
     assert rig.log == ["guard_clamped"]
 
 
+def test_the_clamped_legs_are_those_of_every_clamp_so_far(rig):
+    for leg in (0, 1):  # one leg held 5 mm off, then another: each is clamped in its cycle
+        held = rig.ik(ZERO)
+        held[leg] += 5.0
+        rig.path.hold(ZERO, held)
+        rig.path.follow(rig.active, None, ZERO, None)
+    assert (rig.path.clamped_cycles, rig.path.clamped_legs) == (2, 0b11)
+
+
 def test_a_locked_leg_stays_at_its_reading_and_the_pose_moves_on_the_constraint(rig):
     lock = LegLock(2, rig.path.setpoints[1])
     previous = ZERO

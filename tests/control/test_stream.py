@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from hexactl.control.frames import OperatorFrames
 from hexactl.control.stream import FIRST_TARGET_WAIT_NS
 from hexactl.control.stream_commands import leg_rates, stream_velocity_limits
+from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_pose
 
@@ -150,6 +151,10 @@ def test_moves_and_calibration_swaps_are_refused_while_a_stream_is_open(rig, geo
     refused = rig.controller.move([1, 0, 0, 0, 0, 0])
     assert not refused.ok and refused.error == "busy" and "stream" in refused.message
     assert not rig.controller.stream_open("again").ok
+    zero_lengths = [z + 0.1 for z in geometry.zero_lengths]  # a calibration 0.1 mm off: fine at rest
+    refused = rig.controller.load_calibration(Geometry.model_validate({**geometry.model_dump(), "zero_lengths": zero_lengths}),
+                                              "cal-1")
+    assert not refused.ok and refused.error == "busy" and "stream" in refused.message
 
 
 def test_the_velocity_limits_keep_every_leg_within_the_budget(rig) -> None:

@@ -1,5 +1,5 @@
-"""Calibrations built for tests: compensated ones that keep the set-points at a pose, and
-the implausible ones of hexactl issue 10 (finding 4)."""
+"""Calibrations built for tests: a measured platform, compensated ones that keep the
+set-points at a pose, and the implausible ones of hexactl issue 10 (finding 4)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,19 @@ import numpy as np
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.inverse import LegModel, leg_lengths, sensor_setpoints
 from hexactl.kinematics.pose import absolute_from_relative
+
+
+def measured(nominal: Geometry) -> Geometry:
+    """A platform as a calibration describes it: every joint a few mm off the nominal one on
+    all three axes (the nominal's all lie at z = 0, where a term in z counts for nothing)
+    and the sensors' gains off by up to 1e-4."""
+    rng = np.random.default_rng(7)
+    return Geometry.model_validate({
+        **nominal.model_dump(),
+        "base_joints": (np.array(nominal.base_joints) + rng.uniform(-3.0, 3.0, (6, 3))).tolist(),
+        "platform_joints": (np.array(nominal.platform_joints) + rng.uniform(-3.0, 3.0, (6, 3))).tolist(),
+        "sensor_scale_errors": rng.uniform(-1e-4, 1e-4, 6).tolist(),
+    })
 
 
 def compensated(geometry: Geometry, pose_relative: Sequence[float], name: str, **changes: object) -> Geometry:

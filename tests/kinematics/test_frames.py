@@ -85,3 +85,13 @@ def test_the_batch_maps_equal_the_single_pose_ones(work, tool, samples):
     platform = platform_poses(frames, np.array(samples))
     assert platform == pytest.approx(np.array([frames.platform_pose(x) for x in samples]), abs=1e-6)
     assert tools_in_work(frames, platform) == pytest.approx(np.array([frames.tool_in_work(p) for p in platform]), abs=1e-6)
+
+
+def test_a_tool_at_pitch_90_degrees_in_the_work_frame_is_read_there():
+    # A work frame pitched -96° (a tool facing sideways), the platform pitched -6°: the
+    # product's -sin(pitch) rounds to -(1 + 2⁻⁵²), which asin alone refuses.
+    work_pitch = 1.6758680230392085
+    frames = Frames(work=transform_of((0.0, 0.0, 0.0, 0.0, -work_pitch, 0.0)))
+    platform = (0.0, 0.0, 2000.0, 0.0, np.pi / 2 - work_pitch, 0.0)
+    assert frames.tool_in_work(platform)[4] == np.pi / 2
+    assert tools_in_work(frames, np.array([platform]))[0, 4] == pytest.approx(np.pi / 2)

@@ -19,32 +19,31 @@ from .strategies import relative_poses
 
 
 @given(relative_poses())
-def test_scalar_and_batch_ik_agree_and_match_the_definition(nominal, pose_rel: list[float]) -> None:
-    pose = absolute_from_relative(nominal.home, pose_rel)
-    scalar = leg_lengths(nominal.legs, pose)
-    batch = leg_lengths_batch(nominal.legs, pose[None, :])[0]
+def test_scalar_and_batch_ik_agree_and_match_the_definition(platform, pose_rel: list[float]) -> None:
+    pose = absolute_from_relative(platform.home, pose_rel)
+    scalar = leg_lengths(platform.legs, pose)
+    batch = leg_lengths_batch(platform.legs, pose[None, :])[0]
     rotation = Rotation.from_euler("ZYX", pose[[5, 4, 3]]).as_matrix()
     definition = np.linalg.norm(
-        np.array(nominal.platform_joints) @ rotation.T + pose[:3] - np.array(nominal.base_joints), axis=1
+        np.array(platform.platform_joints) @ rotation.T + pose[:3] - np.array(platform.base_joints), axis=1
     )
     np.testing.assert_allclose(scalar, definition, atol=1e-9, rtol=0)
     np.testing.assert_allclose(batch, definition, atol=1e-9, rtol=0)
-    np.testing.assert_allclose(sensor_setpoints(nominal.legs, pose), definition - nominal.zero_lengths, atol=1e-9, rtol=0)
-    np.testing.assert_allclose(
-        sensor_setpoints_batch(nominal.legs, pose[None, :])[0], definition - nominal.zero_lengths, atol=1e-9, rtol=0
-    )
+    readings = (definition - platform.zero_lengths) / (1.0 + np.array(platform.sensor_scale_errors))
+    np.testing.assert_allclose(sensor_setpoints(platform.legs, pose), readings, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(sensor_setpoints_batch(platform.legs, pose[None, :])[0], readings, atol=1e-9, rtol=0)
 
 
 @given(relative_poses(), st.integers(0, 5))
-def test_twist_jacobian_predicts_leg_length_changes(nominal, pose_rel: list[float], column: int) -> None:
-    pose = absolute_from_relative(nominal.home, pose_rel)
-    jacobian, _ = twist_jacobian(nominal.legs, pose)
+def test_twist_jacobian_predicts_leg_length_changes(platform, pose_rel: list[float], column: int) -> None:
+    pose = absolute_from_relative(platform.home, pose_rel)
+    jacobian, _ = twist_jacobian(platform.legs, pose)
     step = 1e-4  # mm or rad; a central difference leaves an O(step³) error
 
     def lengths_after(twist: np.ndarray) -> np.ndarray:
         rotation = Rotation.from_rotvec(twist[3:]) * Rotation.from_euler("ZYX", pose[[5, 4, 3]])
         moved = np.r_[pose[:3] + twist[:3], rotation.as_euler("ZYX")[::-1]]
-        return np.array(leg_lengths(nominal.legs, moved))
+        return np.array(leg_lengths(platform.legs, moved))
 
     twist = np.zeros(6)
     twist[column] = step
@@ -54,21 +53,37 @@ def test_twist_jacobian_predicts_leg_length_changes(nominal, pose_rel: list[floa
 
 @settings(max_examples=300)
 @given(relative_poses(scale=0.5))
-def test_fk_inverts_ik_from_the_zero_posture(nominal, pose_rel: list[float]) -> None:
-    pose = absolute_from_relative(nominal.home, pose_rel)
-    result = forward_kinematics(nominal.legs, leg_lengths(nominal.legs, pose), absolute_from_relative(nominal.home, [0.0] * 6))
+def test_fk_inverts_ik_from_the_zero_posture(platform, pose_rel: list[float]) -> None:
+    pose = absolute_from_relative(platform.home, pose_rel)
+    zero = absolute_from_relative(platform.home, [0.0] * 6)
+    result = forward_kinematics(platform.legs, leg_lengths(platform.legs, pose), zero)
     assert result.status is FkStatus.OK
     assert result.residual_mm <= 1e-9
-    np.testing.assert_allclose(relative_from_absolute(nominal.home, result.pose), pose_rel, atol=1e-7)
+    np.testing.assert_allclose(relative_from_absolute(platform.home, result.pose), pose_rel, atol=1e-7)
 
 
 @given(relative_poses(), st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6))
-def test_fk_warm_started_near_the_answer_converges_in_few_iterations(nominal, pose_rel, offset) -> None:
-    pose = absolute_from_relative(nominal.home, pose_rel)
-    guess = absolute_from_relative(nominal.home, np.add(pose_rel, np.multiply(offset, [1, 1, 1, 0.1, 0.1, 0.1])))
-    result = forward_kinematics(nominal.legs, leg_lengths(nominal.legs, pose), guess)
+def test_fk_warm_started_near_the_answer_converges_in_few_iterations(platform, pose_rel, offset) -> None:
+    pose = absolute_from_relative(platform.home, pose_rel)
+    guess = absolute_from_relative(platform.home, np.add(pose_rel, np.multiply(offset, [1, 1, 1, 0.1, 0.1, 0.1])))
+    result = forward_kinematics(platform.legs, leg_lengths(platform.legs, pose), guess)
     assert result.ok and result.iterations <= 5
     np.testing.assert_allclose(result.pose, pose, atol=1e-7)  # the tolerance is on leg lengths (1e-9 mm)
+
+
+@given(relative_poses(scale=0.5), st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6))
+def test_fk_converges_as_newton_does_and_counts_its_iterations(platform, pose_rel, offset) -> None:
+    # Newton's method converges quadratically: from 2 mm and 0.2° off, three steps reach
+    # 1e-9 mm. A wrong step (a Jacobian or Euler-rate error) still converges, in more.
+    pose = absolute_from_relative(platform.home, pose_rel)
+    guess = absolute_from_relative(platform.home, np.add(pose_rel, np.multiply(offset, [1, 1, 1, 0.1, 0.1, 0.1])))
+    lengths = leg_lengths(platform.legs, pose)
+    result = forward_kinematics(platform.legs, lengths, guess)
+    assert result.ok and result.iterations <= 3
+    capped = forward_kinematics(platform.legs, lengths, guess, max_iterations=result.iterations)
+    assert capped.ok and (capped.iterations, capped.pose) == (result.iterations, result.pose)
+    at_the_answer = forward_kinematics(platform.legs, lengths, result.pose)
+    assert at_the_answer.ok and at_the_answer.iterations == 0
 
 
 def test_fk_reports_invalid_input_instead_of_raising(nominal) -> None:

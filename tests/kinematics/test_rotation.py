@@ -54,3 +54,9 @@ def test_euler_rates_reproduce_a_small_fixed_frame_rotation(roll: float, pitch: 
     stepped = rotation_matrix(roll + rates[0], pitch + rates[1], yaw + rates[2])
     expected = Rotation.from_rotvec(omega).as_matrix() @ rotation_matrix(roll, pitch, yaw)
     np.testing.assert_allclose(stepped, expected, atol=1e-5)  # first order in |ω| = 1e-3
+
+
+def test_euler_angles_of_a_rotation_rounded_past_pitch_90_degrees() -> None:
+    t = rotation_matrix(0.0, np.pi / 2, 0.0)
+    t[2, 0] = -np.nextafter(1.0, 2.0)  # -sin(pitch) as a product of rotations can round it (pitch 90°)
+    assert euler_from_matrix(t)[1] == np.pi / 2

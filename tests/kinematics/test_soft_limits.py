@@ -33,6 +33,10 @@ def test_the_tilt_is_the_angle_of_the_tool_z_axis_whatever_the_yaw():
     (tilted,) = SoftLimits(max_tilt_deg=4.0).violations([[0, 0, 0, 0, 5, 77]])
     assert [(v.kind, v.value) for v in tilted] == [(ViolationKind.SOFT_TILT, pytest.approx(5.0))]
     assert tilted[0].message == "tilt 5.000 deg beyond the soft limit 4 deg"
+    on, beyond = [0, 0, 0, 0, 4, 0], [0, 0, 0, 0, 4.0001, 0]
+    limits = SoftLimits(max_tilt_deg=4.0)
+    assert [bool(found) for found in limits.violations([on, beyond])] == [False, True]
+    assert (limits.allow(on), limits.allow(beyond)) == (True, False)
 
 
 @pytest.mark.parametrize("bad, fragment", [
@@ -152,10 +156,15 @@ def test_a_pose_passes_exactly_when_every_axis_is_within_its_bounds(samples, a, 
         assert {v.axis for v in found} == outside
 
 
-@given(poses, poses, poses, st.one_of(st.none(), st.floats(1.0, 90.0)), st.lists(st.booleans(), min_size=12, max_size=12))
-def test_allow_says_what_violations_say(pose, a, b, tilt, open_ends):
-    bounds = [(None if open_low else min(x, y), None if open_high else max(x, y) + 1.0)
-              for x, y, open_low, open_high in zip(a, b, open_ends[:6], open_ends[6:])]
+@given(poses, poses, poses, st.one_of(st.none(), st.floats(1.0, 90.0)), st.lists(st.booleans(), min_size=12, max_size=12),
+       st.booleans())
+@example((1.0000005, 0, 0, 0, 0, 0), (0,) * 6, (0,) * 6, None, [False] * 12, False)  # above x's bound by 5e-7
+@example((-0.0000005, 0, 0, 0, 0, 0), (0,) * 6, (0,) * 6, None, [False] * 12, False)  # below it by 5e-7
+def test_allow_says_what_violations_say(pose, a, b, tilt, open_ends, around):
+    # ``around``: the box holds the pose, so that its tilt decides
+    bounds = [(None if open_low else min(x, y, p if around else x),
+               None if open_high else max(x, y, p if around else x) + 1.0)
+              for x, y, p, open_low, open_high in zip(a, b, pose, open_ends[:6], open_ends[6:])]
     limits = SoftLimits(lower=tuple(low for low, _ in bounds), upper=tuple(high for _, high in bounds), max_tilt_deg=tilt)
     assume(tilt is None or abs(tilt_deg(np.array([pose]))[0] - tilt) > 1e-9)  # the two paths round differently
     assert limits.allow(pose) == (limits.violations([pose]) == [[]])

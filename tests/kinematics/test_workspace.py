@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hexactl.adapters.cli.kinematics_commands import paper_extremes
 from hexactl.kinematics import workspace
 from hexactl.kinematics.geometry import Geometry
-from hexactl.kinematics.inverse import leg_jacobian_rows, reading_of_leg_length
+from hexactl.kinematics.inverse import leg_jacobian_rows, reading_of_leg_length, sensor_setpoints
 from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.kinematics.rotation import rotation_elements
 from hexactl.kinematics.workspace import (
@@ -122,6 +122,25 @@ def test_the_yes_no_check_says_what_the_full_assessment_says(nominal, pose, name
     assessment = assess_pose(geometry, pose)
     assume(margin(assessment, geometry) > 1e-6)  # on a bound, the two paths' rounding may differ
     assert pose_within_limits(geometry, pose) == assessment.ok, [v.message for v in assessment.violations]
+
+
+def test_a_reading_on_the_stroke_is_inside_and_one_a_hair_beyond_is_not(nominal) -> None:
+    # The guard sends a set-point on the stroke's end as it is; the stroke has no rounding
+    # allowance (POSE_BOUND_ROUNDING): nothing past it passes either check.
+    pose = [100.0, -50.0, 30.0, 2.0, -3.0, 5.0]
+    batch = assess_pose(nominal, pose).sensor_mm
+    scalar = sensor_setpoints(nominal.legs, absolute_from_relative(nominal.home, pose))
+    for readings, inside in ((batch, lambda geometry: assess_pose(geometry, pose).ok),
+                             (scalar, lambda geometry: pose_within_limits(geometry, pose))):
+        low, high = min(readings), max(readings)
+        assert inside(variant(nominal, "nominal", stroke=(low, high)))
+        assert not inside(variant(nominal, "nominal", stroke=(np.nextafter(low, np.inf), high)))
+        assert not inside(variant(nominal, "nominal", stroke=(low, np.nextafter(high, -np.inf))))
+
+
+def test_a_nan_condition_number_is_near_singular(nominal) -> None:
+    assert workspace.near_singular(float("nan"), nominal.limits)
+    assert workspace.near_singular(np.array([np.nan, 1.0]), nominal.limits).tolist() == [True, False]
 
 
 @pytest.mark.parametrize("name, pose, kind, relaxed", [
