@@ -11,7 +11,7 @@ ports. A separate process (the attacker: anyone who can write into a data direct
 rename-swaps a valid calibration file, a FIFO and a symlink to a valid calibration
 *outside* the data directories onto ``calibrations/race.toml``, one after the other as
 fast as it can. A client repeats ``load_calibration`` of ``race.toml`` all the while
-(for ``--seconds``, and on until one load succeeded);
+(for ``--seconds``, and on until one load succeeded and one met a FIFO or symlink);
 every ``--estop-every`` seconds a new client sends ``estop``, timed from its creation to
 the answer, then reads ``status`` and sends ``reset``. At the end the service gets
 SIGTERM and must exit, leaving both its ports free.
@@ -146,17 +146,18 @@ class RaceResult:
 
 def race(files: RaceFiles, api: str, seconds: float, estop_every_s: float, min_loaded: int = 1) -> RaceResult:
     """Swap files onto ``race.toml`` while loading it over and over, with a new client's
-    ``estop`` (then ``status`` and ``reset``) every ``estop_every_s``: for ``seconds``, and
-    on until ``min_loaded`` loads of the inside file succeeded (at most
-    :data:`LONGEST_RACE_FACTOR` times as long: on a busy host loads are few)."""
+    ``estop`` (then ``status`` and ``reset``) every ``estop_every_s``: for ``seconds`` from
+    the first swap, and on until ``min_loaded`` loads of the inside file succeeded and one
+    met a swapped-in FIFO or symlink (at most :data:`LONGEST_RACE_FACTOR` times as long: on
+    a busy host loads are few)."""
     result = RaceResult()
     racing = threading.Event()
     racing.set()
-    started = time.monotonic()
 
     def racing_on() -> bool:
         elapsed = time.monotonic() - started
-        return elapsed < seconds or (result.loads["loaded"] < min_loaded and elapsed < LONGEST_RACE_FACTOR * seconds)
+        both_ways = result.loads["loaded"] >= min_loaded and result.loads["file_not_found"] > 0
+        return elapsed < seconds or (not both_ways and elapsed < LONGEST_RACE_FACTOR * seconds)
 
     def load_repeatedly() -> None:
         with HexactlClient(api, timeout_s=ANSWER_TIMEOUT_S) as client:
@@ -164,6 +165,7 @@ def race(files: RaceFiles, api: str, seconds: float, estop_every_s: float, min_l
                 result.loads[_outcome(client, files, "load_calibration", path=RACE_NAME)] += 1
 
     with swapping(files) as swaps:
+        started = time.monotonic()  # not before: the attacker's process takes seconds to start on a busy host
         loader = threading.Thread(target=load_repeatedly, name="file-race-loader")
         loader.start()
         try:

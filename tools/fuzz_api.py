@@ -403,8 +403,7 @@ class Strategies:
         return st.one_of(
             reads.map(lambda p: ("load_calibration", {"path": p}, unreadable)),
             reads.map(lambda p: ("play", {"sequence": p if p.endswith(".toml") else p + ".toml"}, unreadable)),
-            writes.map(lambda p: ("save_recording", {"path": p}, frozenset({ApiCode.FORBIDDEN_PATH, ApiCode.FILE_NOT_FOUND,
-                                                                            ApiCode.FILE_EXISTS, ApiCode.NO_RECORDING}))),
+            writes.map(lambda p: ("save_recording", {"path": p}, save_refusals(p))),
             texts.map(lambda text: ("load_calibration", {"toml": text}, frozenset({ApiCode.INVALID_CALIBRATION}))),
             broken.map(lambda p: ("load_calibration", {"path": p}, frozenset({ApiCode.INVALID_CALIBRATION}))),
             broken.map(lambda p: ("play", {"sequence": p}, frozenset({ApiCode.INVALID_SEQUENCE}))),
@@ -421,6 +420,21 @@ class Strategies:
         return st.one_of(self.valid(), self.valid(), self.valid(), self.random_bytes(), self.truncated(),
                          self.non_finite(), self.huge(), self.envelope(), self.unknown_command(), self.wrong_type(),
                          self.out_of_range(), self.hostile_files(), self.multipart())
+
+
+NAME_MAX_BYTES = 255
+"""The longest file name Linux's file systems take (a directory entry's)."""
+
+
+def save_refusals(path: str) -> frozenset[str]:
+    """How the service may refuse ``save_recording`` to a hostile ``path``: outside the data
+    directories or not there, or nothing recorded yet; a name too long for the file system
+    is refused only once there is a recording to write (``write_failed``, "give a shorter
+    name"), which depends on what the run played before."""
+    refusals = {ApiCode.FORBIDDEN_PATH, ApiCode.FILE_NOT_FOUND, ApiCode.FILE_EXISTS, ApiCode.NO_RECORDING}
+    if len(Path(path).name.encode()) > NAME_MAX_BYTES:
+        refusals.add(ApiCode.WRITE_FAILED)
+    return frozenset(refusals)
 
 
 def _not_valid(reply: dict) -> str | None:

@@ -12,7 +12,7 @@ from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.application.service import Service, ServiceConfig
 from hexactl.kinematics.geometry import Geometry
-from tests.api.support import start_service
+from tests.api.support import service_here, start_service
 
 
 @pytest.fixture(scope="session")
@@ -37,10 +37,9 @@ def data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def running(data_dir: Path) -> Iterator[Service]:
     """The whole service on its simulator (loop and API processes), one per module."""
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(data_dir,)))
-    yield service
-    service.close()
+    with service_here(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                    data_dirs=(data_dir,))) as service:
+        yield service
 
 
 @pytest.fixture(scope="module")

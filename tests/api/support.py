@@ -4,8 +4,11 @@ random local ports, and raw sockets to talk to them."""
 from __future__ import annotations
 
 import json
+import os
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -19,6 +22,7 @@ from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from hexactl.adapters.api.wire import jsonable
 from hexactl.adapters.files.geometry_file import geometry_id
+from hexactl.application.service import Service, ServiceConfig, fifo_below_loop
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.snapshot import Event
 from hexactl.control.telemetry import EventLog, SequenceTelemetry, Telemetry, events_after
@@ -314,3 +318,29 @@ def request(endpoint: str, document: dict[str, Any], kind: int = zmq.DEALER) -> 
     frames = exchange(endpoint, [json.dumps(document).encode()], kind)
     assert len(frames) == 1
     return json.loads(frames[0])
+
+
+def below_the_loop(service: Service, names: Collection[str]) -> None:
+    """This process's threads called one of ``names`` just below the real-time loop of
+    ``service`` (nothing without the privilege), as ``hexactl serve`` runs its own."""
+    realtime = service.controller.thread.loop.realtime
+    if realtime is not None and realtime.fifo_priority is not None:
+        fifo_below_loop(realtime.fifo_priority, names)
+
+
+@contextmanager
+def service_here(config: ServiceConfig) -> Iterator[Service]:
+    """``Service.start(config)`` in this (pytest's) process, closed on the way out, with
+    this thread just below its loop meanwhile, its scheduling restored after. The thread
+    polls the service and shares the loop's GIL: at normal priority, preempted by other
+    work while holding it, it held the loop up past the actuators' watchdog on a loaded
+    host (beside six CPU-bound processes: COMM_TIMEOUT twice a minute, loop lateness up
+    to 54 ms; below the loop, none and 10 ms)."""
+    policy, parameters = os.sched_getscheduler(0), os.sched_getparam(0)
+    service = Service.start(config)
+    try:
+        below_the_loop(service, {threading.current_thread().name})
+        yield service
+    finally:
+        os.sched_setscheduler(0, policy, parameters)
+        service.close()

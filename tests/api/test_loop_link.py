@@ -12,8 +12,9 @@ import pickle
 import struct
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import TypeVar
 
 import pytest
 
@@ -31,6 +32,8 @@ from hexactl.kinematics.pose import absolute_from_relative
 from hexactl.sim.ideal_actuators import IdealActuators
 from tests.api.test_service import wait_for
 from tests.control.conftest import SimClock
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -62,6 +65,24 @@ class Link:
             return condition(self.remote.snapshot)
 
         wait_for(reported, "the far end to see it")
+
+    def cycling_meanwhile(self, call: Callable[[], T]) -> T:
+        """``call()`` while another thread cycles, as the real loop runs while the API plans:
+        a plan that takes over ``REPORT_SILENT_S`` (a 60 s move on a loaded host) would
+        otherwise find the hand-stepped loop's last report too old and be refused ``loop_silent``."""
+        done = threading.Event()
+
+        def cycle() -> None:
+            while not done.is_set():
+                self.cycle()
+
+        cycler = threading.Thread(target=cycle, name="test-cycler")
+        cycler.start()
+        try:
+            return call()
+        finally:
+            done.set()
+            cycler.join()
 
 
 @pytest.fixture
@@ -214,7 +235,9 @@ def test_a_silent_api_has_the_loop_brake_and_heartbeats_keep_it_going(nominal: G
     try:
         ticket = link.controller.enable().details["ticket"]
         link.cycle_until_reported(lambda s: any(outcome.ticket == ticket for outcome in s.outcomes))
-        ticket = link.controller.move([0, 0, 50, 0, 0, 0], duration=60.0).details["ticket"]
+        moving = link.cycling_meanwhile(lambda: link.controller.move([0, 0, 50, 0, 0, 0], duration=60.0))
+        assert moving.ok, moving
+        ticket = moving.details["ticket"]
         link.cycle_until_reported(lambda s: any(outcome.ticket == ticket for outcome in s.outcomes))
         assert link.remote.snapshot.motion.value == "moving"
 

@@ -140,6 +140,8 @@ def test_serve_starts_with_a_calibration(nominal, tmp_path) -> None:
 def test_a_program_that_starts_a_service_keeps_its_threads_scheduling(tmp_path) -> None:
     """Only the service's own threads become real-time: the caller's thread may run
     anything (here pytest); ``main_thread_below_loop`` is for processes the service owns."""
+    before = os.sched_getscheduler(0), os.sched_getparam(0)  # this module's service (running) may have raised it
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     policy = os.sched_getscheduler(0)
     service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
                                           data_dirs=(tmp_path,)))
@@ -153,7 +155,7 @@ def test_a_program_that_starts_a_service_keeps_its_threads_scheduling(tmp_path) 
             assert os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK == os.SCHED_FIFO
             assert os.sched_getparam(0).sched_priority == loop_priority - 1
     finally:
-        os.sched_setscheduler(0, policy, os.sched_param(0))
+        os.sched_setscheduler(0, *before)
         service.close()
 
 

@@ -9,10 +9,11 @@ from pathlib import Path
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
-from hexactl.adapters.can.bus_monitor import BusMonitor
+from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME, BusMonitor
 from hexactl.application.service import Service, ServiceConfig
 from hexactl.kinematics.geometry import Geometry
 from tests.api.conftest import nominal  # noqa: F401 - the session's nominal geometry, shared
+from tests.api.support import below_the_loop, service_here
 from tests.api.test_service import WAIT_S
 from tests.reliability.support import LOCAL, RATE_HZ
 
@@ -25,15 +26,15 @@ def data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def service(data_dir: Path) -> Iterator[Service]:
     """The whole service on its simulator, one per module (tests leave it recovered)."""
-    running = Service.start(ServiceConfig(api_endpoint=LOCAL, telemetry_endpoint=LOCAL, data_dirs=(data_dir,),
-                                          rate_hz=RATE_HZ))
-    yield running
-    running.close()
+    with service_here(ServiceConfig(api_endpoint=LOCAL, telemetry_endpoint=LOCAL, data_dirs=(data_dir,),
+                                    rate_hz=RATE_HZ)) as running:
+        yield running
 
 
 @pytest.fixture(scope="module")
 def module_monitor(service: Service, nominal: Geometry) -> Iterator[BusMonitor]:  # noqa: F811
     with BusMonitor(service.simulator.bus_spec, nominal, RATE_HZ) as monitor:
+        below_the_loop(service, {MONITOR_THREAD_NAME})  # it decodes every frame holding the loop's GIL (service_here)
         yield monitor
 
 

@@ -39,3 +39,15 @@ def test_the_code_canary_is_the_runs_own(tmp_path) -> None:
     files = prepare_files(tmp_path, load_geometry(default_config_path()))
     assert files["pwned"].parent == tmp_path and not files["pwned"].exists()
     assert any(f"$(touch '{files['pwned']}')" in text for text in files["hostile_texts"])
+
+
+def test_a_name_too_long_to_save_may_be_refused_write_failed_and_only_such_a_name() -> None:
+    """Over-long names are among the hostile writes; with a recording to save, the service
+    refuses one ``write_failed`` ("give a shorter name"). The run failed under load, when
+    a sequence had been recorded before that request; the outcome is allowed for such a
+    name only."""
+    from tools.fuzz_api import save_refusals
+
+    assert "write_failed" in save_refusals("a" * 300 + ".csv")
+    assert "write_failed" not in save_refusals("../outside/escaped.csv")
+    assert "write_failed" not in save_refusals("a" * 300 + "/r.csv")  # its directory cannot be opened: file_not_found

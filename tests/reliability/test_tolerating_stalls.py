@@ -8,11 +8,14 @@ A real ``hexactl serve`` in a process of its own, as tests/api/test_frozen_api.p
 
 from __future__ import annotations
 
+import os
+import threading
 from pathlib import Path
 
 import pytest
 
 from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME
 from tests.reliability.support import braked_since, hold_up_api, last_event, recover, tolerating_stalls
 from tools.serving import HANG_S, serve, wait_until
 
@@ -53,3 +56,15 @@ def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_
         with pytest.raises(AssertionError, match="own failure"):
             tolerating_stalls(client, fails)
         assert failures == [1]
+
+
+def test_the_threads_sharing_an_in_process_loop_run_just_below_it(service, monitor) -> None:
+    """pytest's thread and the bus monitor's share the GIL of the service's loop in this
+    process: at normal priority they held it up past the watchdog on a loaded host
+    (``service_here``), so they run just below it, as ``hexactl serve``'s own threads do."""
+    priority = service.controller.thread.loop.realtime.fifo_priority
+    expected = (os.SCHED_OTHER, 0) if priority is None else (os.SCHED_FIFO, priority - 1)
+    [monitor_thread] = [thread for thread in threading.enumerate() if thread.name == MONITOR_THREAD_NAME]
+    for thread in (threading.current_thread(), monitor_thread):
+        policy = os.sched_getscheduler(thread.native_id) & ~os.SCHED_RESET_ON_FORK
+        assert (policy, os.sched_getparam(thread.native_id).sched_priority) == expected, thread.name
