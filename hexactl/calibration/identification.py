@@ -142,15 +142,27 @@ def _significant_extra(data: MeasurementData, nominal: Geometry, options: Identi
 def _full_with_significant_extras(data: MeasurementData, nominal: Geometry,
                                   options: IdentificationOptions) -> tuple[IdentificationResult, str]:
     """``full``, with sensor scale errors and then offset drift when asked or when the data
-    show them (:func:`_significant_extra`), and why (for the reason)."""
+    show them (:func:`_significant_extra`), and why (for the reason). An extra taken
+    before a later one is tested again with the later one in the model, and dropped unless
+    still significant: unmodelled, a drift's misfit is partly a gain's."""
     full = identify_full(data, nominal, options)
-    notes = ""
-    for option, what, _ in EXTRAS:
-        if (found := _significant_extra(data, nominal, options, full, option)) is not None:
-            full, drop, threshold = found
+    found: dict[str, tuple[float, float]] = {}  # option: (χ² drop, threshold)
+    for option, _, _ in EXTRAS:
+        if (extra := _significant_extra(data, nominal, options, full, option)) is not None:
+            full, drop, threshold = extra
             options = replace(options, **{option: True})
-            notes += (f"; {what} identified: they lower χ² by {drop:.1f}, more than their absence would by chance "
-                      f"({threshold:.1f} at probability {EXTRA_TEST_FALSE_ALARM:g})")
+            found[option] = drop, threshold
+    for option in list(found)[:-1]:
+        without = replace(options, **{option: False})
+        fewer = identify_full(data, nominal, without)
+        if (extra := _significant_extra(data, nominal, without, fewer, option)) is None:
+            full, options = fewer, without
+            del found[option]
+        else:
+            found[option] = extra[1:]
+    notes = "".join(f"; {what} identified: they lower χ² by {found[option][0]:.1f}, more than their absence would by "
+                    f"chance ({found[option][1]:.1f} at probability {EXTRA_TEST_FALSE_ALARM:g})"
+                    for option, what, _ in EXTRAS if option in found)
     return full, notes
 
 
