@@ -114,7 +114,8 @@ EXTRAS = (("estimate_scales", "sensor scale errors", "--scales"), ("estimate_dri
 
 
 def _significant_extra(data: MeasurementData, nominal: Geometry, options: IdentificationOptions,
-                       full: IdentificationResult, option: str) -> tuple[IdentificationResult, float, float] | None:
+                       full: IdentificationResult, option: str, richer: IdentificationResult | None = None,
+                       ) -> tuple[IdentificationResult, float, float] | None:
     """``full`` refitted with ``option`` (an :data:`EXTRAS` flag) when the data show it
     (richer result, χ² drop, threshold); None otherwise. The test is the likelihood ratio
     (χ², 6 dof) at :data:`EXTRA_TEST_FALSE_ALARM`, with the χ² drop divided by the richer
@@ -123,11 +124,11 @@ def _significant_extra(data: MeasurementData, nominal: Geometry, options: Identi
     scaled up by the same factor). The two fits are compared on the same observations:
     where their searches for gross errors excluded different ones, both are fitted again
     without any either excluded (else a mis-sighting one of them left out would count as the
-    extra's drop in χ²)."""
+    extra's drop in χ²). ``richer``: the refit with the extra, where it is at hand."""
     if getattr(options, option) or not full.ok:
         return None
     richer_options = replace(options, **{option: True})
-    richer = identify_full(data, nominal, richer_options)
+    richer = richer if richer is not None else identify_full(data, nominal, richer_options)
     simpler, compared = full, richer
     full_left_out, richer_left_out = ({observation_key(e) for e in fit.excluded} for fit in (full, richer))
     if richer.ok and full_left_out != richer_left_out:
@@ -155,7 +156,7 @@ def _full_with_significant_extras(data: MeasurementData, nominal: Geometry,
     for option in list(found)[:-1]:
         without = replace(options, **{option: False})
         fewer = identify_full(data, nominal, without)
-        if (extra := _significant_extra(data, nominal, without, fewer, option)) is None:
+        if (extra := _significant_extra(data, nominal, without, fewer, option, richer=full)) is None:
             full, options = fewer, without
             del found[option]
         else:

@@ -16,19 +16,15 @@ import pytest
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME
+from tests.api.test_service import at_rest, status
 from tests.reliability.support import braked_since, hold_up_api, last_event, recover, tolerating_stalls
 from tools.serving import HANG_S, serve, wait_until
 
 GOAL = [0.0, 0.0, 20.0, 0.0, 0.0, 0.0]
 
 
-def status(client: HexactlClient) -> dict:
-    return client.call("status")["status"]
-
-
-def at_rest(client: HexactlClient) -> dict:
-    return wait_until(lambda: (record := status(client))["motion"] == "holding" and record, "the platform at rest",
-                      HANG_S, seen=lambda: status(client))
+def resting(client: HexactlClient) -> dict:
+    return wait_until(lambda: at_rest(client), "the platform at rest", HANG_S, seen=lambda: status(client))
 
 
 def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_not(tmp_path: Path) -> None:
@@ -42,7 +38,7 @@ def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_
             if len(attempts) == 1:
                 wait_until(lambda: status(client)["motion"] == "moving", "the move under way", HANG_S)
                 hold_up_api(served)
-            assert at_rest(client)["pose_command"] == pytest.approx(GOAL, abs=1e-6)
+            assert resting(client)["pose_command"] == pytest.approx(GOAL, abs=1e-6)
 
         tolerating_stalls(client, braked_then_moves)
         assert len(attempts) == 2 and braked_since(client, attempts[0]) and not braked_since(client, attempts[1])
