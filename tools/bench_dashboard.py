@@ -39,6 +39,14 @@ E-stop as above; the table adds the dashboard's resident memory before and at it
 
     python3 tools/bench_dashboard.py --flood 300000
 
+``--slow-page MS`` measures a page that handles telemetry more slowly than it comes, as a
+browser starved of the CPU does: each telemetry message takes it MS more for ``--seconds``.
+Per 2 s, the records the page handled (50 a second come) and how far behind the
+dashboard the page was: the longest time from the dashboard's receipt of a record to the
+page's handling of it.
+
+    python3 tools/bench_dashboard.py --slow-page 30 --seconds 20
+
 ``--silent N`` measures connections that send nothing: a child process opens N TCP
 connections to the dashboard and sends no request on them (a stuck script, a tunnel whose
 far end vanished, a local process doing it on purpose). Meanwhile ``--estops`` fresh pages
@@ -49,11 +57,12 @@ the N are open and at the end, and how many of the N it had closed.
 
 For each N, a child process opens N WebSockets on ``/ws`` and keeps them as a browser tab
 left open would: it offers permessage-deflate as browsers do, reads every message (and
-throws it away) and answers the server's pings; with ``--stalled`` it reads nothing (a
-frozen tab, a wedged client). Then ``--estops`` times, a fresh page connects, waits for
-its first message, sends ``estop`` and times the reply. The table gives p50, p95 and max,
-the dashboard process's CPU over the phase and the load average; the service's own E-stop
-round trip through its API, without the dashboard, comes first for reference.
+throws it away), acknowledges every 8th telemetry message as the page does, and answers
+the server's pings; with ``--stalled`` it reads nothing (a frozen tab, a wedged client).
+Then ``--estops`` times, a fresh page connects, waits for its first message, sends
+``estop`` and times the reply. The table gives p50, p95 and max, the dashboard process's
+CPU over the phase and the load average; the service's own E-stop round trip through its
+API, without the dashboard, comes first for reference.
 """
 
 from __future__ import annotations
@@ -64,6 +73,7 @@ import json
 import multiprocessing
 import os
 import random
+import re
 import resource
 import selectors
 import socket
@@ -86,7 +96,7 @@ from bench_service import Cyclictest, load_average  # noqa: E402
 
 from hexactl.adapters.api.client import CommandError, HexactlClient  # noqa: E402
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY  # noqa: E402
-from tools.browser import dashboard, headless_chromium  # noqa: E402
+from tools.browser import SLOWED_TELEMETRY, dashboard, headless_chromium  # noqa: E402
 from tools.serving import LOOPBACK, serve, wait_for_tool as wait_for  # noqa: E402
 
 RATE_HZ = 500
@@ -177,7 +187,7 @@ def open_page(host: str, port: int) -> tuple[socket.socket, bytes]:
 
 def _frames(buffer: bytearray) -> list[tuple[int, bytes]]:
     """The whole frames at the start of ``buffer`` (removed from it): (opcode, payload of a
-    control frame, else b"")."""
+    control frame, else its first :data:`HEAD_BYTES`)."""
     frames = []
     while len(buffer) >= 2:
         opcode, length, start = buffer[0] & 0x0F, buffer[1] & 0x7F, 2
@@ -191,9 +201,28 @@ def _frames(buffer: bytearray) -> list[tuple[int, bytes]]:
             length, start = struct.unpack_from("!Q", buffer, 2)[0], 10
         if len(buffer) < start + length:
             break
-        frames.append((opcode, bytes(buffer[start:start + length]) if opcode >= 8 else b""))
+        frames.append((opcode, bytes(buffer[start:start + (length if opcode >= 8 else min(length, HEAD_BYTES))])))
         del buffer[:start + length]
     return frames
+
+
+HEAD_BYTES = 48
+TELEMETRY_HEAD = re.compile(rb'^\{"type": "telemetry", "n": (\d+),')
+"""A telemetry message's start, as the dashboard writes it, with its number."""
+ACK_EVERY = 8
+"""As the page (static/app.js): an acknowledgement every 8th telemetry message."""
+
+
+def _acknowledgement(head: bytes, counted: list[int]) -> bytes:
+    """The ack frame due after the text frame starting ``head`` (``counted``: the page's
+    telemetry messages since its last ack, in a list of one), else b""."""
+    if (found := TELEMETRY_HEAD.match(head)) is None:
+        return b""
+    counted[0] += 1
+    if counted[0] < ACK_EVERY:
+        return b""
+    counted[0] = 0
+    return _client_frame(0x1, json.dumps({"type": "ack", "n": int(found[1])}).encode())
 
 
 def _pong(payload: bytes) -> bytes:
@@ -250,17 +279,20 @@ def hold_pages(url: str, count: int, stalled: bool, ready: Any, stop: Any, still
                 selector.unregister(key.fileobj)
                 closed += 1
                 continue
-            key.data.extend(data)
-            for opcode, payload in _frames(key.data):
+            buffer, counted = key.data
+            buffer.extend(data)
+            for opcode, payload in _frames(buffer):
                 if opcode == 0x9:
                     key.fileobj.sendall(_pong(payload))
+                elif opcode == 0x1 and (ack := _acknowledgement(payload, counted)):
+                    key.fileobj.sendall(ack)
 
     for _ in range(count):
         sock, rest = open_page(address.hostname or "127.0.0.1", address.port or 80)
         opened.append(sock)
         if not stalled:
             sock.setblocking(False)
-            selector.register(sock, selectors.EVENT_READ, bytearray(rest))
+            selector.register(sock, selectors.EVENT_READ, (bytearray(rest), [0]))
             read(0.0)
     ready.set()
     while not stop.is_set():
@@ -442,6 +474,48 @@ def one_row_table(title: str, columns: list[str], row: list[str], figures: dict[
     return 0
 
 
+SLOW_PAGE_BIN_S = 2.0
+AFTER_SLOW_S = 10.0
+"""How long the page is followed after its slow spell: what was queued for it shows then."""
+
+
+def slow_page(args: argparse.Namespace) -> int:
+    """The table of a page slowed by ``--slow-page`` MS a telemetry message for ``--seconds``."""
+    with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
+        with serve(Path(directory), "--rate", str(RATE_HZ), api=args.api, telemetry=args.telemetry) as served, \
+                dashboard(served.api, served.telemetry, "--http", args.http, "--log-level", "warning") as board:
+            driver = headless_chromium()
+            try:
+                driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": SLOWED_TELEMETRY})
+                driver.get(board.url)
+                wait_for(lambda: driver.execute_script("return window.hexactlDashboard.dataLoss") is None,
+                         "live data on the page")
+                records = round(args.seconds * 1000.0 / args.slow_page)
+                started = driver.execute_script(f"const slow = window.hexactlTestSlow; slow.ms = {args.slow_page}; "
+                                                f"slow.remaining = {records}; return Date.now()")
+                wait_for(lambda: driver.execute_script("return window.hexactlTestSlow.endedAt"), "the slow spell over")
+                time.sleep(AFTER_SLOW_S)
+                handled = driver.execute_script("return window.hexactlTestSlow.handled")
+            finally:
+                driver.quit()
+    rows = []
+    for first in range(0, int(args.seconds + AFTER_SLOW_S), int(SLOW_PAGE_BIN_S)):
+        begin, end = started + first * 1000.0, started + (first + SLOW_PAGE_BIN_S) * 1000.0
+        spell = [m for m in handled if begin <= m["at"] < end]
+        if spell:
+            rows.append({"from_s": first, "handled": len(spell),
+                         "behind_max_ms": max(m["at"] - m["sent_ms"] for m in spell)})
+    print(f"A page slowed by {args.slow_page:g} ms a telemetry message for {args.seconds:g} s ({records} records), "
+          f"then followed {AFTER_SLOW_S:g} s:\n")
+    print("| from s | records handled | behind the dashboard, max ms |")
+    print("| --- | --- | --- |")
+    for row in rows:
+        print(f"| {row['from_s']} | {row['handled']} | {row['behind_max_ms']:.0f} |")
+    if args.json:
+        args.json.write_text(json.dumps({"slow_ms": args.slow_page, "records": records, "bins": rows}, indent=2))
+    return 0
+
+
 def estop_under_idle_pages(args: argparse.Namespace) -> int:
     """The table of a new page's E-stop round trip for each ``--idle-pages`` N, row by row."""
     kind = "stalled (never read)" if args.stalled else "idle (reading)"
@@ -525,14 +599,16 @@ def main() -> int:
                         "page sends N E-stops and reads no reply")
     parser.add_argument("--silent", type=int, metavar="N", help="instead: a new page's E-stop round trip beside N "
                         "connections that send nothing")
+    parser.add_argument("--slow-page", type=float, metavar="MS", help="instead: a page that takes MS more for each "
+                        "telemetry message for --seconds, and how far behind it falls")
     parser.add_argument("--estops", type=int, default=30, help="with --idle-pages, --flood or --silent: E-stops per "
                         "phase (default 30)")
-    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages, --flood or --silent: the service's API "
-                        "endpoint")
-    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages, --flood or --silent: its telemetry "
-                        "endpoint")
-    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages, --flood or --silent: the "
-                        "dashboard's address")
+    parser.add_argument("--api", default=LOOPBACK, help="with --idle-pages, --flood, --silent or --slow-page: the "
+                        "service's API endpoint")
+    parser.add_argument("--telemetry", default=LOOPBACK, help="with --idle-pages, --flood, --silent or --slow-page: "
+                        "its telemetry endpoint")
+    parser.add_argument("--http", default="127.0.0.1:0", help="with --idle-pages, --flood, --silent or --slow-page: "
+                        "the dashboard's address")
     args = parser.parse_args()
     if args.idle_pages is not None:
         return estop_under_idle_pages(args)
@@ -540,6 +616,10 @@ def main() -> int:
         return estop_under_a_flood(args)
     if args.silent is not None:
         return estop_beside_silent_connections(args)
+    if args.slow_page is not None:
+        if not args.slow_page > 0:
+            parser.error(f"--slow-page {args.slow_page:g}: give the milliseconds each record takes the page, > 0")
+        return slow_page(args)
     cyclictest_path = ensure_executables({"cyclictest": "rt-tests"}, lambda line: print(line, file=sys.stderr))["cyclictest"]
     with tempfile.TemporaryDirectory(prefix="hexactl-bench-dashboard-") as directory:
         workdir = Path(directory)

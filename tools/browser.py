@@ -39,6 +39,38 @@ SCRIPT_TIMEOUT_S = 120.0
 
 _SERVING = re.compile(r"dashboard on (?P<url>http://\S+/)")
 
+SLOWED_TELEMETRY = """
+(() => {
+  const Native = window.WebSocket;
+  const slow = { ms: 100, remaining: 0, endedAt: null, handled: [] };
+  window.hexactlTestSlow = slow;
+  window.WebSocket = class extends Native {
+    addEventListener(type, listener, options) {
+      if (type !== 'message') return super.addEventListener(type, listener, options);
+      return super.addEventListener(type, (event) => {
+        const message = JSON.parse(event.data);
+        if (message.type === 'telemetry') {
+          slow.handled.push({ n: message.n, sent_ms: message.sent_ms, at: Date.now() });
+          if (slow.remaining > 0) {
+            const until = performance.now() + slow.ms;
+            while (performance.now() < until) { /* the page's work, slow */ }
+            slow.remaining -= 1;
+            if (slow.remaining === 0) slow.endedAt = Date.now();
+          }
+        }
+        listener(event);
+      }, options);
+    }
+  };
+})();
+"""
+"""A script to run before the page's own (``Page.addScriptToEvaluateOnNewDocument``) that
+makes the page slow, as a browser starved of the CPU is: while ``hexactlTestSlow.remaining``
+is above 0, each telemetry message takes the page ``ms`` more (100 by default).
+``endedAt`` is when the last slow one was handled, and ``handled`` lists each telemetry
+message's ``n``, ``sent_ms`` and when the page handled it (``at``); all three times are
+this host's clock, ms, as the dashboard's ``sent_ms``."""
+
 
 def ensure_chromium() -> dict[str, str]:
     """Paths of ``chromium`` and ``chromedriver``, installed first if missing."""

@@ -18,8 +18,8 @@ from starlette.websockets import WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
 from hexactl.adapters.web.app import MAX_READ_AHEAD, _serve_page
-from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, Outbox, ServiceBridge, ServiceEndpoints,
-                                         UrgentCommand)
+from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, TELEMETRY_WINDOW, Outbox, ServiceBridge,
+                                         ServiceEndpoints, UrgentCommand, Update)
 
 WAIT_S = 30.0  # bounds a hang only: nothing here waits on anything but the test's own events
 
@@ -29,9 +29,10 @@ DISCONNECT = {"type": "websocket.disconnect", "code": 1000}
 
 class FakePage:
     """A page's WebSocket: what it sends (then it goes away, unless ``stays``), and what it
-    was sent (parsed, and as the very text)."""
+    was sent (parsed, and as the very text). It acknowledges each telemetry message as it
+    is sent it, unless ``acknowledges`` is False."""
 
-    def __init__(self, *messages: dict[str, Any], stays: bool = False) -> None:
+    def __init__(self, *messages: dict[str, Any], stays: bool = False, acknowledges: bool = True) -> None:
         self.incoming: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
         for message in messages if stays else (*messages, DISCONNECT):
             self.incoming.put_nowait(message)
@@ -40,6 +41,7 @@ class FakePage:
         self.client = Address("10.0.0.9", 51000)  # where the browser connected from
         self.application_state = WebSocketState.CONNECTED
         self.gone = False
+        self.acknowledges = acknowledges
 
     async def receive(self) -> dict[str, Any]:
         message = await self.incoming.get()
@@ -51,7 +53,12 @@ class FakePage:
             self.application_state = WebSocketState.DISCONNECTED
             raise WebSocketDisconnect(1006)
         self.texts.append(text)
-        self.sent.append(json.loads(text))
+        self.sent.append(message := json.loads(text))
+        if message["type"] == "telemetry" and self.acknowledges:
+            self.acknowledge(message["n"])
+
+    def acknowledge(self, n: int) -> None:
+        self.incoming.put_nowait(text({"type": "ack", "n": n}))
 
     def telemetry(self) -> dict[Any, str]:
         """The telemetry texts it was sent, by their record's ``t``."""
@@ -368,7 +375,7 @@ def test_a_commands_steps_on_the_loop_do_not_wait_for_a_record_to_reach_every_pa
         bridge.start(asyncio.get_running_loop())
         try:
             outboxes = [bridge.subscribe() for _ in range(pages)]  # each holds the link's state
-            bridge._broadcast("telemetry", '{"type": "telemetry"}')
+            bridge._broadcast(Update("telemetry", '{"type": "telemetry"}', 1))
 
             async def command() -> None:
                 for _ in range(4):
@@ -405,6 +412,43 @@ def test_records_reach_the_pages_while_the_api_does_not_answer_the_geometry() ->
             await until(lambda: any(message["type"] == "geometry" for message in page.sent), "the geometry")
         finally:
             service.geometry_answers.set()
+            page.incoming.put_nowait(DISCONNECT)
+            await asyncio.wait_for(serving, WAIT_S)
+            bridge.close()
+
+    asyncio.run(scenario())
+
+
+def test_a_page_is_sent_telemetry_no_further_ahead_of_it_than_the_window_and_then_the_newest() -> None:
+    """Found under load: a browser starved of the CPU handled records more slowly than
+    they came, and the sockets' buffers and its own queued them: its page fell further
+    behind each second, 10 s after 20 s of handling 26 of the 50 a second, showing that
+    old a state as live. Now a page that acknowledges nothing is sent the window's worth;
+    the link's state still reaches it; and once it acknowledges, it is sent the newest
+    record, not those it missed."""
+    service = FakeService()
+    records = 300
+    page = FakePage(stays=True, acknowledges=False)
+
+    async def scenario() -> None:
+        bridge = SubscribedBridge(service)
+        bridge.start(asyncio.get_running_loop())
+        serving = asyncio.create_task(_serve_page(bridge, page))  # type: ignore[arg-type]
+        sent = lambda: [message for message in page.sent if message["type"] == "telemetry"]  # noqa: E731
+        try:
+            for t in range(TELEMETRY_WINDOW):  # one at a time: a burst would reach the page as its newest only
+                service.records.put({"t": t, "calibration_id": "c1"})
+                await until(lambda: t in page.telemetry(), f"record {t}")
+            for t in range(TELEMETRY_WINDOW, records):
+                service.records.put({"t": t, "calibration_id": "c1"})
+            await until(lambda: service.records.empty() and len(bridge.outboxes[0]) == 1, "a record waiting")
+            assert len(sent()) == TELEMETRY_WINDOW
+            bridge._set_link(False, "no telemetry: a test")  # not held back by the window
+            await until(lambda: page.sent[-1]["type"] == "link" and not page.sent[-1]["connected"], "the link lost")
+            page.acknowledge(sent()[TELEMETRY_WINDOW // 2 - 1]["n"])  # half the window: the newest, not those missed
+            await until(lambda: records - 1 in page.telemetry(), "the newest record")
+            assert len(sent()) == TELEMETRY_WINDOW + 1 and len(bridge.outboxes[0]) == 0
+        finally:
             page.incoming.put_nowait(DISCONNECT)
             await asyncio.wait_for(serving, WAIT_S)
             bridge.close()

@@ -53,7 +53,11 @@ TAP = """
         if (message.type === 'link' && message.connected !== true) tap.losses += 1;
         if (message.type !== 'telemetry') { listener(event); return; }
         const now = performance.now();
-        if (tap.dropTelemetry) { tap.lastTelemetryAt = null; return; }
+        if (tap.dropTelemetry) {  // lost on the way, after the server's window: acknowledged, as a page would
+          tap.lastTelemetryAt = null;
+          super.send(JSON.stringify({ type: 'ack', n: message.n }));
+          return;
+        }
         if (tap.lastTelemetryAt !== null && now - tap.lastTelemetryAt > LOSS_GAP_MS) tap.losses += 1;
         tap.lastTelemetryAt = now;
         if (tap.recordFields === null) { listener(event); return; }
@@ -63,6 +67,7 @@ TAP = """
     }
     send(data) {
       const command = JSON.parse(data);
+      if (command.type !== 'command') return super.send(data);
       tap.sent.push(command.cmd);
       if (command.cmd === 'events') tap.eventsIds.add(command.id);
       return super.send(data);
@@ -75,7 +80,7 @@ record, ``recordFields`` (not null) replaces those fields of each record (the fr
 a field the service cannot be made to send), ``holdEventsReplies``
 holds the replies to the page's ``events`` requests until ``releaseReplies()``,
 ``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``), ``sent``
-lists the ``cmd`` of every message the page sends, and ``losses`` counts the times the page may
+lists the ``cmd`` of every command the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
 service's link down, or records further apart than 1.5 s (the page calls 2 s stale), as
 when a busy host holds up the browser or the dashboard."""

@@ -9,7 +9,7 @@ import socket
 import pytest
 
 from hexactl.adapters.cli.main import main
-from hexactl.adapters.web.app import MAX_MESSAGE_BYTES, _command
+from hexactl.adapters.web.app import MAX_MESSAGE_BYTES, Acknowledgement, _parsed
 from hexactl.adapters.web.server import DashboardError, HttpAddress, bind
 
 
@@ -43,19 +43,28 @@ def test_the_command_line_refuses_a_network_address(capsys) -> None:
 
 
 def test_a_command_goes_to_the_api_unchanged_but_its_envelope() -> None:
-    request_id, (cmd, fields) = _command(json.dumps({"type": "command", "id": 4, "cmd": "move", "pose": [1] * 6}))
+    request_id, (cmd, fields) = _parsed(json.dumps({"type": "command", "id": 4, "cmd": "move", "pose": [1] * 6}))
     assert (request_id, cmd, fields) == (4, "move", {"pose": [1] * 6})
+
+
+def test_an_ack_names_the_telemetry_message_handled() -> None:
+    assert _parsed('{"type": "ack", "n": 12}') == (None, Acknowledgement(12))
 
 
 @pytest.mark.parametrize(("text", "problem"), [
     ("{", "not JSON"),
     ("[1]", "a JSON object"),
-    ('{"type": "hello", "id": 1}', "sends only"),
+    ('{"type": "hello", "id": 1}', "nothing else"),
+    ('{"type": "ack"}', "an ack is"),
+    ('{"type": "ack", "n": "12"}', "an ack is"),
+    ('{"type": "ack", "n": true}', "an ack is"),
+    ('{"type": "ack", "n": -1}', "an ack is"),
+    ('{"type": "ack", "n": 1.5}', "an ack is"),
     ('{"type": "command", "id": 1, "cmd": 5}', "names its cmd"),
     ('{"type": "command", "id": 1, "cmd": "' + "x" * MAX_MESSAGE_BYTES + '"}', "at most"),
 ])
-def test_what_is_not_a_command_is_answered_with_the_reason(text, problem) -> None:
-    _, parsed = _command(text)
+def test_what_is_neither_a_command_nor_an_ack_is_answered_with_the_reason(text, problem) -> None:
+    _, parsed = _parsed(text)
     assert isinstance(parsed, str) and problem in parsed
 
 

@@ -7,7 +7,8 @@ any glue of ours (docs/dashboard.md says why this one).
 The page and the vendored libraries (three.js, uPlot) come from the package: nothing
 from the internet. Commands arrive on the WebSocket as ``{"type": "command", "id": N,
 "cmd": NAME, …fields}`` and go to the API unchanged; the reply comes back as
-``{"type": "reply", "id": N, "reply": …}``.
+``{"type": "reply", "id": N, "reply": …}``. The page acknowledges the telemetry it has
+handled (``{"type": "ack", "n": N}``), and is sent no more than a window ahead of it.
 
 Loopback only, a request whose ``Host`` or WebSocket ``Origin`` is not this server's is
 refused, and no response may be shown in another page's frame: another web site open in
@@ -24,6 +25,7 @@ import json
 import logging
 import re
 from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
@@ -196,9 +198,12 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
             if received.get("text") is None:
                 await reply(None, error_reply("invalid_request", "the page sends text messages (JSON), not binary"))
                 continue
-            request_id, parsed = _command(received["text"])
+            request_id, parsed = _parsed(received["text"])
             if isinstance(parsed, str):
                 await reply(request_id, error_reply("invalid_request", parsed))
+                continue
+            if isinstance(parsed, Acknowledgement):
+                updates.acknowledge(parsed.number)
                 continue
             if len(in_flight) >= MAX_COMMANDS_IN_FLIGHT and parsed[0] not in URGENT_COMMANDS:
                 await reply(request_id, error_reply(
@@ -223,8 +228,15 @@ def _not_json(constant: str) -> Any:
     raise ValueError(f"{constant} is not a JSON number: commands take finite numbers")
 
 
-def _command(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | str]:
-    """(the message's id, (cmd, fields) or why it is not a command)."""
+@dataclass(frozen=True, slots=True)
+class Acknowledgement:
+    """The page has handled the telemetry message ``number`` (its ``n``) and those before it."""
+
+    number: int
+
+
+def _parsed(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | Acknowledgement | str]:
+    """(the message's id, (cmd, fields), an acknowledgement, or why it is neither)."""
     if len(text) > MAX_MESSAGE_BYTES:
         return None, f"a message is at most {MAX_MESSAGE_BYTES} bytes"
     try:
@@ -234,8 +246,14 @@ def _command(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | str]:
     if not isinstance(message, dict):
         return None, "a message is a JSON object"
     request_id = message.get("id")
+    if message.get("type") == "ack":
+        number = message.get("n")
+        if type(number) is not int or number < 0:  # noqa: E721 - a bool is no message number
+            return request_id, "an ack is {\"type\": \"ack\", \"n\": N}: N the n of the last telemetry message handled"
+        return request_id, Acknowledgement(number)
     if message.get("type") != "command":
-        return request_id, "the page sends only {\"type\": \"command\", \"id\": N, \"cmd\": NAME, …}"
+        return request_id, ("the page sends {\"type\": \"command\", \"id\": N, \"cmd\": NAME, …} and "
+                            "{\"type\": \"ack\", \"n\": N}, nothing else")
     cmd = message.get("cmd")
     if not isinstance(cmd, str):
         return request_id, "a command names its cmd"

@@ -1,8 +1,9 @@
 """The dashboard's way to the service: the public ZeroMQ API and telemetry, nothing else.
 
 A :class:`ServiceBridge` follows the telemetry in a thread of its own and hands each
-record to the pages' outboxes, serialised once for all of them (newest only: a page that
-draws slowly skips records, it never falls behind); it fetches the active geometry
+record to the pages' outboxes, serialised once for all of them (newest only, and at most
+:data:`TELEMETRY_WINDOW` records a page has not acknowledged: a page that handles them
+slowly skips records, it never falls behind); it fetches the active geometry
 whenever the calibration changes; and it carries the pages' commands to the API, each on
 a client of its own in a worker thread, so that a slow command never holds up another.
 ``estop``, ``stop`` and ``abort`` each have a worker of their own (:class:`UrgentCommand`):
@@ -20,6 +21,7 @@ import json
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -94,35 +96,70 @@ OUTBOX_KINDS = ("link", "geometry", "telemetry")
 """What the bridge sends a page, in the order an outbox sends what it holds: the link's
 state, then the geometry that telemetry is drawn with, then the newest record."""
 
+TELEMETRY_WINDOW = 16
+"""Telemetry messages a page may have been sent and not yet acknowledged; the newest
+waits in its outbox meanwhile. The page acknowledges at least every 8th it handles
+(``ACK_EVERY`` in static/app.js, which must stay below this)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Update:
+    """A message for every page: ``kind`` (one of :data:`OUTBOX_KINDS`), its JSON ``text``,
+    the same for all, and for telemetry its ``number`` (the ``n`` that pages acknowledge)."""
+
+    kind: str
+    text: str
+    number: int | None = None
+
 
 class Outbox:
-    """A page's messages not yet sent, as JSON text: the newest of each kind only.
+    """A page's messages not yet sent: the newest of each kind only, and no telemetry
+    while :data:`TELEMETRY_WINDOW` sent are unacknowledged.
 
     The same text goes to every page, serialised once by the bridge: at hundreds of pages
     and 50 records a second a serialisation per page kept the event loop busy enough to
     hold an E-stop's reply back for most of a second. A page that does not read (a frozen
-    tab, a wedged client) holds at most one message of each kind here, and the one its
-    sender is stuck on: what it missed is replaced, never queued. Commands' replies do not
-    pass through here: they are sent by the command's own task, never dropped."""
+    tab, a wedged client) holds at most one message of each kind here: what it missed is
+    replaced, never queued. The window bounds what waits beyond here, in the sockets'
+    buffers and the browser's: without it a page that handled records more slowly than
+    they came (a starved browser on a busy host) fell further behind each second, showing
+    a state tens of seconds old as live. Commands' replies do not pass through here: they
+    are sent by the command's own task, never dropped."""
 
     def __init__(self) -> None:
-        self._pending: dict[str, str] = {}
-        self._filled = asyncio.Event()
+        self._pending: dict[str, Update] = {}
+        self._unacknowledged: deque[int] = deque()  # the numbers of telemetry sent, oldest first
+        self._changed = asyncio.Event()
 
-    def put(self, kind: str, text: str) -> None:
-        """On the event loop: ``text`` (a message of ``kind``, one of :data:`OUTBOX_KINDS`)
-        replaces the one of that kind not yet sent."""
-        self._pending[kind] = text
-        self._filled.set()
+    def put(self, update: Update) -> None:
+        """On the event loop: ``update`` replaces the one of its kind not yet sent."""
+        self._pending[update.kind] = update
+        self._changed.set()
+
+    def acknowledge(self, number: int) -> None:
+        """On the event loop: the page has handled telemetry message ``number`` and every
+        one before it."""
+        while self._unacknowledged and self._unacknowledged[0] <= number:
+            self._unacknowledged.popleft()
+        self._changed.set()
 
     async def get(self) -> str:
-        """The next message to send: the first kind of :data:`OUTBOX_KINDS` held."""
-        while not self._pending:
-            self._filled.clear()
-            await self._filled.wait()
-        return self._pending.pop(next(kind for kind in OUTBOX_KINDS if kind in self._pending))
+        """The next message's text: the first kind of :data:`OUTBOX_KINDS` held that may go."""
+        while (kind := self._next_kind()) is None:
+            self._changed.clear()
+            await self._changed.wait()
+        update = self._pending.pop(kind)
+        if update.number is not None:
+            self._unacknowledged.append(update.number)
+        return update.text
+
+    def _next_kind(self) -> str | None:
+        window_open = len(self._unacknowledged) < TELEMETRY_WINDOW
+        return next((kind for kind in OUTBOX_KINDS
+                     if kind in self._pending and (kind != "telemetry" or window_open)), None)
 
     def __len__(self) -> int:
+        """The messages held, not yet sent."""
         return len(self._pending)
 
 
@@ -133,7 +170,7 @@ class ServiceBridge:
         self.endpoints = endpoints
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pages: dict[Outbox, None] = {}  # the pages served (a dict: in the order they came)
-        self._news: dict[str, str] = {}  # the newest message of each kind not yet fanned out
+        self._news: dict[str, Update] = {}  # the newest update of each kind not yet fanned out
         self._news_came = asyncio.Event()
         self._fan_out: asyncio.Task[None] | None = None
         self._stopping = threading.Event()
@@ -149,7 +186,7 @@ class ServiceBridge:
         self._fetching = threading.Event()
         self.connected = False
         self.geometry: dict[str, Any] | None = None
-        self._geometry_text: str | None = None  # the geometry message, serialised for new pages
+        self._geometry_update: Update | None = None  # the geometry message, serialised for new pages
         self._link_message = f"waiting for telemetry from {endpoints.telemetry}"
         self._announced: bool | None = None  # the link state the pages were last told
 
@@ -180,19 +217,19 @@ class ServiceBridge:
         """On the event loop: a page's outbox of ``link``, ``geometry`` and ``telemetry``
         messages. It starts with the link's state and the geometry, when known."""
         outbox = Outbox()
-        outbox.put("link", self._link())
-        if (geometry := self._geometry_text) is not None:
-            outbox.put("geometry", geometry)
+        outbox.put(self._link())
+        if (geometry := self._geometry_update) is not None:
+            outbox.put(geometry)
         self._pages[outbox] = None
         return outbox
 
     def unsubscribe(self, outbox: Outbox) -> None:
         self._pages.pop(outbox, None)
 
-    def _broadcast(self, kind: str, text: str) -> None:
-        """On the event loop: ``text`` (of ``kind``) is news for every page; it replaces
-        news of that kind not yet fanned out."""
-        self._news[kind] = text
+    def _broadcast(self, update: Update) -> None:
+        """On the event loop: ``update`` is news for every page; it replaces news of its
+        kind not yet fanned out."""
+        self._news[update.kind] = update
         self._news_came.set()
 
     async def _fan_out_news(self) -> None:
@@ -207,11 +244,11 @@ class ServiceBridge:
             for first in range(0, len(pages), FAN_OUT_CHUNK):
                 await asyncio.sleep(0)  # a turn of the loop: what came meanwhile (a command's step) goes first
                 for outbox in pages[first:first + FAN_OUT_CHUNK]:
-                    for kind, text in news.items():
-                        outbox.put(kind, text)
+                    for update in news.values():
+                        outbox.put(update)
 
-    def _link(self) -> str:
-        return json.dumps({"type": "link", "connected": self.connected, "message": self._link_message})
+    def _link(self) -> Update:
+        return Update("link", json.dumps({"type": "link", "connected": self.connected, "message": self._link_message}))
 
     # -- commands --------------------------------------------------------------------
 
@@ -244,6 +281,7 @@ class ServiceBridge:
     def _follow_telemetry(self) -> None:
         """The telemetry thread: receive, hand over, notice the link and the calibration."""
         endpoints = self.endpoints
+        number = 0  # the telemetry messages' ``n``: from this process, so it goes on across service restarts
         with endpoints.connect(TelemetrySubscriber, endpoints.telemetry) as telemetry:
             while not self._stopping.is_set():
                 try:
@@ -262,20 +300,21 @@ class ServiceBridge:
                 # Stamped here, with the age, not as each page is sent it: one text for
                 # every page, and the page's age_ms + (its clock − sent_ms) then also
                 # counts the time the record waited in the dashboard.
-                message = {"type": "telemetry", "record": record, "sent_ms": time.time() * 1000.0,
+                number += 1
+                message = {"type": "telemetry", "n": number, "record": record, "sent_ms": time.time() * 1000.0,
                            "age_ms": age_s * 1000.0 if 0.0 <= age_s <= MAX_RECORD_AGE_S else None}
-                self._call(self._broadcast, "telemetry", json.dumps(message))
+                self._call(self._broadcast, Update("telemetry", json.dumps(message), number))
 
     def _set_link(self, connected: bool, message: str) -> None:
         if connected != self.connected:
             log.info("%s", message)
             if not connected:
                 # fetched afresh when the service is back: it may have restarted
-                self.geometry = self._geometry_text = None
+                self.geometry = self._geometry_update = None
         self.connected, self._link_message = connected, message
         if connected != self._announced:
             self._announced = connected
-            self._call(self._broadcast, "link", self._link())
+            self._call(self._broadcast, self._link())
 
     def _fetch_geometry(self) -> None:
         """On the geometry's worker; the next record asks again if this fails."""
@@ -285,8 +324,8 @@ class ServiceBridge:
                 log.warning("geometry: %s", (reply.get("error") or {}).get("message"))
                 return
             self.geometry = drawing_geometry(reply)
-            self._geometry_text = json.dumps({"type": "geometry", "geometry": self.geometry})
-            self._call(self._broadcast, "geometry", self._geometry_text)
+            self._geometry_update = Update("geometry", json.dumps({"type": "geometry", "geometry": self.geometry}))
+            self._call(self._broadcast, self._geometry_update)
         except Exception as error:  # a worker's exception would go unseen
             log.warning("geometry: %s: %s", type(error).__name__, error)
         finally:

@@ -14,6 +14,10 @@ const STALE_MS = 2000;        // no telemetry for longer: nothing on the page is
 const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S)
 const OTHER_CONTROLLER_WINDOW_S = 1.0;  // another controller heard this recently drives the actuators (control/results.py's)
 const TICK_MS = 250;          // the staleness check and the "no data for N s" count
+// Telemetry handled between two acknowledgements: the server sends at most
+// TELEMETRY_WINDOW (16, adapters/web/bridge.py) unacknowledged, so that a page slower than
+// the records falls no further behind than that. Below the window, or the page stalls.
+const ACK_EVERY = 8;
 const pageStartedAt = performance.now();
 
 const state = {
@@ -29,6 +33,7 @@ const state = {
   newRecord: false,
   drawInfo: null,           // {age_ms, sent_ms} of the newest record, until drawn
   lastTelemetryAt: 0,
+  unacknowledged: 0,        // telemetry handled on this WebSocket since the last acknowledgement
   latencies: new Array(LATENCY_RING),
   latencyCount: 0,
   loss: null,               // what the page shows as lost (dataLoss()); null while live
@@ -458,6 +463,7 @@ function handleMessage(ev) {
       schedule();
       // every record, drawn or not (a hidden page draws none): its eight events may be gone from the next ones
       eventsPanel.onRecord(r);
+      acknowledge(msg.n);
       break;
     }
     case 'geometry': {
@@ -495,6 +501,14 @@ function handleMessage(ev) {
   }
 }
 
+/** Tell the server the page has handled telemetry message `n` (every ACK_EVERY). */
+function acknowledge(n) {
+  state.unacknowledged += 1;
+  if (state.unacknowledged < ACK_EVERY || !Number.isSafeInteger(n) || state.ws?.readyState !== WebSocket.OPEN) return;
+  state.unacknowledged = 0;
+  state.ws.send(JSON.stringify({ type: 'ack', n }));
+}
+
 function connect() {
   const url = `${location.protocol === 'https:' ? 'wss:' : 'ws:'}//${location.host}/ws`;
   let ws;
@@ -507,6 +521,7 @@ function connect() {
     return;
   }
   state.ws = ws;
+  state.unacknowledged = 0;
   ws.addEventListener('open', () => {
     state.wsOpen = true;
     state.link = null;
