@@ -178,10 +178,15 @@ def braked_since(client: HexactlClient, after: int) -> bool:
     return any(event["code"] == SILENCE_BRAKE for event in client.call("events", after=after)["events"])
 
 
+STALL_REPLIES = ("loop_timeout",)
+"""Replies that say the host held the loop up, not that the command was wrong: the loop gave
+no verdict within the API's time limit (the command may still have been carried out)."""
+
+
 def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], cleanup: Callable[[], None] = lambda: None) -> None:
     """Run ``scenario``; again from enabled and at rest (``cleanup()`` first) if it failed
-    with only a stall's faults latched, or after the service braked on its API's silence
-    (:data:`SILENCE_BRAKE`), :data:`ATTEMPTS` in all."""
+    with only a stall's faults latched, after the service braked on its API's silence
+    (:data:`SILENCE_BRAKE`), or on a reply of :data:`STALL_REPLIES`, :data:`ATTEMPTS` in all."""
     for attempt in range(1, ATTEMPTS + 1):
         since = last_event(status(client))
         try:
@@ -189,9 +194,10 @@ def tolerating_stalls(client: HexactlClient, scenario: Callable[[], None], clean
             return
         except (AssertionError, CommandError) as error:  # a stall latched between two steps refuses the next one
             braked = braked_since(client, since)
+            held_up = isinstance(error, CommandError) and error.code in STALL_REPLIES
             print(f"attempt {attempt} failed: {error!r:.300}; latched: {status(client)['faults']}"
                   + ("; the service braked when its API fell silent" if braked else ""))
-            if attempt == ATTEMPTS or not (stalled(client) or braked):
+            if attempt == ATTEMPTS or not (stalled(client) or braked or held_up):
                 raise
             cleanup()
             recover(client)

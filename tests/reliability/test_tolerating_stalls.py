@@ -1,7 +1,8 @@
 """The test suite's own tolerance of a loaded host (:func:`tests.reliability.support.tolerating_stalls`):
 a scenario whose move the service braked because its API process fell silent (the
-process held up, as a starved host does, here by SIGSTOP) runs again, and passes; a
-scenario that fails without any stall fails at once.
+process held up, as a starved host does, here by SIGSTOP) runs again, and passes, as does
+one a command of which was answered ``loop_timeout``; a scenario that fails without any
+stall fails at once.
 
 A real ``hexactl serve`` in a process of its own, as tests/api/test_frozen_api.py runs it.
 """
@@ -10,11 +11,12 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
-from hexactl.adapters.api.client import HexactlClient
+from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.adapters.can.bus_monitor import MONITOR_THREAD_NAME
 from tests.api.test_service import at_rest, status
 from tests.reliability.support import braked_since, hold_up_api, last_event, recover, tolerating_stalls
@@ -52,6 +54,25 @@ def test_a_move_braked_on_the_api_silence_is_tried_again_and_a_plain_failure_is_
         with pytest.raises(AssertionError, match="own failure"):
             tolerating_stalls(client, fails)
         assert failures == [1]
+
+        # A command the loop gave no verdict on in time (a host holding the loop up past the
+        # API's limit, seen beside three dashboard suites at load 40) is a stall; another
+        # refusal is the scenario's own failure.
+        replies = []
+
+        def refused(code: str) -> Callable[[], None]:
+            def scenario() -> None:
+                replies.append(code)
+                if len(replies) == 1:
+                    raise CommandError(code, "as the service says it")
+            return scenario
+
+        tolerating_stalls(client, refused("loop_timeout"))
+        assert replies == ["loop_timeout"] * 2
+        replies.clear()
+        with pytest.raises(CommandError, match="not_enabled"):
+            tolerating_stalls(client, refused("not_enabled"))
+        assert replies == ["not_enabled"]
 
 
 def test_the_threads_sharing_an_in_process_loop_run_just_below_it(service, monitor) -> None:
