@@ -450,6 +450,7 @@ function handleMessage(ev) {
   if (!msg || typeof msg !== 'object') return;
   switch (msg.type) {
     case 'telemetry': {
+      acknowledge(msg.n);  // first: an exception below must not stop the telemetry
       const r = msg.record;
       if (!r || typeof r !== 'object') return;
       state.record = r;
@@ -463,7 +464,6 @@ function handleMessage(ev) {
       schedule();
       // every record, drawn or not (a hidden page draws none): its eight events may be gone from the next ones
       eventsPanel.onRecord(r);
-      acknowledge(msg.n);
       break;
     }
     case 'geometry': {
