@@ -3,7 +3,7 @@
 A :class:`ServiceBridge` follows the telemetry in a thread of its own and hands each
 record to the pages' outboxes, serialised once for all of them (newest only, and at most
 :data:`TELEMETRY_WINDOW` records a page has not acknowledged: a page that handles them
-slowly skips records, it never falls behind); it fetches the active geometry
+slowly skips records and falls no further behind than that); it fetches the active geometry
 whenever the calibration changes; and it carries the pages' commands to the API, each on
 a client of its own in a worker thread, so that a slow command never holds up another.
 ``estop``, ``stop`` and ``abort`` each have a worker of their own (:class:`UrgentCommand`):
