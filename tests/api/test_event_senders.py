@@ -11,6 +11,7 @@ import pytest
 
 from hexactl.adapters.api.client import HexactlClient
 from hexactl.application.service import Service, ServiceConfig
+from tests.api.support import service_here
 from tests.api.test_service import WAIT_S, status, wait_for
 from tests.reliability.support import recover, tolerating_loop_stalls
 
@@ -20,10 +21,9 @@ ANN, BOB = "ann at the bench", "bob in the control room"
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     directory = tmp_path_factory.mktemp("senders")
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(directory,)))
-    yield service
-    service.close()
+    with service_here(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                    data_dirs=(directory,))) as service:
+        yield service
 
 
 def events_after(client: HexactlClient, t: float) -> list[tuple[str, str | None]]:

@@ -12,7 +12,8 @@ import pytest
 
 from hexactl.adapters.api.client import CommandError, HexactlClient
 from hexactl.adapters.api.messages import RecordReply, RecordStatusReply, RecordStopReply, RecordingSideFile
-from hexactl.application.service import Service, ServiceConfig
+from hexactl.application.service import ServiceConfig
+from tests.api.support import service_here
 from tests.api.test_service import WAIT_S, wait_for
 from tests.reliability.support import tolerating_stalls
 
@@ -103,14 +104,11 @@ def test_stop_ends_early_and_refusals_name_the_problem(client, data_dir) -> None
 
 
 def test_a_recording_under_way_is_finished_when_the_service_stops(tmp_path) -> None:
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(tmp_path,)))
-    try:
-        with HexactlClient(service.api_endpoint, timeout_s=WAIT_S) as client:
-            client.call("record", name="cut", duration_s=600)
-            wait_for(lambda: client.call("record_status").get("rows_written", 0) >= 50, "rows")
-    finally:
-        service.close()
+    with service_here(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                    data_dirs=(tmp_path,))) as service, \
+            HexactlClient(service.api_endpoint, timeout_s=WAIT_S) as client:
+        client.call("record", name="cut", duration_s=600)
+        wait_for(lambda: client.call("record_status").get("rows_written", 0) >= 50, "rows")
     side = json.loads((tmp_path / "cut.json").read_text())
     assert side["ended"] == "shutdown" and side["cycles_missing"] == 0 and side["rows_written"] >= 50
     with open(tmp_path / "cut.csv") as handle:

@@ -16,6 +16,7 @@ from hexactl.adapters.api.client import HexactlClient
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.application.service import Service, ServiceConfig
 from hexactl.kinematics.geometry import Geometry
+from tests.api.support import service_here
 from tests.api.test_commands import send
 from tests.api.test_service import WAIT_S, at_rest, status, wait_for
 from tests.reliability.support import recover, tolerating_loop_stalls
@@ -27,10 +28,9 @@ WORK_GOAL = [0, 0, 0, 4, 0, 0]  # a 4° roll about the pivot, 300 mm above the p
 @pytest.fixture(scope="module")
 def framed_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     directory = tmp_path_factory.mktemp("validated")
-    service = Service.start(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
-                                          data_dirs=(directory,), frames_path=directory / "frames.toml"))
-    yield service
-    service.close()
+    with service_here(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                    data_dirs=(directory,), frames_path=directory / "frames.toml")) as service:
+        yield service
 
 
 @pytest.fixture
