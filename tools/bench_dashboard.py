@@ -41,9 +41,10 @@ E-stop as above; the table adds the dashboard's resident memory before and at it
 
 ``--slow-page MS`` measures a page that handles telemetry more slowly than it comes, as a
 browser starved of the CPU does: each telemetry message takes it MS more for ``--seconds``.
-Per 2 s, the records the page handled (50 a second come) and how far behind the
-dashboard the page was: the longest time from the dashboard's receipt of a record to the
-page's handling of it.
+Per 2 s, the records the page handled (50 a second come), how far behind the dashboard
+the page was (the longest time from the dashboard's receipt of a record to the page done
+with it), on how many the page showed no live data, and on how many it showed live data
+although over 2 s behind.
 
     python3 tools/bench_dashboard.py --slow-page 30 --seconds 20
 
@@ -475,6 +476,8 @@ def one_row_table(title: str, columns: list[str], row: list[str], figures: dict[
 
 
 SLOW_PAGE_BIN_S = 2.0
+STALE_MS = 2000.0
+"""static/app.js: a page further behind than this shows no live data."""
 AFTER_SLOW_S = 10.0
 """How long the page is followed after its slow spell: what was queued for it shows then."""
 
@@ -501,16 +504,19 @@ def slow_page(args: argparse.Namespace) -> int:
     rows = []
     for first in range(0, int(args.seconds + AFTER_SLOW_S), int(SLOW_PAGE_BIN_S)):
         begin, end = started + first * 1000.0, started + (first + SLOW_PAGE_BIN_S) * 1000.0
-        spell = [m for m in handled if begin <= m["at"] < end]
+        spell = [m for m in handled if begin <= m["at"] < end and "done" in m]
         if spell:
-            rows.append({"from_s": first, "handled": len(spell),
-                         "behind_max_ms": max(m["at"] - m["sent_ms"] for m in spell)})
+            behind = [m["done"] - m["sent_ms"] for m in spell]
+            rows.append({"from_s": first, "handled": len(spell), "behind_max_ms": max(behind),
+                         "shown_not_live": sum(m["loss"] is not None for m in spell),
+                         "live_over_stale": sum(m["loss"] is None and b > STALE_MS for m, b in zip(spell, behind))})
     print(f"A page slowed by {args.slow_page:g} ms a telemetry message for {args.seconds:g} s ({records} records), "
-          f"then followed {AFTER_SLOW_S:g} s:\n")
-    print("| from s | records handled | behind the dashboard, max ms |")
-    print("| --- | --- | --- |")
+          f"then followed {AFTER_SLOW_S:g} s (behind: from the dashboard's receipt to the page done with it):\n")
+    print(f"| from s | records handled | behind, max ms | shown not live | shown live over {STALE_MS:g} ms behind |")
+    print("| --- | --- | --- | --- | --- |")
     for row in rows:
-        print(f"| {row['from_s']} | {row['handled']} | {row['behind_max_ms']:.0f} |")
+        print(f"| {row['from_s']} | {row['handled']} | {row['behind_max_ms']:.0f} | {row['shown_not_live']} | "
+              f"{row['live_over_stale']} |")
     if args.json:
         args.json.write_text(json.dumps({"slow_ms": args.slow_page, "records": records, "bins": rows}, indent=2))
     return 0

@@ -49,16 +49,25 @@ SLOWED_TELEMETRY = """
       if (type !== 'message') return super.addEventListener(type, listener, options);
       return super.addEventListener(type, (event) => {
         const message = JSON.parse(event.data);
-        if (message.type === 'telemetry') {
-          slow.handled.push({ n: message.n, sent_ms: message.sent_ms, at: Date.now() });
-          if (slow.remaining > 0) {
-            const until = performance.now() + slow.ms;
-            while (performance.now() < until) { /* the page's work, slow */ }
-            slow.remaining -= 1;
-            if (slow.remaining === 0) slow.endedAt = Date.now();
-          }
+        if (message.type !== 'telemetry') return listener(event);
+        const entry = { n: message.n, sent_ms: message.sent_ms, at: Date.now() };
+        slow.handled.push(entry);
+        if (slow.remaining > 0) {
+          const until = performance.now() + slow.ms;
+          while (performance.now() < until) { /* the page's work, slow */ }
+          slow.remaining -= 1;
+          if (slow.remaining === 0) slow.endedAt = Date.now();
         }
         listener(event);
+        entry.done = Date.now();
+        entry.loss = window.hexactlDashboard ? window.hexactlDashboard.dataLoss : undefined;
+        if (entry.loss !== slow.loss) {
+          // what the page showed as its verdict changed (a script from outside is not run
+          // while such a page is behind: it waits behind the queued records)
+          slow.loss = entry.loss;
+          const text = (id) => document.getElementById(id)?.innerText;
+          entry.shown = { state: text('state'), age: text('data-age'), banner: text('data-lost') };
+        }
       }, options);
     }
   };
@@ -68,7 +77,9 @@ SLOWED_TELEMETRY = """
 makes the page slow, as a browser starved of the CPU is: while ``hexactlTestSlow.remaining``
 is above 0, each telemetry message takes the page ``ms`` more (100 by default).
 ``endedAt`` is when the last slow one was handled, and ``handled`` lists each telemetry
-message's ``n``, ``sent_ms`` and when the page handled it (``at``); all three times are
+message's ``n``, ``sent_ms``, when the page began handling it (``at``) and was done
+(``done``), and what the page then said it had lost (``loss``, its ``dataLoss``), with what
+it showed (``shown``: its state, data age and banner) where that changed; the times are
 this host's clock, ms, as the dashboard's ``sent_ms``."""
 
 

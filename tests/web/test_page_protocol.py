@@ -424,8 +424,8 @@ def test_a_page_is_sent_telemetry_no_further_ahead_of_it_than_the_window_and_the
     they came, and the sockets' buffers and its own queued them: its page fell further
     behind each second, 10 s after 20 s of handling 26 of the 50 a second, showing that
     old a state as live. Now a page that acknowledges nothing is sent the window's worth;
-    the link's state still reaches it; and once it acknowledges, it is sent the newest
-    record, not those it missed."""
+    the link's state still reaches it; and once it acknowledges, it is told so, and sent the
+    newest record, not those it missed."""
     service = FakeService()
     records = 300
     page = FakePage(stays=True, acknowledges=False)
@@ -445,9 +445,14 @@ def test_a_page_is_sent_telemetry_no_further_ahead_of_it_than_the_window_and_the
             assert len(sent()) == TELEMETRY_WINDOW
             bridge._set_link(False, "no telemetry: a test")  # not held back by the window
             await until(lambda: page.sent[-1]["type"] == "link" and not page.sent[-1]["connected"], "the link lost")
-            page.acknowledge(sent()[TELEMETRY_WINDOW // 2 - 1]["n"])  # half the window: the newest, not those missed
+            acknowledged = sent()[TELEMETRY_WINDOW // 2 - 1]["n"]
+            page.acknowledge(acknowledged)  # half the window: the newest, not those missed
             await until(lambda: records - 1 in page.telemetry(), "the newest record")
             assert len(sent()) == TELEMETRY_WINDOW + 1 and len(bridge.outboxes[0]) == 0
+            # The page is told its ack was received, behind all it was sent before the
+            # ack and ahead of the record sent after: it times from its ack to this how
+            # far behind it is.
+            assert page.sent[-2:] == [{"type": "acked", "n": acknowledged}, sent()[-1]]
         finally:
             page.incoming.put_nowait(DISCONNECT)
             await asyncio.wait_for(serving, WAIT_S)

@@ -92,9 +92,10 @@ class UrgentCommand:
         self._worker.shutdown(wait=False, cancel_futures=True)
 
 
-OUTBOX_KINDS = ("link", "geometry", "telemetry")
-"""What the bridge sends a page, in the order an outbox sends what it holds: the link's
-state, then the geometry that telemetry is drawn with, then the newest record."""
+OUTBOX_KINDS = ("link", "geometry", "acked", "telemetry")
+"""What an outbox sends a page, in the order it sends what it holds: the link's state, the
+geometry that telemetry is drawn with, the page's newest acknowledgement received (so that
+the page can time how far behind it is), then the newest record."""
 
 TELEMETRY_WINDOW = 16
 """Telemetry messages a page may have been sent and not yet acknowledged; the newest
@@ -104,8 +105,9 @@ waits in its outbox meanwhile. The page acknowledges at least every 8th it handl
 
 @dataclass(frozen=True, slots=True)
 class Update:
-    """A message for every page: ``kind`` (one of :data:`OUTBOX_KINDS`), its JSON ``text``,
-    the same for all, and for telemetry its ``number`` (the ``n`` that pages acknowledge)."""
+    """A message for a page's outbox: ``kind`` (one of :data:`OUTBOX_KINDS`), its JSON
+    ``text`` (but for ``acked``, the same for every page), and for telemetry its ``number``
+    (the ``n`` that pages acknowledge)."""
 
     kind: str
     text: str
@@ -138,10 +140,11 @@ class Outbox:
 
     def acknowledge(self, number: int) -> None:
         """On the event loop: the page has handled telemetry message ``number`` and every
-        one before it."""
+        one before it. It is told so (``acked``) behind everything it was sent before: the
+        time that takes, on the page's clock alone, is how far behind the page is."""
         while self._unacknowledged and self._unacknowledged[0] <= number:
             self._unacknowledged.popleft()
-        self._changed.set()
+        self.put(Update("acked", f'{{"type": "acked", "n": {number}}}'))
 
     async def get(self) -> str:
         """The next message's text: the first kind of :data:`OUTBOX_KINDS` held that may go."""

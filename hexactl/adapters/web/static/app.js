@@ -10,7 +10,7 @@ const $ = (id) => document.getElementById(id);
 const RECONNECT_MS = 1000;
 const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
-const STALE_MS = 2000;        // no telemetry for longer: nothing on the page is shown as current
+const STALE_MS = 2000;        // no telemetry for longer, or this far behind it: nothing on the page is shown as current
 const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S)
 const OTHER_CONTROLLER_WINDOW_S = 1.0;  // another controller heard this recently drives the actuators (control/results.py's)
 const TICK_MS = 250;          // the staleness check and the "no data for N s" count
@@ -18,6 +18,11 @@ const TICK_MS = 250;          // the staleness check and the "no data for N s" c
 // TELEMETRY_WINDOW (16, adapters/web/bridge.py) unacknowledged, so that a page slower than
 // the records falls no further behind than that. Below the window, or the page stalls.
 const ACK_EVERY = 8;
+// Also an acknowledgement at least this often while telemetry is handled: how far behind
+// the page is, is timed from its acknowledgements (ackAwaited), so a page slower than the
+// records learns it soon, not after ACK_EVERY of its slow records.
+const ACK_INTERVAL_MS = 250;
+const ACKS_AWAITED_MAX = 64;  // more awaited means the server is not answering them: the oldest is what counts
 const pageStartedAt = performance.now();
 
 const state = {
@@ -34,6 +39,8 @@ const state = {
   drawInfo: null,           // {age_ms, sent_ms} of the newest record, until drawn
   lastTelemetryAt: 0,
   unacknowledged: 0,        // telemetry handled on this WebSocket since the last acknowledgement
+  lastAckAt: 0,
+  acksAwaited: [],          // {n, at}: acknowledgements sent whose `acked` has not come back, oldest first
   latencies: new Array(LATENCY_RING),
   latencyCount: 0,
   loss: null,               // what the page shows as lost (dataLoss()); null while live
@@ -157,8 +164,15 @@ const LOSS_SHORT = {
   service: 'the dashboard server has no telemetry from the hexactl service',
   telemetry: 'no telemetry has reached the page',
   loop: "the service's control loop has sent nothing",
+  late: 'the page is handling the telemetry more slowly than it comes',
   starting: 'no telemetry has reached the page yet',
 };
+/** The E-STOP warning's detail for a press awaiting its reply while the page has lost `loss`. */
+function notConfirmedYet(loss) {
+  const doubt = loss === 'late' ? 'its reply waits behind the telemetry the page has not handled yet'
+    : 'the service may not be running';
+  return `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so ${doubt}.`;
+}
 
 function estop() {
   // first on the wire: nothing the page does for the display comes before the request
@@ -177,7 +191,7 @@ function estop() {
     return;
   }
   // no live data: whether the service gets it is unknown, so say so now, not after the request's timeout
-  if (loss !== null) showEstopWarning(press, `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so the service may not be running.`);
+  if (loss !== null) showEstopWarning(press, notConfirmedYet(loss));
   estopState.awaiting += 1;
   replied.then((reply) => {
     estopState.awaiting -= 1;
@@ -464,8 +478,14 @@ function handleMessage(ev) {
       schedule();
       // every record, drawn or not (a hidden page draws none): its eight events may be gone from the next ones
       eventsPanel.onRecord(r);
+      applyLiveness(state.lastTelemetryAt);   // a page falling behind says so at once, not at the next tick
       break;
     }
+    case 'acked':
+      if (!Number.isSafeInteger(msg.n)) return;
+      while (state.acksAwaited.length > 0 && state.acksAwaited[0].n <= msg.n) state.acksAwaited.shift();
+      applyLiveness(performance.now());
+      break;
     case 'geometry': {
       const g = msg.geometry;
       if (!g || typeof g !== 'object') return;
@@ -501,12 +521,27 @@ function handleMessage(ev) {
   }
 }
 
-/** Tell the server the page has handled telemetry message `n` (every ACK_EVERY). */
+/** Tell the server the page has handled telemetry message `n` (every ACK_EVERY, and every ACK_INTERVAL_MS). */
 function acknowledge(n) {
   state.unacknowledged += 1;
-  if (state.unacknowledged < ACK_EVERY || !Number.isSafeInteger(n) || state.ws?.readyState !== WebSocket.OPEN) return;
+  const now = performance.now();
+  if (state.unacknowledged < ACK_EVERY && now - state.lastAckAt < ACK_INTERVAL_MS) return;
+  if (!Number.isSafeInteger(n) || state.ws?.readyState !== WebSocket.OPEN) return;
   state.unacknowledged = 0;
+  state.lastAckAt = now;
   state.ws.send(JSON.stringify({ type: 'ack', n }));
+  if (state.acksAwaited.length < ACKS_AWAITED_MAX) state.acksAwaited.push({ n, at: now });
+}
+
+/**
+ * How far behind the telemetry the page is, ms: since its oldest acknowledgement whose
+ * `acked` has not come back. The server sends `acked` behind everything it sent the page
+ * before it read the acknowledgement, so until it comes, nothing the page has handled is
+ * newer than that acknowledgement. One clock, the page's: a browser on another host's
+ * clock measures it as well. 0 with none awaited.
+ */
+function behindMs(now) {
+  return state.acksAwaited.length > 0 ? now - state.acksAwaited[0].at : 0;
 }
 
 function connect() {
@@ -522,6 +557,7 @@ function connect() {
   }
   state.ws = ws;
   state.unacknowledged = 0;
+  state.acksAwaited = [];
   ws.addEventListener('open', () => {
     state.wsOpen = true;
     state.link = null;
@@ -550,12 +586,15 @@ function connect() {
  * What the page has lost, or null while its telemetry is live:
  * 'server' (the WebSocket to the dashboard server is closed), 'service' (the dashboard server
  * says it has no telemetry from the service), 'telemetry' (none reached the page for STALE_MS),
- * 'starting' (none yet since the page opened; shown as lost after STALE_MS), 'loop' (telemetry
- * comes, but the service's control loop has sent nothing for REPORT_SILENT_S: its last state).
+ * 'starting' (none yet since the page opened; shown as lost after STALE_MS), 'late' (telemetry
+ * comes, but the page handles it more slowly than it comes and is over STALE_MS behind),
+ * 'loop' (telemetry comes, but the service's control loop has sent nothing for
+ * REPORT_SILENT_S: its last state).
  */
 function dataLoss(now) {
   const fresh = state.record !== null && now - state.lastTelemetryAt <= STALE_MS;
   if (state.wsOpen && state.link?.connected !== false && fresh) {
+    if (behindMs(now) > STALE_MS) return 'late';
     return state.record.loop?.report_age_s > REPORT_SILENT_S ? 'loop' : null;
   }
   if (!state.wsOpen) return state.record === null && now - pageStartedAt <= STALE_MS ? 'starting' : 'server';
@@ -565,6 +604,7 @@ function dataLoss(now) {
 
 function noDataFor(now, loss) {
   if (loss === 'loop') return `no loop report for ${Math.floor(state.record.loop.report_age_s)} s`;
+  if (loss === 'late') return `page ${Math.floor(behindMs(now) / 1000)} s behind`;
   const since = state.record !== null ? state.lastTelemetryAt : pageStartedAt;
   return `no data for ${Math.max(0, Math.floor((now - since) / 1000))} s`;
 }
@@ -575,12 +615,14 @@ const LOSS_TEXT = {
   service: "The dashboard server has no telemetry from the hexactl service: the service may have stopped, or its telemetry stalled. The page's E-STOP is still sent, but may not be carried out.",
   telemetry: "No telemetry from the hexactl service has reached the page: the service, or the dashboard's link to it, may have stopped. The page's E-STOP is still sent, but may not be carried out.",
   loop: "The hexactl service's control loop has sent nothing for over 1 s: its process is stopped or hung, and what the page shows is its last state. The actuators stop on their own watchdogs; the page's E-STOP is still sent, but cannot be carried out until the loop runs.",
+  late: "This page handles the service's telemetry more slowly than it comes (its browser or computer is overloaded, or the tab was held in the background): what it shows is over 2 s old. The page's E-STOP is still sent, but its confirmation comes late.",
 };
 const LOSS_TODO = {
   server: 'If the platform may be moving, use the HARDWARE E-STOP. The page reconnects by itself every 1 s.',
   service: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when telemetry returns.',
   telemetry: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when telemetry returns.',
   loop: 'If the platform may be moving, use the HARDWARE E-STOP. The page shows live data again by itself when the loop reports.',
+  late: 'If the platform may be moving, use the HARDWARE E-STOP. Close what loads this computer, or use a page on another; this one shows live data again by itself once it catches up.',
 };
 
 /** Live: the readouts as drawn. No live data: state and motion UNKNOWN, the banner, the rest greyed. */
@@ -609,7 +651,7 @@ function applyLiveness(now) {
   }
   // an E-stop sent while live whose reply has not come when the data are lost: not confirmed
   if (loss !== null && estopState.awaiting > 0 && !estopState.warning) {
-    showEstopWarning(0, `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so the service may not be running.`);
+    showEstopWarning(0, notConfirmedYet(loss));
   }
   if (!lost) return;
   const age = noDataFor(now, loss);
@@ -645,7 +687,7 @@ window.hexactlDashboard = {
   get connected() { return state.wsOpen && state.link !== null && state.link.connected === true; },
   get record() { return state.record; },
   get geometry() { return state.geometry; },
-  /** null while live telemetry is shown, else 'server', 'service', 'telemetry' or 'starting'. */
+  /** null while live telemetry is shown, else 'server', 'service', 'telemetry', 'loop', 'late' or 'starting'. */
   get dataLoss() { return state.loss; },
   /** The E-stop presses' events in order: {press, what ('pressed', 'sent', 'warning', 'reply-ok', 'reply-failed', 'cleared'), detail}. */
   estopEvents: () => estopState.events.map((e) => ({ ...e })),
