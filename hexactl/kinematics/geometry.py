@@ -331,6 +331,22 @@ def _numeric(text: str) -> bool:
     return True
 
 
+def validation_location(location: Sequence[str | int], named_items: Mapping[str, Sequence[str]] | None = None) -> str:
+    """Where a pydantic problem is, as a person writes it: ``pose[5]``, ``axes.x.amplitude``,
+    ``axes.q (the key)`` for a key at fault (pydantic's ``axes.q.[key]``), and an item of a
+    list named as its file writes it (``soft_limits.upper.yaw``: ``named_items``, below)."""
+    text = ""
+    for part in location:
+        if isinstance(part, int):
+            names = (named_items or {}).get(text, ())
+            text += f".{names[part]}" if part < len(names) else f"[{part}]"
+        elif part == "[key]":
+            text += " (the key)"
+        else:
+            text += f".{part}" if text else part
+    return text
+
+
 def describe_validation_error(error: ValidationError, source: str,
                               named_items: Mapping[str, Sequence[str]] | None = None) -> str:
     """One line per problem, ``source: key[index]: message``, for people rather than parsers.
@@ -338,13 +354,7 @@ def describe_validation_error(error: ValidationError, source: str,
     the names of its items, so that one is named as written (``soft_limits.upper.yaw``)."""
     lines = []
     for problem in error.errors():
-        location = ""
-        for part in problem["loc"]:
-            if isinstance(part, int):
-                names = (named_items or {}).get(location, ())
-                location += f".{names[part]}" if part < len(names) else f"[{part}]"
-            else:
-                location += f".{part}" if location else str(part)
+        location = validation_location(problem["loc"], named_items)
         message = problem["msg"].removeprefix("Value error, ")
         if problem["type"] == "finite_number":
             message = "must be a finite number (NaN and inf are refused)"

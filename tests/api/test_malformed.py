@@ -140,6 +140,36 @@ def test_a_text_refused_by_its_pattern_says_what_it_may_contain(command, field, 
     assert "pattern" not in refused.value.message and refused.value.details[0]["field"] == field
 
 
+@pytest.mark.parametrize("fields, field, problem", [
+    # Found from outside: pydantic's union refused both kinds of sequence, one of them wrongly:
+    # "sequence.str: Input should be a valid string; sequence.InlineSequence.waypoints.0.duration: …".
+    ({"cmd": "play", "sequence": {"name": "s", "waypoints": [{"pose": [0] * 6, "duration": "2"}]}},
+     "sequence.waypoints[0].duration", "Input should be a valid number"),
+    ({"cmd": "play", "sequence": {"name": "s", "waypoints": [{"pose": [0] * 5}]}},
+     "sequence.waypoints[0].pose", "a pose is six numbers [x, y, z, roll, pitch, yaw], got 5"),
+    ({"cmd": "play", "sequence": ["x_sweep"]},
+     "sequence", "a sequence is its name (a string) or the sequence itself (an object), got an array"),
+    ({"cmd": "validate_pose", "pose": [0, 0, 0, 0, 0, None]}, "pose[5]", "Input should be a valid number"),
+    # pydantic's location of a key at fault was "axes.q.[key]"
+    ({"cmd": "wave", "frequency_hz": 1.0, "cycles": 1, "axes": {"q": {"amplitude": 1.0}}},
+     "axes.q (the key)", "Input should be 'x', 'y', 'z', 'roll', 'pitch' or 'yaw'"),
+])
+def test_a_problem_is_told_once_where_a_client_would_write_it(fields, field, problem) -> None:
+    with pytest.raises(ApiError) as refused:
+        decode_request(json.dumps({"v": 1, "id": 1, **fields}).encode())
+    assert refused.value.code == "invalid_request"
+    assert refused.value.details == [{"field": field, "problem": problem}]
+    assert refused.value.message == f"{fields['cmd']}: {field}: {problem}"
+
+
+def test_a_sequence_is_played_by_its_name_or_given_whole() -> None:
+    named = decode_request(json.dumps({"v": 1, "id": 1, "cmd": "play", "sequence": "x_sweep"}).encode())
+    given = decode_request(json.dumps({"v": 1, "id": 1, "cmd": "play", "sequence": {
+        "name": "s", "waypoints": [{"pose": [1, 0, 0, 0, 0, 0], "duration": 2}]}}).encode())
+    assert named.sequence == "x_sweep"
+    assert given.sequence.name == "s" and given.sequence.waypoints[0].duration == 2.0
+
+
 def test_a_calibrations_source_may_be_any_one_line_path() -> None:
     request = {"v": 1, "id": 1, "cmd": "load_calibration", "toml": "", "source": "/home/jos\u00e9/cal 2.toml"}
     assert decode_request(json.dumps(request).encode()).source == "/home/jos\u00e9/cal 2.toml"

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal, Union, get_args
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, ValidatorFunctionWrapHandler, WrapValidator, model_validator
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, MAX_RECORDING_DIVISOR, MAX_RECORDING_S, RECORDING_NAME_PATTERN
 from hexactl.control.core import KEPT_EVENTS
@@ -70,6 +70,11 @@ OneLine = _text_matching(r"^[^\x00-\x1f\x7f-\x9f\u2028\u2029]+$",
 
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
+
+
+def json_type(value: Any) -> str:
+    """What a JSON value that is not an object is, for a refusal: "an array", "a string"…"""
+    return {list: "an array", str: "a string", bool: "a boolean", type(None): "null"}.get(type(value), "a number")
 
 
 class _Message(BaseModel):
@@ -281,11 +286,22 @@ class InlineSequence(_Message):
     waypoints: list[Waypoint] = Field(min_length=1, max_length=MAX_WAYPOINTS)
 
 
+def _named_or_given(value: Any, union: ValidatorFunctionWrapHandler) -> str | InlineSequence:
+    """A sequence's name or the sequence, told apart by the JSON type, so that a mistake in
+    one is refused as that one (pydantic's union refused both: ``sequence.str: Input should
+    be a valid string; sequence.InlineSequence.waypoints.0.duration: …``)."""
+    if isinstance(value, dict):
+        return InlineSequence.model_validate(value)  # its problems are told at sequence.…
+    if isinstance(value, str | InlineSequence):
+        return union(value)
+    raise ValueError(f"a sequence is its name (a string) or the sequence itself (an object), got {json_type(value)}")
+
+
 class PlayRequest(_Request):
     """Play a sequence, every waypoint's path validated before the first moves."""
 
     cmd: Literal["play"]
-    sequence: str | InlineSequence = Field(
+    sequence: Annotated[str | InlineSequence, WrapValidator(_named_or_given)] = Field(
         description="a built-in name (x_sweep, y_rotation, compound), a .toml sequence file or a .csv plan "
         "(from hexactl plan-leglock) in the data directories, or the sequence itself"
     )

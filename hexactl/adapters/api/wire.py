@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
-from hexactl.adapters.api.messages import COMMANDS, Request
+from hexactl.adapters.api.messages import COMMANDS, Request, json_type
 from hexactl.adapters.api.protocol import PROTOCOL_VERSION
+from hexactl.kinematics.geometry import validation_location
 
 MAX_REQUEST_BYTES = 64 * 1024
 """Largest request answered; a larger one gets ``too_large``."""
@@ -99,7 +100,7 @@ def decode_request(body: bytes) -> Request:
     except (ValueError, RecursionError) as error:  # JSONDecodeError is a ValueError
         raise ApiError(ErrorCode.MALFORMED_JSON, f"not valid JSON: {_first_line(error)}") from None
     if not isinstance(document, dict):
-        raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is a JSON object, got {_json_type(document)}")
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is a JSON object, got {json_type(document)}")
     if "id" not in document:
         raise ApiError(ErrorCode.INVALID_REQUEST, "missing id")
     request_id = document["id"]
@@ -126,7 +127,7 @@ def decode_request(body: bytes) -> Request:
         return _REQUEST.validate_python(document)
     except ValidationError as error:
         problems = [
-            {"field": ".".join(str(part) for part in problem["loc"][1:]), "problem": problem["msg"].removeprefix("Value error, ")}
+            {"field": validation_location(problem["loc"][1:]), "problem": problem["msg"].removeprefix("Value error, ")}
             for problem in error.errors(include_url=False, include_input=False, include_context=False)
         ]
         message = "; ".join(f"{p['field']}: {p['problem']}" if p["field"] else p["problem"] for p in problems)
@@ -235,10 +236,6 @@ def _finite_float(text: str) -> float:
     if not isfinite(value):
         raise ValueError(f"number {text[:40]} is out of range")
     return value
-
-
-def _json_type(value: Any) -> str:
-    return {list: "an array", str: "a string", bool: "a boolean", type(None): "null"}.get(type(value), "a number")
 
 
 def _first_line(error: BaseException) -> str:

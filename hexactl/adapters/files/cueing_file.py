@@ -32,6 +32,7 @@ from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
 from hexactl.adapters.files.text import read_text
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import GRAVITY_M_S2, VehicleTrajectory
+from hexactl.kinematics.geometry import validation_location
 
 VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
 
@@ -83,9 +84,7 @@ def _describe(error: ValidationError, source: str) -> str:
             message = "too many values, one per axis as in config/cueing.toml"
         elif problem["type"] == "tuple_type":
             message = "must be a list of numbers, one per axis as in config/cueing.toml"
-        location = ""
-        for part in where:
-            location += f"[{part}]" if isinstance(part, int) else (f".{part}" if location else str(part))
+        location = validation_location(where)
         lines.append(f"{source}: {location}: {message}" if location else f"{source}: {message}")
     return "\n".join(lines)
 
