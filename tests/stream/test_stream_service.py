@@ -149,12 +149,16 @@ def test_hexactl_cue_streams_a_vehicle_file_into_the_service(served, client, tmp
     def scenario() -> None:
         assert main(["cue", str(short), "--api", served.api, "--timeout", str(WAIT_S)]) == 0
         out = capsys.readouterr().out
-        assert "200 poses at 100 Hz" in out and "streamed 200 poses" in out, out
+        assert "200 poses at 100 Hz" in out and "streamed 200 poses (0 dropped here)" in out, out
         wait_for(lambda: status(client)["stream"] is None, "the stream's end")
+        counted = wait_for(lambda: (c := status(client)["stream_input"])["received"] >= 200 and c, "every pose read")
+        # Every pose reached the service, and the loop followed the stream. How many it took
+        # is the host's business: a cue starved of the CPU sends the poses it is late with
+        # at once, and the loop takes the newest (a busy host's run took 77 of the 200).
+        assert counted["received"] == 200 and counted["malformed"] == counted["out_of_order"] == 0, counted
         record = status(client)
-        assert record["last_stream"]["reason"] == "closed by the client" and record["last_stream"]["targets"] > 100
-        assert record["stream_input"]["malformed"] == 0 and record["loop"]["guard_clamps"] == 0
-        assert record["pose_command"] != [0.0] * 6
+        assert record["last_stream"]["reason"] == "closed by the client" and record["last_stream"]["targets"] >= 1
+        assert record["loop"]["guard_clamps"] == 0 and record["pose_command"] != [0.0] * 6
 
     tolerating_stalls(client, scenario)
 
