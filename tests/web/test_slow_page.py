@@ -25,7 +25,8 @@ from hexactl.adapters.web.bridge import TELEMETRY_WINDOW
 from tests.web.test_dashboard import Rig, page_on_a_service, wait_for
 from tools.browser import SLOWED_TELEMETRY
 
-SLOW_RECORDS = 50  # at 100 ms each (:data:`~tools.browser.SLOWED_TELEMETRY`): 10 records a second of the 50 that come
+SLOW_MS = 100  # a record (:data:`~tools.browser.SLOWED_TELEMETRY`): 10 records a second of the 50 that come
+SLOW_RECORDS = 50
 AFTER = 50  # records handled after the slow spell, to see what was still queued for the page
 
 STALE_MS = 2000  # static/app.js: a page further behind than this shows no live data
@@ -44,7 +45,8 @@ def rig(tmp_path_factory) -> Iterator[Rig]:
 
 def test_a_page_slower_than_the_records_falls_no_further_behind_than_the_window(rig) -> None:
     wait_for(lambda: rig.page("return window.hexactlDashboard.dataLoss") is None, "live data on the page")
-    rig.page(f"window.hexactlTestSlow.remaining = {SLOW_RECORDS}")
+    rig.page(f"const slow = window.hexactlTestSlow; slow.handled = []; slow.endedAt = null; slow.ms = {SLOW_MS}; "
+             f"slow.remaining = {SLOW_RECORDS}")
     ended = wait_for(lambda: rig.page("return window.hexactlTestSlow.endedAt"), "the page's slow spell over")
     handled = wait_for(lambda: (h := rig.page("return window.hexactlTestSlow.handled"))
                        and sum(1 for m in h if m["at"] >= ended) >= AFTER and h, f"{AFTER} records handled after it")
