@@ -15,7 +15,8 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal, Union, get_args
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, JsonValue, ValidatorFunctionWrapHandler, WrapValidator, model_validator
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, JsonValue, ValidatorFunctionWrapHandler,
+                      WrapValidator, model_validator)
 
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, MAX_RECORDING_DIVISOR, MAX_RECORDING_S, RECORDING_NAME_PATTERN
 from hexactl.control.core import KEPT_EVENTS

@@ -19,7 +19,7 @@ const TICK_MS = 250;          // the staleness check and the "no data for N s" c
 // the records falls no further behind than that. Below the window, or the page stalls.
 const ACK_EVERY = 8;
 // Also an acknowledgement at least this often while telemetry is handled: how far behind
-// the page is, is timed from its acknowledgements (ackAwaited), so a page slower than the
+// the page is, is timed from its acknowledgements (acksAwaited), so a page slower than the
 // records learns it soon, not after ACK_EVERY of its slow records.
 const ACK_INTERVAL_MS = 250;
 const ACKS_AWAITED_MAX = 64;  // more awaited means the server is not answering them: the oldest is what counts
