@@ -446,13 +446,20 @@ def test_a_page_is_sent_telemetry_no_further_ahead_of_it_than_the_window_and_the
             bridge._set_link(False, "no telemetry: a test")  # not held back by the window
             await until(lambda: page.sent[-1]["type"] == "link" and not page.sent[-1]["connected"], "the link lost")
             acknowledged = sent()[TELEMETRY_WINDOW // 2 - 1]["n"]
+            acknowledged_ms = time.time() * 1000.0
             page.acknowledge(acknowledged)  # half the window: the newest, not those missed
             await until(lambda: records - 1 in page.telemetry(), "the newest record")
+            answered_ms = time.time() * 1000.0
             assert len(sent()) == TELEMETRY_WINDOW + 1 and len(bridge.outboxes[0]) == 0
             # The page is told its ack was received, behind all it was sent before the
             # ack and ahead of the record sent after: it times from its ack to this how
             # far behind it is.
-            assert page.sent[-2:] == [{"type": "acked", "n": acknowledged}, sent()[-1]]
+            answer, newest = page.sent[-2:]
+            assert newest == sent()[-1] and answer.keys() == {"type", "n", "server_ms"}
+            assert answer["type"] == "acked" and answer["n"] == acknowledged
+            # this host's clock when the ack was read, as telemetry's sent_ms: a page on another
+            # host's clock measures how far off it is
+            assert acknowledged_ms - 0.1 <= answer["server_ms"] <= answered_ms + 0.1  # sent to 0.1 ms
         finally:
             page.incoming.put_nowait(DISCONNECT)
             await asyncio.wait_for(serving, WAIT_S)

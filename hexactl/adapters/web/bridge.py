@@ -141,10 +141,12 @@ class Outbox:
     def acknowledge(self, number: int) -> None:
         """On the event loop: the page has handled telemetry message ``number`` and every
         one before it. It is told so (``acked``) behind everything it was sent before: the
-        time that takes, on the page's clock alone, is how far behind the page is."""
+        time that takes, on the page's clock alone, is how far behind the page is. The
+        message carries this host's clock (``server_ms``, as telemetry's ``sent_ms``): with
+        the round trip, a page on another host's clock learns how far its clock is off."""
         while self._unacknowledged and self._unacknowledged[0] <= number:
             self._unacknowledged.popleft()
-        self.put(Update("acked", f'{{"type": "acked", "n": {number}}}'))
+        self.put(Update("acked", f'{{"type": "acked", "n": {number}, "server_ms": {time.time() * 1000.0:.1f}}}'))
 
     async def get(self) -> str:
         """The next message's text: the first kind of :data:`OUTBOX_KINDS` held that may go."""

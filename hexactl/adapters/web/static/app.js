@@ -23,6 +23,9 @@ const ACK_EVERY = 8;
 // records learns it soon, not after ACK_EVERY of its slow records.
 const ACK_INTERVAL_MS = 250;
 const ACKS_AWAITED_MAX = 64;  // more awaited means the server is not answering them: the oldest is what counts
+// The dashboard host's clock, from the acknowledgements' round trips: the offset of the
+// quickest of the last CLOCK_SAMPLES (the one least held up on the way, NTP's rule).
+const CLOCK_SAMPLES = 32;
 const pageStartedAt = performance.now();
 
 const state = {
@@ -40,7 +43,9 @@ const state = {
   lastTelemetryAt: 0,
   unacknowledged: 0,        // telemetry handled on this WebSocket since the last acknowledgement
   lastAckAt: 0,
-  acksAwaited: [],          // {n, at}: acknowledgements sent whose `acked` has not come back, oldest first
+  acksAwaited: [],          // {n, at, wall}: acknowledgements sent whose `acked` has not come back, oldest first
+  clockSamples: [],         // {roundTrip, offset}, ms: the dashboard host's clock minus the page's, per `acked`
+  clockOffset: null,        // ms to add to the page's Date.now() for the dashboard host's; null until measured
   latencies: new Array(LATENCY_RING),
   latencyCount: 0,
   loss: null,               // what the page shows as lost (dataLoss()); null while live
@@ -440,8 +445,8 @@ function frame(now) {
     if (state.drawInfo) {
       const { age_ms: age, sent_ms: sent } = state.drawInfo;
       state.drawInfo = null;
-      if (Number.isFinite(age) && Number.isFinite(sent)) {
-        state.latencies[state.latencyCount % LATENCY_RING] = age + (Date.now() - sent);
+      if (Number.isFinite(age) && Number.isFinite(sent) && state.clockOffset !== null) {
+        state.latencies[state.latencyCount % LATENCY_RING] = age + (Date.now() + state.clockOffset - sent);
         state.latencyCount += 1;
       }
     }
@@ -481,11 +486,17 @@ function handleMessage(ev) {
       applyLiveness(state.lastTelemetryAt);   // a page falling behind says so at once, not at the next tick
       break;
     }
-    case 'acked':
+    case 'acked': {
       if (!Number.isSafeInteger(msg.n)) return;
-      while (state.acksAwaited.length > 0 && state.acksAwaited[0].n <= msg.n) state.acksAwaited.shift();
-      applyLiveness(performance.now());
+      const now = performance.now();
+      let answered = null;
+      while (state.acksAwaited.length > 0 && state.acksAwaited[0].n <= msg.n) answered = state.acksAwaited.shift();
+      if (answered !== null && answered.n === msg.n && Number.isFinite(msg.server_ms)) {
+        timeClock(answered, msg.server_ms, now);
+      }
+      applyLiveness(now);
       break;
+    }
     case 'geometry': {
       const g = msg.geometry;
       if (!g || typeof g !== 'object') return;
@@ -530,7 +541,20 @@ function acknowledge(n) {
   state.unacknowledged = 0;
   state.lastAckAt = now;
   state.ws.send(JSON.stringify({ type: 'ack', n }));
-  if (state.acksAwaited.length < ACKS_AWAITED_MAX) state.acksAwaited.push({ n, at: now });
+  if (state.acksAwaited.length < ACKS_AWAITED_MAX) state.acksAwaited.push({ n, at: now, wall: Date.now() });
+}
+
+/**
+ * One sample of the dashboard host's clock against the page's: the server read the
+ * acknowledgement `ack` and stamped `serverMs` between its sending and `now` (the page's
+ * performance clock), so at about half the round trip. A browser on another host (through
+ * an ssh tunnel) has a clock of its own; the latency it shows is on the dashboard's.
+ */
+function timeClock(ack, serverMs, now) {
+  const roundTrip = now - ack.at;
+  state.clockSamples.push({ roundTrip, offset: serverMs - (ack.wall + roundTrip / 2) });
+  if (state.clockSamples.length > CLOCK_SAMPLES) state.clockSamples.shift();
+  state.clockOffset = state.clockSamples.reduce((best, s) => (s.roundTrip < best.roundTrip ? s : best)).offset;
 }
 
 /**
