@@ -47,7 +47,7 @@ from hexactl.adapters.can.bus_monitor import BusMonitor
 from hexactl.adapters.can.transport import open_bus
 from hexactl.adapters.files.geometry_file import load_geometry
 from hexactl.adapters.files.config_path import default_config_path
-from tests.reliability.support import ATTEMPTS, STALL_FAULTS, enable, last_event, silence_braked
+from tests.reliability.support import ATTEMPTS, STALL_FAULTS, braked_since, enable, last_event, silence_braked
 from tests.vcan.test_service_over_vcan import (
     POSE_ABS,
     RATE_HZ,
@@ -223,9 +223,11 @@ def move_through_stalls(client: HexactlClient, goal: list[float], reached: Calla
             if error.code != "latched":
                 raise
         record = wait_status(client, lambda r: reached(r) or r["state"] != "enabled" or silence_braked(r, since), what)
-        if record["state"] == "enabled" and reached(record):
+        # A move braked on the API's silence ends at rest too, short of its goal: not reached.
+        braked = braked_since(client, since)
+        if record["state"] == "enabled" and reached(record) and not braked:
             return record
-        by_stall = stalled(record["faults"]) if record["faults"] else silence_braked(record, since)
+        by_stall = stalled(record["faults"]) if record["faults"] else braked
         assert attempt < ATTEMPTS and by_stall, (record["state"], record["faults"], record["events"])
         print(f"{what}: attempt {attempt} stopped by a stall of the guest: {record['faults'] or [e['code'] for e in record['events'] if e['seq'] > since]}")
         attempt += 1
