@@ -27,7 +27,7 @@ from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_fo
 TAP = """
 (() => {
   const Native = window.WebSocket;
-  const tap = { dropTelemetry: false, recordFields: null, sent: [], lastTelemetryAt: null, losses: 0,
+  const tap = { dropTelemetry: false, recordFields: null, sent: [], lastTelemetryAt: null, losses: 0, late: false,
                 holdEventsReplies: false, failEventsReplies: 0, eventsIds: new Set(), heldReplies: [] };
   tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
   window.hexactlTestTap = tap;
@@ -38,20 +38,26 @@ TAP = """
     }
     addEventListener(type, listener, options) {
       if (type !== 'message') return super.addEventListener(type, listener, options);
+      const handle = (event) => {
+        listener(event);
+        const late = window.hexactlDashboard?.dataLoss === 'late';  // behind the records: lost on its own too
+        if (late && !tap.late) tap.losses += 1;
+        tap.late = late;
+      };
       return super.addEventListener(type, (event) => {
         const message = JSON.parse(event.data);
         if (message.type === 'reply' && tap.failEventsReplies > 0 && tap.eventsIds.has(message.id)) {
           tap.failEventsReplies -= 1;
           message.reply = { ok: false, error: { code: 'loop_silent', message: 'failed by the test tap' } };
-          listener(new MessageEvent('message', { data: JSON.stringify(message) }));
+          handle(new MessageEvent('message', { data: JSON.stringify(message) }));
           return;
         }
         if (message.type === 'reply' && tap.holdEventsReplies && tap.eventsIds.has(message.id)) {
-          tap.heldReplies.push(() => listener(event));
+          tap.heldReplies.push(() => handle(event));
           return;
         }
         if (message.type === 'link' && message.connected !== true) tap.losses += 1;
-        if (message.type !== 'telemetry') { listener(event); return; }
+        if (message.type !== 'telemetry') { handle(event); return; }
         const now = performance.now();
         if (tap.dropTelemetry) {  // lost on the way, after the server's window: acknowledged, as a page would
           tap.lastTelemetryAt = null;
@@ -60,9 +66,9 @@ TAP = """
         }
         if (tap.lastTelemetryAt !== null && now - tap.lastTelemetryAt > LOSS_GAP_MS) tap.losses += 1;
         tap.lastTelemetryAt = now;
-        if (tap.recordFields === null) { listener(event); return; }
+        if (tap.recordFields === null) { handle(event); return; }
         Object.assign(message.record, tap.recordFields);
-        listener(new MessageEvent('message', { data: JSON.stringify(message) }));
+        handle(new MessageEvent('message', { data: JSON.stringify(message) }));
       }, options);
     }
     send(data) {
@@ -82,8 +88,9 @@ holds the replies to the page's ``events`` requests until ``releaseReplies()``,
 ``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``), ``sent``
 lists the ``cmd`` of every command the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
-service's link down, or records further apart than 1.5 s (the page calls 2 s stale), as
-when a busy host holds up the browser or the dashboard."""
+service's link down, records further apart than 1.5 s (the page calls 2 s stale), or the
+page further behind the records than it shows as live (``late``), as when a busy host holds
+up the browser or the dashboard."""
 
 ATTEMPTS = 3
 

@@ -9,8 +9,9 @@ from the internet. Commands arrive on the WebSocket as ``{"type": "command", "id
 "cmd": NAME, …fields}`` and go to the API unchanged; the reply comes back as
 ``{"type": "reply", "id": N, "reply": …}``. The page acknowledges the telemetry it has
 handled (``{"type": "ack", "n": N}``), and is sent no more than a window ahead of it; each
-acknowledgement read is answered ``{"type": "acked", "n": N}`` behind what the page was
-sent before, which times how far behind the page is.
+acknowledgement read is answered ``{"type": "acked", "n": N, "server_ms": …}`` behind what
+the page was sent before, which times how far behind the page is, and how far its clock is
+off this host's.
 
 Loopback only, a request whose ``Host`` or WebSocket ``Origin`` is not this server's is
 refused, and no response may be shown in another page's frame: another web site open in
