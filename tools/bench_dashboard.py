@@ -97,7 +97,7 @@ from bench_service import Cyclictest, load_average  # noqa: E402
 
 from hexactl.adapters.api.client import CommandError, HexactlClient  # noqa: E402
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY  # noqa: E402
-from tools.browser import SLOWED_TELEMETRY, dashboard, headless_chromium  # noqa: E402
+from tools.browser import PAGE_STALE_MS, SLOWED_TELEMETRY, dashboard, headless_chromium  # noqa: E402
 from tools.serving import LOOPBACK, serve, wait_for_tool as wait_for  # noqa: E402
 
 RATE_HZ = 500
@@ -476,8 +476,6 @@ def one_row_table(title: str, columns: list[str], row: list[str], figures: dict[
 
 
 SLOW_PAGE_BIN_S = 2.0
-STALE_MS = 2000.0
-"""static/app.js: a page further behind than this shows no live data."""
 AFTER_SLOW_S = 10.0
 """How long the page is followed after its slow spell: what was queued for it shows then."""
 
@@ -509,10 +507,10 @@ def slow_page(args: argparse.Namespace) -> int:
             behind = [m["done"] - m["sent_ms"] for m in spell]
             rows.append({"from_s": first, "handled": len(spell), "behind_max_ms": max(behind),
                          "shown_not_live": sum(m["loss"] is not None for m in spell),
-                         "live_over_stale": sum(m["loss"] is None and b > STALE_MS for m, b in zip(spell, behind))})
+                         "live_over_stale": sum(m["loss"] is None and b > PAGE_STALE_MS for m, b in zip(spell, behind))})
     print(f"A page slowed by {args.slow_page:g} ms a telemetry message for {args.seconds:g} s ({records} records), "
           f"then followed {AFTER_SLOW_S:g} s (behind: from the dashboard's receipt to the page done with it):\n")
-    print(f"| from s | records handled | behind, max ms | shown not live | shown live over {STALE_MS:g} ms behind |")
+    print(f"| from s | records handled | behind, max ms | shown not live | shown live over {PAGE_STALE_MS:g} ms behind |")
     print("| --- | --- | --- | --- | --- |")
     for row in rows:
         print(f"| {row['from_s']} | {row['handled']} | {row['behind_max_ms']:.0f} | {row['shown_not_live']} | "

@@ -39,6 +39,10 @@ SCRIPT_TIMEOUT_S = 120.0
 
 _SERVING = re.compile(r"dashboard on (?P<url>http://\S+/)")
 
+PAGE_STALE_MS = 2000.0
+"""static/app.js's STALE_MS: a page with no record for longer, or further behind the records, shows
+no live data."""
+
 SLOWED_TELEMETRY = """
 (() => {
   const Native = window.WebSocket;

@@ -23,17 +23,16 @@ import pytest
 
 from hexactl.adapters.web.bridge import TELEMETRY_WINDOW
 from tests.web.test_dashboard import Rig, page_on_a_service, wait_for
-from tools.browser import SLOWED_TELEMETRY
+from tools.browser import PAGE_STALE_MS, SLOWED_TELEMETRY
 
 SLOW_MS = 100  # a record (:data:`~tools.browser.SLOWED_TELEMETRY`): 10 records a second of the 50 that come
 SLOW_RECORDS = 50
 AFTER = 50  # records handled after the slow spell, to see what was still queued for the page
 
-STALE_MS = 2000  # static/app.js: a page further behind than this shows no live data
 FAR_SLOW_MS = 400  # a record: the window's 16 are 6.4 s of the page's work
 FAR_SLOW_RECORDS = 25
 LATE_CADENCE_MS = 1500
-"""What the page may take beyond STALE_MS to see that it is behind: it times that from its
+"""What the page may take beyond PAGE_STALE_MS to see that it is behind: it times that from its
 acknowledgements, here one a record (400 ms), and a busy host delays its work some more."""
 
 
@@ -69,7 +68,7 @@ def test_a_page_far_behind_the_records_shows_no_live_data_until_it_has_caught_up
     wait_for(lambda: page("return window.hexactlTestSlow.endedAt"), "the page's slow spell over")
     wait_for(lambda: page("return window.hexactlDashboard.dataLoss") is None, "live data on the page again")
     handled = page("return window.hexactlTestSlow.handled.filter((m) => m.done !== undefined)")
-    behind = [m for m in handled if m["done"] - m["sent_ms"] > STALE_MS + LATE_CADENCE_MS]
+    behind = [m for m in handled if m["done"] - m["sent_ms"] > PAGE_STALE_MS + LATE_CADENCE_MS]
     assert len(behind) >= 5, handled  # the spell did put the page that far behind
     assert [m for m in behind if m["loss"] is None] == [], "shown live while far behind"
     shown = next(m["shown"] for m in handled if m["loss"] == "late" and "shown" in m)
