@@ -97,7 +97,7 @@ from bench_service import Cyclictest, load_average  # noqa: E402
 
 from hexactl.adapters.api.client import CommandError, HexactlClient  # noqa: E402
 from hexactl.control.realtime import DEFAULT_FIFO_PRIORITY  # noqa: E402
-from tools.browser import PAGE_STALE_MS, SLOWED_TELEMETRY, dashboard, headless_chromium  # noqa: E402
+from tools.browser import PAGE_STALE_MS, SLOWED_TELEMETRY, dashboard, headless_chromium, page_constant  # noqa: E402
 from tools.serving import LOOPBACK, serve, wait_for_tool as wait_for  # noqa: E402
 
 RATE_HZ = 500
@@ -210,14 +210,16 @@ def _frames(buffer: bytearray) -> list[tuple[int, bytes]]:
 HEAD_BYTES = 48
 TELEMETRY_HEAD = re.compile(rb'^\{"type": "telemetry", "n": (\d+),')
 """A telemetry message's start, as the dashboard writes it, with its number."""
-ACK_EVERY = 8
-"""As the page (static/app.js): an acknowledgement every 8th telemetry message."""
+ACK_EVERY = int(page_constant("ACK_EVERY"))
+"""As the page: an acknowledgement every ACK_EVERY-th telemetry message."""
 
 
 def _acknowledgement(head: bytes, counted: list[int]) -> bytes:
     """The ack frame due after the text frame starting ``head`` (``counted``: the page's
     telemetry messages since its last ack, in a list of one), else b""."""
     if (found := TELEMETRY_HEAD.match(head)) is None:
+        if head.startswith(b'{"type": "telemetry"'):  # unacknowledged, the page would stall: say why
+            raise SystemExit(f"a telemetry message no longer starts with its number: {head!r}; update TELEMETRY_HEAD")
         return b""
     counted[0] += 1
     if counted[0] < ACK_EVERY:

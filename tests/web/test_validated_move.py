@@ -28,7 +28,10 @@ TAP = """
 (() => {
   const Native = window.WebSocket;
   const tap = { dropTelemetry: false, recordFields: null, sent: [], lastTelemetryAt: null, losses: 0, late: false,
-                holdEventsReplies: false, failEventsReplies: 0, eventsIds: new Set(), heldReplies: [] };
+                holdEventsReplies: false, failEventsReplies: 0, eventsIds: new Set(), heldReplies: [],
+                jogIds: new Set(), jogReplyFields: null, intervals: [] };
+  const nativeSetInterval = window.setInterval.bind(window);
+  window.setInterval = (callback, ms, ...rest) => { tap.intervals.push(ms); return nativeSetInterval(callback, ms, ...rest); };
   tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
   window.hexactlTestTap = tap;
   window.WebSocket = class extends Native {
@@ -49,6 +52,11 @@ TAP = """
         if (message.type === 'reply' && tap.failEventsReplies > 0 && tap.eventsIds.has(message.id)) {
           tap.failEventsReplies -= 1;
           message.reply = { ok: false, error: { code: 'loop_silent', message: 'failed by the test tap' } };
+          handle(new MessageEvent('message', { data: JSON.stringify(message) }));
+          return;
+        }
+        if (message.type === 'reply' && tap.jogReplyFields !== null && tap.jogIds.has(message.id)) {
+          Object.assign(message.reply, tap.jogReplyFields);
           handle(new MessageEvent('message', { data: JSON.stringify(message) }));
           return;
         }
@@ -76,6 +84,7 @@ TAP = """
       if (command.type !== 'command') return super.send(data);
       tap.sent.push(command.cmd);
       if (command.cmd === 'events') tap.eventsIds.add(command.id);
+      if (command.cmd === 'jog') tap.jogIds.add(command.id);
       return super.send(data);
     }
   };
@@ -85,8 +94,10 @@ TAP = """
 record, ``recordFields`` (not null) replaces those fields of each record (the frames held,
 a field the service cannot be made to send), ``holdEventsReplies``
 holds the replies to the page's ``events`` requests until ``releaseReplies()``,
-``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``), ``sent``
-lists the ``cmd`` of every command the page sends, and ``losses`` counts the times the page may
+``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``),
+``jogReplyFields`` (not null) replaces those fields of the replies to its jogs, ``intervals``
+lists the period of every ``setInterval`` the page starts, ``sent`` lists the ``cmd`` of every
+command the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
 service's link down, records further apart than 1.5 s (the page calls 2 s stale), or the
 page further behind the records than it shows as live (``late``), as when a busy host holds
@@ -272,6 +283,34 @@ def test_a_held_jog_stops_being_renewed_when_only_the_pages_telemetry_is_stale(r
         finally:
             ActionChains(rig.driver).release(button).perform()
             tap(rig)
+
+    attempted(rig, scenario)
+
+
+def test_a_held_jog_is_renewed_as_often_as_the_services_deadman_asks(rig) -> None:
+    """Renewed four times a deadman, as ``hexactl jog`` renews, the deadman being what the
+    service's reply says (the page renewed every 100 ms whatever it said: two renewals a
+    0.2 s deadman, one late renewal from a brake). Here the tap makes the replies say 0.6 s."""
+    deadman_s = 0.6
+
+    def scenario() -> None:
+        ready_in_frames(rig)
+        rig.fill("#jog-speed", 5)
+        start_x = rig.status()["pose_command"][0]
+        rig.page(f"const t = window.hexactlTestTap; t.jogReplyFields = {{deadman_s: {deadman_s}}}; t.intervals = [];")
+        button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
+        ActionChains(rig.driver).click_and_hold(button).perform()
+        try:
+            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+            wait_for(lambda: deadman_s * 1000 / 4 in rig.page("return window.hexactlTestTap.intervals"),
+                     "the page renewing every quarter of the deadman its reply stated",
+                     seen=lambda: rig.page("return window.hexactlTestTap.intervals"))
+            renewals = sent(rig, "jog")
+            wait_for(lambda: sent(rig, "jog") >= renewals + 3, "the page renewing the held jog")
+        finally:
+            ActionChains(rig.driver).release(button).perform()
+            rig.page("window.hexactlTestTap.jogReplyFields = null;")
+        wait_for(lambda: rig.status()["motion"] == "holding", "the jog braked to rest after the release")
 
     attempted(rig, scenario)
 

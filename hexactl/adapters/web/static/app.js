@@ -10,9 +10,9 @@ const $ = (id) => document.getElementById(id);
 const RECONNECT_MS = 1000;
 const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
-const STALE_MS = 2000;        // no telemetry for longer, or this far behind it: nothing on the page is shown as current (tools/browser.py's PAGE_STALE_MS)
-const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S)
-const OTHER_CONTROLLER_WINDOW_S = 1.0;  // another controller heard this recently drives the actuators (control/results.py's)
+const STALE_MS = 2000;        // no telemetry for longer, or this far behind it: nothing on the page is shown as current
+const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S; tests/web/test_page_constants.py keeps them equal)
+const OTHER_CONTROLLER_WINDOW_S = 1.0;  // another controller heard this recently drives the actuators (control/results.py's, likewise)
 const TICK_MS = 250;          // the staleness check and the "no data for N s" count
 // Telemetry handled between two acknowledgements: the server sends at most
 // TELEMETRY_WINDOW (16, adapters/web/bridge.py) unacknowledged, so that a page slower than

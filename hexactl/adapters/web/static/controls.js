@@ -6,6 +6,9 @@ import { setupCampaign } from './campaign.js';
 const $ = (id) => document.getElementById(id);
 export const AXES = ['x', 'y', 'z', 'roll', 'pitch', 'yaw'];
 const BUILT_IN_SEQUENCES = ['x_sweep', 'y_rotation', 'compound'];
+// As hexactl jog (adapters/cli/jog_commands.py): renewals per deadman interval, so that
+// three may come late before the platform brakes.
+const RENEWALS_PER_DEADMAN = 4;
 
 export const fmt = (v, digits = 3) => (typeof v === 'number' && Number.isFinite(v) ? v.toFixed(digits) : '–');
 
@@ -210,9 +213,10 @@ export function setupControls(ctx) {
 
   // ---------------- jog ----------------
   const jogStatus = $('jog-status');
-  let jog = null;          // {button, velocity, frame, timer}
+  let jog = null;          // {button, velocity, frame, timer, everyMs}
   let jogSerial = 0;
   let jogInFlight = 0;
+  let renewEveryMs = 50;   // the default deadman's (0.2 s) quarter, until a jog's reply says the service's
 
   function jogVelocity(button) {
     const axis = AXES.indexOf(button.dataset.axis);
@@ -229,6 +233,7 @@ export function setupControls(ctx) {
     jogInFlight += 1;
     let reply;
     try { reply = await ctx.send('jog', { velocity, frame }); } finally { jogInFlight -= 1; }
+    if (reply.ok && typeof reply.deadman_s === 'number' && reply.deadman_s > 0) renewEvery(reply.deadman_s * 1000 / RENEWALS_PER_DEADMAN);
     if (serial !== jogSerial) return;   // only the newest request's reply is shown
     if (reply.ok) {
       const extra = [];
@@ -246,13 +251,22 @@ export function setupControls(ctx) {
     if (blind) { setResult(jogStatus, 'refused', `not sent: the page has no live data (${blind})`); return; }
     const velocity = jogVelocity(button);
     const frame = $('jog-frame').value;
-    jog = { button, velocity, frame, timer: null };
+    jog = { button, velocity, frame, timer: null, everyMs: null };
     button.classList.add('held');
     sendJog(velocity, frame);
+    renewEvery(renewEveryMs);
+  }
+
+  /** Renew the held jog every `ms` (from the service's deadman) from now on. */
+  function renewEvery(ms) {
+    renewEveryMs = ms;
+    if (!jog || jog.everyMs === ms) return;
+    clearInterval(jog.timer);
+    jog.everyMs = ms;
     jog.timer = setInterval(() => {
       // never pile up renewals behind a slow link: a lapsed deadman brakes, which is safe
-      if (jog && jogInFlight < 3) sendJog(jog.velocity, jog.frame);
-    }, 100);
+      if (jog && jogInFlight < RENEWALS_PER_DEADMAN - 1) sendJog(jog.velocity, jog.frame);
+    }, ms);
   }
 
   /** Stop renewing the jog; with sendZero, release it at once with a zero velocity, else let the deadman brake it. */
