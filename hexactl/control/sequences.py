@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, MAX_WAYPOINTS, Waypoint, pace_problem, waypoint_count_problem
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
-from hexactl.kinematics.geometry import describe_validation_error
+from hexactl.kinematics.validation_messages import describe_validation_error
 from hexactl.kinematics.numbers import Number
 
 

@@ -69,7 +69,8 @@ from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
 from hexactl.control.submitter import commands_from
 from hexactl.control.waves import WaveSpec
-from hexactl.kinematics.geometry import Geometry, GeometryError, describe_validation_error
+from hexactl.kinematics.geometry import Geometry, GeometryError
+from hexactl.kinematics.validation_messages import describe_validation_error
 
 JOG_REPLY = ("jog", "goal", "speed", "end", "to_limit", "deadman_s")
 """The fields of a ``jog`` reply besides ``message``."""

@@ -21,7 +21,7 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from hexactl.adapters.api.messages import COMMANDS, Request, json_type
 from hexactl.adapters.api.protocol import PROTOCOL_VERSION
-from hexactl.kinematics.geometry import validation_location
+from hexactl.kinematics.validation_messages import validation_location
 
 MAX_REQUEST_BYTES = 64 * 1024
 """Largest request answered; a larger one gets ``too_large``."""

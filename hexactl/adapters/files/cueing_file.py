@@ -32,7 +32,7 @@ from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
 from hexactl.adapters.files.text import read_text
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import GRAVITY_M_S2, VehicleTrajectory
-from hexactl.kinematics.geometry import validation_location
+from hexactl.kinematics.validation_messages import validation_location
 
 VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
 

@@ -33,7 +33,7 @@ from hexactl.adapters.files.geometry_file import toml_value
 from hexactl.adapters.files.text import read_text
 from hexactl.control.frames import OperatorFrames
 from hexactl.kinematics.axes import POSE_AXES
-from hexactl.kinematics.geometry import describe_validation_error
+from hexactl.kinematics.validation_messages import describe_validation_error
 
 
 class FramesFileError(ValueError):

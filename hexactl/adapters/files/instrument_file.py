@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from hexactl.adapters.files.text import read_text
 from hexactl.calibration.observations import Instrument, LaserTracker, Station, Theodolites
-from hexactl.kinematics.geometry import describe_validation_error
+from hexactl.kinematics.validation_messages import describe_validation_error
 from hexactl.kinematics.numbers import Number, SixNumbers
 
 class InstrumentFileError(ValueError):

@@ -50,7 +50,7 @@ from hexactl.control.sequences import (
     sequence_from_mapping,
 )
 from hexactl.kinematics.axes import POSE_AXES
-from hexactl.kinematics.geometry import describe_validation_error
+from hexactl.kinematics.validation_messages import describe_validation_error
 
 
 def sequence_from_toml(text: str, source: str = "sequence") -> MotionSequence:
