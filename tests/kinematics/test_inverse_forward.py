@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -102,6 +103,24 @@ def test_fk_does_not_claim_success_for_unreachable_lengths(nominal) -> None:
     result = forward_kinematics(nominal.legs, lengths, home, max_iterations=30)
     assert result.status in (FkStatus.MAX_ITERATIONS, FkStatus.DIVERGED, FkStatus.SINGULAR)
     assert result.residual_mm > 1e-3 or result.status is FkStatus.DIVERGED
+
+
+@pytest.mark.parametrize(("pitch_deg", "status"), [
+    (80.5, FkStatus.OK), (-80.5, FkStatus.OK), (81.5, FkStatus.DIVERGED), (-85.0, FkStatus.DIVERGED),
+])
+def test_fk_answers_only_inside_the_euler_chart(platform, pitch_deg: float, status: FkStatus) -> None:
+    """Beyond ±81° of pitch the roll–pitch–yaw update nears its singularity at 90°: an
+    iterate there is divergence (no pose), even where Newton would converge, so that no
+    pose is reported in a chart that cannot describe it well."""
+    answer = list(absolute_from_relative(platform.home, [0.0] * 6))
+    answer[4] = np.radians(pitch_deg)
+    guess = [answer[0] + 1.0, *answer[1:]]
+    result = forward_kinematics(platform.legs, leg_lengths(platform.legs, answer), guess)
+    assert result.status is status
+    if status is FkStatus.OK:
+        np.testing.assert_allclose(result.pose, answer, atol=1e-9)
+    else:
+        assert np.isnan(result.pose).all()
 
 
 def test_fk_honours_its_iteration_cap(nominal) -> None:
