@@ -62,6 +62,23 @@ def test_plot_refuses_missing_and_garbled_files(tmp_path, capsys) -> None:
     assert "not a recording" in capsys.readouterr().err
 
 
+def test_plot_writes_where_it_says_and_never_over_its_input(tmp_path, capsys) -> None:
+    recording = tmp_path / "r1.csv"
+    written = "t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2,7.0\n"
+    recording.write_text(written)
+    for out in (recording, tmp_path / "r1.CSV", tmp_path / "r1.json", tmp_path / "r1"):
+        assert main(["plot", str(recording), "-o", str(out)]) == 2  # refused, not a traceback
+        error = capsys.readouterr().err
+        assert str(out) in error and ("input" in error or ".png, .svg, .pdf" in error), error
+    assert recording.read_text() == written and sorted(p.name for p in tmp_path.iterdir()) == ["r1.csv"]
+    (tmp_path / "folder.png").mkdir()
+    assert main(["plot", str(recording), "-o", str(tmp_path / "folder.png")]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    image = tmp_path / "new" / "deeper" / "r1.svg"
+    assert main(["plot", str(recording), "-o", str(image)]) == 0  # missing folders are made
+    assert capsys.readouterr().out.strip() == str(image) and image.read_text().startswith("<?xml")
+
+
 def test_record_wait_exits_1_when_a_fault_came_during_the_recording(capsys) -> None:
     from hexactl.adapters.cli.recording_commands import _report_written
 

@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from hexactl.adapters.api.protocol import MAX_RECORDING_DIVISOR, MAX_RECORDING_S
-from hexactl.adapters.cli.common import CliError, check_writable, connect, positive_up_to, whole_number_in
+from hexactl.adapters.cli.common import (CliError, check_output, connect, positive_up_to, whole_number_in,
+                                        write_failed)
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
 SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
@@ -29,6 +30,9 @@ WAIT_SLACK_S = 30.0
 the wait for the next motion with ``--on-motion``: there, it waits as long as it takes)."""
 
 GOOD_ENDINGS = ("duration", "stopped")
+
+IMAGE_FORMATS = ("png", "svg", "pdf")
+"""What ``plot`` writes, by the image's ending."""
 
 _GROUPS = (  # (column prefix, panel title): one panel each, in this order
     ("pose_command_", "commanded pose"), ("pose_measured_", "measured pose"), ("setpoint_", "set-points"),
@@ -59,7 +63,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     plot = subparsers.add_parser("plot", parents=[common], help="plot a recording (CSV) to a PNG",
                                  description="Plot a recording made by `hexactl record`: one panel per signal group.")
     plot.add_argument("recording", metavar="RECORDING", type=Path, help="the recording's CSV file")
-    plot.add_argument("-o", "--out", type=Path, metavar="PNG", help="the image (default: RECORDING with .png)")
+    plot.add_argument("-o", "--out", type=Path, metavar="IMAGE", help="the image, its format by its ending: "
+                      f"{', '.join('.' + f for f in IMAGE_FORMATS)} (default: RECORDING with .png; replaced if there)")
     plot.set_defaults(run=run_plot)
 
 
@@ -170,10 +175,13 @@ def held_up_gap(side: dict[str, Any]) -> float | None:
 
 def run_plot(arguments: argparse.Namespace) -> int:
     path: Path = arguments.recording
+    out: Path = arguments.out or path.with_suffix(".png")
+    if out.suffix.lower().lstrip(".") not in IMAGE_FORMATS:
+        raise CliError(f"{out}: name the image with the ending of its format: "
+                       f"{', '.join('.' + f for f in IMAGE_FORMATS)}")
+    check_output(str(out), True, path)  # plot replaces its image, never its input
     header, columns = _read_recording(path)
     side = _side_file(path)
-    out = arguments.out or path.with_suffix(".png")
-    check_writable(out)
     import matplotlib  # heavy: only for plot
 
     matplotlib.use("Agg")
@@ -200,9 +208,10 @@ def run_plot(arguments: argparse.Namespace) -> int:
     figure.suptitle(_title(path, side))
     figure.tight_layout()
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
         figure.savefig(out, dpi=100)
     except OSError as error:
-        raise CliError(f"{out}: cannot write the image: {error.strerror}") from None
+        raise write_failed(out, error) from None
     finally:
         plt.close(figure)
     print(out)
