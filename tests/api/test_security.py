@@ -76,6 +76,15 @@ def test_create_keys_adds_clients_and_never_overwrites(tmp_path) -> None:
         create_keys(tmp_path, "other")
 
 
+@pytest.mark.parametrize("name", ["../../evil", "", "a/b", ".hidden", "server", "x" * 65, "tab\tname"])
+def test_a_client_name_that_is_not_a_plain_name_of_its_own_writes_nothing(tmp_path, name: str) -> None:
+    """The name names the key files: a path in it wrote them outside the folder, an empty
+    one hidden files, and 'server' is the server's pair."""
+    with pytest.raises(ValueError, match="client name"):
+        create_keys(tmp_path / "keys", name)
+    assert sorted(tmp_path.rglob("*")) == []
+
+
 def test_curve_end_to_end(tmp_path) -> None:
     keys = create_keys(tmp_path / "keys", "alice")
     stranger = create_keys(tmp_path / "stranger")  # a client whose key is not in clients/

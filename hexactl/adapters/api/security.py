@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -127,11 +128,18 @@ def secure_client(socket: zmq.Socket, keys: CurveClientKeys) -> None:
     socket.curve_secretkey = secret
 
 
+_CLIENT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
+
 def create_keys(directory: Path, client_name: str = "client") -> dict[str, Path]:
     """Make a client certificate pair ``client_name`` in ``directory`` and allow it in
     (its public certificate copied into ``directory/clients``); make the server's pair
     too unless ``directory`` has it. Refuses to overwrite a client's keys, or to complete
-    a server pair of which one half is missing (FileExistsError)."""
+    a server pair of which one half is missing (FileExistsError), and a name that is not
+    a plain file name of the client's own (ValueError: it names the key files)."""
+    if not _CLIENT_NAME.fullmatch(client_name) or client_name == "server":
+        raise ValueError(f"client name {client_name!r}: give 1 to 64 letters, digits, '.', '_' or '-', starting "
+                         "with a letter or digit, other than 'server' (it names the client's key files in the folder)")
     names = {
         "server_secret": directory / "server.key_secret",
         "server_public": directory / "server.key",

@@ -412,6 +412,8 @@ def run_keys(arguments: argparse.Namespace) -> int:
     check_writable(arguments.out, folder=True)
     try:
         made = create_keys(arguments.out, arguments.name)
+    except ValueError as error:
+        raise CliError(f"--name: {error}") from None
     except OSError as error:
         raise write_failed(arguments.out, error) from None
     print(f"server: --curve-secret {made['server_secret']} --curve-clients {made['clients_dir']}")
