@@ -110,7 +110,9 @@ def rows(*times: float) -> str:
     (rows(0.0, 0.01, 0.005), "mine.csv: line 4, column t_s: 0.005 s is not after the sample before it"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,x,9.81,0,0,0\n", "mine.csv: line 3, column f_y: 'x' is not a finite number"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,inf,0\n", "mine.csv: line 3, column omega_y: 'inf' is not a finite"),
-    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81\n", "mine.csv: line 3, column omega_x: nothing is not a finite number"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,,9.81,0,0,0\n", "mine.csv: line 3, column f_y: nothing is not a finite number"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81\n", "mine.csv: line 3: has 4 fields, the header has 7"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,0,0,5,6\n", "mine.csv: line 3: has 9 fields, the header has 7"),
     (rows(0.0), "mine.csv: 1 samples: a vehicle trajectory needs at least two lines of values"),
 ])
 def test_a_bad_vehicle_file_is_refused_naming_the_line_and_column(text: str, expected: str) -> None:

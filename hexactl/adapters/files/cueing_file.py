@@ -107,6 +107,8 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
     values, lines = [], []
     for line, row in enumerate(rows, start=2):
         if any(cell.strip() for cell in row):
+            if len(row) != len(names):  # a value too many or too few shifts the others to another column
+                raise CueingFileError(f"{source}: line {line}: has {len(row)} fields, the header has {len(names)}")
             values.append([_number(row, index, column, line, source) for index, column in zip(where, VEHICLE_COLUMNS)])
             lines.append(line)
     if len(values) < 2:
