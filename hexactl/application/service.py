@@ -59,6 +59,7 @@ from hexactl.adapters.api.protocol import (
     DEFAULT_TELEMETRY_ENDPOINT,
     DEFAULT_TELEMETRY_RATE_HZ,
     check_telemetry_rate,
+    endpoints_clash,
     is_local_endpoint,
 )
 from hexactl.adapters.api.socket_thread import check_bindable
@@ -271,6 +272,13 @@ class Service:
         zmq_endpoints = [config.api_endpoint, config.telemetry_endpoint,
                          *([config.stream_endpoint] if config.stream_endpoint else [])]
         check_endpoints(zmq_endpoints, config.curve)  # refused before any word of CURVE
+        named = [("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
+                 ("--stream", config.stream_endpoint)]
+        for index, (option, endpoint) in enumerate(named):
+            for other_option, other in named[index + 1:]:
+                if endpoint and other and endpoints_clash(endpoint, other):
+                    raise ServiceError(f"{option} {endpoint} and {other_option} {other} take the same address: give "
+                                       "each its own port (tcp://HOST:* takes a free one)")
         for endpoint in zmq_endpoints:
             if not is_local_endpoint(endpoint):
                 log.warning("%s is reachable from the network: CURVE keys given, only their clients get in", endpoint)
@@ -282,8 +290,7 @@ class Service:
                 load_server_keys(config.curve)
             except (SecurityError, OSError, ValueError) as error:
                 raise ServiceError(f"CURVE keys: {error}") from None
-        for option, endpoint in (("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
-                                 ("--stream", config.stream_endpoint)):
+        for option, endpoint in named:
             try:  # here, before the actuators open; the API process binds them for good
                 if endpoint is not None:
                     check_bindable(endpoint)

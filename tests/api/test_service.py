@@ -189,6 +189,35 @@ def test_endpoint_in_use_is_refused_before_the_actuators_open(taken, running, mo
                                   "hexactl serve?): stop it first, or name another port (tcp://HOST:* takes a free one)")
 
 
+@pytest.mark.parametrize(("api", "telemetry", "stream"), [
+    ("tcp://127.0.0.1:56999", "tcp://127.0.0.1:56999", None),
+    ("tcp://127.0.0.1:56999", "tcp://*:56999", None),
+    ("tcp://127.0.0.1:*", "tcp://localhost:56999", "tcp://127.0.0.1:56999"),
+    ("ipc:///tmp/hexactl-clash", "tcp://127.0.0.1:*", "ipc:///tmp/hexactl-clash"),
+])
+def test_two_options_on_one_address_are_refused_naming_both(api, telemetry, stream, monkeypatch) -> None:
+    """It said "cannot serve: Address already in use", as if another process held the port."""
+    monkeypatch.setattr("hexactl.application.service.Simulator", lambda *a, **k: pytest.fail("the actuators opened"))
+    with pytest.raises(ServiceError, match=r"take the same address: give each its own port"):
+        Service.start(ServiceConfig(api_endpoint=api, telemetry_endpoint=telemetry, stream_endpoint=stream))
+
+
+@pytest.mark.parametrize(("first", "second", "clash"), [
+    ("tcp://127.0.0.1:5555", "tcp://127.0.0.1:5556", False),
+    ("tcp://127.0.0.1:*", "tcp://127.0.0.1:*", False),
+    ("tcp://10.0.0.1:5555", "tcp://10.0.0.2:5555", False),
+    ("tcp://10.0.0.1:5555", "tcp://0.0.0.0:5555", True),
+    ("tcp://localhost:5555", "tcp://127.0.0.1:5555", True),
+    ("tcp://[::1]:5555", "tcp://127.0.0.1:5555", False),  # two address families
+    ("ipc:///tmp/a", "ipc:///tmp/b", False),
+    ("ipc:///tmp/a", "tcp://127.0.0.1:5555", False),
+])
+def test_endpoints_clash_on_one_address_only(first: str, second: str, clash: bool) -> None:
+    from hexactl.adapters.api.protocol import endpoints_clash
+
+    assert endpoints_clash(first, second) is clash and endpoints_clash(second, first) is clash
+
+
 def test_bad_geometry_is_refused(tmp_path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text("zero_lengths = [1]\n")

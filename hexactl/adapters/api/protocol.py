@@ -94,6 +94,24 @@ def check_telemetry_rate(rate_hz: float) -> float:
 _LOCAL_HOSTS = frozenset({"localhost", "lo"})
 
 
+def endpoints_clash(first: str, second: str) -> bool:
+    """True if binding both endpoints would take one address twice: the same ``ipc://``
+    path, or TCP on one port (not ``*``: a free one) of one host, of any host where either
+    is a wildcard (``*``, ``0.0.0.0``, ``[::]``), or of ``localhost`` and a loopback address."""
+    (scheme, _, address), (other_scheme, _, other_address) = first.partition("://"), second.partition("://")
+    if scheme != other_scheme or scheme not in ("tcp", "ipc", "inproc"):
+        return False
+    if scheme != "tcp":
+        return address == other_address
+    (host, _, port), (other_host, _, other_port) = address.rpartition(":"), other_address.rpartition(":")
+    if port != other_port or port in ("*", "0"):
+        return False
+    hosts = {host.strip("[]"), other_host.strip("[]")}
+    if len(hosts) == 1 or hosts & {"*", "0.0.0.0", "::"}:
+        return True
+    return "localhost" in hosts and all(is_local_endpoint(f"tcp://{host}:1") for host in hosts)
+
+
 def is_local_endpoint(endpoint: str) -> bool:
     """True for ``inproc://``, ``ipc://`` and TCP on a loopback address or ``localhost``."""
     scheme, _, address = endpoint.partition("://")
