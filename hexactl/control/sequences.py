@@ -37,6 +37,9 @@ class UnknownSequence(SequenceError, KeyError):
         return str(self.args[0])
 
 
+SequenceName = Annotated[str, Field(min_length=1, max_length=200, description="the sequence's name, for people: "
+                                   "events, telemetry and recordings carry it")]
+
 Duration = Annotated[Number, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
 Speed = Annotated[Number, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]
 Dwell = Annotated[Number, Field(ge=0, le=MAX_DWELL_S, description="time to stay on arrival, s")]
@@ -71,7 +74,7 @@ class MotionSequence(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False, populate_by_name=True)
 
-    name: str = Field(min_length=1)
+    name: SequenceName
     description: str = ""
     frame: Literal["zero", "work"] = Field(default="zero", description="what the poses are: relative to the zero "
                                            "posture (zero), or the tool's poses in the work frame (work)")
@@ -84,6 +87,9 @@ class MotionSequence(BaseModel):
     def _counted(cls, value: object) -> object:
         """Counted before any waypoint is validated, let alone planned; here rather than by
         ``min_length``, which also reports a list whose waypoints all failed as empty."""
+        if isinstance(value, dict):  # TOML's [waypoint] where [[waypoint]] was meant
+            raise ValueError("write each waypoint as [[waypoint]] (double brackets: one table of a list), not "
+                             "[waypoint]")
         if isinstance(value, (list, tuple)):
             if not value:
                 raise ValueError("a sequence needs at least one [[waypoint]]")

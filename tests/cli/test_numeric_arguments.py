@@ -83,6 +83,20 @@ def test_a_wave_ramp_beyond_half_its_cycles_is_refused_naming_the_option(capsys:
     assert "--ramp 2 ramps in and again out: at most half of cycles (3)" in capsys.readouterr().err
 
 
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize(("arguments", "says"), [
+    (["status", "--api", NOBODY, "--timeout", "0"], "0 s: a client waits for the service more than 0 s and at most"),
+    (["jog", "x=1", "--api", NOBODY, "--for", "0"], "0 s: jog for more than 0 s and at most 600 s"),
+    ([*WAVE, "--cycles", "1e9"], "'1e9' is not a whole number: write it in digits, 1000000000"),
+    ([*WAVE, "--cycles", "2.5"], "'2.5' is not a whole number\n"),
+])
+def test_a_refused_number_is_told_what_it_may_be(arguments: list[str], says: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A time of 0 was "not a time from 0 to 3600 s", and 1e9 cycles "not a whole number"."""
+    assert exits_with(arguments) == 2
+    assert says in capsys.readouterr().err
+
+
 def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     """It said "points_mm must have shape None, got (0,)"."""
     assert exits_with([*SIMULATE, "--per-leg", "0", "--free", "0"]) == 2

@@ -40,6 +40,8 @@ def test_the_file_format_round_trips_into_waypoints():
     ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\ndwell = -1", "dwell"),
     ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nwait = 1", "wait"),
     ("name = ", "TOML"),
+    ("name = 'x'\n[waypoint]\npose = [0, 0, 0, 0, 0, 0]", r"write each waypoint as \[\[waypoint\]\]"),
+    (f"name = '{'x' * 201}'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]", "name: String should have at most 200"),
 ])
 def test_bad_files_name_the_problem(text, problem):
     with pytest.raises(SequenceError, match=problem):

@@ -23,7 +23,7 @@ from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S
-from hexactl.control.sequences import Paced, SequenceWaypoint
+from hexactl.control.sequences import Paced, SequenceName, SequenceWaypoint
 from hexactl.control.telemetry import TELEMETRY_EVENTS
 from hexactl.control.validated_under import ValidatedUnder
 from hexactl.control.waves import WaveSpec
@@ -280,7 +280,7 @@ class Waypoint(_Message, SequenceWaypoint):
 class InlineSequence(_Message):
     """A sequence given in the request, as a sequence file would give it."""
 
-    name: str = Field(min_length=1, max_length=200)
+    name: SequenceName
     description: str = ""
     frame: Literal["zero", "work"] = Field(default="zero", description="the waypoints' poses: relative to the zero "
                                            "posture (zero), or the tool's poses in the work frame (work)")

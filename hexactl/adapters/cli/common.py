@@ -159,7 +159,7 @@ def connection_parser() -> argparse.ArgumentParser:
 
 def _timeout_problem(seconds: float) -> str | None:
     if not 0 < seconds <= MAX_TIMEOUT_S:
-        return f"{seconds:g} is not a time from 0 to {MAX_TIMEOUT_S:g} s (an hour), as a client waits for the service"
+        return f"{seconds:g} s: a client waits for the service more than 0 s and at most {MAX_TIMEOUT_S:g} s (an hour)"
     return None
 
 
@@ -475,7 +475,13 @@ def _whole_number(text: str) -> int:
     try:
         return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    digits = f": write it in digits, {value:.0f}" if value.is_integer() and abs(value) < 1e18 else ""
+    raise argparse.ArgumentTypeError(f"{text!r} is not a whole number{digits}") from None
 
 
 def positive_int(text: str) -> int:

@@ -47,7 +47,7 @@ def _jog_velocity(text: str) -> list[float]:
 
 def _for_problem(seconds: float) -> str | None:
     if not 0 < seconds <= MAX_JOG_FOR_S:
-        return f"{seconds:g} is not a time from 0 to {MAX_JOG_FOR_S:g} s: jog in shorter runs"
+        return f"{seconds:g} s: jog for more than 0 s and at most {MAX_JOG_FOR_S:g} s (jog in shorter runs)"
     return None
 
 

@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "pose-envelope and singularity limits. Default: the paper's single-axis extremes "
         "(X/Y ±600 mm, Z ±250 mm, roll/pitch ±23°, yaw ±60°). Exit status 1 if any is unreachable.",
         epilog="POSE is X,Y,Z,ROLL,PITCH,YAW (mm, deg) or axis=value pairs such as x=600 or "
-        "pitch=-20,yaw=5. Put -- before poses that start with a minus sign.",
+        "pitch=-20,yaw=5. A pose may start with a minus sign (check -600,0,0,0,0,0).",
     )
     check.add_argument("poses", nargs="*", metavar="POSE", type=pose_argument)
     check.set_defaults(run=run_check)
