@@ -271,7 +271,6 @@ class Service:
         # The stream's ZeroMQ socket steers the platform as the API does (UDP is warned of below).
         zmq_endpoints = [config.api_endpoint, config.telemetry_endpoint,
                          *([config.stream_endpoint] if config.stream_endpoint else [])]
-        check_endpoints(zmq_endpoints, config.curve)  # refused before any word of CURVE
         named = [("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
                  ("--stream", config.stream_endpoint)]
         for index, (option, endpoint) in enumerate(named):
@@ -279,6 +278,7 @@ class Service:
                 if endpoint and other and endpoints_clash(endpoint, other):
                     raise ServiceError(f"{option} {endpoint} and {other_option} {other} take the same address: give "
                                        "each its own port (tcp://HOST:* takes a free one)")
+        check_endpoints(zmq_endpoints, config.curve)  # refused before any word of CURVE
         for endpoint in zmq_endpoints:
             if not is_local_endpoint(endpoint):
                 log.warning("%s is reachable from the network: CURVE keys given, only their clients get in", endpoint)

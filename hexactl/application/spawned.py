@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
-from collections.abc import Callable, Iterable
+import signal
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from multiprocessing.connection import Connection
 
 STOP = "stop"
@@ -31,6 +34,32 @@ log = logging.getLogger("hexactl.spawned")
 
 class SpawnError(RuntimeError):
     """The child did not start; the message says why."""
+
+
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextmanager
+def signals_held(signals: Iterable[signal.Signals] = HELD_SIGNALS) -> Iterator[None]:
+    """In the main thread: ``signals`` received inside the ``with`` are raised again as it
+    ends, so that their handlers (or default actions) run after the block, not halfway
+    through it. For starting a child: a handler run between its spawning and the pickled
+    start-up data it waits for (``hexactl serve``'s, which kills the children it knows and
+    exits) left it unknown, to die on the data's end with a traceback on the shared stderr.
+    Elsewhere a no-op: Python runs signal handlers in the main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    held = [number for number in signals if signal.getsignal(number) is not None]  # None: a handler not Python's
+    previous = {number: signal.signal(number, lambda number, frame: received.append(number)) for number in held}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        for number in dict.fromkeys(received):
+            signal.raise_signal(number)
 
 
 class Spawned:
@@ -47,7 +76,8 @@ class Spawned:
         context = multiprocessing.get_context("spawn")
         self._control, child = context.Pipe()
         self._process = context.Process(target=target, args=(*args, child), name=name, daemon=daemon)
-        self._process.start()
+        with signals_held():
+            self._process.start()
         for end in (*handed_over, child):
             end.close()
         message: object = f"{name} did not start within {start_timeout_s:g} s"

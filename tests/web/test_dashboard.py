@@ -355,14 +355,17 @@ def test_the_dashboard_refuses_another_sites_websocket_and_host(rig) -> None:
 
     import websockets
 
-    async def from_elsewhere() -> str:
+    async def from_elsewhere(origin: str) -> str:
         try:
-            async with websockets.connect(rig.board.url.replace("http", "ws") + "ws", origin="http://attacker.example"):
+            async with websockets.connect(rig.board.url.replace("http", "ws") + "ws", origin=origin):
                 return "open"
         except websockets.InvalidStatus as error:
             return str(error.response.status_code)
 
-    assert asyncio.run(from_elsewhere()) == "403"
+    own = rig.board.url.split("://", 1)[1].rstrip("/")
+    assert asyncio.run(from_elsewhere("http://attacker.example")) == "403"
+    assert asyncio.run(from_elsewhere(f"evil://{own}")) == "403"  # this host and port, not a web page's scheme
+    assert asyncio.run(from_elsewhere(f"http://{own}")) == "open"
 
 
 @contextmanager

@@ -86,7 +86,8 @@ def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlett
 
     async def socket(websocket: WebSocket) -> None:
         origin = websocket.headers.get("origin")
-        if origin is not None and origin.split("://", 1)[-1] not in allowed_hosts:
+        scheme, _, host = (origin or "").partition("://")
+        if origin is not None and (scheme not in ("http", "https") or host not in allowed_hosts):
             log.warning("refused a WebSocket from origin %s (not this dashboard's page)", origin)
             await websocket.close(code=1008)
             return
