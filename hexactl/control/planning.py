@@ -56,7 +56,7 @@ from hexactl.kinematics.axes import (
 )
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.soft_limits import SoftLimits
-from hexactl.kinematics.workspace import Violation, check_poses, pose_within_limits
+from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, Violation, check_poses, pose_within_limits
 
 
 MAX_WAYPOINTS = 500
@@ -267,9 +267,9 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
     remedy = "split it into shorter sequences" if total > 1 else "split the move"
     origin, origin_frames = start.position, start_frames
     segments = []
-    checks = _PathChecks(context)
-    motion_s = 0.0  # the segments' durations so far
     home = context.active.home
+    checks = _PathChecks(context, relative_poses(start_frames, np.array([origin], dtype=float), home)[0])
+    motion_s = 0.0  # the segments' durations so far
     for number, waypoint in enumerate(waypoints, start=1):
         if refusal := budget.refusal(f"at waypoint {number} of {total}", remedy):
             return Plan(refusal=refusal)
@@ -345,6 +345,19 @@ def budgeted_path_violations(context: PlanningContext, relative: NDArray, waypoi
     return checks.violations()
 
 
+def tolerated_excess(geometry: Geometry, start: NDArray) -> NDArray | None:
+    """How far a motion from relative mm/rad ``start`` may be beyond each hardware limit
+    (the columns of :class:`~hexactl.kinematics.workspace.PoseChecks`): as far as the
+    platform already is there, to rounding, so that it may go back inside, never further
+    out; None when it starts inside every limit. The platform ends up beyond one by a hair
+    where it was held on it (a jog to a limit, a move to the envelope's bound): enabled
+    again, it holds the pose its quantised readings give, and every move from there was
+    refused, the move back included."""
+    excess = check_poses(geometry, pose_mm_rad_to_mm_deg(start[None])).excess()[0]
+    beyond = excess > 0
+    return np.where(beyond, excess + POSE_BOUND_ROUNDING, 0.0) if beyond.any() else None
+
+
 class _PathChecks:
     """:func:`path_violations` of the paths of a plan's waypoints, added in order and
     assessed in batches of :data:`_CHECK_BATCH` poses: the same samples, thinned per path as
@@ -355,8 +368,9 @@ class _PathChecks:
     once, for the earlier waypoint (and where it breaks a limit, the plan is refused all
     the same)."""
 
-    def __init__(self, context: PlanningContext) -> None:
+    def __init__(self, context: PlanningContext, start: NDArray | None = None) -> None:
         self._context = context
+        self._tolerated = None if start is None else tolerated_excess(context.active.geometry, start)
         self._pending: list[NDArray] = []  # thinned relative mm/deg poses not assessed yet
         self._owners: list[NDArray] = []  # their waypoints
         self._count = 0
@@ -392,7 +406,7 @@ class _PathChecks:
             if begin and (refusal := budget.refusal(where(), remedy)):
                 return refusal
             _note_first_violations(geometry, poses[begin:begin + _CHECK_BATCH], owners[begin:begin + _CHECK_BATCH],
-                                   self._hardware)
+                                   self._hardware, self._tolerated)
         return None
 
     def violations(self) -> list[PathViolation]:
@@ -467,24 +481,29 @@ def assess_path(
     return list(found.values())
 
 
-def _note_first_violations(geometry: Geometry, poses: NDArray, owners: NDArray, found: dict[tuple, PathViolation]) -> None:
+def _note_first_violations(geometry: Geometry, poses: NDArray, owners: NDArray, found: dict[tuple, PathViolation],
+                           tolerated: NDArray | None = None) -> None:
     """Add to ``found``, by (waypoint, kind, leg, axis), each violation of (N, 6) relative
     mm/deg ``poses`` of waypoints ``owners`` (N,) that is not in it yet, at the first pose
     that has it, in the order of :func:`~hexactl.kinematics.workspace.assess_poses`'
     violations pose by pose. Only a pose that is its waypoint's first to break some limit
-    can add one, so only those poses' violations are built."""
+    can add one, so only those poses' violations are built. ``tolerated`` (K,): how far
+    waypoint 1's poses may be beyond each limit (:func:`tolerated_excess`)."""
     checks = check_poses(geometry, poses)
-    if checks.ok.all():
+    broken = checks.broken
+    if tolerated is not None:
+        broken = broken & ~((owners == 1)[:, None] & (checks.excess() <= tolerated))
+    if not broken.any():
         return
-    rows, columns = np.nonzero(checks.broken)  # by pose, then in the order of a pose's violations
-    _, first = np.unique(owners[rows] * checks.broken.shape[1] + columns, return_index=True)
+    rows, columns = np.nonzero(broken)  # by pose, then in the order of a pose's violations
+    _, first = np.unique(owners[rows] * broken.shape[1] + columns, return_index=True)
     for n in np.unique(rows[first]).tolist():
-        assessment, owner = checks.assessment(n), int(owners[n])
-        for violation in assessment.violations:
+        owner, pose = int(owners[n]), tuple(checks.relative[n].tolist())
+        for violation in (checks.violation(n, column) for column in np.flatnonzero(broken[n]).tolist()):
             key = (owner, violation.kind, violation.leg, violation.axis)
             if key not in found:
                 found[key] = PathViolation(violation.kind, violation.value, violation.limit, violation.message,
-                                           violation.leg, violation.axis, waypoint=owner, pose=assessment.pose_relative)
+                                           violation.leg, violation.axis, waypoint=owner, pose=pose)
 
 
 def _thinned(relative_deg: NDArray, step_mm: float, step_deg: float) -> NDArray:

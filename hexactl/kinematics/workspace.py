@@ -123,11 +123,23 @@ class PoseChecks:
             platform_cone_deg=tuple(self.platform_cone[n].tolist()),
             pose_margin=tuple(self.pose_margin[n].tolist()),
             jacobian_condition=float(self.condition[n]),
-            violations=() if self.ok[n] else tuple(self._violation(n, column)
+            violations=() if self.ok[n] else tuple(self.violation(n, column)
                                                    for column in np.flatnonzero(self.broken[n]).tolist()),
         )
 
-    def _violation(self, n: int, column: int) -> Violation:
+    def excess(self) -> NDArray:
+        """(N, K): how far each pose is beyond each limit of ``broken``'s columns, in the
+        limit's unit (mm, deg, a condition number): positive where broken, NaN where a
+        figure is (a broken pose)."""
+        limits = self.limits
+        low, high = limits.stroke
+        legs = np.stack((low - self.sensor, self.sensor - high, self.base_cone - limits.base_cone_deg,
+                         self.platform_cone - limits.platform_cone_deg), axis=2).reshape(len(self.relative), _LEG_COLUMNS)
+        envelope = np.maximum(np.array(limits.pose_min) - POSE_BOUND_ROUNDING - self.relative,
+                              self.relative - np.array(limits.pose_max) - POSE_BOUND_ROUNDING)
+        return np.concatenate((legs, envelope, (self.condition - limits.max_jacobian_condition)[:, None]), axis=1)
+
+    def violation(self, n: int, column: int) -> Violation:
         """Pose ``n``'s violation of the limit in column ``column`` of ``broken``."""
         limits = self.limits
         if column < _LEG_COLUMNS:

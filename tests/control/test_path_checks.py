@@ -12,10 +12,15 @@ from hypothesis import strategies as st
 
 from hexactl.control import planning
 from hexactl.control.config import ControllerConfig
-from hexactl.control.planning import ActiveGeometry, PathViolation, PlanningBudget, PlanningContext
+from hexactl.control.planning import ActiveGeometry, PathViolation, PlanningBudget, PlanningContext, Waypoint, plan_path
+from hexactl.control.frames import Frame
+from hexactl.control.jog import JogPlan
+from hexactl.control.jog_planning import plan_jog
+from hexactl.control.trajectory import KinematicState
+from hexactl.kinematics.axes import PerAxis, RelativeMmRad
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad
-from hexactl.kinematics.workspace import assess_poses
+from hexactl.kinematics.workspace import ViolationKind, assess_poses, check_poses
 from tests.kinematics.strategies import relative_poses
 
 LIMITS = {
@@ -74,3 +79,68 @@ def test_a_long_paths_violations_do_not_depend_on_the_batch_size(geometry, path,
     with mock.patch.object(planning, "_CHECK_BATCH", batch):
         batched = planning.budgeted_path_violations(context, relative, 1, PlanningBudget(), "here", "nothing")
     assert batched == planning.path_violations(context, relative, 1)
+
+
+@settings(max_examples=100, deadline=None)
+@given(poses=st.lists(relative_poses(scale=1.5), min_size=1, max_size=20), name=st.sampled_from(sorted(LIMITS)))
+def test_a_pose_is_beyond_a_limit_by_a_positive_excess_exactly_where_it_breaks_it(geometry, poses, name) -> None:
+    checks = check_poses(_limited(geometry, name), poses)
+    np.testing.assert_array_equal(checks.excess() > 0, checks.broken)
+
+
+def _context(geometry: Geometry) -> PlanningContext:
+    config = ControllerConfig()
+    return PlanningContext(ActiveGeometry.of(geometry, "test"), config.motion, config.loop.period_s,
+                           geometry.limits.leg_velocity_mm_s)
+
+
+def _beyond_y(geometry: Geometry, mm: float) -> RelativeMmRad:
+    """At rest ``mm`` beyond the envelope's +y bound, as a platform held on the bound may read."""
+    return RelativeMmRad(0.0, geometry.limits.pose_max[1] + mm, 0.0, 0.0, 0.0, 0.0)
+
+
+def test_a_platform_a_hair_beyond_a_limit_may_move_back_inside(geometry) -> None:
+    """Held on the envelope's bound, disabled and enabled again, it held the pose its
+    quantised readings gave, 0.75 µm beyond: every move was refused, the move home
+    included, and jog said to move back inside first (found from outside, 3 a.m. style)."""
+    start = KinematicState.at_rest(_beyond_y(geometry, 0.75e-3))
+    plan = plan_path(_context(geometry), start, [Waypoint((0, 0, 0, 0, 0, 0))])
+    assert plan.ok, plan.refusal
+    assert plan_path(_context(geometry), start, [Waypoint((0, 0, 0, 0, 0, 0)), Waypoint((0, 100, 0, 0, 0, 0))]).ok
+
+
+def test_a_move_from_beyond_a_limit_may_go_no_further_out(geometry) -> None:
+    """Moving out at 50 mm/s when the move home is asked, it brakes further out first:
+    refused, naming the limit, as any path beyond it is."""
+    start = KinematicState(_beyond_y(geometry, 0.75e-3), PerAxis((0.0, 50.0, 0.0, 0.0, 0.0, 0.0)),
+                           PerAxis((0.0,) * 6))
+    plan = plan_path(_context(geometry), start, [Waypoint((0, 0, 0, 0, 0, 0))])
+    assert not plan.ok and [(v.kind, v.axis) for v in plan.refusal.violations] == [(ViolationKind.POSE_RANGE, "y")]
+
+
+def test_a_goal_beyond_a_limit_is_refused_even_from_beyond_it(geometry) -> None:
+    start = KinematicState.at_rest(_beyond_y(geometry, 0.75e-3))
+    plan = plan_path(_context(geometry), start, [Waypoint((0, geometry.limits.pose_max[1] + 0.5e-3, 0, 0, 0, 0))])
+    assert not plan.ok and "outside the pose envelope" in plan.refusal.message
+
+
+def test_only_the_limits_the_platform_starts_beyond_are_eased_and_only_for_the_first_move(geometry) -> None:
+    """From a hair beyond +y, a move may not cross another limit, and a later waypoint of
+    the sequence may not leave the envelope by that hair either."""
+    start = KinematicState.at_rest(_beyond_y(geometry, 0.75e-3))
+    far = geometry.limits.pose_max[0] + 5.0
+    refused = plan_path(_context(geometry), start, [Waypoint((far, 0, 0, 0, 0, 0))])
+    assert not refused.ok and "x " in refused.refusal.message
+    on_the_bound = geometry.limits.pose_max[1]
+    assert plan_path(_context(geometry), start, [Waypoint((0, 0, 0, 0, 0, 0)), Waypoint((0, on_the_bound, 0, 0, 0, 0))]).ok
+
+
+def test_a_jog_from_a_hair_beyond_a_limit_goes_back_inside_and_not_further_out(geometry) -> None:
+    """It was refused: "move back inside with a move before jogging"."""
+    start = KinematicState.at_rest(_beyond_y(geometry, 0.75e-3))
+    inward = plan_jog(_context(geometry), start, None, (0, -20, 0, 0, 0, 0), Frame.ZERO, 200_000_000)
+    assert isinstance(inward, JogPlan), inward
+    assert inward.segment.goal[1] < start.position[1] - 10.0
+    outward = plan_jog(_context(geometry), start, None, (0, 20, 0, 0, 0, 0), Frame.ZERO, 200_000_000)
+    assert not isinstance(outward, JogPlan) and outward.message.endswith("jog the other way, back inside"), outward
+    assert "outside the pose envelope" in outward.message
