@@ -37,6 +37,7 @@ from operator import add, sub
 
 import numpy as np
 from numpy.typing import NDArray
+from ruckig import Trajectory
 
 from hexactl.control.bounds import MAX_MOTION_S
 from hexactl.control.config import ControllerConfig
@@ -90,6 +91,7 @@ _clock = time.monotonic  # the planning budget's clock (tests replace it)
 _MAX_STRETCH_ATTEMPTS = 4  # leg speeds scale exactly as 1/k: one stretch normally suffices
 _STRETCH_MARGIN = 1.001  # covers the rounding of durations to whole periods
 _DURATION_TOLERANCE_S = 1e-6  # a move's duration may fall short of the one asked for by this much
+_SCALE_TOLERANCE = 1e-4  # the velocity scale slowing a move under way to its duration: found to this fraction of it
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -631,14 +633,22 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
         slow = (f" at speed {velocity_scale:g} of the velocity limits: raise the speed (a move may take at most "
                 f"{MAX_MOTION_S:g} s)") if velocity_scale < 1.0 else ""
         return Refusal(ErrorCode.PLANNING_FAILED, f"the trajectory generator refused the move{slow}")
-    # a move to where it already is takes no time, however long it was asked to take
-    time_scale = max(1.0, waypoint.duration_s / natural.duration) if waypoint.duration_s and natural.duration else 1.0
+    time_scale = 1.0  # a move to where it already is takes no time, however long it was asked to take
+    if waypoint.duration_s and 0 < natural.duration < waypoint.duration_s:
+        if start.resting:
+            time_scale = waypoint.duration_s / natural.duration
+        elif (slowed := _slowed_to(context, start, goal, waypoint.duration_s, velocity_scale, natural.duration)) is None:
+            return Refusal(ErrorCode.PLANNING_FAILED, f"the trajectory generator found no move of at least "
+                           f"{waypoint.duration_s:g} s from the motion under way: stop first, or give a speed")
+        else:
+            velocity_scale, natural = slowed
     for attempt in range(_MAX_STRETCH_ATTEMPTS):
         # the natural trajectory is the first attempt's when nothing stretches it
         trajectory = (natural if attempt == 0 and time_scale == 1.0
                       else preview(context.limits, context.period_s, start, goal, time_scale, velocity_scale))
         if trajectory is None:
-            return Refusal(ErrorCode.PLANNING_FAILED, "the trajectory generator refused the move")
+            return Refusal(ErrorCode.PLANNING_FAILED, f"the trajectory generator refused the move slowed {time_scale:.3g} "
+                           "times (for its duration, or the legs' speed): give a shorter duration, or a speed")
         if trajectory.duration > motion_left_s:
             before = (f", after {MAX_MOTION_S - motion_left_s:.6g} s of the moves before it"
                       if motion_left_s < MAX_MOTION_S else "")
@@ -660,6 +670,36 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
             return segment, samples
         time_scale *= peak / context.leg_speed_mm_s * _STRETCH_MARGIN
     return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
+
+
+def _slowed_to(context: PlanningContext, start: KinematicState, goal: Coordinates, duration_s: float,
+               velocity_scale: float, natural_s: float) -> tuple[float, Trajectory] | None:
+    """From a motion under way: the velocity scale, at most ``velocity_scale``, whose move
+    to ``goal`` lasts at least ``duration_s`` (to :data:`_SCALE_TOLERANCE` of it),
+    and its trajectory; None if ruckig refuses one. Not a time scale, which stretches a
+    move from rest exactly: it divides the acceleration and jerk limits too (by k², k³),
+    and braking the motion under way with those ran on for hundreds of millimetres (a 30 s
+    move to x = 100 begun at x = 8 moving +x went to x = 405). At full acceleration and
+    jerk the move brakes as a move without a duration would, then cruises slower."""
+    def lasting(scale: float) -> Trajectory | None:
+        return preview(context.limits, context.period_s, start, goal, 1.0, scale)
+
+    high, low = velocity_scale, velocity_scale * natural_s / duration_s  # a cruise lasts 1/scale
+    while (found := lasting(low)) is not None and found.duration < duration_s:
+        if low < _SCALE_TOLERANCE * velocity_scale * natural_s / MAX_MOTION_S:  # slower than any move may be
+            return None
+        high, low = low, low / 2
+    if found is None:
+        return None
+    while high - low > _SCALE_TOLERANCE * low:
+        middle = (low + high) / 2
+        if (trajectory := lasting(middle)) is None:
+            return None
+        if trajectory.duration >= duration_s:
+            low, found = middle, trajectory
+        else:
+            high = middle
+    return low, found
 
 
 def _samples(context: PlanningContext, start: KinematicState, trajectory, frames: Frames | None,

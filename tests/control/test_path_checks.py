@@ -7,6 +7,7 @@ from __future__ import annotations
 from unittest import mock
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -16,7 +17,7 @@ from hexactl.control.planning import ActiveGeometry, PathViolation, PlanningBudg
 from hexactl.control.frames import Frame
 from hexactl.control.jog import JogPlan
 from hexactl.control.jog_planning import plan_jog
-from hexactl.control.trajectory import KinematicState
+from hexactl.control.trajectory import KinematicState, preview
 from hexactl.kinematics.axes import PerAxis, RelativeMmRad
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad
@@ -144,3 +145,34 @@ def test_a_jog_from_a_hair_beyond_a_limit_goes_back_inside_and_not_further_out(g
     outward = plan_jog(_context(geometry), start, None, (0, 20, 0, 0, 0, 0), Frame.ZERO, 200_000_000)
     assert not isinstance(outward, JogPlan) and outward.message.endswith("jog the other way, back inside"), outward
     assert "outside the pose envelope" in outward.message
+
+
+def _moving_x(at_mm: float, speed_mm_s: float) -> KinematicState:
+    return KinematicState(RelativeMmRad(at_mm, 0.0, 0.0, 0.0, 0.0, 0.0), PerAxis((speed_mm_s, 0.0, 0.0, 0.0, 0.0, 0.0)),
+                          PerAxis((0.0,) * 6))
+
+
+@pytest.mark.parametrize(("goal_x", "duration_s"), [(100.0, 10.0), (100.0, 30.0), (100.0, 500.0), (0.0, 50.0),
+                                                     (-300.0, 20.0)])
+def test_a_duration_from_a_motion_under_way_takes_the_platform_no_further_than_braking_would(
+        geometry, goal_x: float, duration_s: float) -> None:
+    """Found from outside: a 30 s move to x = 100 sent at x = 8 while moving +x at 10 % of
+    the velocity limit went out to x = 405 (its limits divided by 27 000 in jerk braked
+    the motion under way), and 100 to 600 s ones were refused with no reason. Now it goes
+    no further than the move without a duration, or braking to rest at the limits."""
+    context = _context(geometry)
+    start = _moving_x(8.0, 0.1 * context.limits.in_mm_rad()[0][0])
+    timed = plan_path(context, start, [Waypoint((goal_x, 0, 0, 0, 0, 0), duration_s)])
+    untimed = plan_path(context, start, [Waypoint((goal_x, 0, 0, 0, 0, 0))])
+    assert timed.ok and untimed.ok, (timed.refusal, untimed.refusal)
+    (segment,), (natural,) = timed.segments, untimed.segments
+    assert duration_s <= segment.duration_s <= duration_s * 1.01 + 0.1, segment.duration_s
+
+    def farthest(planned) -> float:
+        trajectory = preview(context.limits, context.period_s, start, planned.goal, planned.time_scale,
+                             planned.velocity_scale)
+        return max(trajectory.at_time(t)[0][0] for t in np.linspace(0.0, trajectory.duration, 2001))
+
+    halt = preview(context.limits, context.period_s, start, None)
+    braked = max(halt.at_time(t)[0][0] for t in np.linspace(0.0, halt.duration, 2001))
+    assert farthest(segment) <= max(farthest(natural), braked, goal_x) + 1e-6
