@@ -1,6 +1,6 @@
 """How long planning long motion takes: validating a 600 s two-axis wave near the motion
-limits, a sequence of 500 full-speed waypoints (about 580 s of motion), and a leg-locked
-move of 600 s.
+limits, a sequence of 500 full-speed waypoints (about 580 s of motion), a leg-locked
+move of 600 s, and a 30 s move asked while another one is under way.
 
 The controller runs on ideal in-memory actuators in simulated time (the control tests'
 rig); ``time.perf_counter`` and ``time.process_time`` around the facade's
@@ -39,15 +39,21 @@ SEQUENCE_POSES, SEQUENCE_WAYPOINTS = ((-55.0, 0.0, 0.0, 0.0, 0.0, 0.0), (55.0, 0
 LOCKED_LEG, LOCKED_GOAL, LOCKED_DURATION_S = 1, (60.0, 40.0, 20.0, 0.0, 0.0, 0.0), 600.0
 """Leg 1 locked, a move to the projection of this pose taking 600 s."""
 
-CASES = ("wave", "sequence", "locked")
+UNDERWAY_FIRST, UNDERWAY_CYCLES, UNDERWAY_GOAL, UNDERWAY_DURATION_S = (300.0, 0.0, 0.0, 0.0, 0.0, 0.0), 250, \
+    (100.0, 0.0, 0.0, 0.0, 0.0, 0.0), 30.0
+"""A move to the first pose at speed 0.1, 0.5 s under way (x about 8 mm, moving +x), then
+the second pose validated with a duration of 30 s (the outside tester's case)."""
+
+CASES = ("wave", "sequence", "locked", "underway")
 CASE_NAMES = {"wave": "600 s two-axis wave (x 40 mm, roll 2.5°, 0.5 Hz), validate_wave",
               "sequence": "500-waypoint full-speed sequence (x ±55 mm, 580 s of motion), validate_sequence",
-              "locked": "leg 1 locked, 600 s move, validate_pose"}
+              "locked": "leg 1 locked, 600 s move, validate_pose",
+              "underway": "a 30 s move to x 100 mm asked at x 8 mm moving +x, validate_pose"}
 
 
-def measure(case: str) -> tuple[float, float]:
+def measure(case: str) -> tuple[float, float, float]:
     """The planning time of ``case``, s, wall-clock and CPU (the process's), with the
-    hexactl on the path."""
+    hexactl on the path, and the planned motion's duration, s."""
     from hexactl.adapters.files.geometry_file import load_geometry
     from hexactl.control.config import ControllerConfig
     from hexactl.control.local_controller import LocalController
@@ -75,18 +81,22 @@ def measure(case: str) -> tuple[float, float]:
     elif case == "sequence":
         waypoints = [SequenceWaypoint(pose=SEQUENCE_POSES[n % 2]) for n in range(SEQUENCE_WAYPOINTS)]
         call = partial(controller.validate_sequence, MotionSequence(name="long", waypoint=waypoints))
-    else:
+    elif case == "locked":
         assert controller.leg_lock(LOCKED_LEG).ok
         run(3)
         call = partial(controller.validate_pose, LOCKED_GOAL, duration=LOCKED_DURATION_S)
+    else:
+        assert controller.move(UNDERWAY_FIRST, speed=0.1).ok
+        run(UNDERWAY_CYCLES)
+        call = partial(controller.validate_pose, UNDERWAY_GOAL, duration=UNDERWAY_DURATION_S)
     begin, begin_cpu = time.perf_counter(), time.process_time()
     result = call()
     times = time.perf_counter() - begin, time.process_time() - begin_cpu
     assert result.ok, result.message
-    return times
+    return (*times, result.details["duration_s"])
 
 
-def measure_tree(tree: Path, cases: list[str]) -> dict[str, tuple[float, float]]:
+def measure_tree(tree: Path, cases: list[str]) -> dict[str, tuple[float, float, float]]:
     """One run of each case in a child process importing ``tree``'s hexactl."""
     env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
     command = [sys.executable, __file__, "--child", "--case", *cases]
@@ -113,7 +123,7 @@ def main() -> None:
                           "times": {case: measure(case) for case in arguments.case}}))
         return
     trees = arguments.tree or [ROOT]
-    results: dict[Path, dict[str, list[tuple[float, float]]]] = {tree: {case: [] for case in arguments.case}
+    results: dict[Path, dict[str, list[tuple[float, float, float]]]] = {tree: {case: [] for case in arguments.case}
                                                                   for tree in trees}
     load = os.getloadavg()
     for _ in range(arguments.repeats):
@@ -124,15 +134,15 @@ def main() -> None:
     print(f"load average (1, 5, 15 min): {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} before, "
           f"{load_after[0]:.2f} {load_after[1]:.2f} {load_after[2]:.2f} after; {arguments.repeats} runs each\n")
     ratio = len(trees) > 1
-    header = " | ".join(f"{tree}: wall least (median), CPU least" for tree in trees)
+    header = " | ".join(f"{tree}: wall least (median), CPU least; motion planned" for tree in trees)
     print(f"| case | {header} |" + (f" {trees[0]} ÷ {trees[-1]}, wall least |" if ratio else ""))
     print("| --- |" + " --- |" * (len(trees) + ratio))
     for case in arguments.case:
         cells, least = [], []
         for tree in trees:
-            wall, cpu = zip(*results[tree][case])
+            wall, cpu, planned = zip(*results[tree][case])
             least.append(min(wall))
-            cells.append(f"{min(wall):.2f} ({statistics.median(wall):.2f}) s, {min(cpu):.2f} s")
+            cells.append(f"{min(wall):.2f} ({statistics.median(wall):.2f}) s, {min(cpu):.2f} s; {planned[0]:.1f} s")
         if ratio:
             cells.append(f"{least[0] / least[-1]:.1f}×")
         print(f"| {CASE_NAMES[case]} | {' | '.join(cells)} |")
