@@ -97,6 +97,21 @@ def test_relative_paths_try_each_directory_in_order(tmp_path) -> None:
     assert refusal(read, directories, os.path.relpath("/etc/passwd", first)).code == ErrorCode.FORBIDDEN_PATH
 
 
+def test_a_link_to_outside_is_forbidden_not_missing_where_another_directory_lacks_the_name(tmp_path) -> None:
+    """With several data directories (the service's default three), a link in one to a
+    file outside was "no such file in the data directories", the others lacking the name:
+    the operator, who sees the file there, was told it is not."""
+    first, second = tmp_path / "calibrations", tmp_path / "recordings"
+    first.mkdir()
+    second.mkdir()
+    (tmp_path / "secret.toml").write_text("outside")
+    (first / "pw.toml").symlink_to(tmp_path / "secret.toml")
+    refused = refusal(read, DataDirectories([second, first]), "pw.toml")
+    assert refused.code == ErrorCode.FORBIDDEN_PATH and "leads outside the data directories" in refused.message
+    assert str(first / "pw.toml") in refused.message and "secret" not in refused.message.replace(str(first), "")
+    assert refusal(read, DataDirectories([second, first]), "none.toml").code == ErrorCode.FILE_NOT_FOUND
+
+
 def test_relative_to_the_working_directory_inside_a_data_directory(tmp_path, monkeypatch) -> None:
     (tmp_path / "calibrations").mkdir()
     (tmp_path / "calibrations" / "c.toml").write_text("c")

@@ -124,6 +124,7 @@ class DataDirectories:
         candidates = [path] if path.is_absolute() else [*(directory / path for directory in self.directories), Path.cwd() / path]
         problem: ApiError | None = None  # the first found inside that is not a readable file
         missing = False
+        escaping: Path | None = None  # the first that is there, a link to outside the directories
         for candidate in candidates:
             try:
                 real = candidate.resolve()
@@ -132,6 +133,9 @@ class DataDirectories:
                 continue
             directory = self._containing(real)
             if directory is None:
+                inside_by_name = self._containing(Path(os.path.abspath(candidate))) is not None
+                if escaping is None and inside_by_name and os.path.lexists(candidate):
+                    escaping = candidate
                 continue
             try:
                 descriptor = _open_file_beneath(directory, real.relative_to(directory))
@@ -153,6 +157,9 @@ class DataDirectories:
                 raise
         if problem is not None:
             raise problem
+        if escaping is not None:  # "no such file" of a file the operator sees there misleads
+            raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: {escaping} leads outside the data directories (a "
+                           "symbolic link): copy the file into one instead", self._listing())
         if missing:
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories", self._listing())
         raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
