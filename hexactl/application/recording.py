@@ -141,9 +141,9 @@ class Recordings:
                                        RecordingStart(start))
         except (ValueError, TypeError) as error:
             raise ApiError(ErrorCode.INVALID_REQUEST, f"{error}: frame is zero or work, start now or next_motion") from None
-        problem = _request_problem(request)
-        if problem:
-            raise ApiError(ErrorCode.INVALID_REQUEST, problem)
+        if found := _request_problem(request):
+            field, problem = found
+            raise ApiError(ErrorCode.INVALID_REQUEST, f"record: {problem}", [{"field": field, "problem": problem}])
         with self._lock:
             if (current := self._open) is not None:
                 raise ApiError(ErrorCode.BUSY, f"recording {current.request.name!r} is under way ({current.received} of "
@@ -335,18 +335,19 @@ def _shown(pose: Sequence[float] | None, frames: Frames | None, active: ActiveGe
     return convert(pose, None, frames, active.home)
 
 
-def _request_problem(request: RecordingRequest) -> str | None:
+def _request_problem(request: RecordingRequest) -> tuple[str, str] | None:
+    """The field at fault and what is wrong with it, or None."""
     if not NAME_PATTERN.match(request.name) or request.name.endswith(".partial"):
-        return (f"name {request.name!r}: a bare file name (letters, digits, '.', '_', '-'; up to 100), without a "
-                "directory: the files go to the first data directory")
+        return "name", (f"name {request.name!r}: a bare file name (letters, digits, '.', '_', '-'; up to 100), "
+                        "without a directory: the files go to the first data directory")
     if unknown := [s for s in request.signals if s not in SIGNALS]:
-        return f"unknown signals {unknown}: choose among {', '.join(SIGNALS)}"
+        return "signals", f"unknown signals {unknown}: choose among {', '.join(SIGNALS)}"
     if not request.signals:
-        return f"no signals: choose among {', '.join(SIGNALS)}"
+        return "signals", f"no signals: choose among {', '.join(SIGNALS)}"
     if repeated := sorted({s for s in request.signals if request.signals.count(s) > 1}):
-        return f"signals {', '.join(repeated)} named more than once: name each signal once"
+        return "signals", f"signals {', '.join(repeated)} named more than once: name each signal once"
     if isinstance(request.divisor, bool) or not isinstance(request.divisor, int) or request.divisor < 1:
-        return f"divisor {request.divisor!r}: a whole number ≥ 1 (1: every cycle)"
+        return "divisor", f"divisor {request.divisor!r}: a whole number ≥ 1 (1: every cycle)"
     if not (0 < request.duration_s <= MAX_RECORDING_S):
-        return f"duration_s {request.duration_s!r}: more than 0 and at most {MAX_RECORDING_S:g} s"
+        return "duration_s", f"duration_s {request.duration_s!r}: more than 0 and at most {MAX_RECORDING_S:g} s"
     return None

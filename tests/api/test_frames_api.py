@@ -72,6 +72,9 @@ def test_set_frames_merges_saves_and_clears(framed, tmp_path: Path) -> None:
 def test_bad_frames_are_refused_naming_the_problem_and_change_nothing(framed, fields, fragment) -> None:
     reply = send(framed, "set_frames", **fields)
     assert reply["error"]["code"] == "invalid_request" and fragment in reply["error"]["message"]
+    details = reply["error"]["details"]  # as for any invalid_request: a {field, problem} each
+    assert details and all(set(d) == {"field", "problem"} for d in details), details
+    assert any(fragment in f"{d['field']}: {d['problem']}" for d in details), details
     assert framed.controller.calls == []
 
 

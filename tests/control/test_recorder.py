@@ -181,8 +181,10 @@ def test_writer_refusals_name_the_problem(rig, recordings, tmp_path):
         recordings.start("../up")
     with pytest.raises(ApiError, match="unknown signals"):
         recordings.start("x", signals=("torque",))
-    with pytest.raises(ApiError, match="signals feedback, lateness named more than once: name each signal once"):
+    with pytest.raises(ApiError, match="record: signals feedback, lateness named more than once: name each signal "
+                       "once") as repeated:
         recordings.start("x", signals=("lateness", "feedback", "pose_command", "feedback", "lateness"))
+    assert repeated.value.details == [{"field": "signals", "problem": repeated.value.message.removeprefix("record: ")}]
     assert not (tmp_path / "x.csv.partial").exists()
     recordings.start("one", duration_s=5.0)
     with pytest.raises(ApiError, match="'one' is under way.*record_stop") as busy:

@@ -59,7 +59,7 @@ from hexactl.adapters.api.campaign_board import CampaignBoard
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.port import ControllerPort, RecorderPort, StreamInput
 from hexactl.adapters.api.sequences import resolve_sequence
-from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error
+from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error, validation_problems
 from hexactl.adapters.files.atomic import write_problem
 from hexactl.adapters.files.frames_file import save_frames
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
@@ -270,7 +270,8 @@ class CommandHandler:
                 given["soft_limits"] = request.soft_limit_changes.applied_to(current.soft_limits)
             frames = OperatorFrames.model_validate({**dict(current), **given})
         except ValidationError as error:
-            raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames")) from None
+            raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames"),
+                           validation_problems(error)) from None
         return self._replace_frames(frames)
 
     def _replace_frames(self, frames: OperatorFrames, message: str | None = None) -> dict[str, Any]:

@@ -126,12 +126,18 @@ def decode_request(body: bytes) -> Request:
     try:
         return _REQUEST.validate_python(document)
     except ValidationError as error:
-        problems = [
-            {"field": validation_location(problem["loc"][1:]), "problem": problem["msg"].removeprefix("Value error, ")}
-            for problem in error.errors(include_url=False, include_input=False, include_context=False)
-        ]
+        problems = validation_problems(error, within_command=True)
         message = "; ".join(f"{p['field']}: {p['problem']}" if p["field"] else p["problem"] for p in problems)
         raise ApiError(ErrorCode.INVALID_REQUEST, f"{command}: {message}", problems, request_id) from None
+
+
+def validation_problems(error: ValidationError, within_command: bool = False) -> list[dict[str, str]]:
+    """An ``invalid_request``'s ``details``: one ``{field, problem}`` per problem, the field
+    as a client writes it (``within_command``: the locations start with the command's tag,
+    left out)."""
+    return [{"field": validation_location(problem["loc"][1:] if within_command else problem["loc"]),
+             "problem": problem["msg"].removeprefix("Value error, ")}
+            for problem in error.errors(include_url=False, include_input=False, include_context=False)]
 
 
 def encode(document: dict[str, Any]) -> bytes:
