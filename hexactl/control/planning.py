@@ -668,7 +668,10 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
         if peak <= context.leg_speed_mm_s:
             segment = Segment(goal, time_scale, velocity_scale, waypoint.dwell_s, trajectory.duration, frames)
             return segment, samples
-        time_scale *= peak / context.leg_speed_mm_s * _STRETCH_MARGIN
+        if start.resting:
+            time_scale *= peak / context.leg_speed_mm_s * _STRETCH_MARGIN
+        else:  # the limits of the brake from the motion under way are kept (see _slowed_to)
+            velocity_scale /= peak / context.leg_speed_mm_s * _STRETCH_MARGIN
     return Refusal(ErrorCode.PLANNING_FAILED, f"could not keep the legs under {context.leg_speed_mm_s:g} mm/s")
 
 

@@ -4,6 +4,7 @@ pose from every pose's assessment, however the poses are cut into batches."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from unittest import mock
 
 import numpy as np
@@ -176,3 +177,17 @@ def test_a_duration_from_a_motion_under_way_takes_the_platform_no_further_than_b
     halt = preview(context.limits, context.period_s, start, None)
     braked = max(halt.at_time(t)[0][0] for t in np.linspace(0.0, halt.duration, 2001))
     assert farthest(segment) <= max(farthest(natural), braked, goal_x) + 1e-6
+
+
+def test_a_move_under_way_slowed_for_the_legs_speed_keeps_its_brake(geometry) -> None:
+    """A leg speed budget the move's cruise breaks: from a motion under way it is kept by
+    a lower velocity limit, not by stretching the brake from the motion under way."""
+    context = replace(_context(geometry), leg_speed_mm_s=20.0)
+    start = _moving_x(8.0, 15.0)
+    plan = plan_path(context, start, [Waypoint((100, 0, 0, 0, 0, 0))])
+    assert plan.ok, plan.refusal
+    (segment,) = plan.segments
+    assert segment.time_scale == 1.0 and segment.velocity_scale < 1.0
+    trajectory = preview(context.limits, context.period_s, start, segment.goal, 1.0, segment.velocity_scale)
+    xs = [trajectory.at_time(t)[0][0] for t in np.linspace(0.0, trajectory.duration, 2001)]
+    assert max(xs) <= 100.0 + 1e-6 and min(xs) >= 8.0 - 1e-6
