@@ -347,6 +347,23 @@ def budgeted_path_violations(context: PlanningContext, relative: NDArray, waypoi
     return checks.violations()
 
 
+def farthest_violation(context: PlanningContext, relative: NDArray) -> Violation | None:
+    """Of the hardware limit that (N, 6) relative mm/rad samples of a path break first (as
+    :func:`path_violations` reports it, at the first sample beyond it), the violation where
+    the path is farthest beyond it; None if none is broken. For a refusal that should say
+    how far, not only where: the first sample of a wave beyond the envelope was 1.69 mm
+    beyond, and the wave went on to 745 mm."""
+    relative_deg = pose_mm_rad_to_mm_deg(relative)
+    checks = check_poses(context.active.geometry,
+                         relative_deg[_thinned(relative_deg, context.path_step_mm, context.path_step_deg)])
+    rows, columns = np.nonzero(checks.broken)
+    if not len(rows):
+        return None
+    column = int(columns[0])
+    excess = np.nan_to_num(checks.excess()[:, column], nan=np.inf)
+    return checks.violation(int(np.argmax(excess)), column)
+
+
 def tolerated_excess(geometry: Geometry, start: NDArray) -> NDArray | None:
     """How far a motion from relative mm/rad ``start`` may be beyond each hardware limit
     (the columns of :class:`~hexactl.kinematics.workspace.PoseChecks`): as far as the

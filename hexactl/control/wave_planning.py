@@ -36,6 +36,7 @@ from hexactl.control.planning import (
     PlanningContext,
     Refusal,
     budgeted_path_violations,
+    farthest_violation,
 )
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState
@@ -106,7 +107,9 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
         return violations
     if violations:
         more = f" (and {len(violations) - 1} more)" if len(violations) > 1 else ""
-        return Refusal(ErrorCode.PATH_VIOLATION, f"the wave leaves the limits: {violations[0].message}{more}",
+        farthest = farthest_violation(context, relative)
+        at_worst = f"; at its farthest, {farthest.message}" if farthest and farthest.message != violations[0].message else ""
+        return Refusal(ErrorCode.PATH_VIOLATION, f"the wave leaves the limits: {violations[0].message}{more}{at_worst}",
                        tuple(violations))
     period = context.period_s
     setpoints = sensor_setpoints_batch(context.active.geometry.legs, relative + np.asarray(home))

@@ -2,6 +2,7 @@
 frame, validation at the legs' speed limit, and the loop playing exactly what was
 validated, ending at rest, braking jerk-limited when aborted."""
 
+import re
 from math import radians
 
 import numpy as np
@@ -155,13 +156,19 @@ def test_a_wave_at_the_legs_speed_limit_is_accepted_and_one_just_beyond_is_refus
     assert refused.details["leg_speed_mm_s"] == pytest.approx(budget * 1.01, rel=2e-3)
 
 
-def test_pose_space_limits_and_the_workspace_refuse_naming_the_axis(rig):
+def test_pose_space_limits_and_the_workspace_refuse_naming_the_axis(rig, geometry):
     rig.enabled()
     fast = rig.controller.validate_wave(WaveSpec(frequency_hz=2.0, cycles=4, axes={"x": {"amplitude": 30.0}}))
     assert fast.error == "planning_failed" and fast.details["kind"] == "pose_velocity" and fast.details["axis"] == "x"
     assert "x velocity" in fast.message and "200 mm/s" in fast.message
     far = rig.controller.validate_wave(WaveSpec(frequency_hz=0.01, cycles=2, axes={"x": {"amplitude": 900.0}}))
     assert far.error == "path_violation" and far.details["violations"]
+    # where it first leaves the envelope (a hair beyond, where sampled), and how far it goes: trim to fit
+    spec = WaveSpec(frequency_hz=0.01, cycles=2, axes={"x": {"amplitude": 900.0}})
+    path = WavePath(spec, (0.0,) * 6, rig.controller.config.loop.period_s)
+    peak = max(abs(path.at(k)[0]) for k in range(path.samples + 1))  # ramped in and out: under 900
+    farthest = re.search(r"at its farthest, x (-?[0-9.]+) mm outside the pose envelope", far.message)
+    assert farthest and peak - 2.0 <= abs(float(farthest[1])) <= peak, far.message  # to the path check's 2 mm step
     long = rig.controller.validate_wave(WaveSpec(frequency_hz=0.1, cycles=100, axes={"z": {"amplitude": 1.0}}))
     assert long.error == "planning_failed" and "at most 600 s" in long.message
 
