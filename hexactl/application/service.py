@@ -37,6 +37,7 @@ import threading
 import time
 from collections.abc import Callable, Collection
 from importlib import resources
+from itertools import combinations
 from contextlib import ExitStack, suppress
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -269,15 +270,14 @@ class Service:
             without CURVE keys
         """
         # The stream's ZeroMQ socket steers the platform as the API does (UDP is warned of below).
-        zmq_endpoints = [config.api_endpoint, config.telemetry_endpoint,
-                         *([config.stream_endpoint] if config.stream_endpoint else [])]
-        named = [("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
-                 ("--stream", config.stream_endpoint)]
-        for index, (option, endpoint) in enumerate(named):
-            for other_option, other in named[index + 1:]:
-                if endpoint and other and endpoints_clash(endpoint, other):
-                    raise ServiceError(f"{option} {endpoint} and {other_option} {other} take the same address: give "
-                                       "each its own port (tcp://HOST:* takes a free one)")
+        given = (("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
+                 ("--stream", config.stream_endpoint))
+        named = [(option, endpoint) for option, endpoint in given if endpoint]
+        zmq_endpoints = [endpoint for _, endpoint in named]
+        for (option, endpoint), (other_option, other) in combinations(named, 2):
+            if endpoints_clash(endpoint, other):
+                raise ServiceError(f"{option} {endpoint} and {other_option} {other} take the same address: give each "
+                                   "its own port (tcp://HOST:* takes a free one)")
         check_endpoints(zmq_endpoints, config.curve)  # refused before any word of CURVE
         for endpoint in zmq_endpoints:
             if not is_local_endpoint(endpoint):
@@ -292,8 +292,7 @@ class Service:
                 raise ServiceError(f"CURVE keys: {error}") from None
         for option, endpoint in named:
             try:  # here, before the actuators open; the API process binds them for good
-                if endpoint is not None:
-                    check_bindable(endpoint)
+                check_bindable(endpoint)
             except zmq.ZMQError as error:  # it names the endpoint
                 raise ServiceError(f"{option}: cannot serve: {error}") from None
         config_path = config.config_path or default_config_path()
