@@ -297,7 +297,6 @@ class Service:
                 raise ServiceError(f"{option}: cannot serve: {error}") from None
         config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
-        data_dirs = data_directories(config.data_dirs, config_path)
         frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
         kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
 
@@ -364,6 +363,8 @@ class Service:
             if realtime.fifo_priority is not None:
                 fifo_below_loop(realtime.fifo_priority)
 
+            # Last before the API: a start refused at any step before leaves no directory behind.
+            data_dirs = data_directories(config.data_dirs, config_path)
             settings = ApiSettings(config.api_endpoint, config.telemetry_endpoint, config.telemetry_rate_hz, config.curve,
                                    data_dirs, controller_config, nominal,
                                    simulator.instrument_spec if simulator else None, config.log_level,

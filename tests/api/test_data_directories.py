@@ -97,6 +97,18 @@ def test_serve_refuses_a_missing_data_dir_naming_it(tmp_path) -> None:
     assert not (tmp_path / "nowhere").exists()
 
 
+def test_a_start_refused_at_the_bus_leaves_no_directory_behind(tmp_path) -> None:
+    """The default directories are made last before the API: a start that fails earlier
+    (here a bus that cannot be opened) leaves none in the working directory."""
+    finished = subprocess.run([sys.executable, "-m", "hexactl.adapters.cli.main", "serve", "--api", "tcp://127.0.0.1:*",
+                               "--telemetry", "tcp://127.0.0.1:*", "--no-realtime", "--can", "socketcan:hexactl-none0"],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False)
+    assert finished.returncode != 0
+    assert "cannot open the actuators' bus socketcan:hexactl-none0" in finished.stderr
+    # the kept files' hidden locks stay, as after every run (docs: service_lock)
+    assert sorted(path.name for path in tmp_path.iterdir() if not path.name.startswith(".")) == []
+
+
 def test_serve_creates_the_directories_and_plays_an_example_and_a_plan(tmp_path, capsys) -> None:
     """The operator's first steps in an empty directory: serve, play a shipped example,
     play a plan written by plan-leglock into ./sequences, save the recording."""
