@@ -1,11 +1,12 @@
 """How long planning long motion takes: validating a 600 s two-axis wave near the motion
 limits, a sequence of 500 full-speed waypoints (about 580 s of motion), a leg-locked
-move of 600 s, and a 30 s move asked while another one is under way.
+move of 600 s, a 30 s move asked while another one is under way, and refusing a 200 s
+wave that leaves the envelope (its refusal says which amplitude fits).
 
 The controller runs on ideal in-memory actuators in simulated time (the control tests'
 rig); ``time.perf_counter`` and ``time.process_time`` around the facade's
 ``validate_wave``, ``validate_sequence`` and ``validate_pose`` only, which plan in the
-caller's thread. Every plan must be accepted. Each figure is the least (and the median)
+caller's thread. Every plan must be accepted, but the last case's refused. Each figure is the least (and the median)
 of ``--repeats`` runs, each run in a fresh process; with several ``--tree`` checkouts
 (each one's ``hexactl`` imported instead of this one's, e.g. a ``git worktree`` of the
 revision before a change) the runs alternate between them, so that other work on the
@@ -44,16 +45,20 @@ UNDERWAY_FIRST, UNDERWAY_CYCLES, UNDERWAY_GOAL, UNDERWAY_DURATION_S = (300.0, 0.
 """A move to the first pose at speed 0.1, 0.5 s under way (x about 8 mm, moving +x), then
 the second pose validated with a duration of 30 s (the outside tester's case)."""
 
-CASES = ("wave", "sequence", "locked", "underway")
+REFUSED_WAVE = {"frequency_hz": 0.01, "cycles": 2, "axes": {"x": {"amplitude": 900.0}}}
+"""200 s, out to x 818 mm (ramped in and out), beyond the envelope's 610 mm: refused."""
+
+CASES = ("wave", "sequence", "locked", "underway", "refused")
 CASE_NAMES = {"wave": "600 s two-axis wave (x 40 mm, roll 2.5°, 0.5 Hz), validate_wave",
               "sequence": "500-waypoint full-speed sequence (x ±55 mm, 580 s of motion), validate_sequence",
               "locked": "leg 1 locked, 600 s move, validate_pose",
-              "underway": "a 30 s move to x 100 mm asked at x 8 mm moving +x, validate_pose"}
+              "underway": "a 30 s move to x 100 mm asked at x 8 mm moving +x, validate_pose",
+              "refused": "200 s wave beyond the envelope (x 900 mm, 0.01 Hz), refused, validate_wave"}
 
 
-def measure(case: str) -> tuple[float, float, float]:
+def measure(case: str) -> tuple[float, float, float | None]:
     """The planning time of ``case``, s, wall-clock and CPU (the process's), with the
-    hexactl on the path, and the planned motion's duration, s."""
+    hexactl on the path, and the planned motion's duration, s (None: refused)."""
     from hexactl.adapters.files.geometry_file import load_geometry
     from hexactl.control.config import ControllerConfig
     from hexactl.control.local_controller import LocalController
@@ -76,8 +81,8 @@ def measure(case: str) -> tuple[float, float, float]:
 
     assert controller.enable().ok
     run(3)
-    if case == "wave":
-        call = partial(controller.validate_wave, WaveSpec(**WAVE))
+    if case in ("wave", "refused"):
+        call = partial(controller.validate_wave, WaveSpec(**(WAVE if case == "wave" else REFUSED_WAVE)))
     elif case == "sequence":
         waypoints = [SequenceWaypoint(pose=SEQUENCE_POSES[n % 2]) for n in range(SEQUENCE_WAYPOINTS)]
         call = partial(controller.validate_sequence, MotionSequence(name="long", waypoint=waypoints))
@@ -92,11 +97,14 @@ def measure(case: str) -> tuple[float, float, float]:
     begin, begin_cpu = time.perf_counter(), time.process_time()
     result = call()
     times = time.perf_counter() - begin, time.process_time() - begin_cpu
+    if case == "refused":
+        assert result.error == "path_violation", result.message
+        return (*times, None)
     assert result.ok, result.message
     return (*times, result.details["duration_s"])
 
 
-def measure_tree(tree: Path, cases: list[str]) -> dict[str, tuple[float, float, float]]:
+def measure_tree(tree: Path, cases: list[str]) -> dict[str, tuple[float, float, float | None]]:
     """One run of each case in a child process importing ``tree``'s hexactl."""
     env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
     command = [sys.executable, __file__, "--child", "--case", *cases]
@@ -123,7 +131,7 @@ def main() -> None:
                           "times": {case: measure(case) for case in arguments.case}}))
         return
     trees = arguments.tree or [ROOT]
-    results: dict[Path, dict[str, list[tuple[float, float, float]]]] = {tree: {case: [] for case in arguments.case}
+    results: dict[Path, dict[str, list[tuple[float, float, float | None]]]] = {tree: {case: [] for case in arguments.case}
                                                                   for tree in trees}
     load = os.getloadavg()
     for _ in range(arguments.repeats):
@@ -142,7 +150,8 @@ def main() -> None:
         for tree in trees:
             wall, cpu, planned = zip(*results[tree][case])
             least.append(min(wall))
-            cells.append(f"{min(wall):.2f} ({statistics.median(wall):.2f}) s, {min(cpu):.2f} s; {planned[0]:.1f} s")
+            motion = "refused" if planned[0] is None else f"{planned[0]:.1f} s"
+            cells.append(f"{min(wall):.2f} ({statistics.median(wall):.2f}) s, {min(cpu):.2f} s; {motion}")
         if ratio:
             cells.append(f"{least[0] / least[-1]:.1f}×")
         print(f"| {CASE_NAMES[case]} | {' | '.join(cells)} |")

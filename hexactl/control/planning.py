@@ -244,10 +244,14 @@ class PlanningBudget:
         self.budget_s = PLANNING_BUDGET_S if budget_s is None else budget_s
         self._deadline = _clock() + self.budget_s
 
+    def spent(self) -> bool:
+        """Whether the time is up."""
+        return _clock() > self._deadline
+
     def refusal(self, where: str, remedy: str) -> Refusal | None:
         """None while time is left; else the refusal, saying ``where`` planning was and the
         ``remedy``."""
-        if _clock() <= self._deadline:
+        if not self.spent():
             return None
         return Refusal(ErrorCode.PLANNING_FAILED, f"planning took longer than {self.budget_s:g} s, {where}: {remedy} "
                        "(the machine may be busy)", details={"budget_s": self.budget_s})
@@ -355,7 +359,7 @@ def farthest_violation(context: PlanningContext, relative: NDArray) -> Violation
     beyond, and the wave went on to 745 mm."""
     relative_deg = pose_mm_rad_to_mm_deg(relative)
     checks = check_poses(context.active.geometry,
-                         relative_deg[_thinned(relative_deg, context.path_step_mm, context.path_step_deg)])
+                         relative_deg[thinned(relative_deg, context.path_step_mm, context.path_step_deg)])
     rows, columns = np.nonzero(checks.broken)
     if not len(rows):
         return None
@@ -404,7 +408,7 @@ class _PathChecks:
             if soft := _soft_violations(context, relative, waypoint):
                 self._soft.setdefault(waypoint, []).extend(soft)
         relative_deg = pose_mm_rad_to_mm_deg(relative)
-        keep = _thinned(relative_deg, context.path_step_mm, context.path_step_deg)
+        keep = thinned(relative_deg, context.path_step_mm, context.path_step_deg)
         if self._last is not None and keep[0] == 0 and np.array_equal(relative[0], self._last):
             keep = keep[1:]
         self._last = relative[-1].copy()
@@ -494,7 +498,7 @@ def assess_path(
     of translation or ``step_deg`` of rotation (first and last always kept); the first
     violation of each kind (per leg or axis) with the pose where it happens."""
     relative_deg = pose_mm_rad_to_mm_deg(samples)
-    keep = _thinned(relative_deg, step_mm, step_deg)
+    keep = thinned(relative_deg, step_mm, step_deg)
     found: dict[tuple, PathViolation] = {}
     _note_first_violations(geometry, relative_deg[keep], np.full(len(keep), waypoint), found)
     return list(found.values())
@@ -525,7 +529,7 @@ def _note_first_violations(geometry: Geometry, poses: NDArray, owners: NDArray, 
                                            violation.leg, violation.axis, waypoint=owner, pose=pose)
 
 
-def _thinned(relative_deg: NDArray, step_mm: float, step_deg: float) -> NDArray:
+def thinned(relative_deg: NDArray, step_mm: float, step_deg: float) -> NDArray:
     """The indices of (N, 6) relative mm/deg samples kept at one per ``step_mm`` of
     translation or ``step_deg`` of rotation, ascending; the first and the last always."""
     steps = np.abs(np.diff(relative_deg, axis=0))

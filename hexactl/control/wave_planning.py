@@ -8,7 +8,8 @@ its whole path has been checked, from rest:
 2. the limits of every commanded path (:func:`~hexactl.control.planning.path_violations`:
    stroke, joint cones, envelope, near-singularity, soft limits), in batches, with a look
    at the planning budget (:data:`~hexactl.control.planning.PLANNING_BUDGET_S`) between
-   them and between batches of cycles in 1;
+   them and between batches of cycles in 1; a refusal says where the path first leaves
+   a limit, how far it goes, and the largest amplitudes that stay inside;
 3. the legs' speed: set-points by batch IK, the peak change per cycle against the budget
    moves are planned within (``PlanningContext.leg_speed_mm_s``). A move that is too fast
    is stretched in time; a wave is refused, never stretched: its frequency is what was
@@ -25,7 +26,7 @@ not checked (a leg's acceleration follows from the pose-space limits checked in 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import degrees
+from math import degrees, floor, log10
 
 import numpy as np
 
@@ -37,6 +38,8 @@ from hexactl.control.planning import (
     Refusal,
     budgeted_path_violations,
     farthest_violation,
+    path_violations,
+    thinned,
 )
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState
@@ -44,6 +47,7 @@ from hexactl.control.waves import WavePath, WaveSpec
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import sensor_setpoints_batch
+from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 
 
 _BUDGET_SAMPLES = 50_000
@@ -95,12 +99,9 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
     origin = start.position if frames == start_frames else convert(start.position, start_frames, frames, home)
     path = WavePath(spec, origin, context.period_s)
     budget, remedy = PlanningBudget(), "fewer cycles"
-    rows: list = []
-    for begin in range(0, path.samples + 1, _BUDGET_SAMPLES):
-        if begin and (refusal := budget.refusal(f"at cycle {begin} of {path.samples}", remedy)):
-            return refusal
-        rows += [path.at(k) for k in range(begin, min(begin + _BUDGET_SAMPLES, path.samples + 1))]
-    positions = np.array(rows, dtype=float)
+    positions = _positions(path, budget, remedy)
+    if isinstance(positions, Refusal):
+        return positions
     relative = relative_poses(frames, positions, home)
     violations = budgeted_path_violations(context, relative, 1, budget, "checking the wave's path", remedy)
     if isinstance(violations, Refusal):
@@ -109,8 +110,11 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
         more = f" (and {len(violations) - 1} more)" if len(violations) > 1 else ""
         farthest = farthest_violation(context, relative)
         at_worst = f"; at its farthest, {farthest.message}" if farthest and farthest.message != violations[0].message else ""
-        return Refusal(ErrorCode.PATH_VIOLATION, f"the wave leaves the limits: {violations[0].message}{more}{at_worst}",
-                       tuple(violations))
+        fitting = _fitting_amplitudes(context, path, frames, positions, relative)
+        fit = f"; {_describe_fit(fitting)}" if fitting else ""
+        return Refusal(ErrorCode.PATH_VIOLATION,
+                       f"the wave leaves the limits: {violations[0].message}{more}{at_worst}{fit}", tuple(violations),
+                       details={"fitting_amplitudes": fitting} if fitting else {})
     period = context.period_s
     setpoints = sensor_setpoints_batch(context.active.geometry.legs, relative + np.asarray(home))
     speed = np.abs(np.diff(setpoints, axis=0)).max(axis=0) / period
@@ -129,6 +133,100 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
     hardest = int(np.argmax(acceleration))
     return WavePlan(path, frames, float(speed[fastest]), fastest + 1, float(acceleration[hardest]), hardest + 1,
                     tuple(float(v) for v in (*velocity[:3], *np.degrees(velocity[3:]))))
+
+
+def _positions(path: WavePath, budget: PlanningBudget, remedy: str) -> np.ndarray | Refusal:
+    """Every cycle's position on ``path`` (:meth:`WavePath.at`, as the loop runs it), (N, 6),
+    with a look at ``budget`` between batches of cycles: or its refusal."""
+    rows: list = []
+    for begin in range(0, path.samples + 1, _BUDGET_SAMPLES):
+        if begin and (refusal := budget.refusal(f"at cycle {begin} of {path.samples}", remedy)):
+            return refusal
+        rows += [path.at(k) for k in range(begin, min(begin + _BUDGET_SAMPLES, path.samples + 1))]
+    return np.array(rows, dtype=float)
+
+
+_FIT_HALVINGS = 10
+"""Halvings of the search for the amplitudes that fit: to 1/1024 of those asked."""
+
+_FIT_ALLOWANCE_S = 1.0
+"""The longest the search for the amplitudes that fit may take, s: a hint, that a refusal
+does not wait on (a long wave in the tool frame would take seconds)."""
+
+
+def _fitting_amplitudes(context: PlanningContext, path: WavePath, frames: Frames | None, positions: np.ndarray,
+                        relative: np.ndarray) -> dict[str, float] | None:
+    """The largest amplitudes, in the proportions asked, whose path breaks no limit
+    (:func:`~hexactl.control.planning.path_violations`), each rounded down to 3
+    significant digits, by axis name (mm, deg); None where none is found (from a start
+    beyond a limit) or the search outlasts :data:`_FIT_ALLOWANCE_S`.
+
+    The search assesses candidates at the samples the full wave's path check keeps (at
+    most a path step apart at full amplitude, closer at less), in the ramps and the first
+    period between them: ``positions`` (the full wave's, by cycle) scaled about the start,
+    which is the wave with scaled amplitudes, but for the tool frame's, which
+    :meth:`WavePath.at` gives for each. What it finds is then checked as the wave's
+    validation would check it, every cycle, and lowered by 1 % until it passes (its own
+    samples fall elsewhere)."""
+    spec, start = path.spec, np.asarray(path.start, dtype=float)
+    home = context.active.home
+    indices = thinned(pose_mm_rad_to_mm_deg(relative), context.path_step_mm, context.path_step_deg)
+    # Between the ramps every period repeats the first: the ramps and one period stand for all.
+    times = indices * path.period_s
+    indices = indices[(times <= path.ramp_s + 1.0 / spec.frequency_hz) | (times >= path.duration_s - path.ramp_s)]
+    offsets = positions[indices] - start
+
+    def fits(scale: float) -> bool:
+        if spec.frame is Frame.TOOL:
+            scaled = WavePath(_with_amplitudes(spec, {name: axis.amplitude * scale for name, axis in spec.axes.items()}),
+                              path.start, path.period_s)
+            candidate = np.array([scaled.at(int(k)) for k in indices], dtype=float)
+        else:
+            candidate = start + scale * offsets
+        return not path_violations(context, relative_poses(frames, candidate, home), 1)
+
+    budget = PlanningBudget(_FIT_ALLOWANCE_S)
+    low, high = 0.0, 1.0
+    for _ in range(_FIT_HALVINGS):
+        if budget.spent():
+            return None
+        middle = (low + high) / 2
+        low, high = (middle, high) if fits(middle) else (low, middle)
+    amplitudes = {name: _round_down(axis.amplitude * low) for name, axis in spec.axes.items()}
+    while low > 0.0 and not budget.spent():
+        wave = _positions(WavePath(_with_amplitudes(spec, amplitudes), path.start, path.period_s), budget, "")
+        if isinstance(wave, Refusal):
+            return None
+        violations = budgeted_path_violations(context, relative_poses(frames, wave, home), 1, budget, "", "")
+        if isinstance(violations, Refusal):
+            return None
+        if not violations:
+            return amplitudes
+        amplitudes = {name: _round_down(amplitude * 0.99) for name, amplitude in amplitudes.items()}
+    return None
+
+
+def _with_amplitudes(spec: WaveSpec, amplitudes: dict[str, float]) -> WaveSpec:
+    """``spec`` with ``amplitudes`` by axis name (mm, deg), phases kept."""
+    return spec.model_copy(update={"axes": {name: axis.model_copy(update={"amplitude": amplitudes[name]})
+                                            for name, axis in spec.axes.items()}})
+
+
+def _round_down(value: float) -> float:
+    """``value`` towards zero to 3 significant digits: a fitting amplitude stays fitting."""
+    if value == 0.0:
+        return 0.0
+    digits = 2 - floor(log10(abs(value)))
+    scale = 10.0**abs(digits)
+    magnitude = floor(abs(value) * scale) / scale if digits >= 0 else floor(abs(value) / scale) * scale
+    return float(np.copysign(magnitude, value))
+
+
+def _describe_fit(fitting: dict[str, float]) -> str:
+    """The amplitudes that fit, for a refusal's message."""
+    described = ", ".join(f"{name} {amplitude:.3g} {POSE_UNITS[POSE_AXES.index(name)]}"
+                          for name, amplitude in fitting.items())
+    return f"amplitudes that stay inside the limits: {described}"
 
 
 def _pose_limit_refusal(context: PlanningContext, positions: np.ndarray) -> Refusal | None:

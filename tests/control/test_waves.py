@@ -173,6 +173,56 @@ def test_pose_space_limits_and_the_workspace_refuse_naming_the_axis(rig, geometr
     assert long.error == "planning_failed" and "at most 600 s" in long.message
 
 
+SOFT_AROUND = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0),
+                             soft_limits={"lower": [None, -40.0, None, None, None, None],
+                                          "upper": [None, 40.0, None, None, 3.0, None]})
+
+
+def _scaled(spec: WaveSpec, amplitudes: dict[str, float]) -> WaveSpec:
+    return spec.model_copy(update={"axes": {name: axis.model_copy(update={"amplitude": amplitudes[name]})
+                                            for name, axis in spec.axes.items()}})
+
+
+@pytest.mark.parametrize("frames, spec", [
+    (None, WaveSpec(frequency_hz=0.01, cycles=2, axes={"x": {"amplitude": 900.0}})),
+    (None, WaveSpec(frequency_hz=0.05, cycles=4, axes={"z": {"amplitude": -400.0}, "roll": {"amplitude": 20.0,
+                                                                                          "phase_deg": 90}})),
+    (TOOL_ABOVE, WaveSpec(frame=Frame.TOOL, frequency_hz=0.05, cycles=3,
+                          axes={"z": {"amplitude": 300.0}, "roll": {"amplitude": 30.0}})),
+    (SOFT_AROUND, WaveSpec(frame=Frame.WORK, frequency_hz=0.05, cycles=3,
+                           axes={"y": {"amplitude": 100.0}, "pitch": {"amplitude": 5.0, "phase_deg": 45}})),
+], ids=["envelope", "stroke", "tool-frame", "soft-limits"])
+def test_a_refused_wave_says_the_largest_amplitudes_inside_the_limits(rig, frames, spec):
+    """The refusal's amplitudes, in the proportions asked, stay inside every limit; 2 %
+    more do not (the search is to 1/1024, rounded down to 3 digits)."""
+    if frames is not None:
+        assert rig.controller.set_frames(frames).ok
+    rig.enabled()
+    refused = rig.controller.validate_wave(spec)
+    assert refused.error == "path_violation", refused.message
+    fitting = refused.details["fitting_amplitudes"]
+    assert fitting.keys() == spec.axes.keys()
+    ratios = {name: fitting[name] / axis.amplitude for name, axis in spec.axes.items()}
+    assert all(0.0 < ratio < 1.0 for ratio in ratios.values())
+    assert max(ratios.values()) - min(ratios.values()) < 0.01  # the proportions asked
+    described = ", ".join(f"{name} {amplitude:.3g} {'deg' if name in ('roll', 'pitch', 'yaw') else 'mm'}"
+                          for name, amplitude in fitting.items())
+    assert refused.message.endswith(f"; amplitudes that stay inside the limits: {described}"), refused.message
+    inside = rig.controller.validate_wave(_scaled(spec, fitting))
+    assert inside.ok or inside.error != "path_violation", inside.message
+    beyond = rig.controller.validate_wave(_scaled(spec, {name: a * 1.02 for name, a in fitting.items()}))
+    assert beyond.error == "path_violation", beyond.message
+
+
+def test_no_amplitude_is_offered_where_the_start_breaks_a_limit(make_rig):
+    """A hair beyond the envelope's bound (y 610 mm) already: no wave from there fits."""
+    rig = make_rig(start_pose=(0, 610.001, 0, 0, 0, 0)).enabled()
+    refused = rig.controller.validate_wave(WaveSpec(frequency_hz=0.5, cycles=2, axes={"z": {"amplitude": 1.0}}))
+    assert refused.error == "path_violation" and "fitting_amplitudes" not in refused.details, refused.message
+    assert "y 610.001 mm outside the pose envelope" in refused.message
+    assert "stay inside the limits" not in refused.message
+
+
 def test_a_wave_is_refused_while_moving_in_leg_lock_and_unless_enabled(rig):
     spec = _z_wave(1.0, 1.0)
     assert rig.controller.wave(spec).error == "not_enabled"
