@@ -33,6 +33,7 @@ import numpy as np
 from hexactl.control.frames import Frame, convert, relative_poses
 from hexactl.control.planning import (
     MAX_MOTION_S,
+    OUTSIDE_SOFT_LIMITS,
     PlanningBudget,
     PlanningContext,
     Refusal,
@@ -106,6 +107,11 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
     violations = budgeted_path_violations(context, relative, 1, budget, "checking the wave's path", remedy)
     if isinstance(violations, Refusal):
         return violations
+    if violations and (at_start := path_violations(context, relative[:1], 1)):
+        first = at_start[0]
+        remedy = OUTSIDE_SOFT_LIMITS if first.kind.startswith("soft") else "move it back inside first"
+        return Refusal(ErrorCode.PATH_VIOLATION, f"the wave would start beyond a limit, where the platform rests: "
+                       f"{first.message}: {remedy}", tuple(at_start))
     if violations:
         more = f" (and {len(violations) - 1} more)" if len(violations) > 1 else ""
         farthest = farthest_violation(context, relative)

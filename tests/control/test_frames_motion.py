@@ -11,6 +11,7 @@ from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.jog_planning import JOG_HORIZON_S
 from hexactl.control.sequences import sequence_from_mapping
+from hexactl.control.waves import WaveSpec
 from hexactl.control.planning import (
     OUTSIDE_SOFT_LIMITS,
     ActiveGeometry,
@@ -194,7 +195,7 @@ def test_soft_limits_name_the_limit_and_cannot_be_set_around_a_platform_outside_
 
 def test_a_platform_outside_restored_soft_limits_is_told_how_to_come_back(rig):
     """Soft limits restored at start-up around another pose than the platform's: every
-    move and jog is refused, and each refusal says how to get out (it said to move back
+    move, jog and wave is refused, and each refusal says how to get out (it said to move back
     inside with a move, which was refused too)."""
     rig.enabled()
     assert rig.controller.move([-10, 0, 0, 0, 0, 0]).ok
@@ -203,7 +204,8 @@ def test_a_platform_outside_restored_soft_limits_is_told_how_to_come_back(rig):
                                                      upper=(650, None, None, None, None, None)))
     rig.controller.frames.current = restored  # as the service's start-up restores them, unchecked
     for refused in (rig.controller.move([0, 0, 0, 0, 0, 0]), rig.controller.move([10, 0, 0, 0, 0, 0]),
-                    rig.controller.jog([5, 0, 0, 0, 0, 0])):
+                    rig.controller.jog([5, 0, 0, 0, 0, 0]),
+                    rig.controller.validate_wave(WaveSpec(frequency_hz=0.5, cycles=2, axes={"z": {"amplitude": 1.0}}))):
         assert refused.error == "path_violation" and "below the soft limit -5 mm" in refused.message
         assert refused.message.endswith(OUTSIDE_SOFT_LIMITS), refused.message
     assert rig.controller.set_frames(OperatorFrames()).ok  # the way out it names

@@ -214,13 +214,17 @@ def test_a_refused_wave_says_the_largest_amplitudes_inside_the_limits(rig, frame
     assert beyond.error == "path_violation", beyond.message
 
 
-def test_no_amplitude_is_offered_where_the_start_breaks_a_limit(make_rig):
-    """A hair beyond the envelope's bound (y 610 mm) already: no wave from there fits."""
+def test_a_wave_from_beyond_a_limit_is_refused_saying_so(make_rig):
+    """A hair beyond the envelope's bound (y 610 mm) already, where a disable at the bound
+    leaves it: the refusal says the start is beyond it, and what to do, not an amplitude."""
     rig = make_rig(start_pose=(0, 610.001, 0, 0, 0, 0)).enabled()
     refused = rig.controller.validate_wave(WaveSpec(frequency_hz=0.5, cycles=2, axes={"z": {"amplitude": 1.0}}))
     assert refused.error == "path_violation" and "fitting_amplitudes" not in refused.details, refused.message
-    assert "y 610.001 mm outside the pose envelope" in refused.message
-    assert "stay inside the limits" not in refused.message
+    assert refused.message == ("the wave would start beyond a limit, where the platform rests: y 610.001 mm outside "
+                               "the pose envelope [-610, 610] mm (by 0.001 mm): move it back inside first")
+    assert rig.controller.move([0, 600, 0, 0, 0, 0]).ok  # which a move may
+    rig.settle()
+    assert rig.controller.validate_wave(WaveSpec(frequency_hz=0.5, cycles=2, axes={"z": {"amplitude": 1.0}})).ok
 
 
 def test_a_wave_is_refused_while_moving_in_leg_lock_and_unless_enabled(rig):
