@@ -241,6 +241,49 @@ def test_a_target_in_reach_whose_way_leaves_the_workspace_stops_the_platform_on_
     rig.assert_setpoints_safe()
 
 
+def _noisy(rig, path, noise_mm: float, cycles: int, seed: int = 5) -> list:
+    """Stream ``path(n)`` (mm, deg) plus uniform noise of ±``noise_mm`` on x, one sample a
+    cycle stamped with the loop's clock; the commanded pose (mm, deg) after each cycle."""
+    noise = np.random.default_rng(seed).uniform(-noise_mm, noise_mm, cycles)
+    commanded = []
+    for n in range(cycles):
+        pose = list(path(n))
+        pose[0] += noise[n]
+        assert rig.controller.stream_target(pose, n + 1, rig.clock.now_ns / 1e9, rig.clock.now_ns).sent
+        rig.run()
+        commanded.append(rig.controller.snapshot.pose_command.in_degrees())
+    return commanded
+
+
+def test_noise_in_the_samples_is_not_amplified(rig) -> None:
+    """Found from outside: the velocity came from the sample before, 2 ms back, so ±1 mm of
+    noise read as ±600 mm/s, aimed 30 mm ahead, and a platform held at x 0 swung ±40 mm."""
+    _opened(rig)
+    commanded = _noisy(rig, lambda n: (0, 0, 0, 0, 0, 0), 1.0, 1500)
+    x = np.array([pose[0] for pose in commanded])
+    assert np.max(np.abs(x)) < 3.0, np.max(np.abs(x))  # the noise's own ±1 mm, and a little
+    assert rig.controller.snapshot.clamped_cycles == 0
+
+
+def test_a_noisy_stream_at_the_boundary_stays_inside_without_a_guard_clamp(rig, geometry) -> None:
+    """Found from outside: x 605 mm ± a few mm at z -252 mm, where leg 1's stroke binds. The
+    noise's velocity carried the commanded pose out to x 647 mm, and the set-point guard
+    clamped legs for thousands of cycles."""
+    _opened(rig)
+    commanded = _noisy(rig, lambda n: (605.0 * min(1.0, n / 2000), 0, -252.0 * min(1.0, n / 2000), 0, 0, 0), 2.0,
+                       4000)
+    assert all(assess_pose(geometry, pose).ok for pose in commanded[::4])
+    assert rig.controller.snapshot.clamped_cycles == 0
+    rig.assert_setpoints_safe()
+
+
+def test_a_noisy_stream_at_a_soft_limit_stays_inside_it(rig) -> None:
+    assert rig.controller.set_frames(OperatorFrames(soft_limits=SoftLimits(upper=(50, None, None, None, None, None)))).ok
+    _opened(rig, frame="work")
+    commanded = _noisy(rig, lambda n: (45.0 * min(1.0, n / 500), 0, 0, 0, 0, 0), 2.0, 2500)
+    assert max(pose[0] for pose in commanded) <= 50.0 + 1e-9
+
+
 def test_a_stream_in_a_work_frame_turned_180_degrees_holds_yaw_180_where_it_is(rig) -> None:
     """The tool reads yaw -180° with the work frame turned 180°; a stream holding the 180°
     its sender means, then crossing to -179°, turns the platform by what it asks (the way
