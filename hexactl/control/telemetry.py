@@ -101,6 +101,16 @@ class LegStatus:
 
 
 @dataclass(frozen=True, slots=True)
+class SequenceEnd:
+    """The sequence playing or the last one: ``status`` playing, finished, aborted or
+    fault; ``records`` the dwell records it took (its waypoints done)."""
+
+    name: str
+    status: str
+    records: int
+
+
+@dataclass(frozen=True, slots=True)
 class OtherController:
     """Another controller heard on the bus, driving the same actuators: ``frame`` the kind
     of its last frame heard in the protocol's words (``SYNC``, ``CMD_3 ENABLE``), ``age_s``
@@ -149,6 +159,7 @@ class Telemetry:
     sequence: SequenceTelemetry | None
     faults: tuple[Fault, ...]
     loop: LoopStats
+    last_sequence: SequenceEnd | None = None  # the sequence playing or the last one; None: none since the start
     realtime: RealtimeReport | None = None  # what the loop thread's real-time set-up obtained
     goal: RelativeMmDeg | None = None
     remaining_s: float | None = None
@@ -164,6 +175,12 @@ class Telemetry:
     legs: tuple[LegStatus, ...] | None = None  # None before the first read
     events: tuple[EventTelemetry, ...] = ()  # the loop's latest (TELEMETRY_EVENTS), oldest first
     other_controller: OtherController | None = None  # None: none heard since the loop started
+
+
+def sequence_end(s: CoreSnapshot) -> SequenceEnd | None:
+    """The sequence playing or how the last one ended (None: none since the start)."""
+    last = s.last_sequence
+    return SequenceEnd(last.name, last.status, len(last.records)) if last else None
 
 
 def leg_statuses(s: CoreSnapshot) -> tuple[LegStatus, ...] | None:
@@ -197,8 +214,7 @@ def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
         previous_calibration_id=s.previous.calibration_id if s.previous else None,
         calibration_ramping=s.ramp_active,
         sequence=asdict(sequence_telemetry(s)) if s.sequence else None,
-        last_sequence={"name": s.last_sequence.name, "status": s.last_sequence.status,
-                       "records": len(s.last_sequence.records)} if s.last_sequence else None,
+        last_sequence=asdict(end) if (end := sequence_end(s)) else None,
         faults=[asdict(f) for f in s.faults],
         events=[asdict(e) for e in s.events[-10:]],
         loop_running=report.running,
@@ -237,6 +253,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         sequence=sequence_telemetry(s),
         faults=s.faults,
         loop=stats,
+        last_sequence=sequence_end(s),
         realtime=report.realtime,
         goal=None if moving_to is None else convert(moving_to, s.frames, None, home).in_degrees(),
         remaining_s=motion_remaining_s(s),

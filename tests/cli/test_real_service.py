@@ -202,6 +202,40 @@ def test_wait_says_when_a_stop_left_the_move_short_of_its_goal(served, client) -
     tolerating_stalls(client, scenario)
 
 
+def test_wait_says_when_a_stop_or_an_abort_cut_a_sequence_short(served, client) -> None:
+    """Found from outside: ``play --wait`` and ``resume --wait`` exited 0 when a stop or an
+    abort ended the sequence (a play has no goal to come to rest short of), so
+    ``hexactl play seq --wait && next-step`` went on as if it had played to its end."""
+
+    def waiting(*command: str) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", *command, "--wait", "--api",
+                                 served.api], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def scenario() -> None:
+        playing = waiting("play", "x_sweep")
+        wait_for(lambda: (status(client).get("sequence") or {}).get("phase") == "moving", "the sequence to play")
+        client.request("stop")
+        _, err = playing.communicate(timeout=WAIT_S)
+        assert playing.returncode == 1, err
+        assert "hexactl play: sequence x_sweep ended aborted, before its end" in err, err
+        assert "the service recorded since it started: sequence_aborted: " in err, err
+        assert f"stop: any motion under way brakes to rest, sent by {default_client_name()}" in err, err
+        wait_for(lambda: at_rest(client), "the platform at rest")
+        assert client.request("play", sequence="x_sweep")["ok"]
+        wait_for(lambda: (status(client).get("sequence") or {}).get("phase") == "moving", "the sequence to play")
+        client.request("pause")
+        wait_for(lambda: (status(client).get("sequence") or {}).get("phase") == "paused", "the pause")
+        resuming = waiting("resume")
+        wait_for(lambda: status(client)["motion"] == "moving", "the sequence to resume")
+        client.request("abort")
+        _, err = resuming.communicate(timeout=WAIT_S)
+        assert resuming.returncode == 1, err
+        assert "hexactl resume: sequence x_sweep ended aborted, before its end" in err, err
+        wait_for(lambda: at_rest(client), "the platform at rest")
+
+    tolerating_stalls(client, scenario)
+
+
 def test_wait_returns_at_rest_and_says_when_a_pause_or_an_estop_holds_the_motion(served, client, capsys) -> None:
     def scenario() -> None:
         assert hexactl(served, "move", "z=30", "--duration", "1", "--wait") == 0

@@ -693,6 +693,16 @@ class JogEnd(_Message):
     reason: str = Field(description="why, for people: the deadman lapsed, released, replaced by a move, a fault, …")
 
 
+class SequenceEnd(_Message):
+    """The sequence playing, or how the last one ended."""
+
+    name: str = Field(description="its name")
+    status: Literal["playing", "finished", "aborted", "fault"] = Field(
+        description="playing; or finished (every waypoint played), aborted (by stop, abort or a disable) or fault (a "
+                    "fault or an E-stop ended it)")
+    records: int = Field(ge=0, description="dwell records taken: the waypoints it played to the end of their dwell")
+
+
 class StreamEnd(_Message):
     """How the last pose stream ended."""
 
@@ -781,6 +791,8 @@ class Telemetry(_Message):
     locked_leg: Leg | None = Field(description="the locked leg, or null")
     calibration_id: str = Field(description="content hash of the active geometry or calibration")
     sequence: SequenceProgress | None = Field(description="the sequence being played, or null")
+    last_sequence: SequenceEnd | None = Field(default=None, description="the sequence playing, or how the last one "
+                                              "ended; null before the first")
     faults: list[Fault] = Field(description="why FAULT or ESTOP is latched; empty otherwise")
     loop: LoopTelemetry
     realtime: RealtimeTelemetry | None = Field(default=None, description="the loop's real-time set-up; null before it starts")

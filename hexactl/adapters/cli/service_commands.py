@@ -358,8 +358,8 @@ def newest_event_t(client: Any) -> float | None:
 def wait_until_at_rest(client: Any, cmd: str, reply: dict[str, Any], since: float | None = None) -> int:
     """``--wait``: poll the service until the platform is at rest and no sequence plays.
     0 then; 1 (saying why) when a fault, an E-stop or a disable ended the motion, the
-    sequence is paused, the motion goes on well past its plan, or it came to rest short
-    of the reply's ``goal`` (stopped). What the loop recorded after the motion's own start
+    sequence is paused, the motion goes on well past its plan, it came to rest short of
+    the reply's ``goal`` (stopped), or the sequence or wave ended before its end. What the loop recorded after the motion's own start
     (the events after ``since``, the newest before ``cmd`` was sent) names the cause and who
     sent it."""
     deadline = time.monotonic() + float(reply.get("duration") or 0.0) + WAIT_SLACK_S
@@ -378,7 +378,7 @@ def wait_until_at_rest(client: Any, cmd: str, reply: dict[str, Any], since: floa
         elif sequence and sequence["phase"] == "paused":
             problem = f"sequence {sequence['name']} is paused: `hexactl resume` or `hexactl abort`"
         elif status["motion"] == "holding" and sequence is None:
-            if not (problem := _short_of_goal(reply.get("goal"), status["pose_command"])):
+            if not (problem := _short_of_goal(reply.get("goal"), status["pose_command"]) or _cut_short(cmd, status)):
                 return EXIT_OK
         elif time.monotonic() > deadline:
             problem = f"still moving {WAIT_SLACK_S:g} s after its plan said it would be at rest"
@@ -397,6 +397,22 @@ def since_then(status: dict[str, Any], cmd: str, since: float | None) -> str:
         return ""
     told = [event_text(event, status["t"]) for event in events[started + 1:]]
     return f"\n  the service recorded since it started: {'; '.join(told)}" if told else ""
+
+
+def _cut_short(cmd: str, status: dict[str, Any]) -> str | None:
+    """Why the sequence (``play``, ``resume``) or the wave that ``cmd`` set going, now over,
+    did not run to its end (None: it did, or ``cmd`` sets neither going). Neither has a
+    goal to come to rest short of: a stop or an abort left a sequence at rest on a pose
+    of its own, and ``play --wait && next-step`` went on as if it had finished."""
+    if cmd in ("play", "resume"):
+        last = status.get("last_sequence")
+        if last and last["status"] != "finished":
+            return f"sequence {last['name']} ended {last['status']}, before its end"
+    elif cmd == "wave":
+        wave = status.get("wave") or {}
+        if wave.get("phase") not in (None, "finished"):
+            return f"the wave ended {wave['phase']} in its cycle {wave.get('cycle')} of {wave.get('cycles')}"
+    return None
 
 
 def _short_of_goal(goal: list[float] | None, pose: list[float]) -> str | None:

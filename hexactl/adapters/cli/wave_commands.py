@@ -122,14 +122,7 @@ def run_wave(arguments: argparse.Namespace) -> int:
                 return EXIT_REFUSED
             if not arguments.wait:
                 return EXIT_OK
-            if (waited := wait_until_at_rest(client, "wave", reply, since)) != EXIT_OK:
-                return waited
-            ended = client.request("status")["status"].get("wave") or {}
-            if ended.get("phase") != "finished":
-                print(f"hexactl wave: the wave ended {ended.get('phase')} in its cycle {ended.get('cycle')} of "
-                      f"{ended.get('cycles')}", file=sys.stderr)
-                return EXIT_REFUSED
-            return EXIT_OK
+            return wait_until_at_rest(client, "wave", reply, since)
     except ServiceUnavailable as error:
         print(f"hexactl wave: {error}", file=sys.stderr)
         return EXIT_NO_ANSWER
