@@ -153,17 +153,21 @@ class SwapGeometry(Command):
 
 @dataclass(frozen=True, slots=True)
 class Jog(Command):
-    """Start a jog, or re-plan the one under way (its number: this command's ticket)."""
+    """Start a jog (its number: this command's ticket), or re-plan the one under way:
+    ``continues`` its number when it goes on as it was (a renewal near the end of its
+    plan), which it keeps; refused if that jog has ended meanwhile."""
 
     epoch: int
     plan: JogPlan
+    continues: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class RenewJog(Command):
-    """The jog under way at ``velocity`` in ``frame`` (as :class:`~hexactl.control.jog.JogPlan`)
+    """Jog ``jog``, under way at ``velocity`` in ``frame`` (as :class:`~hexactl.control.jog.JogPlan`),
     goes on for another deadman interval."""
 
+    jog: int
     frame: str
     velocity: tuple[float, ...]
 

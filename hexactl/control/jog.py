@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 from hexactl.control.planning import Segment
-from hexactl.control.results import ErrorCode
+from hexactl.control.results import DEADMAN_LAPSED, ErrorCode, jog_ended_message
 from hexactl.control.trajectory import PoseTrajectory
 
 
@@ -54,7 +54,7 @@ class JogPhase(StrEnum):
 class JogProgress:
     """The jog under way as published: ``jog`` its number (the ticket that started it),
     ``phase``, ``deadline_ns`` (monotonic) when the deadman lapses unless renewed, and the
-    plan's request and end (:class:`JogPlan`)."""
+    plan's request and end (:class:`JogPlan`); ``reason`` why it brakes (None until it does)."""
 
     jog: int
     frame: str
@@ -64,6 +64,7 @@ class JogProgress:
     end: str
     to_limit: bool
     deadline_ns: int
+    reason: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,9 +75,6 @@ class JogReport:
     reason: str
 
 
-DEADMAN_LAPSED = "the deadman lapsed (no renewal in time)"
-
-
 class Jogger:
     """The deadman of the jog running on ``trajectory``; ``log(code, message)`` notes
     starts, arrivals and ends."""
@@ -85,7 +83,6 @@ class Jogger:
         self._trajectory = trajectory
         self._log = log
         self._deadman_ns = 0
-        self._reason = ""
         self.progress: JogProgress | None = None
         """The jog under way as published; made when it changes, not every cycle."""
         self.report: JogReport | None = None
@@ -93,18 +90,33 @@ class Jogger:
 
     def start(self, jog: int, plan: JogPlan, now_ns: int) -> None:
         """Jog ``jog`` runs ``plan`` (its segment already started), renewed until ``now_ns``
-        plus the deadman interval."""
+        plus the deadman interval: a new jog, or the one under way re-planned (logged only
+        when its number is new: a jog held for minutes is re-planned every few seconds)."""
         self._deadman_ns = plan.deadman_ns
+        known = self.progress is not None and self.progress.jog == jog
         self.progress = JogProgress(jog, plan.frame, plan.velocity, plan.speed, JogPhase.JOGGING, plan.end,
                                     plan.to_limit, now_ns + plan.deadman_ns)
-        self._log("jog_started", f"jog {jog}: {plan.frame} frame, velocity {list(plan.velocity)}; ends at {plan.end}")
+        if not known:
+            self._log("jog_started", f"jog {jog}: {plan.frame} frame, velocity {list(plan.velocity)}; ends at "
+                      f"{plan.end}")
 
-    def renew(self, frame: str, velocity: tuple[float, ...], now_ns: int) -> tuple[ErrorCode, str] | None:
-        """Move the deadline on, if the jog under way is this one and not braking."""
+    def ended(self, jog: int) -> tuple[ErrorCode, str] | None:
+        """Why jog ``jog`` cannot be renewed or extended (it is not under way, or it brakes);
+        None if it can."""
+        progress, report = self.progress, self.report
+        if progress is not None and progress.jog == jog:
+            return None if progress.phase is not JogPhase.BRAKING else (ErrorCode.JOG_ENDED,
+                                                                          jog_ended_message(jog, progress.reason))
+        reason = report.reason if report is not None and report.jog == jog else None
+        return ErrorCode.JOG_ENDED, jog_ended_message(jog, reason)
+
+    def renew(self, jog: int, frame: str, velocity: tuple[float, ...], now_ns: int) -> tuple[ErrorCode, str] | None:
+        """Move the deadline on, if the jog under way is ``jog``, at this velocity and frame,
+        and not braking."""
+        if refusal := self.ended(jog):
+            return refusal
         progress = self.progress
-        if progress is None or progress.phase is JogPhase.BRAKING:
-            return ErrorCode.JOG_ENDED, ("no jog is under way (it ended or is braking to rest): send jog again to "
-                                         "start a new one")
+        assert progress is not None
         if progress.frame != frame or progress.velocity != velocity:
             return ErrorCode.JOG_ENDED, "the jog under way has another velocity or frame: send jog again to change it"
         self.progress = replace(progress, deadline_ns=now_ns + self._deadman_ns)
@@ -113,8 +125,7 @@ class Jogger:
     def brake(self, reason: str) -> None:
         """End the jog: brake to rest (the caller halts the trajectory), then it ends as ``reason``."""
         if self.progress is not None and self.progress.phase is not JogPhase.BRAKING:
-            self.progress = replace(self.progress, phase=JogPhase.BRAKING)
-            self._reason = reason
+            self.progress = replace(self.progress, phase=JogPhase.BRAKING, reason=reason)
 
     def end(self, reason: str) -> None:
         """End the jog at once (the motion was taken over or frozen)."""
@@ -140,4 +151,4 @@ class Jogger:
             self.progress = replace(progress, phase=JogPhase.AT_END)
             self._log("jog_at_end", f"jog {progress.jog} at rest at {progress.end}")
         elif progress.phase is JogPhase.BRAKING and not self._trajectory.moving:
-            self.end(self._reason)
+            self.end(progress.reason or "")

@@ -13,7 +13,7 @@ from hexactl.control.frames import Frame, convert
 from hexactl.control.jog import JogPhase
 from hexactl.control.jog_planning import JOG_EXTEND_S, plan_jog
 from hexactl.control.planning import PlanningContext, Refusal
-from hexactl.control.results import CommandResult, ErrorCode
+from hexactl.control.results import DEADMAN_LAPSED, CommandResult, ErrorCode, jog_ended_message
 from hexactl.control.snapshot import ControlState, CoreSnapshot, MotionState
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.telemetry import motion_remaining_s
@@ -29,7 +29,8 @@ class JogCommands:
         self._submitter = submitter
         self.deadman_s = deadman_s
 
-    def jog(self, velocity: Sequence[float], frame: Frame, deadline_ns: int | None) -> CommandResult:
+    def jog(self, velocity: Sequence[float], frame: Frame, deadline_ns: int | None,
+            renews: int | None = None) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.jog`."""
         if problem := _velocity_problem(velocity) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, problem)
@@ -40,9 +41,17 @@ class JogCommands:
         if refusal := preconditions.check_jog(s):
             return CommandResult.failure(*refusal)
         current = s.jog
-        if (current is not None and current.phase is not JogPhase.BRAKING and current.frame == frame.value
-                and current.velocity == velocity and (current.to_limit or (motion_remaining_s(s) or 0.0) > JOG_EXTEND_S)):
-            return self._submitter.submit(lambda t: cmd.RenewJog(t, frame.value, velocity), "jog renewed",
+        if renews is not None and (current is None or current.jog != renews or current.phase is JogPhase.BRAKING):
+            last = s.last_jog
+            if (current is not None and current.jog == renews) or (last is not None and last.jog == renews):
+                return _ended(s, renews)
+            # Not in the snapshot, which lags the loop by up to a report (a jog just started): the loop tells.
+            return self._submitter.submit(lambda t: cmd.RenewJog(t, renews, frame.value, velocity), "jog renewed",
+                                          deadline_ns=deadline_ns, jog=renews, deadman_s=self.deadman_s)
+        same = (current is not None and current.phase is not JogPhase.BRAKING and current.frame == frame.value
+                and current.velocity == velocity)
+        if same and (current.to_limit or (motion_remaining_s(s) or 0.0) > JOG_EXTEND_S):
+            return self._submitter.submit(lambda t: cmd.RenewJog(t, current.jog, frame.value, velocity), "jog renewed",
                                           deadline_ns=deadline_ns, **_details(current.jog, current.speed, current.end,
                                                                               current.to_limit, self.deadman_s))
         context = self._context(s)
@@ -50,11 +59,13 @@ class JogCommands:
         if isinstance(plan, Refusal):
             return plan.result()
         goal = convert(plan.segment.goal, plan.segment.frames, None, s.active.home).in_degrees()
-        result = self._submitter.submit(lambda t: cmd.Jog(t, s.epoch, plan), "jogging", deadline_ns=deadline_ns,
-                                        goal=list(goal), **_details(None, plan.speed, plan.end, plan.to_limit,
-                                                                    self.deadman_s))
+        continues = current.jog if same else None  # a renewal near the plan's end: the same jog, planned on
+        result = self._submitter.submit(lambda t: cmd.Jog(t, s.epoch, plan, continues), "jogging",
+                                        deadline_ns=deadline_ns, goal=list(goal),
+                                        **_details(None, plan.speed, plan.end, plan.to_limit, self.deadman_s))
         # a jog's number is the ticket of the command that started it
-        return replace(result, details={"jog": result.details.get("ticket"), **result.details})
+        number = result.details.get("ticket") if continues is None else continues
+        return replace(result, details={"jog": number, **result.details})
 
     def _release(self, s: CoreSnapshot) -> CommandResult:
         if s.jog is None or s.jog.phase is JogPhase.BRAKING:
@@ -64,6 +75,16 @@ class JogCommands:
         else:
             message = "jog released: braking to rest"
         return self._submitter.submit(cmd.Stop, message)
+
+
+def _ended(s: CoreSnapshot, jog: int) -> CommandResult:
+    """The refusal of a renewal of ``jog``, which brakes or has ended (the snapshot says
+    so): ``details.reason`` why, ``details.lapsed`` whether its deadman lapsed (its client
+    was late: a held button may start a new jog; after anything else it is released)."""
+    current, last = s.jog, s.last_jog
+    reason = current.reason if current is not None and current.jog == jog else last.reason if last else None
+    return CommandResult.failure(ErrorCode.JOG_ENDED, jog_ended_message(jog, reason), jog=jog, reason=reason,
+                                 lapsed=reason == DEADMAN_LAPSED)
 
 
 def _velocity_problem(velocity: object) -> str | None:

@@ -42,11 +42,14 @@ class MotionCommands:
         return preconditions.check_move(self._view) or self._motion.stale(command.epoch) or self._motion.move(command.segment)
 
     def _jog(self, command: cmd.Jog) -> Refusal:
-        return (preconditions.check_jog(self._view) or self._motion.stale(command.epoch)
-                or self._motion.jog(command.ticket, command.plan, self._now_ns()))
+        continues = command.continues  # a jog planned on keeps its number, and must still be under way
+        number = command.ticket if continues is None else continues
+        return (preconditions.check_jog(self._view)
+                or (self._motion.jogger.ended(continues) if continues is not None else None)
+                or self._motion.stale(command.epoch) or self._motion.jog(number, command.plan, self._now_ns()))
 
     def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
-        return self._motion.jogger.renew(command.frame, command.velocity, self._now_ns())
+        return self._motion.jogger.renew(command.jog, command.frame, command.velocity, self._now_ns())
 
     def _stop(self, command: cmd.Stop) -> Refusal:
         self._motion.stop()

@@ -81,3 +81,13 @@ class CommandResult:
     @classmethod
     def failure(cls, error: ErrorCode | str, message: str, **details: object) -> CommandResult:
         return cls(False, ErrorCode(error), message, details)
+
+
+DEADMAN_LAPSED = "the deadman lapsed (no renewal in time)"
+
+
+def jog_ended_message(jog: int, reason: str | None) -> str:
+    """Why a renewal of ``jog``, which brakes or has ended (``reason``, if known), is refused."""
+    said = f" ({reason})" if reason else ""
+    return (f"jog {jog} has ended{said}: it is not renewed; send jog without renews to start a new one (a held button: "
+            "release it and press again)")

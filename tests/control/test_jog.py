@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
-from hexactl.control.jog import DEADMAN_LAPSED
+from hexactl.control.results import DEADMAN_LAPSED
 from hexactl.kinematics.frames import apply, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_poses
@@ -182,6 +182,52 @@ def test_a_jog_renewed_past_its_horizon_goes_on_without_slowing(rig) -> None:
     velocity = np.diff(positions) * 500
     assert np.all(velocity[500:] == pytest.approx(5.0, rel=1e-6))  # past the ramp-up: never slower
     assert positions[-1] > 2.0 * JOG_HORIZON_S * 5.0
+
+
+def test_a_jog_keeps_its_number_and_one_event_however_long_it_is_held(rig) -> None:
+    """Found from outside: each re-plan before the horizon was a new jog, with a new number
+    and a jog_started event every 2.6 s; a jog held for 600 s wrote 230 of them and pushed
+    who started it out of the loop's events."""
+    from hexactl.control.jog_planning import JOG_HORIZON_S
+
+    rig.enabled()
+    first = rig.controller.jog([5, 0, 0, 0, 0, 0])
+    number = first.details["jog"]
+    for _ in range(round(3 * JOG_HORIZON_S * 500 / RENEW_CYCLES)):
+        renewed = rig.controller.jog([5, 0, 0, 0, 0, 0], renews=number)
+        assert renewed.ok and renewed.details["jog"] == number, renewed
+        rig.run(RENEW_CYCLES)
+    assert rig.controller.snapshot.jog.jog == number
+    assert [event.code for event in rig.controller.snapshot.events].count("jog_started") == 1
+
+
+def test_a_stop_ends_a_held_jog_for_good(rig) -> None:
+    """Found from outside: another client's stop braked the jog, and the next renewal of the
+    client holding it started a new jog 50 ms later, which ran on. A renewal that names its
+    jog is refused once that jog has ended, saying why."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    for renew in range(4):
+        assert rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number).ok
+        rig.run(RENEW_CYCLES)
+    assert rig.controller.stop().ok
+    rig.run()
+    braking = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert braking.error == "jog_ended" and braking.details == {"jog": number, "reason": "stopped", "lapsed": False}
+    assert f"jog {number} has ended (stopped)" in braking.message
+    rig.settle()
+    after = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert after.error == "jog_ended" and after.details["reason"] == "stopped"
+    assert rig.controller.snapshot.jog is None and rig.controller.snapshot.motion.value == "holding"
+    assert rig.controller.jog([10, 0, 0, 0, 0, 0]).ok  # a new press starts a new jog
+
+
+def test_a_renewal_of_a_jog_that_lapsed_says_so(rig) -> None:
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.settle()  # no renewal: the deadman lapses, the platform brakes to rest
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert refused.error == "jog_ended" and refused.details["reason"] == DEADMAN_LAPSED and refused.details["lapsed"]
 
 
 X_WITHIN_5 = OperatorFrames(soft_limits=SoftLimits(lower=(-5, None, None, None, None, None),

@@ -102,6 +102,39 @@ def test_the_jog_command_line_jogs_for_a_while_and_releases(client: HexactlClien
     tolerating_loop_stalls(scenario, lambda: service.controller, cleanup=lambda: recover(client))
 
 
+def test_a_stop_from_another_client_ends_the_jog_command(client: HexactlClient, service, capsys) -> None:
+    """Found from outside: ``hexactl jog`` re-sent its jog after another terminal's
+    ``hexactl stop``, which started a new jog 50 ms later and ran its full time; only an
+    E-stop ended it. Its renewals now name the jog, and a stop ends the command: exit 1,
+    saying who stopped it."""
+
+    def scenario() -> None:
+        recover(client)
+        client.call("move", pose=[0, 0, 0, 0, 0, 0], duration=1.0)
+        wait_for(lambda: status(client)["motion"] == "holding", "the zero posture")
+        codes: list[int] = []
+        jogging = threading.Thread(target=lambda: codes.append(main(["jog", "x=-5", "--for", "60", "--api",
+                                                                      service.api_endpoint])))
+        jogging.start()
+        try:
+            wait_for(lambda: (status(client)["jog"] or {}).get("phase") == "jogging", "the jog to start")
+            client.call("stop")
+        finally:
+            jogging.join(timeout=120)
+        assert not jogging.is_alive() and codes == [1], codes
+        err = capsys.readouterr().err
+        assert "has ended (stopped): it is not renewed" in err, err
+        assert "the service recorded since it started: " in err and "stop: any motion under way brakes to rest" in err
+        rested = wait_for(lambda: (s := status(client))["motion"] == "holding" and s, "the platform at rest")
+        assert rested["jog"] is None
+        assert [event["code"] for event in rested["events"]].count("jog_started") >= 1
+        started = [event for event in rested["events"] if event["code"] == "jog_started"]
+        stop_t = max(event["t"] for event in rested["events"] if event["code"] == "stop")
+        assert all(event["t"] < stop_t for event in started), rested["events"]  # none started after the stop
+
+    tolerating_loop_stalls(scenario, lambda: service.controller, cleanup=lambda: recover(client))
+
+
 def test_a_bad_jog_is_refused_with_what_to_do(client: HexactlClient, service, capsys) -> None:
     with pytest.raises(CommandError) as short:
         client.call("jog", velocity=[1, 2, 3])

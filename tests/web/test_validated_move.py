@@ -315,6 +315,37 @@ def test_a_held_jog_is_renewed_as_often_as_the_services_deadman_asks(rig) -> Non
     attempted(rig, scenario)
 
 
+def test_another_clients_stop_ends_a_held_jog_for_good(rig) -> None:
+    """Found from outside (with hexactl jog, which the page renews as): a stop from another
+    client braked the held jog, and the next renewal started a new one. The renewals name
+    their jog: once stopped, the page stops renewing and says why; the platform stays at rest
+    while the button is still held."""
+
+    def scenario() -> None:
+        ready_in_frames(rig)
+        rig.fill("#jog-speed", 5)
+        start_x = rig.status()["pose_command"][0]
+        button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
+        ActionChains(rig.driver).click_and_hold(button).perform()
+        try:
+            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+            rig.client.call("stop")
+            wait_for(lambda: "has ended (stopped)" in rig.element("#jog-status").text,
+                     "the page saying the jog was stopped", seen=lambda: rig.element("#jog-status").text)
+            assert "held" not in button.get_attribute("class").split()
+            at_rest = wait_for(lambda: (r := rig.status())["motion"] == "holding" and r, "the platform at rest",
+                               seen=rig.status)
+            renewals = sent(rig, "jog")
+            assert at_rest["jog"] is None and at_rest["last_jog"]["reason"] == "stopped"
+            rig.client.call("status")  # a round trip: any renewal the page still sent has reached the service
+            assert rig.status()["jog"] is None and rig.status()["motion"] == "holding"
+            assert sent(rig, "jog") == renewals  # none since: the button is still held
+        finally:
+            ActionChains(rig.driver).release(button).perform()
+
+    attempted(rig, scenario)
+
+
 def test_soft_limits_left_empty_keep_what_is_in_force_not_what_the_page_last_heard(rig) -> None:
     """The page used to fill an empty soft-limit input from its latest record and send the
     soft limits whole: a bound another client had set since, which the page had not yet

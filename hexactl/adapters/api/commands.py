@@ -159,7 +159,8 @@ class CommandHandler:
             case ValidatePoseRequest():
                 return self._validate_pose(request)
             case JogRequest():
-                result = self.controller.jog(request.velocity, Frame(request.frame), deadline_ns=deadline_ns)
+                result = self.controller.jog(request.velocity, Frame(request.frame), renews=request.renews,
+                                             deadline_ns=deadline_ns)
                 return _checked(result, **{key: result.details.get(key) for key in JOG_REPLY})
             case WaveRequest():
                 result = controller.wave(_wave_spec(request), deadline_ns=deadline_ns)

@@ -231,11 +231,17 @@ class JogRequest(_Request):
     least every ``jog_deadman_s`` (0.2 s by default; ``status`` says) or the platform
     brakes to rest along its path. The same velocity and frame renew the jog under way,
     another velocity re-plans it, all zeros release it. The jog heads for the first limit
-    ahead (hardware or soft) and comes to rest on it: it is not refused there."""
+    ahead (hardware or soft) and comes to rest on it: it is not refused there. A renewal
+    that names its jog (``renews``) is refused ``jog_ended`` once that jog has ended
+    (a ``stop`` from anyone, a lapse, a fault), instead of starting a new one."""
 
     cmd: Literal["jog"]
     velocity: JogVelocity
     frame: FrameName = Frame.ZERO.value
+    renews: int | None = Field(default=None, ge=1, description="the number of the jog this request renews (the reply "
+                               "that started it says it): refused jog_ended once that jog has ended, so that a stop "
+                               "from anyone ends a held jog for good; without it, a jog after the end of the last "
+                               "starts a new one")
 
 
 class _WaveBody(_Request, WaveSpec):

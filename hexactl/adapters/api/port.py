@@ -64,7 +64,7 @@ class ControllerPort(Protocol):
 
     def operator_frames(self) -> OperatorFrames: ...
 
-    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
+    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *, renews: int | None = None,
             deadline_ns: int | None = None) -> CommandResult:
         """Success details: ``jog`` (its number), ``goal`` (where its plan ends, relative to the
         zero posture; absent on a renewal), ``speed``, ``end``, ``to_limit``, ``deadman_s``."""

@@ -22,6 +22,7 @@ from hexactl.adapters.cli.service_commands import (
     client_parser,
     format_error_reply,
     newest_event_t,
+    since_then,
     wait_until_at_rest,
 )
 from hexactl.adapters.cli.telemetry_text import pose_text
@@ -84,11 +85,13 @@ def run_jog(arguments: argparse.Namespace) -> int:
             else:
                 print(f"jogging (jog {reply['jog']}): heading for {reply['end']}, {_pace(reply['speed'])}", flush=True)
             try:
-                refused = _renew(client, fields, arguments.for_s, reply["deadman_s"] / RENEWALS_PER_DEADMAN)
+                refused = _renew(client, fields, reply["jog"], arguments.for_s,
+                                 reply["deadman_s"] / RENEWALS_PER_DEADMAN)
             finally:
                 client.request("jog", velocity=[0.0] * 6, frame=arguments.frame)
             if refused is not None:
-                print(format_error_reply(refused), file=sys.stderr)
+                print(format_error_reply(refused) + since_then(client.request("status")["status"], "jog", since),
+                      file=sys.stderr)
                 return EXIT_REFUSED
             waited = wait_until_at_rest(client, "jog", {}, since)
             status = client.request("status")["status"]
@@ -111,15 +114,19 @@ def _pace(speed: float) -> str:
     return "at the motion limits (the velocity asked reaches them)"
 
 
-def _renew(client: Any, fields: dict[str, Any], for_s: float, every_s: float) -> dict[str, Any] | None:
-    """Send the jog every ``every_s`` for ``for_s``; the reply that refused it (None: none
-    did). ``jog_ended`` (a renewal that found the jog braking, after a stall of this
-    machine) is no refusal: the next renewal starts it again, as the API says."""
+def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s: float) -> dict[str, Any] | None:
+    """Renew jog ``jog`` every ``every_s`` for ``for_s``; the reply that refused it (None:
+    none did). Once it has ended, a stop from anyone, a fault or a move ends this command
+    too; only a lapse of its deadman (this machine stalled) starts a new jog, as the
+    button is still held."""
     end = time.monotonic() + for_s
     while (left := end - time.monotonic()) > 0:
         time.sleep(min(every_s, left))
-        reply = client.request("jog", **fields)
-        if not reply.get("ok") and (reply.get("error") or {}).get("code") != "jog_ended":
+        reply = client.request("jog", **fields, renews=jog)
+        error = reply.get("error") or {}
+        if error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
+            reply = client.request("jog", **fields)
+        if not reply.get("ok"):
             return reply
+        jog = reply["jog"]
     return None
-

@@ -213,7 +213,7 @@ export function setupControls(ctx) {
 
   // ---------------- jog ----------------
   const jogStatus = $('jog-status');
-  let jog = null;          // {button, velocity, frame, timer, everyMs}
+  let jog = null;          // {button, velocity, frame, timer, everyMs, number}: number, the jog the renewals name
   let jogSerial = 0;
   let jogInFlight = 0;
   let renewEveryMs = 50;   // the default deadman's (0.2 s) quarter, until a jog's reply says the service's
@@ -228,12 +228,28 @@ export function setupControls(ctx) {
     return v;
   }
 
-  async function sendJog(velocity, frame) {
+  // As hexactl jog: a renewal names its jog, so that a stop from anyone ends the held jog for
+  // good (the service refuses the renewal, jog_ended) instead of the next renewal starting
+  // a new one; only a lapse of the deadman (this page stalled) starts it again.
+  async function sendJog(velocity, frame, held = null) {
     const serial = ++jogSerial;
     jogInFlight += 1;
+    const fields = { velocity, frame };
+    if (held && held.number != null) fields.renews = held.number;
     let reply;
-    try { reply = await ctx.send('jog', { velocity, frame }); } finally { jogInFlight -= 1; }
+    try { reply = await ctx.send('jog', fields); } finally { jogInFlight -= 1; }
     if (reply.ok && typeof reply.deadman_s === 'number' && reply.deadman_s > 0) renewEvery(reply.deadman_s * 1000 / RENEWALS_PER_DEADMAN);
+    if (held && held === jog) {
+      if (reply.ok && reply.jog != null) held.number = reply.jog;
+      if (!reply.ok && reply.error && reply.error.code === 'jog_ended') {
+        if ((reply.error.details || {}).lapsed) held.number = null;
+        else {
+          releaseJog(false);
+          setResult(jogStatus, 'refused', describeError(reply.error));
+          return;
+        }
+      }
+    }
     if (serial !== jogSerial) return;   // only the newest request's reply is shown
     if (reply.ok) {
       const extra = [];
@@ -251,9 +267,9 @@ export function setupControls(ctx) {
     if (blind) { setResult(jogStatus, 'refused', `not sent: the page has no live data (${blind})`); return; }
     const velocity = jogVelocity(button);
     const frame = $('jog-frame').value;
-    jog = { button, velocity, frame, timer: null, everyMs: null };
+    jog = { button, velocity, frame, timer: null, everyMs: null, number: null };
     button.classList.add('held');
-    sendJog(velocity, frame);
+    sendJog(velocity, frame, jog);
     renewEvery(renewEveryMs);
   }
 
@@ -265,7 +281,7 @@ export function setupControls(ctx) {
     jog.everyMs = ms;
     jog.timer = setInterval(() => {
       // never pile up renewals behind a slow link: a lapsed deadman brakes, which is safe
-      if (jog && jogInFlight < RENEWALS_PER_DEADMAN - 1) sendJog(jog.velocity, jog.frame);
+      if (jog && jogInFlight < RENEWALS_PER_DEADMAN - 1) sendJog(jog.velocity, jog.frame, jog);
     }, ms);
   }
 
