@@ -52,6 +52,8 @@ class StateCommands:
         if s.state is not ControlState.ENABLED:
             message = "nothing to stop: the controller is " + (
                 "disabled" if s.state is ControlState.DISABLED else f"in {s.state.name} (reset it to go on)")
+        elif s.stream is not None:  # a stream at rest on its target is open all the same: it ends
+            message = "stopping: the pose stream ends"
         elif s.motion is MotionState.HOLDING and s.sequence is None:
             message = "nothing to stop: the platform is at rest"
         else:

@@ -137,6 +137,19 @@ def test_stop_ends_the_stream_braking_and_later_targets_are_ignored(rig) -> None
     assert rig.controller.snapshot.pose_command == at_rest
 
 
+def test_stop_says_it_ends_a_stream_at_rest(rig) -> None:
+    """Found from outside: a stream holding still was ended by stop, which answered "nothing
+    to stop: the platform is at rest"."""
+    _opened(rig)
+    _stream(rig, [(0.0, 0, 0, 0, 0, 0)] * 50)
+    assert rig.controller.snapshot.motion.value == "holding" and rig.controller.snapshot.stream is not None
+    stopped = rig.controller.stop()
+    assert stopped.ok and stopped.message == "stopping: the pose stream ends", stopped
+    rig.settle()
+    rig.run(2)
+    assert rig.controller.snapshot.stream is None and rig.controller.snapshot.last_stream.reason == "stopped"
+
+
 def test_estop_during_a_stream_latches_within_a_cycle(rig) -> None:
     _opened(rig)
     _stream(rig, [(0.1 * n, 0, 0, 0, 0, 0) for n in range(100)])
