@@ -110,7 +110,9 @@ def plan_jog(context: PlanningContext, start: KinematicState, start_frames: Fram
         if seconds == 0.0 and tolerated is not None:  # no goal inside the limits this way: none to rest on
             return Refusal(ErrorCode.PATH_VIOLATION, f"the platform is a hair beyond the limit ahead already "
                            f"({broken([outside])[0][0].message}): jog the other way, back inside")
-    speed = _speed(context, origin, goal(seconds).in_radians(), seconds)
+    # At the limit already (no travel): the pace of the velocity asked, over a step of it.
+    paced_s = seconds if seconds > 0.0 else step_s
+    speed = _speed(context, origin, goal(paced_s).in_radians(), paced_s)
     for _ in range(_SHRINK_ATTEMPTS):
         plan = plan_path(context, start, [Waypoint(goal(seconds), None, speed)], start_frames)
         if plan.ok or plan.refusal is None or plan.refusal.code is not ErrorCode.PATH_VIOLATION:
@@ -136,8 +138,6 @@ def _speed(context: PlanningContext, origin: Sequence[float], goal: Sequence[flo
     """The velocity scale (0, 1] whose cruise covers ``origin`` → ``goal`` (mm, rad) in
     ``seconds``: with phase synchronisation the axis nearest its limit cruises at its
     scaled limit and the others in proportion."""
-    if seconds <= 0.0:
-        return 1.0
     velocity_limits = context.limits.in_mm_rad()[0]
     needed = max(abs(g - o) / seconds / limit for g, o, limit in zip(goal, origin, velocity_limits))
     return float(min(1.0, needed)) if needed > 0.0 else 1.0

@@ -49,6 +49,11 @@ def test_a_jog_into_a_soft_limit_comes_to_rest_on_it_with_no_refusal_and_no_clam
     assert s.pose_command[0] == pytest.approx(5.0, abs=1e-5) and s.pose_command[0] <= 5.0  # on it, to 10 nm
     assert s.clamped_cycles == 0
     rig.assert_setpoints_safe()
+    # From on the limit, a new jog has nowhere to go, at the pace asked (it said 1: the limits)
+    rig.controller.jog([0] * 6)
+    rig.settle()
+    again = rig.controller.jog([10, 0, 0, 0, 0, 0])
+    assert again.ok and again.details["speed"] == replies[0].details["speed"] < 1.0, again
 
 
 def test_a_jog_into_the_hardware_limit_comes_to_rest_on_it(rig, geometry) -> None:
