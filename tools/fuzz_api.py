@@ -87,7 +87,7 @@ from hexactl.adapters.api.client import ServiceUnavailable  # noqa: E402
 from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, OkReply, Request  # noqa: E402
 from hexactl.adapters.api.paths import MAX_FILE_BYTES  # noqa: E402
 from hexactl.adapters.api.server import DEFAULT_HANDLER_TIMEOUT_S  # noqa: E402
-from hexactl.adapters.api.wire import MAX_REQUEST_BYTES  # noqa: E402
+from hexactl.adapters.api.protocol import MAX_REQUEST_BYTES  # noqa: E402
 from hexactl.adapters.api.wire import ErrorCode as ApiCode  # noqa: E402
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
 from hexactl.adapters.files.config_path import default_config_path  # noqa: E402

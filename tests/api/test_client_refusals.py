@@ -12,7 +12,7 @@ import zmq
 
 from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable
 from hexactl.adapters.api.server import sender_of
-from hexactl.adapters.api.wire import MAX_REQUEST_BYTES
+from hexactl.adapters.api.protocol import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES
 
 WAIT_S = 30.0  # bounds a hang only: a reply takes milliseconds
 
@@ -22,6 +22,15 @@ def test_a_request_too_large_to_read_gets_its_error_not_a_timeout(shared_service
         reply = client.request("stream_open", source="x" * MAX_REQUEST_BYTES)
         assert reply["ok"] is False and reply["error"]["code"] == "too_large" and reply["id"] is None
         assert client.call("status")["ok"]  # and the next request gets its own reply
+
+
+def test_a_request_too_large_for_the_service_to_read_is_refused_before_sending() -> None:
+    """Found from outside: a 2 MB calibration said "no answer within 5 s: is hexactl serve
+    running there?": ZeroMQ drops a message beyond the transport's limit, unanswered."""
+    with HexactlClient("tcp://127.0.0.1:9", timeout_s=0.1) as client:  # nobody there: nothing may be sent
+        with pytest.raises(ValueError, match=f"load_calibration: a request of [0-9]+ bytes: the API answers "
+                                             f"{MAX_REQUEST_BYTES} at most"):
+            client.request("load_calibration", toml="#" * TRANSPORT_MAX_BYTES)
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from hexactl.adapters.api.messages import ErrorReply
 from hexactl.adapters.api.server import carry_out, decode_body
-from hexactl.adapters.api.wire import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES, ApiError, decode_request
+from hexactl.adapters.api.protocol import MAX_REQUEST_BYTES, TRANSPORT_MAX_BYTES
+from hexactl.adapters.api.wire import ApiError, decode_request
 from tests.api.support import exchange
 
 STATUS = {"v": 1, "id": "after", "cmd": "status"}

@@ -73,6 +73,27 @@ def test_a_calibration_file_here_is_sent_with_its_name(service, nominal, tmp_pat
     assert run(service, "load-calibration", "--send", "demo-out/calibration.toml") == 0  # still accepted
 
 
+@pytest.mark.parametrize("comment_bytes", [100_000, 2_000_000])
+def test_a_calibration_too_large_to_send_goes_by_its_path(service, nominal, tmp_path, monkeypatch, capsys,
+                                                          comment_bytes) -> None:
+    """Found from outside: a calibration with 68 KB of comments was refused too_large with no
+    way out, and one of 2 MB got "no answer within 5 s: is hexactl serve running there?".
+    Too large for a request, the file goes by its path: read by the service from its data
+    directory, and refused naming them from elsewhere."""
+    text = geometry_to_toml(nominal.model_copy(update={"name": "padded"})) + ("# history\n" * (comment_bytes // 10))
+    (service.data_dir / "padded.toml").write_text(text)
+    (tmp_path / "elsewhere.toml").write_text(text)
+    monkeypatch.chdir(tmp_path)
+    assert run(service, "load-calibration", str(service.data_dir / "padded.toml")) == 0, capsys.readouterr().err
+    assert service.controller.calls[-1][0] == "load_calibration"
+    capsys.readouterr()
+    assert run(service, "load-calibration", "elsewhere.toml") == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"error forbidden_path: {tmp_path / 'elsewhere.toml'}: outside the data directories"), err
+    assert run(service, "load-calibration", "--send", "elsewhere.toml") == 2
+    assert "too large to send" in capsys.readouterr().err
+
+
 def test_malformed_toml_is_refused_here_naming_the_file(service, tmp_path, monkeypatch, capsys) -> None:
     monkeypatch.chdir(tmp_path)
     Path("bad.toml").write_text("zero_lengths = [1,\n")

@@ -27,8 +27,10 @@ from hexactl.adapters.api.protocol import (
     DEFAULT_TELEMETRY_ENDPOINT,
     DEFAULT_TIMEOUT_S,
     MAX_DEADLINE_MS,
+    MAX_REQUEST_BYTES,
     PROTOCOL_VERSION,
     TOPIC,
+    TRANSPORT_MAX_BYTES,
     default_client_name,
     is_local_endpoint,
 )
@@ -138,7 +140,9 @@ class HexactlClient(ZmqConnection):
         not read (too large, not JSON) is answered without its ``id``: that error is the reply.
 
         :raises ValueError: a field is the envelope's (``v``, ``id``, ``cmd``), not finite (NaN
-            or infinity) or not JSON-able; nothing is sent
+            or infinity) or not JSON-able, or the request is beyond what the service reads
+            (:data:`~hexactl.adapters.api.protocol.TRANSPORT_MAX_BYTES`: no reply would come);
+            nothing is sent
         :raises ServiceUnavailable: it cannot be sent or no reply arrives within ``timeout_s``
         """
         if envelope := sorted(ENVELOPE_FIELDS & fields.keys()):
@@ -151,6 +155,9 @@ class HexactlClient(ZmqConnection):
             raise ValueError(f"{cmd}: the API takes finite numbers only, not NaN or infinity ({error})") from None
         except TypeError as error:
             raise ValueError(f"{cmd}: a field is not a JSON value ({error})") from None
+        if (size := len(message.encode())) > TRANSPORT_MAX_BYTES:  # the service would drop it unanswered
+            raise ValueError(f"{cmd}: a request of {size} bytes: the API answers {MAX_REQUEST_BYTES} at most, and one "
+                             f"beyond {TRANSPORT_MAX_BYTES} it cannot even read to answer; send less")
         deadline = time.monotonic() + self.timeout_s
         unavailable = self._unanswered("answer", self.timeout_s)
         self.socket.sndtimeo = max(1, round(self.timeout_s * 1000))

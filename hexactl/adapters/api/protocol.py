@@ -16,6 +16,14 @@ from pathlib import Path
 
 PROTOCOL_VERSION = 1
 
+MAX_REQUEST_BYTES = 64 * 1024
+"""Largest request answered; a larger one gets ``too_large``."""
+
+TRANSPORT_MAX_BYTES = 16 * MAX_REQUEST_BYTES
+"""``zmq.MAXMSGSIZE``: ZeroMQ drops the connection of a peer sending a frame larger than
+this, without a reply (nothing can be answered without reading it all); between
+:data:`MAX_REQUEST_BYTES` and this the request is read, counted and refused."""
+
 DEFAULT_API_ENDPOINT = "tcp://127.0.0.1:5555"
 DEFAULT_TELEMETRY_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_TELEMETRY_RATE_HZ = 50.0

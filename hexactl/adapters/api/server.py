@@ -58,12 +58,16 @@ from typing import Any
 import zmq
 
 from hexactl.adapters.api.messages import Request, StopRequest
-from hexactl.adapters.api.protocol import CLIENT_NAME_PROPERTY, MAX_CLIENT_NAME, PROTOCOL_VERSION
+from hexactl.adapters.api.protocol import (
+    CLIENT_NAME_PROPERTY,
+    MAX_CLIENT_NAME,
+    MAX_REQUEST_BYTES,
+    PROTOCOL_VERSION,
+    TRANSPORT_MAX_BYTES,
+)
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.wire import (
-    MAX_REQUEST_BYTES,
-    TRANSPORT_MAX_BYTES,
     ApiError,
     ErrorCode,
     decode_request,

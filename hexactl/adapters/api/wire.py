@@ -20,16 +20,9 @@ import numpy as np
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from hexactl.adapters.api.messages import COMMANDS, Request, json_type
-from hexactl.adapters.api.protocol import PROTOCOL_VERSION
+from hexactl.adapters.api.protocol import MAX_REQUEST_BYTES, PROTOCOL_VERSION
 from hexactl.kinematics.validation_messages import validation_location
 
-MAX_REQUEST_BYTES = 64 * 1024
-"""Largest request answered; a larger one gets ``too_large``."""
-
-TRANSPORT_MAX_BYTES = 16 * MAX_REQUEST_BYTES
-"""``zmq.MAXMSGSIZE``: ZeroMQ drops the connection of a peer sending a frame larger than
-this, without a reply (nothing can be answered without reading it all); between
-:data:`MAX_REQUEST_BYTES` and this the request is read, counted and refused."""
 
 
 class ErrorCode(StrEnum):

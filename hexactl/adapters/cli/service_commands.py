@@ -266,6 +266,10 @@ def _leg_lock_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any
     return "leg_lock", {"leg": arguments.leg}
 
 
+REQUEST_ENVELOPE_BYTES = 256
+"""Room a request's envelope (version, id, command, deadline) takes beside its fields."""
+
+
 def _play_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     path = Path(arguments.sequence)  # a file here is sent absolute: the service's working directory may differ
     return "play", {"sequence": str(path.resolve()) if path.is_file() else arguments.sequence}
@@ -282,12 +286,17 @@ def _save_recording_request(arguments: argparse.Namespace) -> tuple[str, dict[st
 
 def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     """A file here is read and checked to be TOML here, and sent as content with its
-    name; any other name goes to the service, which looks it up in its data directories."""
+    name; any other name goes to the service, which looks it up in its data directories.
+    A file too large for a request (comments, a long history) goes by its absolute path:
+    the service reads it if it lies in one of its data directories, and else says which
+    they are (it said "too_large", or for 2 MB nothing at all)."""
     path = Path(arguments.file)
     if not (arguments.send or path.is_file()):
         return "load_calibration", {"path": arguments.file}
+    import json
     import tomllib  # light; only for this command
 
+    from hexactl.adapters.api.protocol import MAX_REQUEST_BYTES
     from hexactl.adapters.files.text import read_text
 
     text = read_text(arguments.file, CliError)
@@ -296,7 +305,14 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
         tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise CliError(f"{arguments.file}: not valid TOML: {error}") from None
-    return "load_calibration", {"toml": text, "source": str(path.resolve())}
+    fields = {"toml": text, "source": str(path.resolve())}
+    if len(json.dumps(fields).encode()) > MAX_REQUEST_BYTES - REQUEST_ENVELOPE_BYTES:
+        if arguments.send:
+            raise CliError(f"{arguments.file}: too large to send ({len(text.encode())} bytes; a request carries "
+                           f"{MAX_REQUEST_BYTES}): leave out --send, and put the file in one of the service's data "
+                           "directories")
+        return "load_calibration", {"path": str(path.resolve())}
+    return "load_calibration", fields
 
 
 # -- running -------------------------------------------------------------------------
