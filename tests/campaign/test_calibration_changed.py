@@ -77,3 +77,20 @@ def test_test_motions_are_not_measured_under_another_clients_calibration(nominal
     rows = [line for line in (tmp_path / "c" / VALIDATION_FILE).read_text().splitlines()
             if line.startswith("before")]
     assert len(rows) == 2  # the waypoints measured with the planned geometry, and no other
+
+
+@pytest.mark.parametrize(("phase", "again"), [
+    ("before", "hexactl load-calibration of the geometry file the campaign was planned with"),
+    ("after", "hexactl load-calibration {directory}/calibration.toml"),
+])
+def test_the_way_back_names_the_calibrations_file_not_a_rollback(nominal, tmp_path, phase, again) -> None:
+    """Found from outside: after another client's rollback the campaign advised
+    `hexactl rollback-calibration`, which went back one more load, to an unrelated file."""
+    controller = Controller(1)
+    with CampaignStore.open(tmp_path / "c", nominal, CampaignDesign(postures_per_leg=1, candidates=50)) as store:
+        with pytest.raises(CampaignError) as raised:
+            _validate(PlatformDriver(controller), store, Instrument(nominal, controller), phase, PLANNED,  # type: ignore[arg-type]
+                      Progress(io.StringIO(), io.StringIO()))
+    said = str(raised.value)
+    assert f"make {PLANNED} active again ({again.format(directory=(tmp_path / 'c').resolve())})" in said, said
+    assert "rollback-calibration" not in said

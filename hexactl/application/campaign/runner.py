@@ -272,11 +272,14 @@ def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrume
                 raise CampaignError(f"the controller refused the test-motion move to {list(step.pose)}: {error}") from None
             label = f"{step.motion.name} {step.waypoint}/{len(step.motion.waypoints)}"
             if settled["calibration_id"] != calibration_id:
+                # Named by its file: a rollback goes back one load, which after a rollback is another calibration.
+                again = (f"hexactl load-calibration {store.directory.resolve() / CALIBRATION_FILE}" if phase == "after"
+                         else "hexactl load-calibration of the geometry file the campaign was planned with")
                 raise CampaignError(f"the controller runs calibration {settled['calibration_id']}, not {calibration_id}, "
                                     f"which the test motions {phase} calibration are measured with: another client "
                                     "loaded or rolled back a calibration meanwhile. Nothing was measured at "
-                                    f"{label}; make {calibration_id} active again (hexactl rollback-calibration, or "
-                                    "hexactl load-calibration of its file), then run the same command again to resume")
+                                    f"{label}; make {calibration_id} active again ({again}), then run the same command "
+                                    "again to resume")
             points = instrument.measure(store.measurements_taken, f"{phase} calibration, {label}")
             driver.confirm_still(settled)
             store.add_validation(step, points)
