@@ -10,6 +10,7 @@ from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.calibration_checks import acceptance_refusal, swap_refusal
 from hexactl.control.config import ControllerConfig
+from hexactl.control.core import KEPT_CALIBRATIONS
 from hexactl.control.planning import ActiveGeometry
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import ControlState, CoreSnapshot
@@ -67,7 +68,8 @@ class CalibrationSwaps:
             back = ("" if s.active.geometry == self._nominal else "; to go back to the nominal geometry, load its "
                     "file (hexactl load-calibration FILE: the service's --config)")
             return CommandResult.failure(ErrorCode.NO_PREVIOUS_CALIBRATION, "there is no earlier calibration to roll "
-                                         f"back to ({s.active.calibration_id} is the first since start-up){back}")
+                                         f"back to: none is kept before {s.active.calibration_id} (rollbacks return "
+                                         f"through the last {KEPT_CALIBRATIONS} in force since start-up){back}")
         return self._swap(s.previous, f"rolled back from calibration {s.active.calibration_id} to "
                           f"{s.previous.calibration_id}", rollback=True)
 

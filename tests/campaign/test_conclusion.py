@@ -31,8 +31,8 @@ class Calibrations:
         if cmd == "rollback_calibration":
             self.sent.append(cmd)
             if not self.history:
-                raise CommandError("no_previous_calibration", f"there is no earlier calibration to roll back to "
-                                   f"({self.active} is the first since start-up)")
+                raise CommandError("no_previous_calibration", f"there is no earlier calibration to roll back to: "
+                                   f"none is kept before {self.active}")
             self.active = self.history.pop()
             return {}
         if cmd == "load_calibration":

@@ -86,7 +86,8 @@ def test_rollback_ramps_back_to_the_previous_calibration(rig, calibrated):
     rig.run(3)
     original = rig.sent[-1].copy()
     refused = rig.controller.rollback_calibration()
-    assert refused.message == "there is no earlier calibration to roll back to (nominal is the first since start-up)"
+    assert refused.message == ("there is no earlier calibration to roll back to: none is kept before nominal "
+                               "(rollbacks return through the last 16 in force since start-up)")
     assert rig.controller.load_calibration(calibrated, "cal-1").ok
     rig.run(2)
     rig.run_until(lambda: not rig.controller.snapshot.ramp_active)
