@@ -340,6 +340,30 @@ def test_a_second_udp_sender_is_not_followed() -> None:
         assert receiver.view()["other_sender"] == 2
 
 
+def test_the_first_udp_sender_is_followed_even_after_the_others_higher_numbers() -> None:
+    """Found from outside: the second sender's first datagrams, numbered 1001 and 1002, were
+    taken before it counted as a sender; every later sample of the first (numbered from 1)
+    was then out of order, even once the second was told apart, and the stream timed out
+    heading for the second's poses."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, _, first), udp_socket(receiver) as second:
+        taken = lambda count: lambda: len(controller.targets) == count  # noqa: E731
+        ahead = stream_receiver.SENDER_DATAGRAMS  # the first sender's, all taken
+        for number in range(1, ahead + 1):
+            sent(first.send, encode(number, number * 0.002, [40.0, 0, 0, 0, 0, 0]), taken(number), "the first's")
+        for number in range(1, stream_receiver.SENDER_DATAGRAMS):  # not yet a sender: taken, numbered above
+            sent(second.send, encode(1000 + number, 0.01, [-40.0, 0, 0, 0, 0, 0]), taken(ahead + number),
+                 "the second's, before it counts as a sender")
+        sent(first.send, encode(ahead + 1, 0.02, [40.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
+             "the first's, below the second's numbers")
+        sent(second.send, encode(1100, 0.02, [-40.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the second told apart, and dropped")
+        followed = len(controller.targets)
+        sent(first.send, encode(ahead + 2, 0.03, [40.0, 0, 0, 0, 0, 0]), taken(followed + 1),
+             "the first followed on")
+        assert sequences(controller)[-1] == ahead + 2 and receiver.counters.out_of_order == 1
+
+
 def test_a_sender_with_a_new_port_for_every_datagram_is_followed_whole() -> None:
     """Software that opens a socket per datagram sends each from another port: never two
     senders taking turns, so nothing of it is dropped."""

@@ -121,6 +121,7 @@ class StreamReceiver(SocketThread):
         self._udp_counts: collections.OrderedDict[Any, int] = collections.OrderedDict()  # this stream's recent senders
         self._udp_sender: Any = None  # the first to send SENDER_DATAGRAMS: the one followed once another has too
         self._two_senders = False
+        self._followed_last: Sample | None = None  # the newest sample taken from ``_udp_sender``
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
         self._last: Sample | None = None  # the newest sample taken
         self._due_ns = 0  # when the next sample may go to ``target``
@@ -225,7 +226,7 @@ class StreamReceiver(SocketThread):
                 self._problem(f"UDP receive failed: {error}")
                 break
             if self._from_the_streams_sender(sender):
-                self._taken_or_counted([message])
+                self._taken_or_counted([message], followed=sender == self._udp_sender)
             self._forward_if_due()
 
     def _from_the_streams_sender(self, sender: Any) -> bool:
@@ -250,6 +251,7 @@ class StreamReceiver(SocketThread):
                 self._udp_sender = sender
                 return True
             self._two_senders = True
+            self._follow_only_the_first()
         self.counters.received += 1
         self.counters.other_sender += 1
         self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} sends to this stream "
@@ -257,16 +259,26 @@ class StreamReceiver(SocketThread):
                       "(stream_close) and open one for the other")
         return False
 
-    def _taken_or_counted(self, frames: list[bytes]) -> None:
-        """Take the message of ``frames`` (a datagram is one), or count it as malformed,
-        whatever goes wrong."""
+    def _follow_only_the_first(self) -> None:
+        """From now on the first sender's samples only: what the other's took before it was
+        told apart goes. Its sequence numbers had become the last taken, and every later
+        sample of the first was out of order: the stream timed out, heading for the other's
+        poses."""
+        followed = self._followed_last
+        self._last_sequence = followed.sequence if followed is not None else None
+        self._last = followed
+        self._pending = None  # perhaps the other's; the first's next sample goes on at once
+
+    def _taken_or_counted(self, frames: list[bytes], followed: bool = False) -> None:
+        """Take the message of ``frames`` (a datagram is one; ``followed``: from the UDP
+        sender followed), or count it as malformed, whatever goes wrong."""
         try:
-            self._take(frames)
+            self._take(frames, followed)
         except Exception as error:  # a sample no check foresaw must not end the thread
             self.counters.malformed += 1
             self._failed("a message could not be taken", error)
 
-    def _take(self, frames: list[bytes]) -> None:
+    def _take(self, frames: list[bytes], followed: bool = False) -> None:
         received_ns = time.monotonic_ns()
         c = self.counters
         c.received += 1
@@ -298,6 +310,8 @@ class StreamReceiver(SocketThread):
         # The sample before goes along: the stream's velocity is between the last two samples
         # sent, not the last two forwarded (two equal poses in a row mean at rest there).
         self._pending, self._last = (sample, received_ns, self._last), sample
+        if followed:
+            self._followed_last = sample
 
     def _watch_loop(self) -> None:
         """Follow the loop's stream: a new one resets the counters; each target it took
@@ -310,7 +324,7 @@ class StreamReceiver(SocketThread):
                 self._last_sequence = None
                 self._udp_counts.clear()
                 self._udp_sender, self._two_senders = None, False
-                self._last = None
+                self._last = self._followed_last = None
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()
                 self._arrived_ns.clear()
