@@ -364,6 +364,14 @@ def test_the_first_udp_sender_is_followed_even_after_the_others_higher_numbers()
         assert sequences(controller)[-1] == ahead + 2 and receiver.counters.out_of_order == 1
 
 
+def test_an_oversized_datagram_is_refused_with_its_own_size() -> None:
+    """Found from outside: a datagram of 3000 bytes was said to be of 2048, the size read."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, _, udp):
+        sent(udp.send, b"1" * 3000, lambda: receiver.counters.malformed == 1, "the datagram refused")
+        assert receiver.counters.last_problem.endswith("(3000 bytes)"), receiver.counters.last_problem
+
+
 def test_a_sender_with_a_new_port_for_every_datagram_is_followed_whole() -> None:
     """Software that opens a socket per datagram sends each from another port: never two
     senders taking turns, so nothing of it is dropped."""

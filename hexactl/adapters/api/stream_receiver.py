@@ -122,6 +122,8 @@ class StreamReceiver(SocketThread):
         self._udp_sender: Any = None  # the first to send SENDER_DATAGRAMS: the one followed once another has too
         self._two_senders = False
         self._followed_last: Sample | None = None  # the newest sample taken from ``_udp_sender``
+        # Room for the largest UDP payload: a datagram is read whole, and a refusal says its size.
+        self._datagram = bytearray(65_535)
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
         self._last: Sample | None = None  # the newest sample taken
         self._due_ns = 0  # when the next sample may go to ``target``
@@ -219,14 +221,14 @@ class StreamReceiver(SocketThread):
             return
         for _ in range(MAX_PER_WAKE):
             try:
-                message, sender = self._udp.recvfrom(2048)
+                size, sender = self._udp.recvfrom_into(self._datagram)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
                 self._problem(f"UDP receive failed: {error}")
                 break
             if self._from_the_streams_sender(sender):
-                self._taken_or_counted([message], followed=sender == self._udp_sender)
+                self._taken_or_counted([bytes(self._datagram[:size])], followed=sender == self._udp_sender)
             self._forward_if_due()
 
     def _from_the_streams_sender(self, sender: Any) -> bool:
