@@ -567,6 +567,6 @@ _FILE_ERRORS = {
     "forbidden_path": "the service reads and writes files only in its data directories (hexactl serve --data-dir DIR); "
                       "name a file there, or give a file on this machine to load-calibration (it is sent)",
     "file_not_found": "check the name: a relative name is looked up in each data directory, then in the service's "
-                      "working directory; a recording's directory must exist",
+                      "working directory (a recording is saved only into a directory that exists)",
 }
 """What to do about a file refused: the API's codes for paths."""
