@@ -83,14 +83,16 @@ class SoftLimits(BaseModel):
             limits = np.array([open_end if bound is None else bound + rounding for bound in bounds])
             for n, axis in zip(*np.nonzero(broken(poses, limits))):
                 value, limit, passed = self._way_round(axis, float(poses[n, axis]), side)
+                unit = POSE_UNITS[axis]
                 found[n].append(Violation(ViolationKind.SOFT_LIMIT, value, limit,
-                                          f"{POSE_AXES[axis]} {value:.3f} {POSE_UNITS[axis]} {passed}",
-                                          axis=POSE_AXES[axis]))
+                                          f"{POSE_AXES[axis]} {value:.3f} {unit} {passed} (by "
+                                          f"{abs(value - limit):.3g} {unit})", axis=POSE_AXES[axis]))
         if self.max_tilt_deg is not None:
             for n, tilt in enumerate(tilt_deg(poses)):
                 if self._beyond_tilt(tilt):
                     found[n].append(Violation(ViolationKind.SOFT_TILT, float(tilt), self.max_tilt_deg,
-                                              f"tilt {tilt:.3f} deg beyond the soft limit {self.max_tilt_deg:g} deg"))
+                                              f"tilt {tilt:.3f} deg beyond the soft limit {self.max_tilt_deg:g} deg "
+                                              f"(by {tilt - self.max_tilt_deg:.3g} deg)"))
         return found
 
     def allow(self, tool_in_work_mm_deg: Sequence[float]) -> bool:

@@ -144,7 +144,7 @@ class FakeController:
         return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1,
                                      predicted_accuracy=self.accuracy)
 
-    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *,
+    def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *, renews: int | None = None,
             deadline_ns: int | None = None) -> CommandResult:
         self._call("jog", list(velocity), frame)
         return CommandResult.success("jogging", jog=1, goal=[5.0, 0, 0, 0, 0, 0], speed=1.0,
