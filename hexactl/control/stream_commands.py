@@ -51,11 +51,12 @@ smoothly, and the platform brakes between them."""
 MAX_SAMPLE_GAP_S = 0.1
 """Two requests further apart than this (by their sender's clock) give no velocity."""
 
-VELOCITY_BASELINE_S = HORIZON_S
-"""How far back (by the sender's clock) the request the velocity is taken from lies, at
-least, once the stream is that old: as long as the loop aims ahead, so that the aim goes
-no further ahead than the stream moved in as long. From the request before, 2 ms back at
-500 Hz, ±1 mm of noise read as ±600 mm/s and swung the platform ±40 mm."""
+VELOCITY_WINDOW_S = 0.08
+"""How far back (by the sender's clock) the requests the velocity is fitted to reach, at
+least, once the stream is that old. From the request before alone, 2 ms back at 500 Hz,
+±1 mm of noise read as ±600 mm/s and swung the platform ±44 mm; a straight difference over
+this long lags a changing velocity by half of it (a cue performed worse than planned), a
+parabola's slope at the newest does not."""
 
 MIN_SAMPLE_GAP_S = 1e-4
 """Nor two closer than this: no stream is faster than 10 kHz, and a sender's clock
@@ -136,32 +137,36 @@ class _OpenStream:
 
     def remember(self, sent_s: float, requested: np.ndarray) -> None:
         """Keep the request sent at ``sent_s`` (s, the sender's clock) for the velocity, and
-        forget what the velocity needs no more: after a gap all before it, else all but one
-        older than :data:`VELOCITY_BASELINE_S`."""
+        forget what the velocity needs no more: after a gap all before it, else those older
+        than :data:`VELOCITY_WINDOW_S` but the newest of them."""
         history = self.history
         if history and not MIN_SAMPLE_GAP_S <= sent_s - history[-1][0] <= MAX_SAMPLE_GAP_S:
             if sent_s - history[-1][0] < MIN_SAMPLE_GAP_S and sent_s >= history[-1][0]:
                 return  # the same instant again: the one kept stands
             history.clear()
         history.append((sent_s, requested))
-        while len(history) > 2 and sent_s - history[1][0] >= VELOCITY_BASELINE_S:
+        while len(history) > 2 and sent_s - history[1][0] >= VELOCITY_WINDOW_S:
             history.popleft()
 
     def velocity(self, requested: np.ndarray, sent_s: float) -> np.ndarray:
-        """The stream's velocity at ``requested`` (mm/s, rad/s): from the newest remembered
-        request at least :data:`VELOCITY_BASELINE_S` older (the oldest, while the stream is
-        younger), within its limits; zero after a gap, or with none before."""
+        """The stream's velocity at ``requested`` (mm/s, rad/s), within its limits: the slope
+        there of a parabola fitted (least squares) to it and the requests remembered, back to
+        :data:`VELOCITY_WINDOW_S` at least; the straight difference with only one before;
+        zero after a gap, with none before, or when it repeats the one before (a sender
+        stopping at a pose)."""
         history = self.history
         if not history or not MIN_SAMPLE_GAP_S <= sent_s - history[-1][0] <= MAX_SAMPLE_GAP_S:
             return np.zeros(6)
-        reference = history[0]
-        for sample in history:
-            if sent_s - sample[0] < VELOCITY_BASELINE_S:
-                break
-            reference = sample
-        since_s = sent_s - reference[0]
+        if np.array_equal(requested, history[-1][1]):  # the same pose again: stop there (docs/stream.md)
+            return np.zeros(6)
         max_velocity = self.limits[0]
-        return np.clip((requested - reference[1]) / since_s, -max_velocity, max_velocity)
+        if len(history) < 2:
+            return np.clip((requested - history[-1][1]) / (sent_s - history[-1][0]), -max_velocity, max_velocity)
+        # A parabola through the window, its slope at the newest: no lag under a steady acceleration
+        times = np.array([t - sent_s for t, _ in history] + [0.0])
+        poses = np.array([pose for _, pose in history] + [requested])
+        slope = np.polyfit(times, poses, 2)[1]
+        return np.clip(slope, -max_velocity, max_velocity)
 
     def near_last(self, pose_mm_deg: Sequence[float]) -> np.ndarray:
         """A sample (mm, deg) in mm and rad; in the work frame with its angles in
