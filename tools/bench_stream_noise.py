@@ -7,7 +7,8 @@ cycle (500 Hz) with seeded uniform noise on x, and reports what was commanded:
   x 610), then ± the noise, 8 s: the largest commanded x, the commanded poses beyond a
   hardware limit (every 4th cycle checked) and the set-point guard's clamps;
 - ``sine``: x 10 mm · sin(2π·1 Hz·t), no noise, 3 s: the largest tracking error over the
-  last period (what a smoother velocity costs a clean stream).
+  last period (what a smoother velocity costs a clean stream), and the wall-clock time of
+  the facade's ``stream_target`` per sample (its planning, in the API's process).
 
 With several ``--tree`` checkouts (each one's ``hexactl`` imported instead of this one's,
 e.g. a ``git worktree`` of the revision before a change) each runs in a process of its own:
@@ -25,6 +26,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -62,13 +64,16 @@ def measure(noises_mm: list[float]) -> dict:
         step()
         cycles = int(seconds * RATE_HZ)
         noise = np.random.default_rng(seed).uniform(-noise_mm, noise_mm, cycles)
-        commanded = []
+        commanded, spent = [], []
         for n in range(cycles):
             pose = list(path(n / RATE_HZ))
             pose[0] += noise[n]
+            began = time.perf_counter()
             controller.stream_target(pose, n + 1, now[0] / 1e9, now[0])
+            spent.append(time.perf_counter() - began)
             step()
             commanded.append(controller.snapshot.pose_command.in_degrees())
+        follow.spent_us = np.array(spent) * 1e6  # type: ignore[attr-defined]
         return np.array(commanded), controller.snapshot.clamped_cycles
 
     figures: dict = {"hold": {}, "boundary": {}}
@@ -84,6 +89,7 @@ def measure(noises_mm: list[float]) -> dict:
     times = np.arange(len(traced)) / RATE_HZ
     last = times >= 2.0
     figures["sine"] = float(np.abs(traced[last, 0] - 10.0 * np.sin(2 * np.pi * times[last])).max())
+    figures["target_us"] = [float(np.percentile(follow.spent_us, q)) for q in (50, 99)]  # type: ignore[attr-defined]
     return figures
 
 
@@ -109,7 +115,9 @@ def main() -> None:
         if not Path(reply["hexactl"]).is_relative_to(tree.resolve()):
             sys.exit(f"{tree}: the child imported {reply['hexactl']}")
         figures = reply["figures"]
-        print(f"\n{tree}: sine x 10 mm at 1 Hz, largest tracking error {figures['sine']:.3f} mm\n")
+        p50, p99 = figures["target_us"]
+        print(f"\n{tree}: sine x 10 mm at 1 Hz, largest tracking error {figures['sine']:.3f} mm; the facade's "
+              f"stream_target per sample (wall clock, this machine as it is) p50 {p50:.0f} µs, p99 {p99:.0f} µs\n")
         print("| noise ± mm | hold x 0: largest commanded x mm | boundary: largest commanded x mm | poses beyond a "
               "hardware limit | guard clamps |")
         print("| --- | --- | --- | --- | --- |")
