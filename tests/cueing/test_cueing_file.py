@@ -114,6 +114,12 @@ def rows(*times: float) -> str:
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81\n", "mine.csv: line 3: has 4 fields, the header has 7"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,0,0,5,6\n", "mine.csv: line 3: has 9 fields, the header has 7"),
     (rows(0.0), "mine.csv: 1 samples: a vehicle trajectory needs at least two lines of values"),
+    # found from outside: one glitch of 1e308 overflowed the filter (a traceback), one of 1e6 silenced every cue
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,1e308,0,9.81,0,0,0\n", "mine.csv: line 3, column f_x: 1e+308 m/s² is beyond "
+                                                               "±294.3 m/s² (30 g)"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,-1e6,0,9.81,0,0,0\n", "line 3, column f_x: -1e+06 m/s² is beyond"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,0,57.3\n", "mine.csv: line 3, column omega_z: 57.3 rad/s is beyond "
+                                                               "±35 rad/s (2000 deg/s, a gyro's full scale): in deg/s?"),
 ])
 def test_a_bad_vehicle_file_is_refused_naming_the_line_and_column(text: str, expected: str) -> None:
     with pytest.raises(CueingFileError) as refused:

@@ -46,6 +46,16 @@ near 1 g. A median near 1, 0 or −9.81 m/s² is a file in g, an acceleration wi
 gravity, or z-down (aerospace) axes, and the washout would cue a jolt of about 1 g."""
 
 
+MAX_SPECIFIC_FORCE_M_S2 = 30 * GRAVITY_M_S2
+"""Largest specific force on an axis, m/s²: 30 g, beyond any vehicle a motion platform
+cues (a crash pulse aside). A larger value is a unit mistake or a glitch: one spike of
+10⁶ m/s² had made the workspace gain 0 and silenced every cue, and 1e308 overflowed the
+filter."""
+
+MAX_ANGULAR_RATE_RAD_S = 35.0
+"""Largest angular rate on an axis, rad/s: 2000 deg/s, a vehicle gyro's usual full scale."""
+
+
 class CueingFileError(ValueError):
     """A cueing file could not be read; the message names the file, where, and the problem."""
 
@@ -109,7 +119,8 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
         if any(cell.strip() for cell in row):
             if len(row) != len(names):  # a value too many or too few shifts the others to another column
                 raise CueingFileError(f"{source}: line {line}: has {len(row)} fields, the header has {len(names)}")
-            values.append([_number(row, index, column, line, source) for index, column in zip(where, VEHICLE_COLUMNS)])
+            values.append([_plausible(_number(row, index, column, line, source), column, line, source)
+                           for index, column in zip(where, VEHICLE_COLUMNS)])
             lines.append(line)
     if len(values) < 2:
         raise CueingFileError(f"{source}: {len(values)} samples: a vehicle trajectory needs at least two lines of values")
@@ -146,6 +157,20 @@ def _number(row: list[str], index: int, column: str, line: int, source: str) -> 
     if not isfinite(value):
         shown = f"'{cell}'" if cell else "nothing"
         raise CueingFileError(f"{source}: line {line}, column {column}: {shown} is not a finite number")
+    return value
+
+
+def _plausible(value: float, column: str, line: int, source: str) -> float:
+    """``value`` of ``column``, unless beyond what any vehicle does: then a :class:`CueingFileError`
+    naming the line, the column and the likely mistake."""
+    if column.startswith("f_") and abs(value) > MAX_SPECIFIC_FORCE_M_S2:
+        raise CueingFileError(f"{source}: line {line}, column {column}: {value:g} m/s² is beyond "
+                              f"±{MAX_SPECIFIC_FORCE_M_S2:g} m/s² (30 g), more than any vehicle a motion platform cues: "
+                              "a unit mistake (mm/s²?) or a glitch in the recording; correct or remove the line")
+    if column.startswith("omega_") and abs(value) > MAX_ANGULAR_RATE_RAD_S:
+        raise CueingFileError(f"{source}: line {line}, column {column}: {value:g} rad/s is beyond "
+                              f"±{MAX_ANGULAR_RATE_RAD_S:g} rad/s (2000 deg/s, a gyro's full scale): in deg/s? "
+                              "multiply by π/180; else a glitch in the recording: correct or remove the line")
     return value
 
 
