@@ -93,11 +93,13 @@ class Controller:
         ``PERCENTILES_MAX_AGE_S`` old; counters and maxima are current."""
         return telemetry_of(self._host.report(PERCENTILES_MAX_AGE_S), self.frames.current)
 
-    def events(self, after: int = 0) -> EventLog:
+    def events(self, after: int = 0, now_ns: int | None = None) -> EventLog:
         """The loop's kept events (faults, refusals, commands, sequence and calibration
-        changes) numbered after ``after``, oldest first."""
+        changes) numbered after ``after``, oldest first, read at ``now_ns`` on the loop's
+        clock (default: the snapshot's time, which lags the loop by up to a report: a
+        client placing the events on its own clock from it placed them that much late)."""
         snapshot = self.snapshot
-        return events_after(snapshot.events, snapshot.t_ns, after)
+        return events_after(snapshot.events, snapshot.t_ns if now_ns is None else now_ns, after)
 
     def sequence_records(self) -> SequenceReport | None:
         """The playing or last played sequence's dwell records."""

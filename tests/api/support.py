@@ -230,8 +230,8 @@ class FakeController:
     def sequence_records(self) -> SequenceReport | None:
         return SequenceReport(self.sequence.name, "playing", RECORDS) if self.sequence else None
 
-    def events(self, after: int = 0) -> EventLog:
-        return events_after(self.kept_events, time.monotonic_ns(), after)
+    def events(self, after: int = 0, now_ns: int | None = None) -> EventLog:
+        return events_after(self.kept_events, time.monotonic_ns() if now_ns is None else now_ns, after)
 
     def telemetry(self) -> Telemetry:
         percentiles = Percentiles(10.0, 20.0, 30.0, 40.0)

@@ -118,12 +118,12 @@ def test_an_angle_window_open_on_one_side_ends_at_180_degrees_and_says_so():
     (past_180, below) = _on("yaw", 170, None).violations([[0] * 5 + [-175], [0] * 5 + [160]])
     assert (past_180[0].value, past_180[0].limit) == (185.0, 180.0)
     assert past_180[0].message == ("yaw 185.000 deg above 180 deg: yaw reads up to 180 deg, so its soft window from "
-                                   "170 deg ends there")
+                                   "170 deg ends there (by 5 deg)")
     assert below[0].message == "yaw 160.000 deg below the soft limit 170 deg (by 10 deg)"
     (past_minus_180, above) = _on("roll", None, -170).violations([[0] * 3 + [178, 0, 0], [0] * 3 + [-160, 0, 0]])
     assert (past_minus_180[0].value, past_minus_180[0].limit) == (-182.0, -180.0)
     assert past_minus_180[0].message == ("roll -182.000 deg below -180 deg: roll reads down to -180 deg, so its soft "
-                                         "window up to -170 deg ends there")
+                                         "window up to -170 deg ends there (by 2 deg)")
     assert above[0].message == "roll -160.000 deg above the soft limit -170 deg (by 10 deg)"
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import csv
 import io
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -191,8 +192,8 @@ class CommandHandler:
                 geometry, source = self._calibration(request)
                 return self._kept(_calibration_fields(controller.load_calibration(geometry, geometry_id(geometry),
                                                                                   source)))
-            case EventsRequest():
-                return jsonable(controller.events(request.after))
+            case EventsRequest():  # the loop's clock is this host's monotonic one
+                return jsonable(controller.events(request.after, time.monotonic_ns()))
             case GeometryRequest():
                 active = controller.active_geometry()
                 return {"calibration_id": active.calibration_id, "source": active.source,
