@@ -323,6 +323,8 @@ def test_cue_refused_prints_the_refusal_as_every_command_does(monkeypatch, capsy
         def call(self, cmd: str, **fields: object) -> dict:
             if cmd == "status":  # on the cue's start pose: nothing to move first
                 return {"ok": True, "status": {"pose_command": [0.0] * 6}}
+            if cmd == "events":  # the newest before the stream, to tell what happens to it
+                return {"ok": True, "events": [], "last": 0}
             assert cmd == "geometry"
             return {"ok": True, "geometry": geometry}
 

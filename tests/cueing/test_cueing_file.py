@@ -95,16 +95,19 @@ def test_a_spreadsheets_byte_order_mark_is_not_part_of_the_first_column(tmp_path
     assert len(load_vehicle_trajectory(path)) == 2
 
 
-def rows(*times: float) -> str:
-    return HEADER + "\n" + "".join(f"{t},0,0,9.81,0,0,0\n" for t in times)
+def rows(*times: float, decimals: int | None = None) -> str:
+    """A file at rest at ``times`` (s), written as Python writes them or to ``decimals``."""
+    written = [f"{t}" if decimals is None else f"{t:.{decimals}f}" for t in times]
+    return HEADER + "\n" + "".join(f"{t},0,0,9.81,0,0,0\n" for t in written)
 
 
 @pytest.mark.parametrize(("text", "expected"), [
     ("", "mine.csv: empty"),
     ("t_s,f_x,f_y,f_z,omega_x,omega_y\n0,0,0,9.81,0,0\n", "mine.csv: line 1: missing column omega_z"),
     ("t_s,f_x,f_y,f_z,omega_x,omega_y,omega_Z\n", "missing column omega_z (the header has omega_Z instead"),
-    (rows(0.0, 0.01, 0.02, 0.04, 0.05), "mine.csv: line 5, column t_s: 0.04 s is 0.02 s after the sample before it, "
-                                         "not the sample period 0.01 s"),
+    (rows(0.0, 0.01, 0.02, 0.04, 0.05, decimals=3),
+     "mine.csv: line 5, column t_s: 0.04 s is 0.02 s after the sample before it, where the file's samples are 0.01 s "
+     "apart (its median step; times written to 0.001 s): samples must be evenly spaced (resample the trajectory"),
     (rows(0.0, 0.01, 0.01), "mine.csv: line 4, column t_s: 0.01 s is not after the sample before it (0.01 s): "
                             "times must increase"),
     (rows(0.0, 0.01, 0.005), "mine.csv: line 4, column t_s: 0.005 s is not after the sample before it"),
@@ -150,7 +153,38 @@ def test_times_rounded_in_the_text_are_uniform_and_blank_lines_are_skipped_keepi
     vehicle = parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03) + "\n" + "0.04,0,0,9.81,0,0,0\n", "mine.csv")
     assert len(vehicle) == 5 and vehicle.period_s == pytest.approx(0.01)
     with pytest.raises(CueingFileError, match="line 7, column t_s"):
-        parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03) + "\n" + "0.05,0,0,9.81,0,0,0\n", "mine.csv")
+        parse_vehicle_trajectory(rows(0.0, 0.01, 0.02, 0.03, decimals=3) + "\n" + "0.050,0,0,9.81,0,0,0\n",
+                                 "mine.csv")
+
+
+@pytest.mark.parametrize(("rate_hz", "decimals"), [(60, 4), (60, 3), (120, 4), (100, 2), (30, 2)])
+def test_evenly_spaced_times_rounded_to_their_decimals_are_taken_at_the_files_rate(rate_hz: int, decimals: int) -> None:
+    """Found from outside: 60 Hz written to 4 decimals (0.0167, 0.0333, …) was refused as
+    not evenly spaced, its steps 0.0167 and 0.0166 further apart than 0.1 % of the first."""
+    count = 6 * rate_hz + 1
+    vehicle = parse_vehicle_trajectory(rows(*(n / rate_hz for n in range(count)), decimals=decimals), "mine.csv")
+    assert len(vehicle) == count
+    assert vehicle.period_s == pytest.approx(1 / rate_hz, abs=10.0**-decimals / (count - 1))  # first to last
+
+
+def evenly(start_s: float, period_s: float, count: int) -> list[float]:
+    return [start_s + n * period_s for n in range(count)]
+
+
+@pytest.mark.parametrize(("times", "expected"), [
+    (evenly(0.0, 1 / 60, 180) + evenly(181 / 60, 1 / 60, 180),  # one sample missing at 3 s
+     "mine.csv: line 182, column t_s: 3.0167 s is 0.0334 s after the sample before it, where the file's samples are "
+     "0.0167 s apart (its median step; times written to 0.0001 s)"),
+    (evenly(0.0, 1 / 60, 181) + evenly(3.02, 1 / 50, 150),  # 60 Hz, then 50 Hz
+     "mine.csv: line 183, column t_s: 3.02 s is 0.02 s after the sample before it, where the file's samples are 0.0167 s"),
+    (evenly(0.0, 0.01, 500) + evenly(5.0, 1 / 101, 505),  # 100 Hz, then 101 Hz: each step as even as the rounding
+     "s off the file's even spacing (0.0099503 s, from its first sample to its last; times written to 0.0001 s): the "
+     "rate changes along the file: samples must be evenly spaced (resample the trajectory at one rate)"),
+])
+def test_a_gap_or_a_change_of_rate_is_refused_whatever_the_rounding(times: list[float], expected: str) -> None:
+    with pytest.raises(CueingFileError) as refused:
+        parse_vehicle_trajectory(rows(*times, decimals=4), "mine.csv")
+    assert expected in str(refused.value)
 
 
 def test_a_shipped_trajectory_is_found_by_its_name_and_a_missing_file_names_them(tmp_path, monkeypatch) -> None:

@@ -10,10 +10,11 @@ A vehicle trajectory is CSV with a header naming the columns (any order; others 
     0.00,0.000000,0.000000,9.810000,0.000000,0.000000,0.000000
     0.01,...
 
-``t_s`` in s, increasing by one sample period (uniform, to 0.1 % of it) from line to
-line; ``f_*`` the specific force (m/s², body axes x forward, y left, z up: (0, 0, 9.81)
-at rest) and ``omega_*`` the angular rate (rad/s). Every error names the file, the line
-and the column, and what to do.
+``t_s`` in s, evenly spaced: the period is taken from the first time to the last, and
+each time may be off that even spacing by as much as the text's rounding of it (its
+decimals); ``f_*`` the specific force (m/s², body axes x forward, y left, z up: (0, 0,
+9.81) at rest) and ``omega_*`` the angular rate (rad/s). Every error names the file, the
+line and the column, and what to do.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import csv
 import io
 import os
 import tomllib
+from decimal import Decimal
 from math import isfinite
 from pathlib import Path
 
@@ -37,8 +39,9 @@ from hexactl.kinematics.validation_messages import validation_location
 VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
 
 PERIOD_TOLERANCE = 1e-3
-"""How far, as a fraction of the sample period, a time step may differ from the first:
-the text's rounding (times written to 0.01 s), not a change of rate."""
+"""How far, as a fraction of the sample period, a time may be off the file's even spacing
+beyond the text's rounding of it (:func:`_resolution`): the floats' own rounding of large
+times (1e9 s to 1e-7 s), not a change of rate."""
 
 F_Z_RANGE_G = (0.5, 1.5)
 """Where the median of ``f_z`` lies, in g: a car or an aircraft spends most of its time
@@ -114,7 +117,7 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
         raise CueingFileError(f"{source}: line 1: missing column {', '.join(missing)}{hint}; the header must name "
                               f"{','.join(VEHICLE_COLUMNS)}")
     where = [names.index(column) for column in VEHICLE_COLUMNS]
-    values, lines = [], []
+    values, lines, written_times = [], [], []
     for line, row in enumerate(rows, start=2):
         if any(cell.strip() for cell in row):
             if len(row) != len(names):  # a value too many or too few shifts the others to another column
@@ -122,12 +125,13 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
             values.append([_plausible(_number(row, index, column, line, source), column, line, source)
                            for index, column in zip(where, VEHICLE_COLUMNS)])
             lines.append(line)
+            written_times.append(row[where[0]].strip())
     if len(values) < 2:
         raise CueingFileError(f"{source}: {len(values)} samples: a vehicle trajectory needs at least two lines of values")
     table = np.array(values)
     _check_gravity(table[:, 3], source)
-    return VehicleTrajectory(period_s=_uniform_period(table[:, 0], lines, source),
-                             specific_force=table[:, 1:4], angular_rate=table[:, 4:7])
+    period_s = _uniform_period(table[:, 0], _resolution(written_times), lines, source)
+    return VehicleTrajectory(period_s=period_s, specific_force=table[:, 1:4], angular_rate=table[:, 4:7])
 
 
 def load_vehicle_trajectory(path: str | os.PathLike[str]) -> VehicleTrajectory:
@@ -185,18 +189,52 @@ def _check_gravity(f_z: np.ndarray, source: str) -> None:
             "z down, aerospace axes: negate f_y, f_z, omega_y and omega_z)")
 
 
-def _uniform_period(times: np.ndarray, lines: list[int], source: str) -> float:
-    """The sample period, if every time step is the first one (to :data:`PERIOD_TOLERANCE`);
-    ``lines``: each time's line in the file."""
+def _resolution(written: list[str]) -> float:
+    """How finely the times ``written`` (the t_s cells' text, finite numbers) are written,
+    s: the place of the last decimal of the one with the most (``0.0167``: 1e-4), so
+    every time is rounded (or cut) by less than it. Write every time with as many
+    decimals: one written with fewer (``%g``'s ``10.0167`` beside ``0.0166667``) is
+    rounded more than this says, and may be taken for unevenness."""
+    return float(10.0 ** min(int(Decimal(cell).as_tuple().exponent) for cell in written))
+
+
+def _uniform_period(times: np.ndarray, resolution_s: float, lines: list[int], source: str) -> float:
+    """The sample period (s), from the first time to the last, if the ``times`` (s, each
+    rounded to ``resolution_s`` in the text; ``lines``: each one's line in the file)
+    increase evenly spaced: :class:`CueingFileError` naming the first line where they do not.
+
+    Evenly spaced times rounded (or cut) to ``resolution_s`` differ from step to step by at
+    most one ``resolution_s``, and lie within one of the even spacing from the first to
+    the last: a gap or a change of rate breaks the first, a change of rate whose steps each
+    look even breaks the second. Both allow :data:`PERIOD_TOLERANCE` more. A gap no longer
+    than ``resolution_s`` cannot be told from the rounding."""
+    _check_increasing(times, lines, source)
     steps = np.diff(times)
-    period = float(steps[0])
-    for step, time, before, line in zip(steps.tolist(), times[1:].tolist(), times.tolist(), lines[1:]):
-        if not step > 0:
+    period = float(times[-1] - times[0]) / len(steps)
+    typical = float(np.median(steps))  # the usual step: a gap is one of few, and cannot move it far
+    tolerance = resolution_s + PERIOD_TOLERANCE * period
+    resample = "samples must be evenly spaced (resample the trajectory at one rate)"
+    for step, time, line in zip(steps.tolist(), times[1:].tolist(), lines[1:]):
+        if abs(step - typical) > tolerance:
+            raise CueingFileError(
+                f"{source}: line {line}, column t_s: {time:g} s is {step:g} s after the sample before it, where the "
+                f"file's samples are {typical:g} s apart (its median step; times written to {resolution_s:g} s): "
+                f"{resample}")
+    offsets = times - (times[0] + period * np.arange(len(times)))
+    worst = int(np.argmax(np.abs(offsets)))
+    if abs(offsets[worst]) > tolerance:
+        raise CueingFileError(
+            f"{source}: line {lines[worst]}, column t_s: {times[worst]:g} s is {offsets[worst]:+g} s off the file's "
+            f"even spacing ({period:g} s, from its first sample to its last; times written to {resolution_s:g} s): "
+            f"the rate changes along the file: {resample}")
+    return period
+
+
+def _check_increasing(times: np.ndarray, lines: list[int], source: str) -> None:
+    """:class:`CueingFileError` naming the first of the ``times`` (s; ``lines``: each one's
+    line) not after the one before it: a repeated or reversed time, before any unevenness,
+    which it would otherwise be reported as."""
+    for time, before, line in zip(times[1:].tolist(), times.tolist(), lines[1:]):
+        if not time > before:
             raise CueingFileError(f"{source}: line {line}, column t_s: {time:g} s is not after the sample before it "
                                   f"({before:g} s): times must increase")
-        if abs(step - period) > PERIOD_TOLERANCE * period:
-            raise CueingFileError(
-                f"{source}: line {line}, column t_s: {time:g} s is {step:g} s after the sample before it, not the "
-                f"sample period {period:g} s of the first two: samples must be evenly spaced (resample the "
-                "trajectory at one rate)")
-    return period
