@@ -86,7 +86,7 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
     consistent = full.ok and full.chi2_per_dof <= options.consistency_limit
     if consistent:
         return replace(full, reason=f"auto chose full: every posture's pose and all six readings are used at once "
-                       f"(maximum likelihood, {len(data)} postures{excluded}); the residuals agree with the noise model "
+                       f"(maximum likelihood, {_postures(full, data)}{excluded}); the residuals agree with the noise model "
                        f"(χ²/dof {full.chi2_per_dof:.3g} ≤ {options.consistency_limit:g}){extras_note}")
     if too_few_locked(data) is None:
         leglock = identify_leglock(data, nominal, options)
@@ -187,6 +187,13 @@ def _no_worse(candidate: IdentificationResult, reference: IdentificationResult) 
     position and in orientation."""
     return (candidate.predicted.rms_position_mm <= reference.predicted.rms_position_mm
             and candidate.predicted.rms_orientation_deg <= reference.predicted.rms_orientation_deg)
+
+
+def _postures(result: IdentificationResult, data: MeasurementData) -> str:
+    """How many postures ``result`` used, of how many given when it left some out (all of
+    a posture's observations excluded): the count the output's "postures used" gives."""
+    given = f" of {len(data)}" if result.postures_used != len(data) else ""
+    return f"{result.postures_used}{given} postures"
 
 
 def _accuracy(result: IdentificationResult) -> str:

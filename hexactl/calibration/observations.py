@@ -26,6 +26,9 @@ from numpy.typing import NDArray
 from hexactl.kinematics.rotation import rotation_matrix
 
 _REFINEMENTS = 2
+MIN_BASELINE_MM = 1.0
+"""Two theodolites closer than this stand at one place: from there each point's rays meet
+at the station itself, so nothing can be triangulated."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -97,7 +100,7 @@ class Theodolites:
         """The points (..., 3) the angles imply by least squares (the four angles equally
         weighted): from the middle of the shortest segment between the two stations' rays,
         refined by Gauss–Newton (two steps reach rounding at these precisions). Raises
-        ``ValueError`` for parallel rays."""
+        ``ValueError`` for parallel rays or stations less than :data:`MIN_BASELINE_MM` apart."""
         observations = np.asarray(observations, dtype=float)
         points = self._ray_midpoints(observations)
         for _ in range(_REFINEMENTS):
@@ -109,6 +112,9 @@ class Theodolites:
 
     def _ray_midpoints(self, observations: NDArray) -> NDArray[np.float64]:
         a, b = self.stations
+        if (baseline := float(np.linalg.norm(a.origin - b.origin))) < MIN_BASELINE_MM:
+            raise ValueError(f"the two theodolites' stations coincide ({baseline:.3g} mm apart): from one place the "
+                             "rays of a point meet only at the station, so it cannot be triangulated")
         u = a.direction(observations[..., 0], observations[..., 1])
         v = b.direction(observations[..., 2], observations[..., 3])
         w = a.origin - b.origin

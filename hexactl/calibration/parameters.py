@@ -21,6 +21,11 @@ PARAMETERS_PER_LEG = 7
 GEOMETRIC_PARAMETERS = PARAMETERS_PER_LEG * LEG_COUNT
 SCALE_UNIT = 1000.0
 """Scale errors are carried as mm per this many mm of reading (per metre)."""
+STD_AGREEMENT = 0.02
+"""A calibration file's standard deviations and the square roots of its covariance's
+diagonal agree within this share of the standard deviation (plus :data:`STD_ROUNDING`)."""
+STD_ROUNDING = 5e-4
+"""mm (mm per metre for a gain): what rounding a standard deviation to three decimals leaves."""
 
 
 def _readonly(values: object, shape: tuple[int, ...]) -> NDArray[np.float64]:
@@ -97,6 +102,67 @@ def parameter_names(with_scales: bool) -> tuple[str, ...]:
     if with_scales:
         names += [f"scale{leg}" for leg in range(1, LEG_COUNT + 1)]
     return tuple(names)
+
+
+def covariance_problem(info: CalibrationInfo) -> str | None:
+    """Why ``info``'s ``parameter_covariance`` contradicts the standard deviations beside it,
+    one sentence naming the key and the first parameter that disagrees; None when it agrees.
+
+    hexactl writes each ``*_std_mm`` (and ``sensor_scale_errors_std``) as the square root
+    of the covariance's diagonal entry in the parameter vector's order (per leg B x y z,
+    P x y z, zero; then the six gains in mm per metre). The controller predicts a move's
+    error from the covariance alone, so one that says less than its own standard
+    deviations (zeroed, scaled down: an edit or damage) would let any tolerance pass. They
+    agree within :data:`STD_AGREEMENT` of the standard deviation plus :data:`STD_ROUNDING`
+    (a file rounded by hand); a zero variance never agrees: no measurement knows a
+    parameter exactly.
+    """
+    if info.parameter_covariance is None:
+        return None
+    variances = np.diag(np.array(info.parameter_covariance, dtype=float))
+    with_scales = variances.size > GEOMETRIC_PARAMETERS
+    stated = _stated_deviations(info, with_scales)
+    if stated is None:
+        gains = " and sensor_scale_errors_std" if with_scales else ""
+        return ("parameter_covariance: given without base_joints_std_mm, platform_joints_std_mm, zero_lengths_std_mm"
+                f"{gains}, which hexactl writes beside it and checks it against: the file was edited or damaged; "
+                "calibrate again, or restore the file as hexactl calibrate wrote it")
+    implied = np.sqrt(np.clip(variances, 0.0, None))
+    bad = np.flatnonzero((variances <= 0.0) | (np.abs(implied - stated) > STD_AGREEMENT * stated + STD_ROUNDING))
+    if bad.size == 0:
+        return None
+    first = int(bad[0])
+    key, unit, factor = _deviation_key(first)
+    more = f" (and {bad.size - 1} more parameter(s))" if bad.size > 1 else ""
+    return (f"parameter_covariance: its diagonal entry {first} (0-based; per leg B x y z, P x y z, zero, then the six "
+            f"gains) gives {parameter_names(with_scales)[first]} a standard deviation of "
+            f"{implied[first] / factor:.4g}{unit}, but calibration.{key} says {stated[first] / factor:.4g}{unit}{more}: "
+            "both come from one identification, so the file was edited or damaged, and its covariance would predict "
+            "a wrong error for every move; calibrate again, or restore the file as hexactl calibrate wrote it")
+
+
+def _stated_deviations(info: CalibrationInfo, with_scales: bool) -> NDArray[np.float64] | None:
+    """The file's standard deviations in the covariance's order and units; None if any is missing."""
+    parts = (info.base_joints_std_mm, info.platform_joints_std_mm, info.zero_lengths_std_mm)
+    if any(part is None for part in parts) or (with_scales and info.sensor_scale_errors_std is None):
+        return None
+    base, platform, zero = (np.array(part, dtype=float) for part in parts)
+    vector = np.hstack((base, platform, zero[:, None])).ravel()
+    if with_scales:
+        vector = np.concatenate((vector, np.array(info.sensor_scale_errors_std, dtype=float) * SCALE_UNIT))
+    return vector
+
+
+def _deviation_key(index: int) -> tuple[str, str, float]:
+    """(the ``[calibration]`` key holding parameter ``index``'s standard deviation, its unit
+    as shown, the factor from the covariance's unit to the key's)."""
+    if index >= GEOMETRIC_PARAMETERS:
+        return f"sensor_scale_errors_std[{index - GEOMETRIC_PARAMETERS}]", "", SCALE_UNIT
+    leg, column = divmod(index, PARAMETERS_PER_LEG)
+    if column == PARAMETERS_PER_LEG - 1:
+        return f"zero_lengths_std_mm[{leg}]", " mm", 1.0
+    key = "base_joints_std_mm" if column < 3 else "platform_joints_std_mm"
+    return f"{key}[{leg}][{column % 3}]", " mm", 1.0
 
 
 def leg_columns(leg_index: int) -> slice:

@@ -94,3 +94,14 @@ def test_a_result_beyond_the_plausibility_bounds_is_implausible_whatever_the_met
     result = identify(leglock_campaign.data, strict)
     assert result.status is IdentificationStatus.IMPLAUSIBLE and not result.ok
     assert identify(leglock_campaign.data, nominal).ok
+
+
+def test_the_reason_counts_the_postures_full_used_as_the_output_does(nominal, leglock_campaign):
+    """Found in review: a row whose three points were all excluded left "120 postures" in
+    the method line and "postures used: 119" below it."""
+    data = leglock_campaign.data
+    points = np.array(data.points_mm)
+    points[7, :, 2] += 300.0  # the row's whole target set 300 mm off: its three points are excluded
+    result = identify(MeasurementData(data.locked_leg, data.readings_mm, data.lines, points_mm=points), nominal)
+    assert result.ok and result.postures_used == len(data) - 1
+    assert f"(maximum likelihood, {len(data) - 1} of {len(data)} postures; 3 mis-sighted" in result.reason

@@ -209,3 +209,24 @@ def test_a_file_with_no_usable_row_says_so_without_a_traceback(tmp_path, leglock
     out = capsys.readouterr().out
     assert "needs at least 8 postures, the data have 0" in out and "no calibration written" in out
     assert not output.exists()
+
+
+@pytest.mark.parametrize("method", ["auto", "leglock"])
+def test_an_absurd_coordinate_is_refused_by_line_and_column_without_a_traceback(tmp_path, leglock_campaign, capsys,
+                                                                                method):
+    """Found in review: p1_y written 1e300, finite, crashed `calibrate` in the fit (scipy:
+    "Residuals are not finite in the initial point")."""
+    lines = format_measurements(leglock_campaign.data).splitlines()
+    fields = lines[20].split(",")
+    fields[8] = "1e300"  # p1_y of file line 21
+    lines[20] = ",".join(fields)
+    path = tmp_path / "huge.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    calibrate = ["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml"),
+                 "--method", method]
+    assert main(calibrate) == 2
+    assert (f"{path}: line 21: p1_y 1e300 is beyond ±1,000,000 mm, far beyond any platform or instrument: a typing "
+            "or unit error; correct the value") in capsys.readouterr().err
+    assert main([*calibrate, "--skip-bad-rows"]) == 0
+    captured = capsys.readouterr()
+    assert "line 21: p1_y 1e300" in captured.err and "excluded 1 row(s)" in captured.out

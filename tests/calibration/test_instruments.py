@@ -3,6 +3,8 @@ the points they imply, and calibrations from them with their native noise."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -48,6 +50,17 @@ def test_parallel_rays_cannot_be_triangulated():
     station = Station((0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="parallel"):
         Theodolites((station, Station((0.0, 0.0, 100.0, 0.0, 0.0, 0.0))), ARCSEC).points(np.zeros(4))
+
+
+def test_coincident_stations_are_named_not_triangulated_into_nan():
+    """Found in review: both stations at one place gave numpy warnings and points "nan
+    from their centre"; each point's rays meet only at the station."""
+    station = Station((4000.0, 3000.0, 1500.0, 0.0, 0.0, -140.0))
+    observations = THEODOLITES.predict(np.array([[0.0, 0.0, 2000.0]]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"the two theodolites' stations coincide \(0 mm apart\)"):
+            Theodolites((station, station), ARCSEC).points(observations)
 
 
 def _observed_campaign(nominal, true, instrument, seed, mis_sighted=None):
@@ -150,6 +163,12 @@ def test_observation_files_name_what_is_missing_or_wrong(tmp_path, capsys):
     broken.write_text(TRACKER_FILE.replace("range_sigma_mm = 0.015\n", ""))
     assert main([*calibrate, "--instrument", str(broken)]) == 2
     assert "range_sigma_mm: a tracker needs it" in capsys.readouterr().err
+    same_place = tmp_path / "same.toml"
+    same_place.write_text(THEODOLITE_FILE.replace("[4000, -3000, 1500, 0, 0, 140]", "[4000, 3000, 1500, 0, 0, -140]"))
+    assert main([*calibrate, "--instrument", str(same_place)]) == 2
+    assert (f"{same_place}: stations: the two theodolites stand at the same place (0 mm apart): from one place a "
+            "point's two rays meet only at the station and nothing can be triangulated; give each station's own "
+            "position") in capsys.readouterr().err
     assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "x.csv"), "--pose-form",
                  "--instrument", str(tracker)]) == 2
     assert "exclude each other" in capsys.readouterr().err

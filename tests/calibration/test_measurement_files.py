@@ -187,3 +187,52 @@ def test_any_data_round_trips_through_the_file_format(legs, scale, points):
         assert np.allclose(parsed.data.points_mm, data.points_mm, atol=1e-6)
     else:
         assert np.allclose(parsed.data.poses, data.poses, atol=1e-9)
+
+
+def _with_field(text: str, line: int, column: str, value: str) -> str:
+    """``text`` with file line ``line``'s field of ``column`` replaced by ``value``."""
+    lines = text.splitlines()
+    header = next(entry for entry in lines if entry.startswith("leg,")).split(",")
+    fields = lines[line - 1].split(",")
+    fields[header.index(column)] = value
+    lines[line - 1] = ",".join(fields)
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize(("column", "value"), [("p1_y", "1_000"), ("leg", "１"), ("l2", "３５９.９"), ("p3_z", "٣"),
+                                               ("p2_x", "0x10")])
+def test_numbers_only_python_reads_are_refused_by_line_and_column(leglock_campaign, column, value):
+    """Found in review: ``1_000`` and fullwidth digits passed through Python's float() and
+    int(); no CSV writer produces them, so they are typing errors (plain ASCII only), in a
+    measurement file and in a campaign's instrument file alike."""
+    text = _with_field(_points_text(leglock_campaign), 5, column, value)  # rows on lines 3-8
+    expected = [(5, f"{column} {value!r} is not a number (write digits 0-9 with an optional sign, '.' and exponent, "
+                    "e.g. -12.5 or 1.2e3)")]
+    parsed = parse_measurements(text, "typo.csv", 3)
+    assert [(problem.line, problem.message) for problem in parsed.problems] == expected and 5 not in parsed.data.lines
+    if column.startswith("p"):
+        rows = parse_point_rows(text, "tracker.csv", 3)
+        assert [(problem.line, problem.message) for problem in rows.problems] == expected
+
+
+@pytest.mark.parametrize("value", ["+1.5", "-.5", "2.", "1E3", "-1.25e-2", " 7 "])
+def test_plain_decimal_numbers_are_read(value):
+    assert parse_point_rows(f"p1_x,p1_y,p1_z,p2_x,p2_y,p2_z,p3_x,p3_y,p3_z\n{value},0,0,1,0,0,0,1,0\n", "ok.csv",
+                            3).points_mm[0, 0, 0] == float(value)
+
+
+POSE_ROW = "leg,l1,l2,l3,l4,l5,l6,x,y,z,roll,pitch,yaw\n# one posture\n1,360,360,360,360,360,360,0,0,2000,0,0,0\n"
+
+
+@pytest.mark.parametrize(("column", "value", "unit", "text"), [
+    ("p1_y", "1e300", " mm", None), ("l4", "-2e6", " mm", None), ("p3_z", "1e999", " mm", None),
+    ("roll", "5e6", "°", POSE_ROW), ("z", "1.5e6", " mm", POSE_ROW)])
+def test_absurd_values_are_refused_by_line_and_column_as_a_typing_or_unit_error(leglock_campaign, column, value, unit,
+                                                                                text):
+    """Found in review: a finite 1e300 passed and crashed the fit (its square overflows)."""
+    line = 3 if text else 6
+    text = _with_field(text or _points_text(leglock_campaign), line, column, value)
+    parsed = parse_measurements(text, "huge.csv", 3)
+    assert [(problem.line, problem.message) for problem in parsed.problems] == [
+        (line, f"{column} {value} is beyond ±1,000,000{unit}, far beyond any platform or instrument: a typing or unit "
+            "error; correct the value")]

@@ -17,19 +17,28 @@ import tomli_w
 from firmware_proto.codec import STROKE_MAX_UM, STROKE_MIN_UM, VELOCITY_MAX_UM_S
 from hexactl.adapters.files.atomic import write_atomic
 from hexactl.adapters.files.text import read_text
+from hexactl.calibration.parameters import covariance_problem
 from hexactl.kinematics.geometry import Geometry, GeometryError, Limits, geometry_from_mapping
 
 _UM_PER_MM = 1000.0
 
 
 def parse_geometry(text: str, source: str) -> Geometry:
-    """Validate TOML text into a :class:`Geometry`; :class:`GeometryError` names every problem."""
+    """Validate TOML text into a :class:`Geometry`; :class:`GeometryError` names every problem.
+
+    Besides the geometry's own rules, checked here where every geometry and calibration
+    file is read (a load, a rollback, the service's start): the actuators' limits and a
+    calibration's covariance against its own standard deviations
+    (:func:`~hexactl.calibration.parameters.covariance_problem`)."""
     try:
         data = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise GeometryError(f"{source}: not valid TOML: {error}") from None
     geometry = geometry_from_mapping(data, source)
-    if problems := _actuator_problems(geometry.limits):
+    problems = _actuator_problems(geometry.limits)
+    if geometry.calibration is not None and (problem := covariance_problem(geometry.calibration)):
+        problems.append(f"calibration.{problem}")
+    if problems:
         raise GeometryError("\n".join(f"{source}: {problem}" for problem in problems))
     return geometry
 

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import os
 import tomllib
-from math import radians
+from math import dist, radians
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hexactl.adapters.files.text import read_text
-from hexactl.calibration.observations import Instrument, LaserTracker, Station, Theodolites
+from hexactl.calibration.observations import MIN_BASELINE_MM, Instrument, LaserTracker, Station, Theodolites
 from hexactl.kinematics.validation_messages import describe_validation_error
 from hexactl.kinematics.numbers import Number, SixNumbers
 
@@ -48,6 +48,10 @@ class _InstrumentDescription(BaseModel):
             raise ValueError(f"stations: {self.kind} need {stations} station pose(s), got {len(self.stations)}")
         if (self.kind == "tracker") != (self.range_sigma_mm is not None):
             raise ValueError("range_sigma_mm: a tracker needs it, theodolites have none")
+        if self.kind == "theodolites" and (baseline := dist(self.stations[0][:3], self.stations[1][:3])) < MIN_BASELINE_MM:
+            raise ValueError(f"stations: the two theodolites stand at the same place ({baseline:.3g} mm apart): from "
+                             "one place a point's two rays meet only at the station and nothing can be triangulated; "
+                             "give each station's own position (x, y, z mm)")
         return self
 
     def instrument(self) -> Instrument:

@@ -16,8 +16,12 @@ blank lines allowed anywhere. Columns, in any order:
   observations imply, with its own covariance (:mod:`hexactl.calibration.observations`).
 
 Other columns are ignored (and listed). A row with a missing, non-numeric or non-finite
-value or a bad leg number is reported by its line and left out of the data; the caller
-decides whether that refuses the file. Input files are only read.
+value, a value beyond :data:`MAX_MAGNITUDE` or a bad leg number is reported by its line and
+left out of the data; the caller decides whether that refuses the file. A number is plain
+ASCII: digits 0-9, an optional sign, decimal point and exponent (``-12.5``, ``1.2e3``);
+what else Python's ``float`` would take (``1_000``, fullwidth or other scripts' digits) is
+no number a CSV writer produces, so it is refused as a typing error. Input files are only
+read.
 
 Instrument file (read by ``hexactl campaign --instrument csv:FILE``): the feature-point
 columns alone, one row per measurement, in the order the campaign takes them.
@@ -34,6 +38,7 @@ import csv
 import hashlib
 import io
 import os
+import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from math import isfinite
@@ -49,6 +54,14 @@ from hexactl.calibration.planning import PosturePlan
 from hexactl.kinematics.inverse import LEG_COUNT
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
 from hexactl.kinematics.axes import POSE_AXES
+
+MAX_MAGNITUDE = 1e6
+"""The largest magnitude a value may have, mm for lengths and degrees for angles: 1 km is
+far beyond any platform or instrument, so a value beyond it is a typing or unit error (and
+its square, near 1e300, would overflow the fit)."""
+_DECIMAL = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
+_ANGLE_SUFFIXES = ("roll", "pitch", "yaw", "hz", "v", "hz_a", "v_a", "hz_b", "v_b")
 
 READING_COLUMNS = tuple(f"l{leg}" for leg in range(1, LEG_COUNT + 1))
 SETPOINT_COLUMNS = tuple(f"l{leg}_setpoint" for leg in range(1, LEG_COUNT + 1))
@@ -310,16 +323,29 @@ def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:
 
 
 def _number(text: str, name: str) -> tuple[float, str | None]:
+    """The value of column ``name``'s field ``text`` and why it cannot be used (None if it
+    can): missing, not a plain ASCII decimal number, not finite or beyond
+    :data:`MAX_MAGNITUDE`."""
     text = text.strip()
     if not text:
         return float("nan"), f"{name} is missing"
-    try:
-        value = float(text)
-    except ValueError:
-        return float("nan"), f"{name} {text!r} is not a number"
-    if not isfinite(value):
-        return value, f"{name} is {text} (not a finite number)"
+    if _NON_FINITE.fullmatch(text):
+        return float(text), f"{name} is {text} (not a finite number)"
+    if not _DECIMAL.fullmatch(text):
+        return float("nan"), (f"{name} {text!r} is not a number (write digits 0-9 with an optional sign, '.' and "
+                              "exponent, e.g. -12.5 or 1.2e3)")
+    value = float(text)
+    if not isfinite(value) or abs(value) > MAX_MAGNITUDE:
+        return value, (f"{name} {text} is beyond ±{MAX_MAGNITUDE:,.0f}{_unit(name)}, far beyond any platform or "
+                       "instrument: a typing or unit error; correct the value")
     return value, None
+
+
+def _unit(name: str) -> str:
+    """Column ``name``'s unit as shown after a number."""
+    if name == "leg":
+        return ""
+    return "°" if name in _ANGLE_SUFFIXES or name.partition("_")[2] in _ANGLE_SUFFIXES else " mm"
 
 
 def format_measurements(data: MeasurementData, comments: Sequence[str] = ()) -> str:
