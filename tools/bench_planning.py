@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from functools import partial
@@ -106,14 +105,10 @@ def measure(case: str) -> tuple[float, float, float | None]:
 
 def measure_tree(tree: Path, cases: list[str]) -> dict[str, tuple[float, float, float | None]]:
     """One run of each case in a child process importing ``tree``'s hexactl."""
-    env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
-    command = [sys.executable, __file__, "--child", "--case", *cases]
-    child = subprocess.run(command, env=env, cwd=tree, capture_output=True, text=True)
-    if child.returncode:
-        sys.exit(f"{tree}: {child.stderr}")
-    reply = json.loads(child.stdout.splitlines()[-1])
-    if not Path(reply["hexactl"]).is_relative_to(tree.resolve()):
-        sys.exit(f"{tree}: the child imported {reply['hexactl']}")
+    sys.path.insert(0, str(ROOT))  # the parent's only: a child must import its tree's hexactl
+    from tools.trees import child_reply
+
+    reply = child_reply(tree, __file__, ["--child", "--case", *cases])
     return {case: tuple(times) for case, times in reply["times"].items()}
 
 

@@ -23,8 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -105,16 +103,11 @@ def main() -> None:
         print(json.dumps({"hexactl": str(Path(hexactl.__file__).resolve().parent),
                           "figures": measure(arguments.noise)}))
         return
+    sys.path.insert(0, str(ROOT))  # the parent's only: a child must import its tree's hexactl
+    from tools.trees import child_reply
+
     for tree in arguments.tree or [ROOT]:
-        env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
-        command = [sys.executable, __file__, "--child", "--noise", *map(str, arguments.noise)]
-        child = subprocess.run(command, env=env, cwd=tree, capture_output=True, text=True)
-        if child.returncode:
-            sys.exit(f"{tree}: {child.stderr}")
-        reply = json.loads(child.stdout.splitlines()[-1])
-        if not Path(reply["hexactl"]).is_relative_to(tree.resolve()):
-            sys.exit(f"{tree}: the child imported {reply['hexactl']}")
-        figures = reply["figures"]
+        figures = child_reply(tree, __file__, ["--child", "--noise", *map(str, arguments.noise)])["figures"]
         p50, p99 = figures["target_us"]
         print(f"\n{tree}: sine x 10 mm at 1 Hz, largest tracking error {figures['sine']:.3f} mm; the facade's "
               f"stream_target per sample (wall clock, this machine as it is) p50 {p50:.0f} µs, p99 {p99:.0f} µs\n")

@@ -14,6 +14,8 @@ page's state and the service's, never by how long anything took.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
 
 import pytest
 from selenium.webdriver.common.action_chains import ActionChains
@@ -262,26 +264,35 @@ def test_go_is_disabled_while_the_page_has_no_live_data_with_its_socket_open(rig
     attempted(rig, scenario)
 
 
+@contextmanager
+def _held_x_jog(rig) -> Iterator[Any]:
+    """The +x jog button held down (5 mm/s), once the platform moves; released on the way out."""
+    ready_in_frames(rig)
+    rig.fill("#jog-speed", 5)
+    start_x = rig.status()["pose_command"][0]
+    button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
+    ActionChains(rig.driver).click_and_hold(button).perform()
+    try:
+        wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+        yield button
+    finally:
+        ActionChains(rig.driver).release(button).perform()
+
+
 def test_a_held_jog_stops_being_renewed_when_only_the_pages_telemetry_is_stale(rig) -> None:
     def scenario() -> None:
-        ready_in_frames(rig)
-        rig.fill("#jog-speed", 5)
-        start_x = rig.status()["pose_command"][0]
-        button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
-        ActionChains(rig.driver).click_and_hold(button).perform()
         try:
-            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
-            tap(rig, drop=True)
-            wait_for(lambda: rig.element("#jog-status").text.startswith("jog released: no live data"),
-                     "the page saying why the jog stopped", seen=lambda: rig.element("#jog-status").text)
-            assert "held" not in button.get_attribute("class").split()
-            renewals = sent(rig, "jog")
-            record = wait_for(lambda: (r := rig.status())["motion"] == "holding" and r["last_jog"] and r,
-                              "the service's deadman braking the jog", seen=rig.status)
-            assert record["last_jog"]["reason"].startswith("the deadman lapsed"), record["last_jog"]
-            assert sent(rig, "jog") == renewals  # none since: the button is still held
+            with _held_x_jog(rig) as button:
+                tap(rig, drop=True)
+                wait_for(lambda: rig.element("#jog-status").text.startswith("jog released: no live data"),
+                         "the page saying why the jog stopped", seen=lambda: rig.element("#jog-status").text)
+                assert "held" not in button.get_attribute("class").split()
+                renewals = sent(rig, "jog")
+                record = wait_for(lambda: (r := rig.status())["motion"] == "holding" and r["last_jog"] and r,
+                                  "the service's deadman braking the jog", seen=rig.status)
+                assert record["last_jog"]["reason"].startswith("the deadman lapsed"), record["last_jog"]
+                assert sent(rig, "jog") == renewals  # none since: the button is still held
         finally:
-            ActionChains(rig.driver).release(button).perform()
             tap(rig)
 
     attempted(rig, scenario)
@@ -322,13 +333,7 @@ def test_another_clients_stop_ends_a_held_jog_for_good(rig) -> None:
     while the button is still held."""
 
     def scenario() -> None:
-        ready_in_frames(rig)
-        rig.fill("#jog-speed", 5)
-        start_x = rig.status()["pose_command"][0]
-        button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
-        ActionChains(rig.driver).click_and_hold(button).perform()
-        try:
-            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+        with _held_x_jog(rig) as button:
             rig.client.call("stop")
             wait_for(lambda: "has ended (stopped)" in rig.element("#jog-status").text,
                      "the page saying the jog was stopped", seen=lambda: rig.element("#jog-status").text)
@@ -340,8 +345,6 @@ def test_another_clients_stop_ends_a_held_jog_for_good(rig) -> None:
             rig.client.call("status")  # a round trip: any renewal the page still sent has reached the service
             assert rig.status()["jog"] is None and rig.status()["motion"] == "holding"
             assert sent(rig, "jog") == renewals  # none since: the button is still held
-        finally:
-            ActionChains(rig.driver).release(button).perform()
 
     attempted(rig, scenario)
 
