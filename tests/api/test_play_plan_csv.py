@@ -86,7 +86,8 @@ def test_a_leg_lock_plan_keeps_the_lock_of_its_leg_and_no_other(nominal, plan_te
     (lambda lines: [line for line in lines if line.startswith(("#", "leg"))], r"leg3\.csv: a header but no postures"),
     # Found from outside: a pose beyond any platform's reach (a value in µm) was an internal_error.
     (lambda lines: [*lines[:-1], ",".join([*lines[-1].split(",")[:3], "1e7", *lines[-1].split(",")[4:]])],
-     r"leg3\.csv: line {last}: pose: pose z 1e\+07 is beyond any platform's reach .*check the units"),
+     r"leg3\.csv: line {last}: z 1e7 is beyond ±1,000,000 mm, far beyond any platform or instrument: a typing or "
+     r"unit error"),
 ])
 def test_a_broken_plan_is_refused_naming_the_file_and_line(service, plan_text, edit, expected) -> None:
     lines = plan_text.splitlines()

@@ -149,7 +149,7 @@ def test_hexactl_cue_streams_a_vehicle_file_into_the_service(served, client, tmp
     def scenario() -> None:
         assert main(["cue", str(short), "--api", served.api, "--timeout", str(WAIT_S)]) == 0
         out = capsys.readouterr().out
-        assert "200 poses at 100 Hz" in out and "streamed 200 poses (0 dropped here)" in out, out
+        assert "200 poses at 100 Hz" in out and "streamed 200 of 200 poses (0 dropped here)" in out, out
         wait_for(lambda: status(client)["stream"] is None, "the stream's end")
         counted = wait_for(lambda: (c := status(client)["stream_input"])["received"] >= 200 and c, "every pose read")
         # Every pose reached the service, and the loop followed the stream. How many it took
