@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from math import isfinite
 
 from hexactl.kinematics.axes import POSE_MAGNITUDE_LIMIT
+from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL
 
 MAGIC = b"HXS1"
 BINARY = struct.Struct("<4sId6d")
@@ -44,7 +45,6 @@ MAX_SENT_S = 1e12
 """The largest sender's time, s (31 700 years): any clock a sender keeps, and far from where
 a time in nanoseconds would overflow."""
 _SEPARATORS = re.compile(r"[\s,;]+")
-_DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
 
 class MalformedSample(ValueError):
@@ -85,7 +85,7 @@ def decode(message: bytes) -> Sample:
         fields = [field for field in _SEPARATORS.split(message.decode("ascii").strip()) if field]
     except UnicodeDecodeError:
         fields = []
-    if not fields or not all(_DECIMAL.fullmatch(field) for field in fields):
+    if not fields or not all(PLAIN_DECIMAL.fullmatch(field) for field in fields):
         raise MalformedSample("neither a binary sample (magic b'HXS1') nor a text line of decimal numbers")
     values = [float(field) for field in fields]
     if len(values) == 6:

@@ -16,11 +16,10 @@ blank lines allowed anywhere. Columns, in any order:
   observations imply, with its own covariance (:mod:`hexactl.calibration.observations`).
 
 Other columns are ignored (and listed). A row with a missing, non-numeric or non-finite
-value, a value beyond :data:`MAX_MAGNITUDE` or a bad leg number is reported by its line and
+value, a value beyond :data:`POSE_MAGNITUDE_LIMIT` or a bad leg number is reported by its line and
 left out of the data; the caller decides whether that refuses the file. A number is plain
-ASCII: digits 0-9, an optional sign, decimal point and exponent (``-12.5``, ``1.2e3``);
-what else Python's ``float`` would take (``1_000``, fullwidth or other scripts' digits) is
-no number a CSV writer produces, so it is refused as a typing error. Input files are only
+ASCII (:mod:`hexactl.kinematics.plain_numbers`): ``1_000`` or fullwidth digits are refused
+as a typing error. Input files are only
 read.
 
 Instrument file (read by ``hexactl campaign --instrument csv:FILE``): the feature-point
@@ -52,14 +51,10 @@ from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.observations import Instrument, Theodolites, point_covariance
 from hexactl.calibration.planning import PosturePlan
 from hexactl.kinematics.inverse import LEG_COUNT
+from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
-from hexactl.kinematics.axes import POSE_AXES
+from hexactl.kinematics.axes import POSE_AXES, POSE_MAGNITUDE_LIMIT
 
-MAX_MAGNITUDE = 1e6
-"""The largest magnitude a value may have, mm for lengths and degrees for angles: 1 km is
-far beyond any platform or instrument, so a value beyond it is a typing or unit error (and
-its square, near 1e300, would overflow the fit)."""
-_DECIMAL = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
 _ANGLE_SUFFIXES = ("roll", "pitch", "yaw", "hz", "v", "hz_a", "v_a", "hz_b", "v_b")
 
@@ -325,18 +320,18 @@ def _point_columns(header: Sequence[str]) -> list[tuple[str, str, str]]:
 def _number(text: str, name: str) -> tuple[float, str | None]:
     """The value of column ``name``'s field ``text`` and why it cannot be used (None if it
     can): missing, not a plain ASCII decimal number, not finite or beyond
-    :data:`MAX_MAGNITUDE`."""
+    :data:`POSE_MAGNITUDE_LIMIT`."""
     text = text.strip()
     if not text:
         return float("nan"), f"{name} is missing"
     if _NON_FINITE.fullmatch(text):
         return float(text), f"{name} is {text} (not a finite number)"
-    if not _DECIMAL.fullmatch(text):
+    if not PLAIN_DECIMAL.fullmatch(text):
         return float("nan"), (f"{name} {text!r} is not a number (write digits 0-9 with an optional sign, '.' and "
                               "exponent, e.g. -12.5 or 1.2e3)")
     value = float(text)
-    if not isfinite(value) or abs(value) > MAX_MAGNITUDE:
-        return value, (f"{name} {text} is beyond ±{MAX_MAGNITUDE:,.0f}{_unit(name)}, far beyond any platform or "
+    if not isfinite(value) or abs(value) > POSE_MAGNITUDE_LIMIT:
+        return value, (f"{name} {text} is beyond ±{POSE_MAGNITUDE_LIMIT:,.0f}{_unit(name)}, far beyond any platform or "
                        "instrument: a typing or unit error; correct the value")
     return value, None
 
