@@ -10,3 +10,6 @@ import re
 
 PLAIN_DECIMAL = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 """A plain decimal number, whole (``fullmatch``)."""
+
+PLAIN_DECIMAL_HINT = "write digits 0-9 with an optional sign, '.' and exponent, e.g. -12.5 or 1.2e3"
+"""What to do about a number :data:`PLAIN_DECIMAL` refuses, for an error message."""

@@ -114,6 +114,10 @@ def rows(*times: float, decimals: int | None = None) -> str:
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,x,9.81,0,0,0\n", "mine.csv: line 3, column f_y: 'x' is not a finite number"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,inf,0\n", "mine.csv: line 3, column omega_y: 'inf' is not a finite"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,,9.81,0,0,0\n", "mine.csv: line 3, column f_y: nothing is not a finite number"),
+    # as measurement files and stream text: what float() also takes is a typing error, not a number
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,1_0,0,9.81,0,0,0\n", "mine.csv: line 3, column f_x: '1_0' is not a finite "
+                                                              "number (write digits 0-9"),
+    (HEADER + "\n0,0,0,9.81,0,0,0\n0.0\uff11,0,0,9.81,0,0,0\n", "mine.csv: line 3, column t_s: '0.0\uff11' is not a"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81\n", "mine.csv: line 3: has 4 fields, the header has 7"),
     (HEADER + "\n0,0,0,9.81,0,0,0\n0.01,0,0,9.81,0,0,0,5,6\n", "mine.csv: line 3: has 9 fields, the header has 7"),
     (rows(0.0), "mine.csv: 1 samples: a vehicle trajectory needs at least two lines of values"),

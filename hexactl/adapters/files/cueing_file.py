@@ -34,6 +34,7 @@ from hexactl.adapters.files.config_path import SHIPPED_VEHICLES
 from hexactl.adapters.files.text import read_text
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import GRAVITY_M_S2, VehicleTrajectory
+from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL, PLAIN_DECIMAL_HINT
 from hexactl.kinematics.validation_messages import validation_location
 
 VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
@@ -154,13 +155,11 @@ def shipped_vehicles() -> list[str]:
 
 def _number(row: list[str], index: int, column: str, line: int, source: str) -> float:
     cell = row[index].strip() if index < len(row) else ""
-    try:
-        value = float(cell)
-    except ValueError:
-        value = float("nan")
+    value = float(cell) if PLAIN_DECIMAL.fullmatch(cell) else float("nan")
     if not isfinite(value):
         shown = f"'{cell}'" if cell else "nothing"
-        raise CueingFileError(f"{source}: line {line}, column {column}: {shown} is not a finite number")
+        raise CueingFileError(f"{source}: line {line}, column {column}: {shown} is not a finite number "
+                              f"({PLAIN_DECIMAL_HINT})")
     return value
 
 

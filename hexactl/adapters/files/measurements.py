@@ -51,7 +51,7 @@ from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.observations import Instrument, Theodolites, point_covariance
 from hexactl.calibration.planning import PosturePlan
 from hexactl.kinematics.inverse import LEG_COUNT
-from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL
+from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL, PLAIN_DECIMAL_HINT
 from hexactl.kinematics.pose import pose_mm_deg_to_mm_rad, pose_mm_rad_to_mm_deg
 from hexactl.kinematics.axes import POSE_AXES, POSE_MAGNITUDE_LIMIT
 
@@ -327,8 +327,7 @@ def _number(text: str, name: str) -> tuple[float, str | None]:
     if _NON_FINITE.fullmatch(text):
         return float(text), f"{name} is {text} (not a finite number)"
     if not PLAIN_DECIMAL.fullmatch(text):
-        return float("nan"), (f"{name} {text!r} is not a number (write digits 0-9 with an optional sign, '.' and "
-                              "exponent, e.g. -12.5 or 1.2e3)")
+        return float("nan"), f"{name} {text!r} is not a number ({PLAIN_DECIMAL_HINT})"
     value = float(text)
     if not isfinite(value) or abs(value) > POSE_MAGNITUDE_LIMIT:
         return value, (f"{name} {text} is beyond ±{POSE_MAGNITUDE_LIMIT:,.0f}{_unit(name)}, far beyond any platform or "
