@@ -42,6 +42,9 @@ being about isolated gross errors: more than :data:`MAX_EXCLUDED_FRACTION` of th
 touched (the misfit is a model error, unless one observation carries
 :data:`CONCENTRATED_MISFIT_SHARE` of it: a wrong reading drags its pose by tens of mm and
 biases every posture, and it alone is excluded then), or parameters left undetermined.
+Where the plain fit has an observation beyond the cut or did not converge, the rounds begin
+instead from the observations a robust fit puts beyond it (:func:`_robust_start`), so that
+gross errors in up to that share of the postures cannot bias the fit they are tested against.
 
 Solver: Levenberg–Marquardt on the sparse problem by the Schur complement, as in bundle
 adjustment. Each posture's 6×6 pose block is eliminated, leaving a p×p system; the reduced
@@ -228,10 +231,12 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
                             model.ravel() if target_sigma > 0.0 else np.zeros(0)))
     if left_out is not None:
         problem = problem.with_observation_weights(_weights_without(problem, pose_form, left_out), pose_form)
-    fit = _fit(problem, theta, np.array(poses.rotations), np.array(poses.translations), options.max_iterations)
+    initial = _linearise(problem, theta, np.array(poses.rotations), np.array(poses.translations))
+    initial_fit = _Fit(theta, np.array(poses.rotations), np.array(poses.translations), initial, 0, False)
+    fit = _fit(problem, theta, initial_fit.rotations, initial_fit.translations, options.max_iterations)
     exclusion_notes: tuple[str, ...] = ()
     if left_out is None:
-        fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, pose_form, options)
+        fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, initial_fit, pose_form, options)
     current, theta = fit.linear, fit.theta
 
     full_information = _reduced_normal(current, 0.0)[0]
@@ -410,25 +415,36 @@ def observation_key(observation: ExcludedObservation) -> ObservationKey:
 
 
 def _weights_without(problem: _Problem, pose_form: bool, left_out: Collection[ObservationKey]) -> NDArray[np.float64]:
-    """:meth:`_Problem.observation_weights` with the ``left_out`` observations at 0."""
+    """:meth:`_Problem.observation_weights` with the ``left_out`` observations at 0, except in
+    a posture whose pose they would leave unpinned (two searches may each exclude another
+    explanation of one posture's misfit, its points or its readings): it keeps them all."""
     weights = problem.observation_weights(pose_form).copy()
     first_reading = weights.shape[1] - LEG_COUNT
     for row, point, leg in left_out:
         weights[row, first_reading + leg - 1 if leg else max(point - 1, 0)] = 0.0
+    unpinned = np.sum(weights * problem.observation_dof(pose_form), axis=1) < 6.0
+    weights[unpinned] = problem.observation_weights(pose_form)[unpinned]
     return weights
 
 
-def _exclude_gross_errors(problem: _Problem, fit: _Fit, pose_form: bool,
+def _exclude_gross_errors(problem: _Problem, fit: _Fit, initial: _Fit, pose_form: bool,
                           options: IdentificationOptions) -> tuple[_Fit, _Problem, tuple[str, ...]]:
     """Exclude gross mis-sightings and reading errors and refit, round by round (see the
-    module docstring).
+    module docstring), from the plain ``fit``, or where it failed from the ``initial`` state.
 
     Returns the final fit, the problem with its observation weights, and notes for people.
     """
-    if options.exclusion_false_alarm <= 0.0 or not fit.converged or not _determined(fit.linear):
+    if options.exclusion_false_alarm <= 0.0:
         return fit, problem, ()
     observations = problem.observation_weights(pose_form).size
     false_alarm = options.exclusion_false_alarm / observations  # Bonferroni: points, poses and readings alike
+    usable = fit.converged and _determined(fit.linear)
+    if not usable or _beyond(problem, fit, pose_form, np.log(false_alarm)):
+        starts = (fit, initial) if usable else (initial,)
+        fit, problem = _robust_start(problem, starts, pose_form, false_alarm, options.max_iterations) \
+            or (fit, problem)
+    if not fit.converged or not _determined(fit.linear):
+        return fit, problem, ()
     cuts = _cuts(false_alarm, pose_form)
     fit, problem, notes = _exclusion_rounds(problem, fit, pose_form, false_alarm, cuts, options.max_iterations)
     excluded = problem.observation_weights(pose_form) == 0.0
@@ -445,6 +461,152 @@ def _exclude_gross_errors(problem: _Problem, fit: _Fit, pose_form: bool,
                  f"observations of a campaign without gross errors pass with probability "
                  f"{1.0 - options.exclusion_false_alarm:g}; each is listed: {remedy}", *notes)
     return fit, problem, notes
+
+
+def _beyond(problem: _Problem, fit: _Fit, pose_form: bool, log_cut: float) -> bool:
+    """Whether any used observation's standardised residual is beyond the cut."""
+    statistics, dof = _standardised_residuals(problem, fit.linear, pose_form)
+    used = problem.observation_weights(pose_form) > 0.0
+    return bool(np.any(used & (_log_tail_probabilities(statistics, dof) < log_cut)))
+
+
+_CAUCHY_SCALE = 2.385
+"""The Cauchy loss's scale in σ (95 % efficiency on Gaussian noise): an observation's weight
+in the robust start is 1 / (1 + χ² / (scale² · dof))."""
+_ROBUST_ROUNDS = 30
+_ROBUST_WEIGHT_CHANGE = 1e-3  # the robust start's reweighting ends when no weight moves by more
+
+
+def _robust_start(problem: _Problem, starts: tuple[_Fit, ...], pose_form: bool, false_alarm: float,
+                  max_iterations: int) -> tuple[_Fit, _Problem] | None:
+    """The fit with the observations a robust fit finds beyond the cut excluded, as the start
+    of the exclusion rounds; None where there is nothing to exclude, too much, or the fit
+    without them fails.
+
+    Least squares lets gross errors bias the fit they are tested against: 8 % of postures
+    mis-sighted by a few mm push most good observations beyond the cut, and one point off by
+    metres keeps the fit from converging at all. A Cauchy loss bounds each observation's pull,
+    so the gross errors stand out and the good observations fit. But it has local minima: a
+    posture's pose can follow its points or its readings, and stays with whichever it starts
+    at. So it runs from each of ``starts`` (the plain fit, whose poses follow a wrong reading;
+    the measured poses and nominal geometry, which follow a mis-sighted point) and keeps the
+    one that calls fewer observations wrong (:func:`_trimmed_cost`). Its weights are not the noise
+    model's, so it only chooses where the exclusion rounds begin: they readmit what the plain
+    fit without these observations predicts within the cut, and test the rest as before.
+    """
+    fit = min((_robust_fit(problem, start, pose_form, max_iterations) for start in starts),
+              key=lambda candidate: _trimmed_cost(problem, candidate, pose_form, false_alarm))
+    used = problem.observation_weights(pose_form) > 0.0
+    beyond = used & (_misfit_chi2(problem, fit.linear, pose_form) > _cut_chi2(problem, pose_form, false_alarm))
+    if pose_form:
+        beyond = _pose_or_reading(problem, fit, beyond, false_alarm)
+    # Each posture's pose stays pinned: where too few would be left for that, they all stay in.
+    kept = np.sum(np.where(used & ~beyond, problem.observation_dof(pose_form), 0.0), axis=1) >= 6.0
+    beyond &= kept[:, None]
+    touched = np.count_nonzero(np.any(beyond, axis=1))
+    if touched == 0 or touched > MAX_EXCLUDED_FRACTION * len(used):
+        return None
+    start_problem = problem.with_observation_weights(np.where(beyond, 0.0, problem.observation_weights(pose_form)),
+                                                     pose_form)
+    start = _fit(start_problem, fit.theta, fit.rotations, fit.translations, max_iterations)
+    if not start.converged or not _determined(start.linear):
+        return None
+    return start, start_problem
+
+
+def _pose_or_reading(problem: _Problem, fit: _Fit, beyond: NDArray, false_alarm: float) -> NDArray[np.bool_]:
+    """``beyond`` (N, 7) of a pose-form problem, with each row's wrong pose told from a wrong reading.
+
+    A row's pose follows either its measured pose or its six readings, and the robust fit
+    keeps whichever it started at, so "the pose beyond the cut" is what a wrong reading looks
+    like too. As in the exclusion rounds, a reading is tried first: where a row's pose is
+    beyond, the reading whose exclusion leaves the pose and the other five readings fitting
+    best (at the pose that fits them best, the parameters held) goes instead, if they then
+    pass the test (χ² within the cut at their 5 degrees of freedom). Where all six readings
+    are beyond, one wrong pose is likelier than six wrong readings.
+    """
+    from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
+
+    consistent = chi2.isf(false_alarm, 6 + LEG_COUNT - 1 - 6)  # the pose and five readings, less the pose's 6
+    resolved = beyond.copy()
+    first_reading = beyond.shape[1] - LEG_COUNT
+    for row in np.flatnonzero(beyond[:, 0]):
+        if np.all(beyond[row, first_reading:]):
+            continue
+        weights = problem.observation_weights(True)[row].copy()
+        misfits = []
+        for leg in range(LEG_COUNT):
+            without = weights.copy()
+            without[first_reading + leg] = 0.0
+            misfits.append(_posture_chi2(problem, fit, row, without))
+        if min(misfits) <= consistent:
+            resolved[row] = np.arange(beyond.shape[1]) == first_reading + int(np.argmin(misfits))
+    wrong_pose = np.all(beyond[:, first_reading:], axis=1)
+    resolved[wrong_pose] = np.arange(beyond.shape[1]) == 0
+    return resolved
+
+
+_POSTURE_ITERATIONS = 10  # Gauss–Newton steps of one posture's pose alone: it starts within tens of mm
+
+
+def _posture_chi2(problem: _Problem, fit: _Fit, row: int, weights: NDArray) -> float:
+    """The least χ² of one pose-form row's observations weighted ``weights`` (7,), over its
+    pose from ``fit``'s, the parameters held at ``fit``'s."""
+    rows = slice(row, row + 1)
+    posture = replace(problem, observed=problem.observed[rows], readings=problem.readings[rows],
+                      point_weights=problem.point_weights[rows], reading_weights=problem.reading_weights[rows],
+                      times=None if problem.times is None else problem.times[rows],
+                      whitening=None if problem.whitening is None else problem.whitening[rows])
+    posture = posture.with_observation_weights(weights[None], True)
+    rotations, translations = fit.rotations[rows], fit.translations[rows]
+    for _ in range(_POSTURE_ITERATIONS):
+        linear = _linearise(posture, fit.theta, rotations, translations)
+        step = -np.linalg.solve(linear.pose_normal[0], linear.pose_gradient[0])
+        rotations = Rotation.from_rotvec(step[3:]).as_matrix()[None] @ rotations
+        translations = translations + step[:3]
+    linear = _linearise(posture, fit.theta, rotations, translations)
+    return float(np.sum(linear.point_residuals**2) + np.sum(linear.leg_residuals**2))
+
+
+def _robust_fit(problem: _Problem, fit: _Fit, pose_form: bool, max_iterations: int) -> _Fit:
+    """The Cauchy loss's minimum near ``fit``, by iteratively reweighted least squares."""
+    weights = np.ones_like(problem.observation_weights(pose_form))
+    scales = _CAUCHY_SCALE**2 * problem.observation_dof(pose_form)
+    for _ in range(_ROBUST_ROUNDS):
+        new_weights = 1.0 / (1.0 + _misfit_chi2(problem, fit.linear, pose_form) / scales)
+        settled = np.max(np.abs(new_weights - weights)) < _ROBUST_WEIGHT_CHANGE
+        weights = new_weights
+        if settled:
+            break
+        # The problem's weights multiply the whitened residuals: their squares weigh the cost.
+        fit = _fit(problem.with_observation_weights(np.sqrt(weights), pose_form), fit.theta, fit.rotations,
+                   fit.translations, max_iterations)
+    return fit
+
+
+def _trimmed_cost(problem: _Problem, fit: _Fit, pose_form: bool, false_alarm: float) -> float:
+    """Σ over the used observations of χ², but at most the cut's: what the fit of those within
+    the cut costs, and a fixed price for each beyond it, higher for an observation of more
+    dof (a wrong reading is cheaper than three wrong points, a wrong pose than six readings).
+    Unlike the Cauchy loss, it does not grow with how far a gross error is, in units of a
+    noise that differs 25-fold between readings and points."""
+    cost = np.minimum(_misfit_chi2(problem, fit.linear, pose_form), _cut_chi2(problem, pose_form, false_alarm))
+    return float(np.sum(np.where(problem.observation_weights(pose_form) > 0.0, cost, 0.0)))
+
+
+def _cut_chi2(problem: _Problem, pose_form: bool, false_alarm: float) -> NDArray[np.float64]:
+    """(M,): the χ² beyond which each kind of observation is a gross error at ``false_alarm``."""
+    from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
+
+    return chi2.isf(false_alarm, problem.observation_dof(pose_form))
+
+
+def _misfit_chi2(problem: _Problem, linear: _Linearisation, pose_form: bool) -> NDArray[np.float64]:
+    """(N, M) each observation's whitened misfit squared, in the order of
+    :meth:`_Problem.observation_weights`, whether used or not (no leverage taken out)."""
+    points = np.sum(linear.point_misfits**2, axis=2)
+    observed = np.sum(points, axis=1, keepdims=True) if pose_form else points
+    return np.concatenate((observed, linear.leg_misfits**2), axis=1)
 
 
 def _cuts(false_alarm: float, pose_form: bool) -> str:

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from hexactl.calibration import full
@@ -52,6 +52,7 @@ def clean_fits(nominal, leglock_campaign: OfflineCampaign) -> dict[str, tuple[Me
 @settings(max_examples=6, deadline=None)
 @given(row=st.integers(0, 59), locked=st.booleans(), other_leg=st.integers(1, 5), size=st.floats(5.0, 60.0),
        sign=st.sampled_from([-1.0, 1.0]))
+@example(row=39, locked=False, other_leg=1, size=5.0, sign=-1.0)  # the robust start once blamed the pose (pose form)
 def test_a_wrong_reading_is_excluded_and_named_with_its_line_and_leg(nominal, clean_fits, form, row, locked,
                                                                       other_leg, size, sign):
     data, clean = clean_fits[form]
@@ -112,9 +113,12 @@ def test_a_mis_sighting_and_a_wrong_reading_in_one_campaign_are_both_found(nomin
 
 def test_observations_a_gross_error_pushed_beyond_the_cut_come_back(nominal, leglock_campaign, monkeypatch):
     """A mis-sighted point biases the first fit enough to push good readings elsewhere beyond
-    the cut; they are excluded in the first round, and come back once the point is out."""
+    the cut; they are excluded in the first round, and come back once the point is out. (The
+    robust start would exclude only the point: here it declines, as where it would touch too
+    many postures, and the rounds start from the plain fit.)"""
     weights = []
     fit = full._fit
+    monkeypatch.setattr(full, "_robust_start", lambda *arguments: None)
 
     def recording_fit(problem, *arguments):
         weights.append(problem.observation_weights(False))
