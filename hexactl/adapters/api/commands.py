@@ -68,6 +68,7 @@ from hexactl.adapters.files.kept_calibration import CalibrationKeeper
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
+from hexactl.control.results import ErrorCode as RefusalCode
 from hexactl.control.submitter import commands_from
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry, GeometryError
@@ -189,9 +190,8 @@ class CommandHandler:
             case ValidateCalibrationRequest():  # before its base class: a match takes the first case that fits
                 return self._validate_calibration(request)
             case LoadCalibrationRequest():
-                geometry, source = self._calibration(request)
-                return self._kept(_calibration_fields(controller.load_calibration(geometry, geometry_id(geometry),
-                                                                                  source)))
+                geometry, calibration_id, source = self._calibration(request)
+                return self._kept(_calibration_fields(controller.load_calibration(geometry, calibration_id, source)))
             case EventsRequest():  # the loop's clock is this host's monotonic one
                 return jsonable(controller.events(request.after, time.monotonic_ns()))
             case GeometryRequest():
@@ -302,8 +302,11 @@ class CommandHandler:
             return fields
         return {**fields, "message": f"{fields['message']}; {self.keeper.keep_now()}"}
 
-    def _calibration(self, request: LoadCalibrationRequest) -> tuple[Geometry, str]:
-        """The geometry a load or validate request names, parsed and validated, and its source."""
+    def _calibration(self, request: LoadCalibrationRequest) -> tuple[Geometry, str, str]:
+        """The geometry a load or validate request names, parsed and validated, its
+        calibration id (:func:`geometry_id`, the one rule for both) and its source. With
+        ``expected_id`` (the id a preview answered), :class:`ApiError`
+        ``changed_since_validation`` if what is read now is another calibration."""
         if request.path is not None:
             path, text = self.data.read_text(request.path, ErrorCode.INVALID_CALIBRATION)
             source = str(path)
@@ -311,17 +314,26 @@ class CommandHandler:
             text = request.toml or ""
             source = f"{TOML_SOURCE} ({request.source})" if request.source else TOML_SOURCE
         try:
-            return parse_geometry(text, source), source
+            geometry = parse_geometry(text, source)
         except GeometryError as error:
             raise problems_error(ErrorCode.INVALID_CALIBRATION, str(error)) from None
+        calibration_id = geometry_id(geometry)
+        if request.expected_id is not None and calibration_id != request.expected_id:
+            what = f"{request.path} now holds" if request.path is not None else "the text sent is"
+            raise ApiError(RefusalCode.CHANGED_SINCE_VALIDATION,
+                           f"{what} calibration {calibration_id}, not calibration {request.expected_id} as previewed "
+                           f"(expected_id): it changed since the preview, and nothing was loaded; preview it again "
+                           f"to see the change it would make, then apply that",
+                           {"expected_id": request.expected_id, "calibration_id": calibration_id})
+        return geometry, calibration_id, source
 
     def _validate_calibration(self, request: ValidateCalibrationRequest) -> dict[str, Any]:
         try:
-            geometry, source = self._calibration(request)
+            geometry, calibration_id, source = self._calibration(request)
         except ApiError as error:
             return {"message": error.message, "valid": False, "calibration_id": None, "change_mm": None,
                     "refusal": error_body(error.code, error.message, error.details)}
-        result = self.controller.validate_calibration(geometry, geometry_id(geometry), source)
+        result = self.controller.validate_calibration(geometry, calibration_id, source)
         if not result.ok:
             return {"message": result.message, "valid": False, "calibration_id": None, "change_mm": None,
                     "refusal": error_body(_code(result), result.message, _details(result))}

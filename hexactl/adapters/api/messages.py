@@ -335,13 +335,19 @@ class AbortRequest(_Request):
 class LoadCalibrationRequest(_Request):
     """Switch to a calibration, ramped in; exactly one of ``path`` or ``toml`` (the file's
     text), and with ``toml`` optionally ``source``: where the text came from, recorded as
-    the calibration's source (``request (SOURCE)``, telemetry's ``calibration_source``)."""
+    the calibration's source (``request (SOURCE)``, telemetry's ``calibration_source``).
+    Optionally ``expected_id``: the id a preview (``validate_calibration``) answered; the
+    file or text read now must hold that calibration, or nothing is loaded."""
 
     cmd: Literal["load_calibration"]
     path: FilePath | None = None
     toml: str | None = None
     source: OneLine | None = Field(None, max_length=4096, description="with toml: the sender's name for the text, "
                                    "e.g. the file it read (default: request)")
+    expected_id: str | None = Field(
+        None, min_length=1, max_length=64, pattern=r"^[!-~]+$",
+        description="the calibration id the sender previewed (validate_calibration's calibration_id): refused "
+        "(changed_since_validation), nothing loaded, if the file or text read now holds another calibration")
 
     @model_validator(mode="after")
     def _exactly_one_source(self) -> LoadCalibrationRequest:

@@ -47,17 +47,42 @@ function setResult(el, cls, text) {
   el.textContent = text;
 }
 
-/** Six comma-separated numbers ("null" or an empty entry allowed when allowNull); null when empty. */
+// A number as an operator types it: decimal digits with an optional sign, point and
+// exponent ("-12.5", ".5", "1e-7"). Not Number()'s rules, under which "" and " " are 0,
+// "0x10" is 16, "0b1" is 1 and "Infinity" a number: a typing slip must be refused, never
+// taken for another value.
+const DECIMAL = /^[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$/;
+const NOT_SENT = 'nothing was sent';
+
+/** The number `text` (trimmed) spells as a plain decimal; NaN for anything else, empty included. */
+export function decimal(text) {
+  const t = String(text).trim();
+  const v = DECIMAL.test(t) ? Number(t) : NaN;
+  return Number.isFinite(v) ? v : NaN;
+}
+
+/**
+ * Six numbers, comma-separated (or separated by spaces), optionally in [ ]; null when the
+ * input is empty (left as it is in force). With allowNull an entry `null` or `none` is
+ * null (no bound); any other entry that is not a plain decimal number, an empty one or a
+ * lone "-" among them, is refused naming the field (`what`) and the entry.
+ */
 export function parseSix(text, allowNull, what) {
   const s = text.trim();
   if (!s) return null;
   const inner = s.replace(/^\[|\]$/g, '').trim();
   const parts = (inner.includes(',') ? inner.split(',') : inner.split(/\s+/)).map((x) => x.trim());
-  if (parts.length !== 6) throw new Error(`${what}: six values, x, y, z, roll, pitch, yaw (got ${parts.length})`);
-  return parts.map((x) => {
-    if (allowNull && (x === '' || x === 'null' || x === '-' || x === 'none')) return null;
-    const v = Number(x);
-    if (x === '' || !Number.isFinite(v)) throw new Error(`${what}: "${x}" is not a number${allowNull ? ' (null: none)' : ''}`);
+  if (parts.length !== 6) throw new Error(`${what}: six values, x, y, z, roll, pitch, yaw (got ${parts.length}); ${NOT_SENT}`);
+  return parts.map((x, i) => {
+    const entry = `entry ${i + 1} (${AXES[i]})`;
+    if (allowNull && ['null', 'none'].includes(x.toLowerCase())) return null;
+    if (x === '') {
+      throw new Error(`${what}: ${entry} is empty: type a number${allowNull ? ', or null to remove that bound' : ''}; ${NOT_SENT}`);
+    }
+    const v = decimal(x);
+    if (!Number.isFinite(v)) {
+      throw new Error(`${what}: ${entry} "${x}" is not a number${allowNull ? ' (null or none: no bound)' : ''}; ${NOT_SENT}`);
+    }
     return v;
   });
 }
@@ -83,6 +108,33 @@ function changedSince(under, r) {
   ].filter(([, unchanged]) => !unchanged).map(([name]) => name);
 }
 
+// The events by which the controller leaves `enabled` or comes back to it: a validated move
+// holds only within the enabled spell it was validated in.
+const ENABLED_SPELL_ENDS = new Set(['estop', 'disabled', 'reset', 'enabled']);
+
+/** {seq, t}: the newest event a record `r` carries and its time; what came later is newer. */
+function eventsSeen(r) {
+  const events = Array.isArray(r?.events) ? r.events : [];
+  const seqs = events.map((e) => (e && Number.isSafeInteger(e.seq) ? e.seq : 0));
+  return { seq: Math.max(0, ...seqs), t: typeof r?.t === 'number' ? r.t : Infinity };
+}
+
+/**
+ * Why a move validated in the enabled spell that `since` (eventsSeen) was seen in may no
+ * longer go by record `r`, or null. The state says it when the page sees it; the events
+ * say it too when the page saw no record of it (an E-stop, reset and Enable between two
+ * records it handled: it handles the newest at each frame it draws).
+ */
+function enabledSpellEnded(since, r) {
+  if (r.state !== 'enabled') return `the controller is ${r.state}: Go is withdrawn; validate again once it is enabled`;
+  const events = Array.isArray(r.events) ? r.events : [];
+  const codes = events.filter((e) => e && typeof e === 'object' && ENABLED_SPELL_ENDS.has(e.code)
+    && ((Number.isSafeInteger(e.seq) && e.seq > since.seq) || (typeof e.t === 'number' && e.t > since.t)))
+    .map((e) => e.code);
+  if (!codes.length) return null;
+  return `the controller left enabled since you validated (${[...new Set(codes)].join(', ')}): Go is withdrawn; validate again`;
+}
+
 /**
  * ctx: { send(cmd, fields) -> Promise<reply>, setGhost(goal|null), record() -> last record,
  *        noLiveData() -> null while the page has live data, else what is lost (a phrase) }
@@ -105,26 +157,27 @@ export function setupControls(ctx) {
   const moveIds = [...AXES.map((a) => `move-${a}`), 'move-frame', 'move-relative', 'move-duration', 'move-speed'];
   const moveResult = $('move-result');
   const goButton = $('move-go');
-  let validated = null;   // {key, fields, goal, ref, under}
+  let validated = null;   // {key, fields, goal, ref, under, since}
   let validating = 0;
 
   function readMove() {
     const pose = AXES.map((a) => {
       const el = $(`move-${a}`);
-      if (el.validity && el.validity.badInput) throw new Error(`${a}: not a number`);
+      if (el.validity && el.validity.badInput) throw new Error(`${a}: not a number; ${NOT_SENT}`);
       const t = el.value.trim();
-      const v = t === '' ? 0 : Number(t);
-      if (!Number.isFinite(v)) throw new Error(`${a}: not a number`);
+      if (t === '') throw new Error(`${a}: empty: type a number (0 for none); ${NOT_SENT}`);
+      const v = decimal(t);
+      if (!Number.isFinite(v)) throw new Error(`${a}: "${t}" is not a number; ${NOT_SENT}`);
       return v;
     });
     const fields = { pose, frame: $('move-frame').value, relative: $('move-relative').checked };
     for (const [id, key] of [['move-duration', 'duration'], ['move-speed', 'speed']]) {
       const el = $(id);
-      if (el.validity && el.validity.badInput) throw new Error(`${key}: not a number`);
+      if (el.validity && el.validity.badInput) throw new Error(`${key}: not a number (empty: none); ${NOT_SENT}`);
       const t = el.value.trim();
-      if (t !== '') {
-        const v = Number(t);
-        if (!Number.isFinite(v)) throw new Error(`${key}: not a number`);
+      if (t !== '') {   // empty: none
+        const v = decimal(t);
+        if (!Number.isFinite(v)) throw new Error(`${key}: "${t}" is not a number (empty: none); ${NOT_SENT}`);
         fields[key] = v;
       }
     }
@@ -148,6 +201,24 @@ export function setupControls(ctx) {
     $(id).addEventListener('change', () => invalidate('inputs changed: validate again'));
   });
 
+  // This page's E-stop (the button or Escape), Disable and Reset end the enabled spell: Go
+  // is withdrawn at the press, before any record says so, and a validation under way is
+  // dropped (it began before the press).
+  function withdrawnBy(press) {
+    const underWay = moveResult.textContent === 'validating…';
+    validating += 1;
+    if (validated || underWay) {
+      invalidate();
+      setResult(moveResult, null, `${press} pressed: Go is withdrawn; validate again once the controller is enabled`);
+    }
+  }
+  $('estop').addEventListener('click', () => withdrawnBy('E-STOP'));
+  window.addEventListener('keydown', (ev) => {
+    if (ev.key === 'Escape' || ev.code === 'Escape') withdrawnBy('E-STOP (Escape)');
+  }, true);
+  $('disable').addEventListener('click', () => withdrawnBy('Disable'));
+  $('reset').addEventListener('click', () => withdrawnBy('Reset'));
+
   $('move-validate').addEventListener('click', async () => {
     let fields;
     try { fields = readMove(); } catch (e) { invalidate(); setResult(moveResult, 'refused', e.message); return; }
@@ -155,7 +226,9 @@ export function setupControls(ctx) {
     const key = JSON.stringify(fields);
     const token = ++validating;
     setResult(moveResult, null, 'validating…');
-    const ref = motionRef(ctx.record());
+    const before = ctx.record();
+    const since = eventsSeen(before);   // the enabled spell it is validated in: see enabledSpellEnded
+    const ref = motionRef(before);
     const reply = await ctx.send('validate_pose', fields);
     if (token !== validating) return;                       // a newer validation is under way
     let current;
@@ -167,11 +240,18 @@ export function setupControls(ctx) {
     if (blind) { setResult(moveResult, 'refused', `valid, but the page has no live data (${blind}): validate again once live data return`); return; }
     // what it was validated under goes with the move: the service refuses it if that changed meanwhile
     const under = reply.validated_under && typeof reply.validated_under.frames === 'object' ? reply.validated_under : null;
-    validated = { key, fields, goal: reply.goal ?? null, ref: Array.isArray(ref) ? ref.slice() : null, under };
-    goButton.disabled = false;
-    goButton.title = 'Move to the validated goal';
-    ctx.setGhost(Array.isArray(reply.goal) ? reply.goal : null);
     const lines = [`valid: duration ${fmt(reply.duration, 2)} s`, `goal ${fmtPose(reply.goal)}`];
+    // Go is armed only in the enabled spell the validation was made in (E-stop, fault,
+    // disable, reset end it: enabledSpellEnded)
+    const now = ctx.record();
+    const ended = before && before.state === 'enabled' && now ? enabledSpellEnded(since, now) : null;
+    const armed = before && before.state === 'enabled' && now && !ended;
+    if (armed) {
+      validated = { key, fields, goal: reply.goal ?? null, ref: Array.isArray(ref) ? ref.slice() : null, under, since };
+      goButton.disabled = false;
+      goButton.title = 'Move to the validated goal';
+      ctx.setGhost(Array.isArray(reply.goal) ? reply.goal : null);
+    }
     if (Array.isArray(reply.tool_goal)) lines.push(`tool goal (work frame) ${fmtPose(reply.tool_goal)}`);
     const acc = reply.predicted_accuracy;
     if (acc && typeof acc === 'object') {
@@ -181,7 +261,12 @@ export function setupControls(ctx) {
     } else {
       lines.push('predicted accuracy: not available (no calibration covariance)');
     }
-    setResult(moveResult, 'valid', lines.join('\n'));
+    if (!armed) {
+      const state = now?.state ?? before?.state ?? 'unknown';
+      lines.push(ended ? ended.replace('Go is withdrawn', 'Go is not armed')
+        : `Go is not armed: the controller is ${state}; enable it, then validate again`);
+    }
+    setResult(moveResult, armed ? 'valid' : null, lines.join('\n'));
   });
 
   goButton.addEventListener('click', async () => {
@@ -218,11 +303,20 @@ export function setupControls(ctx) {
   let jogInFlight = 0;
   let renewEveryMs = 50;   // the default deadman's (0.2 s) quarter, until a jog's reply says the service's
 
-  function jogVelocity(button) {
+  /** The jog speed typed (mm/s, °/s); an Error saying why when it is not a number ≥ 0. */
+  function jogSpeed() {
+    const el = $('jog-speed');
+    const t = el.value.trim();
+    if (el.validity && el.validity.badInput) throw new Error('jog speed: not a number; not sent');
+    if (t === '') throw new Error('jog speed: empty: type a speed in mm/s, °/s; not sent');
+    const speed = decimal(t);
+    if (!Number.isFinite(speed) || speed < 0) throw new Error(`jog speed: "${t}" is not a number ≥ 0; not sent`);
+    return speed;
+  }
+
+  function jogVelocity(button, speed) {
     const axis = AXES.indexOf(button.dataset.axis);
     const dir = Number(button.dataset.direction) < 0 ? -1 : 1;
-    let speed = Number($('jog-speed').value);
-    if (!Number.isFinite(speed) || speed < 0) speed = 0;
     const v = [0, 0, 0, 0, 0, 0];
     if (axis >= 0) v[axis] = dir * speed;
     return v;
@@ -265,7 +359,9 @@ export function setupControls(ctx) {
     releaseJog(false);
     const blind = ctx.noLiveData();
     if (blind) { setResult(jogStatus, 'refused', `not sent: the page has no live data (${blind})`); return; }
-    const velocity = jogVelocity(button);
+    let speed;
+    try { speed = jogSpeed(); } catch (e) { setResult(jogStatus, 'refused', e.message); return; }
+    const velocity = jogVelocity(button, speed);
     const frame = $('jog-frame').value;
     jog = { button, velocity, frame, timer: null, everyMs: null, number: null };
     button.classList.add('held');
@@ -362,10 +458,13 @@ export function setupControls(ctx) {
       const tool = parseSix($('frame-tool').value, false, 'tool frame');
       const lower = parseSix($('soft-lower').value, true, 'soft lower bounds');
       const upper = parseSix($('soft-upper').value, true, 'soft upper bounds');
-      const tiltText = $('soft-max-tilt').value.trim().toLowerCase();
+      const tiltText = $('soft-max-tilt').value.trim();
       // undefined: unchanged; null: no bound
-      const tilt = tiltText === '' ? undefined : (tiltText === 'none' || tiltText === 'null' ? null : Number(tiltText));
-      if (typeof tilt === 'number' && !Number.isFinite(tilt)) throw new Error(`max tilt: "${tiltText}" is not a number (none: no bound)`);
+      const tilt = tiltText === '' ? undefined
+        : (['none', 'null'].includes(tiltText.toLowerCase()) ? null : decimal(tiltText));
+      if (typeof tilt === 'number' && !Number.isFinite(tilt)) {
+        throw new Error(`max tilt: "${tiltText}" is not a number (none: no bound; empty: unchanged); ${NOT_SENT}`);
+      }
       if (work) fields.work = work;
       if (tool) fields.tool = tool;
       // Only what is filled in changes; the service keeps every other soft limit in force
@@ -403,7 +502,9 @@ export function setupControls(ctx) {
   const calChange = $('calibration-change');
   const calResult = $('calibration-result');
   const calApply = $('calibration-apply');
-  let previewed = null;   // the file name whose preview was valid
+  let previewed = null;   // {path, id, state, active, ref}: the file previewed valid, the calibration id the
+                          // preview answered, and the state, calibration in force and pose it was made in
+  let previewing = 0;
 
   async function refreshFiles() {
     const reply = await ctx.send('files');
@@ -432,32 +533,58 @@ export function setupControls(ctx) {
   $('calibration-refresh').addEventListener('click', refreshFiles);
   $('sequence-refresh').addEventListener('click', refreshFiles);
 
-  function resetPreview() {
+  function resetPreview(text = '') {
     previewed = null;
     calApply.disabled = true;
-    setResult(calChange, null, '');
+    setResult(calChange, null, text);
   }
-  calSelect.addEventListener('change', resetPreview);
+  calSelect.addEventListener('change', () => { previewing += 1; resetPreview(); });
+
+  /** Why a preview made as `p` says no longer what Apply would do by record `r`, or null. */
+  function previewOutdated(p, r) {
+    if (r.state !== p.state) return `the controller is ${r.state} now (${p.state} when previewed): preview again`;
+    if (r.calibration_id !== p.active) return `the calibration in force changed (now ${r.calibration_id}): preview again`;
+    const ref = motionRef(r);
+    if (Array.isArray(p.ref) && Array.isArray(ref) && ref.some((v, i) => typeof v === 'number' && Math.abs(v - p.ref[i]) > 0.01)) {
+      return 'the platform moved since the preview: preview again';
+    }
+    return null;
+  }
 
   $('calibration-preview').addEventListener('click', async () => {
     const path = calSelect.value;
     resetPreview();
     if (!path) { setResult(calChange, 'refused', 'no calibration file selected: refresh the list'); return; }
     setResult(calChange, null, 'previewing…');
+    const token = ++previewing;
+    const before = ctx.record();
     const reply = await ctx.send('validate_calibration', { path });
+    if (token !== previewing) return;                       // a newer preview, or another file chosen
     if (calSelect.value !== path) { resetPreview(); return; }
     if (!reply.ok) { setResult(calChange, 'refused', describeError(reply.error)); return; }
     if (reply.valid === false) { setResult(calChange, 'refused', describeError(reply.refusal ?? { code: 'refused', message: reply.message })); return; }
-    previewed = path;
+    if (typeof reply.calibration_id !== 'string' || !reply.calibration_id) {
+      setResult(calChange, 'refused', 'the preview named no calibration: preview again');
+      return;
+    }
+    const blind = ctx.noLiveData();
+    if (blind || !before) { setResult(calChange, 'refused', `the page has no live data (${blind ?? 'no record yet'}): preview again once live data return`); return; }
+    const ref = motionRef(before);
+    const made = { path, id: reply.calibration_id, state: before.state, active: before.calibration_id, ref: Array.isArray(ref) ? ref.slice() : null };
+    const outdated = previewOutdated(made, ctx.record());   // changed while the preview was under way
+    if (outdated) { resetPreview(outdated); return; }
+    previewed = made;
     calApply.disabled = false;
-    setResult(calChange, 'valid', `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id ?? '?'}`);
+    setResult(calChange, 'valid', `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id}`);
   });
   calApply.addEventListener('click', async () => {
     const path = calSelect.value;
-    if (!previewed || previewed !== path) { resetPreview(); return; }
+    if (!previewed || previewed.path !== path) { resetPreview(); return; }
+    // the calibration previewed goes with it: the service refuses the file if it now holds another
+    const expected = previewed.id;
     calApply.disabled = true;
     previewed = null;
-    const reply = await ctx.send('load_calibration', { path });
+    const reply = await ctx.send('load_calibration', { path, expected_id: expected });
     setResult(calResult, reply.ok ? 'valid' : 'refused',
       reply.ok ? `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm` : describeError(reply.error));
   });
@@ -473,7 +600,7 @@ export function setupControls(ctx) {
   recName.value = timestampName();
   $('record-start').addEventListener('click', async () => {
     const name = recName.value.trim();
-    const duration = Number($('record-duration').value);
+    const duration = decimal($('record-duration').value);
     if (!name) { setResult(recResult, 'refused', 'name the recording'); return; }
     if (!Number.isFinite(duration) || duration <= 0) { setResult(recResult, 'refused', 'duration: a positive number of seconds'); return; }
     const reply = await ctx.send('record', { name, duration_s: duration });
@@ -547,6 +674,16 @@ export function setupControls(ctx) {
       const changed = changedSince(validated.under, r);
       if (changed.length) invalidate(`the ${changed.join(' and the ')} changed since you validated: validate again`);
     }
+    // … and only in the enabled spell it was validated in
+    if (validated) {
+      const ended = enabledSpellEnded(validated.since, r);
+      if (ended) invalidate(ended);
+    }
+    // a calibration preview holds only in the state, on the calibration and at the pose it was made in
+    if (previewed) {
+      const why = previewOutdated(previewed, r);
+      if (why) resetPreview(why);
+    }
     if (!['enabled'].includes(r.state) && jog) {
       // a jog cannot run disabled/latched: stop renewing (the service refuses it anyway)
       releaseJog(false);
@@ -564,6 +701,7 @@ export function setupControls(ctx) {
   /** No live data (why: what is lost): nothing shown is current, so no validated move may go and no jog is renewed. */
   function onDataLoss(why) {
     invalidate(`no live data (${why}): Go is disabled; validate again once live data return`);
+    if (previewed) resetPreview(`no live data (${why}): Apply is disabled; preview again once live data return`);
     if (jog) {
       releaseJog(false);
       setResult(jogStatus, 'refused', `jog released: no live data (${why}); the page stopped renewing it, so the service brakes within its deadman time`);

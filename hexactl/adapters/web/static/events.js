@@ -5,6 +5,9 @@
 // are numbered (`seq`): when a record's first is more than one past the last the page
 // took (a burst of more than eight, or records the page did not get), it asks the
 // service for those after it (the `events` request), so that the burst is listed whole.
+// A new service run (a restart) is told by the records' t going back (another clock) or,
+// on the same host, whose monotonic clock goes on, by the event numbers going back; the
+// page then asks for the new run's events from its first, and says what it missed.
 //
 // Cheap at 50 records a second: a record whose newest event is the one seen last costs a
 // comparison; the list is built again only when an event is new, and the "ago" texts are
@@ -14,6 +17,7 @@
 const $ = (id) => document.getElementById(id);
 
 export const EVENTS_KEPT = 64;  // as many as the service keeps: a burst it sends is listed whole
+const LINES_KEPT = EVENTS_KEPT + 1;  // … with the events_missed line saying how many came before them
 const AGO_EVERY_MS = 500;
 const ASK_AGAIN_MS = 1000;  // a gap whose request failed is asked for again with a record at least this much later
 const ASK_TRIES = 3;        // then the page says it could not get them
@@ -73,9 +77,12 @@ export function setupEvents(askAfter) {
   const keys = new Set();   // kept's keys: JSON of [t, code, message, sender]
   let newest = null;        // the newest event of the last record taken in, as received
   let recordT = null;       // the newest record's t (s, the service's clock)
-  let run = 0;              // +1 each time the service's clock goes back: a new service, another clock
+  let run = 0;              // +1 for each new service run: its clock or its event numbers went back
   let seq = 0;
   let lastNumber = 0;       // the newest event number taken in from this run (0: none)
+  let recordNumber = 0;     // the newest event number a record of this run carried (records come in order:
+                            // it never goes back within a run, where a reply's events may be newer than a record's)
+  let fromStart = false;    // a new run began: its events are asked for from its first
   let asking = false;       // an `events` request for a gap is under way
   let askNext = null;       // the number after which a gap opened while it was: asked for once it is answered
   let askAgain = null;      // the number after which a gap's request failed (no reply in time, the service busy)
@@ -85,23 +92,45 @@ export function setupEvents(askAfter) {
   let agoAt = -Infinity;    // performance.now() of the last "ago" update (only to limit their rate)
   let agoFor = null;        // the record t they were computed at
 
+  /** A new service run: what the page knew of the last one's numbers no longer holds. */
+  function newRun() {
+    run += 1;
+    lastNumber = 0;
+    recordNumber = 0;
+    askNext = null;
+    askAgain = null;
+    failedAsks = 0;
+    fromStart = true;
+  }
+
   function onRecord(r) {
     if (finite(r.t)) {
-      if (recordT !== null && r.t < recordT) { run += 1; lastNumber = 0; askNext = null; askAgain = null; failedAsks = 0; }
+      if (recordT !== null && r.t < recordT) newRun();   // another clock: a service elsewhere, or a reboot
       recordT = r.t;
+    }
+    const events = Array.isArray(r.events) ? r.events : [];
+    const last = events.length ? clean(events[events.length - 1]) : null;
+    // The same host's monotonic clock goes on over a restart; the new service numbers its events from 1.
+    if (last !== null && last.number !== null) {
+      if (last.number < recordNumber) newRun();
+      recordNumber = Math.max(recordNumber, last.number);
     }
     if (askAgain !== null && !asking && performance.now() >= askAgainAt) {
       const again = askAgain;
       askAgain = null;
       askFrom(again);
     }
-    const events = r.events;
-    if (!Array.isArray(events) || events.length === 0) return;
-    const last = clean(events[events.length - 1]);
     if (last === null || (newest !== null && sameEvent(last, newest))) return;
     newest = last;
     const first = clean(events[0]);
-    if (first !== null && first.number !== null && lastNumber > 0 && first.number > lastNumber + 1) askFrom(lastNumber);
+    if (first !== null && first.number !== null) {
+      if (fromStart) {
+        fromStart = false;
+        if (first.number > 1) askFrom(0);   // the new run's events before this record's
+      } else if (lastNumber > 0 && first.number > lastNumber + 1) {
+        askFrom(lastNumber);
+      }
+    }
     take(events);
   }
 
@@ -169,7 +198,7 @@ export function setupEvents(askAfter) {
     }
     if (!dirty) return;
     kept.sort((a, b) => (b.run - a.run) || (b.t - a.t) || (b.seq - a.seq));
-    while (kept.length > EVENTS_KEPT) keys.delete(kept.pop().key);
+    while (kept.length > LINES_KEPT) keys.delete(kept.pop().key);
   }
 
   function line(e) {
