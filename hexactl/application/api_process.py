@@ -19,6 +19,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -41,6 +42,7 @@ from hexactl.application.spawned import STOP, Spawned, SpawnError
 from hexactl.control.config import ControllerConfig
 from hexactl.control.controller import Controller
 from hexactl.control.frames import OperatorFrames
+from hexactl.control.snapshot import ControlState, MotionState
 from hexactl.kinematics.geometry import Geometry
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -73,6 +75,9 @@ API_TICKET_START = 1 << 40
 on the same loop, and verdicts are found by ticket."""
 
 _CLOSE_API = "close_api"
+RECORDING_REST_WAIT_S = 1.0
+"""At the service's stop, how long a recording under way waits for the reports of the
+platform at rest before it is finished: they arrive a few cycles after the service saw it."""
 
 log = logging.getLogger("hexactl.api")
 
@@ -140,6 +145,16 @@ class ApiProcess:
     def close(self, timeout_s: float = 10.0) -> None:
         """End the process (telemetry too); waits for it, terminates it if it will not."""
         self._child.close(timeout_s)
+
+
+def _await_rest(controller: Controller, timeout_s: float) -> None:
+    """Return once the reports show the platform at rest (or no longer enabled), or after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        telemetry = controller.telemetry()
+        if telemetry.state != ControlState.ENABLED.value or telemetry.motion == MotionState.HOLDING.value:
+            return
+        time.sleep(0.01)
 
 
 def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, instrument_line: Connection | None,
@@ -215,8 +230,12 @@ def _api_main(settings: ApiSettings, commands: Connection, reports: Connection, 
                 if message == _CLOSE_API and server_open:
                     server.close()
                     server_open = False
-                    recordings.close()  # the service is stopping: finish a recording now, while there is time
                 control.send(message)
+            # After the shutdown's brake: a recording under way ends with the platform at rest,
+            # the part an incident's record needs most (it was cut before the brake). Its rows
+            # come with the loop's reports, a little behind the service's view of the rest.
+            _await_rest(controller, RECORDING_REST_WAIT_S)
+            recordings.close()
         except (EOFError, OSError):
             log.warning("the service's process is gone: the API stops")
         finally:

@@ -103,6 +103,27 @@ def test_stop_ends_early_and_refusals_name_the_problem(client, data_dir) -> None
     assert exists.value.code == "file_exists"
 
 
+def test_a_recording_under_way_at_shutdown_ends_with_the_platform_at_rest(tmp_path) -> None:
+    """Found from outside: the recording was finished when the API stopped taking commands,
+    before the shutdown's brake, so a move under way was cut mid-motion and the brake and
+    the rest pose were missing from the file."""
+    with service_here(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
+                                    data_dirs=(tmp_path,))) as service, \
+            HexactlClient(service.api_endpoint, timeout_s=WAIT_S) as client:
+        client.call("enable")
+        client.call("record", name="brake", duration_s=600, signals=["pose_command"])
+        assert client.call("move", pose=[100, 0, 0, 0, 0, 0], duration=20)["ok"]
+        wait_for(lambda: status(client)["pose_command"][0] > 1.0, "moving")
+    side = json.loads((tmp_path / "brake.json").read_text())
+    assert side["ended"] == "shutdown"
+    with open(tmp_path / "brake.csv") as handle:
+        x = [float(row["pose_command_x_mm"]) for row in csv.DictReader(handle)]
+    # At rest, the commanded pose repeats (then, disabled, it follows the measured pose).
+    assert any(x[i] == x[i + 1] for i in range(len(x) - 50, len(x) - 1)), "the file ends before the rest"
+    assert 1.0 < x[-1] < 100.0
+    assert len(set(x)) > 100, "no motion recorded before the brake"
+
+
 def test_a_recording_under_way_is_finished_when_the_service_stops(tmp_path) -> None:
     with service_here(ServiceConfig(api_endpoint="tcp://127.0.0.1:*", telemetry_endpoint="tcp://127.0.0.1:*",
                                     data_dirs=(tmp_path,))) as service, \
