@@ -7,7 +7,9 @@ any glue of ours (docs/dashboard.md says why this one).
 The page and the vendored libraries (three.js, uPlot) come from the package: nothing
 from the internet. Commands arrive on the WebSocket as ``{"type": "command", "id": N,
 "cmd": NAME, …fields}`` and go to the API unchanged; the reply comes back as
-``{"type": "reply", "id": N, "reply": …}``. The page acknowledges the telemetry it has
+``{"type": "reply", "id": N, "reply": …}``. The page is sent ``{"type": "hello",
+"command_timeout_ms": …}`` first: how long it waits for a reply, the time to live the
+dashboard gives each of its commands from when it reads it (:mod:`.bridge`). The page acknowledges the telemetry it has
 handled (``{"type": "ack", "n": N}``), and is sent no more than a window ahead of it; each
 acknowledgement read is answered ``{"type": "acked", "n": N, "server_ms": …}`` behind what
 the page was sent before, which times how far behind the page is, and how far its clock is
@@ -27,6 +29,7 @@ import contextlib
 import json
 import logging
 import re
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from importlib import resources
@@ -40,7 +43,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.protocol import RECORDING_NAME_PATTERN
-from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply
+from hexactl.adapters.web.bridge import RECEIVED_AT, URGENT_COMMANDS, ServiceBridge, error_reply
 
 MAX_MESSAGE_BYTES = 64 * 1024
 """The largest WebSocket message a page may send (a command is a few hundred bytes)."""
@@ -63,7 +66,8 @@ def static_directory() -> str:
 
 def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlette:
     """The dashboard's ASGI application over ``bridge``; ``allowed_hosts``: the ``host:port``
-    forms a request's ``Host`` (and a WebSocket's ``Origin``) may name."""
+    forms a request's ``Host`` (and a WebSocket's ``Origin``) may name (the port left out
+    where it is the scheme's default: :func:`host_allowed`)."""
 
     async def index(request: Request) -> Response:
         return FileResponse(f"{static_directory()}/index.html", headers={"Cache-Control": "no-store"})
@@ -86,13 +90,12 @@ def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlett
 
     async def socket(websocket: WebSocket) -> None:
         origin = websocket.headers.get("origin")
-        scheme, _, host = (origin or "").partition("://")
-        if origin is not None and (scheme not in ("http", "https") or host not in allowed_hosts):
+        if origin is not None and not origin_allowed(origin, allowed_hosts):
             log.warning("refused a WebSocket from origin %s (not this dashboard's page)", origin)
             await websocket.close(code=1008)
             return
         await websocket.accept()
-        await _serve_page(bridge, websocket)
+        await _serve_page(bridge, websocket, bridge.hello())
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
@@ -138,6 +141,34 @@ class _NotFramed:
         await self.app(scope, receive, send_not_framed)
 
 
+DEFAULT_PORTS = {"http": 80, "ws": 80, "https": 443, "wss": 443}
+"""The port a browser leaves out of ``Host`` and ``Origin`` for each scheme."""
+
+_WITHOUT_PORT = re.compile(r"\[[^\]]*\]|[^:\[\]]+")
+
+
+def _with_port(authority: str, scheme: str) -> str:
+    """``authority`` (``host[:port]``) as ``host:port``: a browser names no port when it is
+    the scheme's default (``http://127.0.0.1/`` sends ``Host: 127.0.0.1``)."""
+    if _WITHOUT_PORT.fullmatch(authority) and (port := DEFAULT_PORTS.get(scheme.lower())) is not None:
+        return f"{authority}:{port}"
+    return authority
+
+
+def host_allowed(host: str, scheme: str, allowed_hosts: frozenset[str]) -> bool:
+    """Whether a request's ``Host`` (of a request in ``scheme``: http, ws…) names this
+    server: one of ``allowed_hosts`` (``host:port``), or its host alone where the port is
+    the scheme's default."""
+    return _with_port(host, scheme) in allowed_hosts
+
+
+def origin_allowed(origin: str, allowed_hosts: frozenset[str]) -> bool:
+    """Whether a WebSocket's ``Origin`` is a page of this server: http or https, on one of
+    ``allowed_hosts`` (its port left out only where it is the scheme's default)."""
+    scheme, separator, host = origin.partition("://")
+    return bool(separator) and scheme in ("http", "https") and host_allowed(host, scheme, allowed_hosts)
+
+
 class _HostCheck:
     """Refuse an HTTP request or WebSocket whose ``Host`` is not this server's (a page
     that reached us by DNS rebinding names its own host)."""
@@ -149,7 +180,7 @@ class _HostCheck:
     async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
         if scope["type"] in ("http", "websocket"):
             host = dict(scope["headers"]).get(b"host", b"").decode("latin-1")
-            if host not in self.allowed_hosts:
+            if not host_allowed(host, scope.get("scheme", "http"), self.allowed_hosts):
                 if scope["type"] == "websocket":
                     await send({"type": "websocket.close", "code": 1008})
                     return
@@ -159,8 +190,9 @@ class _HostCheck:
         await self.app(scope, receive, send)
 
 
-async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
-    """One page: updates out, commands in, until it goes.
+async def _serve_page(bridge: ServiceBridge, websocket: WebSocket, hello: str | None = None) -> None:
+    """One page: ``hello`` first (:meth:`ServiceBridge.hello`), then updates out, commands
+    in, until it goes.
 
     The updates have a task of this page's own, and replies go out from each command's
     task: a page that does not read blocks only its own sends (its outbox keeps the newest
@@ -193,10 +225,13 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
             outcome = error_reply("internal_error", f"the dashboard could not carry {cmd}: {type(error).__name__}: {error}")
         await reply(request_id, outcome)
 
+    if hello is not None:
+        await send(hello)  # before anything else: the page's timeout for its commands
     sender = asyncio.create_task(send_updates())
     try:
         while True:
             received = await websocket.receive()
+            received_at = time.monotonic()
             if received["type"] == "websocket.disconnect":
                 break
             if received.get("text") is None:
@@ -213,6 +248,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket) -> None:
                 await reply(request_id, error_reply(
                     "busy", f"{MAX_COMMANDS_IN_FLIGHT} commands of this page are waiting: wait for their replies"))
                 continue
+            RECEIVED_AT.set(received_at)  # the command's task inherits it: its time to live counts from now
             task = asyncio.create_task(answer(request_id, *parsed))
             in_flight.add(task)
             task.add_done_callback(in_flight.discard)

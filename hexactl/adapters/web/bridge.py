@@ -10,6 +10,19 @@ a client of its own in a worker thread, so that a slow command never holds up an
 a page that floods the others, or floods one of them, cannot delay another. ``jog`` has one
 too, in order: a release must never reach the service before a renewal sent ahead of it.
 
+A page's command has a time to live, counted from when the dashboard read it (its
+:class:`Admission`): the page's own timeout (:attr:`ServiceBridge.command_timeout_s`, the
+dashboard's ``--timeout``, which the page is told in its ``hello``), or for a jog that
+moves, one deadman period of the service. One still queued when it is up is never sent:
+it is answered ``expired``. One sent is given what is left of it, as the API client's wait
+and (less its margin) as the request's ``deadline_ms``, so the service refuses it too if it
+comes late; a ``deadline_ms`` of the page's own is kept only when shorter. So nothing the
+page has given up on is carried out later (found from outside: a move queued behind 12
+commands, or behind an API stalled for 17 s, ran after the page had said "timeout"; jog
+renewals queued during a stall started a jog after the page had said it was released).
+What stops motion (``estop``, ``stop``, ``abort``, a jog's release) has no time to live:
+carried out late, it is still wanted.
+
 The dashboard adds no privilege: every command is an API request like any client's, and
 the service validates it.
 """
@@ -17,17 +30,20 @@ the service validates it.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import json
 import logging
+import math
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber, deadline_ms
+from hexactl.control.config import ControllerConfig
 
 URGENT_COMMANDS = ("estop", "stop", "abort")
 """Commands carried out each on a worker of its own, never queued behind others. None
@@ -46,6 +62,20 @@ every page is cut in chunks so that a command waits behind at most one chunk's s
 behind every page's (with 400 pages on a loaded host, a page's E-stop waited behind whole
 fan-outs at each of its steps on the loop)."""
 
+JOG_DEADMAN_S: float = ControllerConfig.model_fields["jog_deadman_s"].default
+"""A jog's time to live in the dashboard until a jog's reply gives the service's own
+deadman (``deadman_s``): the service's default."""
+
+SEND_FLOOR_FRACTION = 0.05
+"""A command with less than this fraction of its time to live left is not sent (it is
+answered ``expired``): the service could hardly carry it out and answer in what is left."""
+
+RECEIVED_AT: contextvars.ContextVar[float | None] = contextvars.ContextVar("received_at", default=None)
+"""When the dashboard read the page's command that the current task carries out
+(``time.monotonic()``): set by the page's reader before it starts the command's task, which
+inherits it. Unset (a download's chunk, a test's call): when :meth:`ServiceBridge.command`
+is called."""
+
 MAX_RECORD_AGE_S = 60.0
 """A record's age is reported only when the service's clock is this host's (a record
 older than this, or from the future, comes from another host's monotonic clock)."""
@@ -62,6 +92,56 @@ class ServiceEndpoints:
     telemetry: str
     timeout_s: float
     connect: Callable[..., Any]
+
+
+@dataclass
+class Admission:
+    """A page's command on its way to a worker: ``cmd``, its ``fields``, the ``client``
+    name, and when it was read (``received``) and must be answered by (``answer_by``),
+    both ``time.monotonic()``; ``send_by``: not sent from then on. ``given_deadline_ms``:
+    the page's own ``deadline_ms``, if it sent one.
+
+    Sent or expired once, by whichever comes first: the worker that takes it
+    (:meth:`take`) or the event loop when its time is up (:meth:`expire`)."""
+
+    cmd: str
+    fields: dict[str, Any]
+    client: str
+    received: float
+    answer_by: float
+    send_by: float
+    given_deadline_ms: float | None = None
+    state: str = "queued"  # queued, then sent or expired
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def take(self) -> bool:
+        """On the worker: whether to send it now (else it is, or has just been, answered ``expired``)."""
+        with self._lock:
+            if self.state == "queued":
+                self.state = "sent" if time.monotonic() < self.send_by else "expired"
+            return self.state == "sent"
+
+    def expire(self) -> bool:
+        """On the event loop, its time up: whether it was still queued (it is never sent now)."""
+        with self._lock:
+            if self.state == "queued":
+                self.state = "expired"
+            return self.state == "expired"
+
+    def request_fields(self, now: float) -> dict[str, Any]:
+        """Its fields with the ``deadline_ms`` of what is left of its time at ``now`` (the
+        page's own, if shorter)."""
+        own = deadline_ms(max(self.answer_by - now, 0.0))
+        if self.given_deadline_ms is not None:
+            own = min(own, self.given_deadline_ms)
+        return {**self.fields, "deadline_ms": own}
+
+    def expired_reply(self) -> dict[str, Any]:
+        waited = time.monotonic() - self.received
+        return error_reply("expired", f"{self.cmd} expired, not carried out: it waited {waited:.1f} s in the dashboard "
+                           f"for its turn (the service is slow to answer, or other commands were ahead of it), and "
+                           f"its time to live was {self.answer_by - self.received:g} s; send it again if it is still "
+                           "wanted")
 
 
 class UrgentCommand:
@@ -188,6 +268,8 @@ class ServiceBridge:
         # The geometry is fetched beside the telemetry, never in its way: an API that does
         # not answer would hold each record back for the request's timeout.
         self._geometry_worker = ThreadPoolExecutor(1, thread_name_prefix="dashboard-geometry")
+        self._jog_deadman_s = JOG_DEADMAN_S  # the service's, from its newest jog reply
+        self._sending = threading.local()  # answer_by: the wait of the request a worker sends, if it has one
         self._fetching = threading.Event()
         self.connected = False
         self.geometry: dict[str, Any] | None = None
@@ -215,6 +297,17 @@ class ServiceBridge:
         self._workers.shutdown(wait=False, cancel_futures=True)
         self._jog_worker.shutdown(wait=False, cancel_futures=True)
         self._geometry_worker.shutdown(wait=False, cancel_futures=True)
+
+    @property
+    def command_timeout_s(self) -> float:
+        """How long a page waits for a command's reply (it is told so in its ``hello``),
+        and the dashboard at most, from when it read it, to answer it: the dashboard's
+        ``--timeout``."""
+        return self.endpoints.timeout_s
+
+    def hello(self) -> str:
+        """The first message to a page: ``{"type": "hello", "command_timeout_ms": …}``."""
+        return json.dumps({"type": "hello", "command_timeout_ms": self.command_timeout_s * 1000.0})
 
     # -- pages -----------------------------------------------------------------------
 
@@ -259,22 +352,64 @@ class ServiceBridge:
 
     async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
         """The API's reply to ``cmd`` with ``fields``, ok or not; an ``unavailable`` error
-        reply when the service does not answer in time, ``invalid_request`` for fields no
+        reply when the service does not answer in time, ``expired`` when it was still queued
+        here when its time to live was up (never sent), ``invalid_request`` for fields no
         request can carry (an urgent command's, the envelope's, a number not finite). The
         service is told it comes from the dashboard for ``browser`` (its address), so that
-        its events say who sent it."""
+        its events say who sent it. Its time to live counts from :data:`RECEIVED_AT`."""
+        received = RECEIVED_AT.get()
+        received = time.monotonic() if received is None else received
         client = f"dashboard, browser {browser}" if browser else "dashboard"
         if (urgent := self._urgent.get(cmd)) is not None:
             if fields:
                 return error_reply("invalid_request", f"{cmd} takes no fields, got {', '.join(sorted(fields))}")
             return await urgent(client)
         workers = self._jog_worker if cmd == "jog" else self._workers
-        return await asyncio.get_running_loop().run_in_executor(workers, self._request, cmd, fields, client)
+        loop = asyncio.get_running_loop()
+        given = fields.get("deadline_ms")
+        if given is not None and (isinstance(given, bool) or not isinstance(given, (int, float))
+                                  or not math.isfinite(given)):
+            return error_reply("invalid_request", f"{cmd}: deadline_ms is a finite number of ms, got {given!r}")
+        if _is_release(cmd, fields):  # stops a jog: no time to live (as stop), in order behind the renewals
+            if given is not None:  # the page's own only when shorter than the dashboard's
+                fields = {**fields, "deadline_ms": min(given, deadline_ms(self.command_timeout_s))}
+            return await loop.run_in_executor(workers, self._request, cmd, fields, client)
+        lifetime_s = self._jog_deadman_s if cmd == "jog" else self.command_timeout_s
+        admission = Admission(cmd, {key: value for key, value in fields.items() if key != "deadline_ms"}, client,
+                              received, received + lifetime_s, received + lifetime_s * (1.0 - SEND_FLOOR_FRACTION),
+                              given)
+        carried = loop.run_in_executor(workers, self._carry_out, admission)
+        done, _ = await asyncio.wait({carried}, timeout=max(0.0, admission.send_by - time.monotonic()))
+        if not done and admission.expire():
+            return admission.expired_reply()  # the worker that takes it later passes it by
+        reply = await carried
+        return admission.expired_reply() if reply is None else reply
+
+    def _carry_out(self, admission: Admission) -> dict[str, Any] | None:
+        """On a worker: ``admission`` sent, with what is left of its time, and its reply;
+        None if it has expired (the event loop answers it)."""
+        if not admission.take():
+            return None
+        self._sending.answer_by = admission.answer_by
+        try:
+            reply = self._request(admission.cmd, admission.request_fields(time.monotonic()), admission.client)
+        finally:
+            self._sending.answer_by = None
+        deadman = reply.get("deadman_s") if admission.cmd == "jog" and reply.get("ok") else None
+        if isinstance(deadman, (int, float)) and not isinstance(deadman, bool) and 0.0 < deadman <= MAX_JOG_DEADMAN_S:
+            self._jog_deadman_s = float(deadman)
+        return reply
 
     def _request(self, cmd: str, fields: dict[str, Any], client_name: str) -> dict[str, Any]:
+        """The API's reply to ``cmd``; waited for until the answer-by time of the page's
+        command this worker sends, else for the dashboard's ``--timeout``."""
         endpoints = self.endpoints
+        answer_by = getattr(self._sending, "answer_by", None)
+        timeout_s = endpoints.timeout_s if answer_by is None else answer_by - time.monotonic()
+        if timeout_s <= 0.0:
+            return error_reply("expired", f"{cmd} expired, not carried out: its time to live was up before it was sent")
         try:
-            with endpoints.connect(HexactlClient, endpoints.api, timeout_s=endpoints.timeout_s, name=client_name) as client:
+            with endpoints.connect(HexactlClient, endpoints.api, timeout_s=timeout_s, name=client_name) as client:
                 return client.request(cmd, **fields)
         except ServiceUnavailable as error:
             return error_reply("unavailable", str(error))
@@ -339,6 +474,18 @@ class ServiceBridge:
     def _call(self, function: Callable[..., None], *arguments: Any) -> None:
         if self._loop is not None and not self._loop.is_closed():
             self._loop.call_soon_threadsafe(function, *arguments)
+
+
+MAX_JOG_DEADMAN_S: float = next(bound.le for bound in ControllerConfig.model_fields["jog_deadman_s"].metadata
+                                if hasattr(bound, "le"))
+"""The longest deadman a jog reply's ``deadman_s`` is taken for (the service's bound)."""
+
+
+def _is_release(cmd: str, fields: dict[str, Any]) -> bool:
+    """Whether ``cmd`` with ``fields`` is a jog's release: a jog of zero velocity."""
+    velocity = fields.get("velocity")
+    return (cmd == "jog" and isinstance(velocity, list) and len(velocity) == 6
+            and all(type(v) in (int, float) and v == 0 for v in velocity))
 
 
 def error_reply(code: str, message: str) -> dict[str, Any]:

@@ -58,6 +58,16 @@ def _is_loopback(host: str) -> bool:
         return False
 
 
+def allowed_hosts(host: str, port: int) -> frozenset[str]:
+    """The ``host:port`` forms a request's ``Host`` and a WebSocket's ``Origin`` may name
+    for a dashboard listening on ``host`` (as given to ``--http``) at ``port``: the loopback
+    names and ``host``, an IPv6 address in brackets. A browser leaves a scheme's default
+    port out of both (port 80: ``Host: 127.0.0.1``); the app's check reads such a host as on
+    that port (:func:`~hexactl.adapters.web.app.host_allowed`)."""
+    named = f"[{host}]" if ":" in host else host
+    return frozenset(f"{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]", named))
+
+
 def bind(address: HttpAddress) -> socket.socket:
     """A listening socket on ``address``. :raises DashboardError: if it cannot be bound."""
     family = socket.AF_INET6 if ":" in address.host else socket.AF_INET
@@ -87,8 +97,7 @@ def run_dashboard(address: HttpAddress, endpoints: ServiceEndpoints, log_level: 
     """
     listener = bind(address)
     port = listener.getsockname()[1]
-    allowed = frozenset(f"{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]", address.host))
-    app = create_app(ServiceBridge(endpoints), allowed)
+    app = create_app(ServiceBridge(endpoints), allowed_hosts(address.host, port))
     host = f"[{address.host}]" if ":" in address.host else address.host
     print(f"dashboard on http://{host}:{port}/ (service API {endpoints.api}, telemetry {endpoints.telemetry})",
           flush=True)

@@ -8,7 +8,6 @@ import { setupEvents, isWarning } from './events.js';
 
 const $ = (id) => document.getElementById(id);
 const RECONNECT_MS = 1000;
-const COMMAND_TIMEOUT_MS = 15000;
 const LATENCY_RING = 2000;
 const STALE_MS = 2000;        // no telemetry for longer, or this far behind it: nothing on the page is shown as current
 const REPORT_SILENT_S = 1.0;   // a record whose loop.report_age_s is over this is a stopped loop's last (control/results.py's REPORT_SILENT_S; tests/web/test_page_constants.py keeps them equal)
@@ -37,7 +36,12 @@ const state = {
   geometry: null,
   ghost: null,
   nextId: 1,
-  pending: new Map(),       // id -> {cmd, resolve, timer}
+  pending: new Map(),       // id -> {cmd, done, timer, sentAt}
+  // How long a command's reply is waited for: the dashboard's own (its --timeout), from its
+  // `hello`, the first message on each connection. The dashboard gives each command that
+  // long from when it reads it and answers it `expired` if it could not send it in time,
+  // so nothing the page has given up on is carried out later. null until the hello.
+  commandTimeoutMs: null,
   newRecord: false,
   drawInfo: null,           // {age_ms, sent_ms} of the newest record, until drawn
   lastTelemetryAt: 0,
@@ -102,19 +106,28 @@ function send(cmd, fields = {}) {
       return;
     }
     const id = state.nextId++;
-    const timer = setTimeout(() => {
-      state.pending.delete(id);
-      done(failure('timeout', `no reply within ${COMMAND_TIMEOUT_MS / 1000} s`));
-    }, COMMAND_TIMEOUT_MS);
-    state.pending.set(id, { cmd, done, timer });
+    const pending = { cmd, done, timer: null, sentAt: performance.now() };
+    state.pending.set(id, pending);
+    armTimeout(id, pending);
     try {
       ws.send(JSON.stringify({ ...fields, type: 'command', id, cmd }));
     } catch (e) {
-      clearTimeout(timer);
+      clearTimeout(pending.timer);
       state.pending.delete(id);
       done(failure('unavailable', `could not send: ${e && e.message ? e.message : e}`));
     }
   });
+}
+
+/** Give up on command `id` the dashboard's command timeout after it was sent (once the hello has said it). */
+function armTimeout(id, pending) {
+  if (state.commandTimeoutMs === null || pending.timer !== null) return;
+  const timeoutMs = state.commandTimeoutMs;
+  pending.timer = setTimeout(() => {
+    if (state.pending.get(id) !== pending) return;
+    state.pending.delete(id);
+    pending.done(failure('timeout', `no reply within ${timeoutMs / 1000} s`));
+  }, Math.max(0, pending.sentAt + timeoutMs - performance.now()));
 }
 
 function failPending(reason) {
@@ -513,6 +526,13 @@ function handleMessage(ev) {
       schedule();
       break;
     }
+    case 'hello': {
+      const ms = msg.command_timeout_ms;
+      if (typeof ms !== 'number' || !Number.isFinite(ms) || ms <= 0) return;
+      state.commandTimeoutMs = ms;
+      for (const [id, p] of state.pending) armTimeout(id, p);  // those sent before it: from when they were sent
+      break;
+    }
     case 'link':
       state.link = { connected: msg.connected === true, message: typeof msg.message === 'string' ? msg.message : '' };
       updateConnection();
@@ -580,6 +600,7 @@ function connect() {
     return;
   }
   state.ws = ws;
+  state.commandTimeoutMs = null;   // this connection's dashboard says it in its hello
   state.unacknowledged = 0;
   state.acksAwaited = [];
   ws.addEventListener('open', () => {
@@ -713,6 +734,8 @@ window.hexactlDashboard = {
   get geometry() { return state.geometry; },
   /** null while live telemetry is shown, else 'server', 'service', 'telemetry', 'loop', 'late' or 'starting'. */
   get dataLoss() { return state.loss; },
+  /** How long the page waits for a command's reply, ms: the dashboard's, from its hello (null before). */
+  get commandTimeoutMs() { return state.commandTimeoutMs; },
   /** The E-stop presses' events in order: {press, what ('pressed', 'sent', 'warning', 'reply-ok', 'reply-failed', 'cleared'), detail}. */
   estopEvents: () => estopState.events.map((e) => ({ ...e })),
   get estopWarning() { return estopState.warning; },
