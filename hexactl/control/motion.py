@@ -103,6 +103,9 @@ class Motion:
             return Fault("planner_error", "the trajectory generator refused its input")
         if result is StepResult.WORKING and trajectory.replanned and not wave.playing:
             self.end_ns = now_ns + round(trajectory.remaining_s * 1e9)
+        if wave.brake_started:  # a stopped wave brakes along its path: its rest is this far ahead
+            wave.brake_started = False
+            self.end_ns = now_ns + round(wave.remaining_s * 1e9)
         if fault := self.path.follow(active, lock, trajectory.position, previous_target, trajectory.frames):
             return fault
         if self.player.playing:
@@ -136,6 +139,7 @@ class Motion:
         if not start_segment(self.trajectory, segment):
             return ErrorCode.STALE_PLAN, ("the motion went on while the move was planned, and from where it is now the "
                                           "trajectory generator refuses it: plan again")
+        self.wave.end(WavePhase.ABORTED)  # a stopped wave's brake, replaced (its phase stays ABORTED)
         self.jogger.end("replaced by a move")
         return None
 
@@ -144,6 +148,7 @@ class Motion:
         if not start_segment(self.trajectory, plan.segment):
             return ErrorCode.STALE_PLAN, ("the motion went on while the jog was planned, and from where it is now the "
                                           "trajectory generator refuses it: send jog again")
+        self.wave.end(WavePhase.ABORTED)  # as in move
         self.jogger.start(jog, plan, now_ns)
         return None
 
@@ -159,10 +164,14 @@ class Motion:
         self.epoch += 1
 
     def stop(self) -> None:
-        """Abort any sequence or wave and brake to rest."""
+        """Abort any sequence or wave and brake to rest: a wave along its own path (it has
+        no goal, and a per-axis brake would leave the path it was validated on), anything
+        else by the generator's halt."""
         self.player.end("aborted")
-        self.wave.end(WavePhase.ABORTED)  # the generator has the wave's state: it brakes from there
-        self.trajectory.halt(self.stream.braking_limits)
+        if self.wave.playing:
+            self.wave.brake()  # ABORTED now; at rest on the path (a second stop: the brake goes on)
+        else:
+            self.trajectory.halt(self.stream.braking_limits)
         self.jogger.brake("stopped")
         self.stream.brake("stopped")
         self.epoch += 1

@@ -229,10 +229,11 @@ class PoseTrajectory:
         self._coordinates = RelativeMmRad if frames is None else ToolInWorkMmRad
         self.reset(pose)
 
-    def track(self, state: KinematicState, goal: RelativeMmRad | ToolInWorkMmRad) -> None:
-        """Be at ``state`` (in the current coordinates), moving towards ``goal``: a path
-        the generator does not compute (a wave) drives it, without calling :meth:`update`,
-        so that :meth:`halt` brakes from where that path is and how it moves."""
+    def track(self, state: KinematicState, goal: RelativeMmRad | ToolInWorkMmRad | None) -> None:
+        """Be at ``state`` (in the current coordinates), moving towards ``goal`` (None:
+        braking to rest, :attr:`halting`): a path the generator does not compute (a wave)
+        drives it, without calling :meth:`update`, so that its state is where that path is
+        and how it moves."""
         parameters = self._input
         parameters.current_position = list(state.position)
         parameters.current_velocity = list(state.velocity)

@@ -16,8 +16,13 @@ its whole path has been checked, from rest:
    asked for;
 4. velocity, acceleration and jerk in pose space (finite differences of the positions,
    at rest before and after) against the :class:`~hexactl.control.trajectory.MotionLimits`
-   of every commanded motion: a stop mid-wave hands the state to the trajectory
-   generator's jerk-limited halt, which needs it within them.
+   of every commanded motion.
+
+A stop mid-wave brakes along the wave's own path (:class:`~hexactl.control.wave_player.WavePlayer`):
+the wave's time slows to a stop, so the platform comes to rest on a pose of the path just
+validated (a wave has no goal: a per-axis brake ends off its path, beyond its amplitude).
+:func:`brake_time_s` finds, from the path's peak velocity, acceleration and jerk, how long
+that takes within the motion limits; the plan carries it.
 
 The geometry sets no leg-acceleration limit: the legs' peak acceleration is reported,
 not checked (a leg's acceleration follows from the pose-space limits checked in 4).
@@ -70,6 +75,8 @@ class WavePlan:
     peak_leg_acceleration_mm_s2: float
     peak_leg_acceleration_leg: int
     peak_pose_velocity: tuple[float, ...]
+    brake_s: float = 0.0
+    """How long a stop takes to slow the wave's time from rate 1 to 0 (:func:`brake_time_s`), s."""
 
     def summary(self) -> dict:
         """The plan's figures for a reply."""
@@ -138,7 +145,8 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
     velocity = np.abs(np.diff(positions, axis=0)).max(axis=0) / period
     hardest = int(np.argmax(acceleration))
     return WavePlan(path, frames, float(speed[fastest]), fastest + 1, float(acceleration[hardest]), hardest + 1,
-                    tuple(float(v) for v in (*velocity[:3], *np.degrees(velocity[3:]))))
+                    tuple(float(v) for v in (*velocity[:3], *np.degrees(velocity[3:]))),
+                    brake_time_s(_pose_peaks(positions, period), context.limits.in_mm_rad()))
 
 
 def _positions(path: WavePath, budget: PlanningBudget, remedy: str) -> np.ndarray | Refusal:
@@ -235,15 +243,63 @@ def _describe_fit(fitting: dict[str, float]) -> str:
     return f"amplitudes that stay inside the limits: {described}"
 
 
+def _pose_peaks(positions: np.ndarray, period_s: float) -> list[np.ndarray]:
+    """Peak |velocity|, |acceleration|, |jerk| per axis (mm/rad) of the (N, 6) ``positions``
+    (at rest before and after), by finite differences."""
+    at_rest = np.repeat(positions[:1], 2, axis=0), np.repeat(positions[-1:], 2, axis=0)
+    padded = np.concatenate((at_rest[0], positions, at_rest[1]))
+    return [np.abs(np.diff(padded, n=order, axis=0)).max(axis=0) / period_s**order for order in (1, 2, 3)]
+
+
+BRAKE_MARGIN = 0.9
+"""The brake slows the wave's time at this fraction of the fastest rate the bounds allow:
+room for the loop's time grid and the finite differences the peaks come from."""
+
+BRAKE_OVER_OWN_PEAK = 1.05
+"""Where the wave's own peak acceleration or jerk on an axis is within 5 % of the limit,
+the brake bounds that axis by its peak times this instead: the bounds use the path's peaks
+wherever the brake is, and the limit itself would leave no room to slow down."""
+
+
+def brake_time_s(peaks: list[np.ndarray], limits: tuple[list[float], list[float], list[float]]) -> float:
+    """How long (s) a stop takes to slow a wave's time from rate 1 to 0 along its path:
+    ``peaks`` are the path's peak |p'|, |p''| and |p'''| per axis (mm/rad, by time;
+    :func:`_pose_peaks`), ``limits`` the velocity, acceleration and jerk limits per axis
+    (mm/rad).
+
+    The brake plays the path at time s(τ) with the rate r = ds/dτ = 1 - e(τ/T), e the
+    quintic smoothstep (acceleration continuous where the brake starts, zero at rest). The
+    pose's acceleration is then p''·r² + p'·ṙ and its jerk p'''·r³ + 3·p''·r·ṙ + p'·r̈
+    (the path's curvature in p''), bounded per axis by the path's peaks wherever the brake
+    is: conservative. Its velocity p'·r stays within the wave's own."""
+    velocity, acceleration, jerk = (np.asarray(peak, dtype=float) for peak in peaks)
+    limit_a = np.maximum(np.asarray(limits[1], dtype=float), BRAKE_OVER_OWN_PEAK * acceleration)
+    limit_j = np.maximum(np.asarray(limits[2], dtype=float), BRAKE_OVER_OWN_PEAK * jerk)
+    u = np.linspace(0.0, 1.0, 2001)[1:, None]
+    r = 1.0 - u**3 * (10.0 + u * (-15.0 + 6.0 * u))
+    de = 30.0 * u**2 * (1.0 - u) ** 2  # de/du
+    dde = np.abs(60.0 * u * (1.0 - u) * (1.0 - 2.0 * u))  # |d²e/du²|
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # acceleration: A·r² + V·e'·x ≤ limit, with x = 1/T
+        rate_a = np.where(velocity * de > 0.0, (limit_a - acceleration * r**2) / (velocity * de), np.inf)
+        # jerk: V·|e''|·x² + 3·A·r·e'·x + J·r³ ≤ limit
+        a2, b, c = velocity * dde, 3.0 * acceleration * r * de, limit_j - jerk * r**3
+        root = np.where(a2 > 0.0, (-b + np.sqrt(b * b + 4.0 * a2 * c)) / (2.0 * a2),
+                        np.where(b > 0.0, c / b, np.inf))
+    rate = float(min(rate_a.min(), root.min()))
+    if not np.isfinite(rate) or rate <= 0.0:  # nothing moves (or no bound): at rest where it is
+        return 0.0
+    return 1.0 / (BRAKE_MARGIN * rate)
+
+
 def _pose_limit_refusal(context: PlanningContext, positions: np.ndarray) -> Refusal | None:
     """The first pose-space velocity, acceleration or jerk beyond ``context.limits`` of the
     (N, 6) ``positions`` (mm/rad; at rest before and after), or None."""
-    at_rest = np.repeat(positions[:1], 2, axis=0), np.repeat(positions[-1:], 2, axis=0)
-    padded = np.concatenate((at_rest[0], positions, at_rest[1]))
     limits = context.limits
+    all_peaks = _pose_peaks(positions, context.period_s)
     for order, name, bounds in ((1, "velocity", limits.max_velocity), (2, "acceleration", limits.max_acceleration),
                                 (3, "jerk", limits.max_jerk)):
-        peaks = np.abs(np.diff(padded, n=order, axis=0)).max(axis=0) / context.period_s**order
+        peaks = all_peaks[order - 1]
         for index, (peak, bound) in enumerate(zip(peaks, bounds)):
             peak = float(peak) if index < 3 else degrees(peak)
             if peak > bound:

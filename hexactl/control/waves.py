@@ -117,7 +117,9 @@ class WavePath:
 
     def displacement(self, k: int) -> list[float]:
         """The displacement from the start at cycle ``k`` (mm, rad), per axis."""
-        t = k * self.period_s
+        return self._displacement_at(k * self.period_s)
+
+    def _displacement_at(self, t: float) -> list[float]:
         scale = self.envelope_at(t)
         offset = [0.0] * 6
         for index, amplitude, omega, phase in self._terms:
@@ -130,7 +132,21 @@ class WavePath:
         start = self.start
         if k <= 0 or k >= self.samples:
             return start
-        offset = self.displacement(k)
+        offset = self._displacement_at(k * self.period_s)
+        if not self._on_tool:  # inline: every cycle
+            return tuple.__new__(self._coordinates, [s + d for s, d in zip(start, offset)])
+        return self._position(offset)
+
+    def at_time(self, t: float) -> Coordinates:
+        """The position on the same path at ``t`` s from the start (between cycles: a
+        stopped wave brakes along its path, :class:`~hexactl.control.wave_player.WavePlayer`);
+        the start itself for t ≤ 0 and from :attr:`samples` cycles on."""
+        if t <= 0.0 or t >= self.samples * self.period_s:
+            return self.start
+        return self._position(self._displacement_at(t))
+
+    def _position(self, offset: list[float]) -> Coordinates:
+        start = self.start
         if not self._on_tool:
             return tuple.__new__(self._coordinates, [s + d for s, d in zip(start, offset)])
         moved = pose_of(compose(self._start_transform, transform_of(offset)))
