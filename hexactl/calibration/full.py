@@ -231,12 +231,11 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
                             model.ravel() if target_sigma > 0.0 else np.zeros(0)))
     if left_out is not None:
         problem = problem.with_observation_weights(_weights_without(problem, pose_form, left_out), pose_form)
-    initial = _linearise(problem, theta, np.array(poses.rotations), np.array(poses.translations))
-    initial_fit = _Fit(theta, np.array(poses.rotations), np.array(poses.translations), initial, 0, False)
-    fit = _fit(problem, theta, initial_fit.rotations, initial_fit.translations, options.max_iterations)
+    initial = theta, np.array(poses.rotations), np.array(poses.translations)
+    fit = _fit(problem, *initial, options.max_iterations)
     exclusion_notes: tuple[str, ...] = ()
     if left_out is None:
-        fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, initial_fit, pose_form, options)
+        fit, problem, exclusion_notes = _exclude_gross_errors(problem, fit, initial, pose_form, options)
     current, theta = fit.linear, fit.theta
 
     full_information = _reduced_normal(current, 0.0)[0]
@@ -427,10 +426,11 @@ def _weights_without(problem: _Problem, pose_form: bool, left_out: Collection[Ob
     return weights
 
 
-def _exclude_gross_errors(problem: _Problem, fit: _Fit, initial: _Fit, pose_form: bool,
+def _exclude_gross_errors(problem: _Problem, fit: _Fit, initial: tuple[NDArray, NDArray, NDArray], pose_form: bool,
                           options: IdentificationOptions) -> tuple[_Fit, _Problem, tuple[str, ...]]:
     """Exclude gross mis-sightings and reading errors and refit, round by round (see the
-    module docstring), from the plain ``fit``, or where it failed from the ``initial`` state.
+    module docstring), from the plain ``fit``, or where it failed from the ``initial`` state
+    (θ, rotations, translations).
 
     Returns the final fit, the problem with its observation weights, and notes for people.
     """
@@ -440,7 +440,8 @@ def _exclude_gross_errors(problem: _Problem, fit: _Fit, initial: _Fit, pose_form
     false_alarm = options.exclusion_false_alarm / observations  # Bonferroni: points, poses and readings alike
     usable = fit.converged and _determined(fit.linear)
     if not usable or _beyond(problem, fit, pose_form, np.log(false_alarm)):
-        starts = (fit, initial) if usable else (initial,)
+        unfitted = _Fit(*initial, _linearise(problem, *initial), 0, False)
+        starts = (fit, unfitted) if usable else (unfitted,)
         fit, problem = _robust_start(problem, starts, pose_form, false_alarm, options.max_iterations) \
             or (fit, problem)
     if not fit.converged or not _determined(fit.linear):

@@ -75,7 +75,7 @@ class WavePlan:
     peak_leg_acceleration_mm_s2: float
     peak_leg_acceleration_leg: int
     peak_pose_velocity: tuple[float, ...]
-    brake_s: float = 0.0
+    brake_s: float
     """How long a stop takes to slow the wave's time from rate 1 to 0 (:func:`brake_time_s`), s."""
 
     def summary(self) -> dict:

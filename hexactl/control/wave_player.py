@@ -116,13 +116,18 @@ class WavePlayer:
             self._trajectory.reset(path.start)
             self.end(WavePhase.FINISHED)
             return StepResult.FINISHED
-        following, h = self._next, path.period_s
+        self._track(previous, current, path.period_s, path.start)
+        self._publish(k)
+        return StepResult.WORKING
+
+    def _track(self, previous: Coordinates, current: Coordinates, h: float, goal: Coordinates | None) -> None:
+        """The generator at ``current``, its velocity and acceleration by central differences
+        of ``previous``, ``current`` and the next position (cycle period ``h``)."""
+        following = self._next
         # list comprehensions: every cycle, and a generator into tuple() costs twice as much
         velocity = tuple([(b - a) / (2.0 * h) for a, b in zip(previous, following)])
         acceleration = tuple([(a - 2.0 * c + b) / (h * h) for a, c, b in zip(previous, current, following)])
-        self._trajectory.track(tuple.__new__(KinematicState, (current, velocity, acceleration)), path.start)
-        self._publish(k)
-        return StepResult.WORKING
+        self._trajectory.track(tuple.__new__(KinematicState, (current, velocity, acceleration)), goal)
 
     def brake(self) -> None:
         """Stop the playing wave (it ends ABORTED now): from the next update, brake to rest
@@ -156,10 +161,7 @@ class WavePlayer:
             self._path, self._braking = None, False
             return StepResult.FINISHED
         self._current, self._next = current, self._brake_at(path, j + 1)
-        following, h = self._next, path.period_s
-        velocity = tuple([(b - a) / (2.0 * h) for a, b in zip(previous, following)])
-        acceleration = tuple([(a - 2.0 * c + b) / (h * h) for a, c, b in zip(previous, current, following)])
-        self._trajectory.track(tuple.__new__(KinematicState, (current, velocity, acceleration)), None)
+        self._track(previous, current, path.period_s, None)
         return StepResult.WORKING
 
     def end(self, phase: WavePhase) -> None:

@@ -115,11 +115,8 @@ class WavePath:
             return envelope((self.duration_s - t) / ramp)
         return 1.0
 
-    def displacement(self, k: int) -> list[float]:
-        """The displacement from the start at cycle ``k`` (mm, rad), per axis."""
-        return self._displacement_at(k * self.period_s)
-
     def _displacement_at(self, t: float) -> list[float]:
+        """The displacement from the start ``t`` s after it (mm, rad), per axis."""
         scale = self.envelope_at(t)
         offset = [0.0] * 6
         for index, amplitude, omega, phase in self._terms:
@@ -129,13 +126,7 @@ class WavePath:
     def at(self, k: int) -> Coordinates:
         """The position commanded ``k`` cycles after the start (the start itself for
         k ≤ 0 and from :attr:`samples` on)."""
-        start = self.start
-        if k <= 0 or k >= self.samples:
-            return start
-        offset = self._displacement_at(k * self.period_s)
-        if not self._on_tool:  # inline: every cycle
-            return tuple.__new__(self._coordinates, [s + d for s, d in zip(start, offset)])
-        return self._position(offset)
+        return self.at_time(k * self.period_s)
 
     def at_time(self, t: float) -> Coordinates:
         """The position on the same path at ``t`` s from the start (between cycles: a

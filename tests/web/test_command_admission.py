@@ -32,8 +32,7 @@ import pytest
 from websockets.sync.client import connect
 
 from hexactl.adapters.api.client import HexactlClient, deadline_ms
-from hexactl.adapters.web.bridge import (COMMAND_WORKERS, JOG_DEADMAN_S, RECEIVED_AT, ServiceBridge,
-                                         ServiceEndpoints)
+from hexactl.adapters.web.bridge import COMMAND_WORKERS, JOG_DEADMAN_S, ServiceBridge, ServiceEndpoints
 from tests.reliability.support import enable
 from tools.browser import dashboard, page_constant
 from tools.serving import serve, spawned_children, wait_until
@@ -124,8 +123,7 @@ def test_a_command_sent_carries_the_time_left_since_the_page_sent_it_as_its_dead
     service.answers.set()
 
     async def read_ago(seconds: float, cmd: str, fields: dict[str, Any]) -> dict[str, Any]:
-        RECEIVED_AT.set(time.monotonic() - seconds)
-        return await bridge.command(cmd, fields)
+        return await bridge.command(cmd, fields, received=time.monotonic() - seconds)
 
     with bridge_to(service, timeout_s=60.0) as bridge:
         assert asyncio.run(read_ago(20.0, "move", {"pose": [0] * 6}))["ok"]

@@ -317,7 +317,9 @@ def test_a_held_jog_is_renewed_as_often_as_the_services_deadman_asks(rig) -> Non
                      "the page renewing every quarter of the deadman its reply stated",
                      seen=lambda: rig.page("return window.hexactlTestTap.intervals"))
             renewals = sent(rig, "jog")
-            wait_for(lambda: sent(rig, "jog") >= renewals + 3, "the page renewing the held jog")
+            wait_for(lambda: sent(rig, "jog") >= renewals + 3, "the page renewing the held jog",
+                     seen=lambda: rig.page("return [document.getElementById('jog-status').textContent, "
+                                           "window.hexactlDashboard.dataLoss]"))
         finally:
             ActionChains(rig.driver).release(button).perform()
             rig.page("window.hexactlTestTap.jogReplyFields = null;")

@@ -43,7 +43,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.protocol import RECORDING_NAME_PATTERN
-from hexactl.adapters.web.bridge import RECEIVED_AT, URGENT_COMMANDS, ServiceBridge, error_reply
+from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply
 
 MAX_MESSAGE_BYTES = 64 * 1024
 """The largest WebSocket message a page may send (a command is a few hundred bytes)."""
@@ -217,9 +217,9 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket, hello: str | 
     async def reply(request_id: Any, reply: dict[str, Any]) -> None:
         await send(json.dumps({"type": "reply", "id": request_id, "reply": reply}))
 
-    async def answer(request_id: Any, cmd: str, fields: dict[str, Any]) -> None:
+    async def answer(request_id: Any, received: float, cmd: str, fields: dict[str, Any]) -> None:
         try:
-            outcome = await bridge.command(cmd, fields, browser)
+            outcome = await bridge.command(cmd, fields, browser, received)
         except Exception as error:  # every command gets a reply, whatever fails on the way
             log.exception("command %s from a page failed", cmd)
             outcome = error_reply("internal_error", f"the dashboard could not carry {cmd}: {type(error).__name__}: {error}")
@@ -248,8 +248,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket, hello: str | 
                 await reply(request_id, error_reply(
                     "busy", f"{MAX_COMMANDS_IN_FLIGHT} commands of this page are waiting: wait for their replies"))
                 continue
-            RECEIVED_AT.set(received_at)  # the command's task inherits it: its time to live counts from now
-            task = asyncio.create_task(answer(request_id, *parsed))
+            task = asyncio.create_task(answer(request_id, received_at, *parsed))  # its time to live counts from then
             in_flight.add(task)
             task.add_done_callback(in_flight.discard)
             if len(in_flight) >= MAX_READ_AHEAD:

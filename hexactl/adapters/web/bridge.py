@@ -30,7 +30,6 @@ the service validates it.
 from __future__ import annotations
 
 import asyncio
-import contextvars
 import json
 import logging
 import math
@@ -69,12 +68,6 @@ deadman (``deadman_s``): the service's default."""
 SEND_FLOOR_FRACTION = 0.05
 """A command with less than this fraction of its time to live left is not sent (it is
 answered ``expired``): the service could hardly carry it out and answer in what is left."""
-
-RECEIVED_AT: contextvars.ContextVar[float | None] = contextvars.ContextVar("received_at", default=None)
-"""When the dashboard read the page's command that the current task carries out
-(``time.monotonic()``): set by the page's reader before it starts the command's task, which
-inherits it. Unset (a download's chunk, a test's call): when :meth:`ServiceBridge.command`
-is called."""
 
 MAX_RECORD_AGE_S = 60.0
 """A record's age is reported only when the service's clock is this host's (a record
@@ -269,7 +262,6 @@ class ServiceBridge:
         # not answer would hold each record back for the request's timeout.
         self._geometry_worker = ThreadPoolExecutor(1, thread_name_prefix="dashboard-geometry")
         self._jog_deadman_s = JOG_DEADMAN_S  # the service's, from its newest jog reply
-        self._sending = threading.local()  # answer_by: the wait of the request a worker sends, if it has one
         self._fetching = threading.Event()
         self.connected = False
         self.geometry: dict[str, Any] | None = None
@@ -350,14 +342,15 @@ class ServiceBridge:
 
     # -- commands --------------------------------------------------------------------
 
-    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
+    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None,
+                      received: float | None = None) -> dict[str, Any]:
         """The API's reply to ``cmd`` with ``fields``, ok or not; an ``unavailable`` error
         reply when the service does not answer in time, ``expired`` when it was still queued
         here when its time to live was up (never sent), ``invalid_request`` for fields no
         request can carry (an urgent command's, the envelope's, a number not finite). The
         service is told it comes from the dashboard for ``browser`` (its address), so that
-        its events say who sent it. Its time to live counts from :data:`RECEIVED_AT`."""
-        received = RECEIVED_AT.get()
+        its events say who sent it. Its time to live counts from ``received``, when the
+        dashboard read it (``time.monotonic()``; None: now)."""
         received = time.monotonic() if received is None else received
         client = f"dashboard, browser {browser}" if browser else "dashboard"
         if (urgent := self._urgent.get(cmd)) is not None:
@@ -390,22 +383,20 @@ class ServiceBridge:
         None if it has expired (the event loop answers it)."""
         if not admission.take():
             return None
-        self._sending.answer_by = admission.answer_by
-        try:
-            reply = self._request(admission.cmd, admission.request_fields(time.monotonic()), admission.client)
-        finally:
-            self._sending.answer_by = None
+        now = time.monotonic()
+        reply = self._request(admission.cmd, admission.request_fields(now), admission.client,
+                              admission.answer_by - now)
         deadman = reply.get("deadman_s") if admission.cmd == "jog" and reply.get("ok") else None
         if isinstance(deadman, (int, float)) and not isinstance(deadman, bool) and 0.0 < deadman <= MAX_JOG_DEADMAN_S:
             self._jog_deadman_s = float(deadman)
         return reply
 
-    def _request(self, cmd: str, fields: dict[str, Any], client_name: str) -> dict[str, Any]:
-        """The API's reply to ``cmd``; waited for until the answer-by time of the page's
-        command this worker sends, else for the dashboard's ``--timeout``."""
+    def _request(self, cmd: str, fields: dict[str, Any], client_name: str,
+                 timeout_s: float | None = None) -> dict[str, Any]:
+        """The API's reply to ``cmd``, waited for ``timeout_s`` (a page's command: what is
+        left of its time to live), by default the dashboard's ``--timeout``."""
         endpoints = self.endpoints
-        answer_by = getattr(self._sending, "answer_by", None)
-        timeout_s = endpoints.timeout_s if answer_by is None else answer_by - time.monotonic()
+        timeout_s = endpoints.timeout_s if timeout_s is None else timeout_s
         if timeout_s <= 0.0:
             return error_reply("expired", f"{cmd} expired, not carried out: its time to live was up before it was sent")
         try:
