@@ -32,7 +32,8 @@ import pytest
 from websockets.sync.client import connect
 
 from hexactl.adapters.api.client import HexactlClient, deadline_ms
-from hexactl.adapters.web.bridge import COMMAND_WORKERS, JOG_DEADMAN_S, ServiceBridge, ServiceEndpoints
+from hexactl.adapters.web.bridge import (COMMAND_WORKERS, JOG_DEADMAN_S, MAX_JOG_DEADMAN_S, ServiceBridge,
+                                         ServiceEndpoints)
 from tests.reliability.support import enable
 from tools.browser import dashboard, page_constant
 from tools.serving import serve, spawned_children, wait_until
@@ -43,9 +44,10 @@ WAIT_S = 60.0  # bounds a hang only
 class HeldService:
     """The API as the bridge's workers reach it: each request is recorded (its command,
     fields and the client's wait) and answered only once :attr:`answers` is set, but for
-    ``estop``, answered at once; a jog's reply names ``deadman_s``."""
+    ``estop``, answered at once; a jog's reply names :attr:`deadman_s`."""
 
-    def __init__(self) -> None:
+    def __init__(self, deadman_s: float = JOG_DEADMAN_S) -> None:
+        self.deadman_s = deadman_s
         self.answers = threading.Event()
         self.sent: list[tuple[str, dict[str, Any], float]] = []
         self.lock = threading.Lock()
@@ -72,7 +74,7 @@ class HeldService:
                 self.service.sent.append((cmd, fields, self.timeout_s))
             if cmd != "estop":
                 assert self.service.answers.wait(WAIT_S), "the test never let the service answer"
-            return {"ok": True, "cmd": cmd, **({"deadman_s": JOG_DEADMAN_S} if cmd == "jog" else {})}
+            return {"ok": True, "cmd": cmd, **({"deadman_s": self.service.deadman_s} if cmd == "jog" else {})}
 
 
 @contextmanager
@@ -83,6 +85,17 @@ def bridge_to(service: HeldService, timeout_s: float) -> Iterator[ServiceBridge]
     finally:
         service.answers.set()
         bridge.close()
+
+
+async def taught_its_deadman(bridge: ServiceBridge, service: HeldService) -> None:
+    """The bridge told the service's deadman by a jog answered at once, then the service held
+    again and what it received forgotten. A long deadman (the service's bound) lets a jog
+    wait for the jog worker on a busy host: what expires then is what waits behind a held one."""
+    service.answers.set()
+    assert (await asyncio.wait_for(bridge.command("jog", {"velocity": [0, 0, 1, 0, 0, 0]}), WAIT_S))["ok"]
+    service.answers.clear()
+    with service.lock:
+        service.sent.clear()
 
 
 async def until(condition: Any, what: str) -> None:
@@ -161,10 +174,11 @@ def test_jog_renewals_queued_longer_than_the_deadman_are_never_sent_but_the_rele
     it are answered ``expired`` (the dashboard waits for them at most one deadman period)
     and never sent, the press itself was given at most one deadman; the release behind
     them all is carried out (what stops motion has no time to live), last."""
-    service = HeldService()
+    service = HeldService(deadman_s=MAX_JOG_DEADMAN_S)
     moving = {"velocity": [0, 0, 5, 0, 0, 0], "frame": "zero"}
 
     async def scenario(bridge: ServiceBridge) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+        await taught_its_deadman(bridge, service)
         press = asyncio.create_task(bridge.command("jog", moving))
         await until(lambda: service.sent, "the press sent")
         renewals = await asyncio.wait_for(asyncio.gather(*(bridge.command("jog", moving) for _ in range(3))), WAIT_S)
@@ -179,15 +193,16 @@ def test_jog_renewals_queued_longer_than_the_deadman_are_never_sent_but_the_rele
     assert release["ok"]
     assert [fields["velocity"] for _, fields, _ in service.sent] == [moving["velocity"], [0] * 6]
     (_, press, press_wait_s) = service.sent[0]
-    assert press_wait_s <= JOG_DEADMAN_S and press["deadline_ms"] <= JOG_DEADMAN_S * 1000.0
+    assert press_wait_s <= service.deadman_s and press["deadline_ms"] <= service.deadman_s * 1000.0
 
 
 def test_an_e_stop_is_carried_out_while_other_commands_are_stuck_queued() -> None:
     """Every command worker and the jog worker held by the stalled service, more queued
     behind them: the E-stop goes on its own worker, at once."""
-    service = HeldService()
+    service = HeldService(deadman_s=MAX_JOG_DEADMAN_S)
 
     async def scenario(bridge: ServiceBridge) -> dict[str, Any]:
+        await taught_its_deadman(bridge, service)
         stuck = [asyncio.create_task(bridge.command("move", {"pose": [0] * 6})) for _ in range(3 * COMMAND_WORKERS)]
         stuck += [asyncio.create_task(bridge.command("jog", {"velocity": [0, 0, 5, 0, 0, 0]})) for _ in range(3)]
         await until(lambda: len(service.sent) == COMMAND_WORKERS + 1, "every worker held")
