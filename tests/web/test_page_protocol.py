@@ -18,8 +18,8 @@ from starlette.websockets import WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.client import ServiceUnavailable, TelemetrySubscriber
 from hexactl.adapters.web.app import MAX_READ_AHEAD, _serve_page
-from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, OUTBOX_KINDS, TELEMETRY_WINDOW, Outbox, ServiceBridge,
-                                         ServiceEndpoints, UrgentCommand, Update)
+from hexactl.adapters.web.bridge import (FAN_OUT_CHUNK, MAX_JOG_DEADMAN_S, OUTBOX_KINDS, TELEMETRY_WINDOW, Outbox,
+                                         ServiceBridge, ServiceEndpoints, UrgentCommand, Update)
 
 WAIT_S = 30.0  # bounds a hang only: nothing here waits on anything but the test's own events
 
@@ -78,7 +78,8 @@ class EchoBridge:
     def unsubscribe(self, outbox: Outbox) -> None:
         pass
 
-    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
+    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None,
+                      received: float | None = None) -> dict[str, Any]:
         if cmd == "explode":
             raise RuntimeError("a dashboard bug")
         return {"ok": True, "cmd": cmd, "fields": fields, "browser": browser}
@@ -136,7 +137,8 @@ class HungBridge(EchoBridge):
         self.answer = asyncio.Event()
         self.commands: list[str] = []
 
-    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None) -> dict[str, Any]:
+    async def command(self, cmd: str, fields: dict[str, Any], browser: str | None = None,
+                      received: float | None = None) -> dict[str, Any]:
         self.commands.append(cmd)
         await self.answer.wait()
         return await super().command(cmd, fields, browser)
@@ -228,16 +230,20 @@ def test_a_flood_of_one_urgent_command_costs_one_request_at_a_time_and_delays_no
 def test_a_jogs_release_reaches_the_service_after_every_renewal_sent_before_it() -> None:
     arrived: list[list[float]] = []
 
-    def request(cmd: str, fields: dict[str, Any], client: str) -> dict[str, Any]:
+    def request(cmd: str, fields: dict[str, Any], client: str, timeout_s: float | None = None) -> dict[str, Any]:
         if any(fields["velocity"]):
             time.sleep(0.05)  # a renewal slow to connect, as on a loaded host
         arrived.append(fields["velocity"])
-        return {"ok": True}
+        return {"ok": True, "deadman_s": MAX_JOG_DEADMAN_S}
 
     bridge = ServiceBridge(ServiceEndpoints("tcp://127.0.0.1:9", "tcp://127.0.0.1:9", 0.1, connect=None))
     bridge._request = request  # type: ignore[method-assign]  # the API, as the worker calls it
 
     async def held_then_released() -> None:
+        # the service's longest deadman first: renewals slow to connect on a busy host must not
+        # expire in the dashboard's queue (tests/web/test_command_admission.py tests that)
+        await bridge.command("jog", {"velocity": [0, 0, 5, 0, 0, 0]})
+        arrived.clear()
         renewals = [bridge.command("jog", {"velocity": [0, 0, 5, 0, 0, 0]}) for _ in range(3)]
         await asyncio.gather(*renewals, bridge.command("jog", {"velocity": [0] * 6}))
 
