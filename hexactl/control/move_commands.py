@@ -16,7 +16,7 @@ from hexactl.control.planning import Plan, PlanningContext, Refusal, Waypoint, p
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
-from hexactl.control.validated_under import ValidatedUnder, changed_since_validation
+from hexactl.control.validated_under import ValidatedUnder, changed_since_validation, goal_changed
 from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
 
 
@@ -72,20 +72,22 @@ class MoveCommands:
         or the refusal. The accuracy at the goal is computed where ``accuracy_wanted`` or a
         ``tolerance_mm`` needs it."""
         frames = self._frames()
-        in_force = ValidatedUnder(calibration_id=s.active.calibration_id, frames=frames)
-        if refusal := changed_since_validation(validated_under, in_force):
+        if refusal := changed_since_validation(validated_under, s.active.calibration_id, frames):
             return refusal
         plan = self._plan(s, frames, pose, duration, speed, frame, relative)
         if not plan.ok:
             return plan_result(plan, "", s.active.home)
+        last = plan.segments[-1]
+        goal = convert(last.goal, last.frames, None, s.active.home)
+        if refusal := goal_changed(validated_under, goal.in_degrees()):
+            return refusal
         accuracy = None
         if accuracy_wanted or tolerance_mm is not None:
-            last = plan.segments[-1]
-            accuracy = predicted_accuracy(s.active, frames.tool[:3],
-                                          convert(last.goal, last.frames, None, s.active.home))
+            accuracy = predicted_accuracy(s.active, frames.tool[:3], goal)
         if refusal := tolerance_refusal(tolerance_mm, accuracy):
             return refusal
-        return _CheckedGoal(plan, accuracy, in_force)
+        return _CheckedGoal(plan, accuracy, ValidatedUnder(calibration_id=s.active.calibration_id, frames=frames,
+                                                           goal=goal.in_degrees()))
 
     def _plan(self, s: CoreSnapshot, frames: OperatorFrames, pose: Sequence[float], duration: float | None,
               speed: float | None, frame: Frame, relative: bool) -> Plan:

@@ -60,7 +60,7 @@ class ErrorCode(StrEnum):
     JOG_ENDED = "jog_ended"  # a jog renewal for a jog that is no longer under way: send jog again
     EXPIRED = "expired"  # the command's deadline had passed when the loop reached it: not carried out
     ACCURACY_INSUFFICIENT = "accuracy_insufficient"  # the predicted error at the tool point exceeds the move's tolerance
-    CHANGED_SINCE_VALIDATION = "changed_since_validation"  # a move's frames or calibration changed since it was validated
+    CHANGED_SINCE_VALIDATION = "changed_since_validation"  # a move's frames, calibration or goal changed since it was validated
     OTHER_CONTROLLER = "other_controller"  # enable: another controller drives the same actuators (its frames heard)
 
 

@@ -119,11 +119,73 @@ def test_a_move_validated_before_another_client_loaded_a_calibration_is_refused_
     tolerating_loop_stalls(scenario, lambda: framed_service.controller)
 
 
+def test_a_relative_move_validated_before_another_client_moved_the_platform_is_refused_and_nothing_moves(
+        framed_service, operators) -> None:
+    """Found from outside: a relative move starts from the target, so after another
+    client's move the same request goes elsewhere than the goal validated; the service
+    passed it on (only the frames and the calibration were checked). Its goal is checked now."""
+    first, second = operators
+
+    def scenario() -> None:
+        start = at_zero_in_frames(first)["pose_command"]
+        validation = first.call("validate_pose", pose=[10, 0, 0, 0, 0, 0], relative=True, duration=0.5)
+        under = validation["validated_under"]
+        assert under["goal"] == pytest.approx(validation["goal"], abs=1e-12)
+        assert validation["goal"][0] == pytest.approx(start[0] + 10, abs=1e-6)
+
+        second.call("move", pose=[25, 0, 0, 0, 0, 0], relative=True, duration=0.5)  # the other operator
+        wait_for(lambda: at_rest(first), "the other operator's move at its end")
+        before = status(first)
+        refused = first.request("move", pose=[10, 0, 0, 0, 0, 0], relative=True, duration=0.5, validated_under=under)
+        error = refused["error"]
+        assert error["code"] == "changed_since_validation", refused
+        assert error["details"]["changed"] == ["goal"], error
+        assert error["details"]["validated_goal"] == pytest.approx(validation["goal"], abs=1e-12), error
+        assert error["details"]["goal"][0] == pytest.approx(start[0] + 35, abs=1e-6), error
+        assert "the goal changed since this move was validated (x 10 → 35 mm)" in error["message"], error
+        after = status(first)
+        assert after["motion"] == "holding" and after["goal"] is None, after
+        assert after["pose_command"] == before["pose_command"], (before, after)
+        again = first.call("validate_pose", pose=[10, 0, 0, 0, 0, 0], relative=True, duration=0.5,
+                           validated_under=under)
+        assert not again["valid"] and again["refusal"]["details"]["changed"] == ["goal"], again
+
+        # from where it was validated, the same validation holds again
+        second.call("move", pose=[-25, 0, 0, 0, 0, 0], relative=True, duration=0.5)
+        wait_for(lambda: at_rest(first), "the other operator's move back")
+        moved = first.call("move", pose=[10, 0, 0, 0, 0, 0], relative=True, duration=0.5, validated_under=under)
+        assert moved["goal"] == pytest.approx(validation["goal"], abs=1e-6)
+        wait_for(lambda: at_rest(first), "the move's end")
+
+    tolerating_loop_stalls(scenario, lambda: framed_service.controller)
+
+
+def test_an_absolute_move_validated_before_an_estop_goes_to_the_goal_validated_once_enabled_again(
+        framed_service, operators) -> None:
+    """Its goal depends on nothing that an E-stop changes, and its path is planned anew from
+    where the platform is: the validation holds across the E-stop and the re-enable."""
+    first, _ = operators
+
+    def scenario() -> None:
+        at_zero_in_frames(first)
+        validation = first.call("validate_pose", pose=[0, 0, 0, 2, 0, 0], frame="work", duration=0.5)
+        first.call("estop")
+        recover(first)
+        moved = first.call("move", pose=[0, 0, 0, 2, 0, 0], frame="work", duration=0.5,
+                           validated_under=validation["validated_under"])
+        assert moved["goal"] == pytest.approx(validation["goal"], abs=1e-6)
+        wait_for(lambda: at_rest(first), "the move's end")
+
+    tolerating_loop_stalls(scenario, lambda: framed_service.controller)
+
+
 @pytest.mark.parametrize("validated_under, fragment", [
     ({"calibration_id": 7, "frames": {}}, "calibration_id"),
     ({"calibration_id": "abc"}, "frames"),
     ({"calibration_id": "abc", "frames": {"work": ["0", 0, 0, 0, 0, 0]}}, "work"),
-    ({"calibration_id": "abc", "frames": {}, "epoch": 3}, "epoch"),
+    ({"calibration_id": "abc", "frames": {}, "goal": [0] * 6, "epoch": 3}, "epoch"),
+    ({"calibration_id": "abc", "frames": {}}, "goal"),
+    ({"calibration_id": "abc", "frames": {}, "goal": [0, 0, 0, 0, 0]}, "goal"),
 ])
 def test_a_malformed_validated_under_is_an_invalid_request(service, validated_under, fragment) -> None:
     reply = send(service, "move", pose=[0] * 6, validated_under=validated_under)

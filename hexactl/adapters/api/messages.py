@@ -153,7 +153,8 @@ class _PoseInFrame(_Request, Paced):
                                        "predicted 1σ position error at the tool point on arrival exceeds this, mm")
     validated_under: ValidatedUnder | None = Field(
         default=None, description="validate_pose's validated_under, sent back unchanged: refuse "
-        "(changed_since_validation) if the frames, soft limits or calibration in force differ from these")
+        "(changed_since_validation) if the frames, soft limits or calibration in force differ from these, or the "
+        "move's goal from the goal validated (a relative move after the platform moved)")
 
 
 class PredictedAccuracy(BaseModel):
@@ -904,8 +905,8 @@ class ValidatePoseReply(OkReply):
         default=None, description="at the goal, when valid; null without a calibration covariance")
     refusal: ErrorBody | None = Field(description="what move would answer, when not valid")
     validated_under: ValidatedUnder | None = Field(
-        default=None, description="when valid: the calibration and the frames it was validated under; send it with "
-        "the move to have the move refused if either changed meanwhile")
+        default=None, description="when valid: the calibration and the frames it was validated under and its goal; "
+        "send it with the move to have the move refused if any of them changed meanwhile")
 
 
 class JogReply(OkReply):

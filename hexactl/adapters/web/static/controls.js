@@ -95,7 +95,8 @@ function timestampName() {
 
 /**
  * What a record shows changed since a move was validated under `under` (validate_pose's
- * validated_under: {calibration_id, frames}), named for people; [] when nothing did.
+ * validated_under: {calibration_id, frames, goal}; the goal is the service's to check),
+ * named for people; [] when nothing did.
  */
 function changedSince(under, r) {
   const same = (a, b) => JSON.stringify(a) === JSON.stringify(b);
