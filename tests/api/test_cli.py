@@ -81,6 +81,44 @@ def test_load_calibration_by_path_or_content(service, nominal, tmp_path, capsys)
     assert run(service, "rollback-calibration") == 0
 
 
+def test_load_calibration_previews_then_loads_only_what_was_previewed(service, nominal, tmp_path, capsys) -> None:
+    """As the dashboard's Preview and Apply: --preview loads nothing and names the id;
+    --expected-id loads the file only while it holds that calibration."""
+    previewed = nominal.model_copy(update={"name": "previewed"})
+    rewritten = nominal.model_copy(update={"name": "rewritten since"})
+    file = tmp_path / "cal.toml"
+    file.write_text(geometry_to_toml(previewed))
+    assert run(service, "load-calibration", str(file), "--preview") == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"ok: calibration {geometry_id(previewed)} would change the set-points by at most 0.500 mm")
+    assert f"nothing loaded: to load this very calibration, --expected-id {geometry_id(previewed)}" in out
+    assert [call[0] for call in service.controller.calls] == ["validate_calibration"]
+
+    file.write_text(geometry_to_toml(rewritten))
+    assert run(service, "load-calibration", str(file), "--expected-id", geometry_id(previewed)) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"error changed_since_validation: the text sent is calibration {geometry_id(rewritten)}, "
+                          f"not calibration {geometry_id(previewed)} as previewed"), err
+    assert service.controller.calibrations == []
+
+    file.write_text(geometry_to_toml(previewed))
+    assert run(service, "load-calibration", str(file), "--expected-id", geometry_id(previewed)) == 0
+    assert service.controller.calibrations == [geometry_id(previewed)]
+
+
+def test_load_calibration_preview_of_what_the_service_refuses_exits_one(service, capsys) -> None:
+    assert run(service, "load-calibration", "no-such-calibration.toml", "--preview") == 1
+    assert capsys.readouterr().err.startswith("error file_not_found:")
+    assert service.controller.calls == []
+
+
+def test_load_calibration_of_a_directory_here_says_so(service, tmp_path, capsys) -> None:
+    """It was sent as a name, and the service answered that no such file exists."""
+    assert run(service, "load-calibration", str(tmp_path)) == 2
+    assert f"{tmp_path}: a directory, not a calibration file: name the .toml file in it" in capsys.readouterr().err
+    assert service.controller.calls == []
+
+
 def test_save_recording(service, capsys) -> None:
     assert run(service, "play", "compound") == 0
     target = service.data_dir / "run.csv"

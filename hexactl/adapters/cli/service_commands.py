@@ -119,6 +119,14 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       "any file works, for a local or a remote service); a name that is no file here is read by the "
                       "service from its data directories")
     load.add_argument("--send", action="store_true", help="insist that FILE is read here (the default when it exists here)")
+    check = load.add_mutually_exclusive_group()
+    check.add_argument("--preview", action="store_true", help="only say whether the service would load it now, its "
+                       "calibration id and how far the set-points would change; nothing is loaded")
+    check.add_argument("--expected-id", metavar="ID",
+                       help="load it only if it is the calibration ID a --preview showed (refused "
+                       "changed_since_validation, nothing loaded, if the file was rewritten since)")
+    load.epilog = ("Preview, then apply what was previewed: hexactl load-calibration cal.toml --preview, then "
+                   "hexactl load-calibration cal.toml --expected-id ID.")
     command("rollback-calibration", "return to the calibration active before the last load", "rollback_calibration")
     save = command("save-recording", "write the last sequence's dwell records as CSV on the service's machine", _save_recording_request)
     save.add_argument("file", metavar="FILE", help="new CSV file (never overwritten): a bare name (run1.csv) goes into the "
@@ -290,9 +298,19 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
     A file too large for a request (comments, a long history) goes by its absolute path:
     the service reads it if it lies in one of its data directories, and else says which
     they are (it said "too_large", or for 2 MB nothing at all)."""
+    cmd = "validate_calibration" if arguments.preview else "load_calibration"
+    fields = _load_calibration_fields(arguments)
+    return cmd, fields if arguments.expected_id is None else {**fields, "expected_id": arguments.expected_id}
+
+
+def _load_calibration_fields(arguments: argparse.Namespace) -> dict[str, Any]:
+    """The file's ``toml`` (and ``source``), or its ``path`` for the service to read."""
     path = Path(arguments.file)
+    if path.is_dir():  # else sent as a name, and the service's "no such file" misleads
+        raise CliError(f"{arguments.file}: a directory, not a calibration file: name the .toml file in it "
+                       f"(hexactl calibrate writes calibration.toml)")
     if not (arguments.send or path.is_file()):
-        return "load_calibration", {"path": arguments.file}
+        return {"path": arguments.file}
     import json
     import tomllib  # light; only for this command
 
@@ -311,8 +329,8 @@ def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[
             raise CliError(f"{arguments.file}: too large to send ({len(text.encode())} bytes; a request carries "
                            f"{MAX_REQUEST_BYTES}): leave out --send, and put the file in one of the service's data "
                            "directories")
-        return "load_calibration", {"path": str(path.resolve())}
-    return "load_calibration", fields
+        return {"path": str(path.resolve())}
+    return fields
 
 
 # -- running -------------------------------------------------------------------------
@@ -333,15 +351,16 @@ def run_client_command(arguments: argparse.Namespace, cmd: str, fields: dict[str
         with client:
             since = newest_event_t(client) if waits else None
             reply = client.request(cmd, **fields)
+            refusal = reply.get("error") if not reply.get("ok") else reply.get("refusal")  # a validate_*'s "not valid"
             if arguments.json:
                 print(json.dumps(reply))
-            elif reply.get("ok"):
+            elif refusal is None:
                 if cmd == "status":
                     print(f"{'service':<15}{arguments.api} (from {arguments.origins['api']})")
                 print(format_ok_reply(cmd, reply, fields), flush=True)
             else:
-                print(format_error_reply(reply), file=sys.stderr)
-            if not reply.get("ok"):
+                print(format_error_reply({"error": refusal}), file=sys.stderr)
+            if refusal is not None:
                 if cmd == "estop":  # refused (loop_silent: only queued, send_failed, …): not latched
                     print(f"hexactl estop: {ESTOP_NOT_CONFIRMED}", file=sys.stderr)
                 return EXIT_REFUSED
@@ -527,7 +546,9 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
         said.append(f"{reply['waypoints']} waypoints")
     if reply.get("duration") is not None:
         said.append(f"{reply['duration']:.2f} s")
-    if "change_mm" in reply:
+    if cmd == "validate_calibration":
+        said.append(f"nothing loaded: to load this very calibration, --expected-id {reply['calibration_id']}")
+    elif "change_mm" in reply:
         said.append(f"set-points change by up to {reply['change_mm']:.3f} mm")
     if "records" in reply:
         said.append(f"{reply['records']} records of {reply['name']} ({reply['status']}) written to {reply['path']}")
