@@ -121,9 +121,10 @@ def test_a_move_validated_before_another_client_loaded_a_calibration_is_refused_
 
 def test_a_relative_move_validated_before_another_client_moved_the_platform_is_refused_and_nothing_moves(
         framed_service, operators) -> None:
-    """Found from outside: a relative move starts from the target, so after another
-    client's move the same request goes elsewhere than the goal validated; the service
-    passed it on (only the frames and the calibration were checked). Its goal is checked now."""
+    """A relative move starts from the target, so after another client's move the same
+    request goes elsewhere than the goal validated; the service passed it on (only the
+    frames and the calibration were checked; the dashboard alone withdrew Go). Its goal is
+    checked now."""
     first, second = operators
 
     def scenario() -> None:
