@@ -230,9 +230,17 @@ class IdentificationResult:
         return "χ²/dof not available (no redundant observation to test the fit against the noise model)"
 
     @property
+    def std_vector(self) -> NDArray[np.float64]:
+        """Each parameter's standard deviation, in the parameter vector's order and units;
+        infinite for a parameter the data do not determine (the covariance leaves its
+        undetermined part out, and its diagonal alone would show a small σ)."""
+        std = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+        return np.where(self.observability.undetermined, np.inf, std)
+
+    @property
     def std(self) -> StructuralParameters:
-        """Standard deviations, shaped like the parameters (mm; scale errors dimensionless)."""
-        return StructuralParameters.from_vector(np.sqrt(np.clip(np.diag(self.covariance), 0, None)), self.parameters.has_scales)
+        """:attr:`std_vector`, shaped like the parameters (mm; scale errors dimensionless)."""
+        return StructuralParameters.from_vector(self.std_vector, self.parameters.has_scales)
 
 
 def assemble_result(
@@ -322,7 +330,8 @@ def failed_result(method: Method, reason: str, status: IdentificationStatus, nom
     """A result that identified nothing (nominal parameters, infinite uncertainty)."""
     size = nominal.size
     nan = np.full(len(lines), np.nan)
-    observability = Observability(np.zeros(size), float("inf"), float("inf"), np.zeros(size), 0)
+    observability = Observability(np.zeros(size), float("inf"), float("inf"), np.zeros(size), 0,
+                                  np.ones(size, dtype=bool))
     residuals = PostureResiduals(np.asarray(lines), np.asarray(locked_leg), nan, nan, np.zeros(len(lines), dtype=bool))
     unknown = PredictedAccuracy(float("inf"), float("inf"), float("inf"), float("inf"))
     return IdentificationResult(status, method, reason, nominal, np.full((size, size), np.inf), observability,

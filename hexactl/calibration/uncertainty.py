@@ -41,6 +41,12 @@ them. Noise alone separates postures that are really one (a posture measured aga
 again) by information that pins such combinations to metres; counting them as determined
 would hide that the data hold one posture. The plausibility bounds are 60 mm."""
 
+UNDETERMINED_SHARE = 1e-4
+"""A parameter with more than this share of its unit vector in the undetermined directions
+(a component above 0.01 in one of them) is itself undetermined: such a direction is
+known no better than :data:`UNDETERMINED_STD_MM`, so the parameter no better than a
+millimetre, whatever the covariance on the determined directions says."""
+
 
 def closure_parameter_jacobian(legs: LegModel, poses: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(C, units): C (N, 6, 42) = ∂(‖T·P_i + R − B_i‖ − zero_i)/∂θ; units (N, 6, 3) leg directions.
@@ -101,7 +107,9 @@ class Observability:
 
     ``singular_values`` of the noise-whitened Jacobian (1/mm), largest first;
     ``worst_std_mm`` = 1/smallest: the standard deviation of the worst-determined parameter
-    combination ``worst_direction`` (unit vector); ``rank`` counts the determined ones.
+    combination ``worst_direction`` (unit vector); ``rank`` counts the determined ones;
+    ``undetermined`` marks each parameter the data do not determine (one in an
+    undetermined combination: :data:`UNDETERMINED_SHARE`).
     """
 
     singular_values: NDArray[np.float64]
@@ -109,6 +117,7 @@ class Observability:
     worst_std_mm: float
     worst_direction: NDArray[np.float64]
     rank: int
+    undetermined: NDArray[np.bool_]
 
     @property
     def full_rank(self) -> bool:
@@ -126,7 +135,7 @@ def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Obse
 
     The covariance is the inverse on the determined subspace (pseudo-inverse), with the
     undetermined directions (rank deficiency, or 1σ beyond :data:`UNDETERMINED_STD_MM`)
-    left out, so it must be read together with ``rank``.
+    left out, so it must be read together with ``rank`` and ``undetermined``.
     """
     information = 0.5 * (np.asarray(information, dtype=float) + np.asarray(information, dtype=float).T)
     eigenvalues, vectors = np.linalg.eigh(information)
@@ -144,6 +153,7 @@ def analyse_information(information: NDArray) -> tuple[NDArray[np.float64], Obse
         worst_std_mm=float(1.0 / smallest) if smallest > 0 else float("inf"),
         worst_direction=vectors[:, -1].copy(),
         rank=int(np.count_nonzero(determined)),
+        undetermined=(vectors[:, ~determined] ** 2).sum(axis=1) > UNDETERMINED_SHARE,
     )
     return covariance, observability
 

@@ -1,10 +1,13 @@
 """What a user is told about data that cannot calibrate as they are: the true count of
-undetermined combinations, and poses in the wrong units named as such."""
+undetermined combinations, the parameters they leave undetermined shown so, and poses in
+the wrong units named as such."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hexactl.calibration.data import MeasurementData, measured_poses, screen_measurements
 from hexactl.calibration.identification import identify
@@ -105,3 +108,57 @@ def test_the_reason_counts_the_postures_full_used_as_the_output_does(nominal, le
     result = identify(MeasurementData(data.locked_leg, data.readings_mm, data.lines, points_mm=points), nominal)
     assert result.ok and result.postures_used == len(data) - 1
     assert f"(maximum likelihood, {len(data) - 1} of {len(data)} postures; 3 mis-sighted" in result.reason
+
+
+def test_the_parameters_a_repeated_posture_leaves_undetermined_have_no_finite_sigma(tmp_path, nominal,
+                                                                                    leglock_campaign, capsys):
+    """Their covariance leaves the undetermined directions out, and its diagonal showed each
+    such parameter a σ of a few hundredths of a millimetre under status "not observable"."""
+    from hexactl.adapters.cli.main import main
+    from hexactl.adapters.files.measurements import write_measurements
+    from tests.calibration.conftest import NOMINAL_PATH
+
+    data, count = leglock_campaign.data, 20
+    noise = np.random.default_rng(0).normal(0.0, 0.25, (count, 3, 3))
+    repeated = MeasurementData(np.repeat(data.locked_leg[:1], count), np.repeat(data.readings_mm[:1], count, axis=0),
+                               np.arange(1, count + 1), points_mm=np.repeat(data.points_mm[:1], count, axis=0) + noise)
+    result = identify(repeated, nominal)
+    covariance_std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
+    assert result.observability.undetermined.sum() >= 36
+    assert np.isinf(result.std_vector[result.observability.undetermined]).all()
+    assert (covariance_std[result.observability.undetermined] < 1.0).any()  # what the table showed before
+
+    path = write_measurements(tmp_path / "repeated.csv", repeated)
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")]) == 1
+    out = capsys.readouterr().out
+    heading = out.index("deviation from nominal ± σ, mm (±∞: not determined by the data):")
+    rows = "\n".join(out[heading:].splitlines()[2:8])  # legs 1–6
+    assert rows.count("±∞") == result.observability.undetermined[:42].sum(), out[heading:]
+
+
+def test_a_campaign_that_determines_every_parameter_leaves_none_undetermined(nominal, leglock_campaign):
+    result = identify(leglock_campaign.data, nominal)
+    assert result.status is IdentificationStatus.OK
+    assert not result.observability.undetermined.any() and np.isfinite(result.std_vector).all()
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5))
+@settings(max_examples=50, deadline=None)
+def test_a_parameter_is_undetermined_exactly_when_an_undetermined_direction_reaches_it(seed, missing):
+    """Information of full rank but ``missing`` directions of a random basis: the parameters
+    with a component beyond 0.01 in those directions, and only those, are undetermined."""
+    from hexactl.calibration.uncertainty import UNDETERMINED_SHARE, analyse_information
+
+    rng = np.random.default_rng(seed)
+    size = 8
+    basis, _ = np.linalg.qr(rng.normal(size=(size, size)))
+    basis[:, :missing] *= rng.random((size, missing)) > 0.5  # some parameters out of the missing directions
+    basis, _ = np.linalg.qr(basis)  # orthonormal again, the zeros kept where whole rows are zero
+    strengths = np.r_[np.zeros(missing), rng.uniform(1.0, 100.0, size - missing)]
+    information = (basis * strengths**2) @ basis.T
+    _, observability = analyse_information(information)
+    share = (basis[:, :missing] ** 2).sum(axis=1)
+    assert observability.rank == size - missing
+    expected = share > UNDETERMINED_SHARE
+    clear = np.abs(share - UNDETERMINED_SHARE) > 1e-9  # away from the threshold, where rounding decides
+    assert (observability.undetermined[clear] == expected[clear]).all()

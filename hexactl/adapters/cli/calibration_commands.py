@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 from datetime import datetime, timezone
+from math import isfinite
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -260,6 +261,11 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     return 0
 
 
+def _sigma(std: float) -> str:
+    """A standard deviation in the parameter table: ∞ where the data do not determine it."""
+    return f"{std:.3f}" if isfinite(std) else "∞    "
+
+
 def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     import numpy as np
 
@@ -280,14 +286,14 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     print(f"predicted pose uncertainty on the paper's test motions: {p.rms_position_mm:.4f} mm, "
           f"{p.rms_orientation_deg:.5f}° RMS per axis (1σ)")
     deviation = result.parameters.to_vector() - StructuralParameters.from_geometry(nominal, result.parameters.has_scales).to_vector()
-    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
-    print("deviation from nominal ± σ, mm:")
+    std = result.std_vector
+    print("deviation from nominal ± σ, mm (±∞: not determined by the data):")
     print(f"{'leg':<4} {'base joint B x, y, z':<42} {'platform joint P x, y, z':<42} {'zero length':<18}")
     for leg in range(6):
-        cells = [f"{deviation[k]:+7.3f}±{std[k]:.3f}" for k in range(7 * leg, 7 * leg + 7)]
+        cells = [f"{deviation[k]:+7.3f}±{_sigma(std[k])}" for k in range(7 * leg, 7 * leg + 7)]
         print(f"{leg + 1:<4} {' '.join(cells[0:3]):<42} {' '.join(cells[3:6]):<42} {cells[6]:<18}")
     if result.parameters.has_scales:
-        scales = ", ".join(f"{deviation[42 + leg]:+.3f}±{std[42 + leg]:.3f}" for leg in range(6))
+        scales = ", ".join(f"{deviation[42 + leg]:+.3f}±{_sigma(std[42 + leg])}" for leg in range(6))
         print(f"sensor scale errors, mm per m of reading: {scales}")
     from hexactl.calibration.identification import extra_estimates
 

@@ -195,16 +195,17 @@ def _compound_table(before: MotionResult, after: MotionResult) -> str:
 
 def _parameter_table(result: IdentificationResult, nominal_vector: np.ndarray, true_vector: np.ndarray | None) -> str:
     estimate = result.parameters.to_vector()
-    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
+    std = result.std_vector
     names = parameter_names(result.parameters.has_scales)
     extra = "<th>true − identified</th><th>error / σ</th>" if true_vector is not None else ""
     rows = []
     for k, name in enumerate(names):
         nominal = nominal_vector[k]
-        cells = f"<td>{nominal:.3f}</td><td>{estimate[k]:.3f}</td><td>{estimate[k] - nominal:+.3f}</td><td>{std[k]:.3f}</td>"
+        sigma = f"{std[k]:.3f}" if np.isfinite(std[k]) else "not determined"
+        cells = f"<td>{nominal:.3f}</td><td>{estimate[k]:.3f}</td><td>{estimate[k] - nominal:+.3f}</td><td>{sigma}</td>"
         if true_vector is not None:
             error = true_vector[k] - estimate[k]
-            cells += f"<td>{error:+.3f}</td><td>{error / std[k] if std[k] > 0 else float('nan'):+.2f}</td>"
+            cells += f"<td>{error:+.3f}</td><td>{error / std[k] if 0 < std[k] < np.inf else float('nan'):+.2f}</td>"
         rows.append(f"<tr><th class='l'>{name}</th>{cells}</tr>")
     return ("<p>mm; scale errors in mm per metre of reading.</p><table><tr><th class='l'>parameter</th><th>nominal</th>"
             f"<th>identified</th><th>deviation</th><th>σ</th>{extra}</tr>{''.join(rows)}</table>")

@@ -62,7 +62,7 @@ def parameters_figure(result: IdentificationResult, nominal_vector: np.ndarray, 
     geometric = slice(0, 6 * PARAMETERS_PER_LEG)  # the gains, in another unit, are in the table only
     estimate, nominal_vector = result.parameters.to_vector()[geometric], nominal_vector[geometric]
     true_vector = None if true_vector is None else true_vector[geometric]
-    std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))[geometric]
+    std = result.std_vector[geometric]
     deviation = estimate - nominal_vector
     figure = Figure(figsize=(10, 7))
     axes = figure.subplots(3, 1)
@@ -70,8 +70,9 @@ def parameters_figure(result: IdentificationResult, nominal_vector: np.ndarray, 
     for ax, (title, columns, labels) in zip(axes, groups):
         index = np.array([PARAMETERS_PER_LEG * leg + c for leg in range(6) for c in range(columns.start, columns.stop)])
         x = np.arange(len(index))
-        ax.errorbar(x, deviation[index], yerr=2 * std[index], fmt="o", color="#1f77b4", ms=4, capsize=2,
-                    label="identified − nominal (±2σ)")
+        bars = np.where(np.isfinite(std[index]), 2 * std[index], np.nan)  # no bar where undetermined
+        ax.errorbar(x, deviation[index], yerr=bars, fmt="o", color="#1f77b4", ms=4, capsize=2,
+                    label="identified − nominal (±2σ; none: not determined)")
         if true_vector is not None:
             ax.plot(x, true_vector[index] - nominal_vector[index], "x", color="#d62728", label="true − nominal")
         ax.axhline(0, color="k", linewidth=0.6)
