@@ -267,6 +267,23 @@ def test_an_output_that_is_a_folder_is_refused_naming_it(tmp_path, capsys) -> No
     assert f"{tmp_path} is a folder: name the file to write" in capsys.readouterr().err
 
 
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize("argv", [
+    ["calibrate", "{data}", "-o", "/proc/hexactl-cal.toml"],
+    ["simulate-campaign", "-o", "/proc/hexactl-data.csv"],
+])
+def test_a_place_that_takes_no_file_is_named_before_any_work(argv, tmp_path, capsys) -> None:
+    """Found from outside: /proc passes the permission check (as root, any folder does) and
+    refuses every file; the identification ran first, then its result was not written."""
+    data = tmp_path / "data.csv"  # measurements that calibrate: the work would start
+    assert exits_with(["simulate-campaign", "-o", str(data), "--per-leg", "10"]) == 0
+    capsys.readouterr()
+    assert exits_with([word.format(data=data) for word in argv]) == 2
+    captured = capsys.readouterr()
+    assert f"cannot write {argv[-1]}" in captured.err and "choose another place" in captured.err, captured.err
+    assert captured.out == ""
+
+
 def test_a_folder_without_write_permission_is_named(tmp_path, monkeypatch, capsys) -> None:
     """Root may write anywhere, so the permission the check asks for is stubbed."""
     asked = []

@@ -275,6 +275,13 @@ def check_writable(path: Path, *, folder: bool = False) -> None:
         raise CliError(f"cannot write {path}: {existing} is a file, not a folder; choose another place")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise CliError(f"cannot write {path}: no permission to write into {existing}; choose another place")
+    import tempfile  # only where a command writes: the start-up of the others stays light
+
+    try:  # a read-only file system, or one like /proc, passes os.access (as root, always): try it
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as error:
+        raise write_failed(path, error) from None
 
 
 def write_failed(path: str | os.PathLike[str], error: OSError) -> CliError:
