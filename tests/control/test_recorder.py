@@ -256,3 +256,53 @@ def test_a_recording_on_a_full_disk_is_refused_saying_so(recordings, tmp_path, m
         recordings.start("full", duration_s=1.0)
     assert refused.value.code == "write_failed"
     assert not (tmp_path / "full.csv.partial").exists() and recordings.state()["state"] == "idle"
+
+
+@pytest.mark.parametrize("tamper, problem", [
+    (lambda partial: partial.unlink(), "removed while it was being written, and its rows with it"),
+    (lambda partial: partial.write_text(""), "changed while it was being written ("),
+])
+def test_a_csv_removed_or_emptied_under_the_recorder_ends_write_failed_and_the_next_recording_is_written(
+        rig, recordings, tmp_path, tamper, problem):
+    """Found from outside: a .csv.partial deleted mid-recording made the finish's rename
+    raise, which ended the writer's thread; every later recording was then accepted and
+    lost (0 rows), until a restart. One emptied by hand was renamed NAME.csv without its
+    header while its side file promised every row."""
+    recordings.start("gone", duration_s=0.2)
+    rig.run(20)
+    recordings.poll()
+    tamper(tmp_path / "gone.csv.partial")
+    side = _finish(rig, recordings)
+    assert side["ended"] == "write_failed", side
+    assert side["write_error"].startswith(f"{tmp_path / 'gone.csv.partial'}: {problem}"), side["write_error"]
+    assert "by someone else" in side["write_error"]
+    assert side["csv"] == str(tmp_path / "gone.csv.partial") and not (tmp_path / "gone.csv").exists()
+    assert json.loads((tmp_path / "gone.json").read_text()) == side
+
+    recordings.start("next", duration_s=0.05)
+    side = _finish(rig, recordings)
+    assert side["ended"] == "duration" and "write_error" not in side, side
+    assert len((tmp_path / "next.csv").read_text().splitlines()) == 1 + side["rows_written"] == 26
+
+
+def test_a_csv_that_cannot_take_its_final_name_keeps_its_partial_one_with_all_its_rows(rig, recordings, tmp_path,
+                                                                                        monkeypatch):
+    """A file system without hard links (EPERM) raised from the finish, as a removal did."""
+    recordings.start("nolinks", duration_s=0.05)
+
+    def no_links(*arguments, **options):
+        raise PermissionError(errno.EPERM, os.strerror(errno.EPERM))
+
+    monkeypatch.setattr(os, "link", no_links)
+    side = _finish(rig, recordings)
+    assert side["ended"] == "duration" and "write_error" not in side, side
+    assert side["csv"] == str(tmp_path / "nolinks.csv.partial")
+    assert len((tmp_path / "nolinks.csv.partial").read_text().splitlines()) == 1 + side["rows_written"] == 26
+
+
+def test_an_interrupted_recordings_rows_are_not_called_a_file_to_remove(recordings, tmp_path):
+    (tmp_path / "run7.csv.partial").write_text("t_s,cycle\n0.0,1\n")
+    with pytest.raises(ApiError, match=r"run7.csv.partial exists; a recording never overwrites a file: the rows of a "
+                       r"recording the service was stopped in .*rename it") as exists:
+        recordings.start("run7")
+    assert exists.value.code == "file_exists" and "remove" not in exists.value.message

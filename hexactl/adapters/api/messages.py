@@ -1030,8 +1030,9 @@ class RecordingSideFile(_Message):
         description="duration reached, stopped (record_stop), shutdown of the service, fault (the loop died), or "
         "write_failed (the CSV could not be written: see write_error)")
     columns: list[dict[str, str]] = Field(description="each CSV column's name and unit")
-    write_error: str | None = Field(default=None, description="why the CSV could not be written whole (a full disk): "
-                                    "it keeps its name NAME.csv.partial and lacks the rows from then on")
+    write_error: str | None = Field(default=None, description="why the CSV could not be written whole (a full disk; "
+                                    "or it was removed or changed by someone else while it was written): it keeps its "
+                                    "name NAME.csv.partial, if it is still there, and lacks rows")
     side_file_error: str | None = Field(default=None, description="why the side file could not be written")
 
 

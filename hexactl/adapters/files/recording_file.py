@@ -107,8 +107,11 @@ class RecordingFile:
         try:
             for existing in (f"{name}.csv", f"{name}.json", f"{name}.csv.partial"):
                 if _exists(existing, descriptor):
+                    what = ("the rows of a recording the service was stopped in (killed, or its host went down): "
+                            "rename it (to a name ending .csv, to plot it) to keep them, or choose another name"
+                            if existing.endswith(".partial") else "choose another name or remove that file")
                     raise RecordingFileError("file_exists", f"{directory / existing} exists; a recording never "
-                                             "overwrites a file: choose another name or remove that file")
+                                             f"overwrites a file: {what}")
             handle = os.fdopen(os.open(f"{name}.csv.partial", os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
                                        | os.O_APPEND | os.O_CLOEXEC, 0o666, dir_fd=descriptor), "wb", buffering=0)
         except RecordingFileError:
@@ -175,31 +178,47 @@ class RecordingFile:
 
     def finish(self, description: Mapping[str, Any], write_error: OSError | None = None) -> dict[str, Any]:
         """Close the CSV, move it to ``NAME.csv`` (kept under its partial name if a file of
-        that name appeared meanwhile) and write ``NAME.json``: ``description`` with the
-        CSV's path (``csv``) and ``columns``. Returns the side file's content, with
-        ``side_file_error`` if it could not be written (the CSV stands). After a write that
-        failed (``write_error``, or one here: a full disk) the rows are not all in the CSV:
-        it keeps its partial name and the side file says why (``write_error``)."""
+        that name appeared meanwhile, or the file system makes no hard links) and write
+        ``NAME.json``: ``description`` with the CSV's path (``csv``) and ``columns``.
+        Returns the side file's content, with ``side_file_error`` if it could not be
+        written (the CSV stands). After a write that failed (``write_error``, or one here:
+        a full disk), or a CSV removed or changed by someone else while it was written, the
+        rows are not all in it: it keeps its partial name, and the side file says why
+        (``write_error``) and ends ``write_failed``."""
         handle, descriptor = self._handle, self._descriptor
+        tampered = None
         try:
             os.fsync(handle.fileno())
+            status = os.fstat(handle.fileno())
         except OSError as error:
             write_error = write_error or error
+        else:
+            if status.st_nlink == 0:
+                tampered = "removed while it was being written, and its rows with it"
+            elif status.st_size != self._size:
+                tampered = (f"changed while it was being written ({status.st_size} bytes in it, {self._size} "
+                            "written): rows are missing or not the recorder's")
         try:
             handle.close()
         except OSError:  # unbuffered: nothing left to write; the fsync said whether it all got there
             pass
         path = self.path
         failed = {}
-        if write_error is not None:
+        if write_error is not None or tampered is not None:
             path = self.directory / self._partial
-            failed["write_error"] = (f"{path}: {write_error.strerror or write_error}: the rows after those in it are "
-                                     f"not recorded; free some space in {self.directory}")
+            why = (f"{tampered} (by someone else: the recorder never rewrites its file)" if tampered else
+                   f"{write_error.strerror or write_error}: the rows after those in it are not recorded; free some "
+                   f"space in {self.directory}")
+            failed = {"write_error": f"{path}: {why}", "ended": "write_failed"}
         else:
             try:
                 os.link(self._partial, path.name, src_dir_fd=descriptor, dst_dir_fd=descriptor, follow_symlinks=False)
                 os.unlink(self._partial, dir_fd=descriptor)
-            except FileExistsError:
+            except FileNotFoundError:  # removed after the check above
+                path = self.directory / self._partial
+                failed = {"write_error": f"{path}: removed while the recording ended, and its rows with it",
+                          "ended": "write_failed"}
+            except OSError:  # a file of that name appeared meanwhile, or no hard links here: all the rows, as named
                 path = self.directory / self._partial
         side = {**description, "csv": str(path), **failed,
                 "columns": [{"name": name, "unit": unit} for name, unit in columns(self._signals)]}
