@@ -103,9 +103,9 @@ class StreamFollower:
 
     @property
     def braking_limits(self) -> MotionLimits | None:
-        """The limits to brake a following stream under (its own, which its receiver's
-        reachability check assumed); None when no stream is following."""
-        return self._limits if self.open else None
+        """The limits to brake a stream under (its own, which its receiver's reachability
+        check assumed); None when no stream is under way."""
+        return self._limits if self.progress is not None else None
 
     def start(self, stream: int, source: str, frame: str, timeout_ns: int, now_ns: int) -> None:
         """Stream ``stream`` starts (the trajectory at rest where it begins)."""

@@ -167,6 +167,7 @@ class PoseTrajectory:
         self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
         self._active = False
         self._passing = False  # heading for a goal to pass at a velocity (a stream's)
+        self._passing_limits = limits  # the limits of that goal's plan: its brake's too
         self._to_goal = False  # a move to :attr:`goal`, arriving at rest there (move_to)
         self._stopping = False  # halted, on the move's own stop at its goal (see halt)
         self.frames: Frames | None = None
@@ -273,6 +274,7 @@ class PoseTrajectory:
         goal ruckig refuses shows as this cycle's :attr:`StepResult.ERROR`."""
         parameters = self._input
         configure_input(parameters, limits, goal)
+        self._passing_limits = limits
         parameters.max_velocity = list(max_velocity)
         parameters.target_velocity = list(velocity)
         self._passing = any(velocity)
@@ -283,15 +285,19 @@ class PoseTrajectory:
 
     def halt(self, limits: MotionLimits | None = None) -> None:
         """Brake smoothly to rest (acceleration and jerk limited, by ``limits``, default
-        the motion's) wherever that ends; but never beyond the goal of a move under way.
+        the motion's) wherever that ends; but never beyond the goal of a move under way,
+        and a brake under way goes on as it is.
 
         Why: the halt's duration is rounded up to the loop's time grid, and a brake
         stretched by up to a cycle can travel farther than the move's own stop: released
         in its deceleration, a jog onto a soft limit came to rest 0.011 mm past it. The
         move's remaining path was validated (every limit holds on it) and ends at rest on
         its goal, so when braking would carry an axis beyond it, the move goes on instead
-        (:attr:`halting` all the same): that stop is the shorter one."""
-        if not self._active or self._stopping:
+        (:attr:`halting` all the same): that stop is the shorter one. A brake planned
+        again, under other limits, can be the longer one: a stop sent while a stream
+        braked under its own, stronger limits took the platform 351 mm on instead of 95,
+        out of the workspace."""
+        if not self._active or self._stopping or self.goal is None:
             return
         if self._to_goal and _beyond_goal(self.state(), self.goal, limits or self.limits, self.period_s):
             self._stopping = True
@@ -319,7 +325,10 @@ class PoseTrajectory:
             return StepResult.ERROR
         self._output.pass_to_input(self._input)
         if result == Result.Finished and self._passing:
-            self.halt()  # passed a stream's target with no newer one: brake from there
+            # passed a stream's target with no newer one: brake from there under the
+            # stream's limits, which its reachability check assumed (the motion's, weaker,
+            # carried a stream 58 mm beyond the workspace)
+            self.halt(self._passing_limits)
             return StepResult.WORKING
         if result == Result.Finished:
             # Park so that later updates are no-ops: on the goal itself, where the planner

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from hexactl.control.frames import OperatorFrames
 from hexactl.control.stream import FIRST_TARGET_WAIT_NS
-from hexactl.control.stream_commands import leg_rates, stream_velocity_limits
+from hexactl.control.stream_commands import HORIZON_S, leg_rates, stream_velocity_limits
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_pose
@@ -307,3 +307,46 @@ def test_a_stream_in_a_work_frame_turned_180_degrees_holds_yaw_180_where_it_is(r
     assert not any(r.clamped for r in results)
     assert rig.controller.snapshot.pose_command.in_degrees()[5] == pytest.approx(1, abs=1e-6)
     rig.assert_setpoints_safe()
+
+
+def _rest_after_a_ramp(rig, end_with, timeout_s: float = 0.1) -> float:
+    """x (mm) where the platform of a fresh ``rig`` comes to rest after a stream ramped x
+    at 200 mm/s for 0.6 s from the zero posture, then ``end_with(rig)`` at once."""
+    _opened(rig, timeout_s=timeout_s)
+    step = 200.0 / (1e9 / rig.period_ns)
+    _stream(rig, [(step * n, 0, 0, 0, 0, 0) for n in range(round(0.6e9 / rig.period_ns))])
+    end_with(rig)
+    rig.run_until(lambda: rig.controller.snapshot.stream is None, limit=round(10e9 / rig.period_ns))
+    rig.settle()
+    s = rig.controller.snapshot
+    assert s.motion.value == "holding" and s.clamped_cycles == 0, s
+    return s.pose_command[0]
+
+
+def test_a_stop_while_a_stream_brakes_does_not_lengthen_its_brake(make_rig) -> None:
+    """Found from outside: stream_close, then stop, planned the brake again under the
+    moves' limits, weaker than the stream's: from 400 mm/s the platform went on 351 mm
+    instead of 95, out of the workspace, the guard clamping legs on their stroke."""
+    closed = _rest_after_a_ramp(make_rig(), lambda r: r.controller.stream_close())
+
+    def close_then_stop(r) -> None:
+        assert r.controller.stream_close().ok
+        r.run(5)
+        assert r.controller.stop().ok
+
+    assert _rest_after_a_ramp(make_rig(), close_then_stop) == pytest.approx(closed, abs=1e-9)
+    stopped = _rest_after_a_ramp(make_rig(), lambda r: r.controller.stop())
+    assert stopped == pytest.approx(closed, abs=1e-9)  # the same brake, on the stream's limits
+
+
+def test_a_sender_that_falls_silent_brakes_under_the_streams_limits_whatever_its_timeout(make_rig) -> None:
+    """Found from outside: passed its last target, the generator braked under the moves'
+    limits until the timeout braked it again under the stream's: with a 3 s timeout a
+    stream stopped 58 mm beyond the workspace (its receiver checks the stream's brake)."""
+    rig = make_rig()
+    long = _rest_after_a_ramp(rig, lambda r: None, timeout_s=3.0)
+    speed, last = 200.0, 200.0 * (round(0.6e9 / rig.period_ns) - 1) * rig.period_ns / 1e9  # mm/s, mm
+    acceleration, jerk = rig.controller.config.stream.max_acceleration[0], rig.controller.config.stream.max_jerk[0]
+    # what the receiver checked: the aim a horizon on, then the stream's brake (a cycle's rounding)
+    checked = last + speed * HORIZON_S + speed**2 / (2 * acceleration) + speed * acceleration / (2 * jerk)
+    assert long <= checked + speed * rig.period_ns / 1e9, (long, checked)
