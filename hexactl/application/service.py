@@ -264,11 +264,28 @@ class Service:
         once the API process serves (clients may enable the actuators from then on):
         :func:`run_service` stops ending the process at once on a signal then.
 
-        :raises ServiceError: for a refused geometry or key file, kept files another
-            service holds, a bus that cannot be opened or an endpoint that cannot be bound
+        :raises ServiceError: for a refused geometry or key file, two options naming one
+            file, a kept file that is a link to nothing, kept files another service holds,
+            a bus that cannot be opened or an endpoint that cannot be bound
         :raises ~hexactl.adapters.api.security.SecurityError: for a non-loopback endpoint
             without CURVE keys
         """
+        # The files first: nothing is read, bound or written before their names are known good.
+        config_path = config.config_path or default_config_path()
+        frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
+        kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
+        _refuse_shared_files(config, config_path, frames_path, kept_path)
+        kept_files = ((kept_path, "the calibration in force", "--keep-calibration", "the nominal geometry"),
+                      (frames_path, "the operator's frames", "--frames", "no frames and no soft limits"))
+        for path, what, option, without in kept_files:
+            if not path.parent.is_dir():  # a mistyped directory: nothing could be kept there, nor read back
+                raise ServiceError(f"{option} {path}: no such directory {path.parent} to keep {what} in; create it, "
+                                   f"or correct {option}")
+            if path.is_symlink() and not path.exists():  # not "nothing kept": the file is elsewhere, out of reach
+                raise ServiceError(f"{option} {path}: a symbolic link to {os.path.realpath(path)}, which is not there "
+                                   f"(a disk not mounted?): {what} kept there can be neither restored nor kept; "
+                                   f"mount or restore the link's target, or remove the link to start with {without}")
+
         # The stream's ZeroMQ socket steers the platform as the API does (UDP is warned of below).
         given = (("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
                  ("--stream", config.stream_endpoint))
@@ -295,21 +312,11 @@ class Service:
                 check_bindable(endpoint)
             except zmq.ZMQError as error:  # it names the endpoint
                 raise ServiceError(f"{option}: cannot serve: {error}") from None
-        config_path = config.config_path or default_config_path()
         nominal = _load(config_path)
-        frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
-        kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
-
-        kept_files = ((kept_path, "the calibration in force", "--keep-calibration"),
-                      (frames_path, "the operator's frames", "--frames"))
-        for path, what, option in kept_files:
-            if not path.parent.is_dir():  # a mistyped directory: nothing could be kept there, nor read back
-                raise ServiceError(f"{option} {path}: no such directory {path.parent} to keep {what} in; create it, "
-                                   f"or correct {option}")
 
         # Unwound in reverse: API, bring to rest, telemetry, loop, link, simulator, the kept files.
         with ExitStack() as closers:
-            for path, what, _ in kept_files:
+            for path, what, _, _ in kept_files:
                 try:  # before they are read, and before the actuators open
                     closers.callback(hold(path, what).release)
                 except HeldByAnother as error:
@@ -724,6 +731,55 @@ def _pose_text(pose: tuple[float, ...] | None) -> str:
     if pose is None:
         return "unknown"
     return ", ".join(f"{axis} {value:.3f} {unit}" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, pose))
+
+
+_KEPT_FOR_A_RESTART = {"--frames": "the operator's frames", "--keep-calibration": "the calibration in force"}
+"""The files serve writes (and, the calibration's, removes), by option: what each keeps."""
+_READ_AT_START = {"--config": "the nominal geometry", "--calibration": "the calibration to start with"}
+"""The files serve only reads, by option: what each holds."""
+
+
+def _refuse_shared_files(config: ServiceConfig, config_path: Path, frames_path: Path, kept_path: Path) -> None:
+    """Refuse a file serve writes that another of its options names too, by any name (a
+    relative path, a symbolic or hard link): a geometry restored as the kept calibration
+    from the ``--config`` file is the nominal one, and the kept file, "nothing to keep",
+    was removed; ``--frames`` and ``--keep-calibration`` would overwrite each other.
+
+    :raises ServiceError: naming both options, the file and what to do
+    """
+    files = [("--config", config_path, config.config_path is not None)]
+    if config.calibration_path is not None:
+        files.append(("--calibration", config.calibration_path, True))
+    files += [("--frames", frames_path, config.frames_path is not None),
+              ("--keep-calibration", kept_path, config.kept_calibration_path is not None)]
+    for (option, path, given), (other, other_path, other_given) in combinations(files, 2):
+        if (option in _READ_AT_START and other in _READ_AT_START) or not _same_file(path, other_path):
+            continue
+        both = (f"{_option_text(option, path, given)} and {_option_text(other, other_path, other_given)} name the "
+                f"same file, {os.path.realpath(path)}")
+        if option in _READ_AT_START:
+            raise ServiceError(f"{both}: the service rewrites or removes {other}'s file to keep "
+                               f"{_KEPT_FOR_A_RESTART[other]} for a restart, and would destroy "
+                               f"{_READ_AT_START[option]} in it; give {other} a file of its own, or copy the file and "
+                               f"give the copy to {option}")
+        raise ServiceError(f"{both}: the service keeps {_KEPT_FOR_A_RESTART[option]} and "
+                           f"{_KEPT_FOR_A_RESTART[other]} for a restart, and each would overwrite the other; give each "
+                           "option a file of its own")
+
+
+def _option_text(option: str, path: Path, given: bool) -> str:
+    return f"{option} {path}" if given else f"{option} (default {path})"
+
+
+def _same_file(path: Path, other: Path) -> bool:
+    """Whether two names lead to one file: resolved alike (relative paths, symbolic links,
+    even to a file not there yet), or one file under two hard links."""
+    if os.path.realpath(path) == os.path.realpath(other):
+        return True
+    try:
+        return os.path.samefile(path, other)
+    except OSError:  # one of them is not there (yet): resolved apart, they are two files
+        return False
 
 
 def _restored_frames(path: Path) -> OperatorFrames:

@@ -70,6 +70,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 def _signals(text: str) -> list[str]:
     signals = [part.strip() for part in text.split(",") if part.strip()]
+    if not signals:  # an empty list would be dropped, and all of them recorded
+        raise argparse.ArgumentTypeError(f"name at least one signal (leave --signals out to record all): "
+                                         f"choose among {','.join(SIGNALS)}")
     if unknown := [s for s in signals if s not in SIGNALS]:
         raise argparse.ArgumentTypeError(f"unknown {', '.join(unknown)}: choose among {','.join(SIGNALS)}")
     return signals
@@ -86,7 +89,7 @@ def record_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     name = arguments.name[:-4] if arguments.name.endswith(".csv") else arguments.name
     fields: dict[str, Any] = {"name": name, "duration_s": arguments.duration, "frame": arguments.frame,
                               "divisor": arguments.divisor, "start": "next_motion" if arguments.on_motion else "now"}
-    if arguments.signals:
+    if arguments.signals is not None:
         fields["signals"] = arguments.signals
     return "record", fields
 
@@ -195,14 +198,15 @@ def run_plot(arguments: argparse.Namespace) -> int:
     figure, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(10, 2.6 * len(panels)), squeeze=False)
     for axis, (title, names) in zip(axes[:, 0], panels):
         # a pose's mm on the left axis, its degrees on a right one; each legend on its side
-        for side, unit in enumerate(dict.fromkeys(name.rsplit("_", 1)[1] for name in names)):
-            target = axis.twinx() if side else axis
-            colours = iter(plt.rcParams["axes.prop_cycle"].by_key()["color"][3 * side:])
+        for unit_index, unit in enumerate(dict.fromkeys(name.rsplit("_", 1)[1] for name in names)):
+            on_the_right = unit_index > 0
+            target = axis.twinx() if on_the_right else axis
+            colours = iter(plt.rcParams["axes.prop_cycle"].by_key()["color"][3 * unit_index:])
             for name in (n for n in names if n.endswith(f"_{unit}")):
                 target.plot(time_s, columns[header.index(name)], linewidth=0.8, color=next(colours),
                             label=name.rsplit("_", 1)[0].split("_")[-1])
             target.set_ylabel(f"{title} ({_UNITS.get(unit, unit)})")
-            target.legend(loc="upper right" if side else "upper left", fontsize="x-small", ncol=3)
+            target.legend(loc="upper right" if on_the_right else "upper left", fontsize="x-small", ncol=3)
         axis.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time (s)")
     figure.suptitle(_title(path, side))

@@ -488,7 +488,8 @@ def run_serve(arguments: argparse.Namespace) -> int:
         restored.append(("--keep-calibration", arguments.keep_calibration,
                          "the nominal geometry (a calibration loaded is kept there)"))
     for option, named, what in restored:
-        if named is not None and named.parent.is_dir() and not named.exists():  # a missing directory refuses the start
+        # A missing directory, or a link to nothing (a disk not mounted), refuses the start.
+        if named is not None and named.parent.is_dir() and not named.exists() and not named.is_symlink():
             # The first start with a new file is legitimate; a mistyped name must not pass unseen.
             print(f"hexactl serve: {option} {named}: no such file yet: starting with {what}; if you meant another "
                   "file, stop the service and correct the name", file=sys.stderr)
