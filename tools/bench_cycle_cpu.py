@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import itertools
+import math
 import statistics
 import sys
 import time
@@ -56,6 +57,12 @@ WAVES = {
 beside ``turns``' moves; ``wave_tool`` a roll about the pivot of :data:`PIVOT`, beside ``frames``."""
 PIVOT = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0))
 """The ``frames`` scenario's: a tool point 300 mm above the platform, the work frame on it."""
+
+STREAMS = {"stream": (10.0, 0.5)}
+"""A pose stream (issue 15): a 1 Hz sine, x 10 mm and roll 0.5°, one target each cycle,
+handed over before the step (the receiver's planning, in the caller's thread, is not
+counted), so that every step recalculates the generator's plan to pass a new target."""
+
 
 
 class _Clock:
@@ -96,10 +103,18 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
         _expect(controller.set_frames(PIVOT))
     if scenario == "recording":
         _expect(controller.record(1, "bench", 1, 1 << 40))
+    if scenario in STREAMS:
+        _expect(controller.stream_open("bench", timeout_s=10.0))
+        step()
     goals = itertools.cycle(TOURS.get(scenario, ()))
     spent_ns = 0
-    for _ in range(cycles):
-        if scenario in WAVES:
+    for n in range(cycles):
+        if scenario in STREAMS:
+            amplitude_mm, amplitude_deg = STREAMS[scenario]
+            phase = math.sin(2 * math.pi * n * period_ns / 1e9)
+            controller.stream_target((amplitude_mm * phase, 0, 0, amplitude_deg * phase, 0, 0), n + 1,
+                                     (clock.now_ns + period_ns) / 1e9, clock.now_ns + period_ns)
+        elif scenario in WAVES:
             if controller.snapshot.motion.value == "holding":
                 _expect(controller.wave(WAVES[scenario]))
         elif scenario in ("frames", "turns", "recording"):  # moves one after the other: a sequence's waypoints are in the zero frame
@@ -127,7 +142,8 @@ def _expect(result) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenario", choices=sorted(TOURS | WAVES), nargs="+", default=sorted(TOURS | WAVES))
+    parser.add_argument("--scenario", choices=sorted(TOURS | WAVES | STREAMS), nargs="+",
+                        default=sorted(TOURS | WAVES | STREAMS))
     parser.add_argument("--rounds", type=int, default=8)
     parser.add_argument("--cycles", type=int, default=5000, help="cycles per round")
     parser.add_argument("--calls", action="store_true", help="count Python calls per cycle instead (one round)")

@@ -165,6 +165,7 @@ class PoseTrajectory:
         self._input = InputParameter(DOFS)
         self._output = OutputParameter(DOFS)
         self._step = functools.partial(self._ruckig.update, self._input, self._output)  # made once: update() runs every cycle
+        self._resting_check = (Ruckig(DOFS, period_s), InputParameter(DOFS), Trajectory(DOFS))  # _beyond_resting_plan
         self._active = False
         self._passing = False  # heading for a goal to pass at a velocity (a stream's)
         self._passing_limits = limits  # the limits of that goal's plan: its brake's too
@@ -270,8 +271,10 @@ class PoseTrajectory:
         of ``limits`` and the per-axis ``max_velocity`` (mm/s, rad/s; ``velocity`` within
         it). Reached before a newer target comes, the generator brakes to rest from there
         (the stream's receiver checked that where that ends is reachable). Unlike
-        :meth:`move_to` nothing is previewed: the next target comes a cycle later, and a
-        goal ruckig refuses shows as this cycle's :attr:`StepResult.ERROR`."""
+        :meth:`move_to` nothing is previewed here: the next target comes a cycle later.
+        :meth:`update` arrives at rest on the goal instead when ruckig refuses to pass it,
+        or its plan to pass it would back up or overshoot beyond where arriving at rest
+        goes (:func:`_beyond_resting_plan`)."""
         parameters = self._input
         configure_input(parameters, limits, goal)
         self._passing_limits = limits
@@ -313,6 +316,11 @@ class PoseTrajectory:
         # ruckig recalculates only when the input changed since its last calculation: once
         # per new target (twice when the jerk retry is needed), not every cycle.
         result = _calculate(self._input, self._step)
+        if result is not None and self._passing and self._output.new_calculation \
+                and _beyond_resting_plan(self._input, self._output.trajectory, self._resting_check):
+            # the plan to pass the target at its velocity backs up (or overshoots) beyond anything the
+            # stream's receiver checked: arrive at rest on it instead (below), as a refused one does
+            result = None
         if result is None and self._passing:
             # ruckig refuses some (position, velocity, minimum duration) targets from some
             # states; a stream's next target comes a cycle later: arrive at rest on this one.
@@ -336,6 +344,41 @@ class PoseTrajectory:
             self.reset(self.goal if self.goal is not None else self.position)
             return StepResult.FINISHED
         return StepResult.WORKING
+
+
+def _beyond_resting_plan(parameters: InputParameter, plan: Trajectory,
+                         check: tuple[Ruckig, InputParameter, Trajectory]) -> bool:
+    """Whether ``plan``, just calculated from ``parameters`` to pass their target position at
+    their target velocity (a stream's target), goes on some axis beyond both the span from
+    its start to the target and where arriving at rest on the target (from the same state,
+    under the same limits) would go. ``check`` (a generator, an input and a trajectory)
+    calculates that arrival, only when the plan leaves the span.
+
+    Why: ruckig reaches a target velocity it has no room to reach ahead by backing up
+    first. A stream's receiver checks the way from its last target to the aim and where
+    braking from the aim ends, not such a detour: a stream coming back inside after being
+    held at rest on the boundary went 12 mm beyond it (x at 610 mm, aiming inwards at
+    320 mm/s, the plan backed up to 634), and a ramp from rest went 3 mm backwards first.
+    Arriving at rest on the target goes no further than the span and the generator's own
+    braking, as for any target without velocity."""
+    start, goal = parameters.current_position, parameters.target_position
+    extrema = plan.position_extrema
+    tolerance = NEGLIGIBLE[0]
+    if all(min(s, g) - tolerance <= e.min and e.max <= max(s, g) + tolerance
+           for s, g, e in zip(start, goal, extrema)):
+        return False  # the usual case: no calculation more
+    generator, resting, trajectory = check
+    resting.current_position, resting.current_velocity, resting.current_acceleration = (
+        start, parameters.current_velocity, parameters.current_acceleration)
+    resting.target_position, resting.target_velocity, resting.target_acceleration = goal, _ZERO6, _ZERO6
+    resting.max_velocity, resting.max_acceleration, resting.max_jerk = (
+        parameters.max_velocity, parameters.max_acceleration, parameters.max_jerk)
+    resting.synchronization, resting.duration_discretization = Synchronization.Phase, DurationDiscretization.Discrete
+    resting.control_interface, resting.minimum_duration = ControlInterface.Position, None
+    if _calculate(resting, lambda: generator.calculate(resting, trajectory)) is None:
+        return True  # no arrival to compare with: the detour is not allowed
+    return any(e.min < min(s, g, r.min) - tolerance or e.max > max(s, g, r.max) + tolerance
+               for s, g, e, r in zip(start, goal, extrema, trajectory.position_extrema))
 
 
 def _beyond_goal(start: KinematicState, goal: RelativeMmRad | ToolInWorkMmRad | None, limits: MotionLimits,
