@@ -46,14 +46,12 @@ class JogCommands:
             if (current is not None and current.jog == renews) or (last is not None and last.jog == renews):
                 return _ended(s, renews)
             # Not in the snapshot, which lags the loop by up to a report (a jog just started): the loop tells.
-            return self._submitter.submit(lambda t: cmd.RenewJog(t, renews, frame.value, velocity), "jog renewed",
-                                          deadline_ns=deadline_ns, jog=renews, deadman_s=self.deadman_s)
+            return self._renew(renews, frame, velocity, deadline_ns, jog=renews, deadman_s=self.deadman_s)
         same = (current is not None and current.phase is not JogPhase.BRAKING and current.frame == frame.value
                 and current.velocity == velocity)
         if same and (current.to_limit or (motion_remaining_s(s) or 0.0) > JOG_EXTEND_S):
-            return self._submitter.submit(lambda t: cmd.RenewJog(t, current.jog, frame.value, velocity), "jog renewed",
-                                          deadline_ns=deadline_ns, **_details(current.jog, current.speed, current.end,
-                                                                              current.to_limit, self.deadman_s))
+            return self._renew(current.jog, frame, velocity, deadline_ns,
+                               **_details(current.jog, current.speed, current.end, current.to_limit, self.deadman_s))
         context = self._context(s)
         plan = plan_jog(context, s.trajectory, s.frames, velocity, frame, round(self.deadman_s * 1e9))
         if isinstance(plan, Refusal):
@@ -66,6 +64,20 @@ class JogCommands:
         # a jog's number is the ticket of the command that started it
         number = result.details.get("ticket") if continues is None else continues
         return replace(result, details={"jog": number, **result.details})
+
+    def _renew(self, number: int, frame: Frame, velocity: tuple[float, ...], deadline_ns: int | None,
+               **details: object) -> CommandResult:
+        """Renew jog ``number``; refused ``jog_ended`` by the loop (it ended since the snapshot
+        the facade checked), with why from the snapshot that came with the verdict, as a
+        refusal the facade makes itself says: a lapse there lacked ``details.lapsed``, and the
+        dashboard released the held button for good where a lapse lets it jog again."""
+        result = self._submitter.submit(lambda t: cmd.RenewJog(t, number, frame.value, velocity), "jog renewed",
+                                        deadline_ns=deadline_ns, **details)
+        if result.error != ErrorCode.JOG_ENDED:
+            return result
+        ended = _ended(self._snapshot(), number)
+        return ended if ended.details["reason"] is not None else replace(
+            result, details={**result.details, "reason": None, "lapsed": False})
 
     def _release(self, s: CoreSnapshot) -> CommandResult:
         if s.jog is None or s.jog.phase is JogPhase.BRAKING:

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
-from hexactl.control.results import DEADMAN_LAPSED
+from hexactl.control.results import DEADMAN_LAPSED, CommandResult, ErrorCode
 from hexactl.kinematics.frames import apply, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_poses
@@ -233,6 +233,26 @@ def test_a_renewal_of_a_jog_that_lapsed_says_so(rig) -> None:
     rig.settle()  # no renewal: the deadman lapses, the platform brakes to rest
     refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
     assert refused.error == "jog_ended" and refused.details["reason"] == DEADMAN_LAPSED and refused.details["lapsed"]
+
+
+def test_a_renewal_the_loop_finds_lapsed_says_so_as_the_facade_would(rig, monkeypatch) -> None:
+    """Found in the full suite on a busy host: a renewal the facade passed on a snapshot a
+    report old, whose deadman lapsed in the loop meanwhile, was refused by the loop without
+    ``details.lapsed``; the dashboard took it for a stop from someone and released the held
+    button for good (a lapse lets a held button jog again)."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.run(2)
+    jogging = rig.controller.snapshot
+    rig.settle()  # no renewal: the deadman lapses in the loop
+    jogs = rig.controller._jogs
+    snapshots = iter([jogging])  # the facade's check sees the jog under way; what follows, the loop's verdict
+    monkeypatch.setattr(jogs, "_snapshot", lambda: next(snapshots, rig.controller.snapshot))
+    monkeypatch.setattr(jogs._submitter, "submit", lambda *arguments, **details: CommandResult.failure(
+        ErrorCode.JOG_ENDED, f"jog {number} has ended", **details))  # the loop's refusal, as its verdict comes
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert refused.error == "jog_ended", refused
+    assert refused.details == {"jog": number, "reason": DEADMAN_LAPSED, "lapsed": True}, refused.details
 
 
 X_WITHIN_5 = OperatorFrames(soft_limits=SoftLimits(lower=(-5, None, None, None, None, None),
