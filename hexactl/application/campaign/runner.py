@@ -51,8 +51,10 @@ from hexactl.application.campaign.store import (
     MEASUREMENTS_FILE,
     PLAN_FILE,
     REPORT_DIRECTORY,
+    VALIDATION_FILE,
     VALIDATION_STEPS,
     CampaignStore,
+    saving,
 )
 from hexactl.adapters.files.geometry_file import (
     geometry_id,
@@ -145,6 +147,10 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
     """The campaign from wherever ``store`` says it stands."""
     geometry = store.geometry
     _announce(store, instrument, progress)
+    if store.postures_measured < len(store.postures):
+        # Measurements are taken in one order; the postures the file lost are measured again,
+        # and the calibration identified from them will not be the one those waypoints checked.
+        _discard_after(store, None, f"before every posture in {MEASUREMENTS_FILE} was measured", progress)
     step = _Resetting(driver, settings.reset_faults, lambda: store.measurements_taken, progress)
     planned_id = geometry_id(geometry)
 
@@ -159,31 +165,39 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
     result, calibrated, text = _identify(store, settings.options, progress)
     calibrated_id = geometry_id(parse_geometry(text, CALIBRATION_FILE))
 
-    def measure_with_the_calibration() -> None:
-        driver.prepare()
-        if driver.status()["calibration_id"] != calibrated_id:
-            driver.require_calibration(planned_id, _planned(geometry))
-            progress.say("loading the calibration into the controller")
-            driver.load_calibration(text)
-        _validate(driver, store, instrument, "after", calibrated_id, progress)
-        driver.move(ZERO_POSE)
-
-    step(measure_with_the_calibration)
+    step(lambda: _measure_after(driver, store, instrument, calibrated_id, text, progress))
     before, after = store.validation_results("before"), store.validation_results("after")
     better = improved(summarise_validation(before), summarise_validation(after))
     _show(before, after, better, progress)
     progress.report(campaign_report(result, calibrated_id, before, after, better))
     step(lambda: _conclude(driver, store, better, settings.apply, progress))
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    report = write_report(store.path(REPORT_DIRECTORY),
-                          CalibrationReport(str(store.path(MEASUREMENTS_FILE)), created, geometry, result, (),
-                                            ValidationComparison(before, after, result.predicted), settings.true),
-                          overwrite=True)
+    with saving(store.path(REPORT_DIRECTORY)):
+        report = write_report(store.path(REPORT_DIRECTORY),
+                              CalibrationReport(str(store.path(MEASUREMENTS_FILE)), created, geometry, result, (),
+                                                ValidationComparison(before, after, result.predicted), settings.true),
+                              overwrite=True)
     progress.say(f"wrote {report}")
     if step.resets:
         progress.say(f"recovered from {step.resets} fault(s): each posture or waypoint one interrupted was measured "
                      "again")
     return CampaignOutcome(result, calibrated, before, after, better, settings.apply and better, report, step.resets)
+
+
+def _measure_after(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, calibrated_id: str,
+                   text: str, progress: Progress) -> None:
+    """Load the calibration ``calibrated_id`` (``text``: its file) unless the controller
+    runs it, and measure the test motions after calibration with it."""
+    driver.prepare()
+    if driver.status()["calibration_id"] != calibrated_id:
+        driver.require_calibration(geometry_id(store.geometry), _planned(store.geometry))
+        progress.say("loading the calibration into the controller")
+        driver.load_calibration(text)
+    # The verdict must judge one calibration: waypoints a stopped run measured with another
+    # (identified from other data since) are measured again.
+    _discard_after(store, calibrated_id, f"not with {calibrated_id}, the calibration they are to check", progress)
+    _validate(driver, store, instrument, "after", calibrated_id, progress)
+    _to_zero(driver, "at the end of the test motions after calibration")
 
 
 class _Resetting:
@@ -257,6 +271,28 @@ def _announce(store: CampaignStore, instrument: Instrument, progress: Progress) 
     progress.say(f"measuring with {instrument.description}")
 
 
+def _discard_after(store: CampaignStore, keep: str | None, why: str, progress: Progress) -> None:
+    """Forget the saved waypoints after calibration not measured with ``keep`` (None:
+    all), saying so: they are measured again."""
+    stale = store.discard_after(keep)
+    if stale:
+        with_ = ", ".join(sorted({f"calibration {calibration_id}" if calibration_id else
+                                  "no calibration recorded (a file of an older hexactl)" for calibration_id in stale}))
+        progress.say(f"{len(stale)} test-motion waypoint(s) after calibration in {store.path(VALIDATION_FILE)} were "
+                     f"measured with {with_}, {why}: measuring them again")
+
+
+def _to_zero(driver: PlatformDriver, purpose: str) -> None:
+    """Move to the zero posture (``purpose`` says why, for the message);
+    :class:`CampaignError` if the controller refuses it."""
+    try:
+        driver.move(ZERO_POSE)
+    except CommandError as error:
+        raise CampaignError(f"the controller refused the move to the zero posture {purpose}: {error}. The campaign "
+                            "needs the zero posture inside the controller's limits (the operator's soft limits among "
+                            "them): widen them to include it, then run the same command again to resume") from None
+
+
 def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, phase: str, calibration_id: str,
               progress: Progress) -> None:
     """Measure the rest of ``phase``'s test-motion waypoints, each with calibration
@@ -282,7 +318,7 @@ def _validate(driver: PlatformDriver, store: CampaignStore, instrument: Instrume
                                     "again to resume")
             points = instrument.measure(store.measurements_taken, f"{phase} calibration, {label}")
             driver.confirm_still(settled)
-            store.add_validation(step, points)
+            store.add_validation(step, points, calibration_id)
             progress.step(total - len(store.validation_steps_left(phase)), label)
         progress.finish()
 
@@ -294,23 +330,39 @@ def _measure_postures(driver: PlatformDriver, store: CampaignStore, instrument: 
         return
     progress.start("postures", len(postures), store.postures_measured)
     locked, length = None, 0.0
-    for number in range(store.postures_measured, len(postures)):
-        posture = postures[number]
-        leg = posture.leg
-        if locked != leg:
-            if locked is not None:
-                driver.unlock()
-            # The plan locks each leg at its length in the zero posture, on this geometry.
-            driver.move(ZERO_POSE)
-            record = driver.lock(leg)
-            locked, length = leg, float(lengths_from_readings(geometry.legs, record["leg_setpoints"][leg - 1], leg - 1))
-        record = _visit(driver, geometry, leg, length, posture.pose)
-        points = instrument.measure(store.measurements_taken, f"posture {number + 1}, leg {leg} locked")
-        driver.confirm_still(record)
-        store.add_posture(leg, record["leg_feedback"], points)
-        progress.step(store.postures_measured, f"leg {leg} locked")
+    try:
+        for number in range(store.postures_measured, len(postures)):
+            posture = postures[number]
+            leg = posture.leg
+            if locked != leg:
+                if locked is not None:
+                    driver.unlock()
+                    locked = None
+                # The plan locks each leg at its length in the zero posture, on this geometry.
+                _to_zero(driver, f"where leg {leg} is to be locked")
+                record = driver.lock(leg)
+                locked, length = leg, float(lengths_from_readings(geometry.legs, record["leg_setpoints"][leg - 1], leg - 1))
+            record = _visit(driver, geometry, leg, length, posture.pose)
+            points = instrument.measure(store.measurements_taken, f"posture {number + 1}, leg {leg} locked")
+            driver.confirm_still(record)
+            store.add_posture(leg, record["leg_feedback"], points)
+            progress.step(store.postures_measured, f"leg {leg} locked")
+    except CampaignError as error:
+        # A controller in fault refuses the unlock; the reset, or the resumed campaign, unlocks.
+        if locked is not None and not isinstance(error, ControllerFault):
+            _unlock_quietly(driver)
+        raise
     driver.unlock()
     progress.finish()
+
+
+def _unlock_quietly(driver: PlatformDriver) -> None:
+    """Unlock the leg a stopped campaign locked, if the service still takes it: the error
+    that stopped the campaign is the one to report, and a resumed campaign unlocks first."""
+    try:
+        driver.unlock()
+    except (CampaignError, CommandError, ServiceUnavailable):
+        pass
 
 
 def _visit(driver: PlatformDriver, geometry: Geometry, leg: int, length_mm: float, goal: Sequence[float]) -> Record:
@@ -386,7 +438,8 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
         created = datetime.now(timezone.utc).isoformat(timespec="seconds")
         info = calibration_info(result, created, measured.sha256, geometry.name or "unnamed geometry")
         calibrated = calibration_geometry(geometry, result, info)
-        save_geometry(calibrated, path, overwrite=True)  # derived from the saved data: a stale one is replaced
+        with saving(path):
+            save_geometry(calibrated, path, overwrite=True)  # derived from the saved data: a stale one is replaced
         progress.say(f"wrote {path}")
     return result, calibrated, path.read_text(encoding="utf-8")
 

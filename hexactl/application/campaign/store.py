@@ -11,7 +11,9 @@ Files (all written atomically: a crash leaves the previous version or the new on
 * ``validation.csv``: the test motions measured before and after calibration, one row
   per waypoint (``phase``, ``motion``, ``waypoint`` 1-based, the commanded pose
   ``command_*``, the achieved pose ``achieved_*`` computed from the points, both relative
-  mm/deg, and the feature points ``p1_x`` …), rewritten after every waypoint;
+  mm/deg, and the feature points ``p1_x`` …), rewritten after every waypoint; its first
+  line, a comment, ends with ``measured with: before=ID after=ID``, the calibration the
+  controller ran for each phase's rows (one per phase: the runner never mixes them);
 * ``calibration.toml`` and ``report/`` at the end;
 * ``campaign.lock``, locked while a campaign runs there: a second one is refused.
 
@@ -26,7 +28,9 @@ import csv
 import fcntl
 import io
 import json
-from collections.abc import Sequence
+import re
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
@@ -67,6 +71,7 @@ PHASES = ("before", "after")
 """Validation phases: on the planning geometry, then with the calibration loaded."""
 
 _FORMAT = "hexactl campaign 1"
+_MEASURED_WITH = "measured with:"
 _DECIMALS = 6  # mm: what the measurement files keep (a nanometre)
 
 
@@ -96,6 +101,9 @@ VALIDATION_STEPS: dict[str, tuple[ValidationStep, ...]] = {
 class _ValidationRow:
     step: ValidationStep
     points_mm: NDArray[np.float64]
+    calibration_id: str | None
+    """The calibration the controller ran while it was measured; None: not recorded (a
+    file of an older hexactl)."""
 
 
 class CampaignStore:
@@ -143,7 +151,8 @@ class CampaignStore:
                 except ValueError as error:
                     raise CampaignError(f"planning: {error}") from None
                 store = cls(directory, geometry, design, campaign_postures(plans, geometry.characteristic_length_mm))
-                write_atomic(plan_path, store._plan_json().encode("utf-8"), overwrite=False)
+                with saving(plan_path):
+                    write_atomic(plan_path, store._plan_json().encode("utf-8"), overwrite=False)
         except BaseException:
             lock.close()
             raise
@@ -210,14 +219,29 @@ class CampaignStore:
         expected = [step for phase in PHASES for step in VALIDATION_STEPS[phase]]
         count = len(self.geometry.measurement.feature_points)
         columns = [f"p{k}_{axis}" for k in range(1, count + 1) for axis in "xyz"]
+        planned = geometry_id(self.geometry)
         try:
-            lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
-            for row in csv.DictReader(lines):
+            # A file of an older hexactl names no calibration. Its rows before calibration were
+            # measured on the planned geometry (campaign.json pins it, and every waypoint was
+            # checked against it); its rows after calibration cannot be attributed to a
+            # calibration, and an accuracy verdict on unattributed data is worthless: they are
+            # measured again (the runner says so), which costs minutes, not the campaign.
+            text = path.read_text(encoding="utf-8")
+            named = dict(re.findall(r"\b(before|after)=([0-9a-f]+)", text.partition("\n")[0].partition(_MEASURED_WITH)[2]))
+            header: list[str] | None = None
+            for line in text.splitlines():
+                if not line or line.startswith("#"):
+                    continue
+                if header is None:
+                    header = next(csv.reader([line]))
+                    continue
+                row = dict(zip(header, next(csv.reader([line]))))
                 step = expected[len(self._validation)]
                 if (row["phase"], row["motion"], int(row["waypoint"])) != (step.phase, step.motion.name, step.waypoint):
                     raise ValueError(f"expected {step.phase} {step.motion.name} waypoint {step.waypoint}")
                 points = np.array([float(row[name]) for name in columns]).reshape(count, 3)
-                self._validation.append(_ValidationRow(step, points))
+                self._validation.append(_ValidationRow(step, points, named.get(step.phase) or
+                                                       (planned if step.phase == "before" else None)))
         except (OSError, ValueError, KeyError, IndexError) as error:
             raise CampaignError(f"{path} does not match the test motions (edited by hand?): {error}") from None
 
@@ -248,15 +272,39 @@ class CampaignStore:
         self._points.append(np.array(points_mm, dtype=float))
         comments = [f"hexactl campaign: {len(self._legs)} of {len(self.postures)} postures of {PLAN_FILE}, "
                     f"geometry {self.geometry.name!r}"]
-        write_measurements(self.directory / MEASUREMENTS_FILE, self.measurements(), overwrite=True, comments=comments)
+        path = self.directory / MEASUREMENTS_FILE
+        with saving(path):
+            write_measurements(path, self.measurements(), overwrite=True, comments=comments)
 
-    def add_validation(self, step: ValidationStep, points_mm: NDArray) -> None:
-        """Save the next waypoint's measurement (``step`` must be the next one)."""
+    def add_validation(self, step: ValidationStep, points_mm: NDArray, calibration_id: str | None = None) -> None:
+        """Save the next waypoint's measurement (``step`` must be the next one), taken with
+        calibration ``calibration_id`` active (before calibration: the planned geometry's,
+        the default)."""
         if step not in self.validation_steps_left(step.phase)[:1]:
             raise ValueError(f"{step.phase} {step.motion.name} waypoint {step.waypoint} is not the next to measure")
+        if calibration_id is None:
+            if step.phase != "before":
+                raise ValueError(f"a waypoint {step.phase} calibration needs the calibration it was measured with")
+            calibration_id = geometry_id(self.geometry)
         # Rounded as the file keeps them, so that a resumed campaign computes what an uninterrupted one does.
-        self._validation.append(_ValidationRow(step, np.round(np.array(points_mm, dtype=float), _DECIMALS)))
-        write_atomic(self.directory / VALIDATION_FILE, self._validation_csv().encode("utf-8"), overwrite=True)
+        self._validation.append(_ValidationRow(step, np.round(np.array(points_mm, dtype=float), _DECIMALS),
+                                               calibration_id))
+        self._save_validation()
+
+    def discard_after(self, calibration_id: str | None) -> tuple[str | None, ...]:
+        """Forget the waypoints after calibration not measured with ``calibration_id``
+        (None: all of them), so that they are measured again; returns the calibration ids
+        they were measured with (None: not recorded)."""
+        stale = [row for row in self._validation if row.step.phase == "after" and row.calibration_id != calibration_id]
+        if stale:
+            self._validation = [row for row in self._validation if row not in stale]
+            self._save_validation()
+        return tuple(row.calibration_id for row in stale)
+
+    def _save_validation(self) -> None:
+        path = self.directory / VALIDATION_FILE
+        with saving(path):
+            write_atomic(path, self._validation_csv().encode("utf-8"), overwrite=True)
 
     # -- reading -----------------------------------------------------------------------
 
@@ -297,8 +345,13 @@ class CampaignStore:
     def _validation_csv(self) -> str:
         count = len(self.geometry.measurement.feature_points)
         out = io.StringIO()
+        phases = {phase: {row.calibration_id for row in self._validation if row.step.phase == phase} for phase in PHASES}
+        if any(len(ids) > 1 for ids in phases.values()):
+            raise ValueError(f"the test motions of one phase measured with several calibrations: {phases}")
+        # In the comment, not a column: readers of the columns by position keep working.
+        named = " ".join(f"{phase}={next(iter(ids))}" for phase, ids in phases.items() if ids and None not in ids)
         out.write("# hexactl campaign: the paper's test motions measured before and after calibration; "
-                  "poses relative to the zero posture (mm, deg), points in the fixed frame (mm)\n")
+                  f"poses relative to the zero posture (mm, deg), points in the fixed frame (mm); {_MEASURED_WITH} {named}\n")
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(["phase", "motion", "waypoint", *(f"command_{a}" for a in POSE_AXES),
                          *(f"achieved_{a}" for a in POSE_AXES), *(f"p{k}_{a}" for k in range(1, count + 1) for a in "xyz")])
@@ -309,6 +362,18 @@ class CampaignStore:
                              *(f"{v:.{_DECIMALS}f}" for v in achieved),
                              *(f"{v:.{_DECIMALS}f}" for v in row.points_mm.ravel())])
         return out.getvalue()
+
+
+@contextmanager
+def saving(path: Path) -> Iterator[None]:
+    """Writing ``path``: an ``OSError`` (the directory made read-only or immutable, a full
+    disk) becomes a :class:`CampaignError` naming the file and what to do."""
+    try:
+        yield
+    except OSError as error:
+        raise CampaignError(f"cannot write {path}: {error.strerror or error}. What was saved before is kept; make "
+                            f"{path.parent} writable again (permissions, chattr -i, free space), then run the same "
+                            "command again to resume (a measurement not saved is taken again)") from None
 
 
 def make_directory(directory: Path) -> None:
