@@ -67,7 +67,7 @@ from hexactl.adapters.api.socket_thread import check_bindable
 from hexactl.application.api_process import LOG_FORMAT, ApiProcess, ApiSettings, ApiStartError
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can.transport import BusSpecError
-from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.atomic import same_file, write_atomic
 from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.kept_calibration import DEFAULT_FILE as DEFAULT_KEPT_CALIBRATION_FILE
@@ -753,7 +753,7 @@ def _refuse_shared_files(config: ServiceConfig, config_path: Path, frames_path: 
     files += [("--frames", frames_path, config.frames_path is not None),
               ("--keep-calibration", kept_path, config.kept_calibration_path is not None)]
     for (option, path, given), (other, other_path, other_given) in combinations(files, 2):
-        if (option in _READ_AT_START and other in _READ_AT_START) or not _same_file(path, other_path):
+        if (option in _READ_AT_START and other in _READ_AT_START) or not same_file(path, other_path):
             continue
         both = (f"{_option_text(option, path, given)} and {_option_text(other, other_path, other_given)} name the "
                 f"same file, {os.path.realpath(path)}")
@@ -769,17 +769,6 @@ def _refuse_shared_files(config: ServiceConfig, config_path: Path, frames_path: 
 
 def _option_text(option: str, path: Path, given: bool) -> str:
     return f"{option} {path}" if given else f"{option} (default {path})"
-
-
-def _same_file(path: Path, other: Path) -> bool:
-    """Whether two names lead to one file: resolved alike (relative paths, symbolic links,
-    even to a file not there yet), or one file under two hard links."""
-    if os.path.realpath(path) == os.path.realpath(other):
-        return True
-    try:
-        return os.path.samefile(path, other)
-    except OSError:  # one of them is not there (yet): resolved apart, they are two files
-        return False
 
 
 def _restored_frames(path: Path) -> OperatorFrames:

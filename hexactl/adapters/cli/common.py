@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S, check_telemetry_rate
-from hexactl.adapters.files.atomic import write_problem
+from hexactl.adapters.files.atomic import same_file, write_problem
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, validate_pose_values
 
@@ -254,7 +254,7 @@ def check_output(output: str | None, force: bool, *inputs: str | Path | None) ->
     if output is None:
         return
     for given in inputs:
-        if given is not None and _same_file(Path(output), Path(given)):
+        if given is not None and same_file(output, given):
             raise CliError(f"{output} is this command's input {given}: an input is never written over, even with "
                            "--force; choose another output")
     if Path(output).is_dir():
@@ -298,13 +298,6 @@ def config_input(arguments: argparse.Namespace) -> Path:
     from hexactl.adapters.files.config_path import default_config_path
 
     return Path(arguments.config) if arguments.config else default_config_path()
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
-    except OSError:  # unresolvable or unreadable: not known to be the same; the write reports it
-        return False
 
 
 def check_campaign_arguments(arguments: argparse.Namespace) -> None:

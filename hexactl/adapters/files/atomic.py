@@ -92,6 +92,18 @@ def _take_new_name(temporary: Path, target: Path) -> None:
     temporary.unlink()
 
 
+def same_file(path: str | os.PathLike[str], other: str | os.PathLike[str]) -> bool:
+    """Whether two names lead to one file: resolved alike (relative paths, symbolic links,
+    even to a file not there yet), or one file under two hard links. The one rule for an
+    output that must not be an input, and for two options that must not share a file."""
+    if os.path.realpath(path) == os.path.realpath(other):
+        return True
+    try:
+        return os.path.samefile(path, other)
+    except OSError:  # one of them is not there (yet), or unreadable: resolved apart, two files
+        return False
+
+
 def write_problem(error: OSError) -> str:
     """Why ``error`` stopped a write and what to do, for people (a full disk's ``[Errno 28]``
     says neither). The one rule for every file hexactl writes."""
