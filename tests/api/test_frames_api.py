@@ -111,6 +111,45 @@ def test_frames_on_a_full_disk_are_refused_saying_so_and_the_file_is_kept(framed
     assert (tmp_path / "frames.toml").read_bytes() == saved and sorted(tmp_path.glob(".frames.toml.*")) == []
 
 
+def test_a_frames_file_edited_under_the_service_is_named_and_kept_aside_not_overwritten(framed, tmp_path: Path,
+                                                                                           capsys) -> None:
+    """The service reads its frames file at start only: an operator who edits the soft limits
+    in it must learn they are not in force, and the edit is not lost at the next change."""
+    path = tmp_path / "frames.toml"
+    send(framed, "set_frames", soft_limits={"lower": [-50] + [None] * 5, "upper": [50] + [None] * 5})
+    assert "message" not in send(framed, "frames") or not send(framed, "frames")["message"]
+    edited = path.read_text().replace("x = 50.0", "x = 10.0")
+    path.write_text(edited)
+    shown = send(framed, "frames")
+    assert shown["frames"]["soft_limits"]["upper"][0] == 50  # what is in force, not the file
+    assert "no longer holds them: it was changed" in shown["message"] and "reads that file at start only" in shown["message"]
+    assert main(["frames", "--api", framed.api]) == 0 and "no longer holds them" in capsys.readouterr().out
+    changed = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    assert "had been changed since the service read it" in changed["message"]
+    [aside] = sorted(tmp_path.glob("frames.toml.changed-*"))
+    assert str(aside) in changed["message"] and aside.read_text() == edited
+    assert load_frames(path) == framed.controller.frames and load_frames(path).soft_limits.upper[0] == 50
+    assert not send(framed, "frames").get("message")  # the file holds the frames in force again
+    send(framed, "set_frames", tool=[0, 0, 200, 0, 0, 0])
+    assert sorted(tmp_path.glob("frames.toml.changed-*")) == [aside]  # only a changed file is kept aside
+
+
+def test_a_frames_file_removed_under_the_service_is_named(framed, tmp_path: Path) -> None:
+    send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    (tmp_path / "frames.toml").unlink()
+    assert "it was removed" in send(framed, "frames")["message"]
+    assert "changed since" not in send(framed, "set_frames", tool=[0, 0, 100, 0, 0, 0])["message"]
+    assert load_frames(tmp_path / "frames.toml").tool == (0, 0, 100, 0, 0, 0)
+
+
+def test_an_unreadable_frames_file_is_kept_aside_whole(framed, tmp_path: Path) -> None:
+    (tmp_path / "frames.toml").write_text("work = [0, 0\n")
+    assert "it cannot be used now" in send(framed, "frames")["message"]
+    send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    [aside] = sorted(tmp_path.glob("frames.toml.changed-*"))
+    assert aside.read_text() == "work = [0, 0\n"
+
+
 def test_the_command_line_sets_shows_and_moves_in_frames(framed, capsys) -> None:
     api = ["--api", framed.api]
     assert main(["frames", "--tool", "z=300", "--soft-lower", "x=-50", "--soft-upper", "x=50", *api]) == 0

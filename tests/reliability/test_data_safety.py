@@ -31,7 +31,7 @@ from hexactl.adapters.api.messages import SaveRecordingRequest
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.wire import ApiError
-from hexactl.adapters.files.atomic import STALE_AFTER_S, remove_stale_temporaries, write_atomic
+from hexactl.adapters.files.atomic import STALE_AFTER_S, keep_aside, remove_stale_temporaries, write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
 from hexactl.adapters.files.measurements import write_measurements
 from hexactl.application.service import Service
@@ -217,6 +217,24 @@ def test_a_new_file_is_written_where_hard_links_are_not_to_be_had(tmp_path, monk
     with pytest.raises(FileExistsError):
         write_atomic(tmp_path / "cal.toml", b"newer", overwrite=False)
     assert [path.name for path in tmp_path.iterdir()] == ["cal.toml"]
+
+
+@pytest.mark.parametrize("links", [True, False], ids=["hard links", "no hard links"])
+def test_a_file_kept_aside_keeps_its_bytes_under_a_name_of_its_own(tmp_path, monkeypatch, links) -> None:
+    """A kept file changed under the service is kept aside before it is replaced: never over
+    another file kept aside, on a FAT stick too."""
+    if not links:
+        def no_links(*args: object) -> None:
+            raise OSError(errno.EPERM, "Operation not permitted")
+        monkeypatch.setattr(os, "link", no_links)
+    target = tmp_path / "frames.toml"
+    write_atomic(target, b"first", overwrite=True)
+    first = keep_aside(target)
+    write_atomic(target, b"second", overwrite=True)  # as the service replaces what it kept aside
+    second = keep_aside(target)
+    write_atomic(target, b"new", overwrite=True)
+    assert first != second and first.name.startswith("frames.toml.changed-")
+    assert (first.read_bytes(), second.read_bytes(), target.read_bytes()) == (b"first", b"second", b"new")
 
 
 def play_short(client: HexactlClient, service: Service) -> None:

@@ -293,3 +293,32 @@ def test_the_nominal_geometry_on_a_read_only_file_system_keeps_nothing_without_a
     kept.path.write_text(geometry_to_toml(CALIBRATED))  # one kept before: that it stays is worth a warning
     with pytest.raises(OSError):
         kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal")
+
+
+def test_a_kept_calibration_changed_under_the_service_is_kept_aside_not_overwritten(tmp_path: Path) -> None:
+    """The service reads its kept calibration at start only: a hand edit (or a file copied
+    over it) is not in force, and the next change must not destroy it."""
+    kept = tmp_path / "active_calibration.toml"
+    handler, loop = _late_handler(tmp_path, kept)
+    with pytest.raises(ApiError):
+        handler(LOAD)
+    loop.step_until(_in_force(loop, geometry_id(CALIBRATED)))
+    handler.record()
+    assert load_geometry(kept) == CALIBRATED
+    kept.write_text(geometry_to_toml(CALIBRATED.model_copy(
+        update={"zero_lengths": tuple(length + 0.5 for length in CALIBRATED.zero_lengths)})))
+    edited = kept.read_text()
+    with pytest.raises(ApiError):
+        handler(ROLLBACK)
+    loop.step_until(_in_force(loop, geometry_id(NOMINAL)))
+    handler.record()
+    assert not kept.exists()
+    [aside] = sorted(tmp_path.glob("active_calibration.toml.changed-*"))
+    assert aside.read_text() == edited
+
+
+def test_a_kept_calibration_the_service_wrote_is_replaced_without_a_copy(tmp_path: Path) -> None:
+    kept = KeptCalibration(tmp_path / "active_calibration.toml", geometry_id(NOMINAL))
+    kept.keep(CALIBRATED, geometry_id(CALIBRATED), "cal.toml")
+    said = kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal", geometry_id(CALIBRATED))
+    assert "changed since" not in said and sorted(tmp_path.iterdir()) == []

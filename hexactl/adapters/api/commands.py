@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import csv
 import io
+import logging
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -62,7 +63,7 @@ from hexactl.adapters.api.port import ControllerPort, RecorderPort, StreamInput
 from hexactl.adapters.api.sequences import resolve_sequence
 from hexactl.adapters.api.wire import ApiError, ErrorCode, error_body, jsonable, problems_error, validation_problems
 from hexactl.adapters.files.atomic import write_problem
-from hexactl.adapters.files.frames_file import save_frames
+from hexactl.adapters.files.frames_file import file_differs, save_frames
 from hexactl.adapters.files.geometry_file import geometry_id, parse_geometry
 from hexactl.adapters.files.kept_calibration import CalibrationKeeper
 from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
@@ -73,6 +74,8 @@ from hexactl.control.submitter import commands_from
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.kinematics.validation_messages import describe_validation_error
+
+log = logging.getLogger(__name__)
 
 JOG_REPLY = ("jog", "goal", "speed", "end", "to_limit", "deadman_s")
 """The fields of a ``jog`` reply besides ``message``."""
@@ -218,7 +221,7 @@ class CommandHandler:
             case ClearFramesRequest():
                 return self._replace_frames(OperatorFrames(), "frames cleared: poses relative to the zero posture")
             case FramesRequest():
-                return {"frames": jsonable(controller.operator_frames())}
+                return self._frames()
             case RecordRequest():
                 return self._recorder().start(request.name, request.signals, request.frame, request.divisor,
                                               request.duration_s, request.start)
@@ -283,15 +286,31 @@ class CommandHandler:
         result = self.controller.set_frames(frames)
         if not result.ok:
             raise ApiError(_code(result), result.message, _details(result))
+        said = message or result.message
         if self.frames_file is not None:
             try:
-                save_frames(frames, self.frames_file)
+                aside = save_frames(frames, self.frames_file, before)
             except OSError as error:
                 self.controller.set_frames(before)
                 raise ApiError(ErrorCode.WRITE_FAILED, f"{self.frames_file}: the frames could not be saved: "
                                f"{write_problem(error)}; they are not in force: the ones before are, and stay in the "
                                "file; set them again once it can be written") from None
-        return {"message": message or result.message, "frames": jsonable(frames)}
+            if aside is not None:
+                said += (f"; {self.frames_file} had been changed since the service read it (at start only): that "
+                         f"version, never in force, is kept as {aside}")
+                log.warning("%s", said)
+        return {"message": said, "frames": jsonable(frames)}
+
+    def _frames(self) -> dict[str, Any]:
+        """The frames in force; the message says if the file they are kept in no longer holds
+        them (a hand edit is not read until a restart: the operator must know which is in force)."""
+        frames = self.controller.operator_frames()
+        reply: dict[str, Any] = {"frames": jsonable(frames)}
+        if self.frames_file is not None and (problem := file_differs(self.frames_file, frames)):
+            reply["message"] = (f"in force; but {self.frames_file}, where they are kept, no longer holds them: "
+                                f"{problem}. The service reads that file at start only: set the frames you want "
+                                "(the changed file is then kept aside) or restart the service to use the file's")
+        return reply
 
     def _kept(self, fields: dict[str, Any]) -> dict[str, Any]:
         """A calibration change's reply ``fields``, once the calibration now in force is kept

@@ -194,11 +194,13 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
         "(repeatable; default: ./recordings, ./calibrations, ./sequences and the config file's directory)",
     )
     serve.add_argument("--frames", type=named_path, metavar="FILE", help="where the operator's frames and soft limits are "
-                       "kept across restarts (default ./frames.toml; read at start, written when they change)")
+                       "kept across restarts (default ./frames.toml; read at start only, written when they change; "
+                       "a hand edit under a running service is kept aside as FILE.changed-TIME, not read)")
     serve.add_argument("--keep-calibration", type=named_path, metavar="FILE",
                        help="where the calibration in force is kept across restarts (default ./active_calibration.toml;"
                        " restored at start without --calibration; follows the calibration the loop has in force, even "
-                       "after a loop_timeout: written when it changes, removed when the nominal geometry is back)")
+                       "after a loop_timeout: written when it changes, removed when the nominal geometry is back; a hand "
+                       "edit under a running service is kept aside as FILE.changed-TIME, not read)")
     serve.add_argument("--curve-secret", type=Path, metavar="FILE", help="CURVE server secret key (needed to bind beyond localhost)")
     serve.add_argument("--curve-clients", type=Path, metavar="DIR", help="directory of the client public keys allowed in")
     serve.add_argument("--dashboard", nargs="?", const=DEFAULT_HTTP, metavar="HOST:PORT",

@@ -12,6 +12,7 @@ import errno
 import os
 import re
 import secrets
+import shutil
 import threading
 import time
 from pathlib import Path
@@ -90,6 +91,36 @@ def _take_new_name(temporary: Path, target: Path) -> None:
         os.replace(temporary, target)
         return
     temporary.unlink()
+
+
+def keep_aside(path: str | os.PathLike[str]) -> Path:
+    """Keep the file at ``path`` under a new name beside it, ``NAME.changed-YYYYmmddTHHMMSS``
+    (``-2``, ``-3``… if taken), before it is replaced: a file a service keeps that someone
+    changed under it. The one rule for those files; the name is returned, for people.
+
+    :raises OSError: if it cannot be kept (then nothing may replace it)
+    """
+    source = Path(path)
+    stamp = time.strftime("%Y%m%dT%H%M%S")
+    for number in range(1, 1000):
+        aside = source.with_name(f"{source.name}.changed-{stamp}" + (f"-{number}" if number > 1 else ""))
+        try:
+            os.link(source, aside)  # the same bytes under a second name, whatever their size
+            return aside
+        except FileExistsError:
+            continue
+        except OSError as error:
+            if error.errno not in (errno.EPERM, errno.EOPNOTSUPP):
+                raise
+        try:  # a file system without hard links (FAT): a copy, never over another file
+            with open(source, "rb") as original, open(aside, "xb") as copy:
+                shutil.copyfileobj(original, copy)
+                copy.flush()
+                os.fsync(copy.fileno())
+            return aside
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{source}: no free name to keep it aside (remove old {source.name}.changed-* files)")
 
 
 def same_file(path: str | os.PathLike[str], other: str | os.PathLike[str]) -> bool:

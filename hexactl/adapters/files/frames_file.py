@@ -28,7 +28,7 @@ from pathlib import Path
 import tomli_w
 from pydantic import ValidationError
 
-from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.atomic import keep_aside, write_atomic
 from hexactl.adapters.files.geometry_file import toml_value
 from hexactl.adapters.files.text import read_text
 from hexactl.control.frames import OperatorFrames
@@ -89,6 +89,33 @@ def frames_to_toml(frames: OperatorFrames) -> str:
     return text + "\n" + tomli_w.dumps({"soft_limits": soft}) if soft else text
 
 
-def save_frames(frames: OperatorFrames, path: str | os.PathLike[str]) -> Path:
-    """Write ``frames`` to ``path`` atomically, replacing what was there."""
-    return write_atomic(path, frames_to_toml(frames).encode("utf-8"), overwrite=True)
+def save_frames(frames: OperatorFrames, path: str | os.PathLike[str], in_force: OperatorFrames) -> Path | None:
+    """Write ``frames`` to ``path`` atomically, replacing the frames ``in_force`` until now.
+    A file that holds anything else (edited by hand under the service, which reads it at
+    start only) is first kept aside (:func:`keep_aside`); its new name is returned (None:
+    there was nothing to keep).
+
+    :raises OSError: if it cannot be written, or the changed file cannot be kept aside
+        (then nothing at ``path`` changed)
+    """
+    aside = keep_aside(path) if os.path.lexists(path) and file_differs(path, in_force) else None
+    try:
+        write_atomic(path, frames_to_toml(frames).encode("utf-8"), overwrite=True)
+    except OSError:
+        if aside is not None:  # the changed file stays where it was, its only name
+            aside.unlink(missing_ok=True)
+        raise
+    return aside
+
+
+def file_differs(path: str | os.PathLike[str], in_force: OperatorFrames) -> str | None:
+    """Why the file at ``path`` does not hold the frames ``in_force`` (None: it does): it was
+    edited or removed since the service read it at start or last wrote it."""
+    location = Path(path)
+    if not os.path.lexists(location):
+        return None if in_force == OperatorFrames() else "it was removed"
+    try:
+        held = load_frames(location)
+    except FramesFileError as error:
+        return f"it cannot be used now ({error})"
+    return None if held == in_force else "it was changed: it holds other frames than those in force"

@@ -19,10 +19,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from hexactl.adapters.files.atomic import write_atomic
-from hexactl.adapters.files.geometry_file import geometry_to_toml, load_geometry
+from hexactl.adapters.files.atomic import keep_aside, write_atomic
+from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from hexactl.control.planning import ActiveGeometry
-from hexactl.kinematics.geometry import Geometry
+from hexactl.kinematics.geometry import Geometry, GeometryError
 
 DEFAULT_FILE = "active_calibration.toml"
 """Where the service keeps it, in its working directory, unless set."""
@@ -44,17 +44,42 @@ class KeptCalibration:
     path: Path
     nominal_id: str
 
-    def keep(self, geometry: Geometry, calibration_id: str, source: str) -> str:
+    def keep(self, geometry: Geometry, calibration_id: str, source: str, kept_before: str | None = None) -> str:
         """Keep ``geometry`` (id ``calibration_id``, loaded from ``source``) as the one in
         force, or remove the kept one if it is the nominal geometry; what was done, for people.
+        ``kept_before``: the id of the calibration this service kept there last (None: none
+        yet). A file that holds anything else (edited or replaced by hand under the
+        service, which reads it at start only) is first kept aside (:func:`keep_aside`).
 
-        :raises OSError: if the file cannot be written or removed (it is as it was)
+        :raises OSError: if the file cannot be written or removed, or a changed file cannot
+            be kept aside (it is as it was)
         """
-        if calibration_id == self.nominal_id:
-            forget_calibration(self.path)
-            return "the nominal geometry is in force: no calibration kept for a restart"
-        keep_calibration(geometry, source, self.path)
-        return f"kept for a restart in {self.path}"
+        aside = keep_aside(self.path) if kept_before is not None and self._changed(kept_before) else None
+        try:
+            if calibration_id == self.nominal_id:
+                forget_calibration(self.path)
+                said = "the nominal geometry is in force: no calibration kept for a restart"
+            else:
+                keep_calibration(geometry, source, self.path)
+                said = f"kept for a restart in {self.path}"
+        except OSError:
+            if aside is not None:  # the changed file stays where it was, its only name
+                aside.unlink(missing_ok=True)
+            raise
+        if aside is not None:
+            said += (f" ({self.path} had been changed since the service kept calibration {kept_before} in it: that "
+                     f"version, never in force, is kept as {aside})")
+            log.warning("%s", said)
+        return said
+
+    def _changed(self, kept_before: str) -> bool:
+        """Whether the file is there and holds another calibration than ``kept_before``."""
+        if not os.path.lexists(self.path):
+            return False
+        try:
+            return geometry_id(load_geometry(self.path)) != kept_before
+        except GeometryError:
+            return True
 
 
 class CalibrationKeeper:
@@ -115,7 +140,7 @@ class CalibrationKeeper:
     def _keep(self, active: ActiveGeometry) -> str:
         calibration_id = active.calibration_id
         try:
-            said = self.kept.keep(active.geometry, calibration_id, active.source)
+            said = self.kept.keep(active.geometry, calibration_id, active.source, self._kept_id)
         except Exception as error:  # OSError (a full disk, permissions); nothing else may stop telemetry either
             said = (f"NOT kept for a restart ({self.kept.path}: {error}): a restart would start on the calibration "
                     "kept before; free the disk or fix the permissions: it is kept as soon as it can be written")
