@@ -49,6 +49,35 @@ def test_record_stop_ends_a_recording_early(api, data_dir, capsys) -> None:
     assert json.loads((data_dir / "early.json").read_text())["ended"] == "stopped"
 
 
+def test_record_wait_reports_the_side_file_when_the_service_stops_answering(api, data_dir, monkeypatch,
+                                                                          capsys) -> None:
+    """A service stopped by a signal ends the recording and writes its files, then answers
+    no more: --wait said only "no answer" (exit 2) of a recording whose file was written."""
+    from hexactl.adapters.api.client import ServiceUnavailable
+    from hexactl.adapters.cli import recording_commands
+
+    def service_stops(client, name, reply, on_motion):  # as SIGTERM: the recording ends, the service goes
+        client.request("record_stop")
+        raise ServiceUnavailable(f"no answer from {api} within 5 s: is `hexactl serve` running there?")
+
+    monkeypatch.setattr(recording_commands, "_wait_written", service_stops)
+    assert main(["record", "gone", "--duration", "600", "--wait", "--api", api]) == 0  # it ended well: stopped
+    captured = capsys.readouterr()
+    assert f"{data_dir / 'gone.csv'}: " in captured.out and "ended: stopped" in captured.out
+    assert f"the service stopped answering (no answer from {api}" in captured.err
+    assert f"its side file {data_dir / 'gone.json'} says how the recording ended" in captured.err
+
+    def side_file_elsewhere(client, name, reply, on_motion):  # a service on another machine
+        client.request("record_stop")
+        (data_dir / "far.json").unlink()
+        raise ServiceUnavailable("no answer")
+
+    monkeypatch.setattr(recording_commands, "_wait_written", side_file_elsewhere)
+    assert main(["record", "far", "--duration", "600", "--wait", "--api", api]) == 2
+    assert (f"how it ended is in far.json beside {data_dir / 'far.csv'} on the service's machine"
+            in capsys.readouterr().err)
+
+
 def test_plot_refuses_missing_and_garbled_files(tmp_path, capsys) -> None:
     assert main(["plot", str(tmp_path / "none.csv")]) == 2
     assert "no such file" in capsys.readouterr().err

@@ -115,10 +115,32 @@ def run_record(arguments: argparse.Namespace) -> int:
                   flush=True)
             if not arguments.wait:
                 return EXIT_OK
-            return _report_written(_wait_written(client, fields["name"], reply, arguments.on_motion), arguments.json)
+            try:
+                side = _wait_written(client, fields["name"], reply, arguments.on_motion)
+            except ServiceUnavailable as error:
+                return _service_gone(reply["path"], error, arguments.json)
+            return _report_written(side, arguments.json)
     except ServiceUnavailable as error:
         print(f"hexactl record: {error}", file=sys.stderr)
         return EXIT_NO_ANSWER
+
+
+def _service_gone(csv_path: str, error: Exception, as_json: bool) -> int:
+    """``--wait``, and the service stopped answering (stopped by a signal, most often, which
+    ends the recording and writes its files first): the side file, when it is on this
+    machine, says how it ended; else where to look."""
+    side_path = Path(csv_path).with_suffix(".json")
+    try:
+        side = json.loads(side_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        side = None
+    if isinstance(side, dict) and side.get("csv") == csv_path:
+        print(f"hexactl record: the service stopped answering ({error}); its side file {side_path} says how the "
+              "recording ended:", file=sys.stderr)
+        return _report_written(side, as_json)
+    print(f"hexactl record: the service stopped answering during the recording ({error}); how it ended is in "
+          f"{side_path.name} beside {csv_path} on the service's machine (not here)", file=sys.stderr)
+    return EXIT_NO_ANSWER
 
 
 def _wait_written(client: Any, name: str, reply: dict[str, Any], on_motion: bool) -> dict[str, Any]:
