@@ -51,18 +51,34 @@ def tracker_rows(geometry, heights) -> str:
 TRACKER_HEADER = "# laser tracker export\np1_x,p1_y,p1_z,p2_x,p2_y,p2_z,p3_x,p3_y,p3_z,operator\n"
 
 
-def test_instrument_file_rows_are_the_measurements_in_order(nominal, tmp_path) -> None:
+def test_instrument_file_rows_are_the_measurements_in_order(nominal, tmp_path, monkeypatch) -> None:
     path = tmp_path / "tracker.csv"
     path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(2)))  # a resumed campaign's two measurements
     instrument = CsvInstrument(path, 3)
-    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(3)))  # the tracker measures the third
+    monkeypatch.setattr(instruments.time, "sleep",  # the tracker measures the third once asked
+                        lambda seconds: path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(3))))
     np.testing.assert_allclose(instrument.measure(2, "third"), points_at(nominal, [0, 0, 2, 0, 0, 0]))
+
+
+def test_a_row_written_while_the_platform_moved_is_refused(nominal, tmp_path, monkeypatch) -> None:
+    """The docs said a row there before the platform reached its posture is refused; one
+    appended after the file was opened, while the platform moved, was taken for it."""
+    path = tmp_path / "tracker.csv"
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(1)))
+    instrument = CsvInstrument(path, 3)
+    monkeypatch.setattr(instruments.time, "sleep",
+                        lambda seconds: path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(2))))
+    np.testing.assert_allclose(instrument.measure(1, "posture 1"), points_at(nominal, [0, 0, 1, 0, 0, 0]))
+    path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(3)))  # triggered early: the platform still moves
+    with pytest.raises(InstrumentError, match=r"rows 3-3 \(lines 5-5\) were there before the platform was at rest at "
+                                              r"posture 2: .* measured while it moved there"):
+        instrument.measure(2, "posture 2")
 
 
 def test_a_row_measured_for_a_measurement_not_kept_is_never_taken_for_another(nominal, tmp_path, monkeypatch) -> None:
     path = tmp_path / "tracker.csv"
     path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(3)))  # the third: a measurement a fault interrupted
-    with pytest.raises(InstrumentError, match=rf"rows 3-3 \(lines 5-5\) were there before the platform reached "
+    with pytest.raises(InstrumentError, match=rf"rows 3-3 \(lines 5-5\) were there before the platform was at rest at "
                                               rf"posture 1: the campaign kept 2 .*delete them from {path}"):
         CsvInstrument(path, 3).measure(2, "posture 1")  # resumed: the posture is measured again, not that row taken
     path.write_text(TRACKER_HEADER + tracker_rows(nominal, range(2)))
@@ -70,7 +86,7 @@ def test_a_row_measured_for_a_measurement_not_kept_is_never_taken_for_another(no
     monkeypatch.setattr(instruments.time, "sleep",
                         lambda seconds: path.write_text(TRACKER_HEADER + tracker_rows(nominal, [0, 1, 20])))
     np.testing.assert_allclose(instrument.measure(2, "posture 1"), points_at(nominal, [0, 0, 20, 0, 0, 0]))
-    with pytest.raises(InstrumentError, match="rows 3-3 .* were there before the platform reached posture 1"):
+    with pytest.raises(InstrumentError, match="rows 3-3 .* were there before the platform was at rest at posture 1"):
         instrument.measure(2, "posture 1")  # not kept (a fault), measured again in the same run: not that row again
     monkeypatch.setattr(instruments.time, "sleep",
                         lambda seconds: path.write_text(TRACKER_HEADER + tracker_rows(nominal, [0, 1, 30])))

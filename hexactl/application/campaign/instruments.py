@@ -75,17 +75,19 @@ class CsvInstrument:
     row refuses it, naming every bad line. ``say`` tells the operator when the campaign
     waits for a row.
 
-    A row is a new measurement only if it was not there when the file was opened (before
-    anything moved) nor read already: a row the campaign read and did not keep (a fault
-    or a move interrupted that measurement) is refused, not taken again for the posture
-    measured again."""
+    A row is a new measurement only if it was written after :meth:`measure` was called,
+    which the campaign does once the platform is at rest at the posture: a row there
+    before was measured while the platform moved, or for a measurement the campaign did
+    not keep (a fault or a move interrupted it; the file was opened with it), and is
+    refused, never taken for this posture."""
 
     def __init__(self, path: Path, feature_point_count: int, say: Callable[[str], None] = print) -> None:
         self.path = Path(path)
         self.description = f"the instrument file {self.path}"
         self._feature_point_count = feature_point_count
         self._say = say
-        self._taken = len(self._rows().lines)  # rows no later measurement may be: there before, or read already
+        self._rows()  # checked whole now, before anything moves
+        self._taken = 0  # rows no measurement may be: there before it was asked for, or read already
 
     def _rows(self) -> PointRows:
         text = read_text(self.path, InstrumentError)
@@ -101,13 +103,15 @@ class CsvInstrument:
         waiting = False
         while True:
             rows = self._rows()
-            self._taken = min(self._taken, len(rows.lines))  # rows deleted since: the rows that take their place are new
+            # Rows deleted since: the rows that take their place are new. On the first look,
+            # every row there is old: written before the platform was at rest here.
+            self._taken = len(rows.lines) if not waiting else min(self._taken, len(rows.lines))
             if index < self._taken:
                 raise InstrumentError(
                     f"{self.path}: rows {index + 1}-{len(rows.lines)} (lines {rows.lines[index]}-{rows.lines[-1]}) were "
-                    f"there before the platform reached {label}: the campaign kept {index} measurements, so these were "
-                    "measured for postures or waypoints it did not keep (a fault, a stop or an interruption came "
-                    f"first) or for another campaign; delete them from {self.path} and run the same command again: it "
+                    f"there before the platform was at rest at {label}: the campaign kept {index} measurements, so these were "
+                    "measured while it moved there, or for postures or waypoints it did not keep (a fault, a stop or "
+                    f"an interruption came first), or for another campaign; delete them from {self.path} and run the same command again: it "
                     f"waits for row {index + 1} and measures it anew")
             if index < len(rows.lines):
                 self._taken = index + 1
