@@ -44,7 +44,7 @@ def test_an_unwritable_directory_stops_the_test_motions_naming_the_file(nominal,
     with CampaignStore.open(tmp_path / "c", nominal, DESIGN) as store:
         monkeypatch.setattr(store_module, "write_atomic", unwritable)
         with pytest.raises(CampaignError, match=rf"cannot write {tmp_path / 'c' / VALIDATION_FILE}: Operation not "
-                                                rf"permitted\. .*chattr -i.*{RESUME}"):
+                                                rf"permitted; write where .*chattr -i\)\. What was saved before is kept; .*{RESUME}"):
             _validate(PlatformDriver(controller), store, Instrument(nominal, controller), "before",  # type: ignore[arg-type]
                       PLANNED, quiet())
 

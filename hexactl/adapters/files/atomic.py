@@ -140,8 +140,10 @@ def write_problem(error: OSError) -> str:
     says neither). The one rule for every file hexactl writes."""
     if error.errno in (errno.ENOSPC, errno.EDQUOT):
         advice = "free some space there"
-    elif error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+    elif error.errno in (errno.EACCES, errno.EROFS):
         advice = "write where you have permission (and the file system is not read-only)"
+    elif error.errno == errno.EPERM:  # what root gets from a file or folder made immutable
+        advice = "write where you have permission (a file or folder made immutable refuses even root: lsattr, chattr -i)"
     elif error.errno == errno.ENAMETOOLONG:
         advice = "give a shorter name (at most about 220 bytes: its temporary adds some 30 to it)"
     else:

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexactl.application.campaign.driver import CampaignError
-from hexactl.adapters.files.atomic import write_atomic
+from hexactl.adapters.files.atomic import write_atomic, write_problem
 from hexactl.adapters.files.geometry_file import geometry_id
 from hexactl.adapters.files.measurements import (
     MeasurementFile,
@@ -371,9 +371,9 @@ def saving(path: Path) -> Iterator[None]:
     try:
         yield
     except OSError as error:
-        raise CampaignError(f"cannot write {path}: {error.strerror or error}. What was saved before is kept; make "
-                            f"{path.parent} writable again (permissions, chattr -i, free space), then run the same "
-                            "command again to resume (a measurement not saved is taken again)") from None
+        raise CampaignError(f"cannot write {path}: {write_problem(error)}. What was saved before is kept; once "
+                            f"{path.parent} can be written, run the same command again to resume (a measurement not "
+                            "saved is taken again)") from None
 
 
 def make_directory(directory: Path) -> None:
