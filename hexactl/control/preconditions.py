@@ -72,9 +72,11 @@ def _no_wave(view: CoreView) -> Refusal:
 def _no_stream(view: CoreView) -> Refusal:
     if view.stream is None:
         return None
-    return ErrorCode.BUSY, (f"stream {view.stream.stream} from {view.stream.source!r} is "
-                            f"{'open' if view.stream.phase is StreamPhase.FOLLOWING else 'braking to its end'}: "
-                            "close it (stream_close) or stop first")
+    if view.stream.phase is StreamPhase.FOLLOWING:
+        return ErrorCode.BUSY, (f"stream {view.stream.stream} from {view.stream.source!r} is open: close it "
+                                "(stream_close) or stop first")
+    return ErrorCode.BUSY, (f"stream {view.stream.stream} from {view.stream.source!r} is closed and braking to rest: "
+                            "wait until the platform is at rest (status: stream null)")
 
 
 def _no_sequence(view: CoreView) -> Refusal:

@@ -170,6 +170,21 @@ def test_moves_and_calibration_swaps_are_refused_while_a_stream_is_open(rig, geo
     assert not refused.ok and refused.error == "busy" and "stream" in refused.message
 
 
+def test_a_stream_closed_and_braking_says_to_wait_for_rest_not_to_close_it(rig) -> None:
+    """A stream_open while the last stream braked was told to close it, which it was."""
+    _opened(rig)
+    _stream(rig, [(x, 0, 0, 0, 0, 0) for x in np.linspace(0, 20, 200)])
+    assert rig.controller.stream_close().ok
+    rig.run()
+    assert rig.controller.snapshot.stream is not None  # braking
+    for refused in (rig.controller.stream_open("again"), rig.controller.move([1, 0, 0, 0, 0, 0])):
+        assert not refused.ok and refused.error == "busy"
+        assert "is closed and braking to rest: wait until the platform is at rest" in refused.message, refused.message
+        assert "close it" not in refused.message
+    rig.settle()
+    assert rig.controller.stream_open("again").ok
+
+
 def test_the_velocity_limits_keep_every_leg_within_the_budget(rig) -> None:
     _opened(rig)
     rate_hz = 1e9 / rig.period_ns
