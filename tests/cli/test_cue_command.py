@@ -158,3 +158,20 @@ def test_json_prints_the_plans_figures_and_how_the_stream_ended(monkeypatch, cap
     assert streamed["ended"]["reason"] == "stopped"
     assert streamed["ended"]["events"][0].startswith("stop: any motion under way brakes to rest, sent by ann@bench-2")
     assert "the stream ended after" in captured.err  # for people, on stderr
+
+
+@pytest.mark.parametrize("state, advice", [("disabled", "enable first (hexactl enable)"),
+                                           ("fault", "reset first (hexactl reset)")])
+def test_a_cue_to_a_platform_not_enabled_is_refused_before_it_plans(monkeypatch, capsys, state, advice) -> None:
+    """Found from outside: the cue planned for seconds, said it was moving to its start,
+    and only then learnt from the refused move that the platform was disabled."""
+    service = Service("stopped", [])
+    service.status = lambda: {"state": state, "t": 100.0, "pose_command": [0.0] * 6, "stream": None}  # type: ignore[method-assign]
+    stand_in(monkeypatch, service)
+    from hexactl.application import cueing
+
+    monkeypatch.setattr(cueing, "plan_cue", lambda *arguments, **options: pytest.fail("planned"))
+    assert cue() == 1
+    captured = capsys.readouterr()
+    assert captured.err == f"hexactl cue: the controller is {state}: {advice}; nothing was planned or moved\n"
+    assert "moving" not in captured.out and service.sent == []

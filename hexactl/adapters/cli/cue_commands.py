@@ -116,6 +116,12 @@ def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingPa
     from hexactl.kinematics.geometry import Geometry
 
     with client:
+        if not arguments.plan_only and (state := client.call("status")["status"]["state"]) != "enabled":
+            # Before seconds of planning: the service would refuse the move to the start anyway.
+            print(f"hexactl cue: the controller is {state}: "
+                  f"{'enable first (hexactl enable)' if state == 'disabled' else 'reset first (hexactl reset)'}; "
+                  "nothing was planned or moved", file=sys.stderr)
+            return EXIT_REFUSED
         geometry = Geometry.model_validate(client.call("geometry")["geometry"])
         try:
             plan = plan_cue(vehicle, parameters, geometry, workspace_gain=not arguments.no_workspace_gain)
@@ -282,7 +288,8 @@ def _to_start(client: HexactlClient, start: list[float], quiet: bool) -> int:
     at = client.call("status")["status"]["pose_command"]
     if max(abs(a - b) for a, b in zip(at, start)) <= GOAL_TOLERANCE:
         return EXIT_OK
+    since = newest_event_t(client)
+    reply = client.call("move", pose=start)  # a refusal raises, before anything is said of moving
     print(f"moving to the cue's start pose first: {pose_text(start)}", file=sys.stderr if quiet else sys.stdout,
           flush=True)
-    since = newest_event_t(client)
-    return wait_until_at_rest(client, "move", client.call("move", pose=start), since)
+    return wait_until_at_rest(client, "move", reply, since)
