@@ -199,6 +199,11 @@ def test_save_recording_writes_csv_once(service) -> None:
     assert send(service, "save_recording", path="run.csv")["error"]["code"] == "file_exists"
     assert send(service, "save_recording", path="../run.csv")["error"]["code"] == "forbidden_path"
     assert send(service, "save_recording", path="missing/run.csv")["error"]["code"] == "file_not_found"
+    for name in ("run2", "run2.json", "run2.csv.tmp"):  # CSV by its name too, or refused saying so
+        refused = send(service, "save_recording", path=name)["error"]
+        assert refused["code"] == "invalid_request" and refused["message"] == (
+            f"{name}: a recording is CSV: name it with the ending .csv"), refused
+    assert send(service, "save_recording", path="RUN2.CSV")["records"] == 2
 
 
 def test_measure_returns_the_instruments_points(service, nominal) -> None:

@@ -12,7 +12,7 @@ import io
 import logging
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 from pydantic import ValidationError
@@ -367,10 +367,8 @@ class CommandHandler:
         writer = csv.writer(table, lineterminator="\n")
         writer.writerow(dwell_header())
         writer.writerows(dwell_rows(report.records))
-        target = self.data.write_new(request.path, table.getvalue().encode("utf-8"))
+        target = self.data.write_new(_csv_name(request.path), table.getvalue().encode("utf-8"))
         return {"path": str(target), "name": report.name, "status": report.status, "records": len(report.records)}
-
-
     def _measure(self) -> dict[str, Any]:
         if self.instrument is None:
             raise ApiError(ErrorCode.NO_INSTRUMENT, "this service has no measuring instrument (only the simulator has one): "
@@ -380,6 +378,15 @@ class CommandHandler:
         except MeasurementError as error:
             raise ApiError(ErrorCode.MEASUREMENT_FAILED, str(error)) from None
         return {"points": [[float(value) for value in point] for point in points]}
+
+
+def _csv_name(path: str) -> str:
+    """``path``, a CSV file's: another ending, or none, is :class:`ApiError`
+    ``invalid_request`` (a CSV named ``run1`` or ``run1.json`` misleads every reader of the
+    folder, and a plotter or spreadsheet does not open it)."""
+    if PurePath(path).suffix.lower() != ".csv":
+        raise ApiError(ErrorCode.INVALID_REQUEST, f"{path}: a recording is CSV: name it with the ending .csv")
+    return path
 
 
 def _code(result: CommandResult) -> str:
