@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hexactl.adapters.cli.main import main
 from hexactl.application.service import Service
@@ -139,3 +142,42 @@ def test_record_wait_says_why_a_recording_could_not_be_written(capsys) -> None:
     side = {"csv": "/data/run.csv.partial", "rows_written": 40, "ended": "write_failed", "write_error": error}
     assert _report_written(side, as_json=False) == 1
     assert capsys.readouterr().err == f"hexactl record: it could not be written whole: {error}\n"
+
+
+@settings(max_examples=200, deadline=None)
+@given(values=st.lists(st.one_of(st.floats(-1e6, 1e6), st.just(float("nan"))), min_size=1, max_size=400),
+       buckets=st.integers(1, 50))
+def test_a_long_line_is_drawn_as_its_envelope_keeping_every_extreme(values, buckets) -> None:
+    from hexactl.adapters.cli.recording_commands import envelope
+
+    data = np.array(values)
+    time_s = np.arange(len(data)) * 0.002
+    t, drawn = envelope(time_s, data, buckets)
+    assert len(drawn) == len(t) <= max(2 * buckets, len(data))
+    assert np.all(np.diff(t) >= 0)  # in time order
+    finite = data[np.isfinite(data)]
+    if finite.size:  # the highest spike and the deepest dip stay in the image
+        assert np.nanmax(drawn) == finite.max() and np.nanmin(drawn) == finite.min()
+    else:
+        assert np.all(np.isnan(drawn))
+
+
+def test_plot_reads_a_long_recording_into_arrays_with_gaps_for_empty_cells(tmp_path, capsys) -> None:
+    from hexactl.adapters.cli.recording_commands import PLOT_BUCKETS, _read_recording
+
+    rows = 3 * PLOT_BUCKETS
+    lines = ["t_s,cycle,pose_measured_x_mm,lateness_us"]
+    lines += [f"{n * 0.002:.3f},{n},{'' if n < 5 else n % 7},{9999 if n == 4321 else 5}" for n in range(rows)]
+    recording = tmp_path / "long.csv"
+    recording.write_text("\ufeff" + "\n".join(lines) + "\n")  # a byte-order mark is dropped
+    header, columns = _read_recording(recording)
+    assert header == ["t_s", "cycle", "pose_measured_x_mm", "lateness_us"]
+    assert all(column.dtype == np.float64 and len(column) == rows for column in columns)
+    assert np.isnan(columns[2][:5]).all() and columns[2][5] == 5 and columns[3].max() == 9999
+    assert main(["plot", str(recording)]) == 0 and capsys.readouterr().out.strip() == str(tmp_path / "long.png")
+    (tmp_path / "wide.csv").write_bytes("t_s,cycle\n0,1\n".encode("utf-16"))
+    assert main(["plot", str(tmp_path / "wide.csv")]) == 2
+    assert "UTF-16 or UTF-32 text, not UTF-8" in capsys.readouterr().err
+    (tmp_path / "latin.csv").write_bytes(b"t_s,cycle,note\n0,1,2\n0.002,2,\xe9\n")
+    assert main(["plot", str(tmp_path / "latin.csv")]) == 2
+    assert "not UTF-8 text" in capsys.readouterr().err
