@@ -324,10 +324,9 @@ class PoseTrajectory:
         if result is None and self._passing:
             # ruckig refuses some (position, velocity, minimum duration) targets from some
             # states; a stream's next target comes a cycle later: arrive at rest on this one.
-            parameters = self._input
-            parameters.target_velocity, parameters.minimum_duration = _ZERO6, None
+            _arrive_at_rest(self._input)
             self._passing = False
-            result = _calculate(parameters, self._step)
+            result = _calculate(self._input, self._step)
         if result is None:
             self.reset(self.position)
             return StepResult.ERROR
@@ -368,17 +367,25 @@ def _beyond_resting_plan(parameters: InputParameter, plan: Trajectory,
            for s, g, e in zip(start, goal, extrema)):
         return False  # the usual case: no calculation more
     generator, resting, trajectory = check
+    # A copy of the input as configure_input and the stream's target set it (ruckig's input
+    # cannot be copied, and _calculate's retries change the one it is given), then at rest.
     resting.current_position, resting.current_velocity, resting.current_acceleration = (
         start, parameters.current_velocity, parameters.current_acceleration)
-    resting.target_position, resting.target_velocity, resting.target_acceleration = goal, _ZERO6, _ZERO6
     resting.max_velocity, resting.max_acceleration, resting.max_jerk = (
         parameters.max_velocity, parameters.max_acceleration, parameters.max_jerk)
-    resting.synchronization, resting.duration_discretization = Synchronization.Phase, DurationDiscretization.Discrete
-    resting.control_interface, resting.minimum_duration = ControlInterface.Position, None
+    resting.synchronization, resting.duration_discretization, resting.control_interface = (
+        parameters.synchronization, parameters.duration_discretization, parameters.control_interface)
+    resting.target_position = goal
+    _arrive_at_rest(resting)
     if _calculate(resting, lambda: generator.calculate(resting, trajectory)) is None:
         return True  # no arrival to compare with: the detour is not allowed
     return any(e.min < min(s, g, r.min) - tolerance or e.max > max(s, g, r.max) + tolerance
                for s, g, e, r in zip(start, goal, extrema, trajectory.position_extrema))
+
+
+def _arrive_at_rest(parameters: InputParameter) -> None:
+    """A target to pass at a velocity (a stream's) made one to arrive at rest on."""
+    parameters.target_velocity, parameters.target_acceleration, parameters.minimum_duration = _ZERO6, _ZERO6, None
 
 
 def _beyond_goal(start: KinematicState, goal: RelativeMmRad | ToolInWorkMmRad | None, limits: MotionLimits,
