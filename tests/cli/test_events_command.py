@@ -142,3 +142,45 @@ def test_follow_counts_the_events_of_a_burst_the_loop_no_longer_kept(follower, a
     assert printed == list(range(last - KEPT_EVENTS + 1, last + 1))  # all the loop kept, each once
     status, said = follower.interrupted()
     assert status == 130 and f"hexactl events: {printed[0] - seen - 1} events came and went between two asks" in said
+
+
+def test_follow_notices_a_restarted_service_however_many_events_it_has_had_since(monkeypatch, capsys) -> None:
+    """A service restarted between two asks numbers its events from 1 again: ``last`` below
+    the ``after`` sent was the only sign, and a new run with more events than that had its
+    first ones skipped, the rest printed as if nothing happened."""
+    from hexactl.adapters.api import client as client_module
+
+    def event(seq: int, code: str) -> dict:
+        return {"seq": seq, "t": 10.0 + seq, "code": code, "message": code, "sender": None}
+
+    first_run = [event(1, "enabled"), event(2, "stop")]
+    second_run = [event(n, f"new{n}") for n in range(1, 6)]  # more than the first run's two
+    replies = iter([("a1", first_run), ("b2", second_run), ("b2", second_run)])
+    asked: list[int] = []
+
+    class Client:
+        def __init__(self, endpoint: str, **options: object) -> None:
+            pass
+
+        def __enter__(self) -> "Client":
+            return self
+
+        def __exit__(self, *exception: object) -> None:
+            pass
+
+        def request(self, cmd: str, after: int) -> dict:
+            asked.append(after)
+            try:
+                run, events = next(replies)
+            except StopIteration:
+                raise KeyboardInterrupt from None  # Ctrl-C once the test's replies are out
+            kept = [e for e in events if e["seq"] > after]
+            return {"ok": True, "t": 20.0, "events": kept, "missed": 0, "last": events[-1]["seq"], "run": run}
+
+    monkeypatch.setattr(client_module, "HexactlClient", Client)
+    assert main(["events", "--follow", "--json", "--api", "tcp://127.0.0.1:1"]) == 130
+    captured = capsys.readouterr()
+    assert [json.loads(line)["code"] for line in captured.out.splitlines()] == [
+        "enabled", "stop", "new1", "new2", "new3", "new4", "new5"]
+    assert asked == [0, 2, 0, 5]
+    assert "the service has restarted: its events from the start" in captured.err

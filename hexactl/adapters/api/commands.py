@@ -10,6 +10,7 @@ import base64
 import csv
 import io
 import logging
+import secrets
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path, PurePath
@@ -124,6 +125,7 @@ class CommandHandler:
         self.frames_file = frames_file
         self.recorder = recorder
         self.campaign = CampaignBoard()
+        self.run = secrets.token_hex(4)  # this service's run: its events are numbered from 1 in each
 
     def record(self) -> dict[str, Any]:
         """A telemetry record: the controller's, with what a client's campaign said last.
@@ -196,7 +198,7 @@ class CommandHandler:
                 geometry, calibration_id, source = self._calibration(request)
                 return self._kept(_calibration_fields(controller.load_calibration(geometry, calibration_id, source)))
             case EventsRequest():  # the loop's clock is this host's monotonic one
-                return jsonable(controller.events(request.after, time.monotonic_ns()))
+                return {**jsonable(controller.events(request.after, time.monotonic_ns())), "run": self.run}
             case GeometryRequest():
                 active = controller.active_geometry()
                 return {"calibration_id": active.calibration_id, "source": active.source,

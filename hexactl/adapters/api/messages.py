@@ -778,7 +778,7 @@ class LoopEvent(_Message):
     """Something the loop did or refused."""
 
     seq: int = Field(description="its number: the loop's first event is 1, each next one more (a gap: events the "
-                     "reader missed; fewer than the last seen: the service has restarted)")
+                     "reader missed; fewer than the last seen: the service has restarted, as the events reply's run says)")
     t: float = Field(description="when, s, on the clock of the record's t")
     code: str = Field(description="what, snake_case: a command carried out (enabled, disabled, stop, reset, move, "
                       "leg_locked, leg_unlocked, pause, resume, abort, wave_started), one that started something "
@@ -885,6 +885,8 @@ class EventsReply(OkReply):
     missed: int = Field(description=f"events numbered after the request's after that the loop no longer keeps (it "
                         f"keeps its latest {KEPT_EVENTS}): read at least every few seconds to miss none")
     last: int = Field(description="the newest event's number (0: none yet); send it as after to read on")
+    run: str = Field(max_length=16, description="this run of the service: another than the last reply's means it "
+                     "restarted, its events numbered from 1 again (read them with after 0)")
 
 
 class MoveReply(OkReply):

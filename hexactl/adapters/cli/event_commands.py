@@ -57,17 +57,18 @@ def run(arguments: argparse.Namespace) -> int:
 
     try:
         with connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout) as client:
-            after, first = 0, True
+            after, first, run = 0, True, None
             while True:
                 reply = client.request("events", after=after)
                 received = time.time()
                 if not reply.get("ok"):
                     print(format_error_reply(reply), file=sys.stderr)
                     return EXIT_REFUSED
-                if reply["last"] < after:  # numbered from 1 again: the service restarted
+                if run is not None and reply.get("run") != run:  # numbered from 1 again, however many came since
                     print("hexactl events: the service has restarted: its events from the start", file=sys.stderr)
-                    after, first = 0, False
+                    after, first, run = 0, False, reply.get("run")
                     continue
+                run = reply.get("run")
                 shown = reply["events"][-arguments.last:] if first else reply["events"]
                 if reply["missed"] and not first:
                     print(f"hexactl events: {reply['missed']} events came and went between two asks (the service's "
