@@ -205,8 +205,10 @@ class ControlCore:
                               "controller drives too")
 
     def _send_estop(self) -> None:
-        self.hardware.send_estop()
-        self._supervisor.estop_sent(self._now_ns)
+        if self.hardware.send_estop():
+            self._supervisor.estop_sent(self._now_ns)
+        else:
+            self._supervisor.estop_failed()
 
     def _enter_estop(self, reason: str, sender: str | None = None) -> None:
         """Latch ESTOP for ``reason``; its fault names ``sender`` (who sent the E-stop), as the event does."""

@@ -14,7 +14,8 @@ which holds its set-points). In any state, an actuator reporting E-stop is the h
 chain's E-stop (:meth:`Supervisor.estop_reported`), except in the grace time a reset
 gives the actuators to leave it.
 
-E-stop timing: while ESTOP is latched the E-stop is re-sent every ``estop_repeat_s``;
+E-stop timing: while ESTOP is latched the E-stop is re-sent every ``estop_repeat_s``
+after the last one sent, and every cycle while none could be sent;
 a reset's CLEAR_FAULT waits until ``estop_clear_holdoff_s`` after the loop's last
 E-stop, because the actuators refuse it while an E-stop is recent.
 
@@ -177,9 +178,15 @@ class Supervisor:
         return False
 
     def estop_sent(self, now_ns: int) -> None:
-        """The loop sent an E-stop at ``now_ns`` (latching ESTOP or repeating it)."""
+        """The loop sent an E-stop at ``now_ns`` (latching ESTOP or repeating it): the next
+        is due ``estop_repeat_s`` later."""
         self._last_estop_ns = now_ns
         self._next_estop_ns = now_ns + self._estop_repeat_ns
+
+    def estop_failed(self) -> None:
+        """The loop's E-stop could not be sent: it is due again at once, every cycle until
+        one goes out (the repeat interval runs only from an E-stop sent)."""
+        self._next_estop_ns = 0
 
     def estop_due(self, now_ns: int) -> bool:
         """While ESTOP is latched: time to repeat the E-stop."""

@@ -94,3 +94,37 @@ def test_the_way_back_names_the_calibrations_file_not_a_rollback(nominal, tmp_pa
     said = str(raised.value)
     assert f"make {PLANNED} active again ({again.format(directory=(tmp_path / 'c').resolve())})" in said, said
     assert "rollback-calibration" not in said
+
+
+def test_a_resumed_campaign_on_another_calibration_is_told_the_way_that_resumes_it(nominal, tmp_path) -> None:
+    """Found from outside: resuming while the controller ran another calibration advised
+    giving the geometry it runs (--config), which the campaign's directory then refused:
+    it was planned on another."""
+    from hexactl.application.campaign.runner import CampaignSettings, run_campaign
+
+    design = CampaignDesign(postures_per_leg=1, candidates=50)
+    with CampaignStore.open(tmp_path / "c", nominal, design):
+        pass  # planned, nothing measured: stopped at once
+    controller = Controller()
+    controller.call("status")
+    controller.calibration_id = OTHER
+    controller.call = _with_locked_leg(controller.call)  # type: ignore[method-assign]
+    controller.request = lambda cmd, **fields: {"ok": True}  # type: ignore[attr-defined]  # progress, for displays
+    with pytest.raises(CampaignError) as raised:
+        run_campaign(controller, nominal, Instrument(nominal, controller), CampaignSettings(tmp_path / "c", design),  # type: ignore[arg-type]
+                     Progress(io.StringIO(), io.StringIO()))
+    said = str(raised.value)
+    assert f"runs calibration {OTHER}, not the geometry the campaign is planned on" in said, said
+    assert "make it active again (hexactl load-calibration of the geometry file the campaign was planned with), then " \
+           "run the same command again to resume" in said
+    assert "give the geometry it runs" not in said and controller.moves == 0
+
+
+def _with_locked_leg(call):
+    """``call``, its status records with the field :meth:`PlatformDriver.prepare` reads."""
+    def calling(cmd: str, **fields: object) -> dict:
+        reply = call(cmd, **fields)
+        if "status" in reply:
+            reply["status"]["locked_leg"] = None
+        return reply
+    return calling

@@ -211,7 +211,7 @@ class _Node:
     """What the link knows about one actuator."""
 
     __slots__ = (
-        "position_mm", "velocity_mm_s", "wire_state", "fault_bits", "wire_counter", "engaged",
+        "position_mm", "velocity_mm_s", "wire_state", "fault_bits", "setpoint_counter", "enable_floor",
         "heard_ns", "heartbeat_ns", "feedback_ns", "protocol_version", "rejected_frames",
         "emergencies", "last_emergency", "last_ack", "sequence", "pending",
     )  # fmt: skip
@@ -222,8 +222,10 @@ class _Node:
         self.velocity_mm_s = nan
         self.wire_state = WireState.INIT
         self.fault_bits = 0
-        self.wire_counter = 0
-        self.engaged = False  # has reported ENABLED or LOCKED: its SetpointCounter means something
+        self.setpoint_counter = -1  # unwrapped at its FEEDBACK; −1 outside ENABLED/LOCKED, or none of ours yet
+        # The last counter sent before this link's latest ENABLE to it: an echo of it or an older
+        # one is the actuator's from before its present enabling (its last session's, 0 after a reboot).
+        self.enable_floor = -1
         self.heard_ns: int | None = None
         self.heartbeat_ns: int | None = None
         self.feedback_ns: int | None = None
@@ -489,15 +491,15 @@ class CanActuatorLink:
                 heard = "no heartbeat yet" if node.protocol_version is None else f"protocol {node.protocol_version}"
                 return self._refuse(f"ENABLE refused for leg {leg}: {heard}, need protocol {PROTOCOL_VERSION}")
             frame = encode_command(leg, code, node.sequence, self.config.loop_rate, self.config.watchdog_cycles)
+            node.enable_floor = -1 if self._last_counter is None else self._last_counter
         else:
             frame = encode_command(leg, code, node.sequence)
         sequence = node.sequence
         node.sequence = (sequence + 1) & 0xFF
-        if not self._send(*frame, 0.0):
-            return False
-        # A newer command supersedes an unacknowledged older one: only the latest is retried.
+        # A newer command supersedes an unacknowledged older one, sent or not: only the latest
+        # is retried, so an older ENABLE is never re-sent after a DISABLE that failed to send.
         node.pending = _PendingCommand(frame, sequence, now)
-        return True
+        return self._send(*frame, 0.0)
 
     def _retry_commands(self, now: int) -> None:
         retry_ns = int(self.config.command_retry_s * 1e9)
@@ -538,7 +540,7 @@ class CanActuatorLink:
             node.velocity_mm_s = decoded.velocity_um_s / _UM_PER_MM
             node.wire_state = decoded.state
             node.fault_bits = int(decoded.faults)
-            node.wire_counter = decoded.setpoint_counter
+            node.setpoint_counter = self._unwrap(decoded.setpoint_counter, node.enable_floor)
             node.feedback_ns = now
         elif kind is Heartbeat:
             node = self._nodes[decoded.node - 1]
@@ -579,8 +581,8 @@ class CanActuatorLink:
                     self._other_frame = _COMMAND_NAMES[decoded.node, decoded.command]
             return
         node.heard_ns = now
-        if node.wire_state in _ENGAGED:
-            node.engaged = True
+        if node.wire_state not in _ENGAGED:
+            node.setpoint_counter = -1  # disabled, faulted or rebooted: it applies nothing of ours
 
     def _feedback(self, node: _Node, now: int) -> ActuatorFeedback:
         return ActuatorFeedback(
@@ -592,18 +594,18 @@ class CanActuatorLink:
             # Not heard (inf) until a HEARTBEAT shows it speaks this protocol: frames before
             # that do not make an actuator the loop may enable (send_command refuses ENABLE).
             heartbeat_age_s=_age_s(node.heard_ns if node.protocol_version == PROTOCOL_VERSION else None, now),
-            setpoint_counter=self._unwrap(node),
+            setpoint_counter=node.setpoint_counter,
         )
 
-    def _unwrap(self, node: _Node) -> int:
+    def _unwrap(self, wire_counter: int, floor: int) -> int:
         """The loop counter whose low byte the actuator echoes: the latest one sent that ends
-        in those 8 bits (acknowledgements lag far less than 256 cycles), or −1 if the
-        actuator has applied nothing this link sent."""
+        in those 8 bits (acknowledgements lag far less than 256 cycles), or −1 if that is not
+        one this link sent after ``floor`` (the actuator's echo from before its ENABLE)."""
         last, first = self._last_counter, self._first_counter
-        if last is None or first is None or not node.engaged:
+        if last is None or first is None:
             return -1
-        counter = last - ((last - node.wire_counter) & 0xFF)
-        return counter if counter >= first else -1
+        counter = last - ((last - wire_counter) & 0xFF)
+        return counter if counter >= first and counter > floor else -1
 
 
 def _age_s(then_ns: int | None, now_ns: int) -> float:

@@ -115,13 +115,12 @@ class PlatformDriver:
                 raise CampaignError("the controller did not reset")
             time.sleep(self.settle.poll_s)
 
-    def require_calibration(self, calibration_id: str, what: str) -> None:
+    def require_calibration(self, calibration_id: str, what: str, advice: str) -> None:
         """:class:`CampaignError` unless the controller runs ``calibration_id`` (``what``
-        names it for the message)."""
+        names it, ``advice`` says what to do, for the message)."""
         active = self.status()["calibration_id"]
         if active != calibration_id:
-            raise CampaignError(f"the controller runs calibration {active}, not {what} ({calibration_id}): start it on "
-                                "that geometry or give the geometry it runs (--config)")
+            raise CampaignError(f"the controller runs calibration {active}, not {what} ({calibration_id}): {advice}")
 
     def move(self, pose: Sequence[float], *, settle: bool = True) -> Record:
         """Move to ``pose`` (relative mm/deg) and wait until the move has ended and, with

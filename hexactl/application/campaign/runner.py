@@ -135,7 +135,8 @@ def run_campaign(client: HexactlClient, geometry: Geometry, instrument: Instrume
     progress.forward_to(driver.tell)  # displays of the service (the dashboard) follow the campaign
     try:
         if not (settings.directory / PLAN_FILE).exists():  # nothing planned or written for a controller on another geometry
-            driver.require_calibration(geometry_id(geometry), _planned(geometry))
+            driver.require_calibration(geometry_id(geometry), _planned(geometry),
+                                       "start it on that geometry, or give the geometry it runs (--config)")
         with CampaignStore.open(settings.directory, geometry, settings.design) as store:
             return _run(driver, store, instrument, settings, progress)
     finally:
@@ -157,7 +158,7 @@ def _run(driver: PlatformDriver, store: CampaignStore, instrument: Instrument, s
     def measure_on_the_planned_geometry() -> None:
         driver.prepare()
         if store.validation_steps_left("before") or store.postures_measured < len(store.postures):
-            driver.require_calibration(planned_id, _planned(geometry))
+            driver.require_calibration(planned_id, _planned(geometry), _MAKE_PLANNED_ACTIVE)
         _validate(driver, store, instrument, "before", planned_id, progress)
         _measure_postures(driver, store, instrument, progress)
 
@@ -190,7 +191,7 @@ def _measure_after(driver: PlatformDriver, store: CampaignStore, instrument: Ins
     runs it, and measure the test motions after calibration with it."""
     driver.prepare()
     if driver.status()["calibration_id"] != calibrated_id:
-        driver.require_calibration(geometry_id(store.geometry), _planned(store.geometry))
+        driver.require_calibration(geometry_id(store.geometry), _planned(store.geometry), _MAKE_PLANNED_ACTIVE)
         progress.say("loading the calibration into the controller")
         driver.load_calibration(text)
     # The verdict must judge one calibration: waypoints a stopped run measured with another
@@ -253,6 +254,12 @@ def calibration_left_in_force(client: HexactlClient, directory: Path) -> str | N
             "motions after calibration, and keeps it for its next start: running the same command again resumes "
             "and, at the end, rolls it back unless --apply keeps it; to go back now: hexactl rollback-calibration "
             "(after a restart of the service: hexactl load-calibration of the geometry the campaign was planned on)")
+
+
+_MAKE_PLANNED_ACTIVE = ("make it active again (hexactl load-calibration of the geometry file the campaign was "
+                        "planned with), then run the same command again to resume; a "
+                        "campaign is resumed on the geometry it was planned on only (on the one the controller runs, "
+                        "start another: --config that geometry and another --out)")
 
 
 def _planned(geometry: Geometry) -> str:
