@@ -16,7 +16,8 @@ from hexactl.control.planning import Plan, PlanningContext, Refusal, Waypoint, p
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
-from hexactl.control.validated_under import ValidatedUnder, changed_since_validation, goal_changed
+from hexactl.control.validated_under import (ValidatedUnder, changed_since_validation, goal_changed,
+                                              why_the_goal_moves)
 from hexactl.kinematics.axes import POSE_AXES, validate_pose_values
 
 
@@ -79,7 +80,8 @@ class MoveCommands:
             return plan_result(plan, "", s.active.home)
         last = plan.segments[-1]
         goal = convert(last.goal, last.frames, None, s.active.home)
-        if refusal := goal_changed(validated_under, goal.in_degrees()):
+        if refusal := goal_changed(validated_under, goal.in_degrees(),
+                                   why_the_goal_moves(relative, s.lock.leg if s.lock is not None else None)):
             return refusal
         accuracy = None
         if accuracy_wanted or tolerance_mm is not None:

@@ -70,11 +70,12 @@ def changed_since_validation(validated: ValidatedUnder | None, calibration_id: s
         changed=changed, in_force={"calibration_id": calibration_id, "frames": frames})
 
 
-def goal_changed(validated: ValidatedUnder | None, goal: RelativeMmDeg) -> CommandResult | None:
+def goal_changed(validated: ValidatedUnder | None, goal: RelativeMmDeg, because: str) -> CommandResult | None:
     """The refusal of a move validated under ``validated`` (None: nothing to check) whose
     goal, planned now, is ``goal`` instead of the one validated (by more than
     :data:`GOAL_TOLERANCE` on an axis): ``changed_since_validation``, ``details.changed``
-    ``["goal"]``, with both goals (``details.validated_goal``, ``details.goal``)."""
+    ``["goal"]``, with both goals (``details.validated_goal``, ``details.goal``).
+    ``because``: why it may have changed, for people (:func:`why_the_goal_moves`)."""
     if validated is None:
         return None
     moved = [f"{axis} {before:.6g} → {after:.6g} {unit}"
@@ -84,7 +85,19 @@ def goal_changed(validated: ValidatedUnder | None, goal: RelativeMmDeg) -> Comma
         return None
     return CommandResult.failure(
         ErrorCode.CHANGED_SINCE_VALIDATION,
-        f"the goal changed since this move was validated ({', '.join(moved)}): a relative move starts from the "
-        "target, and the platform has moved since (another client's move, a jog or a stop), so the move would go "
+        f"the goal changed since this move was validated ({', '.join(moved)}): {because}, so the move would go "
         "elsewhere than the goal validated; nothing moved; validate it again, check the new goal, then move",
         changed=["goal"], validated_goal=list(validated.goal), goal=list(goal))
+
+
+def why_the_goal_moves(relative: bool, locked_leg: int | None) -> str:
+    """What makes a move's goal, planned again, another than the one validated: a relative
+    move's start (the target), and a locked leg's constraint, which the goal is projected on."""
+    causes = []
+    if relative:
+        causes.append("a relative move starts from the target, and the platform has moved since (another client's "
+                      "move, a jog or a stop)")
+    if locked_leg is not None:
+        causes.append(f"leg {locked_leg} is locked, and the goal is projected onto its constraint (locked or moved "
+                      "since the validation)")
+    return "; ".join(causes) or "the platform's state changed since"

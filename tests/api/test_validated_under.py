@@ -161,6 +161,29 @@ def test_a_relative_move_validated_before_another_client_moved_the_platform_is_r
     tolerating_loop_stalls(scenario, lambda: framed_service.controller)
 
 
+def test_an_absolute_move_validated_before_a_leg_was_locked_is_refused_naming_the_lock(framed_service,
+                                                                                      operators) -> None:
+    """Found from outside (the dashboard's Go): the refusal blamed "a relative move … the
+    platform has moved" for an absolute move whose goal the new lock projected elsewhere."""
+    first, second = operators
+
+    def scenario() -> None:
+        at_zero_in_frames(first)
+        validation = first.call("validate_pose", pose=[0, 0, 20, 0, 0, 0], duration=0.5)
+        second.call("leg_lock", leg=2)
+        try:
+            refused = first.request("move", pose=[0, 0, 20, 0, 0, 0], duration=0.5,
+                                    validated_under=validation["validated_under"])
+        finally:
+            second.call("leg_unlock")
+        error = refused["error"]
+        assert error["code"] == "changed_since_validation" and error["details"]["changed"] == ["goal"], refused
+        assert "leg 2 is locked, and the goal is projected onto its constraint" in error["message"], error
+        assert "relative" not in error["message"], error
+
+    tolerating_loop_stalls(scenario, lambda: framed_service.controller)
+
+
 def test_an_absolute_move_validated_before_an_estop_goes_to_the_goal_validated_once_enabled_again(
         framed_service, operators) -> None:
     """Its goal depends on nothing that an E-stop changes, and its path is planned anew from
