@@ -275,16 +275,10 @@ class Service:
         frames_path = config.frames_path or Path.cwd() / DEFAULT_FRAMES_FILE
         kept_path = config.kept_calibration_path or Path.cwd() / DEFAULT_KEPT_CALIBRATION_FILE
         _refuse_shared_files(config, config_path, frames_path, kept_path)
-        kept_files = ((kept_path, "the calibration in force", "--keep-calibration", "the nominal geometry"),
-                      (frames_path, "the operator's frames", "--frames", "no frames and no soft limits"))
-        for path, what, option, without in kept_files:
-            if not path.parent.is_dir():  # a mistyped directory: nothing could be kept there, nor read back
-                raise ServiceError(f"{option} {path}: no such directory {path.parent} to keep {what} in; create it, "
-                                   f"or correct {option}")
-            if path.is_symlink() and not path.exists():  # not "nothing kept": the file is elsewhere, out of reach
-                raise ServiceError(f"{option} {path}: a symbolic link to {os.path.realpath(path)}, which is not there "
-                                   f"(a disk not mounted?): {what} kept there can be neither restored nor kept; "
-                                   f"mount or restore the link's target, or remove the link to start with {without}")
+        kept_files = tuple((_kept_file(path, what, option, without), what) for path, what, option, without in (
+            (kept_path, "the calibration in force", "--keep-calibration", "the nominal geometry"),
+            (frames_path, "the operator's frames", "--frames", "no frames and no soft limits")))
+        (kept_path, _), (frames_path, _) = kept_files
 
         # The stream's ZeroMQ socket steers the platform as the API does (UDP is warned of below).
         given = (("--api", config.api_endpoint), ("--telemetry", config.telemetry_endpoint),
@@ -316,7 +310,7 @@ class Service:
 
         # Unwound in reverse: API, bring to rest, telemetry, loop, link, simulator, the kept files.
         with ExitStack() as closers:
-            for path, what, _, _ in kept_files:
+            for path, what in kept_files:
                 try:  # before they are read, and before the actuators open
                     closers.callback(hold(path, what).release)
                 except HeldByAnother as error:
@@ -765,6 +759,28 @@ def _refuse_shared_files(config: ServiceConfig, config_path: Path, frames_path: 
         raise ServiceError(f"{both}: the service keeps {_KEPT_FOR_A_RESTART[option]} and "
                            f"{_KEPT_FOR_A_RESTART[other]} for a restart, and each would overwrite the other; give each "
                            "option a file of its own")
+
+
+def _kept_file(path: Path, what: str, option: str, without: str) -> Path:
+    """Where ``option`` (``path``) keeps ``what``: the file itself, or, for a symbolic link,
+    its target, which is read, held and written (written over, the link would become a
+    file of its own, and the file it led to, on a shared disk say, would keep the old).
+
+    :raises ServiceError: for a folder that is not there, or a link to nothing (``without``
+        it, the service would start as if nothing were kept)
+    """
+    if not path.parent.is_dir():  # a mistyped directory: nothing could be kept there, nor read back
+        raise ServiceError(f"{option} {path}: no such directory {path.parent} to keep {what} in; create it, "
+                           f"or correct {option}")
+    if not path.is_symlink():
+        return path
+    target = Path(os.path.realpath(path))
+    if not target.exists():  # not "nothing kept": the file is elsewhere, out of reach
+        raise ServiceError(f"{option} {path}: a symbolic link to {target}, which is not there (a disk not "
+                           f"mounted?): {what} kept there can be neither restored nor kept; mount or restore the "
+                           f"link's target, or remove the link to start with {without}")
+    log.info("%s %s: a link to %s, where %s is kept", option, path, target, what)
+    return target
 
 
 def _option_text(option: str, path: Path, given: bool) -> str:

@@ -168,3 +168,33 @@ def test_serve_refuses_a_link_to_nothing_with_exit_2_and_no_word_of_a_first_star
     assert "hexactl serve: error: --frames frames.toml: a symbolic link to /nonexistent-disk/frames.toml" in error
     assert "no such file yet" not in error
     assert (here / "frames.toml").is_symlink()
+
+
+# -- a kept file that is a link to a file ----------------------------------------------
+
+
+def test_kept_files_that_are_links_are_written_through_and_held_at_their_target(here: Path) -> None:
+    """Found from outside: a working link (to a shared disk, say) became a file of its own
+    at the first change, and its target kept the old frames; the lock lay beside the link,
+    so a second service reaching the target by another link was not refused."""
+    from hexactl.adapters.api.client import HexactlClient
+    from hexactl.adapters.files.frames_file import load_frames
+
+    shared = here / "shared"
+    shared.mkdir()
+    (here / "frames.toml").rename(shared / "frames.toml")
+    (here / "frames.toml").symlink_to(shared / "frames.toml")
+    (here / "other").mkdir()
+    (here / "other" / "frames.toml").symlink_to(shared / "frames.toml")
+    started = Service.start(_config(here / "data"))
+    try:
+        assert (shared / ".frames.toml.lock").exists() and not (here / ".frames.toml.lock").exists()
+        refusal = _refusal(_config(here / "data", frames_path=here / "other" / "frames.toml",
+                                   kept_calibration_path=here / "other" / "active_calibration.toml"))
+        assert f"{shared / 'frames.toml'}: another hexactl serve" in refusal, refusal
+        with HexactlClient(started.api_endpoint, timeout_s=30.0) as client:
+            client.call("set_frames", tool=[0, 0, 100, 0, 0, 0])
+    finally:
+        started.close()
+    assert (here / "frames.toml").is_symlink()
+    assert load_frames(shared / "frames.toml").tool == (0, 0, 100, 0, 0, 0)
