@@ -181,3 +181,21 @@ def test_plot_reads_a_long_recording_into_arrays_with_gaps_for_empty_cells(tmp_p
     (tmp_path / "latin.csv").write_bytes(b"t_s,cycle,note\n0,1,2\n0.002,2,\xe9\n")
     assert main(["plot", str(tmp_path / "latin.csv")]) == 2
     assert "not UTF-8 text" in capsys.readouterr().err
+
+
+def test_plot_leaves_out_a_last_line_an_interruption_cut(tmp_path, capsys) -> None:
+    """An interrupted recording's last line may be cut, even within a number (12.5 of
+    12.345): it was refused as garbled, or read as a number it never was."""
+    partial = tmp_path / "run.csv.partial"
+    partial.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2,7.0\n0.004,3,12.3")
+    image = tmp_path / "run.png"
+    assert main(["plot", str(partial), "-o", str(image)]) == 0 and image.exists()
+    assert f"{partial}: line 4 was cut (an interrupted recording?): left out" in capsys.readouterr().err
+    from hexactl.adapters.cli.recording_commands import _read_recording
+
+    partial.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2")  # cut within its second value
+    assert [list(column) for column in _read_recording(partial)[1]] == [[0.0], [1.0], [5.0]]
+    whole = tmp_path / "whole.csv"
+    whole.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2\n0.004,3,1\n")  # a short line within: garbled
+    assert main(["plot", str(whole)]) == 2
+    assert "line 3 has 2 values for 3 columns: the file is garbled" in capsys.readouterr().err

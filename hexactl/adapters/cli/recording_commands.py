@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -269,6 +270,12 @@ def _read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]]]:
     try:
         with path.open("rb") as raw:
             start = raw.read(4)
+            raw.seek(0, os.SEEK_END)
+            if raw.tell():
+                raw.seek(-1, os.SEEK_END)
+            # Every row the recorder writes ends its line: one that does not was cut (an
+            # interrupted recording's .csv.partial), and is left out, not taken for a number.
+            cut = raw.read(1) not in (b"\n", b"")
     except FileNotFoundError:
         raise CliError(f"{path}: no such file (a recording is NAME.csv in the service's data directory)") from None
     except OSError as error:
@@ -284,16 +291,17 @@ def _read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]]]:
                 raise CliError(f"{path}: not a recording (its header has no t_s and cycle columns): plot a file made "
                                "by hexactl record")
             columns = [array("d") for _ in header]
+            held: list[str] | None = None  # the row read last, taken once another follows it (or the file ends whole)
             for number, row in enumerate(rows, start=2):
-                if len(row) != len(header):
-                    raise CliError(f"{path}: line {number} has {len(row)} values for {len(header)} columns: the file "
-                                   "is garbled")
-                for column, cell in zip(columns, row):
-                    column.append(float(cell) if cell else float("nan"))
+                if held is not None:
+                    _take(held, columns, number - 1, path)
+                held = row
+            if held is not None and not cut:
+                _take(held, columns, number, path)
+            elif held is not None:
+                print(f"{path}: line {number} was cut (an interrupted recording?): left out", file=sys.stderr)
     except UnicodeDecodeError:
         raise CliError(f"{path}: not UTF-8 text (after line {number}): {SAVE_AS_UTF8}") from None
-    except ValueError:
-        raise CliError(f"{path}: line {number} has a value that is not a number: the file is garbled") from None
     except csv.Error as error:  # a NUL byte: not a text file
         raise CliError(f"{path}: line {number}: {error}: the file is garbled") from None
     except OSError as error:
@@ -301,6 +309,19 @@ def _read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]]]:
     if not columns[0]:
         raise CliError(f"{path}: the recording has no rows")
     return header, [np.frombuffer(column, dtype=np.float64) for column in columns]
+
+
+def _take(row: list[str], columns: list[Any], number: int, path: Path) -> None:
+    """Append line ``number``'s ``row`` to ``columns`` (NaN for an empty cell); CliError
+    when it has another count of values than the header, or one that is not a number."""
+    if len(row) != len(columns):
+        raise CliError(f"{path}: line {number} has {len(row)} values for {len(columns)} columns: the file is garbled")
+    try:
+        values = [float(cell) if cell else float("nan") for cell in row]
+    except ValueError:
+        raise CliError(f"{path}: line {number} has a value that is not a number: the file is garbled") from None
+    for column, value in zip(columns, values):
+        column.append(value)
 
 
 def envelope(time_s: NDArray[np.float64], values: NDArray[np.float64], buckets: int
