@@ -399,6 +399,7 @@ class Service:
             log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)
             log.info("data directories: %s", ", ".join(str(directory) for directory in data_dirs))
+            _name_interrupted_recordings(data_dirs[0])
             return cls(controller, simulator, api, exchange, closers.pop_all(), budget)
 
     def close(self) -> None:
@@ -781,6 +782,18 @@ def _kept_file(path: Path, what: str, option: str, without: str) -> Path:
                            f"link's target, or remove the link to start with {without}")
     log.info("%s %s: a link to %s, where %s is kept", option, path, target, what)
     return target
+
+
+def _name_interrupted_recordings(directory: Path) -> None:
+    """Log the recordings a service stopped in mid-recording left in ``directory`` (the
+    recorder's): their rows are kept, under a name no reader of finished recordings takes."""
+    try:
+        interrupted = sorted(directory.glob("*.csv.partial"))
+    except OSError:
+        return
+    for path in interrupted:
+        log.warning("%s: a recording not finished (a service stopped during it, or another's under way): its rows "
+                    "are kept; hexactl plot draws it; once no service writes it, rename it to .csv or remove it", path)
 
 
 def _option_text(option: str, path: Path, given: bool) -> str:

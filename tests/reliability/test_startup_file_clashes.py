@@ -198,3 +198,15 @@ def test_kept_files_that_are_links_are_written_through_and_held_at_their_target(
         started.close()
     assert (here / "frames.toml").is_symlink()
     assert load_frames(shared / "frames.toml").tool == (0, 0, 100, 0, 0, 0)
+
+
+def test_a_recording_left_unfinished_is_named_at_start(here: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A service killed mid-recording leaves NAME.csv.partial, which no reader of finished
+    recordings takes: the next start said nothing of it."""
+    (here / "data" / "run7.csv.partial").write_text("t_s,cycle\n0.0,1\n")
+    caplog.set_level("WARNING", logger="hexactl.service")
+    Service.start(_config(here / "data")).close()
+    said = [record.getMessage() for record in caplog.records if "run7" in record.getMessage()]
+    assert said == [f"{here / 'data' / 'run7.csv.partial'}: a recording not finished (a service stopped during it, "
+                    "or another's under way): its rows are kept; hexactl plot draws it; once no service writes it, "
+                    "rename it to .csv or remove it"], said
