@@ -236,3 +236,18 @@ def test_absurd_values_are_refused_by_line_and_column_as_a_typing_or_unit_error(
     assert [(problem.line, problem.message) for problem in parsed.problems] == [
         (line, f"{column} {value} is beyond ±1,000,000{unit}, far beyond any platform or instrument: a typing or unit "
             "error; correct the value")]
+
+
+def test_a_decimal_comma_and_a_missing_header_are_named_as_such(leglock_campaign):
+    """Found from outside: a quoted decimal comma got the generic hint on every field, and a
+    file without a header line was told its columns were missing."""
+    text = _with_field(_points_text(leglock_campaign), 5, "p1_y", '"437,659913"')
+    parsed = parse_measurements(text, "comma.csv", 3)
+    [(line, message)] = [(problem.line, problem.message) for problem in parsed.problems]
+    assert line == 5 and message == ("p1_y '437,659913' is not a number: a decimal comma? (a spreadsheet's export in a "
+                                     "locale that writes them: save it with '.' as the decimal mark)")
+    headless = "\n".join(line for line in _points_text(leglock_campaign).splitlines()
+                         if not line.startswith(("leg,", "#")))
+    with pytest.raises(MeasurementFileError, match=r"^bare\.csv: line 1: numbers where the header belongs: the file "
+                                                   r"has no header line; add one naming the columns"):
+        parse_measurements(headless, "bare.csv", 3)

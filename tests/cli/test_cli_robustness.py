@@ -339,7 +339,7 @@ def test_cue_refused_prints_the_refusal_as_every_command_does(monkeypatch, capsy
     class Service(FakeClient):
         def call(self, cmd: str, **fields: object) -> dict:
             if cmd == "status":  # on the cue's start pose: nothing to move first
-                return {"ok": True, "status": {"pose_command": [0.0] * 6}}
+                return {"ok": True, "status": {"state": "enabled", "pose_command": [0.0] * 6}}
             if cmd == "events":  # the newest before the stream, to tell what happens to it
                 return {"ok": True, "events": [], "last": 0}
             assert cmd == "geometry"

@@ -112,6 +112,10 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
     pose_columns = [] if point_columns else list(POSE_AXES)
     required = ["leg", *READING_COLUMNS, *pose_columns, *(name for point in point_columns for name in point)]
     missing = [name for name in required if name not in header]
+    if missing and all(PLAIN_DECIMAL.fullmatch(name.strip()) for name in header):
+        raise MeasurementFileError(
+            f"{source}: line {header_line}: numbers where the header belongs: the file has no header line; add one "
+            "naming the columns: leg, l1 … l6 and either x, y, z, roll, pitch, yaw or p1_x, p1_y, p1_z … p3_z")
     if missing:
         raise MeasurementFileError(
             f"{source}: line {header_line}: missing columns {', '.join(missing)} (a row needs leg, l1 … l6 and either "
@@ -327,6 +331,9 @@ def _number(text: str, name: str) -> tuple[float, str | None]:
     if _NON_FINITE.fullmatch(text):
         return float(text), f"{name} is {text} (not a finite number)"
     if not PLAIN_DECIMAL.fullmatch(text):
+        if PLAIN_DECIMAL.fullmatch(text.replace(",", ".", 1)):
+            return float("nan"), (f"{name} {text!r} is not a number: a decimal comma? (a spreadsheet's export in a "
+                                  "locale that writes them: save it with '.' as the decimal mark)")
         return float("nan"), f"{name} {text!r} is not a number ({PLAIN_DECIMAL_HINT})"
     value = float(text)
     if not isfinite(value) or abs(value) > POSE_MAGNITUDE_LIMIT:
