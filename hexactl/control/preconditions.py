@@ -25,6 +25,12 @@ from hexactl.control.wave_player import WaveProgress
 
 Refusal = tuple[ErrorCode, str] | None  # (code, message) or None when allowed
 
+BUS_OFF_CHECK = ("the CAN interface left the bus after repeated transmit errors; check the bus wiring and its two "
+                 "120 ohm terminations, that every node runs the same bit rate and that the actuators are powered, "
+                 "then restart the interface (`ip link set can0 down` and `up`, or give it `restart-ms 100`); "
+                 "enable once frames arrive again")
+"""What the operator checks when enable finds the link bus-off."""
+
 
 class CoreView(Protocol):
     """What the checks read (read-only); poses relative mm/rad, legs sensor mm."""
@@ -101,6 +107,11 @@ def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
         return ErrorCode.LATCHED, f"{view.state.value} is latched: reset first"
     if view.feedback is None:
         return ErrorCode.HEARTBEAT_MISSING, "no feedback from the actuators yet"
+    if view.link is not None and view.link.bus_state is BusState.BUS_OFF:
+        # The loop would latch link_failed at once: say what to check instead. (A bus DOWN
+        # silences every leg, which the check below reports with the link's note.)
+        detail = f" ({view.link.detail})" if view.link.detail else ""
+        return ErrorCode.SEND_FAILED, f"the link reports the CAN bus off{detail}: {BUS_OFF_CHECK}"
     if heard := other_controller_heard(view.link):
         return ErrorCode.OTHER_CONTROLLER, (f"{heard}: two controllers would drive the same actuators; "
                                             f"{STOP_OTHER_CONTROLLER}, then enable once none has been heard for "

@@ -95,6 +95,7 @@ class Supervisor:
         self._expected = [ActuatorState.ENABLED] * ACTUATOR_COUNT
         self._settling_until_ns = [0] * ACTUATOR_COUNT
         self._send_failures = 0  # in a row
+        self._first_sent: int | None = None  # counter of the first set-points sent since enabling
         self._estop_grace_until_ns = 0  # after a reset the actuators need time to leave ESTOP
         self._next_estop_ns = 0
         self._last_estop_ns: int | None = None  # when the loop last sent an E-stop
@@ -123,7 +124,7 @@ class Supervisor:
                     faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected {expected.name}", leg))
             elif self._settling_until_ns[leg - 1]:
                 self._settling_until_ns[leg - 1] = 0  # got there: from now on any deviation counts
-            elif expected is ActuatorState.ENABLED and last_sent - actuator.setpoint_counter > self._lag_limit:
+            elif expected is ActuatorState.ENABLED and self._lag(actuator.setpoint_counter, last_sent) > self._lag_limit:
                 faults.append(Fault("setpoints_not_applied", f"leg {leg} applied set-point {actuator.setpoint_counter}, "
                                     f"last sent {last_sent}", leg))
             elif expected is ActuatorState.ENABLED and (fault := self._following(leg, actuator, now_ns)):
@@ -135,6 +136,14 @@ class Supervisor:
         if fault := other_controller_fault(link):
             faults.append(fault)
         return faults
+
+    def _lag(self, counter: int, last_sent: int) -> int:
+        """Cycles by which a leg's applied ``counter`` (−1: none) trails ``last_sent``, counted
+        at most from the first set-points sent since enabling: the leg had none of this session
+        to apply before them, and a counter from before (none yet, or a rebooted actuator's
+        stale echo) says only that it applied none since, not that it lags further."""
+        first = self._first_sent
+        return last_sent - (counter if first is None else max(counter, first))
 
     def _following(self, leg: int, actuator: ActuatorFeedback, now_ns: int) -> Fault | None:
         """The following-error fault of an enabled ``leg`` (1–6) whose error has lasted too long."""
@@ -159,13 +168,16 @@ class Supervisor:
         """The set-points sent with ``counter``: kept for the following error; count a send
         that failed (``ok`` False) or end the run of failures."""
         self._sent[counter % len(self._sent)] = (counter, setpoints)
+        if self._first_sent is None:
+            self._first_sent = counter
         self._send_failures = 0 if ok else self._send_failures + 1
 
     def enabled(self, now_ns: int) -> None:
         """The actuators were told to enable at ``now_ns``: expect ENABLED, forget old send
-        failures and following errors."""
+        failures, following errors and the counters sent before (:meth:`_lag`)."""
         self.expect(None, ActuatorState.ENABLED, now_ns)
         self._send_failures = 0
+        self._first_sent = None
         self._following_since_ns = [None] * ACTUATOR_COUNT
 
     def estop_reported(self, feedback: FeedbackSnapshot, now_ns: int) -> bool:

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from firmware_proto import codec
 from firmware_proto.codec import ActuatorState as WireState
-from firmware_proto.codec import CommandCode, EStopReason, Fault, LoopRate
+from firmware_proto.codec import CommandCode, CommandResult, EStopReason, Fault, LoopRate
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can import transport
 from hexactl.adapters.can.transport import BusSpec, BusSpecError, open_bus, parse_bus_spec
@@ -437,3 +437,99 @@ def test_config_is_validated():
         LinkConfig(loop_rate=LoopRate.NOT_SET)
     with pytest.raises(ValueError, match="watchdog_cycles"):
         LinkConfig(watchdog_cycles=101)
+
+
+# -- found from outside: a review of the CAN link ----------------------------------------
+
+MS = 1_000_000
+
+
+def sent_commands(bus: FakeBus) -> list[codec.Command]:
+    return [codec.decode(*frame) for frame in without_syncs(bus.sent)]
+
+
+class DeliversThenRaises(FakeBus):
+    """As ``memory:`` with one receiver full: the frame reaches the others, then the send raises."""
+
+    def send(self, message, timeout=None) -> None:
+        self.sent.append((message.arbitration_id, bytes(message.data)))
+        if self.fail is not None:
+            raise self.fail
+
+
+@pytest.mark.parametrize("delivered", [False, True])
+def test_a_command_that_fails_to_send_supersedes_the_unacknowledged_one(clock, delivered):
+    """Finding 1: the ENABLE leg 3 missed must not be retried after the DISABLE that followed
+    it failed to send; the DISABLE is retried instead (with its own sequence, so an actuator
+    that did receive it acknowledges the retry without executing it twice)."""
+    bus = DeliversThenRaises() if delivered else FakeBus()
+    link = CanActuatorLink(bus, LinkConfig(), clock_ns=clock)  # type: ignore[arg-type]
+    greet(bus, link)
+    assert link.send_command(3, ActuatorCommand.ENABLE)  # sent, never acknowledged
+    bus.fail = ENOBUFS
+    assert link.send_command(3, ActuatorCommand.DISABLE) is False
+    bus.fail = None
+    for _ in range(3):
+        clock.t_ns += 20 * MS
+        link.read_feedback()
+    enable, *disables = sent_commands(bus)
+    assert enable.command is CommandCode.ENABLE
+    assert [command.command for command in disables] == [CommandCode.DISABLE] * (4 if delivered else 3)
+    assert {command.sequence for command in disables} == {(enable.sequence + 1) & 0xFF}
+
+
+def enabled_at(link: CanActuatorLink, bus: FakeBus, node: int, counter: int) -> None:
+    """Leg ``node`` reports FEEDBACK in ENABLED having applied loop counter ``counter``."""
+    bus.push(*codec.encode_feedback(node, 0, 0, WireState.ENABLED, Fault(0), counter & 0xFF))
+
+
+def test_a_rebooted_actuators_counter_is_unknown_until_it_echoes_one_sent_after_its_enable(link, bus):
+    """Finding 2: after a reboot the actuator echoes SetpointCounter 0, which unwraps to a
+    counter long past (1024 here): the link reports −1 until an echo of a counter it sent
+    after the ENABLE."""
+    greet(bus, link)
+    for counter in range(1000, 1030):
+        link.send_setpoints(counter, SIX)
+    enabled_at(link, bus, 3, 1029)
+    assert link.read_feedback().actuators[2].setpoint_counter == 1029
+    bus.push(*codec.encode_heartbeat(3, WireState.DISABLED, 0))  # rebooted: DISABLED, counter 0
+    assert link.read_feedback().actuators[2].setpoint_counter == -1  # left ENABLED: applies nothing
+    for counter in range(1030, 1095):
+        link.send_setpoints(counter, SIX)
+    assert link.send_command(3, ActuatorCommand.ENABLE)
+    sequence = codec.decode(*bus.sent[-1]).sequence
+    link.send_setpoints(1095, SIX)
+    bus.push(*codec.encode_command_ack(3, CommandCode.ENABLE, sequence, CommandResult.ACCEPTED, WireState.ENABLED))
+    enabled_at(link, bus, 3, 0)  # the first FEEDBACK after ENABLE: the reboot's 0, not a counter of ours
+    assert link.read_feedback().actuators[2].setpoint_counter == -1
+    link.send_setpoints(1096, SIX)
+    enabled_at(link, bus, 3, 1095)
+    assert link.read_feedback().actuators[2].setpoint_counter == 1095
+
+
+def test_the_reason_a_legs_frames_are_rejected_reaches_the_health_detail(link, bus):
+    """Finding 8: a leg whose FEEDBACK has the wrong length is not silent but rejected."""
+    greet(bus, link)
+    feedback = codec.encode_feedback(2, 0, 0, WireState.DISABLED, Fault(0), 0)
+    bus.push(feedback[0], feedback[1][:7])
+    link.read_feedback()
+    assert "leg 2's frames rejected: frame 0x182: bad data length: expected 8 bytes, got 7" in link.link_health().detail
+
+
+def test_a_frame_received_ends_bus_off(link, bus):
+    """Finding 7: receiving proves the controller is back on the bus, restart error frame or not."""
+    bus.push(0x040, bytes(8), is_error_frame=True)  # CAN_ERR_BUSOFF
+    link.read_feedback()
+    assert link.link_health().bus_state is BusState.BUS_OFF
+    bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, 0))
+    link.read_feedback()
+    assert link.link_health().bus_state is BusState.ACTIVE
+
+
+def test_a_command_given_up_is_named(link, bus, clock):
+    """Finding 11: the detail names the command, not its byte."""
+    link.send_command(3, ActuatorCommand.LOCK)
+    for _ in range(4):
+        clock.t_ns += 20 * MS
+        link.read_feedback()
+    assert link.link_health().detail.endswith("; leg 3: command LOCK not acknowledged after 3 retries")

@@ -22,7 +22,8 @@ Receiving happens in :meth:`CanActuatorLink.read_feedback`: it drains at most
 ``max_frames_per_read`` frames with ``recv(timeout=0)``, decodes FEEDBACK, HEARTBEAT, EMCY and
 CMD_ACK into per-actuator state (position and velocity are NaN until an actuator's first
 FEEDBACK), counts every frame the codec rejects (bad DLC, CRC or
-value, unknown id) instead of raising, and notes when another controller's frame (set-points,
+value, unknown id) instead of raising, names the reason for an actuator's in
+:attr:`LinkHealth.detail`, and notes when another controller's frame (set-points,
 SYNC, a command; not an E-stop) was last heard, for :meth:`CanActuatorLink.link_health`.
 """
 
@@ -54,6 +55,7 @@ from firmware_proto.codec import (
     FrameError,
     Heartbeat,
     LoopRate,
+    NodeFrameBase,
     SetpointFrame,
     SetpointsFd,
     Sync,
@@ -112,6 +114,9 @@ _LOOP_RATES = (LoopRate.HZ_250, LoopRate.HZ_500, LoopRate.HZ_1000)
 # that a controller streaming beside this one costs a look-up per frame, not a string.
 _SETPOINT_NAMES = {first: f"SETPOINT_{first}{first + 1}" for first in (1, 3, 5)}
 _COMMAND_NAMES = {(node, code): f"CMD_{node} {code.name}" for node in NODE_IDS for code in CommandCode}
+# The leg that sends each actuator frame, to name it when the codec rejects one of its frames.
+_SENDER = {base + node: node for base in (NodeFrameBase.EMCY, NodeFrameBase.FEEDBACK, NodeFrameBase.CMD_ACK,
+                                          NodeFrameBase.HEARTBEAT) for node in NODE_IDS}
 
 
 @dataclass(frozen=True, slots=True)
@@ -198,9 +203,10 @@ class NodeStatus:
 
 
 class _PendingCommand:
-    __slots__ = ("frame", "sequence", "sent_ns", "retries")
+    __slots__ = ("code", "frame", "sequence", "sent_ns", "retries")
 
-    def __init__(self, frame: tuple[int, bytes], sequence: int, sent_ns: int) -> None:
+    def __init__(self, code: CommandCode, frame: tuple[int, bytes], sequence: int, sent_ns: int) -> None:
+        self.code = code
         self.frame = frame
         self.sequence = sequence
         self.sent_ns = sent_ns
@@ -386,7 +392,8 @@ class CanActuatorLink:
 
     def link_health(self) -> LinkHealth:
         """Bus state, send failures and a note naming any silent legs, any speaking another
-        protocol version, and the last error."""
+        protocol version, and the last error (a send, a command given up or refused, an
+        actuator's frame rejected)."""
         notes = []
         if silent := self.silent_legs():
             notes.append("silent legs: " + ", ".join(str(leg) for leg in silent))
@@ -498,7 +505,7 @@ class CanActuatorLink:
         node.sequence = (sequence + 1) & 0xFF
         # A newer command supersedes an unacknowledged older one, sent or not: only the latest
         # is retried, so an older ENABLE is never re-sent after a DISABLE that failed to send.
-        node.pending = _PendingCommand(frame, sequence, now)
+        node.pending = _PendingCommand(code, frame, sequence, now)
         return self._send(*frame, 0.0)
 
     def _retry_commands(self, now: int) -> None:
@@ -510,7 +517,7 @@ class CanActuatorLink:
             if pending.retries >= self.config.command_retries:
                 node.pending = None
                 self._command_timeouts += 1
-                self._detail = f"leg {leg}: command 0x{pending.frame[1][0]:02X} not acknowledged after {pending.retries} retries"
+                self._detail = f"leg {leg}: command {pending.code.name} not acknowledged after {pending.retries} retries"
                 continue
             pending.retries += 1
             pending.sent_ns = now
@@ -525,13 +532,21 @@ class CanActuatorLink:
             if state is not None:
                 self._bus_state = state
             return
+        if self._bus_state is BusState.BUS_OFF:
+            # A frame received proves the controller is back on the bus, whether or not the
+            # driver's restart error frame arrived (a receive-buffer overrun loses it).
+            self._bus_state = BusState.ACTIVE
         if message.is_extended_id or message.is_remote_frame:
             self._undecodable += 1
             return
         try:
             decoded = decode(message.arbitration_id, message.data)
-        except FrameError:
+        except FrameError as error:
             self._undecodable += 1
+            # A leg whose frames are all rejected (a firmware of another DBC revision) looks
+            # silent to the loop: say why, as the last error, where the enable refusal quotes it.
+            if (leg := _SENDER.get(message.arbitration_id)) is not None:
+                self._detail = f"leg {leg}'s frames rejected: {error}"
             return
         kind = type(decoded)
         if kind is Feedback:
