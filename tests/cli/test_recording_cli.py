@@ -177,7 +177,7 @@ def test_plot_reads_a_long_recording_into_arrays_with_gaps_for_empty_cells(tmp_p
     assert main(["plot", str(recording)]) == 0 and capsys.readouterr().out.strip() == str(tmp_path / "long.png")
     (tmp_path / "wide.csv").write_bytes("t_s,cycle\n0,1\n".encode("utf-16"))
     assert main(["plot", str(tmp_path / "wide.csv")]) == 2
-    assert "UTF-16 or UTF-32 text, not UTF-8" in capsys.readouterr().err
+    assert "UTF-16 or UTF-32 text (it starts with that byte-order mark), not UTF-8" in capsys.readouterr().err
     (tmp_path / "latin.csv").write_bytes(b"t_s,cycle,note\n0,1,2\n0.002,2,\xe9\n")
     assert main(["plot", str(tmp_path / "latin.csv")]) == 2
     assert "not UTF-8 text" in capsys.readouterr().err

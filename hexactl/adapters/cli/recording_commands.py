@@ -259,17 +259,16 @@ def _read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]]]:
     """The header and the columns (NaN for an empty cell); CliError for a missing or garbled
     file. Read row by row into 8 bytes a value: an hour at 500 Hz (1.8 M rows) read whole
     into Python lists of strings took gigabytes."""
-    import codecs
     import csv
     from array import array
 
     import numpy as np  # not for every command's start
 
-    from hexactl.adapters.files.text import SAVE_AS_UTF8
+    from hexactl.adapters.files.text import SAVE_AS_UTF8, TextFileError, decode_text
 
     try:
         with path.open("rb") as raw:
-            start = raw.read(4)
+            start = raw.read(1 << 16)
             raw.seek(0, os.SEEK_END)
             if raw.tell():
                 raw.seek(-1, os.SEEK_END)
@@ -280,8 +279,10 @@ def _read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]]]:
         raise CliError(f"{path}: no such file (a recording is NAME.csv in the service's data directory)") from None
     except OSError as error:
         raise CliError(f"{path}: cannot read it: {error}") from None
-    if start.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE, codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
-        raise CliError(f"{path}: UTF-16 or UTF-32 text, not UTF-8: {SAVE_AS_UTF8}")
+    try:  # the text files' one rule, on the first lines: UTF-16 and the like named as such
+        decode_text(start[:start.rfind(b"\n") + 1] or start, str(path))
+    except TextFileError as error:
+        raise CliError(str(error)) from None
     number = 1
     try:
         with path.open(encoding="utf-8-sig", newline="") as file:
