@@ -112,6 +112,13 @@ class Supervisor:
         """What is wrong while ENABLED (empty: nothing); ``last_sent`` the counter of the
         last set-points sent."""
         faults = []
+        # A leg lags when the counter it applied is below this; counted at most from the first
+        # set-points sent since enabling (None: not that long ago): the leg had none of this
+        # session to apply before them, and a counter from before (none yet, or a rebooted
+        # actuator's stale echo) says only that it applied none since. Once a call, not a leg.
+        stale_below: int | None = last_sent - self._lag_limit
+        if self._first_sent is not None and self._first_sent >= stale_below:
+            stale_below = None
         for leg, actuator in enumerate(feedback.actuators, start=1):
             expected = self._expected[leg - 1]
             if not actuator.heartbeat_age_s <= self.heartbeat_timeout_s:
@@ -124,7 +131,7 @@ class Supervisor:
                     faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected {expected.name}", leg))
             elif self._settling_until_ns[leg - 1]:
                 self._settling_until_ns[leg - 1] = 0  # got there: from now on any deviation counts
-            elif expected is ActuatorState.ENABLED and self._lag(actuator.setpoint_counter, last_sent) > self._lag_limit:
+            elif expected is ActuatorState.ENABLED and stale_below is not None and actuator.setpoint_counter < stale_below:
                 faults.append(Fault("setpoints_not_applied", f"leg {leg} applied set-point {actuator.setpoint_counter}, "
                                     f"last sent {last_sent}", leg))
             elif expected is ActuatorState.ENABLED and (fault := self._following(leg, actuator, now_ns)):
@@ -136,14 +143,6 @@ class Supervisor:
         if fault := other_controller_fault(link):
             faults.append(fault)
         return faults
-
-    def _lag(self, counter: int, last_sent: int) -> int:
-        """Cycles by which a leg's applied ``counter`` (−1: none) trails ``last_sent``, counted
-        at most from the first set-points sent since enabling: the leg had none of this session
-        to apply before them, and a counter from before (none yet, or a rebooted actuator's
-        stale echo) says only that it applied none since, not that it lags further."""
-        first = self._first_sent
-        return last_sent - (counter if first is None else max(counter, first))
 
     def _following(self, leg: int, actuator: ActuatorFeedback, now_ns: int) -> Fault | None:
         """The following-error fault of an enabled ``leg`` (1–6) whose error has lasted too long."""
@@ -174,7 +173,7 @@ class Supervisor:
 
     def enabled(self, now_ns: int) -> None:
         """The actuators were told to enable at ``now_ns``: expect ENABLED, forget old send
-        failures, following errors and the counters sent before (:meth:`_lag`)."""
+        failures, following errors and the counters sent before (:meth:`faults`' lag)."""
         self.expect(None, ActuatorState.ENABLED, now_ns)
         self._send_failures = 0
         self._first_sent = None
