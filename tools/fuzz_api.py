@@ -251,7 +251,7 @@ class Strategies:
             st.one_of(st.sampled_from(files["calibration_texts"]).map(lambda text: {"toml": text}),
                       st.sampled_from([files["calibration_good"], files["calibration_bad"]]).map(lambda p: {"path": p})).map(
                 lambda fields: carried("load_calibration", fields)),
-            st.one_of(self.recording_names, st.just(files["sequence_good"])).map(
+            st.one_of(self.recording_names, st.just(files["recording_taken"])).map(
                 lambda path: carried("save_recording", {"path": path})),
         )
 
@@ -432,6 +432,8 @@ def save_refusals(path: str) -> frozenset[str]:
     is refused only once there is a recording to write (``write_failed``, "give a shorter
     name"), which depends on what the run played before."""
     refusals = {ApiCode.FORBIDDEN_PATH, ApiCode.FILE_NOT_FOUND, ApiCode.FILE_EXISTS, ApiCode.NO_RECORDING}
+    if Path(path).suffix.lower() != ".csv":  # a recording is named as CSV, whatever else is wrong with the path
+        refusals.add(ApiCode.INVALID_REQUEST)
     if len(Path(path).name.encode()) > NAME_MAX_BYTES:
         refusals.add(ApiCode.WRITE_FAILED)
     return frozenset(refusals)
@@ -465,6 +467,8 @@ def prepare_files(root: Path, geometry: Geometry) -> dict[str, Any]:
     (data / "binary.toml").write_bytes(b"\xff\xfe\x00garbage")
     (outside / "canary.toml").write_text(good_texts[1])
     (data / "link_out.toml").symlink_to(outside / "canary.toml")
+    (data / "link_out.csv").symlink_to(outside / "escaped_by_link.csv")  # a write through it would escape
+    (data / "taken.csv").write_text("a recording saved before\n")
     (data / "linkdir").symlink_to(outside)
     os.mkfifo(data / "fifo.toml")  # reading it would block the API thread forever
     with (data / "big.toml").open("wb") as big:
@@ -478,7 +482,7 @@ def prepare_files(root: Path, geometry: Geometry) -> dict[str, Any]:
     hostile_writes = [  # out of the data directory (into ``outside``, where an escape would show), or refused in it
         "../outside/escaped.csv", "linkdir/escaped.csv", str(outside / "escaped.csv"), "../escaped.csv",
         "link_out.toml", "linkdir", ".", "..", "a" * 300 + ".csv", "a" * 300 + "/r.csv", "x/" * 1000 + "r.csv",
-        "missing/r.csv",
+        "missing/r.csv", "link_out.csv",
     ]
     hostile_texts = [
         nested, "[[a]]\n" * 5000, "zero_lengths = [nan, 1, 2, 3, 4, 5]\n", "include = '/etc/passwd'\n",
@@ -489,7 +493,7 @@ def prepare_files(root: Path, geometry: Geometry) -> dict[str, Any]:
         "data": data, "outside": outside, "pwned": pwned,
         "calibration_good": "cal_good.toml", "calibration_bad": "cal_bad.toml",
         "calibration_texts": good_texts[2:] + ["not toml"],
-        "sequence_good": "seq_good.toml", "sequence_bad": "seq_bad.toml",
+        "sequence_good": "seq_good.toml", "sequence_bad": "seq_bad.toml", "recording_taken": "taken.csv",
         "broken_files": ["nested.toml", "binary.toml", "cal_bad.toml", "seq_bad.toml"],
         "hostile_reads": hostile_reads, "hostile_writes": hostile_writes, "hostile_texts": hostile_texts,
     }
