@@ -15,7 +15,8 @@ from itertools import combinations, permutations
 import numpy as np
 from numpy.typing import NDArray
 
-from hexactl.kinematics.inverse import LEG_COUNT, LegModel, sensor_setpoints_batch
+from hexactl.kinematics.forward import forward_kinematics
+from hexactl.kinematics.inverse import LEG_COUNT, LegModel, lengths_from_readings, sensor_setpoints_batch
 from hexactl.kinematics.points import DegeneratePointsError, pose_from_points
 from hexactl.kinematics.rotation import rotation_matrices
 
@@ -172,15 +173,17 @@ def screen_measurements(
     Measured points whose typical spread differs from the feature points' by more than
     :data:`SCALE_TOLERANCE` times are in another unit: that is one problem for the whole file
     (line 0), instead of one per row. So are measured poses whose readings ``legs`` (the
-    nominal geometry, when given) explain far better with the angles read as radians or
-    the positions as metres, and measured points whose readings it explains far better
+    nominal geometry, when given) explain far better with the angles read as radians, the
+    positions as metres, or the poses taken as relative to the zero posture (the one at
+    ``zero_readings_mm``, when given), and measured points whose readings it explains far better
     with the points' columns in another order (a header naming them wrongly). So are
     readings far below what the legs read in the zero posture (``zero_readings_mm``, when
     given), throughout the file: metres, cm or inches.
     """
     problems: list[RowProblem] = []
     unit_problem = _unit_problem(data, feature_points_mm) or _readings_unit_problem(data, zero_readings_mm) or (
-        None if legs is None else _pose_unit_problem(data, legs) or _label_problem(data, feature_points_mm, legs))
+        None if legs is None else _pose_unit_problem(data, legs, zero_readings_mm)
+        or _label_problem(data, feature_points_mm, legs))
     if unit_problem is not None:
         return (unit_problem,)
     if data.points_mm is not None:
@@ -249,9 +252,11 @@ POSE_UNIT_MISFIT_MM = 20.0
 are not a calibration's few millimetres: worth asking whether the poses' units are wrong."""
 
 
-def _pose_unit_problem(data: MeasurementData, legs: LegModel) -> RowProblem | None:
+def _pose_unit_problem(data: MeasurementData, legs: LegModel, zero_readings_mm: NDArray | None) -> RowProblem | None:
     """A file-level problem if the measured poses' readings fit far better with the angles
-    taken as radians or the positions as metres (the file's units are degrees and mm)."""
+    taken as radians or the positions as metres (the file's units are degrees and mm), or
+    with the poses taken as relative to the zero posture, the one the legs reach at
+    ``zero_readings_mm`` (None: not tried), as a plan's are (the file's are absolute)."""
     if data.poses is None or len(data) == 0:
         return None
     readings = np.asarray(data.readings_mm)
@@ -266,13 +271,32 @@ def _pose_unit_problem(data: MeasurementData, legs: LegModel) -> RowProblem | No
     radians[:, 3:] = np.degrees(radians[:, 3:])  # the file's numbers were radians, read as degrees
     metres[:, :3] *= 1000.0
     both = np.hstack((metres[:, :3], radians[:, 3:]))
-    found = {name: misfit(poses) for name, poses in (("angles are radians", radians), ("positions are metres", metres),
-                                                      ("angles are radians and positions metres", both))}
-    name, best = min(found.items(), key=lambda item: item[1])
+    units = "hexactl reads degrees and mm; convert the file"
+    found = {f"the {name}": (misfit(poses), units) for name, poses in (
+        ("angles are radians", radians), ("positions are metres", metres),
+        ("angles are radians and positions metres", both))}
+    if zero_readings_mm is not None and (home := _zero_posture(legs, zero_readings_mm)) is not None:
+        # Relative poses are home + relative in mm and degrees (hexactl.kinematics.pose), so in mm and rad too.
+        found["they are relative to the zero posture (home), as a plan's are"] = (misfit(data.poses + home), (
+            "a measurement file's poses are absolute (the moving frame in the base frame): add home to each (mm, "
+            "degrees), or give the measured feature points"))
+    name, (best, remedy) = min(found.items(), key=lambda item: item[1][0])
     if best > as_read / 5.0:
         return None
     return RowProblem(0, f"the readings are {as_read:.3g} mm (median) from what the nominal geometry gives for the "
-                         f"measured poses, {best:.3g} mm if the {name}: hexactl reads degrees and mm; convert the file")
+                         f"measured poses, {best:.3g} mm if {name}: {remedy}")
+
+
+def _zero_posture(legs: LegModel, zero_readings_mm: NDArray) -> NDArray[np.float64] | None:
+    """The pose (mm, rad) the legs reach at ``zero_readings_mm``: forward kinematics from the
+    level, centred pose of those leg lengths (a zero posture is one, near enough); None where
+    it does not converge."""
+    lengths = lengths_from_readings(legs, zero_readings_mm)
+    across = np.sum((legs.platform_joints_mm[:, :2] - legs.base_joints_mm[:, :2]) ** 2, axis=1)
+    rise = np.sqrt(np.clip(lengths**2 - across, 0.0, None))
+    heights = legs.base_joints_mm[:, 2] - legs.platform_joints_mm[:, 2] + rise
+    result = forward_kinematics(legs, lengths.tolist(), (0.0, 0.0, float(np.median(heights)), 0.0, 0.0, 0.0))
+    return np.array(result.pose) if result.ok else None
 
 
 LABEL_CHECK_ROWS = 30

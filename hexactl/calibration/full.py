@@ -270,7 +270,8 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     structural, drift, targets = problem.split(theta)
     parameters = StructuralParameters.from_vector(structural, options.estimate_scales)
     warnings = exclusion_notes
-    if not pose_form and targets is None and (misplaced := _misplaced_targets(problem, fit)):
+    # An unconverged fit's residuals say nothing of the targets (identify() says what to check).
+    if fit.converged and not pose_form and targets is None and (misplaced := _misplaced_targets(problem, fit)):
         warnings += (misplaced,)
     result = assemble_result(
         Method.FULL, reason, parameters, information, residuals, current.cost, dof,

@@ -24,7 +24,7 @@ from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.full import identify_full, observation_key
 from hexactl.calibration.leglock import identify_leglock, too_few_locked
 from hexactl.calibration.paper import identify_paper
-from hexactl.calibration.parameters import calibrated_geometry
+from hexactl.calibration.parameters import PARAMETERS_PER_LEG, calibrated_geometry
 from hexactl.calibration.results import (IdentificationOptions, IdentificationResult, IdentificationStatus, Method,
                                          excluded_summary)
 from hexactl.kinematics.geometry import CalibrationInfo, Geometry, geometry_from_mapping
@@ -61,19 +61,75 @@ def identify(data: MeasurementData, nominal: Geometry, options: IdentificationOp
     return _plausible(result, nominal)
 
 
+_DATA_CHECKS = ("check their units (mm, degrees), that the instrument's frame is the platform's base frame, and the "
+                "rows flagged above")
+"""What to check when the data do not measure the nominal platform as they should."""
+
+
 def _plausible(result: IdentificationResult, nominal: Geometry) -> IdentificationResult:
     """``result``, or IMPLAUSIBLE when its parameters lie beyond the nominal's plausibility
     bounds, which the controller refuses to load: data that fit a machine that far from
-    the design are wrong (another unit or frame, targets swapped), not a calibration."""
-    parameters = result.parameters
-    if not result.ok or not (problems := parameter_implausibilities(
-            parameters.base_joints_mm, parameters.platform_joints_mm, parameters.zero_lengths_mm, nominal)):
+    the design are wrong (another unit or frame, targets swapped), not a calibration. A fit
+    that did not converge is told what to check too (a frame turned 180° is found no other
+    way), and a plausible one whose base moved as a whole is warned of
+    (:func:`_base_motion_warning`)."""
+    if result.status is IdentificationStatus.NOT_CONVERGED:
+        return replace(result, warnings=result.warnings + (
+            f"the fit found no minimum from the nominal platform: the data may not measure it as they should; "
+            f"{_DATA_CHECKS}",))
+    if not result.ok:
         return result
+    parameters = result.parameters
+    if not (problems := parameter_implausibilities(
+            parameters.base_joints_mm, parameters.platform_joints_mm, parameters.zero_lengths_mm, nominal)):
+        moved = _base_motion_warning(result, nominal)
+        return result if moved is None else replace(result, warnings=result.warnings + (moved,))
     shown = "; ".join(problems[:3]) + (f"; and {len(problems) - 3} more" if len(problems) > 3 else "")
     return replace(result, status=IdentificationStatus.IMPLAUSIBLE, warnings=result.warnings + (
         f"the identified parameters are not this machine's: {shown}; the controller refuses such a calibration. "
-        "The data do not measure the nominal platform as they should: check their units (mm, degrees), that the "
-        "instrument's frame is the platform's base frame, and the rows flagged above",))
+        f"The data do not measure the nominal platform as they should: {_DATA_CHECKS}",))
+
+
+BASE_MOTION_SIGMAS = 5.0
+"""The base's common rigid motion is warned of where its Mahalanobis length (the rigid motion's
+six parameters against their covariance) exceeds this: noise alone does so with probability
+3e-4 (χ² with 6 dof above 25)."""
+
+BASE_MOTION_DOMINANCE = 3.0
+"""... and where its RMS displacement over the joints exceeds this many times the RMS of the
+joints' other deviations: not manufacturing scatter. Independent isotropic joint errors put 6
+of their 18 degrees of freedom in the rigid part (RMS ratio about 0.7) and exceed 3 with
+probability 2e-5 (F(6, 12) > 18); a frame error moves every joint alike and leaves the rest."""
+
+
+def _base_motion_warning(result: IdentificationResult, nominal: Geometry) -> str | None:
+    """A warning when the identified base joints are mostly the nominal ones moved as one
+    rigid body (:data:`BASE_MOTION_SIGMAS`, :data:`BASE_MOTION_DOMINANCE`): the signature of
+    data measured in a frame other than the base frame, which the fit cannot see (the
+    platform joints and zero lengths, in the moving frame, are unaffected); None otherwise.
+    The rigid motion is the least-squares one, linearised (a plausible result's base turns
+    by a few degrees at most)."""
+    designed = np.array(nominal.base_joints)
+    deviations = (result.parameters.base_joints_mm - designed).ravel()  # (18,) mm
+    arms = designed - designed.mean(axis=0)
+    # Each joint's displacement by a translation t and a small rotation ω about the joints' centre: t + ω × arm.
+    turns = np.cross(np.eye(3)[None, :, :], arms[:, None, :]).transpose(0, 2, 1).reshape(-1, 3)  # (18, 3): ∂/∂ω
+    motions = np.concatenate((np.tile(np.eye(3), (LEG_COUNT, 1)), turns), axis=1)
+    fit = np.linalg.pinv(motions)  # (6, 18): the rigid motion (mm, rad) that best explains given deviations
+    motion = fit @ deviations
+    columns = (PARAMETERS_PER_LEG * np.arange(LEG_COUNT)[:, None] + np.arange(3)).ravel()  # base joints' x, y, z
+    motion_covariance = fit @ result.covariance[np.ix_(columns, columns)] @ fit.T
+    sigmas = float(np.sqrt(motion @ np.linalg.pinv(motion_covariance) @ motion))
+    rigid = (motions @ motion).reshape(LEG_COUNT, 3)
+    distances = np.linalg.norm(rigid, axis=1)
+    rest = deviations.reshape(LEG_COUNT, 3) - rigid
+    if not (sigmas > BASE_MOTION_SIGMAS
+            and np.sqrt(np.mean(distances**2)) > BASE_MOTION_DOMINANCE * np.sqrt(np.mean(np.sum(rest**2, axis=1)))):
+        return None
+    return (f"the base moved as a whole by {np.min(distances):.1f} to {np.max(distances):.1f} mm at its joints and "
+            f"turned {np.degrees(np.linalg.norm(motion[3:])):.2f}° ({sigmas:.0f} σ): that is the instrument's frame "
+            "not being the base frame, not the base; measure the base's reference points in the instrument's frame "
+            "and transform the data into the base frame (docs/calibration.md, measurement files)")
 
 
 def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationOptions) -> IdentificationResult:
