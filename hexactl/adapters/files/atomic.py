@@ -15,6 +15,8 @@ import secrets
 import shutil
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 STALE_AFTER_S = 600.0
@@ -121,6 +123,21 @@ def keep_aside(path: str | os.PathLike[str]) -> Path:
         except FileExistsError:
             continue
     raise FileExistsError(f"{source}: no free name to keep it aside (remove old {source.name}.changed-* files)")
+
+
+@contextmanager
+def aside_while_replaced(path: str | os.PathLike[str], changed: bool) -> Iterator[Path | None]:
+    """Around the replacement of a kept file: where it ``changed`` under its service, it is
+    first kept aside (:func:`keep_aside`; its name yielded, else None), and that name is
+    removed again if the replacement raises ``OSError`` (the changed file is still where it
+    was, its only name)."""
+    aside = keep_aside(path) if changed else None
+    try:
+        yield aside
+    except OSError:
+        if aside is not None:
+            aside.unlink(missing_ok=True)
+        raise
 
 
 def same_file(path: str | os.PathLike[str], other: str | os.PathLike[str]) -> bool:

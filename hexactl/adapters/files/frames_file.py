@@ -28,7 +28,7 @@ from pathlib import Path
 import tomli_w
 from pydantic import ValidationError
 
-from hexactl.adapters.files.atomic import keep_aside, write_atomic
+from hexactl.adapters.files.atomic import aside_while_replaced, write_atomic
 from hexactl.adapters.files.geometry_file import toml_value
 from hexactl.adapters.files.text import read_text
 from hexactl.control.frames import OperatorFrames
@@ -92,19 +92,14 @@ def frames_to_toml(frames: OperatorFrames) -> str:
 def save_frames(frames: OperatorFrames, path: str | os.PathLike[str], in_force: OperatorFrames) -> Path | None:
     """Write ``frames`` to ``path`` atomically, replacing the frames ``in_force`` until now.
     A file that holds anything else (edited by hand under the service, which reads it at
-    start only) is first kept aside (:func:`keep_aside`); its new name is returned (None:
+    start only) is first kept aside (:func:`aside_while_replaced`); its new name is returned (None:
     there was nothing to keep).
 
     :raises OSError: if it cannot be written, or the changed file cannot be kept aside
         (then nothing at ``path`` changed)
     """
-    aside = keep_aside(path) if os.path.lexists(path) and file_differs(path, in_force) else None
-    try:
+    with aside_while_replaced(path, os.path.lexists(path) and file_differs(path, in_force) is not None) as aside:
         write_atomic(path, frames_to_toml(frames).encode("utf-8"), overwrite=True)
-    except OSError:
-        if aside is not None:  # the changed file stays where it was, its only name
-            aside.unlink(missing_ok=True)
-        raise
     return aside
 
 

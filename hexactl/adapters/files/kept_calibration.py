@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from hexactl.adapters.files.atomic import keep_aside, write_atomic
+from hexactl.adapters.files.atomic import aside_while_replaced, write_atomic
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
 from hexactl.control.planning import ActiveGeometry
 from hexactl.kinematics.geometry import Geometry, GeometryError
@@ -49,23 +49,18 @@ class KeptCalibration:
         force, or remove the kept one if it is the nominal geometry; what was done, for people.
         ``kept_before``: the id of the calibration this service kept there last (None: none
         yet). A file that holds anything else (edited or replaced by hand under the
-        service, which reads it at start only) is first kept aside (:func:`keep_aside`).
+        service, which reads it at start only) is first kept aside (:func:`aside_while_replaced`).
 
         :raises OSError: if the file cannot be written or removed, or a changed file cannot
             be kept aside (it is as it was)
         """
-        aside = keep_aside(self.path) if kept_before is not None and self._changed(kept_before) else None
-        try:
+        with aside_while_replaced(self.path, kept_before is not None and self._changed(kept_before)) as aside:
             if calibration_id == self.nominal_id:
                 forget_calibration(self.path)
                 said = "the nominal geometry is in force: no calibration kept for a restart"
             else:
                 keep_calibration(geometry, source, self.path)
                 said = f"kept for a restart in {self.path}"
-        except OSError:
-            if aside is not None:  # the changed file stays where it was, its only name
-                aside.unlink(missing_ok=True)
-            raise
         if aside is not None:
             said += (f" ({self.path} had been changed since the service kept calibration {kept_before} in it: that "
                      f"version, never in force, is kept as {aside})")
