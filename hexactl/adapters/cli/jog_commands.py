@@ -117,13 +117,16 @@ def _pace(speed: float) -> str:
 def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s: float) -> dict[str, Any] | None:
     """Renew jog ``jog`` every ``every_s`` for ``for_s``; the reply that refused it (None:
     none did). Once it has ended, a stop from anyone, a fault or a move ends this command
-    too; only a lapse of its deadman (this machine stalled) starts a new jog, as the
-    button is still held."""
+    too; only a stall of this machine or the service starts a new jog, as the button is
+    still held: a lapse of its deadman, or a renewal held up past its deadline (``expired``:
+    not carried out; the next renewal goes on, or finds the jog lapsed)."""
     end = time.monotonic() + for_s
     while (left := end - time.monotonic()) > 0:
         time.sleep(min(every_s, left))
         reply = client.request("jog", **fields, renews=jog)
         error = reply.get("error") or {}
+        if error.get("code") == "expired":
+            continue
         if error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
             reply = client.request("jog", **fields)
         if not reply.get("ok"):

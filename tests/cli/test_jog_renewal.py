@@ -1,0 +1,49 @@
+"""``hexactl jog``'s renewals against a service whose answers are scripted: what ends the
+command, and what a held button rides through (a stall of this machine or the service)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hexactl.adapters.cli.jog_commands import _renew
+
+FIELDS = {"velocity": [0.0, 0.0, 5.0, 0.0, 0.0, 0.0], "frame": "zero"}
+
+
+class ScriptedService:
+    """Answers each ``jog`` request with the next of ``replies`` (then ok for jog 7), and
+    records what it was sent."""
+
+    def __init__(self, *replies: dict[str, Any]) -> None:
+        self.replies = list(replies)
+        self.sent: list[dict[str, Any]] = []
+
+    def request(self, cmd: str, /, **fields: Any) -> dict[str, Any]:
+        assert cmd == "jog"
+        self.sent.append(fields)
+        return self.replies.pop(0) if self.replies else {"ok": True, "jog": 7}
+
+
+def _refused(code: str, **details: Any) -> dict[str, Any]:
+    return {"ok": False, "error": {"code": code, "message": f"{code} (scripted)", "details": details}}
+
+
+def test_a_renewal_held_up_past_its_deadline_does_not_end_the_jog() -> None:
+    """Found on a loaded host: one renewal answered ``expired`` (not carried out: it reached
+    the loop 234 ms after its deadline) ended ``hexactl jog`` with exit 1, the operator's
+    jog cut short by the machine's load. The next renewal goes on with the same jog."""
+    service = ScriptedService({"ok": True, "jog": 7}, _refused("expired"))
+    assert _renew(service, FIELDS, 7, for_s=0.05, every_s=0.005) is None
+    assert len(service.sent) > 3
+    assert all(fields.get("renews") == 7 for fields in service.sent)
+
+
+def test_a_lapsed_jog_starts_again_and_a_stopped_one_ends_the_command() -> None:
+    lapsed = ScriptedService(_refused("jog_ended", lapsed=True, reason="the deadman lapsed"), {"ok": True, "jog": 9})
+    assert _renew(lapsed, FIELDS, 7, for_s=0.03, every_s=0.005) is None
+    assert lapsed.sent[1] == FIELDS and lapsed.sent[2]["renews"] == 9  # a new jog, then renewed as such
+
+    stop = _refused("jog_ended", lapsed=False, reason="stopped")
+    stopped = ScriptedService(stop)
+    assert _renew(stopped, FIELDS, 7, for_s=1.0, every_s=0.005) == stop
+    assert len(stopped.sent) == 1
