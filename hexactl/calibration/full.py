@@ -500,8 +500,7 @@ def _robust_start(problem: _Problem, starts: tuple[_Fit, ...], pose_form: bool, 
               key=lambda candidate: _trimmed_cost(problem, candidate, pose_form, false_alarm))
     used = problem.observation_weights(pose_form) > 0.0
     beyond = used & (_misfit_chi2(problem, fit.linear, pose_form) > _cut_chi2(problem, pose_form, false_alarm))
-    if pose_form:
-        beyond = _pose_or_reading(problem, fit, beyond, false_alarm)
+    beyond = _points_or_reading(problem, fit, beyond, pose_form, false_alarm)
     # Each posture's pose stays pinned: where too few would be left for that, they all stay in.
     kept = np.sum(np.where(used & ~beyond, problem.observation_dof(pose_form), 0.0), axis=1) >= 6.0
     beyond &= kept[:, None]
@@ -516,50 +515,54 @@ def _robust_start(problem: _Problem, starts: tuple[_Fit, ...], pose_form: bool, 
     return start, start_problem
 
 
-def _pose_or_reading(problem: _Problem, fit: _Fit, beyond: NDArray, false_alarm: float) -> NDArray[np.bool_]:
-    """``beyond`` (N, 7) of a pose-form problem, with each row's wrong pose told from a wrong reading.
+def _points_or_reading(problem: _Problem, fit: _Fit, beyond: NDArray, pose_form: bool,
+                       false_alarm: float) -> NDArray[np.bool_]:
+    """``beyond`` (N, M), with each posture's wrong points (pose form: wrong pose) told from a
+    wrong reading.
 
-    A row's pose follows either its measured pose or its six readings, and the robust fit
-    keeps whichever it started at, so "the pose beyond the cut" is what a wrong reading looks
-    like too. As in the exclusion rounds, a reading is tried first: where a row's pose is
-    beyond, the reading whose exclusion leaves the pose and the other five readings fitting
-    best (at the pose that fits them best, the parameters held) goes instead, if they then
-    pass the test (χ² within the cut at their 5 degrees of freedom). Where all six readings
-    are beyond, one wrong pose is likelier than six wrong readings.
+    A posture's pose follows either its feature points (pose form: its measured pose) or its
+    six readings, and the robust fit keeps whichever it started at, so "its points beyond the
+    cut" is what a wrong reading looks like too: a locked leg's reading off by 7 mm once had
+    all three points of its posture excluded, the readings alone pinning the pose, untested.
+    As in the exclusion rounds, a reading is tried first: where the observations beyond would
+    leave their posture's others no redundancy, the reading whose exclusion leaves the others
+    fitting best (at the pose that fits them best, the parameters held) goes instead, if they
+    then pass the test (χ² within the cut at their degrees of freedom). Where all six readings
+    of a pose-form row are beyond, one wrong pose is likelier than six wrong readings.
     """
     from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
 
-    consistent = chi2.isf(false_alarm, 6 + LEG_COUNT - 1 - 6)  # the pose and five readings, less the pose's 6
-    resolved = beyond.copy()
+    weights = problem.observation_weights(pose_form)
+    dof = problem.observation_dof(pose_form)
     first_reading = beyond.shape[1] - LEG_COUNT
-    for row in np.flatnonzero(beyond[:, 0]):
-        if np.all(beyond[row, first_reading:]):
-            continue
-        weights = problem.observation_weights(True)[row].copy()
+    resolved = beyond.copy()
+    unredundant = np.sum(np.where((weights > 0.0) & ~beyond, dof, 0.0), axis=1) <= 6.0
+    for row in np.flatnonzero(unredundant & np.any(beyond, axis=1) & ~np.all(beyond[:, first_reading:], axis=1)):
         misfits = []
         for leg in range(LEG_COUNT):
-            without = weights.copy()
+            without = weights[row].copy()
             without[first_reading + leg] = 0.0
-            misfits.append(_posture_chi2(problem, fit, row, without))
-        if min(misfits) <= consistent:
+            misfits.append(_posture_chi2(problem, fit, row, without, pose_form))
+        if min(misfits) <= chi2.isf(false_alarm, np.sum(weights[row] * dof) - 1.0 - 6.0):  # less the pose's 6
             resolved[row] = np.arange(beyond.shape[1]) == first_reading + int(np.argmin(misfits))
-    wrong_pose = np.all(beyond[:, first_reading:], axis=1)
-    resolved[wrong_pose] = np.arange(beyond.shape[1]) == 0
+    if pose_form:
+        wrong_pose = np.all(beyond[:, first_reading:], axis=1)
+        resolved[wrong_pose] = np.arange(beyond.shape[1]) == 0
     return resolved
 
 
 _POSTURE_ITERATIONS = 10  # Gauss–Newton steps of one posture's pose alone: it starts within tens of mm
 
 
-def _posture_chi2(problem: _Problem, fit: _Fit, row: int, weights: NDArray) -> float:
-    """The least χ² of one pose-form row's observations weighted ``weights`` (7,), over its
-    pose from ``fit``'s, the parameters held at ``fit``'s."""
+def _posture_chi2(problem: _Problem, fit: _Fit, row: int, weights: NDArray, pose_form: bool) -> float:
+    """The least χ² of one posture's observations weighted ``weights`` (M,), over its pose from
+    ``fit``'s, the parameters held at ``fit``'s."""
     rows = slice(row, row + 1)
     posture = replace(problem, observed=problem.observed[rows], readings=problem.readings[rows],
                       point_weights=problem.point_weights[rows], reading_weights=problem.reading_weights[rows],
                       times=None if problem.times is None else problem.times[rows],
                       whitening=None if problem.whitening is None else problem.whitening[rows])
-    posture = posture.with_observation_weights(weights[None], True)
+    posture = posture.with_observation_weights(weights[None], pose_form)
     rotations, translations = fit.rotations[rows], fit.translations[rows]
     for _ in range(_POSTURE_ITERATIONS):
         linear = _linearise(posture, fit.theta, rotations, translations)

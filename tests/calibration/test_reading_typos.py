@@ -53,6 +53,7 @@ def clean_fits(nominal, leglock_campaign: OfflineCampaign) -> dict[str, tuple[Me
 @given(row=st.integers(0, 59), locked=st.booleans(), other_leg=st.integers(1, 5), size=st.floats(5.0, 60.0),
        sign=st.sampled_from([-1.0, 1.0]))
 @example(row=39, locked=False, other_leg=1, size=5.0, sign=-1.0)  # the robust start once blamed the pose (pose form)
+@example(row=34, locked=True, other_leg=1, size=7.0, sign=-1.0)  # ... and the posture's three points
 def test_a_wrong_reading_is_excluded_and_named_with_its_line_and_leg(nominal, clean_fits, form, row, locked,
                                                                       other_leg, size, sign):
     data, clean = clean_fits[form]
