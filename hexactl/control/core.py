@@ -43,7 +43,14 @@ from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.command_inbox import CommandInbox
 from hexactl.control.config import ControllerConfig
-from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, FeedbackSnapshot, LinkHealth
+from hexactl.control.hardware import (
+    ActuatorCommand,
+    ActuatorInterface,
+    ActuatorState,
+    EstopCause,
+    FeedbackSnapshot,
+    LinkHealth,
+)
 from hexactl.control.motion import Motion
 from hexactl.control.motion_commands import MotionCommands
 from hexactl.control.planning import ActiveGeometry, LegLock
@@ -98,6 +105,7 @@ class ControlCore:
         self._now_ns = 0
         self._faults: tuple[Fault, ...] = ()
         self._events: tuple[Event, ...] = ()
+        self._estop_cause = EstopCause.OPERATOR  # of the E-stop latched last
         self.snapshot: CoreSnapshot | None = None
 
     # -- the CoreView attributes that are not fields -----------------------------------
@@ -158,7 +166,7 @@ class ControlCore:
         self._commands.run(now_ns)
         supervisor = self._supervisor
         if self.state is not ControlState.ESTOP and supervisor.estop_reported(feedback, now_ns):
-            self._enter_estop("an actuator reports E-stop (hardware chain)")
+            self._enter_estop("an actuator reports E-stop (hardware chain)", cause=EstopCause.SAFETY_CHAIN)
         if self.state is ControlState.ENABLED:
             if faults := supervisor.faults(feedback, self.link, self._counter - 1, now_ns):
                 self._enter_fault(tuple(faults))
@@ -202,16 +210,18 @@ class ControlCore:
             self._event(fault.code, fault.message)
         if stopping := [fault.code for fault in faults if fault.code in ESTOP_FAULTS]:
             self._enter_estop(f"{', '.join(stopping)}: holding cannot stop actuators that another "
-                              "controller drives too")
+                              "controller drives too", cause=EstopCause.CONTROLLER_FAULT)
 
     def _send_estop(self) -> None:
-        if self.hardware.send_estop():
+        if self.hardware.send_estop(self._estop_cause):
             self._supervisor.estop_sent(self._now_ns)
         else:
             self._supervisor.estop_failed()
 
-    def _enter_estop(self, reason: str, sender: str | None = None) -> None:
-        """Latch ESTOP for ``reason``; its fault names ``sender`` (who sent the E-stop), as the event does."""
+    def _enter_estop(self, reason: str, sender: str | None = None, cause: EstopCause = EstopCause.OPERATOR) -> None:
+        """Latch ESTOP for ``reason``; its fault names ``sender`` (who sent the E-stop), as the
+        event does; its frames, sent now and repeated while it lasts, carry ``cause``."""
+        self._estop_cause = cause
         self._send_estop()
         self._supervisor.latched_estop()
         self.state = ControlState.ESTOP

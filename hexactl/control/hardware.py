@@ -36,6 +36,16 @@ class ActuatorCommand(StrEnum):
     UNLOCK = "unlock"  # release the brake and follow set-points again
 
 
+class EstopCause(StrEnum):
+    """Why the controller sends an E-stop: the actuators log it (in the frame, where the
+    protocol has room), so that whoever reads their logs after a stop can tell who stopped
+    them."""
+
+    OPERATOR = "operator"  # an estop command: a person, a client or a safety PLC through the API
+    SAFETY_CHAIN = "safety_chain"  # an actuator reports E-stop: its e-stop input opened
+    CONTROLLER_FAULT = "controller_fault"  # the controller cannot keep control: its loop died, or another drives
+
+
 class ActuatorState(IntEnum):
     """What an actuator reports it is doing."""
 
@@ -184,8 +194,9 @@ class ActuatorInterface(Protocol):
         """
         ...
 
-    def send_estop(self) -> bool:
-        """Send an emergency stop to all actuators. Safe to call from any thread.
+    def send_estop(self, cause: EstopCause = EstopCause.OPERATOR) -> bool:
+        """Send an emergency stop to all actuators, saying why (``cause``, for their logs).
+        Safe to call from any thread.
 
         Returns False when it could not be sent (counted as a send failure).
         """

@@ -22,7 +22,7 @@ from typing import Protocol
 from hexactl.control import commands as cmd
 from hexactl.control.config import ControllerConfig
 from hexactl.control.core import ControlCore, CoreSnapshot
-from hexactl.control.hardware import ActuatorInterface
+from hexactl.control.hardware import ActuatorInterface, EstopCause
 from hexactl.control.loop import ControlLoop
 from hexactl.control.planning import ActiveGeometry
 from hexactl.control.realtime import RealtimeReport
@@ -87,7 +87,8 @@ class LoopThread:
                  clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
         self.hardware = hardware
         self.core = ControlCore(hardware, active, config)
-        self.loop = ControlLoop(self.core.step, config.loop, on_crash=hardware.send_estop,
+        self.loop = ControlLoop(self.core.step, config.loop,
+                                on_crash=lambda: hardware.send_estop(EstopCause.CONTROLLER_FAULT),
                                 after_cycle=self.core.after_cycle)
         self.core.step(clock_ns())
 
@@ -108,7 +109,7 @@ class LoopThread:
         return True
 
     def estop_now(self) -> bool:
-        return self.hardware.send_estop()
+        return self.hardware.send_estop(EstopCause.OPERATOR)
 
     def take_recorded(self, limit: int = 1 << 20) -> list[Row]:
         """At most ``limit`` of the recorder's rows waiting, oldest first."""

@@ -45,6 +45,7 @@ from firmware_proto.codec import (
     Command,
     CommandCode,
     CommandResult,
+    EStopReason,
     Fault,
     FaultCode,
     FrameError,
@@ -52,6 +53,7 @@ from firmware_proto.codec import (
     LoopRate,
     NodeFrameBase,
     decode_command,
+    decode_estop,
     decode_setpoint_frame,
     decode_setpoints_fd,
     decode_sync,
@@ -211,6 +213,7 @@ class ActuatorFirmware:
         self._watchdog_deadline_s = 0.0
         self._last_command: tuple[int, CommandResult] | None = None  # (sequence, result)
         self._last_estop_s = -float("inf")
+        self.last_estop_reason: EStopReason | None = None  # logged from the last ESTOP (None: none, or unreadable)
         self._last_emergency_s = -float("inf")
         self._setpoint_frame_id = _SETPOINT_FRAME_OF_NODE[node]
         self._command_frame_id = NodeFrameBase.CMD + node
@@ -237,8 +240,9 @@ class ActuatorFirmware:
         out: list[CanFrame] = []
         self._run_to(t_s, out)
         if can_id == FrameId.ESTOP:
-            if self.inject.filter(bytes(payload)) is not None:  # a lost ESTOP is not seen; any payload counts
+            if (received := self.inject.filter(bytes(payload))) is not None:  # a lost one is not seen; any payload counts
                 self._on_estop(t_s, out)
+                self.last_estop_reason = decode_estop(can_id, received).reason
         elif can_id in (FrameId.SYNC, self._setpoint_frame_id, self._command_frame_id, FrameId.SETPOINT_ALL_FD):
             received = self.inject.filter(bytes(payload))
             if received is not None:

@@ -22,6 +22,7 @@ from hexactl.control.hardware import (
     ActuatorFeedback,
     ActuatorState,
     BusState,
+    EstopCause,
     FaultNames,
     FeedbackSnapshot,
     LinkHealth,
@@ -61,6 +62,7 @@ class IdealActuators:
         self.send_failures = 0
         self.commands: list[tuple[int | None, ActuatorCommand]] = []
         self.estops = 0
+        self.last_estop_cause: EstopCause | None = None  # why the last E-stop was sent
         self._last_estop_ns: int | None = None
         self.sent: list[tuple[int, tuple[float, ...]]] | None = [] if record else None
         now = clock_ns()
@@ -91,10 +93,11 @@ class IdealActuators:
             self._apply(i, command)
         return True
 
-    def send_estop(self) -> bool:
+    def send_estop(self, cause: EstopCause = EstopCause.OPERATOR) -> bool:
         if not self._sendable():
             return False
         self.estops += 1
+        self.last_estop_cause = cause
         self._last_estop_ns = self.clock_ns()
         self.press_estop()
         return True

@@ -326,12 +326,14 @@ def test_disable_makes_a_controlled_stop():
     assert positions[-1] - positions[0] <= stop_distance + moving * 0.001
 
 
-@pytest.mark.parametrize("payload", [b"", bytes((EStopReason.OPERATOR,)), b"\xff\xff\xff"])
-def test_estop_acts_on_the_identifier_whatever_the_payload(payload):
+@pytest.mark.parametrize("payload, logged", [(b"", None), (bytes((EStopReason.SAFETY_CHAIN,)), EStopReason.SAFETY_CHAIN),
+                                             (b"\xff\xff\xff", None), (b"\x09", None)])
+def test_estop_acts_on_the_identifier_whatever_the_payload_and_logs_its_reason(payload, logged):
     fw = enabled()
     out = fw.receive(codec.FrameId.ESTOP, payload, 0.001)
     assert fw.state is ActuatorState.ESTOP and fw.faults == Fault.ESTOP
     assert of_type(out, Emergency) == [Emergency(1, FaultCode.ESTOP, ActuatorState.ESTOP, Fault.ESTOP)]
+    assert fw.last_estop_reason == logged
 
 
 def test_estop_wins_over_fault_and_clears_only_after_250_ms():

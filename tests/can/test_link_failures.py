@@ -19,7 +19,7 @@ from firmware_proto.codec import CommandCode, CommandResult, EStopReason, Fault,
 from hexactl.adapters.can.link import CanActuatorLink, LinkConfig
 from hexactl.adapters.can import transport
 from hexactl.adapters.can.transport import BusSpec, BusSpecError, open_bus, parse_bus_spec
-from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, BusState
+from hexactl.control.hardware import ActuatorCommand, ActuatorInterface, ActuatorState, BusState, EstopCause
 from tests.firmware_proto.frames import dbc_fault_names
 
 ENOBUFS = can.CanOperationError("Failed to transmit: No buffer space available", errno.ENOBUFS)
@@ -223,9 +223,12 @@ def test_closed_link_is_down_and_fails_quietly(bus, clock):
     assert link.link_health().bus_state is BusState.DOWN
 
 
-def test_estop_waits_briefly_and_carries_its_reason(link, bus):
-    assert link.send_estop(EStopReason.FEEDBACK_LOST)
-    assert bus.sent == [codec.encode_estop(EStopReason.FEEDBACK_LOST)]
+@pytest.mark.parametrize("cause, reason", [(EstopCause.OPERATOR, EStopReason.OPERATOR),
+                                           (EstopCause.SAFETY_CHAIN, EStopReason.SAFETY_CHAIN),
+                                           (EstopCause.CONTROLLER_FAULT, EStopReason.CONTROLLER_FAULT)])
+def test_estop_waits_briefly_and_carries_its_reason(link, bus, cause, reason):
+    assert link.send_estop(cause)
+    assert bus.sent == [codec.encode_estop(reason)]
     assert bus.timeouts == [LinkConfig().estop_send_timeout_s]
 
 

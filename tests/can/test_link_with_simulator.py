@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from firmware_proto import codec
-from firmware_proto.codec import Fault
+from firmware_proto.codec import EStopReason, Fault
 from hexactl.adapters.can.link import LinkConfig
-from hexactl.control.hardware import ActuatorCommand, ActuatorState, BusState
+from hexactl.control.hardware import ActuatorCommand, ActuatorState, BusState, EstopCause
 from tests.can.harness import START_MM, Rig
 
 ALL = [ActuatorState.ENABLED] * 6
@@ -69,9 +69,10 @@ def test_locked_leg_holds_its_length(rig):
 
 def test_estop_latches_and_wins(rig):
     enable(rig)
-    assert rig.link.send_estop()
+    assert rig.link.send_estop(EstopCause.SAFETY_CHAIN)
     rig.hold(1)
     assert states(rig) == [ActuatorState.ESTOP] * 6
+    assert [firmware.last_estop_reason for firmware in rig.firmwares] == [EStopReason.SAFETY_CHAIN] * 6  # logged
     assert all(a.fault_bits & Fault.ESTOP for a in rig.snapshot.actuators)
     held = rig.snapshot.positions_mm
     for _ in range(50):

@@ -12,6 +12,7 @@ import pytest
 
 from hexactl.control import realtime
 from hexactl.control.config import ControllerConfig, LoopConfig
+from hexactl.control.hardware import EstopCause
 from hexactl.control.local_controller import LocalController
 from hexactl.control.loop import ControlLoop, next_deadline
 from hexactl.control.realtime import RealtimeConfig
@@ -105,7 +106,7 @@ def test_a_crashing_cycle_estops_and_commands_report_it(geometry):
     actuators.read_feedback = lambda: 1 / 0  # a bug in a cycle
     controller.start()
     wait_for(lambda: not controller.status().details["loop_running"], "the crashed loop to end")
-    assert actuators.estops == 1
+    assert actuators.estops == 1 and actuators.last_estop_cause is EstopCause.CONTROLLER_FAULT
     assert "ZeroDivisionError" in controller.status().details["loop_failure"]
     assert controller.enable().error == "loop_failed"
     assert controller.stop().error == "loop_failed"

@@ -78,6 +78,7 @@ from hexactl.control.hardware import (
     ActuatorFeedback,
     ActuatorState,
     BusState,
+    EstopCause,
     FaultNames,
     FeedbackSnapshot,
     LinkHealth,
@@ -94,6 +95,13 @@ STATE_FROM_WIRE: dict[WireState, ActuatorState] = {
     WireState.ESTOP: ActuatorState.ESTOP,
 }
 """Firmware state → control-layer state."""
+
+ESTOP_REASON: dict[EstopCause, EStopReason] = {
+    EstopCause.OPERATOR: EStopReason.OPERATOR,
+    EstopCause.SAFETY_CHAIN: EStopReason.SAFETY_CHAIN,
+    EstopCause.CONTROLLER_FAULT: EStopReason.CONTROLLER_FAULT,
+}
+"""Why the controller stops them → the ESTOP frame's Reason."""
 
 COMMAND_TO_WIRE: dict[ActuatorCommand, CommandCode] = {
     ActuatorCommand.ENABLE: CommandCode.ENABLE,
@@ -286,7 +294,7 @@ class CanActuatorLink:
         self._last_counter: int | None = None
         self._next_sync_counter = 0  # wire counter of the next bare SYNC
         self._cycle_sent = False  # a cycle went to the bus since the last read_feedback
-        self._estop_frames = {reason: encode_estop(reason) for reason in EStopReason}
+        self._estop_frames = {cause: encode_estop(reason) for cause, reason in ESTOP_REASON.items()}
 
     @classmethod
     def open(cls, spec: str | BusSpec, config: LinkConfig = LinkConfig(), **bus_options: object) -> CanActuatorLink:
@@ -358,11 +366,12 @@ class CanActuatorLink:
             sent = self._send_command(node, code, now) and sent
         return sent
 
-    def send_estop(self, reason: EStopReason = EStopReason.OPERATOR) -> bool:
-        """Send ESTOP (``reason`` is informative). Safe from any thread; waits at most
-        ``estop_send_timeout_s`` for room in the transmit queue. Call it again while the
-        e-stop condition lasts (PROTOCOL.md: every 100 ms)."""
-        can_id, payload = self._estop_frames[reason]
+    def send_estop(self, cause: EstopCause = EstopCause.OPERATOR) -> bool:
+        """Send ESTOP, its Reason ``cause`` (:data:`ESTOP_REASON`; informative, for the
+        actuators' logs). Safe from any thread; waits at most ``estop_send_timeout_s`` for
+        room in the transmit queue. Call it again while the e-stop condition lasts
+        (PROTOCOL.md: every 100 ms)."""
+        can_id, payload = self._estop_frames[cause]
         return self._send(can_id, payload, self.config.estop_send_timeout_s)
 
     def read_feedback(self) -> FeedbackSnapshot:
