@@ -256,7 +256,9 @@ def test_enable_carries_loop_rate_and_watchdog_and_sequences_advance(bus, clock)
     greet(bus, link)
     assert link.send_command(3, ActuatorCommand.ENABLE)
     assert link.send_command(3, ActuatorCommand.LOCK)
-    enable, lock = (codec.decode(*frame) for frame in without_syncs(bus.sent))
+    first, enable, lock = (codec.decode(*frame) for frame in without_syncs(bus.sent))
+    # the first command to a leg goes behind a DISABLE (test_link_with_simulator.py)
+    assert (first.command, first.sequence) == (CommandCode.DISABLE, (enable.sequence - 1) & 0xFF)
     assert (enable.node, enable.command, enable.loop_rate, enable.watchdog_cycles) == (3, CommandCode.ENABLE, 250, 8)
     assert (lock.command, lock.loop_rate, lock.watchdog_cycles) == (CommandCode.LOCK, LoopRate.NOT_SET, 0)
     assert lock.sequence == (enable.sequence + 1) & 0xFF
@@ -475,7 +477,7 @@ def test_a_command_that_fails_to_send_supersedes_the_unacknowledged_one(clock, d
     for _ in range(3):
         clock.t_ns += 20 * MS
         link.read_feedback()
-    enable, *disables = sent_commands(bus)
+    _, enable, *disables = sent_commands(bus)  # the first command to a leg goes behind a DISABLE
     assert enable.command is CommandCode.ENABLE
     assert [command.command for command in disables] == [CommandCode.DISABLE] * (4 if delivered else 3)
     assert {command.sequence for command in disables} == {(enable.sequence + 1) & 0xFF}

@@ -120,7 +120,7 @@ def test_heartbeat_loss_is_detected_within_the_configured_time(rig):
 def test_lost_command_is_retried(rig):
     rig.hold(2)
     rig.flush()
-    rig.firmwares[1].inject.drop_next = 1
+    rig.firmwares[1].inject.drop_next = 2  # the DISABLE a first command goes behind, and the ENABLE
     rig.link.send_command(2, ActuatorCommand.ENABLE)
     rig.idle(5)
     assert states(rig)[1] is ActuatorState.DISABLED  # lost; the retry is due after 20 ms
@@ -164,3 +164,25 @@ def codec_message(can_id: int, payload: bytes):
     import can
 
     return can.Message(arbitration_id=can_id, data=payload, is_extended_id=False)
+
+
+@pytest.mark.parametrize("leg", [1, 4])
+def test_the_first_enable_is_carried_out_whatever_sequence_the_actuator_executed_last(rig, leg):
+    """An actuator outlives a controller's restart: its last executed command's sequence is
+    the one the new link starts at (one in 256). It took the first ENABLE for a retry of
+    that command, acknowledged it and stayed disabled. Now the first command goes behind a
+    DISABLE that changes nothing at rest, and carries the next sequence."""
+    rig.idle(2)
+    start = rig.link._nodes[leg - 1].sequence
+    rig.firmwares[leg - 1]._last_command = (start, codec.CommandResult.ACCEPTED)  # the last session's DISABLE
+    assert rig.link.send_command(None, ActuatorCommand.ENABLE)
+    rig.hold(2)
+    assert states(rig) == ALL
+    # Only the first command: the next one has no DISABLE before it.
+    rig.spy_frames()  # those so far
+    assert rig.link.send_command(None, ActuatorCommand.DISABLE)
+    rig.hold(2)
+    frames = rig.spy_frames()
+    commands = [codec.decode(can_id, payload) for can_id, payload in frames if 0x101 <= can_id <= 0x106]
+    assert [command.command for command in commands] == [codec.CommandCode.DISABLE] * 6
+    assert states(rig) == [ActuatorState.DISABLED] * 6

@@ -116,6 +116,7 @@ FAULT_NAMES = FaultNames(Fault)
 """The fault bits' names (PROTOCOL.md section 9), from the codec's definition of them."""
 
 _ENGAGED = (WireState.ENABLED, WireState.LOCKED)
+_AT_REST = (WireState.DISABLED, WireState.FAULT, WireState.ESTOP)  # where DISABLE changes nothing
 _LOOP_RATES = (LoopRate.HZ_250, LoopRate.HZ_500, LoopRate.HZ_1000)
 
 # Another controller's frames as LinkHealth.other_controller_frame names them; made once, so
@@ -227,7 +228,7 @@ class _Node:
     __slots__ = (
         "position_mm", "velocity_mm_s", "wire_state", "fault_bits", "setpoint_counter", "enable_floor",
         "heard_ns", "heartbeat_ns", "feedback_ns", "protocol_version", "rejected_frames",
-        "emergencies", "last_emergency", "last_ack", "sequence", "pending",
+        "emergencies", "last_emergency", "last_ack", "sequence", "commanded", "pending",
     )  # fmt: skip
 
     def __init__(self) -> None:
@@ -248,9 +249,11 @@ class _Node:
         self.emergencies = 0
         self.last_emergency: Emergency | None = None
         self.last_ack: CommandAck | None = None
-        # A random start, because an actuator that outlives a controller restart would take a
-        # first command whose sequence equals its last executed one for a retry (PROTOCOL.md §5).
+        # An actuator that outlives a controller restart takes a first command whose sequence
+        # equals its last executed one for a retry, and does not carry it out (PROTOCOL.md §5):
+        # a random start, and the first command goes behind one that takes that risk (_send_command).
         self.sequence = random.randrange(256)
+        self.commanded = False  # whether this link has sent it a command
         self.pending: _PendingCommand | None = None
 
 
@@ -502,10 +505,18 @@ class CanActuatorLink:
 
     def _send_command(self, leg: int, code: CommandCode, now: int) -> bool:
         node = self._nodes[leg - 1]
+        if code is CommandCode.ENABLE and node.protocol_version != PROTOCOL_VERSION:
+            heard = "no heartbeat yet" if node.protocol_version is None else f"protocol {node.protocol_version}"
+            return self._refuse(f"ENABLE refused for leg {leg}: {heard}, need protocol {PROTOCOL_VERSION}")
+        if not node.commanded and node.wire_state in _AT_REST:
+            # Its last executed sequence, from before this link, may be any: one in 256 first
+            # commands would be acknowledged and not carried out (an ENABLE after a restart left
+            # the leg disabled). A DISABLE, which changes nothing at rest, takes that risk; the
+            # command goes with the next sequence, which is then not the actuator's last.
+            self._send(*encode_command(leg, CommandCode.DISABLE, node.sequence), 0.0)
+            node.sequence = (node.sequence + 1) & 0xFF
+        node.commanded = True
         if code is CommandCode.ENABLE:
-            if node.protocol_version != PROTOCOL_VERSION:
-                heard = "no heartbeat yet" if node.protocol_version is None else f"protocol {node.protocol_version}"
-                return self._refuse(f"ENABLE refused for leg {leg}: {heard}, need protocol {PROTOCOL_VERSION}")
             frame = encode_command(leg, code, node.sequence, self.config.loop_rate, self.config.watchdog_cycles)
             node.enable_floor = -1 if self._last_counter is None else self._last_counter
         else:
