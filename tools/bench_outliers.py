@@ -36,7 +36,7 @@ from hexactl.calibration.campaign import CampaignDesign
 from hexactl.calibration.data import MeasurementData, measured_poses
 from hexactl.calibration.identification import calibration_info, identify
 from hexactl.calibration.parameters import calibrated_geometry
-from hexactl.calibration.results import IdentificationOptions, IdentificationResult, Method
+from hexactl.calibration.results import IdentificationOptions, IdentificationResult, IdentificationStatus, Method
 from hexactl.calibration.validation import summarise_validation
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.rotation import rotation_matrices
@@ -114,7 +114,10 @@ def pose_form(data: MeasurementData, nominal: Geometry) -> MeasurementData:
 
 def position_error_mm(result: IdentificationResult, nominal: Geometry, true: Geometry) -> float:
     """The largest position error of the paper's test motions under ``result``'s parameters;
-    infinite where they are so wrong that the true platform cannot run the motions."""
+    infinite where they are so wrong that the true platform cannot run the motions, or where
+    the fit left some parameter undetermined (no calibration can be written from it)."""
+    if result.status is IdentificationStatus.NOT_OBSERVABLE:
+        return float("inf")
     info = calibration_info(result, "bench", "", nominal.name or "")
     calibrated = calibrated_geometry(nominal, result.parameters, info)
     try:
