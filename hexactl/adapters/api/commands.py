@@ -128,13 +128,16 @@ class CommandHandler:
         self.run = secrets.token_hex(4)  # this service's run: its events are numbered from 1 in each
 
     def record(self) -> dict[str, Any]:
-        """A telemetry record: the controller's, with what a client's campaign said last.
-        The calibration in force is kept first if it changed (the publisher calls this
-        every period: a swap is kept however it came about, even after ``loop_timeout``)."""
+        """A telemetry record: the controller's, with what a client's campaign said last and
+        this service's :attr:`run` (a client reaching it on two endpoints can tell they are
+        one service). The calibration in force is kept first if it changed (the publisher
+        calls this every period: a swap is kept however it came about, even after
+        ``loop_timeout``)."""
         if self.keeper is not None:
             self.keeper.follow()
         stream_input = self.stream_input.view() if self.stream_input is not None else None
-        return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view(), "stream_input": stream_input}
+        return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view(), "stream_input": stream_input,
+                "run": self.run}
 
     def __call__(self, request: Request, deadline_ns: int | None = None, sender: str | None = None) -> dict[str, Any]:
         """Carry out ``request``; the commands it hands the loop name ``sender`` (who sent it, for people)."""

@@ -841,6 +841,9 @@ class Telemetry(_Message):
     other_controller: OtherController | None = Field(
         default=None, description="another controller last heard on the bus (another hexactl serve or a vendor tool "
         "on the same actuators); null: none since the service started")
+    run: str | None = Field(default=None, max_length=16, description="this run of the service, as the events reply's: "
+                            "the same in its telemetry and its status, so a client that reads the one and commands "
+                            "through the other can tell that both are one service; null: an older service's")
 
 
 # -- replies -------------------------------------------------------------------------

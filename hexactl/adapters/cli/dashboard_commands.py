@@ -37,11 +37,11 @@ def run(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.web.bridge import ServiceEndpoints  # starlette and uvicorn: only for this command
     from hexactl.adapters.web.server import DashboardError, HttpAddress, run_dashboard
 
-
     address = HttpAddress.parse(checked_http(arguments.http))
-    connect(TelemetrySubscriber, arguments.telemetry, arguments).close()  # bad CURVE options: say so before serving
+    with connect(TelemetrySubscriber, arguments.telemetry, arguments) as probe:  # bad CURVE options: say so now
+        curve = probe.curve is not None
     endpoints = ServiceEndpoints(arguments.api, arguments.telemetry, arguments.timeout,
-                                 functools.partial(_connect, arguments))
+                                 functools.partial(_connect, arguments), curve)
     try:
         return run_dashboard(address, endpoints, arguments.log_level, arguments.exit_with)
     except DashboardError as error:

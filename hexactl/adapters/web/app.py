@@ -9,7 +9,8 @@ from the internet. Commands arrive on the WebSocket as ``{"type": "command", "id
 "cmd": NAME, …fields}`` and go to the API unchanged; the reply comes back as
 ``{"type": "reply", "id": N, "reply": …}``. The page is sent ``{"type": "hello",
 "command_timeout_ms": …}`` first: how long it waits for a reply, the time to live the
-dashboard gives each of its commands from when it reads it (:mod:`.bridge`). The page acknowledges the telemetry it has
+dashboard gives each of its commands from when the page sent it (:class:`PageClock`,
+:mod:`.bridge`). The page acknowledges the telemetry it has
 handled (``{"type": "ack", "n": N}``), and is sent no more than a window ahead of it; each
 acknowledgement read is answered ``{"type": "acked", "n": N, "server_ms": …}`` behind what
 the page was sent before, which times how far behind the page is, and how far its clock is
@@ -18,7 +19,9 @@ off this host's.
 Loopback only, a request whose ``Host`` or WebSocket ``Origin`` is not this server's is
 refused, and no response may be shown in another page's frame: another web site open in
 the operator's browser cannot drive the platform through it (DNS rebinding, cross-site
-WebSockets, clickjacking).
+WebSockets, clickjacking). With a ``token`` (the dashboard reaches the service with CURVE
+keys), the page, its WebSocket and the downloads need it too: another account or process
+on this host, without the keys, gets no more through the dashboard than from the service.
 """
 
 from __future__ import annotations
@@ -29,21 +32,24 @@ import contextlib
 import json
 import logging
 import re
+import secrets
 import time
+from collections import deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from importlib import resources
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 from starlette.applications import Starlette
-from starlette.requests import Request
+from starlette.requests import HTTPConnection, Request
 from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, Response, StreamingResponse
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from hexactl.adapters.api.protocol import RECORDING_NAME_PATTERN
-from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply
+from hexactl.adapters.web.bridge import URGENT_COMMANDS, ServiceBridge, error_reply, finite_number
 
 MAX_MESSAGE_BYTES = 64 * 1024
 """The largest WebSocket message a page may send (a command is a few hundred bytes)."""
@@ -57,6 +63,11 @@ answered ``busy``), before its next message is read only once one is answered.""
 
 DOWNLOAD_CHUNK_BYTES = 1024 * 1024
 
+PAGE_CLOCK_SAMPLES = 256
+"""The page's latest messages whose least delay is taken for none (:class:`PageClock`): half
+a minute at least of its acknowledgements while records come (it sends one every 250 ms
+and every 8th record)."""
+
 log = logging.getLogger("hexactl.dashboard")
 
 
@@ -64,15 +75,27 @@ def static_directory() -> str:
     return str(resources.files("hexactl.adapters.web") / "static")
 
 
-def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlette:
+def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str], token: str | None = None) -> Starlette:
     """The dashboard's ASGI application over ``bridge``; ``allowed_hosts``: the ``host:port``
     forms a request's ``Host`` (and a WebSocket's ``Origin``) may name (the port left out
-    where it is the scheme's default: :func:`host_allowed`)."""
+    where it is the scheme's default: :func:`host_allowed`); ``token``: the secret the page,
+    its WebSocket and the downloads must carry (:func:`token_given`; None: none needed)."""
+
+    def unauthorised(connection: HTTPConnection) -> bool:
+        return token is not None and not secrets.compare_digest(token_given(connection).encode(), token.encode())
+
+    def refused() -> Response:
+        return PlainTextResponse("this dashboard needs its token: open the URL it printed at its start "
+                                 "(http://HOST:PORT/?token=…)", status_code=403)
 
     async def index(request: Request) -> Response:
+        if unauthorised(request):
+            return refused()
         return FileResponse(f"{static_directory()}/index.html", headers={"Cache-Control": "no-store"})
 
     async def download(request: Request) -> Response:
+        if unauthorised(request):
+            return refused()
         name = request.path_params["name"]
         if not (name.endswith(".csv") and re.fullmatch(RECORDING_NAME_PATTERN, name.removesuffix(".csv"))):
             return PlainTextResponse(f"{name}: not a recording's name (NAME.csv, as given to record)", status_code=400)
@@ -94,6 +117,10 @@ def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlett
             log.warning("refused a WebSocket from origin %s (not this dashboard's page)", origin)
             await websocket.close(code=1008)
             return
+        if unauthorised(websocket):
+            log.warning("refused a WebSocket without this dashboard's token")
+            await websocket.close(code=1008)
+            return
         await websocket.accept()
         await _serve_page(bridge, websocket, bridge.hello())
 
@@ -113,6 +140,16 @@ def create_app(bridge: ServiceBridge, allowed_hosts: frozenset[str]) -> Starlett
         Mount("/static", StaticFiles(directory=static_directory()), name="static"),
     ], lifespan=lifespan)
     return _NotFramed(_HostCheck(app, allowed_hosts))
+
+
+def token_given(connection: HTTPConnection) -> str:
+    """The token a request carries ("" if none): its URL's ``token`` (the page's, opened
+    from the URL printed, and its WebSocket's), else its ``Referer``'s (a download link the
+    page followed: a same-origin request's Referer is the page's whole URL)."""
+    for query in (connection.url.query, urlsplit(connection.headers.get("referer", "")).query):
+        if tokens := parse_qs(query).get("token"):
+            return tokens[0]
+    return ""
 
 
 NOT_FRAMED_HEADERS = ((b"x-frame-options", b"DENY"), (b"content-security-policy", b"frame-ancestors 'none'"),
@@ -199,6 +236,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket, hello: str | 
     update of each kind meanwhile), never another page's, nor the receipt of its own
     commands."""
     updates = bridge.subscribe()
+    clock = PageClock()
     in_flight: set[asyncio.Task[None]] = set()
     browser = websocket.client.host if websocket.client else None  # the service's events name it
 
@@ -241,6 +279,9 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket, hello: str | 
             if isinstance(parsed, str):
                 await reply(request_id, error_reply("invalid_request", parsed))
                 continue
+            at = parsed.at if isinstance(parsed, Acknowledgement) else parsed[1].pop("at", None)
+            if at is not None:  # a sample of the page's clock; a command's time to live counts from when it was sent
+                received_at -= clock.transit_s(at, received_at)
             if isinstance(parsed, Acknowledgement):
                 updates.acknowledge(parsed.number)
                 continue
@@ -248,7 +289,7 @@ async def _serve_page(bridge: ServiceBridge, websocket: WebSocket, hello: str | 
                 await reply(request_id, error_reply(
                     "busy", f"{MAX_COMMANDS_IN_FLIGHT} commands of this page are waiting: wait for their replies"))
                 continue
-            task = asyncio.create_task(answer(request_id, received_at, *parsed))  # its time to live counts from then
+            task = asyncio.create_task(answer(request_id, received_at, *parsed))
             in_flight.add(task)
             task.add_done_callback(in_flight.discard)
             if len(in_flight) >= MAX_READ_AHEAD:
@@ -269,13 +310,16 @@ def _not_json(constant: str) -> Any:
 
 @dataclass(frozen=True, slots=True)
 class Acknowledgement:
-    """The page has handled the telemetry message ``number`` (its ``n``) and those before it."""
+    """The page has handled the telemetry message ``number`` (its ``n``) and those before it;
+    ``at``: when it said so, ms on its clock (its ``performance.now()``; None: not given)."""
 
     number: int
+    at: float | None = None
 
 
 def _parsed(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | Acknowledgement | str]:
-    """(the message's id, (cmd, fields), an acknowledgement, or why it is neither)."""
+    """(the message's id, (cmd, fields), an acknowledgement, or why it is neither). A
+    command's ``at``, checked, stays among its fields; the caller takes it out."""
     if len(text) > MAX_MESSAGE_BYTES:
         return None, f"a message is at most {MAX_MESSAGE_BYTES} bytes"
     try:
@@ -285,11 +329,14 @@ def _parsed(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | Acknowledgemen
     if not isinstance(message, dict):
         return None, "a message is a JSON object"
     request_id = message.get("id")
+    at = message.get("at")
+    if at is not None and not (finite_number(at) and at >= 0):
+        return request_id, f"at is the page's performance.now() when it sent the message, ms ≥ 0, got {at!r:.40}"
     if message.get("type") == "ack":
         number = message.get("n")
         if type(number) is not int or number < 0:  # noqa: E721 - a bool is no message number
             return request_id, "an ack is {\"type\": \"ack\", \"n\": N}: N the n of the last telemetry message handled"
-        return request_id, Acknowledgement(number)
+        return request_id, Acknowledgement(number, at)
     if message.get("type") != "command":
         return request_id, ("the page sends {\"type\": \"command\", \"id\": N, \"cmd\": NAME, …} and "
                             "{\"type\": \"ack\", \"n\": N}, nothing else")
@@ -298,6 +345,28 @@ def _parsed(text: str) -> tuple[Any, tuple[str, dict[str, Any]] | Acknowledgemen
         return request_id, "a command names its cmd"
     fields = {key: value for key, value in message.items() if key not in ("type", "id", "cmd")}
     return request_id, (cmd, fields)
+
+
+class PageClock:
+    """How long a page's messages were on their way before the dashboard read them, from
+    the ``at`` each carries: the page's ``performance.now()`` when it sent it, ms, on a
+    clock of its own (another host's, through a tunnel). A message read at ``read`` (this
+    host's monotonic clock) gives ``read − at``: the offset between the clocks plus its
+    delay. The least of the page's last :data:`PAGE_CLOCK_SAMPLES` is that of the least
+    delayed, taken for none. A window of messages, not of time: a stall of the dashboard,
+    however long, delays every message sent during it, and those before it stay in the
+    window to measure them by; yet it follows a slow drift between the clocks."""
+
+    def __init__(self) -> None:
+        self._offsets_ms: deque[float] = deque(maxlen=PAGE_CLOCK_SAMPLES)
+
+    def transit_s(self, at_ms: float, read_s: float) -> float:
+        """How long the message the page sent at ``at_ms`` was on its way (s, ≥ 0; 0 for
+        the least delayed) before it was read at ``read_s`` (``time.monotonic()``); a sample
+        for the next ones."""
+        offset_ms = read_s * 1000.0 - at_ms
+        self._offsets_ms.append(offset_ms)
+        return (offset_ms - min(self._offsets_ms)) / 1000.0
 
 
 async def _chunks(bridge: ServiceBridge, name: str, first: dict[str, Any]) -> AsyncIterator[bytes]:

@@ -10,21 +10,32 @@ a client of its own in a worker thread, so that a slow command never holds up an
 a page that floods the others, or floods one of them, cannot delay another. ``jog`` has one
 too, in order: a release must never reach the service before a renewal sent ahead of it.
 
-A page's command has a time to live, counted from when the dashboard read it (its
-:class:`Admission`): the page's own timeout (:attr:`ServiceBridge.command_timeout_s`, the
-dashboard's ``--timeout``, which the page is told in its ``hello``), or for a jog that
-moves, one deadman period of the service. One still queued when it is up is never sent:
-it is answered ``expired``. One sent is given what is left of it, as the API client's wait
+A page's command has a time to live, counted from when the page sent it, as far as the
+dashboard can tell (its ``at``: :class:`~hexactl.adapters.web.app.PageClock`), else from
+when the dashboard read it (its :class:`Admission`): the page's own timeout
+(:attr:`ServiceBridge.command_timeout_s`, the dashboard's ``--timeout``, which the page is
+told in its ``hello``), or for a jog that moves, one deadman period of the service. One
+still queued when it is up is never sent: it is answered ``expired``. One sent is given what is left of it, as the API client's wait
 and (less its margin) as the request's ``deadline_ms``, so the service refuses it too if it
 comes late; a ``deadline_ms`` of the page's own is kept only when shorter. So nothing the
 page has given up on is carried out later (found from outside: a move queued behind 12
 commands, or behind an API stalled for 17 s, ran after the page had said "timeout"; jog
-renewals queued during a stall started a jog after the page had said it was released).
-What stops motion (``estop``, ``stop``, ``abort``, a jog's release) has no time to live:
+renewals queued during a stall started a jog after the page had said it was released;
+and both, held up in a stalled dashboard before it read them, while their time to live
+counted from then). What stops motion (``estop``, ``stop``, ``abort``, a jog's release) has no time to live:
 carried out late, it is still wanted.
 
 The dashboard adds no privilege: every command is an API request like any client's, and
 the service validates it.
+
+It shows one service and commands one service, and makes sure they are the same: each
+telemetry record names its service's ``run``, and whenever a record names a run not yet
+compared (at start, after the telemetry was lost, or the service restarted) the API's
+``status`` is asked for its own. While they differ (``--api`` and ``--telemetry`` of two
+services: found from outside, a page showed rig A enabled while its confirmed E-stop
+latched rig B), every command but ``estop``, ``stop`` and ``abort`` is refused
+(``two_services``, naming both endpoints) and the pages are told the link is down, with
+why. Until the first comparison is answered, commands go as before.
 """
 
 from __future__ import annotations
@@ -69,6 +80,10 @@ SEND_FLOOR_FRACTION = 0.05
 """A command with less than this fraction of its time to live left is not sent (it is
 answered ``expired``): the service could hardly carry it out and answer in what is left."""
 
+UNCOMPARED = object()
+"""No run: the telemetry's run compared last, before any comparison and once the telemetry
+is lost (not None: an older service's records name none)."""
+
 MAX_RECORD_AGE_S = 60.0
 """A record's age is reported only when the service's clock is this host's (a record
 older than this, or from the future, comes from another host's monotonic clock)."""
@@ -79,20 +94,21 @@ log = logging.getLogger("hexactl.dashboard")
 @dataclass(frozen=True)
 class ServiceEndpoints:
     """Where the service is and how to reach it: ``connect(kind, endpoint)`` makes a
-    client (with CURVE keys when the service needs them)."""
+    client (with CURVE keys when the service needs them: ``curve``)."""
 
     api: str
     telemetry: str
     timeout_s: float
     connect: Callable[..., Any]
+    curve: bool = False
 
 
 @dataclass
 class Admission:
     """A page's command on its way to a worker: ``cmd``, its ``fields``, the ``client``
-    name, and when it was read (``received``) and must be answered by (``answer_by``),
-    both ``time.monotonic()``; ``send_by``: not sent from then on. ``given_deadline_ms``:
-    the page's own ``deadline_ms``, if it sent one.
+    name, and when the page sent it (``received``) and it must be answered by
+    (``answer_by``), both ``time.monotonic()``; ``send_by``: not sent from then on.
+    ``given_deadline_ms``: the page's own ``deadline_ms``, if it sent one.
 
     Sent or expired once, by whichever comes first: the worker that takes it
     (:meth:`take`) or the event loop when its time is up (:meth:`expire`)."""
@@ -131,8 +147,9 @@ class Admission:
 
     def expired_reply(self) -> dict[str, Any]:
         waited = time.monotonic() - self.received
-        return error_reply("expired", f"{self.cmd} expired, not carried out: it waited {waited:.1f} s in the dashboard "
-                           f"for its turn (the service is slow to answer, or other commands were ahead of it), and "
+        return error_reply("expired", f"{self.cmd} expired, not carried out: it waited {waited:.1f} s on its way from "
+                           f"the page and in the dashboard for its turn (a link or the dashboard held up, the service "
+                           f"slow to answer, or other commands ahead of it), and "
                            f"its time to live was {self.answer_by - self.received:g} s; send it again if it is still "
                            "wanted")
 
@@ -263,11 +280,14 @@ class ServiceBridge:
         self._geometry_worker = ThreadPoolExecutor(1, thread_name_prefix="dashboard-geometry")
         self._jog_deadman_s = JOG_DEADMAN_S  # the service's, from its newest jog reply
         self._fetching = threading.Event()
+        self._comparing = threading.Event()
+        self._run_compared: object = UNCOMPARED  # the telemetry's run the API's was last compared with
+        self._two_services: str | None = None  # why, while --api and --telemetry are two services
         self.connected = False
         self.geometry: dict[str, Any] | None = None
         self._geometry_update: Update | None = None  # the geometry message, serialised for new pages
         self._link_message = f"waiting for telemetry from {endpoints.telemetry}"
-        self._announced: bool | None = None  # the link state the pages were last told
+        self._announced: str | None = None  # the link message the pages were last sent
 
     # -- life ------------------------------------------------------------------------
 
@@ -293,8 +313,8 @@ class ServiceBridge:
     @property
     def command_timeout_s(self) -> float:
         """How long a page waits for a command's reply (it is told so in its ``hello``),
-        and the dashboard at most, from when it read it, to answer it: the dashboard's
-        ``--timeout``."""
+        and the dashboard at most, from when the page sent it, to answer it: the
+        dashboard's ``--timeout``, s."""
         return self.endpoints.timeout_s
 
     def hello(self) -> str:
@@ -338,7 +358,16 @@ class ServiceBridge:
                         outbox.put(update)
 
     def _link(self) -> Update:
-        return Update("link", json.dumps({"type": "link", "connected": self.connected, "message": self._link_message}))
+        two_services = self._two_services
+        return Update("link", json.dumps({"type": "link", "connected": self.connected and two_services is None,
+                                          "message": two_services or self._link_message}))
+
+    def _announce(self) -> None:
+        """On the event loop: the link's state to every page, if it is news to them."""
+        link = self._link()
+        if link.text != self._announced:
+            self._announced = link.text
+            self._broadcast(link)
 
     # -- commands --------------------------------------------------------------------
 
@@ -350,18 +379,19 @@ class ServiceBridge:
         request can carry (an urgent command's, the envelope's, a number not finite). The
         service is told it comes from the dashboard for ``browser`` (its address), so that
         its events say who sent it. Its time to live counts from ``received``, when the
-        dashboard read it (``time.monotonic()``; None: now)."""
+        page sent it as far as the dashboard can tell (``time.monotonic()``; None: now)."""
         received = time.monotonic() if received is None else received
         client = f"dashboard, browser {browser}" if browser else "dashboard"
         if (urgent := self._urgent.get(cmd)) is not None:
             if fields:
                 return error_reply("invalid_request", f"{cmd} takes no fields, got {', '.join(sorted(fields))}")
             return await urgent(client)
+        if (two_services := self._two_services) is not None:
+            return error_reply("two_services", f"{cmd} not sent: {two_services}")
         workers = self._jog_worker if cmd == "jog" else self._workers
         loop = asyncio.get_running_loop()
         given = fields.get("deadline_ms")
-        if given is not None and (isinstance(given, bool) or not isinstance(given, (int, float))
-                                  or not math.isfinite(given)):
+        if given is not None and not finite_number(given):
             return error_reply("invalid_request", f"{cmd}: deadline_ms is a finite number of ms, got {given!r}")
         if _is_release(cmd, fields):  # stops a jog: no time to live (as stop), in order behind the renewals
             if given is not None:  # the page's own only when shorter than the dashboard's
@@ -427,6 +457,9 @@ class ServiceBridge:
                         self.geometry is None or self.geometry.get("calibration_id") != record.get("calibration_id")):
                     self._fetching.set()
                     self._geometry_worker.submit(self._fetch_geometry)
+                if not self._comparing.is_set() and record.get("run") != self._run_compared:
+                    self._comparing.set()
+                    self._geometry_worker.submit(self._compare_runs, record.get("run"))
                 age_s = received - float(record.get("t", received))
                 # Stamped here, with the age, not as each page is sent it: one text for
                 # every page, and the page's age_ms + (its clock − sent_ms) then also
@@ -440,12 +473,38 @@ class ServiceBridge:
         if connected != self.connected:
             log.info("%s", message)
             if not connected:
-                # fetched afresh when the service is back: it may have restarted
+                # fetched and compared afresh when the service is back: it may have restarted
                 self.geometry = self._geometry_update = None
-        self.connected, self._link_message = connected, message
-        if connected != self._announced:
-            self._announced = connected
-            self._call(self._broadcast, self._link())
+                self._run_compared = UNCOMPARED
+        if (connected, message) != (self.connected, self._link_message):
+            self.connected, self._link_message = connected, message
+            self._call(self._announce)
+
+    def _compare_runs(self, telemetry_run: str | None) -> None:
+        """On the geometry's worker: whether the API answers for the service whose records
+        name ``telemetry_run``, by its ``status``'s run; the next record asks again if the
+        API does not answer."""
+        try:
+            reply = self._request("status", {}, "dashboard")
+            if not reply.get("ok"):
+                log.warning("status, to compare the API's service with the telemetry's: %s",
+                            (reply.get("error") or {}).get("message"))
+                return
+            api_run = reply["status"].get("run")
+            endpoints = self.endpoints
+            self._two_services = None if api_run == telemetry_run else (
+                f"--api {endpoints.api} and --telemetry {endpoints.telemetry} are two different services (run "
+                f"{api_run} answers the API, run {telemetry_run} sends the telemetry): the page would show the one "
+                "and command the other, so only estop, stop and abort are sent (to the API's service); check --api "
+                "and --telemetry")
+            if self._two_services is not None:
+                log.error("%s", self._two_services)
+            self._run_compared = telemetry_run
+            self._call(self._announce)
+        except Exception as error:  # a worker's exception would go unseen
+            log.warning("status, to compare the API's service with the telemetry's: %s: %s", type(error).__name__, error)
+        finally:
+            self._comparing.clear()
 
     def _fetch_geometry(self) -> None:
         """On the geometry's worker; the next record asks again if this fails."""
@@ -477,6 +536,15 @@ def _is_release(cmd: str, fields: dict[str, Any]) -> bool:
     velocity = fields.get("velocity")
     return (cmd == "jog" and isinstance(velocity, list) and len(velocity) == 6
             and all(type(v) in (int, float) and v == 0 for v in velocity))
+
+
+def finite_number(value: Any) -> bool:
+    """Whether ``value`` is a JSON number that a float holds, finite: not a bool, not NaN
+    nor infinite, not an integer of hundreds of digits."""
+    try:
+        return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    except OverflowError:  # an int beyond a float's range
+        return False
 
 
 def error_reply(code: str, message: str) -> dict[str, Any]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ipaddress
 import logging
 import os
+import secrets
 import signal
 import socket
 import sys
@@ -68,8 +69,9 @@ def allowed_hosts(host: str, port: int) -> frozenset[str]:
     return frozenset(f"{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]", named))
 
 
-def bind(address: HttpAddress) -> socket.socket:
-    """A listening socket on ``address``. :raises DashboardError: if it cannot be bound."""
+def bind(address: HttpAddress, option: str = "--http") -> socket.socket:
+    """A listening socket on ``address``, given by the command line's ``option`` (named in
+    the error). :raises DashboardError: if it cannot be bound."""
     family = socket.AF_INET6 if ":" in address.host else socket.AF_INET
     host = "127.0.0.1" if address.host == "localhost" else address.host
     # IPPROTO_TCP named, not left 0: asyncio sets TCP_NODELAY only on a connection whose
@@ -82,7 +84,7 @@ def bind(address: HttpAddress) -> socket.socket:
     except OSError as error:
         listener.close()
         raise DashboardError(f"cannot listen on {address.host}:{address.port}: {error.strerror}; choose another port "
-                             "with --http") from None
+                             f"with {option}") from None
     listener.listen(64)
     return listener
 
@@ -90,16 +92,21 @@ def bind(address: HttpAddress) -> socket.socket:
 def run_dashboard(address: HttpAddress, endpoints: ServiceEndpoints, log_level: str = "info",
                   parent: int | None = None) -> int:
     """Serve the dashboard on ``address`` for the service at ``endpoints`` until SIGINT or
-    SIGTERM, or until process ``parent`` (the service that started it) is gone; prints its
-    URL first (``dashboard on http://HOST:PORT/``). Exit status 0.
+    SIGTERM, or until process ``parent`` (the service that started it, with its option
+    ``--dashboard``) is gone; prints its URL first (``dashboard on http://HOST:PORT/``).
+    Reaching the service with CURVE keys, it needs a secret token of this start, in the
+    URL printed (``http://HOST:PORT/?token=…``): it must add no privilege to the accounts
+    of this host without the keys. Exit status 0.
 
     :raises DashboardError: if the address cannot be bound
     """
-    listener = bind(address)
+    listener = bind(address, "--http" if parent is None else "--dashboard HOST:PORT")
     port = listener.getsockname()[1]
-    app = create_app(ServiceBridge(endpoints), allowed_hosts(address.host, port))
+    token = secrets.token_urlsafe(TOKEN_BYTES) if endpoints.curve else None
+    app = create_app(ServiceBridge(endpoints), allowed_hosts(address.host, port), token)
     host = f"[{address.host}]" if ":" in address.host else address.host
-    print(f"dashboard on http://{host}:{port}/ (service API {endpoints.api}, telemetry {endpoints.telemetry})",
+    query = "" if token is None else f"?token={token}"
+    print(f"dashboard on http://{host}:{port}/{query} (service API {endpoints.api}, telemetry {endpoints.telemetry})",
           flush=True)
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
@@ -113,6 +120,9 @@ def run_dashboard(address: HttpAddress, endpoints: ServiceEndpoints, log_level: 
     uvicorn.Server(config).run(sockets=[listener])
     return 0
 
+
+TOKEN_BYTES = 32
+"""The token's randomness, bytes (256 bits)."""
 
 PARENT_POLL_S = 1.0
 

@@ -92,6 +92,13 @@ $('messages-clear').addEventListener('click', () => { messagesEl.textContent = '
 // ---------------- commands ----------------
 function failure(code, message) { return { ok: false, error: { code, message } }; }
 
+// The commands that can move or energise the platform: never sent while the page has no
+// live data, whose panel cannot show what they would do (a jog's zero-velocity release stops).
+const MOVING_CMDS = new Set(['enable', 'move', 'jog', 'play', 'resume', 'wave', 'stream_open', 'leg_lock',
+  'load_calibration', 'rollback_calibration']);
+const moves = (cmd, fields) => MOVING_CMDS.has(cmd)
+  && !(cmd === 'jog' && Array.isArray(fields.velocity) && fields.velocity.every((v) => v === 0));
+
 /** Send one API command; resolves with its reply (never rejects). Failed replies are logged. */
 function send(cmd, fields = {}) {
   return new Promise((resolve) => {
@@ -105,12 +112,20 @@ function send(cmd, fields = {}) {
       done(failure('unavailable', `not connected to the dashboard server: ${cmd} not sent`));
       return;
     }
+    const loss = dataLoss(performance.now());
+    if (loss !== null && moves(cmd, fields)) {
+      done(failure('no_live_data', `not sent: the page has no live data (${LOSS_SHORT[loss]}), so it cannot show `
+        + 'what this would move; do it once live data return (E-STOP, Stop and Abort always go)'));
+      return;
+    }
     const id = state.nextId++;
     const pending = { cmd, done, timer: null, sentAt: performance.now() };
     state.pending.set(id, pending);
     armTimeout(id, pending);
     try {
-      ws.send(JSON.stringify({ ...fields, type: 'command', id, cmd }));
+      // `at`: when the operator's action made it, on the page's clock: the dashboard counts
+      // its time to live from then, so one held up on the way expires instead of running late
+      ws.send(JSON.stringify({ ...fields, type: 'command', id, cmd, at: pending.sentAt }));
     } catch (e) {
       clearTimeout(pending.timer);
       state.pending.delete(id);
@@ -560,7 +575,7 @@ function acknowledge(n) {
   if (!Number.isSafeInteger(n) || state.ws?.readyState !== WebSocket.OPEN) return;
   state.unacknowledged = 0;
   state.lastAckAt = now;
-  state.ws.send(JSON.stringify({ type: 'ack', n }));
+  state.ws.send(JSON.stringify({ type: 'ack', n, at: now }));   // `at`: as a command's, on the page's clock
   if (state.acksAwaited.length < ACKS_AWAITED_MAX) state.acksAwaited.push({ n, at: now, wall: Date.now() });
 }
 
@@ -589,7 +604,7 @@ function behindMs(now) {
 }
 
 function connect() {
-  const url = `${location.protocol === 'https:' ? 'wss:' : 'ws:'}//${location.host}/ws`;
+  const url = `${location.protocol === 'https:' ? 'wss:' : 'ws:'}//${location.host}/ws${location.search}`;   // with its ?token= (CURVE)
   let ws;
   try {
     ws = new WebSocket(url);

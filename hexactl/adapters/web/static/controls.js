@@ -41,7 +41,23 @@ export function describeError(err) {
   return text;
 }
 
+// A result line saying a move or sequence is under way (its reply's) is live status only
+// while the records show it under way: once they have, and show it no more, or the
+// controller leaves enabled (a stop or E-stop from anyone), it says it is over.
+const underWayLines = new Map();   // result element -> {running(r), over(r), seen}
+
+/** Keep `el`'s line saying it is under way until records show otherwise; then over(r) says how it ended. */
+function claimUnderWay(el, running, over) { underWayLines.set(el, { running, over, seen: false }); }
+
+function checkUnderWay(r) {
+  for (const [el, c] of underWayLines) {
+    if (c.running(r)) c.seen = true;
+    else if (c.seen || r.state !== 'enabled') setResult(el, null, c.over(r));
+  }
+}
+
 function setResult(el, cls, text) {
+  underWayLines.delete(el);
   el.classList.remove('valid', 'refused', 'moving');
   if (cls) el.classList.add(cls);
   el.textContent = text;
@@ -70,7 +86,9 @@ export function decimal(text) {
 export function parseSix(text, allowNull, what) {
   const s = text.trim();
   if (!s) return null;
-  const inner = s.replace(/^\[|\]$/g, '').trim();
+  const [opens, closes] = [s.startsWith('['), s.endsWith(']')];
+  if (opens !== closes) throw new Error(`${what}: unbalanced bracket: put the six values in [ ] or in none; ${NOT_SENT}`);
+  const inner = opens ? s.slice(1, -1).trim() : s;
   const parts = (inner.includes(',') ? inner.split(',') : inner.split(/\s+/)).map((x) => x.trim());
   if (parts.length !== 6) throw new Error(`${what}: six values, x, y, z, roll, pitch, yaw (got ${parts.length}); ${NOT_SENT}`);
   return parts.map((x, i) => {
@@ -127,13 +145,32 @@ function eventsSeen(r) {
  * records it handled: it handles the newest at each frame it draws).
  */
 function enabledSpellEnded(since, r) {
-  if (r.state !== 'enabled') return `the controller is ${r.state}: Go is withdrawn; validate again once it is enabled`;
+  if (r.state !== 'enabled') return `the controller is ${r.state}: Go is withdrawn; ${toEnable(r.state)}, then validate again`;
   const events = Array.isArray(r.events) ? r.events : [];
   const codes = events.filter((e) => e && typeof e === 'object' && ENABLED_SPELL_ENDS.has(e.code)
     && ((Number.isSafeInteger(e.seq) && e.seq > since.seq) || (typeof e.t === 'number' && e.t > since.t)))
     .map((e) => e.code);
   if (!codes.length) return null;
   return `the controller left enabled since you validated (${[...new Set(codes)].join(', ')}): Go is withdrawn; validate again`;
+}
+
+/** What the operator does to get `state` back to enabled: a latched fault or E-stop is reset first. */
+const toEnable = (state) => (['fault', 'estop'].includes(state) ? 'reset, then enable it' : 'enable it');
+
+const WAVE_RUNNING = new Set(['ramp_in', 'steady', 'ramp_out']);
+
+/**
+ * Why the platform is not at rest by record `r` (moving, or a sequence, wave or pose stream
+ * under way), or null: a move validated or a calibration previewed now would not start from
+ * where it will be, so Go and Apply are armed only at rest.
+ */
+function notAtRest(r) {
+  if (!r) return null;
+  if (r.motion !== 'holding') return `the platform is ${r.motion}`;
+  if (r.sequence) return 'a sequence is under way';
+  if (r.stream) return 'a pose stream is under way';
+  if (r.wave && WAVE_RUNNING.has(r.wave.phase)) return 'a wave is under way';
+  return null;
 }
 
 /**
@@ -210,7 +247,7 @@ export function setupControls(ctx) {
     validating += 1;
     if (validated || underWay) {
       invalidate();
-      setResult(moveResult, null, `${press} pressed: Go is withdrawn; validate again once the controller is enabled`);
+      setResult(moveResult, null, `${press} pressed: Go is withdrawn; ${toEnable(press.startsWith('E-STOP') ? 'estop' : 'disabled')}, then validate again`);
     }
   }
   $('estop').addEventListener('click', () => withdrawnBy('E-STOP'));
@@ -246,7 +283,8 @@ export function setupControls(ctx) {
     // disable, reset end it: enabledSpellEnded)
     const now = ctx.record();
     const ended = before && before.state === 'enabled' && now ? enabledSpellEnded(since, now) : null;
-    const armed = before && before.state === 'enabled' && now && !ended;
+    const moving = ended ? null : (notAtRest(before) ?? notAtRest(now));
+    const armed = before && before.state === 'enabled' && now && !ended && !moving;
     if (armed) {
       validated = { key, fields, goal: reply.goal ?? null, ref: Array.isArray(ref) ? ref.slice() : null, under, since };
       goButton.disabled = false;
@@ -264,8 +302,9 @@ export function setupControls(ctx) {
     }
     if (!armed) {
       const state = now?.state ?? before?.state ?? 'unknown';
-      lines.push(ended ? ended.replace('Go is withdrawn', 'Go is not armed')
-        : `Go is not armed: the controller is ${state}; enable it, then validate again`);
+      if (ended) lines.push(ended.replace('Go is withdrawn', 'Go is not armed'));
+      else if (moving && state === 'enabled') lines.push(`Go is not armed: ${moving}; validate again once it is at rest`);
+      else lines.push(`Go is not armed: the controller is ${state}; ${toEnable(state)}, then validate again`);
     }
     setResult(moveResult, armed ? 'valid' : null, lines.join('\n'));
   });
@@ -283,6 +322,13 @@ export function setupControls(ctx) {
     const reply = await ctx.send('move', fields);
     if (reply.ok) {
       setResult(moveResult, 'moving', `${reply.message ?? 'moving'}: goal ${fmtPose(reply.goal)}, duration ${fmt(reply.duration, 2)} s`);
+      const goal = reply.goal;
+      claimUnderWay(moveResult, (r) => r.motion !== 'holding', (r) => {
+        if (r.state !== 'enabled') return `move over: the controller is ${r.state}`;
+        const reached = Array.isArray(goal) && Array.isArray(r.pose_command)
+          && goal.every((v, i) => Math.abs(v - r.pose_command[i]) <= 0.01);
+        return `move over: ${reached ? 'at its goal' : 'stopped before its goal'}, at rest at ${fmtPose(r.pose_command)}`;
+      });
     } else {
       setResult(moveResult, 'refused', describeError(reply.error));
     }
@@ -331,8 +377,11 @@ export function setupControls(ctx) {
     jogInFlight += 1;
     const fields = { velocity, frame };
     if (held && held.number != null) fields.renews = held.number;
+    // until the jog that starts it is answered, no renewal: each would start a jog of its own
+    const starting = held !== null && fields.renews === undefined;
+    if (starting) held.starting = true;
     let reply;
-    try { reply = await ctx.send('jog', fields); } finally { jogInFlight -= 1; }
+    try { reply = await ctx.send('jog', fields); } finally { jogInFlight -= 1; if (starting) held.starting = false; }
     if (reply.ok && typeof reply.deadman_s === 'number' && reply.deadman_s > 0) renewEvery(reply.deadman_s * 1000 / RENEWALS_PER_DEADMAN);
     if (held && held === jog) {
       if (reply.ok && reply.jog != null) held.number = reply.jog;
@@ -364,7 +413,7 @@ export function setupControls(ctx) {
     try { speed = jogSpeed(); } catch (e) { setResult(jogStatus, 'refused', e.message); return; }
     const velocity = jogVelocity(button, speed);
     const frame = $('jog-frame').value;
-    jog = { button, velocity, frame, timer: null, everyMs: null, number: null };
+    jog = { button, velocity, frame, timer: null, everyMs: null, number: null, starting: false };
     button.classList.add('held');
     sendJog(velocity, frame, jog);
     renewEvery(renewEveryMs);
@@ -378,7 +427,7 @@ export function setupControls(ctx) {
     jog.everyMs = ms;
     jog.timer = setInterval(() => {
       // never pile up renewals behind a slow link: a lapsed deadman brakes, which is safe
-      if (jog && jogInFlight < RENEWALS_PER_DEADMAN - 1) sendJog(jog.velocity, jog.frame, jog);
+      if (jog && !jog.starting && jogInFlight < RENEWALS_PER_DEADMAN - 1) sendJog(jog.velocity, jog.frame, jog);
     }, ms);
   }
 
@@ -403,6 +452,13 @@ export function setupControls(ctx) {
       button.addEventListener(type, () => { if (jog && jog.button === button) releaseJog(true); });
     }
     button.addEventListener('contextmenu', (ev) => ev.preventDefault());
+    // No jog from the keyboard: a key's release can be lost (focus moved, auto-repeat), and
+    // the held pointer is the deadman. Said, so that the key does not seem to do nothing.
+    button.addEventListener('keydown', (ev) => {
+      if (ev.key !== ' ' && ev.key !== 'Enter') return;
+      ev.preventDefault();
+      setResult(jogStatus, 'refused', 'not sent: jog by pressing and holding a ± button with the mouse or a finger; the keyboard does not jog');
+    });
   });
   window.addEventListener('pointerup', () => { if (jog) releaseJog(true); });
   window.addEventListener('blur', () => { if (jog) releaseJog(true); });
@@ -411,7 +467,13 @@ export function setupControls(ctx) {
 
   // ---------------- sequence ----------------
   const seqResult = $('sequence-result');
-  const seqReply = (reply, okText) => setResult(seqResult, reply.ok ? 'valid' : 'refused', reply.ok ? okText(reply) : describeError(reply.error));
+  const sequenceOver = (r) => (r.state !== 'enabled' ? `sequence over: the controller is ${r.state}`
+    : `sequence over: ${r.last_sequence?.status ?? 'ended'}${r.last_sequence?.name ? ` (${r.last_sequence.name})` : ''}`);
+  /** The reply in the Sequence panel; an ok one but Abort's says the sequence is under way, until it is not. */
+  function seqReply(reply, okText, underWayNow = true) {
+    setResult(seqResult, reply.ok ? 'valid' : 'refused', reply.ok ? okText(reply) : describeError(reply.error));
+    if (reply.ok && underWayNow) claimUnderWay(seqResult, (r) => Boolean(r.sequence), sequenceOver);
+  }
   $('play').addEventListener('click', async () => {
     const name = $('sequence-name').value.trim();
     if (!name) { setResult(seqResult, 'refused', 'name a sequence: a built-in or a file'); return; }
@@ -422,7 +484,7 @@ export function setupControls(ctx) {
     $(cmd).addEventListener('click', async () => {
       if (cmd === 'abort') releaseJog(false);
       const reply = await ctx.send(cmd);
-      seqReply(reply, (r) => r.message ?? cmd);
+      seqReply(reply, (r) => r.message ?? cmd, cmd !== 'abort');
     });
   }
 
@@ -439,8 +501,9 @@ export function setupControls(ctx) {
 
   // ---------------- frames & soft limits ----------------
   const framesResult = $('frames-result');
+  const NO_FRAMES = 'work: none · tool: none · soft limits: none';
   function describeFrames(f) {
-    if (!f || typeof f !== 'object') return 'work: none · tool: none · soft limits: none';
+    if (!f || typeof f !== 'object') return NO_FRAMES;
     const sl = f.soft_limits;
     let soft = 'none';
     if (sl && typeof sl === 'object') {
@@ -450,7 +513,11 @@ export function setupControls(ctx) {
       if (typeof sl.max_tilt_deg === 'number') parts.push(`tilt ≤ ${fmt(sl.max_tilt_deg, 2)} °`);
       soft = parts.length ? parts.join('\n  ') : 'none';
     }
-    return `work: ${fmtPose(f.work, 2)}\ntool: ${fmtPose(f.tool, 2)}\nsoft limits: ${soft}`;
+    // a zero frame is no frame, as hexactl status says it (telemetry_text.NO_FRAMES)
+    const frame = (p) => (Array.isArray(p) && p.every((v) => v === 0) ? 'none' : fmtPose(p, 2));
+    const [work, tool] = [frame(f.work), frame(f.tool)];
+    if (work === 'none' && tool === 'none' && soft === 'none') return NO_FRAMES;
+    return `work: ${work}\ntool: ${tool}\nsoft limits: ${soft}`;
   }
   $('frames-apply').addEventListener('click', async () => {
     const fields = {};
@@ -544,6 +611,8 @@ export function setupControls(ctx) {
   /** Why a preview made as `p` says no longer what Apply would do by record `r`, or null. */
   function previewOutdated(p, r) {
     if (r.state !== p.state) return `the controller is ${r.state} now (${p.state} when previewed): preview again`;
+    const moving = notAtRest(r);
+    if (moving) return `${moving}: Apply is disabled; preview again once it is at rest`;
     if (r.calibration_id !== p.active) return `the calibration in force changed (now ${r.calibration_id}): preview again`;
     const ref = motionRef(r);
     if (Array.isArray(p.ref) && Array.isArray(ref) && ref.some((v, i) => typeof v === 'number' && Math.abs(v - p.ref[i]) > 0.01)) {
@@ -572,11 +641,13 @@ export function setupControls(ctx) {
     if (blind || !before) { setResult(calChange, 'refused', `the page has no live data (${blind ?? 'no record yet'}): preview again once live data return`); return; }
     const ref = motionRef(before);
     const made = { path, id: reply.calibration_id, state: before.state, active: before.calibration_id, ref: Array.isArray(ref) ? ref.slice() : null };
-    const outdated = previewOutdated(made, ctx.record());   // changed while the preview was under way
+    // made while moving, or changed while the preview was under way
+    const outdated = previewOutdated(made, before) ?? previewOutdated(made, ctx.record());
     if (outdated) { resetPreview(outdated); return; }
     previewed = made;
     calApply.disabled = false;
-    setResult(calChange, 'valid', `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id}`);
+    // the service's message says why the change may be 0 (not enabled: nothing ramped) and what the new calibration shifts
+    setResult(calChange, 'valid', `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id}${reply.message ? `\n${reply.message}` : ''}`);
   });
   calApply.addEventListener('click', async () => {
     const path = calSelect.value;
@@ -680,6 +751,10 @@ export function setupControls(ctx) {
       const ended = enabledSpellEnded(validated.since, r);
       if (ended) invalidate(ended);
     }
+    // … and only at rest: a move under way carries it elsewhere than where it was validated from
+    const moving = validated ? notAtRest(r) : null;
+    if (moving) invalidate(`${moving}: Go is withdrawn; validate again once it is at rest`);
+    checkUnderWay(r);
     // a calibration preview holds only in the state, on the calibration and at the pose it was made in
     if (previewed) {
       const why = previewOutdated(previewed, r);
@@ -704,8 +779,9 @@ export function setupControls(ctx) {
     invalidate(`no live data (${why}): Go is disabled; validate again once live data return`);
     if (previewed) resetPreview(`no live data (${why}): Apply is disabled; preview again once live data return`);
     if (jog) {
-      releaseJog(false);
-      setResult(jogStatus, 'refused', `jog released: no live data (${why}); the page stopped renewing it, so the service brakes within its deadman time`);
+      releaseJog(true);   // the release queues behind any renewal held up on the way: nothing starts the jog again
+      jogSerial += 1;     // its reply must not stand in for why it was released
+      setResult(jogStatus, 'refused', `jog released: no live data (${why}); the page sent the release and stopped renewing it (the service's deadman brakes it should the release not arrive)`);
     }
   }
 
