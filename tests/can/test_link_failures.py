@@ -538,3 +538,22 @@ def test_a_command_given_up_is_named(link, bus, clock):
         clock.t_ns += 20 * MS
         link.read_feedback()
     assert link.link_health().detail.endswith("; leg 3: command LOCK not acknowledged after 3 retries")
+
+
+def test_an_actuator_that_restarts_is_named_and_a_counter_wrap_is_not_a_restart(link, bus):
+    """Found from outside: a leg that restarted (a power glitch) read DISABLED with no fault
+    and nothing said why; its heartbeat counter beginning again at 0 says it."""
+    for counter in (250, 251, 252, 253, 254, 255, 0, 1):  # a wrap
+        bus.push(*codec.encode_heartbeat(3, WireState.DISABLED, counter))
+    link.read_feedback()
+    assert link.node_status(3).restarts == 0 and "restarted" not in link.link_health().detail
+    bus.push(*codec.encode_heartbeat(3, WireState.DISABLED, 0))
+    link.read_feedback()
+    assert link.node_status(3).restarts == 1
+    assert ("leg 3 restarted (its heartbeat counter began again at 0 after 1): a power or watchdog reset"
+            in link.link_health().detail)
+    bus.push(*codec.encode_heartbeat(5, WireState.DISABLED, 40))
+    bus.push(*codec.encode_heartbeat(5, WireState.INIT, 41))  # booting, its counter kept
+    link.read_feedback()
+    assert link.node_status(5).restarts == 1
+    assert "leg 5 restarted (it reports INIT, booting, after DISABLED)" in link.link_health().detail

@@ -201,6 +201,8 @@ class NodeStatus:
     :ivar last_ack: its last CMD_ACK, None before the first
     :ivar last_emergency: its last EMCY, None before the first
     :ivar command_pending: a command is waiting for its acknowledgement
+    :ivar restarts: how often it started again since the link opened (its HEARTBEAT counter
+        began again at 0, or it reported INIT after another state): a power or watchdog reset
     """
 
     protocol_version: int | None
@@ -209,6 +211,7 @@ class NodeStatus:
     last_ack: CommandAck | None
     last_emergency: Emergency | None
     command_pending: bool
+    restarts: int = 0
 
 
 class _PendingCommand:
@@ -227,8 +230,8 @@ class _Node:
 
     __slots__ = (
         "position_mm", "velocity_mm_s", "wire_state", "fault_bits", "setpoint_counter", "enable_floor",
-        "heard_ns", "heartbeat_ns", "feedback_ns", "protocol_version", "rejected_frames",
-        "emergencies", "last_emergency", "last_ack", "sequence", "commanded", "pending",
+        "heard_ns", "heartbeat_ns", "heartbeat_counter", "restarts", "feedback_ns", "protocol_version",
+        "rejected_frames", "emergencies", "last_emergency", "last_ack", "sequence", "commanded", "pending",
     )  # fmt: skip
 
     def __init__(self) -> None:
@@ -243,6 +246,8 @@ class _Node:
         self.enable_floor = -1
         self.heard_ns: int | None = None
         self.heartbeat_ns: int | None = None
+        self.heartbeat_counter: int | None = None  # of its last HEARTBEAT
+        self.restarts = 0
         self.feedback_ns: int | None = None
         self.protocol_version: int | None = None
         self.rejected_frames = 0
@@ -447,6 +452,7 @@ class CanActuatorLink:
             node.last_ack,
             node.last_emergency,
             node.pending is not None,
+            node.restarts,
         )
 
     def stats(self) -> LinkStats:
@@ -579,6 +585,8 @@ class CanActuatorLink:
             node.feedback_ns = now
         elif kind is Heartbeat:
             node = self._nodes[decoded.node - 1]
+            self._note_restart(decoded, node)
+            node.heartbeat_counter = decoded.counter
             node.wire_state = decoded.state
             node.protocol_version = decoded.protocol_version
             node.rejected_frames += decoded.rejected_frames
@@ -618,6 +626,23 @@ class CanActuatorLink:
         node.heard_ns = now
         if node.wire_state not in _ENGAGED:
             node.setpoint_counter = -1  # disabled, faulted or rebooted: it applies nothing of ours
+
+    def _note_restart(self, heartbeat: Heartbeat, node: _Node) -> None:
+        """Count and name a restart of the actuator: its heartbeat counter begins again at 0
+        (not after 255), or it reports INIT (booting) after another state. Its faults then
+        read DISABLED or INIT with no fault latched: without this, nothing would say why."""
+        last = node.heartbeat_counter
+        if last is None:
+            return
+        if heartbeat.counter == 0 and last != 0xFF:
+            how = f"its heartbeat counter began again at 0 after {last}"
+        elif heartbeat.state is WireState.INIT and node.wire_state is not WireState.INIT:
+            how = f"it reports INIT, booting, after {node.wire_state.name}"
+        else:
+            return
+        node.restarts += 1
+        self._detail = (f"leg {heartbeat.node} restarted ({how}): a power or watchdog reset of the actuator; "
+                        "check its supply and wiring, then reset and enable")
 
     def _feedback(self, node: _Node, now: int) -> ActuatorFeedback:
         return ActuatorFeedback(
