@@ -82,6 +82,8 @@ class ActuatorFeedback:
     passed to that call (an implementation with a narrower wire field unwraps it), or
     −1 if none yet. ``fault_bits``: the drive's fault word, 0 when healthy;
     ``fault_names``: its set bits' names, lowest bit first (:class:`FaultNames`).
+    ``restarts``: how often it started again (a power or watchdog reset) since the interface
+    opened; a restarted actuator is DISABLED with no fault, so only this says why.
     """
 
     position_mm: float
@@ -91,6 +93,7 @@ class ActuatorFeedback:
     fault_names: tuple[str, ...]
     heartbeat_age_s: float
     setpoint_counter: int
+    restarts: int = 0
 
 
 class FaultNames:

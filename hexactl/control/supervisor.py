@@ -128,7 +128,10 @@ class Supervisor:
                                     f"{fault_text(actuator.fault_names, actuator.fault_bits)}", leg))
             elif actuator.state is not expected:
                 if now_ns >= self._settling_until_ns[leg - 1]:
-                    faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected {expected.name}", leg))
+                    restarted = (f": it restarted (a power or watchdog reset; {actuator.restarts} since the link "
+                                 "opened), check its supply and wiring" if actuator.restarts else "")
+                    faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected "
+                                        f"{expected.name}{restarted}", leg))
             elif self._settling_until_ns[leg - 1]:
                 self._settling_until_ns[leg - 1] = 0  # got there: from now on any deviation counts
             elif expected is ActuatorState.ENABLED and stale_below is not None and actuator.setpoint_counter < stale_below:

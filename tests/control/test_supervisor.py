@@ -62,6 +62,17 @@ def test_a_leg_has_the_state_timeout_to_reach_its_state_then_none(supervisor):
     assert codes(supervisor.faults(late, HEALTHY, 100, 1002 * MS)) == [("actuator_state", 3)]
 
 
+def test_a_leg_that_left_its_state_because_it_restarted_says_so(supervisor):
+    """A restarted actuator reads DISABLED with no fault: the fault says it restarted."""
+    supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)  # all arrived in ENABLED
+    restarted = feedback(leg4={"state": ActuatorState.DISABLED, "restarts": 1})
+    (fault,) = supervisor.faults(restarted, HEALTHY, 100, 2 * MS)
+    assert fault.message == ("leg 4 is DISABLED, expected ENABLED: it restarted (a power or watchdog reset; 1 since "
+                             "the link opened), check its supply and wiring")
+    (fault,) = supervisor.faults(feedback(leg4={"state": ActuatorState.DISABLED}), HEALTHY, 100, 3 * MS)
+    assert fault.message == "leg 4 is DISABLED, expected ENABLED"
+
+
 def test_a_locked_leg_is_expected_locked_and_not_to_follow_setpoints(supervisor):
     supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)  # all arrived in ENABLED
     supervisor.expect(2, ActuatorState.LOCKED, 10 * MS)

@@ -655,6 +655,7 @@ class CanActuatorLink:
             # that do not make an actuator the loop may enable (send_command refuses ENABLE).
             heartbeat_age_s=_age_s(node.heard_ns if node.protocol_version == PROTOCOL_VERSION else None, now),
             setpoint_counter=node.setpoint_counter,
+            restarts=node.restarts,
         )
 
     def _unwrap(self, wire_counter: int, floor: int) -> int:
