@@ -163,14 +163,16 @@ def test_a_long_line_is_drawn_as_its_envelope_keeping_every_extreme(values, buck
 
 
 def test_plot_reads_a_long_recording_into_arrays_with_gaps_for_empty_cells(tmp_path, capsys) -> None:
-    from hexactl.adapters.cli.recording_commands import PLOT_BUCKETS, _read_recording
+    from hexactl.adapters.cli.recording_commands import PLOT_BUCKETS
+    from hexactl.adapters.files.recording_file import read_recording
 
     rows = 3 * PLOT_BUCKETS
     lines = ["t_s,cycle,pose_measured_x_mm,lateness_us"]
     lines += [f"{n * 0.002:.3f},{n},{'' if n < 5 else n % 7},{9999 if n == 4321 else 5}" for n in range(rows)]
     recording = tmp_path / "long.csv"
     recording.write_text("\ufeff" + "\n".join(lines) + "\n")  # a byte-order mark is dropped
-    header, columns = _read_recording(recording)
+    header, columns, cut_line = read_recording(recording)
+    assert cut_line is None
     assert header == ["t_s", "cycle", "pose_measured_x_mm", "lateness_us"]
     assert all(column.dtype == np.float64 and len(column) == rows for column in columns)
     assert np.isnan(columns[2][:5]).all() and columns[2][5] == 5 and columns[3].max() == 9999
@@ -191,10 +193,11 @@ def test_plot_leaves_out_a_last_line_an_interruption_cut(tmp_path, capsys) -> No
     image = tmp_path / "run.png"
     assert main(["plot", str(partial), "-o", str(image)]) == 0 and image.exists()
     assert f"{partial}: line 4 was cut (an interrupted recording?): left out" in capsys.readouterr().err
-    from hexactl.adapters.cli.recording_commands import _read_recording
+    from hexactl.adapters.files.recording_file import read_recording
 
     partial.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2")  # cut within its second value
-    assert [list(column) for column in _read_recording(partial)[1]] == [[0.0], [1.0], [5.0]]
+    _, columns, cut_line = read_recording(partial)
+    assert [list(column) for column in columns] == [[0.0], [1.0], [5.0]] and cut_line == 3
     whole = tmp_path / "whole.csv"
     whole.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2\n0.004,3,1\n")  # a short line within: garbled
     assert main(["plot", str(whole)]) == 2

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hexactl.adapters.api.protocol import MAX_RECORDING_DIVISOR, MAX_RECORDING_S
+from hexactl.adapters.files.recording_file import SIGNALS  # the service checks them again
 from hexactl.adapters.cli.common import (CliError, check_output, connect, positive_up_to, whole_number_in,
                                         write_failed)
 
@@ -26,8 +26,6 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
-SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
-"""The API's signals (docs/api.md); the service checks them again."""
 
 WAIT_POLL_S = 0.2
 WAIT_SLACK_S = 30.0
@@ -213,8 +211,15 @@ def run_plot(arguments: argparse.Namespace) -> int:
         raise CliError(f"{out}: name the image with the ending of its format: "
                        f"{', '.join('.' + f for f in IMAGE_FORMATS)}")
     check_output(str(out), True, path)  # plot replaces its image, never its input
-    header, columns = _read_recording(path)
-    side = _side_file(path)
+    from hexactl.adapters.files.recording_file import RecordingReadError, read_recording, read_side_file
+
+    try:
+        header, columns, cut_line = read_recording(path)
+        side = read_side_file(path)
+    except RecordingReadError as error:
+        raise CliError(str(error)) from None
+    if cut_line is not None:
+        print(f"{path}: line {cut_line} was cut (an interrupted recording?): left out", file=sys.stderr)
     import matplotlib  # heavy: only for plot
 
     matplotlib.use("Agg")
@@ -255,76 +260,6 @@ def run_plot(arguments: argparse.Namespace) -> int:
 _UNITS = {"us": "µs", "deg": "°"}
 
 
-def _read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]]]:
-    """The header and the columns (NaN for an empty cell); CliError for a missing or garbled
-    file. Read row by row into 8 bytes a value: an hour at 500 Hz (1.8 M rows) read whole
-    into Python lists of strings took gigabytes."""
-    import csv
-    from array import array
-
-    import numpy as np  # not for every command's start
-
-    from hexactl.adapters.files.text import SAVE_AS_UTF8, TextFileError, decode_text
-
-    try:
-        with path.open("rb") as raw:
-            start = raw.read(1 << 16)
-            raw.seek(0, os.SEEK_END)
-            if raw.tell():
-                raw.seek(-1, os.SEEK_END)
-            # Every row the recorder writes ends its line: one that does not was cut (an
-            # interrupted recording's .csv.partial), and is left out, not taken for a number.
-            cut = raw.read(1) not in (b"\n", b"")
-    except FileNotFoundError:
-        raise CliError(f"{path}: no such file (a recording is NAME.csv in the service's data directory)") from None
-    except OSError as error:
-        raise CliError(f"{path}: cannot read it: {error}") from None
-    try:  # the text files' one rule, on the first lines: UTF-16 and the like named as such
-        decode_text(start[:start.rfind(b"\n") + 1] or start, str(path))
-    except TextFileError as error:
-        raise CliError(str(error)) from None
-    number = 1
-    try:
-        with path.open(encoding="utf-8-sig", newline="") as file:
-            rows = csv.reader(file)
-            header = next(rows, [])
-            if "t_s" not in header or "cycle" not in header:
-                raise CliError(f"{path}: not a recording (its header has no t_s and cycle columns): plot a file made "
-                               "by hexactl record")
-            columns = [array("d") for _ in header]
-            held: list[str] | None = None  # the row read last, taken once another follows it (or the file ends whole)
-            for number, row in enumerate(rows, start=2):
-                if held is not None:
-                    _take(held, columns, number - 1, path)
-                held = row
-            if held is not None and not cut:
-                _take(held, columns, number, path)
-            elif held is not None:
-                print(f"{path}: line {number} was cut (an interrupted recording?): left out", file=sys.stderr)
-    except UnicodeDecodeError:
-        raise CliError(f"{path}: not UTF-8 text (after line {number}): {SAVE_AS_UTF8}") from None
-    except csv.Error as error:  # a NUL byte: not a text file
-        raise CliError(f"{path}: line {number}: {error}: the file is garbled") from None
-    except OSError as error:
-        raise CliError(f"{path}: cannot read it: {error}") from None
-    if not columns[0]:
-        raise CliError(f"{path}: the recording has no rows")
-    return header, [np.frombuffer(column, dtype=np.float64) for column in columns]
-
-
-def _take(row: list[str], columns: list[Any], number: int, path: Path) -> None:
-    """Append line ``number``'s ``row`` to ``columns`` (NaN for an empty cell); CliError
-    when it has another count of values than the header, or one that is not a number."""
-    if len(row) != len(columns):
-        raise CliError(f"{path}: line {number} has {len(row)} values for {len(columns)} columns: the file is garbled")
-    try:
-        values = [float(cell) if cell else float("nan") for cell in row]
-    except ValueError:
-        raise CliError(f"{path}: line {number} has a value that is not a number: the file is garbled") from None
-    for column, value in zip(columns, values):
-        column.append(value)
-
-
 def envelope(time_s: NDArray[np.float64], values: NDArray[np.float64], buckets: int
              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``values`` over ``time_s`` as drawn: as they are when there are at most ``2 ×
@@ -340,17 +275,6 @@ def envelope(time_s: NDArray[np.float64], values: NDArray[np.float64], buckets: 
     with np.errstate(invalid="ignore"):
         low, high = np.fmin.reduceat(values, starts), np.fmax.reduceat(values, starts)
     return np.repeat(time_s[starts], 2), np.column_stack((low, high)).ravel()
-
-
-def _side_file(path: Path) -> dict[str, Any] | None:
-    """The recording's side file, None when absent; CliError when garbled."""
-    side = path.with_suffix(".json")
-    try:
-        return json.loads(side.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise CliError(f"{side}: the side file cannot be read ({error}): move it away to plot without it") from None
 
 
 def _title(path: Path, side: dict[str, Any] | None) -> str:

@@ -13,20 +13,29 @@ meanwhile does not redirect it; :meth:`RecordingFile.finish` moves it to ``NAME.
 with a hard link, which fails rather than replace a file made meanwhile. Rows are written
 unbuffered, a batch at a time; a batch that cannot be written whole (a full disk) is cut
 off again, so the file always ends on a whole row.
+
+:func:`read_recording` and :func:`read_side_file` read them back (``hexactl plot``).
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
+from array import array
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hexactl.adapters.files.atomic import write_atomic, write_problem
+from hexactl.adapters.files.text import SAVE_AS_UTF8, TextFileError, decode_text
 from hexactl.kinematics.axes import POSE_AXES
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
 SIGNALS = ("pose_command", "pose_measured", "setpoints", "feedback", "lateness", "compute")
 """What a recording may hold, in the order of the CSV's columns (after ``t_s`` and ``cycle``)."""
@@ -248,3 +257,99 @@ def _exists(name: str, directory: int) -> bool:
     except FileNotFoundError:
         return False
     return True
+
+
+# -- reading back (hexactl plot) ---------------------------------------------------
+
+
+class RecordingReadError(ValueError):
+    """A recording or its side file cannot be read back: missing, not UTF-8 text, garbled;
+    the message names the file, the line where known, and what to do."""
+
+
+def read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]], int | None]:
+    """The header, the columns (NaN for an empty cell) and the number of a last line an
+    interruption cut, left out (None: none). Read row by row into 8 bytes a value: an hour
+    at 500 Hz (1.8 M rows) read whole into Python lists of strings took gigabytes.
+
+    :raises RecordingReadError: a missing, unreadable, not UTF-8 or garbled file, or one
+        that is not a recording (no ``t_s`` and ``cycle`` columns) or has no rows
+    """
+    import numpy as np  # not for every command's start (the CLI imports this module lazily too)
+
+    try:
+        with path.open("rb") as raw:
+            start = raw.read(1 << 16)
+            raw.seek(0, os.SEEK_END)
+            if raw.tell():
+                raw.seek(-1, os.SEEK_END)
+            # Every row the recorder writes ends its line: one that does not was cut (an
+            # interrupted recording's .csv.partial), and is left out, not taken for a number.
+            cut = raw.read(1) not in (b"\n", b"")
+    except FileNotFoundError:
+        raise RecordingReadError(f"{path}: no such file (a recording is NAME.csv in the service's data "
+                                 "directory)") from None
+    except OSError as error:
+        raise RecordingReadError(f"{path}: cannot read it: {error}") from None
+    try:  # the text files' one rule, on the first lines: UTF-16 and the like named as such
+        decode_text(start[:start.rfind(b"\n") + 1] or start, str(path))
+    except TextFileError as error:
+        raise RecordingReadError(str(error)) from None
+    number, cut_line = 1, None
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as file:
+            rows = csv.reader(file)
+            header = next(rows, [])
+            if "t_s" not in header or "cycle" not in header:
+                raise RecordingReadError(f"{path}: not a recording (its header has no t_s and cycle columns): plot a "
+                                         "file made by hexactl record")
+            columns = [array("d") for _ in header]
+            held: list[str] | None = None  # the row read last, taken once another follows it (or the file ends whole)
+            for number, row in enumerate(rows, start=2):
+                if held is not None:
+                    _take(held, columns, number - 1, path)
+                held = row
+            if held is not None and not cut:
+                _take(held, columns, number, path)
+            elif held is not None:
+                cut_line = number
+    except UnicodeDecodeError:
+        raise RecordingReadError(f"{path}: not UTF-8 text (after line {number}): {SAVE_AS_UTF8}") from None
+    except csv.Error as error:  # a NUL byte: not a text file
+        raise RecordingReadError(f"{path}: line {number}: {error}: the file is garbled") from None
+    except OSError as error:
+        raise RecordingReadError(f"{path}: cannot read it: {error}") from None
+    if not columns[0]:
+        raise RecordingReadError(f"{path}: the recording has no rows")
+    return header, [np.frombuffer(column, dtype=np.float64) for column in columns], cut_line
+
+
+def _take(row: list[str], columns: list[array[float]], number: int, path: Path) -> None:
+    """Append line ``number``'s ``row`` to ``columns`` (NaN for an empty cell);
+    RecordingReadError when it has another count of values than the header, or one that is
+    not a number."""
+    if len(row) != len(columns):
+        raise RecordingReadError(f"{path}: line {number} has {len(row)} values for {len(columns)} columns: the file "
+                                 "is garbled")
+    try:
+        values = [float(cell) if cell else float("nan") for cell in row]
+    except ValueError:
+        raise RecordingReadError(f"{path}: line {number} has a value that is not a number: the file is garbled") \
+            from None
+    for column, value in zip(columns, values):
+        column.append(value)
+
+
+def read_side_file(path: Path) -> dict[str, Any] | None:
+    """The side file (``NAME.json``) of the recording at ``path``, None when absent.
+
+    :raises RecordingReadError: it is there but cannot be read
+    """
+    side = path.with_suffix(".json")
+    try:
+        return json.loads(side.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise RecordingReadError(f"{side}: the side file cannot be read ({error}): move it away to plot without "
+                                 "it") from None
