@@ -60,10 +60,16 @@ class CoreView(Protocol):
 
 
 def _enabled(view: CoreView) -> Refusal:
-    if view.state is ControlState.ENABLED:
+    return check_enabled(view.state)
+
+
+def check_enabled(state: ControlState) -> Refusal:
+    """None when ``state`` lets the platform move; else why not and what to do first (a
+    client that checks before long work, as ``hexactl cue`` before planning, says the same)."""
+    if state is ControlState.ENABLED:
         return None
-    if view.state in (ControlState.FAULT, ControlState.ESTOP):
-        return ErrorCode.LATCHED, f"{view.state.value} is latched: reset first"
+    if state in (ControlState.FAULT, ControlState.ESTOP):
+        return ErrorCode.LATCHED, f"{state.value} is latched: reset first"
     return ErrorCode.NOT_ENABLED, "the controller is disabled: enable first"
 
 

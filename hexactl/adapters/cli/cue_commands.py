@@ -112,15 +112,15 @@ def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingPa
          arguments: argparse.Namespace) -> int:
     """Plan the cues on the service's geometry and stream them; the exit status."""
     from hexactl.application.cueing import plan_cue
+    from hexactl.control.preconditions import check_enabled
+    from hexactl.control.snapshot import ControlState
     from hexactl.cueing.workspace_gain import WorkspaceError
     from hexactl.kinematics.geometry import Geometry
 
     with client:
-        if not arguments.plan_only and (state := client.call("status")["status"]["state"]) != "enabled":
-            # Before seconds of planning: the service would refuse the move to the start anyway.
-            print(f"hexactl cue: the controller is {state}: "
-                  f"{'enable first (hexactl enable)' if state == 'disabled' else 'reset first (hexactl reset)'}; "
-                  "nothing was planned or moved", file=sys.stderr)
+        # Before seconds of planning: the service would refuse the move to the start anyway.
+        if not arguments.plan_only and (refusal := check_enabled(ControlState(client.call("status")["status"]["state"]))):
+            print(f"hexactl cue: {refusal[1]}; nothing was planned or moved", file=sys.stderr)
             return EXIT_REFUSED
         geometry = Geometry.model_validate(client.call("geometry")["geometry"])
         try:
