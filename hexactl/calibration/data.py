@@ -176,14 +176,15 @@ def screen_measurements(
     nominal geometry, when given) explain far better with the angles read as radians, the
     positions as metres, or the poses taken as relative to the zero posture (the one at
     ``zero_readings_mm``, when given), and measured points whose readings it explains far better
-    with the points' columns in another order (a header naming them wrongly). So are
-    readings far below what the legs read in the zero posture (``zero_readings_mm``, when
+    with the points' columns in another order (a header naming them wrongly), and readings
+    it explains far better with the columns l1 … l6 in another order (legs numbered
+    otherwise). So are readings far below what the legs read in the zero posture (``zero_readings_mm``, when
     given), throughout the file: metres, cm or inches.
     """
     problems: list[RowProblem] = []
     unit_problem = _unit_problem(data, feature_points_mm) or _readings_unit_problem(data, zero_readings_mm) or (
         None if legs is None else _pose_unit_problem(data, legs, zero_readings_mm)
-        or _label_problem(data, feature_points_mm, legs))
+        or _label_problem(data, feature_points_mm, legs) or _readings_order_problem(data, feature_points_mm, legs))
     if unit_problem is not None:
         return (unit_problem,)
     if data.points_mm is not None:
@@ -193,7 +194,15 @@ def screen_measurements(
             else distance_tolerance_mm
         )
         model = np.asarray(feature_points_mm, dtype=float)[: data.point_count]
+        known = _spread_mm(model)
         for line, points in zip(data.lines, data.points_mm):
+            ratio = _spread_mm(points) / known if known > 0.0 else 1.0
+            if not 1.0 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE and (unit := _unit_question(ratio)):
+                # one line in another unit: its points would be called collinear, or mis-sighted
+                problems.append(RowProblem(int(line), f"the measured feature points lie {_spread_mm(points):.3g} "
+                                           f"from their centre (median), the geometry's {known:.1f} mm: "
+                                           f"{unit}hexactl reads mm; write this line in mm"))
+                continue
             try:
                 fit = pose_from_points(model, points)
             except DegeneratePointsError as error:
@@ -319,6 +328,42 @@ def _label_problem(data: MeasurementData, feature_points_mm: NDArray, legs: LegM
                          "… are the geometry's feature_points in their order)")
 
 
+def _readings_order_problem(data: MeasurementData, feature_points_mm: NDArray, legs: LegModel) -> RowProblem | None:
+    """A file-level problem if the readings fit the measured poses far better with the
+    columns l1 … l6 in another order: an instrument or a sheet that numbers the legs
+    otherwise (the fit would not converge, or converge on a machine that is not there)."""
+    rows = slice(0, LABEL_CHECK_ROWS)
+    if data.poses is not None:
+        poses = np.asarray(data.poses)[rows]
+    else:
+        model = np.asarray(feature_points_mm, dtype=float)[:data.point_count]
+        try:
+            poses = np.array([pose_from_points(model, points).pose for points in data.points_mm[rows]])
+        except DegeneratePointsError:  # a row problem of its own
+            return None
+    if len(poses) == 0:
+        return None
+    predicted, readings = sensor_setpoints_batch(legs, poses), np.asarray(data.readings_mm)[rows]
+
+    def misfit(order: tuple[int, ...]) -> float:  # per row, as two legs swapped leave four right
+        return float(np.median(np.sqrt(np.mean((predicted - readings[:, list(order)]) ** 2, axis=1))))
+
+    as_named = tuple(range(LEG_COUNT))
+    as_read = misfit(as_named)
+    if as_read <= POSE_UNIT_MISFIT_MM:
+        return None
+    order, best = min(((order, misfit(order)) for order in permutations(as_named) if order != as_named),
+                      key=lambda item: item[1])
+    if best > min(as_read / 5.0, POSE_UNIT_MISFIT_MM):
+        return None
+    moved = ", ".join(f"l{column + 1} holds leg {leg + 1}" for column, leg in sorted(
+        (column, leg) for leg, column in enumerate(order) if column != leg))
+    return RowProblem(0, f"the readings are {as_read:.3g} mm (RMS, median row) from what the nominal geometry gives "
+                         f"for the measured poses, {best:.3g} mm if {moved}: the legs are numbered otherwise; check the "
+                         "file's header (l1 … l6 are legs 1–6 as the geometry numbers them) and write the readings "
+                         "in that order")
+
+
 def _swapped_rows(data: MeasurementData, feature_points_mm: NDArray, legs: LegModel) -> list[RowProblem]:
     """A problem for each row whose readings fit its points' pose far better with the points
     in another order (up to four points): targets swapped in sighting or in typing. On a
@@ -386,14 +431,17 @@ def _unit_problem(data: MeasurementData, feature_points_mm: NDArray) -> RowProbl
     their own centroid against the feature points')."""
     if data.points_mm is None or len(data) == 0:
         return None
-    model = np.asarray(feature_points_mm, dtype=float)[: data.point_count]
-    known = float(np.median(np.linalg.norm(model - model.mean(axis=0), axis=1)))
-    measured = data.points_mm - data.points_mm.mean(axis=1, keepdims=True)
-    span = float(np.median(np.linalg.norm(measured, axis=2)))
+    known = _spread_mm(np.asarray(feature_points_mm, dtype=float)[: data.point_count])
+    span = _spread_mm(data.points_mm)
     if known <= 0.0 or 1.0 / SCALE_TOLERANCE <= span / known <= SCALE_TOLERANCE:
         return None
     return RowProblem(0, f"the measured feature points lie {span:.3g} from their centre (median), the geometry's "
                          f"{known:.1f} mm: {_unit_question(span / known)}hexactl reads mm; convert the file to mm")
+
+
+def _spread_mm(points: NDArray) -> float:
+    """The median distance of points (..., K, 3) from their centroid (each row's own)."""
+    return float(np.median(np.linalg.norm(points - points.mean(axis=-2, keepdims=True), axis=-1)))
 
 
 _UNITS_IN_MM = {1e-3: "metres", 1e-1: "cm", 1.0 / 25.4: "inches", 1e3: "µm"}

@@ -46,6 +46,38 @@ def test_poses_in_radians_or_metres_are_named_as_a_unit_problem(nominal, leglock
     assert len(metres) == 1 and "if the positions are metres" in metres[0].message and "convert the file" in metres[0].message
 
 
+@pytest.mark.parametrize("factor, unit", [(1e-3, "metres"), (0.1, "cm")])
+def test_one_line_of_points_in_another_unit_is_named_so_not_collinear_nor_mis_sighted(nominal, leglock_campaign,
+                                                                                      factor, unit):
+    """Found from outside: one line pasted in metres was called collinear (its points span
+    a fraction of a mm), one in cm three mis-sightings."""
+    data = leglock_campaign.data
+    points = np.array(data.points_mm)
+    points[7] *= factor
+    problems = screen_measurements(MeasurementData(data.locked_leg, data.readings_mm, data.lines, points_mm=points),
+                                   np.array(nominal.measurement.feature_points), 0.25)
+    assert [problem.line for problem in problems] == [int(data.lines[7])]
+    assert f"are they in {unit}? hexactl reads mm; write this line in mm" in problems[0].message
+    assert "collinear" not in problems[0].message and not problems[0].mis_sighting
+
+
+@pytest.mark.parametrize("form", ["points", "pose"])
+@pytest.mark.parametrize("order, named", [((1, 0, 2, 3, 4, 5), "l1 holds leg 2, l2 holds leg 1"),
+                                          ((1, 2, 3, 4, 5, 0), "l1 holds leg 2, l2 holds leg 3, l3 holds leg 4")])
+def test_legs_numbered_otherwise_are_named_with_the_order_that_fits(nominal, leglock_campaign, form, order, named):
+    """Found from outside: readings with l1 and l2 swapped (an instrument that numbers the
+    legs otherwise) got no hint; the fit failed or converged on a machine not there."""
+    data = leglock_campaign.data
+    if form == "pose":
+        data = _pose_rows(nominal, data)
+    shuffled = MeasurementData(data.locked_leg, np.asarray(data.readings_mm)[:, list(order)], data.lines,
+                               points_mm=data.points_mm, poses=data.poses)
+    points = np.array(nominal.measurement.feature_points)
+    assert screen_measurements(data, points, 0.25, legs=nominal.legs) == ()
+    (problem,) = screen_measurements(shuffled, points, 0.25, legs=nominal.legs)
+    assert problem.line == 0 and named in problem.message and "the legs are numbered otherwise" in problem.message
+
+
 def test_a_mis_sighted_point_goes_to_full_which_excludes_it_and_stops_the_methods_that_cannot(tmp_path, nominal,
                                                                                             leglock_campaign, capsys):
     from hexactl.adapters.cli.main import main
