@@ -557,3 +557,13 @@ def test_an_actuator_that_restarts_is_named_and_a_counter_wrap_is_not_a_restart(
     link.read_feedback()
     assert link.node_status(5).restarts == 1
     assert "leg 5 restarted (it reports INIT, booting, after DISABLED)" in link.link_health().detail
+
+
+def test_two_actuators_answering_as_one_node_are_named(link, bus):
+    """Two actuators set to node 2 interleave their heartbeats: the counter goes back."""
+    for counter in (10, 11, 12, 13, 90, 14, 91, 15):
+        bus.push(*codec.encode_heartbeat(2, WireState.DISABLED, counter))
+    link.read_feedback()
+    assert "leg 2's heartbeat counter went back from 91 to 15: two actuators answer as node 2?" in \
+        link.link_health().detail
+    assert link.node_status(2).restarts == 0

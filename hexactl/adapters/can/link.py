@@ -630,7 +630,8 @@ class CanActuatorLink:
     def _note_restart(self, heartbeat: Heartbeat, node: _Node) -> None:
         """Count and name a restart of the actuator: its heartbeat counter begins again at 0
         (not after 255), or it reports INIT (booting) after another state. Its faults then
-        read DISABLED or INIT with no fault latched: without this, nothing would say why."""
+        read DISABLED or INIT with no fault latched: without this, nothing would say why.
+        A counter that goes back otherwise is named too: two actuators set to one node id."""
         last = node.heartbeat_counter
         if last is None:
             return
@@ -639,6 +640,10 @@ class CanActuatorLink:
         elif heartbeat.state is WireState.INIT and node.wire_state is not WireState.INIT:
             how = f"it reports INIT, booting, after {node.wire_state.name}"
         else:
+            if 0 < (last - heartbeat.counter) & 0xFF < 0x80:  # back, not on (lost heartbeats only skip ahead)
+                self._detail = (f"leg {heartbeat.node}'s heartbeat counter went back from {last} to "
+                                f"{heartbeat.counter}: two actuators answer as node {heartbeat.node}? check each "
+                                "actuator's node id (1–6, one each), or what replays frames on the bus")
             return
         node.restarts += 1
         self._detail = (f"leg {heartbeat.node} restarted ({how}): a power or watchdog reset of the actuator; "
