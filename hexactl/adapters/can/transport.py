@@ -57,6 +57,16 @@ class BusSpec:
         return f"{self.interface}:{self.channel}"
 
 
+def in_process_note(spec: BusSpec) -> str | None:
+    """What a command given an in-process bus should say (None for one that crosses
+    processes): no actuator or simulator in another process can be on it."""
+    if spec.interface not in IN_PROCESS_INTERFACES:
+        return None
+    return (f"{spec} is an in-process bus: only this process hears it, so nothing in another process (actuators, "
+            "hexactl sim-actuators, another service) will answer on it; between processes use socketcan:CHANNEL "
+            "(a virtual one: sudo ip link add vcan0 type vcan && sudo ip link set vcan0 up; docs/can.md)")
+
+
 def parse_bus_spec(spec: str) -> BusSpec:
     """Parse ``socketcan:CHANNEL``, ``memory:NAME`` or ``virtual:NAME``.
 

@@ -9,6 +9,7 @@ reply), 2 when nobody answered within ``--timeout`` or the arguments are bad.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -481,6 +482,12 @@ def run_serve(arguments: argparse.Namespace) -> int:
 
     if (arguments.curve_secret is None) != (arguments.curve_clients is None):
         raise CliError("give both --curve-secret and --curve-clients, or neither")
+    if arguments.can is not None:
+        from hexactl.adapters.can.transport import BusSpecError, in_process_note, parse_bus_spec
+
+        with contextlib.suppress(BusSpecError):  # the service refuses it, saying why
+            if note := in_process_note(parse_bus_spec(arguments.can)):
+                print(f"hexactl serve: --can {note}", file=sys.stderr)
     for directory in arguments.data_dir or ():  # the service says "no such directory" of any that is none
         if directory.exists() and not directory.is_dir():
             raise CliError(f"--data-dir {directory}: {'is a file' if directory.is_file() else 'exists'}, not a "

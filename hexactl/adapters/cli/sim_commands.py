@@ -81,7 +81,7 @@ def _true_geometry(arguments: argparse.Namespace, nominal: Geometry) -> Geometry
 def run_sim_actuators(arguments: argparse.Namespace) -> int:
     import can
 
-    from hexactl.adapters.can.transport import BusSpecError, open_bus, parse_bus_spec
+    from hexactl.adapters.can.transport import BusSpecError, in_process_note, open_bus, parse_bus_spec
     from hexactl.sim.actuator_bus import ActuatorBus, actuator_params_for, make_firmwares, zero_posture_readings_mm
     from hexactl.sim.physical_platform import PhysicalPlatform, PoseUnavailable
 
@@ -93,6 +93,8 @@ def run_sim_actuators(arguments: argparse.Namespace) -> int:
         positions = zero_posture_readings_mm(truth)
     try:
         spec = parse_bus_spec(arguments.can)
+        if note := in_process_note(spec):
+            print(f"hexactl sim-actuators: --can {note}", file=sys.stderr)
         firmwares = make_firmwares(positions, actuator_params_for(nominal), seed=arguments.seed)
     except (BusSpecError, ValueError) as error:
         raise CliError(str(error)) from None
