@@ -18,7 +18,7 @@ rotation turns about the pivot point. Pure: no I/O.
 from __future__ import annotations
 
 from math import ceil, radians, sin, tau
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -59,9 +59,19 @@ class WaveSpec(BaseModel):
     cycles: int = Field(ge=1, le=MAX_CYCLES, description="periods, the ramps included")
     ramp_cycles: float = Field(default=1.0, gt=0.0, description="periods the amplitude takes to ramp in, and again "
                                "to ramp out (a quintic smoothstep: from and to rest without a jump in acceleration); "
-                               "at most half of cycles")
+                               "at most half of cycles; default 1, or 0.5 for a wave of one period")
     axes: dict[AxisName, WaveAxis] = Field(min_length=1, description="the oscillating axes, by name")
     shape: Literal["sine"] = Field(default="sine", description="the waveform")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_period_ramps_over_its_halves(cls, data: Any) -> Any:
+        # The default ramp (one period in, one out) does not fit a wave of one period, which
+        # an operator asking for one means to run: it ramps in over its first half instead.
+        if isinstance(data, dict) and "ramp_cycles" not in data and type(data.get("cycles")) is int \
+                and data["cycles"] == 1:
+            return {**data, "ramp_cycles": 0.5}
+        return data
 
     @model_validator(mode="after")
     def _consistent(self) -> WaveSpec:

@@ -108,6 +108,16 @@ def test_a_malformed_wave_is_refused_naming_the_field(bad, field):
         WaveSpec(**{"frequency_hz": 1.0, "cycles": 5, "axes": {"z": {"amplitude": 1.0}}, **bad})
 
 
+def test_a_wave_of_one_period_ramps_over_its_halves_unless_told_otherwise():
+    """Found from outside: ``hexactl wave --cycles 1`` was refused by its own default ramp
+    (one period in and one out: 'ramp_cycles 1 ramps in and again out: at most half of cycles (1)')."""
+    one = {"frequency_hz": 1.0, "axes": {"z": {"amplitude": 1.0}}}
+    assert WaveSpec(cycles=1, **one).ramp_cycles == 0.5
+    assert WaveSpec(cycles=2, **one).ramp_cycles == 1.0
+    with pytest.raises(ValidationError, match="at most half of cycles"):
+        WaveSpec(cycles=1, ramp_cycles=1.0, **one)  # asked for: refused, not changed
+
+
 def test_a_rotation_in_the_tool_frame_turns_about_the_pivot_point(geometry):
     frames = TOOL_ABOVE.frames(geometry.home.in_radians())
     start = ToolInWorkMmRad(5.0, -3.0, 2.0, 0.02, -0.01, 0.1)

@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     wave.add_argument("--cycles", type=whole_number_in(1, MAX_CYCLES), required=True, metavar="N",
                       help="periods, the ramps included")
     wave.add_argument("--ramp", type=positive_float, metavar="CYCLES", help="periods to ramp in, and again to ramp "
-                      "out (default 1; at most half of --cycles)")
+                      "out (default 1, or 0.5 for --cycles 1; at most half of --cycles)")
     wave.add_argument("--frame", choices=FRAMES, default="zero", help="zero: the axes of the pose relative to the zero "
                       "posture (default); work: of the tool's pose in the work frame; tool: the tool's own axes, "
                       "turning about the pivot point")
