@@ -43,8 +43,10 @@ class StateCommands:
 
     def disable(self) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.disable`."""
-        return self._submitter.submit_unless(preconditions.check_disable, cmd.Disable,
-                                             "disabled" + _lock_released(self._snapshot()))
+        s = self._snapshot()
+        if s.state is ControlState.DISABLED:  # the state asked for: no refusal (as stop's "nothing to stop")
+            return CommandResult.success("already disabled: nothing to do")
+        return self._submitter.submit_unless(preconditions.check_disable, cmd.Disable, "disabled" + _lock_released(s))
 
     def stop(self) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.stop`."""

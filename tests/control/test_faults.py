@@ -238,5 +238,9 @@ def test_disable_at_rest_only(rig):
     rig.run()
     assert rig.controller.snapshot.state.value == "disabled"
     assert rig.actuators.commands[-1] == (None, ActuatorCommand.DISABLE)
-    again = rig.controller.disable()  # found from outside: it said "enable first"
-    assert again.error == "not_enabled" and again.message == "the controller is already disabled"
+    # Found from outside: it said "enable first", then was refused "already disabled" (exit 1:
+    # `hexactl disable && …` failed on a platform already safe). The state asked for is ok.
+    again = rig.controller.disable()
+    assert again.ok and again.message == "already disabled: nothing to do"
+    rig.run()
+    assert rig.actuators.commands[-1] == (None, ActuatorCommand.DISABLE) and rig.controller.snapshot.state.value == "disabled"
