@@ -263,3 +263,27 @@ def test_wait_returns_at_rest_and_says_when_a_pause_or_an_estop_holds_the_motion
         tolerating_stalls(client, scenario)
     finally:
         client.request("reset")
+
+
+def test_move_validate_shows_the_whole_goal_and_moves_nothing(served, client, capsys) -> None:
+    """Found from outside: with a work frame 20 mm up and the tool 100 mm out, `move x=5
+    --frame work` ran to z −80 mm (the axes not given are 0, as documented), which the
+    reply showed only once the platform was moving. --validate shows it first."""
+    def scenario() -> None:
+        assert hexactl(served, "frames", "--work", "z=20", "--tool", "z=100") == 0
+        try:
+            before = status(client)["pose_command"]
+            capsys.readouterr()
+            assert hexactl(served, "move", "x=5", "--frame", "work", "--validate") == 0
+            out = capsys.readouterr().out.strip()
+            assert re.search(r"^ok: .*valid, nothing moved: goal x +5\.000 mm .* z +-80\.000 mm .*\(relative to the "
+                             r"zero posture\); tool x +5\.000 mm .* \(in the work frame\); \d+\.\d\d s$", out), out
+            assert status(client)["pose_command"] == before and at_rest(client)
+            assert hexactl(served, "move", "x=5", "--validate", "--wait") == 2  # nothing to wait for
+            assert "--validate moves nothing" in capsys.readouterr().err
+            assert hexactl(served, "move", "x=5000", "--validate") == 1
+            assert "path_violation" in capsys.readouterr().err
+        finally:
+            client.request("clear_frames")
+
+    tolerating_stalls(client, scenario)

@@ -85,9 +85,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       help="refuse the move if the calibration's predicted 1σ error at the tool point on arrival "
                       "exceeds this, mm")
     _waiting(move)
-    move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). In leg-lock mode the goal is projected "
-                   "onto the locked leg's constraint: the reply prints the goal run to when it differs. "
-                   "Frames: hexactl frames.")
+    move.add_argument("--validate", action="store_true", help="only say whether the service would take the move from "
+                      "here, its whole goal (the axes not given included) and its duration; nothing moves")
+    move.epilog = ("A pose may start with a minus sign (move -10,0,0,0,0,0). An absolute pose's axes not given are 0: "
+                   "--validate shows the whole goal first. In leg-lock mode the goal is projected onto the locked "
+                   "leg's constraint: the reply prints the goal run to when it differs. Frames: hexactl frames.")
     frames = command("frames", "show or set the work and tool frames (the pivot point) and the soft limits",
                      _frames_request)
     frames.add_argument("--work", type=pose_argument, metavar="POSE", help="the work frame in the zero frame (mm, deg)")
@@ -250,11 +252,13 @@ def client_parser() -> argparse.ArgumentParser:
 
 
 def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    if arguments.validate and arguments.wait:
+        raise CliError("--validate moves nothing, so there is nothing to --wait for: give one of them")
     pace = {name: getattr(arguments, name) for name in ("duration", "speed") if getattr(arguments, name) is not None}
     frame = {"frame": arguments.frame} if arguments.frame != "zero" else {}
     tolerance = {"tolerance_mm": arguments.tolerance} if arguments.tolerance is not None else {}
-    return "move", {"pose": arguments.pose, **pace, **frame, **({"relative": True} if arguments.relative else {}),
-                    **tolerance}
+    return "validate_pose" if arguments.validate else "move", {
+        "pose": arguments.pose, **pace, **frame, **({"relative": True} if arguments.relative else {}), **tolerance}
 
 
 def _frames_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -544,7 +548,11 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     said = [reply["message"]] if reply.get("message") else []
     fields = fields or {}
     requested, goal = fields.get("pose"), reply.get("goal")
-    if fields.get("relative") or fields.get("frame"):
+    if cmd == "validate_pose":  # the whole goal, whatever was asked: what a move from here would run to
+        said.append(f"valid, nothing moved: goal {pose_text(goal)} (relative to the zero posture)")
+        if reply.get("tool_goal") is not None:
+            said.append(f"tool {pose_text(reply['tool_goal'])} (in the work frame)")
+    elif fields.get("relative") or fields.get("frame"):
         said.append(f"goal {pose_text(goal)} (relative to the zero posture)")
         if reply.get("tool_goal") is not None:
             said.append(f"tool {pose_text(reply['tool_goal'])} (in the work frame)")
