@@ -32,6 +32,7 @@ class Service:
 
     def __init__(self, reason: str, events: list[dict[str, Any]]) -> None:
         self.geometry = load_geometry(ROOT / "config" / "platform.toml").model_dump(mode="json")
+        self.holding_at = [0.0] * 6  # where the platform holds once the stream is over
         self.reason = reason
         self.ending_events = events
         self.sent: list[list[float]] = []
@@ -43,7 +44,7 @@ class Service:
 
     def status(self) -> dict[str, Any]:
         following = {"stream": STREAM, "phase": "following"}
-        return {"state": "enabled", "t": 100.0, "pose_command": [0.0] * 6,
+        return {"state": "enabled", "t": 100.0, "pose_command": self.holding_at if self.over else [0.0] * 6,
                 "stream": None if self.over else following,
                 "last_stream": {"stream": STREAM, "reason": self.reason, "targets": ENDS_AFTER} if self.over else None,
                 "stream_input": {"forwarded": min(len(self.sent), ENDS_AFTER), "loop_behind": 0, "clamped": 0}}
@@ -125,6 +126,22 @@ def test_a_stream_the_service_ended_stops_the_sending_at_once_saying_why_and_who
     assert ("the service recorded since it opened: stop: any motion under way brakes to rest, sent by ann@bench-2 "
             "(10.0.0.12) (0.1 s ago); stream_ended: stream 7: stopped (0.0 s ago)") in captured.err
     assert f"streamed {len(service.sent)} of 1201 poses (0 dropped here)" in captured.out
+
+
+def test_the_summary_says_where_the_cue_left_the_platform_unless_back_at_zero(monkeypatch, capsys) -> None:
+    """Found from outside: after a cue the platform held at x 224 mm, roll 3.8° (the washout
+    not done, as docs/cueing.md says), and the summary did not say so."""
+    service = Service("stopped", STOPPED_BY_ANOTHER)
+    service.holding_at = [224.2, -149.5, 0.0, 3.84, 3.38, 0.0]
+    stand_in(monkeypatch, service)
+    cue()
+    out = capsys.readouterr().out
+    assert "the platform holds where the cue left it, x  224.200 mm" in out
+    assert "hexactl move 0,0,0,0,0,0 takes it back to the zero posture" in out
+    service = Service("stopped", STOPPED_BY_ANOTHER)  # back at zero: nothing said
+    stand_in(monkeypatch, service)
+    cue()
+    assert "holds where the cue left it" not in capsys.readouterr().out
 
 
 def test_a_stream_another_client_closed_is_not_said_to_be_closed_by_the_cue(monkeypatch, capsys) -> None:

@@ -174,11 +174,17 @@ def _stream(client: HexactlClient, plan: CuePlan, arguments: argparse.Namespace
             sent, dropped = _send_until_ended(stream, plan.poses, plan.period_s, watch.ended)
         # Asked again after the last pose too: the stream may end between the watch's questions.
         ended = None if _following(client.call("status")["status"], number) else _how_it_ended(client, number, since)
-    received = client.call("status")["status"].get("stream_input") or {}
+    record = client.call("status")["status"]
+    received = record.get("stream_input") or {}
     streamed = {"sent": sent - dropped, "dropped": dropped, "forwarded": received.get("forwarded", 0),
-                "loop_behind": received.get("loop_behind", 0), "clamped": received.get("clamped", 0)}
+                "loop_behind": received.get("loop_behind", 0), "clamped": received.get("clamped", 0),
+                "holding_at": record.get("pose_command")}
     _say_streamed(streamed, ended, len(plan.poses), arguments.json)
     return streamed, ended
+
+
+HOME_TOLERANCE = 0.001
+"""mm or deg: a platform holding this close to the zero posture is said to be back."""
 
 
 def _say_streamed(streamed: dict[str, Any], ended: dict[str, Any] | None, planned: int, quiet: bool) -> None:
@@ -188,6 +194,10 @@ def _say_streamed(streamed: dict[str, Any], ended: dict[str, Any] | None, planne
         print(f"streamed {streamed['sent']} of {planned} poses ({streamed['dropped']} dropped here); the service "
               f"forwarded {streamed['forwarded']} to the loop (dropped {streamed['loop_behind']} on the way, the loop "
               f"behind), replaced {streamed['clamped']} out of reach")
+        if (pose := streamed["holding_at"]) and any(abs(value) > HOME_TOLERANCE for value in pose):
+            # The washout had not brought it back when the cues ended (docs/cueing.md): it stays there.
+            print(f"the platform holds where the cue left it, {pose_text(pose)}: hexactl move 0,0,0,0,0,0 takes it "
+                  "back to the zero posture")
     if ended is not None:
         sent = streamed["sent"] + streamed["dropped"]
         print(f"hexactl cue: the stream ended after {sent} of {planned} poses: {ended['reason']}"
