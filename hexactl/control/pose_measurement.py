@@ -7,12 +7,13 @@ and every ``every_cycles`` cycles while ENABLED (``fk_rate_hz``), plus at each d
 record.
 
 Poses: ``pose`` relative to the active geometry's zero posture, mm and rad (None when
-FK failed or never ran). Owned by the loop thread: not thread-safe.
+FK failed or never ran, or a leg has no reading yet). Owned by the loop thread: not thread-safe.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from math import isfinite
 
 from hexactl.control.hardware import FeedbackSnapshot
 from hexactl.control.planning import ActiveGeometry
@@ -30,7 +31,7 @@ class PoseMeasurement:
         self._tolerance_mm = tolerance_mm
         self._max_iterations = max_iterations
         self.pose: RelativeMmRad | None = None
-        self.failures = 0  # FK runs that did not converge
+        self.failures = 0  # FK runs on readings of all six legs that did not converge
         self.cycle = 0  # the cycle it last ran in
         self._absolute: AbsoluteMmRad | None = None  # the last solution, absolute mm/rad: the warm start
 
@@ -56,7 +57,10 @@ class PoseMeasurement:
             self.pose = active.relative_from_absolute_mm_rad(result.pose)
         else:
             self._absolute = self.pose = None
-            self.failures += 1
+            # A leg not read yet (the link's NaN before its first report) is no failure of FK,
+            # which the count would report on every start. Checked here, off the hot path.
+            if isfinite(sum(feedback.positions_mm)):
+                self.failures += 1
 
     def geometry_changed(self) -> None:
         """Another model: start from the commanded pose and measure at the next :meth:`due`."""
