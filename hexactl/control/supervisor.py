@@ -128,8 +128,9 @@ class Supervisor:
                                     f"{fault_text(actuator.fault_names, actuator.fault_bits)}", leg))
             elif actuator.state is not expected:
                 if now_ns >= self._settling_until_ns[leg - 1]:
-                    restarted = (f": it restarted (a power or watchdog reset; {actuator.restarts} since the link "
-                                 "opened), check its supply and wiring" if actuator.restarts else "")
+                    # a fact, not a verdict: the restart may be older than this state, and still the clue
+                    restarted = (f"; it has restarted {actuator.restarts} time(s) since the link opened (a power or "
+                                 "watchdog reset): check its supply and wiring" if actuator.restarts else "")
                     faults.append(Fault("actuator_state", f"leg {leg} is {actuator.state.name}, expected "
                                         f"{expected.name}{restarted}", leg))
             elif self._settling_until_ns[leg - 1]:

@@ -67,8 +67,8 @@ def test_a_leg_that_left_its_state_because_it_restarted_says_so(supervisor):
     supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)  # all arrived in ENABLED
     restarted = feedback(leg4={"state": ActuatorState.DISABLED, "restarts": 1})
     (fault,) = supervisor.faults(restarted, HEALTHY, 100, 2 * MS)
-    assert fault.message == ("leg 4 is DISABLED, expected ENABLED: it restarted (a power or watchdog reset; 1 since "
-                             "the link opened), check its supply and wiring")
+    assert fault.message == ("leg 4 is DISABLED, expected ENABLED; it has restarted 1 time(s) since the link opened "
+                             "(a power or watchdog reset): check its supply and wiring")
     (fault,) = supervisor.faults(feedback(leg4={"state": ActuatorState.DISABLED}), HEALTHY, 100, 3 * MS)
     assert fault.message == "leg 4 is DISABLED, expected ENABLED"
 
