@@ -178,8 +178,8 @@ def screen_measurements(
     ``zero_readings_mm``, when given), and measured points whose readings it explains far better
     with the points' columns in another order (a header naming them wrongly), and readings
     it explains far better with the columns l1 … l6 in another order (legs numbered
-    otherwise). So are readings far below what the legs read in the zero posture (``zero_readings_mm``, when
-    given), throughout the file: metres, cm or inches.
+    otherwise). So are readings far below what the legs read in the zero posture
+    (``zero_readings_mm``, when given), throughout the file: metres, cm or inches.
     """
     problems: list[RowProblem] = []
     unit_problem = _unit_problem(data, feature_points_mm) or _readings_unit_problem(data, zero_readings_mm) or (

@@ -15,15 +15,16 @@ dashboard can tell (its ``at``: :class:`~hexactl.adapters.web.app.PageClock`), e
 when the dashboard read it (its :class:`Admission`): the page's own timeout
 (:attr:`ServiceBridge.command_timeout_s`, the dashboard's ``--timeout``, which the page is
 told in its ``hello``), or for a jog that moves, one deadman period of the service. One
-still queued when it is up is never sent: it is answered ``expired``. One sent is given what is left of it, as the API client's wait
-and (less its margin) as the request's ``deadline_ms``, so the service refuses it too if it
-comes late; a ``deadline_ms`` of the page's own is kept only when shorter. So nothing the
-page has given up on is carried out later (found from outside: a move queued behind 12
-commands, or behind an API stalled for 17 s, ran after the page had said "timeout"; jog
-renewals queued during a stall started a jog after the page had said it was released;
-and both, held up in a stalled dashboard before it read them, while their time to live
-counted from then). What stops motion (``estop``, ``stop``, ``abort``, a jog's release) has no time to live:
-carried out late, it is still wanted.
+still queued when it is up is never sent: it is answered ``expired``. One sent is given
+what is left of it, as the API client's wait and (less its margin) as the request's
+``deadline_ms``, so the service refuses it too if it comes late; a ``deadline_ms`` of the
+page's own is kept only when shorter. So nothing the page has given up on is carried out
+later (found from outside: a move queued behind 12 commands, or behind an API stalled for
+17 s, ran after the page had said "timeout"; jog renewals queued during a stall started a
+jog after the page had said it was released; and both, held up in a stalled dashboard
+before it read them, while their time to live counted from then). What stops motion
+(``estop``, ``stop``, ``abort``, a jog's release) has no time to live: carried out late, it
+is still wanted.
 
 The dashboard adds no privilege: every command is an API request like any client's, and
 the service validates it.
