@@ -254,6 +254,8 @@ class ControlCore:
         return None
 
     def _disable(self, command: cmd.Disable) -> Refusal:
+        if self.state is ControlState.DISABLED:  # raced another disable: the state asked for, as the facade says
+            return None
         if refusal := preconditions.check_disable(self):
             return refusal
         self.hardware.send_command(None, ActuatorCommand.DISABLE)

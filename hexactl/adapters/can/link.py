@@ -585,7 +585,7 @@ class CanActuatorLink:
             node.feedback_ns = now
         elif kind is Heartbeat:
             node = self._nodes[decoded.node - 1]
-            self._note_restart(decoded, node)
+            self._note_heartbeat(decoded, node)
             node.heartbeat_counter = decoded.counter
             node.wire_state = decoded.state
             node.protocol_version = decoded.protocol_version
@@ -627,7 +627,7 @@ class CanActuatorLink:
         if node.wire_state not in _ENGAGED:
             node.setpoint_counter = -1  # disabled, faulted or rebooted: it applies nothing of ours
 
-    def _note_restart(self, heartbeat: Heartbeat, node: _Node) -> None:
+    def _note_heartbeat(self, heartbeat: Heartbeat, node: _Node) -> None:
         """Count and name a restart of the actuator: its heartbeat counter begins again at 0
         (not after 255), or it reports INIT (booting) after another state. Its faults then
         read DISABLED or INIT with no fault latched: without this, nothing would say why.
@@ -639,11 +639,12 @@ class CanActuatorLink:
             how = f"its heartbeat counter began again at 0 after {last}"
         elif heartbeat.state is WireState.INIT and node.wire_state is not WireState.INIT:
             how = f"it reports INIT, booting, after {node.wire_state.name}"
+        elif 0 < (last - heartbeat.counter) & 0xFF < 0x80:  # back, not on (lost heartbeats only skip ahead)
+            self._detail = (f"leg {heartbeat.node}'s heartbeat counter went back from {last} to "
+                            f"{heartbeat.counter}: two actuators answer as node {heartbeat.node}? check each "
+                            "actuator's node id (1–6, one each), or what replays frames on the bus")
+            return
         else:
-            if 0 < (last - heartbeat.counter) & 0xFF < 0x80:  # back, not on (lost heartbeats only skip ahead)
-                self._detail = (f"leg {heartbeat.node}'s heartbeat counter went back from {last} to "
-                                f"{heartbeat.counter}: two actuators answer as node {heartbeat.node}? check each "
-                                "actuator's node id (1–6, one each), or what replays frames on the bus")
             return
         node.restarts += 1
         self._detail = (f"leg {heartbeat.node} restarted ({how}): a power or watchdog reset of the actuator; "

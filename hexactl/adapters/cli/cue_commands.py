@@ -183,10 +183,6 @@ def _stream(client: HexactlClient, plan: CuePlan, arguments: argparse.Namespace
     return streamed, ended
 
 
-HOME_TOLERANCE = 0.001
-"""mm or deg: a platform holding this close to the zero posture is said to be back."""
-
-
 def _say_streamed(streamed: dict[str, Any], ended: dict[str, Any] | None, planned: int, quiet: bool) -> None:
     """What was ``streamed`` of the ``planned`` poses, on stdout unless ``quiet`` (``--json``),
     and how the stream ended early (``ended``; None: it did not), on stderr."""
@@ -194,7 +190,7 @@ def _say_streamed(streamed: dict[str, Any], ended: dict[str, Any] | None, planne
         print(f"streamed {streamed['sent']} of {planned} poses ({streamed['dropped']} dropped here); the service "
               f"forwarded {streamed['forwarded']} to the loop (dropped {streamed['loop_behind']} on the way, the loop "
               f"behind), replaced {streamed['clamped']} out of reach")
-        if (pose := streamed["holding_at"]) and any(abs(value) > HOME_TOLERANCE for value in pose):
+        if (pose := streamed["holding_at"]) and any(abs(value) > GOAL_TOLERANCE for value in pose):
             # The washout had not brought it back when the cues ended (docs/cueing.md): it stays there.
             print(f"the platform holds where the cue left it, {pose_text(pose)}: hexactl move 0,0,0,0,0,0 takes it "
                   "back to the zero posture")
