@@ -122,6 +122,18 @@ class OtherController:
 
 
 @dataclass(frozen=True, slots=True)
+class LinkTelemetry:
+    """The link to the actuators: ``bus_state`` in CAN's error-state terms (active,
+    warning, passive, bus_off, down); ``send_failures`` frames it could not send since
+    it was opened; ``detail`` its note for people (silent legs, a leg restarted, the last
+    driver error), empty when it has none."""
+
+    bus_state: str
+    send_failures: int
+    detail: str
+
+
+@dataclass(frozen=True, slots=True)
 class EventTelemetry:
     """One of the loop's events: ``seq`` its number (one more than the one before), at
     ``t`` (s, the clock of :attr:`Telemetry.t`), ``code`` (snake_case) and ``message``
@@ -175,6 +187,7 @@ class Telemetry:
     legs: tuple[LegStatus, ...] | None = None  # None before the first read
     events: tuple[EventTelemetry, ...] = ()  # the loop's latest (TELEMETRY_EVENTS), oldest first
     other_controller: OtherController | None = None  # None: none heard since the loop started
+    link: LinkTelemetry | None = None  # None before the first read
 
 
 def sequence_end(s: CoreSnapshot) -> SequenceEnd | None:
@@ -200,9 +213,15 @@ def other_controller(s: CoreSnapshot) -> OtherController | None:
     return OtherController(link.other_controller_frame, link.other_controller_age_s)
 
 
+def link_telemetry(s: CoreSnapshot) -> LinkTelemetry | None:
+    """The link's health as the loop last read it (None before the first read)."""
+    link = s.link
+    return None if link is None else LinkTelemetry(link.bus_state.value, link.send_failures, link.detail)
+
+
 def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
     """``status``: state, calibration, sequence, faults, the last ten events, the loop's
-    health, the operator's ``frames`` and another controller heard on the bus."""
+    health, the operator's ``frames``, another controller heard on the bus and the link's health."""
     s = report.snapshot
     return CommandResult.success(
         s.state.value,
@@ -228,6 +247,7 @@ def status_result(report: LoopReport, frames: OperatorFrames) -> CommandResult:
         stream=asdict(stream) if (stream := stream_telemetry(s)) else None,
         last_stream=asdict(s.last_stream) if s.last_stream else None,
         other_controller=asdict(other) if (other := other_controller(s)) else None,
+        link=asdict(link) if (link := link_telemetry(s)) else None,
     )
 
 
@@ -270,6 +290,7 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         legs=leg_statuses(s),
         events=tuple(event_telemetry(e) for e in s.events[-TELEMETRY_EVENTS:]),
         other_controller=other_controller(s),
+        link=link_telemetry(s),
     )
 
 

@@ -332,3 +332,20 @@ def test_another_controller_on_the_bus_is_said_in_status_and_the_view() -> None:
     gone = {**RECORD, "other_controller": {"frame": "CMD_3 ENABLE", "age_s": 42.0}}
     assert "other ctrl     CMD_3 ENABLE last heard 42.0 s ago" in format_telemetry(gone)
     assert "ctrl" not in format_telemetry(RECORD).lower() and "CTRL" not in rendered(RECORD)
+
+
+def test_the_links_health_is_a_row_in_status_and_the_view_red_in_the_view_when_not_active() -> None:
+    from hexactl.adapters.cli.telemetry_text import format_telemetry
+
+    healthy = {**RECORD, "link": {"bus_state": "active", "send_failures": 0, "detail": ""}}
+    assert "link           CAN bus active; no send failures" in format_telemetry(healthy).splitlines()
+    assert re.search(r"link +CAN bus active; no send failures", rendered(healthy))
+    passive = {**RECORD, "link": {"bus_state": "passive", "send_failures": 1, "detail": "silent legs: 2"}}
+    row = next(line for line in format_telemetry(passive).splitlines() if line.startswith("LINK"))
+    assert row.startswith("LINK           CAN bus ERROR-PASSIVE: frames get through with errors")
+    assert row.endswith("; 1 send failure; silent legs: 2")
+    console = Console(file=io.StringIO(), width=200, record=True, color_system="truecolor", force_terminal=True)
+    console.print(view(passive, ""))
+    red_row = next(line for line in console.export_text(styles=True).splitlines() if "ERROR-PASSIVE" in line)
+    assert "\x1b[1;31m" in red_row, red_row  # bold red, as the other alarms
+    assert "link" not in format_telemetry(RECORD).lower().split()  # a service older than the field: no row

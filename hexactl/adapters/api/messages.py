@@ -644,6 +644,21 @@ class OtherController(_Message):
                          "(other_controller) and, enabled, FAULT other_controller is latched and the E-stop sent")
 
 
+class LinkTelemetry(_Message):
+    """The link to the actuators (the CAN bus), as the loop last read it."""
+
+    bus_state: Literal["active", "warning", "passive", "bus_off", "down"] = Field(
+        description="in CAN's error-state terms: active (healthy), warning (error counters high, still working), "
+        "passive (error passive, still working, degraded: look at the wiring and termination), bus_off (this "
+        "controller has left the bus: nothing is sent) or down (the interface is closed or missing); bus_off and "
+        "down latch FAULT link_failed while enabled and refuse enable")
+    send_failures: int = Field(ge=0, description="frames the link could not send (set-points, commands, E-stops) "
+                               "since it was opened; 0 normally: a count that grows means a full transmit queue or "
+                               "a failing interface")
+    detail: str = Field(description="the link's note for people: silent legs, a leg that has restarted or speaks "
+                        "another protocol version, two nodes with one id, the last driver error; empty: none")
+
+
 class RecorderTelemetry(_Message):
     """The data recorder as the loop sees it (the file: ``record_status``)."""
 
@@ -841,6 +856,8 @@ class Telemetry(_Message):
     other_controller: OtherController | None = Field(
         default=None, description="another controller last heard on the bus (another hexactl serve or a vendor tool "
         "on the same actuators); null: none since the service started")
+    link: LinkTelemetry | None = Field(default=None, description="the link to the actuators: bus state, send "
+                                       "failures and its note; null before the first read")
     run: str | None = Field(default=None, max_length=16, description="this run of the service, as the events reply's: "
                             "the same in its telemetry and its status, so a client that reads the one and commands "
                             "through the other can tell that both are one service; null: an older service's")

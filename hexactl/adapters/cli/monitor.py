@@ -36,6 +36,7 @@ from hexactl.adapters.cli.telemetry_text import (
     frames_lines,
     jog_text,
     leg_states_text,
+    link_lines,
     loop_text,
     other_controller_lines,
     percentiles_text,
@@ -349,6 +350,8 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         ("legs", leg_states_text(record.get("legs"))),
         *((label, Text(text, style="bold red", no_wrap=True, overflow="ellipsis"))
           for label, text in other_controller_lines(record.get("other_controller"))),
+        *((label, Text(text, style="bold red" if label.isupper() else "", no_wrap=True, overflow="ellipsis"))
+          for label, text in link_lines(record.get("link"))),
         ("locked leg", f"L{locked}" if locked else "none"),
         ("calibration", record["calibration_id"]),
         ("sequence", sequence_text(record.get("sequence"))),

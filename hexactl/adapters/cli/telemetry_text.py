@@ -28,6 +28,7 @@ def format_telemetry(record: dict[str, Any], calibration_source: str | None = No
         ("leg feedback", legs_text(record.get("leg_feedback"))),
         ("legs", leg_states_text(record.get("legs"))),
         *other_controller_lines(record.get("other_controller")),
+        *link_lines(record.get("link")),
         *frames_lines(record),
         ("locked leg", f"L{record['locked_leg']}" if record.get("locked_leg") else "none"),
         ("calibration", record["calibration_id"] + (f" (from {calibration_source})" if calibration_source else "")),
@@ -65,6 +66,32 @@ def other_controller_lines(heard: dict[str, Any] | None) -> list[tuple[str, str]
         return [("other ctrl", f"{heard['frame']} last heard {heard['age_s']:.1f} s ago")]
     return [("OTHER CTRL", f"{heard['frame']} heard {heard['age_s']:.3f} s ago: another controller drives these "
                            "actuators; enable is refused until it stops (candump on the CAN interface shows it)")]
+
+
+BUS_STATE_TEXT = {
+    "active": "CAN bus active",
+    "warning": "CAN bus WARNING: error counters high, frames still get through",
+    "passive": "CAN bus ERROR-PASSIVE: frames get through with errors; check the wiring, its two terminations and "
+               "the bit rate before it goes bus-off",
+    "bus_off": "CAN bus OFF: this controller has left the bus and sends nothing (enable says what to check)",
+    "down": "CAN interface DOWN: closed or missing, nothing is sent or heard",
+}
+"""The link's bus states (telemetry's ``link.bus_state``) for people."""
+
+
+def link_lines(link: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """A row on the link to the actuators: its bus state, send failures and note (a
+    service older than this field, or before the first read: none). In capitals when the
+    bus is not healthy."""
+    if link is None:
+        return []
+    state = link["bus_state"]
+    failures = link["send_failures"]
+    parts = [BUS_STATE_TEXT.get(state, f"CAN bus {state}"),
+             f"{failures} send failure{'' if failures == 1 else 's'}" if failures else "no send failures"]
+    if link["detail"]:
+        parts.append(link["detail"])
+    return [("link" if state == "active" else "LINK", "; ".join(parts))]
 
 
 def pose_text(pose: list[float] | None) -> str:
