@@ -344,6 +344,29 @@ function updateOtherController(heard) {
     : `another controller last heard on the bus ${fmt(heard.age_s, 0)} s ago (${heard.frame})`);
 }
 
+// The link to the actuators (telemetry's link), as `hexactl status` words it: muted while the bus is active,
+// in red otherwise, with the link's note (silent legs, a restarted leg, the last driver error).
+const BUS_STATE_TEXT = {
+  active: 'CAN bus active',
+  warning: 'CAN bus WARNING: error counters high, frames still get through',
+  passive: 'CAN bus ERROR-PASSIVE: frames get through with errors; check the wiring, its two terminations and the bit rate before it goes bus-off',
+  bus_off: 'CAN bus OFF: this controller has left the bus and sends nothing (enable says what to check)',
+  down: 'CAN interface DOWN: closed or missing, nothing is sent or heard',
+};
+function updateLink(link) {
+  const valid = link !== null && typeof link === 'object' && typeof link.bus_state === 'string';
+  const el = $('link-state');
+  el.hidden = !valid;
+  if (!valid) return;
+  const failures = Number.isInteger(link.send_failures) ? link.send_failures : 0;
+  el.classList.toggle('bad', link.bus_state !== 'active');
+  setText('link-state', [
+    BUS_STATE_TEXT[link.bus_state] ?? `CAN bus ${link.bus_state}`,
+    failures ? `${failures} send failure${failures === 1 ? '' : 's'}` : 'no send failures',
+    typeof link.detail === 'string' ? link.detail : '',
+  ].filter(Boolean).join('; '));
+}
+
 const poseRows = $('pose-table').tBodies[0].rows;
 const legRows = $('leg-table').tBodies[0].rows;
 const cellCache = new Map();
@@ -388,6 +411,7 @@ function updateReadouts(r) {
     ? `the telemetry's calibration ${r.calibration_id} differs from the drawn geometry's ${geomId}` : (state.geometry?.name ?? '');
   updateFaults(r.faults);
   updateOtherController(r.other_controller);
+  updateLink(r.link);
 
   const loop = r.loop && typeof r.loop === 'object' ? r.loop : null;
   setText('loop-summary', loop
