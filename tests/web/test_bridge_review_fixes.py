@@ -53,9 +53,15 @@ MOVE = {"pose": [0, 0, 12, 0, 0, 0], "relative": True}
 JOG = {"velocity": [0, 0, 50, 0, 0, 0], "frame": "zero"}
 
 
+PAGE_ORIGIN_S = time.monotonic() - 654.321
+"""When the page's clock reads 0: its own origin, unrelated to this host's clock, and in the
+past, as a page's is (a page's clock never reads negative; this host's monotonic clock may
+be only minutes old, so an offset from it alone could)."""
+
+
 def page_clock_ms() -> float:
-    """A page's ``performance.now()``: its own origin, unrelated to this host's clock."""
-    return time.monotonic() * 1000.0 - 7_654_321.0
+    """A page's ``performance.now()``: ms since :data:`PAGE_ORIGIN_S`."""
+    return (time.monotonic() - PAGE_ORIGIN_S) * 1000.0
 
 
 def command(request_id: int, cmd: str, fields: dict[str, Any], sent_ago_ms: float | None) -> dict[str, Any]:
