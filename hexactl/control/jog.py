@@ -124,8 +124,11 @@ class Jogger:
 
     def brake(self, reason: str) -> None:
         """End the jog: brake to rest (the caller halts the trajectory), then it ends as ``reason``."""
-        if self.progress is not None and self.progress.phase is not JogPhase.BRAKING:
-            self.progress = replace(self.progress, phase=JogPhase.BRAKING, reason=reason)
+        progress = self.progress
+        if progress is not None and progress.phase is not JogPhase.BRAKING:
+            self.progress = replace(progress, phase=JogPhase.BRAKING, reason=reason)
+        else:
+            self._overrule_lapse(reason)
 
     def end(self, reason: str) -> None:
         """End the jog at once (the motion was taken over or frozen)."""
@@ -133,6 +136,19 @@ class Jogger:
             self.report = JogReport(self.progress.jog, reason)
             self._log("jog_ended", f"jog {self.progress.jog}: {reason}")
             self.progress = None
+        else:
+            self._overrule_lapse(reason)
+
+    def _overrule_lapse(self, reason: str) -> None:
+        """A jog whose deadman lapsed (its client late: a held button may start it again)
+        that anything else then stops or takes over ends as that instead: its client's next
+        renewal is refused for good. Else a stop that came while a late client's jog lapsed
+        was followed by that client starting a new jog, which ran on."""
+        progress, report = self.progress, self.report
+        if progress is not None and progress.reason == DEADMAN_LAPSED:
+            self.progress = replace(progress, reason=reason)
+        elif progress is None and report is not None and report.reason == DEADMAN_LAPSED:
+            self.report = JogReport(report.jog, reason)
 
     def before_step(self, now_ns: int) -> None:
         """Brake if the deadman lapsed by ``now_ns``."""

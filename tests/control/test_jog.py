@@ -235,6 +235,42 @@ def test_a_renewal_of_a_jog_that_lapsed_says_so(rig) -> None:
     assert refused.error == "jog_ended" and refused.details["reason"] == DEADMAN_LAPSED and refused.details["lapsed"]
 
 
+@pytest.mark.parametrize("braked", [False, True])
+def test_a_stop_after_a_lapse_ends_the_held_jog_for_good(rig, braked: bool) -> None:
+    """Found in the full suite on a busy host: the dashboard's renewals came late, the jog
+    lapsed, another client's stop came, and the page's next renewal, refused as lapsed,
+    started a new jog that ran on. A stop (or anything that takes the motion over) after
+    the lapse is why the jog ended: the renewal is refused for good, while braking from the
+    lapse or after it."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.run(round(0.25 * 1e9 / rig.period_ns))  # no renewal: the deadman lapses, the platform brakes
+    assert rig.controller.snapshot.jog.reason == DEADMAN_LAPSED
+    if braked:
+        rig.settle()
+        assert rig.controller.snapshot.last_jog.reason == DEADMAN_LAPSED
+    assert rig.controller.stop().ok
+    rig.run()
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert refused.error == "jog_ended" and refused.details == {"jog": number, "reason": "stopped", "lapsed": False}
+    rig.settle()
+    assert rig.controller.snapshot.last_jog.reason == "stopped"
+    assert rig.controller.jog([10, 0, 0, 0, 0, 0]).ok  # a new press starts a new jog
+
+
+def test_a_move_after_a_lapse_ends_the_held_jog_for_good(rig) -> None:
+    """Nor does a late client's renewal take over another client's move."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.settle()
+    assert rig.controller.move([0, 0, 5, 0, 0, 0]).ok
+    rig.run()
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert refused.details == {"jog": number, "reason": "replaced by a move", "lapsed": False}, refused.details
+    rig.settle()
+    assert rig.controller.snapshot.pose_command[2] == pytest.approx(5.0, abs=1e-6)
+
+
 def test_a_renewal_the_loop_finds_lapsed_says_so_as_the_facade_would(rig, monkeypatch) -> None:
     """Found in the full suite on a busy host: a renewal the facade passed on a snapshot a
     report old, whose deadman lapsed in the loop meanwhile, was refused by the loop without
