@@ -155,11 +155,14 @@ class SwapGeometry(Command):
 class Jog(Command):
     """Start a jog (its number: this command's ticket), or re-plan the one under way:
     ``continues`` its number when it goes on as it was (a renewal near the end of its
-    plan), which it keeps; refused if that jog has ended meanwhile."""
+    plan), which it keeps; refused if that jog has ended meanwhile. ``restarts``: a new
+    jog in place of that one, whose deadman lapsed; refused unless its lapse is still
+    why it ended (nothing, a stop from anyone, came since)."""
 
     epoch: int
     plan: JogPlan
     continues: int | None = None
+    restarts: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,6 +241,9 @@ class StreamTarget(Command):
 @dataclass(frozen=True, slots=True)
 class CloseStream(Command):
     """End the stream under way: brake to rest."""
+
+    def event(self) -> tuple[str, str]:
+        return "stream_closed", "the pose stream is closed: braking to rest"
 
 
 @dataclass(frozen=True, slots=True)

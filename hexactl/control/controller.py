@@ -172,7 +172,7 @@ class Controller:
         return self._moves.accuracy_now()
 
     def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *, renews: int | None = None,
-            deadline_ns: int | None = None) -> CommandResult:
+            restarts: int | None = None, deadline_ns: int | None = None) -> CommandResult:
         """Jog at ``velocity`` (mm/s for x, y, z; deg/s for roll, pitch, yaw) in ``frame``
         while renewed: send it again at least every ``jog_deadman_s`` or the platform brakes
         to rest. The same velocity and frame renew the jog under way, another re-plans it,
@@ -180,8 +180,10 @@ class Controller:
         hard, and comes to rest on it (``details.end``; :mod:`~hexactl.control.jog_planning`).
         ``renews``: the number of the jog this renews; refused ``jog_ended`` (with
         ``details.reason``) once that jog has ended, stopped by anyone, lapsed or replaced,
-        instead of starting a new one."""
-        return self._jogs.jog(velocity, frame, deadline_ns, renews)
+        instead of starting a new one. ``restarts``: the number of a jog whose deadman
+        lapsed (its renewal was refused with ``details.lapsed``): a new jog in its place,
+        refused ``jog_ended`` if anything came after the lapse (a stop from anyone)."""
+        return self._jogs.jog(velocity, frame, deadline_ns, renews, restarts)
 
     def leg_lock(self, leg: int, *, deadline_ns: int | None = None) -> CommandResult:
         """Brake leg ``leg`` (1–6) at its current length; later moves keep it there."""

@@ -75,6 +75,15 @@ class JogReport:
     reason: str
 
 
+def restartable(progress: JogProgress | None, report: JogReport | None, jog: int) -> bool:
+    """Whether jog ``jog``, of the jog under way ``progress`` and the last one ended
+    ``report``, may be restarted by its client: its deadman lapsed (the client was late) and
+    nothing came since, or it is still under way."""
+    if progress is not None and progress.jog == jog:
+        return progress.phase is not JogPhase.BRAKING or progress.reason == DEADMAN_LAPSED
+    return progress is None and report is not None and report.jog == jog and report.reason == DEADMAN_LAPSED
+
+
 class Jogger:
     """The deadman of the jog running on ``trajectory``; ``log(code, message)`` notes
     starts, arrivals and ends."""
@@ -94,6 +103,8 @@ class Jogger:
         when its number is new: a jog held for minutes is re-planned every few seconds)."""
         self._deadman_ns = plan.deadman_ns
         known = self.progress is not None and self.progress.jog == jog
+        if not known:
+            self.end(f"replaced by jog {jog}")  # the one under way or braking, or a lapse nothing came after
         self.progress = JogProgress(jog, plan.frame, plan.velocity, plan.speed, JogPhase.JOGGING, plan.end,
                                     plan.to_limit, now_ns + plan.deadman_ns)
         if not known:

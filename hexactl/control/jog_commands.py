@@ -10,7 +10,7 @@ from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.bounds import jog_velocity_problem
 from hexactl.control.frames import Frame, convert
-from hexactl.control.jog import JogPhase
+from hexactl.control.jog import JogPhase, restartable
 from hexactl.control.jog_planning import JOG_EXTEND_S, plan_jog
 from hexactl.control.planning import PlanningContext, Refusal
 from hexactl.control.results import DEADMAN_LAPSED, CommandResult, ErrorCode, jog_ended_message
@@ -30,9 +30,11 @@ class JogCommands:
         self.deadman_s = deadman_s
 
     def jog(self, velocity: Sequence[float], frame: Frame, deadline_ns: int | None,
-            renews: int | None = None) -> CommandResult:
+            renews: int | None = None, restarts: int | None = None) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.jog`."""
-        if problem := _velocity_problem(velocity) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
+        if problem := (_velocity_problem(velocity) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}")
+                       or ("renews or restarts, not both: a renewal names the jog under way, a restart the one "
+                           "whose deadman lapsed" if renews is not None and restarts is not None else None)):
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, problem)
         velocity, frame = tuple(float(v) for v in velocity), Frame(frame)
         s = self._snapshot()
@@ -40,6 +42,8 @@ class JogCommands:
             return self._release(s)
         if refusal := preconditions.check_jog(s):
             return CommandResult.failure(*refusal)
+        if restarts is not None:
+            return self._restart(s, restarts, velocity, frame, deadline_ns)
         current = s.jog
         if renews is not None and (current is None or current.jog != renews or current.phase is JogPhase.BRAKING):
             last = s.last_jog
@@ -52,18 +56,36 @@ class JogCommands:
         if same and (current.to_limit or (motion_remaining_s(s) or 0.0) > JOG_EXTEND_S):
             return self._renew(current.jog, frame, velocity, deadline_ns,
                                **_details(current.jog, current.speed, current.end, current.to_limit, self.deadman_s))
-        context = self._context(s)
-        plan = plan_jog(context, s.trajectory, s.frames, velocity, frame, round(self.deadman_s * 1e9))
+        # a renewal near the plan's end: the same jog, planned on
+        return self._start(s, velocity, frame, deadline_ns, continues=current.jog if same else None)
+
+    def _start(self, s: CoreSnapshot, velocity: tuple[float, ...], frame: Frame, deadline_ns: int | None,
+               continues: int | None = None, restarts: int | None = None) -> CommandResult:
+        """Plan a jog from ``s`` and start it (see :class:`~hexactl.control.commands.Jog`)."""
+        plan = plan_jog(self._context(s), s.trajectory, s.frames, velocity, frame, round(self.deadman_s * 1e9))
         if isinstance(plan, Refusal):
             return plan.result()
         goal = convert(plan.segment.goal, plan.segment.frames, None, s.active.home).in_degrees()
-        continues = current.jog if same else None  # a renewal near the plan's end: the same jog, planned on
-        result = self._submitter.submit(lambda t: cmd.Jog(t, s.epoch, plan, continues), "jogging",
+        result = self._submitter.submit(lambda t: cmd.Jog(t, s.epoch, plan, continues, restarts), "jogging",
                                         deadline_ns=deadline_ns, goal=list(goal),
                                         **_details(None, plan.speed, plan.end, plan.to_limit, self.deadman_s))
         # a jog's number is the ticket of the command that started it
         number = result.details.get("ticket") if continues is None else continues
         return replace(result, details={"jog": number, **result.details})
+
+    def _restart(self, s: CoreSnapshot, lapsed: int, velocity: tuple[float, ...], frame: Frame,
+                 deadline_ns: int | None) -> CommandResult:
+        """A new jog in place of jog ``lapsed``, whose deadman lapsed, unless something (a
+        stop from anyone) came after the lapse: then refused ``jog_ended`` for good, by the
+        facade on its snapshot or by the loop, which has the last word."""
+        if not restartable(s.jog, s.last_jog, lapsed):
+            return _ended(s, lapsed)
+        result = self._start(s, velocity, frame, deadline_ns, restarts=lapsed)
+        if result.error != ErrorCode.JOG_ENDED:
+            return result
+        ended = _ended(self._snapshot(), lapsed)  # the snapshot may not show yet what came after the lapse
+        return ended if not ended.details["lapsed"] else replace(
+            result, details={**result.details, "jog": lapsed, "reason": None, "lapsed": False})
 
     def _renew(self, number: int, frame: Frame, velocity: tuple[float, ...], deadline_ns: int | None,
                **details: object) -> CommandResult:
@@ -94,7 +116,8 @@ def _ended(s: CoreSnapshot, jog: int) -> CommandResult:
     so): ``details.reason`` why, ``details.lapsed`` whether its deadman lapsed (its client
     was late: a held button may start a new jog; after anything else it is released)."""
     current, last = s.jog, s.last_jog
-    reason = current.reason if current is not None and current.jog == jog else last.reason if last else None
+    reason = (current.reason if current is not None and current.jog == jog
+              else last.reason if last is not None and last.jog == jog else None)
     return CommandResult.failure(ErrorCode.JOG_ENDED, jog_ended_message(jog, reason), jog=jog, reason=reason,
                                  lapsed=reason == DEADMAN_LAPSED)
 

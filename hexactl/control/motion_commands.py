@@ -14,6 +14,7 @@ from collections.abc import Callable
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.command_inbox import Handler
+from hexactl.control.jog import restartable
 from hexactl.control.motion import Motion
 from hexactl.control.preconditions import CoreView, Refusal
 from hexactl.control.results import ErrorCode
@@ -46,7 +47,16 @@ class MotionCommands:
         number = command.ticket if continues is None else continues
         return (preconditions.check_jog(self._view)
                 or (self._motion.jogger.ended(continues) if continues is not None else None)
+                or self._not_restartable(command.restarts)
                 or self._motion.stale(command.epoch) or self._motion.jog(number, command.plan, self._now_ns()))
+
+    def _not_restartable(self, jog: int | None) -> Refusal:
+        """Why jog ``jog`` is not to be restarted: it ended otherwise than by its lapse, or
+        something came after (None: it may be, it is still under way, or none is to be)."""
+        jogger = self._motion.jogger
+        if jog is None or restartable(jogger.progress, jogger.report, jog):
+            return None
+        return jogger.ended(jog)
 
     def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
         return self._motion.jogger.renew(command.jog, command.frame, command.velocity, self._now_ns())

@@ -41,7 +41,13 @@ def test_a_renewal_held_up_past_its_deadline_does_not_end_the_jog() -> None:
 def test_a_lapsed_jog_starts_again_and_a_stopped_one_ends_the_command() -> None:
     lapsed = ScriptedService(_refused("jog_ended", lapsed=True, reason="the deadman lapsed"), {"ok": True, "jog": 9})
     assert _renew(lapsed, FIELDS, 7, for_s=0.03, every_s=0.005) is None
-    assert lapsed.sent[1] == FIELDS and lapsed.sent[2]["renews"] == 9  # a new jog, then renewed as such
+    # a new jog in place of the lapsed one (refused if a stop came after the lapse), then renewed as such
+    assert lapsed.sent[1] == {**FIELDS, "restarts": 7} and lapsed.sent[2]["renews"] == 9
+
+    stop_after_lapse = _refused("jog_ended", lapsed=False, reason="stopped")
+    restart_refused = ScriptedService(_refused("jog_ended", lapsed=True, reason="the deadman lapsed"), stop_after_lapse)
+    assert _renew(restart_refused, FIELDS, 7, for_s=1.0, every_s=0.005) == stop_after_lapse
+    assert len(restart_refused.sent) == 2
 
     stop = _refused("jog_ended", lapsed=False, reason="stopped")
     stopped = ScriptedService(stop)

@@ -271,6 +271,65 @@ def test_a_move_after_a_lapse_ends_the_held_jog_for_good(rig) -> None:
     assert rig.controller.snapshot.pose_command[2] == pytest.approx(5.0, abs=1e-6)
 
 
+def test_a_lapsed_jog_restarts_in_its_place_unless_a_stop_came_after_the_lapse(rig) -> None:
+    """A client whose renewal was refused as lapsed names the lapsed jog to start anew:
+    refused for good if anything came after the lapse, even when the stop reaches the
+    loop after the client was told of the lapse (the race a restart without a name lost)."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.settle()
+    lapsed = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number)
+    assert lapsed.details["lapsed"]
+    again = rig.controller.jog([10, 0, 0, 0, 0, 0], restarts=number)
+    assert again.ok and again.details["jog"] not in (None, number), again
+    rig.run(2)
+    assert rig.controller.snapshot.jog.jog == again.details["jog"]
+    assert rig.controller.snapshot.last_jog.jog == number  # reported ended, as replaced by the new one
+    assert rig.controller.snapshot.last_jog.reason == f"replaced by jog {again.details['jog']}"
+
+    second = again.details["jog"]
+    rig.settle()  # the restarted jog lapses too; then a stop from another client, then the restart
+    assert rig.controller.jog([10, 0, 0, 0, 0, 0], renews=second).details["lapsed"]
+    assert rig.controller.stop().ok
+    rig.run()
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], restarts=second)
+    assert refused.error == "jog_ended" and refused.details == {"jog": second, "reason": "stopped", "lapsed": False}
+    rig.settle()
+    assert rig.controller.snapshot.jog is None and rig.controller.snapshot.motion.value == "holding"
+
+
+def test_a_restart_the_loop_refuses_says_the_jog_ended_for_good(rig, monkeypatch) -> None:
+    """The facade passed the restart on a snapshot from before the stop; the loop, which
+    has the stop, refuses it, and the reply is not ``lapsed`` (the client would restart again)."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.settle()
+    lapsed_snapshot = rig.controller.snapshot
+    assert rig.controller.stop().ok
+    rig.run()
+    jogs = rig.controller._jogs
+    monkeypatch.setattr(jogs, "_snapshot", lambda: lapsed_snapshot)  # the facade sees only the lapse
+    passed = rig.controller.jog([10, 0, 0, 0, 0, 0], restarts=number)
+    assert passed.details.get("pending"), passed  # this rig's loop gives its verdict when stepped
+    rig.settle()
+    s = rig.controller.snapshot
+    assert s.jog is None and s.motion.value == "holding" and s.pose_command[0] == pytest.approx(
+        lapsed_snapshot.pose_command[0], abs=1e-9)
+    refusal = s.events[-1]
+    assert refusal.code == "command_refused" and f"jog {number} has ended (stopped)" in refusal.message, refusal
+    # As the service's facade hears that verdict: refused for good, not lapsed (its client would restart again)
+    monkeypatch.setattr(jogs._submitter, "submit", lambda *arguments, **details: CommandResult.failure(
+        ErrorCode.JOG_ENDED, refusal.message, **details))
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], restarts=number)
+    assert refused.error == "jog_ended" and refused.details["jog"] == number and not refused.details["lapsed"], refused
+
+
+def test_renews_and_restarts_together_are_refused(rig) -> None:
+    rig.enabled()
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=5, restarts=5)
+    assert refused.error == "invalid_argument" and "not both" in refused.message
+
+
 def test_a_renewal_the_loop_finds_lapsed_says_so_as_the_facade_would(rig, monkeypatch) -> None:
     """Found in the full suite on a busy host: a renewal the facade passed on a snapshot a
     report old, whose deadman lapsed in the loop meanwhile, was refused by the loop without

@@ -24,6 +24,7 @@ from selenium.webdriver.support.ui import Select
 from hexactl.adapters.api.client import CommandError
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
+from hexactl.control.results import DEADMAN_LAPSED
 from tests.web.test_dashboard import Rig, page_on_a_service, screenshot, wait_for
 
 TAP = """
@@ -31,10 +32,11 @@ TAP = """
   const Native = window.WebSocket;
   const tap = { dropTelemetry: false, recordFields: null, sent: [], lastTelemetryAt: null, losses: 0, late: false,
                 holdEventsReplies: false, failEventsReplies: 0, eventsIds: new Set(), heldReplies: [],
-                jogIds: new Set(), jogReplyFields: null, intervals: [] };
+                jogIds: new Set(), jogReplyFields: null, intervals: [], jogs: [], holdJogs: null, heldJogs: [] };
   const nativeSetInterval = window.setInterval.bind(window);
   window.setInterval = (callback, ms, ...rest) => { tap.intervals.push(ms); return nativeSetInterval(callback, ms, ...rest); };
   tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
+  tap.releaseJogs = () => { tap.holdJogs = null; tap.heldJogs.splice(0).forEach((f) => f()); };
   window.hexactlTestTap = tap;
   window.WebSocket = class extends Native {
     constructor(...args) {
@@ -86,7 +88,14 @@ TAP = """
       if (command.type !== 'command') return super.send(data);
       tap.sent.push(command.cmd);
       if (command.cmd === 'events') tap.eventsIds.add(command.id);
-      if (command.cmd === 'jog') tap.jogIds.add(command.id);
+      if (command.cmd === 'jog') {
+        tap.jogIds.add(command.id);
+        tap.jogs.push(command);
+        if (tap.holdJogs === 'all' || (tap.holdJogs === 'restarts' && command.restarts != null)) {
+          tap.heldJogs.push(() => super.send(data));
+          return undefined;
+        }
+      }
       return super.send(data);
     }
   };
@@ -97,7 +106,9 @@ record, ``recordFields`` (not null) replaces those fields of each record (the fr
 a field the service cannot be made to send), ``holdEventsReplies``
 holds the replies to the page's ``events`` requests until ``releaseReplies()``,
 ``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``),
-``jogReplyFields`` (not null) replaces those fields of the replies to its jogs, ``intervals``
+``jogReplyFields`` (not null) replaces those fields of the replies to its jogs, ``jogs`` lists
+every jog command the page sends, ``holdJogs`` (``all``, or ``restarts``: only those that name a
+lapsed jog) holds them on the way until ``releaseJogs()`` (a stalled page), ``intervals``
 lists the period of every ``setInterval`` the page starts, ``sent`` lists the ``cmd`` of every
 command the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
@@ -376,3 +387,77 @@ def test_soft_limits_left_empty_keep_what_is_in_force_not_what_the_page_last_hea
         tap(rig)
         rig.client.call("clear_frames")
 
+
+
+def _stalled_until_lapsed(rig) -> int:
+    """The page's jog renewals held on the way (a stalled page) until the service's deadman
+    lapses and the platform brakes to rest; the jog's number."""
+    rig.page("window.hexactlTestTap.holdJogs = 'all';")
+
+    def lapsed() -> int | None:  # the jog the page renews (a busy host may have lapsed one before: it restarted)
+        record, held = rig.status(), rig.page("return window.hexactlTestTap.heldJogs.length && "
+                                              "window.hexactlTestTap.jogs.at(-1).renews")
+        last = record["last_jog"]
+        return (last["jog"] if held and record["jog"] is None and last == {"jog": held, "reason": DEADMAN_LAPSED}
+                else None)
+
+    return wait_for(lapsed, "the deadman lapsed", seen=rig.status)
+
+
+def _jogs_sent(rig) -> list[dict]:
+    return rig.page("return window.hexactlTestTap.jogs")
+
+
+def test_a_held_jog_whose_renewals_came_late_starts_again_in_place_of_the_lapsed_one(rig) -> None:
+    """A stall of the page lets the deadman lapse: the button still held, the page starts a
+    new jog naming the lapsed one (``restarts``), and the platform jogs on."""
+
+    def scenario() -> None:
+        try:
+            with _held_x_jog(rig):
+                lapsed = _stalled_until_lapsed(rig)
+                x = rig.status()["pose_command"][0]
+                rig.page("window.hexactlTestTap.releaseJogs();")
+                wait_for(lambda: rig.status()["pose_command"][0] > x + 1.0, "the platform jogging again",
+                         seen=lambda: rig.element("#jog-status").text)
+                assert any(jog.get("restarts") == lapsed for jog in _jogs_sent(rig)), _jogs_sent(rig)
+                assert rig.status()["jog"]["jog"] != lapsed
+        finally:
+            rig.page("window.hexactlTestTap.releaseJogs();")
+        wait_for(lambda: rig.status()["motion"] == "holding", "the jog braked to rest after the release")
+
+    attempted(rig, scenario)
+
+
+def test_a_stop_between_the_lapse_and_the_pages_restart_ends_the_held_jog_for_good(rig) -> None:
+    """Found in the full suite on a busy host: the page's renewals came late, the jog
+    lapsed, the page was told so and started a new jog, which reached the service after
+    another client's stop and ran on. The restart names the lapsed jog; the stop came after
+    the lapse, so the restart is refused, the page stops renewing and says why, and the
+    platform stays at rest while the button is still held."""
+
+    def scenario() -> None:
+        try:
+            with _held_x_jog(rig) as button:
+                lapsed = _stalled_until_lapsed(rig)
+                # the renewals go on to be refused as lapsed; the page's restart is held on the way
+                rig.page("const t = window.hexactlTestTap; t.releaseJogs(); t.holdJogs = 'restarts';")
+                wait_for(lambda: rig.page("return window.hexactlTestTap.heldJogs.length"), "the page's restart",
+                         seen=lambda: rig.element("#jog-status").text)
+                rig.client.call("stop")
+                rig.page("window.hexactlTestTap.releaseJogs();")
+                wait_for(lambda: "has ended (stopped)" in rig.element("#jog-status").text,
+                         "the page saying the jog was stopped", seen=lambda: rig.element("#jog-status").text)
+                assert "held" not in button.get_attribute("class").split()
+                restarts = [jog for jog in _jogs_sent(rig) if jog.get("restarts") == lapsed]
+                assert len(restarts) == 1, _jogs_sent(rig)
+                renewals = sent(rig, "jog")
+                rig.client.call("status")  # a round trip: any jog the page still sent has reached the service
+                record = rig.status()
+                assert record["jog"] is None and record["motion"] == "holding", record
+                assert record["last_jog"] == {"jog": lapsed, "reason": "stopped"}
+                assert sent(rig, "jog") == renewals  # none since: the button is still held
+        finally:
+            rig.page("window.hexactlTestTap.releaseJogs();")
+
+    attempted(rig, scenario)

@@ -170,6 +170,7 @@ class CommandHandler:
                 return self._validate_pose(request)
             case JogRequest():
                 result = self.controller.jog(request.velocity, Frame(request.frame), renews=request.renews,
+                                             restarts=request.restarts,
                                              deadline_ns=deadline_ns)
                 return _checked(result, **{key: result.details.get(key) for key in JOG_REPLY})
             case WaveRequest():

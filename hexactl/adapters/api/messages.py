@@ -234,7 +234,8 @@ class JogRequest(_Request):
     another velocity re-plans it, all zeros release it. The jog heads for the first limit
     ahead (hardware or soft) and comes to rest on it: it is not refused there. A renewal
     that names its jog (``renews``) is refused ``jog_ended`` once that jog has ended
-    (a ``stop`` from anyone, a lapse, a fault), instead of starting a new one."""
+    (a ``stop`` from anyone, a lapse, a fault), instead of starting a new one; after a
+    lapse, ``restarts`` starts a new one unless anything came after the lapse."""
 
     cmd: Literal["jog"]
     velocity: JogVelocity
@@ -243,6 +244,10 @@ class JogRequest(_Request):
                                "that started it says it): refused jog_ended once that jog has ended, so that a stop "
                                "from anyone ends a held jog for good; without it, a jog after the end of the last "
                                "starts a new one")
+    restarts: int | None = Field(default=None, ge=1, description="the number of a jog whose deadman lapsed (its "
+                                 "renewal was refused jog_ended with details.lapsed true): a new jog in its place, "
+                                 "refused jog_ended (lapsed false) if anything came after the lapse, a stop from "
+                                 "anyone; not with renews")
 
 
 class _WaveBody(_Request, WaveSpec):
@@ -796,7 +801,7 @@ class LoopEvent(_Message):
                      "reader missed; fewer than the last seen: the service has restarted, as the events reply's run says)")
     t: float = Field(description="when, s, on the clock of the record's t")
     code: str = Field(description="what, snake_case: a command carried out (enabled, disabled, stop, reset, move, "
-                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started), one that started something "
+                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started, stream_closed), one that started something "
                       "(sequence_started, jog_started, stream_opened, calibration_swapped), estop, a fault's code, "
                       "command_refused, the end of something (sequence_*, jog_ended, stream_ended), "
                       "command_link_silent, …")

@@ -128,7 +128,7 @@ def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s:
         if error.get("code") == "expired":
             continue
         if error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
-            reply = client.request("jog", **fields)
+            reply = client.request("jog", **fields, restarts=jog)  # refused if a stop came after the lapse
         if not reply.get("ok"):
             return reply
         jog = reply["jog"]

@@ -345,7 +345,7 @@ export function setupControls(ctx) {
 
   // ---------------- jog ----------------
   const jogStatus = $('jog-status');
-  let jog = null;          // {button, velocity, frame, timer, everyMs, number}: number, the jog the renewals name
+  let jog = null;          // {button, velocity, frame, timer, everyMs, number, lapsed}: number, the jog the renewals name; lapsed, the one a restart names
   let jogSerial = 0;
   let jogInFlight = 0;
   let renewEveryMs = 50;   // the default deadman's (0.2 s) quarter, until a jog's reply says the service's
@@ -377,6 +377,7 @@ export function setupControls(ctx) {
     jogInFlight += 1;
     const fields = { velocity, frame };
     if (held && held.number != null) fields.renews = held.number;
+    else if (held && held.lapsed != null) fields.restarts = held.lapsed;   // refused if a stop came after the lapse
     // until the jog that starts it is answered, no renewal: each would start a jog of its own
     const starting = held !== null && fields.renews === undefined;
     if (starting) held.starting = true;
@@ -384,9 +385,9 @@ export function setupControls(ctx) {
     try { reply = await ctx.send('jog', fields); } finally { jogInFlight -= 1; if (starting) held.starting = false; }
     if (reply.ok && typeof reply.deadman_s === 'number' && reply.deadman_s > 0) renewEvery(reply.deadman_s * 1000 / RENEWALS_PER_DEADMAN);
     if (held && held === jog) {
-      if (reply.ok && reply.jog != null) held.number = reply.jog;
+      if (reply.ok && reply.jog != null) { held.number = reply.jog; held.lapsed = null; }
       if (!reply.ok && reply.error && reply.error.code === 'jog_ended') {
-        if ((reply.error.details || {}).lapsed) held.number = null;
+        if ((reply.error.details || {}).lapsed) { held.lapsed = held.number; held.number = null; }
         else {
           releaseJog(false);
           setResult(jogStatus, 'refused', describeError(reply.error));
@@ -413,7 +414,7 @@ export function setupControls(ctx) {
     try { speed = jogSpeed(); } catch (e) { setResult(jogStatus, 'refused', e.message); return; }
     const velocity = jogVelocity(button, speed);
     const frame = $('jog-frame').value;
-    jog = { button, velocity, frame, timer: null, everyMs: null, number: null, starting: false };
+    jog = { button, velocity, frame, timer: null, everyMs: null, number: null, lapsed: null, starting: false };
     button.classList.add('held');
     sendJog(velocity, frame, jog);
     renewEvery(renewEveryMs);
