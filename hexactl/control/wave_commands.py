@@ -43,7 +43,8 @@ class WaveCommands:
     def _plan(self, s: CoreSnapshot, spec: WaveSpec) -> WavePlan | Refusal:
         if not isinstance(spec, WaveSpec):
             return Refusal(ErrorCode.INVALID_ARGUMENT, "a wave is a WaveSpec")
-        return plan_wave(self._context(s), s.trajectory, s.frames, spec)
+        # about where the platform comes to rest: the goal of a move under way, else where it is
+        return plan_wave(self._context(s), s.goal if s.goal is not None else s.trajectory.position, s.frames, spec)
 
 
 def _result(plan: WavePlan | Refusal, message: str) -> CommandResult:

@@ -48,9 +48,8 @@ from hexactl.control.planning import (
     thinned,
 )
 from hexactl.control.results import ErrorCode
-from hexactl.control.trajectory import KinematicState
 from hexactl.control.waves import WavePath, WaveSpec
-from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS, RelativeMmRad, ToolInWorkMmRad
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import sensor_setpoints_batch
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
@@ -87,16 +86,12 @@ class WavePlan:
                 "peak_pose_velocity": list(self.peak_pose_velocity)}
 
 
-def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Frames | None,
+def plan_wave(context: PlanningContext, start: RelativeMmRad | ToolInWorkMmRad, start_frames: Frames | None,
               spec: WaveSpec) -> WavePlan | Refusal:
-    """Plan and validate ``spec`` from the generator state ``start`` (in the coordinates of
-    ``start_frames``); the refusal names the limit, the leg or axis, the peak and the bound.
-    Never raises for a valid spec."""
-    if context.lock is not None:
-        return Refusal(ErrorCode.LEG_LOCKED,
-                       f"leg {context.lock.leg} is locked: a wave needs all six legs; unlock first")
-    if not start.resting:
-        return Refusal(ErrorCode.BUSY, "a wave starts from rest: stop first")
+    """Plan and validate ``spec`` about the pose ``start`` it starts from at rest (in the
+    coordinates of ``start_frames``, as the generator's); the refusal names the limit, the
+    leg or axis, the peak and the bound. Whether it may start now (at rest, all six legs)
+    is :func:`~hexactl.control.preconditions.check_wave`'s. Never raises for a valid spec."""
     if spec.duration_s > MAX_MOTION_S:
         return Refusal(ErrorCode.PLANNING_FAILED, f"the wave would take {spec.duration_s:.6g} s; a motion may take at "
                        f"most {MAX_MOTION_S:g} s: fewer cycles or a higher frequency")
@@ -104,7 +99,7 @@ def plan_wave(context: PlanningContext, start: KinematicState, start_frames: Fra
     frames = None if spec.frame is Frame.ZERO else context.frames
     if spec.frame is not Frame.ZERO and frames is None:
         return Refusal(ErrorCode.INVALID_ARGUMENT, "a wave in the work or tool frame needs the operator's frames")
-    origin = start.position if frames == start_frames else convert(start.position, start_frames, frames, home)
+    origin = start if frames == start_frames else convert(start, start_frames, frames, home)
     path = WavePath(spec, origin, context.period_s)
     budget, remedy = PlanningBudget(), "fewer cycles"
     positions = _positions(path, budget, remedy)

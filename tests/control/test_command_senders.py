@@ -66,3 +66,17 @@ def test_what_the_loop_does_of_its_own_accord_names_no_sender(rig):
 def test_a_caller_in_the_loops_own_process_is_no_one_in_particular(rig):
     rig.enabled()
     assert {sender for _, sender in recorded(rig)} == {None}
+
+
+def test_a_stream_closed_by_another_client_names_who_closed_it(rig):
+    """Found from outside: a stream_close left only the stream's end, named by no one (the
+    loop ends it once braked), so "who closed my stream?" had no answer."""
+    rig.enabled()
+    with commands_from(ALICE):
+        assert rig.controller.stream_open("sim", timeout_s=1.0).ok
+    rig.run(2)
+    before = len(rig.controller.events().events)
+    with commands_from(BOB):
+        assert rig.controller.stream_close().ok
+    rig.settle()
+    assert recorded(rig, before) == [("stream_closed", BOB), ("stream_ended", None)]

@@ -20,6 +20,7 @@ from hexactl.control.waves import WavePath, WaveSpec, envelope
 from hexactl.kinematics.axes import POSE_AXES, RelativeMmRad, ToolInWorkMmRad
 from hexactl.kinematics.frames import apply, transform_of
 from hexactl.kinematics.inverse import sensor_setpoints
+from hexactl.kinematics.soft_limits import SoftLimits
 
 PERIOD_S = 0.002  # the default loop's
 MICROMETRE = 1e-3
@@ -265,6 +266,28 @@ def test_a_wave_is_refused_while_moving_in_leg_lock_and_unless_enabled(rig):
     rig.run(2)
     refused = rig.controller.wave(spec)
     assert refused.error == "leg_locked" and "unlock first" in refused.message
+
+
+def test_a_wave_validates_whatever_the_controllers_state_about_where_the_platform_comes_to_rest(rig):
+    """Found from outside: validate_wave answered busy while moving and leg_locked with a
+    leg locked, where the API says it is like validate_pose, not about the controller's
+    state. While a move is under way it validates about the move's goal."""
+    assert rig.controller.set_frames(OperatorFrames(soft_limits=SoftLimits(upper=(None, None, 40, None, None, None)))).ok
+    small, large = _z_wave(5.0, 0.2), _z_wave(30.0, 0.2)
+    assert rig.controller.validate_wave(large).ok  # disabled, at z 0: 30 mm up stays below 40
+    rig.enabled()
+    assert rig.controller.move([0, 0, 30, 0, 0, 0]).ok
+    rig.run(20)
+    assert rig.controller.snapshot.motion.value == "moving"
+    assert rig.controller.validate_wave(small).ok  # about z 30, where the move ends: 35 < 40
+    beyond = rig.controller.validate_wave(large)
+    assert beyond.error == "path_violation" and "soft" in beyond.message, beyond
+    assert rig.controller.wave(small).error == "busy"  # playing it needs rest
+    rig.settle()
+    assert rig.controller.leg_lock(2).ok
+    rig.run(2)
+    assert rig.controller.validate_wave(small).ok
+    assert rig.controller.wave(small).error == "leg_locked"
 
 
 # -- the loop --------------------------------------------------------------------------
