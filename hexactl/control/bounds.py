@@ -3,6 +3,8 @@ frequency, cycles, amplitudes and phase, a jog's velocity), stated once: the pla
 them, and the CLI refuses an option beyond them before it asks. Standard library only
 here: the CLI reads it."""
 
+from collections.abc import Sequence
+
 MAX_MOTION_S = 600.0
 """The longest motion one plan may hold, s: a move, or a sequence's moves together (dwells
 not counted). Planning samples every loop period, so its work grows with the motion's
@@ -20,6 +22,9 @@ MAX_PHASE_DEG = 360.0
 """A wave axis's phase at the start is within ±this, deg."""
 MAX_JOG_VELOCITY = 1e4
 """Bigger jog velocity components (mm/s, deg/s) are typing errors; the motion limits cap the rest."""
+MIN_JOG_VELOCITY = 1e-6
+"""A jog whose every component (mm/s, deg/s) is smaller, and not all zero (a release), moves
+less than a nanometre a second: a rounding residue, not a velocity."""
 
 
 def amplitude_problem(axis: str, amplitude: float) -> str | None:
@@ -39,8 +44,13 @@ def ramp_problem(ramp_cycles: float, cycles: int) -> str | None:
     return None
 
 
-def jog_velocity_problem(value: float) -> str | None:
-    """What is wrong with a jog velocity's component ``value`` (mm/s or deg/s), or None."""
-    if abs(value) > MAX_JOG_VELOCITY:
-        return f"a jog velocity component of {value:g} is beyond {MAX_JOG_VELOCITY:g} (mm/s or deg/s): a typing error?"
+def jog_velocity_problem(velocity: Sequence[float]) -> str | None:
+    """What is wrong with a jog's ``velocity`` (six finite numbers, mm/s and deg/s), or None."""
+    for value in velocity:
+        if abs(value) > MAX_JOG_VELOCITY:
+            return (f"a jog velocity component of {value:.12g} is beyond {MAX_JOG_VELOCITY:g} (mm/s or deg/s): a "
+                    "typing error?")
+    if 0 < (fastest := max(map(abs, velocity))) < MIN_JOG_VELOCITY:
+        return (f"a jog velocity of at most {fastest:.3g} (mm/s or deg/s) is too slow to move: at least "
+                f"{MIN_JOG_VELOCITY:g} on one axis, or all zeros to release")
     return None

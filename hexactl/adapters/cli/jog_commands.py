@@ -41,7 +41,7 @@ def _jog_velocity(text: str) -> list[float]:
     if not any(velocity):
         raise argparse.ArgumentTypeError(f"velocity {text!r} is zero on every axis: give a velocity to jog at, "
                                          "e.g. z=5 (to brake to rest: hexactl stop)")
-    if problem := next(filter(None, map(jog_velocity_problem, velocity)), None):
+    if problem := jog_velocity_problem(velocity):
         raise argparse.ArgumentTypeError(f"velocity {text!r}: {problem}")
     return velocity
 
