@@ -166,6 +166,14 @@ class Jog(Command):
 
 
 @dataclass(frozen=True, slots=True)
+class ReleaseJog(Command):
+    """The jog under way is released: it brakes to rest (anything else moving goes on: a
+    move that took it over is another's)."""
+
+    brakes = True
+
+
+@dataclass(frozen=True, slots=True)
 class RenewJog(Command):
     """Jog ``jog``, under way at ``velocity`` in ``frame`` (as :class:`~hexactl.control.jog.JogPlan`),
     goes on for another deadman interval."""

@@ -103,8 +103,9 @@ class Jogger:
         when its number is new: a jog held for minutes is re-planned every few seconds)."""
         self._deadman_ns = plan.deadman_ns
         known = self.progress is not None and self.progress.jog == jog
-        if not known:
-            self.end(f"replaced by jog {jog}")  # the one under way or braking, or a lapse nothing came after
+        if not known:  # the one under way or braking (why, kept), or a lapse nothing came after, is replaced
+            braking = self.progress.reason if self.progress is not None else None
+            self.end(f"{braking}, then replaced by jog {jog}" if braking else f"replaced by jog {jog}")
         self.progress = JogProgress(jog, plan.frame, plan.velocity, plan.speed, JogPhase.JOGGING, plan.end,
                                     plan.to_limit, now_ns + plan.deadman_ns)
         if not known:

@@ -102,13 +102,15 @@ class JogCommands:
             result, details={**result.details, "reason": None, "lapsed": False})
 
     def _release(self, s: CoreSnapshot) -> CommandResult:
+        """Release the jog under way: sent to the loop whatever the snapshot says (it may not
+        show yet a jog just started), which brakes only a jog (another's move goes on)."""
         if s.jog is None or s.jog.phase is JogPhase.BRAKING:
-            return CommandResult.success("nothing to release: no jog is under way")
-        if s.state is not ControlState.ENABLED or s.motion is MotionState.HOLDING:
+            message = "nothing to release: no jog is under way"
+        elif s.state is not ControlState.ENABLED or s.motion is MotionState.HOLDING:
             message = "jog released (at rest)"
         else:
             message = "jog released: braking to rest"
-        return self._submitter.submit(cmd.Stop, message)
+        return self._submitter.submit(cmd.ReleaseJog, message)
 
 
 def _ended(s: CoreSnapshot, jog: int) -> CommandResult:
@@ -129,9 +131,7 @@ def _velocity_problem(velocity: object) -> str | None:
     for value in values:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not isfinite(value):
             return f"a jog velocity's components are finite numbers, got {value!r}"
-        if problem := jog_velocity_problem(value):
-            return problem
-    return None
+    return jog_velocity_problem(values)
 
 
 def _details(jog: int | None, speed: float, end: str, to_limit: bool, deadman_s: float) -> dict[str, object]:

@@ -24,10 +24,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from hexactl.control.config import ControllerConfig
-from hexactl.control.jog import Jogger, JogPlan
+from hexactl.control.jog import Jogger, JogPhase, JogPlan
 from hexactl.control.planning import ActiveGeometry, LegLock, Segment
 from hexactl.control.preconditions import Refusal
-from hexactl.control.results import ErrorCode
+from hexactl.control.results import JOG_RELEASED, ErrorCode
 from hexactl.control.sequence_player import SequencePhase, SequencePlayer, start_segment
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.setpoint_path import SetpointPath
@@ -76,7 +76,10 @@ class Motion:
     def stale(self, epoch: int) -> Refusal:
         """The refusal of a command planned at ``epoch`` if that is not the current one."""
         if epoch != self.epoch:
-            return ErrorCode.STALE_PLAN, "the target changed while the command was being planned: plan again"
+            # Not "plan again": what came first may be a stop, which a blind retry would undo.
+            return ErrorCode.STALE_PLAN, ("the motion changed while the command was being planned (a stop, another "
+                                          "motion or a calibration swap came first): not carried out; look at what "
+                                          "came (hexactl events) before sending it again")
         return None
 
     # -- the cycle ---------------------------------------------------------------------
@@ -175,6 +178,17 @@ class Motion:
         self.jogger.brake("stopped")
         self.stream.brake("stopped")
         self.epoch += 1
+
+    def release_jog(self) -> bool:
+        """Brake the jog under way to rest, as released; False if none is (at rest, braking
+        or taken over)."""
+        progress = self.jogger.progress
+        if progress is None or progress.phase is JogPhase.BRAKING:
+            return False
+        self.trajectory.halt()
+        self.jogger.brake(JOG_RELEASED)
+        self.epoch += 1
+        return True
 
     def open_stream(self, stream: int, source: str, frame: str, frames: Frames | None,
                     start: RelativeMmRad | ToolInWorkMmRad, timeout_ns: int, now_ns: int) -> None:

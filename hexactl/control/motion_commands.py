@@ -33,7 +33,8 @@ class MotionCommands:
         self._log = log
 
     def handlers(self) -> dict[type[cmd.Command], Handler]:
-        return {cmd.Move: self._move, cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog, cmd.Stop: self._stop,
+        return {cmd.Move: self._move, cmd.Jog: self._jog, cmd.RenewJog: self._renew_jog,
+                cmd.ReleaseJog: self._release_jog, cmd.Stop: self._stop,
                 cmd.Play: self._play, cmd.PlayWave: self._play_wave, cmd.Pause: self._pause, cmd.Resume: self._resume,
                 cmd.Abort: self._abort, cmd.OpenStream: self._open_stream, cmd.StreamTarget: self._stream_target,
                 cmd.CloseStream: self._close_stream, cmd.CommandLinkSilent: self._command_link_silent,
@@ -60,6 +61,12 @@ class MotionCommands:
 
     def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
         return self._motion.jogger.renew(command.jog, command.frame, command.velocity, self._now_ns())
+
+    def _release_jog(self, command: cmd.ReleaseJog) -> Refusal:
+        jog = self._motion.jogger.progress
+        if self._motion.release_jog():
+            self._log("jog_released", f"jog {jog.jog} released: braking to rest")
+        return None
 
     def _stop(self, command: cmd.Stop) -> Refusal:
         self._motion.stop()

@@ -101,8 +101,7 @@ class MoveCommands:
             # turn would go the other way, to the same orientation
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
                                         f"got {', '.join(beyond)}: turn the other way round (360° less)"))
-        target = s.goal if s.goal is not None else s.trajectory.position
-        goal = requested_goal(pose, Frame(frame), bool(relative), target, s.frames, context.frames, s.active.home)
+        goal = requested_goal(pose, Frame(frame), bool(relative), s.target, s.frames, context.frames, s.active.home)
         if isinstance(goal, str):
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, goal))
         return plan_path(context, s.trajectory, [Waypoint(goal, duration, speed)], s.frames)

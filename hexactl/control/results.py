@@ -84,6 +84,7 @@ class CommandResult:
 
 
 DEADMAN_LAPSED = "the deadman lapsed (no renewal in time)"
+JOG_RELEASED = "released"
 
 
 def jog_ended_message(jog: int, reason: str | None) -> str:

@@ -95,3 +95,11 @@ class CoreSnapshot:
     wave: WaveProgress | None = None  # the wave playing, or how the last one ended
     stream: StreamProgress | None = None  # the pose stream under way
     last_stream: StreamReport | None = None  # how the last stream ended
+
+    @property
+    def target(self) -> RelativeMmRad | ToolInWorkMmRad:
+        """Where the motion under way is headed as someone aimed it, in the generator's
+        coordinates: a move's or a waypoint's goal; where the platform is at rest, and while
+        it jogs (a jog's plan ends at its horizon or on the limit ahead: no one's aim). A
+        relative move, and a wave validated under way, start from it."""
+        return self.goal if self.goal is not None and self.jog is None else self.trajectory.position

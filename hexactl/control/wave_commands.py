@@ -43,8 +43,7 @@ class WaveCommands:
     def _plan(self, s: CoreSnapshot, spec: WaveSpec) -> WavePlan | Refusal:
         if not isinstance(spec, WaveSpec):
             return Refusal(ErrorCode.INVALID_ARGUMENT, "a wave is a WaveSpec")
-        # about where the platform comes to rest: the goal of a move under way, else where it is
-        return plan_wave(self._context(s), s.goal if s.goal is not None else s.trajectory.position, s.frames, spec)
+        return plan_wave(self._context(s), s.target, s.frames, spec)
 
 
 def _result(plan: WavePlan | Refusal, message: str) -> CommandResult:

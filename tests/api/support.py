@@ -145,7 +145,7 @@ class FakeController:
                                      predicted_accuracy=self.accuracy)
 
     def jog(self, velocity: Sequence[float], frame: Frame = Frame.ZERO, *, renews: int | None = None,
-            deadline_ns: int | None = None) -> CommandResult:
+            restarts: int | None = None, deadline_ns: int | None = None) -> CommandResult:
         self._call("jog", list(velocity), frame)
         return CommandResult.success("jogging", jog=1, goal=[5.0, 0, 0, 0, 0, 0], speed=1.0,
                                      end="the soft limit on x at 5", to_limit=True, deadman_s=0.2)

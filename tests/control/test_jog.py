@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from hexactl.control.config import ControllerConfig
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import DEADMAN_LAPSED, CommandResult, ErrorCode
+from hexactl.control.submitter import commands_from
 from hexactl.kinematics.frames import apply, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_poses
@@ -98,14 +99,48 @@ def test_the_deadman_interval_is_configurable(make_rig) -> None:
     assert rig.controller.snapshot.jog.phase.value == "braking"
 
 
-def test_a_release_brakes_and_ends_the_jog(rig) -> None:
+def test_a_release_brakes_and_ends_the_jog_said_as_released_by_whom(rig) -> None:
+    """Found from outside: a release was carried out as a stop, recorded ``stop`` and the
+    jog ``stopped``, so an operator's own release could not be told from another's stop."""
     rig.enabled()
-    _hold(rig, [10, 0, 0, 0, 0, 0], 250)
-    released = rig.controller.jog([0, 0, 0, 0, 0, 0])
+    number = _hold(rig, [10, 0, 0, 0, 0, 0], 250)[0].details["jog"]
+    with commands_from("hexactl ann@bench-2"):
+        released = rig.controller.jog([0, 0, 0, 0, 0, 0])
     assert released.ok and released.message == "jog released: braking to rest"
     rig.settle()
-    assert rig.controller.snapshot.last_jog.reason == "stopped"
+    assert rig.controller.snapshot.last_jog.reason == "released"
+    events = [(e.code, e.message, e.sender) for e in rig.controller.snapshot.events[-2:]]
+    assert events == [("jog_released", f"jog {number} released: braking to rest", "hexactl ann@bench-2"),
+                      ("jog_ended", f"jog {number}: released", None)]
     assert rig.controller.jog([0] * 6).message == "nothing to release: no jog is under way"
+
+
+def test_a_release_brakes_only_a_jog_not_the_move_that_took_it_over(rig) -> None:
+    """A release that reaches the loop after another client's move replaced the jog leaves
+    that move alone (it used to stop whatever moved)."""
+    rig.enabled()
+    rig.controller.jog([10, 0, 0, 0, 0, 0])
+    rig.run(50)
+    assert rig.controller.move([0, 0, 20, 0, 0, 0], relative=True).ok
+    rig.run()
+    assert rig.controller.jog([0] * 6).ok  # the page's release, late
+    rig.settle()
+    assert rig.controller.snapshot.pose_command[2] == pytest.approx(20.0, abs=1e-6)  # the move went to its goal
+
+
+def test_a_release_reaches_the_loop_even_before_the_snapshot_shows_the_jog(rig, monkeypatch) -> None:
+    """Found from outside: hexactl jog's final release found only the previous jog, braking,
+    in the facade's snapshot, answered "nothing to release", and the jog just restarted ran
+    until its deadman lapsed. The loop decides."""
+    rig.enabled()
+    before = rig.controller.snapshot  # no jog in it
+    rig.controller.jog([10, 0, 0, 0, 0, 0])
+    rig.run(20)
+    monkeypatch.setattr(rig.controller._jogs, "_snapshot", lambda: before)
+    assert rig.controller.jog([0] * 6).message == "nothing to release: no jog is under way"
+    rig.run()
+    assert rig.controller.snapshot.jog.phase.value == "braking"
+    assert rig.controller.snapshot.jog.reason == "released"
 
 
 def test_a_new_velocity_replans_the_jog_under_way(rig) -> None:
@@ -149,6 +184,25 @@ def test_a_jog_is_refused_when_it_cannot_run(rig) -> None:
     rig.run(2)
     locked = rig.controller.jog([1, 0, 0, 0, 0, 0])
     assert locked.error.value == "leg_locked" and "unlock first" in locked.message
+
+
+@pytest.mark.parametrize("tiny", [1e-320, 5e-324, 1e-7])
+def test_a_velocity_too_slow_to_move_is_refused_naming_the_floor_not_an_internal_error(rig, tiny: float) -> None:
+    """Found from outside: a subnormal component (1e-320 mm/s) made the planner's step
+    overflow to infinity and the jog fail with internal_error; 1e-6 on an axis still jogs,
+    and a tiny component beside a real one is no problem."""
+    rig.enabled()
+    for axis in (0, 5):
+        velocity = [0.0] * 6
+        velocity[axis] = tiny
+        refused = rig.controller.jog(velocity)
+        assert refused.error == "invalid_argument" and "too slow to move: at least 1e-06" in refused.message, refused
+    assert rig.controller.jog([tiny, 0, 0, 0, 0, 1e-6]).ok
+    rig.controller.jog([0] * 6)
+    rig.settle()
+    assert rig.controller.jog([10, tiny, 0, 0, 0, 0]).ok
+    beyond = rig.controller.jog([10000.0001, 0, 0, 0, 0, 0])
+    assert beyond.message.startswith("a jog velocity component of 10000.0001 is beyond 10000"), beyond.message
 
 
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -380,3 +434,17 @@ def test_a_jog_released_while_it_decelerates_onto_a_soft_limit_never_passes_it(m
     for cycle in range(118, 220):  # decelerating from cycle 124, at rest on the limit (-5 + 2 nm) from 214
         xs = _released_at(make_rig, cycle)
         assert xs.min() >= -5.0, (cycle, xs.min())
+
+
+def test_a_relative_move_during_a_jog_starts_from_where_the_platform_is_not_the_jogs_horizon(rig) -> None:
+    """Found from outside: a +10 mm relative move sent at x 5.5 during a 10 mm/s jog went to
+    x 50, 10 mm beyond the jog's 4 s horizon (40 mm), which no one aimed at."""
+    rig.enabled()
+    assert rig.controller.jog([10, 0, 0, 0, 0, 0]).details["end"].startswith("the horizon")
+    rig.run(250)  # 0.5 s
+    x = rig.controller.snapshot.trajectory.position[0]
+    assert 2.0 < x < 10.0
+    moved = rig.controller.move([10, 0, 0, 0, 0, 0], relative=True)
+    assert moved.ok and moved.details["goal"][0] == pytest.approx(x + 10.0, abs=1e-6), (x, moved.details["goal"])
+    rig.settle()
+    assert rig.controller.snapshot.pose_command[0] == pytest.approx(x + 10.0, abs=1e-6)

@@ -52,7 +52,7 @@ def playing(client: HexactlClient) -> None:
 
 
 def load(client: HexactlClient, fields: dict[str, str]) -> dict:
-    """``load_calibration``'s reply, asked again as its ``stale_plan`` says ("plan again"):
+    """``load_calibration``'s reply, asked again after a ``stale_plan`` (nothing here stops):
     the motion went on to its next segment, or the tour began again, while the swap's ramp
     was planned (on a loaded host the API plans from an older snapshot)."""
     return wait_for(lambda: None if (reply := client.request("load_calibration", **fields)).get("error", {}).get("code")

@@ -801,7 +801,7 @@ class LoopEvent(_Message):
                      "reader missed; fewer than the last seen: the service has restarted, as the events reply's run says)")
     t: float = Field(description="when, s, on the clock of the record's t")
     code: str = Field(description="what, snake_case: a command carried out (enabled, disabled, stop, reset, move, "
-                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started, stream_closed), one that started something "
+                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started, stream_closed, jog_released), one that started something "
                       "(sequence_started, jog_started, stream_opened, calibration_swapped), estop, a fault's code, "
                       "command_refused, the end of something (sequence_*, jog_ended, stream_ended), "
                       "command_link_silent, …")
