@@ -387,7 +387,9 @@ export function setupControls(ctx) {
     if (held && held === jog) {
       if (reply.ok && reply.jog != null) { held.number = reply.jog; held.lapsed = null; }
       if (!reply.ok && reply.error && reply.error.code === 'jog_ended') {
-        if ((reply.error.details || {}).lapsed) { held.lapsed = held.number; held.number = null; }
+        // several renewals of the lapsed jog may be answered so: the restart names that jog, whichever reply came first
+        const details = reply.error.details || {};
+        if (details.lapsed) { held.lapsed = details.jog ?? held.number ?? held.lapsed; held.number = null; }
         else {
           releaseJog(false);
           setResult(jogStatus, 'refused', describeError(reply.error));
