@@ -41,11 +41,29 @@ def wait_for(link: CanActuatorLink, condition, what: str):
 
 
 def test_threaded_runner_serves_a_link_in_the_same_process(nominal, truth):
-    spec = "virtual:hexactl-threaded-runner"
+    """Feedback and heartbeats, then ENABLE and an E-stop, through the runner's thread. (A
+    50-cycle watchdog and attempts, as below: found red in the full suite on a loaded host,
+    where this test's own sender, held up past the default 10 ms watchdog, let the firmwares
+    stop as designed; such an attempt says nothing of the runner.)"""
+    for attempt in range(1, ATTEMPTS + 1):
+        runner, failed, longest_gap_s = _enable_then_estop(nominal, truth, f"virtual:hexactl-threaded-runner-{attempt}")
+        if failed is None or longest_gap_s < WATCHDOG_CYCLES / 500:
+            break
+        print(f"attempt {attempt}: {failed}, this test's sender held up {longest_gap_s:.3f} s, a watchdog period")
+    assert failed is None, failed
+    assert runner.send_failures == 0
+    assert [firmware.position_um / 1000 for firmware in runner.firmwares] == pytest.approx(
+        zero_posture_readings_mm(truth), abs=0.001)
+
+
+def _enable_then_estop(nominal, truth, spec: str) -> tuple[ActuatorBus, str | None, float]:
+    """One run: the runner, what was not reached (None: all was), and the longest gap
+    between two of this test's set-point sends, s."""
     start = zero_posture_readings_mm(truth)
     runner = ActuatorBus(open_bus(spec), make_firmwares(start, actuator_params_for(nominal))).start()
+    longest_gap_s = 0.0
     try:
-        with CanActuatorLink.open(spec) as link:
+        with CanActuatorLink.open(spec, LinkConfig(watchdog_cycles=WATCHDOG_CYCLES)) as link:
             snapshot = wait_for(
                 link,
                 lambda s: all(abs(p - q) <= 0.0005 for p, q in zip(s.positions_mm, start))
@@ -55,23 +73,29 @@ def test_threaded_runner_serves_a_link_in_the_same_process(nominal, truth):
             held = snapshot.positions_mm
             assert link.send_command(None, ActuatorCommand.ENABLE)
             counter = 0
+            sent_s = time.monotonic()
 
-            def stream_until(condition, what):
-                nonlocal counter
+            def stream_until(state: ActuatorState) -> bool:
+                nonlocal counter, sent_s, longest_gap_s
                 end = time.monotonic() + DEADLINE_S
-                while not condition(link.read_feedback()):
-                    assert time.monotonic() < end, what
+                while not all(a.state is state for a in link.read_feedback().actuators):
+                    if time.monotonic() > end:
+                        return False
                     link.send_setpoints(counter, held)
                     counter += 1
+                    now = time.monotonic()
+                    longest_gap_s, sent_s = max(longest_gap_s, now - sent_s), now
                     time.sleep(0.002)
+                return True
 
-            stream_until(lambda s: all(a.state is ActuatorState.ENABLED for a in s.actuators), "ENABLED")
+            if not stream_until(ActuatorState.ENABLED):
+                return runner, "not all ENABLED", longest_gap_s
             link.send_estop()
-            stream_until(lambda s: all(a.state is ActuatorState.ESTOP for a in s.actuators), "ESTOP")
+            if not stream_until(ActuatorState.ESTOP):
+                return runner, "not all in ESTOP", longest_gap_s
     finally:
         runner.close()
-    assert runner.send_failures == 0
-    assert [firmware.position_um / 1000 for firmware in runner.firmwares] == pytest.approx(start, abs=0.001)
+    return runner, None, longest_gap_s
 
 
 WATCHDOG_CYCLES = 50
