@@ -231,6 +231,11 @@ def test_one_escape_with_a_drop_down_list_open_sends_the_estop(rig, selector) ->
 
 # ---------------------------------------------------------------- F6: only at rest
 
+OTHER_MOVE_S = 60.0
+"""Another client's move, stopped once the page has answered: long enough that the page's
+answer comes while it runs on a loaded host (with a 3 s move it came after the move, once
+in the full suite beside another, and rightly armed Go)."""
+
 
 def test_go_is_not_armed_while_another_clients_move_carries_the_platform(rig) -> None:
     """Found from outside: validated 1 s into another client's move to a fixed goal, Go was
@@ -243,12 +248,13 @@ def test_go_is_not_armed_while_another_clients_move_carries_the_platform(rig) ->
             rig.fill(f"#move-{axis}", value)
         Select(rig.shown("#move-frame")).select_by_value("zero")
         rig.fill("#move-duration", 1)
-        rig.client.call("move", pose=[0, 0, z + 20, 0, 0, 0], duration=3.0)  # another client's
+        rig.client.call("move", pose=[0, 0, z + 20, 0, 0, 0], duration=OTHER_MOVE_S)  # another client's
         wait_for(lambda: rig.page("return window.hexactlDashboard.record.motion") == "moving", "moving on the page")
         rig.click("#move-validate")
         said = wait_for(lambda: move_result(rig) != "validating…" and move_result(rig), "the validation's answer")
         assert said.startswith("valid: duration") and "Go is not armed: the platform is moving" in said, said
         assert not go_enabled(rig)
+        rig.client.call("stop")
         wait_for(lambda: rig.status()["motion"] == "holding", "the move over")
         assert not go_enabled(rig)
 
@@ -273,13 +279,14 @@ def test_apply_is_not_armed_by_a_preview_made_while_the_platform_moves(rig) -> N
             rig.enabled_from_the_page()
             previewed_in_page(rig, calibrated(0.5, "review 2"))   # the file listed, selected; Apply armed at rest
             z = rig.status()["pose_command"][2]
-            rig.client.call("move", pose=[0, 0, z + 20, 0, 0, 0], duration=3.0)  # another client's
+            rig.client.call("move", pose=[0, 0, z + 20, 0, 0, 0], duration=OTHER_MOVE_S)  # another client's
             wait_for(lambda: rig.page("return window.hexactlDashboard.record.motion") == "moving", "moving on the page")
             cleared(rig, "#calibration-change")
             rig.click("#calibration-preview")
             said = wait_for(lambda: text(rig, "#calibration-change") not in ("", "previewing…")
                             and text(rig, "#calibration-change"), "the preview's answer")
             assert not apply_enabled(rig) and "preview again once it is at rest" in said, said
+            rig.client.call("stop")
             wait_for(lambda: rig.status()["motion"] == "holding", "the move over")
             assert not apply_enabled(rig)
         finally:
