@@ -27,14 +27,15 @@ MAX_COMMANDS_PER_CYCLE = 8
 KEPT_OUTCOMES = 64
 """Recent command outcomes kept for the snapshot."""
 
-Handler = Callable[[cmd.Command], Refusal]
+Handler = Callable[[cmd.Command], Refusal | cmd.CarriedOut]
 
 
 class CommandInbox:
     """Commands waiting for the loop; ``handlers`` carry out each command type (the
-    refusal, or None when done); ``log(code, message)`` notes refusals and the commands'
-    own events. While a command is carried out, :attr:`sender` is its sender (else None):
-    every event noted meanwhile, by its handler too, is that sender's doing."""
+    refusal, or None or a :class:`~hexactl.control.commands.CarriedOut` when done);
+    ``log(code, message)`` notes refusals and the commands' own events. While a command
+    is carried out, :attr:`sender` is its sender (else None): every event noted meanwhile,
+    by its handler too, is that sender's doing."""
 
     def __init__(self, handlers: Mapping[type[cmd.Command], Handler], log: Callable[[str, str], None]) -> None:
         self.queue: deque[cmd.Command] = deque()
@@ -61,13 +62,16 @@ class CommandInbox:
     def _carry_out(self, command: cmd.Command, now_ns: int) -> None:
         deadline_ns = command.deadline_ns
         if deadline_ns is not None and now_ns > deadline_ns:
-            refusal: Refusal = ErrorCode.EXPIRED, (
+            verdict: Refusal | cmd.CarriedOut = ErrorCode.EXPIRED, (
                 f"its deadline passed {(now_ns - deadline_ns) / 1e6:.1f} ms before the loop reached it; "
                 "not carried out: send it again with a longer timeout if it is still wanted")
         else:
-            refusal = self._handlers[type(command)](command)
-        code, message = refusal if refusal else (None, "done")
-        if refusal:
+            verdict = self._handlers[type(command)](command)
+        if isinstance(verdict, cmd.CarriedOut):
+            code, message = None, verdict.message
+        else:
+            code, message = verdict if verdict else (None, cmd.DONE)
+        if code is not None:
             self._log("command_refused", f"{type(command).__name__}: {message}")
         elif (event := command.event()) is not None:
             self._log(*event)

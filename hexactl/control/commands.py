@@ -273,9 +273,23 @@ class CommandLinkHeard(Command):
     answered: ClassVar[bool] = False
 
 
+DONE = "done"
+"""The message of an :class:`Outcome` whose handler said nothing (the submitter's own stands)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CarriedOut:
+    """A handler's verdict that it carried its command out, and what it found to do, for
+    people: what the loop did can differ from what the submitter's snapshot, a report
+    older, led it to expect (a release that finds a jog only the loop has seen start)."""
+
+    message: str
+
+
 @dataclass(frozen=True, slots=True)
 class Outcome:
-    """The loop's verdict on command ``ticket``: ``code`` None when carried out."""
+    """The loop's verdict on command ``ticket``: ``code`` None when carried out, then
+    ``message`` is :data:`DONE` or the handler's :class:`CarriedOut` message."""
 
     ticket: int
     code: str | None

@@ -14,7 +14,7 @@ from hexactl.control.jog import JogPhase, restartable
 from hexactl.control.jog_planning import JOG_EXTEND_S, plan_jog
 from hexactl.control.planning import PlanningContext, Refusal
 from hexactl.control.results import DEADMAN_LAPSED, CommandResult, ErrorCode, jog_ended_message
-from hexactl.control.snapshot import ControlState, CoreSnapshot, MotionState
+from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
 from hexactl.control.telemetry import motion_remaining_s
 
@@ -39,7 +39,7 @@ class JogCommands:
         velocity, frame = tuple(float(v) for v in velocity), Frame(frame)
         s = self._snapshot()
         if not any(velocity):
-            return self._release(s)
+            return self._release()
         if refusal := preconditions.check_jog(s):
             return CommandResult.failure(*refusal)
         if restarts is not None:
@@ -101,16 +101,11 @@ class JogCommands:
         return ended if ended.details["reason"] is not None else replace(
             result, details={**result.details, "reason": None, "lapsed": False})
 
-    def _release(self, s: CoreSnapshot) -> CommandResult:
+    def _release(self) -> CommandResult:
         """Release the jog under way: sent to the loop whatever the snapshot says (it may not
-        show yet a jog just started), which brakes only a jog (another's move goes on)."""
-        if s.jog is None or s.jog.phase is JogPhase.BRAKING:
-            message = "nothing to release: no jog is under way"
-        elif s.state is not ControlState.ENABLED or s.motion is MotionState.HOLDING:
-            message = "jog released (at rest)"
-        else:
-            message = "jog released: braking to rest"
-        return self._submitter.submit(cmd.ReleaseJog, message)
+        show yet a jog just started), which brakes only a jog (another's move goes on) and
+        says what it released."""
+        return self._submitter.submit(cmd.ReleaseJog, "release sent: the loop carries it out when it runs")
 
 
 def _ended(s: CoreSnapshot, jog: int) -> CommandResult:

@@ -18,7 +18,7 @@ from hexactl.control.jog import restartable
 from hexactl.control.motion import Motion
 from hexactl.control.preconditions import CoreView, Refusal
 from hexactl.control.results import ErrorCode
-from hexactl.control.snapshot import ControlState
+from hexactl.control.snapshot import ControlState, MotionState
 
 
 class MotionCommands:
@@ -62,11 +62,14 @@ class MotionCommands:
     def _renew_jog(self, command: cmd.RenewJog) -> Refusal:
         return self._motion.jogger.renew(command.jog, command.frame, command.velocity, self._now_ns())
 
-    def _release_jog(self, command: cmd.ReleaseJog) -> Refusal:
+    def _release_jog(self, command: cmd.ReleaseJog) -> cmd.CarriedOut:
         jog = self._motion.jogger.progress
-        if self._motion.release_jog():
-            self._log("jog_released", f"jog {jog.jog} released: braking to rest")
-        return None
+        at_rest = self._view.motion is MotionState.HOLDING
+        if not self._motion.release_jog():
+            return cmd.CarriedOut("nothing to release: no jog is under way")
+        message = f"jog {jog.jog} released" + (" (at rest)" if at_rest else ": braking to rest")
+        self._log("jog_released", message)
+        return cmd.CarriedOut(message)
 
     def _stop(self, command: cmd.Stop) -> Refusal:
         self._motion.stop()

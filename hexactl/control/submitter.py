@@ -69,7 +69,8 @@ class CommandSubmitter:
     def submit(self, factory: Callable[[int], cmd.Command], message: str, *, deadline_ns: int | None = None,
                **details: object) -> CommandResult:
         """Queue the command ``factory`` builds for its ticket; with the loop running by
-        itself, wait for its verdict (``message`` and ``details`` join an accepted one).
+        itself, wait for its verdict (``details`` join an accepted one, and ``message`` unless
+        its handler told what it did: :class:`~hexactl.control.commands.CarriedOut`).
         With ``deadline_ns`` (monotonic) the loop refuses it as ``expired`` once that has
         passed. It carries the sender of :func:`commands_from`. ``loop_failed`` if the loop died;
         ``loop_silent`` if it has not reported for :data:`REPORT_SILENT_S`
@@ -89,7 +90,8 @@ class CommandSubmitter:
         while time.monotonic() < deadline:
             verdict = self.outcome(ticket)
             if verdict is not None:
-                return CommandResult(verdict.ok, verdict.error, message if verdict.ok else verdict.message,
+                told = not verdict.ok or verdict.message != cmd.DONE  # the loop's word over the snapshot's
+                return CommandResult(verdict.ok, verdict.error, verdict.message if told else message,
                                      {**verdict.details, **details})
             time.sleep(self._config.loop.period_s / 2)
         return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "

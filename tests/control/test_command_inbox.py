@@ -61,3 +61,13 @@ def test_the_last_outcomes_are_kept():
         rig.inbox.queue.append(cmd.Stop(ticket))
         rig.inbox.run(0)
     assert [o.ticket for o in rig.inbox.outcomes] == list(range(5, KEPT_OUTCOMES + 5))
+
+
+def test_a_handler_may_say_what_it_did_and_the_outcome_carries_it():
+    rig = Rig()
+    rig.inbox = CommandInbox({cmd.ReleaseJog: lambda command: cmd.CarriedOut("jog 4 released")},
+                             lambda code, message: rig.log.append((code, message)))
+    rig.inbox.queue.append(cmd.ReleaseJog(9))
+    rig.inbox.run(0)
+    assert rig.inbox.outcomes == (cmd.Outcome(9, None, "jog 4 released"),)
+    assert rig.log == []  # carried out: not a refusal

@@ -106,13 +106,16 @@ def test_a_release_brakes_and_ends_the_jog_said_as_released_by_whom(rig) -> None
     number = _hold(rig, [10, 0, 0, 0, 0, 0], 250)[0].details["jog"]
     with commands_from("hexactl ann@bench-2"):
         released = rig.controller.jog([0, 0, 0, 0, 0, 0])
-    assert released.ok and released.message == "jog released: braking to rest"
+    assert released.ok
     rig.settle()
+    assert rig.controller.outcome(released.details["ticket"]).message == f"jog {number} released: braking to rest"
     assert rig.controller.snapshot.last_jog.reason == "released"
     events = [(e.code, e.message, e.sender) for e in rig.controller.snapshot.events[-2:]]
     assert events == [("jog_released", f"jog {number} released: braking to rest", "hexactl ann@bench-2"),
                       ("jog_ended", f"jog {number}: released", None)]
-    assert rig.controller.jog([0] * 6).message == "nothing to release: no jog is under way"
+    again = rig.controller.jog([0] * 6)
+    rig.run()
+    assert rig.controller.outcome(again.details["ticket"]).message == "nothing to release: no jog is under way"
 
 
 def test_a_release_brakes_only_a_jog_not_the_move_that_took_it_over(rig) -> None:
@@ -131,16 +134,18 @@ def test_a_release_brakes_only_a_jog_not_the_move_that_took_it_over(rig) -> None
 def test_a_release_reaches_the_loop_even_before_the_snapshot_shows_the_jog(rig, monkeypatch) -> None:
     """Found from outside: hexactl jog's final release found only the previous jog, braking,
     in the facade's snapshot, answered "nothing to release", and the jog just restarted ran
-    until its deadman lapsed. The loop decides."""
+    until its deadman lapsed. The loop decides, and says what it did: the reply, from the
+    facade's snapshot, said "nothing to release" while the loop braked the jog."""
     rig.enabled()
     before = rig.controller.snapshot  # no jog in it
-    rig.controller.jog([10, 0, 0, 0, 0, 0])
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
     rig.run(20)
     monkeypatch.setattr(rig.controller._jogs, "_snapshot", lambda: before)
-    assert rig.controller.jog([0] * 6).message == "nothing to release: no jog is under way"
+    released = rig.controller.jog([0] * 6)
     rig.run()
     assert rig.controller.snapshot.jog.phase.value == "braking"
     assert rig.controller.snapshot.jog.reason == "released"
+    assert rig.controller.outcome(released.details["ticket"]).message == f"jog {number} released: braking to rest"
 
 
 def test_a_new_velocity_replans_the_jog_under_way(rig) -> None:

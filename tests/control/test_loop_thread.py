@@ -53,6 +53,23 @@ def test_the_thread_runs_commands_to_completion(geometry, rate_hz):
     assert gc.isenabled() == gc_was_enabled and sys.getswitchinterval() == switch_before
 
 
+
+def test_a_release_is_answered_with_what_the_loop_released(geometry):
+    """Found from outside: the reply came from the facade's snapshot, a report behind the
+    loop, and said "nothing to release" for a jog just started that the loop then braked."""
+    actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, [0] * 6)))
+    controller = LocalController.in_thread(actuators, geometry, "nominal")
+    controller.start()
+    try:
+        assert controller.enable().ok
+        number = controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+        released = controller.jog([0] * 6)  # at once: the facade's snapshot may not show the jog yet
+        assert released.ok and released.message in (f"jog {number} released: braking to rest",
+                                                     f"jog {number} released (at rest)")
+        assert controller.jog([0] * 6).message == "nothing to release: no jog is under way"
+    finally:
+        controller.shutdown()
+
 def test_realtime_set_up_falls_back_and_says_why(monkeypatch):
     def refuse(*args):
         raise PermissionError(1, "Operation not permitted")
