@@ -88,7 +88,10 @@ JOG_RELEASED = "released"
 
 
 def jog_ended_message(jog: int, reason: str | None) -> str:
-    """Why a renewal of ``jog``, which brakes or has ended (``reason``, if known), is refused."""
-    said = f" ({reason})" if reason else ""
-    return (f"jog {jog} has ended{said}: it is not renewed; send jog without renews to start a new one (a held button: "
+    """Why a renewal of ``jog``, which brakes or has ended (``reason``, if known), is refused.
+    Without a reason the loop knows nothing of it: it ended before the last jog, or the
+    number names no jog (a client's mistake, which "has ended" would hide)."""
+    state = (f"has ended ({reason})" if reason
+             else "is not under way (it ended before the last jog, or no jog has that number)")
+    return (f"jog {jog} {state}: it is not renewed; send jog without renews to start a new one (a held button: "
             "release it and press again)")

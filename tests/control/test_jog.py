@@ -294,6 +294,20 @@ def test_a_renewal_of_a_jog_that_lapsed_says_so(rig) -> None:
     assert refused.error == "jog_ended" and refused.details["reason"] == DEADMAN_LAPSED and refused.details["lapsed"]
 
 
+
+def test_a_renewal_naming_no_jog_the_loop_knows_does_not_say_it_ended(rig) -> None:
+    """Found from outside: a renewal naming a number no jog ever had (a client's mistake)
+    was refused "jog N has ended", which hid the mistake."""
+    rig.enabled()
+    number = rig.controller.jog([10, 0, 0, 0, 0, 0]).details["jog"]
+    rig.run()
+    refused = rig.controller.jog([10, 0, 0, 0, 0, 0], renews=number + 1000)
+    rig.run()
+    verdict = rig.controller.outcome(refused.details["ticket"])
+    assert verdict.error == "jog_ended"
+    assert verdict.message.startswith(f"jog {number + 1000} is not under way (it ended before the last jog, or no "
+                                      "jog has that number)"), verdict.message
+
 @pytest.mark.parametrize("braked", [False, True])
 def test_a_stop_after_a_lapse_ends_the_held_jog_for_good(rig, braked: bool) -> None:
     """Found in the full suite on a busy host: the dashboard's renewals came late, the jog
