@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from hexactl.adapters.cli.jog_commands import _renew
+import pytest
+
+from hexactl.adapters.cli.jog_commands import _pace, _renew
 
 FIELDS = {"velocity": [0.0, 0.0, 5.0, 0.0, 0.0, 0.0], "frame": "zero"}
 
@@ -53,3 +55,10 @@ def test_a_lapsed_jog_starts_again_and_a_stopped_one_ends_the_command() -> None:
     stopped = ScriptedService(stop)
     assert _renew(stopped, FIELDS, 7, for_s=1.0, every_s=0.005) == stop
     assert len(stopped.sent) == 1
+
+
+@pytest.mark.parametrize(("speed", "said"), [(0.5, "50%"), (0.0996, "10%"), (2 / 600, "0.33%"), (0.025, "2.5%"),
+                                             (1e-7, "under 0.01%")])
+def test_a_jogs_pace_is_said_in_two_digits_below_ten_percent(speed: float, said: str) -> None:
+    """A jog at 2 mm/s of 600 was said to run at "0% of the motion limits"."""
+    assert _pace(speed) == f"at the velocity asked ({said} of the motion limits)"

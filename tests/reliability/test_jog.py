@@ -93,7 +93,7 @@ def test_the_jog_command_line_jogs_for_a_while_and_releases(client: HexactlClien
         assert exit_code == 0, out
         assert "jogging (jog " in out and "released; at rest at" in out
         limit_z = service.controller.config.motion.max_velocity[2]
-        assert f"at the velocity asked ({10 / limit_z:.0%} of the motion limits)" in out  # 10 mm/s asked
+        assert f"at the velocity asked ({1000 / limit_z:.2g}% of the motion limits)" in out  # 10 mm/s asked: 2.5 %
         final = status(client)
         top = client.call("geometry")["geometry"]["limits"]["pose_max"][2]
         # Up, and released short of the limit it heads for; how far past 10 mm the release's

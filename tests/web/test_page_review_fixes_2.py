@@ -132,7 +132,7 @@ def test_no_jog_renewal_goes_before_the_reply_to_the_jog_that_starts_it(rig) -> 
 
     def scenario() -> None:
         rig.enabled_from_the_page()
-        rig.fill("#jog-speed", 2)
+        rig.fill("#jog-speed", 0.5)
         since = count(rig)
         rig.page("window.hexactlTestSent.holdFirstJogReplyMs = 150")  # under the 0.2 s deadman
         button = jog_button(rig)
@@ -140,6 +140,11 @@ def test_no_jog_renewal_goes_before_the_reply_to_the_jog_that_starts_it(rig) -> 
         try:
             wait_for(lambda: any("renews" in m for m in messages(rig, since) if m.get("cmd") == "jog"),
                      "a renewal naming its jog", seen=lambda: messages(rig, since))
+            # a slow jog's pace, under 1 % of the motion limits, in two digits (it said "0 %")
+            percent = wait_for(lambda: (rig.status()["jog"] or {}).get("speed"), "the jog's pace") * 100
+            assert percent < 1, percent
+            pace = f", {percent:.2g} % of the motion limits)"
+            wait_for(lambda: pace in text(rig, "#jog-status"), "the jog's pace said", seen=lambda: text(rig, "#jog-status"))
         finally:
             ActionChains(rig.driver).release(button).perform()
         first, *later = [m for m in messages(rig, since) if m.get("cmd") == "jog"]

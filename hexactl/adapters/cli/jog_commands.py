@@ -110,7 +110,9 @@ def run_jog(arguments: argparse.Namespace) -> int:
 def _pace(speed: float) -> str:
     """The jog's pace from its velocity scale (the fraction of the motion limits it runs at)."""
     if speed < 1.0:
-        return f"at the velocity asked ({speed:.0%} of the motion limits)"
+        percent = speed * 100  # two significant digits below 10 %: a slow jog is not "0 %"
+        share = f"{percent:.0f}" if percent >= 9.95 else f"{percent:.2g}" if percent >= 0.01 else "under 0.01"
+        return f"at the velocity asked ({share}% of the motion limits)"
     return "at the motion limits (the velocity asked reaches them)"
 
 

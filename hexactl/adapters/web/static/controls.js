@@ -105,6 +105,13 @@ export function parseSix(text, allowNull, what) {
   });
 }
 
+/** A percentage for people: whole below 100 from 10 on, two significant digits below (a slow jog is not "0 %"), as `hexactl jog` says it. */
+function percentText(percent) {
+  if (percent >= 9.95) return `${percent.toFixed(0)} %`;
+  if (percent >= 0.01) return `${Number(percent.toPrecision(2))} %`;
+  return 'under 0.01 %';
+}
+
 function timestampName() {
   const d = new Date();
   const p = (n) => String(n).padStart(2, '0');
@@ -401,7 +408,7 @@ export function setupControls(ctx) {
     if (reply.ok) {
       const extra = [];
       if (reply.end) extra.push(`to ${reply.end}`);
-      if (typeof reply.speed === 'number') extra.push(`${(reply.speed * 100).toFixed(0)} % of the motion limits`);
+      if (typeof reply.speed === 'number') extra.push(`${percentText(reply.speed * 100)} of the motion limits`);
       setResult(jogStatus, jog ? 'moving' : null, `${reply.message ?? 'ok'}${extra.length ? ` (${extra.join(', ')})` : ''}`);
     } else {
       setResult(jogStatus, 'refused', describeError(reply.error));
