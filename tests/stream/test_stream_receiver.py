@@ -402,3 +402,31 @@ def test_a_target_dropped_on_the_way_to_the_loop_is_not_counted_forwarded() -> N
              "the target dropped on the way counted")
         view = receiver.view()
         assert view["forwarded"] == 0 and view["clamped"] == 0 and view["loop_behind"] == 1
+
+
+def test_after_a_stream_closes_the_counts_still_name_it_until_the_next_opens() -> None:
+    """Found from outside: once the stream closed, ``stream`` became null while the counts
+    beside it were still that stream's: a reader could not tell whose they were."""
+    controller = RecordingController()
+    progress = [StreamProgress(7, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)]
+    with zmq.Context() as context:
+        receiver = StreamReceiver(context, "tcp://127.0.0.1:*", None, controller.stream_target, PERIOD_S,
+                                  lambda: progress[0])
+        receiver.start()
+        push = context.socket(zmq.PUSH)
+        push.linger = 0
+        push.connect(receiver.endpoint)
+        try:
+            sent(push.send, encode(1, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [1], "sample 1")
+            assert receiver.view()["stream"] == 7
+            progress[0] = None  # closed
+            sent(push.send, encode(2, time.monotonic(), [0.0] * 6), lambda: receiver.counters.no_stream == 1,
+                 "sample 2 taken with no stream open")
+            view = receiver.view()
+            assert (view["stream"], view["forwarded"], view["no_stream"]) == (7, 1, 1), view
+            progress[0] = StreamProgress(8, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
+            wait_for(lambda: receiver.view()["stream"] == 8, "the next stream's counts")
+            assert receiver.view()["forwarded"] == 0
+        finally:
+            push.close()
+            receiver.close()

@@ -756,7 +756,8 @@ class StreamInputTelemetry(_Message):
 
     running: bool = Field(description="the input takes samples; false: it stopped (the service's log says why) and "
                           "stream_open is refused until the service restarts")
-    stream: int | None = Field(description="the stream the counts are for; null before the first")
+    stream: int | None = Field(description="the stream the counts are for: the one open, or the last once it "
+                               "closed (telemetry's stream says whether one is open); null before the first")
     received: int = Field(ge=0, description="messages read, well formed or not")
     malformed: int = Field(ge=0, description="not a sample (docs/stream.md), dropped")
     out_of_order: int = Field(ge=0, description="a sequence not above the last one taken: reordered or duplicated, "

@@ -116,7 +116,8 @@ class StreamReceiver(SocketThread):
         self._period_ns = round(period_s * 1e9)
         self._progress = progress
         self.counters = StreamCounters()
-        self._stream: int | None = None  # the loop's stream the counters are for
+        self._stream: int | None = None  # the loop's stream open now
+        self._counted: int | None = None  # the stream the counters are for: the open one, or the last
         self._last_sequence: int | None = None
         self._udp_counts: collections.OrderedDict[Any, int] = collections.OrderedDict()  # this stream's recent senders
         self._udp_sender: Any = None  # the first to send SENDER_DATAGRAMS: the one followed once another has too
@@ -149,7 +150,7 @@ class StreamReceiver(SocketThread):
         stamps its samples with this host's CLOCK_MONOTONIC, as tools/bench_stream.py does)."""
         now = time.monotonic_ns()
         c = self.counters
-        return {"running": self.running, "stream": self._stream, "received": c.received, "malformed": c.malformed,
+        return {"running": self.running, "stream": self._counted, "received": c.received, "malformed": c.malformed,
                 "out_of_order": c.out_of_order, "other_sender": c.other_sender, "no_stream": c.no_stream,
                 "coalesced": c.coalesced, "forwarded": c.forwarded, "clamped": c.clamped, "loop_behind": c.loop_behind,
                 "failed": c.failed, "last_problem": c.last_problem,
@@ -331,6 +332,7 @@ class StreamReceiver(SocketThread):
                 self._age_ns.clear()
                 self._arrived_ns.clear()
                 self._taken = 0
+                self._counted = stream
             self._stream = stream
             self._pending = None
         if progress is not None and progress.targets != self._taken and progress.latency_ns is not None:
