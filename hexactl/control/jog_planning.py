@@ -35,14 +35,16 @@ from hexactl.control.planning import (
     OUTSIDE_SOFT_LIMITS,
     PlanningContext,
     Refusal,
+    StartExcess,
     Waypoint,
     plan_path,
+    soft_limits_broken,
     tolerated_excess,
 )
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
-from hexactl.kinematics.frames import Frames, tools_in_work
+from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.workspace import Violation, check_poses
 
@@ -82,16 +84,12 @@ def plan_jog(context: PlanningContext, start: KinematicState, start_frames: Fram
         assert not isinstance(reached, str), "a relative move is always a goal"
         return reached
 
-    # a hardware limit it starts beyond (by a hair, held on it): the jog may go back inside, no further out
-    tolerated = tolerated_excess(context.active.geometry,
-                                 relative_poses(frames, np.array([goal(0.0).in_radians()]), np.asarray(home))[0])
+    # a limit it starts beyond (by a hair, held on it): the jog may go back inside, no further out
+    tolerated = tolerated_excess(context, relative_poses(frames, np.array([goal(0.0).in_radians()]), np.asarray(home))[0])
 
     def broken(seconds: Sequence[float]) -> list[list[Violation]]:
         return _violations_each(context, frames, [goal(s).in_radians() for s in seconds], tolerated)
 
-    if at_start := broken([0.0])[0]:  # the soft limits: they are the operator's to widen
-        return Refusal(ErrorCode.PATH_VIOLATION, f"the platform is outside its limits ({at_start[0].message}): "
-                       f"{OUTSIDE_SOFT_LIMITS}")
     step_s = _step_s(context, velocity)
     candidates = np.arange(1, ceil(JOG_HORIZON_S / step_s) + 1) * step_s
     first = next((n for n, found in enumerate(broken(candidates)) if found), None)
@@ -108,8 +106,9 @@ def plan_jog(context: PlanningContext, start: KinematicState, start_frames: Fram
         # a hair inside: the trajectory's samples reach the goal only to rounding (~1e-13)
         seconds, end, to_limit = max(0.0, inside - step_s * BOUNDARY_TOLERANCE), _limit_name(broken([outside])[0][0]), True
         if seconds == 0.0 and tolerated is not None:  # no goal inside the limits this way: none to rest on
-            return Refusal(ErrorCode.PATH_VIOLATION, f"the platform is a hair beyond the limit ahead already "
-                           f"({broken([outside])[0][0].message}): jog the other way, back inside")
+            return Refusal(ErrorCode.PATH_VIOLATION, f"the platform is beyond the limit ahead already "
+                           f"({broken([outside])[0][0].message}): jog the other way, back inside"
+                           + (f" ({OUTSIDE_SOFT_LIMITS})" if tolerated.soft else ""))
     # At the limit already (no travel): the pace of the velocity asked, over a step of it.
     paced_s = seconds if seconds > 0.0 else step_s
     speed = _speed(context, origin, goal(paced_s).in_radians(), paced_s)
@@ -151,17 +150,16 @@ def _limit_name(violation: Violation) -> str:
 
 
 def _violations_each(context: PlanningContext, frames: Frames | None, positions: Sequence[Sequence[float]],
-                     tolerated: NDArray | None = None) -> list[list[Violation]]:
-    """For each position (mm, rad, in the coordinates of ``frames``), every hardware limit
-    it breaks by more than ``tolerated`` (:func:`~hexactl.control.planning.tolerated_excess`)
-    and every soft limit it breaks."""
+                     tolerated: StartExcess | None = None) -> list[list[Violation]]:
+    """For each position (mm, rad, in the coordinates of ``frames``), every limit, hardware
+    or soft, it breaks further than ``tolerated`` (:func:`~hexactl.control.planning.tolerated_excess`)."""
     home = np.asarray(context.active.home)
     relative: NDArray = relative_poses(frames, np.array(positions, dtype=float), home)
     checks = check_poses(context.active.geometry, pose_mm_rad_to_mm_deg(relative))
-    broken = checks.broken if tolerated is None else checks.broken & ~(checks.excess() <= tolerated)
+    hardware = None if tolerated is None else tolerated.hardware
+    broken = checks.broken if hardware is None else checks.broken & ~(checks.excess() <= hardware)
     found = [[checks.violation(n, column) for column in np.flatnonzero(row).tolist()] for n, row in enumerate(broken)]
     if context.soft_limits is not None and context.frames is not None:
-        tool = pose_mm_rad_to_mm_deg(tools_in_work(context.frames, relative + home))
-        for mine, soft in zip(found, context.soft_limits.violations(tool)):
-            mine.extend(soft)
+        for mine, soft in zip(found, soft_limits_broken(context, relative)):
+            mine.extend(v for v in soft if tolerated is None or not tolerated.soft_tolerates(v))
     return found

@@ -29,7 +29,7 @@ Poses inside the control layer are relative to the zero posture in mm and *radia
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from itertools import chain
 from math import degrees, isfinite
@@ -57,7 +57,13 @@ from hexactl.kinematics.axes import (
 )
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 from hexactl.kinematics.soft_limits import SoftLimits
-from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, Violation, check_poses, pose_within_limits
+from hexactl.kinematics.workspace import (
+    POSE_BOUND_ROUNDING,
+    Violation,
+    ViolationKind,
+    check_poses,
+    pose_within_limits,
+)
 
 
 MAX_WAYPOINTS = 500
@@ -303,7 +309,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
         if not pose_allowed(context, goal_relative[0]):
             goal_violations = path_violations(context, goal_relative, number)
             if goal_violations:
-                return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, _summary(goal_violations), tuple(goal_violations)))
+                return Plan(refusal=_path_refusal(context, goal_violations, origin, origin_frames))
         planned = _plan_segment(context, start, goal, frames, waypoint, MAX_MOTION_S - motion_s, budget, remedy)
         if isinstance(planned, Refusal):
             return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
@@ -320,15 +326,23 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
     if refusal := checks.flush(budget, lambda: f"checking the paths of {total} waypoints", remedy, final=True):
         return Plan(refusal=refusal)
     if violations := checks.violations():
-        message = _summary(violations)
-        if outside_soft_limits(context, origin, origin_frames):
-            message += f": {OUTSIDE_SOFT_LIMITS}"
-        return Plan(refusal=Refusal(ErrorCode.PATH_VIOLATION, message, tuple(violations)))
+        return Plan(refusal=_path_refusal(context, violations, origin, origin_frames))
     return Plan(segments=tuple(segments))
 
 
-OUTSIDE_SOFT_LIMITS = ("the platform is outside the soft limits already (they were set, or restored at start-up, "
-                       "around another pose): widen them, or clear them, to bring it back inside")
+def _path_refusal(context: PlanningContext, violations: Sequence[PathViolation], origin: Coordinates,
+                  origin_frames: Frames | None) -> Refusal:
+    """The refusal of a plan for ``violations``, saying so when the motion starts outside
+    the soft limits (at ``origin``, in the coordinates of ``origin_frames``)."""
+    message = _summary(violations)
+    if outside_soft_limits(context, origin, origin_frames):
+        message += f": {OUTSIDE_SOFT_LIMITS}"
+    return Refusal(ErrorCode.PATH_VIOLATION, message, tuple(violations))
+
+
+OUTSIDE_SOFT_LIMITS = ("the platform is outside the soft limits already (held a hair beyond one it was brought to, "
+                       "or they were restored at start-up around another pose): a motion may go back inside them, "
+                       "never further out; to go further, widen them or clear them")
 
 
 def outside_soft_limits(context: PlanningContext, position: Coordinates, frames: Frames | None) -> bool:
@@ -352,33 +366,57 @@ def budgeted_path_violations(context: PlanningContext, relative: NDArray, waypoi
 
 
 def farthest_violation(context: PlanningContext, relative: NDArray) -> Violation | None:
-    """Of the hardware limit that (N, 6) relative mm/rad samples of a path break first (as
-    :func:`path_violations` reports it, at the first sample beyond it), the violation where
-    the path is farthest beyond it; None if none is broken. For a refusal that should say
-    how far, not only where: the first sample of a wave beyond the envelope was 1.69 mm
-    beyond, and the wave went on to 745 mm."""
+    """Of the limit that (N, 6) relative mm/rad samples of a path break first (as
+    :func:`path_violations` reports it, at the first sample beyond it: a hardware limit
+    before a soft one), the violation where the path is farthest beyond it; None if none
+    is broken. For a refusal that should say how far, not only where: the first sample of a
+    wave beyond the envelope was 1.69 mm beyond, and the wave went on to 745 mm."""
     relative_deg = pose_mm_rad_to_mm_deg(relative)
-    checks = check_poses(context.active.geometry,
-                         relative_deg[thinned(relative_deg, context.path_step_mm, context.path_step_deg)])
+    kept = thinned(relative_deg, context.path_step_mm, context.path_step_deg)
+    checks = check_poses(context.active.geometry, relative_deg[kept])
     rows, columns = np.nonzero(checks.broken)
-    if not len(rows):
+    if len(rows):
+        column = int(columns[0])
+        excess = np.nan_to_num(checks.excess()[:, column], nan=np.inf)
+        return checks.violation(int(np.argmax(excess)), column)
+    if context.soft_limits is None or context.frames is None:
         return None
-    column = int(columns[0])
-    excess = np.nan_to_num(checks.excess()[:, column], nan=np.inf)
-    return checks.violation(int(np.argmax(excess)), column)
+    soft = [violation for broken in soft_limits_broken(context, relative) for violation in broken]
+    if not soft:
+        return None
+    first = (soft[0].kind, soft[0].axis)
+    return max((v for v in soft if (v.kind, v.axis) == first), key=lambda v: abs(v.value - v.limit))
 
 
-def tolerated_excess(geometry: Geometry, start: NDArray) -> NDArray | None:
-    """How far a motion from relative mm/rad ``start`` may be beyond each hardware limit
-    (the columns of :class:`~hexactl.kinematics.workspace.PoseChecks`): as far as the
-    platform already is there, to rounding, so that it may go back inside, never further
-    out; None when it starts inside every limit. The platform ends up beyond one by a hair
-    where it was held on it (a jog to a limit, a move to the envelope's bound): enabled
-    again, it holds the pose its quantised readings give, and every move from there was
-    refused, the move back included."""
-    excess = check_poses(geometry, pose_mm_rad_to_mm_deg(start[None])).excess()[0]
+@dataclass(frozen=True, slots=True)
+class StartExcess:
+    """How far a motion may be beyond each limit it starts beyond: as far as the platform
+    already is there, to rounding, so that it may go back inside, never further out.
+    ``hardware`` per column of :class:`~hexactl.kinematics.workspace.PoseChecks` (None:
+    inside every hardware limit); ``soft`` by (kind, axis) of the soft limits it is beyond."""
+
+    hardware: NDArray | None
+    soft: Mapping[tuple[ViolationKind, str | None], float]
+
+    def soft_tolerates(self, violation: Violation) -> bool:
+        """Whether soft limit ``violation`` goes no further beyond than the start."""
+        allowed = self.soft.get((violation.kind, violation.axis))
+        return allowed is not None and abs(violation.value - violation.limit) <= allowed
+
+
+def tolerated_excess(context: PlanningContext, start: NDArray) -> StartExcess | None:
+    """What a motion from relative mm/rad ``start`` may be beyond (:class:`StartExcess`);
+    None when it starts inside every limit. The platform ends up beyond one by a hair
+    where it was held on it (a jog to a limit, a move to the envelope's bound, a stream
+    clamped on a soft limit): enabled again, it holds the pose its quantised readings
+    give, and every move from there was refused, the move back included."""
+    excess = check_poses(context.active.geometry, pose_mm_rad_to_mm_deg(start[None])).excess()[0]
     beyond = excess > 0
-    return np.where(beyond, excess + POSE_BOUND_ROUNDING, 0.0) if beyond.any() else None
+    hardware = np.where(beyond, excess + POSE_BOUND_ROUNDING, 0.0) if beyond.any() else None
+    soft = {} if context.soft_limits is None or context.frames is None else {
+        (violation.kind, violation.axis): abs(violation.value - violation.limit) + POSE_BOUND_ROUNDING
+        for violation in soft_limits_broken(context, start[None])[0]}
+    return None if hardware is None and not soft else StartExcess(hardware, soft)
 
 
 class _PathChecks:
@@ -393,7 +431,7 @@ class _PathChecks:
 
     def __init__(self, context: PlanningContext, start: NDArray | None = None) -> None:
         self._context = context
-        self._tolerated = None if start is None else tolerated_excess(context.active.geometry, start)
+        self._tolerated = None if start is None else tolerated_excess(context, start)
         self._pending: list[NDArray] = []  # thinned relative mm/deg poses not assessed yet
         self._owners: list[NDArray] = []  # their waypoints
         self._count = 0
@@ -405,7 +443,7 @@ class _PathChecks:
         """The (N, 6) relative mm/rad samples of waypoint ``waypoint``'s path."""
         context = self._context
         if context.soft_limits is not None and context.frames is not None:
-            if soft := _soft_violations(context, relative, waypoint):
+            if soft := _soft_violations(context, relative, waypoint, self._tolerated if waypoint == 1 else None):
                 self._soft.setdefault(waypoint, []).extend(soft)
         relative_deg = pose_mm_rad_to_mm_deg(relative)
         keep = thinned(relative_deg, context.path_step_mm, context.path_step_deg)
@@ -429,7 +467,7 @@ class _PathChecks:
             if begin and (refusal := budget.refusal(where(), remedy)):
                 return refusal
             _note_first_violations(geometry, poses[begin:begin + _CHECK_BATCH], owners[begin:begin + _CHECK_BATCH],
-                                   self._hardware, self._tolerated)
+                                   self._hardware, None if self._tolerated is None else self._tolerated.hardware)
         return None
 
     def violations(self) -> list[PathViolation]:
@@ -454,19 +492,28 @@ def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) 
     return found + _soft_violations(context, relative, waypoint)
 
 
-def _soft_violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
+def _soft_violations(context: PlanningContext, relative: NDArray, waypoint: int,
+                     tolerated: StartExcess | None = None) -> list[PathViolation]:
     """The soft limits broken by every one of (N, 6) relative mm/rad samples (the context
-    has soft limits and frames): the first of each kind (per axis) with its pose."""
-    limits, frames = context.soft_limits, context.frames
-    assert limits is not None and frames is not None
-    tool = pose_mm_rad_to_mm_deg(tools_in_work(frames, relative + np.asarray(context.active.home)))
+    has soft limits and frames), but for those ``tolerated`` (its path starts beyond them):
+    the first of each kind (per axis) with its pose."""
     first: dict[tuple, PathViolation] = {}
-    for n, broken in enumerate(limits.violations(tool)):
+    for n, broken in enumerate(soft_limits_broken(context, relative)):
         for violation in broken:
+            if tolerated is not None and tolerated.soft_tolerates(violation):
+                continue
             first.setdefault((violation.kind, violation.axis), PathViolation(
                 violation.kind, violation.value, violation.limit, violation.message, axis=violation.axis,
                 waypoint=waypoint, pose=RelativeMmDeg._make(pose_mm_rad_to_mm_deg(relative[n]))))
     return list(first.values())
+
+
+def soft_limits_broken(context: PlanningContext, relative: NDArray) -> list[list[Violation]]:
+    """For each of (N, 6) relative mm/rad poses, the soft limits it breaks (the context has
+    soft limits and frames)."""
+    limits, frames = context.soft_limits, context.frames
+    assert limits is not None and frames is not None
+    return limits.violations(pose_mm_rad_to_mm_deg(tools_in_work(frames, relative + np.asarray(context.active.home))))
 
 
 def _first_of_each(violations: Sequence[PathViolation]) -> list[PathViolation]:

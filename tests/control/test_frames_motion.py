@@ -193,23 +193,51 @@ def test_soft_limits_name_the_limit_and_cannot_be_set_around_a_platform_outside_
     assert OUTSIDE_SOFT_LIMITS not in refused.message  # it started inside them
 
 
-def test_a_platform_outside_restored_soft_limits_is_told_how_to_come_back(rig):
-    """Soft limits restored at start-up around another pose than the platform's: every
-    move, jog and wave is refused, and each refusal says how to get out (it said to move back
-    inside with a move, which was refused too)."""
+def test_a_platform_outside_restored_soft_limits_may_come_back_never_go_further(rig):
+    """Soft limits restored at start-up around another pose than the platform's: a move or
+    a jog back inside is planned (every motion was refused, the way back included, and the
+    only way out was to clear them); one further out is refused, saying why."""
     rig.enabled()
     assert rig.controller.move([-10, 0, 0, 0, 0, 0]).ok
     rig.settle()
     restored = OperatorFrames(soft_limits=SoftLimits(lower=(-5, None, None, None, None, None),
                                                      upper=(650, None, None, None, None, None)))
     rig.controller.frames.current = restored  # as the service's start-up restores them, unchecked
-    for refused in (rig.controller.move([0, 0, 0, 0, 0, 0]), rig.controller.move([10, 0, 0, 0, 0, 0]),
-                    rig.controller.jog([5, 0, 0, 0, 0, 0]),
+    for refused in (rig.controller.validate_pose([-12, 0, 0, 0, 0, 0]),
+                    rig.controller.validate_pose([-10, 5, 0, 0, 0, 0]),  # along the bound, then beyond it: no
+                    rig.controller.jog([-5, 0, 0, 0, 0, 0]),
                     rig.controller.validate_wave(WaveSpec(frequency_hz=0.5, cycles=2, axes={"z": {"amplitude": 1.0}}))):
-        assert refused.error == "path_violation" and "below the soft limit -5 mm" in refused.message
-        assert refused.message.endswith(OUTSIDE_SOFT_LIMITS), refused.message
-    assert rig.controller.set_frames(OperatorFrames()).ok  # the way out it names
+        assert refused.error == "path_violation" and "below the soft limit -5 mm" in refused.message, refused
+        assert OUTSIDE_SOFT_LIMITS in refused.message, refused.message
+    assert rig.controller.jog([5, 0, 0, 0, 0, 0]).ok  # back inside
+    assert rig.controller.stop().ok
+    rig.settle()
     assert rig.controller.move([0, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    assert rig.controller.snapshot.pose_command == pytest.approx((0,) * 6, abs=1e-9)
+
+
+def test_held_a_hair_beyond_a_soft_limit_the_platform_is_not_locked_out(rig):
+    """Found from outside: jogged onto a soft limit, E-stopped, reset and enabled again, the
+    platform held the pose its readings gave, 1.2 µm beyond the limit, and every move was
+    refused, the move back inside included."""
+    limit = 20.0
+    assert rig.controller.set_frames(OperatorFrames(soft_limits=SoftLimits(upper=(limit,) + (None,) * 5))).ok
+    rig.enabled()
+    assert rig.controller.move([limit + 0.0012, 0, 0, 0, 0, 0], relative=False).error == "path_violation"
+    rig.controller.frames.current = OperatorFrames()  # to put it there; then the limit, as the service kept it
+    assert rig.controller.move([limit + 0.0012, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    rig.controller.frames.current = OperatorFrames(soft_limits=SoftLimits(upper=(limit,) + (None,) * 5))
+    further = rig.controller.validate_pose([limit + 0.01, 0, 0, 0, 0, 0])
+    assert further.error == "path_violation" and "above the soft limit 20 mm" in further.message
+    along = rig.controller.validate_pose([0, 0, 5, 0, 0, 0], relative=True)  # along it, beyond it: no
+    assert along.error == "path_violation" and OUTSIDE_SOFT_LIMITS in along.message, along.message
+    assert rig.controller.jog([1, 0, 0, 0, 0, 0]).error == "path_violation"
+    assert rig.controller.move([10, 0, 0, 0, 0, 0]).ok
+    rig.settle()
+    assert rig.controller.snapshot.pose_command[0] == pytest.approx(10.0, abs=1e-9)
+    assert rig.controller.jog([1, 0, 0, 0, 0, 0]).ok  # inside: it heads for the limit again
 
 
 def test_a_tool_mounted_backwards_is_held_in_a_yaw_window_up_to_180(rig):

@@ -185,6 +185,21 @@ def test_pose_space_limits_and_the_workspace_refuse_naming_the_axis(rig, geometr
     assert long.error == "planning_failed" and "at most 600 s" in long.message
 
 
+
+def test_a_wave_beyond_a_soft_limit_says_how_far_it_goes(rig):
+    """Found from outside: the refusal named only the first sample beyond the soft limit,
+    "by 0.0206 mm", for a wave that went 13 mm beyond it: a trim seemed to do."""
+    assert rig.controller.set_frames(OperatorFrames(soft_limits=SoftLimits(upper=(5,) + (None,) * 5))).ok
+    rig.enabled()
+    spec = WaveSpec(frequency_hz=0.2, cycles=2, axes={"x": {"amplitude": 20.0}})
+    refused = rig.controller.validate_wave(spec)
+    path = WavePath(spec, (0.0,) * 6, rig.controller.config.loop.period_s)
+    peak = max(path.at(k)[0] for k in range(path.samples + 1))  # ramped in and out: under 20
+    farthest = re.search(r"at its farthest, x ([0-9.]+) mm above the soft limit 5 mm \(by ([0-9.]+) mm\)",
+                         refused.message)
+    assert refused.error == "path_violation" and farthest, refused.message
+    assert float(farthest[1]) == pytest.approx(peak, abs=1e-3) and float(farthest[2]) == pytest.approx(peak - 5, rel=1e-2)
+
 SOFT_AROUND = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0),
                              soft_limits={"lower": [None, -40.0, None, None, None, None],
                                           "upper": [None, 40.0, None, None, 3.0, None]})
