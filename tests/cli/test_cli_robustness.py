@@ -11,6 +11,7 @@ import errno
 import os
 import re
 import signal
+import stat
 import subprocess
 import sys
 import threading
@@ -265,6 +266,23 @@ def test_a_file_where_a_folder_must_be_is_named_before_any_work(argv, tmp_path, 
 def test_an_output_that_is_a_folder_is_refused_naming_it(tmp_path, capsys) -> None:
     assert exits_with(["simulate-campaign", "-o", str(tmp_path), "--force"]) == 2
     assert f"{tmp_path} is a folder: name the file to write" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate-campaign", "--per-leg", "2", "-o", "{out}", "--force"],
+    ["calibrate", "{data}", "-o", "{out}", "--force"],
+])
+def test_an_output_that_is_a_device_or_a_pipe_is_refused_before_any_work(argv, tmp_path, capsys) -> None:
+    """Found from outside: ``-o /dev/null --force`` as root replaced the device with a
+    file. A named pipe stands in for it here."""
+    pipe = tmp_path / "out.toml"
+    os.mkfifo(pipe)
+    data = tmp_path / "data.csv"
+    data.write_text("leg,l1,l2,l3,l4,l5,l6,x,y,z,roll,pitch,yaw\n")
+    assert exits_with([word.format(out=pipe, data=data) for word in argv]) == 2
+    captured = capsys.readouterr()
+    assert f"{pipe} is a named pipe (FIFO), not a file: refusing to replace it" in captured.err, captured.err
+    assert captured.out == "" and stat.S_ISFIFO(pipe.lstat().st_mode)
 
 
 @pytest.mark.usefixtures("nothing_serves")

@@ -31,7 +31,13 @@ from hexactl.adapters.api.messages import SaveRecordingRequest
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.server import ApiServer
 from hexactl.adapters.api.wire import ApiError
-from hexactl.adapters.files.atomic import STALE_AFTER_S, keep_aside, remove_stale_temporaries, write_atomic
+from hexactl.adapters.files.atomic import (
+    STALE_AFTER_S,
+    NotARegularFile,
+    keep_aside,
+    remove_stale_temporaries,
+    write_atomic,
+)
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry, save_geometry
 from hexactl.adapters.files.measurements import write_measurements
 from hexactl.application.service import Service
@@ -218,6 +224,46 @@ def test_a_new_file_is_written_where_hard_links_are_not_to_be_had(tmp_path, monk
         write_atomic(tmp_path / "cal.toml", b"newer", overwrite=False)
     assert [path.name for path in tmp_path.iterdir()] == ["cal.toml"]
 
+
+
+@pytest.mark.parametrize("kind", ["pipe", "socket", "folder", "link to a pipe"])
+def test_overwrite_never_replaces_what_is_not_a_file(tmp_path, kind) -> None:
+    """Found from outside: ``hexactl calibrate … -o /dev/null --force`` as root replaced
+    the device with a file (every other process then wrote into it); a named pipe, too."""
+    target = tmp_path / "cal.toml"
+    if kind in ("pipe", "link to a pipe"):
+        os.mkfifo(tmp_path / "pipe")
+        if kind == "pipe":
+            (tmp_path / "pipe").rename(target)
+        else:
+            target.symlink_to(tmp_path / "pipe")
+    elif kind == "socket":
+        import socket
+
+        listener = socket.socket(socket.AF_UNIX)
+        listener.bind(str(target))
+        listener.close()
+    else:
+        target.mkdir()
+    with pytest.raises(NotARegularFile, match="not a file: refusing to replace it"):
+        write_atomic(target, b"new", overwrite=True)
+    assert not (target.resolve().is_file())
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["cal.toml"] + (["pipe"] if "link" in kind else []))
+
+
+def test_overwrite_through_a_symbolic_link_replaces_the_file_it_leads_to(tmp_path) -> None:
+    """As the service writes a kept file that is a link (docs/cli.md): the link stays a link;
+    one that leads to nothing is not written through (a disk not mounted)."""
+    real, link = tmp_path / "real.toml", tmp_path / "link.toml"
+    real.write_bytes(b"old")
+    link.symlink_to(real)
+    write_atomic(link, b"new", overwrite=True)
+    assert link.is_symlink() and real.read_bytes() == b"new"
+    dangling = tmp_path / "dangling.toml"
+    dangling.symlink_to(tmp_path / "mnt" / "cal.toml")
+    with pytest.raises(NotARegularFile, match="which is not there"):
+        write_atomic(dangling, b"new", overwrite=True)
+    assert dangling.is_symlink() and not (tmp_path / "mnt").exists()
 
 @pytest.mark.parametrize("links", [True, False], ids=["hard links", "no hard links"])
 def test_a_file_kept_aside_keeps_its_bytes_under_a_name_of_its_own(tmp_path, monkeypatch, links) -> None:

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S, check_telemetry_rate
-from hexactl.adapters.files.atomic import same_file, write_problem
+from hexactl.adapters.files.atomic import NotARegularFile, replaceable, same_file, write_problem
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, validate_pose_values
 
@@ -250,7 +250,7 @@ def load_config(arguments: argparse.Namespace) -> Geometry:
 def check_output(output: str | None, force: bool, *inputs: str | Path | None) -> None:
     """Before any work: :class:`CliError` if ``output`` is one of the command's ``inputs``
     (never written over, even with --force: a measurement file can be hours of measuring),
-    or exists and ``force`` is not given."""
+    exists and ``force`` is not given, or is not a file (a device, a pipe: never replaced)."""
     if output is None:
         return
     for given in inputs:
@@ -261,6 +261,10 @@ def check_output(output: str | None, force: bool, *inputs: str | Path | None) ->
         raise CliError(f"{output} is a folder: name the file to write")
     if Path(output).exists() and not force:
         raise CliError(f"{output} exists; refusing to overwrite it (use --force)")
+    try:
+        replaceable(Path(output))
+    except NotARegularFile as error:
+        raise CliError(str(error)) from None
     check_writable(Path(output))
 
 

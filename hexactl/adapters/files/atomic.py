@@ -13,6 +13,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 import threading
 import time
 from collections.abc import Iterator
@@ -37,13 +38,21 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     """Write ``data`` to ``path`` via a temporary file in the same folder, fsync and rename,
     after removing stale temporaries of earlier writes to ``path``.
 
+    With ``overwrite``, a symbolic link is written through (the file it leads to is
+    replaced; the link stays a link).
+
     Raises ``FileExistsError`` when ``path`` exists and ``overwrite`` is false, so nothing
-    saved is replaced by accident; ``OSError`` when the folder cannot be made or the file
-    cannot be written (then the old file is untouched and the temporary removed).
+    saved is replaced by accident; :class:`NotARegularFile` when what is there, or what a
+    link leads to, is not a regular file (a device, a pipe, a socket, a folder, nothing:
+    replaced by a file, ``/dev/null`` was, as root); ``OSError`` when the folder cannot be
+    made or the file cannot be written (then the old file is untouched and the temporary
+    removed).
     """
     target = Path(path)
     if target.exists() and not overwrite:
         raise FileExistsError(f"{target} exists; refusing to overwrite it (use --force)")
+    if overwrite:
+        target = replaceable(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(target)
     temporary = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(8)}.tmp")
@@ -74,6 +83,38 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
     finally:
         os.close(directory)
     return target
+
+
+class NotARegularFile(OSError):
+    """What a write would replace is not a regular file: nothing is written."""
+
+
+def replaceable(target: Path) -> Path:
+    """The file a write with overwrite replaces for ``target``: itself, or the file its
+    symbolic link leads to (which stays a link).
+
+    :raises NotARegularFile: there is something else there than a regular file, or a link
+        leads to nothing
+    """
+    if target.is_symlink():
+        real = Path(os.path.realpath(target))
+        if not real.exists():
+            raise NotARegularFile(f"{target} is a symbolic link to {real}, which is not there: nothing is written "
+                                  "through it; restore its target, or remove the link")
+        target = real
+    try:
+        mode = target.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):  # nothing there: the write says what it finds on its way
+        return target
+    if not stat.S_ISREG(mode):
+        kind = _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+        raise NotARegularFile(f"{target} is {kind}, not a file: refusing to replace it, --force or not; "
+                              "write to a file")
+    return target
+
+
+_KINDS = {stat.S_IFDIR: "a folder", stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device",
+          stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFSOCK: "a socket"}
 
 
 def _take_new_name(temporary: Path, target: Path) -> None:
