@@ -97,6 +97,17 @@ def test_a_refused_number_is_told_what_it_may_be(arguments: list[str], says: str
     assert says in capsys.readouterr().err
 
 
+@pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize("command", [CAMPAIGN, ["demo", "--out", "never-made"]], ids=["campaign", "demo"])
+def test_a_campaign_too_small_to_identify_is_refused_before_anything_moves(command: list[str],
+                                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Found from outside: ``campaign --per-leg 1`` drove and measured all six postures,
+    then the identification refused 6 (at least 8), and the directory, planned for one per
+    leg, could be neither finished nor grown."""
+    assert exits_with([*command, "--per-leg", "1"]) == 2
+    assert "--per-leg 1: 6 postures, and the identification needs at least 8: give --per-leg 2 or more" in \
+        capsys.readouterr().err
+
 def test_a_simulated_campaign_of_no_posture_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     """It said "points_mm must have shape None, got (0,)"."""
     assert exits_with([*SIMULATE, "--per-leg", "0", "--free", "0"]) == 2

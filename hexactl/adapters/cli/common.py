@@ -309,8 +309,14 @@ def check_campaign_arguments(arguments: argparse.Namespace) -> None:
 
     :raises CliError: naming the option and what it must be
     """
-    if arguments.per_leg < 1:
-        raise CliError(f"--per-leg {arguments.per_leg}: at least one posture per leg")
+    from hexactl.calibration.results import MIN_POSTURES
+    from hexactl.kinematics.inverse import LEG_COUNT
+
+    fewest = -(-MIN_POSTURES // LEG_COUNT)
+    if arguments.per_leg < fewest:  # before anything moves: else hours of measuring that cannot be used
+        raise CliError(f"--per-leg {arguments.per_leg}: {max(arguments.per_leg, 0) * LEG_COUNT} postures, and the "
+                       f"identification needs at least {MIN_POSTURES}: give --per-leg {fewest} or more (the default, "
+                       "20, for an accurate calibration)")
     if not 0 < arguments.envelope <= 1:
         raise CliError(f"--envelope {arguments.envelope}: a fraction in (0, 1]")
 
