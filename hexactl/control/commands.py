@@ -135,10 +135,9 @@ class Resume(Command):
 
 @dataclass(frozen=True, slots=True)
 class Abort(Command):
-    brakes = True
+    """The sequence or the wave playing ends, braking to rest (its handler records which)."""
 
-    def event(self) -> tuple[str, str]:
-        return "abort", "the sequence ends, braking to rest"
+    brakes = True
 
 
 @dataclass(frozen=True, slots=True)

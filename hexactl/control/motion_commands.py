@@ -134,5 +134,8 @@ class MotionCommands:
     def _abort(self, command: cmd.Abort) -> Refusal:
         if refusal := preconditions.check_abort(self._view):
             return refusal
+        ended = "the sequence ends, braking to rest" if self._view.sequence is not None else \
+            "the wave ends, braking to rest on its path"
         self._motion.stop()
+        self._log("abort", ended)
         return None

@@ -152,6 +152,7 @@ def test_abort_brakes_and_keeps_the_records(rig):
     rig.run(200)
     assert rig.controller.abort().ok
     rig.settle()
+    assert ("abort", "the sequence ends, braking to rest") in [(e.code, e.message) for e in rig.controller.snapshot.events]
     report = rig.controller.sequence_records()
     assert report.status == "aborted" and len(report.records) == 1
     assert report.records[0].pose_command == pytest.approx((600, 0, 0, 0, 0, 0), abs=1e-9)

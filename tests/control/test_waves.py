@@ -388,6 +388,9 @@ def test_abort_mid_wave_brakes_to_rest_jerk_limited_without_a_guard_clamp(rig):
     rig.run()
     assert rig.controller.snapshot.motion.value == "stopping"
     assert rig.controller.snapshot.wave.phase is WavePhase.ABORTED
+    # it was recorded as "the sequence ends": there was none
+    assert ("abort", "the wave ends, braking to rest on its path") in [(e.code, e.message)
+                                                                      for e in rig.controller.snapshot.events]
     while rig.controller.snapshot.motion.value != "holding":
         poses.append(rig.controller.snapshot.pose_command)
         rig.run()
