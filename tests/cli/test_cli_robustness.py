@@ -168,6 +168,19 @@ def test_a_repeated_axis_is_refused_naming_it(argv, capsys) -> None:
     assert re.search(r"axis (x|z|roll) is given twice \('\w+=-?\d' and '\w+=-?\d'\): give each axis once", error), error
 
 
+def test_a_soft_bound_option_given_twice_adds_up_and_refuses_an_axis_in_both(capsys) -> None:
+    """Found from outside: ``--soft-upper x=15 --soft-upper y=1`` set y alone, and the x
+    bound typed was dropped unseen."""
+    from hexactl.adapters.cli.main import build_parser
+    from hexactl.adapters.cli.service_commands import _frames_request
+
+    arguments = build_parser().parse_args(["frames", "--soft-upper", "x=15", "--soft-upper", "y=1",
+                                           "--soft-lower", "x=-5"])
+    assert _frames_request(arguments) == ("set_frames", {"soft_limit_changes": {"lower": {"x": -5.0},
+                                                                                "upper": {"x": 15.0, "y": 1.0}}})
+    assert exits_with(["frames", "--soft-upper", "x=15", "--soft-upper", "z=2,x=1", "--api", NOBODY]) == 2
+    assert "argument --soft-upper: x given in two --soft-upper options" in capsys.readouterr().err
+
 def test_keyed_and_plain_values_in_one_pose_are_refused_with_both_forms(capsys) -> None:
     assert exits_with(["check", "x=5,5"]) == 2
     error = capsys.readouterr().err

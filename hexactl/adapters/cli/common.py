@@ -418,6 +418,20 @@ def bound_changes_argument(text: str) -> dict[str, float | None]:
     return _argparse_type(parse_bound_changes, text)
 
 
+class MergedBounds(argparse.Action):
+    """An option of :func:`bound_changes_argument` pairs given more than once: the pairs of
+    all of them (the last alone was kept, and a bound typed before it dropped unseen), an
+    axis in one of them only, as within one."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        merged = dict(getattr(namespace, self.dest) or {})
+        if repeated := [axis for axis in values if axis in merged]:
+            parser.error(f"argument {option_string}: {', '.join(repeated)} given in two {option_string} options: "
+                         "give each axis once (the options' pairs add up)")
+        setattr(namespace, self.dest, {**merged, **values})
+
+
 def tilt_bound_argument(text: str) -> float | str:
     """An argparse ``type``: a tilt bound in (0, :data:`~hexactl.kinematics.axes.MAX_TILT_DEG`]
     deg, or :data:`NO_BOUND`."""

@@ -25,6 +25,7 @@ from hexactl.adapters.api.protocol import (
 )
 from hexactl.adapters.cli.common import (
     CliError,
+    MergedBounds,
     bind_endpoint,
     NO_BOUND,
     bound_changes_argument,
@@ -95,10 +96,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     frames.add_argument("--work", type=pose_argument, metavar="POSE", help="the work frame in the zero frame (mm, deg)")
     frames.add_argument("--tool", type=pose_argument, metavar="POSE",
                         help="the tool frame in the platform's frame (mm, deg): its origin is the pivot point")
-    frames.add_argument("--soft-lower", type=bound_changes_argument, metavar="BOUNDS",
+    frames.add_argument("--soft-lower", type=bound_changes_argument, action=MergedBounds, metavar="BOUNDS",
                         help=f"lower soft bounds on the tool's pose in the work frame, axis=value pairs, e.g. "
-                        f"x=-50,z=-10 ({NO_BOUND}: remove that bound)")
-    frames.add_argument("--soft-upper", type=bound_changes_argument, metavar="BOUNDS", help="upper soft bounds, likewise")
+                        f"x=-50,z=-10 ({NO_BOUND}: remove that bound); given again, its pairs add up")
+    frames.add_argument("--soft-upper", type=bound_changes_argument, action=MergedBounds, metavar="BOUNDS",
+                        help="upper soft bounds, likewise")
     frames.add_argument("--max-tilt", type=tilt_bound_argument, metavar="DEG",
                         help=f"soft bound on the tool's tilt, deg (at most {MAX_TILT_DEG:g}; {NO_BOUND}: remove it)")
     frames.add_argument("--clear", action="store_true", help="no frames and no soft limits")
