@@ -105,6 +105,8 @@ def rows(*times: float, decimals: int | None = None) -> str:
     ("", "mine.csv: empty"),
     ("t_s,f_x,f_y,f_z,omega_x,omega_y\n0,0,0,9.81,0,0\n", "mine.csv: line 1: missing column omega_z"),
     ("t_s,f_x,f_y,f_z,omega_x,omega_y,omega_Z\n", "missing column omega_z (the header has omega_Z instead"),
+    # found from outside: the first f_x was taken, the real one after it ignored
+    (HEADER + ",f_x\n0,50,0,9.81,0,0,0,-3\n", "mine.csv: line 1: column f_x named more than once: which is meant cannot"),
     (rows(0.0, 0.01, 0.02, 0.04, 0.05, decimals=3),
      "mine.csv: line 5, column t_s: 0.04 s is 0.02 s after the sample before it, where the file's samples are 0.01 s "
      "apart (its median step; times written to 0.001 s): samples must be evenly spaced (resample the trajectory"),

@@ -117,6 +117,9 @@ def parse_vehicle_trajectory(text: str, source: str) -> VehicleTrajectory:
         hint = f" (the header has {', '.join(unknown)} instead: check the spelling)" if unknown else ""
         raise CueingFileError(f"{source}: line 1: missing column {', '.join(missing)}{hint}; the header must name "
                               f"{','.join(VEHICLE_COLUMNS)}")
+    if twice := sorted({name for name in names if name in VEHICLE_COLUMNS and names.count(name) > 1}):
+        raise CueingFileError(f"{source}: line 1: column {', '.join(twice)} named more than once: which is meant "
+                              "cannot be told; keep one")
     where = [names.index(column) for column in VEHICLE_COLUMNS]
     values, lines, written_times = [], [], []
     for line, row in enumerate(rows, start=2):
