@@ -214,6 +214,18 @@ def test_a_data_directory_that_is_a_file_is_called_a_file(tmp_path, capsys) -> N
 
 
 @pytest.mark.usefixtures("nothing_serves")
+@pytest.mark.parametrize(("option", "kept"), [("--frames", "frames.toml"),
+                                              ("--keep-calibration", "active_calibration.toml")])
+def test_a_kept_file_that_is_a_directory_is_called_a_directory(option, kept, tmp_path, capsys) -> None:
+    """Found from outside: "cannot read: [Errno 21] Is a directory", then "remove the file
+    to start on the nominal geometry": the operator's own directory."""
+    assert exits_with(["serve", "--no-realtime", option, str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert f"{option} {tmp_path} is a directory: name the file the service keeps there, e.g. {tmp_path / kept}" \
+        in error and "remove" not in error, error
+    assert tmp_path.is_dir() and not any(tmp_path.iterdir())
+
+@pytest.mark.usefixtures("nothing_serves")
 @pytest.mark.parametrize("option", ["--config", "--calibration", "--frames", "--keep-calibration", "--data-dir"])
 def test_an_empty_path_is_refused_naming_the_option(option, capsys) -> None:
     """``--config "$PLATFORM"`` with the variable unset: ``--config ''`` served the default

@@ -503,6 +503,9 @@ def run_serve(arguments: argparse.Namespace) -> int:
         restored.append(("--keep-calibration", arguments.keep_calibration,
                          "the nominal geometry (a calibration loaded is kept there)"))
     for option, named, what in restored:
+        if named is not None and named.is_dir():  # the service's "cannot read", and "remove the file", misled
+            raise CliError(f"{option} {named} is a directory: name the file the service keeps there, e.g. "
+                           f"{named / ('frames.toml' if option == '--frames' else 'active_calibration.toml')}")
         # A missing directory, or a link to nothing (a disk not mounted), refuses the start.
         if named is not None and named.parent.is_dir() and not named.exists() and not named.is_symlink():
             # The first start with a new file is legitimate; a mistyped name must not pass unseen.
