@@ -45,3 +45,15 @@ def test_record_refuses_an_empty_signal_list_naming_the_option(signals: str, mon
     error = capsys.readouterr().err
     assert ("argument --signals: name at least one signal (leave --signals out to record all): choose among "
             "pose_command,pose_measured,setpoints,feedback,lateness,compute") in error, error
+
+
+def test_record_refuses_a_signal_named_twice_before_sending(monkeypatch, capsys) -> None:
+    """Found from outside: the service refused it (exit 1) where every other bad --signals exits 2."""
+    def connect(*arguments: object, **options: object) -> None:
+        pytest.fail("the request was to be sent")
+
+    monkeypatch.setattr(recording_commands, "connect", connect)
+    with pytest.raises(SystemExit) as exit:
+        main(["record", "run1", "--duration", "1", "--signals", "lateness,pose_command,lateness"])
+    assert exit.value.code == 2
+    assert "argument --signals: lateness named more than once: name each signal once" in capsys.readouterr().err

@@ -81,6 +81,8 @@ def _signals(text: str) -> list[str]:
                                          f"choose among {','.join(SIGNALS)}")
     if unknown := [s for s in signals if s not in SIGNALS]:
         raise argparse.ArgumentTypeError(f"unknown {', '.join(unknown)}: choose among {','.join(SIGNALS)}")
+    if twice := sorted({s for s in signals if signals.count(s) > 1}):  # as the service refuses them
+        raise argparse.ArgumentTypeError(f"{', '.join(twice)} named more than once: name each signal once")
     return signals
 
 
