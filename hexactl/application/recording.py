@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import re
 import threading
 import time
@@ -29,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from enum import StrEnum
+from pathlib import Path
 from typing import Any
 
 from hexactl.adapters.api.paths import DataDirectories
@@ -196,6 +198,17 @@ class Recordings:
             if self.last is not None:
                 return {"state": "done", **self.last}
             return {"state": "idle"}
+
+    def reserved(self) -> dict[Path, str]:
+        """The files of the recording under way (its CSV, under its final and its partial
+        name, and its side file), each with why no other write may take it; none when idle."""
+        with self._lock:
+            if (current := self._open) is None:
+                return {}
+            csv_path = Path(os.path.realpath(current.file.path))
+            why = f"the recording {current.request.name!r} under way writes it"
+            return {path: why for path in (csv_path, csv_path.with_name(f"{csv_path.name}.partial"),
+                                           csv_path.with_suffix(".json"))}
 
     # -- the writer ----------------------------------------------------------------------
 

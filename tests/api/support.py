@@ -274,6 +274,9 @@ class FakeRecorder:
         self.controller._call("record_status")
         return {"state": "idle"}
 
+    def reserved(self) -> dict:
+        return {}
+
 
 def start_service(geometry: Geometry, data_dir: Path, telemetry_rate_hz: float = 200.0,
                   instrument: Instrument | None = None, frames_file: Path | None = None) -> SimpleNamespace:

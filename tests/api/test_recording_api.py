@@ -103,6 +103,31 @@ def test_stop_ends_early_and_refusals_name_the_problem(client, data_dir) -> None
     assert exists.value.code == "file_exists"
 
 
+def test_save_recording_never_takes_the_name_of_the_recording_under_way(client, data_dir) -> None:
+    """Found from outside: save_recording wrote NAME.csv while recording NAME was under way,
+    which then ended under its partial name without saying why, and a later record of
+    NAME was refused as if a service had died during it."""
+    def scenario() -> None:
+        wait_for(lambda: at_rest(client), "rest")
+        client.call("play", sequence="x_sweep")
+        client.request("abort")  # any sequence's report will do: it has dwell records to save, or none
+        client.call("record", name="taken", duration_s=600, signals=["lateness"])
+        with pytest.raises(CommandError, match="taken.csv: the recording 'taken' under way writes it: choose another "
+                                               "name") as refused:
+            client.call("save_recording", path="taken.csv")
+        assert refused.value.code == "file_exists"
+        assert not (data_dir / "taken.csv").exists()
+        stopped = client.call("record_stop")
+        assert stopped["csv"] == str(data_dir / "taken.csv") and "write_error" not in stopped, stopped
+
+    def cleanup() -> None:
+        if client.call("record_status")["state"] == "writing":
+            client.call("record_stop")
+        for made in ("taken.csv", "taken.json", "taken.csv.partial"):
+            (data_dir / made).unlink(missing_ok=True)
+
+    tolerating_stalls(client, scenario, cleanup)
+
 def test_a_recording_under_way_at_shutdown_ends_with_the_platform_at_rest(tmp_path) -> None:
     """Found from outside: the recording was finished when the API stopped taking commands,
     before the shutdown's brake, so a move under way was cut mid-motion and the brake and

@@ -373,8 +373,10 @@ class CommandHandler:
         writer = csv.writer(table, lineterminator="\n")
         writer.writerow(dwell_header())
         writer.writerows(dwell_rows(report.records))
-        target = self.data.write_new(_csv_name(request.path), table.getvalue().encode("utf-8"))
+        reserved = self.recorder.reserved() if self.recorder is not None else None
+        target = self.data.write_new(_csv_name(request.path), table.getvalue().encode("utf-8"), reserved)
         return {"path": str(target), "name": report.name, "status": report.status, "records": len(report.records)}
+
     def _measure(self) -> dict[str, Any]:
         if self.instrument is None:
             raise ApiError(ErrorCode.NO_INSTRUMENT, "this service has no measuring instrument (only the simulator has one): "

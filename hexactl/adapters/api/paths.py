@@ -18,7 +18,7 @@ from __future__ import annotations
 import errno
 import os
 import stat
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path, PurePath
 
 from hexactl.adapters.api.wire import ApiError, ErrorCode
@@ -164,11 +164,12 @@ class DataDirectories:
             raise ApiError(ErrorCode.FILE_NOT_FOUND, f"{text}: no such file in the data directories", self._listing())
         raise ApiError(ErrorCode.FORBIDDEN_PATH, f"{text}: outside the data directories", self._listing())
 
-    def write_new(self, text: str, data: bytes) -> Path:
+    def write_new(self, text: str, data: bytes, reserved: Mapping[Path, str] | None = None) -> Path:
         """Write ``data`` to a new file ``text`` names (relative to the first data directory,
         or absolute) atomically; its real path. :class:`ApiError` ``forbidden_path`` unless
         its directory is inside a data directory, ``file_not_found`` if that directory does
-        not exist, ``write_failed`` if the file cannot be written, ``file_exists`` if the file exists."""
+        not exist, ``write_failed`` if the file cannot be written, ``file_exists`` if the file
+        exists or is one of ``reserved`` (real paths, each with why: a file being written)."""
         self._check_text(text)
         path = Path(text) if Path(text).is_absolute() else self.directories[0] / text
         if path.name in ("", ".", ".."):
@@ -188,6 +189,8 @@ class DataDirectories:
             raise _open_refusal(text, error) from None
         try:
             real_parent = self._place(text, descriptor)
+            if why := (reserved or {}).get(real_parent / path.name):
+                raise ApiError(ErrorCode.FILE_EXISTS, f"{text}: {why}: choose another name")
             # Through the descriptor's own /proc entry, every step of the write happens in
             # the directory just checked, whatever is renamed onto its path meanwhile.
             write_atomic(Path(f"/proc/self/fd/{descriptor}") / path.name, data, overwrite=False)

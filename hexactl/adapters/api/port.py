@@ -10,7 +10,8 @@ bad input: each returns a :class:`~hexactl.control.results.CommandResult` whose
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 from hexactl.control.frames import Frame, OperatorFrames
@@ -140,6 +141,8 @@ class RecorderPort(Protocol):
     def stop(self) -> dict[str, Any]: ...
 
     def state(self) -> dict[str, Any]: ...
+
+    def reserved(self) -> Mapping[Path, str]: ...
 
 
 class StreamInput(Protocol):
