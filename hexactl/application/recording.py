@@ -41,7 +41,6 @@ from hexactl.control.controller import Controller
 from hexactl.control.frames import OperatorFrames, convert
 from hexactl.control.planning import ActiveGeometry
 from hexactl.control.recorder import RecorderPhase, Row
-from hexactl.control.snapshot import ControlState
 from hexactl.kinematics.forward import forward_kinematics
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.inverse import lengths_from_readings
@@ -245,7 +244,8 @@ class Recordings:
         for known in (snapshot.active, snapshot.previous):
             if known is not None:
                 self._geometries[known.calibration_id] = known
-        current.faults_seen |= snapshot.state in (ControlState.FAULT, ControlState.ESTOP)
+        if snapshot.recorder.recording == current.recording:  # the loop's word: a cycle recorded was in FAULT or ESTOP
+            current.faults_seen |= snapshot.recorder.faulted
         try:
             self._write(current, [row for row in rows if row[0] == current.recording])
         except OSError as error:  # a full disk: end this recording, saying why; the writer stays for the next

@@ -57,7 +57,8 @@ class RecorderState:
     """The recorder as published in the snapshot: recording ``recording`` (its id; 0:
     none yet) named ``name``, ``rows`` recorded of ``rows_requested``, ``lost`` for want
     of room (:data:`MAX_PENDING_ROWS`), ``first_cycle`` the cycle it started in (0 until
-    it does), ``ended`` once DONE."""
+    it does), ``ended`` once DONE; ``faulted``: a cycle it recorded was in FAULT or ESTOP
+    (before its first row, while armed, does not count)."""
 
     phase: RecorderPhase = RecorderPhase.IDLE
     recording: int = 0
@@ -68,6 +69,7 @@ class RecorderState:
     divisor: int = 1
     first_cycle: int = 0
     ended: RecordingEnd | None = None
+    faulted: bool = False
 
     @property
     def active(self) -> bool:
@@ -131,9 +133,11 @@ class CycleRecorder:
             lost += 1
         # Built whole, not by dataclasses.replace: one call instead of a dozen, every recorded cycle.
         done = rows + lost >= state.rows_requested
+        # "fault", "estop": ControlState by value, as _moving compares the motion
+        faulted = state.faulted or snapshot.state in ("fault", "estop")
         self.state = RecorderState(RecorderPhase.DONE if done else state.phase, state.recording, state.name, rows, lost,
                                    state.rows_requested, state.divisor, state.first_cycle,
-                                   RecordingEnd.DURATION if done else None)
+                                   RecordingEnd.DURATION if done else None, faulted)
         self._active = not done
 
     def take(self, limit: int) -> list[Row]:

@@ -59,6 +59,24 @@ def test_armed_recording_starts_with_the_next_motion(rig):
     assert rig.controller.snapshot.recorder.phase is RecorderPhase.DONE
 
 
+def test_a_fault_before_an_armed_recordings_first_row_is_not_during_it(rig, recordings):
+    """Found from outside: a recording armed while an E-stop was latched, run on the next
+    motion after reset and enable, said faults_during (and record exited 1)."""
+    assert rig.controller.estop().ok
+    rig.run(3)
+    recordings.start("armed", duration_s=0.1, start="next_motion")
+    rig.run(20)
+    recordings.poll()
+    assert rig.controller.reset().ok
+    rig.run_until(lambda: all(a.state.name == "DISABLED" for a in rig.controller.snapshot.feedback.actuators))
+    rig.enabled()
+    recordings.poll()
+    assert rig.controller.move([1.0, 0, 0, 0, 0, 0], duration=0.5).ok
+    assert _finish(rig, recordings)["faults_during"] is False
+    recordings.start("latched", duration_s=0.1)
+    assert rig.controller.estop().ok  # within it: it was
+    assert _finish(rig, recordings)["faults_during"] is True
+
 def test_stop_ends_early_and_a_second_start_is_refused_while_active(rig):
     assert rig.controller.record(3, "first", 1, 1000).ok
     rig.run(5)
