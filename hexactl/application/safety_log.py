@@ -21,7 +21,7 @@ _WARNING_STATES = (ControlState.FAULT, ControlState.ESTOP)
 
 _ROUTINE_EVENTS = ("sequence_", "jog_", "stream_", "wave_", "leg_locked", "leg_unlocked", "calibration_swapped",
                    "command_refused", "command_link_heard", "enabled", "disabled", "stop", "reset", "move", "pause",
-                   "resume", "abort")
+                   "resume", "abort", "frames_set")
 """Codes (or their prefixes) of the loop's events that are its daily work, logged as INFO;
 the others (faults such as ``leg_lock_projection``, E-stops, a guard's clamp) as WARNING.
 The dashboard's Events panel draws the same line (``events.js``, ``isWarning``)."""

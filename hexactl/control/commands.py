@@ -95,6 +95,17 @@ class Move(Command):
 
 
 @dataclass(frozen=True, slots=True)
+class FramesSet(Command):
+    """The operator's frames and soft limits, which the facade holds, are now ``text``:
+    carried out by nothing but its event, so that the loop's log says who changed them."""
+
+    text: str
+
+    def event(self) -> tuple[str, str]:
+        return "frames_set", self.text
+
+
+@dataclass(frozen=True, slots=True)
 class LockLeg(Command):
     leg: int
 

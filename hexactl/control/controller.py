@@ -64,10 +64,10 @@ class Controller:
     def __init__(self, host: LoopHost, *, config: ControllerConfig, nominal: Geometry,
                  ticket_start: int = 1, frames: OperatorFrames | None = None) -> None:
         self.config = config
-        self.frames = FrameCommands(frames or OperatorFrames(), lambda: self.snapshot)
         self.nominal = nominal
         self._host = host
         self._commands = CommandSubmitter(host, config, ticket_start)
+        self.frames = FrameCommands(frames or OperatorFrames(), lambda: self.snapshot, self._commands)
         self._jogs = JogCommands(lambda: self.snapshot, self._context, self._commands, config.jog_deadman_s)
         self.recordings = RecordingCommands(self._commands, lambda: self.snapshot)
         self._waves = WaveCommands(lambda: self.snapshot, self._context, self._commands)

@@ -92,6 +92,7 @@ class ControlCore:
             cmd.Enable: self._enable, cmd.Disable: self._disable, cmd.EStop: self._estop, cmd.Reset: self._reset,
             cmd.LockLeg: self._lock_leg, cmd.UnlockLeg: self._unlock_leg, cmd.SwapGeometry: self._swap,
             cmd.StartRecording: self.recorder.start, cmd.StopRecording: self.recorder.stop,
+            cmd.FramesSet: lambda command: None,
             **MotionCommands(self, self._motion, lambda: self._now_ns, self._event).handlers(),
         }, self._event)
         self.inbox = self._commands.queue

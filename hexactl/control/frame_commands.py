@@ -7,10 +7,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.frames import OperatorFrames
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
+from hexactl.control.submitter import CommandSubmitter
 from hexactl.kinematics.frames import tools_in_work
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
 
@@ -20,9 +22,11 @@ class FrameCommands:
     replaced from any thread: a replacement is one reference swap, and a plan reads the
     reference once. A motion under way keeps the frames it was planned in."""
 
-    def __init__(self, frames: OperatorFrames, snapshot: Callable[[], CoreSnapshot]) -> None:
+    def __init__(self, frames: OperatorFrames, snapshot: Callable[[], CoreSnapshot],
+                 submitter: CommandSubmitter) -> None:
         self.current = frames
         self._snapshot = snapshot
+        self._submitter = submitter
 
     def set(self, frames: OperatorFrames) -> CommandResult:
         """Make ``frames`` the operator's, at rest only (``busy`` while a motion, sequence,
@@ -43,6 +47,8 @@ class FrameCommands:
                 f"the platform is outside these soft limits ({'; '.join(v.message for v in broken)}): move it inside "
                 "first, or widen them", violations=[v.message for v in broken])
         self.current = frames
+        text = frames.text()  # the loop's log says what they are now, and who set them
+        self._submitter.submit(lambda ticket: cmd.FramesSet(ticket, text), "noted")
         return self.result("frames set")
 
     def result(self, message: str = "frames") -> CommandResult:

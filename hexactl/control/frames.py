@@ -25,6 +25,7 @@ from hexactl.kinematics.axes import (
     RelativeMmRad,
     ToolInWorkMmDeg,
     ToolInWorkMmRad,
+    bounds_text,
 )
 from hexactl.kinematics.frames import Frames, compose, platform_poses, pose_of, transform_of
 from hexactl.kinematics.soft_limits import NO_SOFT_LIMITS, SoftLimits
@@ -58,6 +59,18 @@ class OperatorFrames(BaseModel):
             if not -bound <= value <= bound:
                 raise ValueError(f"{axis} {value:g} {unit} is outside [{-bound:g}, {bound:g}] {unit}")
         return pose
+
+    def text(self) -> str:
+        """For people, as an event says what was set: the frames (mm, deg) and the soft limits."""
+        if self == OperatorFrames():
+            return "none: no work frame, no tool frame, no soft limits"
+        limits = self.soft_limits
+
+        def pose(values: Sequence[float]) -> str:
+            return ", ".join(f"{value:g}" for value in values)
+
+        return (f"work frame ({pose(self.work)}), tool frame ({pose(self.tool)}) (mm, deg); soft limits "
+                f"{bounds_text(limits.lower, limits.upper, limits.max_tilt_deg)}")
 
     def frames(self, home_mm_rad: tuple[float, ...]) -> Frames:
         """The frames as rigid transforms in the fixed frame, for a calibration whose zero

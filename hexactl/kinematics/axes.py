@@ -23,6 +23,20 @@ MAX_TILT_DEG = 90.0
 """The largest bound on a tool's tilt (the angle between its z axis and the work frame's,
 :mod:`hexactl.kinematics.soft_limits`): beyond it the tool's z axis points down."""
 
+def bounds_text(lower: Sequence[float | None], upper: Sequence[float | None], max_tilt_deg: float | None) -> str:
+    """Soft limits for people: ``x -50..50 mm, z ≥ -10 mm, tilt ≤ 5 deg``, or ``none``
+    (per axis in its unit, None: no bound on that side)."""
+    parts = []
+    for axis, unit, low, high in zip(POSE_AXES, POSE_UNITS, lower, upper):
+        if low is not None and high is not None:
+            parts.append(f"{axis} {low:g}..{high:g} {unit}")
+        elif low is not None or high is not None:
+            parts.append(f"{axis} {'≥' if low is not None else '≤'} {low if low is not None else high:g} {unit}")
+    if max_tilt_deg is not None:
+        parts.append(f"tilt ≤ {max_tilt_deg:g} deg")
+    return ", ".join(parts) or "none"
+
+
 PerAxis: TypeAlias = tuple[float, float, float, float, float, float]
 """One value per pose axis, in that axis's units (a limit, a velocity): not a pose."""
 

@@ -193,6 +193,25 @@ def test_soft_limits_name_the_limit_and_cannot_be_set_around_a_platform_outside_
     assert OUTSIDE_SOFT_LIMITS not in refused.message  # it started inside them
 
 
+def test_setting_and_clearing_frames_are_in_the_loops_log_with_who_did_it(rig):
+    """Found from outside: a change of the soft limits, their removal included, left no
+    event, so nothing said who removed them."""
+    from hexactl.control.submitter import commands_from
+
+    frames = OperatorFrames(work=(0, 0, 300, 0, 0, 30), tool=(0, 0, 300, 0, 0, 0),
+                            soft_limits=SoftLimits(lower=(-10,) + (None,) * 5, upper=(25,) + (None,) * 5,
+                                                   max_tilt_deg=8))
+    with commands_from("hexactl ann@bench-2"):
+        assert rig.controller.set_frames(frames).ok
+    with commands_from("hexactl bob@bench-3"):
+        assert rig.controller.set_frames(OperatorFrames()).ok
+    rig.run()
+    events = [(e.code, e.message, e.sender) for e in rig.controller.snapshot.events if e.code == "frames_set"]
+    assert events == [
+        ("frames_set", "work frame (0, 0, 300, 0, 0, 30), tool frame (0, 0, 300, 0, 0, 0) (mm, deg); soft limits "
+                       "x -10..25 mm, tilt ≤ 8 deg", "hexactl ann@bench-2"),
+        ("frames_set", "none: no work frame, no tool frame, no soft limits", "hexactl bob@bench-3")]
+
 def test_a_platform_outside_restored_soft_limits_may_come_back_never_go_further(rig):
     """Soft limits restored at start-up around another pose than the platform's: a move or
     a jog back inside is planned (every motion was refused, the way back included, and the

@@ -162,7 +162,8 @@ def test_a_senders_name_is_shown_as_text_never_as_markup(rig) -> None:
 
 ROUTINE = ("enabled", "disabled", "stop", "reset", "move", "pause", "resume", "abort", "leg_locked", "leg_unlocked",
            "wave_started", "sequence_started", "sequence_finished", "sequence_aborted", "jog_started", "jog_ended",
-           "jog_at_end", "stream_opened", "stream_ended", "calibration_swapped", "command_refused", "command_link_heard")
+           "jog_at_end", "stream_opened", "stream_ended", "calibration_swapped", "command_refused", "command_link_heard",
+           "frames_set")
 WARNINGS = ("estop", "command_link_silent", "guard_clamped", "heartbeat_lost", "actuator_fault", "actuator_state",
             "following_error", "link_failed", "send_failed", "setpoints_not_applied", "planner_error",
             "leg_lock_projection", "a_code_the_page_does_not_know")

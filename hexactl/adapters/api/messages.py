@@ -802,7 +802,8 @@ class LoopEvent(_Message):
                      "reader missed; fewer than the last seen: the service has restarted, as the events reply's run says)")
     t: float = Field(description="when, s, on the clock of the record's t")
     code: str = Field(description="what, snake_case: a command carried out (enabled, disabled, stop, reset, move, "
-                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started, stream_closed, jog_released), one that started something "
+                      "leg_locked, leg_unlocked, pause, resume, abort, wave_started, stream_closed, jog_released, frames_set: the "
+                      "operator's frames and soft limits now), one that started something "
                       "(sequence_started, jog_started, stream_opened, calibration_swapped), estop, a fault's code, "
                       "command_refused, the end of something (sequence_*, jog_ended, stream_ended), "
                       "command_link_silent, …")

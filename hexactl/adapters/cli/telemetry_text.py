@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S, REPORT_SILENT_S
-from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS, bounds_text
 
 
 def format_telemetry(record: dict[str, Any], calibration_source: str | None = None) -> str:
@@ -118,16 +118,8 @@ def frames_lines(record: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def soft_limits_text(limits: dict[str, Any]) -> str:
-    """``x -50..50 mm, z ≥ -10 mm, tilt ≤ 5 deg``, or ``none``."""
-    parts = []
-    for axis, unit, low, high in zip(POSE_AXES, POSE_UNITS, limits["lower"], limits["upper"]):
-        if low is not None and high is not None:
-            parts.append(f"{axis} {low:g}..{high:g} {unit}")
-        elif low is not None or high is not None:
-            parts.append(f"{axis} {'≥' if low is not None else '≤'} {low if low is not None else high:g} {unit}")
-    if limits.get("max_tilt_deg") is not None:
-        parts.append(f"tilt ≤ {limits['max_tilt_deg']:g} deg")
-    return ", ".join(parts) or "none"
+    """``x -50..50 mm, z ≥ -10 mm, tilt ≤ 5 deg``, or ``none`` (:func:`~hexactl.kinematics.axes.bounds_text`)."""
+    return bounds_text(limits["lower"], limits["upper"], limits.get("max_tilt_deg"))
 
 
 def legs_text(values: list[float | None] | None) -> str:

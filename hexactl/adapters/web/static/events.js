@@ -29,7 +29,7 @@ const ASK_TRIES = 3;        // then the page says it could not get them
 // clamp, and any code this page does not know.
 const ROUTINE_CODES = new Set([
   'enabled', 'disabled', 'stop', 'reset', 'move', 'pause', 'resume', 'abort',
-  'leg_locked', 'leg_unlocked', 'calibration_swapped', 'command_refused', 'command_link_heard',
+  'leg_locked', 'leg_unlocked', 'calibration_swapped', 'command_refused', 'command_link_heard', 'frames_set',
 ]);
 const ROUTINE_PREFIXES = ['sequence_', 'jog_', 'stream_', 'wave_'];
 
