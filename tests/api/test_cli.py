@@ -176,3 +176,13 @@ def test_keys(tmp_path, capsys) -> None:
     assert main(["keys", "--out", str(tmp_path / "k")]) == 0
     assert "--curve-secret" in capsys.readouterr().out
     assert main(["keys", "--out", str(tmp_path / "k")]) == 2  # refuses to overwrite
+
+
+def test_telemetry_text_says_how_the_last_stream_ended_and_a_stopped_stream_input(service) -> None:
+    record = jsonable(service.controller.telemetry())
+    assert "\nstream         none\n" in format_telemetry(record)
+    ended = {**record, "last_stream": {"stream": 7, "reason": "timeout: no target for 54 ms", "targets": 1200}}
+    assert "\nstream         none (stream 7 ended: timeout: no target for 54 ms, 1200 targets)\n" in format_telemetry(ended)
+    stopped = {"running": False, "stream": None, "received": 0}
+    assert "\nSTREAM INPUT   stopped: stream_open is refused until the service restarts" in \
+        format_telemetry({**record, "stream_input": stopped})

@@ -18,6 +18,7 @@ import pytest
 from hexactl.adapters.api.client import CommandError
 from hexactl.adapters.api.stream_client import PoseStream
 from hexactl.adapters.api.stream_wire import encode
+from hexactl.adapters.cli.telemetry_text import format_telemetry
 from tests.reliability.support import recovered_client_fixture, status, tolerating_stalls, wait_for
 from tools.serving import Served, serve
 
@@ -95,6 +96,13 @@ def test_bad_samples_are_counted_and_dropped_over_zeromq_and_udp(client) -> None
             counted = status(client)["stream_input"]
             assert counted["out_of_order"] == 3 and counted["malformed"] == 4, counted
             assert "malformed sample" in counted["last_problem"]
+            # and hexactl status and monitor say so (they showed nothing of a stream)
+            shown = format_telemetry(status(client)).splitlines()
+            stream_row = next(line for line in shown if line.startswith("stream "))
+            input_row = next(line for line in shown if line.startswith("stream input "))
+            assert re.fullmatch(r"stream +stream \d+ from .+ in zero: following, \d+ targets.*", stream_row), stream_row
+            assert "3 out of order" in input_row and "4 malformed" in input_row, input_row
+            assert "; last problem: malformed sample" in input_row, input_row
             wait_for(lambda: status(client)["stream"]["last_sequence"] == 14, "the last good sample followed")
             record = status(client)
             assert record["state"] == "enabled" and record["loop"]["guard_clamps"] == 0

@@ -45,6 +45,8 @@ from hexactl.adapters.cli.telemetry_text import (
     remaining_text,
     sequence_text,
     silent_loop_lines,
+    stream_input_lines,
+    stream_text,
     wave_text,
 )
 from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS
@@ -357,6 +359,10 @@ def _record_view(record: dict[str, Any]) -> list[RenderableType]:
         ("sequence", sequence_text(record.get("sequence"))),
         ("jog", jog_text(record.get("jog"))),
         ("wave", wave_text(record.get("wave"))),
+        ("stream", Text(stream_text(record.get("stream"), record.get("last_stream")), no_wrap=True,
+                        overflow="ellipsis")),
+        *((label, Text(text, style="bold red" if label.isupper() else "", no_wrap=True, overflow="ellipsis"))
+          for label, text in stream_input_lines(record.get("stream_input"))),
         ("recording", recording_text(record.get("recording"))),
         # One line each, cut at the screen's edge: a long one (an E-stop names its sender) must
         # not push the key's result off the screen; `hexactl status` prints them whole.

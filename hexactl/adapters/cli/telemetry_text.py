@@ -35,6 +35,8 @@ def format_telemetry(record: dict[str, Any], calibration_source: str | None = No
         ("sequence", sequence_text(record.get("sequence"))),
         ("jog", jog_text(record.get("jog"))),
         ("wave", wave_text(record.get("wave"))),
+        ("stream", stream_text(record.get("stream"), record.get("last_stream"))),
+        *stream_input_lines(record.get("stream_input")),
         ("recording", recording_text(record.get("recording"))),
         ("faults", "; ".join(fault_text(fault) for fault in record.get("faults") or []) or "none"),
         ("last event", event_text(events[-1], record["t"]) if (events := record.get("events")) else "none"),
@@ -182,6 +184,39 @@ def wave_text(wave: dict[str, Any] | None) -> str:
     if wave["phase"] in ("ramp_in", "steady", "ramp_out"):
         return f"cycle {wave['cycle']} of {wave['cycles']} ({wave['phase']})"
     return f"{wave['phase']} in cycle {wave['cycle']} of {wave['cycles']}"
+
+
+def stream_text(stream: dict[str, Any] | None, last: dict[str, Any] | None) -> str:
+    """``stream 7 from sim-1 in work: following, 1200 targets (sample 1234, 0.004 s ago, 1.2 ms from arrival)``;
+    ``none (stream 7 ended: timeout …, 1200 targets)``; or ``none``."""
+    if stream:
+        newest = (f" (sample {stream['last_sequence']}, {stream['since_target_s']:.3f} s ago"
+                  + (f", {stream['latency_ms']:.1f} ms from arrival)" if stream.get("latency_ms") is not None else ")")
+                  if stream.get("last_sequence") is not None else "")
+        return (f"stream {stream['stream']} from {stream['source']} in {stream['frame']}: {stream['phase']}, "
+                f"{stream['targets']} targets{newest}")
+    if last:
+        return f"none (stream {last['stream']} ended: {last['reason']}, {last['targets']} targets)"
+    return "none"
+
+
+_DROPPED = (("malformed", "malformed"), ("out_of_order", "out of order"), ("other_sender", "from a second sender"),
+            ("no_stream", "with no stream open"), ("loop_behind", "dropped, the loop behind"), ("failed", "failed"))
+
+
+def stream_input_lines(received: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """The pose stream's receiver, once it has read anything or stopped: what it read and
+    dropped, and its last problem (``STREAM INPUT`` in capitals once it has stopped)."""
+    if not received or (received["running"] and not received["received"]):
+        return []
+    if not received["running"]:
+        return [("STREAM INPUT", "stopped: stream_open is refused until the service restarts (its log says why)")]
+    dropped = [f"{received[key]} {what}" for key, what in _DROPPED if received.get(key)]
+    counted = [f"{received['rate_hz']} Hz", f"{received['received']} read", f"{received['forwarded']} to the loop",
+               *([f"{received['clamped']} clamped"] if received.get("clamped") else []), *dropped]
+    problem = f"; last problem: {received['last_problem']}" if received.get("last_problem") else ""
+    stream = f"stream {received['stream']}: " if received.get("stream") is not None else ""
+    return [("stream input", f"{stream}{', '.join(counted)}{problem}")]
 
 
 def recording_text(recording: dict[str, Any] | None) -> str:
