@@ -430,3 +430,31 @@ def test_after_a_stream_closes_the_counts_still_name_it_until_the_next_opens() -
         finally:
             push.close()
             receiver.close()
+
+
+@pytest.mark.parametrize(("clock", "said"), [(lambda t: t * 1000.0, True), (lambda t: 0.0, True),
+                                             (lambda t: t, False)], ids=["milliseconds", "constant", "seconds"])
+def test_a_sent_s_that_is_not_seconds_is_said(clock, said: bool) -> None:
+    """Found from outside: sent_s in milliseconds, or left 0, made the platform follow the
+    stream stop-and-go at a fraction of its speed, and nothing said why."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        for sequence in range(1, stream_receiver.SENT_CLOCK_SAMPLES + 4):
+            time.sleep(0.005)  # paced: arrivals apart by more than a burst's
+            sent(push.send, encode(sequence, clock(time.monotonic()), [0.0] * 6),
+                 lambda s=sequence: receiver.counters.received == s, f"sample {sequence}")
+        problem = receiver.counters.last_problem
+        assert ("sent_s is the sender's clock in seconds (not milliseconds, not a constant)" in problem) == said, problem
+        assert receiver.counters.malformed == receiver.counters.out_of_order == 0  # nothing dropped for it
+
+
+def test_a_line_without_a_sequence_after_the_largest_is_dropped_saying_why() -> None:
+    """Found from outside: it was numbered 2³², beyond any sample's, and every sample after
+    it was dropped as out of order."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        sent(push.send, encode(2**32 - 1, time.monotonic(), [0.0] * 6), lambda: receiver.counters.received == 1,
+             "the largest sequence")
+        sent(push.send, b"0 0 0 0 0 0", lambda: receiver.counters.out_of_order == 1, "the line dropped")
+        assert "has reached 4294967295, the largest" in receiver.counters.last_problem
+        assert sequences(controller) == [2**32 - 1]  # the line went nowhere

@@ -63,6 +63,17 @@ RECENT_SENDERS = 64
 LOG_INTERVAL_S = 1.0
 """A new problem with the input is logged at most this often (all are counted)."""
 
+SENT_CLOCK_BAND = (0.05, 20.0)
+"""How much ``sent_s`` may advance per second of arrival between two samples and pass for
+the sender's clock in seconds (jitter and bursts stay inside; a clock in milliseconds
+advances 1000, a constant 0)."""
+
+SENT_CLOCK_SAMPLES = 10
+"""Samples in a row whose ``sent_s`` leaves :data:`SENT_CLOCK_BAND` before it is said."""
+
+_ARRIVAL_PACE_NS = 2_000_000  # two samples closer than this arrived in a burst: no pace to compare with
+_LAST_SEQUENCE = 2**32 - 1
+
 log = logging.getLogger("hexactl.stream")
 
 Target = Callable[[Sequence[float], int, float, int, tuple[Sequence[float], float] | None], TargetResult]
@@ -127,6 +138,8 @@ class StreamReceiver(SocketThread):
         self._datagram = bytearray(65_535)
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
         self._last: Sample | None = None  # the newest sample taken
+        self._sent_before: tuple[float, int] | None = None  # the last sample's sent_s and arrival, for their pace
+        self._sent_off = 0  # samples in a row whose sent_s has not kept pace with their arrival
         self._due_ns = 0  # when the next sample may go to ``target``
         self._next_log_ns = 0  # when a new problem may be logged
         self._taken = 0  # the loop's target count when last looked at
@@ -297,6 +310,11 @@ class StreamReceiver(SocketThread):
             c.no_stream += 1
             return
         if sample.sequence is None:  # numbered after the last taken, of either form: the newest
+            if self._last_sequence == _LAST_SEQUENCE:  # none is above it: every sample after would be dropped
+                c.out_of_order += 1
+                self._problem(f"the stream's sequence has reached {_LAST_SEQUENCE}, the largest: a line without one "
+                              "cannot be numbered after it; open a new stream (stream_close, then stream_open)")
+                return
             sample = Sample((self._last_sequence or 0) + 1, received_ns / 1e9, sample.pose)
         elif self._last_sequence is not None and sample.sequence <= self._last_sequence:
             c.out_of_order += 1
@@ -306,6 +324,7 @@ class StreamReceiver(SocketThread):
             return
         else:
             self._age_ns.append(received_ns - round(sample.sent_s * 1e9))
+            self._check_sent_clock(sample.sent_s, received_ns)
         self._last_sequence = sample.sequence
         self._arrived_ns.append(received_ns)
         if self._pending is not None:
@@ -315,6 +334,24 @@ class StreamReceiver(SocketThread):
         self._pending, self._last = (sample, received_ns, self._last), sample
         if followed:
             self._followed_last = sample
+
+    def _check_sent_clock(self, sent_s: float, received_ns: int) -> None:
+        """Say (``last_problem``) when ``sent_s`` does not keep pace with the samples'
+        arrival, :data:`SENT_CLOCK_SAMPLES` in a row: in milliseconds, or constant. The
+        velocity between two samples is taken from it, so such a stream was followed as if
+        at rest at each target, lagging and stop-and-go, and nothing said why."""
+        before, self._sent_before = self._sent_before, (sent_s, received_ns)
+        if before is None or received_ns - before[1] < _ARRIVAL_PACE_NS:
+            return
+        arrival_s = (received_ns - before[1]) / 1e9
+        low, high = SENT_CLOCK_BAND
+        paced = low <= (sent_s - before[0]) / arrival_s <= high
+        self._sent_off = 0 if paced else self._sent_off + 1
+        if self._sent_off >= SENT_CLOCK_SAMPLES:
+            self._problem(f"sent_s advanced {sent_s - before[0]:.6g} s between samples that arrived {arrival_s:.3g} s "
+                          f"apart ({self._sent_off} in a row): sent_s is the sender's clock in seconds (not "
+                          "milliseconds, not a constant): the velocity between samples is taken from it, and the "
+                          "platform follows this stream as if at rest at each sample")
 
     def _watch_loop(self) -> None:
         """Follow the loop's stream: a new one resets the counters; each target it took
@@ -328,6 +365,7 @@ class StreamReceiver(SocketThread):
                 self._udp_counts.clear()
                 self._udp_sender, self._two_senders = None, False
                 self._last = self._followed_last = None
+                self._sent_before, self._sent_off = None, 0
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()
                 self._arrived_ns.clear()
