@@ -192,3 +192,7 @@ def test_a_cue_to_a_platform_not_enabled_is_refused_before_it_plans(monkeypatch,
     captured = capsys.readouterr()
     assert captured.err == f"hexactl cue: {advice}; nothing was planned or moved\n"  # the service's own words
     assert "moving" not in captured.out and service.sent == []
+    assert cue("--json") == 1  # found from outside: --json printed nothing on stdout, and a script read no document
+    refused = json.loads(capsys.readouterr().out)
+    assert refused == {"file": "braking", "error": {"code": "not_enabled" if state == "disabled" else "latched",
+                                                    "message": advice, "details": {}}}

@@ -103,8 +103,9 @@ def run_cue(arguments: argparse.Namespace) -> int:
         print(f"hexactl cue: {error}", file=sys.stderr)
         return EXIT_NO_ANSWER
     except CommandError as error:  # printed as every command prints a refusal
-        print(format_error_reply({"error": {"code": error.code, "message": error.message, "details": error.details}}),
-              file=sys.stderr)
+        reply = {"error": {"code": error.code, "message": error.message, "details": error.details}}
+        print(format_error_reply(reply), file=sys.stderr)
+        _print_json(arguments, {"file": str(arguments.file), **reply})
         return EXIT_REFUSED
 
 
@@ -121,6 +122,8 @@ def _cue(client: HexactlClient, vehicle: VehicleTrajectory, parameters: CueingPa
         # Before seconds of planning: the service would refuse the move to the start anyway.
         if not arguments.plan_only and (refusal := check_enabled(ControlState(client.call("status")["status"]["state"]))):
             print(f"hexactl cue: {refusal[1]}; nothing was planned or moved", file=sys.stderr)
+            _print_json(arguments, {"file": str(arguments.file), "error": {"code": refusal[0].value,
+                                                                           "message": refusal[1], "details": {}}})
             return EXIT_REFUSED
         geometry = Geometry.model_validate(client.call("geometry")["geometry"])
         try:
@@ -151,7 +154,8 @@ def _plan_figures(plan: CuePlan) -> dict[str, Any]:
 
 
 def _print_json(arguments: argparse.Namespace, document: dict[str, Any]) -> None:
-    """With ``--json``, ``document`` as one line of JSON on stdout (and nothing else there)."""
+    """With ``--json``, ``document`` as one line of JSON on stdout (and nothing else there):
+    a refusal's too (``error``: ``code``, ``message``, ``details``, as in the API's reply)."""
     if arguments.json:
         print(json.dumps(document))
 
