@@ -720,8 +720,10 @@ def _plan_segment(context: PlanningContext, start: KinematicState, goal: Coordin
         if trajectory.duration > motion_left_s:
             before = (f", after {MAX_MOTION_S - motion_left_s:.6g} s of the moves before it"
                       if motion_left_s < MAX_MOTION_S else "")
+            # a stretch's first attempt runs a little short of the duration asked: that is the least it takes
+            lasting = max(trajectory.duration, waypoint.duration_s or 0.0)
             return Refusal(ErrorCode.PLANNING_FAILED,
-                           f"the move would take {trajectory.duration:.6g} s{before}; a move, or a sequence's moves "
+                           f"the move would take {lasting:.6g} s{before}; a move, or a sequence's moves "
                            f"together, may take at most {MAX_MOTION_S:g} s: raise the speed, shorten the duration"
                            + (" or split the sequence" if before else ""))
         if waypoint.duration_s and 0 < trajectory.duration < waypoint.duration_s - _DURATION_TOLERANCE_S:

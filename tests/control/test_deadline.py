@@ -71,4 +71,6 @@ def test_planning_refuses_unbounded_durations_dwells_and_speeds(rig):
                      [Waypoint(POSE, 250.0), Waypoint((0,) * 6, 250.0), Waypoint(POSE, 250.0)])
     assert plan.refusal is not None and "waypoint 3" in plan.refusal.message and "at most 600 s" in plan.refusal.message
     assert "after 500 s of the moves before it" in plan.refusal.message and "split the sequence" in plan.refusal.message
+    # it said 248.9 s, the stretch's first attempt, for a move asked to take 250 s at least
+    assert "the move would take 250 s, after 500 s" in plan.refusal.message, plan.refusal.message
     assert "moves before it" not in result.message  # a single move has none
