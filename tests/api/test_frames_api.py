@@ -137,7 +137,9 @@ def test_a_frames_file_edited_under_the_service_is_named_and_kept_aside_not_over
 def test_a_frames_file_removed_under_the_service_is_named(framed, tmp_path: Path) -> None:
     send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
     (tmp_path / "frames.toml").unlink()
-    assert "it was removed" in send(framed, "frames")["message"]
+    said = send(framed, "frames")["message"]
+    assert "it was removed" in said and "restart the service to use the file's" not in said, said  # there is none
+    assert "a restart would start with no frames and no soft limits: set them again (hexactl frames)" in said, said
     assert "changed since" not in send(framed, "set_frames", tool=[0, 0, 100, 0, 0, 0])["message"]
     assert load_frames(tmp_path / "frames.toml").tool == (0, 0, 100, 0, 0, 0)
 

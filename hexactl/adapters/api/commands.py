@@ -10,6 +10,7 @@ import base64
 import csv
 import io
 import logging
+import os
 import secrets
 import time
 from collections.abc import Callable, Sequence
@@ -313,9 +314,13 @@ class CommandHandler:
         frames = self.controller.operator_frames()
         reply: dict[str, Any] = {"frames": jsonable(frames)}
         if self.frames_file is not None and (problem := file_differs(self.frames_file, frames)):
+            remedy = ("a restart would start with no frames and no soft limits: set them again (hexactl frames) to "
+                      "keep them, or clear them (hexactl frames --clear) if that is what was meant"
+                      if not os.path.lexists(self.frames_file) else
+                      "set the frames you want (the changed file is then kept aside) or restart the service to use "
+                      "the file's")
             reply["message"] = (f"in force; but {self.frames_file}, where they are kept, no longer holds them: "
-                                f"{problem}. The service reads that file at start only: set the frames you want "
-                                "(the changed file is then kept aside) or restart the service to use the file's")
+                                f"{problem}. The service reads that file at start only: {remedy}")
         return reply
 
     def _kept(self, fields: dict[str, Any]) -> dict[str, Any]:
