@@ -221,6 +221,9 @@ def test_writes_land_in_the_checked_directory(data) -> None:
     assert refusal(directories.write_new, "../outside/run.csv", b"").code == ErrorCode.FORBIDDEN_PATH
     assert refusal(directories.write_new, "none/run.csv", b"").code == ErrorCode.FILE_NOT_FOUND
     assert not (data / "outside" / "run.csv").exists()
+    (data / "data" / "d.csv").mkdir()  # found from outside: "exists; a saved file is never overwritten"
+    refused = refusal(directories.write_new, "d.csv", b"")
+    assert refused.code == ErrorCode.FILE_EXISTS and refused.message == "d.csv: is a directory: name a file"
 
 
 def test_a_directory_swapped_for_a_symlink_during_a_write_is_not_followed(data, monkeypatch) -> None:

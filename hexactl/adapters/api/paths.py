@@ -195,6 +195,8 @@ class DataDirectories:
             # the directory just checked, whatever is renamed onto its path meanwhile.
             write_atomic(Path(f"/proc/self/fd/{descriptor}") / path.name, data, overwrite=False)
         except FileExistsError:
+            if (Path(f"/proc/self/fd/{descriptor}") / path.name).is_dir():
+                raise ApiError(ErrorCode.FILE_EXISTS, f"{text}: is a directory: name a file") from None
             raise ApiError(ErrorCode.FILE_EXISTS, f"{text}: exists; a saved file is never overwritten: choose another name") from None
         except OSError as error:
             raise ApiError(ErrorCode.WRITE_FAILED, f"{text}: cannot write: {write_problem(error)}") from None

@@ -608,9 +608,9 @@ def format_error_reply(reply: dict[str, Any]) -> str:
 
 
 _FILE_ERRORS = {
-    "forbidden_path": "the service reads and writes files only in its data directories (hexactl serve --data-dir DIR); "
-                      "name a file there, or give a file on this machine to load-calibration (it is sent)",
+    "forbidden_path": "the service reads and writes files only in its data directories (hexactl serve --data-dir DIR): "
+                      "name a file there, or copy yours into one of them",
     "file_not_found": "check the name: a relative name is looked up in each data directory, then in the service's "
-                      "working directory (a recording is saved only into a directory that exists)",
+                      "working directory",
 }
 """What to do about a file refused: the API's codes for paths."""
