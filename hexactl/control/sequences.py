@@ -127,7 +127,7 @@ def builtin_sequence(name: str, dwell_s: float = BUILTIN_DWELL_S) -> MotionSeque
     """
     motion = _PAPER_MOTIONS.get(name)
     if motion is None:
-        near = difflib.get_close_matches(name, BUILTIN_SEQUENCES, n=1)
+        near = difflib.get_close_matches(name.lower(), BUILTIN_SEQUENCES, n=1)  # X_SWEEP too
         guess = f"did you mean {near[0]!r}? " if near else ""
         raise UnknownSequence(f"{name!r} is not a built-in sequence ({guess}built in: {', '.join(BUILTIN_SEQUENCES)})")
     return MotionSequence(name=motion.name, description=motion.title,

@@ -116,6 +116,7 @@ def test_a_mistyped_built_in_name_gets_the_list_and_a_guess(service) -> None:
     assert error["message"] == ("'x_swep' is not a built-in sequence (did you mean 'x_sweep'? built in: x_sweep, "
                                 "y_rotation, compound); or name a .toml sequence file or a .csv plan (from hexactl "
                                 "plan-leglock) in a data directory")
+    assert "did you mean 'x_sweep'?" in send(service, "play", sequence="X_SWEEP")["error"]["message"]
     far = send(service, "play", sequence="circle")["error"]["message"]
     assert "did you mean" not in far and "built in: x_sweep, y_rotation, compound" in far
 
