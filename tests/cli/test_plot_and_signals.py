@@ -57,3 +57,23 @@ def test_record_refuses_a_signal_named_twice_before_sending(monkeypatch, capsys)
         main(["record", "run1", "--duration", "1", "--signals", "lateness,pose_command,lateness"])
     assert exit.value.code == 2
     assert "argument --signals: lateness named more than once: name each signal once" in capsys.readouterr().err
+
+
+def test_plot_leaves_out_a_side_file_of_other_columns_and_says_when_time_goes_back(tmp_path: Path, monkeypatch,
+                                                                                      capsys) -> None:
+    """Found from outside: another recording's side file titled the image (its name, rate
+    and rows), and a t_s that went back was plotted without a word."""
+    import matplotlib
+
+    monkeypatch.setitem(matplotlib.rcParams, "svg.fonttype", "none")  # the title as text
+    recording = tmp_path / "mine.csv"
+    recording.write_text(RECORDING.replace("0.002,2,", "-0.002,2,"))
+    (tmp_path / "mine.json").write_text(json.dumps({
+        "name": "other", "rate_hz": 250, "frame": "zero", "rows_written": 1000, "ended": "duration",
+        "columns": [{"name": "t_s", "unit": "s"}, {"name": "cycle", "unit": ""}, {"name": "lateness_us", "unit": "us"}]}))
+    image = tmp_path / "mine.svg"
+    assert main(["plot", str(recording), "-o", str(image)]) == 0
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'mine.json'} describes other columns (another recording's?): plotted without it" in err, err
+    assert "t_s goes back at row 2 of its values" in err, err
+    assert "other: 250" not in image.read_text()

@@ -222,12 +222,20 @@ def run_plot(arguments: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     if cut_line is not None:
         print(f"{path}: line {cut_line} was cut (an interrupted recording?): left out", file=sys.stderr)
+    if isinstance(side, dict) and isinstance(side.get("columns"), list) and [
+            column.get("name") if isinstance(column, dict) else None for column in side["columns"]] != header:
+        print(f"{path}: its side file {path.with_suffix('.json')} describes other columns (another recording's?): "
+              "plotted without it", file=sys.stderr)
+        side = None
+    time_s = columns[header.index("t_s")]
+    if len(back := (time_s[1:] < time_s[:-1]).nonzero()[0]):
+        print(f"{path}: t_s goes back at row {int(back[0]) + 2} of its values (a recording's never does: edited?): "
+              "plotted as it is", file=sys.stderr)
     import matplotlib  # heavy: only for plot
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    time_s = columns[header.index("t_s")]
     panels = [(title, [name for name in header if name.startswith(prefix)]) for prefix, title in _GROUPS]
     panels = [(title, names) for title, names in panels if names]
     if not panels:
