@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import os
+import re
 import tomllib
 from pathlib import Path
 
@@ -148,6 +149,11 @@ def test_unreadable_and_invalid_toml_files_are_named(tmp_path: Path) -> None:
     broken.write_text("base_joints = [[1, 2, 3]\n")
     with pytest.raises(GeometryError, match="broken.toml: not valid TOML"):
         load_geometry(broken)
+    # found from outside: a file caught while being written said six keys were each "Field required"
+    for text, said in (("", "empty (no key at all: being written?)"), ("# only a comment\n", "empty (no key at all)")):
+        with pytest.raises(GeometryError, match=re.escape(f"cal.toml: {said}")) as refused:
+            parse_geometry(text, "cal.toml")
+        assert "Field required" not in str(refused.value)
 
 
 def test_saved_files_get_ordinary_permissions(nominal, tmp_path: Path) -> None:

@@ -34,6 +34,10 @@ def parse_geometry(text: str, source: str) -> Geometry:
         data = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, RecursionError) as error:  # RecursionError: arrays nested 1000 deep
         raise GeometryError(f"{source}: not valid TOML: {error}") from None
+    if not data:  # else every key "Field required": the file's emptiness said nowhere
+        raise GeometryError(f"{source}: empty (no key at all{': being written?' if not text.strip() else ''}): a "
+                            "geometry or calibration file names base_joints, platform_joints, zero_lengths, home, "
+                            "limits and measurement")
     geometry = geometry_from_mapping(data, source)
     problems = _actuator_problems(geometry.limits)
     if geometry.calibration is not None and (problem := covariance_problem(geometry.calibration)):
