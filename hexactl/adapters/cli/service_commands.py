@@ -93,9 +93,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                    "leg's constraint: the reply prints the goal run to when it differs. Frames: hexactl frames.")
     frames = command("frames", "show or set the work and tool frames (the pivot point) and the soft limits",
                      _frames_request)
-    frames.add_argument("--work", type=pose_argument, metavar="POSE", help="the work frame in the zero frame (mm, deg)")
+    frames.add_argument("--work", type=pose_argument, metavar="POSE",
+                        help="the work frame in the zero frame (mm, deg), whole: axes not given are 0")
     frames.add_argument("--tool", type=pose_argument, metavar="POSE",
-                        help="the tool frame in the platform's frame (mm, deg): its origin is the pivot point")
+                        help="the tool frame in the platform's frame (mm, deg): its origin is the pivot point; whole, "
+                        "axes not given are 0")
     frames.add_argument("--soft-lower", type=bound_changes_argument, action=MergedBounds, metavar="BOUNDS",
                         help=f"lower soft bounds on the tool's pose in the work frame, axis=value pairs, e.g. "
                         f"x=-50,z=-10 ({NO_BOUND}: remove that bound); given again, its pairs add up")
@@ -104,9 +106,10 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     frames.add_argument("--max-tilt", type=tilt_bound_argument, metavar="DEG",
                         help=f"soft bound on the tool's tilt, deg (at most {MAX_TILT_DEG:g}; {NO_BOUND}: remove it)")
     frames.add_argument("--clear", action="store_true", help="no frames and no soft limits")
-    frames.epilog = ("Without options: show them. Each option changes only what it names: --soft-lower x=-40 sets x's "
-                     f"lower bound and keeps every other soft limit; x={NO_BOUND} removes one. Saved by the service, "
-                     "restored on restart.")
+    frames.epilog = ("Without options: show them. Each option changes only what it names: --work and --tool each set "
+                     "a whole frame (--work z=305 is 0,0,305,0,0,0: give every axis to keep the others); --soft-lower "
+                     f"x=-40 sets x's lower bound and keeps every other soft limit; x={NO_BOUND} removes one. Saved by "
+                     "the service, restored on restart.")
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name, a sequence file or a plan", _play_request)
     play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound), a .toml "
