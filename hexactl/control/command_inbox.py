@@ -67,10 +67,12 @@ class CommandInbox:
                 "not carried out: send it again with a longer timeout if it is still wanted")
         else:
             verdict = self._handlers[type(command)](command)
-        if isinstance(verdict, cmd.CarriedOut):
+        if verdict is None:  # the common case first: a stream's target every cycle
+            code, message = None, cmd.DONE
+        elif isinstance(verdict, cmd.CarriedOut):
             code, message = None, verdict.message
         else:
-            code, message = verdict if verdict else (None, cmd.DONE)
+            code, message = verdict
         if code is not None:
             self._log("command_refused", f"{type(command).__name__}: {message}")
         elif (event := command.event()) is not None:
