@@ -163,6 +163,10 @@ def test_the_command_line_sets_shows_and_moves_in_frames(framed, capsys) -> None
     assert main(["enable", *api]) == 0
     assert main(["move", "--frame", "tool", "--relative", "pitch=5", *api]) == 0
     assert framed.controller.frames_of_moves[-1] == (Frame.TOOL, True)
+    moves = len(framed.controller.frames_of_moves)
+    assert main(["move", "--frame", "tool", "pitch=5", *api]) == 2  # bad input: the service refused it, exit 1
+    assert "--frame tool moves relative to where the tool is" in capsys.readouterr().err
+    assert len(framed.controller.frames_of_moves) == moves  # not sent
     assert main(["frames", "--clear", "--tool", "z=1", *api]) == 2
     assert "--clear takes no other frame option" in capsys.readouterr().err
     assert main(["frames", "--clear", *api]) == 0 and "frames         none" in capsys.readouterr().out

@@ -259,6 +259,9 @@ def client_parser() -> argparse.ArgumentParser:
 def _move_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     if arguments.validate and arguments.wait:
         raise CliError("--validate moves nothing, so there is nothing to --wait for: give one of them")
+    if arguments.frame == "tool" and not arguments.relative:  # the service would refuse it (exit 1) as bad input
+        raise CliError("--frame tool moves relative to where the tool is (it is always at its own origin): add "
+                       "--relative")
     pace = {name: getattr(arguments, name) for name in ("duration", "speed") if getattr(arguments, name) is not None}
     frame = {"frame": arguments.frame} if arguments.frame != "zero" else {}
     tolerance = {"tolerance_mm": arguments.tolerance} if arguments.tolerance is not None else {}
