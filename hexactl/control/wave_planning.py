@@ -124,7 +124,7 @@ def plan_wave(context: PlanningContext, start: RelativeMmRad | ToolInWorkMmRad, 
                        f"the wave leaves the limits: {violations[0].message}{more}{at_worst}{fit}", tuple(violations),
                        details={"fitting_amplitudes": fitting} if fitting else {})
     period = context.period_s
-    setpoints = sensor_setpoints_batch(context.active.geometry.legs, relative + np.asarray(home))
+    setpoints = _setpoints(context, relative)
     speed = np.abs(np.diff(setpoints, axis=0)).max(axis=0) / period
     acceleration = np.abs(np.diff(setpoints, n=2, axis=0)).max(axis=0) / period**2
     fastest = int(np.argmax(speed))
@@ -166,9 +166,11 @@ does not wait on (a long wave in the tool frame would take seconds)."""
 def _fitting_amplitudes(context: PlanningContext, path: WavePath, frames: Frames | None, positions: np.ndarray,
                         relative: np.ndarray) -> dict[str, float] | None:
     """The largest amplitudes, in the proportions asked, whose path breaks no limit
-    (:func:`~hexactl.control.planning.path_violations`), each rounded down to 3
-    significant digits, by axis name (mm, deg); None where none is found (from a start
-    beyond a limit) or the search outlasts :data:`_FIT_ALLOWANCE_S`.
+    (:func:`~hexactl.control.planning.path_violations`) and which are not too fast (the
+    legs' speed, the pose's motion limits: :func:`_pace`; a fit that is found too fast was
+    the next refusal), each rounded down to 3 significant digits, by axis name (mm, deg);
+    None where none is found (from a start beyond a limit) or the search outlasts
+    :data:`_FIT_ALLOWANCE_S`.
 
     The search assesses candidates at the samples the full wave's path check keeps (at
     most a path step apart at full amplitude, closer at less), in the ramps and the first
@@ -206,13 +208,33 @@ def _fitting_amplitudes(context: PlanningContext, path: WavePath, frames: Frames
         wave = _positions(WavePath(_with_amplitudes(spec, amplitudes), path.start, path.period_s), budget, "")
         if isinstance(wave, Refusal):
             return None
-        violations = budgeted_path_violations(context, relative_poses(frames, wave, home), 1, budget, "", "")
+        relative = relative_poses(frames, wave, home)
+        violations = budgeted_path_violations(context, relative, 1, budget, "", "")
         if isinstance(violations, Refusal):
             return None
-        if not violations:
+        pace = 0.0 if violations else _pace(context, relative, wave)
+        if not violations and pace <= 1.0:
             return amplitudes
-        amplitudes = {name: _round_down(amplitude * 0.99) for name, amplitude in amplitudes.items()}
+        # each peak grows with the amplitude: one over its limit by k is fitted by 1/k of it
+        factor = 0.99 / pace if pace > 1.0 else 0.99
+        amplitudes = {name: _round_down(amplitude * factor) for name, amplitude in amplitudes.items()}
     return None
+
+
+def _setpoints(context: PlanningContext, relative: np.ndarray) -> np.ndarray:
+    """The legs' sensor set-points (N, 6) of (N, 6) relative mm/rad poses."""
+    return sensor_setpoints_batch(context.active.geometry.legs, relative + np.asarray(context.active.home))
+
+
+def _pace(context: PlanningContext, relative: np.ndarray, positions: np.ndarray) -> float:
+    """How far the fastest of a wave's paces goes against its limit (1: on it): the legs'
+    speed, and the pose's velocity, acceleration and jerk, of its (N, 6) ``relative``
+    poses and ``positions`` (mm/rad), as :func:`plan_wave` checks them."""
+    leg_speed = np.abs(np.diff(_setpoints(context, relative), axis=0)).max() / context.period_s
+    limits = context.limits.in_mm_rad()
+    peaks = _pose_peaks(positions, context.period_s)
+    return max(leg_speed / context.leg_speed_mm_s,
+               *(float(np.max(peak / np.asarray(bound))) for peak, bound in zip(peaks, limits)))
 
 
 def _with_amplitudes(spec: WaveSpec, amplitudes: dict[str, float]) -> WaveSpec:

@@ -419,3 +419,16 @@ def test_stop_also_ends_a_wave_and_an_estop_freezes_it_as_a_fault(rig):
     rig.run(2)
     assert rig.controller.snapshot.wave.phase is WavePhase.FAULT
     assert rig.controller.snapshot.state.value == "estop"
+
+
+def test_a_refused_waves_fitting_amplitudes_are_not_too_fast_either(rig, monkeypatch):
+    """Found from outside: the amplitudes said to fit the limits were then refused as too
+    fast for the legs (or the pose's motion limits): the fit now keeps those too."""
+    monkeypatch.setattr(wave_planning, "_FIT_ALLOWANCE_S", 600.0)  # what it finds is judged here, not how fast
+    rig.enabled()
+    spec = WaveSpec(frequency_hz=0.1, cycles=2, axes={"x": {"amplitude": 900.0}})  # 610 mm fit the envelope: too fast
+    refused = rig.controller.validate_wave(spec)
+    assert refused.error == "path_violation", refused.message
+    fitting = refused.details["fitting_amplitudes"]
+    assert rig.controller.validate_wave(_scaled(spec, fitting)).ok
+    assert not rig.controller.validate_wave(_scaled(spec, {"x": fitting["x"] * 1.02})).ok
