@@ -307,7 +307,8 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
         # and an accepted goal is assessed with its path below.
         goal_relative = relative_poses(frames, np.array([goal], dtype=float), home)
         if not pose_allowed(context, goal_relative[0]):
-            goal_violations = path_violations(context, goal_relative, number)
+            goal_violations = path_violations(context, goal_relative, number,
+                                              checks.tolerated if number == 1 else None)
             if goal_violations:
                 return Plan(refusal=_path_refusal(context, goal_violations, origin, origin_frames))
         planned = _plan_segment(context, start, goal, frames, waypoint, MAX_MOTION_S - motion_s, budget, remedy)
@@ -393,15 +394,24 @@ class StartExcess:
     """How far a motion may be beyond each limit it starts beyond: as far as the platform
     already is there, to rounding, so that it may go back inside, never further out.
     ``hardware`` per column of :class:`~hexactl.kinematics.workspace.PoseChecks` (None:
-    inside every hardware limit); ``soft`` by (kind, axis) of the soft limits it is beyond."""
+    inside every hardware limit); ``soft`` by :func:`soft_bound` of the soft limits it is
+    beyond."""
 
     hardware: NDArray | None
-    soft: Mapping[tuple[ViolationKind, str | None], float]
+    soft: Mapping[tuple[ViolationKind, str | None, bool], float]
 
     def soft_tolerates(self, violation: Violation) -> bool:
-        """Whether soft limit ``violation`` goes no further beyond than the start."""
-        allowed = self.soft.get((violation.kind, violation.axis))
+        """Whether soft limit ``violation`` goes no further beyond than the start, past the
+        same bound."""
+        allowed = self.soft.get(soft_bound(violation))
         return allowed is not None and abs(violation.value - violation.limit) <= allowed
+
+
+def soft_bound(violation: Violation) -> tuple[ViolationKind, str | None, bool]:
+    """Which soft bound ``violation`` passes: its kind, its axis and whether it is above
+    the bound. Not the axis alone: a platform 100 mm below x's lower bound was let 100 mm
+    past its upper one (a move blended from the motion under way overshot it by 19 mm)."""
+    return violation.kind, violation.axis, violation.value > violation.limit
 
 
 def tolerated_excess(context: PlanningContext, start: NDArray) -> StartExcess | None:
@@ -414,7 +424,7 @@ def tolerated_excess(context: PlanningContext, start: NDArray) -> StartExcess | 
     beyond = excess > 0
     hardware = np.where(beyond, excess + POSE_BOUND_ROUNDING, 0.0) if beyond.any() else None
     soft = {} if context.soft_limits is None or context.frames is None else {
-        (violation.kind, violation.axis): abs(violation.value - violation.limit) + POSE_BOUND_ROUNDING
+        soft_bound(violation): abs(violation.value - violation.limit) + POSE_BOUND_ROUNDING
         for violation in soft_limits_broken(context, start[None])[0]}
     return None if hardware is None and not soft else StartExcess(hardware, soft)
 
@@ -431,7 +441,7 @@ class _PathChecks:
 
     def __init__(self, context: PlanningContext, start: NDArray | None = None) -> None:
         self._context = context
-        self._tolerated = None if start is None else tolerated_excess(context, start)
+        self.tolerated = None if start is None else tolerated_excess(context, start)
         self._pending: list[NDArray] = []  # thinned relative mm/deg poses not assessed yet
         self._owners: list[NDArray] = []  # their waypoints
         self._count = 0
@@ -443,7 +453,7 @@ class _PathChecks:
         """The (N, 6) relative mm/rad samples of waypoint ``waypoint``'s path."""
         context = self._context
         if context.soft_limits is not None and context.frames is not None:
-            if soft := _soft_violations(context, relative, waypoint, self._tolerated if waypoint == 1 else None):
+            if soft := _soft_violations(context, relative, waypoint, self.tolerated if waypoint == 1 else None):
                 self._soft.setdefault(waypoint, []).extend(soft)
         relative_deg = pose_mm_rad_to_mm_deg(relative)
         keep = thinned(relative_deg, context.path_step_mm, context.path_step_deg)
@@ -467,7 +477,7 @@ class _PathChecks:
             if begin and (refusal := budget.refusal(where(), remedy)):
                 return refusal
             _note_first_violations(geometry, poses[begin:begin + _CHECK_BATCH], owners[begin:begin + _CHECK_BATCH],
-                                   self._hardware, None if self._tolerated is None else self._tolerated.hardware)
+                                   self._hardware, None if self.tolerated is None else self.tolerated.hardware)
         return None
 
     def violations(self) -> list[PathViolation]:
@@ -482,14 +492,17 @@ class _PathChecks:
                 for violation in by_waypoint[waypoint] + _first_of_each(self._soft.get(waypoint, []))]
 
 
-def path_violations(context: PlanningContext, relative: NDArray, waypoint: int) -> list[PathViolation]:
+def path_violations(context: PlanningContext, relative: NDArray, waypoint: int,
+                    tolerated: StartExcess | None = None) -> list[PathViolation]:
     """The hardware's limits (:func:`assess_path`: stroke, joint cones, envelope,
     near-singularity) and the soft limits broken by (N, 6) relative mm/rad samples of
-    waypoint ``waypoint``'s path: what every commanded path is checked against."""
+    waypoint ``waypoint``'s path: what every commanded path is checked against. The soft
+    limits but for those ``tolerated`` (a motion's goal from beyond them: a jog back
+    inside, slower than its horizon's reach, was refused; the hardware's, never)."""
     found = assess_path(context.active.geometry, relative, waypoint, context.path_step_mm, context.path_step_deg)
     if context.soft_limits is None or context.frames is None:
         return found
-    return found + _soft_violations(context, relative, waypoint)
+    return found + _soft_violations(context, relative, waypoint, tolerated)
 
 
 def _soft_violations(context: PlanningContext, relative: NDArray, waypoint: int,
