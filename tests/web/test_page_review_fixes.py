@@ -158,6 +158,26 @@ def test_an_empty_move_input_is_refused_not_taken_for_zero(rig) -> None:
     assert not go_enabled(rig)
 
 
+@pytest.mark.parametrize(("typed", "said"), [("1,5", 'x: "1,5" is not a number (a decimal point, not a comma: 1.5)'),
+                                             ("0x10", 'x: "0x10" is not a number'),
+                                             ("1.2.3", 'x: "1.2.3" is not a number')])
+def test_a_move_typed_with_a_comma_is_refused_not_read_as_another_number(rig, typed: str, said: str) -> None:
+    """Found from outside: the fields were number inputs, and the browser dropped what it
+    refused as it was typed: "1,5" became 15 (a goal ten times as far), "1.2.3" 1.23."""
+    rig.at_rest_disabled()
+    for axis in AXES:
+        rig.fill(f"#move-{axis}", 0)
+    rig.fill("#move-x", typed)
+    assert rig.element("#move-x").get_attribute("value") == typed  # as typed: nothing dropped
+    before = sent(rig, "validate_pose")
+    cleared(rig, "#move-result")
+    rig.click("#move-validate")
+    shown = wait_for(lambda: move_result(rig), "the page's answer")
+    assert shown.startswith(said) and "nothing was sent" in shown, shown
+    rig.client.call("status")
+    assert sent(rig, "validate_pose") == before
+    assert not go_enabled(rig)
+
 def test_a_jog_speed_that_is_not_a_number_sends_no_jog(rig) -> None:
     """Number('') is 0: an empty speed sent a jog at 0 (a jog the operator did not mean)."""
     rig.at_rest_disabled()

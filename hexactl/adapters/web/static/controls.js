@@ -105,6 +105,11 @@ export function parseSix(text, allowNull, what) {
   });
 }
 
+/** What to say of a number refused for a decimal comma (the fields are text: a number field dropped it, "1,5" became 15). */
+function commaHint(text) {
+  return String(text).includes(',') ? ' (a decimal point, not a comma: 1.5)' : '';
+}
+
 /** A percentage for people: whole below 100 from 10 on, two significant digits below (a slow jog is not "0 %"), as `hexactl jog` says it. */
 function percentText(percent) {
   if (percent >= 9.95) return `${percent.toFixed(0)} %`;
@@ -207,22 +212,18 @@ export function setupControls(ctx) {
 
   function readMove() {
     const pose = AXES.map((a) => {
-      const el = $(`move-${a}`);
-      if (el.validity && el.validity.badInput) throw new Error(`${a}: not a number; ${NOT_SENT}`);
-      const t = el.value.trim();
+      const t = $(`move-${a}`).value.trim();
       if (t === '') throw new Error(`${a}: empty: type a number (0 for none); ${NOT_SENT}`);
       const v = decimal(t);
-      if (!Number.isFinite(v)) throw new Error(`${a}: "${t}" is not a number; ${NOT_SENT}`);
+      if (!Number.isFinite(v)) throw new Error(`${a}: "${t}" is not a number${commaHint(t)}; ${NOT_SENT}`);
       return v;
     });
     const fields = { pose, frame: $('move-frame').value, relative: $('move-relative').checked };
     for (const [id, key] of [['move-duration', 'duration'], ['move-speed', 'speed']]) {
-      const el = $(id);
-      if (el.validity && el.validity.badInput) throw new Error(`${key}: not a number (empty: none); ${NOT_SENT}`);
-      const t = el.value.trim();
+      const t = $(id).value.trim();
       if (t !== '') {   // empty: none
         const v = decimal(t);
-        if (!Number.isFinite(v)) throw new Error(`${key}: "${t}" is not a number (empty: none); ${NOT_SENT}`);
+        if (!Number.isFinite(v)) throw new Error(`${key}: "${t}" is not a number${commaHint(t)} (empty: none); ${NOT_SENT}`);
         fields[key] = v;
       }
     }
@@ -359,12 +360,10 @@ export function setupControls(ctx) {
 
   /** The jog speed typed (mm/s, °/s); an Error saying why when it is not a number ≥ 0. */
   function jogSpeed() {
-    const el = $('jog-speed');
-    const t = el.value.trim();
-    if (el.validity && el.validity.badInput) throw new Error('jog speed: not a number; not sent');
+    const t = $('jog-speed').value.trim();
     if (t === '') throw new Error('jog speed: empty: type a speed in mm/s, °/s; not sent');
     const speed = decimal(t);
-    if (!Number.isFinite(speed) || speed < 0) throw new Error(`jog speed: "${t}" is not a number ≥ 0; not sent`);
+    if (!Number.isFinite(speed) || speed < 0) throw new Error(`jog speed: "${t}" is not a number ≥ 0${commaHint(t)}; not sent`);
     return speed;
   }
 
@@ -684,7 +683,10 @@ export function setupControls(ctx) {
     const name = recName.value.trim();
     const duration = decimal($('record-duration').value);
     if (!name) { setResult(recResult, 'refused', 'name the recording'); return; }
-    if (!Number.isFinite(duration) || duration <= 0) { setResult(recResult, 'refused', 'duration: a positive number of seconds'); return; }
+    if (!Number.isFinite(duration) || duration <= 0) {
+      setResult(recResult, 'refused', `duration: a positive number of seconds${commaHint($('record-duration').value)}`);
+      return;
+    }
     const reply = await ctx.send('record', { name, duration_s: duration });
     if (reply.ok) {
       setResult(recResult, 'valid', `${reply.message ?? 'recording'}${reply.rows ? `: ${reply.rows} rows` : ''}${reply.rate_hz ? ` at ${reply.rate_hz} Hz` : ''}`);
