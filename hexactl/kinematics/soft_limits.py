@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, POSE_UNITS, AxisName
+from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, POSE_MAGNITUDE_LIMIT, POSE_UNITS, AxisName
 from hexactl.kinematics.numbers import Number
 from hexactl.kinematics.workspace import POSE_BOUND_ROUNDING, Violation, ViolationKind
 
@@ -60,6 +60,11 @@ class SoftLimits(BaseModel):
 
     @model_validator(mode="after")
     def _ordered(self) -> SoftLimits:
+        if far := [f"{axis} {bound:g} {unit}" for axis, unit, low, high in zip(POSE_AXES, POSE_UNITS, self.lower,
+                                                                                   self.upper)
+                   for bound in (low, high) if bound is not None and abs(bound) > POSE_MAGNITUDE_LIMIT]:
+            raise ValueError(f"soft bound {', '.join(far)} is beyond any platform's reach (at most "
+                             f"±{POSE_MAGNITUDE_LIMIT:g} mm or deg): check the units and the number (null: no bound)")
         if across := [problem for axis, low, high in zip(range(6), self.lower, self.upper)
                       if (problem := _angle_window_problem(axis, low, high))]:
             raise ValueError("; ".join(across))

@@ -193,3 +193,10 @@ def test_no_change_keeps_the_soft_limits_and_a_null_tilt_removes_its_bound():
     limits = SoftLimits(lower=(-10,) + (None,) * 5, max_tilt_deg=5)
     assert SoftLimitChanges().applied_to(limits) == limits
     assert SoftLimitChanges.model_validate({"max_tilt_deg": None}).applied_to(limits) == SoftLimits(lower=limits.lower)
+
+
+def test_a_bound_beyond_any_platforms_reach_is_refused_as_a_typing_error() -> None:
+    """Found from outside: a soft bound of 1e308 was taken, where a frame's 1e308 is refused."""
+    with pytest.raises(ValidationError, match=r"soft bound x 1e\+308 mm is beyond any platform's reach"):
+        SoftLimits(upper=(1e308, None, None, None, None, None))
+    assert SoftLimits(lower=(-1e6, None, None, None, None, None)).lower[0] == -1e6
