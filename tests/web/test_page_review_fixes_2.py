@@ -155,6 +155,30 @@ def test_no_jog_renewal_goes_before_the_reply_to_the_jog_that_starts_it(rig) -> 
     attempted(rig, scenario)
 
 
+def test_a_refused_jog_keeps_its_refusal_in_the_panel_and_is_not_renewed(rig) -> None:
+    """Found from outside: a jog refused (a speed of 1e308) went on being sent while held,
+    and the release's reply then stood in the panel for the refusal."""
+
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        rig.fill("#jog-speed", "1e308")
+        cleared(rig, "#jog-status")
+        since = count(rig)
+        button = jog_button(rig)
+        ActionChains(rig.driver).click_and_hold(button).perform()
+        try:
+            said = wait_for(lambda: text(rig, "#jog-status"), "the page's answer", seen=lambda: messages(rig, since))
+        finally:
+            ActionChains(rig.driver).release(button).perform()
+        rig.client.call("status")  # a round trip: anything the page still sent has been sent
+        assert "beyond 10000 (mm/s or deg/s)" in said, said
+        assert "beyond 10000 (mm/s or deg/s)" in text(rig, "#jog-status"), text(rig, "#jog-status")
+        jogs = [m for m in messages(rig, since) if m.get("cmd") == "jog"]
+        assert len(jogs) == 1, jogs  # the refused press alone: no renewal, no release of a jog never started
+        rig.fill("#jog-speed", 10)
+
+    attempted(rig, scenario)
+
 def test_a_jog_dropped_for_lost_live_data_is_released_with_a_zero_velocity(rig) -> None:
     """Found from outside: it was only no longer renewed, so nothing that stops it queued
     behind renewals held up in a stalled dashboard."""

@@ -392,6 +392,14 @@ export function setupControls(ctx) {
     if (reply.ok && typeof reply.deadman_s === 'number' && reply.deadman_s > 0) renewEvery(reply.deadman_s * 1000 / RENEWALS_PER_DEADMAN);
     if (held && held === jog) {
       if (reply.ok && reply.jog != null) { held.number = reply.jog; held.lapsed = null; }
+      if (!reply.ok && starting) {
+        // the jog pressed is refused: the button is released here, so that no renewal, the
+        // release's reply or the state's "jog released" stands in for why (a renewal's refusal,
+        // expired say, is followed by the next as usual)
+        releaseJog(false);
+        setResult(jogStatus, 'refused', describeError(reply.error));
+        return;
+      }
       if (!reply.ok && reply.error && reply.error.code === 'jog_ended') {
         // several renewals of the lapsed jog may be answered so: the restart names that jog, whichever reply came first
         const details = reply.error.details || {};
