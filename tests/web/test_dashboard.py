@@ -450,6 +450,12 @@ def test_the_frames_panel_changes_only_the_soft_limits_filled_in(rig) -> None:
         rig.fill("#soft-max-tilt", "none")
         rig.fill("#soft-upper", "null, null, null, null, null, 5")
         assert applied({"lower": lower, "upper": [None, None, None, None, None, 5], "max_tilt_deg": None})
+        wait_for(lambda: rig.element("#frames-result").text.startswith("frames set"), "the page's result")
+        # found from outside: once another client changed them, the result still showed the frames set here
+        rig.client.call("set_frames", soft_limit_changes={"max_tilt_deg": 20})
+        wait_for(lambda: rig.element("#frames-result").text.startswith("the frames in force have changed since "
+                                                                        "this page set them"),
+                 "the page's result withdrawn", seen=lambda: rig.element("#frames-result").text)
     finally:
         rig.client.call("clear_frames")
 
