@@ -13,6 +13,7 @@ import json
 import os
 import re
 import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -625,13 +626,22 @@ def test_a_pose_stream_shows_while_it_runs_and_how_it_ended(rig) -> None:
         wait_for(lambda: rig.status()["motion"] == "holding", "enabled at rest")
         with PoseStream(rig.client, "page test", timeout_ms=2000) as stream:
             number = stream.opened["stream"]
+            # Fed by a thread of its own: sent between the page's reads, a busy host's slow read
+            # (seconds) let the stream time out, and the page rightly showed it ended.
+            fed = threading.Event()
 
-            def following() -> bool:
-                stream.send((0.5, 0, 0, 0, 0, 0))
-                text = summary.text
-                return f"stream {number} from page test (zero) following" in text and "clamped 0" in text
+            def feed() -> None:
+                while not fed.wait(0.02):
+                    stream.send((0.5, 0, 0, 0, 0, 0))
 
-            wait_for(following, "the stream on the page", seen=lambda: summary.text)
+            feeder = threading.Thread(target=feed, name="stream-feeder", daemon=True)
+            feeder.start()
+            try:
+                wait_for(lambda: f"stream {number} from page test (zero) following" in (text := summary.text)
+                         and "clamped 0" in text, "the stream on the page", seen=lambda: summary.text)
+            finally:
+                fed.set()
+                feeder.join()
         wait_for(lambda: summary.text.startswith(f"last stream {number}: "), "how it ended", seen=lambda: summary.text)
         assert "closed by the client" in summary.text, summary.text
         rig.client.call("disable")
