@@ -385,8 +385,8 @@ def farthest_violation(context: PlanningContext, relative: NDArray) -> Violation
     soft = [violation for broken in soft_limits_broken(context, relative) for violation in broken]
     if not soft:
         return None
-    first = (soft[0].kind, soft[0].axis)
-    return max((v for v in soft if (v.kind, v.axis) == first), key=lambda v: abs(v.value - v.limit))
+    first = soft_bound(soft[0])
+    return max((v for v in soft if soft_bound(v) == first), key=lambda v: abs(v.value - v.limit))
 
 
 @dataclass(frozen=True, slots=True)
