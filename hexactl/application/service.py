@@ -347,6 +347,8 @@ class Service:
                                                        config=controller_config, nominal=nominal)
             except ValueError as error:  # a calibration whose [limits] are not the nominal's, or implausible
                 raise ServiceError(f"{source}: {error}{refused}") from None
+            # said once the loop took it: logged when read, a calibration then refused read as active
+            log.info("active calibration %r (%s) from %s", active.name, calibration_id, source)
             # What is in force is what a restart restores: the API process keeps it from its start on.
             kept = KeptCalibration(kept_path, geometry_id(nominal))
 
@@ -827,19 +829,19 @@ def _start_calibration(calibration_path: Path | None, kept_path: Path, nominal: 
     """
     if calibration_path:
         active = _load(calibration_path)
-        log.info("active calibration %r (%s) from %s", active.name, geometry_id(active), calibration_path)
+        log.info("calibration %r (%s) read from %s", active.name, geometry_id(active), calibration_path)
         return active, str(calibration_path), ""
     remedy = (f"\n{kept_path} keeps the calibration in force when the service last ran: give --calibration FILE, "
               "or remove the file to start on the nominal geometry")
     if not kept_path.exists():
-        log.info("no calibration kept in %s: the nominal geometry is active", kept_path)
+        log.info("no calibration kept in %s: starting on the nominal geometry", kept_path)
         return nominal, str(config_path), ""
     try:
         active, source = restore_calibration(kept_path)
     except GeometryError as error:
         raise ServiceError(f"{error}{remedy}") from None
-    log.info("active calibration %r (%s) restored from %s (loaded from %s)", active.name, geometry_id(active),
-             kept_path, source)
+    log.info("calibration %r (%s) read from %s, where it was kept (loaded from %s)", active.name,
+             geometry_id(active), kept_path, source)
     return active, source, remedy
 
 

@@ -322,3 +322,17 @@ def test_a_kept_calibration_the_service_wrote_is_replaced_without_a_copy(tmp_pat
     kept.keep(CALIBRATED, geometry_id(CALIBRATED), "cal.toml")
     said = kept.keep(NOMINAL, geometry_id(NOMINAL), "nominal", geometry_id(CALIBRATED))
     assert "changed since" not in said and sorted(tmp_path.iterdir()) == []
+
+
+def test_a_calibration_refused_at_start_is_never_logged_as_active(tmp_path: Path, caplog) -> None:
+    """Found from outside: ``serve --calibration`` logged "active calibration … from FILE",
+    then refused it: a reader of the log took it for the one in force."""
+    moved = tmp_path / "moved.toml"
+    moved.write_text(geometry_to_toml(CALIBRATED.model_copy(update={"home": (0.0, 0.0, 2020.0, 0.0, 0.0, 0.0)})))
+    caplog.set_level(logging.INFO, logger="hexactl.service")
+    with pytest.raises(ServiceError):
+        Service.start(ServiceConfig(api_endpoint=LOCAL, telemetry_endpoint=LOCAL, data_dirs=(tmp_path,),
+                                    calibration_path=moved, kept_calibration_path=tmp_path / "kept.toml"))
+    said = [record.getMessage() for record in caplog.records if record.name == "hexactl.service"]
+    assert any(f"read from {moved}" in line for line in said), said
+    assert not any(line.startswith("active calibration") for line in said), said
