@@ -206,17 +206,6 @@ def test_save_recording_writes_csv_once(service) -> None:
     assert send(service, "save_recording", path="RUN2.CSV")["records"] == 2
 
 
-def test_save_recording_of_no_record_writes_nothing(service, monkeypatch) -> None:
-    """Found from outside: a sequence aborted before its first dwell wrote a file of the
-    header alone, which then held the name."""
-    from hexactl.control.sequence_player import SequenceReport
-
-    monkeypatch.setattr(service.controller, "sequence_records", lambda: SequenceReport("x_sweep", "aborted", ()))
-    refused = send(service, "save_recording", path="none.csv")["error"]
-    assert refused["code"] == "no_recording" and "'x_sweep' (aborted) has no dwell record" in refused["message"]
-    assert not (service.data_dir / "none.csv").exists()
-
-
 def test_measure_returns_the_instruments_points(service, nominal) -> None:
     points = send(service, "measure")["points"]
     assert len(points) == len(nominal.measurement.feature_points)

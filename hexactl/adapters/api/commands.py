@@ -374,9 +374,6 @@ class CommandHandler:
         report = self.controller.sequence_records()
         if report is None:
             raise ApiError(ErrorCode.NO_RECORDING, "no sequence has been played yet")
-        if not report.records:  # a file of its header alone would only take the name
-            raise ApiError(ErrorCode.NO_RECORDING, f"the sequence {report.name!r} ({report.status}) has no dwell "
-                           "record: one is taken at the end of each waypoint's dwell; nothing was written")
         table = io.StringIO()
         writer = csv.writer(table, lineterminator="\n")
         writer.writerow(dwell_header())
