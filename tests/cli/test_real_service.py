@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import re
+import select
 import signal
 import subprocess
 import sys
@@ -253,6 +254,11 @@ def test_wait_returns_at_rest_and_says_when_a_pause_or_an_estop_holds_the_motion
         assert playing.returncode == 1 and "sequence x_sweep is paused: `hexactl resume` or `hexactl abort`" in err
         resuming = subprocess.Popen([sys.executable, "-m", "hexactl.adapters.cli.main", "resume", "--wait",
                                      "--api", served.api], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # Its reply first (the ok line, flushed), then the E-stop it waits through: an E-stop
+        # that came before the reply cancels the resume instead, rightly ("resume cancelled:
+        # a stop, abort or estop arrived while it was being planned"), and --wait is not reached.
+        replied, _, _ = select.select([resuming.stdout], [], [], WAIT_S)
+        assert replied and resuming.stdout.readline().startswith("ok: "), "the resume's reply"
         wait_for(lambda: status(client)["motion"] == "moving", "the sequence to resume")
         client.request("estop")
         _, err = resuming.communicate(timeout=WAIT_S)
