@@ -32,7 +32,7 @@ import zmq
 
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
-from hexactl.adapters.api.stream_wire import MAX_TEXT_BYTES, MalformedSample, Sample, decode
+from hexactl.adapters.api.stream_wire import LAST_SEQUENCE, MAX_TEXT_BYTES, MalformedSample, Sample, decode
 from hexactl.control.stream import StreamProgress
 from hexactl.control.stream_commands import TargetResult
 
@@ -72,7 +72,6 @@ SENT_CLOCK_SAMPLES = 10
 """Samples in a row whose ``sent_s`` leaves :data:`SENT_CLOCK_BAND` before it is said."""
 
 _ARRIVAL_PACE_NS = 2_000_000  # two samples closer than this arrived in a burst: no pace to compare with
-_LAST_SEQUENCE = 2**32 - 1
 
 log = logging.getLogger("hexactl.stream")
 
@@ -310,9 +309,9 @@ class StreamReceiver(SocketThread):
             c.no_stream += 1
             return
         if sample.sequence is None:  # numbered after the last taken, of either form: the newest
-            if self._last_sequence == _LAST_SEQUENCE:  # none is above it: every sample after would be dropped
+            if self._last_sequence == LAST_SEQUENCE:  # none is above it: every sample after would be dropped
                 c.out_of_order += 1
-                self._problem(f"the stream's sequence has reached {_LAST_SEQUENCE}, the largest: a line without one "
+                self._problem(f"the stream's sequence has reached {LAST_SEQUENCE}, the largest: a line without one "
                               "cannot be numbered after it; open a new stream (stream_close, then stream_open)")
                 return
             sample = Sample((self._last_sequence or 0) + 1, received_ns / 1e9, sample.pose)

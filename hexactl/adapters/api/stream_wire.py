@@ -40,6 +40,9 @@ from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL
 
 MAGIC = b"HXS1"
 BINARY = struct.Struct("<4sId6d")
+
+LAST_SEQUENCE = 2**32 - 1
+"""The largest sequence a sample carries (uint32)."""
 MAX_TEXT_BYTES = 512
 MAX_SENT_S = 1e12
 """The largest sender's time, s (31 700 years): any clock a sender keeps, and far from where
@@ -92,7 +95,7 @@ def decode(message: bytes) -> Sample:
         return _checked(None, None, values)
     if len(values) == 8:
         sequence = values[0]
-        if not sequence.is_integer() or not 0 <= sequence < 2**32:
+        if not sequence.is_integer() or not 0 <= sequence <= LAST_SEQUENCE:
             raise MalformedSample(f"a sample's sequence is a whole number in [0, 2³²), got {fields[0]}")
         return _checked(int(sequence), values[1], values[2:])
     raise MalformedSample(f"a text sample is 8 numbers (sequence, sent_s, x, y, z, roll, pitch, yaw) or 6 (the "
