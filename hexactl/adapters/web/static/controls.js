@@ -519,6 +519,7 @@ export function setupControls(ctx) {
   // ---------------- frames & soft limits ----------------
   const framesResult = $('frames-result');
   let framesApplied = null;   // framesKey of the frames this page set last, while its result is shown
+  let framesInForce = false;  // a record has shown them in force since (an older record, still on its way, does not)
   const framesKey = (f) => JSON.stringify(f ? [f.work, f.tool, f.soft_limits?.lower, f.soft_limits?.upper,
     f.soft_limits?.max_tilt_deg] : null);
   const NO_FRAMES = 'work: none · tool: none · soft limits: none';
@@ -571,11 +572,13 @@ export function setupControls(ctx) {
     const reply = await ctx.send('set_frames', fields);
     setResult(framesResult, reply.ok ? 'valid' : 'refused', reply.ok ? `${reply.message ?? 'frames set'}\n${describeFrames(reply.frames)}` : describeError(reply.error));
     framesApplied = reply.ok ? framesKey(reply.frames) : null;
+    framesInForce = false;
   });
   $('frames-clear').addEventListener('click', async () => {
     const reply = await ctx.send('clear_frames');
     setResult(framesResult, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'frames cleared' : describeError(reply.error));
     framesApplied = reply.ok ? framesKey(reply.frames) : null;
+    framesInForce = false;
   });
   $('frames-fill').addEventListener('click', () => {
     const f = ctx.record()?.frames;
@@ -722,10 +725,13 @@ export function setupControls(ctx) {
   function onRecord(r) {
     updateCampaign(r.campaign);
     // the page's own frames result holds while they are in force (another client may change them)
-    if (framesApplied !== null && r.frames && framesKey(r.frames) !== framesApplied) {
-      framesApplied = null;
-      setResult(framesResult, null, 'the frames in force have changed since this page set them (another client?): '
-        + 'see what is in force above');
+    if (framesApplied !== null && r.frames) {
+      if (framesKey(r.frames) === framesApplied) framesInForce = true;
+      else if (framesInForce) {
+        framesApplied = null;
+        setResult(framesResult, null, 'the frames in force have changed since this page set them (another client?): '
+          + 'see what is in force above');
+      }
     }
     // sequence progress
     const s = r.sequence;
