@@ -37,6 +37,12 @@ TAP = """
   window.setInterval = (callback, ms, ...rest) => { tap.intervals.push(ms); return nativeSetInterval(callback, ms, ...rest); };
   tap.releaseReplies = () => { tap.holdEventsReplies = false; tap.heldReplies.splice(0).forEach((f) => f()); };
   tap.releaseJogs = () => { tap.holdJogs = null; tap.heldJogs.splice(0).forEach((f) => f()); };
+  tap.releaseRenewals = () => {  // the held renewals go on their way; a held restart stays held, and any to come
+    tap.holdJogs = 'restarts';
+    const held = tap.heldJogs.splice(0);
+    tap.heldJogs.push(...held.filter((f) => f.command.restarts != null));
+    held.filter((f) => f.command.restarts == null).forEach((f) => f());
+  };
   window.hexactlTestTap = tap;
   window.WebSocket = class extends Native {
     constructor(...args) {
@@ -92,7 +98,11 @@ TAP = """
         tap.jogIds.add(command.id);
         tap.jogs.push(command);
         if (tap.holdJogs === 'all' || (tap.holdJogs === 'restarts' && command.restarts != null)) {
-          tap.heldJogs.push(() => super.send(data));
+          // a restart goes stamped when released, as one the page made then: held from its making,
+          // it would expire on the way (one deadman period) and the page rightly release the button
+          const send = () => super.send(command.restarts == null ? data
+            : JSON.stringify({ ...command, at: performance.now() }));
+          tap.heldJogs.push(Object.assign(send, { command }));
           return undefined;
         }
       }
@@ -108,7 +118,8 @@ holds the replies to the page's ``events`` requests until ``releaseReplies()``,
 ``failEventsReplies`` (a count) turns that many of them into failures (``loop_silent``),
 ``jogReplyFields`` (not null) replaces those fields of the replies to its jogs, ``jogs`` lists
 every jog command the page sends, ``holdJogs`` (``all``, or ``restarts``: only those that name a
-lapsed jog) holds them on the way until ``releaseJogs()`` (a stalled page), ``intervals``
+lapsed jog) holds them on the way until ``releaseJogs()`` (a stalled page) or, for the
+renewals only, ``releaseRenewals()`` (which holds restarts from then on), ``intervals``
 lists the period of every ``setInterval`` the page starts, ``sent`` lists the ``cmd`` of every
 command the page sends, and ``losses`` counts the times the page may
 have lost its live data on its own (not by ``dropTelemetry``): the socket closed, the
@@ -395,8 +406,9 @@ def _stalled_until_lapsed(rig) -> int:
     rig.page("window.hexactlTestTap.holdJogs = 'all';")
 
     def lapsed() -> int | None:  # the jog the page renews (a busy host may have lapsed one before: it restarted)
-        record, held = rig.status(), rig.page("return window.hexactlTestTap.heldJogs.length && "
-                                              "window.hexactlTestTap.jogs.at(-1).renews")
+        # the last held: a renewal, or a restart when a renewal sent before the hold was refused as lapsed
+        record, held = rig.status(), rig.page("const last = window.hexactlTestTap.heldJogs.at(-1)?.command; "
+                                              "return last && (last.renews ?? last.restarts)")
         last = record["last_jog"]
         return (last["jog"] if held and record["jog"] is None and last == {"jog": held, "reason": DEADMAN_LAPSED}
                 else None)
@@ -446,7 +458,7 @@ def test_a_stop_between_the_lapse_and_the_pages_restart_ends_the_held_jog_for_go
             with _held_x_jog(rig) as button:
                 lapsed = _stalled_until_lapsed(rig)
                 # the renewals go on to be refused as lapsed; the page's restart is held on the way
-                rig.page("const t = window.hexactlTestTap; t.releaseJogs(); t.holdJogs = 'restarts';")
+                rig.page("window.hexactlTestTap.releaseRenewals();")
                 wait_for(lambda: rig.page("return window.hexactlTestTap.heldJogs.length"), "the page's restart",
                          seen=lambda: rig.element("#jog-status").text)
                 rig.client.call("stop")
