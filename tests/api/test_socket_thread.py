@@ -5,6 +5,8 @@ endpoint refused with nothing left open, one thread from ``start`` to ``close``,
 
 from __future__ import annotations
 
+import json
+import logging
 import socket
 import threading
 from collections.abc import Callable
@@ -12,7 +14,7 @@ from collections.abc import Callable
 import pytest
 import zmq
 
-from hexactl.adapters.api.server import ApiServer
+from hexactl.adapters.api.server import MAX_QUEUED_PER_CLIENT, ApiServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from tests.api.support import LOCAL
@@ -123,4 +125,45 @@ def test_an_ipc_endpoint_another_process_serves_is_refused_a_stale_one_taken(mak
         gone.bind(str(stale))
     served = make(context, f"ipc://{stale}")
     served.close()
+    assert terminated(context)
+
+
+def test_a_client_that_never_reads_its_replies_loses_them_past_the_per_client_bound_and_the_log_says_why(
+        caplog) -> None:
+    """Found from outside: ZeroMQ kept up to 1000 unread replies a client, so one that
+    pipelined ``read_file`` and never read held hundreds of MB of the API process's memory.
+    It keeps :data:`MAX_QUEUED_PER_CLIENT` (beyond what the sockets buffer); the rest are
+    dropped, said once in the log, and other clients are answered as before."""
+    reply = {"message": "x" * 128_000}
+    context = zmq.Context()
+    server = ApiServer(context, LOCAL, lambda request, deadline_ns, sender: reply)
+    server.start()
+    hoarder = context.socket(zmq.DEALER)
+    hoarder.linger = 0
+    hoarder.rcvhwm = 1
+    hoarder.setsockopt(zmq.RCVBUF, 4096)
+    hoarder.connect(server.endpoint)
+    sent = 0
+
+    def dropped() -> bool:
+        nonlocal sent
+        if sent < 600:  # past 32 unread and the sockets' buffers (about 64 of these replies) without the bound
+            for _ in range(16):  # within the requests one client may have waiting
+                hoarder.send(json.dumps({"v": 1, "id": sent, "cmd": "status"}).encode())
+                sent += 1
+        return any(f"it has {MAX_QUEUED_PER_CLIENT} replies unread" in record.getMessage() for record in caplog.records)
+
+    try:
+        with caplog.at_level(logging.WARNING, logger="hexactl.adapters.api.server"):
+            wait_until(dropped, "the log saying the replies were dropped", WAIT_S, poll_s=0.1,
+                       seen=lambda: f"{sent} requests sent")
+        reader = context.socket(zmq.DEALER)
+        reader.linger = 0
+        reader.connect(server.endpoint)
+        reader.send(b'{"v": 1, "id": "other", "cmd": "status"}')
+        assert reader.poll(round(WAIT_S * 1000)) and b'"other"' in reader.recv()
+        reader.close()
+    finally:
+        hoarder.close()
+        server.close()
     assert terminated(context)

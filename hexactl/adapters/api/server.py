@@ -340,8 +340,12 @@ class ApiServer(SocketThread):
         self._worker_niceness = worker_niceness
         self._handler_timeout_ns = round(handler_timeout_s * 1e9)
         self._on_stuck = on_stuck
+        # SNDHWM: a client keeps at most MAX_QUEUED_PER_CLIENT replies unread (ZeroMQ's default,
+        # 1000, let one that never reads hold a gigabyte of read_file replies); MANDATORY: one
+        # dropped for it raises, so that the log says why it lost a reply.
         super().__init__(context, zmq.ROUTER, endpoint, name="hexactl-api",
-                         options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES}, curve=curve)
+                         options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES, zmq.SNDHWM: MAX_QUEUED_PER_CLIENT,
+                                  zmq.ROUTER_MANDATORY: 1}, curve=curve)
         replies = f"inproc://hexactl-api-replies-{id(self)}"
         # Never full while the socket thread drains it: at most MAX_QUEUED replies a worker are owed.
         self._replies_in = context.socket(zmq.PULL)
@@ -353,6 +357,7 @@ class ApiServer(SocketThread):
         self._workers = [_Worker("hexactl-api-worker", self._commands, context, replies),
                          _Worker("hexactl-api-queries", self._queries, context, replies)]
         self._reported: tuple[int, str] | None = None  # the stuck handling already reported
+        self._not_reading: set[bytes] = set()  # routing ids of the clients whose replies are being dropped
 
     @property
     def _queued(self) -> int:
@@ -468,11 +473,20 @@ class ApiServer(SocketThread):
                     self._on_stuck(description)
 
     def _send(self, frames: list[bytes]) -> None:
+        """Never blocks: a reply to a client that is gone, or that has
+        :data:`MAX_QUEUED_PER_CLIENT` replies unread, is dropped (the latter said once a run
+        of them, in the log)."""
         try:
-            # ROUTER never blocks on send: it drops replies to peers that are gone or full.
             self._socket.send_multipart(frames, zmq.NOBLOCK)
-        except zmq.ZMQError as error:
-            log.warning("reply not sent: %s", error)
+        except zmq.Again:
+            if frames[0] not in self._not_reading:
+                self._not_reading.add(frames[0])
+                log.warning("replies to a client dropped: it has %d replies unread (the most kept for one client); "
+                            "a client must read its replies", MAX_QUEUED_PER_CLIENT)
+            return
+        except zmq.ZMQError as error:  # EHOSTUNREACH: the client has gone, as a timed-out one does
+            log.debug("reply not sent: %s", error)
+        self._not_reading.discard(frames[0])
 
     # -- the workers ---------------------------------------------------------------------
 
