@@ -5,6 +5,7 @@ multipart messages, random bytes."""
 from __future__ import annotations
 
 import json
+import sys
 
 import pytest
 import zmq
@@ -34,6 +35,11 @@ CASES: list[tuple[str, bytes, str, object]] = [
     ("Infinity literal", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, -Infinity]}', "malformed_json", None),
     ("overflowing number", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, 1e400]}', "malformed_json", None),
     ("deep nesting", b"[" * 50_000, "malformed_json", None),
+    ("integer id beyond double range", b'{"v": 1, "id": 1' + b"0" * 400 + b', "cmd": "status"}', "malformed_json", None),
+    ("integer beyond double range", b'{"v": 1, "id": 1, "cmd": "move", "pose": [1' + b"0" * 400 + b', 0, 0, 0, 0, 0]}',
+     "malformed_json", None),
+    ("integer of 5000 digits", b'{"v": 1, "id": 1' + b"0" * 5000 + b', "cmd": "status"}', "malformed_json", None),
+    ("lone surrogate in id", b'{"v": 1, "id": {"a": ["\\ud800"]}, "cmd": "status"}', "invalid_request", None),
     ("JSON array", b'[{"v": 1, "id": 1, "cmd": "status"}]', "invalid_request", None),
     ("JSON string", b'"status"', "invalid_request", None),
     ("missing id", b'{"v": 1, "cmd": "status"}', "invalid_request", None),
@@ -75,6 +81,33 @@ def test_not_utf8_is_refused_as_such(body) -> None:
         decode_request(body)
     assert refused.value.code == "malformed_json"
     assert refused.value.message.startswith("not UTF-8: ") and "requests are UTF-8 JSON" in refused.value.message
+
+
+@pytest.mark.parametrize("digits", [400, 5000])
+def test_an_integer_beyond_double_range_is_refused_as_1e400_is(digits) -> None:
+    """Found from outside: a 401-digit id was echoed (against the docs), a 401-digit pose
+    number was "not a valid number", and a 5000-digit one answered with advice to call
+    sys.set_int_max_str_digits() in the service's own interpreter."""
+    with pytest.raises(ApiError) as refused:
+        decode_request(b'{"v": 1, "id": 1' + b"0" * digits + b', "cmd": "status"}')
+    assert refused.value.message == f"not valid JSON: number 1{'0' * 39}… is out of range"
+    largest = int(sys.float_info.max)  # a double's range, in full, is accepted
+    assert decode_request(f'{{"v": 1, "id": -{largest}, "cmd": "status"}}'.encode()).id == -largest
+
+
+def test_nesting_too_deep_says_so_in_a_clients_terms() -> None:
+    with pytest.raises(ApiError) as refused:
+        decode_request(b"[" * 50_000)
+    assert refused.value.message == "not read: arrays and objects nested too deeply (a request nests a few levels at most)"
+
+
+def test_a_lone_surrogate_in_the_id_is_refused_a_pair_accepted() -> None:
+    """Echoed, a lone surrogate made the reply's JSON one a strict parser refuses whole."""
+    with pytest.raises(ApiError) as refused:
+        decode_request(b'{"v": 1, "id": "\\udfff", "cmd": "status"}')
+    assert (refused.value.code, refused.value.request_id) == ("invalid_request", None)
+    assert "lone UTF-16 surrogate" in refused.value.message
+    assert decode_request(b'{"v": 1, "id": "\\ud83d\\ude00", "cmd": "status"}').id == "\U0001f600"
 
 
 def test_utf8_beyond_ascii_and_a_leading_byte_order_mark_are_accepted() -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import codecs
 import dataclasses
 import json
+import sys
 from collections import Counter
 from collections.abc import Mapping
 from enum import Enum, StrEnum
@@ -86,17 +87,23 @@ def decode_request(body: bytes) -> Request:
         raise ApiError(ErrorCode.TOO_LARGE, f"request of {len(body)} bytes; the limit is {MAX_REQUEST_BYTES}")
     try:
         document = json.loads(_utf8_text(body), parse_constant=_refuse_constant, parse_float=_finite_float,
-                              object_pairs_hook=_unique_keys)
+                              parse_int=_double_range_int, object_pairs_hook=_unique_keys)
     except _DuplicateKey as error:
         raise ApiError(ErrorCode.INVALID_REQUEST, f"key {error.key[:100]!r} appears twice in one object: "
                        "give each key once") from None
-    except (ValueError, RecursionError) as error:  # JSONDecodeError is a ValueError
+    except RecursionError:
+        raise ApiError(ErrorCode.MALFORMED_JSON, "not read: arrays and objects nested too deeply (a request nests "
+                       "a few levels at most)") from None
+    except ValueError as error:  # JSONDecodeError is a ValueError
         raise ApiError(ErrorCode.MALFORMED_JSON, f"not valid JSON: {_first_line(error)}") from None
     if not isinstance(document, dict):
         raise ApiError(ErrorCode.INVALID_REQUEST, f"a request is a JSON object, got {json_type(document)}")
     if "id" not in document:
         raise ApiError(ErrorCode.INVALID_REQUEST, "missing id")
     request_id = document["id"]
+    if not _unicode(request_id):  # echoed as is, it would make the reply's JSON unreadable to a strict parser
+        raise ApiError(ErrorCode.INVALID_REQUEST, "id holds a lone UTF-16 surrogate (\\ud800-\\udfff unpaired): "
+                       "not Unicode text; use another id")
     version = document.get("v")
     if "v" not in document:
         raise ApiError(ErrorCode.INVALID_REQUEST, f"missing v (the protocol version, {PROTOCOL_VERSION})", request_id=request_id)
@@ -235,6 +242,32 @@ def _finite_float(text: str) -> float:
     if not isfinite(value):
         raise ValueError(f"number {text[:40]} is out of range")
     return value
+
+
+_LARGEST_DOUBLE = int(sys.float_info.max)
+
+
+def _double_range_int(text: str) -> int:
+    # As _finite_float: a client's JSON library reads numbers as doubles, and Python's int()
+    # of over 4300 digits would answer with advice for the service's own interpreter.
+    if len(text) > len(str(_LARGEST_DOUBLE)) + 1 or abs(value := int(text)) > _LARGEST_DOUBLE:
+        raise ValueError(f"number {text[:40]}{'…' if len(text) > 40 else ''} is out of range")
+    return value
+
+
+def _unicode(value: object) -> bool:
+    """Whether every string in ``value`` (a parsed JSON value) encodes as UTF-8."""
+    if isinstance(value, str):
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:
+            return False
+        return True
+    if isinstance(value, dict):
+        return all(_unicode(key) and _unicode(item) for key, item in value.items())
+    if isinstance(value, list):
+        return all(_unicode(item) for item in value)
+    return True
 
 
 def _first_line(error: BaseException) -> str:
