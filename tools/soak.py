@@ -467,8 +467,11 @@ def add_service_arguments(parser: argparse.ArgumentParser) -> None:
     (:func:`scheduling_from`), where to write the figures (:func:`conclude`), and a seed."""
     parser.add_argument("--rate", type=int, default=500, choices=(500, 1000), help="loop rate, Hz")
     parser.add_argument("--fifo", type=int, choices=range(2, 100), metavar="PRIO",
-                        help="run the service as 'hexactl serve --fifo PRIO' does (the bus monitor one below the loop)")
-    parser.add_argument("--mlock", action="store_true", help="lock the service's memory, as 'hexactl serve --mlock'")
+                        help="run the service's loop under SCHED_FIFO PRIO, as 'hexactl serve --fifo PRIO' does (the bus "
+                             "monitor one below the loop; default: normal scheduling, as 'hexactl serve --no-realtime')")
+    parser.add_argument("--mlock", action="store_true",
+                        help="lock the service's memory, as 'hexactl serve' does by default (default: not locked, "
+                             "as 'hexactl serve --no-realtime')")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, help="also write the figures here")
 
