@@ -195,3 +195,27 @@ def test_a_command_that_expired_unrun_is_sent_again_then_names_the_timeout() -> 
     with pytest.raises(CampaignError, match=r"refused leg_lock: .*not carried out.*raise --timeout"):
         PlatformDriver(hopeless).lock(2)  # type: ignore[arg-type]
     assert hopeless.others == MOVE_ATTEMPTS
+
+
+class LateReset:
+    """A controller in FAULT whose ``reset`` is answered ``loop_timeout`` (a loaded host);
+    carried out a moment later when ``done`` (the state disabled from the second poll), else never."""
+
+    def __init__(self, done: bool) -> None:
+        self.done, self.polls = done, 0
+
+    def call(self, cmd: str, **fields: object) -> dict:
+        if cmd == "reset":
+            raise CommandError("loop_timeout", "the loop gave no verdict in time; the command may still be carried out")
+        self.polls += 1
+        return {"status": {"state": "disabled" if self.done and self.polls > 1 else "fault", "faults": []}}
+
+
+def test_a_reset_answered_loop_timeout_is_judged_by_the_state_it_leaves() -> None:
+    """Found from outside: ``campaign --reset-faults`` gave up on such a reply, though the
+    reset had been carried out."""
+    carried_out = LateReset(done=True)
+    PlatformDriver(carried_out).reset()  # type: ignore[arg-type]
+    assert carried_out.polls == 2
+    with pytest.raises(CampaignError, match="the controller did not reset"):
+        PlatformDriver(LateReset(done=False), SettleCriteria(timeout_s=0.05)).reset()  # type: ignore[arg-type]

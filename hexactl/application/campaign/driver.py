@@ -107,8 +107,9 @@ class PlatformDriver:
         return record
 
     def reset(self) -> None:
-        """Clear a latched FAULT (``reset``, which ends disabled); :meth:`prepare` enables again."""
-        self._call("reset")
+        """Clear a latched FAULT (``reset``, which ends disabled); :meth:`prepare` enables
+        again. A reset answered ``loop_timeout`` may still be carried out: the state says."""
+        self._call("reset", harmless=("loop_timeout",))
         deadline = time.monotonic() + self.settle.timeout_s
         while self.client.call("status")["status"]["state"] != "disabled":
             if time.monotonic() > deadline:
