@@ -55,6 +55,13 @@ class SupervisionConfig(_Frozen):
     following_error_s: Number = Field(
         default=0.1, ge=0, description="how long the following error may exceed following_error_mm before FAULT"
     )
+    locked_slip_mm: Number = Field(
+        default=0.2, gt=0,
+        description="a locked leg farther than this from where it was locked, for following_error_s, has slipped on "
+        "its brake or is overloaded. Below the step an actuator takes from where it measures after UNLOCK (its speed "
+        "limit × the loop period: 0.4 mm at 400 mm/s and 1000 Hz; the smaller of the two applies), so that unlocking "
+        "never asks a jump of it",
+    )
     command_silence_s: Number = Field(
         default=1.0, gt=0,
         description="nothing from the API (no command, no heartbeat) for this long, and the loop brakes a motion "

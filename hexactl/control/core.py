@@ -83,7 +83,7 @@ class ControlCore:
     def __init__(self, hardware: ActuatorInterface, active: ActiveGeometry, config: ControllerConfig) -> None:
         self.hardware = hardware
         period_s = config.loop.period_s
-        self._supervisor = Supervisor(config.supervision, period_s)
+        self._supervisor = Supervisor(config.supervision, period_s, active.geometry.limits.leg_velocity_mm_s * period_s)
         self._measurement = PoseMeasurement(max(1, round(config.loop.rate_hz / config.fk_rate_hz)),
                                             config.fk_tolerance_mm, config.fk_max_iterations)
         self._motion = Motion(config, active, period_s, self._dwell_record, self._event)

@@ -197,11 +197,9 @@ def check_lock(view: CoreView) -> Refusal:
 
 
 def check_unlock(view: CoreView) -> Refusal:
-    if refusal := _enabled(view):
-        return refusal
-    if view.lock is None:
+    if view.lock is None:  # first: disabling or a reset ended it, and enabling would not help
         return ErrorCode.NOT_LOCKED, "no leg is locked"
-    return _at_rest(view)
+    return _enabled(view) or _at_rest(view)
 
 
 def check_play(view: CoreView) -> Refusal:

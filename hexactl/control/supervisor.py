@@ -6,7 +6,9 @@ longer than ``heartbeat_timeout_s``, reporting a fault, in another state than th
 it was told to reach (after ``state_timeout_s`` to get there), not applying the
 set-points (more than ``setpoint_lag_s`` behind), or farther than ``following_error_mm``
 from the set-point it applied for ``following_error_s`` (jammed, overloaded, slipping:
-compared with the set-point of the counter it reports, so a late frame adds nothing);
+compared with the set-point of the counter it reports, so a late frame adds nothing), a
+locked leg farther than ``locked_slip_mm`` (or one cycle's step of a leg, if less) from
+its locked reading as long (its brake slips);
 the link failed; too many set-point sends failed in a row; another controller heard on
 the bus (:func:`other_controller_heard`: the actuators would follow whichever of the two
 commanded last, so the core E-stops them: :data:`ESTOP_FAULTS`; checked in FAULT too,
@@ -76,13 +78,16 @@ def other_controller_fault(link: LinkHealth | None) -> Fault | None:
 
 
 class Supervisor:
-    """The supervision rules and timers of one loop running every ``period_s``."""
+    """The supervision rules and timers of one loop running every ``period_s``, whose
+    legs move at most ``max_step_mm`` a cycle."""
 
-    def __init__(self, supervision: SupervisionConfig, period_s: float) -> None:
+    def __init__(self, supervision: SupervisionConfig, period_s: float, max_step_mm: float) -> None:
         self.heartbeat_timeout_s = supervision.heartbeat_timeout_s
         self._state_timeout_ns = round(supervision.state_timeout_s * 1e9)
         self._lag_limit = ceil(supervision.setpoint_lag_s / period_s)  # cycles
         self._following_error_mm = supervision.following_error_mm
+        # never more than a step: the actuator checks the first set-point after UNLOCK from where it measures
+        self._locked_slip_mm = min(supervision.locked_slip_mm, max_step_mm)
         self._following_error_ns = round(supervision.following_error_s * 1e9)
         # The set-points of the last counters sent, at counter % len: all a healthy actuator
         # may report applied (an older counter is a lag fault of its own).
@@ -107,6 +112,7 @@ class Supervisor:
         for i in range(ACTUATOR_COUNT) if leg is None else (leg - 1,):
             self._expected[i] = state
             self._settling_until_ns[i] = now_ns + self._state_timeout_ns
+            self._following_since_ns[i] = None  # an error timed against another state's limit
 
     def faults(self, feedback: FeedbackSnapshot, link: LinkHealth | None, last_sent: int, now_ns: int) -> list[Fault]:
         """What is wrong while ENABLED (empty: nothing); ``last_sent`` the counter of the
@@ -138,7 +144,7 @@ class Supervisor:
             elif expected is ActuatorState.ENABLED and stale_below is not None and actuator.setpoint_counter < stale_below:
                 faults.append(Fault("setpoints_not_applied", f"leg {leg} applied set-point {actuator.setpoint_counter}, "
                                     f"last sent {last_sent}", leg))
-            elif expected is ActuatorState.ENABLED and (fault := self._following(leg, actuator, now_ns)):
+            elif (fault := self._following(leg, actuator, expected, now_ns)) is not None:
                 faults.append(fault)
         if link is not None and link.bus_state in LINK_FAILED_STATES:
             faults.append(Fault("link_failed", f"bus {link.bus_state.value}" + (f": {link.detail}" if link.detail else "")))
@@ -148,14 +154,18 @@ class Supervisor:
             faults.append(fault)
         return faults
 
-    def _following(self, leg: int, actuator: ActuatorFeedback, now_ns: int) -> Fault | None:
-        """The following-error fault of an enabled ``leg`` (1–6) whose error has lasted too long."""
+    def _following(self, leg: int, actuator: ActuatorFeedback, expected: ActuatorState, now_ns: int) -> Fault | None:
+        """The fault of ``leg`` (1–6), ``expected`` ENABLED or LOCKED, farther from the
+        set-point it reports applied than it may be, for too long: an enabled leg's following
+        error; a locked leg's slip from its locked reading (the set-point it is sent)."""
         counter = actuator.setpoint_counter
         kept = self._sent[counter % len(self._sent)]
         if kept is None or kept[0] != counter:
             return None  # nothing of ours applied yet
         error_mm = actuator.position_mm - kept[1][leg - 1]
-        if not abs(error_mm) > self._following_error_mm:  # NaN too: a missing position is not an error here
+        locked = expected is ActuatorState.LOCKED
+        limit_mm = self._locked_slip_mm if locked else self._following_error_mm
+        if not abs(error_mm) > limit_mm:  # NaN too: a missing position is not an error here
             self._following_since_ns[leg - 1] = None
             return None
         since = self._following_since_ns[leg - 1]
@@ -163,9 +173,12 @@ class Supervisor:
             self._following_since_ns[leg - 1] = since = now_ns
         if now_ns - since < self._following_error_ns:
             return None
-        return Fault("following_error", f"leg {leg} is {error_mm:+.3f} mm from its set-point for "
-                     f"{(now_ns - since) / 1e9:.3f} s (limit {self._following_error_mm:g} mm): jammed, overloaded "
-                     "or slipping; check the leg before reset and enable", leg)
+        lasted = f"for {(now_ns - since) / 1e9:.3f} s (limit {limit_mm:g} mm)"
+        if locked:
+            return Fault("locked_leg_slipped", f"leg {leg} is {error_mm:+.3f} mm from where it was locked {lasted}: "
+                         "its brake slips or the leg is overloaded; check the leg before reset and enable", leg)
+        return Fault("following_error", f"leg {leg} is {error_mm:+.3f} mm from its set-point {lasted}: jammed, "
+                     "overloaded or slipping; check the leg before reset and enable", leg)
 
     def sent(self, counter: int, setpoints: tuple[float, ...], ok: bool) -> None:
         """The set-points sent with ``counter``: kept for the following error; count a send
@@ -177,11 +190,11 @@ class Supervisor:
 
     def enabled(self, now_ns: int) -> None:
         """The actuators were told to enable at ``now_ns``: expect ENABLED, forget old send
-        failures, following errors and the counters sent before (:meth:`faults`' lag)."""
+        failures, following errors (:meth:`expect`) and the counters sent before
+        (:meth:`faults`' lag)."""
         self.expect(None, ActuatorState.ENABLED, now_ns)
         self._send_failures = 0
         self._first_sent = None
-        self._following_since_ns = [None] * ACTUATOR_COUNT
 
     def estop_reported(self, feedback: FeedbackSnapshot, now_ns: int) -> bool:
         """An actuator reports E-stop, outside a reset's grace time."""

@@ -132,6 +132,7 @@ class FaultInjection:
     :ivar silent: the actuator transmits nothing (heartbeat, feedback, acks): it looks lost
     :ivar stall: the drive is jammed and does not move: a moving target trips FOLLOWING_ERROR
     :ivar sensor_fault: the sensor reports a fault: SENSOR latches and persists while set
+    :ivar brake_slip_um_s: in LOCKED the brake slips: the leg creeps at this speed, µm/s (signed)
     """
 
     drop_next: int = 0
@@ -142,6 +143,7 @@ class FaultInjection:
     silent: bool = False
     stall: bool = False
     sensor_fault: bool = False
+    brake_slip_um_s: float = 0.0
     _random: random.Random = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -436,7 +438,9 @@ class ActuatorFirmware:
         params = self.params
         accel = params.max_acceleration_um_s2
         velocity = self.velocity_um_s
-        if self.state is ActuatorState.LOCKED or self.inject.stall:
+        if self.state is ActuatorState.LOCKED:
+            velocity = self.inject.brake_slip_um_s
+        elif self.inject.stall:
             velocity = 0.0
         else:
             if self.state is ActuatorState.ENABLED:

@@ -27,7 +27,7 @@ def test_an_estop_that_could_not_be_sent_is_sent_the_next_cycle(rig):
 
 
 def test_a_failed_estop_is_due_at_once_even_within_the_repeat_interval():
-    supervisor = Supervisor(CONFIG, PERIOD_S)
+    supervisor = Supervisor(CONFIG, PERIOD_S, 0.8)
     supervisor.estop_sent(10 * MS)
     supervisor.estop_failed()
     assert supervisor.estop_due(12 * MS)
@@ -41,7 +41,7 @@ def six(counter: int, **leg) -> FeedbackSnapshot:
 def test_a_counter_from_before_enabling_lags_only_as_long_as_the_session():
     """Finding 2: a rebooted actuator echoes a counter long past (1024) or none (−1) until its
     first FEEDBACK after ENABLE; that is no lag while the session is younger than the limit."""
-    supervisor = Supervisor(CONFIG, PERIOD_S)
+    supervisor = Supervisor(CONFIG, PERIOD_S, 0.8)
     supervisor.enabled(1 * MS)
     lag = 5  # setpoint_lag_s / period, cycles
     for counter in range(1095, 1096 + lag):

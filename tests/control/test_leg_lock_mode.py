@@ -116,6 +116,8 @@ def test_a_calibration_change_while_locked_and_latched_says_to_reset(rig, geomet
 
 def test_lock_preconditions(rig):
     assert rig.controller.leg_lock(1).error == "not_enabled"
+    # disabled, no leg is locked: not "enable first", which would not give unlock anything to do
+    assert (rig.controller.leg_unlock().error, rig.controller.leg_unlock().message) == ("not_locked", "no leg is locked")
     rig.enabled()
     for leg in (0, 7, "1", 2.0, True, None):
         assert rig.controller.leg_lock(leg).error == "invalid_argument"

@@ -16,6 +16,7 @@ CONFIG = SupervisionConfig(heartbeat_timeout_s=0.05, state_timeout_s=0.5, setpoi
                            estop_repeat_s=0.1, estop_clear_holdoff_s=0.3)
 MS = 1_000_000
 HEALTHY = LinkHealth(BusState.ACTIVE, 0)
+MAX_STEP_MM = 0.8  # a leg's speed limit × PERIOD_S: 400 mm/s
 HELD = (100.0,) * 6
 """Set-points where :func:`feedback`'s actuators stand."""
 
@@ -28,7 +29,7 @@ def feedback(state=ActuatorState.ENABLED, counter=100, **leg) -> FeedbackSnapsho
 
 @pytest.fixture
 def supervisor() -> Supervisor:
-    supervisor = Supervisor(CONFIG, PERIOD_S)
+    supervisor = Supervisor(CONFIG, PERIOD_S, MAX_STEP_MM)
     supervisor.enabled(0)
     return supervisor
 
@@ -80,6 +81,37 @@ def test_a_locked_leg_is_expected_locked_and_not_to_follow_setpoints(supervisor)
     assert supervisor.faults(locked, HEALTHY, 100, 11 * MS) == []  # arrives
     assert supervisor.faults(locked, HEALTHY, 100, 12 * MS) == []  # its stale counter does not count
     assert codes(supervisor.faults(feedback(), HEALTHY, 100, 13 * MS)) == [("actuator_state", 2)]
+
+
+@pytest.mark.parametrize("max_step_mm", [MAX_STEP_MM, 0.05])
+def test_a_locked_leg_away_from_its_locked_reading_for_the_time_allowed_has_slipped(max_step_mm):
+    """Compared with the set-point it is sent (its locked reading); the limit is
+    ``locked_slip_mm``, or a cycle's step of the leg when that is less: the actuator checks
+    the first set-point after UNLOCK from where it measures."""
+    supervisor = Supervisor(CONFIG, PERIOD_S, max_step_mm)
+    supervisor.enabled(0)
+    supervisor.faults(feedback(), HEALTHY, 100, 1 * MS)
+    supervisor.expect(2, ActuatorState.LOCKED, 2 * MS)
+    supervisor.sent(100, HELD, True)
+    limit, hold_ms = min(CONFIG.locked_slip_mm, max_step_mm), round(CONFIG.following_error_s * 1000)
+
+    def locked(position_mm: float) -> FeedbackSnapshot:
+        return feedback(leg2={"state": ActuatorState.LOCKED, "position_mm": position_mm})
+
+    assert supervisor.faults(locked(100.0), HEALTHY, 100, 3 * MS) == []  # arrived in LOCKED
+    assert supervisor.faults(locked(100.0 + 0.99 * limit), HEALTHY, 100, 4 * MS) == []
+    assert supervisor.faults(locked(100.0 + 0.99 * limit), HEALTHY, 100, (4 + 2 * hold_ms) * MS) == []
+    crept = locked(100.0 - 1.01 * limit)
+    assert supervisor.faults(crept, HEALTHY, 100, 500 * MS) == []  # over the limit from now
+    (fault,) = supervisor.faults(crept, HEALTHY, 100, (500 + hold_ms) * MS)
+    assert (fault.code, fault.leg) == ("locked_leg_slipped", 2)
+    assert fault.message == (f"leg 2 is {(100.0 - 1.01 * limit) - 100.0:+.3f} mm from where it was locked for {hold_ms / 1000:.3f} s "
+                             f"(limit {limit:g} mm): its brake slips or the leg is overloaded; check the leg before "
+                             "reset and enable")
+    # unlocked, the leg is an enabled one again: the following error's limit, timed afresh
+    supervisor.expect(2, ActuatorState.ENABLED, 600 * MS)
+    assert supervisor.faults(feedback(leg2={"position_mm": 100.0 - 1.01 * limit}), HEALTHY, 100, 601 * MS) == []
+    assert supervisor.faults(feedback(leg2={"position_mm": 100.0 - 1.01 * limit}), HEALTHY, 100, 900 * MS) == []
 
 
 def test_setpoints_not_applied_for_longer_than_the_lag_is_a_fault(supervisor):

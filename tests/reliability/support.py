@@ -40,6 +40,7 @@ def clear_injections(service: Service) -> None:
     for firmware in firmwares(service):
         injection = firmware.inject
         injection.silent = injection.stall = injection.sensor_fault = False
+        injection.brake_slip_um_s = 0.0
         injection.drop_probability = injection.corrupt_probability = 0.0
         injection.drop_next = injection.corrupt_next = 0
 

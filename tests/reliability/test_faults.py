@@ -119,6 +119,61 @@ def test_a_jammed_leg_is_a_following_error_before_the_drive_notices(client, actu
                            lambda: clear_injections(service))
 
 
+def _locked(client: HexactlClient, leg: int) -> None:
+    """Enabled and at rest, with ``leg`` locked."""
+    recover(client)
+    if status(client)["locked_leg"] != leg:
+        client.request("leg_unlock")
+        client.call("leg_lock", leg=leg)
+    wait_for(lambda: status(client)["legs"][leg - 1]["state"] == "locked", f"leg {leg} locked")
+
+
+def test_a_locked_leg_that_slips_on_its_brake_is_a_fault(client, actuators, service) -> None:
+    """Found from outside: a locked leg was not supervised at all. Its brake let it creep
+    10 mm and nothing said so; moves went on planned as if it had kept its length; and
+    unlocking asked the actuator, which follows from where it measures, for the whole
+    10 mm in one step (SETPOINT_RANGE on the firmware)."""
+    supervision = service.controller.config.supervision
+
+    def scenario() -> None:
+        _locked(client, 3)
+        actuators[2].inject.brake_slip_um_s = -2000.0  # 2 mm/s
+        record = wait_for(lambda: (record := status(client))["state"] == "fault" and record, "the fault to latch")
+        assert codes(record)[0] == ("locked_leg_slipped", 3), record["faults"]
+        message = record["faults"][0]["message"]
+        assert message.startswith("leg 3 is -") and " mm from where it was locked for " in message, message
+        assert f"(limit {supervision.locked_slip_mm:g} mm): its brake slips" in message, message
+        assert_held(client)
+        actuators[2].inject.brake_slip_um_s = 0.0
+        back_in_service(client)  # the reset ended the lock
+        assert status(client)["locked_leg"] is None
+
+    tolerating_loop_stalls(scenario, lambda: service.controller, {("locked_leg_slipped", 3)},
+                           lambda: clear_injections(service))
+
+
+def test_a_locked_leg_that_crept_within_the_limit_unlocks_without_a_jump(client, actuators, service) -> None:
+    """Within ``locked_slip_mm`` the creep is tolerated, and unlocking asks the actuator
+    (which follows from where it measures) for no more than one step allows."""
+    supervision = service.controller.config.supervision
+
+    def scenario() -> None:
+        _locked(client, 4)
+        held = status(client)["leg_setpoints"][3]
+        actuators[3].inject.brake_slip_um_s = 1000.0
+        wait_for(lambda: status(client)["leg_feedback"][3] >= held + supervision.locked_slip_mm / 2, "the creep")
+        actuators[3].inject.brake_slip_um_s = 0.0
+        client.call("leg_unlock")
+        client.call("move", pose=[0, 0, 20, 0, 0, 0], duration=0.5)
+        wait_for(lambda: (record := status(client))["motion"] == "holding" and record["goal"] is None,
+                 "the move after the unlock")
+        record = status(client)
+        assert record["state"] == "enabled" and record["faults"] == [], record["faults"]
+        assert record["legs"][3]["state"] == "enabled"
+
+    tolerating_loop_stalls(scenario, lambda: service.controller, (), lambda: clear_injections(service))
+
+
 def test_a_short_burst_of_lost_or_corrupted_frames_is_ridden_through(client, actuators, service) -> None:
     """Two frames lost, then two corrupted: at most one missed cycle each, inside the
     actuator's watchdog; the corrupted ones are rejected and reported in its heartbeat."""
