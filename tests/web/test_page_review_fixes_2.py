@@ -188,9 +188,8 @@ def test_a_jog_dropped_for_lost_live_data_is_released_with_a_zero_velocity(rig) 
         rig.fill("#jog-speed", 2)
         start_x = rig.status()["pose_command"][0]
         button = jog_button(rig)
-        ActionChains(rig.driver).click_and_hold(button).perform()
         try:
-            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 0.2, "the platform jogging while held")
+            rig.jog_held(button, lambda: rig.status()["pose_command"][0] > start_x + 0.2, "the platform jogging while held")
             since = count(rig)
             tap(rig, drop=True)
             wait_for(lambda: text(rig, "#jog-status").startswith("jog released: no live data"),

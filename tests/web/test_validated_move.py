@@ -293,9 +293,8 @@ def _held_x_jog(rig) -> Iterator[Any]:
     rig.fill("#jog-speed", 5)
     start_x = rig.status()["pose_command"][0]
     button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
-    ActionChains(rig.driver).click_and_hold(button).perform()
     try:
-        wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+        rig.jog_held(button, lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
         yield button
     finally:
         ActionChains(rig.driver).release(button).perform()
@@ -333,9 +332,8 @@ def test_a_held_jog_is_renewed_as_often_as_the_services_deadman_asks(rig) -> Non
         start_x = rig.status()["pose_command"][0]
         rig.page(f"const t = window.hexactlTestTap; t.jogReplyFields = {{deadman_s: {deadman_s}}}; t.intervals = [];")
         button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
-        ActionChains(rig.driver).click_and_hold(button).perform()
         try:
-            wait_for(lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
+            rig.jog_held(button, lambda: rig.status()["pose_command"][0] > start_x + 1.0, "the platform jogging while held")
             wait_for(lambda: deadman_s * 1000 / 4 in rig.page("return window.hexactlTestTap.intervals"),
                      "the page renewing every quarter of the deadman its reply stated",
                      seen=lambda: rig.page("return window.hexactlTestTap.intervals"))
@@ -437,7 +435,8 @@ def test_a_held_jog_whose_renewals_came_late_starts_again_in_place_of_the_lapsed
                 assert any(jog.get("restarts") == lapsed for jog in jogs), jogs
                 # every jog after the press names one: none could start unconditionally over a stop
                 assert all("renews" in jog or "restarts" in jog for jog in jogs[1:]), jogs
-                assert rig.status()["jog"]["jog"] != lapsed
+                jogging = rig.status()["jog"]  # none when the new jog lapsed too on a busy host, after moving
+                assert jogging is None or jogging["jog"] != lapsed, jogging
         finally:
             rig.page("window.hexactlTestTap.releaseJogs();")
         wait_for(lambda: rig.status()["motion"] == "holding", "the jog braked to rest after the release")
