@@ -16,7 +16,7 @@ import difflib
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, MAX_WAYPOINTS, Waypoint, pace_problem, waypoint_count_problem
@@ -37,8 +37,17 @@ class UnknownSequence(SequenceError, KeyError):
         return str(self.args[0])
 
 
+def _one_line(name: str) -> str:
+    # The service's log writes it: a line end in it would forge the lines after it.
+    if not name.isprintable():
+        raise ValueError(f"{name[:60]!r}: a sequence's name is one line of printable text (no line end, tab or other "
+                         "control character)")
+    return name
+
+
 SequenceName = Annotated[str, Field(min_length=1, max_length=200, description="the sequence's name, for people: "
-                                   "events, telemetry and recordings carry it")]
+                                   "events, telemetry and recordings carry it; one line of printable text"),
+                         AfterValidator(_one_line)]
 
 Duration = Annotated[Number, Field(gt=0, le=MAX_MOTION_S, description="the move takes at least this long, s")]
 Speed = Annotated[Number, Field(gt=0, le=1, description="fraction of the velocity limits, (0, 1]")]

@@ -42,6 +42,10 @@ def test_the_file_format_round_trips_into_waypoints():
     ("name = ", "TOML"),
     ("name = 'x'\n[waypoint]\npose = [0, 0, 0, 0, 0, 0]", r"write each waypoint as \[\[waypoint\]\]"),
     (f"name = '{'x' * 201}'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]", "name: String should have at most 200"),
+    # the log writes the name: a line end would forge the lines after it, an escape recolour a terminal
+    ('name = "a\\nsequence_finished"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]',
+     r"name: 'a\\nsequence_finished': a sequence's name is one line of printable text"),
+    ('name = "a\\u001b[31m"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]', "one line of printable text"),
 ])
 def test_bad_files_name_the_problem(text, problem):
     with pytest.raises(SequenceError, match=problem):
