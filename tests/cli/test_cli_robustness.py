@@ -189,6 +189,19 @@ def test_keyed_and_plain_values_in_one_pose_are_refused_with_both_forms(capsys) 
     assert "is not a number" not in error
 
 
+@pytest.mark.parametrize(("typed", "said"), [
+    ("5,,0,0,0,0", "field 2 of 6 is empty"),  # was read as five numbers ("got 5")
+    ("0,,0,0,0,0,5", "field 2 of 7 is empty"),  # was read as six: yaw 5 from a slip of the finger
+    ("x=5,,z=2", "field 2 of 3 is empty"),
+    ("5,0,0,0,0,0,", "field 7 of 7 is empty"),
+    ("  ", "empty: give six numbers"),
+])
+def test_an_empty_field_is_refused_not_dropped(typed, said) -> None:
+    """Found from outside: empty fields were dropped, so the numbers typed shifted axis."""
+    with pytest.raises(CliError, match=f"pose {typed!r}: {said}"):
+        parse_pose_argument(typed)
+
+
 def test_the_forms_still_parse() -> None:
     assert parse_pose_argument("x=5,yaw=-2") == [5.0, 0.0, 0.0, 0.0, 0.0, -2.0]
     assert parse_pose_argument("1,2,3,4,5,6") == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]

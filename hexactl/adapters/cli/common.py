@@ -346,9 +346,15 @@ def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
 
     Either six comma-separated numbers ``X,Y,Z,ROLL,PITCH,YAW`` or ``axis=value`` pairs
     separated by commas, missing axes 0: ``x=600``, ``pitch=-20,yaw=5``; not both in one
-    argument, and each axis once (as the API, which refuses a repeated key).
+    argument, and each axis once (as the API, which refuses a repeated key). No field empty:
+    ``5,,0,0,0,0`` is a value left out, not five numbers.
     """
-    parts = [part for part in text.split(",") if part.strip()]
+    if not text.strip():
+        raise CliError(f"{what} {text!r}: empty: give {POSE_FORMS}")
+    parts = text.split(",")
+    if (empty := next((i for i, part in enumerate(parts, start=1) if not part.strip()), None)) is not None:
+        raise CliError(f"{what} {text!r}: field {empty} of {len(parts)} is empty (two commas in a row, or one at an "
+                       f"end): give {POSE_FORMS}")
     keyed = [part for part in parts if "=" in part]
     if keyed and len(keyed) < len(parts):
         plain = next(part.strip() for part in parts if "=" not in part)
