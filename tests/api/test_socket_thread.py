@@ -14,7 +14,7 @@ from collections.abc import Callable
 import pytest
 import zmq
 
-from hexactl.adapters.api.server import MAX_QUEUED_PER_CLIENT, ApiServer
+from hexactl.adapters.api.server import MAX_UNREAD_REPLIES, ApiServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.telemetry import TelemetryPublisher
 from tests.api.support import LOCAL
@@ -132,7 +132,7 @@ def test_a_client_that_never_reads_its_replies_loses_them_past_the_per_client_bo
         caplog) -> None:
     """Found from outside: ZeroMQ kept up to 1000 unread replies a client, so one that
     pipelined ``read_file`` and never read held hundreds of MB of the API process's memory.
-    It keeps :data:`MAX_QUEUED_PER_CLIENT` (beyond what the sockets buffer); the rest are
+    It keeps :data:`MAX_UNREAD_REPLIES` (beyond what the sockets buffer); the rest are
     dropped, said once in the log, and other clients are answered as before."""
     reply = {"message": "x" * 128_000}
     context = zmq.Context()
@@ -147,11 +147,11 @@ def test_a_client_that_never_reads_its_replies_loses_them_past_the_per_client_bo
 
     def dropped() -> bool:
         nonlocal sent
-        if sent < 600:  # past 32 unread and the sockets' buffers (about 64 of these replies) without the bound
+        if sent < 600:  # past 128 unread and the sockets' buffers (about 64 of these replies) without the bound
             for _ in range(16):  # within the requests one client may have waiting
                 hoarder.send(json.dumps({"v": 1, "id": sent, "cmd": "status"}).encode())
                 sent += 1
-        return any(f"it has {MAX_QUEUED_PER_CLIENT} replies unread" in record.getMessage() for record in caplog.records)
+        return any(f"it has {MAX_UNREAD_REPLIES} replies unread" in record.getMessage() for record in caplog.records)
 
     try:
         with caplog.at_level(logging.WARNING, logger="hexactl.adapters.api.server"):

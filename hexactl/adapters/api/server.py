@@ -99,6 +99,13 @@ MAX_QUEUED_PER_CLIENT = 32
 has one in flight; a DEALER pipelining a batch (poses to validate) rarely needs more,
 and one client must not fill the whole queue."""
 
+MAX_UNREAD_REPLIES = 4 * MAX_QUEUED_PER_CLIENT
+"""Replies kept for a client that has not read them (beyond what the sockets buffer);
+later ones are dropped. ZeroMQ's default, 1000, let one that never read hold a gigabyte of
+``read_file`` replies. Room for a reading client's :data:`MAX_QUEUED_PER_CLIENT` and its
+``busy`` replies besides: ZeroMQ counts a reply unread until the client's side says, in
+batches of half this bound, that it took it."""
+
 MAX_QUEUED = 256
 """Requests waiting for one worker from all clients together. Planning a move or validating a pose takes
 tens of milliseconds, so a full queue is seconds of work: what waits longer would outlive
@@ -340,11 +347,9 @@ class ApiServer(SocketThread):
         self._worker_niceness = worker_niceness
         self._handler_timeout_ns = round(handler_timeout_s * 1e9)
         self._on_stuck = on_stuck
-        # SNDHWM: a client keeps at most MAX_QUEUED_PER_CLIENT replies unread (ZeroMQ's default,
-        # 1000, let one that never reads hold a gigabyte of read_file replies); MANDATORY: one
-        # dropped for it raises, so that the log says why it lost a reply.
+        # MANDATORY: a reply dropped past MAX_UNREAD_REPLIES raises, so that the log says why.
         super().__init__(context, zmq.ROUTER, endpoint, name="hexactl-api",
-                         options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES, zmq.SNDHWM: MAX_QUEUED_PER_CLIENT,
+                         options={zmq.MAXMSGSIZE: TRANSPORT_MAX_BYTES, zmq.SNDHWM: MAX_UNREAD_REPLIES,
                                   zmq.ROUTER_MANDATORY: 1}, curve=curve)
         replies = f"inproc://hexactl-api-replies-{id(self)}"
         # Never full while the socket thread drains it: at most MAX_QUEUED replies a worker are owed.
@@ -474,7 +479,7 @@ class ApiServer(SocketThread):
 
     def _send(self, frames: list[bytes]) -> None:
         """Never blocks: a reply to a client that is gone, or that has
-        :data:`MAX_QUEUED_PER_CLIENT` replies unread, is dropped (the latter said once a run
+        :data:`MAX_UNREAD_REPLIES` replies unread, is dropped (the latter said once a run
         of them, in the log)."""
         try:
             self._socket.send_multipart(frames, zmq.NOBLOCK)
@@ -482,7 +487,7 @@ class ApiServer(SocketThread):
             if frames[0] not in self._not_reading:
                 self._not_reading.add(frames[0])
                 log.warning("replies to a client dropped: it has %d replies unread (the most kept for one client); "
-                            "a client must read its replies", MAX_QUEUED_PER_CLIENT)
+                            "a client must read its replies", MAX_UNREAD_REPLIES)
             return
         except zmq.ZMQError as error:  # EHOSTUNREACH: the client has gone, as a timed-out one does
             log.debug("reply not sent: %s", error)
