@@ -23,7 +23,10 @@ def measure(calls: int, repeats: int) -> float:
     from hexactl.control.hardware import ActuatorFeedback, ActuatorState, BusState, FeedbackSnapshot, LinkHealth
     from hexactl.control.supervisor import Supervisor
 
-    supervisor = Supervisor(SupervisionConfig(), 0.002)
+    if len(inspect.signature(Supervisor).parameters) == 3:  # since the locked leg's supervision: a leg's step a cycle
+        supervisor = Supervisor(SupervisionConfig(), 0.002, 0.8)  # 400 mm/s × 2 ms
+    else:
+        supervisor = Supervisor(SupervisionConfig(), 0.002)
     supervisor.enabled(0)
     # Since the fault bits are named; a tree from before has no such field.
     named = {"fault_names": ()} if "fault_names" in inspect.signature(ActuatorFeedback).parameters else {}
