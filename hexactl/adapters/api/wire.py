@@ -245,12 +245,13 @@ def _finite_float(text: str) -> float:
 
 
 _LARGEST_DOUBLE = int(sys.float_info.max)
+_LONGEST_DOUBLE_TEXT = len(str(-_LARGEST_DOUBLE))
 
 
 def _double_range_int(text: str) -> int:
     # As _finite_float: a client's JSON library reads numbers as doubles, and Python's int()
     # of over 4300 digits would answer with advice for the service's own interpreter.
-    if len(text) > len(str(_LARGEST_DOUBLE)) + 1 or abs(value := int(text)) > _LARGEST_DOUBLE:
+    if len(text) > _LONGEST_DOUBLE_TEXT or abs(value := int(text)) > _LARGEST_DOUBLE:
         raise ValueError(f"number {text[:40]}{'…' if len(text) > 40 else ''} is out of range")
     return value
 
