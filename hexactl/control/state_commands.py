@@ -69,6 +69,8 @@ class StateCommands:
         if sent is False:
             return CommandResult.failure(ErrorCode.SEND_FAILED, "the E-stop frame could not be sent; the loop "
                                          "latched ESTOP and keeps repeating it", **result.details)
+        if sent and result.error is ErrorCode.LOOP_TIMEOUT:
+            return replace(result, message=f"E-stop sent to the actuators; the loop's latch of it is {result.message}")
         return result
 
     def reset(self) -> CommandResult:

@@ -94,8 +94,22 @@ class CommandSubmitter:
                 return CommandResult(verdict.ok, verdict.error, verdict.message if told else message,
                                      {**verdict.details, **details})
             time.sleep(self._config.loop.period_s / 2)
-        return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, "the loop gave no verdict in time; the command may still "
-                                     "be carried out", ticket=ticket)
+        return self._unconfirmed(command)
+
+    def _unconfirmed(self, command: cmd.Command) -> CommandResult:
+        """``loop_timeout`` for ``command``, queued to a loop that reports but gave no verdict
+        within ``command_timeout_s``: it runs late (a host too busy for it), so the command
+        is carried out when the loop reaches it, unless its deadline has passed by then. A
+        command that brakes has none and is said to be on its way: a stop or E-stop answered
+        "may still be carried out" reads, at the worst moment, as one that may not be."""
+        late = (f"the loop gave no verdict within {self._config.command_timeout_s:g} s (it runs late: a host too "
+                "busy for it?)")
+        if command.brakes:
+            message = (f"queued, not confirmed yet: {late}; the loop carries it out when it reaches it, and "
+                       "status shows it carried out")
+        else:
+            message = f"{late}; the command may still be carried out: see status before sending it again"
+        return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, message, ticket=command.ticket)
 
     def settled(self, problem: Callable[[CoreSnapshot], str | None], timeout_s: float) -> str | None:
         """None once ``problem`` finds nothing in the loop's latest snapshot, asked every half

@@ -24,6 +24,7 @@ class AgedHost:
 
     thread: LoopThread
     ages: list[float]
+    running: bool | None = None  # what the reports say of it (None: as it is)
     submitted: list[cmd.Command] = field(default_factory=list)
     reports: int = 0
 
@@ -35,7 +36,8 @@ class AgedHost:
         self.reports += 1
         report = self.thread.report(stats_max_age_s)
         age = self.ages.pop(0) if len(self.ages) > 1 else self.ages[0]
-        return replace(report, stats=replace(report.stats, report_age_s=age))
+        report = replace(report, stats=replace(report.stats, report_age_s=age))
+        return report if self.running is None else replace(report, running=self.running)
 
     def submit(self, command: cmd.Command) -> None:
         self.submitted.append(command)
@@ -47,9 +49,10 @@ class AgedHost:
         return []
 
 
-def facade(rig, ages: list[float]) -> tuple[Controller, AgedHost]:
-    host = AgedHost(rig.controller.thread, ages)
-    return Controller(host, config=ControllerConfig(), nominal=rig.geometry), host
+def facade(rig, ages: list[float], running: bool | None = None,
+           config: ControllerConfig | None = None) -> tuple[Controller, AgedHost]:
+    host = AgedHost(rig.controller.thread, ages, running)
+    return Controller(host, config=config or ControllerConfig(), nominal=rig.geometry), host
 
 
 def test_a_silent_loop_is_sent_only_what_brakes(rig) -> None:
@@ -87,3 +90,35 @@ def test_a_silence_confirmed_is_not_waited_for_again_until_a_report_comes(rig) -
     assert host.reports == rechecked + 3  # one look each: no report came since the silence was confirmed
     rig.run()  # a report: what comes next may be this process held up again
     assert controller.stop().error == "loop_silent" and host.reports > rechecked + 5
+
+
+def test_a_late_loops_stop_and_estop_are_said_to_be_on_their_way(rig) -> None:
+    """A loop that reports but runs late (a host too busy for it) gives no verdict in time.
+    A stop or E-stop answered "the command may still be carried out" read, at the worst
+    moment, as one that may not be: it is queued, and said so."""
+    controller, host = facade(rig, [0.002], running=True, config=ControllerConfig(command_timeout_s=0.05))
+    for brake, kind in ((controller.stop, cmd.Stop), (controller.estop, cmd.EStop)):
+        late = brake()
+        assert late.error == "loop_timeout" and type(host.submitted[-1]) is kind, late
+        assert late.details["ticket"] == host.submitted[-1].ticket
+        assert late.message.startswith("queued, not confirmed yet: the loop gave no verdict within 0.05 s (it runs "
+                                       "late"), late.message
+        assert "carries it out when it reaches it" in late.message and "may still" not in late.message
+    other = controller.enable()
+    assert other.error == "loop_timeout" and "the command may still be carried out: see status before sending it " \
+        "again" in other.message, other.message
+
+
+def test_an_estop_sent_from_here_but_unconfirmed_by_a_late_loop_says_it_was_sent(rig) -> None:
+    """In-process the E-stop frame goes to the actuators from the caller's thread at once:
+    a late loop's missing verdict does not make that uncertain, and the reply says so."""
+
+    class SendingHost(AgedHost):
+        def estop_now(self) -> bool:
+            return True
+
+    host = SendingHost(rig.controller.thread, [0.002], running=True)
+    controller = Controller(host, config=ControllerConfig(command_timeout_s=0.05), nominal=rig.geometry)
+    late = controller.estop()
+    assert late.error == "loop_timeout" and late.message.startswith(
+        "E-stop sent to the actuators; the loop's latch of it is queued, not confirmed yet"), late.message
