@@ -27,7 +27,7 @@ Times are monotonic ns; legs 1–6. Owned by the loop thread: not thread-safe.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import ceil
+from math import ceil, isinf
 
 from hexactl.control.config import SupervisionConfig
 from hexactl.control.hardware import (
@@ -128,7 +128,7 @@ class Supervisor:
         for leg, actuator in enumerate(feedback.actuators, start=1):
             expected = self._expected[leg - 1]
             if not actuator.heartbeat_age_s <= self.heartbeat_timeout_s:
-                faults.append(Fault("heartbeat_lost", f"leg {leg}: no report for {actuator.heartbeat_age_s:.3f} s", leg))
+                faults.append(Fault("heartbeat_lost", _silence(leg, actuator.heartbeat_age_s, link), leg))
             elif actuator.state is ActuatorState.FAULT or actuator.fault_bits:
                 faults.append(Fault("actuator_fault", f"leg {leg} reports {actuator.state.name}, faults: "
                                     f"{fault_text(actuator.fault_names, actuator.fault_bits)}", leg))
@@ -256,3 +256,12 @@ class Supervisor:
                     return True
         self._clear_fault_due_ns = None  # every actuator left E-stop: done
         return False
+
+
+def _silence(leg: int, age_s: float, link: LinkHealth | None) -> str:
+    """What a leg's lost heartbeat reads as: its age, or, never heard in this controller's
+    protocol (an actuator that restarted into another firmware), the link's word on why."""
+    if not isinf(age_s):
+        return f"leg {leg}: no report for {age_s:.3f} s"
+    why = f": {link.detail}" if link is not None and link.detail else ""
+    return f"leg {leg}: not heard in this controller's protocol{why}"

@@ -49,8 +49,20 @@ def test_each_fault_is_named_with_its_leg(supervisor):
     assert codes(faults) == [("heartbeat_lost", 2), ("actuator_fault", 4), ("actuator_fault", 5)]
     assert [f.message for f in faults[1:]] == ["leg 4 reports ENABLED, faults: comm_timeout, sensor (0x9)",
                                                "leg 5 reports FAULT, faults: none"]
+    assert faults[0].message == "leg 2: no report for 0.060 s"
     never_heard = feedback(leg1={"heartbeat_age_s": float("inf")})
     assert codes(supervisor.faults(never_heard, HEALTHY, 100, 1 * MS)) == [("heartbeat_lost", 1)]
+
+
+def test_a_leg_not_heard_in_this_protocol_says_what_the_link_says_not_inf_seconds(supervisor):
+    """An actuator that restarts, while enabled, into a firmware of another protocol version
+    is not heard by the link (its age is infinite): "no report for inf s" said nothing."""
+    link = LinkHealth(BusState.ACTIVE, 0, "leg 1 speaks protocol version 2, this controller 1: it is never enabled")
+    [fault] = supervisor.faults(feedback(leg1={"heartbeat_age_s": float("inf")}), link, 100, 1 * MS)
+    assert fault.message == ("leg 1: not heard in this controller's protocol: leg 1 speaks "
+                             "protocol version 2, this controller 1: it is never enabled"), fault.message
+    [fault] = supervisor.faults(feedback(leg1={"heartbeat_age_s": float("inf")}), None, 100, 1 * MS)
+    assert fault.message == "leg 1: not heard in this controller's protocol"
 
 
 def test_a_leg_has_the_state_timeout_to_reach_its_state_then_none(supervisor):
