@@ -567,3 +567,33 @@ def test_two_actuators_answering_as_one_node_are_named(link, bus):
     assert "leg 2's heartbeat counter went back from 91 to 15: two actuators answer as node 2?" in \
         link.link_health().detail
     assert link.node_status(2).restarts == 0
+
+
+def stray_heartbeat(node: int, protocol_version: int = codec.PROTOCOL_VERSION) -> tuple[int, bytes]:
+    """Our actuator's HEARTBEAT, as one set to node id ``node`` (no leg's) sends it."""
+    _, payload = codec.encode_heartbeat(1, WireState.DISABLED, 7, protocol_version)
+    return codec.NodeFrameBase.HEARTBEAT + node, payload
+
+
+def test_an_actuator_set_to_a_node_id_no_leg_has_is_named_beside_the_silent_leg(link, bus, clock):
+    """Found from outside: an actuator whose node id was mis-set (9 for 3) read as a silent
+    leg 3 and a counter of undecodable frames; nothing pointed at the cause."""
+    for leg in (1, 2, 4, 5, 6):
+        bus.push(*codec.encode_heartbeat(leg, WireState.DISABLED, 1))
+    bus.push(*stray_heartbeat(9))
+    link.read_feedback()
+    assert link.link_health().detail == ("silent legs: 3; an actuator answers as node 9 (its heartbeat, id 0x709), "
+                                         "which is no leg: set its node id to the silent leg's (1–6, one each)")
+    clock.t_ns = int(LinkConfig().heartbeat_timeout_s * 1e9) + 1  # it has gone quiet since: not named any longer
+    assert "node 9" not in link.link_health().detail
+
+
+@pytest.mark.parametrize("frame", [stray_heartbeat(9, codec.PROTOCOL_VERSION + 1), (0x709, b"\x05"), (0x785, bytes(8)),
+                                   stray_heartbeat(0x7F)[:1] + (b"\x00" * 3,)], ids=["other protocol", "other payload",
+                                                                                     "not a heartbeat id", "bad dlc"])
+def test_a_frame_that_is_not_our_heartbeat_from_another_node_is_not_named(link, bus, frame):
+    """Another device on the bus (a CANopen node's heartbeat) is no mis-set actuator."""
+    bus.push(*frame)
+    link.read_feedback()
+    assert link.link_health().detail.startswith("silent legs: 1, 2, 3, 4, 5, 6")
+    assert "answers as node" not in link.link_health().detail

@@ -297,6 +297,7 @@ class CanActuatorLink:
         self._foreign = 0
         self._other_ns: int | None = None  # when another controller's frame was last heard
         self._other_frame = ""
+        self._stray: tuple[int, int] | None = None  # (node id, when): our heartbeat from a node no leg has
         self._command_timeouts = 0
         self._first_counter: int | None = None
         self._last_counter: int | None = None
@@ -414,6 +415,9 @@ class CanActuatorLink:
         notes = []
         if silent := self.silent_legs():
             notes.append("silent legs: " + ", ".join(str(leg) for leg in silent))
+            if (stray := self._stray_node()) is not None:
+                notes.append(f"an actuator answers as node {stray} (its heartbeat, id 0x{NodeFrameBase.HEARTBEAT + stray:03X}), "
+                             "which is no leg: set its node id to the silent leg's (1–6, one each)")
         for leg, node in zip(NODE_IDS, self._nodes):
             # Heard, yet reported absent to the loop (heartbeat_age_s inf): say why.
             if node.protocol_version not in (None, PROTOCOL_VERSION):
@@ -426,6 +430,15 @@ class CanActuatorLink:
         return LinkHealth(self._bus_state, self._send_failures, "; ".join(notes), other_age_s, self._other_frame)
 
     # -- diagnostics -------------------------------------------------------------------
+
+    def _stray_node(self) -> int | None:
+        """The node id no leg has from which one of our actuators' heartbeats came within
+        ``heartbeat_timeout_s`` (None: none). With a leg silent, an actuator set to a wrong
+        node id is the likeliest cause; alone, it may be any device's: it is not named then."""
+        if self._stray is None:
+            return None
+        node, heard_ns = self._stray
+        return node if _age_s(heard_ns, self._clock_ns()) <= self.config.heartbeat_timeout_s else None
 
     def silent_legs(self) -> tuple[int, ...]:
         """Legs from which nothing arrived for longer than ``heartbeat_timeout_s`` (as of
@@ -573,6 +586,8 @@ class CanActuatorLink:
             # silent to the loop: say why, as the last error, where the enable refusal quotes it.
             if (leg := _SENDER.get(message.arbitration_id)) is not None:
                 self._detail = f"leg {leg}'s frames rejected: {error}"
+            elif (stray := _stray_heartbeat(message)) is not None:
+                self._stray = stray, now
             return
         kind = type(decoded)
         if kind is Feedback:
@@ -673,6 +688,19 @@ class CanActuatorLink:
             return -1
         counter = last - ((last - wire_counter) & 0xFF)
         return counter if counter >= first and counter > floor else -1
+
+
+def _stray_heartbeat(message: can.Message) -> int | None:
+    """The node id (0–127, none of the legs') of ``message`` if it is a HEARTBEAT of this
+    protocol from an actuator with a node id no leg has; None if it is anything else."""
+    node = message.arbitration_id - NodeFrameBase.HEARTBEAT
+    if not 0 <= node <= 0x7F:
+        return None
+    try:
+        heartbeat = decode(NodeFrameBase.HEARTBEAT + NODE_IDS[0], message.data)
+    except FrameError:
+        return None
+    return node if heartbeat.protocol_version == PROTOCOL_VERSION else None
 
 
 def _age_s(then_ns: int | None, now_ns: int) -> float:
