@@ -401,13 +401,18 @@ def test_socketcan_error_frames_set_the_bus_state(link, bus, can_id, data, state
 
 def test_read_drains_a_bounded_number_of_frames(bus, clock):
     link = CanActuatorLink(bus, LinkConfig(max_frames_per_read=10), clock_ns=clock)  # type: ignore[arg-type]
-    for _ in range(25):
-        bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, 0))
+    for counter in range(25):
+        bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, counter))
     link.read_feedback()
     assert len(bus.incoming) == 15
+    assert link.link_health().detail.endswith("; receiving behind: more than 10 frames waited at a read, so what "
+                                              "the actuators report reaches the loop late (a flood on the bus? "
+                                              "candump shows who sends it)")
     link.read_feedback()
     link.read_feedback()
     assert not bus.incoming and link.stats().frames_received == 25
+    clock.t_ns = int(LinkConfig().heartbeat_timeout_s * 1e9) + 1  # caught up since: said no longer
+    assert "behind" not in link.link_health().detail
 
 
 def test_setpoint_counter_is_unwrapped_to_the_loop_counter(link, bus):

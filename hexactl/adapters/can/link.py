@@ -298,6 +298,7 @@ class CanActuatorLink:
         self._other_ns: int | None = None  # when another controller's frame was last heard
         self._other_frame = ""
         self._stray: tuple[int, int] | None = None  # (node id, when): our heartbeat from a node no leg has
+        self._behind_ns: int | None = None  # when a read last left frames waiting (it drains a bounded number)
         self._command_timeouts = 0
         self._first_counter: int | None = None
         self._last_counter: int | None = None
@@ -405,6 +406,8 @@ class CanActuatorLink:
                 if message is None:
                     break
                 handle(message, now)
+            else:
+                self._behind_ns = now
             self._retry_commands(now)
         return FeedbackSnapshot(tuple(self._feedback(node, now) for node in self._nodes), now)
 
@@ -423,6 +426,10 @@ class CanActuatorLink:
             if node.protocol_version not in (None, PROTOCOL_VERSION):
                 notes.append(f"leg {leg} speaks protocol version {node.protocol_version}, this controller "
                              f"{PROTOCOL_VERSION}: it is never enabled")
+        if self._behind_ns is not None and self._recent(self._behind_ns):
+            notes.append(f"receiving behind: more than {self.config.max_frames_per_read} frames waited at a read, "
+                         "so what the actuators report reaches the loop late (a flood on the bus? candump shows "
+                         "who sends it)")
         if self._detail:
             notes.append(self._detail)
         other_ns = self._other_ns
@@ -438,7 +445,11 @@ class CanActuatorLink:
         if self._stray is None:
             return None
         node, heard_ns = self._stray
-        return node if _age_s(heard_ns, self._clock_ns()) <= self.config.heartbeat_timeout_s else None
+        return node if self._recent(heard_ns) else None
+
+    def _recent(self, then_ns: int) -> bool:
+        """``then_ns`` is within ``heartbeat_timeout_s`` of now: what the link's note still says."""
+        return _age_s(then_ns, self._clock_ns()) <= self.config.heartbeat_timeout_s
 
     def silent_legs(self) -> tuple[int, ...]:
         """Legs from which nothing arrived for longer than ``heartbeat_timeout_s`` (as of
