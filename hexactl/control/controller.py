@@ -195,12 +195,17 @@ class Controller:
 
     def validate_sequence(self, sequence: MotionSequence | str) -> CommandResult:
         """Would :meth:`play` accept this sequence (or built-in name) from here? Plans and
-        checks every waypoint's path, moves nothing."""
+        checks every waypoint's path from where the motion under way ends (a play waits for
+        rest), moves nothing; the same details as :meth:`play`'s, in leg-lock mode with how
+        far each waypoint is moved onto the locked leg's constraint
+        (``details.lock_corrections_mm``). It does not ask for ENABLED: checked while
+        disabled, a path error shows before enabling."""
         return self._sequences.validate(sequence)
 
     def play(self, sequence: MotionSequence | str, *, deadline_ns: int | None = None) -> CommandResult:
         """Play a sequence, or a built-in one by name; every waypoint's path is validated
-        before the first moves."""
+        before the first moves. In leg-lock mode each waypoint is projected onto the locked
+        leg's constraint, and ``details.lock_corrections_mm`` says how far."""
         return self._sequences.play(sequence, deadline_ns)
 
     def pause(self) -> CommandResult:

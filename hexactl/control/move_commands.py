@@ -120,15 +120,18 @@ class _CheckedGoal:
 def plan_result(plan: Plan, message: str, home_mm_rad: Sequence[float]) -> CommandResult:
     """The result of ``plan``: its refusal, or ``goal`` relative to the zero posture
     ``home_mm_rad`` (and ``tool_goal``, the tool's pose in the work frame, for a motion in
-    it; mm and deg), ``duration_s`` and ``waypoints``."""
+    it; mm and deg), ``duration_s``, ``waypoints`` and, in leg-lock mode,
+    ``lock_corrections_mm`` (:attr:`~hexactl.control.planning.Plan.lock_corrections_mm`)."""
     if plan.refusal is not None:
         return plan.refusal.result()
     last = plan.segments[-1]
     in_work = {"tool_goal": list(last.goal.in_degrees())} if last.frames is not None else {}
+    locked = {"lock_corrections_mm": list(plan.lock_corrections_mm)} if plan.lock_corrections_mm else {}
     return CommandResult.success(
         message,
         goal=list(convert(last.goal, last.frames, None, home_mm_rad).in_degrees()),
         duration_s=sum(seg.duration_s + seg.dwell_s for seg in plan.segments),
         waypoints=len(plan.segments),
         **in_work,
+        **locked,
     )

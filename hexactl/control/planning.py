@@ -223,10 +223,13 @@ class PlanningContext:
 
 @dataclass(frozen=True, slots=True)
 class Plan:
-    """Either ``segments`` (all validated) or a ``refusal``."""
+    """Either ``segments`` (all validated) or a ``refusal``. In leg-lock mode
+    ``lock_corrections_mm`` holds how far each waypoint's goal was moved to keep the locked
+    leg's length (the projection's metric distance, mm; empty outside leg-lock mode)."""
 
     segments: tuple[Segment, ...] = ()
     refusal: Refusal | None = None
+    lock_corrections_mm: tuple[float, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -282,6 +285,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
     home = context.active.home
     checks = _PathChecks(context, relative_poses(start_frames, np.array([origin], dtype=float), home)[0])
     motion_s = 0.0  # the segments' durations so far
+    corrections = []
     for number, waypoint in enumerate(waypoints, start=1):
         if refusal := budget.refusal(f"at waypoint {number} of {total}", remedy):
             return Plan(refusal=refusal)
@@ -291,7 +295,9 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
         goal = _goal(context, waypoint.pose)
         if isinstance(goal, Refusal):
             return Plan(refusal=Refusal(goal.code, f"waypoint {number}: {goal.message}", details={"waypoint": number, **goal.details}))
-        goal, frames = goal
+        goal, frames, correction_mm = goal
+        if correction_mm is not None:
+            corrections.append(correction_mm)
         rebased = None
         if frames != start_frames:
             if not start.resting:
@@ -328,7 +334,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
         return Plan(refusal=refusal)
     if violations := checks.violations():
         return Plan(refusal=_path_refusal(context, violations, origin, origin_frames))
-    return Plan(segments=tuple(segments))
+    return Plan(segments=tuple(segments), lock_corrections_mm=tuple(corrections))
 
 
 def _path_refusal(context: PlanningContext, violations: Sequence[PathViolation], origin: Coordinates,
@@ -637,21 +643,23 @@ def _number_in(value: object, low: float, high: float, low_open: bool = False) -
     return isfinite(value) and (low < value if low_open else low <= value) and value <= high
 
 
-def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> tuple[Coordinates, Frames | None] | Refusal:
-    """The goal and the frames of its coordinates: a pose in the work frame in the
-    operator's frames, any other relative mm/rad; in leg-lock mode projected onto the
-    constraint (relative mm/rad: a projected path keeps no pivot)."""
+def _goal(context: PlanningContext,
+          pose_mm_deg: Sequence[float]) -> tuple[Coordinates, Frames | None, float | None] | Refusal:
+    """The goal, the frames of its coordinates and, in leg-lock mode, how far it was moved
+    (mm, None outside it): a pose in the work frame in the operator's frames, any other
+    relative mm/rad; in leg-lock mode projected onto the constraint (relative mm/rad: a
+    projected path keeps no pivot)."""
     if isinstance(pose_mm_deg, ToolInWorkMmDeg):
         if context.frames is None:
             return Refusal(ErrorCode.INVALID_ARGUMENT, "a pose in the work frame needs the operator's frames")
         goal, frames = pose_mm_deg.in_radians(), context.frames
         if context.lock is None:
-            return goal, frames
+            return goal, frames, None
         goal = convert(goal, frames, None, context.active.home)
     else:
         goal = RelativeMmDeg._make(float(v) for v in pose_mm_deg).in_radians()
         if context.lock is None:
-            return goal, None
+            return goal, None, None
     projected = project_locked(context.active, context.lock, goal)
     if not projected.ok:
         return Refusal(ErrorCode.LOCK_UNREACHABLE, f"no pose with leg {context.lock.leg} at its locked length near the goal "
@@ -662,7 +670,7 @@ def _goal(context: PlanningContext, pose_mm_deg: Sequence[float]) -> tuple[Coord
                        f"from the goal (limit {context.lock_max_correction_mm:g} mm)",
                        details={"correction_mm": projected.correction, "limit_mm": context.lock_max_correction_mm,
                                 "nearest_pose": list(context.active.relative_from_absolute_mm_rad(projected.pose).in_degrees())})
-    return context.active.relative_from_absolute_mm_rad(projected.pose), None
+    return context.active.relative_from_absolute_mm_rad(projected.pose), None, projected.correction
 
 
 def locked_leg(active: ActiveGeometry, lock: LegLock) -> LockedLeg:

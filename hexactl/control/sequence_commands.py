@@ -14,6 +14,7 @@ from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.sequences import BUILTIN_SEQUENCES, MotionSequence, UnknownSequence, builtin_sequence
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
+from hexactl.control.trajectory import KinematicState
 
 
 class SequenceCommands:
@@ -32,7 +33,9 @@ class SequenceCommands:
         if isinstance(resolved, CommandResult):
             return resolved
         s = self._snapshot()
-        return plan_result(plan_path(self._context(s), s.trajectory, resolved.planning_waypoints(), s.frames), "valid",
+        # From where the motion under way ends, at rest: play waits for rest (as waves do).
+        start = KinematicState.at_rest(s.target)
+        return plan_result(plan_path(self._context(s), start, resolved.planning_waypoints(), s.frames), "valid",
                            s.active.home)
 
     def play(self, sequence: MotionSequence | str, deadline_ns: int | None) -> CommandResult:

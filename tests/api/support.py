@@ -188,6 +188,12 @@ class FakeController:
                                          "speed limit 360 mm/s", kind="leg_speed", leg=2)
         return CommandResult.success("valid", **wave_figures(spec))
 
+    def validate_sequence(self, sequence: MotionSequence) -> CommandResult:
+        if len(sequence.waypoints) > 3:
+            return CommandResult.failure(ErrorCode.PATH_VIOLATION, "waypoint 4: leg 2 beyond its stroke", waypoint=4)
+        return CommandResult.success("valid", duration_s=12.5, waypoints=len(sequence.waypoints),
+                                     goal=list(sequence.waypoints[-1].pose))
+
     def play(self, sequence: MotionSequence, *, deadline_ns: int | None = None) -> CommandResult:
         self._call("play", sequence)
         self.sequence = sequence

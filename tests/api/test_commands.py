@@ -24,6 +24,7 @@ ARGUMENTS: dict[str, dict] = {
     "leg_lock": {"leg": 3},
     "jog": {"velocity": [10, 0, 0, 0, 0, 0]},
     "play": {"sequence": "x_sweep"},
+    "validate_sequence": {"sequence": "x_sweep"},
     "save_recording": {"path": "recording.csv"},
     "record": {"name": "run1", "duration_s": 1.0},
     "wave": {"axes": {"z": {"amplitude": 2.0}}, "frequency_hz": 1.0, "cycles": 3},
@@ -55,7 +56,8 @@ def test_every_command_round_trips(service, kind) -> None:
         assert reply["id"] == {"n": cmd}
     called = [name for name, _ in service.controller.calls]
     # queries and the instrument call nothing; clear_frames is a set_frames of no frames
-    assert set(called) == set(COMMANDS) - {"status", "events", "validate_pose", "validate_wave", "save_recording",
+    assert set(called) == set(COMMANDS) - {"status", "events", "validate_pose", "validate_wave", "validate_sequence",
+                                           "save_recording",
                                            "measure", "frames", "clear_frames", "geometry", "files", "read_file",
                                            "progress"}
 
@@ -162,6 +164,19 @@ def test_play_unknown_name(service) -> None:
     reply = send(service, "play", sequence="no_such_motion")
     assert reply["error"]["code"] == "unknown_sequence"
     assert "x_sweep" in reply["error"]["details"]["built_in"]
+
+
+def test_validate_sequence_says_valid_with_the_plan_or_the_refusal_and_plays_nothing(service) -> None:
+    steps = {"name": "steps", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0]}, {"pose": [0, 0, 5, 0, 0, 0], "dwell": 1.0}]}
+    valid = send(service, "validate_sequence", sequence=steps)
+    assert valid == {**valid, "valid": True, "name": "steps", "waypoints": 2, "duration": 12.5,
+                     "goal": [0, 0, 5, 0, 0, 0], "lock_corrections_mm": None, "refusal": None}
+    refused = send(service, "validate_sequence", sequence="y_rotation")  # the fake refuses more than 3 waypoints
+    assert refused == {**refused, "valid": False, "name": "y_rotation", "waypoints": 9, "duration": None, "goal": None}
+    assert refused["refusal"] == {"code": "path_violation", "message": "waypoint 4: leg 2 beyond its stroke",
+                                  "details": {"waypoint": 4}}
+    assert send(service, "validate_sequence", sequence="no_such_motion")["error"]["code"] == "unknown_sequence"
+    assert [name for name, _ in service.controller.calls if name == "play"] == []
 
 
 def test_load_and_roll_back_calibration(service, nominal) -> None:

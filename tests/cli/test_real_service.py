@@ -293,3 +293,39 @@ def test_move_validate_shows_the_whole_goal_and_moves_nothing(served, client, ca
             client.request("clear_frames")
 
     tolerating_stalls(client, scenario)
+
+
+def test_play_validate_says_how_far_a_leg_lock_moves_the_waypoints_and_plays_nothing(served, directory, client,
+                                                                                      capsys) -> None:
+    """Found from outside: a sequence played with a leg locked ran to projected waypoints,
+    up to 25 mm from the file's, and nothing said so; nor could a sequence be checked
+    before it played."""
+    steps = directory / "sequences" / "steps.toml"
+    steps.write_text('name = "steps"\n[[waypoint]]\npose = [0, 0, 6, 0, 0, 0]\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\n')
+
+    def scenario() -> None:
+        before = status(client)["pose_command"]
+        capsys.readouterr()
+        assert hexactl(served, "play", str(steps), "--validate") == 0
+        out = capsys.readouterr().out.strip()
+        assert re.fullmatch(r"ok: valid, nothing moved: it ends at x +0\.000 mm .* yaw +0\.000 deg \(relative "
+                            r"to the zero posture\); 2 waypoints; \d+\.\d\d s", out), out
+        assert hexactl(served, "leg-lock", "3") == 0
+        try:
+            capsys.readouterr()
+            assert hexactl(served, "play", str(steps), "--validate") == 0
+            out = capsys.readouterr().out.strip()
+            assert re.search(r"; 2 waypoints; projected onto the locked leg's constraint: waypoints move by up to "
+                             r"[1-9]\d*\.\d{3} mm \(waypoint 1\); \d+\.\d\d s$", out), out
+            assert status(client)["pose_command"] == before and at_rest(client)
+            assert hexactl(served, "play", "steps", "--validate", "--wait") == 2  # nothing to wait for
+            assert "--validate plays nothing" in capsys.readouterr().err
+        finally:
+            client.request("leg_unlock")  # refused while a fault is latched: the retry's recover resets
+        far = directory / "sequences" / "far.toml"
+        far.write_text('name = "far"\n[[waypoint]]\npose = [0, 0, 5000, 0, 0, 0]\n')
+        capsys.readouterr()
+        assert hexactl(served, "play", str(far), "--validate") == 1
+        assert "error path_violation: " in capsys.readouterr().err
+
+    tolerating_stalls(client, scenario)

@@ -8,9 +8,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hexactl.control.config import ControllerConfig
-from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, Waypoint, plan_path
+from hexactl.control.planning import ActiveGeometry, LegLock, PlanningContext, Waypoint, plan_path, project_locked
 from hexactl.control.trajectory import KinematicState
-from hexactl.kinematics.axes import RelativeMmRad
+from hexactl.kinematics.axes import RelativeMmDeg, RelativeMmRad
 from hexactl.kinematics.inverse import leg_lengths, sensor_setpoints
 from hexactl.kinematics.leg_lock import ProjectionStatus, project_to_locked_leg
 from hexactl.kinematics.pose import absolute_from_relative
@@ -209,3 +209,28 @@ def test_leg_lock_moves_planning_accepts_run_to_the_end(make_rig, leg, first, se
         assert rig.controller.telemetry().pose_command == pytest.approx(result.details["goal"], abs=1e-6)
     rig.assert_setpoints_safe()
     assert rig.controller.telemetry().loop.guard_clamps == 0
+
+
+def test_a_sequence_played_with_a_leg_locked_says_how_far_each_waypoint_is_moved(rig):
+    """Found from outside: a sequence played with a leg locked went to projected waypoints,
+    up to 25 mm from the file's, and neither play nor its validation said how far."""
+    from hexactl.control.sequences import sequence_from_mapping
+
+    sequence = sequence_from_mapping({"name": "steps", "waypoint": [
+        {"pose": [0, 0, 0, 0, 0, 0]}, {"pose": [0, 0, 8, 0, 0, 0]}, {"pose": [15, 0, 0, 0, 0, 0]}]})
+    rig.enabled()
+    assert "lock_corrections_mm" not in rig.controller.validate_sequence(sequence).details  # no leg locked
+    _locked(rig, 2)
+    validated = rig.controller.validate_sequence(sequence)
+    assert validated.ok, validated.message
+    at_rest, up, aside = validated.details["lock_corrections_mm"]
+    assert at_rest == pytest.approx(0.0, abs=1e-6)  # the lock was taken there: on the constraint
+    assert up > 1.0  # every leg longer: the locked one cannot follow, the goal moves
+    assert 0.0 <= aside < rig.controller.config.lock_max_correction_mm
+    # Each is the projection of that waypoint alone onto the lock, as a move's goal is.
+    snapshot = rig.controller.snapshot
+    for pose, correction in zip(([0, 0, 8, 0, 0, 0], [15, 0, 0, 0, 0, 0]), (up, aside)):
+        projected = project_locked(snapshot.active, snapshot.lock, RelativeMmDeg(*pose).in_radians())
+        assert projected.correction == pytest.approx(correction, rel=1e-6, abs=1e-6)
+    played = rig.controller.play(sequence)
+    assert played.ok and played.details["lock_corrections_mm"] == pytest.approx(validated.details["lock_corrections_mm"])

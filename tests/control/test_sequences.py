@@ -67,6 +67,24 @@ def test_every_builtin_validates_on_the_nominal_platform(rig, name):
     assert result.details["waypoints"] == len(builtin_sequence(name).waypoints)
 
 
+def test_a_sequence_is_validated_from_where_the_motion_under_way_ends_and_while_disabled(rig):
+    """play waits for rest, so its validation plans from the move's goal at rest, as a wave's
+    does: from the moving state, its first waypoint was planned as a move that replaces
+    the running one, which play never runs. Disabled, it validates all the same."""
+    steps = sequence_from_mapping({"name": "steps", "waypoint": [{"pose": [0, 0, 20, 0, 0, 0]}]})
+    disabled = rig.controller.validate_sequence(steps)
+    assert disabled.ok, disabled.message
+    rig.enabled()
+    assert rig.controller.move([60, 0, 0, 0, 0, 0], duration=2.0).ok
+    rig.run(100)  # under way
+    while_moving = rig.controller.validate_sequence(steps)
+    rig.settle()
+    at_goal = rig.controller.validate_sequence(steps)
+    assert while_moving.ok and at_goal.ok
+    assert while_moving.details["duration_s"] == pytest.approx(at_goal.details["duration_s"], rel=1e-9)
+    assert at_goal.details["duration_s"] > disabled.details["duration_s"]  # from x 60, not from zero
+
+
 def test_play_records_commanded_and_measured_pose_at_each_dwell(rig):
     rig.enabled()
     sequence = sequence_from_toml(TEXT)

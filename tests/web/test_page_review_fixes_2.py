@@ -22,6 +22,7 @@ what it sent and the service's state, never by how long anything took.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 
 import pytest
@@ -369,6 +370,31 @@ def test_the_sequence_line_says_it_is_over_after_another_clients_stop(rig) -> No
         wait_for(lambda: rig.status()["motion"] == "holding", "at rest")
 
     attempted(rig, scenario)
+
+
+def test_the_sequence_line_says_how_far_a_leg_lock_moves_the_waypoints(rig) -> None:
+    """Found from outside: a sequence played with a leg locked ran to waypoints projected
+    onto the lock, up to 25 mm from the file's, and the page did not say so."""
+    def scenario() -> None:
+        (rig.directory / "sequences" / "steps.toml").write_text(
+            'name = "steps"\n[[waypoint]]\npose = [0, 0, 6, 0, 0, 0]\ndwell = 5\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\n')
+        rig.enabled_from_the_page()
+        rig.client.call("leg_lock", leg=3)
+        try:
+            rig.fill("#sequence-name", "steps.toml")
+            rig.click("#play")
+            said = wait_for(lambda: "steps" in text(rig, "#sequence-result") and text(rig, "#sequence-result"),
+                            "the play's reply", seen=lambda: text(rig, "#sequence-result"))
+            assert re.fullmatch(r"playing steps: steps, 2 waypoints, \d+\.\d s; projected onto the locked leg: "
+                                r"waypoints move by up to [1-9]\d*\.\d{3} mm", said), said
+            wait_for(lambda: rig.status()["sequence"] is None and rig.status()["motion"] == "holding", "played")
+        finally:
+            rig.client.request("leg_unlock")
+
+    try:
+        attempted(rig, scenario)
+    finally:
+        rig.at_rest_disabled()
 
 
 # ---------------------------------------------------------------- F12: the keyboard on a jog button

@@ -55,6 +55,7 @@ from hexactl.adapters.api.messages import (
     StreamCloseRequest,
     StreamOpenRequest,
     ValidatePoseRequest,
+    ValidateSequenceRequest,
     ValidateWaveRequest,
     WaveFigures,
     WaveRequest,
@@ -187,10 +188,14 @@ class CommandHandler:
                 return _checked(controller.leg_lock(request.leg, deadline_ns=deadline_ns))
             case LegUnlockRequest():
                 return _checked(controller.leg_unlock(deadline_ns=deadline_ns))
+            case ValidateSequenceRequest():  # before its base class: a match takes the first case that fits
+                return self._validate_sequence(request)
             case PlayRequest():
                 sequence = resolve_sequence(request.sequence, self.data)
                 result = controller.play(sequence, deadline_ns=deadline_ns)
-                return _checked(result, name=sequence.name, waypoints=len(sequence.waypoints), duration=result.details.get("duration_s"))
+                return _checked(result, name=sequence.name, waypoints=len(sequence.waypoints),
+                                duration=result.details.get("duration_s"),
+                                lock_corrections_mm=result.details.get("lock_corrections_mm"))
             case PauseRequest():
                 return _checked(controller.pause())
             case ResumeRequest():
@@ -273,6 +278,17 @@ class CommandHandler:
             return {"valid": True, "refusal": None,
                     "wave": jsonable(_wave_figures(result))}
         return {"valid": False, "wave": None, "refusal": error_body(_code(result), result.message, _details(result))}
+
+    def _validate_sequence(self, request: ValidateSequenceRequest) -> dict[str, Any]:
+        sequence = resolve_sequence(request.sequence, self.data)  # a bad file is refused as play refuses it
+        result = self.controller.validate_sequence(sequence)
+        named = {"name": sequence.name, "waypoints": len(sequence.waypoints)}
+        if result.ok:
+            return {"valid": True, **named, "duration": result.details.get("duration_s"),
+                    "goal": result.details.get("goal"),
+                    "lock_corrections_mm": result.details.get("lock_corrections_mm"), "refusal": None}
+        return {"valid": False, **named, "duration": None, "goal": None, "lock_corrections_mm": None,
+                "refusal": error_body(_code(result), result.message, _details(result))}
 
     def _set_frames(self, request: SetFramesRequest) -> dict[str, Any]:
         current = self.controller.operator_frames()

@@ -320,6 +320,13 @@ class PlayRequest(_Request):
     )
 
 
+class ValidateSequenceRequest(PlayRequest):
+    """Would ``play`` accept this sequence? Plans and checks every waypoint's path from
+    where the motion under way ends; moves nothing."""
+
+    cmd: Literal["validate_sequence"]  # type: ignore[assignment]
+
+
 class PauseRequest(_Request):
     """Pause the sequence: brake to rest mid-move, or freeze the dwell's clock."""
 
@@ -538,6 +545,7 @@ REQUEST_MODELS: tuple[type[_Request], ...] = (
     LegLockRequest,
     LegUnlockRequest,
     PlayRequest,
+    ValidateSequenceRequest,
     PauseRequest,
     ResumeRequest,
     AbortRequest,
@@ -962,10 +970,28 @@ class StreamOpenReply(OkReply):
     endpoints: StreamEndpoints = Field(description="where to send the samples")
 
 
+LOCK_CORRECTIONS = ("in leg-lock mode, how far each waypoint's goal is moved, in order, to the nearest pose that "
+                    "keeps the locked leg's length, mm (rotations counted at the platform's characteristic length, "
+                    "as lock_max_correction_mm counts them); null with no leg locked")
+
+
 class PlayReply(OkReply):
     name: str
     waypoints: int = Field(description="number of waypoints")
     duration: float = Field(description="planned duration including dwells, s")
+    lock_corrections_mm: list[float] | None = Field(default=None, description=LOCK_CORRECTIONS)
+
+
+class ValidateSequenceReply(OkReply):
+    valid: bool = Field(description="whether play would accept its paths now (play also needs the controller "
+                        "enabled and at rest)")
+    name: str = Field(description="the sequence's name")
+    waypoints: int = Field(description="number of waypoints")
+    duration: float | None = Field(description="planned duration including dwells, s, when valid")
+    goal: RelativeMmDeg | None = Field(description="where the last waypoint ends, relative to the zero posture, when "
+                                       "valid")
+    lock_corrections_mm: list[float] | None = Field(description=LOCK_CORRECTIONS + " or not valid")
+    refusal: ErrorBody | None = Field(description="what play would answer, when not valid")
 
 
 class CalibrationReply(OkReply):
@@ -1138,6 +1164,7 @@ REPLY_MODELS: dict[str, type[OkReply]] = {
     "wave": WaveReply,
     "validate_wave": ValidateWaveReply,
     "play": PlayReply,
+    "validate_sequence": ValidateSequenceReply,
     "load_calibration": CalibrationReply,
     "rollback_calibration": CalibrationReply,
     "validate_calibration": ValidateCalibrationReply,

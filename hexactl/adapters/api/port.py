@@ -96,7 +96,12 @@ class ControllerPort(Protocol):
     def leg_unlock(self, *, deadline_ns: int | None = None) -> CommandResult: ...
 
     def play(self, sequence: MotionSequence, *, deadline_ns: int | None = None) -> CommandResult:
-        """Success details: ``duration_s`` (with dwells), ``waypoints``."""
+        """Success details: ``duration_s`` (with dwells), ``waypoints``, ``goal``; in leg-lock
+        mode ``lock_corrections_mm``."""
+        ...
+
+    def validate_sequence(self, sequence: MotionSequence) -> CommandResult:
+        """Would :meth:`play` take its paths now? The same details on success."""
         ...
 
     def pause(self) -> CommandResult: ...

@@ -116,6 +116,11 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                       "sequence file or a .csv plan from plan-leglock: a file here is sent by its absolute path, any "
                       "other name is looked up in the service's data directories (serve puts examples in ./sequences)")
     _waiting(play)
+    play.add_argument("--validate", action="store_true", help="only say whether the service would take the "
+                      "sequence's paths from where the motion under way ends, and its duration; nothing moves (also "
+                      "while disabled)")
+    play.epilog = ("In leg-lock mode each waypoint is projected onto the locked leg's constraint: the reply says how "
+                   "far the farthest one moves (--json: each one's, lock_corrections_mm).")
     command("pause", "pause the playing sequence", "pause")
     _waiting(command("resume", "resume the paused sequence", "resume"))
     command("abort", "abandon the playing sequence (halts smoothly)", "abort")
@@ -294,8 +299,11 @@ REQUEST_ENVELOPE_BYTES = 256
 
 
 def _play_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    if arguments.validate and arguments.wait:
+        raise CliError("--validate plays nothing, so there is nothing to --wait for: give one of them")
     path = Path(arguments.sequence)  # a file here is sent absolute: the service's working directory may differ
-    return "play", {"sequence": str(path.resolve()) if path.is_file() else arguments.sequence}
+    return "validate_sequence" if arguments.validate else "play", {
+        "sequence": str(path.resolve()) if path.is_file() else arguments.sequence}
 
 
 def _save_recording_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -571,8 +579,14 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
         said.append(f"goal {pose_text(goal)} (projected onto the locked leg's constraint)")
     if source := (fields or {}).get("source"):
         said.append(f"read from {source} here and sent")
+    if cmd == "validate_sequence":
+        said.append(f"valid, nothing moved: it ends at {pose_text(goal)} (relative to the zero posture)")
     if "waypoints" in reply:
         said.append(f"{reply['waypoints']} waypoints")
+    if corrections := reply.get("lock_corrections_mm"):
+        farthest = max(range(len(corrections)), key=corrections.__getitem__)
+        said.append(f"projected onto the locked leg's constraint: waypoints move by up to "
+                    f"{corrections[farthest]:.3f} mm (waypoint {farthest + 1})")
     if reply.get("duration") is not None:
         said.append(f"{reply['duration']:.2f} s")
     if cmd == "validate_calibration":

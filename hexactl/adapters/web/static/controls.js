@@ -495,8 +495,11 @@ export function setupControls(ctx) {
     const name = $('sequence-name').value.trim();
     if (!name) { setResult(seqResult, 'refused', 'name a sequence: a built-in or a file'); return; }
     const reply = await ctx.send('play', { sequence: name });
-    seqReply(reply, (r) => `${r.message ?? 'playing'}${r.name ? `: ${r.name}` : ''}${r.waypoints !== undefined ? `, ${Array.isArray(r.waypoints) ? r.waypoints.length : r.waypoints} waypoints` : ''}${typeof r.duration === 'number' ? `, ${r.duration.toFixed(1)} s` : ''}`);
+    seqReply(reply, (r) => `${r.message ?? 'playing'}${r.name ? `: ${r.name}` : ''}${r.waypoints !== undefined ? `, ${Array.isArray(r.waypoints) ? r.waypoints.length : r.waypoints} waypoints` : ''}${typeof r.duration === 'number' ? `, ${r.duration.toFixed(1)} s` : ''}${lockShift(r.lock_corrections_mm)}`);
   });
+  /** With a leg locked each waypoint goes to the nearest pose that keeps its length: say how far, at most. */
+  const lockShift = (corrections) => (Array.isArray(corrections) && corrections.length
+    ? `; projected onto the locked leg: waypoints move by up to ${Math.max(...corrections).toFixed(3)} mm` : '');
   for (const cmd of ['pause', 'resume', 'abort']) {
     $(cmd).addEventListener('click', async () => {
       if (cmd === 'abort') releaseJog(false);
