@@ -30,11 +30,13 @@ class Loading(Controller):
         super().__init__()
         self.locked_leg: int | None = None
         self.calls: list[str] = []
+        self.sources: list[object] = []  # what each load_calibration said it loads
 
     def call(self, cmd: str, **fields: object) -> dict:
         self.calls.append(cmd)
         if cmd == "load_calibration":
             self.calibration_id = str(fields["toml"])
+            self.sources.append(fields.get("source"))
         elif cmd in ("leg_lock", "leg_unlock"):
             self.locked_leg = fields.get("leg")  # type: ignore[assignment]
         reply = super().call(cmd, **fields)
@@ -100,6 +102,7 @@ def test_waypoints_measured_with_an_older_calibration_are_measured_again(nominal
     instrument = Instrument(nominal, controller)
     said = measure_after(nominal, directory, controller, B, instrument)
     assert controller.calibration_id == B
+    assert controller.sources == [f"hexactl campaign: {directory / 'calibration.toml'}"] * 2  # the service records it
     assert f"6 test-motion waypoint(s) after calibration in {directory / VALIDATION_FILE} were measured with " \
            f"calibration {A}, not with {B}, the calibration they are to check: measuring them again" in said, said
     total = len(VALIDATION_STEPS["after"])

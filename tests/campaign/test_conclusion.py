@@ -7,6 +7,7 @@ again or not, and left the calibration in force and kept for the next restart)."
 from __future__ import annotations
 
 import io
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -26,6 +27,7 @@ class Calibrations:
 
     def __init__(self, history: list[str], active: str) -> None:
         self.history, self.active, self.sent, self.polls = history, active, [], 0
+        self.sources: list[object] = []
 
     def call(self, cmd: str, **fields: object) -> dict:
         if cmd == "rollback_calibration":
@@ -39,6 +41,7 @@ class Calibrations:
             self.sent.append(cmd)
             self.history.append(self.active)
             self.active = geometry_id(parse_geometry(str(fields["toml"]), "request"))
+            self.sources.append(fields.get("source"))
             return {}
         self.polls += 1
         record = {"state": "enabled", "motion": "holding", "sequence": None, "leg_feedback": [400.0] * 6,
@@ -57,7 +60,11 @@ def test_a_calibration_not_kept_leaves_the_planned_geometry_active(nominal, hist
     history = [planned if entry == "nominal" else entry for entry in history]
     controller = Calibrations(history, "0123456789abcdef" if len(history) == 2 else CALIBRATED)
     out = io.StringIO()
-    _conclude(PlatformDriver(controller), SimpleNamespace(geometry=nominal), better=True, apply=False,  # type: ignore[arg-type]
+    store = SimpleNamespace(geometry=nominal, path=lambda name: Path("/data/campaign") / name)
+    _conclude(PlatformDriver(controller), store, better=True, apply=False,  # type: ignore[arg-type]
               progress=Progress(out, io.StringIO()))
     assert controller.active == planned and controller.sent == sent
+    # a load says what it loads: the service records it as the calibration's source
+    assert controller.sources == ["hexactl campaign: the geometry /data/campaign/campaign.json was planned on"] * (
+        "load_calibration" in sent)
     assert "rolled back to the geometry the campaign started on (--apply keeps it)" in out.getvalue()

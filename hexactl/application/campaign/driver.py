@@ -183,18 +183,20 @@ class PlatformDriver:
     def unlock(self) -> Record:
         return self._settled_after("leg_unlock")
 
-    def load_calibration(self, toml: str) -> Record:
-        """Send a calibration's text; returns the settled record once it is ramped in."""
-        return self._settled_after("load_calibration", toml=toml)
+    def load_calibration(self, toml: str, source: str) -> Record:
+        """Send a calibration's text, ``source`` saying where it came from (the service
+        records it: telemetry's ``calibration_source``, its log); returns the settled record
+        once it is ramped in."""
+        return self._settled_after("load_calibration", toml=toml, source=source)
 
-    def return_to_calibration(self, calibration_id: str, toml: str) -> Record:
-        """Make calibration ``calibration_id`` (``toml``: its text) active again after a
-        load: by rolling the load back or, where that does not lead to it, by loading it
-        (the service restarted since, with an undo history that starts empty; or another
-        client loaded one since). Returns the settled record."""
+    def return_to_calibration(self, calibration_id: str, toml: str, source: str) -> Record:
+        """Make calibration ``calibration_id`` (``toml``: its text, from ``source``) active
+        again after a load: by rolling the load back or, where that does not lead to it, by
+        loading it (the service restarted since, with an undo history that starts empty; or
+        another client loaded one since). Returns the settled record."""
         self._call("rollback_calibration", harmless=("no_previous_calibration",))
         record = self.wait_settled(0.0)
-        return record if record["calibration_id"] == calibration_id else self.load_calibration(toml)
+        return record if record["calibration_id"] == calibration_id else self.load_calibration(toml, source)
 
     def wait_settled(self, duration_s: float, *, settle: bool = True) -> Record:
         """Wait (at most ``duration_s`` + the criteria's timeout) until the platform holds

@@ -193,7 +193,7 @@ def _measure_after(driver: PlatformDriver, store: CampaignStore, instrument: Ins
     if driver.status()["calibration_id"] != calibrated_id:
         driver.require_calibration(geometry_id(store.geometry), _planned(store.geometry), _MAKE_PLANNED_ACTIVE)
         progress.say("loading the calibration into the controller")
-        driver.load_calibration(text)
+        driver.load_calibration(text, f"hexactl campaign: {store.path(CALIBRATION_FILE)}")
     # The verdict must judge one calibration: waypoints a stopped run measured with another
     # (identified from other data since) are measured again.
     _discard_after(store, calibrated_id, f"not with {calibrated_id}, the calibration they are to check", progress)
@@ -509,6 +509,7 @@ def _conclude(driver: PlatformDriver, store: CampaignStore, better: bool, apply:
     planned = geometry_id(store.geometry)
     if driver.status()["calibration_id"] == planned:
         return  # rolled back already (a fault came after it)
-    driver.return_to_calibration(planned, geometry_to_toml(store.geometry))
+    driver.return_to_calibration(planned, geometry_to_toml(store.geometry),
+                                 f"hexactl campaign: the geometry {store.path(PLAN_FILE)} was planned on")
     why = "it did not improve the accuracy" if apply else "--apply keeps it"
     progress.say(f"rolled back to the geometry the campaign started on ({why})")
