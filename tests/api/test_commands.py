@@ -204,6 +204,17 @@ def test_load_calibration_needs_exactly_one_source(service) -> None:
     assert send(service, "load_calibration")["error"]["code"] == "invalid_request"
 
 
+def test_a_play_over_dwell_records_never_saved_says_it_replaces_them(service) -> None:
+    """Found from outside: playing a sequence dropped the last one's dwell records, which
+    only save_recording keeps, without a word."""
+    assert send(service, "play", sequence="compound")["message"] == "playing compound"  # none before it
+    assert send(service, "play", sequence="x_sweep")["message"] == (
+        "playing x_sweep; the 2 dwell record(s) of compound, never saved, are replaced by this sequence's "
+        "(save_recording saves a sequence's records before the next one plays)")
+    send(service, "save_recording", path="sweep.csv")
+    assert send(service, "play", sequence="y_rotation")["message"] == "playing y_rotation"  # saved: nothing lost
+
+
 def test_save_recording_writes_csv_once(service) -> None:
     assert send(service, "save_recording", path="run.csv")["error"]["code"] == "no_recording"
     send(service, "play", sequence="compound")

@@ -73,6 +73,7 @@ from hexactl.adapters.files.sequence_file import dwell_header, dwell_rows
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.results import CommandResult
 from hexactl.control.results import ErrorCode as RefusalCode
+from hexactl.control.sequence_player import SequenceReport
 from hexactl.control.submitter import commands_from
 from hexactl.control.waves import WaveSpec
 from hexactl.kinematics.geometry import Geometry, GeometryError
@@ -128,6 +129,7 @@ class CommandHandler:
         self.recorder = recorder
         self.campaign = CampaignBoard()
         self.run = secrets.token_hex(4)  # this service's run: its events are numbered from 1 in each
+        self._saved: tuple[str, tuple[float, ...]] | None = None  # the dwell records save_recording wrote last
 
     def record(self) -> dict[str, Any]:
         """A telemetry record: the controller's, with what a client's campaign said last and
@@ -192,10 +194,16 @@ class CommandHandler:
                 return self._validate_sequence(request)
             case PlayRequest():
                 sequence = resolve_sequence(request.sequence, self.data)
+                previous = controller.sequence_records()
                 result = controller.play(sequence, deadline_ns=deadline_ns)
-                return _checked(result, name=sequence.name, waypoints=len(sequence.waypoints),
-                                duration=result.details.get("duration_s"),
-                                lock_corrections_mm=result.details.get("lock_corrections_mm"))
+                reply = _checked(result, name=sequence.name, waypoints=len(sequence.waypoints),
+                                 duration=result.details.get("duration_s"),
+                                 lock_corrections_mm=result.details.get("lock_corrections_mm"))
+                if previous is not None and previous.records and _dwells(previous) != self._saved:
+                    reply["message"] += (f"; the {len(previous.records)} dwell record(s) of {previous.name}, never "
+                                         "saved, are replaced by this sequence's (save_recording saves a sequence's "
+                                         "records before the next one plays)")
+                return reply
             case PauseRequest():
                 return _checked(controller.pause())
             case ResumeRequest():
@@ -396,6 +404,7 @@ class CommandHandler:
         writer.writerows(dwell_rows(report.records))
         reserved = self.recorder.reserved() if self.recorder is not None else None
         target = self.data.write_new(_csv_name(request.path), table.getvalue().encode("utf-8"), reserved)
+        self._saved = _dwells(report)
         return {"path": str(target), "name": report.name, "status": report.status, "records": len(report.records)}
 
     def _measure(self) -> dict[str, Any]:
@@ -407,6 +416,12 @@ class CommandHandler:
         except MeasurementError as error:
             raise ApiError(ErrorCode.MEASUREMENT_FAILED, str(error)) from None
         return {"points": [[float(value) for value in point] for point in points]}
+
+
+def _dwells(report: SequenceReport) -> tuple[str, tuple[float, ...]]:
+    """A sequence's dwell records told apart from any other's by their times (equal values
+    would not do: a record without feedback holds NaN, which equals nothing)."""
+    return report.name, tuple(record.t_s for record in report.records)
 
 
 def _csv_name(path: str) -> str:
