@@ -110,6 +110,22 @@ def test_fk_warns_near_a_singular_configuration(capsys) -> None:
     assert "Jacobian condition" in out and "warning: near-singular" in out
 
 
+def test_fk_warns_of_a_pose_outside_the_workspace_whose_readings_lie_inside_the_stroke(capsys) -> None:
+    """Found from outside: readings inside the stroke whose pose lies outside the pose
+    envelope (x 650 mm, the envelope ±610) were printed as a pose like any other."""
+    assert main(["ik", "650", "0", "0", "0", "0", "0", "--json"]) == 1  # the pose is refused ...
+    readings = json.loads(capsys.readouterr().out)["setpoints_mm"]
+    assert main(["fk", *map(repr, readings), "--json"]) == 0  # ... its readings are a pose all the same
+    record = json.loads(capsys.readouterr().out)
+    assert record["warnings"] == ["outside the workspace: x 650 mm outside the pose envelope [-610, 610] mm (by 40 mm)"]
+    assert main(["fk", *map(repr, readings)]) == 0
+    assert "warning: outside the workspace: x 650 mm outside the pose envelope" in capsys.readouterr().out
+    assert main(["ik", "600", "0", "0", "0", "0", "0", "--json"]) == 0
+    inside = json.loads(capsys.readouterr().out)["setpoints_mm"]
+    assert main(["fk", *map(repr, inside), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == []  # inside: nothing to say
+
+
 def test_fk_reports_the_condition_of_a_well_conditioned_pose(capsys) -> None:
     assert main(["fk", "317.6618", "421.2270", "513.9011", "559.2190", "514.5708", "447.7747", "--json"]) == 0
     record = json.loads(capsys.readouterr().out)

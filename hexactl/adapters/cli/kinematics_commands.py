@@ -157,7 +157,7 @@ def run_fk(arguments: argparse.Namespace) -> int:
     from hexactl.kinematics.forward import forward_kinematics
     from hexactl.kinematics.inverse import lengths_from_readings
     from hexactl.kinematics.pose import relative_from_absolute
-    from hexactl.kinematics.workspace import jacobian_condition, near_singular
+    from hexactl.kinematics.workspace import ViolationKind, assess_poses, jacobian_condition, near_singular
 
     geometry = load_config(arguments)
     readings = parse_numbers([getattr(arguments, label) for label in LEG_LABELS], LEG_LABELS)
@@ -169,6 +169,9 @@ def run_fk(arguments: argparse.Namespace) -> int:
                 for label, reading in zip(LEG_LABELS, readings) if not low <= reading <= high]
     condition = jacobian_condition(geometry, result.pose) if result.ok else None
     singular = condition is not None and near_singular(condition, geometry.limits)
+    if result.ok:  # the stroke is said of the readings above, the condition below: the joints' and the pose's limits
+        warnings += [f"outside the workspace: {violation.message}" for violation in assess_poses(geometry, [pose])[0].violations
+                     if violation.kind in (ViolationKind.BASE_CONE, ViolationKind.PLATFORM_CONE, ViolationKind.POSE_RANGE)]
     if singular:
         warnings.append(f"near-singular: Jacobian condition {condition:.1f} > {geometry.limits.max_jacobian_condition:g} "
                         "([limits] max_jacobian_condition); other poses (another assembly mode) have almost these "
