@@ -63,7 +63,8 @@ def _text_matching(pattern: str, rule: str) -> Any:
 
 
 RecordingName = _text_matching(RECORDING_NAME_PATTERN, "a recording's name is 1 to 100 letters, digits, '.', '_' or "
-                               "'-', starting with a letter or digit (no directory; .csv and .json are added)")
+                               "'-', starting with a letter or digit, without directory or extension (run1, not "
+                               "run1.csv: .csv and .json are added)")
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
 OneLine = _text_matching(r"^[^\x00-\x1f\x7f-\x9f\u2028\u2029]+$",
                          "one line of text, without control characters (no line end, no tab)")
