@@ -80,6 +80,8 @@ class WaveSpec(BaseModel):
         for name, axis in self.axes.items():
             if problem := amplitude_problem(name, axis.amplitude):
                 raise ValueError(problem)
+        if not any(axis.amplitude for axis in self.axes.values()):
+            raise ValueError("every amplitude is 0: the wave would move nothing")
         return self
 
     @property

@@ -36,7 +36,8 @@ axis_waves = st.fixed_dictionaries({"amplitude": st.floats(-20.0, 20.0), "phase_
 specs = st.builds(
     lambda axes, frequency, cycles, ramp: WaveSpec(frequency_hz=frequency, cycles=cycles,
                                                    ramp_cycles=min(ramp, cycles / 2), axes=axes),
-    st.dictionaries(st.sampled_from(POSE_AXES), axis_waves, min_size=1, max_size=6),
+    st.dictionaries(st.sampled_from(POSE_AXES), axis_waves, min_size=1, max_size=6).filter(
+        lambda axes: any(axis["amplitude"] for axis in axes.values())),  # all 0 is refused: it moves nothing
     st.floats(0.1, 10.0), st.integers(2, 8), st.floats(0.25, 3.0))
 starts = st.tuples(*[st.floats(-50.0, 50.0)] * 3, *[st.floats(-0.2, 0.2)] * 3).map(RelativeMmRad._make)
 
@@ -103,6 +104,8 @@ def test_at_its_peaks_the_path_is_the_spec_amplitude(axis, amplitude, frequency,
     ({"axes": {}}, "axes"), ({"axes": {"w": {"amplitude": 1}}}, "axes"),
     ({"axes": {"roll": {"amplitude": 91}}}, "roll amplitude 91 deg"), ({"shape": "square"}, "shape"),
     ({"frequency_hz": float("nan")}, "frequency_hz"), ({"speed": 1}, "speed"),
+    # Found from outside: hexactl wave --axis z:0 was accepted and "played" a wave that moved nothing.
+    ({"axes": {"z": {"amplitude": 0}, "roll": {"amplitude": -0.0}}}, "every amplitude is 0: the wave would move nothing"),
 ])
 def test_a_malformed_wave_is_refused_naming_the_field(bad, field):
     with pytest.raises(ValidationError, match=field):
