@@ -312,7 +312,7 @@ class ActuatorFirmware:
                 self._latch_fault(FaultCode.SETPOINT_RANGE, t_s, out)
                 return
             self.target_um = float(setpoint_um)
-        # In LOCKED the set-point is validated and counted but the brake holds the leg.
+        # In LOCKED the set-point, a fresh frame, is counted but not applied: the brake holds the leg.
         self._last_counter = counter
         self.setpoint_counter = counter
         self._restart_watchdog(t_s)
