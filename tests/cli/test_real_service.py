@@ -46,6 +46,14 @@ def hexactl(served: Served, *arguments: str) -> int:
     return main([*arguments, "--api", served.api, "--timeout", str(WAIT_S)])
 
 
+def printed(served: Served, capsys: pytest.CaptureFixture[str], *arguments: str, exit_status: int = 0) -> tuple[str, str]:
+    """What ``hexactl *arguments`` printed (stdout stripped, stderr), having exited ``exit_status``."""
+    capsys.readouterr()
+    assert hexactl(served, *arguments) == exit_status
+    out, err = capsys.readouterr()
+    return out.strip(), err
+
+
 def at_rest(client: HexactlClient) -> bool:
     record = status(client)
     assert record["state"] == "enabled", f"{record['state']}: {record['faults']}"
@@ -279,16 +287,13 @@ def test_move_validate_shows_the_whole_goal_and_moves_nothing(served, client, ca
         assert hexactl(served, "frames", "--work", "z=20", "--tool", "z=100") == 0
         try:
             before = status(client)["pose_command"]
-            capsys.readouterr()
-            assert hexactl(served, "move", "x=5", "--frame", "work", "--validate") == 0
-            out = capsys.readouterr().out.strip()
+            out, _ = printed(served, capsys, "move", "x=5", "--frame", "work", "--validate")
             assert re.search(r"^ok: .*valid, nothing moved: goal x +5\.000 mm .* z +-80\.000 mm .*\(relative to the "
                              r"zero posture\); tool x +5\.000 mm .* \(in the work frame\); \d+\.\d\d s$", out), out
             assert status(client)["pose_command"] == before and at_rest(client)
-            assert hexactl(served, "move", "x=5", "--validate", "--wait") == 2  # nothing to wait for
-            assert "--validate moves nothing" in capsys.readouterr().err
-            assert hexactl(served, "move", "x=5000", "--validate") == 1
-            assert "path_violation" in capsys.readouterr().err
+            _, err = printed(served, capsys, "move", "x=5", "--validate", "--wait", exit_status=2)  # nothing to wait for
+            assert "--validate moves nothing" in err
+            assert "path_violation" in printed(served, capsys, "move", "x=5000", "--validate", exit_status=1)[1]
         finally:
             client.request("clear_frames")
 
@@ -305,27 +310,21 @@ def test_play_validate_says_how_far_a_leg_lock_moves_the_waypoints_and_plays_not
 
     def scenario() -> None:
         before = status(client)["pose_command"]
-        capsys.readouterr()
-        assert hexactl(served, "play", str(steps), "--validate") == 0
-        out = capsys.readouterr().out.strip()
+        out, _ = printed(served, capsys, "play", str(steps), "--validate")
         assert re.fullmatch(r"ok: valid, nothing moved: it ends at x +0\.000 mm .* yaw +0\.000 deg \(relative "
                             r"to the zero posture\); 2 waypoints; \d+\.\d\d s", out), out
         assert hexactl(served, "leg-lock", "3") == 0
         try:
-            capsys.readouterr()
-            assert hexactl(served, "play", str(steps), "--validate") == 0
-            out = capsys.readouterr().out.strip()
+            out, _ = printed(served, capsys, "play", str(steps), "--validate")
             assert re.search(r"; 2 waypoints; projected onto the locked leg's constraint: waypoints move by up to "
                              r"[1-9]\d*\.\d{3} mm \(waypoint 1\); \d+\.\d\d s$", out), out
             assert status(client)["pose_command"] == before and at_rest(client)
-            assert hexactl(served, "play", "steps", "--validate", "--wait") == 2  # nothing to wait for
-            assert "--validate plays nothing" in capsys.readouterr().err
+            _, err = printed(served, capsys, "play", "steps", "--validate", "--wait", exit_status=2)  # nothing to wait for
+            assert "--validate plays nothing" in err
         finally:
             client.request("leg_unlock")  # refused while a fault is latched: the retry's recover resets
         far = directory / "sequences" / "far.toml"
         far.write_text('name = "far"\n[[waypoint]]\npose = [0, 0, 5000, 0, 0, 0]\n')
-        capsys.readouterr()
-        assert hexactl(served, "play", str(far), "--validate") == 1
-        assert "error path_violation: " in capsys.readouterr().err
+        assert "error path_violation: " in printed(served, capsys, "play", str(far), "--validate", exit_status=1)[1]
 
     tolerating_stalls(client, scenario)
