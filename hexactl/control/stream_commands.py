@@ -24,6 +24,7 @@ import numpy as np
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.frames import Frame, convert, short_way
+from hexactl.control.one_line import is_one_line
 from hexactl.control.planning import PlanningContext, pose_allowed
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
@@ -336,7 +337,7 @@ def _mm_rad(pose_mm_deg: Sequence[float]) -> np.ndarray:
 
 
 def _open_problem(source: object, frame: object, timeout_s: object) -> str | None:
-    if not isinstance(source, str) or not 0 < len(source) <= MAX_SOURCE_LENGTH or not source.isprintable():
+    if not isinstance(source, str) or not 0 < len(source) <= MAX_SOURCE_LENGTH or not is_one_line(source):
         return f"a stream's source is a printable name of 1 to {MAX_SOURCE_LENGTH} characters, got {source!r}"
     if frame not in tuple(STREAM_FRAMES):
         return (f"a stream's frame is one of {', '.join(f.value for f in STREAM_FRAMES)} (a stream's targets are "

@@ -46,10 +46,17 @@ def test_the_file_format_round_trips_into_waypoints():
     ('name = "a\\nsequence_finished"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]',
      r"name: 'a\\nsequence_finished': a sequence's name is one line of printable text"),
     ('name = "a\\u001b[31m"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]', "one line of printable text"),
+    ('name = "a\\u2028b"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]', "one line of printable text"),  # a line end too
 ])
 def test_bad_files_name_the_problem(text, problem):
     with pytest.raises(SequenceError, match=problem):
         sequence_from_toml(text, "bad.toml")
+
+
+def test_a_name_is_any_one_line_of_text_as_the_apis_sources_are():
+    """One rule for every name the log writes (hexactl/control/one_line.py)."""
+    assert sequence_from_toml('name = "Prüfung 2 – ε"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]', "f.toml").name == \
+        "Prüfung 2 – ε"
 
 
 def test_builtins_are_the_paper_test_motions():

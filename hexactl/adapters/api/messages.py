@@ -21,6 +21,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, JsonValue, V
 from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, MAX_RECORDING_DIVISOR, MAX_RECORDING_S, RECORDING_NAME_PATTERN
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
+from hexactl.control.one_line import ONE_LINE_PATTERN
 from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S
 from hexactl.control.sequences import Paced, SequenceName, SequenceWaypoint
@@ -66,9 +67,8 @@ RecordingName = _text_matching(RECORDING_NAME_PATTERN, "a recording's name is 1 
                                "'-', starting with a letter or digit, without directory or extension (run1, not "
                                "run1.csv: .csv and .json are added)")
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
-OneLine = _text_matching(r"^[^\x00-\x1f\x7f-\x9f\u2028\u2029]+$",
-                         "one line of text, without control characters (no line end, no tab)")
-"""Text the service's log writes (a line end in it would forge the lines after it)."""
+OneLine = _text_matching(ONE_LINE_PATTERN, "one line of text, without control characters (no line end, no tab)")
+"""Text the service's log writes (:mod:`hexactl.control.one_line`)."""
 
 FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]

@@ -1,0 +1,19 @@
+"""The rule for text a client names things with (a sequence, a stream's source, where a
+calibration came from), which the service's log and events write: one line, no control
+character. A line end in it would forge the log's lines after it, an escape recolour the
+terminal that shows them. The API's schema carries :data:`ONE_LINE_PATTERN`."""
+
+from __future__ import annotations
+
+import re
+
+ONE_LINE_PATTERN = r"^[^\x00-\x1f\x7f-\x9f\u2028\u2029]+$"
+"""Non-empty, without C0 or C1 control characters or Unicode's line and paragraph
+separators; a JSON Schema (ECMA) regular expression too."""
+
+_ONE_LINE = re.compile(ONE_LINE_PATTERN)
+
+
+def is_one_line(text: str) -> bool:
+    """``text`` keeps to :data:`ONE_LINE_PATTERN`."""
+    return _ONE_LINE.fullmatch(text) is not None
