@@ -4,7 +4,8 @@ busy host or the planning thread's share of the GIL inflates).
 
 The controller runs on ideal in-memory actuators in simulated time, as the control
 tests' rig does; each scenario plays a tour of moves (``lock``: with leg 1 locked; ``frames``:
-in the work frame, turning about a pivot point 300 mm above the platform) and
+in the work frame, turning about a pivot point 300 mm above the platform; ``disabled``:
+none, the controller disabled) and
 ``time.thread_time_ns`` is summed around each ``step`` only, so planning, which runs in the
 caller's thread, is not counted. Each round steps ``--cycles`` cycles; the minimum over
 the rounds is the figure (the least disturbed one), the median beside it. On a shared
@@ -55,6 +56,8 @@ WAVES = {
 }
 """Waves played one after the other (issue 12): ``wave`` on z and roll in the zero frame,
 beside ``turns``' moves; ``wave_tool`` a roll about the pivot of :data:`PIVOT`, beside ``frames``."""
+DISABLED = "disabled"
+"""The scenario without motion: a disabled controller, which follows the measured pose."""
 PIVOT = OperatorFrames(work=(0, 0, 300, 0, 0, 0), tool=(0, 0, 300, 0, 0, 0))
 """The ``frames`` scenario's: a tool point 300 mm above the platform, the work frame on it."""
 
@@ -92,7 +95,8 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
             profile.runcall(controller.step, clock.now_ns)
         return time.thread_time_ns() - start
 
-    _expect(controller.enable())
+    if scenario != DISABLED:
+        _expect(controller.enable())
     for _ in range(2):
         step()
     if scenario == "lock":
@@ -120,7 +124,7 @@ def per_cycle(scenario: str, cycles: int, config_path: Path, profile: cProfile.P
         elif scenario in ("frames", "turns", "recording"):  # moves one after the other: a sequence's waypoints are in the zero frame
             if controller.snapshot.motion.value == "holding":
                 _expect(controller.move(next(goals), frame=frame))
-        elif controller.snapshot.sequence is None:
+        elif scenario != DISABLED and controller.snapshot.sequence is None:
             _expect(controller.play(tour))
         spent_ns += step()
         controller.take_recorded()  # outside the step: the exchange's work, in the loop's slack
@@ -142,8 +146,8 @@ def _expect(result) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenario", choices=sorted(TOURS | WAVES | STREAMS), nargs="+",
-                        default=sorted(TOURS | WAVES | STREAMS))
+    scenarios = sorted([*TOURS, *WAVES, *STREAMS, DISABLED])
+    parser.add_argument("--scenario", choices=scenarios, nargs="+", default=scenarios)
     parser.add_argument("--rounds", type=int, default=8)
     parser.add_argument("--cycles", type=int, default=5000, help="cycles per round")
     parser.add_argument("--calls", action="store_true", help="count Python calls per cycle instead (one round)")

@@ -63,6 +63,7 @@ from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.stream import StreamProgress
 from hexactl.control.supervisor import ESTOP_FAULTS, Fault, Supervisor, other_controller_fault
+from hexactl.control.trajectory import KinematicState
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
 
@@ -316,10 +317,14 @@ class ControlCore:
     def _publish(self) -> None:
         motion = self._motion
         trajectory, path = motion.trajectory, motion.path
+        # Disabled, a plan starts where enabling starts the generator: at rest on the commanded
+        # pose, which follows the platform; not where the last motion left the generator.
+        disabled = self.state is ControlState.DISABLED
         self.snapshot = CoreSnapshot(
             t_ns=self._now_ns, cycle=self._cycle, state=self.state, motion=self.motion, epoch=motion.epoch,
-            pose_command=path.pose_command, trajectory=trajectory.state(), goal=trajectory.goal,
-            frames=trajectory.frames, pose_measured=self._measurement.pose, setpoints=path.setpoints,
+            pose_command=path.pose_command, trajectory=KinematicState.at_rest(path.pose_command) if disabled else
+            trajectory.state(), goal=None if disabled else trajectory.goal,
+            frames=None if disabled else trajectory.frames, pose_measured=self._measurement.pose, setpoints=path.setpoints,
             feedback=self.feedback, link=self.link, lock=motion.lock, active=self.active,
             previous=self.history[-1] if self.history else None, ramp_active=path.ramp.active,
             sequence=motion.player.progress, last_sequence=motion.player.report, faults=self._faults,

@@ -56,7 +56,8 @@ class CoreSnapshot:
 
     Poses relative to the zero posture in mm and rad; ``trajectory`` the generator's
     (position, velocity, acceleration), which a new plan starts from, and ``goal`` its
-    target (None while braking), both in the coordinates of ``frames`` (None: relative
+    target (None while braking; while DISABLED at rest on ``pose_command``, with no goal and
+    no frames: where enabling starts the generator), both in the coordinates of ``frames`` (None: relative
     mm/rad; else the tool's pose in the work frame, mm/rad); set-points and
     feedback sensor mm. ``clamped_cycles``: cycles in which the guard changed a
     set-point (each one means a plan was wrong); ``clamped_legs``: bit mask of the

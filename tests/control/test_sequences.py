@@ -92,6 +92,29 @@ def test_a_sequence_is_validated_from_where_the_motion_under_way_ends_and_while_
     assert at_goal.details["duration_s"] > disabled.details["duration_s"]  # from x 60, not from zero
 
 
+def test_a_validation_while_disabled_plans_from_where_the_platform_is(make_rig):
+    """Found from outside: disabled, the validations planned from where the generator was
+    left (zero at start-up; the last move's goal after a disable), not from where the
+    platform is, which is where enabling starts it: a path error did not show before
+    enabling, or one showed that was not there."""
+    from hexactl.control.waves import WaveSpec
+
+    rig = make_rig(start_pose=(60, 0, 0, 0, 0, 0))  # started away from zero, never enabled
+    rig.run(3)
+    steps = sequence_from_mapping({"name": "steps", "waypoint": [{"pose": [0, 0, 20, 0, 0, 0]}]})
+    wave = WaveSpec(frequency_hz=0.5, cycles=2, axes={"x": {"amplitude": 20.0}})
+    controller = rig.controller
+    disabled = (controller.validate_sequence(steps), controller.validate_wave(wave),
+                controller.validate_pose([5, 0, 0, 0, 0, 0], relative=True))
+    rig.enabled()
+    enabled = (controller.validate_sequence(steps), controller.validate_wave(wave),
+               controller.validate_pose([5, 0, 0, 0, 0, 0], relative=True))
+    for before, after in zip(disabled, enabled):
+        assert before.ok and after.ok, (before.message, after.message)
+        assert before.details == pytest.approx(after.details), (before.details, after.details)
+    assert disabled[2].details["goal"] == pytest.approx([65, 0, 0, 0, 0, 0], abs=1e-6)  # by 5 from where it is
+
+
 def test_play_records_commanded_and_measured_pose_at_each_dwell(rig):
     rig.enabled()
     sequence = sequence_from_toml(TEXT)

@@ -323,7 +323,7 @@ class PlayRequest(_Request):
 
 class ValidateSequenceRequest(PlayRequest):
     """Would ``play`` accept this sequence? Plans and checks every waypoint's path from
-    where the motion under way ends; moves nothing."""
+    where the move under way ends, at rest (disabled: where the platform is); moves nothing."""
 
     cmd: Literal["validate_sequence"]  # type: ignore[assignment]
 
