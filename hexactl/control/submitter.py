@@ -97,11 +97,17 @@ class CommandSubmitter:
         return self._unconfirmed(command)
 
     def _unconfirmed(self, command: cmd.Command) -> CommandResult:
-        """``loop_timeout`` for ``command``, queued to a loop that reports but gave no verdict
-        within ``command_timeout_s``: it runs late (a host too busy for it), so the command
-        is carried out when the loop reaches it, unless its deadline has passed by then. A
-        command that brakes has none and is said to be on its way: a stop or E-stop answered
-        "may still be carried out" reads, at the worst moment, as one that may not be."""
+        """``loop_timeout`` for ``command``, queued to a loop that gave no verdict within
+        ``command_timeout_s``. One that still reports runs late (a host too busy for it): the
+        command is carried out when the loop reaches it, unless its deadline has passed by
+        then. A command that brakes has none and is said to be on its way: a stop or E-stop
+        answered "may still be carried out" reads, at the worst moment, as one that may not
+        be. One that has stopped reporting meanwhile (hung) carries out nothing until it
+        runs again: that is said instead."""
+        age_s = self._host.report(PERCENTILES_MAX_AGE_S).stats.report_age_s
+        if age_s > REPORT_SILENT_S:
+            return CommandResult.failure(ErrorCode.LOOP_TIMEOUT, f"queued, to be carried out if the loop runs again: "
+                                         f"{_silence(age_s)}", ticket=command.ticket)
         late = (f"the loop gave no verdict within {self._config.command_timeout_s:g} s (it runs late: a host too "
                 "busy for it?)")
         if command.brakes:
@@ -142,10 +148,15 @@ class CommandSubmitter:
         its process is stopped or hung, and no verdict would come. A command that only
         brakes (:attr:`~hexactl.control.commands.Command.brakes`) is queued all the same, for
         if it runs again; any other is not sent (it would run whenever the loop does)."""
-        silence = (f"the control loop has sent no report for {silent_s:.1f} s (its process is stopped or hung); "
-                   "actuators that receive no set-points stop on their own watchdogs")
+        silence = _silence(silent_s)
         if not command.brakes:
             return CommandResult.failure(ErrorCode.LOOP_SILENT, f"not sent: {silence}; see status")
         self._host.submit(command)
         return CommandResult.failure(ErrorCode.LOOP_SILENT, f"queued, to be carried out if the loop runs again: "
                                      f"{silence}", ticket=command.ticket)
+
+
+def _silence(silent_s: float) -> str:
+    """What a loop that has sent no report for ``silent_s`` means for the platform."""
+    return (f"the control loop has sent no report for {silent_s:.1f} s (its process is stopped or hung); "
+            "actuators that receive no set-points stop on their own watchdogs")

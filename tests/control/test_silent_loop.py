@@ -122,3 +122,14 @@ def test_an_estop_sent_from_here_but_unconfirmed_by_a_late_loop_says_it_was_sent
     late = controller.estop()
     assert late.error == "loop_timeout" and late.message.startswith(
         "E-stop sent to the actuators; the loop's latch of it is queued, not confirmed yet"), late.message
+
+
+def test_a_loop_that_stops_reporting_while_a_command_waits_is_said_to_be_silent_not_late(rig) -> None:
+    """Found by a reviewer: a loop whose last report was 0.9 s old when a stop was sent
+    (not yet silent) and 1.4 s when the wait ended was said to run late and to carry the
+    stop out "when it reaches it": a hung loop reaches nothing."""
+    controller, host = facade(rig, [0.9, 1.4], running=True, config=ControllerConfig(command_timeout_s=0.05))
+    stop = controller.stop()
+    assert stop.error == "loop_timeout" and type(host.submitted[-1]) is cmd.Stop, stop
+    assert stop.message.startswith("queued, to be carried out if the loop runs again: the control loop has sent no "
+                                   "report for 1.4 s (its process is stopped or hung)"), stop.message
