@@ -271,7 +271,9 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
     parameters = StructuralParameters.from_vector(structural, options.estimate_scales)
     warnings = exclusion_notes
     # An unconverged fit's residuals say nothing of the targets (identify() says what to check).
-    if fit.converged and not pose_form and targets is None and (misplaced := _misplaced_targets(problem, fit)):
+    chi2_per_dof = current.cost / dof if dof > 0 else float("nan")
+    if fit.converged and not pose_form and targets is None and (
+            misplaced := _misplaced_targets(problem, fit, chi2_per_dof)):
         warnings += (misplaced,)
     result = assemble_result(
         Method.FULL, reason, parameters, information, residuals, current.cost, dof,
@@ -280,8 +282,7 @@ def identify_full(data: MeasurementData, nominal: Geometry, options: Identificat
             sigma if covariance is None else float(np.sqrt(np.mean(np.trace(covariance, axis1=2, axis2=3)) / 3.0))),
         iterations=fit.iterations, converged=fit.converged, options=options, home_mm_deg=nominal.home,
         warnings=warnings, excluded=_excluded_observations(problem, fit.linear, pose_form, data),
-        covariance=_noise_scaled_covariance(problem, fit, pose_form, full_information,
-                                            current.cost / dof if dof > 0 else float("nan")),
+        covariance=_noise_scaled_covariance(problem, fit, pose_form, full_information, chi2_per_dof),
     )
     extras_std = _extras_std(full_information, problem.structural_size)
     return replace(
@@ -336,11 +337,14 @@ TARGET_TEST_FALSE_ALARM = 1e-3
 """The feature-point test's probability of firing on correct data."""
 
 
-def _misplaced_targets(problem: _Problem, fit: _Fit) -> str | None:
+def _misplaced_targets(problem: _Problem, fit: _Fit, chi2_per_dof: float) -> str | None:
     """A warning when the feature points' residuals, seen from the platform, are the same
     posture after posture: the targets are not where ``[measurement]`` says. Each
     posture's pose absorbs a rigid motion of them, so of the 3K mean residuals 3K − 6 are
-    free; their χ² (residuals σ-whitened) is tested at :data:`TARGET_TEST_FALSE_ALARM`."""
+    free; their χ² (residuals σ-whitened) is tested at :data:`TARGET_TEST_FALSE_ALARM`,
+    divided by the fit's ``chi2_per_dof`` where that exceeds 1: residuals larger than the
+    noise model all round (an optimistic noise figure) make their means larger too, and
+    would otherwise send the user to survey targets that are where they should be."""
     from scipy.stats import chi2  # imported here: slow to import (see results.flag_outliers)
 
     count = len(problem.model_points)
@@ -352,7 +356,7 @@ def _misplaced_targets(problem: _Problem, fit: _Fit) -> str | None:
         return None
     in_platform = np.einsum("nji,nkj->nki", fit.rotations, fit.linear.point_residuals)  # Tᵀ·r, whitened
     sums = in_platform.sum(axis=0)  # excluded points' residuals are zero
-    statistic = float(np.sum(sums**2 / used.sum(axis=0)[:, None]))
+    statistic = float(np.sum(sums**2 / used.sum(axis=0)[:, None])) / max(1.0, chi2_per_dof)  # NaN: unscaled
     threshold = float(chi2.isf(TARGET_TEST_FALSE_ALARM, dof))
     if statistic <= threshold:
         return None
@@ -702,7 +706,8 @@ def _worst_observations(problem: _Problem, pose_form: bool, log_tails: NDArray,
 def _too_many(touched: int, count: int, cuts: str) -> str:
     return (f"{touched} of {count} postures have observations beyond the gross-error cut ({cuts}): too many for "
             "isolated mis-sightings or wrong readings, so no more are excluded; the model does not fit these data "
-            "(drifting sensor offsets, joint play, wrong feature-point coordinates or units?)")
+            "(noise figures too small for the instrument, [measurement] point_sigma_mm or --point-sigma? drifting "
+            "sensor offsets, joint play, wrong feature-point coordinates or units?)")
 
 
 def _determined(linear: _Linearisation) -> bool:

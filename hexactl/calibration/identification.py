@@ -142,8 +142,9 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
     consistent = full.ok and full.chi2_per_dof <= options.consistency_limit
     if consistent:
         return replace(full, reason=f"auto chose full: every posture's pose and all six readings are used at once "
-                       f"(maximum likelihood, {_postures(full, data)}{excluded}); the residuals agree with the noise model "
-                       f"(χ²/dof {full.chi2_per_dof:.3g} ≤ {options.consistency_limit:g}){extras_note}")
+                       f"(maximum likelihood, {_postures(full, data)}{excluded}); its residuals are within the noise "
+                       f"model's consistency limit (χ²/dof {full.chi2_per_dof:.3g} ≤ {options.consistency_limit:g})"
+                       f"{extras_note}")
     if too_few_locked(data) is None:
         leglock = identify_leglock(data, nominal, options)
         if leglock.ok and leglock.chi2_per_dof <= options.consistency_limit:

@@ -278,8 +278,10 @@ def assemble_result(
     if chi2_per_dof > options.consistency_limit:
         notes.append(
             f"residuals are {np.sqrt(chi2_per_dof):.2g}× the noise model (χ²/dof {chi2_per_dof:.3g}): the noise "
-            "figures are optimistic or something is not modelled (outliers, joint play, drift); standard "
-            "deviations are scaled up accordingly")
+            "figures are optimistic (the instrument's point_sigma_mm, --point-sigma) or something is not modelled "
+            "(outliers, joint play, drift); standard deviations are scaled up accordingly")
+    elif noise := noise_model_note(chi2_total, degrees_of_freedom, len(excluded)):
+        notes.append(noise)
     outliers = residuals.outlier_lines
     if outliers:
         notes.append(f"{len(outliers)} posture(s) fit worse than the noise model allows (p < "
@@ -310,6 +312,39 @@ def assemble_result(
                                 residual_rms_mm, expected_rms_mm, chi2_per_dof, predicted,
                                 int(np.count_nonzero(np.isfinite(residuals.normalised))), iterations, tuple(notes),
                                 excluded, degrees_of_freedom)
+
+
+NOISE_TEST_FALSE_ALARM = 1e-3
+"""The noise model's test (:func:`noise_model_note`): its probability of firing on data
+whose noise is what the model says."""
+
+
+def noise_model_note(chi2_total: float, degrees_of_freedom: int, excluded: int) -> str | None:
+    """A note when the residuals' χ² lies where the noise model puts it with less than
+    :data:`NOISE_TEST_FALSE_ALARM` probability, either side (None otherwise, and without
+    degrees of freedom). χ²/dof is within ``consistency_limit`` here, but with hundreds of
+    degrees of freedom 1.3 already says the noise figures are optimistic, and 0.7 that they
+    are pessimistic: a fixed limit does not see it, and σ and the predicted accuracy follow
+    the figures. ``excluded``: observations cut as gross errors, which were judged against
+    the noise figures."""
+    from scipy.stats import chi2  # imported here: see flag_outliers
+
+    if degrees_of_freedom <= 0 or not np.isfinite(chi2_total):
+        return None
+    ratio = chi2_total / degrees_of_freedom
+    chance = (f"χ²/dof {ratio:.3g}, which {degrees_of_freedom} degrees of freedom leave to chance with p < "
+              f"{NOISE_TEST_FALSE_ALARM:g}")
+    if chi2_total > chi2.isf(NOISE_TEST_FALSE_ALARM, degrees_of_freedom):
+        cut = (f"; the {excluded} observation(s) excluded as gross errors were judged against these figures and may "
+               "be ordinary: calibrate again with the noise figures raised to see" if excluded else "")
+        return (f"residuals are {np.sqrt(ratio):.2g}× the noise model ({chance}): the noise figures look optimistic "
+                f"(the instrument's point_sigma_mm, --point-sigma, --reading-sigma); standard deviations are scaled "
+                f"up accordingly{cut}")
+    if chi2_total < chi2.ppf(NOISE_TEST_FALSE_ALARM, degrees_of_freedom):
+        return (f"residuals are {np.sqrt(ratio):.2g}× the noise model ({chance}): the noise figures are pessimistic, "
+                "and so are the standard deviations and the predicted accuracy; give the instrument's noise "
+                "(point_sigma_mm, --point-sigma, --reading-sigma) to have them honest")
+    return None
 
 
 def flag_outliers(chi2_values: NDArray, dof: NDArray | float, probability: float) -> NDArray[np.bool_]:

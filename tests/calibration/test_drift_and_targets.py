@@ -145,6 +145,20 @@ def test_misplaced_feature_points_are_named_when_their_tolerance_is_not_given(no
         assert "feature_point_sigma_mm" in warning
 
 
+def test_an_optimistic_noise_figure_is_not_taken_for_misplaced_feature_points(nominal):
+    """Found from outside: points measured with σ 1 mm against the 0.25 mm declared fired the
+    feature-point test (χ² 36 and 73 with 3 dof) on targets exactly where they should be,
+    sending the user to survey them; the residuals' excess all round says what is wrong."""
+    plans = plan_campaign(nominal, SMALL)
+    for seed in (5, 6, 12):
+        exact = SimulatedInstrument(np.array(nominal.measurement.feature_points), 1.0, seed)
+        noisy = execute_plans(nominal, true_geometry(nominal, seed), plans, exact, 0.001, seed)
+        result = identify(noisy.data, nominal, IdentificationOptions(method=Method.FULL))
+        assert not any("feature points' residuals" in warning for warning in result.warnings), result.warnings
+        assert any(warning.startswith("residuals are ") and "the noise figures are optimistic" in warning
+                   for warning in result.warnings), result.warnings
+
+
 def test_full_without_drift_warns_that_the_data_show_it(nominal):
     data, _, _ = _drifting(nominal, 6)
     result = identify(data, nominal, IdentificationOptions(method=Method.FULL))

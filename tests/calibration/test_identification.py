@@ -7,7 +7,7 @@ import pytest
 
 from hexactl.calibration.identification import identify
 from hexactl.calibration.parameters import StructuralParameters
-from hexactl.calibration.results import IdentificationOptions, IdentificationStatus, Method
+from hexactl.calibration.results import IdentificationOptions, IdentificationStatus, Method, noise_model_note
 from hexactl.calibration.uncertainty import fisher_information
 from hexactl.calibration.campaign import CampaignDesign, plan_campaign
 from hexactl.sim.offline_campaign import execute_plans
@@ -130,3 +130,27 @@ def test_a_bad_posture_is_excluded_or_with_exclusion_off_flagged(nominal, legloc
     assert result.chi2_per_dof < 1.3
     plain = identify(shifted, nominal, IdentificationOptions(method=Method.FULL, exclusion_false_alarm=0.0))
     assert plain.excluded == () and line in plain.residuals.outlier_lines
+
+
+@pytest.mark.parametrize("ratio, says", [
+    (1.0, None),
+    (1.87, "residuals are 1.4× the noise model (χ²/dof 1.87, which 1027 degrees of freedom leave to chance with "
+           "p < 0.001): the noise figures look optimistic"),
+    (0.00676, "residuals are 0.082× the noise model (χ²/dof 0.00676, which 1027 degrees of freedom leave to chance "
+              "with p < 0.001): the noise figures are pessimistic, and so are the standard deviations and the "
+              "predicted accuracy"),
+])
+def test_the_noise_model_is_tested_against_its_degrees_of_freedom_not_a_fixed_limit(ratio, says):
+    """Found from outside: χ²/dof 1.87 over 1027 degrees of freedom (noise 1.4× the figure)
+    read "the residuals agree with the noise model (≤ 2)", and 0.007 (a figure 12× too large,
+    the predicted accuracy with it) passed without a word."""
+    note = noise_model_note(ratio * 1027, 1027, 0)
+    assert (note is None) if says is None else note.startswith(says), note
+    assert noise_model_note(1.87 * 6, 6, 0) is None  # few degrees of freedom: within chance
+    assert noise_model_note(5.0, 0, 0) is None
+
+
+def test_observations_cut_against_optimistic_noise_figures_are_said_to_be_maybe_ordinary():
+    note = noise_model_note(1.87 * 1027, 1027, 5)
+    assert note.endswith("; the 5 observation(s) excluded as gross errors were judged against these figures and may "
+                         "be ordinary: calibrate again with the noise figures raised to see"), note
