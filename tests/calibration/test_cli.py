@@ -96,6 +96,53 @@ def test_report_with_simulated_validation(tmp_path, data_file, true_platform):
                                                                "parameters.png", "residuals.png"]
 
 
+def test_a_failed_identification_writes_its_report_and_predicts_no_accuracy(tmp_path, leglock_campaign, capsys,
+                                                                           recwarn):
+    """Found from outside: with one posture measured sixty times ("not observable") the
+    report was not written (what would show why), and 0.023 mm was printed as the predicted
+    accuracy, better than a good campaign's, from a fit with 36 undetermined combinations."""
+    header, first = [line for line in format_measurements(leglock_campaign.data).splitlines()
+                     if not line.startswith("#")][:2]
+    points = [k for k, name in enumerate(header.split(",")) if name.startswith("p")]
+    rng = np.random.default_rng(3)
+    rows = []
+    for _ in range(30):  # the one posture measured again and again: the points' noise anew each time
+        fields = first.split(",")
+        for k in points:
+            fields[k] = f"{float(fields[k]) + rng.normal(0.0, 0.25):.4f}"
+        rows.append(",".join(fields))
+    path = tmp_path / "one_posture.csv"
+    path.write_text("\n".join([header, *rows]) + "\n", encoding="utf-8")
+    report, output = tmp_path / "report", tmp_path / "cal.toml"
+    assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(output), "--report", str(report)]) == 1
+    out = capsys.readouterr().out
+    assert "status: not observable" in out and "no calibration written: not observable" in out
+    assert "predicted pose uncertainty on the paper's test motions: not predicted (the data do not determine every " \
+           "parameter)" in out
+    page = (report / "index.html").read_text(encoding="utf-8")
+    assert "not observable: no calibration file was written" in page and "not predicted: the data do not" in page
+    assert not output.exists() and f"wrote {report / 'index.html'}" in out
+    few = tmp_path / "few.csv"  # too few to fit at all: a report of nothing determined, drawn without warnings
+    few.write_text("\n".join([header, *rows[:3]]) + "\n", encoding="utf-8")
+    assert main(["calibrate", str(few), "--config", str(NOMINAL_PATH), "-o", str(output), "--report",
+                 str(tmp_path / "few")]) == 1
+    assert "no calibration written: insufficient data" in capsys.readouterr().out
+    assert not [w for w in recwarn if issubclass(w.category, (RuntimeWarning, UserWarning))], \
+        [str(w.message) for w in recwarn]
+
+
+def test_the_report_may_not_be_the_calibration_files_path_and_options_a_method_ignores_are_named(tmp_path, data_file,
+                                                                                              capsys):
+    output = tmp_path / "cal.toml"
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(output),
+                 "--report", str(output)]) == 2
+    assert "is the calibration file's own path (-o)" in capsys.readouterr().err and not output.exists()
+    assert main(["calibrate", str(data_file), "--config", str(NOMINAL_PATH), "-o", str(output), "--method", "full",
+                 "--loss", "cauchy"]) == 0
+    assert "note: --loss applies to --method leglock and auto (auto: when it takes leglock); --method full does not " \
+           "use it" in capsys.readouterr().err
+
+
 def test_bad_rows_are_refused_by_line_or_skipped_on_request(tmp_path, leglock_campaign, capsys):
     lines = format_measurements(leglock_campaign.data).splitlines()
     fields = lines[5].split(",")

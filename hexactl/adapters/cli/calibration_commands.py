@@ -202,7 +202,11 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
     if arguments.report and (Path(arguments.report) / REPORT_PAGE).exists() and not arguments.force:
         raise CliError(f"{arguments.report} already holds a report; refusing to overwrite it (use --force)")
     if arguments.report:
+        if Path(arguments.report).resolve() == output.resolve():
+            raise CliError(f"--report {arguments.report} is the calibration file's own path (-o): give the report a "
+                           "folder of its own")
         check_writable(Path(arguments.report), folder=True)
+    _note_ignored_options(arguments)
     true = _load_geometry(arguments.true) if arguments.true else None
     point_sigma = nominal.measurement.point_sigma_mm if arguments.point_sigma is None else arguments.point_sigma
     try:
@@ -233,22 +237,23 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
         max_zero_length_deviation_mm=arguments.max_deviation, loss=arguments.loss)
     result = identify(data, nominal, options)
     _print_result(result, nominal)
-    if not result.ok:
-        print(f"no calibration written: {result.status.name.lower().replace('_', ' ')}")
-        return 1
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    info = calibration_info(result, created, measurements.sha256, nominal.name or str(arguments.config or ""))
-    try:
-        calibrated = calibration_geometry(nominal, result, info)
-        save_geometry(calibrated, output, overwrite=arguments.force)
-    except GeometryError as error:
-        raise CliError(str(error)) from None
-    except OSError as error:
-        raise write_failed(output, error) from None
-    print(f"wrote {output}")
-    if arguments.report:
+    calibrated = None
+    if result.ok:
+        info = calibration_info(result, created, measurements.sha256, nominal.name or str(arguments.config or ""))
+        try:
+            calibrated = calibration_geometry(nominal, result, info)
+            save_geometry(calibrated, output, overwrite=arguments.force)
+        except GeometryError as error:
+            raise CliError(str(error)) from None
+        except OSError as error:
+            raise write_failed(output, error) from None
+        print(f"wrote {output}")
+    else:
+        print(f"no calibration written: {result.status.name.lower().replace('_', ' ')}")
+    if arguments.report:  # a failed identification's too: its residuals and observability say why it failed
         validation = None
-        if true is not None:
+        if true is not None and calibrated is not None:
             from hexactl.sim.offline_campaign import validate_geometry  # simulation only
 
             validation = ValidationComparison(validate_geometry(nominal, true), validate_geometry(calibrated, true))
@@ -258,7 +263,20 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
         except OSError as error:
             raise write_failed(arguments.report, error) from None
         print(f"wrote {page}")
-    return 0
+    return 0 if result.ok else 1
+
+
+def _note_ignored_options(arguments: argparse.Namespace) -> None:
+    """Say which given options the chosen method does not use (they were taken silently)."""
+    from hexactl.calibration.results import IdentificationOptions
+
+    defaults = IdentificationOptions()
+    for option, given, users in (
+            ("--loss", arguments.loss != defaults.loss, ("leglock", "auto")),
+            ("--max-deviation", arguments.max_deviation != defaults.max_joint_deviation_mm, ("leglock", "paper", "auto"))):
+        if given and arguments.method not in users:
+            print(f"note: {option} applies to --method {' and '.join(users)} (auto: when it takes leglock); "
+                  f"--method {arguments.method} does not use it", file=sys.stderr)
 
 
 def _sigma(std: float) -> str:
@@ -283,8 +301,12 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
           f"{result.consistency}")
     print(f"observability: condition number {o.condition_number:.3g}, smallest singular value "
           f"{o.singular_values[-1]:.3g} /mm (worst combination ±{o.worst_std_mm:.3g} mm)")
-    print(f"predicted pose uncertainty on the paper's test motions: {p.rms_position_mm:.4f} mm, "
-          f"{p.rms_orientation_deg:.5f}° RMS per axis (1σ)")
+    if o.full_rank:
+        print(f"predicted pose uncertainty on the paper's test motions: {p.rms_position_mm:.4f} mm, "
+              f"{p.rms_orientation_deg:.5f}° RMS per axis (1σ)")
+    else:  # its covariance holds only what the data determine: a figure would be far too small
+        print("predicted pose uncertainty on the paper's test motions: not predicted (the data do not determine "
+              "every parameter)")
     deviation = result.parameters.to_vector() - StructuralParameters.from_geometry(nominal, result.parameters.has_scales).to_vector()
     std = result.std_vector
     print("deviation from nominal ± σ, mm (±∞: not determined by the data):")

@@ -136,7 +136,8 @@ def _page(report: CalibrationReport, figures: dict[str, bytes], nominal_vector: 
 def _summary(result: IdentificationResult) -> str:
     predicted = result.predicted
     rows = [
-        ("status", result.status.name.lower().replace("_", " ")),
+        ("status", result.status.name.lower().replace("_", " ")
+         + ("" if result.ok else ": no calibration file was written")),
         ("method", f"{result.method} — {result.reason}"),
         ("postures used", str(result.postures_used)),
         ("fit residual RMS", f"{result.residual_rms_mm:.4f} mm (noise model expects {result.expected_rms_mm:.4f} mm)"),
@@ -147,7 +148,9 @@ def _summary(result: IdentificationResult) -> str:
          f"angle (roll, pitch, yaw), RMS (1σ); as a radius √(σx² + σy² + σz²), what status's "
          f"predicted_accuracy.position_mm gives at the platform's origin: {np.sqrt(3.0) * predicted.rms_position_mm:.4f} mm "
          f"RMS; expected largest on one axis {predicted.expected_max_position_mm:.4f} mm, "
-         f"{predicted.expected_max_orientation_deg:.5f}°"),
+         f"{predicted.expected_max_orientation_deg:.5f}°" if result.observability.full_rank else
+         "not predicted: the data do not determine every parameter (what they determine alone would give a figure "
+         "far too small)"),
     ]
     return "<h2>Summary</h2><table>" + "".join(f"<tr><th class='l'>{_e(k)}</th><td class='l'>{_e(v)}</td></tr>" for k, v in rows) + "</table>"
 

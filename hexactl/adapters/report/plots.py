@@ -89,15 +89,22 @@ def observability_figure(result: IdentificationResult) -> bytes:
     """Singular values of the whitened Jacobian and the parameter correlation matrix."""
     figure = Figure(figsize=(10, 4.2))
     left, right = figure.subplots(1, 2)
-    singular = result.observability.singular_values
-    left.semilogy(np.arange(1, len(singular) + 1), singular, "o-", ms=3)
+    singular = np.asarray(result.observability.singular_values)
+    determined = singular > 0  # an undetermined combination's 0 has no place on a log axis
+    if determined.any():
+        left.semilogy(np.arange(1, len(singular) + 1)[determined], singular[determined], "o-", ms=3)
+    if not determined.all():
+        left.text(0.5, 0.5, f"{int(np.sum(~determined))} combination(s) not determined (0)", transform=left.transAxes,
+                  ha="center", fontsize=9)
     left.set_xlabel("index")
     left.set_ylabel("singular value, 1/mm")
     left.set_title(f"Observability (condition {result.observability.condition_number:.3g})", fontsize=10)
     left.grid(True, which="both", alpha=0.3)
     std = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
-    scale = np.where(std > 0, std, 1.0)
-    image = right.imshow(result.covariance / np.outer(scale, scale), vmin=-1, vmax=1, cmap="RdBu_r")
+    scale = np.where((std > 0) & np.isfinite(std), std, 1.0)
+    with np.errstate(invalid="ignore"):  # an undetermined parameter's ∞ leaves its row blank (NaN)
+        correlations = np.where(np.isfinite(result.covariance), result.covariance, np.nan) / np.outer(scale, scale)
+    image = right.imshow(correlations, vmin=-1, vmax=1, cmap="RdBu_r")
     right.set_title("parameter correlations (B, P, zero per leg)", fontsize=10)
     ticks = np.arange(0, len(std), PARAMETERS_PER_LEG)
     right.set_xticks(ticks, [f"leg {k + 1}" for k in range(len(ticks))], fontsize=7, rotation=45)
