@@ -158,8 +158,9 @@ def test_a_version_of_another_json_type_says_to_send_the_integer(version) -> Non
     ("record", "name", "r" * 101, "1 to 100"),
     ("record", "name", "run\n", "starting with a letter or digit"),
     # Found from outside: "r1.json" recorded to r1.json.csv and r1.json.json.
-    ("record", "name", "r1.json", "without directory or extension (run1, not run1.csv: .csv and .json are added)"),
-    ("record", "name", "R1.CSV", "without directory or extension"),
+    ("record", "name", "r1.json", "a recording's name is given without extension (run1, not run1.csv: .csv and .json "
+                                  "are added)"),
+    ("record", "name", "R1.CSV", "given without extension"),
     ("stream_open", "source", "caf\u00e9", "printable ASCII"),
     # Found from outside: a source with a line end forged lines in the service's log (calibration_swapped).
     ("load_calibration", "source", "cal\n2026-11-27 15:00:00,000 WARNING hexactl.safety: loop estop", "one line"),

@@ -81,3 +81,22 @@ def test_every_request_field_and_telemetry_field_is_in_its_table() -> None:
     telemetry = _table_rows(text.split("## Telemetry", 1)[1].split("## Command line", 1)[0])
     missing += [f"telemetry: {name}" for name in Telemetry.model_fields if name not in telemetry]
     assert not missing, f"not in docs/api.md's tables: {missing}"
+
+
+def test_every_pattern_is_one_a_re2_engine_compiles() -> None:
+    """Clients generate validators from the schema, many with an RE2-family engine (Go, Rust,
+    pydantic-core's default), which has no lookaround, backreference or inline flag: one such
+    pattern makes the whole schema unusable to them (found by a reviewer: a lookahead)."""
+    def patterns(node):
+        if isinstance(node, dict):
+            if isinstance(node.get("pattern"), str):
+                yield node["pattern"]
+            for value in node.values():
+                yield from patterns(value)
+        elif isinstance(node, list):
+            for value in node:
+                yield from patterns(value)
+
+    found = list(patterns(api_schema()))
+    assert found and all(re.compile(pattern) for pattern in found)
+    assert [pattern for pattern in found if "(?" in pattern or re.search(r"\\[1-9]", pattern)] == []

@@ -18,7 +18,13 @@ from typing import Annotated, Any, Literal, Union, get_args
 from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, JsonValue, ValidatorFunctionWrapHandler,
                       WrapValidator, model_validator)
 
-from hexactl.adapters.api.protocol import MAX_DEADLINE_MS, MAX_RECORDING_DIVISOR, MAX_RECORDING_S, RECORDING_NAME_PATTERN
+from hexactl.adapters.api.protocol import (
+    MAX_DEADLINE_MS,
+    MAX_RECORDING_DIVISOR,
+    MAX_RECORDING_S,
+    RECORDING_EXTENSION_PATTERN,
+    RECORDING_NAME_PATTERN,
+)
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
 from hexactl.control.one_line import ONE_LINE_PATTERN
@@ -63,9 +69,20 @@ def _text_matching(pattern: str, rule: str) -> Any:
     return Annotated[str, AfterValidator(check), Field(json_schema_extra={"pattern": pattern})]
 
 
-RecordingName = _text_matching(RECORDING_NAME_PATTERN, "a recording's name is 1 to 100 letters, digits, '.', '_' or "
-                               "'-', starting with a letter or digit, without directory or extension (run1, not "
-                               "run1.csv: .csv and .json are added)")
+_RECORDING_EXTENSION = re.compile(RECORDING_EXTENSION_PATTERN)
+
+
+def _no_extension(name: str) -> str:
+    if _RECORDING_EXTENSION.search(name):
+        raise ValueError(f"{name!r} is not allowed: a recording's name is given without extension (run1, not "
+                         "run1.csv: .csv and .json are added)")
+    return name
+
+
+RecordingName = Annotated[
+    _text_matching(RECORDING_NAME_PATTERN, "a recording's name is 1 to 100 letters, digits, '.', '_' or '-', "
+                   "starting with a letter or digit (no directory; .csv and .json are added)"),
+    AfterValidator(_no_extension), Field(json_schema_extra={"not": {"pattern": RECORDING_EXTENSION_PATTERN}})]
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
 OneLine = _text_matching(ONE_LINE_PATTERN, "one line of text, without control characters (no line end, no tab)")
 """Text the service's log writes (:mod:`hexactl.control.one_line`)."""

@@ -39,11 +39,14 @@ names, and a service with any client."""
 MAX_CLIENT_NAME = 64
 """The most characters of a client's name the service keeps."""
 
-RECORDING_NAME_PATTERN = r"^(?!.*\.([cC][sS][vV]|[jJ][sS][oO][nN])$)[A-Za-z0-9][A-Za-z0-9._-]{0,99}$"
-"""A recording's name, as ``record`` takes it (``.csv`` and ``.json`` are added: a name
-ending in either, ``r1.json``, made ``r1.json.csv`` and ``r1.json.json``): here for the
-dashboard's download route too, which must not import the models. In the API's schema,
-so a JSON Schema (ECMA) regular expression: no inline flags."""
+RECORDING_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$"
+"""A recording's name, as ``record`` takes it (``.csv`` and ``.json`` are added): here
+for the dashboard's download route too, which must not import the models."""
+RECORDING_EXTENSION_PATTERN = r"\.([cC][sS][vV]|[jJ][sS][oO][nN])$"
+"""What a recording's name may not end with: ``r1.json`` made ``r1.json.csv`` and
+``r1.json.json``. A pattern of its own (the schema's ``not``), not a lookahead in the
+name's: regular-expression engines of the RE2 family, which clients' validators use,
+have none."""
 
 MAX_RECORDING_S = 3600
 """The longest recording, s: an hour is 1.8 million rows (about 0.5 GB) at 500 Hz."""
