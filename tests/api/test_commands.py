@@ -3,18 +3,21 @@ and DEALER clients alike; controller refusals come back with their codes."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 import zmq
 from pydantic import TypeAdapter
 
 from hexactl.control.snapshot import Event
-from hexactl.adapters.api.commands import CommandHandler, MeasurementError
+from hexactl.adapters.api.commands import CommandHandler, MeasurementError, _dwells, _unsaved_dwells
 from hexactl.adapters.api.messages import COMMANDS, REPLY_MODELS, ErrorReply, MeasureRequest, OkReply, PathViolation
 from hexactl.adapters.api.paths import DataDirectories
 from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml
 from hexactl.control.results import CommandResult, ErrorCode
-from tests.api.support import FakeController, request
+from hexactl.control.sequence_player import SequenceReport
+from tests.api.support import RECORDS, FakeController, request
 
 REPLY = TypeAdapter(ErrorReply | OkReply)
 
@@ -213,6 +216,19 @@ def test_a_play_over_dwell_records_never_saved_says_it_replaces_them(service) ->
         "(save_recording saves a sequence's records before the next one plays)")
     send(service, "save_recording", path="sweep.csv")
     assert send(service, "play", sequence="y_rotation")["message"] == "playing y_rotation"  # saved: nothing lost
+
+
+def test_a_save_made_while_the_sequence_played_leaves_only_its_later_dwell_records_unsaved() -> None:
+    """Found by a reviewer: save_recording mid-sequence saved its first records; the next
+    play called all of them "never saved"."""
+    report = SequenceReport("x_sweep", "finished", RECORDS + (replace(RECORDS[1], waypoint=3, t_s=15.0),))
+    partly = _dwells(SequenceReport("x_sweep", "playing", RECORDS))
+    assert _unsaved_dwells(report, partly) == ("the 1 dwell record(s) of x_sweep after the 2 saved, never saved, are "
+                                               "replaced by this sequence's (save_recording saves a sequence's "
+                                               "records before the next one plays)")
+    assert _unsaved_dwells(report, _dwells(report)) is None
+    assert _unsaved_dwells(report, _dwells(replace(report, name="other"))).startswith("the 3 dwell record(s) of x_sweep,")
+    assert _unsaved_dwells(replace(report, records=()), None) is None
 
 
 def test_save_recording_writes_csv_once(service) -> None:

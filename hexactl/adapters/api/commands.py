@@ -199,10 +199,8 @@ class CommandHandler:
                 reply = _checked(result, name=sequence.name, waypoints=len(sequence.waypoints),
                                  duration=result.details.get("duration_s"),
                                  lock_corrections_mm=result.details.get("lock_corrections_mm"))
-                if previous is not None and previous.records and _dwells(previous) != self._saved:
-                    reply["message"] += (f"; the {len(previous.records)} dwell record(s) of {previous.name}, never "
-                                         "saved, are replaced by this sequence's (save_recording saves a sequence's "
-                                         "records before the next one plays)")
+                if previous is not None and (unsaved := _unsaved_dwells(previous, self._saved)):
+                    reply["message"] += f"; {unsaved}"
                 return reply
             case PauseRequest():
                 return _checked(controller.pause())
@@ -422,6 +420,19 @@ def _dwells(report: SequenceReport) -> tuple[str, tuple[float, ...]]:
     """A sequence's dwell records told apart from any other's by their times (equal values
     would not do: a record without feedback holds NaN, which equals nothing)."""
     return report.name, tuple(record.t_s for record in report.records)
+
+
+def _unsaved_dwells(report: SequenceReport, saved: tuple[str, tuple[float, ...]] | None) -> str | None:
+    """What a play that replaces ``report``'s dwell records loses: those after the ones
+    ``saved`` (:func:`_dwells` of the last save; one made while it played holds its first
+    records only), or None when none."""
+    name, times = _dwells(report)
+    kept = saved[1] if saved is not None and saved[0] == name and times[:len(saved[1])] == saved[1] else ()
+    if len(times) == len(kept):
+        return None
+    after = f" after the {len(kept)} saved" if kept else ""
+    return (f"the {len(times) - len(kept)} dwell record(s) of {name}{after}, never saved, are replaced by this "
+            "sequence's (save_recording saves a sequence's records before the next one plays)")
 
 
 def _csv_name(path: str) -> str:
