@@ -260,8 +260,9 @@ class Supervisor:
 
 def _silence(leg: int, age_s: float, link: LinkHealth | None) -> str:
     """What a leg's lost heartbeat reads as: its age, or, never heard in this controller's
-    protocol (an actuator that restarted into another firmware), the link's word on why."""
+    protocol (an actuator that restarted into another firmware), the link's word on that
+    leg (its note's parts that name it)."""
     if not isinf(age_s):
         return f"leg {leg}: no report for {age_s:.3f} s"
-    why = f": {link.detail}" if link is not None and link.detail else ""
-    return f"leg {leg}: not heard in this controller's protocol{why}"
+    said = [part for part in link.detail.split("; ") if part.startswith((f"leg {leg} ", f"leg {leg}'s"))] if link else []
+    return f"leg {leg}: not heard in this controller's protocol" + "".join(f": {part}" for part in said[:1])

@@ -285,7 +285,7 @@ def test_health_names_a_leg_speaking_another_protocol_version(link, bus):
     assert feedback.actuators[3].heartbeat_age_s == math.inf  # the loop must not count it present ...
     health = link.link_health()  # ... and is told why, though its frames arrive
     assert health.bus_state is BusState.ACTIVE and link.silent_legs() == ()
-    assert health.detail == "leg 4 speaks protocol version 2, this controller 1: it is never enabled"
+    assert health.detail == "leg 4 speaks protocol version 2, this controller 1: it is not enabled while it does"
 
 
 def test_bad_leg_is_refused(link, bus):
@@ -405,9 +405,9 @@ def test_read_drains_a_bounded_number_of_frames(bus, clock):
         bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, counter))
     link.read_feedback()
     assert len(bus.incoming) == 15
-    assert link.link_health().detail.endswith("; receiving behind: more than 10 frames waited at a read, so what "
-                                              "the actuators report reaches the loop late (a flood on the bus? "
-                                              "candump shows who sends it)")
+    assert link.link_health().detail.endswith("; receiving behind: a read found 10 frames or more waiting, so what "
+                                              "the actuators report reaches the loop late (the loop held up, or a "
+                                              "flood on the bus: candump shows who sends)")
     link.read_feedback()
     link.read_feedback()
     assert not bus.incoming and link.stats().frames_received == 25

@@ -57,10 +57,11 @@ def test_each_fault_is_named_with_its_leg(supervisor):
 def test_a_leg_not_heard_in_this_protocol_says_what_the_link_says_not_inf_seconds(supervisor):
     """An actuator that restarts, while enabled, into a firmware of another protocol version
     is not heard by the link (its age is infinite): "no report for inf s" said nothing."""
-    link = LinkHealth(BusState.ACTIVE, 0, "leg 1 speaks protocol version 2, this controller 1: it is never enabled")
+    link = LinkHealth(BusState.ACTIVE, 0, "silent legs: 2; leg 1 speaks protocol version 2, this controller 1: it is "
+                      "not enabled while it does; leg 12 restarted (…)")  # the other legs' notes are not this fault's
     [fault] = supervisor.faults(feedback(leg1={"heartbeat_age_s": float("inf")}), link, 100, 1 * MS)
     assert fault.message == ("leg 1: not heard in this controller's protocol: leg 1 speaks "
-                             "protocol version 2, this controller 1: it is never enabled"), fault.message
+                             "protocol version 2, this controller 1: it is not enabled while it does"), fault.message
     [fault] = supervisor.faults(feedback(leg1={"heartbeat_age_s": float("inf")}), None, 100, 1 * MS)
     assert fault.message == "leg 1: not heard in this controller's protocol"
 

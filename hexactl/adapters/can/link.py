@@ -425,11 +425,11 @@ class CanActuatorLink:
             # Heard, yet reported absent to the loop (heartbeat_age_s inf): say why.
             if node.protocol_version not in (None, PROTOCOL_VERSION):
                 notes.append(f"leg {leg} speaks protocol version {node.protocol_version}, this controller "
-                             f"{PROTOCOL_VERSION}: it is never enabled")
+                             f"{PROTOCOL_VERSION}: it is not enabled while it does")
         if self._behind_ns is not None and self._recent(self._behind_ns):
-            notes.append(f"receiving behind: more than {self.config.max_frames_per_read} frames waited at a read, "
-                         "so what the actuators report reaches the loop late (a flood on the bus? candump shows "
-                         "who sends it)")
+            notes.append(f"receiving behind: a read found {self.config.max_frames_per_read} frames or more waiting, "
+                         "so what the actuators report reaches the loop late (the loop held up, or a flood on the "
+                         "bus: candump shows who sends)")
         if self._detail:
             notes.append(self._detail)
         other_ns = self._other_ns
