@@ -17,3 +17,9 @@ _ONE_LINE = re.compile(ONE_LINE_PATTERN)
 def is_one_line(text: str) -> bool:
     """``text`` keeps to :data:`ONE_LINE_PATTERN`."""
     return _ONE_LINE.fullmatch(text) is not None
+
+
+def as_one_line(text: str) -> str:
+    """``text`` kept to :data:`ONE_LINE_PATTERN`: each character it refuses written as its
+    escape (``\\n``, ``\\x1b``), so text from elsewhere (a path) is sent as the rule wants."""
+    return "".join(c if is_one_line(c) else c.encode("unicode_escape").decode("ascii") for c in text)

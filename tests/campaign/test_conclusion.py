@@ -60,11 +60,12 @@ def test_a_calibration_not_kept_leaves_the_planned_geometry_active(nominal, hist
     history = [planned if entry == "nominal" else entry for entry in history]
     controller = Calibrations(history, "0123456789abcdef" if len(history) == 2 else CALIBRATED)
     out = io.StringIO()
-    store = SimpleNamespace(geometry=nominal, path=lambda name: Path("/data/campaign") / name)
+    # a folder named with a line end: sent escaped, as the service's one-line rule for a source wants
+    store = SimpleNamespace(geometry=nominal, path=lambda name: Path("/data/camp\naign") / name)
     _conclude(PlatformDriver(controller), store, better=True, apply=False,  # type: ignore[arg-type]
               progress=Progress(out, io.StringIO()))
     assert controller.active == planned and controller.sent == sent
     # a load says what it loads: the service records it as the calibration's source
-    assert controller.sources == ["hexactl campaign: the geometry /data/campaign/campaign.json was planned on"] * (
+    assert controller.sources == ["hexactl campaign: the geometry /data/camp\\naign/campaign.json was planned on"] * (
         "load_calibration" in sent)
     assert "rolled back to the geometry the campaign started on (--apply keeps it)" in out.getvalue()

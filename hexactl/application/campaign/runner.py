@@ -81,6 +81,7 @@ from hexactl.calibration.identification import (
 from hexactl.calibration.parameters import StructuralParameters, parameter_names
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
+from hexactl.control.one_line import as_one_line
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.kinematics.inverse import lengths_from_readings
 
@@ -193,7 +194,7 @@ def _measure_after(driver: PlatformDriver, store: CampaignStore, instrument: Ins
     if driver.status()["calibration_id"] != calibrated_id:
         driver.require_calibration(geometry_id(store.geometry), _planned(store.geometry), _MAKE_PLANNED_ACTIVE)
         progress.say("loading the calibration into the controller")
-        driver.load_calibration(text, f"hexactl campaign: {store.path(CALIBRATION_FILE)}")
+        driver.load_calibration(text, as_one_line(f"hexactl campaign: {store.path(CALIBRATION_FILE)}"))
     # The verdict must judge one calibration: waypoints a stopped run measured with another
     # (identified from other data since) are measured again.
     _discard_after(store, calibrated_id, f"not with {calibrated_id}, the calibration they are to check", progress)
@@ -510,6 +511,6 @@ def _conclude(driver: PlatformDriver, store: CampaignStore, better: bool, apply:
     if driver.status()["calibration_id"] == planned:
         return  # rolled back already (a fault came after it)
     driver.return_to_calibration(planned, geometry_to_toml(store.geometry),
-                                 f"hexactl campaign: the geometry {store.path(PLAN_FILE)} was planned on")
+                                 as_one_line(f"hexactl campaign: the geometry {store.path(PLAN_FILE)} was planned on"))
     why = "it did not improve the accuracy" if apply else "--apply keeps it"
     progress.say(f"rolled back to the geometry the campaign started on ({why})")
