@@ -150,9 +150,17 @@ def plan_postures(geometry: Geometry, request: PlanRequest) -> PosturePlan:
     candidates = _feasible_candidates(geometry, request, locked_length)
     locked_reading = float(readings_from_lengths(geometry.legs, locked_length, request.leg - 1)) if request.leg else nan
     if len(candidates) < request.count:
+        low, high = geometry.limits.stroke
+        margin = request.margins.stroke_mm
+        # A locked reading inside the stroke's margin leaves no posture at all: more candidates cannot help.
+        remedy = (f"the locked reading {locked_reading:.3f} mm lies within the stroke's {margin:g} mm margin "
+                  f"([{low:g}, {high:g}] mm): lock the leg between {low + margin:g} and {high - margin:g} mm"
+                  if request.leg and not low + margin <= locked_reading <= high - margin else
+                  f"raise --candidates (at most {MAX_CANDIDATES})" + (" or choose another locked length" if request.leg
+                                                                     else ""))
         return PosturePlan(PlanStatus.TOO_FEW_FEASIBLE, request.leg, empty, empty, locked_length, locked_reading,
             len(candidates), f"only {len(candidates)} of {request.candidates} candidates are feasible with the "
-            f"margins, {request.count} requested: raise --candidates or choose another locked length")
+            f"margins, {request.count} requested: {remedy}")
     sigma = geometry.measurement.point_sigma_mm if request.point_sigma_mm is None else request.point_sigma_mm
     factors = posture_information_factors(
         geometry.legs, absolute_from_relative(geometry.home, candidates),

@@ -189,6 +189,15 @@ def test_plan_leglock_file_holds_the_lock_and_the_limits(tmp_path, nominal, caps
     for lock in (["--reading", "2000"], ["--reading", "-5"], ["--length", "10"]):  # where no leg can be
         assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "2", "--count", "3", *lock]) == 2
         assert "leg 2 cannot be locked there: outside its stroke [0, 850] mm" in capsys.readouterr().err, lock
+    # Found from outside: inside the stroke but within its margin, no posture is feasible, and the
+    # advice was to raise --candidates, which cannot help.
+    assert main(["plan-leglock", "--config", str(NOMINAL_PATH), "--leg", "1", "--count", "5", "--reading", "849"]) == 1
+    assert ("the locked reading 849.000 mm lies within the stroke's 10 mm margin ([0, 850] mm): lock the leg between "
+            "10 and 840 mm") in capsys.readouterr().err
+    # ... and simulate-campaign, which has no --candidates, was told to give more of them
+    assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "x.csv"),
+                 "--per-leg", "100000"]) == 2
+    assert "argument --per-leg: '100000' is not a whole number from 0 to 1500" in capsys.readouterr().err
 
 
 def test_simulate_campaign_then_calibrate_pose_form(tmp_path, capsys):

@@ -100,12 +100,16 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 
 def _declare_simulate(simulate: argparse.ArgumentParser) -> None:
+    from hexactl.calibration.planning import DEFAULT_CANDIDATES
     from hexactl.kinematics.geometry import noise_sigma_problem
 
     simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
     simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
-    simulate.add_argument("--per-leg", type=non_negative_int, default=20, help="leg-lock postures per leg (default 20)")
-    simulate.add_argument("--free", type=non_negative_int, default=0, help="free postures (default 0)")
+    # Each plan draws DEFAULT_CANDIDATES candidates here (no --candidates): it can give no more postures.
+    simulate.add_argument("--per-leg", type=whole_number_in(0, DEFAULT_CANDIDATES), default=20,
+                          help=f"leg-lock postures per leg (default 20, at most {DEFAULT_CANDIDATES})")
+    simulate.add_argument("--free", type=whole_number_in(0, DEFAULT_CANDIDATES), default=0,
+                          help=f"free postures (default 0, at most {DEFAULT_CANDIDATES})")
     simulate.add_argument("--seed", type=non_negative_int, default=0, help="seed of errors, plans and noise (default 0)")
     simulate.add_argument("--point-sigma", type=checked_number(noise_sigma_problem), metavar="MM",
                           help="instrument noise (default: the geometry's)")
