@@ -195,8 +195,9 @@ def test_plan_leglock_file_holds_the_lock_and_the_limits(tmp_path, nominal, caps
     assert ("the locked reading 849.000 mm lies within the stroke's 10 mm margin ([0, 850] mm): lock the leg between "
             "10 and 840 mm") in capsys.readouterr().err
     # ... and simulate-campaign, which has no --candidates, was told to give more of them
-    assert main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "x.csv"),
-                 "--per-leg", "100000"]) == 2
+    with pytest.raises(SystemExit) as refused:
+        main(["simulate-campaign", "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "x.csv"), "--per-leg", "100000"])
+    assert refused.value.code == 2
     assert "argument --per-leg: '100000' is not a whole number from 0 to 1500" in capsys.readouterr().err
 
 
