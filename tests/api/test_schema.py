@@ -23,20 +23,21 @@ def test_every_command_is_in_the_request_schema_and_the_document() -> None:
     assert all(f"| `{command}` |" in text for command in COMMANDS)
 
 
+def keyword_values(node, keyword: str):
+    """Every string value of ``keyword`` anywhere in the schema ``node``."""
+    if isinstance(node, dict):
+        if isinstance(node.get(keyword), str):
+            yield node[keyword]
+        for value in node.values():
+            yield from keyword_values(value, keyword)
+    elif isinstance(node, list):
+        for value in node:
+            yield from keyword_values(value, keyword)
+
+
 def test_every_reference_resolves() -> None:
     schema = api_schema()
-
-    def references(node):
-        if isinstance(node, dict):
-            if "$ref" in node:
-                yield node["$ref"]
-            for value in node.values():
-                yield from references(value)
-        elif isinstance(node, list):
-            for value in node:
-                yield from references(value)
-
-    for reference in references(schema):
+    for reference in keyword_values(schema, "$ref"):
         assert reference.removeprefix("#/$defs/") in schema["$defs"], reference
 
 
@@ -87,16 +88,6 @@ def test_every_pattern_is_one_a_re2_engine_compiles() -> None:
     """Clients generate validators from the schema, many with an RE2-family engine (Go, Rust,
     pydantic-core's default), which has no lookaround, backreference or inline flag: one such
     pattern makes the whole schema unusable to them (found by a reviewer: a lookahead)."""
-    def patterns(node):
-        if isinstance(node, dict):
-            if isinstance(node.get("pattern"), str):
-                yield node["pattern"]
-            for value in node.values():
-                yield from patterns(value)
-        elif isinstance(node, list):
-            for value in node:
-                yield from patterns(value)
-
-    found = list(patterns(api_schema()))
+    found = list(keyword_values(api_schema(), "pattern"))
     assert found and all(re.compile(pattern) for pattern in found)
     assert [pattern for pattern in found if "(?" in pattern or re.search(r"\\[1-9]", pattern)] == []
