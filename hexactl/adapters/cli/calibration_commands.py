@@ -188,6 +188,10 @@ def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
                           "real platform needs the operator). A measurement a fault interrupted is never kept")
 
 
+LARGE_CAMPAIGN_POSTURES = 2000
+"""From this many postures on, ``calibrate`` says before it starts that it takes a while."""
+
+
 def run_calibrate(arguments: argparse.Namespace) -> int:
     import numpy as np
 
@@ -239,6 +243,9 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
         method=Method(arguments.method), point_sigma_mm=point_sigma, reading_sigma_mm=arguments.reading_sigma,
         estimate_scales=arguments.scales, max_joint_deviation_mm=arguments.max_deviation,
         max_zero_length_deviation_mm=arguments.max_deviation, loss=arguments.loss)
+    if len(data) >= LARGE_CAMPAIGN_POSTURES:  # minutes of work with nothing printed read as a hang
+        print(f"hexactl calibrate: identifying from {len(data)} postures: this takes a while (its time and memory "
+              "grow with the postures; a few hundred well spread determine every parameter)", file=sys.stderr, flush=True)
     result = identify(data, nominal, options)
     _print_result(result, nominal)
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
