@@ -426,6 +426,10 @@ def test_after_a_stream_closes_the_counts_still_name_it_until_the_next_opens() -
                  "sample 2 taken with no stream open")
             view = receiver.view()
             assert (view["stream"], view["forwarded"], view["no_stream"]) == (7, 1, 1), view
+            # Found from outside: a PUSH or UDP sender hears nothing back; its samples after the
+            # stream ended were only counted, and last_problem kept an old word or none.
+            assert view["last_problem"] == ("samples arrive with no stream open (the last one ended: telemetry's "
+                                            "last_stream says why): they move nothing; stream_open to stream again")
             progress[0] = StreamProgress(8, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
             wait_for(lambda: receiver.view()["stream"] == 8, "the next stream's counts")
             assert receiver.view()["forwarded"] == 0

@@ -306,7 +306,7 @@ class StreamReceiver(SocketThread):
             self._problem(f"malformed sample: {error}")
             return
         if self._stream is None:
-            c.no_stream += 1
+            self._no_stream()
             return
         if sample.sequence is None:  # numbered after the last taken, of either form: the newest
             if self._last_sequence == LAST_SEQUENCE:  # none is above it: every sample after would be dropped
@@ -392,7 +392,14 @@ class StreamReceiver(SocketThread):
             self.counters.forwarded += 1
             self.counters.clamped += result.clamped
         else:
-            self.counters.no_stream += 1
+            self._no_stream()
+
+    def _no_stream(self) -> None:
+        """A well-formed sample with no stream open: counted, and said, for a sender (PUSH or
+        UDP: nothing comes back to it) may go on "driving" a platform whose stream ended."""
+        self.counters.no_stream += 1
+        ended = " (the last one ended: telemetry's last_stream says why)" if self._counted is not None else ""
+        self._problem(f"samples arrive with no stream open{ended}: they move nothing; stream_open to stream again")
 
     def _failed(self, what: str, error: Exception) -> None:
         """A failure no check foresaw: named in ``last_problem``, logged with its traceback."""
