@@ -195,8 +195,8 @@ class Controller:
 
     def validate_sequence(self, sequence: MotionSequence | str) -> CommandResult:
         """Would :meth:`play` accept this sequence (or built-in name) from here? Plans and
-        checks every waypoint's path from where the move under way ends, at rest (a play waits
-        for rest; disabled, from where the platform is), moves nothing; the same details as :meth:`play`'s, in leg-lock mode with how
+        checks every waypoint's path from where the move under way ends, at rest (a play needs
+        rest; disabled, from where the platform is), moves nothing; the same details as :meth:`play`'s, in leg-lock mode with how
         far each waypoint is moved onto the locked leg's constraint
         (``details.lock_corrections_mm``). It does not ask for ENABLED: checked while
         disabled, a path error shows before enabling."""

@@ -25,9 +25,14 @@ class WaveCommands:
         self._submitter = submitter
 
     def validate(self, spec: WaveSpec) -> CommandResult:
-        """See :meth:`hexactl.control.controller.Controller.validate_wave`."""
+        """See :meth:`hexactl.control.controller.Controller.validate_wave`. Not the state,
+        as every validation; but with a leg locked the message says that its figures are the
+        wave's with all six legs free, which :meth:`play` needs (a plain "valid" beside a
+        locked leg's speed read as a wave that runs braked)."""
         s = self._snapshot()
-        return _result(self._plan(s, spec), "valid")
+        locked = "" if s.lock is None else (f" with all six legs free: leg {s.lock.leg} is locked, and wave is refused "
+                                            "until it is unlocked")
+        return _result(self._plan(s, spec), f"valid{locked}")
 
     def play(self, spec: WaveSpec, deadline_ns: int | None) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.wave`."""

@@ -302,9 +302,13 @@ def test_a_wave_validates_whatever_the_controllers_state_about_where_the_platfor
     assert beyond.error == "path_violation" and "soft" in beyond.message, beyond
     assert rig.controller.wave(small).error == "busy"  # playing it needs rest
     rig.settle()
+    assert rig.controller.validate_wave(small).message == "valid"
     assert rig.controller.leg_lock(2).ok
     rig.run(2)
-    assert rig.controller.validate_wave(small).ok
+    locked = rig.controller.validate_wave(small)
+    # Found from outside: "valid" beside leg 2's peak speed read as a wave that runs with the leg braked.
+    assert locked.ok and locked.message == ("valid with all six legs free: leg 2 is locked, and wave is refused until "
+                                            "it is unlocked"), locked.message
     assert rig.controller.wave(small).error == "leg_locked"
 
 

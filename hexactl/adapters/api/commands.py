@@ -281,7 +281,7 @@ class CommandHandler:
     def _validate_wave(self, request: ValidateWaveRequest) -> dict[str, Any]:
         result = self.controller.validate_wave(_wave_spec(request))
         if result.ok:
-            return {"valid": True, "refusal": None,
+            return {"message": result.message, "valid": True, "refusal": None,
                     "wave": jsonable(_wave_figures(result))}
         return {"valid": False, "wave": None, "refusal": error_body(_code(result), result.message, _details(result))}
 
