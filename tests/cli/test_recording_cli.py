@@ -64,9 +64,13 @@ def test_record_wait_reports_the_side_file_when_the_service_stops_answering(api,
         raise ServiceUnavailable(f"no answer from {api} within 5 s: is `hexactl serve` running there?")
 
     monkeypatch.setattr(recording_commands, "_wait_written", service_stops)
-    assert main(["record", "gone", "--duration", "600", "--wait", "--api", api]) == 0  # it ended well: stopped
+    # Stopped, cut short: 1, as move --wait is when a stop ends the move (found from outside:
+    # record --on-motion --wait && analyse went on with an empty file)
+    assert main(["record", "gone", "--duration", "600", "--wait", "--api", api]) == 1
     captured = capsys.readouterr()
     assert f"{data_dir / 'gone.csv'}: " in captured.out and "ended: stopped" in captured.out
+    assert "hexactl record: it was stopped after " in captured.err and " of its 300000 rows (record --stop, or " \
+           "the service stopping)" in captured.err
     assert f"the service stopped answering (no answer from {api}" in captured.err
     assert f"its side file {data_dir / 'gone.json'} says how the recording ended" in captured.err
 
@@ -115,8 +119,8 @@ def test_record_wait_exits_1_when_a_fault_came_during_the_recording(capsys) -> N
     from hexactl.adapters.cli.recording_commands import _report_written
 
     side = {"csv": "/data/run.csv", "rows_written": 150, "ended": "duration", "cycles_missing": 0}
-    assert _report_written(side, as_json=False) == 0
-    assert _report_written({**side, "faults_during": True}, as_json=False) == 1
+    assert _report_written(side, as_json=False, waited=True) == 0
+    assert _report_written({**side, "faults_during": True}, as_json=False, waited=True) == 1
     captured = capsys.readouterr()
     assert "/data/run.csv: 150 rows, ended: duration" in captured.out
     assert captured.err == ("hexactl record: the controller was in FAULT or ESTOP during it: the motion recorded is "
@@ -128,8 +132,8 @@ def test_record_wait_notes_a_loop_held_up_during_the_recording(capsys) -> None:
 
     side = {"csv": "/data/run.csv", "rows_written": 150, "ended": "duration", "cycles_missing": 0, "rate_hz": 10.0,
             "longest_row_gap_s": 0.149}
-    assert _report_written(side, as_json=False) == 0 and "note" not in capsys.readouterr().out
-    assert _report_written({**side, "longest_row_gap_s": 3.1}, as_json=False) == 0  # the data are there
+    assert _report_written(side, as_json=False, waited=True) == 0 and "note" not in capsys.readouterr().out
+    assert _report_written({**side, "longest_row_gap_s": 3.1}, as_json=False, waited=True) == 0  # the data are there
     assert capsys.readouterr().out.splitlines()[-1] == ("note: rows up to 3.100 s apart, every 0.1 s planned: the "
                                                         "control loop was held up (its cycles numbered on, late); t_s "
                                                         "has each row's time")
@@ -140,7 +144,7 @@ def test_record_wait_says_why_a_recording_could_not_be_written(capsys) -> None:
 
     error = "/data/run.csv.partial: No space left on device: the rows after those in it are not recorded; free some space"
     side = {"csv": "/data/run.csv.partial", "rows_written": 40, "ended": "write_failed", "write_error": error}
-    assert _report_written(side, as_json=False) == 1
+    assert _report_written(side, as_json=False, waited=True) == 1
     assert capsys.readouterr().err == f"hexactl record: it could not be written whole: {error}\n"
 
 

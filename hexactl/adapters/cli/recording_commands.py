@@ -118,7 +118,7 @@ def run_record(arguments: argparse.Namespace) -> int:
                 print(format_error_reply(reply), file=sys.stderr)
                 return EXIT_REFUSED
             if cmd == "record_stop":
-                return _report_written(reply, arguments.json)
+                return _report_written(reply, arguments.json, waited=False)
             print(f"ok: {reply['message']}: {reply['rows']} rows at {reply['rate_hz']:g} Hz to {reply['path']}",
                   flush=True)
             if not arguments.wait:
@@ -127,7 +127,7 @@ def run_record(arguments: argparse.Namespace) -> int:
                 side = _wait_written(client, fields["name"], reply, arguments.on_motion)
             except ServiceUnavailable as error:
                 return _service_gone(reply["path"], error, arguments.json)
-            return _report_written(side, arguments.json)
+            return _report_written(side, arguments.json, waited=True)
     except ServiceUnavailable as error:
         print(f"hexactl record: {error}", file=sys.stderr)
         return EXIT_NO_ANSWER
@@ -145,7 +145,7 @@ def _service_gone(csv_path: str, error: Exception, as_json: bool) -> int:
     if isinstance(side, dict) and side.get("csv") == csv_path:
         print(f"hexactl record: the service stopped answering ({error}); its side file {side_path} says how the "
               "recording ended:", file=sys.stderr)
-        return _report_written(side, as_json)
+        return _report_written(side, as_json, waited=True)
     print(f"hexactl record: the service stopped answering during the recording ({error}); how it ended is in "
           f"{side_path.name} beside {csv_path} on the service's machine (not here)", file=sys.stderr)
     return EXIT_NO_ANSWER
@@ -167,8 +167,10 @@ def _wait_written(client: Any, name: str, reply: dict[str, Any], on_motion: bool
         time.sleep(WAIT_POLL_S)
 
 
-def _report_written(side: dict[str, Any], as_json: bool) -> int:
-    """Print where the recording was written; 1 (saying why) if it ended badly."""
+def _report_written(side: dict[str, Any], as_json: bool, *, waited: bool) -> int:
+    """Print where the recording was written; 1 (saying why) if it ended badly, and, for
+    who ``waited`` for it, if it was stopped short of its rows (``record --stop`` itself
+    asked for that)."""
     if as_json:
         print(json.dumps(side))
     problems = []
@@ -178,6 +180,10 @@ def _report_written(side: dict[str, Any], as_json: bool) -> int:
         problems.append(f"it could not be written whole: {side['write_error']}")
     elif side.get("ended") not in GOOD_ENDINGS:
         problems.append(f"it ended early: {side.get('ended')} (the service stopped, or its loop failed)")
+    elif waited and side.get("ended") == "stopped" and side.get("rows_written", 0) < side.get("rows_requested", 0):
+        # --wait && analyse NAME.csv must not go on with a recording cut short (as move --wait does not)
+        problems.append(f"it was stopped after {side.get('rows_written', 0)} of its {side['rows_requested']} rows "
+                        "(record --stop, or the service stopping)")
     if side.get("cycles_missing"):
         problems.append(f"{side['cycles_missing']} cycles are missing ({side.get('rows_lost', 0)} rows lost)")
     if side.get("side_file_error"):
