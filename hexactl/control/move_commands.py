@@ -100,7 +100,7 @@ class MoveCommands:
             # a goal in the work frame is reached the short way round (short_way): such a
             # turn would go the other way, to the same orientation
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
-                                        f"got {', '.join(beyond)}: turn the other way round (360° less)"))
+                                        f"got {', '.join(beyond)}: turn the other way round (-200° is +160°)"))
         goal = requested_goal(pose, Frame(frame), bool(relative), s.target, s.frames, context.frames, s.active.home)
         if isinstance(goal, str):
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, goal))

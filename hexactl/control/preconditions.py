@@ -102,7 +102,7 @@ def _at_rest(view: CoreView) -> Refusal:
     if refusal := _no_wave(view) or _no_stream(view) or _no_sequence(view):
         return refusal
     if view.motion is not MotionState.HOLDING:
-        return ErrorCode.BUSY, "the platform is moving: stop first"
+        return ErrorCode.BUSY, "the platform is moving: wait until it is at rest, or stop it"
     return None
 
 
@@ -192,7 +192,7 @@ def check_lock(view: CoreView) -> Refusal:
     if refusal := _enabled(view) or _at_rest(view):
         return refusal
     if view.lock is not None:
-        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is already locked"
+        return ErrorCode.LEG_LOCKED, f"leg {view.lock.leg} is already locked: unlock it first (one leg at a time)"
     return _not_ramping(view)
 
 

@@ -142,8 +142,8 @@ def test_frames_and_soft_limits_change_only_at_rest(rig):
     refused = rig.controller.set_frames(OperatorFrames(tool=(0, 0, 100, 0, 0, 0)))
     rig.run(20)
     assert np.linalg.norm(np.subtract(_tool_point(rig, TOOL_ABOVE), before)) < MICROMETRE  # the turn about it goes on
-    assert refused.error == "busy" and "the platform is moving: stop first: frames and soft limits change only at " \
-        "rest" in refused.message
+    assert refused.error == "busy" and "the platform is moving: wait until it is at rest, or stop it: frames and soft " \
+        "limits change only at rest" in refused.message
     rig.settle()
     assert rig.controller.move([300, 0, 0, 0, 0, 0]).ok
     rig.run(20)

@@ -582,7 +582,7 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     if cmd == "validate_sequence":
         said.append(f"valid, nothing moved: it ends at {pose_text(goal)} (relative to the zero posture)")
     if "waypoints" in reply:
-        said.append(f"{reply['waypoints']} waypoints")
+        said.append(f"{reply['waypoints']} waypoint{'' if reply['waypoints'] == 1 else 's'}")
     if corrections := reply.get("lock_corrections_mm"):
         farthest = max(range(len(corrections)), key=corrections.__getitem__)
         said.append(f"projected onto the locked leg's constraint: waypoints move by up to "
