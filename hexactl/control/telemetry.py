@@ -178,6 +178,7 @@ class Telemetry:
     tool_pose_command: ToolInWorkMmDeg | None = None
     tool_pose_measured: ToolInWorkMmDeg | None = None
     frames: OperatorFrames | None = None
+    outside_soft_limits: tuple[str, ...] = ()  # the soft limits the commanded pose breaks, one sentence each
     recording: RecordingTelemetry | None = None  # None: no recording since the start
     jog: JogTelemetry | None = None  # None: no jog under way
     last_jog: JogReport | None = None  # how the last jog ended; None: none since the start
@@ -277,10 +278,12 @@ def telemetry_of(report: LoopReport, frames: OperatorFrames) -> Telemetry:
         realtime=report.realtime,
         goal=None if moving_to is None else convert(moving_to, s.frames, None, home).in_degrees(),
         remaining_s=motion_remaining_s(s),
-        tool_pose_command=convert(s.pose_command, None, in_work, home).in_degrees(),
+        tool_pose_command=(tool_command := convert(s.pose_command, None, in_work, home).in_degrees()),
         tool_pose_measured=None if s.pose_measured is None
         else convert(s.pose_measured, None, in_work, home).in_degrees(),
         frames=frames,
+        outside_soft_limits=() if frames.soft_limits.allow(tool_command)  # plain floats first: every record asks
+        else tuple(v.message for v in frames.soft_limits.violations([tool_command])[0]),
         recording=recording_telemetry(s),
         jog=jog_telemetry(s),
         last_jog=s.last_jog,

@@ -81,6 +81,7 @@ class FakeController:
     frames: OperatorFrames = field(default_factory=OperatorFrames)
     frames_of_moves: list[tuple[Frame, bool]] = field(default_factory=list)
     kept_events: tuple[Event, ...] = ()
+    outside_soft_limits: tuple[str, ...] = ()
 
     def _call(self, name: str, *arguments: Any) -> None:
         self.calls.append((name, arguments))
@@ -254,6 +255,7 @@ class FakeController:
             sequence=SequenceTelemetry(self.sequence.name, 1, len(self.sequence.waypoints), "moving") if self.sequence else None,
             faults=(Fault("estop", "operator"),) if self.state == "estop" else (),
             loop=LoopStats(500.0, 1, 0, 0, percentiles, percentiles, 0, 0.0),
+            outside_soft_limits=self.outside_soft_limits,
         )
 
 

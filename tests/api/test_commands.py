@@ -264,3 +264,22 @@ def test_measure_without_an_instrument_or_when_it_fails(nominal, tmp_path) -> No
         with pytest.raises(ApiError) as refused:
             handler(request)
         assert refused.value.code == code
+
+
+def test_the_platform_outside_the_soft_limits_is_logged_once_as_it_happens(nominal, tmp_path, caplog) -> None:
+    """Found from outside: a service restored soft limits the platform stood outside of, and
+    its log said only that the frames were restored."""
+    controller = FakeController(nominal, outside_soft_limits=("y 15.161 mm above the soft limit 10 mm",))
+    handler = CommandHandler(controller, DataDirectories([tmp_path]))
+    with caplog.at_level("WARNING", logger="hexactl.adapters.api.commands"):
+        assert handler.record()["outside_soft_limits"] == ["y 15.161 mm above the soft limit 10 mm"]
+        handler.record()
+        controller.outside_soft_limits = ()
+        handler.record()
+        controller.outside_soft_limits = ("x 51 mm above the soft limit 50 mm",)
+        handler.record()
+    assert [r.getMessage() for r in caplog.records] == [
+        "the platform is outside the operator's soft limits: y 15.161 mm above the soft limit 10 mm; moves may only "
+        "go back inside",
+        "the platform is outside the operator's soft limits: x 51 mm above the soft limit 50 mm; moves may only go back "
+        "inside"]

@@ -442,3 +442,23 @@ def test_a_relative_turn_beyond_half_a_turn_is_refused_not_taken_the_other_way(r
     for frame in Frame:
         refused = rig.controller.move([0, 0, 0, 0, 0, 300], frame=frame, relative=True)
         assert refused.error == "invalid_argument" and "at most 180° about each axis, got yaw 300°" in refused.message
+
+
+def test_telemetry_names_the_soft_limits_the_commanded_pose_breaks(make_rig):
+    """Found from outside: a service restored soft limits the platform stood outside of and
+    said nothing, in its log or in status, until a move was refused."""
+    from hexactl.control.controller import Controller
+
+    rig = make_rig(start_pose=(0, 15, 0, 0, 0, 0))
+    limits = OperatorFrames(soft_limits=SoftLimits(upper=(None, 10, None, None, None, None)))
+    restored = Controller(rig.controller.thread, config=ControllerConfig(), nominal=rig.geometry, frames=limits)
+    outside = restored.telemetry().outside_soft_limits
+    assert len(outside) == 1 and outside[0].startswith("y 15") and "above the soft limit 10 mm" in outside[0], outside
+    assert rig.controller.telemetry().outside_soft_limits == ()  # no soft limits: nothing to break
+    # as the API publishes it, and hexactl status shows it
+    from hexactl.adapters.api.messages import Telemetry
+    from hexactl.adapters.api.wire import jsonable
+    from hexactl.adapters.cli.telemetry_text import format_telemetry
+
+    record = Telemetry.model_validate(jsonable(restored.telemetry())).model_dump(mode="json")
+    assert f"OUTSIDE        {outside[0]}" in format_telemetry(record).splitlines(), format_telemetry(record)

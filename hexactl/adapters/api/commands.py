@@ -130,6 +130,7 @@ class CommandHandler:
         self.campaign = CampaignBoard()
         self.run = secrets.token_hex(4)  # this service's run: its events are numbered from 1 in each
         self._saved: tuple[str, tuple[float, ...]] | None = None  # the dwell records save_recording wrote last
+        self._outside = False  # the last telemetry had the platform outside the soft limits
 
     def record(self) -> dict[str, Any]:
         """A telemetry record: the controller's, with what a client's campaign said last and
@@ -140,8 +141,12 @@ class CommandHandler:
         if self.keeper is not None:
             self.keeper.follow()
         stream_input = self.stream_input.view() if self.stream_input is not None else None
-        return {**jsonable(self.controller.telemetry()), "campaign": self.campaign.view(), "stream_input": stream_input,
-                "run": self.run}
+        telemetry = self.controller.telemetry()
+        if telemetry.outside_soft_limits and not self._outside:  # said once, as it happens (a start there too)
+            log.warning("the platform is outside the operator's soft limits: %s; moves may only go back inside",
+                        "; ".join(telemetry.outside_soft_limits))
+        self._outside = bool(telemetry.outside_soft_limits)
+        return {**jsonable(telemetry), "campaign": self.campaign.view(), "stream_input": stream_input, "run": self.run}
 
     def __call__(self, request: Request, deadline_ns: int | None = None, sender: str | None = None) -> dict[str, Any]:
         """Carry out ``request``; the commands it hands the loop name ``sender`` (who sent it, for people)."""

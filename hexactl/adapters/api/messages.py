@@ -867,6 +867,9 @@ class Telemetry(_Message):
     tool_pose_measured: ToolInWorkMmDeg | None = Field(default=None, description="pose_measured as the tool's pose in "
                                                        "the work frame, mm and deg; null if none")
     frames: OperatorFrames | None = Field(default=None, description="the operator's frames and soft limits")
+    outside_soft_limits: list[str] = Field(default=[], description="the soft limits the commanded pose breaks, one "
+                                           "sentence each (a service started with the platform outside the soft limits "
+                                           "it restored); empty inside them")
     recording: RecorderTelemetry | None = Field(default=None, description="the data recorder in the loop; null before "
                                                 "the first recording")
     wave: WaveTelemetry | None = Field(default=None, description="the wave playing, or how the last one ended; null "

@@ -115,8 +115,9 @@ def frames_lines(record: dict[str, Any]) -> list[tuple[str, str]]:
     if not frames or frames == NO_FRAMES:
         return [("frames", "none (poses relative to the zero posture)")]
     in_work = [("tool in work", pose_text(record["tool_pose_command"]))] if "tool_pose_command" in record else []
+    outside = [("OUTSIDE", "; ".join(record["outside_soft_limits"]))] if record.get("outside_soft_limits") else []
     return [("work frame", pose_text(frames["work"])), ("tool frame", pose_text(frames["tool"])), *in_work,
-            ("soft limits", soft_limits_text(frames["soft_limits"]))]
+            ("soft limits", soft_limits_text(frames["soft_limits"])), *outside]
 
 
 def soft_limits_text(limits: dict[str, Any]) -> str:
