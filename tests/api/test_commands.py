@@ -182,6 +182,18 @@ def test_validate_sequence_says_valid_with_the_plan_or_the_refusal_and_plays_not
     assert [name for name, _ in service.controller.calls if name == "play"] == []
 
 
+def test_a_sequence_files_name_without_its_ending_is_pointed_at_the_file(service) -> None:
+    """Found from outside: play xy_square (its file xy_square.toml in ./sequences) was told
+    only that xy_square is no built-in."""
+    (service.data_dir / "xy_square.toml").write_text('name = "xy_square"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\n')
+    refused = send(service, "play", sequence="xy_square")["error"]
+    assert refused["code"] == "unknown_sequence" and refused["details"]["file"] == str(service.data_dir / "xy_square.toml")
+    assert refused["message"].endswith(f"; but {service.data_dir / 'xy_square.toml'} is a sequence file there: play "
+                                       "xy_square.toml (a file is named with its ending)"), refused["message"]
+    assert "file" not in send(service, "play", sequence="no_such_motion")["error"]["details"]
+    assert send(service, "play", sequence="xy_square.toml")["ok"]
+
+
 def test_load_and_roll_back_calibration(service, nominal) -> None:
     calibrated = nominal.model_copy(update={"name": "calibrated", "zero_lengths": (1751.0,) * 6})
     loaded = send(service, "load_calibration", toml=geometry_to_toml(calibrated))

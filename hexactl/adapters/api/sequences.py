@@ -9,6 +9,7 @@ a ``.csv`` plan as ``hexactl plan-leglock`` writes it.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 from hexactl.adapters.api.messages import InlineSequence
 from hexactl.adapters.api.paths import DataDirectories
@@ -45,7 +46,25 @@ def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> M
         path, text = data.read_text(sequence, ErrorCode.INVALID_SEQUENCE)
         return reader(text, str(path))
     except UnknownSequence as error:
+        assert isinstance(sequence, str)  # an inline sequence is no name
+        if (file := _file_named(sequence, data)) is not None:
+            raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{error}; but {file} is a sequence file there: play {file.name} "
+                           "(a file is named with its ending)", {"built_in": list(BUILTIN_SEQUENCES),
+                                                                 "file": str(file)}) from None
         raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{error}; or name a .toml sequence file or a .csv plan "
                        "(from hexactl plan-leglock) in a data directory", {"built_in": list(BUILTIN_SEQUENCES)}) from None
     except SequenceError as error:
         raise problems_error(ErrorCode.INVALID_SEQUENCE, str(error)) from None
+
+
+def _file_named(name: str, data: DataDirectories) -> Path | None:
+    """The sequence file or plan directly in a data directory that ``name`` names but for
+    its ending (``xy_square`` for ``xy_square.toml``), if there is one; None for a name
+    with a directory in it."""
+    if Path(name).name != name or name.startswith("."):
+        return None
+    for directory in data.directories:
+        for ending in SEQUENCE_READERS:
+            if (candidate := Path(directory) / f"{name}{ending}").is_file():
+                return candidate
+    return None
