@@ -91,7 +91,10 @@ class Move(Command):
     segment: Segment
 
     def event(self) -> tuple[str, str]:
-        return "move", f"{self.segment.duration_s:.3g} s as planned"
+        # Where it goes, said: after an incident the log is read for it (found from outside).
+        goal = " ".join(f"{value:.3f}" for value in self.segment.goal.in_degrees())
+        where = "relative to the zero posture" if self.segment.frames is None else "the tool in the work frame"
+        return "move", f"{self.segment.duration_s:.3g} s as planned, to {goal} (mm, deg; {where})"
 
 
 @dataclass(frozen=True, slots=True)

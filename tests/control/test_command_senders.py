@@ -31,7 +31,8 @@ def test_each_command_names_its_sender_in_the_event_it_leaves(rig):
     rig.run()
     assert recorded(rig) == [("enabled", ALICE), ("move", BOB), ("stop", ALICE), ("disabled", ALICE)]
     move = next(event for event in rig.controller.events().events if event.code == "move")
-    assert move.message == "2 s as planned"
+    assert move.message == ("2 s as planned, to 0.000 0.000 20.000 0.000 0.000 0.000 (mm, deg; relative to the zero "
+                            "posture)")  # where it went, for who reads the log after an incident
 
 
 def test_an_estop_names_who_pressed_it_in_its_fault_and_a_refusal_names_who_was_refused(rig):
