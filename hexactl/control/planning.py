@@ -341,6 +341,9 @@ def _path_refusal(context: PlanningContext, violations: Sequence[PathViolation],
                   origin_frames: Frames | None) -> Refusal:
     """The refusal of a plan for ``violations``, saying so when the motion starts outside
     the soft limits (at ``origin``, in the coordinates of ``origin_frames``)."""
+    # The pose's axes first, in the message and the list: the legs' limits a pose beyond its
+    # envelope breaks follow from it (found from outside: yaw −90° came last, after twelve leg lines).
+    violations = sorted(violations, key=lambda violation: violation.kind not in _POSE_KINDS)
     message = _summary(violations)
     if outside_soft_limits(context, origin, origin_frames):
         message += f": {OUTSIDE_SOFT_LIMITS}"
@@ -842,6 +845,10 @@ def _peak_leg_speed(context: PlanningContext, samples: NDArray) -> float:
     if len(setpoints) < 2:
         return 0.0
     return float(np.max(np.abs(np.diff(setpoints, axis=0)))) / context.period_s
+
+
+_POSE_KINDS = (ViolationKind.POSE_RANGE, ViolationKind.SOFT_LIMIT, ViolationKind.SOFT_TILT)
+"""Violations in the operator's terms (an axis of the pose), named first in a refusal."""
 
 
 def _summary(violations: Sequence[PathViolation]) -> str:

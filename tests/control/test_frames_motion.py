@@ -462,3 +462,15 @@ def test_telemetry_names_the_soft_limits_the_commanded_pose_breaks(make_rig):
 
     record = Telemetry.model_validate(jsonable(restored.telemetry())).model_dump(mode="json")
     assert f"OUTSIDE        {outside[0]}" in format_telemetry(record).splitlines(), format_telemetry(record)
+
+
+def test_a_refused_path_names_the_poses_axis_first_and_the_legs_after(rig):
+    """Found from outside: with the tool frame turned 90° in yaw, a move in the work frame to
+    yaw 0 is yaw −90° for the platform; the refusal began with a leg's stroke and named the
+    yaw last, after twelve leg lines."""
+    assert rig.controller.set_frames(OperatorFrames(tool=(0, 0, 0, 0, 0, 90))).ok
+    refused = rig.controller.validate_pose([0, 0, 10, 0, 0, 0], frame=Frame.WORK)
+    assert refused.error == "path_violation"
+    assert refused.message.startswith("waypoint 1: yaw -90 deg outside the pose envelope"), refused.message
+    kinds = [violation["kind"] for violation in refused.details["violations"]]
+    assert kinds[0] == "pose_range" and len(kinds) > 1 and "pose_range" not in kinds[1:], kinds
