@@ -568,3 +568,14 @@ def test_serve_under_nohup_keeps_ignoring_sighup(tmp_path) -> None:
     launched.process.send_signal(signal.SIGTERM)
     status, log = launched.ended()
     assert status == 0 and "SIGTERM: shutting down" in log and "SIGHUP" not in log, log
+
+
+def test_a_validation_says_when_its_goal_is_projected_onto_a_locked_leg_as_the_move_does() -> None:
+    """Found from outside: move x=50 --validate with a leg locked showed the projected goal
+    (x 48.954) without saying why it was not the pose asked for; move x=50 said it."""
+    goal, asked = [48.954, 0.1, -0.2, 0.0, 0.0, 0.1], {"pose": [50.0, 0, 0, 0, 0, 0]}
+    for cmd, reply in (("validate_pose", {"goal": goal, "duration": 1.2}),
+                       ("move", {"goal": goal, "duration": 1.2, "message": "moving"})):
+        assert "projected onto the locked leg's constraint" in service_commands.format_ok_reply(cmd, reply, asked), cmd
+    unmoved = service_commands.format_ok_reply("validate_pose", {"goal": asked["pose"], "duration": 1.2}, asked)
+    assert "projected" not in unmoved and "(relative to the zero posture)" in unmoved

@@ -567,15 +567,18 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     said = [reply["message"]] if reply.get("message") else []
     fields = fields or {}
     requested, goal = fields.get("pose"), reply.get("goal")
+    projected = (not (fields.get("relative") or fields.get("frame")) and requested is not None and goal is not None
+                 and any(abs(a - b) > GOAL_TOLERANCE for a, b in zip(goal, requested)))  # an absolute goal moved
     if cmd == "validate_pose":  # the whole goal, whatever was asked: what a move from here would run to
-        said.append(f"valid, nothing moved: goal {pose_text(goal)} (relative to the zero posture)")
+        where = "relative to the zero posture" + ("; projected onto the locked leg's constraint" if projected else "")
+        said.append(f"valid, nothing moved: goal {pose_text(goal)} ({where})")
         if reply.get("tool_goal") is not None:
             said.append(f"tool {pose_text(reply['tool_goal'])} (in the work frame)")
     elif fields.get("relative") or fields.get("frame"):
         said.append(f"goal {pose_text(goal)} (relative to the zero posture)")
         if reply.get("tool_goal") is not None:
             said.append(f"tool {pose_text(reply['tool_goal'])} (in the work frame)")
-    elif requested is not None and goal is not None and any(abs(a - b) > GOAL_TOLERANCE for a, b in zip(goal, requested)):
+    elif projected:
         said.append(f"goal {pose_text(goal)} (projected onto the locked leg's constraint)")
     if source := (fields or {}).get("source"):
         said.append(f"read from {source} here and sent")
