@@ -670,7 +670,8 @@ def _goal(context: PlanningContext,
     if projected.correction > context.lock_max_correction_mm:
         return Refusal(ErrorCode.LOCK_UNREACHABLE,
                        f"the nearest pose with leg {context.lock.leg} at its locked length is {projected.correction:.1f} mm "
-                       f"from the goal (limit {context.lock_max_correction_mm:g} mm)",
+                       f"from the goal (limit {context.lock_max_correction_mm:g} mm): ask for a goal nearer that pose "
+                       f"(details: nearest_pose), or unlock leg {context.lock.leg} to go there",
                        details={"correction_mm": projected.correction, "limit_mm": context.lock_max_correction_mm,
                                 "nearest_pose": list(context.active.relative_from_absolute_mm_rad(projected.pose).in_degrees())})
     return context.active.relative_from_absolute_mm_rad(projected.pose), None, projected.correction

@@ -55,6 +55,8 @@ def test_a_goal_far_from_the_constraint_is_refused(rig):
     result = rig.controller.move([0, 0, 200, 0, 0, 0])  # every leg gets much longer
     assert not result.ok and result.error == "lock_unreachable"
     assert result.details["correction_mm"] > rig.controller.config.lock_max_correction_mm
+    assert result.message.endswith("ask for a goal nearer that pose (details: nearest_pose), or unlock leg 2 to go "
+                                   "there"), result.message  # found from outside: no remedy was given
     assert len(result.details["nearest_pose"]) == 6
 
 
