@@ -309,6 +309,7 @@ def test_play_validate_says_how_far_a_leg_lock_moves_the_waypoints_and_plays_not
     steps.write_text('name = "steps"\n[[waypoint]]\npose = [0, 0, 6, 0, 0, 0]\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\n')
 
     def scenario() -> None:
+        assert hexactl(served, "move", "0,0,0,0,0,0", "--wait") == 0  # the lock taken where waypoint 2 is
         before = status(client)["pose_command"]
         out, _ = printed(served, capsys, "play", str(steps), "--validate")
         assert re.fullmatch(r"ok: valid, nothing moved: it ends at x +0\.000 mm .* yaw +0\.000 deg \(relative "
