@@ -33,7 +33,7 @@ class SequenceCommands:
         if isinstance(resolved, CommandResult):
             return resolved
         s = self._snapshot()
-        # From where the motion under way ends, at rest: play waits for rest (as waves do).
+        # From where the motion under way ends, at rest: play needs rest (as a wave does).
         start = KinematicState.at_rest(s.target)
         return plan_result(plan_path(self._context(s), start, resolved.planning_waypoints(), s.frames), "valid",
                            s.active.home)
