@@ -117,7 +117,7 @@ def sequence_from_mapping(data: object, source: str = "sequence") -> MotionSeque
     try:
         return MotionSequence.model_validate(data)
     except ValidationError as error:
-        raise SequenceError(describe_validation_error(error, source)) from None
+        raise SequenceError(describe_validation_error(error, source, model=MotionSequence)) from None
 
 
 BUILTIN_DWELL_S = 2.0

@@ -309,4 +309,4 @@ def geometry_from_mapping(data: object, source: str = "geometry") -> Geometry:
     try:
         return Geometry.model_validate(data)
     except ValidationError as error:
-        raise GeometryError(describe_validation_error(error, source)) from None
+        raise GeometryError(describe_validation_error(error, source, model=Geometry)) from None

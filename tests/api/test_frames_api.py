@@ -66,6 +66,7 @@ def test_set_frames_merges_saves_and_clears(framed, tmp_path: Path) -> None:
     ({"soft_limits": {"max_tilt_deg": 95}}, "max_tilt_deg"),
     ({"soft_limits": {"lower": [1, 2, 3, 4, 5, 6], "upper": [0, 2, 3, 4, 5, 6]}}, "below its upper bound"),
     ({"pivot": [0, 0, 300]}, "pivot"),
+    ({"soft_limits": {"uper": [None] * 6}}, "soft_limits.uper: not a key here; did you mean upper?"),
     ({"soft_limits": {"lower": [None] * 5 + [170], "upper": [None] * 5 + [-170]}},
      "soft_limits: yaw [170, -170] deg crosses ±180 deg, which soft limits do not support"),
 ])
@@ -253,7 +254,9 @@ def test_the_command_line_knows_every_frame_the_controller_does() -> None:
 @pytest.mark.parametrize("text, fragment", [
     ("tool = [0, 0, 300", "not valid TOML"),
     ("[soft_limits.lower]\ntilt = 3\n", "soft_limits.lower: unknown axis tilt; the axes are x, y, z, roll, pitch, yaw"),
-    ("tool = [0, 0, 300, 0, 0, 0]\npivot = 1\n", "pivot"),
+    ("tool = [0, 0, 300, 0, 0, 0]\npivot = 1\n", "pivot: not a key here; the keys here are work, tool, soft_limits"),
+    ("[soft_limits]\nmax_tilt = 5\n",
+     "soft_limits.max_tilt: not a key here; did you mean max_tilt_deg? the keys here are lower, upper, max_tilt_deg"),
     ("", "empty (no work, tool or soft_limits)"),  # found from outside: it started the service with no soft limits
     ("# hexactl operator frames\n\n", "empty"),
     # named as the operator wrote it, not by its place in a list the file does not show (it said upper[5])

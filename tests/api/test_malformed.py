@@ -95,6 +95,22 @@ def test_an_integer_beyond_double_range_is_refused_as_1e400_is(digits) -> None:
     assert decode_request(f'{{"v": 1, "id": -{largest}, "cmd": "status"}}'.encode()).id == -largest
 
 
+@pytest.mark.parametrize(("body", "field", "problem"), [
+    (b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "durration": 2}', "durration",
+     "not a key here; did you mean duration? the keys here are duration, speed, v, id, deadline_ms, pose, frame, "
+     "relative, tolerance_mm, validated_under, cmd"),
+    (b'{"v": 1, "id": 1, "cmd": "status", "verbose": true}', "verbose",
+     "not a key here; the keys here are v, id, deadline_ms, cmd"),
+    (b'{"v": 1, "id": 1, "cmd": "set_frames", "soft_limit_changes": {"uper": {}}}', "soft_limit_changes.uper",
+     "not a key here; did you mean upper? the keys here are lower, upper, max_tilt_deg"),
+])
+def test_an_unknown_field_is_answered_with_the_fields_taken_there(body, field, problem) -> None:
+    with pytest.raises(ApiError) as refused:
+        decode_request(body)
+    assert refused.value.details == [{"field": field, "problem": problem}]
+    assert refused.value.message.endswith(f"{field}: {problem}")
+
+
 def test_nesting_too_deep_says_so_in_a_clients_terms() -> None:
     with pytest.raises(ApiError) as refused:
         decode_request(b"[" * 50_000)

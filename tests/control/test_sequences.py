@@ -38,7 +38,12 @@ def test_the_file_format_round_trips_into_waypoints():
     ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nduration = 1\nspeed = 0.5", "not both"),
     ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nspeed = 2", "speed"),
     ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\ndwell = -1", "dwell"),
-    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nwait = 1", "wait"),
+    # an unknown key is answered with the keys taken there, and the nearest
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\nwait = 1",
+     r"^bad.toml: waypoint\[0\].wait: not a key here; the keys here are duration, speed, pose, dwell$"),
+    ("name = 'x'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]\ndwel = 1", r"waypoint\[0\].dwel: not a key here; did you mean dwell\?"),
+    ("name = 'x'\nframes = 'work'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]",
+     r"frames: not a key here; did you mean frame\? the keys here are name, description, frame, waypoint$"),
     ("name = ", "TOML"),
     ("name = 'x'\n[waypoint]\npose = [0, 0, 0, 0, 0, 0]", r"write each waypoint as \[\[waypoint\]\]"),
     (f"name = '{'x' * 201}'\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]", "name: String should have at most 200"),

@@ -38,7 +38,8 @@ def test_a_key_left_out_keeps_its_default() -> None:
 
 
 @pytest.mark.parametrize(("text", "expected"), [
-    ("[tilt]\nrate_limt_deg_s = 2.0\n", "mine.toml: tilt.rate_limt_deg_s: not a cueing parameter; config/cueing.toml"),
+    ("[tilt]\nrate_limt_deg_s = 2.0\n", "mine.toml: tilt.rate_limt_deg_s: not a key here; did you mean rate_limit_deg_s? "
+                                       "the keys here are gain, break_rad_s, damping, rate_limit_deg_s, limit_deg"),
     ("[translational]\nbreak_rad_s = [1.0, -1.0, 2.0]\n",
      "mine.toml: translational.break_rad_s[1]: Input should be greater than 0"),
     ("[translational]\ngain = [1.0, 1.0]\n", "mine.toml: translational.gain: too few values, one per axis"),
@@ -47,7 +48,7 @@ def test_a_key_left_out_keeps_its_default() -> None:
     ("[tilt]\nlimit_deg = nan\n", "mine.toml: tilt.limit_deg: must be a finite number"),
     ("[workspace]\nlimiter_knee = 0.98\n", "mine.toml: workspace: limiter_knee 0.98 must be below limiter_ceiling 0.97"),
     ("[workspace]\nmax_gain = 1e4\n", "mine.toml: workspace.max_gain: Input should be less than or equal to 100"),
-    ("[wash]\ngain = 1\n", "mine.toml: wash: not a cueing parameter"),
+    ("[wash]\ngain = 1\n", "mine.toml: wash: not a key here; the keys here are translational, rotational, tilt, workspace"),
     ("[tilt\n", "mine.toml: not valid TOML"),
 ])
 def test_a_bad_parameters_file_is_refused_naming_the_file_and_the_key(text: str, expected: str) -> None:

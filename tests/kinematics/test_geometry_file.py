@@ -93,7 +93,9 @@ def _set(path, value):
          r"measurement.point_sigma_mm: 1e-200 is not a noise \(1σ\) from 1e-06 to 1000 mm, a nanometre to a metre"),
         (_set(["measurement", "feature_point_sigma_mm"], 1e-200),
          r"measurement.feature_point_sigma_mm: 1e-200 is not a noise .*; or 0: known exactly$"),
-        (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: Extra inputs are not permitted"),
+        (_set(["limits", "typo_key"], 1.0), r"limits.typo_key: not a key here; the keys here are stroke, base_cone_deg, .*"),
+        (_set(["limits", "max_jacobian_conditon"], 1.0),
+         r"limits.max_jacobian_conditon: not a key here; did you mean max_jacobian_condition\?"),
         (_set(["zero_lengths", 0], "long"), r'zero_lengths\[0\]: must be a number, not the string "long"$'),
         # numbers are numbers: a quoted one or a bool is a slip to refuse, not to read
         (_set(["zero_lengths", 0], "1750.0"), r'zero_lengths\[0\]: must be a number, not the string "1750.0" '

@@ -309,8 +309,8 @@ class CommandHandler:
                 given["soft_limits"] = request.soft_limit_changes.applied_to(current.soft_limits)
             frames = OperatorFrames.model_validate({**dict(current), **given})
         except ValidationError as error:
-            raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames"),
-                           validation_problems(error)) from None
+            raise ApiError(ErrorCode.INVALID_REQUEST, describe_validation_error(error, "set_frames", model=OperatorFrames),
+                           validation_problems(error, OperatorFrames)) from None
         return self._replace_frames(frames)
 
     def _replace_frames(self, frames: OperatorFrames, message: str | None = None) -> dict[str, Any]:

@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
-from hexactl.adapters.api.messages import COMMANDS, Request, json_type
+from hexactl.adapters.api.messages import COMMANDS, REQUEST_MODELS, Request, json_type
 from hexactl.adapters.api.protocol import MAX_REQUEST_BYTES, PROTOCOL_VERSION
-from hexactl.kinematics.validation_messages import validation_location
+from hexactl.kinematics.validation_messages import problem_message, validation_location
 
 
 
@@ -75,6 +75,7 @@ def problems_error(code: str, text: str) -> ApiError:
 
 
 _REQUEST = TypeAdapter(Request)
+_REQUEST_MODEL = dict(zip(COMMANDS, REQUEST_MODELS))
 
 
 def decode_request(body: bytes) -> Request:
@@ -126,18 +127,22 @@ def decode_request(body: bytes) -> Request:
     try:
         return _REQUEST.validate_python(document)
     except ValidationError as error:
-        problems = validation_problems(error, within_command=True)
+        problems = validation_problems(error, _REQUEST_MODEL[command], within_command=True)
         message = "; ".join(f"{p['field']}: {p['problem']}" if p["field"] else p["problem"] for p in problems)
         raise ApiError(ErrorCode.INVALID_REQUEST, f"{command}: {message}", problems, request_id) from None
 
 
-def validation_problems(error: ValidationError, within_command: bool = False) -> list[dict[str, str]]:
-    """An ``invalid_request``'s ``details``: one ``{field, problem}`` per problem, the field
-    as a client writes it (``within_command``: the locations start with the command's tag,
-    left out)."""
-    return [{"field": validation_location(problem["loc"][1:] if within_command else problem["loc"]),
-             "problem": problem["msg"].removeprefix("Value error, ")}
-            for problem in error.errors(include_url=False, include_input=False, include_context=False)]
+def validation_problems(error: ValidationError, model: type[BaseModel],
+                        within_command: bool = False) -> list[dict[str, str]]:
+    """An ``invalid_request``'s ``details``: one ``{field, problem}`` per problem of validating
+    ``model``, the field as a client writes it (``within_command``: the locations start with
+    the command's tag, left out); an unknown field is answered with the fields taken."""
+    problems = []
+    for problem in error.errors(include_url=False, include_input=False, include_context=False):
+        location = problem["loc"][1:] if within_command else problem["loc"]
+        problems.append({"field": validation_location(location),
+                         "problem": problem_message({**problem, "loc": location}, model)})
+    return problems
 
 
 def encode(document: dict[str, Any]) -> bytes:

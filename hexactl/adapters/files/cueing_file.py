@@ -35,7 +35,7 @@ from hexactl.adapters.files.text import read_text
 from hexactl.cueing.parameters import CueingParameters
 from hexactl.cueing.washout import GRAVITY_M_S2, VehicleTrajectory
 from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL, PLAIN_DECIMAL_HINT
-from hexactl.kinematics.validation_messages import validation_location
+from hexactl.kinematics.validation_messages import accepted_keys, unknown_key_message, validation_location
 
 VEHICLE_COLUMNS = ("t_s", "f_x", "f_y", "f_z", "omega_x", "omega_y", "omega_z")
 
@@ -89,7 +89,7 @@ def _describe(error: ValidationError, source: str) -> str:
         where = list(problem["loc"])
         message = problem["msg"].removeprefix("Value error, ")
         if problem["type"] == "extra_forbidden":
-            message = "not a cueing parameter; config/cueing.toml lists every key (check the spelling and the table)"
+            message = unknown_key_message(where[-1], accepted_keys(CueingParameters, where))
         elif problem["type"] == "finite_number":
             message = "must be a finite number (NaN and inf are refused)"
         elif problem["type"] == "missing" and where and isinstance(where[-1], int):  # a list one value short

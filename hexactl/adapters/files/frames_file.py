@@ -70,7 +70,7 @@ def load_frames(path: str | os.PathLike[str]) -> OperatorFrames:
     except ValidationError as error:
         # A bound is named as written, [soft_limits.upper] yaw = …, not by its place in the list.
         raise FramesFileError(describe_validation_error(
-            error, str(location), {f"soft_limits.{side}": POSE_AXES for side in tables})) from None
+            error, str(location), {f"soft_limits.{side}": POSE_AXES for side in tables}, OperatorFrames)) from None
 
 
 def frames_to_toml(frames: OperatorFrames) -> str:

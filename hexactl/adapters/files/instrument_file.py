@@ -72,7 +72,7 @@ def parse_instrument(text: str, source: str) -> Instrument:
     try:
         return _InstrumentDescription.model_validate(document).instrument()
     except ValidationError as error:
-        raise InstrumentFileError(describe_validation_error(error, source)) from None
+        raise InstrumentFileError(describe_validation_error(error, source, model=_InstrumentDescription)) from None
 
 
 def load_instrument(path: str | os.PathLike[str]) -> Instrument:
