@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from hexactl.adapters.api.client import CommandError, HexactlClient, TelemetrySubscriber
+from hexactl.adapters.api.client import HexactlClient, TelemetrySubscriber
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
 from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT
 
@@ -31,11 +31,7 @@ def wait_until_at_rest(client: HexactlClient, telemetry: TelemetrySubscriber) ->
 
 
 def demo(client: HexactlClient, telemetry: TelemetrySubscriber) -> None:
-    try:
-        client.call("enable")
-    except CommandError as error:
-        if error.code != "already_enabled":
-            raise
+    client.call("enable")  # ok if it already is
     reply = client.call("move", pose=[0, 0, 50, 0, 0, 5], duration=2.0)
     print(f"moving to {reply['goal']} in {reply['duration']:.2f} s")
     print("measured:", [round(v, 3) for v in wait_until_at_rest(client, telemetry)["pose_measured"]])

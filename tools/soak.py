@@ -147,7 +147,7 @@ class MonitoredService:
         deadline = time.monotonic() + ENABLE_TIMEOUT_S
         while time.monotonic() < deadline:
             reply = self.operator.request("enable")
-            if reply["ok"] or reply["error"]["code"] == "already_enabled":
+            if reply["ok"]:
                 return cause
             if reply["error"]["code"] == "actuator_fault":  # CLEAR_FAULT still pending or refused: again
                 self.operator.call("reset")

@@ -240,6 +240,8 @@ class ControlCore:
     # -- commands ------------------------------------------------------------------------
 
     def _enable(self, command: cmd.Enable) -> Refusal:
+        if self.state is ControlState.ENABLED:  # raced another enable: the state asked for, as the facade says
+            return None
         if refusal := preconditions.check_enable(self, self._supervisor.heartbeat_timeout_s):
             return refusal
         assert self.feedback is not None and self.pose_measured is not None

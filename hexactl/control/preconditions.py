@@ -107,8 +107,7 @@ def _at_rest(view: CoreView) -> Refusal:
 
 
 def check_enable(view: CoreView, heartbeat_timeout_s: float) -> Refusal:
-    if view.state is ControlState.ENABLED:
-        return ErrorCode.ALREADY_ENABLED, "already enabled"
+    """Of a controller not already enabled (callers answer that as done: the state asked for)."""
     if view.state is not ControlState.DISABLED:
         return ErrorCode.LATCHED, f"{view.state.value} is latched: reset first"
     if view.feedback is None:

@@ -30,7 +30,6 @@ class ErrorCode(StrEnum):
     INVALID_ARGUMENT = "invalid_argument"  # the request itself is malformed (NaN, wrong leg, …)
     NOT_ENABLED = "not_enabled"  # needs ENABLED; the controller is DISABLED
     LATCHED = "latched"  # FAULT or ESTOP is latched: reset first
-    ALREADY_ENABLED = "already_enabled"
     NOT_LATCHED = "not_latched"  # reset while ENABLED
     BUSY = "busy"  # moving, a sequence playing, or a calibration ramping in
     PATH_VIOLATION = "path_violation"  # the move's path leaves the workspace: see details.violations

@@ -37,7 +37,10 @@ class StateCommands:
 
     def enable(self, deadline_ns: int | None) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.enable`."""
-        if refusal := preconditions.check_enable(self._snapshot(), self._supervision.heartbeat_timeout_s):
+        s = self._snapshot()
+        if s.state is ControlState.ENABLED:  # the state asked for: no refusal, as disable's
+            return CommandResult.success("already enabled: nothing to do")
+        if refusal := preconditions.check_enable(s, self._supervision.heartbeat_timeout_s):
             return CommandResult.failure(*refusal)
         return self._submitter.submit(cmd.Enable, "enabled", deadline_ns=deadline_ns)
 

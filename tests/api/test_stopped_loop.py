@@ -30,7 +30,7 @@ def status(client: HexactlClient) -> dict:
 def enable(client: HexactlClient) -> None:
     def enabled() -> bool:
         reply = client.request("enable")
-        return reply["ok"] or reply["error"]["code"] == "already_enabled"
+        return reply["ok"]
 
     wait_until(enabled, "the actuators to enable", HANG_S, poll_s=0.2)
 

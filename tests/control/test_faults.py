@@ -199,8 +199,21 @@ def test_enable_refusals(make_rig, geometry):
     rig.run()
     assert rig.controller.enable().ok
     rig.run()
-    assert rig.controller.enable().error == "already_enabled"
+    again = rig.controller.enable()  # the state asked for, as a second disable
+    assert (again.ok, again.message) == (True, "already enabled: nothing to do")
     assert rig.controller.reset().error == "not_latched"
+
+
+def test_two_enables_queued_together_both_succeed_and_enable_once(rig) -> None:
+    """A retried enable (its first verdict late, loop_timeout) meets the loop already enabled
+    by the first: the state asked for, not a refusal the retrying client must know of."""
+    rig.run()
+    first, second = rig.controller.enable(), rig.controller.enable()  # both queued before the loop runs
+    rig.run()
+    assert all(rig.controller.outcome(result.details["ticket"]).ok for result in (first, second))
+    assert rig.controller.snapshot.state.value == "enabled"
+    assert [command for command in rig.actuators.commands if command[1] is ActuatorCommand.ENABLE] == \
+        [(None, ActuatorCommand.ENABLE)]
 
 
 def test_enable_refused_for_a_silent_leg_says_what_the_link_knows(rig):

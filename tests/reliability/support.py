@@ -26,7 +26,7 @@ BOOTING = ("heartbeat_missing", "outside_stroke", "pose_unknown")
 """Refusals of enable while the actuators boot: heard, but no FEEDBACK yet (position NaN)."""
 NOT_YET = (*BOOTING, "loop_timeout")
 """Answers to enable that call for asking again: booting, or no verdict in time from a loop
-held up on a busy host (it may still enable: asked again, it answers already_enabled)."""
+held up on a busy host (it may still enable: asked again, it answers that it already is)."""
 
 
 def firmwares(service: Service) -> tuple[ActuatorFirmware, ...]:
@@ -54,8 +54,6 @@ def enable(client: HexactlClient) -> None:
         try:
             client.call("enable")
         except CommandError as error:
-            if error.code == "already_enabled":
-                return True
             if error.code == "actuator_fault":
                 client.call("reset")
                 time.sleep(RESET_RETRY_S)

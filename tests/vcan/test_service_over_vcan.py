@@ -320,8 +320,6 @@ def enabled_at_rest(client: HexactlClient) -> dict:
         try:
             client.call("enable")
         except CommandError as error:
-            if error.code == "already_enabled":
-                return True
             # actuators not heard from yet, an E-stop still clearing (they release it only
             # 250 ms after the last ESTOP frame), or a stall latched since the status: reset next
             assert error.code in ("heartbeat_missing", "actuator_fault", "latched"), error

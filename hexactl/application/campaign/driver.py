@@ -229,8 +229,8 @@ class PlatformDriver:
         """Enable, waiting for actuators that are still booting (``heartbeat_missing``) or
         clearing a fault after a reset (``actuator_fault``, for :data:`FAULT_CLEAR_S`), and
         asking again after a verdict that came too late for the API (``loop_timeout``: if
-        the first was carried out, the next answers ``already_enabled``) or a loop held up
-        past a second (``loop_silent``: not sent)."""
+        the first was carried out, the next answers that it is already enabled) or a loop
+        held up past a second (``loop_silent``: not sent)."""
         start = time.monotonic()
         while True:
             try:
@@ -238,8 +238,6 @@ class PlatformDriver:
                 return
             except CommandError as error:
                 waited = time.monotonic() - start
-                if error.code == "already_enabled":
-                    return
                 if error.code == "actuator_fault" and waited > FAULT_CLEAR_S:
                     raise ControllerFault(f"an actuator is in fault ({error.message})", True) from None
                 if error.code not in ("heartbeat_missing", "actuator_fault", "loop_timeout", "loop_silent") \
