@@ -29,7 +29,7 @@ Poses inside the control layer are relative to the zero posture in mm and *radia
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from itertools import chain
 from math import degrees, isfinite
@@ -280,6 +280,7 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
                                     details={"waypoints": total, "limit": MAX_WAYPOINTS}))
     budget = PlanningBudget()
     remedy = "split it into shorter sequences" if total > 1 else "split the move"
+    at = _waypoint_label(total)
     origin, origin_frames = start.position, start_frames
     segments = []
     home = context.active.home
@@ -291,17 +292,17 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
             return Plan(refusal=refusal)
         problem = _check_waypoint(waypoint)
         if problem:
-            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"waypoint {number}: {problem}", details={"waypoint": number}))
+            return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"{at(number)}{problem}", details={"waypoint": number}))
         goal = _goal(context, waypoint.pose)
         if isinstance(goal, Refusal):
-            return Plan(refusal=Refusal(goal.code, f"waypoint {number}: {goal.message}", details={"waypoint": number, **goal.details}))
+            return Plan(refusal=Refusal(goal.code, f"{at(number)}{goal.message}", details={"waypoint": number, **goal.details}))
         goal, frames, correction_mm = goal
         if correction_mm is not None:
             corrections.append(correction_mm)
         rebased = None
         if frames != start_frames:
             if not start.resting:
-                return Plan(refusal=Refusal(ErrorCode.BUSY, f"waypoint {number}: the motion under way runs in another "
+                return Plan(refusal=Refusal(ErrorCode.BUSY, f"{at(number)}the motion under way runs in another "
                                             "frame: stop first, or move in its frame", details={"waypoint": number}))
             rebased = convert(start.position, start_frames, frames, home)
             start, start_frames = KinematicState.at_rest(rebased), frames
@@ -316,10 +317,10 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
             goal_violations = path_violations(context, goal_relative, number,
                                               checks.tolerated if number == 1 else None)
             if goal_violations:
-                return Plan(refusal=_path_refusal(context, goal_violations, origin, origin_frames))
+                return Plan(refusal=_path_refusal(context, goal_violations, origin, origin_frames, at))
         planned = _plan_segment(context, start, goal, frames, waypoint, MAX_MOTION_S - motion_s, budget, remedy)
         if isinstance(planned, Refusal):
-            return Plan(refusal=Refusal(planned.code, f"waypoint {number}: {planned.message}",
+            return Plan(refusal=Refusal(planned.code, f"{at(number)}{planned.message}",
                                         details={"waypoint": number, **planned.details}))
         segment, samples = planned
         checks.add(samples, number)
@@ -333,18 +334,25 @@ def plan_path(context: PlanningContext, start: KinematicState, waypoints: Sequen
     if refusal := checks.flush(budget, lambda: f"checking the paths of {total} waypoints", remedy, final=True):
         return Plan(refusal=refusal)
     if violations := checks.violations():
-        return Plan(refusal=_path_refusal(context, violations, origin, origin_frames))
+        return Plan(refusal=_path_refusal(context, violations, origin, origin_frames, at))
     return Plan(segments=tuple(segments), lock_corrections_mm=tuple(corrections))
 
 
+def _waypoint_label(total: int) -> Callable[[int], str]:
+    """How a refusal names the waypoint at fault among ``total``: not at all for a single
+    move, where "waypoint 1" would name a sequence the operator never wrote."""
+    return (lambda number: f"waypoint {number}: ") if total > 1 else (lambda number: "")
+
+
 def _path_refusal(context: PlanningContext, violations: Sequence[PathViolation], origin: Coordinates,
-                  origin_frames: Frames | None) -> Refusal:
+                  origin_frames: Frames | None, at: Callable[[int], str]) -> Refusal:
     """The refusal of a plan for ``violations``, saying so when the motion starts outside
-    the soft limits (at ``origin``, in the coordinates of ``origin_frames``)."""
+    the soft limits (at ``origin``, in the coordinates of ``origin_frames``); ``at`` names
+    a waypoint (:func:`_waypoint_label`)."""
     # The pose's axes first, in the message and the list: the legs' limits a pose beyond its
     # envelope breaks follow from it (found from outside: yaw −90° came last, after twelve leg lines).
     violations = sorted(violations, key=lambda violation: violation.kind not in _POSE_KINDS)
-    message = _summary(violations)
+    message = _summary(violations, at)
     if outside_soft_limits(context, origin, origin_frames):
         message += f": {OUTSIDE_SOFT_LIMITS}"
     return Refusal(ErrorCode.PATH_VIOLATION, message, tuple(violations))
@@ -852,7 +860,7 @@ _POSE_KINDS = (ViolationKind.POSE_RANGE, ViolationKind.SOFT_LIMIT, ViolationKind
 """Violations in the operator's terms (an axis of the pose), named first in a refusal."""
 
 
-def _summary(violations: Sequence[PathViolation]) -> str:
+def _summary(violations: Sequence[PathViolation], at: Callable[[int], str]) -> str:
     first = violations[0]
     more = f" (and {len(violations) - 1} more)" if len(violations) > 1 else ""
-    return f"waypoint {first.waypoint}: {first.message}{more}"
+    return f"{at(first.waypoint)}{first.message}{more}"

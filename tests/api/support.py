@@ -141,7 +141,7 @@ class FakeController:
         if violations:
             items = [{"waypoint": 1, "pose": tuple(pose), **{k: getattr(v, k) for k in ("kind", "message", "value", "limit", "leg", "axis")}}
                      for v in violations]
-            return CommandResult.failure(ErrorCode.PATH_VIOLATION, f"waypoint 1: {violations[0].message}", violations=items)
+            return CommandResult.failure(ErrorCode.PATH_VIOLATION, violations[0].message, violations=items)
         return CommandResult.success("valid", goal=list(pose), duration_s=duration or 1.25, waypoints=1,
                                      predicted_accuracy=self.accuracy)
 

@@ -45,7 +45,7 @@ def test_refusal_exits_one_and_says_why(service, capsys) -> None:
     service.controller.state = "enabled"
     assert run(service, "move", "x=700") == 1
     err = capsys.readouterr().err
-    assert err.startswith("error path_violation: waypoint 1: x 700 mm outside the pose envelope")
+    assert err.startswith("error path_violation: x 700 mm outside the pose envelope")
 
 
 def test_json_prints_the_raw_reply(service, capsys) -> None:

@@ -25,10 +25,12 @@ export function describeError(err) {
   let text = `${err.code ?? 'error'}: ${err.message ?? ''}`;
   const v = err.details && Array.isArray(err.details.violations) ? err.details.violations : null;
   if (v && v.length) {
+    // A single move's violations are all at waypoint 1: named only where a sequence's are.
+    const sequence = v.some((x) => x && typeof x === 'object' && Number(x.waypoint) > 1);
     const lines = v.slice(0, 4).map((x) => {
       if (x && typeof x === 'object') {
         const where = x.axis ? x.axis : (x.leg ? `leg ${x.leg}` : '');
-        const wp = x.waypoint !== undefined && x.waypoint !== null ? `waypoint ${x.waypoint}: ` : '';
+        const wp = sequence && x.waypoint !== undefined && x.waypoint !== null ? `waypoint ${x.waypoint}: ` : '';
         return `  • ${wp}${x.message ?? `${x.kind ?? ''} ${where} ${fmt(x.value)} beyond ${fmt(x.limit)}`}`;
       }
       return `  • ${String(x)}`;
