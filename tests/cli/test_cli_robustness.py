@@ -202,6 +202,16 @@ def test_an_empty_field_is_refused_not_dropped(typed, said) -> None:
         parse_pose_argument(typed)
 
 
+@pytest.mark.parametrize("args", [["move", "0", "0", "50", "0", "0", "0"], ["check", "0 0 50 0 0 0"]])
+def test_a_pose_typed_with_spaces_is_told_to_use_commas(args, capsys) -> None:
+    """`hexactl move 0 0 50 0 0 0`, as ik and fk take their six, said "a pose is six numbers,
+    got 1" (of the first '0'); spaces inside quotes said "'0 0 50 0 0 0' is not a number"."""
+    assert exits_with(args) == 2
+    error = capsys.readouterr().err
+    assert "one value where six are needed" in error and "with commas between the numbers (not spaces)" in error, error
+    assert "is not a number" not in error and "got 1" not in error, error
+
+
 def test_the_forms_still_parse() -> None:
     assert parse_pose_argument("x=5,yaw=-2") == [5.0, 0.0, 0.0, 0.0, 0.0, -2.0]
     assert parse_pose_argument("1,2,3,4,5,6") == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]

@@ -60,6 +60,31 @@ def test_a_file_not_in_utf_8_is_refused_naming_it_and_how_to_save_it(argv, encod
     assert SAVE_AS in err and "Traceback" not in err and "codec" not in err
 
 
+@pytest.mark.parametrize("argv", [
+    ["ik", "0", "0", "0", "0", "0", "0", "--config", "{file}"],
+    ["calibrate", "{file}", "-o", "{tmp}/cal.toml"],
+    ["plot", "{file}"],
+    ["cue", "{file}", "--plan-only"],
+], ids=lambda argv: argv[0])
+@pytest.mark.parametrize(("name", "said"), [
+    ("", "a folder, not a file: name a file in it"),
+    ("missing.csv", "no such file"),  # plot and cue then say where theirs are
+])
+def test_a_folder_or_a_missing_file_is_named_as_such(argv, name, said, tmp_path, capsys) -> None:
+    """Found from outside: a folder read "cannot read: [Errno 21] Is a directory: '/tmp'"."""
+    path = tmp_path / name if name else tmp_path
+    assert exits_with([word.format(file=path, tmp=tmp_path) for word in argv]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: {said}" in err and "Errno" not in err, err
+
+
+def test_a_missing_file_named_relatively_says_where_it_was_looked_for(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert exits_with(["calibrate", "missing.csv", "-o", "cal.toml"]) == 2
+    assert f"missing.csv: no such file: check the name (a relative name is looked up in {tmp_path})" in \
+        capsys.readouterr().err
+
+
 def test_the_client_file_with_a_byte_order_mark_is_read(tmp_path, monkeypatch, capsys) -> None:
     client = saved(tmp_path / "client.toml", f'api = "ipc://{tmp_path}/nobody"\n', "utf-8 with BOM")
     monkeypatch.setenv("HEXACTL_CLIENT_CONFIG", str(client))

@@ -362,6 +362,9 @@ def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
                        f"and {plain!r}): give {POSE_FORMS}")
     if keyed:
         pose = _keyed_values(what, text, parts, 0.0)
+    elif len(parts) == 1:  # `move 0 0 50 0 0 0`: six arguments, or one with spaces between its numbers
+        raise CliError(f"{what} {text!r}: one value where six are needed: give {POSE_FORMS}, as one argument with "
+                       "commas between the numbers (not spaces)")
     else:
         pose = [_number(part, text) for part in parts]
     problem = validate_pose_values(pose)

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from hexactl.adapters.files.atomic import write_atomic
-from hexactl.adapters.files.text import TextFileError, decode_text
+from hexactl.adapters.files.text import TextFileError, decode_text, read_problem
 from hexactl.calibration.data import MeasurementData, RowProblem
 from hexactl.calibration.observations import Instrument, Theodolites, point_covariance
 from hexactl.calibration.planning import PosturePlan
@@ -92,7 +92,7 @@ def read_measurements(path: str | os.PathLike[str], feature_point_count: int,
         raw = location.read_bytes()
         text = decode_text(raw, str(location))
     except OSError as error:
-        raise MeasurementFileError(f"{location}: cannot read: {error}") from None
+        raise MeasurementFileError(f"{location}: {read_problem(error)}") from None
     except TextFileError as error:
         raise MeasurementFileError(str(error)) from None
     return parse_measurements(text, str(location), feature_point_count, hashlib.sha256(raw).hexdigest(), instrument)

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hexactl.adapters.files.atomic import write_atomic, write_problem
-from hexactl.adapters.files.text import SAVE_AS_UTF8, TextFileError, decode_text
+from hexactl.adapters.files.text import SAVE_AS_UTF8, TextFileError, decode_text, read_problem
 from hexactl.kinematics.axes import POSE_AXES
 
 if TYPE_CHECKING:
@@ -290,7 +290,7 @@ def read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]], in
         raise RecordingReadError(f"{path}: no such file (a recording is NAME.csv in the service's data "
                                  "directory)") from None
     except OSError as error:
-        raise RecordingReadError(f"{path}: cannot read it: {error}") from None
+        raise RecordingReadError(f"{path}: {read_problem(error)}") from None
     try:  # the text files' one rule, on the first lines: UTF-16 and the like named as such
         decode_text(start[:start.rfind(b"\n") + 1] or start, str(path))
     except TextFileError as error:
@@ -318,7 +318,7 @@ def read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]], in
     except csv.Error as error:  # a NUL byte: not a text file
         raise RecordingReadError(f"{path}: line {number}: {error}: the file is garbled") from None
     except OSError as error:
-        raise RecordingReadError(f"{path}: cannot read it: {error}") from None
+        raise RecordingReadError(f"{path}: {read_problem(error)}") from None
     if not columns[0]:
         raise RecordingReadError(f"{path}: the recording has no rows")
     return header, [np.frombuffer(column, dtype=np.float64) for column in columns], cut_line

@@ -10,6 +10,7 @@ it must be saved as UTF-8.
 from __future__ import annotations
 
 import codecs
+import errno
 import os
 from pathlib import Path
 
@@ -42,14 +43,27 @@ def _line(data: bytes, offset: int) -> int:
     return data.count(b"\n", 0, offset) + 1
 
 
+def read_problem(error: OSError) -> str:
+    """Why ``error`` stopped a read and what to do, for people (``[Errno 21] Is a directory:
+    '/tmp'`` says only the first). The one rule for every file hexactl reads."""
+    if error.errno == errno.EISDIR:
+        return "a folder, not a file: name a file in it"
+    if error.errno == errno.ENOENT:
+        relative = error.filename is not None and not os.path.isabs(error.filename)
+        return "no such file: check the name" + (f" (a relative name is looked up in {os.getcwd()})" if relative else "")
+    if error.errno in (errno.EACCES, errno.EPERM):
+        return "no permission to read it: check its permissions and its folder's (ls -l)"
+    return f"cannot read it: {error.strerror or error}; check the name and the disk"
+
+
 def read_text(path: str | os.PathLike[str], error: type[Exception] = TextFileError) -> str:
     """The text of the file ``path`` (:func:`decode_text`). Raises ``error`` (the
     reader's own error type, :class:`TextFileError` by default) naming the file when it
-    cannot be read or is not UTF-8."""
+    cannot be read (:func:`read_problem`) or is not UTF-8."""
     try:
         data = Path(path).read_bytes()
     except OSError as cause:
-        raise error(f"{path}: cannot read: {cause}") from None
+        raise error(f"{path}: {read_problem(cause)}") from None
     try:
         return decode_text(data, str(path))
     except TextFileError as cause:
