@@ -253,6 +253,24 @@ def test_a_bad_client_file_is_named(service, tmp_path, monkeypatch, capsys) -> N
                                                "file knows api, curve_client, curve_server, telemetry")
 
 
+@pytest.mark.parametrize(("content", "said"), [
+    (None, "no such file: check the name, or unset HEXACTL_CLIENT_CONFIG to use $XDG_CONFIG_HOME/hexactl/client.toml"),
+    ("", "the file names no setting; give at least one of api, curve_client, curve_server, telemetry"),
+    ("# only a comment\n", "the file names no setting"),
+])
+def test_a_client_file_named_but_missing_or_empty_is_refused_not_passed_over(content, said, tmp_path, monkeypatch,
+                                                                              capsys) -> None:
+    """Found from outside: a HEXACTL_CLIENT_CONFIG naming a file not there (a typo) or empty
+    was passed over, and move, enable … went to the default endpoint: another service, perhaps."""
+    client_file = tmp_path / "client.toml"
+    if content is not None:
+        client_file.write_text(content)
+    monkeypatch.setenv("HEXACTL_CLIENT_CONFIG", str(client_file))
+    assert main(["enable", "--timeout", "0.2"]) == 2
+    error = capsys.readouterr().err
+    assert f"HEXACTL_CLIENT_CONFIG={client_file}: {said}" in error and "no answer" not in error, error
+
+
 def test_without_settings_the_default_endpoint(service, monkeypatch, capsys) -> None:
     assert main(["status", "--timeout", "0.2"]) in (0, 2)  # whether or not a service runs on the default port
     captured = capsys.readouterr()

@@ -34,6 +34,9 @@ SETTINGS = {  # argument name → (environment variable, client file key, defaul
 _PATHS = ("curve_server", "curve_client")
 
 
+_DEFAULT_CLIENT_FILE = "$XDG_CONFIG_HOME/hexactl/client.toml (~/.config/hexactl/client.toml)"
+
+
 def client_config_path() -> Path:
     """The client file: ``$HEXACTL_CLIENT_CONFIG``, else ``$XDG_CONFIG_HOME/hexactl/client.toml``."""
     if named := os.environ.get(CLIENT_CONFIG_VARIABLE):
@@ -82,13 +85,23 @@ def fill_endpoints(arguments: argparse.Namespace) -> None:
 
 
 def _read_client_file() -> dict[str, Any]:
+    """The client file's settings: none from a default file not there; a file named by
+    :data:`CLIENT_CONFIG_VARIABLE` must be there and name one (else the commands would go,
+    unsaid, to the default endpoint: another machine's service, perhaps)."""
     path = client_config_path()
+    named = bool(os.environ.get(CLIENT_CONFIG_VARIABLE))
     try:
         data = path.read_bytes()
     except FileNotFoundError:
+        if named:
+            raise CliError(f"{CLIENT_CONFIG_VARIABLE}={path}: no such file: check the name, or unset "
+                           f"{CLIENT_CONFIG_VARIABLE} to use {_DEFAULT_CLIENT_FILE}") from None
         return {}
     except OSError as error:
-        raise CliError(f"{path}: cannot read the client file: {error}; fix it or set {CLIENT_CONFIG_VARIABLE}") from None
+        from hexactl.adapters.files.text import read_problem
+
+        raise CliError(f"{path}: the client file: {read_problem(error)}; fix it or set {CLIENT_CONFIG_VARIABLE}") \
+            from None
     import tomllib  # only when there is a file
 
     from hexactl.adapters.files.text import TextFileError, decode_text
@@ -107,4 +120,7 @@ def _read_client_file() -> dict[str, Any]:
         raise CliError(f"{path}: unknown key {', '.join(unknown)}; the client file knows {', '.join(sorted(known))}")
     if wrong := sorted(key for key, value in values.items() if not isinstance(value, str)):
         raise CliError(f"{path}: {', '.join(wrong)}: must be a string, e.g. api = \"tcp://10.0.0.2:5555\"")
+    if named and not values:
+        raise CliError(f"{CLIENT_CONFIG_VARIABLE}={path}: the file names no setting; give at least one of "
+                       f"{', '.join(sorted(known))}, e.g. api = \"tcp://10.0.0.2:5555\"")
     return values
