@@ -53,6 +53,7 @@ from hexactl.adapters.api.security import (
     CurveServerKeys,
     SecurityError,
     check_endpoints,
+    client_keys,
     load_server_keys,
 )
 from hexactl.adapters.api.protocol import (
@@ -397,7 +398,8 @@ class Service:
             if config.dashboard_http:  # started again by its own watcher should it end
                 board = DashboardProcess(api.api_endpoint, api.telemetry_endpoint, config.dashboard_http)
                 closers.callback(board.close)  # the first to go: it stops sending commands
-            security = "CURVE" if config.curve else "no authentication (loopback)"
+            security = (f"CURVE, client keys {', '.join(client_keys(config.curve.clients_dir))}" if config.curve
+                        else "no authentication (loopback)")
             log.info("API on %s, telemetry on %s at %g Hz; %s", api.api_endpoint, api.telemetry_endpoint,
                      config.telemetry_rate_hz, security)
             log.info("data directories: %s", ", ".join(str(directory) for directory in data_dirs))

@@ -15,6 +15,7 @@ from hexactl.adapters.api.security import (
     CurveServerKeys,
     SecurityError,
     check_endpoints,
+    client_keys,
     create_keys,
 )
 from hexactl.adapters.api.protocol import is_local_endpoint
@@ -59,6 +60,25 @@ def test_non_loopback_bind_needs_curve(tmp_path) -> None:
         check_endpoints(["tcp://0.0.0.0:5555"], CurveServerKeys(tmp_path / "missing", tmp_path))
     keys = create_keys(tmp_path / "keys")
     check_endpoints(["tcp://0.0.0.0:5555"], CurveServerKeys(keys["server_secret"], keys["clients_dir"]))
+
+
+def test_a_clients_folder_that_would_let_no_client_in_is_refused_naming_why(tmp_path) -> None:
+    """Found from outside: one bad *.key among the clients' made ZeroMQ load none (logged by
+    zmq.auth only), and the service started saying CURVE: every client locked out. A file
+    for the folder said the folder "does not exist"."""
+    keys = create_keys(tmp_path / "keys")
+    clients = keys["clients_dir"]
+    assert client_keys(clients) == ["client"]
+    (clients / "junk.key").write_text("junk\n")
+    with pytest.raises(SecurityError, match=r"clients directory .*: junk.key \(.*\) is not a client's public key, "
+                                            r"and ZeroMQ would then let no client in: remove it"):
+        check_endpoints(["tcp://0.0.0.0:5555"], CurveServerKeys(keys["server_secret"], clients))
+    (clients / "junk.key").unlink()
+    with pytest.raises(SecurityError, match="is a file: name the folder of the clients' public keys"):
+        client_keys(clients / "client.key")
+    (clients / "client.key").unlink()
+    with pytest.raises(SecurityError, match="holds no client key \\(\\*.key\\): no client could connect"):
+        client_keys(clients)
 
 
 def test_create_keys_adds_clients_and_never_overwrites(tmp_path) -> None:

@@ -60,8 +60,41 @@ def check_endpoints(endpoints: list[str], keys: CurveServerKeys | None) -> None:
         return
     if not keys.secret_key_file.is_file():
         raise SecurityError(f"CURVE server secret key file {keys.secret_key_file} does not exist")
-    if not keys.clients_dir.is_dir():
-        raise SecurityError(f"CURVE clients directory {keys.clients_dir} does not exist")
+    client_keys(keys.clients_dir)
+
+
+def client_keys(clients_dir: Path) -> list[str]:
+    """The names of the client keys in ``clients_dir`` (its ``*.key`` files, as ZeroMQ's
+    authenticator reads them).
+
+    :raises SecurityError: it is not a folder; a ``*.key`` there is not a public key (the
+        authenticator then loads none: every client would be locked out while the service
+        said CURVE was on); or it holds none (no client could connect)
+    """
+    if clients_dir.is_file():
+        raise SecurityError(f"CURVE clients directory {clients_dir} is a file: name the folder of the clients' public "
+                            "keys (*.key; `hexactl keys --out DIR` makes DIR/clients)")
+    if not clients_dir.is_dir():
+        raise SecurityError(f"CURVE clients directory {clients_dir} does not exist")
+    names, problems = [], []
+    for path in sorted(clients_dir.glob("*.key")):
+        try:
+            public, _ = zmq.auth.load_certificate(path)
+        except (OSError, ValueError) as error:
+            problems.append(f"{path.name} ({error})")
+            continue
+        if public:
+            names.append(path.stem)
+        else:
+            problems.append(f"{path.name} (no public key)")
+    if problems:
+        raise SecurityError(f"CURVE clients directory {clients_dir}: {', '.join(problems)} is not a client's public "
+                            "key, and ZeroMQ would then let no client in: remove it, or put there the .key file "
+                            "`hexactl keys` made")
+    if not names:
+        raise SecurityError(f"CURVE clients directory {clients_dir} holds no client key (*.key): no client could "
+                            "connect; copy there each client's .key file (`hexactl keys --out DIR --name NAME`)")
+    return names
 
 
 def load_server_keys(keys: CurveServerKeys) -> tuple[bytes, bytes]:
