@@ -259,6 +259,29 @@ def test_an_empty_path_is_refused_naming_the_option(option, capsys) -> None:
     assert f"argument {option}: an empty path: name a file or folder (an unset shell variable?)" in error, error
 
 
+@pytest.mark.parametrize(("argv", "option"), [
+    (["keys", "--out", ""], "--out"),  # wrote a key pair into the working directory
+    (["calibrate", "", "-o", "cal.toml"], "DATA.csv"),
+    (["calibrate", "data.csv", "-o", ""], "-o/--output"),  # "error:  is a folder", the option unnamed
+    (["calibrate", "data.csv", "-o", "cal.toml", "--report", ""], "--report"),
+    (["simulate-campaign", "-o", ""], "-o/--output"),
+    (["plan-leglock", "-o", ""], "-o/--output"),
+    (["plot", ""], "RECORDING"),
+    (["plot", "rec.csv", "-o", ""], "-o/--out"),  # ".: name the image with the ending"
+    (["cue", "", "--plan-only"], "file"),
+    (["demo", "--out", ""], "--out"),
+    (["campaign", "--out", ""], "--out"),
+], ids=lambda value: value[0] if isinstance(value, list) else value)
+def test_an_empty_path_is_refused_naming_the_option_in_every_command(argv, option, tmp_path, monkeypatch,
+                                                                      capsys) -> None:
+    """Found from outside: ``hexactl keys --out "$DIR"`` with the variable unset wrote keys
+    into the working directory."""
+    monkeypatch.chdir(tmp_path)
+    assert exits_with(argv) == 2
+    assert f"argument {option}: an empty path: name a file or folder" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
 def test_a_named_kept_file_not_there_yet_is_said_at_the_start(tmp_path, monkeypatch, capsys) -> None:
     """A mistyped ``--frames`` name started the service with no soft limits, said only in
     an INFO line among the start's; a new file is legitimate (the first start), so it is

@@ -34,6 +34,7 @@ from hexactl.adapters.cli.common import (
     connection_parser,
     finite_float,
     load_config,
+    named_path,
     non_negative_int,
     positive_int,
     whole_number_in,
@@ -103,8 +104,8 @@ def _declare_simulate(simulate: argparse.ArgumentParser) -> None:
     from hexactl.calibration.planning import DEFAULT_CANDIDATES
     from hexactl.kinematics.geometry import noise_sigma_problem
 
-    simulate.add_argument("-o", "--output", required=True, metavar="DATA.csv", help="measurement file to write")
-    simulate.add_argument("--true-output", metavar="TRUE.toml", help="also write the simulated true geometry")
+    simulate.add_argument("-o", "--output", required=True, type=named_path, metavar="DATA.csv", help="measurement file to write")
+    simulate.add_argument("--true-output", type=named_path, metavar="TRUE.toml", help="also write the simulated true geometry")
     # Each plan draws DEFAULT_CANDIDATES candidates here (no --candidates): it can give no more postures.
     simulate.add_argument("--per-leg", type=whole_number_in(0, DEFAULT_CANDIDATES), default=20,
                           help=f"leg-lock postures per leg (default 20, at most {DEFAULT_CANDIDATES})")
@@ -114,7 +115,7 @@ def _declare_simulate(simulate: argparse.ArgumentParser) -> None:
     simulate.add_argument("--point-sigma", type=checked_number(noise_sigma_problem), metavar="MM",
                           help="instrument noise (default: the geometry's)")
     simulate.add_argument("--pose-form", action="store_true", help="write measured poses instead of feature points")
-    simulate.add_argument("--instrument", metavar="FILE", help="write the angles (and ranges) of the instrument this "
+    simulate.add_argument("--instrument", type=named_path, metavar="FILE", help="write the angles (and ranges) of the instrument this "
                           "TOML file describes, with its noise, instead of points (docs/calibration.md)")
     simulate.add_argument("--force", action="store_true", help="overwrite existing output files")
 
@@ -126,16 +127,16 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
 
     noise = checked_number(noise_sigma_problem)
 
-    calibrate.add_argument("data", metavar="DATA.csv", help="measurement file (never modified)")
-    calibrate.add_argument("-o", "--output", required=True, metavar="CAL.toml", help="calibration file to write")
+    calibrate.add_argument("data", type=named_path, metavar="DATA.csv", help="measurement file (never modified)")
+    calibrate.add_argument("-o", "--output", required=True, type=named_path, metavar="CAL.toml", help="calibration file to write")
     calibrate.add_argument("--method", choices=[m.value for m in Method], default=Method.AUTO.value,
                            help="identification method (default: auto, the best for the data, explained in the output)")
-    calibrate.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
+    calibrate.add_argument("--report", type=named_path, metavar="DIR", help="write an HTML report with plots into DIR")
     calibrate.add_argument("--force", action="store_true", help="overwrite an existing calibration file or report")
     calibrate.add_argument("--skip-bad-rows", action="store_true",
                            help="exclude rows with problems (listed) instead of refusing the file")
     calibrate.add_argument("--scales", action="store_true", help="also identify the six sensor scale errors (full)")
-    calibrate.add_argument("--instrument", metavar="FILE", help="the instrument (TOML: theodolites or a laser tracker, "
+    calibrate.add_argument("--instrument", type=named_path, metavar="FILE", help="the instrument (TOML: theodolites or a laser tracker, "
                            "its stations and noise) whose own angles and ranges DATA holds (docs/calibration.md)")
     calibrate.add_argument("--point-sigma", type=noise, metavar="MM",
                            help="instrument noise per coordinate, 1σ (default: the geometry's point_sigma_mm)")
@@ -145,7 +146,7 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
                            help="leglock/paper: bound on each parameter's deviation from nominal (default 15 mm)")
     calibrate.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy", "arctan"],
                            help="leglock: robust loss (default linear)")
-    calibrate.add_argument("--true", metavar="TRUE.toml",
+    calibrate.add_argument("--true", type=named_path, metavar="TRUE.toml",
                            help="simulation only: the true geometry, to add before/after validation to the report")
 
 
@@ -160,14 +161,14 @@ def _declare_plan(plan: argparse.ArgumentParser) -> None:
     plan.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
                       help=f"random candidates (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
     plan.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
-    plan.add_argument("-o", "--output", metavar="FILE", help="write the plan here (default: standard output)")
+    plan.add_argument("-o", "--output", type=named_path, metavar="FILE", help="write the plan here (default: standard output)")
     plan.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
 def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
     from hexactl.calibration.planning import DEFAULT_CANDIDATES, MAX_CANDIDATES
 
-    campaign.add_argument("--out", required=True, type=Path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
+    campaign.add_argument("--out", required=True, type=named_path, metavar="DIR", help="the campaign's directory (resumed if it holds one)")
     campaign.add_argument("--api", type=client_endpoint, metavar="ENDPOINT", help="the service's command endpoint (default $HEXACTL_API, "
                           f"else the client file's api, else {DEFAULT_API_ENDPOINT})")
     campaign.add_argument("--instrument", default="sim", metavar="SOURCE",

@@ -17,11 +17,10 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
 from hexactl.adapters.api.protocol import GOAL_TOLERANCE
-from hexactl.adapters.cli.common import CliError, connect
+from hexactl.adapters.cli.common import CliError, connect, named_path
 from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_OK,
@@ -70,9 +69,9 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "poses with the washout filter, on the service's active geometry, and stream them to it in real time "
         "(docs/stream.md); the platform must be enabled and at rest, and is moved to the cue's start pose first. "
         "--json: the plan's figures, and once streamed the stream's counts and how it ended, as one JSON object")
-    cue.add_argument("file", type=Path, help="the vehicle trajectory, CSV: t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z, "
+    cue.add_argument("file", type=named_path, help="the vehicle trajectory, CSV: t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z, "
                      "or a shipped one by name: braking, lane_change")
-    cue.add_argument("--parameters", type=Path, metavar="TOML", help="the washout's parameters (default: "
+    cue.add_argument("--parameters", type=named_path, metavar="TOML", help="the washout's parameters (default: "
                      "config/cueing.toml's values)")
     cue.add_argument("--no-workspace-gain", action="store_true", help="leave the cues at their gains, with only the "
                      "limiter between them and the workspace")

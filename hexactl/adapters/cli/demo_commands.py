@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 
 from hexactl.adapters.cli.common import (CliError, campaign_stopped, check_campaign_arguments, check_writable,
-                                        non_negative_int)
+                                        named_path, non_negative_int)
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 
 DEFAULT_OUT = Path("demo-out")
@@ -38,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 def _declare_demo(demo: argparse.ArgumentParser) -> None:
     from hexactl.application.demo import DEMO_ENVELOPE_FRACTION, DEMO_FAULTS_IN_A_ROW, DEMO_POSTURES_PER_LEG
 
-    demo.add_argument("--out", type=Path, default=DEFAULT_OUT, metavar="DIR",
+    demo.add_argument("--out", type=named_path, default=DEFAULT_OUT, metavar="DIR",
                       help=f"results directory (default ./{DEFAULT_OUT})")
     demo.add_argument("--seed", type=non_negative_int, default=0,
                       help="seed of the manufacturing errors, the instrument noise and the plan (default 0)")

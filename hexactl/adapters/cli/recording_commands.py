@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 
 from hexactl.adapters.api.protocol import MAX_RECORDING_DIVISOR, MAX_RECORDING_S
 from hexactl.adapters.files.recording_file import SIGNALS  # the service checks them again
-from hexactl.adapters.cli.common import (CliError, check_output, connect, positive_up_to, whole_number_in,
-                                        write_failed)
+from hexactl.adapters.cli.common import (CliError, check_output, connect, named_path, positive_up_to,
+                                        whole_number_in, write_failed)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -68,8 +68,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     record.set_defaults(run=run_record)
     plot = subparsers.add_parser("plot", parents=[common], help="plot a recording (CSV) to a PNG",
                                  description="Plot a recording made by `hexactl record`: one panel per signal group.")
-    plot.add_argument("recording", metavar="RECORDING", type=Path, help="the recording's CSV file")
-    plot.add_argument("-o", "--out", type=Path, metavar="IMAGE", help="the image, its format by its ending: "
+    plot.add_argument("recording", metavar="RECORDING", type=named_path, help="the recording's CSV file")
+    plot.add_argument("-o", "--out", type=named_path, metavar="IMAGE", help="the image, its format by its ending: "
                       f"{', '.join('.' + f for f in IMAGE_FORMATS)} (default: RECORDING with .png; replaced if there)")
     plot.set_defaults(run=run_plot)
 

@@ -156,7 +156,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
         "Serve with --curve-secret DIR/server.key_secret --curve-clients DIR/clients; connect with "
         "--curve-server DIR/server.key --curve-client DIR/NAME.key_secret.",
     )
-    keys.add_argument("--out", required=True, type=Path, metavar="DIR")
+    keys.add_argument("--out", required=True, type=named_path, metavar="DIR")
     keys.add_argument("--name", default="client", help="the client's name (default client); run again with another name to add a client")
     keys.set_defaults(run=run_keys)
 
