@@ -60,25 +60,30 @@ const estopState = {
   presses: 0,
   awaiting: 0,              // presses sent whose reply has not come
   warning: false,           // "E-STOP NOT CONFIRMED" on screen
+  seqAtPress: 0,            // the newest event number seen when the last press went: an estop event after it is one in force
   events: [],               // {press, what, detail, t}: for the tests and tools (window.hexactlDashboard)
 };
 
 // ---------------- messages log ----------------
 const messagesEl = $('messages');
+const MERGE_MS = 2000;      // the same message again within this is one line, counted; later, a line of its own
 function logMessage(kind, cmd, code, message) {
   const text = `${cmd ? `${cmd}: ` : ''}${code ?? ''}|${message ?? ''}`;
   const first = messagesEl.firstElementChild;
-  const now = new Date().toLocaleTimeString();
-  if (first && first.dataset.key === text) {
+  const at = Date.now();
+  const now = new Date(at).toLocaleTimeString();
+  // Repeats of a burst merge; each E-stop is a line of its own, with its time.
+  if (cmd !== 'estop' && first && first.dataset.key === text && at - Number(first.dataset.last) < MERGE_MS) {
     const count = Number(first.dataset.count || 1) + 1;
     first.dataset.count = String(count);
-    first.querySelector('.time').textContent = `${now} `;
-    first.querySelector('.count').textContent = ` ×${count}`;
+    first.dataset.last = String(at);
+    first.querySelector('.count').textContent = ` ×${count} (last ${now})`;
     return;
   }
   const li = document.createElement('li');
   li.className = `${kind} fresh`;
   li.dataset.key = text;
+  li.dataset.last = String(at);
   const time = document.createElement('span'); time.className = 'time'; time.textContent = `${now} `;
   const c = document.createElement('span'); c.className = 'code'; c.textContent = `${cmd ? `${cmd} ` : ''}${code ?? ''} `;
   const m = document.createElement('span'); m.className = 'msg'; m.textContent = message ?? '';
@@ -212,6 +217,7 @@ function estop() {
   const replied = state.wsOpen ? send('estop') : null;
   const loss = dataLoss(performance.now());
   const press = ++estopState.presses;
+  estopState.seqAtPress = newestEventSeq(state.record);
   estopEvent(press, 'pressed', loss ?? 'live');
   if (replied) estopEvent(press, 'sent');
   controls.releaseJog(false);
@@ -240,6 +246,26 @@ function estop() {
   });
 }
 estopButton.addEventListener('click', estop);
+
+function newestEventSeq(r) {
+  const events = Array.isArray(r?.events) ? r.events : [];
+  return Math.max(0, ...events.map((e) => (e && Number.isSafeInteger(e.seq) ? e.seq : 0)));
+}
+
+/**
+ * A warning on screen is answered by the records too: the controller in estop, by an estop
+ * event after the press (a queued E-stop the loop carried out once it ran again, or another
+ * client's), is the E-stop in force, said as such: the banner's "not confirmed" would
+ * contradict the state shown beside it.
+ */
+function estopSeenInForce(r) {
+  if (!estopState.warning || r.state !== 'estop' || !Array.isArray(r.events)) return;
+  const latched = r.events.find((e) => e && e.code === 'estop' && Number.isSafeInteger(e.seq) && e.seq > estopState.seqAtPress);
+  if (!latched) return;
+  const by = latched.sender ? ` (sent by ${latched.sender})` : '';
+  logMessage('info', 'estop', 'in force', `the controller is in estop: event ${latched.seq}, ${latched.message}${by}`);
+  clearEstopWarning(estopState.presses, `in force: event ${latched.seq}`);
+}
 window.addEventListener('keydown', (ev) => {
   if (ev.key === 'Escape' || ev.code === 'Escape') {
     ev.preventDefault();
@@ -535,6 +561,7 @@ function handleMessage(ev) {
       schedule();
       // every record, drawn or not (a hidden page draws none): its eight events may be gone from the next ones
       eventsPanel.onRecord(r);
+      estopSeenInForce(r);
       applyLiveness(state.lastTelemetryAt);   // a page falling behind says so at once, not at the next tick
       break;
     }

@@ -210,6 +210,7 @@ export function setupControls(ctx) {
   const moveResult = $('move-result');
   const goButton = $('move-go');
   let validated = null;   // {key, fields, goal, ref, under, since}
+  let withdrawnIn = null; // the state whose advice ("the controller is estop: … reset, then enable") the Move line shows
   let validating = 0;
 
   function readMove() {
@@ -360,12 +361,14 @@ export function setupControls(ctx) {
   let jogInFlight = 0;
   let renewEveryMs = 50;   // the default deadman's (0.2 s) quarter, until a jog's reply says the service's
 
-  /** The jog speed typed (mm/s, °/s); an Error saying why when it is not a number ≥ 0. */
+  /** The jog speed typed (mm/s, °/s); an Error saying why when it is not a number > 0. */
   function jogSpeed() {
     const t = $('jog-speed').value.trim();
     if (t === '') throw new Error('jog speed: empty: type a speed in mm/s, °/s; not sent');
     const speed = decimal(t);
-    if (!Number.isFinite(speed) || speed < 0) throw new Error(`jog speed: "${t}" is not a number ≥ 0${commaHint(t)}; not sent`);
+    if (!Number.isFinite(speed) || speed < 0) throw new Error(`jog speed: "${t}" is not a number > 0${commaHint(t)}; not sent`);
+    // 0 would be a jog's release to the service: "nothing to release", said of a press
+    if (speed === 0) throw new Error('jog speed: 0 moves nothing: type a speed > 0 in mm/s, °/s; not sent');
     return speed;
   }
 
@@ -684,8 +687,7 @@ export function setupControls(ctx) {
     if (!previewed || previewed.path !== path) { resetPreview(); return; }
     // the calibration previewed goes with it: the service refuses the file if it now holds another
     const expected = previewed.id;
-    calApply.disabled = true;
-    previewed = null;
+    resetPreview('used by Apply (below): preview again for another change');
     const reply = await ctx.send('load_calibration', { path, expected_id: expected });
     setResult(calResult, reply.ok ? 'valid' : 'refused',
       reply.ok ? `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm` : describeError(reply.error));
@@ -789,9 +791,15 @@ export function setupControls(ctx) {
       if (changed.length) invalidate(`the ${changed.join(' and the ')} changed since you validated: validate again`);
     }
     // … and only in the enabled spell it was validated in
+    if (withdrawnIn && r.state !== withdrawnIn) {   // its advice followed (or overtaken): say what happened, not what to do
+      const shown = moveResult.textContent.startsWith(`the controller is ${withdrawnIn}:`);
+      if (shown) setResult(moveResult, null, `Go was withdrawn when the controller went ${withdrawnIn}: validate again`);
+      withdrawnIn = null;
+    }
     if (validated) {
       const ended = enabledSpellEnded(validated.since, r);
       if (ended) invalidate(ended);
+      if (ended && r.state !== 'enabled') withdrawnIn = r.state;
     }
     // … and only at rest: a move under way carries it elsewhere than where it was validated from
     const moving = validated ? notAtRest(r) : null;

@@ -6,6 +6,8 @@ const UNITS = ['mm', 'mm', 'mm', 'deg', 'deg', 'deg'];
 const MAX_SECONDS = 300;
 const CAPACITY = MAX_SECONDS * 50 + 500;   // 300 s at 50 Hz, with slack for a faster stream
 const TRIM = 500;                          // drop records from the front in chunks
+const GAP_FACTOR = 3;                      // a wait this many record intervals long (and ≥ MIN_GAP_S) is an outage
+const MIN_GAP_S = 0.5;
 
 const num = (v) => (typeof v === 'number' && Number.isFinite(v) ? v : null);
 
@@ -31,6 +33,9 @@ export class History {
     const n = this.t.length;
     if (n && t < this.t[n - 1]) this.clear();          // the service restarted: its clock began again
     else if (n && t === this.t[n - 1]) return;           // the same record twice
+    else if (n && t - this.t[n - 1] > Math.max(MIN_GAP_S, GAP_FACTOR * (n > 1 ? this.t[n - 1] - this.t[n - 2] : 0))) {
+      this.pushGap((t + this.t[n - 1]) / 2);            // no records came: break the lines, never draw a move across
+    }
     this.t.push(t);
     for (let i = 0; i < 6; i++) {
       this.pc[i].push(num(r.pose_command?.[i]));
@@ -42,6 +47,14 @@ export class History {
     this.comp.push(num(r.loop?.compute_us?.p99));
     const last = this.t.length - 1;
     if (this.t.length > CAPACITY || this.t[last] - this.t[0] > MAX_SECONDS + 2) this.trim();
+  }
+
+  /** A row of no values at ``t``: the charts' lines break there (spanGaps false). */
+  pushGap(t) {
+    this.t.push(t);
+    for (let i = 0; i < 6; i++) { this.pc[i].push(null); this.pm[i].push(null); this.sp[i].push(null); this.fb[i].push(null); }
+    this.lat.push(null);
+    this.comp.push(null);
   }
 
   trim() {
@@ -71,6 +84,7 @@ export class History {
     const lines = [head.join(',')];
     const cell = (v) => (v === null || v === undefined ? '' : String(v));
     for (let k = 0; k < this.t.length; k++) {
+      if (this.pc[0][k] === null && this.sp[0][k] === null && this.lat[k] === null) continue;  // a gap's row
       const row = [this.t[k]];
       for (let i = 0; i < 6; i++) row.push(this.pc[i][k]);
       for (let i = 0; i < 6; i++) row.push(this.pm[i][k]);

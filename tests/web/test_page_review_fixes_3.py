@@ -1,0 +1,208 @@
+"""Defects a third outside review of the dashboard found in the page, in a real headless
+Chromium against a real ``hexactl serve``:
+
+- the plots drew a straight line across an outage (the service stopped for 14 s: a smooth
+  "move" from 94 mm to 0 that never happened);
+- an E-stop whose reply failed (the loop held up: queued) and that the loop then carried
+  out kept "E-STOP NOT CONFIRMED" on screen beside the state pill reading estop;
+- the Messages list merged two E-stops a reset apart into one line, the first's time lost;
+- the calibration preview still offered "would be accepted" after Apply had loaded it;
+- a jog speed of 0 was sent, and answered "nothing to release";
+- after an E-stop, reset and enable by another client, the Move line still advised
+  "reset, then enable it".
+
+Judged by the page's state, what it sent and the service's state, never by how long
+anything took.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.keys import Keys
+
+from hexactl.adapters.files.geometry_file import geometry_id
+from tests.web.test_dashboard import Rig, page_on_a_service, wait_for
+from tests.web.test_page_review_fixes import (
+    NOMINAL_ID,
+    apply_enabled,
+    back_to_nominal,
+    calibrated,
+    cleared,
+    previewed_in_page,
+)
+from tests.web.test_validated_move import (
+    TAP,
+    attempted,
+    go_enabled,
+    live,
+    move_result,
+    ready_in_frames,
+    sent,
+    validated_in_page,
+)
+
+FAIL_ESTOP_REPLIES = """
+(() => {
+  const mine = { failEstopReplies: false, estopIds: new Set() };
+  window.hexactlTestEstop = mine;
+  const proto = WebSocket.prototype;
+  const send = proto.send;
+  proto.send = function (data) {
+    const message = JSON.parse(data);
+    if (message.cmd === 'estop') mine.estopIds.add(message.id);
+    return send.call(this, data);
+  };
+  const add = proto.addEventListener;
+  proto.addEventListener = function (type, listener, options) {
+    if (type !== 'message') return add.call(this, type, listener, options);
+    return add.call(this, type, (event) => {
+      const message = JSON.parse(event.data);
+      if (mine.failEstopReplies && message.type === 'reply' && mine.estopIds.has(message.id)) {
+        const reply = { ok: false, error: { code: 'loop_silent', message: 'queued, to be carried out if the loop runs again' } };
+        listener(new MessageEvent('message', { data: JSON.stringify({ ...message, reply }) }));
+        return;
+      }
+      listener(event);
+    }, options);
+  };
+})();
+"""
+"""Turns the reply to every E-stop into the ``loop_silent`` failure a held-up loop gives
+while ``hexactlTestEstop.failEstopReplies``: the E-stop itself goes to the service as sent."""
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory) -> Iterator[Rig]:
+    with page_on_a_service(tmp_path_factory.mktemp("review-fixes-3"), before_load=FAIL_ESTOP_REPLIES + TAP) as rig:
+        wait_for(lambda: live(rig), "live data on the page")
+        yield rig
+
+
+def messages(rig: Rig, key_start: str) -> list[str]:
+    """The Messages list's lines whose key (``cmd: code|message``) starts with ``key_start``, newest first."""
+    return rig.page(f"return [...document.querySelectorAll('#messages li')]"
+                    f".filter(li => li.dataset.key.startsWith({key_start!r})).map(li => li.textContent)")
+
+
+def test_the_plots_break_their_lines_where_no_records_came(rig) -> None:
+    history = rig.driver.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        import('/static/plots.js').then(({ History }) => {
+          const h = new History();
+          const record = (t, z) => ({ t, pose_command: [0, 0, z, 0, 0, 0], pose_measured: [0, 0, z, 0, 0, 0],
+                                      leg_setpoints: [1, 2, 3, 4, 5, 6], leg_feedback: [1, 2, 3, 4, 5, 6],
+                                      loop: { lateness_us: { p99: 5 }, compute_us: { p99: 7 } } });
+          [0, 0.02, 0.04].forEach((t) => h.push(record(t, 94)));
+          h.push(record(14.04, -0.6));            // the service back after 14 s
+          h.push(record(14.06, -0.6));
+          h.push(record(14.08, -0.6));
+          h.push(record(14.1, -0.6));             // a record 10 ms early: no gap
+          h.push(record(14.7, -0.6));             // 0.6 s late (30 intervals): an outage too
+          done({ t: h.t, z: h.pc[2], lat: h.lat, csv: h.toCSV().trim().split('\\n') });
+        });
+    """)
+    assert history["t"] == pytest.approx([0, 0.02, 0.04, 7.04, 14.04, 14.06, 14.08, 14.1, 14.4, 14.7]), history["t"]
+    assert history["z"] == [94, 94, 94, None, -0.6, -0.6, -0.6, -0.6, None, -0.6], history["z"]
+    assert history["lat"][3] is None and history["lat"][8] is None
+    assert len(history["csv"]) == 1 + 8 and not any(",,,," in line for line in history["csv"][1:]), history["csv"]
+
+
+def test_a_queued_estop_the_loop_carries_out_clears_the_not_confirmed_banner_saying_so(rig) -> None:
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        rig.page("window.hexactlTestEstop.failEstopReplies = true")
+        try:
+            rig.click("#estop")
+            wait_for(lambda: rig.status()["state"] == "estop", "the E-stop carried out")
+            events = lambda: rig.page("return window.hexactlDashboard.estopEvents()")  # noqa: E731
+            wait_for(lambda: any(e["what"] == "cleared" for e in events()), "the banner cleared by the records",
+                     seen=events)
+        finally:
+            rig.page("window.hexactlTestEstop.failEstopReplies = false")
+        whats = [e["what"] for e in events()]
+        assert "reply-failed" in whats and "warning" in whats, whats  # the failed reply did raise it
+        cleared_by = [e for e in events() if e["what"] == "cleared"][-1]
+        assert cleared_by["detail"].startswith("in force: event "), cleared_by
+        assert not rig.page("return window.hexactlDashboard.estopWarning")
+        assert rig.element("#estop-warning").get_attribute("hidden") is not None
+        said = messages(rig, "estop: in force|")
+        assert said and "the controller is in estop: event " in said[0], said
+
+    rig.scenario(scenario)
+
+
+def test_two_estops_a_reset_apart_are_two_lines_each_with_its_time(rig) -> None:
+    def scenario() -> None:
+        rig.at_rest_disabled()
+        before = len(messages(rig, "estop: ok|"))
+        rig.click("#estop")
+        wait_for(lambda: len(messages(rig, "estop: ok|")) == before + 1, "the first E-stop confirmed")
+        rig.click("#reset")
+        wait_for(lambda: rig.status()["state"] == "disabled", "reset")
+        ActionChains(rig.driver).send_keys(Keys.ESCAPE).perform()
+        wait_for(lambda: len(messages(rig, "estop: ok|")) == before + 2, "the second E-stop, a line of its own",
+                 seen=lambda: messages(rig, "estop"))
+        assert not any("×" in line for line in messages(rig, "estop: ok|")), messages(rig, "estop")
+
+    rig.scenario(scenario)
+
+
+def test_apply_clears_the_calibration_preview_it_used(rig) -> None:
+    small = calibrated(0.2, "review-3 small")
+
+    def scenario() -> None:
+        rig.at_rest_disabled()
+        try:
+            previewed_in_page(rig, small)
+            cleared(rig, "#calibration-result")
+            rig.click("#calibration-apply")
+            wait_for(lambda: rig.status()["calibration_id"] == geometry_id(small), "the calibration applied")
+            change = rig.element("#calibration-change")
+            assert change.text == "used by Apply (below): preview again for another change", change.text
+            assert not apply_enabled(rig)
+            rig.click("#calibration-rollback")
+            wait_for(lambda: rig.status()["calibration_id"] == NOMINAL_ID, "rolled back")
+            assert "would be accepted" not in change.text and not apply_enabled(rig), change.text
+        finally:
+            back_to_nominal(rig)
+
+    rig.scenario(scenario)
+
+
+def test_a_jog_speed_of_zero_sends_no_jog_and_says_why(rig) -> None:
+    rig.at_rest_disabled()
+    wait_for(lambda: live(rig), "live data on the page")
+    before = sent(rig, "jog")
+    rig.fill("#jog-speed", "0")
+    cleared(rig, "#jog-status")
+    button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
+    ActionChains(rig.driver).click_and_hold(button).perform()
+    try:
+        said = wait_for(lambda: rig.element("#jog-status").text, "the page's answer")
+    finally:
+        ActionChains(rig.driver).release(button).perform()
+    assert said == "jog speed: 0 moves nothing: type a speed > 0 in mm/s, °/s; not sent", said
+    rig.client.call("status")
+    assert sent(rig, "jog") == before
+    rig.fill("#jog-speed", 10)
+
+
+def test_the_move_line_stops_advising_reset_once_the_controller_is_enabled_again(rig) -> None:
+    def scenario() -> None:
+        ready_in_frames(rig)
+        validated_in_page(rig, [0, 0, 6, 0, 0, 0], "zero")
+        rig.client.call("estop")  # another client
+        wait_for(lambda: not go_enabled(rig), "Go withdrawn", seen=lambda: move_result(rig))
+        assert move_result(rig) == "the controller is estop: Go is withdrawn; reset, then enable it, then validate again"
+        rig.client.call("reset")
+        wait_for(lambda: rig.status()["state"] == "disabled", "reset")
+        rig.client.call("enable")
+        wait_for(lambda: rig.element("#state").text.strip() == "enabled", "the page showing enabled")
+        wait_for(lambda: move_result(rig) == "Go was withdrawn when the controller went estop: validate again",
+                 "the Move line in the past tense", seen=lambda: move_result(rig))
+        assert not go_enabled(rig)
+
+    attempted(rig, scenario)
