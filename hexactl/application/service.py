@@ -72,7 +72,7 @@ from hexactl.adapters.files.atomic import same_file, write_atomic
 from hexactl.adapters.files.frames_file import FramesFileError, load_frames
 from hexactl.adapters.files.geometry_file import geometry_id, load_geometry
 from hexactl.adapters.files.kept_calibration import DEFAULT_FILE as DEFAULT_KEPT_CALIBRATION_FILE
-from hexactl.adapters.files.kept_calibration import KeptCalibration, restore_calibration
+from hexactl.adapters.files.kept_calibration import KeptCalibration, KeptCalibrationError, restore_calibration
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.service_lock import HeldByAnother, hold
 from hexactl.application.dashboard import DashboardProcess
@@ -840,7 +840,7 @@ def _start_calibration(calibration_path: Path | None, kept_path: Path, nominal: 
         return nominal, str(config_path), ""
     try:
         active, source = restore_calibration(kept_path)
-    except GeometryError as error:
+    except (GeometryError, KeptCalibrationError) as error:
         raise ServiceError(f"{error}{remedy}") from None
     log.info("calibration %r (%s) read from %s, where it was kept (loaded from %s)", active.name,
              geometry_id(active), kept_path, source)

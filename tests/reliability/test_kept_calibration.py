@@ -24,7 +24,8 @@ from hexactl.adapters.api.wire import ApiError
 from hexactl.adapters.files import kept_calibration
 from hexactl.adapters.files.config_path import default_config_path
 from hexactl.adapters.files.geometry_file import geometry_id, geometry_to_toml, load_geometry
-from hexactl.adapters.files.kept_calibration import CalibrationKeeper, KeptCalibration
+from hexactl.adapters.files.kept_calibration import (CalibrationKeeper, KeptCalibration, KeptCalibrationError,
+                                                   restore_calibration)
 from hexactl.application.service import Service, ServiceConfig, ServiceError
 from hexactl.control import commands as cmd
 from hexactl.control.config import ControllerConfig
@@ -95,8 +96,8 @@ def test_calibration_at_start_is_kept_and_a_kept_file_that_cannot_be_used_refuse
     kept = tmp_path / "active_calibration.toml"
     started = _service(kept, tmp_path, calibration=calibration)
     started.close()
-    assert kept.read_text().startswith(f"# the calibration hexactl serve had in force, kept for its restart; loaded "
-                                       f"from {calibration}\n")
+    assert kept.read_text().startswith(f"# the calibration hexactl serve had in force (id {geometry_id(CALIBRATED)}), "
+                                       f"kept for its restart; loaded from {calibration}\n")
     restored = _service(kept, tmp_path)
     try:
         assert _calibration_in_force(restored) == (geometry_id(CALIBRATED), str(calibration))
@@ -113,6 +114,28 @@ def test_calibration_at_start_is_kept_and_a_kept_file_that_cannot_be_used_refuse
     again = _service(kept, tmp_path, calibration=calibration)  # --calibration chooses, and is kept
     again.close()
     assert load_geometry(kept) == CALIBRATED
+
+
+def test_a_kept_file_the_service_did_not_leave_refuses_the_start_saying_how(tmp_path: Path) -> None:
+    """Found from outside: a calibration copied over the kept file while the service was
+    stopped (or written there by ``calibrate -o … --force``) was restored at the next start
+    as the one "kept", said in an INFO line only: a calibration never loaded through the service."""
+    kept = KeptCalibration(tmp_path / "active_calibration.toml", geometry_id(NOMINAL))
+    kept.keep(CALIBRATED, geometry_id(CALIBRATED), "cal.toml")
+    assert restore_calibration(kept.path) == (CALIBRATED, "cal.toml")
+    header, _, body = kept.path.read_text().partition("\n")
+    other = CALIBRATED.model_copy(update={"zero_lengths": (1750.8,) * 6})
+    kept.path.write_text(f"{header}\n{geometry_to_toml(other)}")  # edited under the header
+    with pytest.raises(KeptCalibrationError, match=f"holds calibration {geometry_id(other)}, not "
+                                                   f"{geometry_id(CALIBRATED)}, the one the service kept there"):
+        restore_calibration(kept.path)
+    kept.path.write_text(geometry_to_toml(other))  # copied there
+    with pytest.raises(ServiceError, match=r"(?s)not a calibration the service kept .* never loaded through the "
+                                           r"service\n.*give --calibration FILE, or remove the file"):
+        _service(kept.path, tmp_path)
+    # as services before the id wrote it: still restored
+    kept.path.write_text(f"# the calibration hexactl serve had in force, kept for its restart; loaded from cal.toml\n{body}")
+    assert restore_calibration(kept.path) == (CALIBRATED, "cal.toml")
 
 
 def test_a_second_service_on_the_same_kept_files_is_refused_before_it_changes_them(tmp_path: Path) -> None:
@@ -232,8 +255,8 @@ def test_a_calibration_the_loop_swaps_in_after_a_loop_timeout_is_kept_and_forgot
     loop.step_until(_in_force(loop, geometry_id(CALIBRATED)))  # the loop carries it out all the same
     handler.record()  # as the telemetry publisher does each period
     assert load_geometry(kept) == CALIBRATED
-    assert kept.read_text().startswith(f"# the calibration hexactl serve had in force, kept for its restart; loaded "
-                                       f"from {tmp_path / 'cal.toml'}\n")
+    assert kept.read_text().startswith(f"# the calibration hexactl serve had in force (id {geometry_id(CALIBRATED)}), "
+                                       f"kept for its restart; loaded from {tmp_path / 'cal.toml'}\n")
 
     with pytest.raises(ApiError) as late:
         handler(ROLLBACK)

@@ -5,7 +5,9 @@ The service's :class:`CalibrationKeeper` follows the calibration the loop has in
 a rollback, ``--calibration`` at start-up, a swap the loop carried out after the reply
 said ``loop_timeout``) and removes the file once the nominal geometry is in force again;
 started without ``--calibration``, the service restores what the file holds. The first
-line, a comment, says where the calibration was loaded from, for the log. Written
+line, a comment, says the calibration's id and where it was loaded from, for the log: a
+file without it, or holding another calibration, was not left by the service (a copy, an
+edit while it was stopped) and is not restored (:class:`KeptCalibrationError`). Written
 atomically (whole, old or new, whatever happens during the write).
 """
 
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -27,7 +30,14 @@ from hexactl.kinematics.geometry import Geometry, GeometryError
 DEFAULT_FILE = "active_calibration.toml"
 """Where the service keeps it, in its working directory, unless set."""
 
-_FROM = "# the calibration hexactl serve had in force, kept for its restart; loaded from "
+_HEADER = "# the calibration hexactl serve had in force (id {id}), kept for its restart; loaded from {source}"
+_HEADER_READ = re.compile(r"# the calibration hexactl serve had in force(?: \(id (?P<id>[0-9a-f]+)\))?, kept for its "
+                          r"restart; loaded from (?P<source>.*)")
+"""The header as written, and as read: without the id, as services before it wrote it."""
+
+
+class KeptCalibrationError(ValueError):
+    """A kept calibration file the service did not leave as it is: the message says how."""
 
 RETRY_INTERVAL_S = 10.0
 """After a calibration could not be kept, :meth:`CalibrationKeeper.follow` tries it again
@@ -153,7 +163,7 @@ def keep_calibration(geometry: Geometry, source: str, path: str | os.PathLike[st
 
     :raises OSError: if it cannot be written (nothing at ``path`` changed)
     """
-    text = _FROM + " ".join(source.split()) + "\n" + geometry_to_toml(geometry)
+    text = _HEADER.format(id=geometry_id(geometry), source=" ".join(source.split())) + "\n" + geometry_to_toml(geometry)
     return write_atomic(path, text.encode("utf-8"), overwrite=True)
 
 
@@ -170,12 +180,21 @@ def forget_calibration(path: str | os.PathLike[str]) -> None:
 
 
 def restore_calibration(path: str | os.PathLike[str]) -> tuple[Geometry, str]:
-    """The calibration kept in ``path`` and where it was loaded from (``path`` itself if
-    the file does not say).
+    """The calibration kept in ``path`` and where it was loaded from.
 
     :raises ~hexactl.kinematics.geometry.GeometryError: naming the file and the problem
+    :raises KeptCalibrationError: the file is not as the service left it: no header (a
+        calibration copied there, or written by ``calibrate -o``), or another calibration
+        than its header's (edited): never loaded through the service, so not restored
     """
     geometry = load_geometry(path)
-    with open(path, encoding="utf-8") as file:
-        first = file.readline().rstrip("\n")
-    return geometry, first[len(_FROM):] if first.startswith(_FROM) else str(path)
+    with open(path, encoding="utf-8-sig") as file:
+        header = _HEADER_READ.fullmatch(file.readline().rstrip("\r\n"))
+    if header is None:
+        raise KeptCalibrationError(f"{path}: not a calibration the service kept (its first line is not the comment "
+                                   "the service writes): a file copied or written there, never loaded through the "
+                                   "service")
+    if header["id"] is not None and header["id"] != (actual := geometry_id(geometry)):
+        raise KeptCalibrationError(f"{path}: holds calibration {actual}, not {header['id']}, the one the service kept "
+                                   "there: edited or replaced while the service was stopped")
+    return geometry, header["source"]
