@@ -15,6 +15,7 @@ from hexactl.adapters.cli.main import build_parser, main
 from hexactl.adapters.cli.service_commands import FRAMES, _frames_request
 from hexactl.adapters.files.frames_file import load_frames
 from hexactl.control.frames import Frame
+from hexactl.control.results import CommandResult
 from hexactl.kinematics.geometry import Geometry
 from tests.api.support import start_service
 from tests.api.test_commands import send
@@ -110,6 +111,35 @@ def test_frames_on_a_full_disk_are_refused_saying_so_and_the_file_is_kept(framed
     assert "check the name" not in capsys.readouterr().err  # file_not_found's hint, which misled
     monkeypatch.undo()
     assert (tmp_path / "frames.toml").read_bytes() == saved and sorted(tmp_path.glob(".frames.toml.*")) == []
+
+
+def test_frames_not_saved_and_not_put_back_are_said_to_be_in_force(framed, tmp_path: Path, monkeypatch) -> None:
+    """Found from outside (by reading): the frames before were put back unchecked, and the
+    reply said "they are not in force" whatever that answered."""
+    send(framed, "set_frames", tool=[0, 0, 100, 0, 0, 0])
+
+    def full_disk(descriptor, *arguments, **options):
+        os.close(descriptor)
+        return open("/dev/full", *arguments, **options)
+
+    calls = []
+
+    def second_refused(frames):  # noqa: ANN001, ANN202
+        calls.append(frames)
+        if len(calls) == 1:
+            framed.controller.frames = frames
+            return CommandResult.success("frames set")
+        return CommandResult.failure("busy", "the platform is moving: wait until it is at rest, or stop it")
+
+    monkeypatch.setattr(os, "fdopen", full_disk)
+    monkeypatch.setattr(framed.controller, "set_frames", second_refused)
+    reply = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    assert reply["error"]["code"] == "write_failed", reply
+    assert reply["error"]["message"].endswith(
+        "free some space there; they are in force all the same: putting the ones before back was refused (the "
+        "platform is moving: wait until it is at rest, or stop it), and a restart would restore the file's; set them "
+        "again once it can be written"), reply
+    assert framed.controller.frames.tool == (0, 0, 300, 0, 0, 0)
 
 
 def test_a_frames_file_edited_under_the_service_is_named_and_kept_aside_not_overwritten(framed, tmp_path: Path,

@@ -325,10 +325,12 @@ class CommandHandler:
             try:
                 aside = save_frames(frames, self.frames_file, before)
             except OSError as error:
-                self.controller.set_frames(before)
+                undone = self.controller.set_frames(before)
+                where = ("they are not in force: the ones before are, and stay in the file" if undone.ok else
+                         f"they are in force all the same: putting the ones before back was refused ({undone.message}), "
+                         "and a restart would restore the file's")
                 raise ApiError(ErrorCode.WRITE_FAILED, f"{self.frames_file}: the frames could not be saved: "
-                               f"{write_problem(error)}; they are not in force: the ones before are, and stay in the "
-                               "file; set them again once it can be written") from None
+                               f"{write_problem(error)}; {where}; set them again once it can be written") from None
             if aside is not None:
                 said += (f"; {self.frames_file} had been changed since the service read it (at start only): that "
                          f"version, never in force, is kept as {aside}")
