@@ -169,6 +169,24 @@ def test_play_unknown_name(service) -> None:
     assert "x_sweep" in reply["error"]["details"]["built_in"]
 
 
+@pytest.mark.parametrize("name", ["/etc/passwd", "sequences", "sequences/"])
+def test_a_path_that_is_no_sequence_file_is_said_to_be_one(service, name) -> None:
+    """Found from outside: a directory or /etc/passwd was "not a built-in sequence"."""
+    name = str(service.data_dir / name) if not name.startswith("/") else name
+    refused = send(service, "play", sequence=name)["error"]
+    assert refused["code"] == "unknown_sequence", refused
+    assert refused["message"] == (f"{name!r}: a path, but a sequence file's name ends in .toml and a posture plan's "
+                                  "in .csv (a directory or another file cannot be played)"), refused["message"]
+
+
+def test_a_directory_is_refused_by_the_cli_before_anything_is_sent(tmp_path, capsys) -> None:
+    from hexactl.adapters.cli.main import main
+
+    assert main(["play", str(tmp_path), "--api", "ipc://" + str(tmp_path / "nobody"), "--timeout", "0.2"]) == 2
+    assert f"{tmp_path}: a directory, not a sequence: name a .toml sequence file or a .csv plan in it" in \
+        capsys.readouterr().err
+
+
 def test_validate_sequence_says_valid_with_the_plan_or_the_refusal_and_plays_nothing(service) -> None:
     steps = {"name": "steps", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0]}, {"pose": [0, 0, 5, 0, 0, 0], "dwell": 1.0}]}
     valid = send(service, "validate_sequence", sequence=steps)

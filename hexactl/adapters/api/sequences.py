@@ -47,6 +47,10 @@ def resolve_sequence(sequence: str | InlineSequence, data: DataDirectories) -> M
         return reader(text, str(path))
     except UnknownSequence as error:
         assert isinstance(sequence, str)  # an inline sequence is no name
+        if Path(sequence).name != sequence:  # a path: neither ending, so never a file to play
+            raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{sequence!r}: a path, but a sequence file's name ends in "
+                           ".toml and a posture plan's in .csv (a directory or another file cannot be played)",
+                           {"built_in": list(BUILTIN_SEQUENCES)}) from None
         if (file := _file_named(sequence, data)) is not None:
             raise ApiError(ErrorCode.UNKNOWN_SEQUENCE, f"{error}; but {file} is a sequence file there: play {file.name} "
                            "(a file is named with its ending)", {"built_in": list(BUILTIN_SEQUENCES),

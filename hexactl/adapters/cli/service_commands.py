@@ -302,6 +302,9 @@ def _play_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     if arguments.validate and arguments.wait:
         raise CliError("--validate plays nothing, so there is nothing to --wait for: give one of them")
     path = Path(arguments.sequence)  # a file here is sent absolute: the service's working directory may differ
+    if path.is_dir():
+        raise CliError(f"{arguments.sequence}: a directory, not a sequence: name a .toml sequence file or a .csv "
+                       "plan in it, or a built-in sequence")
     return "validate_sequence" if arguments.validate else "play", {
         "sequence": str(path.resolve()) if path.is_file() else arguments.sequence}
 
