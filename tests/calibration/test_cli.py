@@ -48,6 +48,19 @@ def test_calibrate_writes_a_reloadable_file_and_refuses_to_overwrite(tmp_path, d
     assert load_geometry(output).calibration.method == "leglock"
 
 
+def test_a_file_with_a_header_and_no_postures_is_bad_input(tmp_path, data_file, capsys):
+    """Found from outside: it exited 1, "insufficient data … the data have 0", as a fit that
+    failed; it is a file to fix (exit 2), as play says of a plan without rows."""
+    header_only = tmp_path / "header_only.csv"
+    lines = data_file.read_text().splitlines()
+    header = next(number for number, line in enumerate(lines, start=1) if line.strip() and not line.startswith("#"))
+    header_only.write_text("\n".join(lines[:header]) + "\n")
+    assert main(["calibrate", str(header_only), "-o", str(tmp_path / "cal.toml")]) == 2
+    assert f"{header_only}: a header (line {header}) but no postures: a measurement file holds a row per posture " \
+           "measured" in capsys.readouterr().err
+    assert not (tmp_path / "cal.toml").exists()
+
+
 def test_no_command_writes_over_its_own_input_even_with_force(tmp_path, data_file, capsys):
     """A measurement file is hours of measuring: -o naming it (or the geometry read) is a
     slip, refused before any work, whatever --force says."""
@@ -265,13 +278,13 @@ def test_undetermined_data_give_no_library_warning_and_say_why(tmp_path, leglock
     assert "Warning" not in captured.err
 
 
-@pytest.mark.parametrize("bad", ["header only", "every row bad"])
-def test_a_file_with_no_usable_row_says_so_without_a_traceback(tmp_path, leglock_campaign, capsys, bad):
-    """An export that kept only the header, or whose every row is bad and skipped, leaves no
-    posture: the screening of repeated rows crashed on it (reshape of an empty array)."""
+def test_a_file_with_no_usable_row_says_so_without_a_traceback(tmp_path, leglock_campaign, capsys):
+    """An export whose every row is bad and skipped leaves no posture: the screening of
+    repeated rows crashed on it (reshape of an empty array). (One with only its header is
+    bad input: test_a_file_with_a_header_and_no_postures_is_bad_input.)"""
     lines = format_measurements(leglock_campaign.data).splitlines()
     header, rows = lines[0], lines[1:]
-    body = [] if bad == "header only" else [",".join(["9", *row.split(",")[1:]]) for row in rows]  # leg 9
+    body = [",".join(["9", *row.split(",")[1:]]) for row in rows]  # leg 9
     path = tmp_path / "empty.csv"
     path.write_text("\n".join([header, *body]) + "\n", encoding="utf-8")
     output = tmp_path / "cal.toml"

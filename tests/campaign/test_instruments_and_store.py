@@ -112,7 +112,7 @@ def test_a_bad_instrument_file_is_refused_naming_every_bad_line(tmp_path) -> Non
     (tmp_path / "few.csv").write_text("p1_x,p1_y,p1_z\n1,2,3\n")
     with pytest.raises(InstrumentError, match="1 feature point"):
         CsvInstrument(tmp_path / "few.csv", 3)
-    with pytest.raises(InstrumentError, match="cannot read"):
+    with pytest.raises(InstrumentError, match="missing.csv: no such file: check the name"):
         CsvInstrument(tmp_path / "missing.csv", 3)
 
 

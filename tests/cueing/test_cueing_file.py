@@ -65,11 +65,11 @@ def test_every_problem_of_a_parameters_file_is_named_at_once() -> None:
 
 
 def test_an_unreadable_file_is_named(tmp_path: Path) -> None:
-    with pytest.raises(CueingFileError, match="missing.toml: cannot read"):
+    with pytest.raises(CueingFileError, match="missing.toml: no such file: check the name"):
         load_cueing_parameters(tmp_path / "missing.toml")
     with pytest.raises(CueingFileError, match="missing.csv: no such file"):
         load_vehicle_trajectory(tmp_path / "missing.csv")
-    with pytest.raises(CueingFileError, match="cannot read"):
+    with pytest.raises(CueingFileError, match="a folder, not a file: name a file in it"):
         load_vehicle_trajectory(tmp_path)  # a directory
 
 

@@ -105,6 +105,7 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
     header_line, header, rows = _table(text, source)
     kind, observation_columns = _observation_columns(header)
     if observation_columns:
+        _some_rows(rows, header_line, source)
         return _parse_observations(header_line, header, rows, source, feature_point_count, sha256, instrument, kind,
                                    observation_columns)
     point_columns = _point_columns(header)
@@ -121,6 +122,7 @@ def parse_measurements(text: str, source: str, feature_point_count: int, sha256:
             f"{source}: line {header_line}: missing columns {', '.join(missing)} (a row needs leg, l1 … l6 and either "
             "x, y, z, roll, pitch, yaw or feature points p1_x, p1_y, p1_z … p3_z)")
     _check_point_count(len(point_columns), source, feature_point_count)
+    _some_rows(rows, header_line, source)
     used = set(required) | (set(POSE_AXES) if point_columns else set())
     ignored = tuple(name for name in header if name not in used)
 
@@ -196,6 +198,13 @@ def _table(text: str, source: str) -> tuple[int, list[str], list[tuple[int, str]
     if duplicates:
         raise MeasurementFileError(f"{source}: line {header_line}: duplicate columns {', '.join(duplicates)}")
     return header_line, header, rows[1:]
+
+
+def _some_rows(rows: list[tuple[int, str]], header_line: int, source: str) -> None:
+    """A file without rows is bad input, not the identification's "insufficient data"."""
+    if not rows:
+        raise MeasurementFileError(f"{source}: a header (line {header_line}) but no postures: a measurement file holds "
+                                   "a row per posture measured")
 
 
 def _check_point_count(count: int, source: str, feature_point_count: int) -> None:
