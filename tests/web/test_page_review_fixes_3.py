@@ -206,3 +206,21 @@ def test_the_move_line_stops_advising_reset_once_the_controller_is_enabled_again
         assert not go_enabled(rig)
 
     attempted(rig, scenario)
+
+
+def test_an_invalid_requests_problems_are_shown_once_in_words(rig) -> None:
+    """Found from outside: ``duration: Input should be greater than 0`` came twice, the
+    second time as JSON (``• {"field":"duration","problem":…}``)."""
+    described = rig.driver.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        import('/static/controls.js').then(({ describeError }) => done([
+          describeError({ code: 'invalid_request', message: 'validate_pose: duration: Input should be greater than 0',
+                          details: [{ field: 'duration', problem: 'Input should be greater than 0' }] }),
+          describeError({ code: 'invalid_request', message: 'move: speed: too fast',
+                          details: [{ field: 'speed', problem: 'too fast' }, { field: 'pose[2]', problem: 'not a number' },
+                                    { field: '', problem: 'give one of them' }] }),
+        ]));
+    """)
+    assert described[0] == "invalid_request: validate_pose: duration: Input should be greater than 0", described[0]
+    assert described[1] == "invalid_request: move: speed: too fast\n  • pose[2]: not a number\n  • give one of them", \
+        described[1]

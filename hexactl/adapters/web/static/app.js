@@ -287,7 +287,7 @@ const controls = setupControls({
 const UNIT = ['mm', 'mm', 'mm', '°', '°', '°'];
 function plotTitles() {
   const a = Number($('plot-axis').value);
-  $('plot-pose-title').textContent = `pose ${AXES[a]}: commanded vs measured (${UNIT[a] === '°' ? 'deg' : 'mm'}, relative to home)`;
+  $('plot-pose-title').textContent = `pose ${AXES[a]}: commanded vs measured (${UNIT[a] === '°' ? 'deg' : 'mm'}, relative to the zero posture)`;
   $('plot-leg-title').textContent = `leg ${$('plot-leg').value}: set-point vs feedback (sensor mm)`;
 }
 $('plot-axis').addEventListener('change', () => { plotTitles(); plots.setAxis(Number($('plot-axis').value)); });

@@ -38,7 +38,11 @@ export function describeError(err) {
     if (v.length > 4) lines.push(`  • … and ${v.length - 4} more`);
     text += `\n${lines.join('\n')}`;
   } else if (err.details && Array.isArray(err.details)) {
-    text += `\n${err.details.slice(0, 4).map((d) => `  • ${typeof d === 'string' ? d : JSON.stringify(d)}`).join('\n')}`;
+    // an invalid_request's {field, problem} items, as the message words them; each once
+    const items = err.details.map((d) => (d && typeof d === 'object' && 'problem' in d
+      ? (d.field ? `${d.field}: ${d.problem}` : String(d.problem)) : (typeof d === 'string' ? d : JSON.stringify(d))));
+    const unsaid = items.filter((item) => !text.includes(item));
+    if (unsaid.length) text += `\n${unsaid.slice(0, 4).map((item) => `  • ${item}`).join('\n')}`;
   }
   return text;
 }
