@@ -111,6 +111,19 @@ def test_an_unknown_field_is_answered_with_the_fields_taken_there(body, field, p
     assert refused.value.message.endswith(f"{field}: {problem}")
 
 
+@pytest.mark.parametrize("cmd", ["save_recording", "load_calibration", "play"])
+def test_a_path_with_a_line_end_is_refused_saying_to_rename_the_file(cmd) -> None:
+    """Found from outside: save_recording wrote a file named with a line end (which the
+    log then wrote as two lines); a calibration so named was refused as a "source"."""
+    field = "sequence" if cmd == "play" else "path"
+    with pytest.raises(ApiError) as refused:
+        decode_request(json.dumps({"v": 1, "id": 1, "cmd": cmd, field: "nl\nx.csv"}).encode())
+    assert refused.value.code == "invalid_request"
+    assert refused.value.message.endswith(f"{field}: 'nl\\nx.csv' is not allowed: a path is one line of text, without "
+                                          "control characters (a file named with a line end or a tab: rename it)"), \
+        refused.value.message
+
+
 def test_nesting_too_deep_says_so_in_a_clients_terms() -> None:
     with pytest.raises(ApiError) as refused:
         decode_request(b"[" * 50_000)

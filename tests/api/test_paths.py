@@ -29,7 +29,7 @@ def outside(service):
 
 @pytest.mark.parametrize(
     "path",
-    ["../outside.toml", "sub/../../outside.toml", "{outside}", "/etc/passwd", "link.toml", "linkdir/outside.toml", "a\0b.toml"],
+    ["../outside.toml", "sub/../../outside.toml", "{outside}", "/etc/passwd", "link.toml", "linkdir/outside.toml"],
 )
 def test_paths_outside_are_forbidden(service, outside, path) -> None:
     (service.data_dir / "link.toml").symlink_to(outside)
@@ -41,6 +41,8 @@ def test_paths_outside_are_forbidden(service, outside, path) -> None:
 
 def test_empty_path_is_invalid(service) -> None:
     assert call(service, "load_calibration", path="")["error"]["code"] == "invalid_request"
+    assert call(service, "load_calibration", path="a\0b.toml")["error"]["code"] == "invalid_request"  # no control character
+    assert not service.controller.calls
 
 
 def test_sequence_paths_outside_are_forbidden(service, outside) -> None:

@@ -15,8 +15,8 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal, Union, get_args
 
-from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, JsonValue, ValidatorFunctionWrapHandler,
-                      WrapValidator, model_validator)
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, JsonValue, TypeAdapter,
+                      ValidatorFunctionWrapHandler, WrapValidator, model_validator)
 
 from hexactl.adapters.api.protocol import (
     MAX_DEADLINE_MS,
@@ -56,9 +56,10 @@ MAX_FILES_LISTED = 1000
 """The most files ``files`` lists."""
 
 
-def _text_matching(pattern: str, rule: str) -> Any:
+def _text_matching(pattern: str, rule: str, *lengths: Any) -> Any:
     """A string type that must match ``pattern`` (in the schema), refused saying ``rule``,
-    what the text may contain: pydantic's own refusal quotes the regular expression."""
+    what the text may contain: pydantic's own refusal quotes the regular expression.
+    ``lengths``: a ``Field``'s length bounds, checked first (an empty text is empty, not "not allowed")."""
     compiled = re.compile(pattern)
 
     def check(text: str) -> str:
@@ -66,7 +67,7 @@ def _text_matching(pattern: str, rule: str) -> Any:
             raise ValueError(f"{text[:120]!r} is not allowed: {rule}")
         return text
 
-    return Annotated[str, AfterValidator(check), Field(json_schema_extra={"pattern": pattern})]
+    return Annotated[str, *lengths, AfterValidator(check), Field(json_schema_extra={"pattern": pattern})]
 
 
 _RECORDING_EXTENSION = re.compile(RECORDING_EXTENSION_PATTERN)
@@ -87,7 +88,11 @@ StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII:
 OneLine = _text_matching(ONE_LINE_PATTERN, "one line of text, without control characters (no line end, no tab)")
 """Text the service's log writes (:mod:`hexactl.control.one_line`)."""
 
-FilePath = Annotated[str, Field(min_length=1, max_length=4096, description="a file in the service's data directories")]
+FilePath = Annotated[
+    _text_matching(ONE_LINE_PATTERN, "a path is one line of text, without control characters (a file named with a "
+                   "line end or a tab: rename it)", Field(min_length=1, max_length=4096)),
+    Field(description="a file in the service's data directories")]
+"""The log writes it, as every name it writes: one line (:mod:`hexactl.control.one_line`)."""
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
 
 
@@ -317,13 +322,18 @@ class InlineSequence(_Message):
     waypoints: list[Waypoint] = Field(min_length=1, max_length=MAX_WAYPOINTS)
 
 
+_SEQUENCE_NAME = TypeAdapter(FilePath)
+
+
 def _named_or_given(value: Any, union: ValidatorFunctionWrapHandler) -> str | InlineSequence:
     """A sequence's name or the sequence, told apart by the JSON type, so that a mistake in
     one is refused as that one (pydantic's union refused both: ``sequence.str: Input should
     be a valid string; sequence.InlineSequence.waypoints.0.duration: …``)."""
     if isinstance(value, dict):
         return InlineSequence.model_validate(value)  # its problems are told at sequence.…
-    if isinstance(value, str | InlineSequence):
+    if isinstance(value, str):
+        return _SEQUENCE_NAME.validate_python(value)
+    if isinstance(value, InlineSequence):
         return union(value)
     raise ValueError(f"a sequence is its name (a string) or the sequence itself (an object), got {json_type(value)}")
 
@@ -332,7 +342,7 @@ class PlayRequest(_Request):
     """Play a sequence, every waypoint's path validated before the first moves."""
 
     cmd: Literal["play"]
-    sequence: Annotated[str | InlineSequence, WrapValidator(_named_or_given)] = Field(
+    sequence: Annotated[FilePath | InlineSequence, WrapValidator(_named_or_given)] = Field(
         description="a built-in name (x_sweep, y_rotation, compound), a .toml sequence file or a .csv plan "
         "(from hexactl plan-leglock) in the data directories, or the sequence itself"
     )
