@@ -212,6 +212,11 @@ def test_a_pose_typed_with_spaces_is_told_to_use_commas(args, capsys) -> None:
     assert "is not a number" not in error and "got 1" not in error, error
 
 
+def test_one_word_that_is_no_number_is_called_so() -> None:
+    with pytest.raises(CliError, match="abc: 'abc' is not a number"):
+        parse_pose_argument("abc")
+
+
 def test_the_forms_still_parse() -> None:
     assert parse_pose_argument("x=5,yaw=-2") == [5.0, 0.0, 0.0, 0.0, 0.0, -2.0]
     assert parse_pose_argument("1,2,3,4,5,6") == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]

@@ -362,7 +362,7 @@ def parse_pose_argument(text: str, what: str = "pose") -> list[float]:
                        f"and {plain!r}): give {POSE_FORMS}")
     if keyed:
         pose = _keyed_values(what, text, parts, 0.0)
-    elif len(parts) == 1:  # `move 0 0 50 0 0 0`: six arguments, or one with spaces between its numbers
+    elif len(parts) == 1 and _all_numbers(text.split()):  # `move 0 0 50 0 0 0`, or "0 0 50 0 0 0"
         raise CliError(f"{what} {text!r}: one value where six are needed: give {POSE_FORMS}, as one argument with "
                        "commas between the numbers (not spaces)")
     else:
@@ -583,6 +583,14 @@ def parse_numbers(values: list[str], labels: tuple[str, ...]) -> list[float]:
             raise CliError(f"{label}: {value!r} is not a finite number")
         numbers.append(number)
     return numbers
+
+
+def _all_numbers(words: list[str]) -> bool:
+    try:
+        [float(word) for word in words]
+    except ValueError:
+        return False
+    return True
 
 
 def _number(text: str, context: str) -> float:
