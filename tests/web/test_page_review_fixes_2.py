@@ -51,7 +51,8 @@ from tests.web.test_validated_move import (
 
 SENT = """
 (() => {
-  const mine = { messages: [], holdFirstJogReplyMs: 0, heldReplyAt: null, jogIds: new Set() };
+  const mine = { messages: [], holdFirstJogReplyMs: 0, heldReplyAt: null, jogIds: new Set(), failEstopReplies: false,
+                 estopIds: new Set() };
   window.hexactlTestSent = mine;
   const proto = WebSocket.prototype;
   const send = proto.send;
@@ -59,6 +60,7 @@ SENT = """
     const message = JSON.parse(data);
     mine.messages.push({ ...message, tapAt: performance.now() });
     if (message.cmd === 'jog') mine.jogIds.add(message.id);
+    if (message.cmd === 'estop') mine.estopIds.add(message.id);
     return send.call(this, data);
   };
   const add = proto.addEventListener;
@@ -66,6 +68,11 @@ SENT = """
     if (type !== 'message') return add.call(this, type, listener, options);
     return add.call(this, type, (event) => {
       const message = JSON.parse(event.data);
+      if (mine.failEstopReplies && message.type === 'reply' && mine.estopIds.has(message.id)) {
+        const reply = { ok: false, error: { code: 'loop_silent', message: 'queued, to be carried out if the loop runs again' } };
+        listener(new MessageEvent('message', { data: JSON.stringify({ ...message, reply }) }));
+        return;
+      }
       const ms = mine.holdFirstJogReplyMs;
       if (ms > 0 && message.type === 'reply' && mine.jogIds.has(message.id)) {
         mine.holdFirstJogReplyMs = 0;
@@ -81,7 +88,8 @@ SENT = """
 with ``tapAt``, when it was handed; the test tap's own acknowledgements of dropped telemetry
 included) and holds the reply to the
 next jog for ``holdFirstJogReplyMs`` (a slow first reply), handing it to the page at
-``heldReplyAt``."""
+``heldReplyAt``. While ``failEstopReplies``, the reply to every E-stop becomes the
+``loop_silent`` failure a held-up loop gives (the E-stop itself goes to the service as sent)."""
 
 NO_FRAMES = "work: none · tool: none · soft limits: none"
 

@@ -25,59 +25,15 @@ from selenium.webdriver.common.keys import Keys
 
 from hexactl.adapters.files.geometry_file import geometry_id
 from tests.web.test_dashboard import Rig, page_on_a_service, wait_for
-from tests.web.test_page_review_fixes import (
-    NOMINAL_ID,
-    apply_enabled,
-    back_to_nominal,
-    calibrated,
-    cleared,
-    previewed_in_page,
-)
-from tests.web.test_validated_move import (
-    TAP,
-    attempted,
-    go_enabled,
-    live,
-    move_result,
-    ready_in_frames,
-    sent,
-    validated_in_page,
-)
-
-FAIL_ESTOP_REPLIES = """
-(() => {
-  const mine = { failEstopReplies: false, estopIds: new Set() };
-  window.hexactlTestEstop = mine;
-  const proto = WebSocket.prototype;
-  const send = proto.send;
-  proto.send = function (data) {
-    const message = JSON.parse(data);
-    if (message.cmd === 'estop') mine.estopIds.add(message.id);
-    return send.call(this, data);
-  };
-  const add = proto.addEventListener;
-  proto.addEventListener = function (type, listener, options) {
-    if (type !== 'message') return add.call(this, type, listener, options);
-    return add.call(this, type, (event) => {
-      const message = JSON.parse(event.data);
-      if (mine.failEstopReplies && message.type === 'reply' && mine.estopIds.has(message.id)) {
-        const reply = { ok: false, error: { code: 'loop_silent', message: 'queued, to be carried out if the loop runs again' } };
-        listener(new MessageEvent('message', { data: JSON.stringify({ ...message, reply }) }));
-        return;
-      }
-      listener(event);
-    }, options);
-  };
-})();
-"""
-"""Turns the reply to every E-stop into the ``loop_silent`` failure a held-up loop gives
-while ``hexactlTestEstop.failEstopReplies``: the E-stop itself goes to the service as sent."""
-
+from tests.web import test_page_review_fixes as preview
+from tests.web import test_validated_move as moves
+from tests.web.test_page_review_fixes_2 import SENT
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory) -> Iterator[Rig]:
-    with page_on_a_service(tmp_path_factory.mktemp("review-fixes-3"), before_load=FAIL_ESTOP_REPLIES + TAP) as rig:
-        wait_for(lambda: live(rig), "live data on the page")
+    with page_on_a_service(tmp_path_factory.mktemp("review-fixes-3"),
+                           before_load=SENT + moves.TAP) as rig:
+        wait_for(lambda: moves.live(rig), "live data on the page")
         yield rig
 
 
@@ -113,7 +69,7 @@ def test_the_plots_break_their_lines_where_no_records_came(rig) -> None:
 def test_a_queued_estop_the_loop_carries_out_clears_the_not_confirmed_banner_saying_so(rig) -> None:
     def scenario() -> None:
         rig.enabled_from_the_page()
-        rig.page("window.hexactlTestEstop.failEstopReplies = true")
+        rig.page("window.hexactlTestSent.failEstopReplies = true")
         try:
             rig.click("#estop")
             wait_for(lambda: rig.status()["state"] == "estop", "the E-stop carried out")
@@ -121,7 +77,7 @@ def test_a_queued_estop_the_loop_carries_out_clears_the_not_confirmed_banner_say
             wait_for(lambda: any(e["what"] == "cleared" for e in events()), "the banner cleared by the records",
                      seen=events)
         finally:
-            rig.page("window.hexactlTestEstop.failEstopReplies = false")
+            rig.page("window.hexactlTestSent.failEstopReplies = false")
         whats = [e["what"] for e in events()]
         assert "reply-failed" in whats and "warning" in whats, whats  # the failed reply did raise it
         cleared_by = [e for e in events() if e["what"] == "cleared"][-1]
@@ -151,33 +107,33 @@ def test_two_estops_a_reset_apart_are_two_lines_each_with_its_time(rig) -> None:
 
 
 def test_apply_clears_the_calibration_preview_it_used(rig) -> None:
-    small = calibrated(0.2, "review-3 small")
+    small = preview.calibrated(0.2, "review-3 small")
 
     def scenario() -> None:
         rig.at_rest_disabled()
         try:
-            previewed_in_page(rig, small)
-            cleared(rig, "#calibration-result")
+            preview.previewed_in_page(rig, small)
+            preview.cleared(rig, "#calibration-result")
             rig.click("#calibration-apply")
             wait_for(lambda: rig.status()["calibration_id"] == geometry_id(small), "the calibration applied")
             change = rig.element("#calibration-change")
             assert change.text == "used by Apply (below): preview again for another change", change.text
-            assert not apply_enabled(rig)
+            assert not preview.apply_enabled(rig)
             rig.click("#calibration-rollback")
-            wait_for(lambda: rig.status()["calibration_id"] == NOMINAL_ID, "rolled back")
-            assert "would be accepted" not in change.text and not apply_enabled(rig), change.text
+            wait_for(lambda: rig.status()["calibration_id"] == preview.NOMINAL_ID, "rolled back")
+            assert "would be accepted" not in change.text and not preview.apply_enabled(rig), change.text
         finally:
-            back_to_nominal(rig)
+            preview.back_to_nominal(rig)
 
     rig.scenario(scenario)
 
 
 def test_a_jog_speed_of_zero_sends_no_jog_and_says_why(rig) -> None:
     rig.at_rest_disabled()
-    wait_for(lambda: live(rig), "live data on the page")
-    before = sent(rig, "jog")
+    wait_for(lambda: moves.live(rig), "live data on the page")
+    before = moves.sent(rig, "jog")
     rig.fill("#jog-speed", "0")
-    cleared(rig, "#jog-status")
+    preview.cleared(rig, "#jog-status")
     button = rig.shown('.jog[data-axis="x"][data-direction="1"]')
     ActionChains(rig.driver).click_and_hold(button).perform()
     try:
@@ -186,26 +142,27 @@ def test_a_jog_speed_of_zero_sends_no_jog_and_says_why(rig) -> None:
         ActionChains(rig.driver).release(button).perform()
     assert said == "jog speed: 0 moves nothing: type a speed > 0 in mm/s, °/s; not sent", said
     rig.client.call("status")
-    assert sent(rig, "jog") == before
+    assert moves.sent(rig, "jog") == before
     rig.fill("#jog-speed", 10)
 
 
 def test_the_move_line_stops_advising_reset_once_the_controller_is_enabled_again(rig) -> None:
     def scenario() -> None:
-        ready_in_frames(rig)
-        validated_in_page(rig, [0, 0, 6, 0, 0, 0], "zero")
+        moves.ready_in_frames(rig)
+        moves.validated_in_page(rig, [0, 0, 6, 0, 0, 0], "zero")
         rig.client.call("estop")  # another client
-        wait_for(lambda: not go_enabled(rig), "Go withdrawn", seen=lambda: move_result(rig))
-        assert move_result(rig) == "the controller is estop: Go is withdrawn; reset, then enable it, then validate again"
+        wait_for(lambda: not moves.go_enabled(rig), "Go withdrawn", seen=lambda: moves.move_result(rig))
+        assert moves.move_result(rig) == \
+            "the controller is estop: Go is withdrawn; reset, then enable it, then validate again"
         rig.client.call("reset")
         wait_for(lambda: rig.status()["state"] == "disabled", "reset")
         rig.client.call("enable")
         wait_for(lambda: rig.element("#state").text.strip() == "enabled", "the page showing enabled")
-        wait_for(lambda: move_result(rig) == "Go was withdrawn when the controller went estop: validate again",
-                 "the Move line in the past tense", seen=lambda: move_result(rig))
-        assert not go_enabled(rig)
+        wait_for(lambda: moves.move_result(rig) == "Go was withdrawn when the controller went estop: validate again",
+                 "the Move line in the past tense", seen=lambda: moves.move_result(rig))
+        assert not moves.go_enabled(rig)
 
-    attempted(rig, scenario)
+    moves.attempted(rig, scenario)
 
 
 def test_an_invalid_requests_problems_are_shown_once_in_words(rig) -> None:
