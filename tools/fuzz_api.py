@@ -92,6 +92,7 @@ from hexactl.adapters.api.wire import ErrorCode as ApiCode  # noqa: E402
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
 from hexactl.adapters.files.config_path import default_config_path  # noqa: E402
 from hexactl.control.planning import MAX_WAYPOINTS  # noqa: E402
+from hexactl.control.one_line import is_one_line  # noqa: E402
 from hexactl.control.results import ErrorCode as ControlCode  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402
@@ -399,10 +400,9 @@ class Strategies:
         writes = st.sampled_from(files["hostile_writes"])
         texts = st.sampled_from(files["hostile_texts"])
         broken = st.sampled_from(files["broken_files"])
-        unreadable = frozenset({ApiCode.FORBIDDEN_PATH, ApiCode.FILE_NOT_FOUND, ApiCode.TOO_LARGE})
         return st.one_of(
-            reads.map(lambda p: ("load_calibration", {"path": p}, unreadable)),
-            reads.map(lambda p: ("play", {"sequence": p if p.endswith(".toml") else p + ".toml"}, unreadable)),
+            reads.map(lambda p: ("load_calibration", {"path": p}, read_refusals(p))),
+            reads.map(lambda p: ("play", {"sequence": p if p.endswith(".toml") else p + ".toml"}, read_refusals(p))),
             writes.map(lambda p: ("save_recording", {"path": p}, save_refusals(p))),
             texts.map(lambda text: ("load_calibration", {"toml": text}, frozenset({ApiCode.INVALID_CALIBRATION}))),
             broken.map(lambda p: ("load_calibration", {"path": p}, frozenset({ApiCode.INVALID_CALIBRATION}))),
@@ -426,11 +426,22 @@ NAME_MAX_BYTES = 255
 """The longest file name Linux's file systems take (a directory entry's)."""
 
 
+def read_refusals(path: str) -> frozenset[str]:
+    """How the service refuses to read a hostile ``path``: outside the data directories, not
+    there or not a regular file, too large; a path that is not one line of text (a line end,
+    a NUL) is no name a request takes (``invalid_request``)."""
+    if not is_one_line(path):
+        return frozenset({ApiCode.INVALID_REQUEST})
+    return frozenset({ApiCode.FORBIDDEN_PATH, ApiCode.FILE_NOT_FOUND, ApiCode.TOO_LARGE})
+
+
 def save_refusals(path: str) -> frozenset[str]:
     """How the service may refuse ``save_recording`` to a hostile ``path``: outside the data
     directories or not there, or nothing recorded yet; a name too long for the file system
     is refused only once there is a recording to write (``write_failed``, "give a shorter
     name"), which depends on what the run played before."""
+    if not is_one_line(path):
+        return frozenset({ApiCode.INVALID_REQUEST})
     refusals = {ApiCode.FORBIDDEN_PATH, ApiCode.FILE_NOT_FOUND, ApiCode.FILE_EXISTS, ApiCode.NO_RECORDING}
     if Path(path).suffix.lower() != ".csv":  # a recording is named as CSV, whatever else is wrong with the path
         refusals.add(ApiCode.INVALID_REQUEST)

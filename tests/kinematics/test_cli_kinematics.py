@@ -67,7 +67,7 @@ def test_fk_json_of_a_diverged_solve_is_standard_json(capsys) -> None:
         (["ik", "1e308", "0", "0", "0", "0", "0", "--json"], "pose x 1e+308 is beyond any platform's reach"),
         (["fk", "1", "2", "3", "4", "5", "inf"], "L6: 'inf' is not a finite number"),
         (["sim-actuators", "--can", "socketcan:vcan0", "--positions", "1,2"], "give 6 numbers (L1,L2,L3,L4,L5,L6), not 2"),
-        (["check", "--config", "/nonexistent/platform.toml"], "/nonexistent/platform.toml: cannot read"),
+        (["check", "--config", "/nonexistent/platform.toml"], "/nonexistent/platform.toml: no such file: check the name"),
     ],
 )
 def test_bad_arguments_get_a_named_error_and_status_2(argv, message, capsys) -> None:

@@ -145,7 +145,7 @@ def test_bad_geometry_files_are_refused_naming_the_key(edit, expected) -> None:
 
 
 def test_unreadable_and_invalid_toml_files_are_named(tmp_path: Path) -> None:
-    with pytest.raises(GeometryError, match="missing.toml: cannot read"):
+    with pytest.raises(GeometryError, match="missing.toml: no such file: check the name"):
         load_geometry(tmp_path / "missing.toml")
     broken = tmp_path / "broken.toml"
     broken.write_text("base_joints = [[1, 2, 3]\n")
