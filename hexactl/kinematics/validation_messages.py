@@ -46,13 +46,17 @@ def validation_location(location: Sequence[str | int], named_items: Mapping[str,
 
 
 def _model_within(annotation: Any) -> type[BaseModel] | None:
-    """The model a field holds: itself, or as the items of a list, a tuple or an optional."""
+    """The model a field holds: itself, or as the items of a list, a tuple or an optional;
+    None where it may hold one of several (a union of models: which one's keys to list is
+    not known from the location)."""
+    models = _models_in(annotation)
+    return models.pop() if len(models) == 1 else None
+
+
+def _models_in(annotation: Any) -> set[type[BaseModel]]:
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-        return annotation
-    for argument in get_args(annotation):
-        if (model := _model_within(argument)) is not None:
-            return model
-    return None
+        return {annotation}
+    return set().union(*(_models_in(argument) for argument in get_args(annotation)))
 
 
 def accepted_keys(model: type[BaseModel], location: Sequence[str | int]) -> tuple[str, ...]:
