@@ -57,13 +57,15 @@ def test_the_plots_break_their_lines_where_no_records_came(rig) -> None:
           h.push(record(14.08, -0.6));
           h.push(record(14.1, -0.6));             // a record 10 ms early: no gap
           h.push(record(14.7, -0.6));             // 0.6 s late (30 intervals): an outage too
+          h.push(record(15.5, -0.6));             // 0.8 s more, right after: the outage before sets no interval
           done({ t: h.t, z: h.pc[2], lat: h.lat, csv: h.toCSV().trim().split('\\n') });
         });
     """)
-    assert history["t"] == pytest.approx([0, 0.02, 0.04, 7.04, 14.04, 14.06, 14.08, 14.1, 14.4, 14.7]), history["t"]
-    assert history["z"] == [94, 94, 94, None, -0.6, -0.6, -0.6, -0.6, None, -0.6], history["z"]
-    assert history["lat"][3] is None and history["lat"][8] is None
-    assert len(history["csv"]) == 1 + 8 and not any(",,,," in line for line in history["csv"][1:]), history["csv"]
+    assert history["t"] == pytest.approx([0, 0.02, 0.04, 7.04, 14.04, 14.06, 14.08, 14.1, 14.4, 14.7, 15.1, 15.5]), \
+        history["t"]
+    assert history["z"] == [94, 94, 94, None, -0.6, -0.6, -0.6, -0.6, None, -0.6, None, -0.6], history["z"]
+    assert history["lat"][3] is None and history["lat"][8] is None and history["lat"][10] is None
+    assert len(history["csv"]) == 1 + 9 and not any(",,,," in line for line in history["csv"][1:]), history["csv"]
 
 
 def test_a_queued_estop_the_loop_carries_out_clears_the_not_confirmed_banner_saying_so(rig) -> None:

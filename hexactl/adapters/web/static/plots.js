@@ -16,6 +16,7 @@ export class History {
   constructor() { this.clear(); }
 
   clear() {
+    this.interval = 0;     // between the last two records that came without an outage between them, s
     this.t = [];
     this.pc = AXES.map(() => []);
     this.pm = AXES.map(() => []);
@@ -33,9 +34,9 @@ export class History {
     const n = this.t.length;
     if (n && t < this.t[n - 1]) this.clear();          // the service restarted: its clock began again
     else if (n && t === this.t[n - 1]) return;           // the same record twice
-    else if (n && t - this.t[n - 1] > Math.max(MIN_GAP_S, GAP_FACTOR * (n > 1 ? this.t[n - 1] - this.t[n - 2] : 0))) {
+    else if (n && t - this.t[n - 1] > Math.max(MIN_GAP_S, GAP_FACTOR * this.interval)) {
       this.pushGap((t + this.t[n - 1]) / 2);            // no records came: break the lines, never draw a move across
-    }
+    } else if (n) this.interval = t - this.t[n - 1];     // an outage's length is no record interval
     this.t.push(t);
     for (let i = 0; i < 6; i++) {
       this.pc[i].push(num(r.pose_command?.[i]));
