@@ -332,24 +332,29 @@ def test_killing_and_restarting_the_service_reconnects_the_page(tmp_path) -> Non
         driver.quit()
 
 
-def test_a_narrow_window_still_shows_the_state_the_motion_and_the_estop(rig) -> None:
+def test_a_narrow_window_still_shows_the_state_the_motion_the_estop_and_the_controller_buttons(rig) -> None:
     """Found from outside: in a window 683 px wide (half a laptop's screen) the E-STOP
-    button covered the MOTION pill, and at 500 px the header clipped both pills away."""
+    button covered the MOTION pill, and at 500 px the header clipped both pills away; at
+    800×600 the stacked page scrolled Stop, Disable and Reset out of view."""
     def hidden() -> list[str]:  # the ones not shown whole, on top, inside the window
         return rig.page("""
-            return ['state', 'motion', 'estop'].filter((id) => {
+            return ['state', 'motion', 'estop', 'enable', 'disable', 'stop', 'reset'].filter((id) => {
                 const element = document.getElementById(id), r = element.getBoundingClientRect();
                 const across = [0.15, 0.5, 0.85].map((f) => [r.left + f * r.width, (r.top + r.bottom) / 2]);
-                return r.width === 0 || r.left < 0 || r.right > innerWidth || !across.every(([x, y]) =>
-                    element.contains(document.elementFromPoint(x, y)));
+                return r.width === 0 || r.left < 0 || r.right > innerWidth || r.top < 0 || r.bottom > innerHeight
+                    || !across.every(([x, y]) => element.contains(document.elementFromPoint(x, y)));
             });""")
 
     try:
-        for width in (683, 500):
-            rig.driver.set_window_size(width, 1000)
+        for width, height in ((683, 1000), (500, 1000), (800, 600)):
+            rig.driver.set_window_size(width, height)
             wait_for(lambda: rig.page("return innerWidth") <= width, f"the window {width} px wide")
-            assert hidden() == [], width
+            for where in ("top", "bottom"):
+                rig.page(f"window.scrollTo(0, {'0' if where == 'top' else 'document.body.scrollHeight'})")
+                assert rig.page("return document.body.scrollHeight > innerHeight"), "a page that scrolls"
+                assert hidden() == [], (width, height, where)
     finally:
+        rig.page("window.scrollTo(0, 0)")
         rig.driver.set_window_size(1600, 1000)
 
 
