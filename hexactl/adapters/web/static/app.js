@@ -5,6 +5,7 @@ import { View3D, strokeMargin } from './view3d.js';
 import { History, Plots } from './plots.js';
 import { setupControls, fmt, fmtPose, AXES } from './controls.js';
 import { setupEvents, isWarning } from './events.js';
+import { groupFaults, faultLine, faultAdvice } from './faults.js';
 
 const $ = (id) => document.getElementById(id);
 const RECONNECT_MS = 1000;
@@ -340,18 +341,26 @@ function updateConnection() {
   document.body.dataset.connected = connected ? 'true' : 'false';
 }
 
-function updateFaults(faults) {
-  const list = Array.isArray(faults) ? faults : [];
-  const key = JSON.stringify(list);
+function updateFaults(faults, controllerState) {
+  const groups = groupFaults(faults);
+  const advice = groups.length ? faultAdvice(controllerState) : '';
+  const key = JSON.stringify([groups, advice]);
   if (shown.faults === key) return;
   shown.faults = key;
   const ul = $('faults');
   ul.textContent = '';
-  for (const f of list) {
+  for (const group of groups) {
     const li = document.createElement('li');
     const b = document.createElement('b');
-    b.textContent = f?.code ?? 'fault';
-    li.append(b, document.createTextNode(` ${f?.message ?? ''}${f?.leg ? ` (leg ${f.leg})` : ''}`));
+    b.textContent = group.code;
+    li.append(b, document.createTextNode(` ${faultLine(group)}`));
+    li.title = group.all.join('\n');
+    ul.append(li);
+  }
+  if (advice) {
+    const li = document.createElement('li');
+    li.className = 'advice';
+    li.textContent = advice;
     ul.append(li);
   }
 }
@@ -435,7 +444,7 @@ function updateReadouts(r) {
   const geomId = state.geometry?.calibration_id;
   $('calibration-id').title = geomId && r.calibration_id && geomId !== r.calibration_id
     ? `the telemetry's calibration ${r.calibration_id} differs from the drawn geometry's ${geomId}` : (state.geometry?.name ?? '');
-  updateFaults(r.faults);
+  updateFaults(r.faults, r.state);
   updateOtherController(r.other_controller);
   updateLink(r.link);
 
