@@ -350,6 +350,8 @@ class Service:
                 raise ServiceError(f"{source}: {error}{refused}") from None
             # said once the loop took it: logged when read, a calibration then refused read as active
             log.info("active calibration %r (%s) from %s", active.name, calibration_id, source)
+            for warning in active.identification_warnings:
+                log.warning("calibration %s, when identified: %s", calibration_id, warning)
             # What is in force is what a restart restores: the API process keeps it from its start on.
             kept = KeptCalibration(kept_path, geometry_id(nominal))
 

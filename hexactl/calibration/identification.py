@@ -161,7 +161,7 @@ def _identify(data: MeasurementData, nominal: Geometry, options: IdentificationO
                            f"uncertainty scaled up by its excess χ²){extras_note}")
     if not full.ok:  # nothing fitted: no residuals to speak of (χ²/dof is NaN)
         return replace(full, reason=f"auto tried full, which identified nothing "
-                       f"({full.status.name.lower().replace('_', ' ')}), and leglock offers nothing better for these data")
+                       f"({full.status.text}), and leglock offers nothing better for these data")
     return replace(full, reason=f"auto chose full, although its residuals do not match the noise model "
                    f"(χ²/dof {full.chi2_per_dof:.3g}{excluded}) and leglock offers nothing better for these data{extras_note}")
 
@@ -274,6 +274,8 @@ def calibration_info(result: IdentificationResult, created: str, input_sha256: s
         parameter_covariance=tuple(tuple(float(v) for v in row) for row in result.covariance),
         notes=result.reason + "".join(f"; excluded as a {observation.kind}: {observation}" for observation in result.excluded)
         + "".join(f"; {sentence}" for sentence in extra_estimates(result)),
+        status=result.status.text,
+        warnings=result.warnings,
     )
 
 

@@ -41,6 +41,11 @@ class IdentificationStatus(IntEnum):
     INSUFFICIENT_DATA = 4  # too few postures for the method: nothing was identified
     IMPLAUSIBLE = 5  # beyond the nominal's plausibility bounds: not this machine, the data are wrong
 
+    @property
+    def text(self) -> str:
+        """For people and files: ``weakly determined``."""
+        return self.name.lower().replace("_", " ")
+
 
 MIN_LOCKED_POSTURES = 8
 """Per leg, for leglock and paper: seven unknowns plus at least one redundant equation."""

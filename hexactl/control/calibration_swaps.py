@@ -42,7 +42,8 @@ class CalibrationSwaps:
             return refusal
         if calibration_id == self._snapshot().active.calibration_id:  # nothing to swap, nor to roll back to later
             return CommandResult.success(f"calibration {calibration_id} is already active: nothing changed",
-                                         calibration_id=calibration_id, change_mm=0.0)
+                                         calibration_id=calibration_id, change_mm=0.0,
+                                         warnings=geometry.identification_warnings)
         return self._swap(new, f"calibration {calibration_id} loaded")
 
     def validate(self, geometry: Geometry, calibration_id: str, source: str) -> CommandResult:
@@ -58,7 +59,8 @@ class CalibrationSwaps:
         said, change = _effect(s, new, checked)
         return CommandResult.success(f"calibration {calibration_id} would " + (f"be accepted; {said}" if said else
                                      f"change the set-points by at most {change:.3f} mm"),
-                                     calibration_id=calibration_id, change_mm=change)
+                                     calibration_id=calibration_id, change_mm=change,
+                                     warnings=geometry.identification_warnings)
 
     def rollback(self) -> CommandResult:
         """See :meth:`hexactl.control.controller.Controller.rollback_calibration`."""
@@ -84,7 +86,8 @@ class CalibrationSwaps:
         said, change = _effect(s, new, checked)
         return self._submitter.submit(lambda t: cmd.SwapGeometry(t, s.epoch, new, rollback),
                                       message + (f"; {said}" if said else ""),
-                                      calibration_id=new.calibration_id, change_mm=change, **replaced)
+                                      calibration_id=new.calibration_id, change_mm=change,
+                                      warnings=new.geometry.identification_warnings, **replaced)
 
     def _check(self, s: CoreSnapshot, new: ActiveGeometry) -> float | CommandResult:
         """The largest set-point change swapping in ``new`` makes at ``s``, mm

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from functools import cached_property
 from itertools import combinations
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -143,6 +143,11 @@ class CalibrationInfo(_Strict):
                     "predicted accuracy is computed from",
     )
     notes: str = ""
+    status: Literal["ok", "weakly determined"] | None = Field(
+        default=None, description="the identification's status: ok, or weakly determined (written, but the data leave "
+        "commanded poses uncertain: warnings say how); absent from files written before it was kept here")
+    warnings: tuple[str, ...] = Field(default=(), description="what the identification warned of, as calibrate printed "
+                                      "it; load_calibration and validate_calibration answer with them")
 
     @field_validator("base_joints_std_mm", "platform_joints_std_mm", "zero_lengths_std_mm", "sensor_scale_errors_std")
     @classmethod
@@ -270,6 +275,12 @@ class Geometry(_Strict):
     def zero_readings_mm(self) -> np.ndarray:
         """The six sensor readings in the zero posture, mm."""
         return np.asarray(sensor_setpoints(self.legs, self.home.in_radians()), dtype=float)
+
+    @property
+    def identification_warnings(self) -> list[str]:
+        """What the identification that wrote this calibration warned of (weakly determined,
+        the instrument's frame, …); none for a geometry file."""
+        return list(self.calibration.warnings) if self.calibration is not None else []
 
     @cached_property
     def characteristic_length_mm(self) -> float:

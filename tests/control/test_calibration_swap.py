@@ -397,3 +397,25 @@ def test_a_swap_checks_a_work_frame_sequence_at_the_platform_poses_it_will_take(
     assert (loaded := rig.controller.load_calibration(small, "small")).ok, loaded.message
     rig.settle()
     rig.assert_setpoints_safe()
+
+
+def test_a_load_a_preview_and_a_rollback_answer_with_the_identification_warnings_of_the_calibration(rig, calibrated):
+    """Found from outside: a calibration written "weakly determined" (a combination known to
+    ±70 mm) was loaded with no word of it; its file now keeps the warnings, and every swap
+    to it repeats them."""
+    warned = ("weakly determined: … the worst combination 0.66·B4.z −0.66·zero4 is known to ±70.6 mm",
+              "residuals are 0.55× the noise model")
+    table = {"method": "full", "created": "now", "input_sha256": "0" * 64, "postures": 8, "residual_rms_mm": 0.1,
+             "status": "weakly determined", "warnings": warned}
+    weak = _variant(calibrated, calibration=table)
+    assert rig.controller.validate_calibration(weak, "weak").details["warnings"] == list(warned)
+    loaded = rig.controller.load_calibration(weak, "weak")
+    assert loaded.ok and loaded.details["warnings"] == list(warned)
+    rig.run(2)
+    assert rig.controller.load_calibration(weak, "weak").details["warnings"] == list(warned)  # already active
+    plain = rig.controller.load_calibration(_variant(calibrated, zero_lengths=[z + 0.1 for z in calibrated.zero_lengths]),
+                                            "plain")
+    assert plain.ok and plain.details["warnings"] == []  # a geometry with no [calibration] table
+    rig.run(2)
+    back = rig.controller.rollback_calibration()
+    assert back.ok and back.details["calibration_id"] == "weak" and back.details["warnings"] == list(warned)

@@ -359,3 +359,23 @@ def test_a_calibration_refused_at_start_is_never_logged_as_active(tmp_path: Path
     said = [record.getMessage() for record in caplog.records if record.name == "hexactl.service"]
     assert any(f"read from {moved}" in line for line in said), said
     assert not any(line.startswith("active calibration") for line in said), said
+
+
+def test_a_service_started_on_a_calibration_logs_what_its_identification_warned_of(tmp_path: Path, caplog) -> None:
+    """Found from outside: a calibration written "weakly determined" was taken without a word."""
+    from hexactl.kinematics.geometry import CalibrationInfo
+
+    warned = "weakly determined: the worst combination 0.66·B4.z −0.66·zero4 is known to ±70.6 mm"
+    info = CalibrationInfo(method="full", created="now", input_sha256="0" * 64, postures=8, residual_rms_mm=0.1,
+                           status="weakly determined", warnings=(warned,))
+    weak = CALIBRATED.model_copy(update={"calibration": info})
+    path = tmp_path / "weak.toml"
+    path.write_text(geometry_to_toml(weak))
+    caplog.set_level(logging.INFO, logger="hexactl.service")
+    service = _service(tmp_path / "kept.toml", tmp_path, path)
+    try:
+        assert _calibration_in_force(service)[0] == geometry_id(weak)
+    finally:
+        service.close()
+    said = [(record.levelno, record.getMessage()) for record in caplog.records if record.name == "hexactl.service"]
+    assert (logging.WARNING, f"calibration {geometry_id(weak)}, when identified: {warned}") in said, said

@@ -397,7 +397,7 @@ class CommandHandler:
             return {"message": result.message, "valid": False, "calibration_id": None, "change_mm": None,
                     "refusal": error_body(_code(result), result.message, _details(result))}
         return {"message": result.message, "valid": True, "calibration_id": result.details["calibration_id"],
-                "change_mm": result.details["change_mm"], "refusal": None}
+                "change_mm": result.details["change_mm"], "refusal": None, "warnings": result.details.get("warnings", [])}
 
     def _save_recording(self, request: SaveRecordingRequest) -> dict[str, Any]:
         report = self.controller.sequence_records()
@@ -481,4 +481,5 @@ def _checked(result: CommandResult, **fields: Any) -> dict[str, Any]:
 
 
 def _calibration_fields(result: CommandResult) -> dict[str, Any]:
-    return _checked(result, calibration_id=result.details.get("calibration_id"), change_mm=result.details.get("change_mm"))
+    return _checked(result, calibration_id=result.details.get("calibration_id"), change_mm=result.details.get("change_mm"),
+                    warnings=result.details.get("warnings", []))

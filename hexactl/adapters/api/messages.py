@@ -1025,10 +1025,17 @@ class ValidateSequenceReply(OkReply):
     refusal: ErrorBody | None = Field(description="what play would answer, when not valid")
 
 
+CalibrationWarnings = Annotated[list[str], Field(
+    description="what the identification that wrote the calibration warned of (its [calibration] table's warnings: "
+                "weakly determined, the instrument's frame, the noise figures): read them before moving on it; empty: "
+                "none, a geometry file, or a calibration written before they were kept")]
+
+
 class CalibrationReply(OkReply):
     calibration_id: str = Field(description="content hash of the calibration being ramped in")
     change_mm: float = Field(description="the largest set-point change the swap makes at the current pose, mm (0 when "
                              "not enabled: nothing is ramped)")
+    warnings: CalibrationWarnings = []
 
 
 class ValidateCalibrationReply(OkReply):
@@ -1037,6 +1044,7 @@ class ValidateCalibrationReply(OkReply):
     change_mm: float | None = Field(description="the largest set-point change the load would make now, mm, when valid "
                                     "(0 when not enabled: nothing is ramped)")
     refusal: ErrorBody | None = Field(description="what load_calibration would answer, when not valid")
+    warnings: CalibrationWarnings = []
 
 
 class GeometryReply(OkReply):

@@ -260,9 +260,10 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
             raise CliError(str(error)) from None
         except OSError as error:
             raise write_failed(output, error) from None
-        print(f"wrote {output}")
+        kept = f", with its status ({result.status.text}) and warnings: load-calibration repeats them" if result.warnings else ""
+        print(f"wrote {output}{kept}")
     else:
-        print(f"no calibration written: {result.status.name.lower().replace('_', ' ')}")
+        print(f"no calibration written: {result.status.text}")
     if arguments.report:  # a failed identification's too: its residuals and observability say why it failed
         validation = None
         if true is not None and calibrated is not None:
@@ -302,7 +303,7 @@ def _print_result(result: IdentificationResult, nominal: Geometry) -> None:
     from hexactl.calibration.parameters import StructuralParameters
 
     print(f"method: {result.reason}")
-    print(f"status: {result.status.name.lower().replace('_', ' ')}")
+    print(f"status: {result.status.text}")
     if not np.isfinite(result.residual_rms_mm):
         for warning in result.warnings:
             print(f"warning: {warning}")

@@ -601,7 +601,9 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
         said.append(f"set-points change by up to {reply['change_mm']:.3f} mm")
     if "records" in reply:
         said.append(f"{reply['records']} records of {reply['name']} ({reply['status']}) written to {reply['path']}")
-    return "ok" + (": " + "; ".join(said) if said else "")
+    # A calibration's identification warnings (weakly determined, the instrument's frame), as calibrate printed them.
+    warned = [f"\nwarning: when identified: {warning}" for warning in reply.get("warnings") or []]
+    return "ok" + (": " + "; ".join(said) if said else "") + "".join(warned)
 
 
 def accuracy_line(accuracy: dict[str, Any] | None) -> str:

@@ -136,7 +136,7 @@ def _page(report: CalibrationReport, figures: dict[str, bytes], nominal_vector: 
 def _summary(result: IdentificationResult) -> str:
     predicted = result.predicted
     rows = [
-        ("status", result.status.name.lower().replace("_", " ")
+        ("status", result.status.text
          + ("" if result.ok else ": no calibration file was written")),
         ("method", f"{result.method} — {result.reason}"),
         ("postures used", str(result.postures_used)),

@@ -428,7 +428,7 @@ def _identify(store: CampaignStore, options: IdentificationOptions, progress: Pr
     result = identify(measured.data, geometry, options)
     progress.say(f"identification: {result.reason}")
     if not result.ok:
-        raise CampaignError(f"identification {result.status.name.lower().replace('_', ' ')}: "
+        raise CampaignError(f"identification {result.status.text}: "
                             + "; ".join(result.warnings) + f" (the data are in {measured.source})")
     predicted = result.predicted
     progress.say(f"fit residual RMS {result.residual_rms_mm:.4f} mm (noise model {result.expected_rms_mm:.4f} mm), "

@@ -62,9 +62,16 @@ function checkUnderWay(r) {
   }
 }
 
+// A calibration accepted (previewed, loaded, rolled back to), with what its identification
+// warned of (the reply's warnings: weakly determined, the instrument's frame) in amber.
+function showCalibration(el, reply, text) {
+  const warnings = (Array.isArray(reply.warnings) ? reply.warnings : []).filter((w) => typeof w === 'string');
+  setResult(el, warnings.length ? 'cautioned' : 'valid', text + warnings.map((w) => `\nwarning, when identified: ${w}`).join(''));
+}
+
 function setResult(el, cls, text) {
   underWayLines.delete(el);
-  el.classList.remove('valid', 'refused', 'moving');
+  el.classList.remove('valid', 'refused', 'moving', 'cautioned');
   if (cls) el.classList.add(cls);
   el.textContent = text;
 }
@@ -684,7 +691,7 @@ export function setupControls(ctx) {
     previewed = made;
     calApply.disabled = false;
     // the service's message says why the change may be 0 (not enabled: nothing ramped) and what the new calibration shifts
-    setResult(calChange, 'valid', `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id}${reply.message ? `\n${reply.message}` : ''}`);
+    showCalibration(calChange, reply, `change ${fmt(reply.change_mm, 3)} mm, calibration ${reply.calibration_id}${reply.message ? `\n${reply.message}` : ''}`);
   });
   calApply.addEventListener('click', async () => {
     const path = calSelect.value;
@@ -693,13 +700,13 @@ export function setupControls(ctx) {
     const expected = previewed.id;
     resetPreview('used by Apply (below): preview again for another change');
     const reply = await ctx.send('load_calibration', { path, expected_id: expected });
-    setResult(calResult, reply.ok ? 'valid' : 'refused',
-      reply.ok ? `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm` : describeError(reply.error));
+    if (!reply.ok) { setResult(calResult, 'refused', describeError(reply.error)); return; }
+    showCalibration(calResult, reply, `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm`);
   });
   $('calibration-rollback').addEventListener('click', async () => {
     const reply = await ctx.send('rollback_calibration');
-    setResult(calResult, reply.ok ? 'valid' : 'refused',
-      reply.ok ? `${reply.message ?? 'rolled back'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm` : describeError(reply.error));
+    if (!reply.ok) { setResult(calResult, 'refused', describeError(reply.error)); return; }
+    showCalibration(calResult, reply, `${reply.message ?? 'rolled back'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm`);
   });
 
   // ---------------- recorder ----------------
