@@ -40,10 +40,12 @@ class RecordingController:
 
     def __init__(self) -> None:
         self.targets: list[tuple[int, int]] = []  # (monotonic ns, sequence)
+        self.poses: list[tuple[float, ...]] = []
 
     def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
                       before: tuple[Sequence[float], float] | None) -> TargetResult:
         self.targets.append((time.monotonic_ns(), sequence))
+        self.poses.append(tuple(pose))
         return TargetResult(True)
 
 
@@ -338,32 +340,50 @@ def test_a_second_udp_sender_is_not_followed() -> None:
         assert len(controller.targets) == followed + 1
         problem = receiver.counters.last_problem
         own, other = (f"127.0.0.1:{s.getsockname()[1]}" for s in (first, second))
-        assert problem.startswith(f"UDP samples from {other} dropped: {own} sends to this stream too"), problem
+        assert problem.startswith(f"UDP samples from {other} dropped: {own} is this stream's sender"), problem
         assert receiver.view()["other_sender"] == 2
 
 
-def test_the_first_udp_sender_is_followed_even_after_the_others_higher_numbers() -> None:
-    """Found from outside: the second sender's first datagrams, numbered 1001 and 1002, were
-    taken before it counted as a sender; every later sample of the first (numbered from 1)
-    was then out of order, even once the second was told apart, and the stream timed out
-    heading for the second's poses."""
+def test_once_the_stream_has_its_sender_a_stray_datagram_is_dropped_from_the_first() -> None:
+    """Found from outside: one datagram from another socket, numbered 99999, was taken (a
+    second sender's first datagrams were, before it counted as one): the platform swung
+    40 mm towards its pose, and every later sample of the stream's own sender was dropped
+    as out of order until the stream timed out. Once the sender is found, another
+    address's datagrams are dropped from the first, named."""
     controller = RecordingController()
-    with receiver_with_udp(controller) as (receiver, _, first), udp_socket(receiver) as second:
+    with receiver_with_udp(controller) as (receiver, _, first), udp_socket(receiver) as stray:
         taken = lambda count: lambda: len(controller.targets) == count  # noqa: E731
-        ahead = stream_receiver.SENDER_DATAGRAMS  # the first sender's, all taken
-        for number in range(1, ahead + 1):
-            sent(first.send, encode(number, number * 0.002, [40.0, 0, 0, 0, 0, 0]), taken(number), "the first's")
-        for number in range(1, stream_receiver.SENDER_DATAGRAMS):  # not yet a sender: taken, numbered above
-            sent(second.send, encode(1000 + number, 0.01, [-40.0, 0, 0, 0, 0, 0]), taken(ahead + number),
-                 "the second's, before it counts as a sender")
-        sent(first.send, encode(ahead + 1, 0.02, [40.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
-             "the first's, below the second's numbers")
-        sent(second.send, encode(1100, 0.02, [-40.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
-             "the second told apart, and dropped")
-        followed = len(controller.targets)
-        sent(first.send, encode(ahead + 2, 0.03, [40.0, 0, 0, 0, 0, 0]), taken(followed + 1),
-             "the first followed on")
-        assert sequences(controller)[-1] == ahead + 2 and receiver.counters.out_of_order == 1
+        found = stream_receiver.SENDER_DATAGRAMS
+        for number in range(1, found + 1):
+            sent(first.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]), taken(number), "the first's")
+        sent(stray.send, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the stray dropped")
+        for number in range(found + 1, found + 4):
+            sent(first.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]), taken(number), "the first's")
+        assert sequences(controller) == list(range(1, found + 4)) and receiver.counters.out_of_order == 0
+        assert all(pose[0] == 20.0 for pose in controller.poses)
+        stray_address = f"127.0.0.1:{stray.getsockname()[1]}"
+        assert receiver.counters.last_problem.startswith(f"UDP samples from {stray_address} dropped: "), \
+            receiver.counters.last_problem
+
+
+def test_a_stray_datagram_taken_before_the_sender_was_found_does_not_rank_its_samples() -> None:
+    """Before the sender is found (its first datagrams) a stray is taken like any; once the
+    sender is found, the stray's number no longer ranks the sender's samples."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, _, first), udp_socket(receiver) as stray:
+        sent(stray.send, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: len(controller.targets) == 1,
+             "the stray, taken: no sender yet")
+        found = stream_receiver.SENDER_DATAGRAMS
+        for number in range(1, found):  # below the stray's number: out of order
+            sent(first.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: receiver.counters.out_of_order == n, "the first's, below the stray's")
+        for number in range(found, found + 3):  # the sender found: followed on
+            sent(first.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the first's, followed")
+        sent(stray.send, encode(100000, 0.02, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the stray dropped")
+        assert sequences(controller) == [99999, *range(found, found + 3)]
 
 
 def test_an_oversized_datagram_is_refused_with_its_own_size() -> None:

@@ -55,10 +55,12 @@ the API's process); so the receive queue holds at most RCVHWM times this. Up to 
 message is read and refused with its reason."""
 
 SENDER_DATAGRAMS = 3
-"""Datagrams a UDP sender sends to a stream before it counts as one of its senders."""
+"""Datagrams of the last :data:`SENDER_WINDOW` a UDP address sends to a stream to become its sender."""
 
-RECENT_SENDERS = 64
-"""UDP senders whose datagrams are counted, the most recent; older ones are forgotten."""
+SENDER_WINDOW = 8
+"""The datagrams, the stream's last, in which its sender is found. A sender with a socket of
+its own sends all of them; one that opens a socket per datagram sends each from a new port,
+the kernel's pick among thousands, and none of those comes back three times in eight."""
 
 LOG_INTERVAL_S = 1.0
 """A new problem with the input is logged at most this often (all are counted)."""
@@ -86,7 +88,7 @@ class StreamCounters:
         self.received = 0  # messages read, well formed or not
         self.malformed = 0
         self.out_of_order = 0  # a sequence not above the last one taken: reordered or duplicated
-        self.other_sender = 0  # UDP from a second sender to the stream: dropped
+        self.other_sender = 0  # UDP from another address than the stream's sender: dropped
         self.no_stream = 0  # well formed, but no stream open
         self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
         self.forwarded = 0  # reached the loop's pipe (or inbox)
@@ -129,10 +131,9 @@ class StreamReceiver(SocketThread):
         self._stream: int | None = None  # the loop's stream open now
         self._counted: int | None = None  # the stream the counters are for: the open one, or the last
         self._last_sequence: int | None = None
-        self._udp_counts: collections.OrderedDict[Any, int] = collections.OrderedDict()  # this stream's recent senders
-        self._udp_sender: Any = None  # the first to send SENDER_DATAGRAMS: the one followed once another has too
-        self._two_senders = False
-        self._followed_last: Sample | None = None  # the newest sample taken from ``_udp_sender``
+        self._recent_senders: collections.deque[Any] = collections.deque(maxlen=SENDER_WINDOW)  # UDP, until one is found
+        self._udp_sender: Any = None  # the stream's UDP sender, once found: the only one followed from then on
+        self._last_from: Any = None  # who sent the newest sample taken: a UDP address, None for ZeroMQ
         # Room for the largest UDP payload: a datagram is read whole, and a refusal says its size.
         self._datagram = bytearray(65_535)
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
@@ -241,59 +242,48 @@ class StreamReceiver(SocketThread):
                 self._problem(f"UDP receive failed: {error}")
                 break
             if self._from_the_streams_sender(sender):
-                self._taken_or_counted([bytes(self._datagram[:size])], followed=sender == self._udp_sender)
+                self._taken_or_counted([bytes(self._datagram[:size])], sender)
             self._forward_if_due()
 
     def _from_the_streams_sender(self, sender: Any) -> bool:
         """Whether a datagram from ``sender`` (host, port) is the open stream's. Two senders
-        (a second program sending to the same port) would steer the platform between their
-        poses: once a second sender has sent :data:`SENDER_DATAGRAMS` datagrams too, only
-        the first to have done so is followed, and the other's datagrams are counted
-        ``other_sender`` and dropped. A sender that opens a socket per datagram sends each
-        from a new port (the kernel's pick among thousands), so none of its ports comes
-        back that often among the :data:`RECENT_SENDERS` last: nothing of it is dropped.
-        Without a stream open, nothing is dropped here (they are counted ``no_stream``)."""
+        (a second program sending to the same port, a stray datagram numbered far ahead)
+        would steer the platform between their poses, or take the stream over: the first
+        address to send :data:`SENDER_DATAGRAMS` of the last :data:`SENDER_WINDOW` datagrams
+        is the stream's sender, and from then on each datagram from another address is
+        counted ``other_sender`` and dropped, from its first. What another sent before the
+        sender was found goes: its numbers no longer rank the sender's (one datagram
+        numbered 99999 had every later sample of the sender dropped as out of order, and
+        the stream timed out heading for its pose). A sender that opens a socket per
+        datagram is never found (:data:`SENDER_WINDOW`): nothing of it is dropped. Without a
+        stream open, nothing is dropped here (they are counted ``no_stream``)."""
         if self._stream is None or sender == self._udp_sender:
             return True
-        if not self._two_senders:
-            counts = self._udp_counts
-            counts[sender] = counts.pop(sender, 0) + 1
-            if len(counts) > RECENT_SENDERS:
-                counts.popitem(last=False)
-            if counts[sender] < SENDER_DATAGRAMS:
+        if self._udp_sender is None:
+            self._recent_senders.append(sender)
+            if self._recent_senders.count(sender) < SENDER_DATAGRAMS:
                 return True
-            if self._udp_sender is None:
-                self._udp_sender = sender
-                return True
-            self._two_senders = True
-            self._follow_only_the_first()
+            self._udp_sender = sender
+            if self._last_from != sender:  # the newest sample taken is another's: the sender's next goes on at once
+                self._last_sequence = self._last = self._pending = None
+            return True
         self.counters.received += 1
         self.counters.other_sender += 1
-        self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} sends to this stream "
-                      "too, and the platform would swing between their poses; stop one of them, or close the stream "
-                      "(stream_close) and open one for the other")
+        self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} is this stream's "
+                      "sender, and the platform would swing between their poses or follow a stray datagram; stop the "
+                      "other, or close the stream (stream_close) and open one for it")
         return False
 
-    def _follow_only_the_first(self) -> None:
-        """From now on the first sender's samples only: what the other's took before it was
-        told apart goes. Its sequence numbers had become the last taken, and every later
-        sample of the first was out of order: the stream timed out, heading for the other's
-        poses."""
-        followed = self._followed_last
-        self._last_sequence = followed.sequence if followed is not None else None
-        self._last = followed
-        self._pending = None  # perhaps the other's; the first's next sample goes on at once
-
-    def _taken_or_counted(self, frames: list[bytes], followed: bool = False) -> None:
-        """Take the message of ``frames`` (a datagram is one; ``followed``: from the UDP
-        sender followed), or count it as malformed, whatever goes wrong."""
+    def _taken_or_counted(self, frames: list[bytes], sender: Any = None) -> None:
+        """Take the message of ``frames`` (a datagram is one, from the UDP address
+        ``sender``; None: ZeroMQ's), or count it as malformed, whatever goes wrong."""
         try:
-            self._take(frames, followed)
+            self._take(frames, sender)
         except Exception as error:  # a sample no check foresaw must not end the thread
             self.counters.malformed += 1
             self._failed("a message could not be taken", error)
 
-    def _take(self, frames: list[bytes], followed: bool = False) -> None:
+    def _take(self, frames: list[bytes], sender: Any = None) -> None:
         received_ns = time.monotonic_ns()
         c = self.counters
         c.received += 1
@@ -330,9 +320,7 @@ class StreamReceiver(SocketThread):
             c.coalesced += 1
         # The sample before goes along: the stream's velocity is between the last two samples
         # sent, not the last two forwarded (two equal poses in a row mean at rest there).
-        self._pending, self._last = (sample, received_ns, self._last), sample
-        if followed:
-            self._followed_last = sample
+        self._pending, self._last, self._last_from = (sample, received_ns, self._last), sample, sender
 
     def _check_sent_clock(self, sent_s: float, received_ns: int) -> None:
         """Say (``last_problem``) when ``sent_s`` does not keep pace with the samples'
@@ -361,9 +349,8 @@ class StreamReceiver(SocketThread):
             if stream is not None:
                 self.counters = StreamCounters()
                 self._last_sequence = None
-                self._udp_counts.clear()
-                self._udp_sender, self._two_senders = None, False
-                self._last = self._followed_last = None
+                self._recent_senders.clear()
+                self._udp_sender = self._last = self._last_from = None
                 self._sent_before, self._sent_off = None, 0
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()

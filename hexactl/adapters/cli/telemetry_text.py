@@ -201,7 +201,7 @@ def stream_text(stream: dict[str, Any] | None, last: dict[str, Any] | None) -> s
     return "none"
 
 
-_DROPPED = (("malformed", "malformed"), ("out_of_order", "out of order"), ("other_sender", "from a second sender"),
+_DROPPED = (("malformed", "malformed"), ("out_of_order", "out of order"), ("other_sender", "from another sender"),
             ("no_stream", "with no stream open"), ("loop_behind", "dropped, the loop behind"), ("failed", "failed"))
 
 
