@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from collections import deque
 from dataclasses import dataclass, field
-from math import ceil, isfinite, radians
+from math import ceil, degrees, isfinite, pi, radians
 from operator import add
 
 import numpy as np
@@ -72,6 +72,13 @@ VELOCITY_FLOOR = 0.1
 """The share of each axis's velocity limit that a stream's velocity box keeps before it is
 scaled, whatever the direction the stream moves in: room to change course on every axis."""
 
+JOIN_DISTANCE = (20.0, 20.0, 20.0, radians(2.0), radians(2.0), radians(2.0))
+"""How close (mm, rad, per axis) a stream's sample must come to the platform for the stream
+to be followed at its own velocity; farther (its first samples, a sender that did not move
+the platform to its first pose), each sample is a step, joined at rest as a step is. Found
+from outside: a first sample 600 mm away, of a stream moving at 300 mm/s the other way, had
+the platform lunge at it at the caps, 609 mm/s, aiming ahead along the stream's velocity."""
+
 RATE_STEPS = (1e-3, 1e-3, 1e-3, 1e-6, 1e-6, 1e-6)
 """Steps (mm, rad) of the finite differences in :func:`leg_rates`."""
 
@@ -125,6 +132,7 @@ class _OpenStream:
     replaced: tuple[np.ndarray, np.ndarray] | None = None  # (request, goal): a target held outside is bisected once
     sent_ns: int | None = None  # when the last target handed to the loop arrived (monotonic)
     interval_s: float = 0.0  # between targets sent, smoothed
+    joined: bool = False  # a sample came within JOIN_DISTANCE of the platform: followed at its velocity since
 
     def horizon(self, received_ns: int) -> float:
         """How far ahead the loop aims along the velocity of a target that arrived at
@@ -188,12 +196,15 @@ class TargetResult:
     """What became of a target: ``sent`` False when no stream is open; ``clamped`` True
     when it was out of reach and replaced; ``goal`` what the loop got, mm/deg;
     ``dropped`` True when it was sent but dropped on the way, the loop being behind
-    (:meth:`~hexactl.control.host.LoopHost.submit`): the next target replaces it."""
+    (:meth:`~hexactl.control.host.LoopHost.submit`): the next target replaces it;
+    ``joining`` the sample's largest distance from the platform, mm and deg, while the
+    stream has not come within :data:`JOIN_DISTANCE` of it yet (None once it has)."""
 
     sent: bool
     clamped: bool = False
     goal: RelativeMmDeg | ToolInWorkMmDeg | None = None
     dropped: bool = False
+    joining: tuple[float, float] | None = None
 
 
 class StreamCommands:
@@ -269,6 +280,9 @@ class StreamCommands:
         horizon_s = stream.horizon(received_ns)
         velocity = stream.velocity(requested, sent_s)
         stream.remember(sent_s, requested)
+        joining = None if stream.joined else self._joining(stream, requested)
+        if joining is not None:
+            velocity = np.zeros(6)  # a step: arrived at at rest, not aimed ahead along the stream
         clamped = False
         goal = requested + velocity * horizon_s
         # The way on is the last target (checked) → the aim → where braking from it ends. The
@@ -290,7 +304,20 @@ class StreamCommands:
                                                    received_ns))
         if taken:  # a target dropped on the way is not the loop's: the next one's way runs from the last it got
             stream.last = goal
-        return TargetResult(True, clamped, target.in_degrees(), dropped=not taken)
+        return TargetResult(True, clamped, target.in_degrees(), dropped=not taken, joining=joining)
+
+    def _joining(self, stream: _OpenStream, requested: np.ndarray) -> tuple[float, float] | None:
+        """How far ``requested`` is from the platform (mm, deg: the largest on each kind of
+        axis) while it is beyond :data:`JOIN_DISTANCE`; None, and the stream joined, once a
+        sample is within it."""
+        s = self._snapshot()
+        platform = np.asarray(convert(s.trajectory.position, s.frames, stream.frames, s.active.home))
+        gap = np.abs(requested - platform)
+        gap[3:] = np.abs((gap[3:] + pi) % (2 * pi) - pi)  # the short way round
+        if np.all(gap <= JOIN_DISTANCE):
+            stream.joined = True
+            return None
+        return float(gap[:3].max()), degrees(float(gap[3:].max()))
 
     def _reachable(self, stream: _OpenStream, requested: np.ndarray) -> tuple[np.ndarray, bool]:
         """``requested`` if the way to it from the last target is allowed, else where that way

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from hexactl.control.frames import OperatorFrames
 from hexactl.control.stream import FIRST_TARGET_WAIT_NS
-from hexactl.control.stream_commands import HORIZON_S, leg_rates, stream_velocity_limits
+from hexactl.control.stream_commands import HORIZON_S, JOIN_DISTANCE, leg_rates, stream_velocity_limits
 from hexactl.kinematics.geometry import Geometry
 from hexactl.kinematics.soft_limits import SoftLimits
 from hexactl.kinematics.workspace import assess_pose
@@ -365,3 +365,34 @@ def test_a_sender_that_falls_silent_brakes_under_the_streams_limits_whatever_its
     # what the receiver checked: the aim a horizon on, then the stream's brake (a cycle's rounding)
     checked = last + speed * HORIZON_S + speed**2 / (2 * acceleration) + speed * acceleration / (2 * jerk)
     assert long <= checked + speed * rig.period_ns / 1e9, (long, checked)
+
+
+@pytest.mark.parametrize("start_x", [600.0, -500.0])
+def test_a_moving_stream_far_from_the_platform_is_joined_at_rest_not_at_its_speed(make_rig, start_x) -> None:
+    """Found from outside: the platform at x 600 mm, a stream opened whose samples start at
+    x 0 and move at 300 mm/s: the platform lunged towards the first samples at the caps,
+    609 mm/s, aiming ahead along the stream's velocity. Samples beyond JOIN_DISTANCE of the
+    platform are steps, joined at rest at the speed of a stream at rest; once one is within
+    it, the stream is followed at its velocity."""
+    rig = make_rig(start_pose=(start_x, 0, 0, 0, 0, 0))
+    _opened(rig)
+    s = rig.controller.snapshot
+    caps = np.array(rig.controller.config.stream.in_mm_rad()[0])
+    at_rest = stream_velocity_limits(rig.controller._context(s), None, s.pose_command, np.zeros(6), caps)[0]
+    rate_hz = 1e9 / rig.period_ns
+    results, commanded = [], []
+    for n in range(int(10 * rate_hz)):  # from -500 mm, a stream running away faster is joined once it is held
+        pose = (300.0 * min(n / rate_hz, 1.8), 0, 0, 0, 0, 0)  # from x 0 at 300 mm/s, then held at 540
+        results.append(rig.controller.stream_target(pose, n + 1, rig.clock.now_ns / 1e9, rig.clock.now_ns))
+        rig.run()
+        commanded.append(rig.controller.snapshot.pose_command[0])
+    assert results[0].joining == pytest.approx((abs(start_x), 0.0))
+    joined = next(n for n, result in enumerate(results) if result.joining is None)
+    speeds = np.diff([start_x, *commanded]) * rate_hz
+    # The box is the one at each sample, which moves: about the one at the start.
+    assert np.max(np.abs(speeds[:joined])) < 1.1 * at_rest < 0.5 * caps[0], (np.abs(speeds[:joined]).max(), at_rest)
+    assert abs(commanded[joined] - results[joined].goal[0]) < 2 * JOIN_DISTANCE[0]
+    assert all(result.joining is None for result in results[joined:])  # joined for good
+    s = rig.controller.snapshot
+    assert s.motion.value == "holding" and commanded[-1] == pytest.approx(540.0, abs=1e-6) and s.clamped_cycles == 0
+    rig.assert_setpoints_safe()

@@ -486,3 +486,26 @@ def test_a_line_without_a_sequence_after_the_largest_is_dropped_saying_why() -> 
         assert receiver.counters.out_of_order == 1
         assert "has reached 4294967295, the largest" in receiver.counters.last_problem
         assert sequences(controller) == [2**32 - 1]  # the line went nowhere
+
+
+class JoiningController(RecordingController):
+    """Says each target is a sample far from the platform, joined as a step."""
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+                      before: tuple[Sequence[float], float] | None) -> TargetResult:
+        super().stream_target(pose, sequence, sent_s, received_ns, before)
+        return TargetResult(True, joining=(600.0, 0.0))
+
+
+def test_a_sample_far_from_the_platform_is_said_to_be_joined_as_a_step() -> None:
+    """Found from outside: a stream whose first samples were 600 mm from the platform was
+    taken without a word (then lunged at; now joined at rest): the sender is told why the
+    platform does not follow it at its speed, and what to do."""
+    controller = JoiningController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        sent(push.send, encode(1, time.monotonic(), [0.0] * 6), lambda: receiver.counters.forwarded == 1,
+             "the target handed over")
+        assert receiver.counters.last_problem == (
+            "sample 1 is 600.0 mm and 0.00° from the platform: beyond 20 mm or 2° the stream is joined as a step, at "
+            "rest, not followed at its speed; move the platform to the stream's first pose before stream_open "
+            "(hexactl cue does)")

@@ -25,6 +25,7 @@ import collections
 import logging
 import socket
 import time
+from math import degrees
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -34,7 +35,7 @@ from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
 from hexactl.adapters.api.stream_wire import LAST_SEQUENCE, MAX_TEXT_BYTES, MalformedSample, Sample, decode
 from hexactl.control.stream import StreamProgress
-from hexactl.control.stream_commands import TargetResult
+from hexactl.control.stream_commands import JOIN_DISTANCE, TargetResult
 
 POLL_MS = 100
 """How often the idle thread wakes to check for shutdown."""
@@ -378,6 +379,12 @@ class StreamReceiver(SocketThread):
         elif result.sent:
             self.counters.forwarded += 1
             self.counters.clamped += result.clamped
+            if result.joining is not None:
+                mm, deg = result.joining
+                self._problem(f"sample {sample.sequence} is {mm:.1f} mm and {deg:.2f}° from the platform: beyond "
+                              f"{JOIN_DISTANCE[0]:g} mm or {degrees(JOIN_DISTANCE[3]):g}° the stream is joined as a "
+                              "step, at rest, not followed at its speed; move the platform to the stream's first pose "
+                              "before stream_open (hexactl cue does)")
         else:
             self._no_stream()
 
