@@ -66,6 +66,13 @@ _DATA_CHECKS = ("check their units (mm, degrees), that the instrument's frame is
 """What to check when the data do not measure the nominal platform as they should."""
 
 
+GROSS_MISFIT_CHI2_PER_DOF = 1e4
+"""χ²/dof beyond which residuals (100× the noise model) are not noise or a lack of postures
+but data that do not measure the platform (another frame or unit): found from outside, a
+tracker frame turned 90° gave χ²/dof 8e5 and "not observable: add postures", which no
+posture could help."""
+
+
 def _plausible(result: IdentificationResult, nominal: Geometry) -> IdentificationResult:
     """``result``, or IMPLAUSIBLE when its parameters lie beyond the nominal's plausibility
     bounds, which the controller refuses to load: data that fit a machine that far from
@@ -77,6 +84,10 @@ def _plausible(result: IdentificationResult, nominal: Geometry) -> Identificatio
         return replace(result, warnings=result.warnings + (
             f"the fit found no minimum from the nominal platform: the data may not measure it as they should; "
             f"{_DATA_CHECKS}",))
+    if result.status is IdentificationStatus.NOT_OBSERVABLE and result.chi2_per_dof > GROSS_MISFIT_CHI2_PER_DOF:
+        return replace(result, warnings=(  # first: the advice to add postures that follows cannot help yet
+            f"residuals {np.sqrt(result.chi2_per_dof):.3g}× the noise model are no lack of postures: the data do not "
+            f"measure the nominal platform as they should; {_DATA_CHECKS}, before adding postures",) + result.warnings)
     if not result.ok:
         return result
     parameters = result.parameters

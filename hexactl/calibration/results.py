@@ -248,6 +248,11 @@ class IdentificationResult:
         return StructuralParameters.from_vector(self.std_vector, self.parameters.has_scales)
 
 
+LINES_NAMED = 12
+"""Lines a note names at most: past a dozen, a list of line numbers is noise (every line of a
+file measured in another frame); the count says how many."""
+
+
 def assemble_result(
     method: Method,
     reason: str,
@@ -289,8 +294,10 @@ def assemble_result(
         notes.append(noise)
     outliers = residuals.outlier_lines
     if outliers:
+        shown = ", ".join(map(str, outliers[:LINES_NAMED])) + (
+            f" and {len(outliers) - LINES_NAMED} more" if len(outliers) > LINES_NAMED else "")
         notes.append(f"{len(outliers)} posture(s) fit worse than the noise model allows (p < "
-                     f"{options.outlier_probability:g}): lines {', '.join(map(str, outliers))}")
+                     f"{options.outlier_probability:g}): lines {shown}")
     with_scales = parameters.has_scales
     status = IdentificationStatus.OK
     # Undetermined parameters are the cause when both happen: say that first.

@@ -100,3 +100,18 @@ def test_calibrate_refuses_a_file_of_poses_relative_to_home_with_status_2(tmp_pa
     assert main(["calibrate", str(path), "--config", str(NOMINAL_PATH), "-o", str(tmp_path / "cal.toml")]) == 2
     assert "relative to the zero posture (home)" in capsys.readouterr().err
     assert not (tmp_path / "cal.toml").exists()
+
+
+def test_data_in_another_frame_that_leave_a_combination_undetermined_are_not_sent_for_more_postures(
+        nominal, leglock_campaign):
+    """Found from outside: data from a tracker frame turned 90° and 3 m away fit with χ²/dof
+    8e5, "not observable", and the only advice was to add postures, which could not help:
+    the frame and units come first, before the advice to add postures, and the outlier
+    note names a dozen lines, not every one."""
+    turned = Rotation.from_euler("z", 90.0, degrees=True)
+    result = identify(_in_frame(leglock_campaign.data, turned, (3000.0, -1500.0, -800.0)), nominal)
+    assert result.status is IdentificationStatus.NOT_OBSERVABLE, result.status
+    assert FRAME_ADVICE in result.warnings[0] and result.warnings[0].endswith("before adding postures"), result.warnings
+    assert "add postures that move these joints differently" in result.warnings[-1], result.warnings
+    outliers = next(warning for warning in result.warnings if "fit worse than the noise model allows" in warning)
+    assert len(outliers.split(": lines ", 1)[1].split(", ")) == 12 and outliers.endswith(" more"), outliers
