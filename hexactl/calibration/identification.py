@@ -189,7 +189,11 @@ def _significant_extra(data: MeasurementData, nominal: Geometry, options: Identi
     (χ², 6 dof) at :data:`EXTRA_TEST_FALSE_ALARM`, with the χ² drop divided by the richer
     fit's χ²/dof where that exceeds 1: a misfit of another kind (a sliding sensor) lowers χ²
     with any added freedom, and must not pass for a gain or a drift (as the covariance is
-    scaled up by the same factor). The two fits are compared on the same observations:
+    scaled up by the same factor). Nor is an extra taken whose fit still does not match the
+    noise model (χ²/dof above ``consistency_limit``): with the noise figures off, the test
+    says nothing (found from outside: noise 0.3 and 1 mm given as 0.25, χ²/dof 6, and a
+    drift "identified" at 9 σ that the platform did not have; the residuals' note says to
+    give the noise figures). The two fits are compared on the same observations:
     where their searches for gross errors excluded different ones, both are fitted again
     without any either excluded (else a mis-sighting one of them left out would count as the
     extra's drop in χ²). ``richer``: the refit with the extra, where it is at hand."""
@@ -205,7 +209,8 @@ def _significant_extra(data: MeasurementData, nominal: Geometry, options: Identi
         compared = identify_full(data, nominal, richer_options, left_out=left_out)
     threshold = float(chi2.isf(EXTRA_TEST_FALSE_ALARM, LEG_COUNT))
     drop = (simpler.chi2 - compared.chi2) / max(1.0, compared.chi2_per_dof)
-    return (richer, drop, threshold) if richer.ok and compared.ok and drop > threshold else None  # also None for NaN
+    consistent = compared.chi2_per_dof <= options.consistency_limit
+    return (richer, drop, threshold) if richer.ok and compared.ok and consistent and drop > threshold else None  # NaN too
 
 
 def _full_with_significant_extras(data: MeasurementData, nominal: Geometry,
