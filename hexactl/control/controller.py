@@ -72,7 +72,7 @@ class Controller:
         self.recordings = RecordingCommands(self._commands, lambda: self.snapshot)
         self._waves = WaveCommands(lambda: self.snapshot, self._context, self._commands)
         self._streams = StreamCommands(lambda: self.snapshot, self._context, self._commands, host.submit,
-                                       config.stream)
+                                       config.stream, config.loop.rate_hz)
         self._moves = MoveCommands(lambda: self.snapshot, lambda: self.frames.current, self._context, self._commands)
         self._sequences = SequenceCommands(lambda: self.snapshot, self._context, self._commands)
         self._calibrations = CalibrationSwaps(lambda: self.snapshot, self._commands, config, nominal)

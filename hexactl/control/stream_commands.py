@@ -40,8 +40,14 @@ STREAM_FRAMES = (Frame.ZERO, Frame.WORK)
 stream's targets are absolute)."""
 
 TIMEOUT_RANGE_S = (0.005, 10.0)
-"""A stream's timeout, s: shorter than a few cycles would end every stream at once, longer
-would leave a platform moving towards a target nobody sends any more."""
+"""A stream's timeout, s, and at least :data:`TIMEOUT_MIN_CYCLES` loop periods: shorter would
+end every stream at once, longer would leave a platform moving towards a target nobody
+sends any more."""
+
+TIMEOUT_MIN_CYCLES = 3
+"""Loop periods a stream's timeout lasts at least: the receiver hands a target over once a
+period, so a timeout of about one (5 ms at 250 Hz, found from outside) ended the stream
+whenever one sample came a cycle late."""
 
 MAX_SOURCE_LENGTH = 64
 
@@ -214,8 +220,10 @@ class StreamCommands:
     thread at a time (the stream's receiver)."""
 
     def __init__(self, snapshot: Callable[[], CoreSnapshot], context: Callable[[CoreSnapshot], PlanningContext],
-                 submitter: CommandSubmitter, host_submit: Callable[[cmd.Command], bool], limits: MotionLimits) -> None:
+                 submitter: CommandSubmitter, host_submit: Callable[[cmd.Command], bool], limits: MotionLimits,
+                 rate_hz: float) -> None:
         self._limits = limits
+        self._rate_hz = rate_hz
         self._snapshot = snapshot
         self._context = context
         self._submitter = submitter
@@ -225,7 +233,7 @@ class StreamCommands:
     def open(self, source: str, frame: Frame | str, timeout_s: float, deadline_ns: int | None = None) -> CommandResult:
         """Open a stream from ``source`` of target poses in ``frame`` (zero or work) that
         ends if no target comes for ``timeout_s``. At rest, enabled, all six legs."""
-        if problem := _open_problem(source, frame, timeout_s):
+        if problem := _open_problem(source, frame, timeout_s, self._rate_hz):
             return CommandResult.failure(ErrorCode.INVALID_ARGUMENT, problem)
         s = self._snapshot()
         if refusal := preconditions.check_stream(s):
@@ -363,7 +371,7 @@ def _mm_rad(pose_mm_deg: Sequence[float]) -> np.ndarray:
     return np.array([*pose_mm_deg[:3], *(radians(v) for v in pose_mm_deg[3:])], dtype=float)
 
 
-def _open_problem(source: object, frame: object, timeout_s: object) -> str | None:
+def _open_problem(source: object, frame: object, timeout_s: object, rate_hz: float) -> str | None:
     if not isinstance(source, str) or not 0 < len(source) <= MAX_SOURCE_LENGTH or not is_one_line(source):
         return f"a stream's source is a printable name of 1 to {MAX_SOURCE_LENGTH} characters, got {source!r}"
     if frame not in tuple(STREAM_FRAMES):
@@ -373,4 +381,8 @@ def _open_problem(source: object, frame: object, timeout_s: object) -> str | Non
     if isinstance(timeout_s, bool) or not isinstance(timeout_s, (int, float)) or not isfinite(timeout_s) \
             or not low <= timeout_s <= high:
         return f"a stream's timeout is a number of seconds in [{low:g}, {high:g}], got {timeout_s!r}"
+    if timeout_s < (cycles := TIMEOUT_MIN_CYCLES / rate_hz):
+        return (f"a stream's timeout of {timeout_s * 1e3:g} ms is shorter than {TIMEOUT_MIN_CYCLES} cycles of this "
+                f"{rate_hz:g} Hz loop ({cycles * 1e3:g} ms): it would end the stream whenever one sample came a cycle "
+                f"late; give at least {cycles * 1e3:g} ms (100 ms is the default)")
     return None

@@ -396,3 +396,18 @@ def test_a_moving_stream_far_from_the_platform_is_joined_at_rest_not_at_its_spee
     s = rig.controller.snapshot
     assert s.motion.value == "holding" and commanded[-1] == pytest.approx(540.0, abs=1e-6) and s.clamped_cycles == 0
     rig.assert_setpoints_safe()
+
+
+def test_a_timeout_shorter_than_three_loop_cycles_is_refused_saying_the_least(make_rig) -> None:
+    """Found from outside: timeout_ms 5 was taken at a 250 Hz loop, whose targets come once a
+    cycle (4 ms): the stream ended whenever one sample came a cycle late."""
+    from hexactl.control.config import ControllerConfig, LoopConfig
+
+    rig = make_rig(config=ControllerConfig(loop=LoopConfig(rate_hz=250.0)))
+    rig.enabled()
+    refused = rig.controller.stream_open("test", timeout_s=0.005)
+    assert not refused.ok and refused.error.value == "invalid_argument"
+    assert refused.message == ("a stream's timeout of 5 ms is shorter than 3 cycles of this 250 Hz loop (12 ms): it "
+                               "would end the stream whenever one sample came a cycle late; give at least 12 ms "
+                               "(100 ms is the default)")
+    assert rig.controller.stream_open("test", timeout_s=0.012).ok
