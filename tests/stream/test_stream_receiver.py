@@ -450,9 +450,20 @@ def test_after_a_stream_closes_the_counts_still_name_it_until_the_next_opens() -
             # stream ended were only counted, and last_problem kept an old word or none.
             assert view["last_problem"] == ("samples arrive with no stream open (the last one ended: telemetry's "
                                             "last_stream says why): they move nothing; stream_open to stream again")
+            # Found from outside: what went wrong while the stream was open (the reason it timed
+            # out) was replaced by this within a cycle: it stays, said after it.
             progress[0] = StreamProgress(8, "test", "zero", StreamPhase.FOLLOWING, timeout_ns=10**9)
             wait_for(lambda: receiver.view()["stream"] == 8, "the next stream's counts")
             assert receiver.view()["forwarded"] == 0
+            sent(push.send, b"1 2 3", lambda: receiver.counters.malformed == 1,
+                 "a malformed sample in stream 8")
+            problem = receiver.counters.last_problem
+            progress[0] = None  # ended
+            sent(push.send, encode(2, time.monotonic(), [0.0] * 6), lambda: receiver.counters.no_stream == 1,
+                 "a sample after stream 8 ended")
+            assert receiver.view()["last_problem"] == (
+                "samples arrive with no stream open (the last one ended: telemetry's last_stream says why): they move "
+                f"nothing; stream_open to stream again; the last problem while it was open: {problem}")
         finally:
             push.close()
             receiver.close()

@@ -135,6 +135,7 @@ class StreamReceiver(SocketThread):
         self._recent_senders: collections.deque[Any] = collections.deque(maxlen=SENDER_WINDOW)  # UDP, until one is found
         self._udp_sender: Any = None  # the stream's UDP sender, once found: the only one followed from then on
         self._last_from: Any = None  # who sent the newest sample taken: a UDP address, None for ZeroMQ
+        self._stream_problem = ""  # the last problem while the stream was open (said with later samples)
         # Room for the largest UDP payload: a datagram is read whole, and a refusal says its size.
         self._datagram = bytearray(65_535)
         self._pending: tuple[Sample, int, Sample | None] | None = None  # the newest, its arrival, the one before
@@ -353,6 +354,7 @@ class StreamReceiver(SocketThread):
                 self._recent_senders.clear()
                 self._udp_sender = self._last = self._last_from = None
                 self._sent_before, self._sent_off = None, 0
+                self._stream_problem = ""
                 self._loop_latency_ns.clear()
                 self._age_ns.clear()
                 self._arrived_ns.clear()
@@ -393,7 +395,10 @@ class StreamReceiver(SocketThread):
         UDP: nothing comes back to it) may go on "driving" a platform whose stream ended."""
         self.counters.no_stream += 1
         ended = " (the last one ended: telemetry's last_stream says why)" if self._counted is not None else ""
-        self._problem(f"samples arrive with no stream open{ended}: they move nothing; stream_open to stream again")
+        # What went wrong while it was open stays in view: these samples would replace it within a cycle.
+        before = f"; the last problem while it was open: {self._stream_problem}" if self._stream_problem else ""
+        self._problem(f"samples arrive with no stream open{ended}: they move nothing; stream_open to stream "
+                      f"again{before}")
 
     def _failed(self, what: str, error: Exception) -> None:
         """A failure no check foresaw: named in ``last_problem``, logged with its traceback."""
@@ -410,6 +415,8 @@ class StreamReceiver(SocketThread):
             else:
                 log.error("stream input: %s", problem, exc_info=error)
         self.counters.last_problem = problem
+        if self._stream is not None:
+            self._stream_problem = problem
 
 
 def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
