@@ -520,3 +520,25 @@ def test_a_sample_far_from_the_platform_is_said_to_be_joined_as_a_step() -> None
             "sample 1 is 600.0 mm and 0.00° from the platform: beyond 20 mm or 2° the stream is joined as a step, at "
             "rest, not followed at its speed; move the platform to the stream's first pose before stream_open "
             "(hexactl cue does)")
+
+
+class HoldingController(RecordingController):
+    """Says each target was out of reach and held at x 610 mm."""
+
+    def stream_target(self, pose: Sequence[float], sequence: int, sent_s: float, received_ns: int,
+                      before: tuple[Sequence[float], float] | None) -> TargetResult:
+        super().stream_target(pose, sequence, sent_s, received_ns, before)
+        return TargetResult(True, clamped=True, goal=(610.0, 0.0, 0.0, 0.0, 0.0, -179.5))
+
+
+def test_a_sample_out_of_reach_says_where_the_platform_is_held_and_how_far_short() -> None:
+    """Found from outside: a stream held on the workspace's boundary (x 610 mm, samples at
+    900) showed only a growing count, "255 clamped", beside a status that looked normal."""
+    controller = HoldingController()
+    with receiver_with_udp(controller) as (receiver, push, _):
+        sent(push.send, encode(1, time.monotonic(), [900.0, 0, 0, 0, 0, 179.5]), lambda: receiver.counters.clamped == 1,
+             "the target held short")
+        assert receiver.counters.last_problem == (
+            "sample 1 is out of reach (a hardware or soft limit): the platform is held at (610.0, 0.0, 0.0, 0.0, 0.0, "
+            "-179.5) mm and deg, the nearest reachable pose on the way, 290.0 mm and 1.00° short of it; hexactl check "
+            "with the sample's pose names the limit")

@@ -381,6 +381,8 @@ class StreamReceiver(SocketThread):
         elif result.sent:
             self.counters.forwarded += 1
             self.counters.clamped += result.clamped
+            if result.clamped and result.goal is not None:
+                self._problem(_held_short(sample, result.goal))
             if result.joining is not None:
                 mm, deg = result.joining
                 self._problem(f"sample {sample.sequence} is {mm:.1f} mm and {deg:.2f}° from the platform: beyond "
@@ -417,6 +419,18 @@ class StreamReceiver(SocketThread):
         self.counters.last_problem = problem
         if self._stream is not None:
             self._stream_problem = problem
+
+
+def _held_short(sample: Sample, goal: Sequence[float]) -> str:
+    """Why the platform is not where ``sample`` asks (mm, deg): held at ``goal``, the nearest
+    reachable pose on the way to it. Counted alone, a platform held on a limit looked as if it
+    followed (found from outside: 255 clamped, the status otherwise normal)."""
+    gap = [abs(a - b) for a, b in zip(sample.pose, goal)]
+    turn = max(min(g % 360.0, 360.0 - g % 360.0) for g in gap[3:])
+    held = ", ".join(f"{value:.1f}" for value in goal)
+    return (f"sample {sample.sequence} is out of reach (a hardware or soft limit): the platform is held at "
+            f"({held}) mm and deg, the nearest reachable pose on the way, {max(gap[:3]):.1f} mm and {turn:.2f}° short "
+            "of it; hexactl check with the sample's pose names the limit")
 
 
 def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
