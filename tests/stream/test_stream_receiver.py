@@ -542,3 +542,16 @@ def test_a_sample_out_of_reach_says_where_the_platform_is_held_and_how_far_short
             "sample 1 is out of reach (a hardware or soft limit): the platform is held at (610.0, 0.0, 0.0, 0.0, 0.0, "
             "-179.5) mm and deg, the nearest reachable pose on the way, 290.0 mm and 1.00° short of it; hexactl check "
             "with the sample's pose names the limit")
+
+
+def test_a_zeromq_sender_whose_connection_closes_during_a_stream_is_said(receiving) -> None:
+    """Found from outside: a message over the size limit had ZeroMQ close its sender's
+    connection, unread; the stream then timed out and nothing said why."""
+    receiver, controller, push = receiving
+    sent(push.send, encode(1, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [1], "sample 1")
+    push.send(b"0 0 0 0 0 0" + b" " * stream_receiver.MAX_MESSAGE_BYTES)
+    wait_for(lambda: "connection to stream 1 closed" in receiver.counters.last_problem, "the closed connection said",
+             seen=lambda: receiver.counters.last_problem)
+    assert receiver.counters.last_problem.startswith(
+        f"a ZeroMQ sender's connection to stream 1 closed: the sender ended, or sent a message over "
+        f"{stream_receiver.MAX_MESSAGE_BYTES} bytes")

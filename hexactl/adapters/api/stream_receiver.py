@@ -30,6 +30,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import zmq
+from zmq.utils.monitor import recv_monitor_message
 
 from hexactl.adapters.api.security import CurveServer
 from hexactl.adapters.api.socket_thread import SocketThread
@@ -113,6 +114,9 @@ class StreamReceiver(SocketThread):
                  curve: CurveServer | None = None) -> None:
         super().__init__(context, zmq.PULL, endpoint, name="hexactl-stream", curve=curve,
                          options={zmq.RCVHWM: 10_000, zmq.MAXMSGSIZE: MAX_MESSAGE_BYTES})
+        # A sender's connection closed is said: ZeroMQ closes it, unread, for a message over
+        # MAX_MESSAGE_BYTES, and the stream then timed out with nothing said (found from outside).
+        self._monitor = self._socket.get_monitor_socket(zmq.EVENT_DISCONNECTED)
         self._udp: socket.socket | None = None
         if udp is not None:
             try:
@@ -123,6 +127,7 @@ class StreamReceiver(SocketThread):
             except OSError:
                 if self._udp is not None:
                     self._udp.close()
+                self._close_monitor()
                 self._socket.close()
                 raise
         self._target = target
@@ -187,15 +192,25 @@ class StreamReceiver(SocketThread):
         return self._thread.is_alive()
 
     def close(self) -> None:
+        self._stopping.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        self._close_monitor()
         super().close()
         if self._udp is not None:
             self._udp.close()
+
+    def _close_monitor(self) -> None:
+        if not self._monitor.closed:  # close() may come more than once
+            self._socket.disable_monitor()
+            self._monitor.close()
 
     # -- the thread ------------------------------------------------------------------------
 
     def _run(self) -> None:
         poller = zmq.Poller()
         poller.register(self._socket, zmq.POLLIN)
+        poller.register(self._monitor, zmq.POLLIN)
         if self._udp is not None:
             poller.register(self._udp.fileno(), zmq.POLLIN)
         while not self._stopping.is_set():
@@ -209,6 +224,17 @@ class StreamReceiver(SocketThread):
                 self._failed("reading the loop's stream failed", error)
             self._read()
             self._forward_if_due()
+            self._watch_connections()
+
+    def _watch_connections(self) -> None:
+        """Say each ZeroMQ sender's connection that closed while a stream was open."""
+        while self._monitor.poll(0):
+            recv_monitor_message(self._monitor)  # EVENT_DISCONNECTED: the only event asked for
+            if self._stream is not None:
+                self._problem(f"a ZeroMQ sender's connection to stream {self._stream} closed: the sender ended, or "
+                              f"sent a message over {MAX_MESSAGE_BYTES} bytes, whose connection ZeroMQ closes unread "
+                              "(what it queued meanwhile is lost, and the stream may time out); keep each message "
+                              "one sample")
 
     def _forward_if_due(self) -> None:
         if self._pending is None:
