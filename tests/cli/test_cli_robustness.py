@@ -409,6 +409,21 @@ def test_cue_refuses_a_vehicle_file_sampled_too_slowly_to_stream(period_s: float
     assert f"{path}: sample period {period_s:g} s" in err and "at 10 Hz or more" in err and "no answer" not in err
 
 
+@pytest.mark.parametrize("omega_z, noted", [(30.0, True), (0.5, False)], ids=["deg/s taken for rad/s", "rad/s"])
+def test_cue_notes_an_angular_rate_faster_than_vehicles_turn(omega_z: float, noted: bool, tmp_path, capsys) -> None:
+    """Found from outside: a yaw rate in deg/s (30) was read as rad/s with no word; only the
+    workspace gain, 0.16, hinted at it. Under the gyro's full scale it is not refused: noted."""
+    path = tmp_path / "turning.csv"
+    path.write_text("t_s,f_x,f_y,f_z,omega_x,omega_y,omega_z\n"
+                    + "".join(f"{n * 0.01:g},0,0,9.81,0,0,{omega_z if n > 2 else 0}\n" for n in range(10)),
+                    encoding="utf-8")
+    assert exits_with(["cue", str(path), "--api", f"ipc://{tmp_path}/nobody", "--timeout", "0.2"]) == 2  # no service
+    err = capsys.readouterr().err
+    said = (f"hexactl cue: note: {path}: column omega_z reaches 30 rad/s (1719 deg/s), faster than a road vehicle, "
+            "a ship or an airliner turns: if the file is in deg/s, multiply omega_* by π/180 (the washout reads rad/s)")
+    assert (said in err) == noted, err
+
+
 class FakeClient:
     """A stand-in for HexactlClient, monkeypatched in: a test's subclass answers."""
 

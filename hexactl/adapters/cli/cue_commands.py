@@ -81,7 +81,8 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 def run_cue(arguments: argparse.Namespace) -> int:
     from hexactl.adapters.api.client import CommandError, HexactlClient, ServiceUnavailable
-    from hexactl.adapters.files.cueing_file import CueingFileError, load_cueing_parameters, load_vehicle_trajectory
+    from hexactl.adapters.files.cueing_file import (CueingFileError, angular_rate_note, load_cueing_parameters,
+                                                    load_vehicle_trajectory)
     from hexactl.control.stream_commands import MAX_SAMPLE_GAP_S
     from hexactl.cueing.parameters import CueingParameters
 
@@ -90,6 +91,8 @@ def run_cue(arguments: argparse.Namespace) -> int:
         parameters = load_cueing_parameters(arguments.parameters) if arguments.parameters else CueingParameters()
     except CueingFileError as error:
         raise CliError(str(error)) from None
+    if note := angular_rate_note(vehicle, str(arguments.file)):
+        print(f"hexactl cue: note: {note}", file=sys.stderr)
     if vehicle.period_s > MAX_SAMPLE_GAP_S:  # each pose would be a stop: the stream has no velocity between them
         raise CliError(f"{arguments.file}: sample period {vehicle.period_s:g} s: hexactl cue streams one pose per "
                        f"sample, and a stream is followed smoothly only at {1 / MAX_SAMPLE_GAP_S:g} Hz or more "

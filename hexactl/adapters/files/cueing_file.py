@@ -59,6 +59,11 @@ filter."""
 MAX_ANGULAR_RATE_RAD_S = 35.0
 """Largest angular rate on an axis, rad/s: 2000 deg/s, a vehicle gyro's usual full scale."""
 
+NOTED_ANGULAR_RATE_RAD_S = 6.0
+"""An angular rate beyond this (about 340 deg/s) is noted, not refused: a car, a ship or an
+airliner turns far slower, an aerobatic aircraft or a crash test may not, and a file in
+deg/s read as rad/s (30 deg/s taken for 30 rad/s, found from outside) looks the same."""
+
 
 class CueingFileError(ValueError):
     """A cueing file could not be read; the message names the file, where, and the problem."""
@@ -154,6 +159,18 @@ def load_vehicle_trajectory(path: str | os.PathLike[str]) -> VehicleTrajectory:
 def shipped_vehicles() -> list[str]:
     """The names of the vehicle trajectories hexactl ships."""
     return sorted(path.stem for path in SHIPPED_VEHICLES.glob("*.csv"))
+
+
+def angular_rate_note(vehicle: VehicleTrajectory, source: str) -> str | None:
+    """A note when ``vehicle`` turns faster than :data:`NOTED_ANGULAR_RATE_RAD_S` on an axis:
+    perhaps deg/s; None otherwise."""
+    peaks = np.max(np.abs(vehicle.angular_rate), axis=0)
+    axis = int(np.argmax(peaks))
+    if peaks[axis] <= NOTED_ANGULAR_RATE_RAD_S:
+        return None
+    return (f"{source}: column omega_{'xyz'[axis]} reaches {peaks[axis]:g} rad/s ({np.degrees(peaks[axis]):.0f} deg/s), "
+            f"faster than a road vehicle, a ship or an airliner turns: if the file is in deg/s, multiply omega_* by "
+            "π/180 (the washout reads rad/s)")
 
 
 def _number(row: list[str], index: int, column: str, line: int, source: str) -> float:
