@@ -355,7 +355,9 @@ def noise_model_note(chi2_total: float, degrees_of_freedom: int, excluded: int) 
     if chi2_total < chi2.ppf(NOISE_TEST_FALSE_ALARM, degrees_of_freedom):
         return (f"residuals are {np.sqrt(ratio):.2g}× the noise model ({chance}): the noise figures are pessimistic, "
                 "and so are the standard deviations and the predicted accuracy; give the instrument's noise "
-                "(point_sigma_mm, --point-sigma, --reading-sigma) to have them honest")
+                "(point_sigma_mm, --point-sigma, --reading-sigma) to have them honest (a figure is one σ for every "
+                "axis: a tracker's noise, smaller across its beam than along it, is modelled axis by axis from its "
+                "own observations, the tracker form with --instrument)")
     return None
 
 

@@ -154,3 +154,12 @@ def test_observations_cut_against_optimistic_noise_figures_are_said_to_be_maybe_
     note = noise_model_note(1.87 * 1027, 1027, 5)
     assert note.endswith("; the 5 observation(s) excluded as gross errors were judged against these figures and may "
                          "be ordinary: calibrate again with the noise figures raised to see"), note
+
+
+def test_pessimistic_noise_figures_point_to_the_instruments_own_form_for_noise_that_differs_by_axis():
+    """Found from outside: a tracker's σ 0.05, 0.05 and 0.3 mm given as one 0.25 mm figure were
+    called pessimistic, and the advice, give the instrument's noise, could not be followed
+    with one number."""
+    said = noise_model_note(0.00676 * 1027, 1027, 0)
+    assert said.endswith("a tracker's noise, smaller across its beam than along it, is modelled axis by axis from "
+                         "its own observations, the tracker form with --instrument)"), said
