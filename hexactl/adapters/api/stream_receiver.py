@@ -217,14 +217,15 @@ class StreamReceiver(SocketThread):
             wait_ms = POLL_MS
             if self._pending is not None:  # rounded up: a wait rounded down would spin until the time is due
                 wait_ms = max(0, -((time.monotonic_ns() - self._due_ns) // 1_000_000))
-            poller.poll(wait_ms)
+            ready = dict(poller.poll(wait_ms))
             try:
                 self._watch_loop()  # first: samples that follow a stream_open's reply count for the new stream
             except Exception as error:  # the controller's view, in this process: logged, and read again next wake
                 self._failed("reading the loop's stream failed", error)
             self._read()
             self._forward_if_due()
-            self._watch_connections()
+            if self._monitor in ready:  # rare: looked at only when it has something
+                self._watch_connections()
 
     def _watch_connections(self) -> None:
         """Say each ZeroMQ sender's connection that closed while a stream was open."""
@@ -295,11 +296,11 @@ class StreamReceiver(SocketThread):
             if self._last_from != sender:  # the newest sample taken is another's: the sender's next goes on at once
                 self._last_sequence = self._last = self._pending = None
             return True
-        self.counters.received += 1
-        self.counters.other_sender += 1
         self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} is this stream's "
                       "sender, and the platform would swing between their poses or follow a stray datagram; stop the "
                       "other, or close the stream (stream_close) and open one for it")
+        self.counters.received += 1
+        self.counters.other_sender += 1
         return False
 
     def _taken_or_counted(self, frames: list[bytes], sender: Any = None) -> None:
@@ -320,24 +321,24 @@ class StreamReceiver(SocketThread):
                 raise MalformedSample(f"a sample is a ZeroMQ message of one frame, this one has {len(frames)}")
             sample = decode(frames[0])
         except MalformedSample as error:
-            c.malformed += 1
             self._problem(f"malformed sample: {error}")
+            c.malformed += 1
             return
         if self._stream is None:
             self._no_stream()
             return
         if sample.sequence is None:  # numbered after the last taken, of either form: the newest
             if self._last_sequence == LAST_SEQUENCE:  # none is above it: every sample after would be dropped
-                c.out_of_order += 1
                 self._problem(f"the stream's sequence has reached {LAST_SEQUENCE}, the largest: a line without one "
                               "cannot be numbered after it; open a new stream (stream_close, then stream_open)")
+                c.out_of_order += 1
                 return
             sample = Sample((self._last_sequence or 0) + 1, received_ns / 1e9, sample.pose)
         elif self._last_sequence is not None and sample.sequence <= self._last_sequence:
-            c.out_of_order += 1
             self._problem(f"sample {sample.sequence} is not above the last one taken ({self._last_sequence}): dropped "
                           "as reordered or duplicated (a sender that restarted its count needs a new stream: "
                           "stream_close, then stream_open; or a second sender is sending)")
+            c.out_of_order += 1
             return
         else:
             self._age_ns.append(received_ns - round(sample.sent_s * 1e9))
@@ -399,14 +400,12 @@ class StreamReceiver(SocketThread):
             result = self._target(sample.pose, sample.sequence, sample.sent_s, received_ns,
                                   None if before is None or before.sent_s is None else (before.pose, before.sent_s))
         except Exception as error:  # the controller's, in this process: the loop brakes if no target follows
-            self.counters.failed += 1
             self._failed(f"target {sample.sequence} could not be handed to the loop", error)
+            self.counters.failed += 1
             return
         if result.dropped:
             self.counters.loop_behind += 1
         elif result.sent:
-            self.counters.forwarded += 1
-            self.counters.clamped += result.clamped
             if result.clamped and result.goal is not None:
                 self._problem(_held_short(sample, result.goal))
             if result.joining is not None:
@@ -415,18 +414,20 @@ class StreamReceiver(SocketThread):
                               f"{JOIN_DISTANCE[0]:g} mm or {degrees(JOIN_DISTANCE[3]):g}° the stream is joined as a "
                               "step, at rest, not followed at its speed; move the platform to the stream's first pose "
                               "before stream_open (hexactl cue does)")
+            self.counters.forwarded += 1
+            self.counters.clamped += result.clamped
         else:
             self._no_stream()
 
     def _no_stream(self) -> None:
         """A well-formed sample with no stream open: counted, and said, for a sender (PUSH or
         UDP: nothing comes back to it) may go on "driving" a platform whose stream ended."""
-        self.counters.no_stream += 1
         ended = " (the last one ended: telemetry's last_stream says why)" if self._counted is not None else ""
         # What went wrong while it was open stays in view: these samples would replace it within a cycle.
         before = f"; the last problem while it was open: {self._stream_problem}" if self._stream_problem else ""
         self._problem(f"samples arrive with no stream open{ended}: they move nothing; stream_open to stream "
                       f"again{before}")
+        self.counters.no_stream += 1
 
     def _failed(self, what: str, error: Exception) -> None:
         """A failure no check foresaw: named in ``last_problem``, logged with its traceback."""
@@ -434,7 +435,8 @@ class StreamReceiver(SocketThread):
 
     def _problem(self, problem: str, error: Exception | None = None) -> None:
         """``problem`` becomes ``last_problem``; it is logged when it is new, at most once
-        every :data:`LOG_INTERVAL_S` (a sender alternating two bad messages cannot flood the log)."""
+        every :data:`LOG_INTERVAL_S` (a sender alternating two bad messages cannot flood the log).
+        Said before the count that goes with it: a reader that sees the count sees why."""
         now_ns = time.monotonic_ns()
         if problem != self.counters.last_problem and now_ns >= self._next_log_ns:
             self._next_log_ns = now_ns + round(LOG_INTERVAL_S * 1e9)
