@@ -272,8 +272,8 @@ def test_a_sender_that_restarts_its_count_is_told_why_its_samples_are_dropped() 
     controller = RecordingController()
     with receiver_with_udp(controller) as (receiver, push, _):
         sent(push.send, encode(5000, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [5000], "sample 5000")
-        # waited for by its problem, what is judged
-        sent(push.send, encode(1, time.monotonic(), [1.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.last_problem,
+        # waited for by its count: the receiver says why before it counts
+        sent(push.send, encode(1, time.monotonic(), [1.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
              "sample 1 dropped")
         assert receiver.counters.out_of_order == 1
         problem = receiver.counters.last_problem
@@ -492,8 +492,8 @@ def test_a_line_without_a_sequence_after_the_largest_is_dropped_saying_why() -> 
     with receiver_with_udp(controller) as (receiver, push, _):
         sent(push.send, encode(2**32 - 1, time.monotonic(), [0.0] * 6), lambda: receiver.counters.received == 1,
              "the largest sequence")
-        # waited for by its problem, what is judged
-        sent(push.send, b"0 0 0 0 0 0", lambda: receiver.counters.last_problem, "the line dropped")
+        # waited for by its count: the receiver says why before it counts
+        sent(push.send, b"0 0 0 0 0 0", lambda: receiver.counters.out_of_order == 1, "the line dropped")
         assert receiver.counters.out_of_order == 1
         assert "has reached 4294967295, the largest" in receiver.counters.last_problem
         assert sequences(controller) == [2**32 - 1]  # the line went nowhere
