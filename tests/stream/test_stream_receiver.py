@@ -555,3 +555,19 @@ def test_a_zeromq_sender_whose_connection_closes_during_a_stream_is_said(receivi
     assert receiver.counters.last_problem.startswith(
         f"a ZeroMQ sender's connection to stream 1 closed: the sender ended, or sent a message over "
         f"{stream_receiver.MAX_MESSAGE_BYTES} bytes")
+
+
+def test_malformed_datagrams_do_not_make_their_address_the_streams_sender() -> None:
+    """Found from outside: three datagrams "hello" from a stray program, sent before the
+    stream's own sender began, made that address the sender: every sample of the real one
+    was then dropped, and the stream timed out."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, _, first), udp_socket(receiver) as stray:
+        for count in range(1, stream_receiver.SENDER_DATAGRAMS + 1):
+            sent(stray.send, b"hello", lambda n=count: receiver.counters.malformed == n, "a malformed datagram")
+        for number in range(1, stream_receiver.SENDER_DATAGRAMS + 3):
+            sent(first.send, encode(number, number * 0.002, [1.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the sender's sample followed")
+        assert receiver.counters.other_sender == 0
+        sent(stray.send, encode(99999, 0.1, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the stray's well-formed sample dropped: the sender is the first")

@@ -270,12 +270,13 @@ class StreamReceiver(SocketThread):
             except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
                 self._problem(f"UDP receive failed: {error}")
                 break
-            if self._from_the_streams_sender(sender):
-                self._taken_or_counted([bytes(self._datagram[:size])], sender)
+            datagram = bytes(self._datagram[:size])
+            if self._from_the_streams_sender(sender, datagram):
+                self._taken_or_counted([datagram], sender)
             self._forward_if_due()
 
-    def _from_the_streams_sender(self, sender: Any) -> bool:
-        """Whether a datagram from ``sender`` (host, port) is the open stream's. Two senders
+    def _from_the_streams_sender(self, sender: Any, datagram: bytes) -> bool:
+        """Whether ``datagram`` from ``sender`` (host, port) is the open stream's. Two senders
         (a second program sending to the same port, a stray datagram numbered far ahead)
         would steer the platform between their poses, or take the stream over: the first
         address to send :data:`SENDER_DATAGRAMS` of the last :data:`SENDER_WINDOW` datagrams
@@ -284,11 +285,15 @@ class StreamReceiver(SocketThread):
         sender was found goes: its numbers no longer rank the sender's (one datagram
         numbered 99999 had every later sample of the sender dropped as out of order, and
         the stream timed out heading for its pose). A sender that opens a socket per
-        datagram is never found (:data:`SENDER_WINDOW`): nothing of it is dropped. Without a
+        datagram is never found (:data:`SENDER_WINDOW`): nothing of it is dropped. Only a
+        well-formed sample counts towards finding the sender (three malformed datagrams from
+        a stray program, sent first, made it the sender, found from outside). Without a
         stream open, nothing is dropped here (they are counted ``no_stream``)."""
         if self._stream is None or sender == self._udp_sender:
             return True
         if self._udp_sender is None:
+            if not _well_formed(datagram):
+                return True  # counted malformed where it is taken
             self._recent_senders.append(sender)
             if self._recent_senders.count(sender) < SENDER_DATAGRAMS:
                 return True
@@ -467,6 +472,14 @@ def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
         return None
     pick = lambda q: values[min(len(values) - 1, int(q * len(values)))] / 1e6  # noqa: E731
     return {"p50": pick(0.5), "p99": pick(0.99), "max": values[-1] / 1e6, "count": len(values)}
+
+
+def _well_formed(datagram: bytes) -> bool:
+    try:
+        decode(datagram)
+    except MalformedSample:
+        return False
+    return True
 
 
 def _address(sender: Any) -> str:
