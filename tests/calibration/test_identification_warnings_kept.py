@@ -52,3 +52,20 @@ def test_load_calibration_prints_each_warning_on_a_line_of_its_own() -> None:
     ]
     assert format_ok_reply("load_calibration", {**reply, "warnings": []}).splitlines() == [
         "ok: calibration abc loaded; set-points change by up to 0.000 mm"]
+
+
+def test_calibrate_says_the_file_keeps_its_status_and_warnings(tmp_path, nominal, leglock_campaign, capsys) -> None:
+    from hexactl.adapters.cli.main import main
+    from hexactl.adapters.files.geometry_file import load_geometry
+    from hexactl.adapters.files.measurements import write_measurements
+
+    from .conftest import NOMINAL_PATH
+
+    data = write_measurements(tmp_path / "data.csv", leglock_campaign.data.without_lines(
+        leglock_campaign.data.lines[8:]), comments=["eight postures: weakly determined"])
+    output = tmp_path / "cal.toml"
+    assert main(["calibrate", str(data), "--config", str(NOMINAL_PATH), "-o", str(output)]) == 0
+    out = capsys.readouterr().out
+    written = load_geometry(output).calibration
+    assert written.status == "weakly determined" and written.warnings, written
+    assert f"wrote {output}, with its status (weakly determined) and warnings: load-calibration repeats them" in out

@@ -25,8 +25,8 @@ import collections
 import logging
 import socket
 import time
-from math import degrees
 from collections.abc import Callable, Sequence
+from math import degrees
 from typing import Any
 
 import zmq
@@ -314,8 +314,8 @@ class StreamReceiver(SocketThread):
         try:
             self._take(frames, sender)
         except Exception as error:  # a sample no check foresaw must not end the thread
-            self.counters.malformed += 1
             self._failed("a message could not be taken", error)
+            self.counters.malformed += 1
 
     def _take(self, frames: list[bytes], sender: Any = None) -> None:
         received_ns = time.monotonic_ns()

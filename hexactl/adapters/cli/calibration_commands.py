@@ -260,8 +260,8 @@ def run_calibrate(arguments: argparse.Namespace) -> int:
             raise CliError(str(error)) from None
         except OSError as error:
             raise write_failed(output, error) from None
-        kept = f", with its status ({result.status.text}) and warnings: load-calibration repeats them" if result.warnings else ""
-        print(f"wrote {output}{kept}")
+        kept = f", with its status ({result.status.text}) and warnings: load-calibration repeats them"
+        print(f"wrote {output}{kept if result.warnings else ''}")
     else:
         print(f"no calibration written: {result.status.text}")
     if arguments.report:  # a failed identification's too: its residuals and observability say why it failed
