@@ -475,11 +475,11 @@ def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
 
 
 def _well_formed(datagram: bytes) -> bool:
+    """Whether ``datagram`` is a sample (:func:`decode` takes it)."""
     try:
-        decode(datagram)
+        return decode(datagram) is not None
     except MalformedSample:
         return False
-    return True
 
 
 def _address(sender: Any) -> str:
