@@ -84,8 +84,10 @@ def test_a_calibration_previewed_applied_and_rolled_back_to_shows_what_its_ident
     said = f"warning, when identified: {warned}"
 
     def shown(selector: str) -> tuple[list[str], str]:
-        element = rig.element(selector)
-        return element.get_attribute("class").split(), element.text
+        """The result's classes and text, read at once: read one after the other, a reply that
+        came between them paired the last result's class with this one's text."""
+        return tuple(rig.page(f"const e = document.querySelector({selector!r}); "
+                              "return [e.className.split(' '), e.textContent]"))
 
     def scenario() -> None:
         rig.at_rest_disabled()
