@@ -71,7 +71,12 @@ class SocketThread(ABC):
         self._stopping.set()
         if self._thread.is_alive():
             self._thread.join()
+        self._release()
         self._socket.close()
+
+    def _release(self) -> None:
+        """Release what a subclass's thread used besides the socket: called once the thread
+        has stopped, before the socket closes (nothing here)."""
 
     @abstractmethod
     def _run(self) -> None:

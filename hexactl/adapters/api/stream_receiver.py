@@ -191,12 +191,8 @@ class StreamReceiver(SocketThread):
         """Whether the thread takes samples (started and not ended)."""
         return self._thread.is_alive()
 
-    def close(self) -> None:
-        self._stopping.set()
-        if self._thread.is_alive():
-            self._thread.join()
-        self._close_monitor()
-        super().close()
+    def _release(self) -> None:
+        self._close_monitor()  # before the socket it monitors
         if self._udp is not None:
             self._udp.close()
 
