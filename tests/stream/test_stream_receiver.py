@@ -218,11 +218,11 @@ def test_a_six_number_line_is_the_newest_and_does_not_let_an_old_sample_back_in(
     """Found from outside: a 6-number line was numbered by arrival (1, 2, …), which let a
     binary sample older than the last one taken in again after it."""
     controller = RecordingController()
-    with receiver_with_udp(controller) as (receiver, push, udp):
+    with receiver_with_udp(controller) as (receiver, push, _):
         sent(push.send, encode(100, time.monotonic(), [0.0] * 6), lambda: sequences(controller) == [100], "sample 100")
         sent(push.send, encode(50, time.monotonic(), [5.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 1,
              "sample 50 dropped")
-        sent(udp.send, b"1 0 0 0 0 0\n", lambda: len(controller.targets) == 2, "the line to go on")
+        sent(push.send, b"1 0 0 0 0 0\n", lambda: len(controller.targets) == 2, "the line to go on")
         sent(push.send, encode(50, time.monotonic(), [9.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.out_of_order == 2,
              "the second sample 50 dropped")
         assert sequences(controller) == [100, 101] and receiver.counters.out_of_order == 2
@@ -257,7 +257,7 @@ def test_the_rate_of_a_sender_faster_than_the_samples_kept_is_not_capped_at_thei
             receiver._watch_loop()
             for sequence in range(1, 5001):  # 5 kHz for a second
                 now_ns[0] += 200_000
-                receiver._taken_or_counted([encode(sequence, now_ns[0] / 1e9, [0.0] * 6)])
+                receiver._taken_or_counted([encode(sequence, now_ns[0] / 1e9, [0.0] * 6)], stream_receiver.ZEROMQ)
             assert receiver.view()["rate_hz"] == 5000
             now_ns[0] += 2 * 10**9  # quiet for two seconds
             assert receiver.view()["rate_hz"] == 0
@@ -340,7 +340,7 @@ def test_a_second_udp_sender_is_not_followed() -> None:
         assert len(controller.targets) == followed + 1
         problem = receiver.counters.last_problem
         own, other = (f"127.0.0.1:{s.getsockname()[1]}" for s in (first, second))
-        assert problem.startswith(f"UDP samples from {other} dropped: {own} is this stream's sender"), problem
+        assert problem.startswith(f"samples from UDP {other} dropped: UDP {own} is this stream's sender"), problem
         assert receiver.view()["other_sender"] == 2
 
 
@@ -363,7 +363,7 @@ def test_once_the_stream_has_its_sender_a_stray_datagram_is_dropped_from_the_fir
         assert sequences(controller) == list(range(1, found + 4)) and receiver.counters.out_of_order == 0
         assert all(pose[0] == 20.0 for pose in controller.poses)
         stray_address = f"127.0.0.1:{stray.getsockname()[1]}"
-        assert receiver.counters.last_problem.startswith(f"UDP samples from {stray_address} dropped: "), \
+        assert receiver.counters.last_problem.startswith(f"samples from UDP {stray_address} dropped: "), \
             receiver.counters.last_problem
 
 
@@ -571,3 +571,42 @@ def test_malformed_datagrams_do_not_make_their_address_the_streams_sender() -> N
         assert receiver.counters.other_sender == 0
         sent(stray.send, encode(99999, 0.1, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
              "the stray's well-formed sample dropped: the sender is the first")
+
+
+def test_a_zeromq_sample_during_a_udp_stream_is_dropped_from_the_first() -> None:
+    """Found from outside: once a UDP stream had its sender, one ZeroMQ message numbered
+    99999 was taken: the platform headed for its pose, and every later sample of the UDP
+    sender was dropped as out of order until the stream timed out. ZeroMQ is a sender of
+    its own, told apart from each UDP address."""
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, udp):
+        found = stream_receiver.SENDER_DATAGRAMS
+        for number in range(1, found + 1):
+            sent(udp.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the UDP sender's sample")
+        sent(push.send, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the ZeroMQ sample dropped")
+        for number in range(found + 1, found + 4):
+            sent(udp.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the UDP sender's sample, followed on")
+        assert sequences(controller) == list(range(1, found + 4)) and receiver.counters.out_of_order == 0
+        assert all(pose[0] == 20.0 for pose in controller.poses)
+        own = f"127.0.0.1:{udp.getsockname()[1]}"
+        assert receiver.counters.last_problem.startswith(f"samples from ZeroMQ dropped: UDP {own} is this stream's "
+                                                         "sender"), receiver.counters.last_problem
+
+
+def test_a_udp_datagram_during_a_zeromq_stream_is_dropped_from_the_first() -> None:
+    controller = RecordingController()
+    with receiver_with_udp(controller) as (receiver, push, udp):
+        found = stream_receiver.SENDER_DATAGRAMS
+        for number in range(1, found + 1):
+            sent(push.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the ZeroMQ sender's sample")
+        sent(udp.send, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the UDP datagram dropped")
+        sent(push.send, encode(found + 1, 0.1, [20.0, 0, 0, 0, 0, 0]),
+             lambda: sequences(controller)[-1:] == [found + 1], "the ZeroMQ sender followed on")
+        assert all(pose[0] == 20.0 for pose in controller.poses)
+        assert receiver.counters.last_problem.startswith(
+            f"samples from UDP 127.0.0.1:{udp.getsockname()[1]} dropped: ZeroMQ is this stream's sender")

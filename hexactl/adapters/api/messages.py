@@ -798,8 +798,9 @@ class StreamInputTelemetry(_Message):
     malformed: int = Field(ge=0, description="not a sample (docs/stream.md), dropped")
     out_of_order: int = Field(ge=0, description="a sequence not above the last one taken: reordered or duplicated, "
                               "dropped")
-    other_sender: int = Field(ge=0, description="UDP datagrams from another address than the stream's sender (the "
-                              "first to send 3 of the stream's last 8 datagrams), once it is found: dropped")
+    other_sender: int = Field(ge=0, description="samples from another sender than the stream's (the first UDP "
+                              "address, or ZeroMQ, to send 3 of the stream's last 8 samples), once it is found: "
+                              "dropped")
     no_stream: int = Field(ge=0, description="well formed, but no stream was open: dropped")
     coalesced: int = Field(ge=0, description="superseded by a newer sample before the loop's next cycle (not lost: "
                            "the newest wins)")

@@ -56,11 +56,16 @@ message is larger, unread (read whole into memory first, a message of gigabytes 
 the API's process); so the receive queue holds at most RCVHWM times this. Up to it a
 message is read and refused with its reason."""
 
+ZEROMQ = "ZeroMQ"
+"""The sender of every ZeroMQ message: a PUSH socket names no sender, so all of them are one,
+told apart from each UDP address."""
+
 SENDER_DATAGRAMS = 3
-"""Datagrams of the last :data:`SENDER_WINDOW` a UDP address sends to a stream to become its sender."""
+"""Samples of the last :data:`SENDER_WINDOW` a sender (a UDP address, or ZeroMQ) sends to a
+stream to become its sender."""
 
 SENDER_WINDOW = 8
-"""The datagrams, the stream's last, in which its sender is found. A sender with a socket of
+"""The samples, the stream's last, in which its sender is found. A UDP sender with a socket of
 its own sends all of them; one that opens a socket per datagram sends each from a new port,
 the kernel's pick among thousands, and none of those comes back three times in eight."""
 
@@ -90,7 +95,7 @@ class StreamCounters:
         self.received = 0  # messages read, well formed or not
         self.malformed = 0
         self.out_of_order = 0  # a sequence not above the last one taken: reordered or duplicated
-        self.other_sender = 0  # UDP from another address than the stream's sender: dropped
+        self.other_sender = 0  # from another sender than the stream's (a UDP address, or ZeroMQ): dropped
         self.no_stream = 0  # well formed, but no stream open
         self.coalesced = 0  # superseded by a newer sample before the loop's next turn (not lost: newer wins)
         self.forwarded = 0  # reached the loop's pipe (or inbox)
@@ -137,9 +142,9 @@ class StreamReceiver(SocketThread):
         self._stream: int | None = None  # the loop's stream open now
         self._counted: int | None = None  # the stream the counters are for: the open one, or the last
         self._last_sequence: int | None = None
-        self._recent_senders: collections.deque[Any] = collections.deque(maxlen=SENDER_WINDOW)  # UDP, until one is found
-        self._udp_sender: Any = None  # the stream's UDP sender, once found: the only one followed from then on
-        self._last_from: Any = None  # who sent the newest sample taken: a UDP address, None for ZeroMQ
+        self._recent_senders: collections.deque[Any] = collections.deque(maxlen=SENDER_WINDOW)  # until one is found
+        self._sender: Any = None  # the stream's sender, once found: the only one followed from then on
+        self._last_from: Any = None  # who sent the newest sample taken
         self._stream_problem = ""  # the last problem while the stream was open (said with later samples)
         # Room for the largest UDP payload: a datagram is read whole, and a refusal says its size.
         self._datagram = bytearray(65_535)
@@ -254,7 +259,8 @@ class StreamReceiver(SocketThread):
                 frames = self._socket.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
                 break
-            self._taken_or_counted(frames)
+            if self._from_the_streams_sender(ZEROMQ, frames):
+                self._taken_or_counted(frames, ZEROMQ)
             self._forward_if_due()
         if self._udp is None:
             return
@@ -266,54 +272,56 @@ class StreamReceiver(SocketThread):
             except OSError as error:  # e.g. ICMP errors reported on the socket: not a sample
                 self._problem(f"UDP receive failed: {error}")
                 break
-            datagram = bytes(self._datagram[:size])
+            datagram = [bytes(self._datagram[:size])]
             if self._from_the_streams_sender(sender, datagram):
-                self._taken_or_counted([datagram], sender)
+                self._taken_or_counted(datagram, sender)
             self._forward_if_due()
 
-    def _from_the_streams_sender(self, sender: Any, datagram: bytes) -> bool:
-        """Whether ``datagram`` from ``sender`` (host, port) is the open stream's. Two senders
-        (a second program sending to the same port, a stray datagram numbered far ahead)
-        would steer the platform between their poses, or take the stream over: the first
-        address to send :data:`SENDER_DATAGRAMS` of the last :data:`SENDER_WINDOW` datagrams
-        is the stream's sender, and from then on each datagram from another address is
-        counted ``other_sender`` and dropped, from its first. What another sent before the
-        sender was found goes: its numbers no longer rank the sender's (one datagram
-        numbered 99999 had every later sample of the sender dropped as out of order, and
-        the stream timed out heading for its pose). A sender that opens a socket per
-        datagram is never found (:data:`SENDER_WINDOW`): nothing of it is dropped. Only a
-        well-formed sample counts towards finding the sender (three malformed datagrams from
-        a stray program, sent first, made it the sender, found from outside). Without a
-        stream open, nothing is dropped here (they are counted ``no_stream``)."""
-        if self._stream is None or sender == self._udp_sender:
+    def _from_the_streams_sender(self, sender: Any, frames: list[bytes]) -> bool:
+        """Whether the message of ``frames`` from ``sender`` (a UDP address (host, port), or
+        :data:`ZEROMQ`) is the open stream's. Two senders (a second program sending to the
+        same port, a stray sample numbered far ahead, a ZeroMQ sender beside a UDP one) would
+        steer the platform between their poses, or take the stream over: the first sender to
+        send :data:`SENDER_DATAGRAMS` of the last :data:`SENDER_WINDOW` samples is the
+        stream's, and from then on each message from another is counted ``other_sender`` and
+        dropped, from its first. What another sent before the sender was found goes: its
+        numbers no longer rank the sender's (one datagram numbered 99999 had every later
+        sample of the sender dropped as out of order, and the stream timed out heading for
+        its pose; one ZeroMQ message did the same to a UDP stream, found from outside). A UDP
+        sender that opens a socket per datagram is never found (:data:`SENDER_WINDOW`):
+        nothing of it is dropped. Only a well-formed sample counts towards finding the
+        sender (three malformed datagrams from a stray program, sent first, made it the
+        sender, found from outside). Without a stream open, nothing is dropped here (they
+        are counted ``no_stream``)."""
+        if self._stream is None or sender == self._sender:
             return True
-        if self._udp_sender is None:
-            if not _well_formed(datagram):
+        if self._sender is None:
+            if not _well_formed(frames):
                 return True  # counted malformed where it is taken
             self._recent_senders.append(sender)
             if self._recent_senders.count(sender) < SENDER_DATAGRAMS:
                 return True
-            self._udp_sender = sender
+            self._sender = sender
             if self._last_from != sender:  # the newest sample taken is another's: the sender's next goes on at once
                 self._last_sequence = self._last = self._pending = None
             return True
-        self._problem(f"UDP samples from {_address(sender)} dropped: {_address(self._udp_sender)} is this stream's "
-                      "sender, and the platform would swing between their poses or follow a stray datagram; stop the "
-                      "other, or close the stream (stream_close) and open one for it")
+        self._problem(f"samples from {_name(sender)} dropped: {_name(self._sender)} is this stream's sender, and the "
+                      "platform would swing between their poses or follow a stray sample; stop the other, or close "
+                      "the stream (stream_close) and open one for it")
         self.counters.received += 1
         self.counters.other_sender += 1
         return False
 
-    def _taken_or_counted(self, frames: list[bytes], sender: Any = None) -> None:
-        """Take the message of ``frames`` (a datagram is one, from the UDP address
-        ``sender``; None: ZeroMQ's), or count it as malformed, whatever goes wrong."""
+    def _taken_or_counted(self, frames: list[bytes], sender: Any) -> None:
+        """Take the message of ``frames`` (a datagram is one) from ``sender`` (a UDP
+        address, or :data:`ZEROMQ`), or count it as malformed, whatever goes wrong."""
         try:
             self._take(frames, sender)
         except Exception as error:  # a sample no check foresaw must not end the thread
             self._failed("a message could not be taken", error)
             self.counters.malformed += 1
 
-    def _take(self, frames: list[bytes], sender: Any = None) -> None:
+    def _take(self, frames: list[bytes], sender: Any) -> None:
         received_ns = time.monotonic_ns()
         c = self.counters
         c.received += 1
@@ -380,7 +388,7 @@ class StreamReceiver(SocketThread):
                 self.counters = StreamCounters()
                 self._last_sequence = None
                 self._recent_senders.clear()
-                self._udp_sender = self._last = self._last_from = None
+                self._sender = self._last = self._last_from = None
                 self._sent_before, self._sent_off = None, 0
                 self._stream_problem = ""
                 self._loop_latency_ns.clear()
@@ -470,14 +478,17 @@ def _percentiles(values_ns: collections.deque[int]) -> dict[str, float] | None:
     return {"p50": pick(0.5), "p99": pick(0.99), "max": values[-1] / 1e6, "count": len(values)}
 
 
-def _well_formed(datagram: bytes) -> bool:
-    """Whether ``datagram`` is a sample (:func:`decode` takes it)."""
+def _well_formed(frames: list[bytes]) -> bool:
+    """Whether ``frames`` are a sample: one frame that :func:`decode` takes."""
     try:
-        return decode(datagram) is not None
+        return len(frames) == 1 and decode(frames[0]) is not None
     except MalformedSample:
         return False
 
 
-def _address(sender: Any) -> str:
+def _name(sender: Any) -> str:
+    """``sender`` as ``last_problem`` names it: ``ZeroMQ``, or ``UDP HOST:PORT``."""
+    if sender == ZEROMQ:
+        return ZEROMQ
     host, port = sender[:2]
-    return f"{host}:{port}"
+    return f"UDP {host}:{port}"
