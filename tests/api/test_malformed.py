@@ -242,6 +242,15 @@ def test_a_calibrations_source_may_be_any_one_line_path() -> None:
     assert decode_request(json.dumps(request).encode()).source == "/home/jos\u00e9/cal 2.toml"
 
 
+def test_a_streams_timeout_is_bounded_below_by_the_loops_rule_only() -> None:
+    """Found in review: the request refused timeout_ms under 5, a rule of its own beside the
+    loop's 3 cycles (3 ms at 1000 Hz): one rule, in the loop (tests/control/test_stream.py)."""
+    request = {"v": 1, "id": 1, "cmd": "stream_open", "source": "sim"}
+    assert decode_request(json.dumps({**request, "timeout_ms": 3.5}).encode()).timeout_ms == 3.5
+    with pytest.raises(ApiError, match="stream_open: timeout_ms: Input should be greater than 0"):
+        decode_request(json.dumps({**request, "timeout_ms": 0}).encode())
+
+
 def test_handler_bug_becomes_internal_error() -> None:
     def broken(request, deadline_ns, sender):
         raise KeyError("boom")

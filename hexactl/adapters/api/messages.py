@@ -540,8 +540,11 @@ class StreamOpenRequest(_Request):
                                  description="who sends the stream, for people (printable ASCII)")
     frame: Literal["zero", "work"] = Field(default="zero", description="the targets' frame: zero (relative to the "
                                            "zero posture) or work (the tool's pose in the work frame)")
-    timeout_ms: float = Field(default=100.0, ge=5.0, le=10_000.0,
-                              description="the stream ends, braking to rest, when no target comes for this long")
+    # No lower bound of its own: the loop's, 3 of its cycles, is the one rule (stream_commands).
+    timeout_ms: float = Field(default=100.0, gt=0.0, le=10_000.0,
+                              description="the stream ends, braking to rest, when no target comes for this long; "
+                              "at least 3 cycles of the loop (6 ms at 500 Hz): a shorter one is refused, naming "
+                              "the least")
 
 
 class StreamCloseRequest(_Request):
