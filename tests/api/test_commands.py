@@ -143,6 +143,22 @@ def test_status_carries_the_telemetry_record(service) -> None:
     assert reply["status"]["calibration_id"] == geometry_id(service.controller.geometry)
 
 
+def test_status_carries_the_identification_warnings_of_the_calibration_in_force(service, nominal) -> None:
+    """Found in review: a calibration written "weakly determined" said so when loaded, then
+    nowhere: hexactl status, what an operator looks at later, showed only its id."""
+    from hexactl.adapters.cli.service_commands import format_ok_reply
+    from hexactl.kinematics.geometry import CalibrationInfo
+
+    assert send(service, "status")["calibration_warnings"] == []  # the nominal: a geometry file
+    warned = ["weakly determined: … the worst combination is known to ±70.6 mm", "the base moved as a whole"]
+    service.controller.geometry = nominal.model_copy(update={"calibration": CalibrationInfo(
+        method="full", created="now", input_sha256="0" * 64, postures=8, residual_rms_mm=0.1,
+        status="weakly determined", warnings=tuple(warned))})
+    reply = send(service, "status")
+    assert reply["calibration_warnings"] == warned
+    assert format_ok_reply("status", reply).splitlines()[-2:] == [f"warning: when identified: {w}" for w in warned]
+
+
 def test_play_inline_waypoints(service) -> None:
     sequence = {"name": "steps", "waypoints": [{"pose": [0, 0, 10, 0, 0, 0], "speed": 0.5}, {"pose": [0] * 6, "dwell": 2.0}]}
     reply = send(service, "play", sequence=sequence)

@@ -157,7 +157,9 @@ class CommandHandler:
         controller = self.controller
         match request:
             case StatusRequest():
-                return {"status": self.record(), "calibration_source": controller.active_geometry().source,
+                active = controller.active_geometry()
+                return {"status": self.record(), "calibration_source": active.source,
+                        "calibration_warnings": active.geometry.identification_warnings,
                         "predicted_accuracy": controller.predicted_accuracy()}
             case EnableRequest():
                 return _checked(controller.enable(deadline_ns=deadline_ns))

@@ -944,6 +944,9 @@ class StatusReply(OkReply):
     status: Telemetry
     calibration_source: str = Field(description="where the calibration in force (status.calibration_id) was read "
                                     "from: a file, or request (SOURCE) for one a client sent as text")
+    calibration_warnings: list[str] = Field(
+        default_factory=list, description="what the identification of the calibration in force warned of (its "
+        "file's [calibration] warnings: a weakly determined one says so here); empty for a geometry file")
     predicted_accuracy: PredictedAccuracy | None = Field(
         default=None, description="at the commanded pose now; null without a calibration covariance")
 

@@ -563,7 +563,7 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
     from the requested pose (``fields``, the request's)."""
     if cmd == "status":
         return (format_telemetry(reply["status"], reply.get("calibration_source")) + "\n"
-                + accuracy_line(reply.get("predicted_accuracy")))
+                + accuracy_line(reply.get("predicted_accuracy")) + _identification_warnings(reply, "calibration_warnings"))
     if "frames" in reply:
         return "\n".join([f"ok: {reply.get('message') or 'frames'}"] + [f"{label:<15}{text}" for label, text in
                                                                        frames_lines({"frames": reply["frames"]})])
@@ -601,9 +601,13 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
         said.append(f"set-points change by up to {reply['change_mm']:.3f} mm")
     if "records" in reply:
         said.append(f"{reply['records']} records of {reply['name']} ({reply['status']}) written to {reply['path']}")
-    # A calibration's identification warnings (weakly determined, the instrument's frame), as calibrate printed them.
-    warned = [f"\nwarning: when identified: {warning}" for warning in reply.get("warnings") or []]
-    return "ok" + (": " + "; ".join(said) if said else "") + "".join(warned)
+    return "ok" + (": " + "; ".join(said) if said else "") + _identification_warnings(reply, "warnings")
+
+
+def _identification_warnings(reply: dict[str, Any], field: str) -> str:
+    """A calibration's identification warnings in ``reply[field]`` (weakly determined, the
+    instrument's frame), as calibrate printed them: a line each."""
+    return "".join(f"\nwarning: when identified: {warning}" for warning in reply.get(field) or [])
 
 
 def accuracy_line(accuracy: dict[str, Any] | None) -> str:
