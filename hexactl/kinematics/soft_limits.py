@@ -32,6 +32,11 @@ _TURNING_AXES = (3, 5)
 _HALF_TURN_READ = 180.0 - POSE_BOUND_ROUNDING
 """An angle read this far from 0 or farther is at ±180°."""
 
+_LIMITED = "the tool's {} in the work frame"
+"""What a soft limit bounds, as a refusal names it: an axis of the tool in the work frame, not
+the axis the operator moved (found from outside: y=40 about a work frame turned 90° was
+refused as "x 40.000 mm above the soft limit 30 mm", read as the wrong axis)."""
+
 
 class SoftLimits(BaseModel):
     """``lower``/``upper``: per axis of the tool's pose in the work frame, mm and deg
@@ -90,13 +95,14 @@ class SoftLimits(BaseModel):
                 value, limit, passed = self._way_round(axis, float(poses[n, axis]), side)
                 unit = POSE_UNITS[axis]
                 found[n].append(Violation(ViolationKind.SOFT_LIMIT, value, limit,
-                                          f"{POSE_AXES[axis]} {value:.3f} {unit} {passed} (by "
+                                          f"{_LIMITED.format(POSE_AXES[axis])}, {value:.3f} {unit}, {passed} (by "
                                           f"{abs(value - limit):.3g} {unit})", axis=POSE_AXES[axis]))
         if self.max_tilt_deg is not None:
             for n, tilt in enumerate(tilt_deg(poses)):
                 if self._beyond_tilt(tilt):
                     found[n].append(Violation(ViolationKind.SOFT_TILT, float(tilt), self.max_tilt_deg,
-                                              f"tilt {tilt:.3f} deg beyond the soft limit {self.max_tilt_deg:g} deg "
+                                              f"{_LIMITED.format('tilt')}, {tilt:.3f} deg, beyond the soft limit "
+                                              f"{self.max_tilt_deg:g} deg "
                                               f"(by {tilt - self.max_tilt_deg:.3g} deg)"))
         return found
 

@@ -188,7 +188,7 @@ def test_soft_limits_name_the_limit_and_cannot_be_set_around_a_platform_outside_
     rig.settle()
     narrower = OperatorFrames(soft_limits=SoftLimits(upper=(30, None, None, None, None, None)))
     outside = rig.controller.set_frames(narrower)
-    assert outside.error == "outside_soft_limits" and "x 40.000 mm above the soft limit 30 mm" in outside.message
+    assert outside.error == "outside_soft_limits" and "the tool's x in the work frame, 40.000 mm, above the soft limit 30 mm" in outside.message
     assert rig.controller.operator_frames().soft_limits == limits  # unchanged
     assert OUTSIDE_SOFT_LIMITS not in refused.message  # it started inside them
 
@@ -300,7 +300,7 @@ def test_a_tool_mounted_backwards_is_held_in_a_yaw_window_up_to_180(rig):
     assert rig.controller.move([0, 0, 0, 0, 0, 5], frame=Frame.WORK, relative=True).ok
     rig.settle()
     beyond = rig.controller.validate_pose([0, 0, 0, 0, 0, 1], frame=Frame.WORK, relative=True)
-    assert beyond.error == "path_violation" and "yaw 181.000 deg above the soft limit 180 deg" in beyond.message
+    assert beyond.error == "path_violation" and "the tool's yaw in the work frame, 181.000 deg, above the soft limit 180 deg" in beyond.message
     assert rig.controller.move([0, 0, 0, 0, 0, -5], frame=Frame.WORK, relative=True).ok
     rig.settle()
     jog = rig.controller.jog([0, 0, 0, 0, 0, 2], frame=Frame.WORK)  # it said: the soft limit on yaw at 170
@@ -317,7 +317,7 @@ def test_a_goal_on_a_soft_limit_is_accepted_whatever_its_path_rounds_to(rig):
                  [-17.0, 0, 123.456, 13.847896737132508, 0, 0]):
         assert rig.controller.validate_pose(goal).ok, (goal, rig.controller.validate_pose(goal).message)
     refused = rig.controller.validate_pose([50.001, 0, 0, 0, 0, 0])
-    assert not refused.ok and "x 50.001 mm above the soft limit 50 mm" in refused.message
+    assert not refused.ok and "the tool's x in the work frame, 50.001 mm, above the soft limit 50 mm" in refused.message
 
 
 axis_values = st.floats(-700.0, 700.0)
@@ -453,7 +453,7 @@ def test_telemetry_names_the_soft_limits_the_commanded_pose_breaks(make_rig):
     limits = OperatorFrames(soft_limits=SoftLimits(upper=(None, 10, None, None, None, None)))
     restored = Controller(rig.controller.thread, config=ControllerConfig(), nominal=rig.geometry, frames=limits)
     outside = restored.telemetry().outside_soft_limits
-    assert len(outside) == 1 and outside[0].startswith("y 15") and "above the soft limit 10 mm" in outside[0], outside
+    assert len(outside) == 1 and outside[0].startswith("the tool's y in the work frame, 15") and "above the soft limit 10 mm" in outside[0], outside
     assert rig.controller.telemetry().outside_soft_limits == ()  # no soft limits: nothing to break
     # as the API publishes it, and hexactl status shows it
     from hexactl.adapters.api.messages import Telemetry

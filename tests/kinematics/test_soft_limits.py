@@ -22,9 +22,9 @@ def test_each_broken_bound_is_named_with_its_axis_and_units():
     assert inside == []
     assert [(v.kind, v.axis, v.value, v.limit) for v in low_x_and_pitch] == [
         (ViolationKind.SOFT_LIMIT, "x", -11.0, -10), (ViolationKind.SOFT_LIMIT, "pitch", -3.0, -2)]
-    assert low_x_and_pitch[0].message == "x -11.000 mm below the soft limit -10 mm (by 1 mm)"
-    assert low_x_and_pitch[1].message == "pitch -3.000 deg below the soft limit -2 deg (by 1 deg)"
-    assert high_z[0].message == "z 60.000 mm above the soft limit 50 mm (by 10 mm)"
+    assert low_x_and_pitch[0].message == "the tool's x in the work frame, -11.000 mm, below the soft limit -10 mm (by 1 mm)"
+    assert low_x_and_pitch[1].message == "the tool's pitch in the work frame, -3.000 deg, below the soft limit -2 deg (by 1 deg)"
+    assert high_z[0].message == "the tool's z in the work frame, 60.000 mm, above the soft limit 50 mm (by 10 mm)"
 
 
 def test_the_tilt_is_the_angle_of_the_tool_z_axis_whatever_the_yaw():
@@ -32,7 +32,7 @@ def test_the_tilt_is_the_angle_of_the_tool_z_axis_whatever_the_yaw():
         [np.degrees(np.arccos(np.cos(np.radians(3)) * np.cos(np.radians(4)))), 5.0])
     (tilted,) = SoftLimits(max_tilt_deg=4.0).violations([[0, 0, 0, 0, 5, 77]])
     assert [(v.kind, v.value) for v in tilted] == [(ViolationKind.SOFT_TILT, pytest.approx(5.0))]
-    assert tilted[0].message == "tilt 5.000 deg beyond the soft limit 4 deg (by 1 deg)"
+    assert tilted[0].message == "the tool's tilt in the work frame, 5.000 deg, beyond the soft limit 4 deg (by 1 deg)"
     on, beyond = [0, 0, 0, 0, 4, 0], [0, 0, 0, 0, 4.0001, 0]
     limits = SoftLimits(max_tilt_deg=4.0)
     assert [bool(found) for found in limits.violations([on, beyond])] == [False, True]
@@ -106,10 +106,10 @@ def test_angle_windows_up_to_180_degrees_name_the_bound_turned_past():
     assert _on("yaw", -180, 180).violations([[0] * 5 + [180], [0] * 5 + [-180]]) == [[], []]
     (inside, past_180, below) = _on("yaw", 170, 180).violations([[0] * 5 + [175], [0] * 5 + [-175], [0] * 5 + [160]])
     assert inside == [] and (past_180[0].value, past_180[0].limit) == (185.0, 180)
-    assert past_180[0].message == "yaw 185.000 deg above the soft limit 180 deg (by 5 deg)"
-    assert below[0].message == "yaw 160.000 deg below the soft limit 170 deg (by 10 deg)"
+    assert past_180[0].message == "the tool's yaw in the work frame, 185.000 deg, above the soft limit 180 deg (by 5 deg)"
+    assert below[0].message == "the tool's yaw in the work frame, 160.000 deg, below the soft limit 170 deg (by 10 deg)"
     (past_minus_180,) = _on("roll", -180, -170).violations([[0] * 3 + [178, 0, 0]])
-    assert past_minus_180[0].message == "roll -182.000 deg below the soft limit -180 deg (by 2 deg)"
+    assert past_minus_180[0].message == "the tool's roll in the work frame, -182.000 deg, below the soft limit -180 deg (by 2 deg)"
     assert _on("pitch", -90, 90).violations([[0] * 4 + [90, 0]]) == [[]]
 
 
@@ -117,14 +117,14 @@ def test_an_angle_window_open_on_one_side_ends_at_180_degrees_and_says_so():
     # With only yaw >= 170 set, -175 read (5 deg past 180) was "below the soft limit 170".
     (past_180, below) = _on("yaw", 170, None).violations([[0] * 5 + [-175], [0] * 5 + [160]])
     assert (past_180[0].value, past_180[0].limit) == (185.0, 180.0)
-    assert past_180[0].message == ("yaw 185.000 deg above 180 deg: yaw reads up to 180 deg, so its soft window from "
+    assert past_180[0].message == ("the tool's yaw in the work frame, 185.000 deg, above 180 deg: yaw reads up to 180 deg, so its soft window from "
                                    "170 deg ends there (by 5 deg)")
-    assert below[0].message == "yaw 160.000 deg below the soft limit 170 deg (by 10 deg)"
+    assert below[0].message == "the tool's yaw in the work frame, 160.000 deg, below the soft limit 170 deg (by 10 deg)"
     (past_minus_180, above) = _on("roll", None, -170).violations([[0] * 3 + [178, 0, 0], [0] * 3 + [-160, 0, 0]])
     assert (past_minus_180[0].value, past_minus_180[0].limit) == (-182.0, -180.0)
-    assert past_minus_180[0].message == ("roll -182.000 deg below -180 deg: roll reads down to -180 deg, so its soft "
+    assert past_minus_180[0].message == ("the tool's roll in the work frame, -182.000 deg, below -180 deg: roll reads down to -180 deg, so its soft "
                                          "window up to -170 deg ends there (by 2 deg)")
-    assert above[0].message == "roll -160.000 deg above the soft limit -170 deg (by 10 deg)"
+    assert above[0].message == "the tool's roll in the work frame, -160.000 deg, above the soft limit -170 deg (by 10 deg)"
 
 
 @pytest.mark.parametrize("axis", ["roll", "yaw"])
@@ -138,7 +138,7 @@ def test_an_angle_read_at_minus_180_is_the_180_a_window_up_to_180_holds(axis):
         assert limits.violations(at) == [[], []]
         assert limits.allow(at[0]) and limits.allow(at[1])
     (beyond,) = _on(axis, -10, 10).violations(at[:1])
-    assert beyond[0].message == f"{axis} -180.000 deg below the soft limit -10 deg (by 170 deg)"
+    assert beyond[0].message == f"the tool's {axis} in the work frame, -180.000 deg, below the soft limit -10 deg (by 170 deg)"
     assert not _on(axis, -10, 10).allow(at[1])
 
 
