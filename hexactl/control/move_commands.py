@@ -96,11 +96,13 @@ class MoveCommands:
         context = self._context(s, frames)
         if problem := validate_pose_values(pose) or (None if frame in tuple(Frame) else f"unknown frame {frame!r}"):
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, problem))
-        if relative and (beyond := [f"{axis} {turn:g}°" for axis, turn in zip(POSE_AXES[3:], pose[3:]) if abs(turn) > 180]):
+        if relative and (beyond := [(axis, turn) for axis, turn in zip(POSE_AXES[3:], pose[3:]) if abs(turn) > 180]):
             # a goal in the work frame is reached the short way round (short_way): such a
             # turn would go the other way, to the same orientation
+            got = ", ".join(f"{axis} {turn:g}°" for axis, turn in beyond)
+            same = ", ".join(f"{axis} {(turn + 180.0) % 360.0 - 180.0:+g}°" for axis, turn in beyond)
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
-                                        f"got {', '.join(beyond)}: turn the other way round (-200° is +160°)"))
+                                        f"got {got}: the same orientation is {same}"))
         goal = requested_goal(pose, Frame(frame), bool(relative), s.target, s.frames, context.frames, s.active.home)
         if isinstance(goal, str):
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, goal))

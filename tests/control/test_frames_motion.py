@@ -441,7 +441,12 @@ def test_a_relative_turn_beyond_half_a_turn_is_refused_not_taken_the_other_way(r
     rig.enabled()
     for frame in Frame:
         refused = rig.controller.move([0, 0, 0, 0, 0, 300], frame=frame, relative=True)
-        assert refused.error == "invalid_argument" and "at most 180° about each axis, got yaw 300°" in refused.message
+        assert refused.error == "invalid_argument" and refused.message == (
+            "a relative turn is at most 180° about each axis, got yaw 300°: the same orientation is yaw -60°")
+    # Found from outside: the hint was a fixed "(-200° is +160°)" whatever the turn asked
+    refused = rig.controller.move([0, 0, 0, 400, 0, -200], relative=True)
+    assert refused.message.endswith("got roll 400°, yaw -200°: the same orientation is roll +40°, yaw +160°"), \
+        refused.message
 
 
 def test_telemetry_names_the_soft_limits_the_commanded_pose_breaks(make_rig):
