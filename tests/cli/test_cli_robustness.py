@@ -217,6 +217,21 @@ def test_one_word_that_is_no_number_is_called_so() -> None:
         parse_pose_argument("abc")
 
 
+@pytest.mark.parametrize("typed", ["x=1_0", "1_0,0,0,0,0,0", "x=\uff11"])  # fullwidth 1
+def test_a_number_python_reads_but_no_one_writes_is_refused_not_read(typed) -> None:
+    """Found from outside: ``x=1_0``, a typo for 1.0, moved to x 10 mm."""
+    with pytest.raises(CliError, match="is not a plain decimal number: write digits 0-9"):
+        parse_pose_argument(typed)
+
+
+@pytest.mark.parametrize("argv", [["wave", "--axis", "x:1_0", "--frequency", "1", "--cycles", "2"],
+                                  ["wave", "--axis", "x:1", "--frequency", "1", "--cycles", "1_0"],
+                                  ["jog", "x=5", "--for", "1_0"]], ids=["amplitude", "cycles", "for"])
+def test_options_refuse_a_number_no_one_writes(argv, capsys) -> None:
+    assert exits_with(argv) == 2
+    assert "'1_0' is not a plain decimal number" in capsys.readouterr().err
+
+
 def test_the_forms_still_parse() -> None:
     assert parse_pose_argument("x=5,yaw=-2") == [5.0, 0.0, 0.0, 0.0, 0.0, -2.0]
     assert parse_pose_argument("1,2,3,4,5,6") == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
@@ -276,6 +291,9 @@ def test_an_empty_path_is_refused_naming_the_option(option, capsys) -> None:
     (["cue", "", "--plan-only"], "file"),
     (["demo", "--out", ""], "--out"),
     (["campaign", "--out", ""], "--out"),
+    (["play", ""], "SEQUENCE"),  # ": a directory, not a sequence": the working directory
+    (["load-calibration", ""], "FILE"),
+    (["save-recording", ""], "FILE"),
 ], ids=lambda value: value[0] if isinstance(value, list) else value)
 def test_an_empty_path_is_refused_naming_the_option_in_every_command(argv, option, tmp_path, monkeypatch,
                                                                       capsys) -> None:

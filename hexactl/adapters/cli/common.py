@@ -26,6 +26,7 @@ from hexactl.adapters.api.protocol import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S, chec
 from hexactl.adapters.files.atomic import NotARegularFile, replaceable, same_file, write_problem
 from hexactl.adapters.files.config_path import CONFIG_ENVIRONMENT_VARIABLE
 from hexactl.kinematics.axes import MAX_TILT_DEG, POSE_AXES, validate_pose_values
+from hexactl.kinematics.plain_numbers import PLAIN_DECIMAL, PLAIN_DECIMAL_HINT
 
 if TYPE_CHECKING:  # loaded only by the commands that use them
     from hexactl.adapters.api.client import HexactlClient, TelemetrySubscriber
@@ -457,9 +458,22 @@ def _argparse_type(parse: Callable[[str], Any], text: str) -> Any:
 def _float_argument(text: str) -> float:
     """``text`` as a float, for an argparse ``type``; ArgumentTypeError if it is none."""
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if problem := not_plainly_written(text, value):
+        raise argparse.ArgumentTypeError(problem)
+    return value
+
+
+def not_plainly_written(text: str, value: float) -> str | None:
+    """Why ``text``, which Python reads as the finite ``value``, is no number an operator
+    means (:mod:`hexactl.kinematics.plain_numbers`); None when it is plain decimal. Found
+    from outside: ``x=1_0``, a typo for 1.0, was read as 10 mm. Non-finite values are
+    left to the caller, whose message says what range it takes."""
+    if isfinite(value) and not PLAIN_DECIMAL.fullmatch(text.strip()):
+        return f"{text.strip()!r} is not a plain decimal number: {PLAIN_DECIMAL_HINT}"
+    return None
 
 
 def positive_float(text: str) -> float:
@@ -506,9 +520,13 @@ def checked_number(problem_of: Callable[[float], str | None]) -> Callable[[str],
 
 def _whole_number(text: str) -> int:
     try:
-        return int(text)
+        whole = int(text)
     except ValueError:
         pass
+    else:
+        if problem := not_plainly_written(text, whole):
+            raise argparse.ArgumentTypeError(problem)
+        return whole
     try:
         value = float(text)
     except ValueError:
@@ -595,6 +613,9 @@ def _all_numbers(words: list[str]) -> bool:
 
 def _number(text: str, context: str) -> float:
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise CliError(f"{context}: {text.strip()!r} is not a number") from None
+    if problem := not_plainly_written(text, value):
+        raise CliError(f"{context}: {problem}")
+    return value

@@ -112,7 +112,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                      "the service, restored on restart.")
     command("stop", "halt any motion smoothly and stay enabled", "stop")
     play = command("play", "play a sequence: a built-in name, a sequence file or a plan", _play_request)
-    play.add_argument("sequence", metavar="SEQUENCE", help="built-in name (x_sweep, y_rotation, compound), a .toml "
+    play.add_argument("sequence", metavar="SEQUENCE", type=named_path, help="built-in name (x_sweep, y_rotation, compound), a .toml "
                       "sequence file or a .csv plan from plan-leglock: a file here is sent by its absolute path, any "
                       "other name is looked up in the service's data directories (serve puts examples in ./sequences)")
     _waiting(play)
@@ -128,7 +128,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     leg_lock.add_argument("leg", type=int, choices=range(1, 7), metavar="N", help="leg 1–6")
     command("unlock", "release the locked leg", "leg_unlock")
     load = command("load-calibration", "switch the running service to a calibration file", _load_calibration_request)
-    load.add_argument("file", metavar="FILE", help="calibration TOML: a file here is read here and its content sent (so "
+    load.add_argument("file", metavar="FILE", type=named_path, help="calibration TOML: a file here is read here and its content sent (so "
                       "any file works, for a local or a remote service); a name that is no file here is read by the "
                       "service from its data directories")
     load.add_argument("--send", action="store_true", help="insist that FILE is read here (the default when it exists here)")
@@ -142,7 +142,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
                    "hexactl load-calibration cal.toml --expected-id ID.")
     command("rollback-calibration", "return to the calibration active before the last load", "rollback_calibration")
     save = command("save-recording", "write the last sequence's dwell records as CSV on the service's machine", _save_recording_request)
-    save.add_argument("file", metavar="FILE", help="new CSV file (never overwritten): a bare name (run1.csv) goes into the "
+    save.add_argument("file", metavar="FILE", type=named_path, help="new CSV file (never overwritten): a bare name (run1.csv) goes into the "
                       "service's first data directory; a path with a directory (recordings/run1.csv) names that directory, "
                       "sent absolute when it exists here (a service in the same working directory), else as typed; it "
                       "must be a data directory of the service")
@@ -306,7 +306,7 @@ def _play_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
         raise CliError(f"{arguments.sequence}: a directory, not a sequence: name a .toml sequence file or a .csv "
                        "plan in it, or a built-in sequence")
     return "validate_sequence" if arguments.validate else "play", {
-        "sequence": str(path.resolve()) if path.is_file() else arguments.sequence}
+        "sequence": str(path.resolve()) if path.is_file() else str(arguments.sequence)}
 
 
 def _save_recording_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -315,7 +315,7 @@ def _save_recording_request(arguments: argparse.Namespace) -> tuple[str, dict[st
     first data directory (docs/api.md)."""
     path = Path(arguments.file)
     here = path.parent != Path() and path.parent.is_dir()
-    return "save_recording", {"path": str(path.resolve()) if here else arguments.file}
+    return "save_recording", {"path": str(path.resolve()) if here else str(arguments.file)}
 
 
 def _load_calibration_request(arguments: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -336,7 +336,7 @@ def _load_calibration_fields(arguments: argparse.Namespace) -> dict[str, Any]:
         raise CliError(f"{arguments.file}: a directory, not a calibration file: name the .toml file in it "
                        f"(hexactl calibrate writes calibration.toml)")
     if not (arguments.send or path.is_file()):
-        return {"path": arguments.file}
+        return {"path": str(arguments.file)}
     import json
     import tomllib  # light; only for this command
 

@@ -13,7 +13,7 @@ import sys
 from math import isfinite
 from typing import Any
 
-from hexactl.adapters.cli.common import CliError, connect, positive_float, positive_up_to, whole_number_in
+from hexactl.adapters.cli.common import CliError, connect, not_plainly_written, positive_float, positive_up_to, whole_number_in
 from hexactl.adapters.cli.service_commands import (
     EXIT_NO_ANSWER,
     EXIT_OK,
@@ -67,6 +67,8 @@ def axis_argument(text: str) -> tuple[str, dict[str, float]]:
         raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are numbers") from None
     if not all(isfinite(value) for value in values):
         raise argparse.ArgumentTypeError(f"{text!r}: the amplitude and the phase are finite numbers")
+    if problem := next(filter(None, map(not_plainly_written, parts[1:], values)), None):
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}")
     if problem := amplitude_problem(parts[0], values[0]):
         raise argparse.ArgumentTypeError(f"{text!r}: {problem}")
     if len(values) == 2 and not abs(values[1]) <= MAX_PHASE_DEG:
