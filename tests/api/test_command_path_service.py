@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import functools
 import json
+import os
+import signal
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -16,9 +18,9 @@ from typing import Any
 import pytest
 import zmq
 
-from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber
+from hexactl.adapters.api.client import HexactlClient, ServiceUnavailable, TelemetrySubscriber, deadline_ms
 from tests.reliability.support import enable, tolerating_stalls
-from tools.serving import serve, terminate, wait_until
+from tools.serving import serve, spawned_children, terminate, wait_until
 
 WAIT_S = 60.0  # only turns a hang into a failure (the machine is shared and busy)
 LOCAL = "tcp://127.0.0.1:*"
@@ -89,6 +91,47 @@ def flood_then_move(api: str, operator: HexactlClient) -> None:
     # The service still moves for a client that waits long enough.
     operator.call("move", pose=[20, 0, 0, 0, 0, 0])
     wait_for(lambda: status(operator)["pose_command"][0] == pytest.approx(20.0, abs=1e-6), "the move")
+
+
+def test_a_move_sent_into_a_frozen_api_process_expires_by_its_senders_clock(tmp_path: Path) -> None:
+    """Found from outside: the API process frozen (SIGSTOP here; a starved host alike) while
+    a client's move was on its way; the client timed out, and when the process resumed it
+    received the move then, counted its deadline_ms from there and moved the platform.
+    The client library's expires_at is the sender's own time: the move expires."""
+    with serve(tmp_path) as served, HexactlClient(served.api, timeout_s=WAIT_S) as operator:
+        enable(operator)
+        [api_process] = spawned_children(served.process.pid)
+        tolerating_stalls(operator, lambda: move_into_a_frozen_api(served.api, api_process, operator))
+        shutdown = terminate(served)
+    assert shutdown.problems() == [], f"{shutdown}\n{served.log}"
+
+
+def move_into_a_frozen_api(api: str, api_process: int, operator: HexactlClient) -> None:
+    wait_for(lambda: status(operator)["motion"] == "holding", "the platform at rest")
+    start = status(operator)["pose_command"]
+    since = operator.call("events", after=0)["last"]
+    sender = zmq.Context.instance().socket(zmq.DEALER)  # a client that gave up, but reads the late reply
+    sender.linger = 0
+    sender.immediate = True
+    sender.connect(api)
+    try:
+        wait_for(lambda: operator.call("status") and True, "connected")  # the service is up: the connection too
+        os.kill(api_process, signal.SIGSTOP)
+        try:
+            timeout_s = 1.0  # as HexactlClient(timeout_s=1.0) sends it
+            sender.send(json.dumps({"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 20, 0, 0, 0], "duration": 1.0,
+                                    "deadline_ms": deadline_ms(timeout_s),
+                                    "expires_at": time.time() + deadline_ms(timeout_s) / 1000.0}).encode())
+            time.sleep(1.5 * timeout_s)  # the sender gives up
+        finally:
+            os.kill(api_process, signal.SIGCONT)
+        assert sender.poll(WAIT_S * 1000), "no reply to the move"
+        reply = json.loads(sender.recv_multipart()[-1])
+    finally:
+        sender.close()
+    assert reply["error"]["code"] == "expired" and "its expires_at" in reply["error"]["message"], reply
+    assert [event for event in operator.call("events", after=since)["events"] if event["code"] == "move"] == []
+    assert status(operator)["pose_command"] == start
 
 
 def test_stop_ends_the_moves_a_vanished_client_left_queued(tmp_path: Path) -> None:

@@ -97,10 +97,10 @@ def test_an_integer_beyond_double_range_is_refused_as_1e400_is(digits) -> None:
 
 @pytest.mark.parametrize(("body", "field", "problem"), [
     (b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, 0], "durration": 2}', "durration",
-     "not a key here; did you mean duration? the keys here are duration, speed, v, id, deadline_ms, pose, frame, "
-     "relative, tolerance_mm, validated_under, cmd"),
+     "not a key here; did you mean duration? the keys here are duration, speed, v, id, deadline_ms, expires_at, pose, "
+     "frame, relative, tolerance_mm, validated_under, cmd"),
     (b'{"v": 1, "id": 1, "cmd": "status", "verbose": true}', "verbose",
-     "not a key here; the keys here are v, id, deadline_ms, cmd"),
+     "not a key here; the keys here are v, id, deadline_ms, expires_at, cmd"),
     (b'{"v": 1, "id": 1, "cmd": "set_frames", "soft_limit_changes": {"uper": {}}}', "soft_limit_changes.uper",
      "not a key here; did you mean upper? the keys here are lower, upper, max_tilt_deg"),
 ])

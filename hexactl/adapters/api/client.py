@@ -118,10 +118,11 @@ class HexactlClient(ZmqConnection):
 
     Every request carries ``deadline_ms`` (unless the caller gives one): ``timeout_s``
     less a margin of 20 % of it, at least 50 ms and at most half of it
-    (:func:`deadline_ms`). The service carries out nothing after its deadline (it
+    (:func:`deadline_ms`), and ``expires_at``, the same deadline on this host's clock
+    (unless the caller gives one). The service carries out nothing after either (it
     answers ``expired``), and the margin lets the answer to a request carried out just
     before it reach this client before it gives up: a request this client timed out on
-    never runs later.
+    never runs later, even when the service reads it late (a frozen API process).
     """
 
     def __init__(
@@ -149,6 +150,9 @@ class HexactlClient(ZmqConnection):
             raise ValueError(f"{cmd}: {', '.join(envelope)}: the request's envelope, not a command's field")
         request_id = next(self._ids)
         fields = {"deadline_ms": deadline_ms(self.timeout_s), **fields}
+        # The same deadline on this host's clock: deadline_ms counts from the service's receipt,
+        # which a frozen service delays past this client's giving up.
+        fields.setdefault("expires_at", time.time() + fields["deadline_ms"] / 1000.0)
         try:
             message = json.dumps({"v": PROTOCOL_VERSION, "id": request_id, "cmd": cmd, **fields}, allow_nan=False)
         except ValueError as error:

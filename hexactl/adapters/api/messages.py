@@ -47,6 +47,12 @@ DeadlineMs = Annotated[
     Field(gt=0, le=MAX_DEADLINE_MS, description="carry it out within this many ms of the service receiving it, or not at all "
           "(expired); at most an hour"),
 ]
+ExpiresAt = Annotated[
+    float,
+    Field(gt=0, description="carry it out before this Unix time (s, as time.time() gives it) by the service host's "
+          "clock, or not at all (expired): the sender's own deadline, which holds however late the request reaches "
+          "the service; client and service keep their clocks together (NTP)"),
+]
 ErrorCodeText = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", description="snake_case error code")]
 RequestId = Annotated[JsonValue, Field(description="any JSON value; echoed in the reply")]
 MAX_READ_BYTES = 1024 * 1024
@@ -112,6 +118,7 @@ class _Request(_Message):
     v: Literal[1] = Field(description="protocol version")
     id: RequestId
     deadline_ms: DeadlineMs | None = None
+    expires_at: ExpiresAt | None = None
 
 
 class StatusRequest(_Request):

@@ -30,8 +30,8 @@ Each request goes to its handler with its **sender**, for people (:func:`sender_
 name its client gave its connection, where it connected from, and with CURVE the name of
 its key; the commands it sets off carry it, and the loop's events name it.
 
-A worker takes requests in turn, answers ``expired`` for one whose ``deadline_ms`` has
-passed, else runs the handler with the absolute deadline (the loop refuses a motion
+A worker takes requests in turn, answers ``expired`` for one whose deadline
+(:func:`request_deadline`: ``deadline_ms``, ``expires_at``) has passed, else runs the handler with the absolute deadline (the loop refuses a motion
 command past it). Its replies reach the socket thread through an inproc PUSH→PULL pair
 the socket thread polls with the ROUTER (a PUSH per worker: ZeroMQ sockets are not
 thread-safe).
@@ -61,6 +61,7 @@ from hexactl.adapters.api.messages import Request, StopRequest
 from hexactl.adapters.api.protocol import (
     CLIENT_NAME_PROPERTY,
     MAX_CLIENT_NAME,
+    MAX_DEADLINE_MS,
     MAX_REQUEST_BYTES,
     PROTOCOL_VERSION,
     TRANSPORT_MAX_BYTES,
@@ -206,7 +207,35 @@ class _Queued:
     envelope: list[bytes]
     request: Request
     deadline_ns: int | None  # monotonic
+    deadline: str  # which of the request's deadlines that is, for an expired reply
     sender: str
+
+
+def request_deadline(request: Request, received_ns: int, now_s: float) -> tuple[int | None, str]:
+    """When ``request``, received at ``received_ns`` (monotonic ns), is too late to carry
+    out (monotonic ns; None: never), and which deadline that is, for people: its
+    ``deadline_ms`` from its receipt, or its ``expires_at`` on this host's wall clock,
+    ``now_s`` (time.time()) at about its receipt, whichever comes first. ``deadline_ms``
+    alone counts from the receipt, which a frozen or starved API process delays: a move
+    its client had given up on ran when the process resumed (found from outside);
+    ``expires_at`` is the sender's own time.
+
+    :raises ApiError: ``invalid_request``: ``expires_at`` more than the longest deadline
+        (an hour) ahead, a time in ms, or not this host's epoch: no bound at all
+    """
+    deadlines: list[tuple[int, str]] = []
+    if request.deadline_ms is not None:
+        deadlines.append((received_ns + round(request.deadline_ms * 1e6), f"its deadline_ms ({request.deadline_ms:g})"))
+    if request.expires_at is not None:
+        if (left_s := request.expires_at - now_s) > MAX_DEADLINE_MS / 1000.0:
+            raise ApiError(ErrorCode.INVALID_REQUEST, f"{request.cmd}: expires_at {request.expires_at:.17g} is "
+                           f"{left_s:.6g} s after this host's time {now_s:.3f}, beyond the longest deadline, an hour: "
+                           "a Unix time in s, as time.time() gives it (not ms)", request_id=request.id)
+        late = (f"; it arrived {-left_s * 1e3:.0f} ms after it: held up on its way, or the sender's clock is behind "
+                "this host's (keep them together: NTP)") if left_s < 0 else ""
+        deadlines.append((received_ns + round(left_s * 1e9),
+                          f"its expires_at ({request.expires_at:.3f}, by this host's clock{late})"))
+    return min(deadlines, default=(None, ""))
 
 
 _STOP_AFTER_RACE = StopRequest(v=PROTOCOL_VERSION, id=None, cmd="stop")
@@ -436,12 +465,16 @@ class ApiServer(SocketThread):
                 self._cancel_in_transport(cause)
             self._send([*envelope, reply])
             return
-        deadline_ns = None if request.deadline_ms is None else received_ns + round(request.deadline_ms * 1e6)
+        try:
+            deadline_ns, deadline = request_deadline(request, received_ns, time.time())
+        except ApiError as error:
+            self._send([*envelope, encode(error_reply(error.request_id, error.code, error.message))])
+            return
         client = envelope[0]
         # A query waits behind its own client's commands (what it asks after them reflects
         # them), never behind another client's.
         quick = request.cmd in QUERY_COMMANDS and not self._commands.holds(client)
-        item = _Queued(envelope, request, deadline_ns, sender_of(frames[-1]))
+        item = _Queued(envelope, request, deadline_ns, deadline, sender_of(frames[-1]))
         refusal = (self._queries if quick else self._commands).put(client, item)
         if refusal is not None:
             self._send([*envelope, encode(error_reply(request.id, ErrorCode.BUSY, refusal,
@@ -503,9 +536,9 @@ class ApiServer(SocketThread):
             request = item.request
             if item.deadline_ns is not None and (late_ns := time.monotonic_ns() - item.deadline_ns) >= 0:
                 reply = error_reply(request.id, ErrorCode.EXPIRED,
-                                    f"{request.cmd} expired, not carried out: its deadline_ms "
-                                    f"({request.deadline_ms:g}) passed {late_ns / 1e6:.1f} ms before its "
-                                    "turn came; send it again with a longer deadline if it is still wanted")
+                                    f"{request.cmd} expired, not carried out: {item.deadline} passed "
+                                    f"{late_ns / 1e6:.1f} ms before its turn came; send it again with a longer "
+                                    "deadline if it is still wanted")
             else:
                 worker.in_handler = (time.monotonic_ns(), describe(request))
                 reply = reply_to(request, self._handle, item.deadline_ns, item.sender)
