@@ -50,7 +50,7 @@ class ErrorCode(StrEnum):
     NO_INSTRUMENT = "no_instrument"  # measure on a service without a measuring instrument (real actuators)
     MEASUREMENT_FAILED = "measurement_failed"  # the instrument could not measure (the simulated platform has no pose)
     BUSY = "busy"  # too many requests queued from this client (or from all): wait for replies
-    EXPIRED = "expired"  # its deadline_ms passed before it could be carried out; it never will be
+    EXPIRED = "expired"  # its deadline_ms or expires_at passed before it could be carried out; it never will be
     CANCELLED = "cancelled"  # a motion request still queued when a stop, abort or estop arrived
     INTERNAL_ERROR = "internal_error"  # a bug: logged with its traceback
 
