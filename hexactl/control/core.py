@@ -62,7 +62,7 @@ from hexactl.control.sequence_player import SequenceProgress, dwell_record
 from hexactl.control.sequences import DwellRecord
 from hexactl.control.snapshot import ControlState, CoreSnapshot, Event, MotionState
 from hexactl.control.stream import StreamProgress
-from hexactl.control.supervisor import ESTOP_FAULTS, Fault, Supervisor, other_controller_fault
+from hexactl.control.supervisor import ESTOP_FAULTS, Fault, Supervisor, other_controller_fault, released_legs
 from hexactl.control.trajectory import KinematicState
 from hexactl.control.wave_player import WaveProgress
 from hexactl.kinematics.axes import RelativeMmRad
@@ -203,13 +203,16 @@ class ControlCore:
     # -- state changes -----------------------------------------------------------------
 
     def _enter_fault(self, faults: tuple[Fault, ...]) -> None:
-        """Latch FAULT for ``faults`` (beside those latched, in FAULT already); E-stop for
-        those holding cannot hold (:data:`~hexactl.control.supervisor.ESTOP_FAULTS`)."""
+        """Latch FAULT for ``faults`` (beside those latched, in FAULT already); release the
+        leg of those a hold would strain (:func:`~hexactl.control.supervisor.released_legs`);
+        E-stop for those holding cannot hold (:data:`~hexactl.control.supervisor.ESTOP_FAULTS`)."""
         self.state = ControlState.FAULT
         self._faults += faults
         self._motion.freeze("fault")
         for fault in faults:
             self._event(fault.code, fault.message)
+        for leg in released_legs(faults):
+            self.hardware.send_command(leg, ActuatorCommand.DISABLE)
         if stopping := [fault.code for fault in faults if fault.code in ESTOP_FAULTS]:
             self._enter_estop(f"{', '.join(stopping)}: holding cannot stop actuators that another "
                               "controller drives too", cause=EstopCause.CONTROLLER_FAULT)

@@ -60,6 +60,18 @@ class Fault:
     leg: int | None = None
 
 
+RELEASE_FAULTS = frozenset({"following_error"})
+"""Faults whose leg the FAULT hold releases, with DISABLE (a controlled stop, power off,
+brake on), while the others hold: held at its set-point, a jammed leg's motor pushed
+against what jams it, in stall, for as long as FAULT lasted (found from outside: 17.5 mm
+short of its set-point three seconds on; the drive's own limit, larger, never came)."""
+
+
+def released_legs(faults: tuple[Fault, ...]) -> list[int]:
+    """The legs the FAULT hold releases for ``faults`` (:data:`RELEASE_FAULTS`)."""
+    return [fault.leg for fault in faults if fault.code in RELEASE_FAULTS and fault.leg is not None]
+
+
 def other_controller_heard(link: LinkHealth | None) -> str | None:
     """``another controller's SYNC was heard 0.002 s ago`` when the link heard one within
     :data:`~hexactl.control.results.OTHER_CONTROLLER_WINDOW_S`, else None."""

@@ -112,6 +112,13 @@ def test_a_jammed_leg_is_a_following_error_before_the_drive_notices(client, actu
         assert codes(record)[0] == ("following_error", 2), record["faults"]
         assert f"(limit {supervision.following_error_mm:g} mm): jammed" in record["faults"][0]["message"]
         assert_held(client)
+        # Found from outside: the jammed leg was held at its set-point, its motor pushing
+        # against the jam, as long as FAULT lasted. It is released (DISABLE: brake on); the
+        # others hold.
+        legs = wait_for(lambda: (legs := status(client)["legs"])[1]["state"] == "disabled" and legs,
+                        "the jammed leg released")
+        assert [leg["state"] for leg in legs] == ["enabled", "disabled"] + ["enabled"] * 4, legs
+        assert status(client)["state"] == "fault"
         actuators[1].inject.stall = False
         back_in_service(client)
 
