@@ -396,6 +396,8 @@ def test_socketcan_error_frames_set_the_bus_state(link, bus, can_id, data, state
     bus.push(0x040, bytes(8), is_error_frame=True)
     bus.push(can_id, data, is_error_frame=True)
     link.read_feedback()
+    assert link.link_health().bus_state is BusState.BUS_OFF  # the read a bus-off came in says it, whatever came after
+    link.read_feedback()
     assert link.link_health().bus_state is state
 
 
@@ -534,6 +536,30 @@ def test_a_frame_received_ends_bus_off(link, bus):
     bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, 0))
     link.read_feedback()
     assert link.link_health().bus_state is BusState.ACTIVE
+
+
+def test_a_bus_off_followed_by_a_frame_in_one_read_is_still_said(link, bus):
+    """Found from outside: a bus-off error frame, then any frame in the same read, left
+    no trace: the frame ended the bus-off before the loop looked. That read says bus-off
+    (frames were lost); the next, with none, does not."""
+    bus.push(0x040, bytes(8), is_error_frame=True)  # CAN_ERR_BUSOFF
+    bus.push(*codec.encode_heartbeat(1, WireState.DISABLED, 0))
+    link.read_feedback()
+    health = link.link_health()
+    assert health.bus_state is BusState.BUS_OFF and "bus-off in the last read, back on the bus since" in health.detail
+    link.read_feedback()
+    assert link.link_health().bus_state is BusState.ACTIVE
+
+
+def test_an_emergency_stands_against_a_feedback_after_it_in_one_read(link, bus):
+    """Found from outside: an EMCY (FAULT, overtemperature), then the leg's FEEDBACK in the
+    same read saying ENABLED, left the loop seeing an enabled leg with no fault."""
+    bus.push(*codec.encode_emergency(2, codec.FaultCode.OVERTEMPERATURE, WireState.FAULT, Fault.OVERTEMPERATURE))
+    bus.push(*codec.encode_feedback(2, 1000, 0, WireState.ENABLED, Fault(0), 0))
+    two = link.read_feedback().actuators[1]
+    assert two.state is ActuatorState.FAULT and two.fault_names == ("overtemperature",) and two.position_mm == 1.0
+    bus.push(*codec.encode_feedback(2, 1000, 0, WireState.ENABLED, Fault(0), 0))  # a read later: its own word
+    assert link.read_feedback().actuators[1].state is ActuatorState.ENABLED
 
 
 def test_a_command_given_up_is_named(link, bus, clock):

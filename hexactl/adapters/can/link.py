@@ -231,7 +231,7 @@ class _Node:
     __slots__ = (
         "position_mm", "velocity_mm_s", "wire_state", "fault_bits", "setpoint_counter", "enable_floor",
         "heard_ns", "heartbeat_ns", "heartbeat_counter", "restarts", "feedback_ns", "protocol_version",
-        "rejected_frames", "emergencies", "last_emergency", "last_ack", "sequence", "commanded", "pending",
+        "rejected_frames", "emergencies", "last_emergency", "emergency_read", "last_ack", "sequence", "commanded", "pending",
     )  # fmt: skip
 
     def __init__(self) -> None:
@@ -253,6 +253,7 @@ class _Node:
         self.rejected_frames = 0
         self.emergencies = 0
         self.last_emergency: Emergency | None = None
+        self.emergency_read = -1  # the read its last EMCY came in
         self.last_ack: CommandAck | None = None
         # An actuator that outlives a controller restart takes a first command whose sequence
         # equals its last executed one for a retry, and does not carry it out (PROTOCOL.md §5):
@@ -299,6 +300,8 @@ class CanActuatorLink:
         self._other_frame = ""
         self._stray: tuple[int, int] | None = None  # (node id, when): our heartbeat from a node no leg has
         self._behind_ns: int | None = None  # when a read last left frames waiting (it drains a bounded number)
+        self._reads = 0  # read_feedback calls: which read a frame came in
+        self._bus_off_read = -1  # the read a bus-off error frame last came in
         self._command_timeouts = 0
         self._first_counter: int | None = None
         self._last_counter: int | None = None
@@ -389,6 +392,7 @@ class CanActuatorLink:
         send a bare SYNC if no cycle was sent since the last call, and return every actuator's
         latest report. Never waits and never raises."""
         now = self._clock_ns()
+        self._reads += 1
         if not self._closed:
             if not self._cycle_sent:
                 self._send(*encode_sync(self._next_sync_counter), 0.0)
@@ -434,7 +438,14 @@ class CanActuatorLink:
             notes.append(self._detail)
         other_ns = self._other_ns
         other_age_s = inf if other_ns is None else (self._clock_ns() - other_ns) * 1e-9
-        return LinkHealth(self._bus_state, self._send_failures, "; ".join(notes), other_age_s, self._other_frame)
+        state = self._bus_state
+        if self._bus_off_read == self._reads and state is not BusState.BUS_OFF:
+            # Back on the bus within the read: said all the same (frames were lost), as a
+            # bus-off read last is (found from outside: a frame after it left no trace).
+            state = BusState.BUS_OFF
+            notes.append("bus-off in the last read, back on the bus since: frames were lost (wiring, termination, "
+                         "bit rate: ip -details -statistics link show shows the error counters)")
+        return LinkHealth(state, self._send_failures, "; ".join(notes), other_age_s, self._other_frame)
 
     # -- diagnostics -------------------------------------------------------------------
 
@@ -581,6 +592,8 @@ class CanActuatorLink:
             state = bus_state_from_error_frame(message)
             if state is not None:
                 self._bus_state = state
+                if state is BusState.BUS_OFF:
+                    self._bus_off_read = self._reads
             return
         if self._bus_state is BusState.BUS_OFF:
             # A frame received proves the controller is back on the bus, whether or not the
@@ -605,8 +618,11 @@ class CanActuatorLink:
             node = self._nodes[decoded.node - 1]
             node.position_mm = decoded.position_um / _UM_PER_MM
             node.velocity_mm_s = decoded.velocity_um_s / _UM_PER_MM
-            node.wire_state = decoded.state
-            node.fault_bits = int(decoded.faults)
+            if node.emergency_read != self._reads:
+                node.wire_state = decoded.state
+                node.fault_bits = int(decoded.faults)
+            else:  # an EMCY in this read stands: a FEEDBACK after it in one read hid it from the loop (found from outside)
+                node.fault_bits |= int(decoded.faults)
             node.setpoint_counter = self._unwrap(decoded.setpoint_counter, node.enable_floor)
             node.feedback_ns = now
         elif kind is Heartbeat:
@@ -623,6 +639,7 @@ class CanActuatorLink:
             node.fault_bits = int(decoded.faults)
             node.emergencies += 1
             node.last_emergency = decoded
+            node.emergency_read = self._reads
         elif kind is CommandAck:
             node = self._nodes[decoded.node - 1]
             node.wire_state = decoded.state
