@@ -6,6 +6,7 @@ from hypothesis import strategies as st
 
 from firmware_proto import codec
 from firmware_proto.codec import FrameError, FrameErrorReason
+from firmware_proto.generate import PROTOCOL_MD
 from hexactl.adapters.can.bus_monitor import crc8_sae_j1850 as bitwise_crc8
 
 from .frames import MESSAGES, strategy_for
@@ -208,3 +209,16 @@ def test_feedback_is_250_hz_per_actuator_and_spread_over_the_cycles(loop_rate):
         assert sum(node in cycle for cycle in senders) == 256 // divisor
     assert max(map(len, senders)) - min(map(len, senders)) <= 1
 
+
+
+def test_the_whole_frame_test_vectors_in_protocol_md_are_the_codecs() -> None:
+    """A firmware author checks a CRC implementation against PROTOCOL.md's whole frames
+    (identifier included): they must be what the codec sends."""
+    text = PROTOCOL_MD.read_text(encoding="utf-8")
+    vectors = [
+        codec.encode_sync(0),
+        codec.encode_command(1, codec.CommandCode.ENABLE, 0, codec.LoopRate.HZ_500, 5),
+        codec.encode_setpoint_frame(1, 7, [1000, -1000]),
+    ]
+    for can_id, payload in vectors:
+        assert f"| `0x{can_id:03X}` | `{payload.hex(' ')}` |" in text, (hex(can_id), payload.hex(" "))
