@@ -650,3 +650,12 @@ def test_a_validation_says_when_its_goal_is_projected_onto_a_locked_leg_as_the_m
         assert "projected onto the locked leg's constraint" in service_commands.format_ok_reply(cmd, reply, asked), cmd
     unmoved = service_commands.format_ok_reply("validate_pose", {"goal": asked["pose"], "duration": 1.2}, asked)
     assert "projected" not in unmoved and "(relative to the zero posture)" in unmoved
+
+
+def test_an_absolute_move_says_its_whole_goal() -> None:
+    """Found from outside: "move z=50" after "move x=100" took x back 100 mm (an absolute
+    pose's axes not given are 0) and said only "ok: moving; 1.12 s"."""
+    said = service_commands.format_ok_reply("move", {"ok": True, "message": "moving", "goal": [0, 0, 50, 0, 0, 0],
+                                                     "duration": 1.12}, {"pose": [0, 0, 50, 0, 0, 0]})
+    assert said.startswith("ok: moving; goal x    0.000 mm  y    0.000 mm  z   50.000 mm"), said
+    assert said.endswith("(relative to the zero posture; axes not given are 0: --relative keeps them); 1.12 s"), said

@@ -559,8 +559,8 @@ def run_serve(arguments: argparse.Namespace) -> int:
 
 def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | None = None) -> str:
     """A successful reply for people: the telemetry for ``status``, else ``ok``, what the
-    service said, and the reply's figures; for a move, the goal run to when it differs
-    from the requested pose (``fields``, the request's)."""
+    service said, and the reply's figures; for a move, its whole goal (and when it differs
+    from the requested pose, ``fields``, the request's, why)."""
     if cmd == "status":
         return (format_telemetry(reply["status"], reply.get("calibration_source")) + "\n"
                 + accuracy_line(reply.get("predicted_accuracy")) + _identification_warnings(reply, "calibration_warnings"))
@@ -583,6 +583,11 @@ def format_ok_reply(cmd: str, reply: dict[str, Any], fields: dict[str, Any] | No
             said.append(f"tool {pose_text(reply['tool_goal'])} (in the work frame)")
     elif projected:
         said.append(f"goal {pose_text(goal)} (projected onto the locked leg's constraint)")
+    elif cmd == "move" and goal is not None:
+        # Whole, every time: an absolute pose sets the axes not given to 0, and "move z=50" after
+        # "move x=100" took x back 100 mm with only "moving; 1.12 s" said (found from outside).
+        said.append(f"goal {pose_text(goal)} (relative to the zero posture; axes not given are 0: --relative keeps "
+                    "them)")
     if source := (fields or {}).get("source"):
         said.append(f"read from {source} here and sent")
     if cmd == "validate_sequence":
