@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from hexactl.adapters.cli.jog_commands import _pace, _renew
+from hexactl.adapters.cli.jog_commands import _in_cli_terms, _pace, _renew
 
 FIELDS = {"velocity": [0.0, 0.0, 5.0, 0.0, 0.0, 0.0], "frame": "zero"}
 
@@ -55,6 +55,18 @@ def test_a_lapsed_jog_starts_again_and_a_stopped_one_ends_the_command() -> None:
     stopped = ScriptedService(stop)
     assert _renew(stopped, FIELDS, 7, for_s=1.0, every_s=0.005) == stop
     assert len(stopped.sent) == 1
+
+
+def test_a_renewal_cancelled_by_a_stop_ends_the_command_with_the_jogs_own_word() -> None:
+    """Found from outside: a stop from another terminal while a renewal was queued ended the
+    command with "jog cancelled, not carried out", said of a jog that had run 1.5 s."""
+    stop = _refused("jog_ended", lapsed=False, reason="stopped")
+    service = ScriptedService(_refused("cancelled"), stop)
+    assert _renew(service, FIELDS, 7, for_s=1.0, every_s=0.005) == stop
+    assert [fields.get("renews") for fields in service.sent] == [7, 7]
+    # said in this command's terms, not the API's ("send jog without renews")
+    said = _in_cli_terms(_refused("jog_ended", lapsed=False, reason="stopped", jog=7))["error"]["message"]
+    assert said == "jog 7 has ended (stopped): run hexactl jog again to jog on"
 
 
 @pytest.mark.parametrize(("speed", "said"), [(0.5, "50%"), (0.0996, "10%"), (2 / 600, "0.33%"), (0.025, "2.5%"),

@@ -124,7 +124,7 @@ def test_a_stop_from_another_client_ends_the_jog_command(client: HexactlClient, 
             jogging.join(timeout=120)
         assert not jogging.is_alive() and codes == [1], codes
         err = capsys.readouterr().err
-        assert "has ended (stopped): it is not renewed" in err, err
+        assert "has ended (stopped): run hexactl jog again to jog on" in err, err
         assert "the service recorded since it started: " in err and "stop: any motion under way brakes to rest" in err
         rested = wait_for(lambda: (s := status(client))["motion"] == "holding" and s, "the platform at rest")
         assert rested["jog"] is None

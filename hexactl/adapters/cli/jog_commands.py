@@ -90,8 +90,8 @@ def run_jog(arguments: argparse.Namespace) -> int:
             finally:
                 client.request("jog", velocity=[0.0] * 6, frame=arguments.frame)
             if refused is not None:
-                print(format_error_reply(refused) + since_then(client.request("status")["status"], "jog", since),
-                      file=sys.stderr)
+                print(format_error_reply(_in_cli_terms(refused)) + since_then(client.request("status")["status"], "jog",
+                                                                                since), file=sys.stderr)
                 return EXIT_REFUSED
             waited = wait_until_at_rest(client, "jog", {}, since)
             status = client.request("status")["status"]
@@ -107,6 +107,17 @@ def run_jog(arguments: argparse.Namespace) -> int:
         return EXIT_NO_ANSWER
 
 
+def _in_cli_terms(refused: dict[str, Any]) -> dict[str, Any]:
+    """``refused`` with a jog that has ended said as this command's user acts on it (the
+    service's "send jog without renews" is the API's)."""
+    error = refused.get("error") or {}
+    details = error.get("details") or {}
+    if error.get("code") != "jog_ended" or not details.get("reason"):
+        return refused
+    message = f"jog {details.get('jog')} has ended ({details['reason']}): run hexactl jog again to jog on"
+    return {**refused, "error": {**error, "message": message}}
+
+
 def _pace(speed: float) -> str:
     """The jog's pace from its velocity scale (the fraction of the motion limits it runs at)."""
     if speed < 1.0:
@@ -118,8 +129,8 @@ def _pace(speed: float) -> str:
 
 def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s: float) -> dict[str, Any] | None:
     """Renew jog ``jog`` every ``every_s`` for ``for_s``; the reply that refused it (None:
-    none did). Once it has ended, a stop from anyone, a fault or a move ends this command
-    too; only a stall of this machine or the service starts a new jog, as the button is
+    none did). Once it has ended, a stop from anyone (also one that cancelled a renewal on
+    its way), a fault or a move ends this command too; only a stall of this machine or the service starts a new jog, as the button is
     still held: a lapse of its deadman, or a renewal held up past its deadline (``expired``:
     not carried out; the next renewal goes on, or finds the jog lapsed)."""
     end = time.monotonic() + for_s
@@ -129,7 +140,12 @@ def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s:
         error = reply.get("error") or {}
         if error.get("code") == "expired":
             continue
-        if error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
+        if error.get("code") == "cancelled":
+            # A stop reached the service while this renewal was queued: "not carried out" is the
+            # renewal's, not the jog's (it had run for seconds: found from outside). The next
+            # renewal gets the jog's own word: ended, stopped, by whom.
+            reply = client.request("jog", **fields, renews=jog)
+        elif error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
             reply = client.request("jog", **fields, restarts=jog)  # refused if a stop came after the lapse
         if not reply.get("ok"):
             return reply
