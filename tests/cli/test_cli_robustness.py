@@ -659,3 +659,12 @@ def test_an_absolute_move_says_its_whole_goal() -> None:
                                                      "duration": 1.12}, {"pose": [0, 0, 50, 0, 0, 0]})
     assert said.startswith("ok: moving; goal x    0.000 mm  y    0.000 mm  z   50.000 mm"), said
     assert said.endswith("(relative to the zero posture; axes not given are 0: --relative keeps them); 1.12 s"), said
+
+
+def test_check_names_the_envelope_margins_axis_and_unit(capsys) -> None:
+    """Found from outside: the envelope column was the least margin of mm and deg alike,
+    "10.0" for x and "1.0" for roll, with no axis and no unit."""
+    assert main(["check", "x=600", "roll=23"]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[1].endswith("envelope margin")
+    assert rows[2].endswith(" x 10.0 mm") and rows[3].endswith(" roll 1.0 deg"), rows

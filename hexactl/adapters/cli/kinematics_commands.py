@@ -112,15 +112,18 @@ def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> N
           f"cones base {limits.base_cone_deg:g}° platform {limits.platform_cone_deg:g}°, "
           f"condition ≤ {limits.max_jacobian_condition:g}")
     print(f"{'pose (mm, deg)':<36} {'result':<11} {'stroke margin':>15} {'base cone':>10} "
-          f"{'plat. cone':>10} {'cond.':>6} {'envelope':>9}")
+          f"{'plat. cone':>10} {'cond.':>6} {'envelope margin':>17}")
     for a in assessments:
         stroke_leg = min(range(6), key=lambda leg: a.stroke_margin_mm[leg])
         pose = ",".join(f"{v:g}" for v in a.pose_relative)
-        envelope = min(a.pose_margin)
+        # The axis nearest its bound for its envelope's size, in its own unit: the least of mm and
+        # deg together (10 mm on x, 1 deg on roll printed "1.0") named no axis and mixed units.
+        axis = min(range(6), key=lambda n: a.pose_margin[n] / (limits.pose_max[n] - limits.pose_min[n]))
+        envelope = f"{POSE_AXES[axis]} {a.pose_margin[axis]:.1f} {POSE_UNITS[axis]}"
         print(f"{pose:<36} {'reachable' if a.ok else 'UNREACHABLE':<11} "
               f"{a.stroke_margin_mm[stroke_leg]:>8.1f} mm L{stroke_leg + 1} "
               f"{max(a.base_cone_deg):>9.1f}° {max(a.platform_cone_deg):>9.1f}° "
-              f"{a.jacobian_condition:>6.1f} {envelope:>9.1f}")
+              f"{a.jacobian_condition:>6.1f} {envelope:>17}")
         for violation in a.violations:
             print(f"    {violation.message}")
     unreachable = sum(not a.ok for a in assessments)
