@@ -118,7 +118,7 @@ def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> N
         pose = ",".join(f"{v:g}" for v in a.pose_relative)
         # The axis nearest its bound for its envelope's size, in its own unit: the least of mm and
         # deg together (10 mm on x, 1 deg on roll printed "1.0") named no axis and mixed units.
-        axis = min(range(6), key=lambda n: a.pose_margin[n] / (limits.pose_max[n] - limits.pose_min[n]))
+        axis = min(range(6), key=lambda n: a.pose_margin[n] / max(limits.pose_max[n] - limits.pose_min[n], 1e-9))
         envelope = f"{POSE_AXES[axis]} {a.pose_margin[axis]:.1f} {POSE_UNITS[axis]}"
         print(f"{pose:<36} {'reachable' if a.ok else 'UNREACHABLE':<11} "
               f"{a.stroke_margin_mm[stroke_leg]:>8.1f} mm L{stroke_leg + 1} "
