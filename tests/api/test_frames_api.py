@@ -4,6 +4,7 @@ leaves the frames in force unchanged (issue 12)."""
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -101,7 +102,10 @@ def test_frames_on_a_full_disk_are_refused_saying_so_and_the_file_is_kept(framed
         return open("/dev/full", *arguments, **options)
 
     monkeypatch.setattr(os, "fdopen", full_disk)
+    calls = len(framed.controller.calls)
     reply = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
+    # Found from outside: they were taken first, in force until put back once the write failed
+    assert framed.controller.calls[calls:] == [], "the frames were in force before they were saved"
     assert reply["error"]["code"] == "write_failed", reply  # was file_not_found: no file was missing
     assert reply["error"]["message"] == (f"{tmp_path / 'frames.toml'}: the frames could not be saved: No space left on "
                                          "device; free some space there; they are not in force: the ones before are, "
@@ -115,12 +119,12 @@ def test_frames_on_a_full_disk_are_refused_saying_so_and_the_file_is_kept(framed
 
 def test_frames_not_saved_and_not_put_back_are_said_to_be_in_force(framed, tmp_path: Path, monkeypatch) -> None:
     """Found from outside (by reading): the frames before were put back unchecked, and the
-    reply said "they are not in force" whatever that answered."""
+    reply said "they are not in force" whatever that answered. The frames are taken once
+    on disk, before they replace the file: a rename that fails then puts them back."""
     send(framed, "set_frames", tool=[0, 0, 100, 0, 0, 0])
 
-    def full_disk(descriptor, *arguments, **options):
-        os.close(descriptor)
-        return open("/dev/full", *arguments, **options)
+    def full_disk(source, target):  # noqa: ANN001, ANN202
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     calls = []
 
@@ -131,7 +135,7 @@ def test_frames_not_saved_and_not_put_back_are_said_to_be_in_force(framed, tmp_p
             return CommandResult.success("frames set")
         return CommandResult.failure("busy", "the platform is moving: wait until it is at rest, or stop it")
 
-    monkeypatch.setattr(os, "fdopen", full_disk)
+    monkeypatch.setattr(os, "replace", full_disk)
     monkeypatch.setattr(framed.controller, "set_frames", second_refused)
     reply = send(framed, "set_frames", tool=[0, 0, 300, 0, 0, 0])
     assert reply["error"]["code"] == "write_failed", reply

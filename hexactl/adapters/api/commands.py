@@ -316,27 +316,37 @@ class CommandHandler:
         return self._replace_frames(frames)
 
     def _replace_frames(self, frames: OperatorFrames, message: str | None = None) -> dict[str, Any]:
-        """Make ``frames`` the controller's, then save them; if saving fails, the old ones
-        are put back (what is in force is what a restart restores)."""
+        """Save ``frames`` and make them the controller's: written to disk first, taken by
+        the controller, then in the file's place; written or taken not, nothing changes
+        (what is in force is what a restart restores). Found from outside: taken first, then
+        written to a full disk, new soft limits were in force until they were put back."""
         before = self.controller.operator_frames()
-        result = self.controller.set_frames(frames)
-        if not result.ok:
-            raise ApiError(_code(result), result.message, _details(result))
-        said = message or result.message
-        if self.frames_file is not None:
-            try:
-                aside = save_frames(frames, self.frames_file, before)
-            except OSError as error:
+        taken: list[CommandResult] = []
+
+        def take() -> None:
+            taken.append(result := self.controller.set_frames(frames))
+            if not result.ok:
+                raise ApiError(_code(result), result.message, _details(result))
+
+        if self.frames_file is None:
+            take()
+            return {"message": message or taken[0].message, "frames": jsonable(frames)}
+        try:
+            aside = save_frames(frames, self.frames_file, before, before_rename=take)
+        except OSError as error:
+            where = "they are not in force: the ones before are, and stay in the file"
+            if taken and taken[0].ok:  # the rename failed after the controller took them
                 undone = self.controller.set_frames(before)
-                where = ("they are not in force: the ones before are, and stay in the file" if undone.ok else
-                         f"they are in force all the same: putting the ones before back was refused ({undone.message}), "
-                         "and a restart would restore the file's")
-                raise ApiError(ErrorCode.WRITE_FAILED, f"{self.frames_file}: the frames could not be saved: "
-                               f"{write_problem(error)}; {where}; set them again once it can be written") from None
-            if aside is not None:
-                said += (f"; {self.frames_file} had been changed since the service read it (at start only): that "
-                         f"version, never in force, is kept as {aside}")
-                log.warning("%s", said)
+                if not undone.ok:
+                    where = (f"they are in force all the same: putting the ones before back was refused "
+                             f"({undone.message}), and a restart would restore the file's")
+            raise ApiError(ErrorCode.WRITE_FAILED, f"{self.frames_file}: the frames could not be saved: "
+                           f"{write_problem(error)}; {where}; set them again once it can be written") from None
+        said = message or taken[0].message
+        if aside is not None:
+            said += (f"; {self.frames_file} had been changed since the service read it (at start only): that "
+                     f"version, never in force, is kept as {aside}")
+            log.warning("%s", said)
         return {"message": said, "frames": jsonable(frames)}
 
     def _frames(self) -> dict[str, Any]:

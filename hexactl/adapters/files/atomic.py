@@ -16,7 +16,7 @@ import shutil
 import stat
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -34,9 +34,13 @@ service is often PID 1 again)."""
 _writing_lock = threading.Lock()
 
 
-def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) -> Path:
+def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool,
+                 before_rename: Callable[[], None] | None = None) -> Path:
     """Write ``data`` to ``path`` via a temporary file in the same folder, fsync and rename,
-    after removing stale temporaries of earlier writes to ``path``.
+    after removing stale temporaries of earlier writes to ``path``. ``before_rename`` is
+    called once the data are on disk, just before the rename: what must happen for the new
+    file to be the one kept (a service taking what it holds); should it raise, nothing is
+    renamed, the temporary is removed and its exception propagates.
 
     With ``overwrite``, a symbolic link is written through (the file it leads to is
     replaced; the link stays a link).
@@ -67,6 +71,8 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool) 
                 handle.write(data)
                 handle.flush()
                 os.fsync(handle.fileno())
+            if before_rename is not None:
+                before_rename()
             if overwrite:
                 os.replace(temporary, target)
             else:
@@ -170,12 +176,12 @@ def keep_aside(path: str | os.PathLike[str]) -> Path:
 def aside_while_replaced(path: str | os.PathLike[str], changed: bool) -> Iterator[Path | None]:
     """Around the replacement of a kept file: where it ``changed`` under its service, it is
     first kept aside (:func:`keep_aside`; its name yielded, else None), and that name is
-    removed again if the replacement raises ``OSError`` (the changed file is still where it
-    was, its only name)."""
+    removed again if the replacement raises (the changed file is still where it was, its
+    only name)."""
     aside = keep_aside(path) if changed else None
     try:
         yield aside
-    except OSError:
+    except BaseException:
         if aside is not None:
             aside.unlink(missing_ok=True)
         raise

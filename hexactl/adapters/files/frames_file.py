@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import os
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 import tomli_w
@@ -89,17 +90,19 @@ def frames_to_toml(frames: OperatorFrames) -> str:
     return text + "\n" + tomli_w.dumps({"soft_limits": soft}) if soft else text
 
 
-def save_frames(frames: OperatorFrames, path: str | os.PathLike[str], in_force: OperatorFrames) -> Path | None:
-    """Write ``frames`` to ``path`` atomically, replacing the frames ``in_force`` until now.
-    A file that holds anything else (edited by hand under the service, which reads it at
-    start only) is first kept aside (:func:`aside_while_replaced`); its new name is returned (None:
-    there was nothing to keep).
+def save_frames(frames: OperatorFrames, path: str | os.PathLike[str], in_force: OperatorFrames,
+                before_rename: Callable[[], None] | None = None) -> Path | None:
+    """Write ``frames`` to ``path`` atomically, replacing the frames ``in_force`` until now;
+    ``before_rename`` once they are on disk, before they replace the file
+    (:func:`write_atomic`). A file that holds anything else (edited by hand under the
+    service, which reads it at start only) is first kept aside (:func:`aside_while_replaced`);
+    its new name is returned (None: there was nothing to keep).
 
     :raises OSError: if it cannot be written, or the changed file cannot be kept aside
         (then nothing at ``path`` changed)
     """
     with aside_while_replaced(path, os.path.lexists(path) and file_differs(path, in_force) is not None) as aside:
-        write_atomic(path, frames_to_toml(frames).encode("utf-8"), overwrite=True)
+        write_atomic(path, frames_to_toml(frames).encode("utf-8"), overwrite=True, before_rename=before_rename)
     return aside
 
 
