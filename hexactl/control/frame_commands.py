@@ -3,7 +3,8 @@ which every plan reads and a command replaces whole."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import itertools
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -13,8 +14,37 @@ from hexactl.control.frames import OperatorFrames
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot
 from hexactl.control.submitter import CommandSubmitter
+from hexactl.kinematics.axes import POSE_AXES
 from hexactl.kinematics.frames import tools_in_work
-from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
+from hexactl.kinematics.pose import absolute_from_relative, pose_mm_rad_to_mm_deg
+
+REACH_SLACK = 0.1
+"""Of the span the tool's x, y or z covers over the pose envelope's corners, how far
+beyond it a soft bound is still taken to limit something: between the corners the
+reach is not linear in the angles."""
+
+
+def bounds_beyond_reach(frames: OperatorFrames, home_mm_rad: tuple[float, ...], pose_min: Sequence[float],
+                        pose_max: Sequence[float]) -> list[str]:
+    """The soft bounds on x, y and z (mm) of ``frames`` beyond anywhere the tool can go in
+    its work frame within the pose envelope ``pose_min``..``pose_max`` (relative mm and
+    deg), as notes: such a bound limits nothing. Found from outside: x -5000..5000 mm was
+    taken without a word, as a unit slip for 50.00 would be. Judged at the envelope's 64
+    corners, :data:`REACH_SLACK` to spare."""
+    corners = np.array(list(itertools.product(*zip(pose_min, pose_max))), dtype=float)
+    home_mm_deg = pose_mm_rad_to_mm_deg(home_mm_rad)
+    reach = pose_mm_rad_to_mm_deg(tools_in_work(frames.frames(home_mm_rad),
+                                                absolute_from_relative(home_mm_deg, corners)))
+    notes = []
+    for axis in range(3):
+        low, high = float(reach[:, axis].min()), float(reach[:, axis].max())
+        spare = REACH_SLACK * (high - low)
+        for side, bound in (("lower", frames.soft_limits.lower[axis]), ("upper", frames.soft_limits.upper[axis])):
+            if bound is not None and not low - spare <= bound <= high + spare:
+                notes.append(f"{POSE_AXES[axis]} {side} bound {bound:g} mm is beyond where the tool can go "
+                             f"({POSE_AXES[axis]} {low:.0f}..{high:.0f} mm over the pose envelope): it limits nothing "
+                             "(a unit slip?)")
+    return notes
 
 
 class FrameCommands:
@@ -49,7 +79,9 @@ class FrameCommands:
         self.current = frames
         text = frames.text()  # the loop's log says what they are now, and who set them
         self._submitter.submit(lambda ticket: cmd.FramesSet(ticket, text), "noted")
-        return self.result("frames set")
+        limits = s.active.geometry.limits
+        notes = bounds_beyond_reach(frames, home, limits.pose_min, limits.pose_max)
+        return self.result("frames set" + "".join(f"; note: {note}" for note in notes))
 
     def result(self, message: str = "frames") -> CommandResult:
         """The operator's frames and soft limits (mm, deg) as a result's details."""

@@ -479,3 +479,17 @@ def test_a_refused_path_names_the_poses_axis_first_and_the_legs_after(rig):
     assert refused.message.startswith("yaw -90 deg outside the pose envelope"), refused.message
     kinds = [violation["kind"] for violation in refused.details["violations"]]
     assert kinds[0] == "pose_range" and len(kinds) > 1 and "pose_range" not in kinds[1:], kinds
+
+
+def test_a_soft_bound_beyond_where_the_tool_can_go_is_taken_with_a_note(rig) -> None:
+    """Found from outside: x -5000..5000 mm was taken without a word, though the envelope
+    ends at ±610 mm: a bound that limits nothing, or a unit slip for 50.00."""
+    wide = OperatorFrames(soft_limits=SoftLimits(lower=(-5000, -50) + (None,) * 4, upper=(5000, 50) + (None,) * 4))
+    result = rig.controller.set_frames(wide)
+    assert result.ok and result.message.startswith("frames set; note: x lower bound -5000 mm is beyond where the tool "
+                                                   "can go (x -610..610 mm over the pose envelope): it limits nothing")
+    assert "x upper bound 5000 mm" in result.message and "y " not in result.message, result.message
+    # In a work frame 3 m away the same x reaches 3 m on: a bound there limits something
+    moved = OperatorFrames(work=(-3000, 0, 0, 0, 0, 0), soft_limits=SoftLimits(
+        lower=(2500,) + (None,) * 5, upper=(3500,) + (None,) * 5))
+    assert rig.controller.set_frames(moved).message == "frames set"
