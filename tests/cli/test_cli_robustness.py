@@ -668,3 +668,4 @@ def test_check_names_the_envelope_margins_axis_and_unit(capsys) -> None:
     rows = capsys.readouterr().out.splitlines()
     assert rows[1].endswith("envelope margin")
     assert rows[2].endswith(" x 10.0 mm") and rows[3].endswith(" roll 1.0 deg"), rows
+

@@ -511,6 +511,8 @@ def checked_number(problem_of: Callable[[float], str | None]) -> Callable[[str],
 
     def parse(text: str) -> float:
         value = _float_argument(text)
+        if not isfinite(value):  # said as typed: the rule's own words would say "inf s"
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
         if problem := problem_of(value):
             raise argparse.ArgumentTypeError(problem)
         return value
@@ -553,9 +555,20 @@ def whole_number_in(low: int, high: int) -> Callable[[str], int]:
     """An argparse ``type``: a whole number from ``low`` to ``high``."""
 
     def parse(text: str) -> int:
-        if not low <= _whole_number(text) <= high:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number from {low} to {high}")
-        return int(text)
+        beyond = argparse.ArgumentTypeError(f"{text!r} is not a whole number from {low} to {high}")
+        try:
+            value = _whole_number(text)
+        except argparse.ArgumentTypeError:
+            try:  # 1e9: "write it in digits" would only lead to this refusal next
+                out_of_range = isfinite(number := float(text)) and not low <= number <= high
+            except ValueError:
+                out_of_range = False
+            if out_of_range:
+                raise beyond from None
+            raise
+        if not low <= value <= high:
+            raise beyond
+        return value
 
     return parse
 
