@@ -168,7 +168,8 @@ def test_a_leg_locked_move_prints_the_goal_it_runs_to(served, client, capsys) ->
         finally:
             client.request("leg_unlock")  # refused while a fault is latched: the retry's recover resets
         assert hexactl(served, "move", "x=20") == 0
-        assert "goal" not in capsys.readouterr().out  # unlocked: the goal is the pose asked for
+        out = capsys.readouterr().out  # unlocked: the goal is the pose asked for, not projected
+        assert "goal x   20.000 mm" in out and "projected" not in out, out
         wait_for(lambda: at_rest(client), "the platform at rest")
 
     tolerating_stalls(client, scenario)
