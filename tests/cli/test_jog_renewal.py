@@ -64,6 +64,9 @@ def test_a_renewal_cancelled_by_a_stop_ends_the_command_with_the_jogs_own_word()
     service = ScriptedService(_refused("cancelled"), stop)
     assert _renew(service, FIELDS, 7, for_s=1.0, every_s=0.005) == stop
     assert [fields.get("renews") for fields in service.sent] == [7, 7]
+    # Found from outside: the renewal sent again at once was cancelled too, taken with the stop
+    twice = ScriptedService(_refused("cancelled"), _refused("cancelled"), stop)
+    assert _renew(twice, FIELDS, 7, for_s=1.0, every_s=0.005) == stop and len(twice.sent) == 3
     # said in this command's terms, not the API's ("send jog without renews")
     said = _in_cli_terms(_refused("jog_ended", lapsed=False, reason="stopped", jog=7))["error"]["message"]
     assert said == "jog 7 has ended (stopped): run hexactl jog again to jog on"

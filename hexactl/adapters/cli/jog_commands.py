@@ -127,12 +127,17 @@ def _pace(speed: float) -> str:
     return "at the motion limits (the velocity asked reaches them)"
 
 
+CANCELLED_RETRIES = 3
+"""Renewals sent again, a renewal period apart, after one a stop cancelled on its way."""
+
+
 def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s: float) -> dict[str, Any] | None:
     """Renew jog ``jog`` every ``every_s`` for ``for_s``; the reply that refused it (None:
     none did). Once it has ended, a stop from anyone (also one that cancelled a renewal on
-    its way), a fault or a move ends this command too; only a stall of this machine or the service starts a new jog, as the button is
-    still held: a lapse of its deadman, or a renewal held up past its deadline (``expired``:
-    not carried out; the next renewal goes on, or finds the jog lapsed)."""
+    its way), a fault or a move ends this command too; only a stall of this machine or the
+    service starts a new jog, as the button is still held: a lapse of its deadman, or a
+    renewal held up past its deadline (``expired``: not carried out; the next renewal goes
+    on, or finds the jog lapsed)."""
     end = time.monotonic() + for_s
     while (left := end - time.monotonic()) > 0:
         time.sleep(min(every_s, left))
@@ -140,12 +145,17 @@ def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s:
         error = reply.get("error") or {}
         if error.get("code") == "expired":
             continue
-        if error.get("code") == "cancelled":
-            # A stop reached the service while this renewal was queued: "not carried out" is the
-            # renewal's, not the jog's (it had run for seconds: found from outside). The next
-            # renewal gets the jog's own word: ended, stopped, by whom.
+        for _ in range(CANCELLED_RETRIES):
+            if (reply.get("error") or {}).get("code") != "cancelled":
+                break
+            # A stop reached the service while this renewal was on its way: "not carried out"
+            # is the renewal's, not the jog's (it had run for seconds: found from outside). The
+            # next renewal gets the jog's own word: ended, stopped, by whom; sent at once, it may
+            # be cancelled as well, while the service still takes what came with the stop.
+            time.sleep(every_s)
             reply = client.request("jog", **fields, renews=jog)
-        elif error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
+        error = reply.get("error") or {}
+        if error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
             reply = client.request("jog", **fields, restarts=jog)  # refused if a stop came after the lapse
         if not reply.get("ok"):
             return reply
