@@ -39,10 +39,9 @@ STREAM_FRAMES = (Frame.ZERO, Frame.WORK)
 """The frames a stream's poses may be in (a tool-frame pose is a relative move, and a
 stream's targets are absolute)."""
 
-TIMEOUT_RANGE_S = (0.005, 10.0)
-"""A stream's timeout, s, and at least :data:`TIMEOUT_MIN_CYCLES` loop periods: shorter would
-end every stream at once, longer would leave a platform moving towards a target nobody
-sends any more."""
+MAX_TIMEOUT_S = 10.0
+"""A stream's longest timeout, s: longer would leave a platform moving towards a target
+nobody sends any more. The shortest is :data:`TIMEOUT_MIN_CYCLES` loop periods."""
 
 TIMEOUT_MIN_CYCLES = 3
 """Loop periods a stream's timeout lasts at least: the receiver hands a target over once a
@@ -377,10 +376,9 @@ def _open_problem(source: object, frame: object, timeout_s: object, rate_hz: flo
     if frame not in tuple(STREAM_FRAMES):
         return (f"a stream's frame is one of {', '.join(f.value for f in STREAM_FRAMES)} (a stream's targets are "
                 f"absolute poses), got {frame!r}")
-    low, high = TIMEOUT_RANGE_S
     if isinstance(timeout_s, bool) or not isinstance(timeout_s, (int, float)) or not isfinite(timeout_s) \
-            or not low <= timeout_s <= high:
-        return f"a stream's timeout is a number of seconds in [{low:g}, {high:g}], got {timeout_s!r}"
+            or not 0 < timeout_s <= MAX_TIMEOUT_S:
+        return f"a stream's timeout is a number of seconds in (0, {MAX_TIMEOUT_S:g}], got {timeout_s!r}"
     if timeout_s < (cycles := TIMEOUT_MIN_CYCLES / rate_hz):
         return (f"a stream's timeout of {timeout_s * 1e3:g} ms is shorter than {TIMEOUT_MIN_CYCLES} cycles of this "
                 f"{rate_hz:g} Hz loop ({cycles * 1e3:g} ms): it would end the stream whenever one sample came a cycle "

@@ -411,3 +411,18 @@ def test_a_timeout_shorter_than_three_loop_cycles_is_refused_saying_the_least(ma
                                "would end the stream whenever one sample came a cycle late; give at least 12 ms "
                                "(100 ms is the default)")
     assert rig.controller.stream_open("test", timeout_s=0.012).ok
+
+
+@pytest.mark.parametrize(("rate_hz", "timeout_s", "least_ms"), [(500.0, 0.003, 6), (1000.0, 0.0035, None)])
+def test_the_least_timeout_is_three_cycles_at_every_rate(make_rig, rate_hz, timeout_s, least_ms) -> None:
+    """Found from outside: a range of its own, from 5 ms, refused 3.5 ms at 1000 Hz (three
+    cycles: 3 ms) and answered 3 ms at 500 Hz without naming the least."""
+    from hexactl.control.config import ControllerConfig, LoopConfig
+
+    rig = make_rig(config=ControllerConfig(loop=LoopConfig(rate_hz=rate_hz)))
+    rig.enabled()
+    opened = rig.controller.stream_open("test", timeout_s=timeout_s)
+    if least_ms is None:
+        assert opened.ok, opened.message
+    else:
+        assert not opened.ok and f"give at least {least_ms} ms" in opened.message, opened.message
