@@ -226,7 +226,9 @@ def test_a_number_python_reads_but_no_one_writes_is_refused_not_read(typed) -> N
 
 @pytest.mark.parametrize("argv", [["wave", "--axis", "x:1_0", "--frequency", "1", "--cycles", "2"],
                                   ["wave", "--axis", "x:1", "--frequency", "1", "--cycles", "1_0"],
-                                  ["jog", "x=5", "--for", "1_0"]], ids=["amplitude", "cycles", "for"])
+                                  ["jog", "x=5", "--for", "1_0"], ["leg-lock", "1_0"],  # leg-lock ３ locked leg 3
+                                  ["plan-leglock", "--leg", "1_0"], ["serve", "--rate", "1_0"]],
+                         ids=["amplitude", "cycles", "for", "leg-lock", "plan-leglock", "rate"])
 def test_options_refuse_a_number_no_one_writes(argv, capsys) -> None:
     assert exits_with(argv) == 2
     assert "'1_0' is not a plain decimal number" in capsys.readouterr().err

@@ -37,6 +37,7 @@ from hexactl.adapters.cli.common import (
     named_path,
     non_negative_int,
     positive_int,
+    whole_number,
     whole_number_in,
     write_failed,
 )
@@ -153,7 +154,7 @@ def _declare_calibrate(calibrate: argparse.ArgumentParser) -> None:
 def _declare_plan(plan: argparse.ArgumentParser) -> None:
     from hexactl.calibration.planning import DEFAULT_CANDIDATES, MAX_CANDIDATES
 
-    plan.add_argument("--leg", type=int, required=True, help="leg to lock, 1-6 (0: free postures)")
+    plan.add_argument("--leg", type=whole_number, required=True, help="leg to lock, 1-6 (0: free postures)")
     plan.add_argument("--count", type=positive_int, required=True, help="number of postures")
     lock = plan.add_mutually_exclusive_group()
     lock.add_argument("--length", type=finite_float, metavar="MM", help="locked joint-to-joint length")
@@ -174,7 +175,7 @@ def _declare_campaign(campaign: argparse.ArgumentParser) -> None:
     campaign.add_argument("--instrument", default="sim", metavar="SOURCE",
                           help="sim: the service's simulated instrument (default); csv:FILE: a real instrument's file of "
                           "feature points p1_x … (row k = the k-th measurement, waited for); prompt: typed here")
-    campaign.add_argument("--per-leg", type=int, default=20, metavar="N", help="leg-lock postures per leg (default 20)")
+    campaign.add_argument("--per-leg", type=whole_number, default=20, metavar="N", help="leg-lock postures per leg (default 20)")
     campaign.add_argument("--candidates", type=whole_number_in(1, MAX_CANDIDATES), default=DEFAULT_CANDIDATES,
                           help=f"random candidates per plan (default {DEFAULT_CANDIDATES}, at most {MAX_CANDIDATES})")
     campaign.add_argument("--envelope", type=float, default=1.0, metavar="F",

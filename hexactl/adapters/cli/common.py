@@ -537,6 +537,13 @@ def _whole_number(text: str) -> int:
     raise argparse.ArgumentTypeError(f"{text!r} is not a whole number{digits}") from None
 
 
+def whole_number(text: str) -> int:
+    """An argparse ``type``: a whole number, plainly written (Python's ``int`` takes ``0_3``
+    and other scripts' digits: ``leg-lock ３`` locked leg 3, found from outside); its range
+    is the option's ``choices`` or the command's."""
+    return _whole_number(text)
+
+
 def positive_int(text: str) -> int:
     """An argparse ``type``: a whole number from 1."""
     if (value := _whole_number(text)) < 1:

@@ -6,7 +6,7 @@ import argparse
 import functools
 
 from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT, DEFAULT_TELEMETRY_ENDPOINT
-from hexactl.adapters.cli.common import CliError, client_endpoint, connect, connection_parser
+from hexactl.adapters.cli.common import CliError, client_endpoint, connect, connection_parser, whole_number
 
 DEFAULT_HTTP = "127.0.0.1:8080"
 """Where the dashboard is served unless told (``--http``; ``serve --dashboard``, ``demo --dashboard``)."""
@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     dashboard.add_argument("--telemetry", type=client_endpoint, metavar="ENDPOINT", help="telemetry endpoint (default $HEXACTL_TELEMETRY, else "
                            f"the client file's telemetry, else {DEFAULT_TELEMETRY_ENDPOINT})")
     dashboard.add_argument("--log-level", default="warning", choices=("debug", "info", "warning", "error"))
-    dashboard.add_argument("--exit-with", type=int, metavar="PID", help=argparse.SUPPRESS)  # serve --dashboard's
+    dashboard.add_argument("--exit-with", type=whole_number, metavar="PID", help=argparse.SUPPRESS)  # serve --dashboard's
     dashboard.set_defaults(run=run)
 
 

@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 
 from hexactl.adapters.cli.common import (CliError, campaign_stopped, check_campaign_arguments, check_writable,
-                                        named_path, non_negative_int)
+                                        named_path, non_negative_int, whole_number)
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 
 DEFAULT_OUT = Path("demo-out")
@@ -42,7 +42,7 @@ def _declare_demo(demo: argparse.ArgumentParser) -> None:
                       help=f"results directory (default ./{DEFAULT_OUT})")
     demo.add_argument("--seed", type=non_negative_int, default=0,
                       help="seed of the manufacturing errors, the instrument noise and the plan (default 0)")
-    demo.add_argument("--per-leg", type=int, default=DEMO_POSTURES_PER_LEG, metavar="N",
+    demo.add_argument("--per-leg", type=whole_number, default=DEMO_POSTURES_PER_LEG, metavar="N",
                       help=f"leg-lock postures per leg (default {DEMO_POSTURES_PER_LEG}, to finish in under two minutes; "
                       "the paper measured 20)")
     demo.add_argument("--envelope", type=float, default=DEMO_ENVELOPE_FRACTION, metavar="F",

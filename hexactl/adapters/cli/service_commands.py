@@ -26,8 +26,8 @@ from hexactl.adapters.api.protocol import (
 from hexactl.adapters.cli.common import (
     CliError,
     MergedBounds,
-    bind_endpoint,
     NO_BOUND,
+    bind_endpoint,
     bound_changes_argument,
     check_writable,
     client_endpoint,
@@ -41,6 +41,7 @@ from hexactl.adapters.cli.common import (
     positive_up_to,
     telemetry_rate,
     tilt_bound_argument,
+    whole_number,
     write_failed,
 )
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
@@ -125,7 +126,7 @@ def register(subparsers: argparse._SubParsersAction, common: argparse.ArgumentPa
     _waiting(command("resume", "resume the paused sequence", "resume"))
     command("abort", "abandon the playing sequence (halts smoothly)", "abort")
     leg_lock = command("leg-lock", "lock one leg at its current length (leg-lock calibration mode)", _leg_lock_request)
-    leg_lock.add_argument("leg", type=int, choices=range(1, 7), metavar="N", help="leg 1–6")
+    leg_lock.add_argument("leg", type=whole_number, choices=range(1, 7), metavar="N", help="leg 1–6")
     command("unlock", "release the locked leg", "leg_unlock")
     load = command("load-calibration", "switch the running service to a calibration file", _load_calibration_request)
     load.add_argument("file", metavar="FILE", type=named_path, help="calibration TOML: a file here is read here and its content sent (so "
@@ -185,7 +186,7 @@ def _declare_serve(serve: argparse.ArgumentParser) -> None:
     serve.add_argument("--can", metavar="SPEC", help="CAN bus of real actuators, e.g. socketcan:can0 (default: the simulator)")
     serve.add_argument("--calibration", type=named_path, metavar="FILE", help="start with this calibration instead of "
                        "the one kept from the last run (--keep-calibration) or, if none, the --config geometry")
-    serve.add_argument("--rate", type=int, choices=(250, 500, 1000), default=500, metavar="HZ",
+    serve.add_argument("--rate", type=whole_number, choices=(250, 500, 1000), default=500, metavar="HZ",
                        help="control loop rate: 250, 500 (default) or 1000 Hz (the protocol's rates; with --can, "
                             "1000 Hz overloads classic CAN, the only profile the link speaks: docs/can.md)")
     realtime = serve.add_mutually_exclusive_group()
