@@ -92,7 +92,7 @@ from hexactl.adapters.api.wire import ErrorCode as ApiCode  # noqa: E402
 from hexactl.adapters.files.geometry_file import load_geometry  # noqa: E402
 from hexactl.adapters.files.config_path import default_config_path  # noqa: E402
 from hexactl.control.planning import MAX_WAYPOINTS  # noqa: E402
-from hexactl.control.one_line import is_one_line  # noqa: E402
+from hexactl.kinematics.one_line import is_one_line  # noqa: E402
 from hexactl.control.results import ErrorCode as ControlCode  # noqa: E402
 from hexactl.control.sequences import BUILTIN_SEQUENCES  # noqa: E402
 from hexactl.kinematics.geometry import Geometry  # noqa: E402

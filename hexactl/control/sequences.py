@@ -19,7 +19,7 @@ from typing import Annotated, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from hexactl.calibration.test_motions import PAPER_TEST_MOTIONS
-from hexactl.control.one_line import is_one_line
+from hexactl.kinematics.one_line import is_one_line
 from hexactl.control.planning import MAX_DWELL_S, MAX_MOTION_S, MAX_WAYPOINTS, Waypoint, pace_problem, waypoint_count_problem
 from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.validation_messages import describe_validation_error

@@ -24,7 +24,7 @@ import numpy as np
 from hexactl.control import commands as cmd
 from hexactl.control import preconditions
 from hexactl.control.frames import Frame, convert, short_way
-from hexactl.control.one_line import is_one_line
+from hexactl.kinematics.one_line import is_one_line
 from hexactl.control.planning import PlanningContext, pose_allowed
 from hexactl.control.results import CommandResult, ErrorCode
 from hexactl.control.snapshot import CoreSnapshot

@@ -14,11 +14,12 @@ from itertools import combinations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from hexactl.kinematics.inverse import LegModel, sensor_setpoints, twist_jacobian
 from hexactl.kinematics.axes import POSE_AXES, AbsoluteMmDeg, RelativeMmDeg
 from hexactl.kinematics.numbers import Number, SixNumbers, WholeNumber
+from hexactl.kinematics.one_line import is_one_line
 from hexactl.kinematics.validation_messages import describe_validation_error
 
 MIN_JOINT_SEPARATION_MM = 1.0
@@ -121,6 +122,18 @@ class Measurement(_Strict):
         return self
 
 
+def _one_line_warning(text: str) -> str:
+    if not is_one_line(text):
+        raise ValueError(f"{text[:120]!r} is not allowed: a warning is one line of text, without control characters "
+                         "(load-calibration, status and the log print each as a line of its own)")
+    return text
+
+
+IdentificationWarning = Annotated[str, AfterValidator(_one_line_warning)]
+"""One of a calibration's warnings. Found from outside: a file's warning with an escape
+sequence cleared the operator's terminal when load-calibration and status printed it."""
+
+
 class CalibrationInfo(_Strict):
     """Metadata of an identified geometry (the ``[calibration]`` table)."""
 
@@ -146,7 +159,7 @@ class CalibrationInfo(_Strict):
     status: Literal["ok", "weakly determined"] | None = Field(
         default=None, description="the identification's status: ok, or weakly determined (written, but the data leave "
         "commanded poses uncertain: warnings say how); absent from files written before it was kept here")
-    warnings: tuple[str, ...] = Field(default=(), description="what the identification warned of, as calibrate printed "
+    warnings: tuple[IdentificationWarning, ...] = Field(default=(), description="what the identification warned of, as calibrate printed "
                                       "it; load_calibration and validate_calibration answer with them")
 
     @field_validator("base_joints_std_mm", "platform_joints_std_mm", "zero_lengths_std_mm", "sensor_scale_errors_std")

@@ -69,3 +69,19 @@ def test_calibrate_says_the_file_keeps_its_status_and_warnings(tmp_path, nominal
     written = load_geometry(output).calibration
     assert written.status == "weakly determined" and written.warnings, written
     assert f"wrote {output}, with its status (weakly determined) and warnings: load-calibration repeats them" in out
+
+
+def test_a_warning_that_is_not_one_line_of_text_is_refused_naming_it(nominal) -> None:
+    """Found from outside: a file's warnings with a line end and a terminal escape
+    ("\\x1b[2J", clearing the screen) were printed as they were by load-calibration and
+    status."""
+    import pytest
+    from pydantic import ValidationError
+
+    from hexactl.kinematics.geometry import CalibrationInfo
+
+    fields = {"method": "full", "created": "now", "input_sha256": "0" * 64, "postures": 8, "residual_rms_mm": 0.1}
+    for bad in ("first\nsecond line", "\x1b[2J\x1b[31mRED", ""):
+        with pytest.raises(ValidationError, match="a warning is one line of text, without control characters"):
+            CalibrationInfo(**fields, warnings=(bad,))
+    assert CalibrationInfo(**fields, warnings=("σ ±70.6 mm · 0.66·B4.z",)).warnings == ("σ ±70.6 mm · 0.66·B4.z",)

@@ -59,7 +59,7 @@ def test_bad_files_name_the_problem(text, problem):
 
 
 def test_a_name_is_any_one_line_of_text_as_the_apis_sources_are():
-    """One rule for every name the log writes (hexactl/control/one_line.py)."""
+    """One rule for every name the log writes (hexactl/kinematics/one_line.py)."""
     assert sequence_from_toml('name = "Prüfung 2 – ε"\n[[waypoint]]\npose = [0, 0, 0, 0, 0, 0]', "f.toml").name == \
         "Prüfung 2 – ε"
 

@@ -27,7 +27,7 @@ from hexactl.adapters.api.protocol import (
 )
 from hexactl.control.core import KEPT_EVENTS
 from hexactl.control.frames import Frame, OperatorFrames
-from hexactl.control.one_line import ONE_LINE_PATTERN
+from hexactl.kinematics.one_line import ONE_LINE_PATTERN
 from hexactl.control.planning import MAX_WAYPOINTS
 from hexactl.control.results import OTHER_CONTROLLER_WINDOW_S
 from hexactl.control.sequences import Paced, SequenceName, SequenceWaypoint
@@ -92,13 +92,13 @@ RecordingName = Annotated[
     AfterValidator(_no_extension), Field(json_schema_extra={"not": {"pattern": RECORDING_EXTENSION_PATTERN}})]
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
 OneLine = _text_matching(ONE_LINE_PATTERN, "one line of text, without control characters (no line end, no tab)")
-"""Text the service's log writes (:mod:`hexactl.control.one_line`)."""
+"""Text the service's log writes (:mod:`hexactl.kinematics.one_line`)."""
 
 FilePath = Annotated[
     _text_matching(ONE_LINE_PATTERN, "a path is one line of text, without control characters (a file named with a "
                    "line end or a tab: rename it)", Field(min_length=1, max_length=4096)),
     Field(description="a file in the service's data directories")]
-"""The log writes it, as every name it writes: one line (:mod:`hexactl.control.one_line`)."""
+"""The log writes it, as every name it writes: one line (:mod:`hexactl.kinematics.one_line`)."""
 Point = Annotated[list[float], Field(min_length=3, max_length=3, description="[x, y, z], mm, fixed frame")]
 
 

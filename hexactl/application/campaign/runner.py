@@ -81,7 +81,7 @@ from hexactl.calibration.identification import (
 from hexactl.calibration.parameters import StructuralParameters, parameter_names
 from hexactl.calibration.results import IdentificationOptions, IdentificationResult
 from hexactl.calibration.validation import MotionResult, summarise_validation
-from hexactl.control.one_line import as_one_line
+from hexactl.kinematics.one_line import as_one_line
 from hexactl.kinematics.geometry import Geometry, GeometryError
 from hexactl.kinematics.inverse import lengths_from_readings
 
