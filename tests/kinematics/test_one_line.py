@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hexactl.control.one_line import as_one_line, is_one_line
+from hexactl.kinematics.one_line import as_one_line, is_one_line
 
 
 @given(st.text(min_size=1))
