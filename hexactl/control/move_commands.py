@@ -99,8 +99,10 @@ class MoveCommands:
         if relative and (beyond := [(axis, turn) for axis, turn in zip(POSE_AXES[3:], pose[3:]) if abs(turn) > 180]):
             # a goal in the work frame is reached the short way round (short_way): such a
             # turn would go the other way, to the same orientation
-            got = ", ".join(f"{axis} {turn:g}°" for axis, turn in beyond)
-            same = ", ".join(f"{axis} {(turn + 180.0) % 360.0 - 180.0:+g}°" for axis, turn in beyond)
+            # to the µ°: 180.0001 is no "180" (:g's six digits), whose other way round is no "-180"
+            got = ", ".join(f"{axis} {f'{turn:.6f}'.rstrip('0').rstrip('.')}°" for axis, turn in beyond)
+            same = ", ".join(f"{axis} {f'{(turn + 180.0) % 360.0 - 180.0:+.6f}'.rstrip('0').rstrip('.')}°"
+                             for axis, turn in beyond)
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
                                         f"got {got}: the same orientation is {same}"))
         goal = requested_goal(pose, Frame(frame), bool(relative), s.target, s.frames, context.frames, s.active.home)

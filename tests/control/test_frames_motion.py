@@ -447,6 +447,8 @@ def test_a_relative_turn_beyond_half_a_turn_is_refused_not_taken_the_other_way(r
     refused = rig.controller.move([0, 0, 0, 400, 0, -200], relative=True)
     assert refused.message.endswith("got roll 400°, yaw -200°: the same orientation is roll +40°, yaw +160°"), \
         refused.message
+    refused = rig.controller.move([0, 0, 0, 0, 0, 180.0001], relative=True)  # was "got yaw 180°: … is yaw -180°"
+    assert refused.message.endswith("got yaw 180.0001°: the same orientation is yaw -179.9999°"), refused.message
 
 
 def test_telemetry_names_the_soft_limits_the_commanded_pose_breaks(make_rig):
