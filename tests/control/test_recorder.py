@@ -303,6 +303,20 @@ def test_a_csv_removed_or_emptied_under_the_recorder_ends_write_failed_and_the_n
     assert len((tmp_path / "next.csv").read_text().splitlines()) == 1 + side["rows_written"] == 26
 
 
+def test_a_csv_renamed_under_the_recorder_is_named_where_it_is_with_all_its_rows(rig, recordings, tmp_path):
+    """Found from outside: a .csv.partial renamed by hand mid-recording was said to be
+    "removed while the recording ended, and its rows with it", write_failed, though every
+    row was in it under its new name."""
+    recordings.start("moved", duration_s=0.05)
+    rig.run(10)
+    recordings.poll()
+    (tmp_path / "moved.csv.partial").rename(tmp_path / "elsewhere.csv.partial")
+    side = _finish(rig, recordings)
+    assert side["ended"] == "duration" and "write_error" not in side, side
+    assert side["csv"] == str(tmp_path / "elsewhere.csv.partial")
+    assert len((tmp_path / "elsewhere.csv.partial").read_text().splitlines()) == 1 + side["rows_written"] == 26
+
+
 def test_a_csv_that_cannot_take_its_final_name_keeps_its_partial_one_with_all_its_rows(rig, recordings, tmp_path,
                                                                                         monkeypatch):
     """A file system without hard links (EPERM) raised from the finish, as a removal did."""

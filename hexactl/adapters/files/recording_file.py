@@ -193,15 +193,21 @@ class RecordingFile:
         written (the CSV stands). After a write that failed (``write_error``, or one here:
         a full disk), or a CSV removed or changed by someone else while it was written, the
         rows are not all in it: it keeps its partial name, and the side file says why
-        (``write_error``) and ends ``write_failed``."""
+        (``write_error``) and ends ``write_failed``. Renamed by someone else, it holds every
+        row: ``csv`` names it where it is now."""
         handle, descriptor = self._handle, self._descriptor
         tampered = None
+        where = None  # where the file is now, by its open descriptor: renamed, all its rows are there
         try:
             os.fsync(handle.fileno())
             status = os.fstat(handle.fileno())
         except OSError as error:
             write_error = write_error or error
         else:
+            try:
+                where = Path(os.readlink(f"/proc/self/fd/{handle.fileno()}"))
+            except OSError:
+                pass
             if status.st_nlink == 0:
                 tampered = "removed while it was being written, and its rows with it"
             elif status.st_size != self._size:
@@ -223,10 +229,15 @@ class RecordingFile:
             try:
                 os.link(self._partial, path.name, src_dir_fd=descriptor, dst_dir_fd=descriptor, follow_symlinks=False)
                 os.unlink(self._partial, dir_fd=descriptor)
-            except FileNotFoundError:  # removed after the check above
+            except FileNotFoundError:  # renamed (its rows all in it), or removed after the check above
                 path = self.directory / self._partial
-                failed = {"write_error": f"{path}: removed while the recording ended, and its rows with it",
-                          "ended": "write_failed"}
+                if where is not None and where.name != self._partial and where.exists():
+                    # Found from outside: a .partial renamed by hand was said to be removed "and its rows
+                    # with it", though every row was in it under its new name: csv names that.
+                    path = where
+                else:
+                    failed = {"write_error": f"{path}: removed while the recording ended, and its rows with it",
+                              "ended": "write_failed"}
             except OSError:  # a file of that name appeared meanwhile, or no hard links here: all the rows, as named
                 path = self.directory / self._partial
         side = {**description, "csv": str(path), **failed,
