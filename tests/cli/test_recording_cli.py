@@ -95,7 +95,17 @@ def test_plot_refuses_missing_and_garbled_files(tmp_path, capsys) -> None:
     other = tmp_path / "other.csv"
     other.write_text("a,b\n1,2\n")
     assert main(["plot", str(other)]) == 2
-    assert "not a recording" in capsys.readouterr().err
+    assert "not a recording (its header has no t_s and no cycle column)" in capsys.readouterr().err
+    # Found from outside: a dwell record (save-recording) and an empty file were both said to
+    # have no t_s and cycle columns
+    dwells = tmp_path / "dwells.csv"
+    dwells.write_text("t_s,command_x\n1.0,2.0\n")
+    assert main(["plot", str(dwells)]) == 2
+    assert "not a recording (its header has no cycle column)" in capsys.readouterr().err
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    assert main(["plot", str(empty)]) == 2
+    assert f"{empty}: empty: plot a file made by hexactl record" in capsys.readouterr().err
 
 
 def test_plot_writes_where_it_says_and_never_over_its_input(tmp_path, capsys) -> None:

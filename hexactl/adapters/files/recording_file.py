@@ -310,10 +310,14 @@ def read_recording(path: Path) -> tuple[list[str], list[NDArray[np.float64]], in
     try:
         with path.open(encoding="utf-8-sig", newline="") as file:
             rows = csv.reader(file)
-            header = next(rows, [])
-            if "t_s" not in header or "cycle" not in header:
-                raise RecordingReadError(f"{path}: not a recording (its header has no t_s and cycle columns): plot a "
-                                         "file made by hexactl record")
+            header = next(rows, None)
+            if header is None:
+                raise RecordingReadError(f"{path}: empty: plot a file made by hexactl record")
+            if missing := [name for name in ("t_s", "cycle") if name not in header]:
+                # Found from outside: a dwell record (t_s, no cycle) was said to have no t_s either
+                raise RecordingReadError(f"{path}: not a recording (its header has no {' and no '.join(missing)} "
+                                         "column): plot a file made by hexactl record (save-recording writes a "
+                                         "sequence's dwell records, which plot does not draw)")
             columns = [array("d") for _ in header]
             held: list[str] | None = None  # the row read last, taken once another follows it (or the file ends whole)
             for number, row in enumerate(rows, start=2):
