@@ -51,7 +51,7 @@ class Motion:
         self.path = SetpointPath(config, active, period_s, log)
         self.player = SequencePlayer(self.trajectory, record, log)
         self.jogger = Jogger(self.trajectory, log)
-        self.wave = WavePlayer(self.trajectory)
+        self.wave = WavePlayer(self.trajectory, log)
         self.stream = StreamFollower(self.trajectory, config.stream, log)
         self.lock: LegLock | None = None
         self.epoch = 0

@@ -22,6 +22,7 @@ only: not thread-safe.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
 from math import ceil
@@ -59,10 +60,14 @@ class WaveProgress:
 
 
 class WavePlayer:
-    """Plays planned waves on ``trajectory`` (the loop's generator), one at a time."""
+    """Plays planned waves on ``trajectory`` (the loop's generator), one at a time; ``log``
+    (code, message) records how each ends, ``wave_finished``, ``wave_aborted`` or
+    ``wave_fault``, as a sequence's end is (found from outside: a wave's end was in the
+    status line only, gone from the events once the next wave began)."""
 
-    def __init__(self, trajectory: PoseTrajectory) -> None:
+    def __init__(self, trajectory: PoseTrajectory, log: Callable[[str, str], None]) -> None:
         self._trajectory = trajectory
+        self._log = log
         self._path: WavePath | None = None
         self._k = 0
         self._current = self._next = None  # the positions at cycles k and k + 1
@@ -141,9 +146,7 @@ class WavePlayer:
         self._brake_from, self._brake_span, self._brake_steps, self._j = self._k * h, 2 * n * h, 2 * n, 0
         self._rest = path.at(self._k + n)
         self._next = self._brake_at(path, 1)  # _current is cycle k's position, where the brake starts
-        progress = self.progress
-        assert progress is not None
-        self.progress = WaveProgress(progress.cycle, progress.cycles, WavePhase.ABORTED)
+        self._ended(WavePhase.ABORTED)
 
     def _brake_at(self, path: WavePath, j: int) -> Coordinates:
         """The brake's position ``j`` cycles in: the path at the wave's time slowed by the
@@ -173,9 +176,14 @@ class WavePlayer:
         if self._braking:
             self._braking = False
             return
+        self._ended(phase)
+
+    def _ended(self, phase: WavePhase) -> None:
         progress = self.progress
         assert progress is not None
         self.progress = WaveProgress(progress.cycle, progress.cycles, phase)
+        self._log(f"wave_{phase.value}", f"the wave ended {phase.value} in its cycle {progress.cycle} of "
+                  f"{progress.cycles}")
 
     def _publish(self, k: int) -> None:
         path, progress = self._path, self.progress

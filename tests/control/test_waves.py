@@ -198,7 +198,8 @@ def test_a_wave_beyond_a_soft_limit_says_how_far_it_goes(rig):
     refused = rig.controller.validate_wave(spec)
     path = WavePath(spec, (0.0,) * 6, rig.controller.config.loop.period_s)
     peak = max(path.at(k)[0] for k in range(path.samples + 1))  # ramped in and out: under 20
-    farthest = re.search(r"at its farthest, x ([0-9.]+) mm above the soft limit 5 mm \(by ([0-9.]+) mm\)",
+    farthest = re.search(r"at its farthest, the tool's x in the work frame, ([0-9.]+) mm, above the soft limit 5 mm "
+                         r"\(by ([0-9.]+) mm\)",
                          refused.message)
     assert refused.error == "path_violation" and farthest, refused.message
     assert float(farthest[1]) == pytest.approx(peak, abs=1e-3) and float(farthest[2]) == pytest.approx(peak - 5, rel=1e-2)
@@ -346,6 +347,8 @@ def test_the_loop_plays_the_validated_samples_and_ends_at_rest_on_the_start(make
             break
         assert s.motion.value == "moving" and s.goal == path.start
     assert phases == [WavePhase.RAMP_IN, WavePhase.STEADY, WavePhase.RAMP_OUT, WavePhase.FINISHED]
+    finished = [e.message for e in rig.controller.events().events if e.code == "wave_finished"]
+    assert finished == ["the wave ended finished in its cycle 3 of 3"], finished
     assert sorted(set(cycles)) == [1, 2, 3] and cycles == sorted(cycles)
     sent = rig.sent[before:]
     assert len(sent) >= path.samples
@@ -426,6 +429,10 @@ def test_stop_also_ends_a_wave_and_an_estop_freezes_it_as_a_fault(rig):
     rig.run(2)
     assert rig.controller.snapshot.wave.phase is WavePhase.FAULT
     assert rig.controller.snapshot.state.value == "estop"
+    # Found from outside: how a wave ended was in the status line only, no event said it
+    ends = [(e.code, e.message) for e in rig.controller.events().events if e.code.startswith("wave_")]
+    assert [code for code, _ in ends] == ["wave_started", "wave_aborted", "wave_started", "wave_fault"], ends
+    assert ends[1][1].startswith("the wave ended aborted in its cycle ") and ends[1][1].endswith(" of 4"), ends
 
 
 def test_a_refused_waves_fitting_amplitudes_are_not_too_fast_either(rig, monkeypatch):

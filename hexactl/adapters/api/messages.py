@@ -852,7 +852,8 @@ class LoopEvent(_Message):
                       "leg_locked, leg_unlocked, pause, resume, abort, wave_started, stream_closed, jog_released, frames_set: the "
                       "operator's frames and soft limits now), one that started something "
                       "(sequence_started, jog_started, stream_opened, calibration_swapped), estop, a fault's code, "
-                      "command_refused, the end of something (sequence_*, jog_ended, stream_ended), "
+                      "command_refused, the end of something (sequence_*, wave_*: finished, aborted or fault, jog_ended, "
+                      "stream_ended), "
                       "command_link_silent, …")
     message: str = Field(description="for people")
     sender: str | None = Field(description="who sent the command it carried out or refused: the name its client gave "
