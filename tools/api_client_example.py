@@ -17,15 +17,26 @@ from hexactl.adapters.api.protocol import DEFAULT_API_ENDPOINT
 from hexactl.adapters.api.protocol import DEFAULT_TELEMETRY_ENDPOINT
 
 
-def wait_until_at_rest(client: HexactlClient, telemetry: TelemetrySubscriber) -> dict:
+GOAL_TOLERANCE = 0.0005
+"""How close (mm or deg, each axis) a motion that ran its course rests on its goal (docs/api.md)."""
+
+
+def wait_until_at_rest(client: HexactlClient, telemetry: TelemetrySubscriber, goal: list[float]) -> dict:
     """Show the pose from the telemetry until ``status`` says the platform holds still
-    with no sequence playing. (``status`` rather than telemetry decides: it answers after
-    the command before it was accepted, while a conflated subscriber may still hold one
-    record from before that command.)"""
+    with no sequence playing; then, by docs/api.md's rule, whether the motion reached
+    ``goal`` (the reply's): still enabled and resting on it, else what cut it short.
+    (``status`` rather than telemetry decides: it answers after the command before it was
+    accepted, while a conflated subscriber may still hold one record from before that
+    command.)"""
     while True:
         record = client.call("status")["status"]
         if record["motion"] == "holding" and record["sequence"] is None:
             print()
+            if record["state"] != "enabled":
+                raise SystemExit(f"cut short: {record['state']}: {[fault['message'] for fault in record['faults']]}")
+            if any(abs(a - b) > GOAL_TOLERANCE for a, b in zip(record["pose_command"], goal)):
+                raise SystemExit(f"cut short at {record['pose_command']} (a stop, a pause, another client's motion: "
+                                 "hexactl events says which)")
             return record
         print("\r  pose", " ".join(f"{v:8.2f}" for v in telemetry.receive()["pose_measured"] or []), end="", flush=True)
 
@@ -34,7 +45,7 @@ def demo(client: HexactlClient, telemetry: TelemetrySubscriber) -> None:
     client.call("enable")  # ok if it already is
     reply = client.call("move", pose=[0, 0, 50, 0, 0, 5], duration=2.0)
     print(f"moving to {reply['goal']} in {reply['duration']:.2f} s")
-    print("measured:", [round(v, 3) for v in wait_until_at_rest(client, telemetry)["pose_measured"]])
+    print("measured:", [round(v, 3) for v in wait_until_at_rest(client, telemetry, reply["goal"])["pose_measured"]])
 
     refused = client.request("validate_pose", pose=[700, 0, 0, 0, 0, 0])
     print("x = 700 mm:", refused["refusal"]["message"])
@@ -47,7 +58,7 @@ def demo(client: HexactlClient, telemetry: TelemetrySubscriber) -> None:
     ]}
     reply = client.call("play", sequence=sequence)
     print(f"playing {reply['name']}: {reply['waypoints']} waypoints, {reply['duration']:.1f} s")
-    wait_until_at_rest(client, telemetry)
+    wait_until_at_rest(client, telemetry, sequence["waypoints"][-1]["pose"])  # a sequence ends on its last
     client.call("disable")
     print("done; disabled")
 
