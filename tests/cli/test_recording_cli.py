@@ -85,27 +85,21 @@ def test_record_wait_reports_the_side_file_when_the_service_stops_answering(api,
             in capsys.readouterr().err)
 
 
-def test_plot_refuses_missing_and_garbled_files(tmp_path, capsys) -> None:
-    assert main(["plot", str(tmp_path / "none.csv")]) == 2
-    assert "no such file" in capsys.readouterr().err
-    garbled = tmp_path / "bad.csv"
-    garbled.write_text("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2\n")
-    assert main(["plot", str(garbled)]) == 2
-    assert "line 3 has 2 values for 3 columns" in capsys.readouterr().err
-    other = tmp_path / "other.csv"
-    other.write_text("a,b\n1,2\n")
-    assert main(["plot", str(other)]) == 2
-    assert "not a recording (its header has no t_s and no cycle column)" in capsys.readouterr().err
+@pytest.mark.parametrize(("text", "said"), [
+    (None, "no such file"),
+    ("t_s,cycle,lateness_us\n0.0,1,5.0\n0.002,2\n", "line 3 has 2 values for 3 columns"),
+    ("a,b\n1,2\n", "not a recording (its header has no t_s and no cycle column)"),
     # Found from outside: a dwell record (save-recording) and an empty file were both said to
     # have no t_s and cycle columns
-    dwells = tmp_path / "dwells.csv"
-    dwells.write_text("t_s,command_x\n1.0,2.0\n")
-    assert main(["plot", str(dwells)]) == 2
-    assert "not a recording (its header has no cycle column)" in capsys.readouterr().err
-    empty = tmp_path / "empty.csv"
-    empty.write_text("")
-    assert main(["plot", str(empty)]) == 2
-    assert f"{empty}: empty: plot a file made by hexactl record" in capsys.readouterr().err
+    ("t_s,command_x\n1.0,2.0\n", "not a recording (its header has no cycle column)"),
+    ("", "plot.csv: empty: plot a file made by hexactl record"),
+], ids=["missing", "garbled", "other", "dwell-record", "empty"])
+def test_plot_refuses_missing_and_garbled_files(text, said, tmp_path, capsys) -> None:
+    path = tmp_path / "plot.csv"
+    if text is not None:
+        path.write_text(text)
+    assert main(["plot", str(path)]) == 2
+    assert said in capsys.readouterr().err
 
 
 def test_plot_writes_where_it_says_and_never_over_its_input(tmp_path, capsys) -> None:

@@ -573,40 +573,27 @@ def test_malformed_datagrams_do_not_make_their_address_the_streams_sender() -> N
              "the stray's well-formed sample dropped: the sender is the first")
 
 
-def test_a_zeromq_sample_during_a_udp_stream_is_dropped_from_the_first() -> None:
+@pytest.mark.parametrize("transport", ["udp", "zeromq"])
+def test_a_sample_from_the_other_transport_is_dropped_once_the_stream_has_its_sender(transport) -> None:
     """Found from outside: once a UDP stream had its sender, one ZeroMQ message numbered
     99999 was taken: the platform headed for its pose, and every later sample of the UDP
     sender was dropped as out of order until the stream timed out. ZeroMQ is a sender of
-    its own, told apart from each UDP address."""
+    its own, told apart from each UDP address, both ways round."""
     controller = RecordingController()
     with receiver_with_udp(controller) as (receiver, push, udp):
+        udp_name = f"UDP 127.0.0.1:{udp.getsockname()[1]}"
+        (own, own_name), (other, other_name) = (((udp.send, udp_name), (push.send, "ZeroMQ")) if transport == "udp"
+                                                else ((push.send, "ZeroMQ"), (udp.send, udp_name)))
         found = stream_receiver.SENDER_DATAGRAMS
         for number in range(1, found + 1):
-            sent(udp.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
-                 lambda n=number: sequences(controller)[-1:] == [n], "the UDP sender's sample")
-        sent(push.send, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
-             "the ZeroMQ sample dropped")
+            sent(own, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the sender's sample")
+        sent(other, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
+             "the other transport's sample dropped")
         for number in range(found + 1, found + 4):
-            sent(udp.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
-                 lambda n=number: sequences(controller)[-1:] == [n], "the UDP sender's sample, followed on")
+            sent(own, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
+                 lambda n=number: sequences(controller)[-1:] == [n], "the sender's sample, followed on")
         assert sequences(controller) == list(range(1, found + 4)) and receiver.counters.out_of_order == 0
         assert all(pose[0] == 20.0 for pose in controller.poses)
-        own = f"127.0.0.1:{udp.getsockname()[1]}"
-        assert receiver.counters.last_problem.startswith(f"samples from ZeroMQ dropped: UDP {own} is this stream's "
-                                                         "sender"), receiver.counters.last_problem
-
-
-def test_a_udp_datagram_during_a_zeromq_stream_is_dropped_from_the_first() -> None:
-    controller = RecordingController()
-    with receiver_with_udp(controller) as (receiver, push, udp):
-        found = stream_receiver.SENDER_DATAGRAMS
-        for number in range(1, found + 1):
-            sent(push.send, encode(number, number * 0.002, [20.0, 0, 0, 0, 0, 0]),
-                 lambda n=number: sequences(controller)[-1:] == [n], "the ZeroMQ sender's sample")
-        sent(udp.send, encode(99999, 0.01, [-20.0, 0, 0, 0, 0, 0]), lambda: receiver.counters.other_sender == 1,
-             "the UDP datagram dropped")
-        sent(push.send, encode(found + 1, 0.1, [20.0, 0, 0, 0, 0, 0]),
-             lambda: sequences(controller)[-1:] == [found + 1], "the ZeroMQ sender followed on")
-        assert all(pose[0] == 20.0 for pose in controller.poses)
-        assert receiver.counters.last_problem.startswith(
-            f"samples from UDP 127.0.0.1:{udp.getsockname()[1]} dropped: ZeroMQ is this stream's sender")
+        assert receiver.counters.last_problem.startswith(f"samples from {other_name} dropped: {own_name} is this "
+                                                         "stream's sender"), receiver.counters.last_problem
