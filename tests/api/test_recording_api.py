@@ -70,7 +70,8 @@ def test_a_recording_at_the_loop_rate_during_a_motion_has_every_cycle(client, da
         assert written["start"] == "next_motion" and side["csv"] == str(data_dir / "moving.csv")
         assert not (data_dir / "moving.csv.partial").exists()
         assert status(client)["recording"] == {"state": "done", "name": "moving", "rows": 500, "rows_requested": 500,
-                                               "lost": 0, "ended": "duration"}
+                                               "lost": 0, "ended": "duration",
+                                               "file": {"ended": "duration", "faults_during": False}}
 
     def cleanup() -> None:  # a retry records anew: a recording never overwrites
         if client.call("record_status")["state"] == "writing":
@@ -159,3 +160,15 @@ def test_a_recording_under_way_is_finished_when_the_service_stops(tmp_path) -> N
     assert side["ended"] == "shutdown" and side["cycles_missing"] == 0 and side["rows_written"] >= 50
     with open(tmp_path / "cut.csv") as handle:
         assert sum(1 for _ in handle) == side["rows_written"] + 1  # the header, then every row written
+
+
+def test_status_says_what_the_file_of_a_recording_done_says(tmp_path) -> None:
+    """Found from outside: hexactl status said "done … (duration)" of a recording whose
+    file failed, or that saw a fault, while record --wait and the side file said so."""
+    from hexactl.adapters.cli.telemetry_text import recording_text
+
+    done = {"state": "done", "name": "r7", "rows": 2000, "rows_requested": 2000, "lost": 0, "ended": "duration"}
+    assert recording_text(done) == "r7 done 2000/2000 rows (duration)"
+    failed = {**done, "file": {"ended": "write_failed", "faults_during": True}}
+    assert recording_text(failed) == ("r7 done 2000/2000 rows (duration); its file: write_failed, rows missing (r7.json "
+                                      "says why); FAULT or ESTOP during it (hexactl events says when)")

@@ -146,7 +146,12 @@ class CommandHandler:
             log.warning("the platform is outside the operator's soft limits: %s; moves may only go back inside",
                         "; ".join(telemetry.outside_soft_limits))
         self._outside = bool(telemetry.outside_soft_limits)
-        return {**jsonable(telemetry), "campaign": self.campaign.view(), "stream_input": stream_input, "run": self.run}
+        record = {**jsonable(telemetry), "campaign": self.campaign.view(), "stream_input": stream_input, "run": self.run}
+        if (recording := record.get("recording")) and recording["state"] == "done" and self.recorder is not None:
+            written = self.recorder.state()
+            if written["state"] == "done" and written.get("name") == recording["name"]:
+                recording["file"] = {"ended": written["ended"], "faults_during": written["faults_during"]}
+        return record
 
     def __call__(self, request: Request, deadline_ns: int | None = None, sender: str | None = None) -> dict[str, Any]:
         """Carry out ``request``; the commands it hands the loop name ``sender`` (who sent it, for people)."""

@@ -710,8 +710,17 @@ class LinkTelemetry(_Message):
                         "another protocol version, two nodes with one id, the last driver error; empty: none")
 
 
+class RecordingFileTelemetry(_Message):
+    """What the writer's side file says of a recording the loop has done with."""
+
+    ended: str = Field(description="as the side file's ended: duration, stopped, shutdown, fault or write_failed "
+                       "(the rows are not all in the file: record_status's write_error says why)")
+    faults_during: bool = Field(description="the controller was in FAULT or ESTOP during the recording")
+
+
 class RecorderTelemetry(_Message):
-    """The data recorder as the loop sees it (the file: ``record_status``)."""
+    """The data recorder as the loop sees it, and, once written, what its file says
+    (the whole side file: ``record_status``)."""
 
     state: Literal["idle", "armed", "recording", "done"]
     name: str = Field(description="the recording's name")
@@ -719,6 +728,9 @@ class RecorderTelemetry(_Message):
     rows_requested: int = Field(ge=0, description="rows the recording asked for")
     lost: int = Field(ge=0, description="rows lost for want of room (the writer fell behind); 0 normally")
     ended: Literal["duration", "stopped"] | None = Field(description="how it ended, once done")
+    file: RecordingFileTelemetry | None = Field(default=None, description="once done and its file written, what "
+                                                "the side file says of it (found from outside: status said done, "
+                                                "duration, of a recording whose file failed or saw a fault)")
 
 
 class WaveTelemetry(_Message):

@@ -226,7 +226,12 @@ def recording_text(recording: dict[str, Any] | None) -> str:
         return "none"
     lost = f", {recording['lost']} lost" if recording.get("lost") else ""
     ended = f" ({recording['ended']})" if recording.get("ended") else ""
-    return f"{recording['name']} {recording['state']} {recording['rows']}/{recording['rows_requested']} rows{lost}{ended}"
+    file = recording.get("file") or {}
+    said = (f"; its file: write_failed, rows missing ({recording['name']}.json says why)"
+            if file.get("ended") == "write_failed" else "")
+    said += "; FAULT or ESTOP during it (hexactl events says when)" if file.get("faults_during") else ""
+    return (f"{recording['name']} {recording['state']} {recording['rows']}/{recording['rows_requested']} rows{lost}"
+            f"{ended}{said}")
 
 
 def event_text(event: dict[str, Any], now_t: float) -> str:
