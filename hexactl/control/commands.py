@@ -245,8 +245,10 @@ class StreamTarget(Command):
     """Stream ``stream``'s newest target, checked reachable, in the stream's coordinates,
     to pass at ``velocity`` (mm/s, rad/s) in no less than ``horizon_s`` (s; the goal lies that
     far ahead of the sample along its velocity), no axis faster than ``max_velocity``
-    (mm/s, rad/s: :func:`~hexactl.control.stream_commands.stream_velocity_limits`);
-    ``sequence`` the sender's number, ``received_ns`` when it arrived (monotonic)."""
+    (mm/s, rad/s: :func:`~hexactl.control.stream_commands.stream_velocity_limits`), nor
+    slower than ``min_velocity`` (None: ``-max_velocity``; a stream being joined, faster
+    along its way than against it); ``sequence`` the sender's number, ``received_ns`` when
+    it arrived (monotonic)."""
 
     stream: int
     goal: RelativeMmRad | ToolInWorkMmRad
@@ -255,6 +257,7 @@ class StreamTarget(Command):
     horizon_s: float
     sequence: int
     received_ns: int
+    min_velocity: PerAxis | None = None
     answered: ClassVar[bool] = False
     superseded: ClassVar[bool] = True
 

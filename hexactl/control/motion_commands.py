@@ -122,7 +122,8 @@ class MotionCommands:
 
     def _stream_target(self, command: cmd.StreamTarget) -> Refusal:
         self._motion.stream.target(command.stream, command.goal, command.velocity, command.max_velocity,
-                                   command.horizon_s, command.sequence, command.received_ns, self._now_ns())
+                                   command.horizon_s, command.sequence, command.received_ns, self._now_ns(),
+                                   command.min_velocity)
         return None
 
     def _close_stream(self, command: cmd.CloseStream) -> Refusal:

@@ -114,15 +114,17 @@ class StreamFollower:
                   f"{timeout_ns / 1e6:g} ms")
 
     def target(self, stream: int, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, max_velocity: PerAxis,
-               horizon_s: float, sequence: int, received_ns: int, now_ns: int) -> None:
+               horizon_s: float, sequence: int, received_ns: int, now_ns: int,
+               min_velocity: PerAxis | None = None) -> None:
         """Head for ``goal`` (in the trajectory's coordinates), passing it at ``velocity``
-        (mm/s, rad/s) in no less than ``horizon_s``, no axis faster than ``max_velocity``.
+        (mm/s, rad/s) in no less than ``horizon_s``, each axis within ``min_velocity``
+        (None: ``-max_velocity``) and ``max_velocity``.
         A target for a stream that is not following (it ended or is braking) is ignored:
         it was on its way when the stream ended."""
         progress = self.progress
         if progress is None or progress.stream != stream or progress.phase is not StreamPhase.FOLLOWING:
             return
-        self._trajectory.follow(goal, velocity, self._limits, max_velocity, horizon_s)
+        self._trajectory.follow(goal, velocity, self._limits, max_velocity, horizon_s, min_velocity)
         self.progress = replace(progress, targets=progress.targets + 1, last_sequence=sequence,
                                 last_target_ns=now_ns, latency_ns=now_ns - received_ns)
 

@@ -288,6 +288,7 @@ class StreamCommands:
         velocity = stream.velocity(requested, sent_s)
         stream.remember(sent_s, requested)
         joining = None if stream.joined else self._joining(stream, requested)
+        running = velocity  # the stream's own, while it is joined: how fast its samples move on
         if joining is not None:
             velocity = np.zeros(6)  # a step: arrived at at rest, not aimed ahead along the stream
         clamped = False
@@ -300,6 +301,9 @@ class StreamCommands:
             velocity = np.zeros(6)
             goal, clamped = self._reachable(stream, requested)
         max_velocity = stream_velocity_limits(stream.context, stream.frames, goal, velocity, stream.limits[0])
+        min_velocity = None
+        if joining is not None and running.any():
+            max_velocity, min_velocity = _joining_limits(stream, goal, running, max_velocity)
         # Faster than the legs allow along its way: passed slower, its direction kept.
         moving = velocity != 0.0
         if moving.any():
@@ -308,7 +312,8 @@ class StreamCommands:
         target = coordinates._make(float(v) for v in goal)
         taken = self._host_submit(cmd.StreamTarget(0, stream.stream, target, tuple(float(v) for v in velocity),  # type: ignore[arg-type]
                                                    tuple(float(v) for v in max_velocity), horizon_s, sequence,  # type: ignore[arg-type]
-                                                   received_ns))
+                                                   received_ns, None if min_velocity is None else  # type: ignore[arg-type]
+                                                   tuple(float(v) for v in min_velocity)))
         if taken:  # a target dropped on the way is not the loop's: the next one's way runs from the last it got
             stream.last = goal
         return TargetResult(True, clamped, target.in_degrees(), dropped=not taken, joining=joining)
@@ -364,6 +369,21 @@ class StreamCommands:
     def _ok(stream: _OpenStream, position: np.ndarray) -> bool:
         context = stream.context
         return pose_allowed(context, convert(position.tolist(), stream.frames, None, context.active.home))
+
+
+def _joining_limits(stream: _OpenStream, goal: np.ndarray, running: np.ndarray,
+                    at_rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity limits (max, min; mm/s, rad/s) towards ``goal``, a sample of a stream
+    running at ``running`` that is being joined: along the stream's way on each axis the
+    box of a stream at that velocity (:func:`stream_velocity_limits`: its speed and a tenth
+    of the caps), against it only ``at_rest``'s, the box of a stream at rest. Found from
+    outside: with the box at rest both ways, a stream running away faster than it (a yaw
+    of 10°/s starting 8° off) was never joined; with the stream's box both ways, a far
+    sample coming towards the platform had it lunge at it."""
+    along = np.minimum(stream_velocity_limits(stream.context, stream.frames, goal, running, stream.limits[0]),
+                       np.abs(running) + at_rest)
+    against = np.minimum(at_rest, along)
+    return np.where(running > 0, along, against), -np.where(running < 0, along, against)
 
 
 def _mm_rad(pose_mm_deg: Sequence[float]) -> np.ndarray:

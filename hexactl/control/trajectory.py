@@ -135,6 +135,7 @@ def configure_input(
     """
     velocity, acceleration, jerk = limits.in_mm_rad()
     parameters.max_velocity = [v * velocity_scale / time_scale for v in velocity]
+    parameters.min_velocity = None  # a stream's own, while joining it, ends here (follow sets it)
     parameters.max_acceleration = [a / time_scale**2 for a in acceleration]
     parameters.max_jerk = [j / time_scale**3 for j in jerk]
     parameters.synchronization = Synchronization.Phase
@@ -264,13 +265,14 @@ class PoseTrajectory:
         return True
 
     def follow(self, goal: RelativeMmRad | ToolInWorkMmRad, velocity: PerAxis, limits: MotionLimits,
-               max_velocity: PerAxis, horizon_s: float) -> None:
+               max_velocity: PerAxis, horizon_s: float, min_velocity: PerAxis | None = None) -> None:
         """Head for ``goal`` (in the current coordinates), passing it at ``velocity`` (mm/s,
         rad/s) in no less than ``horizon_s`` (when moving), from wherever the generator is:
         a stream's target (:mod:`hexactl.control.stream`), under the acceleration and jerk
-        of ``limits`` and the per-axis ``max_velocity`` (mm/s, rad/s; ``velocity`` within
-        it). Reached before a newer target comes, the generator brakes to rest from there
-        (the stream's receiver checked that where that ends is reachable). Unlike
+        of ``limits`` and the per-axis ``max_velocity`` and ``min_velocity`` (mm/s, rad/s;
+        None: ``-max_velocity``; ``velocity`` within them). Reached before a newer target
+        comes, the generator brakes to rest from there (the stream's receiver checked that
+        where that ends is reachable). Unlike
         :meth:`move_to` nothing is previewed here: the next target comes a cycle later.
         :meth:`update` arrives at rest on the goal instead when ruckig refuses to pass it,
         or its plan to pass it would back up or overshoot beyond where arriving at rest
@@ -279,6 +281,7 @@ class PoseTrajectory:
         configure_input(parameters, limits, goal)
         self._passing_limits = limits
         parameters.max_velocity = list(max_velocity)
+        parameters.min_velocity = None if min_velocity is None else list(min_velocity)
         parameters.target_velocity = list(velocity)
         self._passing = any(velocity)
         parameters.minimum_duration = horizon_s if self._passing else None
@@ -371,8 +374,8 @@ def _beyond_resting_plan(parameters: InputParameter, plan: Trajectory,
     # cannot be copied, and _calculate's retries change the one it is given), then at rest.
     resting.current_position, resting.current_velocity, resting.current_acceleration = (
         start, parameters.current_velocity, parameters.current_acceleration)
-    resting.max_velocity, resting.max_acceleration, resting.max_jerk = (
-        parameters.max_velocity, parameters.max_acceleration, parameters.max_jerk)
+    resting.max_velocity, resting.min_velocity, resting.max_acceleration, resting.max_jerk = (
+        parameters.max_velocity, parameters.min_velocity, parameters.max_acceleration, parameters.max_jerk)
     resting.synchronization, resting.duration_discretization, resting.control_interface = (
         parameters.synchronization, parameters.duration_discretization, parameters.control_interface)
     resting.target_position = goal

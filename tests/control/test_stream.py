@@ -367,13 +367,39 @@ def test_a_sender_that_falls_silent_brakes_under_the_streams_limits_whatever_its
     assert long <= checked + speed * rig.period_ns / 1e9, (long, checked)
 
 
+def test_a_stream_running_away_faster_than_one_at_rest_is_joined_while_it_runs(make_rig) -> None:
+    """Found from outside: a yaw stream at 10°/s starting 8° from the platform was never
+    joined: its samples were steps, approached at the speed of a stream at rest, slower
+    than the stream. Along the stream's way the platform may go its speed and that of a
+    stream at rest: it catches up while the stream still runs."""
+    rig = make_rig()
+    _opened(rig)
+    s = rig.controller.snapshot
+    caps = np.array(rig.controller.config.stream.in_mm_rad()[0])
+    at_rest = stream_velocity_limits(rig.controller._context(s), None, s.pose_command, np.zeros(6), caps)[5]
+    speed = 1.5 * np.degrees(at_rest)  # deg/s: faster than a stream at rest
+    rate_hz = 1e9 / rig.period_ns
+    results, yaws = [], []
+    for n in range(int(6 * rate_hz)):  # from 8° on, for 4 s, then held
+        pose = (0, 0, 0, 0, 0, 8.0 + speed * min(n / rate_hz, 4.0))
+        results.append(rig.controller.stream_target(pose, n + 1, rig.clock.now_ns / 1e9, rig.clock.now_ns))
+        rig.run()
+        yaws.append(rig.controller.snapshot.pose_command[5])
+    joined = next((n for n, result in enumerate(results) if result.joining is None), None)
+    assert joined is not None and joined < 4 * rate_hz, (joined, speed)  # while the stream still runs
+    assert all(result.joining is None for result in results[joined:])
+    assert np.max(np.abs(np.diff(yaws[:joined]))) * rate_hz < 1.1 * (np.radians(speed) + at_rest)
+    rig.assert_setpoints_safe()
+
+
 @pytest.mark.parametrize("start_x", [600.0, -500.0])
 def test_a_moving_stream_far_from_the_platform_is_joined_at_rest_not_at_its_speed(make_rig, start_x) -> None:
     """Found from outside: the platform at x 600 mm, a stream opened whose samples start at
     x 0 and move at 300 mm/s: the platform lunged towards the first samples at the caps,
     609 mm/s, aiming ahead along the stream's velocity. Samples beyond JOIN_DISTANCE of the
-    platform are steps, joined at rest at the speed of a stream at rest; once one is within
-    it, the stream is followed at its velocity."""
+    platform are steps, joined at rest: against the stream's way (from 600) at the speed of
+    a stream at rest, along it (from -500) at most that faster than the stream; once one is
+    within it, the stream is followed at its velocity."""
     rig = make_rig(start_pose=(start_x, 0, 0, 0, 0, 0))
     _opened(rig)
     s = rig.controller.snapshot
@@ -390,7 +416,8 @@ def test_a_moving_stream_far_from_the_platform_is_joined_at_rest_not_at_its_spee
     joined = next(n for n, result in enumerate(results) if result.joining is None)
     speeds = np.diff([start_x, *commanded]) * rate_hz
     # The box is the one at each sample, which moves: about the one at the start.
-    assert np.max(np.abs(speeds[:joined])) < 1.1 * at_rest < 0.5 * caps[0], (np.abs(speeds[:joined]).max(), at_rest)
+    bound = at_rest if start_x > 0 else 300.0 + at_rest
+    assert np.max(np.abs(speeds[:joined])) < 1.1 * bound < caps[0], (np.abs(speeds[:joined]).max(), bound)
     assert abs(commanded[joined] - results[joined].goal[0]) < 2 * JOIN_DISTANCE[0]
     assert all(result.joining is None for result in results[joined:])  # joined for good
     s = rig.controller.snapshot
