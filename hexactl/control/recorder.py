@@ -2,7 +2,7 @@
 
 :class:`CycleRecorder` is a part of the :class:`~hexactl.control.core.ControlCore`. A
 recording is started by a :class:`~hexactl.control.commands.StartRecording` (at once, or
-armed until the next motion starts) and records every ``divisor``-th cycle until it has
+armed until the next motion starts, or a fault latches) and records every ``divisor``-th cycle until it has
 ``rows`` rows or a :class:`~hexactl.control.commands.StopRecording` ends it. After each
 cycle the loop calls :meth:`CycleRecorder.capture` with the cycle's lateness and compute
 time: a due cycle appends one :data:`Row` of references (no copy, no formatting: the
@@ -88,6 +88,7 @@ class CycleRecorder:
         self.state = IDLE
         self._active = False  # the one check an idle cycle costs
         self._next_cycle = 0  # the next cycle due
+        self._faulted = True  # armed: FAULT or ESTOP in the cycle before (a start in one waits for the next)
 
     def start(self, command: cmd.StartRecording) -> Refusal:
         """Begin ``command``'s recording (armed with ``on_motion``); refused while one is active."""
@@ -98,6 +99,7 @@ class CycleRecorder:
                                    command.recording, command.name, rows_requested=command.rows,
                                    divisor=command.divisor)
         self._next_cycle = 0  # from the next captured cycle on
+        self._faulted = True
         self._active = True
         return None
 
@@ -115,7 +117,11 @@ class CycleRecorder:
         state = self.state
         cycle = snapshot.cycle
         if state.phase is RecorderPhase.ARMED:
-            if not _moving(snapshot):
+            # A fault latched while armed starts it too: a motion that faults in its first
+            # cycle never shows as moving, and its recording stayed armed, empty, its fault
+            # unseen (found from outside).
+            faulted, self._faulted = self._faulted, snapshot.state in ("fault", "estop")
+            if not (_moving(snapshot) or (self._faulted and not faulted)):
                 return
             state = self.state = replace(state, phase=RecorderPhase.RECORDING)
         if state.first_cycle == 0:

@@ -59,6 +59,20 @@ def test_armed_recording_starts_with_the_next_motion(rig):
     assert rig.controller.snapshot.recorder.phase is RecorderPhase.DONE
 
 
+def test_a_fault_latched_while_armed_starts_the_recording(rig):
+    """Found from outside: a sequence that faulted in its first cycle never showed as
+    moving; the recording armed for it stayed armed, and record --stop wrote no row and
+    faults_during false."""
+    rig.enabled()
+    assert rig.controller.record(2, "r", 1, 5, on_motion=True).ok
+    rig.run(10)
+    assert rig.controller.snapshot.recorder.phase is RecorderPhase.ARMED
+    rig.actuators.inject_fault(2, 0x10)
+    rig.run(20)
+    recorder = rig.controller.snapshot.recorder
+    assert recorder.phase is RecorderPhase.DONE and recorder.rows == 5 and recorder.faulted, recorder
+
+
 def test_a_fault_before_an_armed_recordings_first_row_is_not_during_it(rig, recordings):
     """Found from outside: a recording armed while an E-stop was latched, run on the next
     motion after reset and enable, said faults_during (and record exited 1)."""
