@@ -31,10 +31,10 @@ name its client gave its connection, where it connected from, and with CURVE the
 its key; the commands it sets off carry it, and the loop's events name it.
 
 A worker takes requests in turn, answers ``expired`` for one whose deadline
-(:func:`request_deadline`: ``deadline_ms``, ``expires_at``) has passed, else runs the handler with the absolute deadline (the loop refuses a motion
-command past it). Its replies reach the socket thread through an inproc PUSH→PULL pair
-the socket thread polls with the ROUTER (a PUSH per worker: ZeroMQ sockets are not
-thread-safe).
+(:func:`request_deadline`: ``deadline_ms``, ``expires_at``) has passed, else runs the
+handler with the absolute deadline (the loop refuses a motion command past it). Its
+replies reach the socket thread through an inproc PUSH→PULL pair the socket thread polls
+with the ROUTER (a PUSH per worker: ZeroMQ sockets are not thread-safe).
 
 A watchdog: when a worker has been inside one handler longer than
 ``handler_timeout_s``, the socket thread logs an error naming the request and calls
