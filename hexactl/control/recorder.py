@@ -2,8 +2,9 @@
 
 :class:`CycleRecorder` is a part of the :class:`~hexactl.control.core.ControlCore`. A
 recording is started by a :class:`~hexactl.control.commands.StartRecording` (at once, or
-armed until the next motion starts, or a fault latches) and records every ``divisor``-th cycle until it has
-``rows`` rows or a :class:`~hexactl.control.commands.StopRecording` ends it. After each
+armed until the next motion starts or a fault latches) and records every ``divisor``-th
+cycle until it has ``rows`` rows or a :class:`~hexactl.control.commands.StopRecording`
+ends it. After each
 cycle the loop calls :meth:`CycleRecorder.capture` with the cycle's lateness and compute
 time: a due cycle appends one :data:`Row` of references (no copy, no formatting: the
 snapshot's values are immutable) to :attr:`CycleRecorder.rows`, a deque that another
