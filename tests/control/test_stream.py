@@ -367,6 +367,22 @@ def test_a_sender_that_falls_silent_brakes_under_the_streams_limits_whatever_its
     assert long <= checked + speed * rig.period_ns / 1e9, (long, checked)
 
 
+def test_a_stream_running_away_in_x_is_joined_while_it_runs_not_trailed_by_its_braking_distance(make_rig) -> None:
+    """Found from outside: x at 250 mm/s from 100 mm ahead was caught up, then trailed 21 to
+    35 mm behind, each sample arrived at at rest, and never joined while it ran."""
+    rig = make_rig()
+    _opened(rig)
+    rate_hz = 1e9 / rig.period_ns
+    results = []
+    for n in range(int(3 * rate_hz)):
+        pose = (100.0 + 250.0 * min(n / rate_hz, 1.6), 0, 0, 0, 0, 0)  # 1.6 s on, then held
+        results.append(rig.controller.stream_target(pose, n + 1, rig.clock.now_ns / 1e9, rig.clock.now_ns))
+        rig.run()
+    joined = next((n for n, result in enumerate(results) if result.joining is None), None)
+    assert joined is not None and joined < 1.5 * rate_hz, joined  # while the stream still runs
+    rig.assert_setpoints_safe()
+
+
 def test_a_stream_running_away_faster_than_one_at_rest_is_joined_while_it_runs(make_rig) -> None:
     """Found from outside: a yaw stream at 10°/s starting 8° from the platform was never
     joined: its samples were steps, approached at the speed of a stream at rest, slower
