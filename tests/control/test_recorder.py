@@ -325,9 +325,10 @@ def test_a_csv_renamed_under_the_recorder_is_named_where_it_is_with_all_its_rows
     rig.run(10)
     recordings.poll()
     (tmp_path / "moved.csv.partial").rename(tmp_path / "elsewhere.csv.partial")
+    (tmp_path / "moved.csv.partial").write_text("")  # another file under its old name: not the recording
     side = _finish(rig, recordings)
     assert side["ended"] == "duration" and "write_error" not in side, side
-    assert side["csv"] == str(tmp_path / "elsewhere.csv.partial")
+    assert side["csv"] == str(tmp_path / "elsewhere.csv.partial") and not (tmp_path / "moved.csv").exists()
     assert len((tmp_path / "elsewhere.csv.partial").read_text().splitlines()) == 1 + side["rows_written"] == 26
 
 

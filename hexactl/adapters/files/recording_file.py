@@ -227,6 +227,10 @@ class RecordingFile:
             failed = {"write_error": f"{path}: {why}", "ended": "write_failed"}
         else:
             try:
+                if not _same_file(self._partial, descriptor, status):
+                    # Found from outside: renamed, and another file made under its old name, that
+                    # one was linked as NAME.csv (no row in it) and said to be the recording.
+                    raise FileNotFoundError(self._partial)
                 os.link(self._partial, path.name, src_dir_fd=descriptor, dst_dir_fd=descriptor, follow_symlinks=False)
                 os.unlink(self._partial, dir_fd=descriptor)
             except FileNotFoundError:  # renamed (its rows all in it), or removed after the check above
@@ -260,6 +264,15 @@ def _pose_cells(pose: Sequence[float] | None) -> list[str]:
     x, y, z, roll, pitch, yaw = pose
     return [f"{x:.6f}", f"{y:.6f}", f"{z:.6f}", f"{math.degrees(roll):.7f}", f"{math.degrees(pitch):.7f}",
             f"{math.degrees(yaw):.7f}"]
+
+
+def _same_file(name: str, directory: int, status: os.stat_result) -> bool:
+    """Whether ``name`` in ``directory`` is the file of ``status`` (not another made under its name)."""
+    try:
+        named = os.stat(name, dir_fd=directory, follow_symlinks=False)
+    except FileNotFoundError:
+        return False
+    return (named.st_dev, named.st_ino) == (status.st_dev, status.st_ino)
 
 
 def _exists(name: str, directory: int) -> bool:
