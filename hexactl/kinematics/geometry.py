@@ -123,15 +123,25 @@ class Measurement(_Strict):
 
 
 def _one_line_warning(text: str) -> str:
-    if not is_one_line(text):
+    if not (is_one_line(text) and text.strip()):
         raise ValueError(f"{text[:120]!r} is not allowed: a warning is one line of text, without control characters "
                          "(load-calibration, status and the log print each as a line of its own)")
+    return text
+
+
+def _one_line_or_none(text: str) -> str:
+    if text and not is_one_line(text):
+        raise ValueError(f"{text[:120]!r} is not allowed: a name is one line of text, without control characters "
+                         "(hexactl check and the log print it)")
     return text
 
 
 IdentificationWarning = Annotated[str, AfterValidator(_one_line_warning)]
 """One of a calibration's warnings. Found from outside: a file's warning with an escape
 sequence cleared the operator's terminal when load-calibration and status printed it."""
+
+GeometryName = Annotated[str, AfterValidator(_one_line_or_none)]
+"""A geometry's name or a calibration's nominal: empty, or one line of text."""
 
 
 class CalibrationInfo(_Strict):
@@ -142,7 +152,7 @@ class CalibrationInfo(_Strict):
     input_sha256: str = Field(description="hash of the measurement data file")
     postures: WholeNumber = Field(ge=1, description="postures used")
     residual_rms_mm: Number = Field(ge=0, description="fit residual, RMS, mm")
-    nominal: str = Field(default="", description="the nominal geometry it started from")
+    nominal: GeometryName = Field(default="", description="the nominal geometry it started from")
     base_joints_std_mm: tuple[Vector3, ...] | None = None
     platform_joints_std_mm: tuple[Vector3, ...] | None = None
     zero_lengths_std_mm: SixNumbers | None = None
@@ -201,7 +211,7 @@ class CalibrationInfo(_Strict):
 class Geometry(_Strict):
     """A platform's nominal or calibrated geometry (mm, deg)."""
 
-    name: str = ""
+    name: GeometryName = ""
     base_joints: tuple[Vector3, Vector3, Vector3, Vector3, Vector3, Vector3] = Field(
         description="base joint centres B_i, fixed frame, mm"
     )

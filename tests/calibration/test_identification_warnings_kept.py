@@ -81,7 +81,9 @@ def test_a_warning_that_is_not_one_line_of_text_is_refused_naming_it(nominal) ->
     from hexactl.kinematics.geometry import CalibrationInfo
 
     fields = {"method": "full", "created": "now", "input_sha256": "0" * 64, "postures": 8, "residual_rms_mm": 0.1}
-    for bad in ("first\nsecond line", "\x1b[2J\x1b[31mRED", ""):
+    for bad in ("first\nsecond line", "\x1b[2J\x1b[31mRED", "", "   ", "ok \u202eedoc"):  # found from outside
         with pytest.raises(ValidationError, match="a warning is one line of text, without control characters"):
             CalibrationInfo(**fields, warnings=(bad,))
+    with pytest.raises(ValidationError, match="a name is one line of text"):  # printed by check, logged
+        CalibrationInfo(**fields, nominal="nom\x1b[2J\ninal")
     assert CalibrationInfo(**fields, warnings=("σ ±70.6 mm · 0.66·B4.z",)).warnings == ("σ ±70.6 mm · 0.66·B4.z",)

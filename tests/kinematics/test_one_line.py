@@ -20,3 +20,5 @@ def test_a_line_end_an_escape_and_a_unicode_separator_are_written_as_escapes() -
     have made the service refuse the load at the campaign's end, after hours of measuring."""
     assert as_one_line("/data/run\n2/ü.toml\x1b[31m\u2028") == "/data/run\\n2/ü.toml\\x1b[31m\\u2028"
     assert not is_one_line("") and not is_one_line("a\tb") and is_one_line("Prüfung 2 – ε")
+    # a right-to-left override reorders what is printed after it (found from outside)
+    assert not is_one_line("ok \u202eedoc") and not is_one_line("a\u2066b") and is_one_line("שלום")
