@@ -101,8 +101,8 @@ class MoveCommands:
             # turn would go the other way, to the same orientation
             # to the µ°: 180.0001 is no "180" (:g's six digits), whose other way round is no "-180"
             got = ", ".join(f"{axis} {f'{turn:.6f}'.rstrip('0').rstrip('.')}°" for axis, turn in beyond)
-            same = ", ".join(f"{axis} {f'{(turn + 180.0) % 360.0 - 180.0:+.6f}'.rstrip('0').rstrip('.')}°"
-                             for axis, turn in beyond)
+            same = ", ".join(f"{axis} {f'{round((turn + 180.0) % 360.0 - 180.0, 6) + 0.0:+.6f}'.rstrip('0').rstrip('.')}°"
+                             for axis, turn in beyond)  # + 0.0: no "-0"
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
                                         f"got {got}: the same orientation is {same}"))
         goal = requested_goal(pose, Frame(frame), bool(relative), s.target, s.frames, context.frames, s.active.home)

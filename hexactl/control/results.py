@@ -86,6 +86,17 @@ DEADMAN_LAPSED = "the deadman lapsed (no renewal in time)"
 JOG_RELEASED = "released"
 
 
+_WAVE_ENDED_AS = {"finished": "finished", "aborted": "was aborted (stop or abort)",
+                  "fault": "ended on a fault, an E-stop or a disable"}
+
+
+def wave_ended_message(phase: str, cycle: int, cycles: int) -> str:
+    """How a wave ended, by its phase (``finished``, ``aborted``, ``fault``), in its period
+    ``cycle`` of ``cycles``: the loop's event and ``hexactl wave --wait`` say it alike ("the
+    wave ended aborted" read as a slip, found from outside)."""
+    return f"the wave {_WAVE_ENDED_AS.get(phase, f'ended {phase}')} in its cycle {cycle} of {cycles}"
+
+
 def jog_ended_message(jog: int, reason: str | None) -> str:
     """Why a renewal of ``jog``, which brakes or has ended (``reason``, if known), is refused.
     Without a reason the loop knows nothing of it: it ended before the last jog, or the

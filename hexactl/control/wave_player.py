@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from math import ceil
 
+from hexactl.control.results import wave_ended_message
 from hexactl.control.trajectory import KinematicState, PoseTrajectory, StepResult
 from hexactl.control.wave_planning import WavePlan
 from hexactl.control.frames import Coordinates
@@ -182,8 +183,7 @@ class WavePlayer:
         progress = self.progress
         assert progress is not None
         self.progress = WaveProgress(progress.cycle, progress.cycles, phase)
-        self._log(f"wave_{phase.value}", f"the wave ended {phase.value} in its cycle {progress.cycle} of "
-                  f"{progress.cycles}")
+        self._log(f"wave_{phase.value}", wave_ended_message(phase.value, progress.cycle, progress.cycles))
 
     def _publish(self, k: int) -> None:
         path, progress = self._path, self.progress

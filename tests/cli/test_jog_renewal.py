@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 
 from hexactl.adapters.cli.jog_commands import _in_cli_terms, _pace, _renew
+from hexactl.control.results import jog_ended_message
 
 FIELDS = {"velocity": [0.0, 0.0, 5.0, 0.0, 0.0, 0.0], "frame": "zero"}
 
@@ -68,8 +69,9 @@ def test_a_renewal_cancelled_by_a_stop_ends_the_command_with_the_jogs_own_word()
     twice = ScriptedService(_refused("cancelled"), _refused("cancelled"), stop)
     assert _renew(twice, FIELDS, 7, for_s=1.0, every_s=0.005) == stop and len(twice.sent) == 3
     # said in this command's terms, not the API's ("send jog without renews")
-    said = _in_cli_terms(_refused("jog_ended", lapsed=False, reason="stopped", jog=7))["error"]["message"]
-    assert said == "jog 7 has ended (stopped): run hexactl jog again to jog on"
+    for reason in ("stopped", "the deadman lapsed (no renewal in time)"):  # the loop's words too (found from outside)
+        refused = {"ok": False, "error": {"code": "jog_ended", "message": jog_ended_message(7, reason)}}
+        assert _in_cli_terms(refused)["error"]["message"] == f"jog 7 has ended ({reason}): run hexactl jog again to jog on"
 
 
 @pytest.mark.parametrize(("speed", "said"), [(0.5, "50%"), (0.0996, "10%"), (2 / 600, "0.33%"), (0.025, "2.5%"),

@@ -348,7 +348,7 @@ def test_the_loop_plays_the_validated_samples_and_ends_at_rest_on_the_start(make
         assert s.motion.value == "moving" and s.goal == path.start
     assert phases == [WavePhase.RAMP_IN, WavePhase.STEADY, WavePhase.RAMP_OUT, WavePhase.FINISHED]
     finished = [e.message for e in rig.controller.events().events if e.code == "wave_finished"]
-    assert finished == ["the wave ended finished in its cycle 3 of 3"], finished
+    assert finished == ["the wave finished in its cycle 3 of 3"], finished
     assert sorted(set(cycles)) == [1, 2, 3] and cycles == sorted(cycles)
     sent = rig.sent[before:]
     assert len(sent) >= path.samples
@@ -432,7 +432,8 @@ def test_stop_also_ends_a_wave_and_an_estop_freezes_it_as_a_fault(rig):
     # Found from outside: how a wave ended was in the status line only, no event said it
     ends = [(e.code, e.message) for e in rig.controller.events().events if e.code.startswith("wave_")]
     assert [code for code, _ in ends] == ["wave_started", "wave_aborted", "wave_started", "wave_fault"], ends
-    assert ends[1][1].startswith("the wave ended aborted in its cycle ") and ends[1][1].endswith(" of 4"), ends
+    assert ends[1][1].startswith("the wave was aborted (stop or abort) in its cycle ") and ends[1][1].endswith(" of 4")
+    assert ends[3][1].startswith("the wave ended on a fault, an E-stop or a disable in its cycle "), ends
 
 
 def test_a_refused_waves_fitting_amplitudes_are_not_too_fast_either(rig, monkeypatch):

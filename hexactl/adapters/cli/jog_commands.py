@@ -109,13 +109,15 @@ def run_jog(arguments: argparse.Namespace) -> int:
 
 def _in_cli_terms(refused: dict[str, Any]) -> dict[str, Any]:
     """``refused`` with a jog that has ended said as this command's user acts on it (the
-    service's "send jog without renews" is the API's)."""
+    service's "send jog without renews" is the API's). Whatever said it (the facade, with
+    the jog and why in its details, or the loop, in its words only), the API's advice is
+    the part from "it is not renewed" on."""
     error = refused.get("error") or {}
-    details = error.get("details") or {}
-    if error.get("code") != "jog_ended" or not details.get("reason"):
+    message = str(error.get("message") or "")
+    if error.get("code") != "jog_ended" or ": it is not renewed" not in message:
         return refused
-    message = f"jog {details.get('jog')} has ended ({details['reason']}): run hexactl jog again to jog on"
-    return {**refused, "error": {**error, "message": message}}
+    said = message.split(": it is not renewed", 1)[0] + ": run hexactl jog again to jog on"
+    return {**refused, "error": {**error, "message": said}}
 
 
 def _pace(speed: float) -> str:

@@ -47,6 +47,7 @@ from hexactl.adapters.cli.common import (
 from hexactl.adapters.cli.dashboard_commands import DEFAULT_HTTP, checked_http
 from hexactl.adapters.cli.telemetry_text import event_text, format_telemetry, frames_lines, pose_text
 from hexactl.control.bounds import MAX_MOTION_S
+from hexactl.control.results import wave_ended_message
 from hexactl.kinematics.axes import MAX_TILT_DEG
 
 EXIT_OK, EXIT_REFUSED, EXIT_NO_ANSWER = 0, 1, 2
@@ -473,7 +474,7 @@ def _cut_short(cmd: str, status: dict[str, Any]) -> str | None:
     elif cmd == "wave":
         wave = status.get("wave") or {}
         if wave.get("phase") not in (None, "finished"):
-            return f"the wave ended {wave['phase']} in its cycle {wave.get('cycle')} of {wave.get('cycles')}"
+            return wave_ended_message(wave["phase"], wave.get("cycle"), wave.get("cycles"))
     return None
 
 
