@@ -31,8 +31,8 @@ SECONDS = 8.0
 def joined(tree: Path, start: tuple[float, ...], sample: Callable[[float], tuple[float, ...]],
            axis: int) -> tuple[float | None, float]:
     """When the stream was joined (s; None: not within :data:`SECONDS`) and the fastest the
-    platform moved on ``axis`` until then (mm/s or deg/s), with the code of ``tree``."""
-    sys.path.insert(0, str(tree))
+    platform moved on ``axis`` until then (mm/s or deg/s), with the code of ``tree``
+    (first on the import path: :func:`main`)."""
     from hexactl.adapters.files.geometry_file import load_geometry
     from hexactl.control.local_controller import LocalController
     from hexactl.kinematics.inverse import sensor_setpoints
@@ -76,6 +76,7 @@ def main() -> None:
     parser.add_argument("--tree", type=Path, default=Path(__file__).resolve().parents[1],
                         help="the checkout whose code runs (default: this one)")
     arguments = parser.parse_args()
+    sys.path.insert(0, str(arguments.tree.resolve()))
     for name, (start, sample, axis) in CASES.items():
         when, fastest = joined(arguments.tree.resolve(), start, sample, axis)
         print(f"{name}: joined {'not within %g s' % SECONDS if when is None else f'after {when:.2f} s'}, "

@@ -99,10 +99,8 @@ class MoveCommands:
         if relative and (beyond := [(axis, turn) for axis, turn in zip(POSE_AXES[3:], pose[3:]) if abs(turn) > 180]):
             # a goal in the work frame is reached the short way round (short_way): such a
             # turn would go the other way, to the same orientation
-            # to the µ°: 180.0001 is no "180" (:g's six digits), whose other way round is no "-180"
-            got = ", ".join(f"{axis} {f'{turn:.6f}'.rstrip('0').rstrip('.')}°" for axis, turn in beyond)
-            same = ", ".join(f"{axis} {f'{round((turn + 180.0) % 360.0 - 180.0, 6) + 0.0:+.6f}'.rstrip('0').rstrip('.')}°"
-                             for axis, turn in beyond)  # + 0.0: no "-0"
+            got = ", ".join(f"{axis} {_micro_degrees(turn)}°" for axis, turn in beyond)
+            same = ", ".join(f"{axis} {_micro_degrees((turn + 180.0) % 360.0 - 180.0, '+')}°" for axis, turn in beyond)
             return Plan(refusal=Refusal(ErrorCode.INVALID_ARGUMENT, f"a relative turn is at most 180° about each axis, "
                                         f"got {got}: the same orientation is {same}"))
         goal = requested_goal(pose, Frame(frame), bool(relative), s.target, s.frames, context.frames, s.active.home)
@@ -139,3 +137,9 @@ def plan_result(plan: Plan, message: str, home_mm_rad: Sequence[float]) -> Comma
         **in_work,
         **locked,
     )
+
+
+def _micro_degrees(angle: float, sign: str = "") -> str:
+    """``angle`` (deg) to the µ°, trailing zeros dropped: 180.0001 is no "180" (:g's six
+    digits), whose other way round is no "-180"; never "-0"."""
+    return f"{round(angle, 6) + 0.0:{sign}.6f}".rstrip("0").rstrip(".")

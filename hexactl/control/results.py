@@ -97,11 +97,15 @@ def wave_ended_message(phase: str, cycle: int, cycles: int) -> str:
     return f"the wave {_WAVE_ENDED_AS.get(phase, f'ended {phase}')} in its cycle {cycle} of {cycles}"
 
 
+JOG_RESTART_ADVICE = ("it is not renewed; send jog without renews to start a new one (a held button: release it "
+                      "and press again)")
+"""What a client of the API does about a jog that has ended; the command line says its own."""
+
+
 def jog_ended_message(jog: int, reason: str | None) -> str:
     """Why a renewal of ``jog``, which brakes or has ended (``reason``, if known), is refused.
     Without a reason the loop knows nothing of it: it ended before the last jog, or the
     number names no jog (a client's mistake, which "has ended" would hide)."""
     state = (f"has ended ({reason})" if reason
              else "is not under way (it ended before the last jog, or no jog has that number)")
-    return (f"jog {jog} {state}: it is not renewed; send jog without renews to start a new one (a held button: "
-            "release it and press again)")
+    return f"jog {jog} {state}: {JOG_RESTART_ADVICE}"

@@ -211,18 +211,21 @@ class _Queued:
     sender: str
 
 
-def request_deadline(request: Request, received_ns: int, now_s: float) -> tuple[int | None, str]:
+def request_deadline(request: Request, received_ns: int, now: tuple[int, float]) -> tuple[int | None, str]:
     """When ``request``, received at ``received_ns`` (monotonic ns), is too late to carry
     out (monotonic ns; None: never), and which deadline that is, for people: its
     ``deadline_ms`` from its receipt, or its ``expires_at`` on this host's wall clock,
-    ``now_s`` (time.time()) at about its receipt, whichever comes first. ``deadline_ms``
-    alone counts from the receipt, which a frozen or starved API process delays: a move
-    its client had given up on ran when the process resumed (found from outside);
-    ``expires_at`` is the sender's own time.
+    whichever comes first. ``now`` is one instant on both clocks (monotonic ns,
+    time.time()), read together: the wall clock's deadline is carried over to the
+    monotonic one from it, so a thread preempted after the receipt does not shorten it.
+    ``deadline_ms`` alone counts from the receipt, which a frozen or starved API process
+    delays: a move its client had given up on ran when the process resumed (found from
+    outside); ``expires_at`` is the sender's own time.
 
     :raises ApiError: ``invalid_request``: ``expires_at`` more than the longest deadline
         (an hour) ahead, a time in ms, or not this host's epoch: no bound at all
     """
+    now_ns, now_s = now
     deadlines: list[tuple[int, str]] = []
     if request.deadline_ms is not None:
         deadlines.append((received_ns + round(request.deadline_ms * 1e6), f"its deadline_ms ({request.deadline_ms:g})"))
@@ -233,7 +236,7 @@ def request_deadline(request: Request, received_ns: int, now_s: float) -> tuple[
                            "a Unix time in s, as time.time() gives it (not ms)", request_id=request.id)
         late = (f"; it arrived {-left_s * 1e3:.0f} ms after it: held up on its way, or the sender's clock is behind "
                 "this host's (keep them together: NTP)") if left_s < 0 else ""
-        deadlines.append((received_ns + round(left_s * 1e9),
+        deadlines.append((now_ns + round(left_s * 1e9),
                           f"its expires_at ({request.expires_at:.3f}, by this host's clock{late})"))
     return min(deadlines, default=(None, ""))
 
@@ -466,7 +469,7 @@ class ApiServer(SocketThread):
             self._send([*envelope, reply])
             return
         try:
-            deadline_ns, deadline = request_deadline(request, received_ns, time.time())
+            deadline_ns, deadline = request_deadline(request, received_ns, (time.monotonic_ns(), time.time()))
         except ApiError as error:
             self._send([*envelope, encode(error_reply(error.request_id, error.code, error.message))])
             return

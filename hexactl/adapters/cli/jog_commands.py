@@ -27,6 +27,7 @@ from hexactl.adapters.cli.service_commands import (
 )
 from hexactl.adapters.cli.telemetry_text import pose_text
 from hexactl.control.bounds import jog_velocity_problem
+from hexactl.control.results import JOG_RESTART_ADVICE
 
 RENEWALS_PER_DEADMAN = 4
 """Renewals per deadman interval: three may be late before the platform brakes."""
@@ -109,14 +110,14 @@ def run_jog(arguments: argparse.Namespace) -> int:
 
 def _in_cli_terms(refused: dict[str, Any]) -> dict[str, Any]:
     """``refused`` with a jog that has ended said as this command's user acts on it (the
-    service's "send jog without renews" is the API's). Whatever said it (the facade, with
-    the jog and why in its details, or the loop, in its words only), the API's advice is
-    the part from "it is not renewed" on."""
+    service's :data:`~hexactl.control.results.JOG_RESTART_ADVICE` is the API's), whatever
+    said it (the facade, with the jog and why in its details, or the loop, in its words
+    only)."""
     error = refused.get("error") or {}
     message = str(error.get("message") or "")
-    if error.get("code") != "jog_ended" or ": it is not renewed" not in message:
+    if error.get("code") != "jog_ended" or not message.endswith(f": {JOG_RESTART_ADVICE}"):
         return refused
-    said = message.split(": it is not renewed", 1)[0] + ": run hexactl jog again to jog on"
+    said = message.removesuffix(f": {JOG_RESTART_ADVICE}") + ": run hexactl jog again to jog on"
     return {**refused, "error": {**error, "message": said}}
 
 
