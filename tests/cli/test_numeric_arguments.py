@@ -87,12 +87,14 @@ def test_a_wave_ramp_beyond_half_its_cycles_is_refused_naming_the_option(capsys:
 @pytest.mark.parametrize(("arguments", "says"), [
     (["status", "--api", NOBODY, "--timeout", "0"], "0 s: a client waits for the service more than 0 s and at most"),
     (["jog", "x=1", "--api", NOBODY, "--for", "0"], "0 s: jog for more than 0 s and at most 600 s"),
-    ([*WAVE, "--cycles", "1e2"], "'1e2' is not a whole number: write it in digits, 100"),
+    ([*WAVE, "--cycles", "1e2"], "'1e2' is not written as a whole number: write 100"),
     # Found from outside: "write it in digits, 1000000000", which the next attempt was refused for
     ([*WAVE, "--cycles", "1e9"], "'1e9' is not a whole number from 1 to 1000000"),
     ([*WAVE, "--cycles", "nan"], "'nan' is not a whole number\n"),
     (["jog", "x=1", "--api", NOBODY, "--for", "1e400"], "'1e400' is not a finite number"),  # was "inf s: …", not as typed
     ([*WAVE, "--cycles", "2.5"], "'2.5' is not a whole number\n"),
+    # Found from outside: "'3.0' is not a whole number", which it is, only not written as one
+    (["leg-lock", "3.0", "--api", NOBODY], "'3.0' is not written as a whole number: write 3\n"),
 ])
 def test_a_refused_number_is_told_what_it_may_be(arguments: list[str], says: str,
                                                   capsys: pytest.CaptureFixture[str]) -> None:

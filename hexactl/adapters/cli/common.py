@@ -533,8 +533,9 @@ def _whole_number(text: str) -> int:
         value = float(text)
     except ValueError:
         value = float("nan")
-    digits = f": write it in digits, {value:.0f}" if value.is_integer() and abs(value) < 1e18 else ""
-    raise argparse.ArgumentTypeError(f"{text!r} is not a whole number{digits}") from None
+    if value.is_integer() and abs(value) < 1e18:  # 3.0 is whole, but not written as one
+        raise argparse.ArgumentTypeError(f"{text!r} is not written as a whole number: write {value:.0f}")
+    raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
 
 
 def whole_number(text: str) -> int:
@@ -566,7 +567,7 @@ def whole_number_in(low: int, high: int) -> Callable[[str], int]:
         try:
             value = _whole_number(text)
         except argparse.ArgumentTypeError:
-            try:  # 1e9: "write it in digits" would only lead to this refusal next
+            try:  # 1e9: "write 1000000000" would only lead to this refusal next
                 out_of_range = isfinite(number := float(text)) and not low <= number <= high
             except ValueError:
                 out_of_range = False
