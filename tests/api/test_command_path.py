@@ -400,3 +400,45 @@ def test_a_motion_request_being_planned_when_a_stop_arrives_is_stopped_again(ser
     assert [(cmd, request_id) for cmd, request_id, _ in handler.done] == [("stop", "stop"), ("move", "block-move"),
                                                                           ("stop", None)]
     mover.close()
+
+
+def test_a_request_the_socket_thread_fails_on_is_answered_and_the_next_is_served(server, monkeypatch) -> None:
+    """A defect met reading one request is answered internal_error and logged; the thread that
+    reads every request, an E-stop's, goes on (found from outside: one request killed it)."""
+    import hexactl.adapters.api.server as server_module
+
+    decode = server_module.decode_body
+
+    def failing(body):
+        if b"fail" in body[-1]:
+            raise RecursionError("maximum recursion depth exceeded")
+        return decode(body)
+
+    monkeypatch.setattr(server_module, "decode_body", failing)
+    client = Client(server.endpoint)
+    try:
+        client.send("fail", "status")
+        reply = client.receive()
+        assert reply["error"]["code"] == "internal_error" and "RecursionError" in reply["error"]["message"]
+        client.send("after", "estop")
+        assert client.receive()["ok"]
+    finally:
+        client.close()
+
+
+def test_a_socket_thread_that_fails_ends_the_process_as_a_stuck_worker_does(monkeypatch) -> None:
+    """Had it died, no request would be answered again while the service ran on."""
+    import hexactl.adapters.api.server as server_module
+
+    stuck = []
+    monkeypatch.setattr(server_module.zmq, "Poller", lambda: (_ for _ in ()).throw(MemoryError("no poller")))
+    context = zmq.Context()
+    served = ApiServer(context, LOCAL, BlockingHandler(), on_stuck=stuck.append)
+    try:
+        served.start()
+        wait_until(lambda: stuck, "the failure reported", WAIT_S)
+    finally:
+        served.close()
+        context.term()
+    assert stuck == ["the API's socket thread failed (MemoryError: no poller): no request would be answered again"]
+

@@ -35,6 +35,10 @@ CASES: list[tuple[str, bytes, str, object]] = [
     ("Infinity literal", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, -Infinity]}', "malformed_json", None),
     ("overflowing number", b'{"v": 1, "id": 1, "cmd": "move", "pose": [0, 0, 0, 0, 0, 1e400]}', "malformed_json", None),
     ("deep nesting", b"[" * 50_000, "malformed_json", None),
+    # Found from outside: an id of 500 nested arrays overflowed the stack of the API's socket
+    # thread, which died: nothing was answered again, an E-stop included.
+    ("an id nested 500 deep", b'{"v": 1, "id": ' + b"[" * 500 + b"]" * 500 + b', "cmd": "estop"}', "malformed_json", None),
+    ("an id nested 33 deep", b'{"v": 1, "id": ' + b"[" * 32 + b"]" * 32 + b', "cmd": "status"}', "malformed_json", None),
     ("integer id beyond double range", b'{"v": 1, "id": 1' + b"0" * 400 + b', "cmd": "status"}', "malformed_json", None),
     ("integer beyond double range", b'{"v": 1, "id": 1, "cmd": "move", "pose": [1' + b"0" * 400 + b', 0, 0, 0, 0, 0]}',
      "malformed_json", None),
@@ -124,10 +128,18 @@ def test_a_path_with_a_line_end_is_refused_saying_to_rename_the_file(cmd) -> Non
         refused.value.message
 
 
-def test_nesting_too_deep_says_so_in_a_clients_terms() -> None:
+@pytest.mark.parametrize("body", [b"[" * 50_000, b'{"v": 1, "id": ' + b"[" * 300 + b"]" * 300 + b', "cmd": "status"}'],
+                         ids=["beyond the parser", "beyond pydantic's JsonValue"])
+def test_nesting_too_deep_says_so_in_a_clients_terms(body) -> None:
+    """pydantic's own refusal of an id 300 deep named its every level, and a "cyclic reference"."""
     with pytest.raises(ApiError) as refused:
-        decode_request(b"[" * 50_000)
-    assert refused.value.message == "not read: arrays and objects nested too deeply (a request nests a few levels at most)"
+        decode_request(body)
+    assert refused.value.message == "not read: arrays and objects nested too deeply (a request nests 32 levels at most)"
+
+
+def test_a_request_nesting_32_levels_is_taken() -> None:
+    request = decode_request(b'{"v": 1, "id": ' + b"[" * 31 + b"]" * 31 + b', "cmd": "status"}')
+    assert request.cmd == "status"
 
 
 def test_a_lone_surrogate_in_the_id_is_refused_a_pair_accepted() -> None:

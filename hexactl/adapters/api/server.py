@@ -352,7 +352,8 @@ class _Worker:
 class ApiServer(SocketThread):
     """Serve ``handle`` on a ROUTER bound to ``endpoint`` (``tcp://HOST:*`` picks a free
     port), as the module describes. ``on_stuck(description)`` is called once when the
-    worker has spent ``handler_timeout_s`` in one request (None: only logged).
+    worker has spent ``handler_timeout_s`` in one request, or if the socket thread fails
+    (None: only logged).
     :meth:`close` stops both threads (the worker within :data:`WORKER_JOIN_S`, else it is
     left behind: it is a daemon) and closes the sockets. ``worker_niceness``: the worker
     thread's ``nice`` (the socket thread keeps the process's). ``on_wake()``: called by the
@@ -424,6 +425,17 @@ class ApiServer(SocketThread):
     # -- the socket thread -------------------------------------------------------------
 
     def _run(self) -> None:
+        """Serve until stopped. Should this thread fail all the same, nothing would be
+        answered again, an E-stop included: it ends the process as a stuck worker does."""
+        try:
+            self._serve()
+        except Exception as error:
+            log.exception("the API's socket thread failed")
+            if self._on_stuck is not None:
+                self._on_stuck(f"the API's socket thread failed ({type(error).__name__}: {error}): no request "
+                               "would be answered again")
+
+    def _serve(self) -> None:
         poller = zmq.Poller()
         poller.register(self._socket, zmq.POLLIN)
         poller.register(self._replies_in, zmq.POLLIN)
@@ -444,7 +456,20 @@ class ApiServer(SocketThread):
                         frames = self._socket.recv_multipart(zmq.NOBLOCK, copy=False)  # frames: their sender's properties
                     except zmq.Again:
                         break
-                    self._admit(frames, time.monotonic_ns())
+                    try:
+                        self._admit(frames, time.monotonic_ns())
+                    except Exception as error:  # a defect in one request must not end the thread reading all
+                        self._internal_error(frames, error)
+
+    def _internal_error(self, frames: list[zmq.Frame], error: Exception) -> None:
+        """Log the defect that ``error`` is and answer the request in ``frames`` with it."""
+        log.exception("a request could not be handled")
+        try:
+            envelope, _ = split_envelope([frame.bytes for frame in frames])
+            self._send([*envelope, encode(error_reply(None, ErrorCode.INTERNAL_ERROR,
+                                                      f"internal error: {type(error).__name__}: {error}"))])
+        except Exception:
+            log.exception("nor could it be answered")
 
     def _admit(self, frames: list[zmq.Frame], received_ns: int, stopped_by: str | None = None) -> None:
         """Answer, carry out or queue one request. ``stopped_by``: the urgent command just
