@@ -28,6 +28,7 @@ from hexactl.adapters.cli.monitor import (
     LEGEND,
     KeyReader,
     KeyThread,
+    ServiceCheck,
     key_result,
     say_if_moving,
     view,
@@ -224,6 +225,57 @@ def test_an_estop_key_does_not_wait_behind_a_command_the_service_is_slow_to_answ
     finally:
         release.set()
         thread.stop()
+
+
+class _StatusClient(RecordingClient):
+    def __enter__(self) -> "_StatusClient":
+        return self
+
+    def __exit__(self, *exception: object) -> None:
+        pass
+
+
+class _Keys:
+    def __init__(self, *keys: str) -> None:
+        self.keys = list(keys)
+
+    def read(self, timeout_s: float) -> str | None:
+        if self.keys:
+            return self.keys.pop(0)
+        time.sleep(timeout_s)
+        return None
+
+
+def _until(condition, what: str):  # noqa: ANN001, ANN202
+    deadline = time.monotonic() + TIMEOUT_S  # only turns a hang into a failure
+    while not (value := condition()):
+        assert time.monotonic() < deadline, what
+        time.sleep(0.01)
+    return value
+
+
+def test_telemetry_of_another_service_than_the_apis_is_said_and_only_stops_are_sent() -> None:
+    """Found from outside: --api of one service and $HEXACTL_TELEMETRY of another showed the
+    one platform while the keys went to the other, and nothing said so."""
+    client = _StatusClient({"ok": True, "status": {"run": "api-run"}})
+    services = ServiceCheck(lambda: client, "tcp://b:5555", "tcp://a:5556")  # type: ignore[arg-type,return-value]
+    services.check("api-run")
+    _until(lambda: client.sent == ["status"], "the API asked")
+    assert services.two_services is None
+    services.check("shown-run")
+    two = _until(lambda: services.two_services, "the two services told apart")
+    assert two.startswith("--api tcp://b:5555 and --telemetry tcp://a:5556 are two different services (run api-run "
+                          "answers the API, run shown-run sends what is shown)"), two
+    assert "are two different services" in rendered(RECORD, "", two)  # in red on the screen, under the legend
+    said: list[str] = []
+    keys = KeyThread(_Keys("x", "r", " ", ESCAPE), lambda: _StatusClient({"ok": True, "message": "done"}),  # type: ignore[arg-type,return-value]
+                     said.append, lambda: services.two_services)
+    keys.start()
+    try:
+        _until(lambda: len(said) == 4, "every key answered")
+    finally:
+        keys.stop()
+    assert sorted(said) == sorted(["'x': not sent: " + two, "'r': not sent: " + two, "stop: ok: done", "estop: ok: done"])
 
 
 def test_keys_from_a_terminal_escape_alone_or_in_a_sequence_and_the_mode_restored() -> None:

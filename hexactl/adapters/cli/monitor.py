@@ -65,6 +65,9 @@ ESCAPE_SEQUENCE_WAIT_S = 0.05
 
 KEY_COMMANDS: dict[str, str] = {" ": "stop", ESCAPE: "estop", "e": "estop", "p": "pause", "r": "resume", "x": "reset"}
 """Key → the API command it sends."""
+SENT_TO_ANOTHER_SERVICE = ("stop", "estop")
+"""The keys' commands sent when the API answers for another service than the one shown:
+stopping is never wrong; a reset or a resume of a platform not watched is."""
 QUIT_KEY = "q"
 LEGEND = "space stop · Esc or e E-STOP · p pause · r resume · x reset · q quit"
 
@@ -156,20 +159,23 @@ def _run_screen(arguments: argparse.Namespace) -> int:
     exit_status = EXIT_OK
     with (connect(TelemetrySubscriber, arguments.telemetry, arguments) as telemetry,
           KeyReader(sys.stdin.fileno()) as reader):
-        keys = KeyThread(reader, lambda: connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout),
-                         status.set)
+        api = lambda: connect(HexactlClient, arguments.api, arguments, timeout_s=arguments.timeout)  # noqa: E731
+        services = ServiceCheck(api, arguments.api, arguments.telemetry)
+        keys = KeyThread(reader, api, status.set, lambda: services.two_services)
         keys.start()
         try:
             with Live(console=Console(), screen=True, auto_refresh=False, redirect_stdout=False, redirect_stderr=False) as live:
                 while not keys.quit.is_set():
                     try:
                         record, received_at = telemetry.receive(0), time.monotonic()
+                        services.check(record.get("run"))
                     except ServiceUnavailable:  # none new: the last one stays, with its age
                         pass
                     silence_s = time.monotonic() - received_at
                     waiting = (f"no telemetry from {arguments.telemetry} for {silence_s:.0f} s: is `hexactl serve` running there?"
                                if silence_s > arguments.timeout else None)
-                    live.update(view(record, status.text, waiting), refresh=True)
+                    warnings = "\n".join(text for text in (services.two_services, waiting) if text)
+                    live.update(view(record, status.text, warnings or None), refresh=True)
                     keys.quit.wait(REFRESH_S)
         except KeyboardInterrupt:
             exit_status = EXIT_INTERRUPTED
@@ -177,6 +183,42 @@ def _run_screen(arguments: argparse.Namespace) -> int:
             keys.stop()  # before the client closes: the thread uses it
     say_if_moving(record)
     return exit_status
+
+
+class ServiceCheck:
+    """Whether the API (``connect()``, at ``api``) answers for the service whose telemetry
+    (at ``telemetry``) is shown, by their ``run``: asked in a thread of its own for each new
+    run the records name. Found from outside: ``--api`` of one service and the telemetry of
+    another (``$HEXACTL_TELEMETRY``, or the default beside another ``--api``) showed the
+    one platform while the keys went to the other, and nothing said so."""
+
+    def __init__(self, connect: Callable[[], HexactlClient], api: str, telemetry: str) -> None:
+        self._connect, self._api, self._telemetry = connect, api, telemetry
+        self._asked: object = _UNASKED  # the telemetry's run compared, or being compared
+        self.two_services: str | None = None
+        """Set when the two differ: what to show, in place of the keys' other commands."""
+
+    def check(self, telemetry_run: str | None) -> None:
+        if telemetry_run != self._asked:
+            self._asked = telemetry_run
+            threading.Thread(target=self._compare, args=(telemetry_run,), name="hexactl-monitor-runs",
+                             daemon=True).start()
+
+    def _compare(self, telemetry_run: str | None) -> None:
+        try:
+            with self._connect() as client:
+                reply = client.request("status")
+        except Exception:  # no answer: the keys say so when pressed; asked again with the next run
+            self._asked = _UNASKED
+            return
+        api_run = reply.get("status", {}).get("run") if reply.get("ok") else telemetry_run
+        self.two_services = None if api_run == telemetry_run else (
+            f"--api {self._api} and --telemetry {self._telemetry} are two different services (run {api_run} answers "
+            f"the API, run {telemetry_run} sends what is shown): the keys stop the API's, only space and Esc are sent; "
+            "check --api and --telemetry")
+
+
+_UNASKED = object()
 
 
 class StatusLine:
@@ -233,11 +275,13 @@ class KeyThread(threading.Thread):
     says what came of each through ``say``. ``quit`` is set when the quit key is read (or
     the thread fails)."""
 
-    def __init__(self, reader: KeyReader, connect: Callable[[], HexactlClient], say: Callable[[str], None]) -> None:
+    def __init__(self, reader: KeyReader, connect: Callable[[], HexactlClient], say: Callable[[str], None],
+                 two_services: Callable[[], str | None] = lambda: None) -> None:
         super().__init__(name="hexactl-monitor-keys", daemon=True)
         self._reader = reader
         self._connect = connect
         self._say = say
+        self._two_services = two_services
         self._stopping = threading.Event()
         self.quit = threading.Event()
 
@@ -263,6 +307,9 @@ class KeyThread(threading.Thread):
 
 
     def _send(self, key: str, unavailable: type[Exception]) -> None:
+        if (two := self._two_services()) and KEY_COMMANDS.get(key) not in SENT_TO_ANOTHER_SERVICE:
+            self._say(f"{key_name(key)}: not sent: {two}")
+            return
         try:
             with self._connect() as client:
                 self._say(key_result(key, client, unavailable))
