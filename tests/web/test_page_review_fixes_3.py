@@ -92,6 +92,41 @@ def test_a_queued_estop_the_loop_carries_out_clears_the_not_confirmed_banner_say
     rig.scenario(scenario)
 
 
+def _presses(rig: Rig) -> list[int]:
+    return [e["press"] for e in rig.page("return window.hexactlDashboard.estopEvents()") if e["what"] == "pressed"]
+
+
+def test_the_estop_button_stops_on_the_press_not_the_release(rig) -> None:
+    """Found from outside: sent on click, the E-stop needed the release over the button: an
+    operator who pressed and slid off it sent nothing, and one holding it down waited for
+    the release. Now the press sends it, once; the keyboard's Enter on the button too."""
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        before = len(_presses(rig))
+        button = rig.shown("#estop")
+        hold = ActionChains(rig.driver).click_and_hold(button)
+        hold.perform()
+        try:
+            wait_for(lambda: rig.status()["state"] == "estop", "the E-stop in force, the button still held")
+            ActionChains(rig.driver).move_by_offset(-300, 200).perform()
+        finally:
+            ActionChains(rig.driver).release().perform()
+        assert len(_presses(rig)) == before + 1  # pressed once: the slide and release send nothing more
+        rig.client.call("reset")
+        wait_for(lambda: rig.status()["state"] == "disabled", "reset")
+        ActionChains(rig.driver).click(button).perform()  # a whole click is one press, one E-stop
+        wait_for(lambda: rig.status()["state"] == "estop", "the E-stop of a click")
+        assert len(_presses(rig)) == before + 2
+        rig.client.call("reset")
+        wait_for(lambda: rig.status()["state"] == "disabled", "reset")
+        rig.page("document.getElementById('estop').focus()")
+        ActionChains(rig.driver).send_keys(Keys.ENTER).perform()
+        wait_for(lambda: rig.status()["state"] == "estop", "the E-stop of Enter on the button")
+        assert len(_presses(rig)) == before + 3
+
+    rig.scenario(scenario)
+
+
 def test_two_estops_a_reset_apart_are_two_lines_each_with_its_time(rig) -> None:
     def scenario() -> None:
         rig.at_rest_disabled()

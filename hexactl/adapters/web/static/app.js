@@ -246,7 +246,12 @@ function estop() {
     }
   });
 }
-estopButton.addEventListener('click', estop);
+// Sent on the press, not on the release: a click needs the release over the button, and an
+// operator who slid off it, or a touch screen that took the touch for a scroll, sent nothing
+// (found from outside). A click the keyboard makes (Enter or Space: detail 0) sends it too;
+// a pointer's click follows the press that already sent it.
+estopButton.addEventListener('pointerdown', (ev) => { if (ev.button === 0) estop(); });
+estopButton.addEventListener('click', (ev) => { if (ev.detail === 0) estop(); });
 
 function newestEventSeq(r) {
   const events = Array.isArray(r?.events) ? r.events : [];
