@@ -29,6 +29,7 @@ class SimulatedStream:
     def __init__(self, geometry: Geometry | None = None, source: str = "simulated") -> None:
         geometry = geometry or load_geometry(default_config_path())
         self.now_ns = START_NS
+        self._before: tuple[Sequence[float], float] | None = None
         actuators = IdealActuators(sensor_setpoints(geometry.legs, absolute_from_relative(geometry.home, (0.0,) * 6)),
                                    clock_ns=lambda: self.now_ns)
         self.controller = LocalController.in_thread(actuators, geometry, "nominal", config=ControllerConfig(),
@@ -46,8 +47,10 @@ class SimulatedStream:
         return (self.now_ns - START_NS) / 1e9
 
     def send(self, pose_mm_deg: Sequence[float], sequence: int, sent_s: float) -> None:
-        """A sample (relative mm and deg, numbered, stamped by its sender), arriving now."""
-        self.controller.stream_target(pose_mm_deg, sequence, sent_s, self.now_ns)
+        """A sample (relative mm and deg, numbered, stamped by its sender), arriving now,
+        handed over with the one sent before it as the receiver hands it."""
+        self.controller.stream_target(pose_mm_deg, sequence, sent_s, self.now_ns, self._before)
+        self._before = (tuple(pose_mm_deg), sent_s)
 
     def step(self) -> None:
         """One loop period."""

@@ -441,6 +441,47 @@ def test_a_moving_stream_far_from_the_platform_is_joined_at_rest_not_at_its_spee
     rig.assert_setpoints_safe()
 
 
+def _held_source(rig, source_hz: float, seconds: float, x) -> list[float]:
+    """Send once a cycle ``x(t)`` (mm) of a source updated ``source_hz`` times a second, its
+    last value resent between updates (a game's 60 Hz sent on at the loop's rate), each with
+    the one before as the receiver hands them over; x commanded each cycle."""
+    rate_hz = 1e9 / rig.period_ns
+    commanded, before = [], None
+    for n in range(int(seconds * rate_hz)):
+        pose, sent_s = (x(math.floor(n / rate_hz * source_hz) / source_hz), 0, 0, 0, 0, 0), rig.clock.now_ns / 1e9
+        assert rig.controller.stream_target(pose, n + 1, sent_s, rig.clock.now_ns, before).sent
+        before = (pose, sent_s)
+        rig.run()
+        commanded.append(rig.controller.snapshot.pose_command[0])
+    return commanded
+
+
+def test_a_sender_resending_its_sources_last_pose_is_followed_at_the_sources_speed(rig) -> None:
+    """Found from outside: a 100 mm, 0.5 Hz sine from a 60 Hz source sent on at 500 Hz, each
+    pose repeated until the source updated, was followed at 159 mm/s for its 314, 348 ms
+    late: every repeat read as a stop, arrived at at rest."""
+    _opened(rig)
+    rate_hz = 1e9 / rig.period_ns
+    commanded = np.array(_held_source(rig, 60.0, 4.0, lambda t: 100.0 * math.sin(math.pi * t)))
+    t = np.arange(len(commanded)) / rate_hz
+    later = t > 1.5
+    error = commanded[later] - 100.0 * np.sin(np.pi * t[later])
+    assert np.max(np.abs(error)) < 10.0, np.max(np.abs(error))  # mm; 100 mm behind when repeats were stops
+    assert rig.controller.snapshot.clamped_cycles == 0
+    rig.assert_setpoints_safe()
+
+
+def test_a_resending_sender_that_stops_is_arrived_at_at_rest(rig) -> None:
+    """Its repeats stand for a moving pose only about as long as its source takes to update:
+    held longer, the pose is a stop, arrived at at rest on it."""
+    _opened(rig)
+    commanded = _held_source(rig, 60.0, 3.0, lambda t: 200.0 * min(t, 1.0))  # 200 mm/s, then held at 200
+    s = rig.controller.snapshot
+    assert s.motion.value == "holding" and commanded[-1] == pytest.approx(200.0, abs=1e-6)
+    assert max(commanded) < 200.0 + 25.0  # its aim ahead and braking, as a sender of every sample's
+    rig.assert_setpoints_safe()
+
+
 def test_a_timeout_shorter_than_three_loop_cycles_is_refused_saying_the_least(make_rig) -> None:
     """Found from outside: timeout_ms 5 was taken at a 250 Hz loop, whose targets come once a
     cycle (4 ms): the stream ended whenever one sample came a cycle late."""
