@@ -206,12 +206,17 @@ def test_a_version_of_another_json_type_says_to_send_the_integer(version) -> Non
     # Found from outside: a source with a line end forged lines in the service's log (calibration_swapped).
     ("load_calibration", "source", "cal\n2026-11-27 15:00:00,000 WARNING hexactl.safety: loop estop", "one line"),
     ("load_calibration", "source", "cal\u2028forged", "one line"),
+    # Found from outside: telemetry carried these to every display as sent, an escape sequence included.
+    ("progress", "title", "postures\n2026-11-30 WARNING forged", "one line"),
+    ("progress", "label", "\x1b[31mleg 3", "no escape sequence"),
+    ("progress", "said", "done\u202eenod", "one line"),
 ])
 def test_a_text_refused_by_its_pattern_says_what_it_may_contain(command, field, value, rule) -> None:
     """Found from outside: ``record`` with ``name: "../run"`` was answered pydantic's "String
     should match pattern '^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$'"."""
-    extra = {"record": {"duration_s": 1.0}, "load_calibration": {"toml": ""}}.get(command, {})
-    request = {"v": 1, "id": 1, "cmd": command, field: value, **extra}
+    extra = {"record": {"duration_s": 1.0}, "load_calibration": {"toml": ""},
+             "progress": {"title": "t", "done": 0, "total": 1}}.get(command, {})
+    request = {"v": 1, "id": 1, "cmd": command, **extra, field: value}
     with pytest.raises(ApiError) as refused:
         decode_request(json.dumps(request).encode())
     assert refused.value.code == "invalid_request" and rule in refused.value.message

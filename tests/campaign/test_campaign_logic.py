@@ -144,3 +144,18 @@ def test_largest_stroke_error_names_the_axis() -> None:
     achieved[5, 3] += 0.46  # 2 % of roll's 23°
     fraction, axis = largest_stroke_error([MotionResult(X_SWEEP, achieved)], [600, 600, 250, 23, 23, 60])
     assert (fraction, axis) == (pytest.approx(0.02), 3)
+
+
+def test_a_sentence_of_several_lines_is_forwarded_a_line_at_a_time() -> None:
+    """The API takes one line of text for a display (``progress``'s ``said``): the demo's
+    sentences of several lines were refused whole."""
+    import io
+
+    from hexactl.application.campaign.progress import Progress
+
+    forwarded: list[dict] = []
+    progress = Progress(io.StringIO(), io.StringIO())
+    progress.forward_to(forwarded.append)
+    progress.say("hexactl demo (seed 1): the experiment\n\n  measuring\n")
+    assert [sent["said"] for sent in forwarded] == ["hexactl demo (seed 1): the experiment", "  measuring"]
+

@@ -93,6 +93,9 @@ RecordingName = Annotated[
 StreamSource = _text_matching(r"^[\x20-\x7e]+$", "the source is printable ASCII: letters, digits, spaces and punctuation")
 OneLine = _text_matching(ONE_LINE_PATTERN, "one line of text, without control characters (no line end, no tab)")
 """Text the service's log writes (:mod:`hexactl.kinematics.one_line`)."""
+ShownLine = _text_matching(ONE_LINE_PATTERN.replace("]+$", "]*$"), "one line of text, without control characters "
+                           "(no line end, no tab, no escape sequence)")
+"""Text telemetry carries to every display, and a terminal prints: one line, or none."""
 
 FilePath = Annotated[
     _text_matching(ONE_LINE_PATTERN, "a path is one line of text, without control characters (a file named with a "
@@ -407,14 +410,14 @@ class LoadCalibrationRequest(_Request):
 
 
 class ParameterEstimate(_Message):
-    name: str = Field(max_length=40, description="B1.x … P6.z (joints, mm), zero1 … (zero lengths, mm), scale1 … "
+    name: ShownLine = Field(max_length=40, description="B1.x … P6.z (joints, mm), zero1 … (zero lengths, mm), scale1 … "
                       "(sensor scale errors)")
     value: float
     sigma: float | None = Field(description="1σ, same unit; null when not determined")
 
 
 class MotionErrors(_Message):
-    motion: str = Field(max_length=100, description="the test motion")
+    motion: ShownLine = Field(max_length=100, description="the test motion")
     before_position_mm: float = Field(description="largest position error before calibration, mm")
     before_orientation_deg: float = Field(description="largest orientation error before calibration, deg")
     after_position_mm: float = Field(description="largest position error after calibration, mm")
@@ -424,16 +427,16 @@ class MotionErrors(_Message):
 class CampaignReport(_Message):
     """A finished campaign's results, for displays."""
 
-    method: str = Field(max_length=40)
-    calibration_id: str = Field(max_length=64)
+    method: ShownLine = Field(max_length=40)
+    calibration_id: ShownLine = Field(max_length=64)
     postures: int = Field(ge=0)
     residual_rms_mm: float
     expected_rms_mm: float = Field(description="the noise model's expectation of the residual RMS, mm")
-    fit: str = Field(max_length=200, description="the χ²/dof sentence")
+    fit: ShownLine = Field(max_length=200, description="the χ²/dof sentence")
     parameters: list[ParameterEstimate] = Field(max_length=60)
     validation: list[MotionErrors] = Field(max_length=20, description="each test motion before and after")
     improved: bool
-    warnings: list[Annotated[str, Field(max_length=1000)]] = Field(default=[], max_length=20)
+    warnings: list[Annotated[ShownLine, Field(max_length=1000)]] = Field(default=[], max_length=20)
 
 
 class ProgressRequest(_Request):
@@ -441,11 +444,12 @@ class ProgressRequest(_Request):
     report when finished); telemetry's ``campaign`` carries the latest to every display."""
 
     cmd: Literal["progress"]
-    title: str = Field(max_length=200, description="the phase, e.g. postures")
+    title: ShownLine = Field(max_length=200, description="the phase, e.g. postures")
     done: int = Field(ge=0, description="steps of the phase done")
     total: int = Field(ge=0, description="steps of the phase")
-    label: str = Field(default="", max_length=200, description="the latest step, e.g. leg 3 locked")
-    said: str | None = Field(default=None, max_length=2000, description="a sentence the campaign printed")
+    label: ShownLine = Field(default="", max_length=200, description="the latest step, e.g. leg 3 locked")
+    said: ShownLine | None = Field(default=None, max_length=2000, description="a sentence the campaign printed (a "
+                                   "line of it)")
     report: CampaignReport | None = Field(default=None, description="the finished campaign's results")
 
     @model_validator(mode="after")

@@ -46,9 +46,13 @@ class Progress:
         self._send(report=report)
 
     def say(self, text: str) -> None:
+        """Print ``text``; forward it a line at a time (the API takes one line of text: a
+        display prints it), blank lines left out."""
         self._clear()
         print(text, file=self.out, flush=True)
-        self._send(said=text)
+        for line in text.splitlines():
+            if line.strip():
+                self._send(said=line)
 
     def start(self, title: str, total: int, done: int = 0) -> None:
         """A phase of ``total`` steps begins, ``done`` of them already done (a resumed campaign)."""
