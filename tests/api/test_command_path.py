@@ -205,6 +205,26 @@ def test_an_urgent_command_cancels_queued_motion_from_every_client(server, handl
         client.close()
 
 
+def test_an_estops_reply_goes_before_the_motion_it_cancels_in_transport(server, handler) -> None:
+    """Found from outside: an E-stop's reply waited until thousands of requests read after it
+    were answered, 2 to 4 s under a flood. (A stop's still waits: what a client sends once it
+    has seen it must not be cancelled by it; a motion sent after an E-stop's reply is
+    refused while it is latched, either way.)"""
+    client = Client(server.endpoint)
+    try:
+        client.send("block-estop", "estop")  # the socket thread carries it out, held in the handler
+        assert handler.entered.wait(WAIT_S)
+        for number in range(20):
+            client.send(f"move{number}", "move", pose=POSE)  # in transport meanwhile
+        time.sleep(0.2)  # lets them arrive: the old order showed only for those that had
+        handler.release.set()
+        replies = [client.receive() for _ in range(21)]
+    finally:
+        client.close()
+    assert replies[0]["id"] == "block-estop" and replies[0]["ok"], [reply["id"] for reply in replies]
+    assert sorted(reply["id"] for reply in replies[1:]) == sorted(f"move{number}" for number in range(20))
+
+
 def wait_queued(server: ApiServer, count: int) -> None:
     """Wait until ``count`` requests wait in the server's queues (its own counter)."""
     wait_until(lambda: server._queued >= count, f"{count} requests queued", WAIT_S, poll_s=0.005,
