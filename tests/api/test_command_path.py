@@ -20,7 +20,7 @@ import zmq
 from hexactl.adapters.api.client import DEADLINE_MARGIN_MIN_MS, HexactlClient, deadline_ms
 from hexactl.adapters.api.messages import Request
 from hexactl.adapters.api.protocol import default_client_name
-from hexactl.adapters.api.server import MAX_QUEUED, MAX_QUEUED_PER_CLIENT, QUERY_COMMANDS, ApiServer
+from hexactl.adapters.api.server import MAX_QUEUED_PER_CLIENT, QUERY_COMMANDS, ApiServer
 from hexactl.control.planning import MAX_MOTION_S
 from hexactl.adapters.files.sequence_file import sequence_from_toml
 from hexactl.control.sequences import SequenceError
@@ -252,21 +252,57 @@ def test_a_flooding_client_gets_busy_and_others_are_served_in_turn(server, handl
         client.close()
 
 
-def test_the_total_queue_is_bounded(server, handler) -> None:
+@pytest.fixture
+def small_queues(monkeypatch) -> None:
+    """A total of 4 and a ceiling of 6 (the rules, with fewer sockets)."""
+    import hexactl.adapters.api.server as server_module
+
+    monkeypatch.setattr(server_module, "MAX_QUEUED", 4)
+    monkeypatch.setattr(server_module, "MAX_QUEUED_CEILING", 6)
+
+
+@pytest.mark.usefixtures("small_queues")
+def test_the_total_queue_refuses_clients_at_their_share_and_takes_the_others(server, handler) -> None:
+    """Found from outside: eight clients of 32 requests each filled the queue of 256, and
+    every other client's every command (an operator's reset) was refused busy."""
     holder = blocked(server, handler)
-    clients = [Client(server.endpoint) for _ in range(MAX_QUEUED // MAX_QUEUED_PER_CLIENT)]
+    clients = [Client(server.endpoint) for _ in range(2)]
     for client in clients:
-        for number in range(MAX_QUEUED_PER_CLIENT):
-            client.send(number, "frames")
-    wait_queued(server, MAX_QUEUED)
+        for number in range(2):
+            client.send(number, "validate_pose", pose=POSE)
+    wait_queued(server, 4)
+    clients[0].send("over", "validate_pose", pose=POSE)  # 2 of 4 from 2 clients: its share
+    reply = clients[0].receive()
+    assert reply["id"] == "over" and reply["error"]["code"] == "busy", reply
+    assert reply["error"]["message"] == ("4 requests queued from 2 clients, 2 of them from this one (its share: 2); "
+                                         "wait for replies before sending more")
     late = Client(server.endpoint)
-    late.send("late", "frames")
-    reply = late.receive()
-    assert reply["error"]["code"] == "busy" and f"{MAX_QUEUED} requests queued from all clients" in reply["error"]["message"]
+    late.send("late", "reset")  # none of its own queued: taken
+    wait_queued(server, 5)
     handler.release.set()
+    assert late.receive()["ok"]
     for client in clients:
-        assert len(client.replies(MAX_QUEUED_PER_CLIENT)) == MAX_QUEUED_PER_CLIENT
+        assert len(client.replies(2)) == 2
     for client in (holder, late, *clients):
+        client.close()
+
+
+@pytest.mark.usefixtures("small_queues")
+def test_the_total_queue_is_bounded_for_every_client(server, handler) -> None:
+    holder = blocked(server, handler)
+    clients = [Client(server.endpoint) for _ in range(7)]
+    for number, client in enumerate(clients[:6]):
+        client.send(number, "validate_pose", pose=POSE)
+        wait_queued(server, number + 1)
+    clients[6].send("late", "validate_pose", pose=POSE)  # none of its own, but the ceiling reached
+    reply = clients[6].receive()
+    assert reply["error"]["code"] == "busy" and reply["error"]["message"] == (
+        "6 requests queued from 6 clients, the most the service keeps; wait a moment and send it again")
+    assert reply["error"]["details"] == {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": 4, "ceiling": 6}
+    handler.release.set()
+    for client in clients[:6]:
+        assert client.receive()["ok"]
+    for client in (holder, *clients):
         client.close()
 
 

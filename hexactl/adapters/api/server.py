@@ -108,9 +108,16 @@ later ones are dropped. ZeroMQ's default, 1000, let one that never read hold a g
 batches of half this bound, that it took it."""
 
 MAX_QUEUED = 256
-"""Requests waiting for one worker from all clients together. Planning a move or validating a pose takes
-tens of milliseconds, so a full queue is seconds of work: what waits longer would outlive
-the client library's default 5 s timeout, so it is refused ``busy`` at once instead."""
+"""Requests waiting for one worker from all clients together beyond which a client is
+refused ``busy`` if it holds its share of them or more (this over the clients with some
+waiting). Planning a move or validating a pose takes tens of milliseconds, so a full queue
+is seconds of work: what waits longer would outlive the client library's default 5 s
+timeout, so it is refused at once instead. A client below its share is still taken, up to
+:data:`MAX_QUEUED_CEILING`: found from outside, eight clients of 32 each refused every
+other client's every command (an operator's ``reset``, ``frames``) but the stops."""
+
+MAX_QUEUED_CEILING = 2 * MAX_QUEUED
+"""Requests waiting for one worker from all clients together beyond which every client is refused."""
 
 DEFAULT_HANDLER_TIMEOUT_S = 120.0
 """The watchdog's default bound on one request's handling, s. The slowest legitimate
@@ -279,8 +286,12 @@ class _RoundRobin:
             mine = len(self._queues.get(client, ()))
             if mine >= MAX_QUEUED_PER_CLIENT:
                 return f"{mine} requests queued from this client; wait for replies before sending more"
-            if self.queued >= MAX_QUEUED:
-                return f"{self.queued} requests queued from all clients; wait for a reply and send it again"
+            if self.queued >= MAX_QUEUED_CEILING:
+                return (f"{self.queued} requests queued from {len(self._queues)} clients, the most the service "
+                        "keeps; wait a moment and send it again")
+            if self.queued >= MAX_QUEUED and mine >= (share := max(1, MAX_QUEUED // len(self._queues))):
+                return (f"{self.queued} requests queued from {len(self._queues)} clients, {mine} of them from this "
+                        f"one (its share: {share}); wait for replies before sending more")
             if not mine:
                 self._queues[client] = deque()
                 self._turns.append(client)
@@ -512,7 +523,8 @@ class ApiServer(SocketThread):
         refusal = (self._queries if quick else self._commands).put(client, item)
         if refusal is not None:
             self._send([*envelope, encode(error_reply(request.id, ErrorCode.BUSY, refusal,
-                                                      {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": MAX_QUEUED}))])
+                                                      {"limit_per_client": MAX_QUEUED_PER_CLIENT, "limit": MAX_QUEUED,
+                                                       "ceiling": MAX_QUEUED_CEILING}))])
 
     def _cancel_in_transport(self, cause: str) -> None:
         """Cancel the motion requests ZeroMQ had received but this thread not yet read when
