@@ -213,7 +213,8 @@ function notConfirmedYet(loss) {
   return `Sent, no confirmation yet: ${LOSS_SHORT[loss]}, so ${doubt}.`;
 }
 
-function estop() {
+/** `pressed`: what sent it, as the Move panel says why Go was withdrawn. */
+function estop(pressed = 'E-STOP') {
   // first on the wire: nothing the page does for the display comes before the request
   const replied = state.wsOpen ? send('estop') : null;
   const loss = dataLoss(performance.now());
@@ -222,6 +223,7 @@ function estop() {
   estopEvent(press, 'pressed', loss ?? 'live');
   if (replied) estopEvent(press, 'sent');
   controls.releaseJog(false);
+  controls.withdrawnBy(pressed);
   estopButton.classList.remove('sent');
   void estopButton.offsetWidth;   // restart the flash animation
   estopButton.classList.add('sent');
@@ -275,7 +277,7 @@ function estopSeenInForce(r) {
 window.addEventListener('keydown', (ev) => {
   if (ev.key === 'Escape' || ev.code === 'Escape') {
     ev.preventDefault();
-    if (!ev.repeat) estop();
+    if (!ev.repeat) estop('E-STOP (Escape)');
   }
 }, true);
 

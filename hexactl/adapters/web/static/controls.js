@@ -261,9 +261,9 @@ export function setupControls(ctx) {
     $(id).addEventListener('change', () => invalidate('inputs changed: validate again'));
   });
 
-  // This page's E-stop (the button or Escape), Disable and Reset end the enabled spell: Go
-  // is withdrawn at the press, before any record says so, and a validation under way is
-  // dropped (it began before the press).
+  // This page's E-stop (the button or Escape: app.js's estop() calls it), Disable and Reset
+  // end the enabled spell: Go is withdrawn at the press, before any record says so, and a
+  // validation under way is dropped (it began before the press).
   function withdrawnBy(press) {
     const underWay = moveResult.textContent === 'validating…';
     validating += 1;
@@ -272,10 +272,6 @@ export function setupControls(ctx) {
       setResult(moveResult, null, `${press} pressed: Go is withdrawn; ${toEnable(press.startsWith('E-STOP') ? 'estop' : 'disabled')}, then validate again`);
     }
   }
-  $('estop').addEventListener('click', () => withdrawnBy('E-STOP'));
-  window.addEventListener('keydown', (ev) => {
-    if (ev.key === 'Escape' || ev.code === 'Escape') withdrawnBy('E-STOP (Escape)');
-  }, true);
   $('disable').addEventListener('click', () => withdrawnBy('Disable'));
   $('reset').addEventListener('click', () => withdrawnBy('Reset'));
 
@@ -846,5 +842,5 @@ export function setupControls(ctx) {
     }
   }
 
-  return { onRecord, onLink, onDisconnect, onDataLoss, releaseJog };
+  return { onRecord, onLink, onDisconnect, onDataLoss, releaseJog, withdrawnBy };
 }
