@@ -43,10 +43,10 @@ from hexactl.control.planning import (
 )
 from hexactl.control.results import ErrorCode
 from hexactl.control.trajectory import KinematicState
-from hexactl.kinematics.axes import RelativeMmDeg, ToolInWorkMmDeg
+from hexactl.kinematics.axes import POSE_AXES, POSE_UNITS, RelativeMmDeg, ToolInWorkMmDeg
 from hexactl.kinematics.frames import Frames
 from hexactl.kinematics.pose import pose_mm_rad_to_mm_deg
-from hexactl.kinematics.workspace import Violation, check_poses
+from hexactl.kinematics.workspace import Violation, ViolationKind, check_poses
 
 JOG_HORIZON_S = 4.0
 """How far ahead a jog is planned, in seconds of travel at its velocity, when no limit is
@@ -143,10 +143,19 @@ def _speed(context: PlanningContext, origin: Sequence[float], goal: Sequence[flo
 
 
 def _limit_name(violation: Violation) -> str:
-    """The limit ``violation`` breaks, by name: "the soft limit on x at 5", "the stroke high of leg 3 at 60"."""
+    """The limit ``violation`` breaks, by name, with its unit: "the soft limit on x at 5 mm",
+    "the stroke high limit of leg 3 at 60 mm" (found from outside without one)."""
     name = violation.kind.value.replace("_", " ")
     where = f" of leg {violation.leg}" if violation.leg is not None else f" on {violation.axis}" if violation.axis else ""
-    return f"the {name}{'' if name.endswith('limit') else ' limit'}{where} at {violation.limit:g}"
+    return f"the {name}{'' if name.endswith('limit') else ' limit'}{where} at {violation.limit:g}{_unit(violation)}"
+
+
+def _unit(violation: Violation) -> str:
+    """`` mm``, `` deg`` or nothing (a condition number) for ``violation``'s limit."""
+    if violation.axis in POSE_AXES:
+        return f" {POSE_UNITS[POSE_AXES.index(violation.axis)]}"
+    return {ViolationKind.STROKE_LOW: " mm", ViolationKind.STROKE_HIGH: " mm", ViolationKind.BASE_CONE: " deg",
+            ViolationKind.PLATFORM_CONE: " deg", ViolationKind.SOFT_TILT: " deg"}.get(violation.kind, "")
 
 
 def _violations_each(context: PlanningContext, frames: Frames | None, positions: Sequence[Sequence[float]],

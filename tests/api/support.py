@@ -149,7 +149,7 @@ class FakeController:
             restarts: int | None = None, deadline_ns: int | None = None) -> CommandResult:
         self._call("jog", list(velocity), frame)
         return CommandResult.success("jogging", jog=1, goal=[5.0, 0, 0, 0, 0, 0], speed=1.0,
-                                     end="the soft limit on x at 5", to_limit=True, deadman_s=0.2)
+                                     end="the soft limit on x at 5 mm", to_limit=True, deadman_s=0.2)
 
     def stream_open(self, source: str, frame: Frame | str = Frame.ZERO, timeout_s: float = 0.1, *,
                     deadline_ns: int | None = None) -> CommandResult:

@@ -120,11 +120,11 @@ def test_the_view_and_status_show_the_jog_and_the_recording() -> None:
 
     assert "jog          none" in rendered(RECORD) and "recording    none" in rendered(RECORD)
     busy = {**RECORD, "jog": {"jog": 17, "frame": "tool", "velocity": [0.0, 0.0, 0.0, 2.0, 0.0, 0.0], "speed": 1.0,
-                              "phase": "jogging", "end": "the soft tilt limit at 12", "to_limit": True,
+                              "phase": "jogging", "end": "the soft tilt limit at 12 deg", "to_limit": True,
                               "renew_within_s": 0.15},
             "recording": {"state": "recording", "name": "run2", "rows": 1200, "rows_requested": 2500, "lost": 0,
                           "ended": None}}
-    jog = "jog 17 jogging roll 2 deg/s in tool, to the soft tilt limit at 12 (renew within 0.15 s)"
+    jog = "jog 17 jogging roll 2 deg/s in tool, to the soft tilt limit at 12 deg (renew within 0.15 s)"
     for text in (rendered(busy), format_telemetry(busy)):
         assert jog in text and "run2 recording 1200/2500 rows" in text
 

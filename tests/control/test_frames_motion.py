@@ -276,7 +276,7 @@ def test_from_below_a_soft_window_nothing_goes_past_its_upper_bound(rig):
     assert rig.controller.stop().ok
     rig.settle()
     jog = rig.controller.jog([50, 0, 0, 0, 0, 0], frame=Frame.WORK)  # 105 mm to go: the window in its horizon
-    assert jog.ok and jog.details["end"] == "the soft limit on x at 6", jog
+    assert jog.ok and jog.details["end"] == "the soft limit on x at 6 mm", jog
     assert rig.controller.stop().ok
     rig.settle()
     assert rig.controller.move([-200, 349.2, 0, 0, 0, 0]).ok  # to work x 5.5
@@ -304,7 +304,7 @@ def test_a_tool_mounted_backwards_is_held_in_a_yaw_window_up_to_180(rig):
     assert rig.controller.move([0, 0, 0, 0, 0, -5], frame=Frame.WORK, relative=True).ok
     rig.settle()
     jog = rig.controller.jog([0, 0, 0, 0, 0, 2], frame=Frame.WORK)  # it said: the soft limit on yaw at 170
-    assert jog.ok and jog.details["end"] == "the soft limit on yaw at 180"
+    assert jog.ok and jog.details["end"] == "the soft limit on yaw at 180 deg"
 
 
 def test_a_goal_on_a_soft_limit_is_accepted_whatever_its_path_rounds_to(rig):

@@ -44,7 +44,7 @@ def test_a_jog_into_a_soft_limit_comes_to_rest_on_it_with_no_refusal_and_no_clam
     rig.enabled()
     replies = _hold(rig, [10, 0, 0, 0, 0, 0], 1500)
     assert all(reply.ok for reply in replies), [r.message for r in replies if not r.ok]
-    assert replies[0].details["to_limit"] and replies[0].details["end"] == "the soft limit on x at 5"
+    assert replies[0].details["to_limit"] and replies[0].details["end"] == "the soft limit on x at 5 mm"
     s = rig.controller.snapshot
     assert s.jog is not None and s.jog.phase.value == "at_end" and s.motion.value == "holding"
     assert s.pose_command[0] == pytest.approx(5.0, abs=1e-5) and s.pose_command[0] <= 5.0  # on it, to 10 nm

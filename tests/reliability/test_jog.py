@@ -57,7 +57,7 @@ def test_a_jog_into_a_soft_limit_rests_on_it_and_a_lapsed_one_brakes(client: Hex
         with _renewing(service.api_endpoint, [20, 0, 0, 0, 0, 0]) as refusals:  # 8 mm at 20 mm/s
             at_limit = wait_for(lambda: (s := status(client))["jog"] and s["jog"]["phase"] == "at_end" and s,
                                 "the jog at rest on the soft limit")
-            assert at_limit["jog"]["end"] == f"the soft limit on x at {SOFT_X_MM:g}"
+            assert at_limit["jog"]["end"] == f"the soft limit on x at {SOFT_X_MM:g} mm"
             assert at_limit["pose_command"][0] == pytest.approx(SOFT_X_MM, abs=1e-5)
             assert at_limit["loop"]["guard_clamps"] == clamps
             assert main(["status", "--api", service.api_endpoint]) == 0

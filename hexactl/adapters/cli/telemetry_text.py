@@ -169,7 +169,7 @@ def sequence_text(sequence: dict[str, Any] | None) -> str:
 
 
 def jog_text(jog: dict[str, Any] | None) -> str:
-    """``jog 12 jogging x 10 mm/s in zero, to the soft limit on x at 5 (renew within 0.15 s)``, or ``none``."""
+    """``jog 12 jogging x 10 mm/s in zero, to the soft limit on x at 5 mm (renew within 0.15 s)``, or ``none``."""
     if not jog:
         return "none"
     velocity = ", ".join(f"{axis} {value:g} {unit}/s" for axis, unit, value in zip(POSE_AXES, POSE_UNITS, jog["velocity"])
