@@ -148,9 +148,11 @@ class PoseChecks:
                 reading = float(self.sensor[n, leg])
                 if check == 0:
                     return Violation(ViolationKind.STROKE_LOW, reading, limits.stroke[0],
-                        f"leg {leg + 1} below stroke: {reading:.3f} mm < {limits.stroke[0]:g} mm", leg=leg + 1)
+                        f"leg {leg + 1} below stroke: {_told_apart(reading, limits.stroke[0], '.3f')} mm < "
+                        f"{limits.stroke[0]:g} mm", leg=leg + 1)
                 return Violation(ViolationKind.STROKE_HIGH, reading, limits.stroke[1],
-                    f"leg {leg + 1} above stroke: {reading:.3f} mm > {limits.stroke[1]:g} mm", leg=leg + 1)
+                    f"leg {leg + 1} above stroke: {_told_apart(reading, limits.stroke[1], '.3f')} mm > "
+                    f"{limits.stroke[1]:g} mm", leg=leg + 1)
             kind, angles, limit, where = ((ViolationKind.BASE_CONE, self.base_cone, limits.base_cone_deg, "base")
                 if check == 2 else (ViolationKind.PLATFORM_CONE, self.platform_cone, limits.platform_cone_deg, "platform"))
             angle = float(angles[n, leg])
@@ -162,11 +164,23 @@ class PoseChecks:
             value = float(self.relative[n, index])
             bound = high if value > high else low
             return Violation(ViolationKind.POSE_RANGE, value, bound,
-                f"{axis} {value:g} {unit} outside the pose envelope [{low:g}, {high:g}] {unit} "
+                f"{axis} {_told_apart(value, bound, 'g')} {unit} outside the pose envelope [{low:g}, {high:g}] {unit} "
                 f"(by {abs(value - bound):.3g} {unit})", axis=axis)
         condition = float(self.condition[n])
         return Violation(ViolationKind.SINGULAR, condition, limits.max_jacobian_condition,
             f"near-singular pose: Jacobian condition {condition:.1f} > {limits.max_jacobian_condition:g}")
+
+
+def _told_apart(value: float, bound: float, form: str) -> str:
+    """``value`` written in ``form`` ('g', '.3f'), with more digits where that would read as
+    ``bound`` (found from outside: "x 610 mm outside the pose envelope [-610, 610] mm (by
+    0.0001 mm)")."""
+    text = format(value, form)
+    for digits in range(7, 17):
+        if text != format(bound, form) or value == bound:
+            break
+        text = f"{value:.{digits}g}"
+    return text
 
 
 _CHECKS_PER_LEG = 4  # PoseChecks.broken's columns per leg: stroke low, stroke high, base cone, platform cone

@@ -27,6 +27,16 @@ def test_check_refuses_unreachable_poses_with_reasons(capsys) -> None:
     assert "1 of 3 poses reachable; 2 unreachable" in out
 
 
+def test_check_of_a_hair_beyond_a_bound_reads_beyond_it(capsys) -> None:
+    """Found from outside: "610,0,0,0,0,0 … x -0.0 mm" and "x 610 mm outside the pose envelope
+    [-610, 610] mm (by 0.0001 mm)" for x 610.0001."""
+    assert main(["check", "x=610.0001"]) == 1
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if "UNREACHABLE" in line)
+    assert row.startswith("610.0001,0,0,0,0,0 ") and row.endswith("x -0.0001 mm"), row
+    assert "x 610.0001 mm outside the pose envelope [-610, 610] mm (by 0.0001 mm)" in out
+
+
 def test_check_json_has_margins(capsys) -> None:
     assert main(["check", "--json", "z=250"]) == 0
     (record,) = json.loads(capsys.readouterr().out)

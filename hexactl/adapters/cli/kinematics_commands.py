@@ -115,11 +115,13 @@ def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> N
           f"{'plat. cone':>10} {'cond.':>6} {'envelope margin':>17}")
     for a in assessments:
         stroke_leg = min(range(6), key=lambda leg: a.stroke_margin_mm[leg])
-        pose = ",".join(f"{v:g}" for v in a.pose_relative)
+        pose = ",".join(repr(v).removesuffix(".0") for v in a.pose_relative)  # as typed: 610.0001 was "610"
         # The axis nearest its bound for its envelope's size, in its own unit: the least of mm and
         # deg together (10 mm on x, 1 deg on roll printed "1.0") named no axis and mixed units.
         axis = min(range(6), key=lambda n: a.pose_margin[n] / max(limits.pose_max[n] - limits.pose_min[n], 1e-9))
-        envelope = f"{POSE_AXES[axis]} {a.pose_margin[axis]:.1f} {POSE_UNITS[axis]}"
+        margin = a.pose_margin[axis]  # a hair beyond its bound is not "-0.0"
+        envelope = f"{POSE_AXES[axis]} {margin:.1f}" if abs(margin) >= 0.05 or margin == 0 else f"{POSE_AXES[axis]} {margin:.2g}"
+        envelope += f" {POSE_UNITS[axis]}"
         print(f"{pose:<36} {'reachable' if a.ok else 'UNREACHABLE':<11} "
               f"{a.stroke_margin_mm[stroke_leg]:>8.1f} mm L{stroke_leg + 1} "
               f"{max(a.base_cone_deg):>9.1f}° {max(a.platform_cone_deg):>9.1f}° "
