@@ -208,7 +208,7 @@ class ControlCore:
         E-stop for those holding cannot hold (:data:`~hexactl.control.supervisor.ESTOP_FAULTS`)."""
         self.state = ControlState.FAULT
         self._faults += faults
-        self._motion.freeze("fault")
+        self._motion.freeze("fault", f"a fault latched: {', '.join(fault.code for fault in faults)}")
         for fault in faults:
             self._event(fault.code, fault.message)
         for leg in released_legs(faults):
@@ -231,14 +231,14 @@ class ControlCore:
         self._supervisor.latched_estop()
         self.state = ControlState.ESTOP
         self._faults = self._faults + (Fault("estop", f"{reason} from {sender}" if sender else reason),)
-        self._motion.freeze("fault")
+        self._motion.freeze("fault", f"an E-stop latched: {reason}")
         self._event("estop", reason)
 
     def _to_disabled(self) -> None:
         """DISABLE sent: every actuator brakes; the motion and any leg lock end."""
         self.state = ControlState.DISABLED
         self._motion.lock = None
-        self._motion.freeze("aborted")
+        self._motion.freeze("aborted", "the controller was disabled")
 
     # -- commands ------------------------------------------------------------------------
 

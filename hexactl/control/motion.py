@@ -125,15 +125,15 @@ class Motion:
         """While disabled: command where the platform is, so that enabling starts there."""
         self.path.hold(pose, setpoints)
 
-    def freeze(self, sequence_status: str) -> None:
-        """Forget any motion (the sequence ends as ``sequence_status``): the commanded
-        pose and set-points stay as they are."""
+    def freeze(self, sequence_status: str, why: str) -> None:
+        """Forget any motion (the sequence ends as ``sequence_status``, a stream saying
+        ``why``): the commanded pose and set-points stay as they are."""
         self.trajectory.rebase(self.path.pose_command, None)
         self.path.ramp.cancel()
         self.player.end(sequence_status)
         self.jogger.end(sequence_status)
         self.wave.end(WavePhase.FAULT if sequence_status == "fault" else WavePhase.ABORTED)
-        self.stream.end("a fault or E-stop latched" if sequence_status == "fault" else "the controller was disabled")
+        self.stream.end(why)
         self.epoch += 1
 
     # -- commands, once their preconditions hold -----------------------------------------

@@ -157,6 +157,18 @@ def test_estop_during_a_stream_latches_within_a_cycle(rig) -> None:
     rig.run()
     s = rig.controller.snapshot
     assert s.state.value == "estop" and s.stream is None
+    assert s.last_stream.reason.startswith("an E-stop latched: "), s.last_stream  # was "a fault or E-stop latched"
+
+
+def test_a_stream_a_fault_ends_names_the_fault(rig) -> None:
+    """Found from outside: "a fault or E-stop latched", its cause only in the events."""
+    _opened(rig)
+    _stream(rig, [(0.1 * n, 0, 0, 0, 0, 0) for n in range(50)])
+    rig.actuators.inject_fault(2, 0x20)
+    rig.run(5)
+    s = rig.controller.snapshot
+    assert s.state.value == "fault" and s.stream is None
+    assert s.last_stream.reason == "a fault latched: actuator_fault", s.last_stream
 
 
 def test_moves_and_calibration_swaps_are_refused_while_a_stream_is_open(rig, geometry) -> None:
