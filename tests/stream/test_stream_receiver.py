@@ -164,6 +164,23 @@ def test_a_sender_time_too_large_for_any_clock_is_malformed_and_the_input_goes_o
         assert receiver.running and "sent_s is a time in s within" in receiver.counters.last_problem
 
 
+@pytest.mark.parametrize(("sent_s", "pose"), [
+    (86737.31, (100.0, 0, 5.0, 0.1, 0, 0)), (1.7e9, (100.0, 0, 5.0, 0.1, 0, 0)), (0.01, (0.0,) * 6),
+    (86737.31, (0.0,) * 6), (0.0, (-2.5, 1e-3, 0, 0, 0, 180.0)), (12.5, (-2.5, 1e-3, 0, 0, 0, 180.0)),
+])  # not all zeros: that reads the same in either byte order
+def test_a_big_endian_binary_sample_is_refused_saying_so(sent_s, pose) -> None:
+    """Found from outside: half of a big-endian sender's samples were taken, their poses
+    subnormal (about 1e-317), the zero posture the platform then went to."""
+    import struct
+
+    with pytest.raises(MalformedSample, match="the numbers are big-endian"):
+        decode(struct.pack(">4sId6d", b"HXS1", 7, sent_s, *pose))
+
+
+def test_a_little_endian_sample_with_a_tiny_value_is_taken() -> None:
+    assert decode(encode(7, 12.5, [1e-310, 0, 0, 0, 0, 0])).pose[0] == 1e-310
+
+
 def test_an_error_handing_a_target_on_is_counted_and_the_next_target_goes_on() -> None:
     controller = FailingController(failing=1)
     with receiver_with_udp(controller) as (receiver, push, _):

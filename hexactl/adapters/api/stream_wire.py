@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import re
 import struct
+import sys
 from dataclasses import dataclass
 from math import isfinite
 
@@ -80,6 +81,9 @@ def decode(message: bytes) -> Sample:
         if len(message) != BINARY.size:
             raise MalformedSample(f"a binary sample is {BINARY.size} bytes, this one {len(message)}")
         _, sequence, sent_s, *pose = BINARY.unpack(message)
+        if _big_endian(message, (sent_s, *pose)):
+            raise MalformedSample(f"the numbers are big-endian (network byte order): a binary sample's are "
+                                  f"little-endian (struct format {BINARY.format!r})")
         return _checked(sequence, sent_s, pose)
     if len(message) > MAX_TEXT_BYTES:
         raise MalformedSample(f"neither a binary sample (magic {MAGIC!r}) nor a text line of at most "
@@ -100,6 +104,22 @@ def decode(message: bytes) -> Sample:
         return _checked(int(sequence), values[1], values[2:])
     raise MalformedSample(f"a text sample is 8 numbers (sequence, sent_s, x, y, z, roll, pitch, yaw) or 6 (the "
                           f"pose), got {len(values)}")
+
+
+_SWAPPED = struct.Struct(">" + BINARY.format[1:])
+
+
+def _big_endian(message: bytes, numbers: tuple[float, ...]) -> bool:
+    """Whether a binary sample whose ``numbers`` (sent_s and pose, read little-endian) hold
+    a subnormal or a sent_s out of range reads well big-endian. Found from outside: half of
+    a big-endian sender's samples were taken, their poses subnormal, about 1e-317: the
+    zero posture, where the platform went."""
+    if not any(value != 0.0 and abs(value) < sys.float_info.min for value in numbers) and \
+            isfinite(numbers[0]) and abs(numbers[0]) <= MAX_SENT_S:
+        return False
+    _, _, *swapped = _SWAPPED.unpack(message)
+    return all(isfinite(value) and (value == 0.0 or abs(value) >= sys.float_info.min) for value in swapped) and \
+        abs(swapped[0]) <= MAX_SENT_S and all(abs(value) <= POSE_MAGNITUDE_LIMIT for value in swapped[1:])
 
 
 def _checked(sequence: int | None, sent_s: float | None, pose: list[float]) -> Sample:
