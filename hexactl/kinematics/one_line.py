@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import re
 
-ONE_LINE_PATTERN = r"^[^\x00-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]+$"
-"""Non-empty, without C0 or C1 control characters, Unicode's line and paragraph separators
-or its bidirectional embeddings, overrides and isolates (which reorder the text printed
-after them: found from outside in a calibration's warning); a JSON Schema (ECMA) regular
-expression too."""
+ONE_LINE_PATTERN = (r"^[^\x00-\x1f\x7f-\x9f\u061c\u200b\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069"
+                    r"\ud800-\udfff\ufeff\ufff9-\ufffb]+$")
+"""Non-empty, without C0 or C1 control characters, Unicode's line and paragraph separators,
+its bidirectional embeddings, overrides, isolates and marks (which reorder the text printed
+after them: found from outside in a calibration's warning), a zero-width space or byte
+order mark (text that reads as other text), interlinear annotation characters, or a lone
+surrogate (not Unicode text: a strict JSON parser refuses the message that carries it); a
+JSON Schema (ECMA) regular expression too."""
 
 _ONE_LINE = re.compile(ONE_LINE_PATTERN)
 

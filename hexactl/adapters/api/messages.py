@@ -444,12 +444,12 @@ class ProgressRequest(_Request):
     report when finished); telemetry's ``campaign`` carries the latest to every display."""
 
     cmd: Literal["progress"]
-    title: ShownLine = Field(max_length=200, description="the phase, e.g. postures")
+    title: OneLine = Field(max_length=200, description="the phase, e.g. postures")
     done: int = Field(ge=0, description="steps of the phase done")
     total: int = Field(ge=0, description="steps of the phase")
     label: ShownLine = Field(default="", max_length=200, description="the latest step, e.g. leg 3 locked")
-    said: ShownLine | None = Field(default=None, max_length=2000, description="a sentence the campaign printed (a "
-                                   "line of it)")
+    said: OneLine | None = Field(default=None, min_length=1, max_length=2000, description="a sentence the campaign printed (a "
+                                 "line of it)")
     report: CampaignReport | None = Field(default=None, description="the finished campaign's results")
 
     @model_validator(mode="after")
