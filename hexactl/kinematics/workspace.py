@@ -174,12 +174,12 @@ class PoseChecks:
 def _told_apart(value: float, bound: float, form: str) -> str:
     """``value`` written in ``form`` ('g', '.3f'), with more digits where that would read as
     ``bound`` (found from outside: "x 610 mm outside the pose envelope [-610, 610] mm (by
-    0.0001 mm)")."""
+    0.0001 mm)", and "-0.000 mm < 0 mm" for a stroke)."""
+    kind, digits = form[-1], int(form[1:-1] or 6)
     text = format(value, form)
-    for digits in range(7, 17):
-        if text != format(bound, form) or value == bound:
-            break
-        text = f"{value:.{digits}g}"
+    while value != bound and float(text) == float(format(bound, f".{digits}{kind}")) and digits < 17:
+        digits += 1
+        text = format(value, f".{digits}{kind}")
     return text
 
 

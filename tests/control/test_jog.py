@@ -15,7 +15,7 @@ from hexactl.control.results import DEADMAN_LAPSED, CommandResult, ErrorCode
 from hexactl.control.submitter import commands_from
 from hexactl.kinematics.frames import apply, transform_of
 from hexactl.kinematics.soft_limits import SoftLimits
-from hexactl.kinematics.workspace import assess_poses
+from hexactl.kinematics.workspace import Violation, ViolationKind, assess_poses
 
 RENEW_CYCLES = 25  # 50 ms at 500 Hz: well inside the 0.2 s deadman
 X_AT_MOST_5 = OperatorFrames(soft_limits=SoftLimits(upper=(5, None, None, None, None, None)))
@@ -467,3 +467,16 @@ def test_a_relative_move_during_a_jog_starts_from_where_the_platform_is_not_the_
     assert moved.ok and moved.details["goal"][0] == pytest.approx(x + 10.0, abs=1e-6), (x, moved.details["goal"])
     rig.settle()
     assert rig.controller.snapshot.pose_command[0] == pytest.approx(x + 10.0, abs=1e-6)
+
+
+@pytest.mark.parametrize(("violation", "said"), [
+    (Violation(ViolationKind.SOFT_TILT, 12.5, 12.000001, ""), "the soft tilt limit at 12.000001 deg"),  # was "at 12"
+    (Violation(ViolationKind.SOFT_LIMIT, -3.5, -3.448287, "", axis="x"), "the soft limit on x at -3.448287 mm"),
+    (Violation(ViolationKind.STROKE_HIGH, 851.0, 850.0, "", leg=3), "the stroke high limit of leg 3 at 850 mm"),
+    (Violation(ViolationKind.SINGULAR, 90.0, 80.0, ""), "the near singular limit at 80"),
+])
+def test_a_limit_a_jog_heads_for_is_named_as_set_with_its_unit(violation, said) -> None:
+    from hexactl.control.jog_planning import _limit_name
+
+    assert _limit_name(violation) == said
+

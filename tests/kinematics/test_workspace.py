@@ -243,3 +243,17 @@ def test_a_rank_deficient_jacobian_has_an_infinite_condition_number_in_the_batch
         warnings.simplefilter("error")
         condition = workspace._conditions(nominal, np.stack((np.zeros((6, 6)), np.eye(6))))
     assert condition[0] == np.inf and condition[1] == pytest.approx(nominal.characteristic_length_mm, rel=1e-12)
+
+
+@pytest.mark.parametrize(("value", "bound", "form", "text"), [
+    (610.0001, 610.0, "g", "610.0001"), (-610.0000001, -610.0, "g", "-610.0000001"), (700.0, 610.0, "g", "700"),
+    (850.0004, 850.0, ".3f", "850.0004"), (850.4, 850.0, ".3f", "850.400"),
+    (850.0000004, 850.0, ".3f", "850.0000004"),  # found from outside: read "850" after a first fix
+    (-0.0001, 0.0, ".3f", "-0.0001"),  # and "-0.000 mm < 0 mm"
+    (5.0, 5.0, ".3f", "5.000"),
+])
+def test_a_value_beyond_its_bound_is_written_with_the_digits_that_tell_them_apart(value, bound, form, text) -> None:
+    from hexactl.kinematics.workspace import _told_apart
+
+    assert _told_apart(value, bound, form) == text
+

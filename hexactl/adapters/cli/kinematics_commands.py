@@ -106,6 +106,11 @@ def _assessment_record(assessment: PoseAssessment) -> dict[str, object]:
     }
 
 
+def _margin(margin: float) -> str:
+    """A margin to one decimal; a hair beyond its bound with two significant digits, not "-0.0"."""
+    return f"{margin:.1f}" if abs(margin) >= 0.05 or margin == 0 else f"{margin:.2g}"
+
+
 def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> None:
     limits = geometry.limits
     print(f"geometry: {geometry.name or 'unnamed'}  stroke {limits.stroke[0]:g}..{limits.stroke[1]:g} mm, "
@@ -119,11 +124,9 @@ def _print_check(geometry: Geometry, assessments: Sequence[PoseAssessment]) -> N
         # The axis nearest its bound for its envelope's size, in its own unit: the least of mm and
         # deg together (10 mm on x, 1 deg on roll printed "1.0") named no axis and mixed units.
         axis = min(range(6), key=lambda n: a.pose_margin[n] / max(limits.pose_max[n] - limits.pose_min[n], 1e-9))
-        margin = a.pose_margin[axis]  # a hair beyond its bound is not "-0.0"
-        envelope = f"{POSE_AXES[axis]} {margin:.1f}" if abs(margin) >= 0.05 or margin == 0 else f"{POSE_AXES[axis]} {margin:.2g}"
-        envelope += f" {POSE_UNITS[axis]}"
+        envelope = f"{POSE_AXES[axis]} {_margin(a.pose_margin[axis])} {POSE_UNITS[axis]}"
         print(f"{pose:<36} {'reachable' if a.ok else 'UNREACHABLE':<11} "
-              f"{a.stroke_margin_mm[stroke_leg]:>8.1f} mm L{stroke_leg + 1} "
+              f"{_margin(a.stroke_margin_mm[stroke_leg]):>8} mm L{stroke_leg + 1} "
               f"{max(a.base_cone_deg):>9.1f}° {max(a.platform_cone_deg):>9.1f}° "
               f"{a.jacobian_condition:>6.1f} {envelope:>17}")
         for violation in a.violations:
