@@ -498,3 +498,32 @@ def test_a_socket_thread_that_fails_ends_the_process_as_a_stuck_worker_does(monk
         context.term()
     assert stuck == ["the API's socket thread failed (MemoryError: no poller): no request would be answered again"]
 
+
+def test_a_request_that_fails_in_an_estops_drain_is_answered_and_the_drain_goes_on(server, handler, monkeypatch) -> None:
+    """Found reading the code from outside: the drain's requests were read outside the guard,
+    so one that failed ended the drain, its client unanswered and the E-stop's answered twice."""
+    import hexactl.adapters.api.server as server_module
+
+    decode = server_module.decode_body
+
+    def failing(body):
+        if b"fail" in body[-1]:
+            raise RuntimeError("a defect")
+        return decode(body)
+
+    monkeypatch.setattr(server_module, "decode_body", failing)
+    stopper, other = Client(server.endpoint), Client(server.endpoint)
+    try:
+        stopper.send("block-estop", "estop")
+        assert handler.entered.wait(WAIT_S)
+        other.send("fail", "status")
+        time.sleep(0.2)  # lets it arrive: read in the drain, or after it, its reply is the same
+        handler.release.set()
+        assert stopper.receive()["id"] == "block-estop"
+        reply = other.receive()
+        assert reply["error"]["code"] == "internal_error" and "RuntimeError: a defect" in reply["error"]["message"]
+        stopper.send("after", "status")
+        assert stopper.receive()["id"] == "after"  # the E-stop's client had one reply, not two
+    finally:
+        stopper.close()
+        other.close()

@@ -535,7 +535,10 @@ class ApiServer(SocketThread):
                 frames = self._socket.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:
                 return
-            self._admit(frames, time.monotonic_ns(), stopped_by=cause)
+            try:
+                self._admit(frames, time.monotonic_ns(), stopped_by=cause)
+            except Exception as error:  # that request's defect, not the stop's: the drain goes on
+                self._internal_error(frames, error)
 
     def _cancel_queued(self, cause: str) -> None:
         """Discard every queued :data:`CANCELLED_BY_STOP` request, answering each ``cancelled``."""
