@@ -87,6 +87,13 @@ class Rig:
     def click(self, selector: str) -> None:
         self.shown(selector).click()
 
+    def confirm(self, selector: str) -> None:
+        """Press a button that asks for a second press (Play, Roll back, Clear all), then
+        press it again once it asks."""
+        self.click(selector)
+        wait_for(lambda: "armed" in (self.element(selector).get_attribute("class") or ""), f"{selector} asking to confirm")
+        self.click(selector)
+
     def fill(self, selector: str, value: object) -> None:
         field = self.shown(selector)
         field.clear()

@@ -368,7 +368,7 @@ def test_the_sequence_line_says_it_is_over_after_another_clients_stop(rig) -> No
     def scenario() -> None:
         rig.enabled_from_the_page()
         rig.fill("#sequence-name", "x_sweep")
-        rig.click("#play")
+        rig.confirm("#play")
         wait_for(lambda: text(rig, "#sequence-result").startswith("playing"), "playing",
                  seen=lambda: text(rig, "#sequence-result"))
         wait_for(lambda: rig.status()["sequence"], "the sequence under way")
@@ -390,7 +390,7 @@ def test_the_sequence_line_says_how_far_a_leg_lock_moves_the_waypoints(rig) -> N
         rig.client.call("leg_lock", leg=3)
         try:
             rig.fill("#sequence-name", "steps.toml")
-            rig.click("#play")
+            rig.confirm("#play")
             said = wait_for(lambda: "steps" in text(rig, "#sequence-result") and text(rig, "#sequence-result"),
                             "the play's reply", seen=lambda: text(rig, "#sequence-result"))
             assert re.fullmatch(r"playing steps: steps, 2 waypoints, \d+\.\d s; projected onto the locked leg: "
@@ -439,7 +439,7 @@ def test_an_unbalanced_bracket_is_refused_and_no_frames_read_none_after_clear_al
     rig.fill("#frame-work", "[1,2,3,4,5,6]")
     rig.click("#frames-apply")
     wait_for(lambda: rig.client.call("frames")["frames"]["work"] == [1, 2, 3, 4, 5, 6], "the work frame set")
-    rig.click("#frames-clear")
+    rig.confirm("#frames-clear")
     wait_for(lambda: text(rig, "#frames-current") == NO_FRAMES, "no frames, said as before any was set",
              seen=lambda: text(rig, "#frames-current"))
     rig.fill("#frame-work", "")

@@ -127,6 +127,48 @@ def test_the_estop_button_stops_on_the_press_not_the_release(rig) -> None:
     rig.scenario(scenario)
 
 
+def test_play_clear_all_and_roll_back_ask_for_a_second_press_saying_what_they_would_do(rig) -> None:
+    """Found from outside: Play (its name filled in: x_sweep, 32 s to x -600 mm), Roll back
+    and Clear all acted at one click, beside the Move panel that validates first."""
+    def scenario() -> None:
+        rig.enabled_from_the_page()
+        assert rig.page("return document.getElementById('sequence-name').defaultValue") == ""  # none filled in
+        rig.client.call("set_frames", work=[0, 0, 0, 0, 0, 5])
+        work = lambda: rig.client.call("frames")["frames"]["work"]  # noqa: E731
+        plays, clears, rollbacks = (moves.sent(rig, cmd) for cmd in ("play", "clear_frames", "rollback_calibration"))
+        rig.click("#frames-clear")
+        said = wait_for(lambda: rig.element("#frames-result").text, "Clear all's question")
+        assert said.startswith("clears the work frame, the tool frame and every soft limit (now: ") and \
+            'Press "Confirm: Clear all" within 10 s' in said, said
+        rig.click("#calibration-rollback")
+        said = wait_for(lambda: rig.element("#calibration-result").text, "Roll back's question")
+        assert said.startswith("returns to the calibration active before the last load"), said
+        rig.fill("#sequence-name", "x_sweep")
+        rig.click("#play")
+        said = wait_for(lambda: "ending at" in rig.element("#sequence-result").text and rig.element("#sequence-result").text,
+                        "Play's question", seen=lambda: rig.element("#sequence-result").text)
+        assert said.startswith("x_sweep: ") and " waypoints, " in said and 'Press "Confirm: Play"' in said, said
+        rig.fill("#sequence-name", "y_rotation")  # another sequence than the one told: asked again, not played
+        rig.click("#play")
+        wait_for(lambda: rig.element("#sequence-result").text.startswith("y_rotation: "), "asked again")
+        rig.client.call("status")  # a round trip: whatever the page sent has reached the service
+        assert (moves.sent(rig, "play"), moves.sent(rig, "clear_frames"), moves.sent(rig, "rollback_calibration")) == \
+            (plays, clears, rollbacks)
+        assert work() == [0, 0, 0, 0, 0, 5] and rig.status()["sequence"] is None
+        rig.click("#play")  # the second press: played
+        wait_for(lambda: rig.status()["sequence"] is not None or rig.status()["last_sequence"], "played")
+        assert moves.sent(rig, "play") == plays + 1
+        rig.client.call("abort")
+        wait_for(lambda: rig.status()["motion"] == "holding", "at rest")
+        rig.confirm("#frames-clear")
+        wait_for(lambda: not any(work() or []), "cleared on the second press (a zero frame is none)", seen=work)
+
+    try:
+        rig.scenario(scenario)
+    finally:
+        rig.client.request("clear_frames")
+
+
 def test_two_estops_a_reset_apart_are_two_lines_each_with_its_time(rig) -> None:
     def scenario() -> None:
         rig.at_rest_disabled()
@@ -156,7 +198,7 @@ def test_apply_clears_the_calibration_preview_it_used(rig) -> None:
             change = rig.element("#calibration-change")
             assert change.text == "used by Apply (below): preview again for another change", change.text
             assert not preview.apply_enabled(rig)
-            rig.click("#calibration-rollback")
+            rig.confirm("#calibration-rollback")
             wait_for(lambda: rig.status()["calibration_id"] == preview.NOMINAL_ID, "rolled back")
             assert "would be accepted" not in change.text and not preview.apply_enabled(rig), change.text
         finally:

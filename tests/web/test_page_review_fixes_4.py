@@ -110,11 +110,11 @@ def test_a_calibration_previewed_applied_and_rolled_back_to_shows_what_its_ident
             assert rig.status()["calibration_id"] == geometry_id(weak)
             rig.client.call("load_calibration", toml=geometry_to_toml(preview.calibrated(0.1, "review plain")))
             preview.cleared(rig, "#calibration-result")
-            rig.click("#calibration-rollback")
+            rig.confirm("#calibration-rollback")
             classes, text = wait_for(lambda: (s := shown("#calibration-result"))[1] and s, "Roll back's answer")
             assert "cautioned" in classes and said in text, (classes, text)
             preview.cleared(rig, "#calibration-result")
-            rig.click("#calibration-rollback")  # back to the nominal geometry: no warnings
+            rig.confirm("#calibration-rollback")  # back to the nominal geometry: no warnings
             classes, text = wait_for(lambda: (s := shown("#calibration-result"))[1] and s, "Roll back's answer")
             assert "valid" in classes and "warning" not in text, (classes, text)
         finally:

@@ -69,6 +69,39 @@ function showCalibration(el, reply, text) {
   setResult(el, warnings.length ? 'cautioned' : 'valid', text + warnings.map((w) => `\nwarning, when identified: ${w}`).join(''));
 }
 
+const CONFIRM_MS = 10000;
+
+/**
+ * `button`'s action asks for a second press: the first says in `result` what it would do
+ * (`explain(inputs())`: a text, or null when it is refused, which explain says itself) and
+ * arms the button for CONFIRM_MS; a second press then, with the same `inputs()`, does it
+ * (`act(inputs())`). Found from outside: Play (a 32 s sequence to x -600 mm, its name filled
+ * in), Roll back and Clear all changed the motion, the calibration or every soft limit in
+ * one click, beside buttons that validate first.
+ */
+function confirmed(button, result, inputs, explain, act) {
+  const label = button.textContent;
+  let armed = null;
+  const disarm = () => { armed = null; button.textContent = label; button.classList.remove('armed'); };
+  button.addEventListener('click', async () => {
+    const key = inputs();
+    if (armed && armed.key === key && performance.now() < armed.until) {
+      disarm();
+      setResult(result, null, '');   // the question answered: the reply takes its place
+      await act(key);
+      return;
+    }
+    disarm();
+    const said = await explain(key);
+    if (said === null) return;
+    armed = { key, until: performance.now() + CONFIRM_MS };
+    button.textContent = `Confirm: ${label}`;
+    button.classList.add('armed');
+    setResult(result, 'cautioned', `${said}. Press "Confirm: ${label}" within ${CONFIRM_MS / 1000} s to go on`);
+    setTimeout(() => { if (armed && performance.now() >= armed.until) disarm(); }, CONFIRM_MS + 10);
+  });
+}
+
 function setResult(el, cls, text) {
   underWayLines.delete(el);
   el.classList.remove('valid', 'refused', 'moving', 'cautioned');
@@ -503,9 +536,15 @@ export function setupControls(ctx) {
     setResult(seqResult, reply.ok ? 'valid' : 'refused', reply.ok ? okText(reply) : describeError(reply.error));
     if (reply.ok && underWayNow) claimUnderWay(seqResult, (r) => Boolean(r.sequence), sequenceOver);
   }
-  $('play').addEventListener('click', async () => {
-    const name = $('sequence-name').value.trim();
-    if (!name) { setResult(seqResult, 'refused', 'name a sequence: a built-in or a file'); return; }
+  confirmed($('play'), seqResult, () => $('sequence-name').value.trim(), async (name) => {
+    if (!name) { setResult(seqResult, 'refused', 'name a sequence: a built-in or a file'); return null; }
+    const blind = ctx.noLiveData();
+    if (blind) { setResult(seqResult, 'refused', `not sent: the page has no live data (${blind}), so it cannot show what the sequence would start from`); return null; }
+    const reply = await ctx.send('validate_sequence', { sequence: name });
+    if (!reply.ok) { setResult(seqResult, 'refused', describeError(reply.error)); return null; }
+    if (!reply.valid) { setResult(seqResult, 'refused', describeError(reply.refusal)); return null; }
+    return `${reply.name ?? name}: ${reply.waypoints} waypoints, ${fmt(reply.duration, 1)} s, ending at ${fmtPose(reply.goal)} (relative to the zero posture)${lockShift(reply.lock_corrections_mm)}`;
+  }, async (name) => {
     const reply = await ctx.send('play', { sequence: name });
     seqReply(reply, (r) => `${r.message ?? 'playing'}${r.name ? `: ${r.name}` : ''}${r.waypoints !== undefined ? `, ${Array.isArray(r.waypoints) ? r.waypoints.length : r.waypoints} waypoints` : ''}${typeof r.duration === 'number' ? `, ${r.duration.toFixed(1)} s` : ''}${lockShift(r.lock_corrections_mm)}`);
   });
@@ -589,7 +628,10 @@ export function setupControls(ctx) {
     framesApplied = reply.ok ? framesKey(reply.frames) : null;
     framesInForce = false;
   });
-  $('frames-clear').addEventListener('click', async () => {
+  confirmed($('frames-clear'), framesResult, () => '', async () => {
+    const f = ctx.record()?.frames;
+    return `clears the work frame, the tool frame and every soft limit (now: ${describeFrames(f).replace(/\n/g, '; ')})`;
+  }, async () => {
     const reply = await ctx.send('clear_frames');
     setResult(framesResult, reply.ok ? 'valid' : 'refused', reply.ok ? reply.message ?? 'frames cleared' : describeError(reply.error));
     framesApplied = reply.ok ? framesKey(reply.frames) : null;
@@ -699,7 +741,9 @@ export function setupControls(ctx) {
     if (!reply.ok) { setResult(calResult, 'refused', describeError(reply.error)); return; }
     showCalibration(calResult, reply, `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm`);
   });
-  $('calibration-rollback').addEventListener('click', async () => {
+  confirmed($('calibration-rollback'), calResult, () => '', async () =>
+    `returns to the calibration active before the last load (now ${ctx.record()?.calibration_id ?? '?'}): the set-points change by its difference, ramped while enabled`,
+  async () => {
     const reply = await ctx.send('rollback_calibration');
     if (!reply.ok) { setResult(calResult, 'refused', describeError(reply.error)); return; }
     showCalibration(calResult, reply, `${reply.message ?? 'rolled back'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm`);
