@@ -41,11 +41,14 @@ def test_a_renewal_held_up_past_its_deadline_does_not_end_the_jog() -> None:
     assert all(fields.get("renews") == 7 for fields in service.sent)
 
 
-def test_a_lapsed_jog_starts_again_and_a_stopped_one_ends_the_command() -> None:
+def test_a_lapsed_jog_starts_again_and_a_stopped_one_ends_the_command(capsys: pytest.CaptureFixture[str]) -> None:
     lapsed = ScriptedService(_refused("jog_ended", lapsed=True, reason="the deadman lapsed"), {"ok": True, "jog": 9})
     assert _renew(lapsed, FIELDS, 7, for_s=0.03, every_s=0.005) is None
     # a new jog in place of the lapsed one (refused if a stop came after the lapse), then renewed as such
     assert lapsed.sent[1] == {**FIELDS, "restarts": 7} and lapsed.sent[2]["renews"] == 9
+    # and said: the platform braked to rest between them (found from outside: nothing was)
+    assert capsys.readouterr().err == ("hexactl jog: jog 7 lapsed (this machine or the service held up its renewals): "
+                                       "the platform braked; jogging on as jog 9\n")
 
     stop_after_lapse = _refused("jog_ended", lapsed=False, reason="stopped")
     restart_refused = ScriptedService(_refused("jog_ended", lapsed=True, reason="the deadman lapsed"), stop_after_lapse)

@@ -160,6 +160,9 @@ def _renew(client: Any, fields: dict[str, Any], jog: int, for_s: float, every_s:
         error = reply.get("error") or {}
         if error.get("code") == "jog_ended" and (error.get("details") or {}).get("lapsed"):
             reply = client.request("jog", **fields, restarts=jog)  # refused if a stop came after the lapse
+            if reply.get("ok"):  # said: the platform braked to rest and goes on (found from outside: silent)
+                print(f"hexactl jog: jog {jog} lapsed (this machine or the service held up its renewals): the "
+                      f"platform braked; jogging on as jog {reply['jog']}", file=sys.stderr, flush=True)
         if not reply.get("ok"):
             return reply
         jog = reply["jog"]
