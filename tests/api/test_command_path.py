@@ -458,9 +458,9 @@ def test_a_motion_request_being_planned_when_a_stop_arrives_is_stopped_again(ser
     mover.close()
 
 
-def test_a_request_the_socket_thread_fails_on_is_answered_and_the_next_is_served(server, monkeypatch) -> None:
-    """A defect met reading one request is answered internal_error and logged; the thread that
-    reads every request, an E-stop's, goes on (found from outside: one request killed it)."""
+@pytest.fixture
+def failing_reads(monkeypatch) -> None:
+    """Reading a request whose body holds "fail" raises, as a defect of the server would."""
     import hexactl.adapters.api.server as server_module
 
     decode = server_module.decode_body
@@ -471,6 +471,12 @@ def test_a_request_the_socket_thread_fails_on_is_answered_and_the_next_is_served
         return decode(body)
 
     monkeypatch.setattr(server_module, "decode_body", failing)
+
+
+@pytest.mark.usefixtures("failing_reads")
+def test_a_request_the_socket_thread_fails_on_is_answered_and_the_next_is_served(server) -> None:
+    """A defect met reading one request is answered internal_error and logged; the thread that
+    reads every request, an E-stop's, goes on (found from outside: one request killed it)."""
     client = Client(server.endpoint)
     try:
         client.send("fail", "status")
@@ -499,19 +505,10 @@ def test_a_socket_thread_that_fails_ends_the_process_as_a_stuck_worker_does(monk
     assert stuck == ["the API's socket thread failed (MemoryError: no poller): no request would be answered again"]
 
 
-def test_a_request_that_fails_in_an_estops_drain_is_answered_and_the_drain_goes_on(server, handler, monkeypatch) -> None:
+@pytest.mark.usefixtures("failing_reads")
+def test_a_request_that_fails_in_an_estops_drain_is_answered_and_the_drain_goes_on(server, handler) -> None:
     """Found reading the code from outside: the drain's requests were read outside the guard,
     so one that failed ended the drain, its client unanswered and the E-stop's answered twice."""
-    import hexactl.adapters.api.server as server_module
-
-    decode = server_module.decode_body
-
-    def failing(body):
-        if b"fail" in body[-1]:
-            raise RuntimeError("a defect")
-        return decode(body)
-
-    monkeypatch.setattr(server_module, "decode_body", failing)
     stopper, other = Client(server.endpoint), Client(server.endpoint)
     try:
         stopper.send("block-estop", "estop")
@@ -521,7 +518,7 @@ def test_a_request_that_fails_in_an_estops_drain_is_answered_and_the_drain_goes_
         handler.release.set()
         assert stopper.receive()["id"] == "block-estop"
         reply = other.receive()
-        assert reply["error"]["code"] == "internal_error" and "RuntimeError: a defect" in reply["error"]["message"]
+        assert reply["error"]["code"] == "internal_error" and "RecursionError" in reply["error"]["message"]
         stopper.send("after", "status")
         assert stopper.receive()["id"] == "after"  # the E-stop's client had one reply, not two
     finally:
