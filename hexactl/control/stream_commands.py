@@ -143,7 +143,7 @@ class _OpenStream:
     sent_ns: int | None = None  # when the last target handed to the loop arrived (monotonic)
     interval_s: float = 0.0  # between targets sent, smoothed
     joined: bool = False  # a sample came within JOIN_DISTANCE of the platform: followed at its velocity since
-    held: tuple[float, np.ndarray] | None = None  # (sent_s, request): the newest pose that changed, when it came first
+    held: tuple[float, tuple[float, ...]] | None = None  # (sent_s, pose as sent): the newest that changed, when it came first
     held_velocity: np.ndarray = field(default_factory=lambda: np.zeros(6))  # the velocity it came with
     change_interval_s: float = 0.0  # between the sender's changes of pose (its source's updates), smoothed
     repeats: int = 0  # requests since the held one that repeated it
@@ -159,9 +159,10 @@ class _OpenStream:
         self.sent_ns = received_ns
         return min(MAX_HORIZON_S, max(HORIZON_S, 2.0 * self.interval_s))
 
-    def take(self, sent_s: float, requested: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where the stream is by the request sent at ``sent_s`` (s, the sender's clock),
-        mm and rad, and its velocity (:meth:`velocity`), the request kept for the velocity.
+    def take(self, sent_s: float, pose_mm_deg: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """Where the stream is by the sample ``pose_mm_deg`` sent at ``sent_s`` (s, the
+        sender's clock), mm and rad (:meth:`near_last`), and its velocity (:meth:`velocity`),
+        the request kept for the velocity.
 
         A request that repeats the pose before is a stop there: velocity zero. But once the
         sender has shown that it resends its source's last pose until the source updates (a
@@ -170,8 +171,12 @@ class _OpenStream:
         on at its velocity since it came. Each repeat read as a stop had the platform arrive
         at rest at every one: found from outside, such a stream of a 314 mm/s sine was
         followed at 159 mm/s, 348 ms late."""
+        # Repeats are told by the pose as sent: converted near the last target, which the
+        # resent samples move on, a turned frame's angle near ±180° differed in its last bit
+        # (found from outside: such a stream stuttered again).
+        requested, pose = self.near_last(pose_mm_deg), tuple(pose_mm_deg)
         held = self.held
-        if held is not None and np.array_equal(requested, held[1]) and sent_s >= held[0]:
+        if held is not None and pose == held[1] and sent_s >= held[0]:
             age = sent_s - held[0]
             if age < MIN_SAMPLE_GAP_S:  # the same sample again: the receiver hands the one before along
                 return requested, self.held_velocity
@@ -184,7 +189,7 @@ class _OpenStream:
             if held is not None and 0.0 < sent_s - held[0] <= MAX_SAMPLE_GAP_S:
                 self.change_interval_s += 0.2 * (sent_s - held[0] - self.change_interval_s)
                 self.resends = self.resends or self.repeats > 0
-            self.held, self.held_velocity, self.repeats = (sent_s, requested), velocity, 0
+            self.held, self.held_velocity, self.repeats = (sent_s, pose), velocity, 0
         self.remember(sent_s, requested)
         return requested, velocity
 
@@ -318,9 +323,9 @@ class StreamCommands:
             self._open = None
             return TargetResult(False)
         if before is not None:
-            stream.take(before[1], stream.near_last(before[0]))
+            stream.take(before[1], before[0])
         horizon_s = stream.horizon(received_ns)
-        requested, velocity = stream.take(sent_s, stream.near_last(pose_mm_deg))
+        requested, velocity = stream.take(sent_s, pose_mm_deg)
         running = velocity  # the stream's own, while it is joined: how fast its samples move on
         joining = None if stream.joined else self._joining(stream, requested, running)
         if joining is not None:

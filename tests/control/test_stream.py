@@ -453,18 +453,21 @@ def test_a_moving_stream_far_from_the_platform_is_joined_at_rest_not_at_its_spee
     rig.assert_setpoints_safe()
 
 
-def _held_source(rig, source_hz: float, seconds: float, x) -> list[float]:
-    """Send once a cycle ``x(t)`` (mm) of a source updated ``source_hz`` times a second, its
-    last value resent between updates (a game's 60 Hz sent on at the loop's rate), each with
-    the one before as the receiver hands them over; x commanded each cycle."""
+def _held_source(rig, source_hz: float, seconds: float, value, axis: int = 0) -> list[float]:
+    """Send once a cycle ``value(t)`` (mm, deg) on ``axis`` of a source updated ``source_hz``
+    times a second, its last value resent between updates (a game's 60 Hz sent on at the
+    loop's rate), each with the one before as the receiver hands them over; that axis
+    commanded each cycle (relative to the zero posture, mm and deg)."""
     rate_hz = 1e9 / rig.period_ns
     commanded, before = [], None
     for n in range(int(seconds * rate_hz)):
-        pose, sent_s = (x(math.floor(n / rate_hz * source_hz) / source_hz), 0, 0, 0, 0, 0), rig.clock.now_ns / 1e9
+        pose = [0.0] * 6
+        pose[axis] = value(math.floor(n / rate_hz * source_hz) / source_hz)
+        sent_s = rig.clock.now_ns / 1e9
         assert rig.controller.stream_target(pose, n + 1, sent_s, rig.clock.now_ns, before).sent
         before = (pose, sent_s)
         rig.run()
-        commanded.append(rig.controller.snapshot.pose_command[0])
+        commanded.append(rig.controller.snapshot.pose_command.in_degrees()[axis])
     return commanded
 
 
@@ -480,6 +483,25 @@ def test_a_sender_resending_its_sources_last_pose_is_followed_at_the_sources_spe
     error = commanded[later] - 100.0 * np.sin(np.pi * t[later])
     assert np.max(np.abs(error)) < 10.0, np.max(np.abs(error))  # mm; 100 mm behind when repeats were stops
     assert rig.controller.snapshot.clamped_cycles == 0
+    rig.assert_setpoints_safe()
+
+
+def test_a_resending_sender_in_a_work_frame_turned_180_degrees_is_followed_as_in_any_other(rig) -> None:
+    """Found from outside: a yaw sine about 180° in a work frame turned 180°, resent, came out
+    of the short way round with its last bit changed now and then, read as a change of pose:
+    122 ms late and stalling, against 10 ms in an unturned frame."""
+    assert rig.controller.set_frames(OperatorFrames(work=(0, 0, 0, 0, 0, 180))).ok
+    _opened(rig, frame="work")
+    rate_hz = 1e9 / rig.period_ns
+
+    def sent_yaw(t: float) -> float:  # as a sender reads it: in [-180, 180]
+        return math.remainder(180.0 + 10.0 * math.sin(math.pi * t), 360.0)
+
+    commanded = np.array(_held_source(rig, 60.0, 4.0, sent_yaw, axis=5))
+    t = np.arange(len(commanded)) / rate_hz
+    later = t > 1.5
+    error = commanded[later] - 10.0 * np.sin(np.pi * t[later])  # relative yaw: the frame's 180° taken out
+    assert np.sqrt(np.mean(error**2)) < 0.5, np.sqrt(np.mean(error**2))  # deg; 1.54 when it stuttered
     rig.assert_setpoints_safe()
 
 

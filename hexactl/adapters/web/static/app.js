@@ -250,9 +250,16 @@ function estop(pressed = 'E-STOP') {
 }
 // Sent on the press, not on the release: a click needs the release over the button, and an
 // operator who slid off it, or a touch screen that took the touch for a scroll, sent nothing
-// (found from outside). A click the keyboard makes (Enter or Space: detail 0) sends it too;
+// (found from outside). A mouse's left press is its mousedown, which comes for a press while
+// another button is held too (a pointerdown does not); a touch's or a pen's is its
+// pointerdown, whose default (the mouse events that would follow) is prevented. A click the
+// keyboard makes (Enter or Space: detail 0) sends it too, once however long the key is held;
 // a pointer's click follows the press that already sent it.
-estopButton.addEventListener('pointerdown', (ev) => { if (ev.button === 0) estop(); });
+estopButton.addEventListener('mousedown', (ev) => { if (ev.button === 0) estop(); });
+estopButton.addEventListener('pointerdown', (ev) => {
+  if (ev.pointerType !== 'mouse' && ev.button === 0) { ev.preventDefault(); estop(); }
+});
+estopButton.addEventListener('keydown', (ev) => { if (ev.repeat) ev.preventDefault(); });
 estopButton.addEventListener('click', (ev) => { if (ev.detail === 0) estop(); });
 
 function newestEventSeq(r) {
