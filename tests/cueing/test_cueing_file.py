@@ -47,6 +47,8 @@ def test_a_key_left_out_keeps_its_default() -> None:
     ("[translational]\ngain = 0.5\n", "mine.toml: translational.gain: must be a list of numbers"),
     ("[tilt]\nlimit_deg = nan\n", "mine.toml: tilt.limit_deg: must be a finite number"),
     ("[workspace]\nlimiter_knee = 0.98\n", "mine.toml: workspace: limiter_knee 0.98 must be below limiter_ceiling 0.97"),
+    # Found from outside: taken, and the lane change's y then ran at 911 mm/s
+    ("[workspace]\nuse_fraction = 0.99\n", "mine.toml: workspace: use_fraction 0.99 must be at most limiter_ceiling 0.97"),
     ("[workspace]\nmax_gain = 1e4\n", "mine.toml: workspace.max_gain: Input should be less than or equal to 100"),
     ("[wash]\ngain = 1\n", "mine.toml: wash: not a key here; the keys here are translational, rotational, tilt, workspace"),
     ("[tilt\n", "mine.toml: not valid TOML"),
