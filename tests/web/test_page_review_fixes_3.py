@@ -108,6 +108,8 @@ def test_the_estop_button_stops_on_the_press_not_the_release(rig) -> None:
         hold.perform()
         try:
             wait_for(lambda: rig.status()["state"] == "estop", "the E-stop in force, the button still held")
+            # and the tab says so among other tabs (found from outside: "hexactl dashboard" whatever the state)
+            wait_for(lambda: rig.driver.title == "ESTOP · hexactl dashboard", "the tab's title", seen=lambda: rig.driver.title)
             ActionChains(rig.driver).move_by_offset(-300, 200).perform()
         finally:
             ActionChains(rig.driver).release().perform()

@@ -451,8 +451,15 @@ function streamSummary(r) {
   return [last ? `last stream ${last.stream}: ${last.reason} (${last.targets} targets)` : '', stopped].filter(Boolean).join(' · ');
 }
 
+/** The tab's title says the state, so that a page among other tabs shows an E-stop or a fault. */
+function tabTitle(text) {
+  const title = `${text} · hexactl dashboard`;
+  if (document.title !== title) document.title = title;
+}
+
 function updateReadouts(r) {
   setPill('state', r.state, 'st');
+  tabTitle(String(r.state).toUpperCase());
   setPill('motion', r.motion, 'mo');
   setText('calibration-id', r.calibration_id ?? '–');
   const geomId = state.geometry?.calibration_id;
@@ -790,6 +797,7 @@ function applyLiveness(now) {
   if (!lost) return;
   const age = noDataFor(now, loss);
   const r = state.record;
+  tabTitle('NO LIVE DATA');
   for (const [id, key] of [['state', 'state'], ['motion', 'motion']]) {
     setText(id, 'UNKNOWN');
     const el = $(id);
