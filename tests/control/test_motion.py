@@ -85,7 +85,7 @@ def test_freeze_keeps_the_commanded_pose_and_forgets_the_rest(rig):
     rig.motion.swap(rig.active, enabled=True)  # a ramp under way
     rig.run(20)
     pose, setpoints, epoch = rig.motion.path.pose_command, rig.motion.path.setpoints, rig.motion.epoch
-    rig.motion.freeze("fault")
+    rig.motion.freeze("fault", "a fault latched: following_error")
     assert not rig.motion.trajectory.moving and rig.motion.trajectory.position == pytest.approx(pose)
     assert not rig.motion.path.ramp.active and rig.motion.player.report.status == "fault"
     assert (rig.motion.path.pose_command, rig.motion.path.setpoints) == (pose, setpoints)
