@@ -94,8 +94,8 @@ class WorkspaceUse(_Frozen):
             raise ValueError(f"limiter_knee {self.limiter_knee:g} must be below limiter_ceiling "
                              f"{self.limiter_ceiling:g}: the limiter bends poses between the two")
         if self.use_fraction > self.limiter_ceiling:  # found from outside: 0.99 over 0.97, y at 911 mm/s
-            raise ValueError(f"use_fraction {self.use_fraction:g} must be at most limiter_ceiling "
-                             f"{self.limiter_ceiling:g}: the gain would fit cues into a workspace the limiter then cuts")
+            raise ValueError(f"use_fraction {self.use_fraction!r} must be at most limiter_ceiling "
+                             f"{self.limiter_ceiling!r}: the gain would fit cues into a workspace the limiter then cuts")
         return self
 
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import re
 import struct
-import sys
 from dataclasses import dataclass
 from math import isfinite
 
@@ -108,18 +107,32 @@ def decode(message: bytes) -> Sample:
 
 _SWAPPED = struct.Struct(">" + BINARY.format[1:])
 
+_SMALLEST_PLAUSIBLE = 1e-9
+"""Below this (mm, deg, s), but not zero, no sender means a value: a double's bytes in the
+other order read as one of about 3 % of the exponents between this and the largest bound."""
+
 
 def _big_endian(message: bytes, numbers: tuple[float, ...]) -> bool:
-    """Whether a binary sample whose ``numbers`` (sent_s and pose, read little-endian) hold
-    a subnormal or a sent_s out of range reads well big-endian. Found from outside: half of
-    a big-endian sender's samples were taken, their poses subnormal, about 1e-317: the
-    zero posture, where the platform went."""
-    if not any(value != 0.0 and abs(value) < sys.float_info.min for value in numbers) and \
-            isfinite(numbers[0]) and abs(numbers[0]) <= MAX_SENT_S:
+    """Whether a binary sample's ``numbers`` (sent_s and pose, read little-endian) hold
+    values a sender cannot mean, and fewer of them read big-endian, none beyond its bound.
+    Found from outside: half of a big-endian sender's samples were taken, their poses about
+    1e-317 (the zero posture, where the platform went); a first rule that looked at
+    subnormals only let poses of about 1e-236 through, and refused a little-endian sample
+    holding a subnormal."""
+    unmeant = _unmeant(numbers)
+    if not unmeant:
         return False
     _, _, *swapped = _SWAPPED.unpack(message)
-    return all(isfinite(value) and (value == 0.0 or abs(value) >= sys.float_info.min) for value in swapped) and \
-        abs(swapped[0]) <= MAX_SENT_S and all(abs(value) <= POSE_MAGNITUDE_LIMIT for value in swapped[1:])
+    swapped_unmeant = _unmeant(tuple(swapped))
+    return len(swapped_unmeant) < len(unmeant) and not any(abs(value) >= _SMALLEST_PLAUSIBLE
+                                                            for value in swapped_unmeant)
+
+
+def _unmeant(numbers: tuple[float, ...]) -> list[float]:
+    """Those of sent_s and the pose that are neither 0 nor within what a sender means."""
+    sent_s, *pose = numbers
+    return [value for value, high in ((sent_s, MAX_SENT_S), *((value, POSE_MAGNITUDE_LIMIT) for value in pose))
+            if value != 0.0 and not (isfinite(value) and _SMALLEST_PLAUSIBLE <= abs(value) <= high)]
 
 
 def _checked(sequence: int | None, sent_s: float | None, pose: list[float]) -> Sample:
