@@ -92,6 +92,7 @@ class Rig:
         press it again once it asks."""
         self.click(selector)
         wait_for(lambda: "armed" in (self.element(selector).get_attribute("class") or ""), f"{selector} asking to confirm")
+        time.sleep(0.45)  # a press sooner than 0.4 s after the question confirms nothing (controls.js)
         self.click(selector)
 
     def fill(self, selector: str, value: object) -> None:

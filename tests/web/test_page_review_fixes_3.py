@@ -17,6 +17,7 @@ anything took.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -176,7 +177,27 @@ def test_play_clear_all_and_roll_back_ask_for_a_second_press_saying_what_they_wo
         assert (moves.sent(rig, "play"), moves.sent(rig, "clear_frames"), moves.sent(rig, "rollback_calibration")) == \
             (plays, clears, rollbacks)
         assert work() == [0, 0, 0, 0, 0, 5] and rig.status()["sequence"] is None
-        rig.click("#play")  # the second press: played
+        # Found from outside: a double-click, a held Enter and frames changed between the presses each played
+        ActionChains(rig.driver).double_click(rig.shown("#frames-clear")).perform()
+        rig.fill("#sequence-name", "compound")  # Play is armed for y_rotation: another name asks first
+        rig.page("document.getElementById('play').focus()")
+        enter = {"key": "Enter", "code": "Enter", "windowsVirtualKeyCode": 13}
+        for repeat in (False, True, True, True):
+            rig.driver.execute_cdp_cmd("Input.dispatchKeyEvent", {"type": "keyDown", "text": "\r", "autoRepeat": repeat,
+                                                                  **enter})
+        rig.driver.execute_cdp_cmd("Input.dispatchKeyEvent", {"type": "keyUp", **enter})
+        rig.client.call("status")  # a round trip: whatever the page sent has reached the service
+        assert moves.sent(rig, "play") == plays and moves.sent(rig, "clear_frames") == clears
+        wait_for(lambda: rig.element("#sequence-result").text.startswith("compound: "), "Enter's question")
+        rig.client.call("set_frames", work=[0, 0, 0, 0, 0, 6])  # another client, between the question and the press
+        wait_for(lambda: rig.page("return window.hexactlDashboard.record.frames.work[5]") == 6, "the page told")
+        preview.cleared(rig, "#sequence-result")
+        time.sleep(0.45)  # past the 0.4 s in which a press confirms nothing
+        rig.click("#play")
+        wait_for(lambda: rig.element("#sequence-result").text.startswith("compound: "), "asked again")
+        assert moves.sent(rig, "play") == plays
+        time.sleep(0.45)
+        rig.click("#play")  # the second press on what was described: played
         wait_for(lambda: rig.status()["sequence"] is not None or rig.status()["last_sequence"], "played")
         assert moves.sent(rig, "play") == plays + 1
         rig.client.call("abort")

@@ -70,22 +70,29 @@ function showCalibration(el, reply, text) {
 }
 
 const CONFIRM_MS = 10000;
+const CONFIRM_NOT_BEFORE_MS = 400;
 
 /**
  * `button`'s action asks for a second press: the first says in `result` what it would do
  * (`explain(inputs())`: a text, or null when it is refused, which explain says itself) and
- * arms the button for CONFIRM_MS; a second press then, with the same `inputs()`, does it
- * (`act(inputs())`). Found from outside: Play (a 32 s sequence to x -600 mm, its name filled
- * in), Roll back and Clear all changed the motion, the calibration or every soft limit in
- * one click, beside buttons that validate first.
+ * arms the button for CONFIRM_MS; a second press then, with the same `inputs()` (what the
+ * text described: a name, the frames, the calibration in force), does it (`act(inputs())`).
+ * Found from outside: Play (a 32 s sequence to x -600 mm, its name filled in), Roll back
+ * and Clear all changed the motion, the calibration or every soft limit in one click,
+ * beside buttons that validate first. A double-click's second click, a press sooner than
+ * CONFIRM_NOT_BEFORE_MS after the question, and a held key's repeats confirm nothing
+ * (found from outside: each did).
  */
 function confirmed(button, result, inputs, explain, act) {
   const label = button.textContent;
   let armed = null;
   const disarm = () => { armed = null; button.textContent = label; button.classList.remove('armed'); };
-  button.addEventListener('click', async () => {
-    const key = inputs();
-    if (armed && armed.key === key && performance.now() < armed.until) {
+  button.addEventListener('keydown', (ev) => { if (ev.repeat) ev.preventDefault(); });
+  button.addEventListener('click', async (ev) => {
+    if (ev.detail > 1) return;
+    const key = inputs(), now = performance.now();
+    if (armed && now < armed.from + CONFIRM_NOT_BEFORE_MS) return;
+    if (armed && armed.key === key && now < armed.until) {
       disarm();
       setResult(result, null, '');   // the question answered: the reply takes its place
       await act(key);
@@ -94,7 +101,7 @@ function confirmed(button, result, inputs, explain, act) {
     disarm();
     const said = await explain(key);
     if (said === null) return;
-    armed = { key, until: performance.now() + CONFIRM_MS };
+    armed = { key, from: performance.now(), until: performance.now() + CONFIRM_MS };
     button.textContent = `Confirm: ${label}`;
     button.classList.add('armed');
     setResult(result, 'cautioned', `${said}. Press "Confirm: ${label}" within ${CONFIRM_MS / 1000} s to go on`);
@@ -536,7 +543,10 @@ export function setupControls(ctx) {
     setResult(seqResult, reply.ok ? 'valid' : 'refused', reply.ok ? okText(reply) : describeError(reply.error));
     if (reply.ok && underWayNow) claimUnderWay(seqResult, (r) => Boolean(r.sequence), sequenceOver);
   }
-  confirmed($('play'), seqResult, () => $('sequence-name').value.trim(), async (name) => {
+  // what Play's question describes: the sequence, and the frames and calibration it is planned in
+  const inForce = () => JSON.stringify([ctx.record()?.frames ?? null, ctx.record()?.calibration_id ?? null]);
+  confirmed($('play'), seqResult, () => JSON.stringify([$('sequence-name').value.trim(), inForce()]), async (key) => {
+    const [name] = JSON.parse(key);
     if (!name) { setResult(seqResult, 'refused', 'name a sequence: a built-in or a file'); return null; }
     const blind = ctx.noLiveData();
     if (blind) { setResult(seqResult, 'refused', `not sent: the page has no live data (${blind}), so it cannot show what the sequence would start from`); return null; }
@@ -544,8 +554,8 @@ export function setupControls(ctx) {
     if (!reply.ok) { setResult(seqResult, 'refused', describeError(reply.error)); return null; }
     if (!reply.valid) { setResult(seqResult, 'refused', describeError(reply.refusal)); return null; }
     return `${reply.name ?? name}: ${reply.waypoints} waypoints, ${fmt(reply.duration, 1)} s, ending at ${fmtPose(reply.goal)} (relative to the zero posture)${lockShift(reply.lock_corrections_mm)}`;
-  }, async (name) => {
-    const reply = await ctx.send('play', { sequence: name });
+  }, async (key) => {
+    const reply = await ctx.send('play', { sequence: JSON.parse(key)[0] });
     seqReply(reply, (r) => `${r.message ?? 'playing'}${r.name ? `: ${r.name}` : ''}${r.waypoints !== undefined ? `, ${Array.isArray(r.waypoints) ? r.waypoints.length : r.waypoints} waypoints` : ''}${typeof r.duration === 'number' ? `, ${r.duration.toFixed(1)} s` : ''}${lockShift(r.lock_corrections_mm)}`);
   });
   /** With a leg locked each waypoint goes to the nearest pose that keeps its length: say how far, at most. */
@@ -628,7 +638,7 @@ export function setupControls(ctx) {
     framesApplied = reply.ok ? framesKey(reply.frames) : null;
     framesInForce = false;
   });
-  confirmed($('frames-clear'), framesResult, () => '', async () => {
+  confirmed($('frames-clear'), framesResult, () => JSON.stringify(ctx.record()?.frames ?? null), async () => {
     const f = ctx.record()?.frames;
     return `clears the work frame, the tool frame and every soft limit (now: ${describeFrames(f).replace(/\n/g, '; ')})`;
   }, async () => {
@@ -741,7 +751,7 @@ export function setupControls(ctx) {
     if (!reply.ok) { setResult(calResult, 'refused', describeError(reply.error)); return; }
     showCalibration(calResult, reply, `${reply.message ?? 'loaded'}: calibration ${reply.calibration_id ?? '?'}, change ${fmt(reply.change_mm, 3)} mm`);
   });
-  confirmed($('calibration-rollback'), calResult, () => '', async () =>
+  confirmed($('calibration-rollback'), calResult, () => ctx.record()?.calibration_id ?? '', async () =>
     `returns to the calibration active before the last load (now ${ctx.record()?.calibration_id ?? '?'}): the set-points change by its difference, ramped while enabled`,
   async () => {
     const reply = await ctx.send('rollback_calibration');
