@@ -11,10 +11,13 @@ default (:class:`soak.MonitoredService`, a bus monitor on its bus), enabled and 
 every client's ``--requests`` at once (``status``, ``validate_pose`` and ``move`` to
 random poses in half the envelope), without waiting for replies, then collect them. An
 operator client meanwhile sends ``stop`` every ``--operator-every`` seconds and times
-its answer (``stop`` goes ahead of every queued request).
+its answer (``stop`` goes ahead of every queued request); ``--operator-command enable``
+sends an ``enable`` instead (already enabled: nothing to do), a command that waits its turn
+in the queues as the flood's do: the admission control's fairness to a client with nothing
+queued.
 
 Prints the answers by command and outcome (``busy`` is the admission control refusing
-what it cannot queue), the requests never answered, the operator's ``stop`` latencies,
+what it cannot queue), the requests never answered, the operator's latencies,
 the loop's missed cycles before and after, the faults that latched, and the monitor's
 figures. Exit status 0 if every request was answered, none with ``internal_error``, no
 fault latched and the monitor saw no violation; else 1.
@@ -90,11 +93,11 @@ def flood_process(endpoint: str, clients: int, requests: int, seed: int, envelop
 
 
 class Operator(threading.Thread):
-    """Sends ``stop`` every ``every_s`` and keeps each answer's round trip (ms)."""
+    """Sends ``command`` every ``every_s`` and keeps each answer's round trip (ms)."""
 
-    def __init__(self, endpoint: str, every_s: float) -> None:
+    def __init__(self, endpoint: str, every_s: float, command: str = "stop") -> None:
         super().__init__(name="flood-operator", daemon=True)
-        self.endpoint, self.every_s = endpoint, every_s
+        self.endpoint, self.every_s, self.command = endpoint, every_s, command
         self.latencies_ms: list[float] = []
         self.refusals: Counter[str] = Counter()
         self._stopping = threading.Event()
@@ -103,7 +106,7 @@ class Operator(threading.Thread):
         with HexactlClient(self.endpoint, timeout_s=COLLECT_TIMEOUT_S) as client:
             while not self._stopping.wait(self.every_s):
                 start = time.perf_counter()
-                reply = client.request("stop")
+                reply = client.request(self.command)
                 self.latencies_ms.append((time.perf_counter() - start) * 1e3)
                 if not reply["ok"]:
                     self.refusals[reply["error"]["code"]] += 1
@@ -118,7 +121,7 @@ SERVE_DEFAULT = Scheduling(fifo_priority=DEFAULT_FIFO_PRIORITY, lock_memory=True
 
 
 def flood(clients: int, requests: int, processes: int, operator_every_s: float, seed: int,
-          scheduling: Scheduling = SERVE_DEFAULT) -> dict[str, Any]:
+          scheduling: Scheduling = SERVE_DEFAULT, operator_command: str = "stop") -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="hexactl-flood-") as directory, \
             MonitoredService(Path(directory), scheduling=scheduling) as harness:
         harness.ensure_enabled()
@@ -126,7 +129,7 @@ def flood(clients: int, requests: int, processes: int, operator_every_s: float, 
         harness.operator.call("move", pose=random_pose(harness.geometry, rng))
         envelope = (list(harness.geometry.limits.pose_min), list(harness.geometry.limits.pose_max))
         before = harness.loop_figures()
-        operator = Operator(harness.api_endpoint, operator_every_s)
+        operator = Operator(harness.api_endpoint, operator_every_s, operator_command)
         operator.start()
         context = multiprocessing.get_context("spawn")
         results = context.Queue()
@@ -158,7 +161,8 @@ def flood(clients: int, requests: int, processes: int, operator_every_s: float, 
             "outcomes": dict(sorted(outcomes.items())),
             "unanswered": unanswered,
             "internal_errors": sum(n for key, n in outcomes.items() if key.endswith(":internal_error")),
-            "operator_stop_ms": {
+            "operator_ms": {
+                "command": operator_command,
                 "count": len(latencies),
                 "p50": round(latencies[len(latencies) // 2], 2) if latencies else None,
                 "p99": round(latencies[min(len(latencies) - 1, int(0.99 * len(latencies)))], 2) if latencies else None,
@@ -183,9 +187,9 @@ def print_report(result: dict[str, Any]) -> None:
     for key, count in result["outcomes"].items():
         print(f"  {key:40s} {count}")
     print(f"  unanswered: {result['unanswered']}; internal errors: {result['internal_errors']}")
-    stop = result["operator_stop_ms"]
-    print(f"  operator stop: {stop['count']} sent, answered in p50 {stop['p50']} ms, p99 {stop['p99']} ms, "
-          f"max {stop['max']} ms; refused {stop['refused'] or 'none'}")
+    operator = result["operator_ms"]
+    print(f"  operator {operator['command']}: {operator['count']} sent, answered in p50 {operator['p50']} ms, p99 "
+          f"{operator['p99']} ms, max {operator['max']} ms; refused {operator['refused'] or 'none'}")
     loop = result["loop"]
     print(f"  loop: {loop['cycles']} cycles in {loop['seconds']} s ({loop['achieved_rate_hz']} Hz), missed {loop['missed']}, "
           f"guard clamps {loop['guard_clamps']}")
@@ -198,13 +202,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--clients", type=int, default=200)
     parser.add_argument("--requests", type=int, default=50, help="requests per client, all sent at once")
     parser.add_argument("--processes", type=int, default=4, help="processes the clients are spread over")
-    parser.add_argument("--operator-every", type=float, default=1.0, help="seconds between the operator's stops")
+    parser.add_argument("--operator-every", type=float, default=1.0, help="seconds between the operator's commands")
+    parser.add_argument("--operator-command", choices=("stop", "enable"), default="stop",
+                        help="what the operator sends: stop (ahead of every queued request) or enable (queued)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-realtime", action="store_true", help="normal scheduling, as 'hexactl serve --no-realtime'")
     parser.add_argument("--json", type=Path, help="also write the figures here")
     arguments = parser.parse_args(argv)
     result = flood(arguments.clients, arguments.requests, arguments.processes, arguments.operator_every,
-                   arguments.seed, Scheduling() if arguments.no_realtime else SERVE_DEFAULT)
+                   arguments.seed, Scheduling() if arguments.no_realtime else SERVE_DEFAULT, arguments.operator_command)
     print_report(result)
     if arguments.json:
         arguments.json.write_text(json.dumps(result, indent=2) + "\n")
