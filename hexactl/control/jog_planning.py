@@ -147,7 +147,7 @@ def _limit_name(violation: Violation) -> str:
     "the stroke high limit of leg 3 at 60 mm" (found from outside without one)."""
     name = violation.kind.value.replace("_", " ")
     where = f" of leg {violation.leg}" if violation.leg is not None else f" on {violation.axis}" if violation.axis else ""
-    limit = repr(violation.limit).removesuffix(".0")  # as set: 12.000001 read "12" at 6 digits
+    limit = repr(float(violation.limit)).removesuffix(".0")  # as set: 12.000001 read "12" at 6 digits
     return f"the {name}{'' if name.endswith('limit') else ' limit'}{where} at {limit}{_unit(violation)}"
 
 
