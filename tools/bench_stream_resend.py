@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,41 +26,37 @@ def sine(t: float) -> float:
     return SINE_MM * math.sin(2 * math.pi * SINE_HZ * t)
 
 
-def follow(send_hz: float, source_hz: float, seconds: float = 6.0) -> tuple[float, float]:
-    """The lag (s) at which x commanded best matches the sine, and the RMS error to the sine
-    itself (mm), from 1.5 s to 5.5 s."""
+def commanded_x(pose_x: Callable[[float], float], send_hz: float, seconds: float) -> tuple[np.ndarray, np.ndarray]:
+    """Times (s) and x commanded (mm) each loop cycle for a stream of x ``pose_x(t)`` (mm)
+    sent ``send_hz`` times a second, stamped with its send time."""
     from simulated_stream import SimulatedStream
 
     stream = SimulatedStream()
-    period_s, sent, times, x = stream.period_ns / 1e9, 0, [], []
+    sent, times, x = 0, [], []
     while stream.time_s < seconds:
         while stream.time_s >= sent / send_hz - 1e-9:  # every sample due by now (the first few at once)
-            t = sent / send_hz
-            stream.send((sine(math.floor(t * source_hz + 1e-9) / source_hz), 0, 0, 0, 0, 0), sent + 1, t)
+            stream.send((pose_x(sent / send_hz), 0, 0, 0, 0, 0), sent + 1, sent / send_hz)
             sent += 1
         stream.step()
         times.append(stream.time_s), x.append(stream.pose_command[0])
-    t, x = np.array(times), np.array(x)
+    return np.array(times), np.array(x)
+
+
+def follow(send_hz: float, source_hz: float, seconds: float = 6.0) -> tuple[float, float]:
+    """The lag (s) at which x commanded best matches the sine, and the RMS error to the sine
+    itself (mm), from 1.5 s to 5.5 s."""
+    t, x = commanded_x(lambda s: sine(math.floor(s * source_hz + 1e-9) / source_hz), send_hz, seconds)
     window = (t > 1.5) & (t < 5.5)
-    lags = np.arange(0, 0.4, period_s)
-    errors = [np.sqrt(np.mean((x[window] - SINE_MM * np.sin(2 * np.pi * SINE_HZ * (t[window] - lag))) ** 2)) for lag in lags]
+    lags = np.arange(0, 0.4, t[1] - t[0])
+    errors = [np.sqrt(np.mean((x[window] - np.vectorize(sine)(t[window] - lag)) ** 2)) for lag in lags]
     return float(lags[int(np.argmin(errors))]), float(errors[0])
 
 
 def stop(send_hz: float, seconds: float = 3.0) -> tuple[float, float]:
     """A ramp of x at 200 mm/s that stops at 200 mm after 1 s, each sample its own: the
     farthest x went (mm) and where it came to rest."""
-    from simulated_stream import SimulatedStream
-
-    stream = SimulatedStream()
-    sent, farthest = 0, 0.0
-    while stream.time_s < seconds:
-        while stream.time_s >= sent / send_hz - 1e-9:  # every sample due by now (the first few at once)
-            stream.send((200.0 * min(sent / send_hz, 1.0), 0, 0, 0, 0, 0), sent + 1, sent / send_hz)
-            sent += 1
-        stream.step()
-        farthest = max(farthest, stream.pose_command[0])
-    return farthest, stream.pose_command[0]
+    _, x = commanded_x(lambda s: 200.0 * min(s, 1.0), send_hz, seconds)
+    return float(x.max()), float(x[-1])
 
 
 def main() -> None:

@@ -146,7 +146,7 @@ class _OpenStream:
     held: tuple[float, tuple[float, ...]] | None = None  # (sent_s, pose as sent): the newest that changed, when it came first
     held_velocity: np.ndarray = field(default_factory=lambda: np.zeros(6))  # the velocity it came with
     change_interval_s: float = 0.0  # between the sender's changes of pose (its source's updates), smoothed
-    repeats: int = 0  # requests since the held one that repeated it
+    repeated: bool = False  # a request since the held one repeated it
     resends: bool = False  # the sender moved on after repeating a pose: it resends its source's last pose
 
     def horizon(self, received_ns: int) -> float:
@@ -180,7 +180,7 @@ class _OpenStream:
             age = sent_s - held[0]
             if age < MIN_SAMPLE_GAP_S:  # the same sample again: the receiver hands the one before along
                 return requested, self.held_velocity
-            self.repeats += 1
+            self.repeated = True
             if self.resends and age <= min(MAX_SAMPLE_GAP_S, HOLD_INTERVALS * self.change_interval_s):
                 return requested + self.held_velocity * age, self.held_velocity
             velocity = np.zeros(6)
@@ -188,8 +188,8 @@ class _OpenStream:
             velocity = self.velocity(requested, sent_s)
             if held is not None and 0.0 < sent_s - held[0] <= MAX_SAMPLE_GAP_S:
                 self.change_interval_s += 0.2 * (sent_s - held[0] - self.change_interval_s)
-                self.resends = self.resends or self.repeats > 0
-            self.held, self.held_velocity, self.repeats = (sent_s, pose), velocity, 0
+                self.resends = self.resends or self.repeated
+            self.held, self.held_velocity, self.repeated = (sent_s, pose), velocity, False
         self.remember(sent_s, requested)
         return requested, velocity
 

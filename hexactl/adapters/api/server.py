@@ -467,10 +467,15 @@ class ApiServer(SocketThread):
                         frames = self._socket.recv_multipart(zmq.NOBLOCK, copy=False)  # frames: their sender's properties
                     except zmq.Again:
                         break
-                    try:
-                        self._admit(frames, time.monotonic_ns())
-                    except Exception as error:  # a defect in one request must not end the thread reading all
-                        self._internal_error(frames, error)
+                    self._admit_guarded(frames)
+
+    def _admit_guarded(self, frames: list[zmq.Frame], stopped_by: str | None = None) -> None:
+        """:meth:`_admit`; a defect met in it is that request's, answered ``internal_error``
+        and logged: it must not end the thread that reads every request, an E-stop's."""
+        try:
+            self._admit(frames, time.monotonic_ns(), stopped_by)
+        except Exception as error:
+            self._internal_error(frames, error)
 
     def _internal_error(self, frames: list[zmq.Frame], error: Exception) -> None:
         """Log the defect that ``error`` is and answer the request in ``frames`` with it."""
@@ -535,10 +540,7 @@ class ApiServer(SocketThread):
                 frames = self._socket.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:
                 return
-            try:
-                self._admit(frames, time.monotonic_ns(), stopped_by=cause)
-            except Exception as error:  # that request's defect, not the stop's: the drain goes on
-                self._internal_error(frames, error)
+            self._admit_guarded(frames, stopped_by=cause)
 
     def _cancel_queued(self, cause: str) -> None:
         """Discard every queued :data:`CANCELLED_BY_STOP` request, answering each ``cancelled``."""
